@@ -1,0 +1,35 @@
+# Two commands do all the set-up on a fresh machine (Python 3.11 with venv):
+#   make demo   - create .venv if needed, install, run the paper scenario, say where the outputs are
+#   make test   - same set-up, run the test suite
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test test-fast bench install clean
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+
+$(STAMP): pyproject.toml | $(PY)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	MUJOCO_GL=$${MUJOCO_GL:-egl} $(VENV)/bin/bioform run paper --plant mujoco --out runs/demo --video --rrd --figures
+	@echo "demo outputs: runs/demo/ (summary.json, log.npz, scene.xml, video.mp4, run.rrd, figures/)"
+
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+test-fast: $(STAMP)
+	$(PY) -m pytest -q -m "not slow"
+
+bench: $(STAMP)
+	$(PY) scripts/bench_control_step.py
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

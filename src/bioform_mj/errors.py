@@ -1,0 +1,35 @@
+"""Exception types shared by the library and the CLI.
+
+Each maps to one exit code of the ``bioform`` command (SPEC §10): input errors
+exit 2 with a single ``error:`` line, a diverging simulation exits 3.
+"""
+from __future__ import annotations
+
+
+class BioformError(Exception):
+    """Base class of every error the CLI reports without a traceback."""
+
+
+class InputError(BioformError, ValueError):
+    """Bad user input: a scenario key, a graph, a model file, a CLI flag (exit 2)."""
+
+
+class ScenarioError(InputError):
+    """A scenario value is missing, mistyped or out of range; names the key."""
+
+    def __init__(self, key: str, message: str) -> None:
+        self.key = key
+        super().__init__(f"scenario key '{key}': {message}" if key else message)
+
+
+class GraphError(InputError):
+    """The communication graph violates Assumption 1 or is malformed."""
+
+
+class Diverged(BioformError, RuntimeError):
+    """The closed loop produced NaN/inf or a state beyond the configured limits (exit 3)."""
+
+    def __init__(self, message: str, *, step: int, time: float) -> None:
+        self.step = step
+        self.time = time
+        super().__init__(message)

@@ -1,0 +1,1 @@
+"""Plants the control stack drives: the paper's ideal model and MuJoCo robots."""

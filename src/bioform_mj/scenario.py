@@ -1,0 +1,519 @@
+"""Scenarios: frozen dataclasses, TOML files, presets, ``--set`` overrides, validation.
+
+The dataclass defaults *are* the paper scenario (one source of defaults); the
+shipped ``scenarios/paper.toml`` restates them with the choices the paper leaves
+open, and a test keeps the two equal. Unknown keys are an error, never ignored.
+Follower ids are 1-based in files and messages.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+import typing
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from . import graph as graph_mod
+from . import leader as leader_mod
+from .control.stack import METHODS
+from .errors import GraphError, InputError, ScenarioError
+
+PLANTS = ("ideal", "mujoco")
+LEADER_KINDS = ("paper", "line", "circle", "figure8", "harmonic")
+GRAPH_KINDS = ("explicit", "chain", "ring", "star", "complete")
+ESTIMATOR_INITS = ("zero", "self", "leader")
+EVENT_KINDS = ("payload",)
+
+
+@dataclass(frozen=True)
+class SimCfg:
+    """Time axis. duration, control_dt, physics_dt, log_dt in s."""
+
+    duration: float = 20.0
+    control_dt: float = 0.001
+    physics_dt: float = 0.001
+    log_dt: float = 0.01
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class LeaderCfg:
+    """Virtual leader (SPEC §2). Lengths in m, speeds in m/s, angles in rad, rates in rad/s.
+
+    paper: ``x = x0 + speed t``, ``y = y0 + amplitude cos(frequency t − π/2)``;
+    line: from (x0, y0) at ``speed`` along ``heading``; circle: centre (x0, y0),
+    ``radius``, ``speed``; figure8: centre (x0, y0), ``radius``, ``frequency``;
+    harmonic: ``x = x0 + vx t + Σ A cos(w t + φ)`` with ``x_terms = [[A, w, φ], …]``, same for y.
+    """
+
+    kind: str = "paper"
+    x0: float = 0.0
+    y0: float = 3.0
+    speed: float = 1.0
+    heading: float = 0.0
+    amplitude: float = 0.4
+    frequency: float = 1.0
+    radius: float = 5.0
+    vx: float = 0.0
+    vy: float = 0.0
+    x_terms: tuple[tuple[float, ...], ...] = ()
+    y_terms: tuple[tuple[float, ...], ...] = ()
+
+
+@dataclass(frozen=True)
+class GraphCfg:
+    """Communication graph (SPEC §1). The paper's Fig. 1 is missing; default: leader → 1, edges 1–2, 1–3."""
+
+    kind: str = "explicit"
+    edges: tuple[tuple[int, ...], ...] = ((1, 2), (1, 3))
+    leader_access: tuple[int, ...] = (1,)
+    center: int = 1
+
+
+@dataclass(frozen=True)
+class FormationCfg:
+    """Offsets ``(Δx, Δy)`` (m, world frame) and initial poses ``(x, y, θ)`` (m, m, rad), one row per follower.
+
+    ``init_jitter`` (m for x/y, rad for θ) adds a seeded uniform perturbation to the initial poses.
+    """
+
+    offsets: tuple[tuple[float, ...], ...] = ((3.0, 0.0), (4.0, 5.0), (4.0, -5.0))
+    initial_poses: tuple[tuple[float, ...], ...] = ((0.0, 0.0, 0.0), (-1.0, -4.0, 0.0), (-1.0, 4.0, 0.0))
+    init_jitter: float = 0.0
+
+
+@dataclass(frozen=True)
+class EstimatorCfg:
+    """Eqs. 12–13. ``kp = (k_x, k_y, k_θ)``; ``ka = (k_a1, k_a2)`` sign-term gains; ``kb = (k_b1, k_b2)``.
+
+    ``phi``: boundary layers (m/s, rad/s), 0 = the paper's sgn. ``init``: ``P_ir(0)`` is
+    ``zero`` (origin, heading 0), ``self`` (own pose + offset) or ``leader`` (true leader pose).
+    The proof (eq. 15) swaps the gains (ka = 1, kb = 25): 25× less chatter.
+    """
+
+    kp: tuple[float, ...] = (15.0, 15.0, 15.0)
+    ka: tuple[float, ...] = (25.0, 25.0)
+    kb: tuple[float, ...] = (1.0, 1.0)
+    phi: tuple[float, ...] = (0.0, 0.0)
+    init: str = "zero"
+
+
+@dataclass(frozen=True)
+class KinematicCfg:
+    """Eq. 31 gains ``k1, k2, k3`` and neuron parameters ``A, B, D`` (eq. 32)."""
+
+    k1: float = 2.0
+    k2: float = 3.0
+    k3: float = 4.0
+    A: float = 2.0
+    B: float = 2.0
+    D: float = 2.0
+
+
+@dataclass(frozen=True)
+class TorqueCfg:
+    """Eqs. 38–39: ``c = (c_a, c_b)``, boundary layer ``phi`` (0 = sgn), wheel limit ``tau_max`` (N·m),
+    command-derivative filter natural frequency ``deriv_wn`` (rad/s)."""
+
+    c: tuple[float, ...] = (3.0, 3.0)
+    phi: float = 0.0
+    tau_max: float = 20.0
+    deriv_wn: float = 50.0
+
+
+@dataclass(frozen=True)
+class LearnerCfg:
+    """Eq. 37 gains; ``ĉ(0) = c_hat0_scale ⊙ c_true`` per follower; projection onto
+    ``[c_bounds[0], c_bounds[1]] × ĉ(0)``."""
+
+    k4: tuple[float, ...] = (6.0, 50.0)
+    k5: tuple[float, ...] = (25.0, 50.0)
+    c_hat0_scale: tuple[float, ...] = (0.5, 0.5)
+    c_bounds: tuple[float, ...] = (0.1, 10.0)
+
+
+@dataclass(frozen=True)
+class PlantCfg:
+    """Plant. Ideal: ``c_true = (a, b)`` and the mass (kg) / yaw inertia (kg·m²) consistent with
+    them for r = 0.1 m, l = 0.2 m (used by payload events). MuJoCo: ``robots`` are shipped model
+    names or MJCF paths, one per follower or one for all."""
+
+    kind: str = "ideal"
+    c_true: tuple[float, ...] = (0.4, 10.0)
+    mass: float = 25.0
+    inertia: float = 0.2
+    robots: tuple[str, ...] = ("paper",)
+
+
+@dataclass(frozen=True)
+class DisturbanceCfg:
+    """``d_k = bias_k + amp_k cos(freq_k t + phase_k)``, k = (υ m/s², ω rad/s²). Paper: d1 = 0.1, d2 = 0.1 cos t."""
+
+    bias: tuple[float, ...] = (0.1, 0.0)
+    amp: tuple[float, ...] = (0.0, 0.1)
+    freq: tuple[float, ...] = (0.0, 1.0)
+    phase: tuple[float, ...] = (0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class EventCfg:
+    """A timed event. ``payload``: follower (1-based) gains ``mass`` kg and yaw ``inertia`` kg·m²."""
+
+    time: float = 0.0
+    kind: str = "payload"
+    follower: int = 1
+    mass: float = 0.0
+    inertia: float = 0.0
+
+
+@dataclass(frozen=True)
+class LimitsCfg:
+    """Divergence guard: the run stops (exit 3) beyond these magnitudes."""
+
+    speed: float = 100.0  # m/s, measured or commanded
+    position: float = 1.0e4  # m, robot or estimate
+    torque: float = 1.0e6  # N·m, commanded before saturation
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A complete, validated run description."""
+
+    name: str = "paper"
+    description: str = "Xu et al. 2024, Sec. IV: three followers track a sinusoidal leader."
+    method: str = "bioinspired-learning"
+    sim: SimCfg = field(default_factory=SimCfg)
+    leader: LeaderCfg = field(default_factory=LeaderCfg)
+    graph: GraphCfg = field(default_factory=GraphCfg)
+    formation: FormationCfg = field(default_factory=FormationCfg)
+    estimator: EstimatorCfg = field(default_factory=EstimatorCfg)
+    kinematic: KinematicCfg = field(default_factory=KinematicCfg)
+    torque: TorqueCfg = field(default_factory=TorqueCfg)
+    learner: LearnerCfg = field(default_factory=LearnerCfg)
+    plant: PlantCfg = field(default_factory=PlantCfg)
+    disturbance: DisturbanceCfg = field(default_factory=DisturbanceCfg)
+    limits: LimitsCfg = field(default_factory=LimitsCfg)
+    events: tuple[EventCfg, ...] = ()
+
+    @property
+    def n(self) -> int:
+        """Number of followers."""
+        return len(self.formation.offsets)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain nested dict (JSON/TOML-able) of every resolved value."""
+        return _to_plain(dataclasses.asdict(self))
+
+    # ---- derived objects -------------------------------------------------------------
+    def build_graph(self) -> graph_mod.Graph:
+        g, n = self.graph, self.n
+        if g.kind == "explicit":
+            return graph_mod.from_edges(n, g.edges, g.leader_access)
+        if g.kind == "star":
+            return graph_mod.star(n, g.center, g.leader_access)
+        builder = {"chain": graph_mod.chain, "ring": graph_mod.ring, "complete": graph_mod.complete}[g.kind]
+        return builder(n, g.leader_access)
+
+    def build_leader(self) -> leader_mod.Trajectory:
+        c = self.leader
+        if c.kind == "paper":
+            return leader_mod.paper(c.x0, c.y0, c.speed, c.amplitude, c.frequency)
+        if c.kind == "line":
+            return leader_mod.line(c.x0, c.y0, c.speed, c.heading)
+        if c.kind == "circle":
+            return leader_mod.circle(c.x0, c.y0, c.radius, c.speed)
+        if c.kind == "figure8":
+            return leader_mod.figure_eight(c.x0, c.y0, c.radius, c.frequency)
+        return leader_mod.Harmonic(c.x0, c.y0, c.vx, c.vy, tuple(map(tuple, c.x_terms)), tuple(map(tuple, c.y_terms)))
+
+    def initial_poses(self) -> np.ndarray:
+        """(n, 3) initial poses, with the seeded jitter applied."""
+        p = np.array(self.formation.initial_poses, dtype=float)
+        j = self.formation.init_jitter
+        if j > 0:
+            rng = np.random.default_rng(self.sim.seed)
+            p += rng.uniform(-j, j, size=p.shape)
+        return p
+
+
+# ---------------------------------------------------------------------------------------
+# Loading
+# ---------------------------------------------------------------------------------------
+
+def preset_names() -> list[str]:
+    """Names of the shipped presets (``scenarios/*.toml`` inside the package)."""
+    d = resources.files("bioform_mj") / "scenarios"
+    return sorted(p.name[:-5] for p in d.iterdir() if p.name.endswith(".toml"))
+
+
+def load(source: str | Path | None = None, overrides: Mapping[str, Any] | list[str] | None = None,
+         method: str | None = None, plant: str | None = None) -> Scenario:
+    """Load a preset name or TOML path, apply ``--set`` overrides, method and plant; validate.
+
+    Raises :class:`InputError` (or a subclass) with one line naming the problem.
+    """
+    data: dict[str, Any]
+    if source is None:
+        source = "paper"
+    src = str(source)
+    if src.endswith(".toml") or "/" in src or Path(src).is_file():
+        path = Path(src)
+        if not path.is_file():
+            raise InputError(f"scenario file '{path}' does not exist")
+        data = _read_toml(path.read_bytes(), str(path))
+    else:
+        names = preset_names()
+        if src not in names:
+            raise InputError(f"unknown preset '{src}' (expected one of: {', '.join(names)}, or a .toml path)")
+        data = _read_toml((resources.files("bioform_mj") / "scenarios" / f"{src}.toml").read_bytes(), f"preset {src}")
+    if overrides:
+        items = overrides.items() if isinstance(overrides, Mapping) else [parse_override(s) for s in overrides]
+        for key, value in items:
+            _set_path(data, key, value)
+    if method is not None:
+        data["method"] = method
+    if plant is not None:
+        data.setdefault("plant", {})["kind"] = plant
+    sc = from_dict(data)
+    validate(sc)
+    return sc
+
+
+def _read_toml(raw: bytes, where: str) -> dict[str, Any]:
+    try:
+        return tomllib.loads(raw.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{where} is not valid TOML: {exc}") from None
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """``'kinematic.k1=3'`` → ``('kinematic.k1', 3)``; values are TOML literals, bare words are strings."""
+    key, sep, raw = text.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise InputError(f"--set '{text}': expected KEY=VALUE, e.g. kinematic.k1=3")
+    raw = raw.strip()
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key, value
+
+
+def _set_path(data: dict[str, Any], key: str, value: Any) -> None:
+    parts = key.split(".")
+    cls: Any = Scenario
+    node = data
+    for i, part in enumerate(parts):
+        hints = typing.get_type_hints(cls)
+        if part not in hints:
+            raise ScenarioError(key, f"unknown key (expected one of: {', '.join(hints)})")
+        if i == len(parts) - 1:
+            node[part] = value
+            return
+        cls = hints[part]
+        if not dataclasses.is_dataclass(cls):
+            raise ScenarioError(key, f"'{'.'.join(parts[: i + 1])}' is a value, not a table")
+        node = node.setdefault(part, {})
+
+
+def from_dict(data: Mapping[str, Any]) -> Scenario:
+    """Build a :class:`Scenario` from nested dicts; unknown keys and wrong types raise ScenarioError."""
+    return _build(Scenario, data, "")
+
+
+def _build(cls: Any, data: Any, prefix: str) -> Any:
+    if not isinstance(data, Mapping):
+        raise ScenarioError(prefix.rstrip("."), f"expected a table, got {type(data).__name__}")
+    hints = typing.get_type_hints(cls)
+    unknown = [k for k in data if k not in hints]
+    if unknown:
+        raise ScenarioError(prefix + unknown[0], f"unknown key (expected one of: {', '.join(hints)})")
+    kwargs = {k: _convert(v, hints[k], prefix + k) for k, v in data.items()}
+    return cls(**kwargs)
+
+
+def _convert(value: Any, tp: Any, key: str) -> Any:
+    if dataclasses.is_dataclass(tp):
+        return _build(tp, value, key + ".")
+    origin = typing.get_origin(tp)
+    if origin is tuple:
+        (inner, *_rest) = typing.get_args(tp)
+        if not isinstance(value, (list, tuple)):
+            raise ScenarioError(key, f"expected an array, got {type(value).__name__} {value!r}")
+        if dataclasses.is_dataclass(inner):
+            return tuple(_build(inner, v, f"{key}[{i}].") for i, v in enumerate(value))
+        return tuple(_convert(v, inner, f"{key}[{i}]") for i, v in enumerate(value))
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ScenarioError(key, f"expected a number, got {type(value).__name__} {value!r}")
+        if not math.isfinite(value):
+            raise ScenarioError(key, f"expected a finite number, got {value}")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, float) and value.is_integer():
+                return int(value)
+            raise ScenarioError(key, f"expected an integer, got {type(value).__name__} {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ScenarioError(key, f"expected a string, got {type(value).__name__} {value!r}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ScenarioError(key, f"expected true or false, got {value!r}")
+        return value
+    raise TypeError(f"unsupported field type {tp} for {key}")  # programming error, not user input
+
+
+def _to_plain(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _to_plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_to_plain(v) for v in obj]
+    return obj
+
+
+# ---------------------------------------------------------------------------------------
+# Validation
+# ---------------------------------------------------------------------------------------
+
+def _positive(key: str, values: Any, strict: bool = True) -> None:
+    for v in np.atleast_1d(values):
+        if (v <= 0) if strict else (v < 0):
+            raise ScenarioError(key, f"must be {'> 0' if strict else '>= 0'}, got {v:g}")
+
+
+def _length(key: str, values: tuple, n: int) -> None:
+    if len(values) != n:
+        raise ScenarioError(key, f"expected {n} values, got {len(values)}")
+
+
+def validate(sc: Scenario) -> None:
+    """Check every value the algorithm's assumptions need; raise on the first problem found."""
+    if sc.method not in METHODS:
+        raise ScenarioError("method", f"unknown method '{sc.method}' (expected one of: {', '.join(METHODS)})")
+    if sc.plant.kind not in PLANTS:
+        raise ScenarioError("plant.kind", f"unknown plant '{sc.plant.kind}' (expected one of: {', '.join(PLANTS)})")
+    s = sc.sim
+    _positive("sim.duration", s.duration)
+    _positive("sim.control_dt", s.control_dt)
+    _positive("sim.physics_dt", s.physics_dt)
+    _positive("sim.log_dt", s.log_dt)
+    if s.physics_dt > s.control_dt * (1 + 1e-9):
+        raise ScenarioError("sim.physics_dt", f"must not exceed sim.control_dt = {s.control_dt:g} s, got {s.physics_dt:g}")
+    ratio = s.control_dt / s.physics_dt
+    if abs(ratio - round(ratio)) > 1e-6:
+        raise ScenarioError("sim.physics_dt", f"must divide sim.control_dt = {s.control_dt:g} s into whole substeps, got {s.physics_dt:g}")
+    if s.log_dt < s.control_dt * (1 - 1e-9):
+        raise ScenarioError("sim.log_dt", f"must be >= sim.control_dt = {s.control_dt:g} s, got {s.log_dt:g}")
+    if s.duration < s.control_dt:
+        raise ScenarioError("sim.duration", f"must be at least one control period ({s.control_dt:g} s), got {s.duration:g}")
+    if s.seed < 0:
+        raise ScenarioError("sim.seed", f"must be >= 0, got {s.seed}")
+
+    ld = sc.leader
+    if ld.kind not in LEADER_KINDS:
+        raise ScenarioError("leader.kind", f"unknown trajectory '{ld.kind}' (expected one of: {', '.join(LEADER_KINDS)})")
+    if ld.kind in ("circle", "figure8"):
+        _positive("leader.radius", ld.radius)
+    if ld.kind in ("paper", "line", "circle"):
+        _positive("leader.speed", ld.speed)
+    if ld.kind == "figure8":
+        _positive("leader.frequency", ld.frequency)
+    for key, terms in (("leader.x_terms", ld.x_terms), ("leader.y_terms", ld.y_terms)):
+        for i, t in enumerate(terms):
+            if len(t) != 3:
+                raise ScenarioError(f"{key}[{i}]", f"expected [amplitude, frequency, phase], got {list(t)}")
+    traj = sc.build_leader()
+    vmin = traj.min_speed(s.duration)
+    if not vmin > 1e-6:
+        raise ScenarioError("leader", f"the leader's speed reaches {vmin:g} m/s; its heading is undefined where it stops")
+
+    n = sc.n
+    f = sc.formation
+    if n < 1:
+        raise ScenarioError("formation.offsets", "need at least one follower")
+    for i, o in enumerate(f.offsets):
+        if len(o) != 2:
+            raise ScenarioError(f"formation.offsets[{i}]", f"expected [dx, dy], got {list(o)}")
+    _length("formation.initial_poses", f.initial_poses, n)
+    for i, p in enumerate(f.initial_poses):
+        if len(p) != 3:
+            raise ScenarioError(f"formation.initial_poses[{i}]", f"expected [x, y, theta], got {list(p)}")
+    _positive("formation.init_jitter", f.init_jitter, strict=False)
+    offs = np.array(f.offsets)
+    uniq, inv, counts = np.unique(np.round(offs, 9), axis=0, return_inverse=True, return_counts=True)
+    if np.any(counts > 1):
+        dup = np.flatnonzero(counts[inv.reshape(-1)] > 1)[:2] + 1
+        raise ScenarioError("formation.offsets", f"followers {dup[0]} and {dup[1]} are assigned the same formation slot")
+
+    g = sc.graph
+    if g.kind not in GRAPH_KINDS:
+        raise ScenarioError("graph.kind", f"unknown topology '{g.kind}' (expected one of: {', '.join(GRAPH_KINDS)})")
+    try:
+        sc.build_graph()
+    except GraphError as exc:
+        raise ScenarioError("graph", str(exc)) from None
+
+    e = sc.estimator
+    _length("estimator.kp", e.kp, 3)
+    _positive("estimator.kp", e.kp)
+    for key, vals in (("estimator.ka", e.ka), ("estimator.kb", e.kb), ("estimator.phi", e.phi)):
+        _length(key, vals, 2)
+    _positive("estimator.ka", e.ka)
+    _positive("estimator.kb", e.kb)
+    _positive("estimator.phi", e.phi, strict=False)
+    if e.init not in ESTIMATOR_INITS:
+        raise ScenarioError("estimator.init", f"unknown '{e.init}' (expected one of: {', '.join(ESTIMATOR_INITS)})")
+
+    k = sc.kinematic
+    for name in ("k1", "k2", "k3", "A", "B", "D"):
+        _positive(f"kinematic.{name}", getattr(k, name))
+
+    t = sc.torque
+    _length("torque.c", t.c, 2)
+    _positive("torque.c", t.c)
+    _positive("torque.phi", t.phi, strict=False)
+    _positive("torque.tau_max", t.tau_max)
+    _positive("torque.deriv_wn", t.deriv_wn)
+
+    lc = sc.learner
+    for key in ("k4", "k5", "c_hat0_scale", "c_bounds"):
+        _length(f"learner.{key}", getattr(lc, key), 2)
+        _positive(f"learner.{key}", getattr(lc, key))
+    if not lc.c_bounds[0] <= 1.0 <= lc.c_bounds[1]:
+        raise ScenarioError("learner.c_bounds", f"must satisfy lower <= 1 <= upper (factors of c_hat0), got {list(lc.c_bounds)}")
+
+    pc = sc.plant
+    _length("plant.c_true", pc.c_true, 2)
+    _positive("plant.c_true", pc.c_true)
+    _positive("plant.mass", pc.mass)
+    _positive("plant.inertia", pc.inertia)
+    if len(pc.robots) not in (1, n):
+        raise ScenarioError("plant.robots", f"expected 1 or {n} robot models, got {len(pc.robots)}")
+
+    d = sc.disturbance
+    for key in ("bias", "amp", "freq", "phase"):
+        _length(f"disturbance.{key}", getattr(d, key), 2)
+
+    lim = sc.limits
+    for key in ("speed", "position", "torque"):
+        _positive(f"limits.{key}", getattr(lim, key))
+
+    for i, ev in enumerate(sc.events):
+        key = f"events[{i}]"
+        if ev.kind not in EVENT_KINDS:
+            raise ScenarioError(f"{key}.kind", f"unknown event '{ev.kind}' (expected one of: {', '.join(EVENT_KINDS)})")
+        if not 0 <= ev.time <= s.duration:
+            raise ScenarioError(f"{key}.time", f"must lie in [0, sim.duration = {s.duration:g}], got {ev.time:g}")
+        if not 1 <= ev.follower <= n:
+            raise ScenarioError(f"{key}.follower", f"must be a follower id in 1..{n}, got {ev.follower}")
+        _positive(f"{key}.mass", ev.mass, strict=False)
+        _positive(f"{key}.inertia", ev.inertia, strict=False)

@@ -1,0 +1,319 @@
+"""The closed loop: scenario in, plant and control stack built, log and summary out."""
+from __future__ import annotations
+
+import logging
+import platform
+import time
+from dataclasses import dataclass, field
+from typing import Any, Protocol, Sequence
+
+import numpy as np
+
+from . import __version__
+from .control.common import wrap
+from .control.stack import ControlStack, StackParams, parse_method
+from .disturbance import Harmonic as HarmonicDisturbance
+from .errors import Diverged
+from .plants.base import Plant
+from .plants.ideal import IdealPlant
+from .scenario import Scenario
+
+log = logging.getLogger(__name__)
+
+#: Time-series channels of ``log.npz``: name → trailing shape (``n`` = followers).
+CHANNELS: dict[str, tuple[str, ...]] = {
+    "pose": ("n", "3"),            # [x, y, θ] m, m, rad
+    "vel": ("n", "2"),             # [υ, ω] m/s, rad/s (measured)
+    "est_pose": ("n", "3"),        # P_ir, each follower's estimate of the leader's pose
+    "est_vel": ("n", "2"),         # [υ_ir, ω_ir]
+    "cmd": ("n", "2"),             # [υ_cmd, ω_cmd]
+    "dcmd": ("n", "2"),            # filtered [υ̇_cmd, ω̇_cmd]
+    "tau": ("n", "2"),             # applied [τ_L, τ_R] N·m
+    "tau_raw": ("n", "2"),         # commanded before saturation
+    "c_hat": ("n", "2"),           # [â, b̂]
+    "c_true": ("n", "2"),          # [a, b] of the plant
+    "z_hat": ("n", "2"),           # learner's velocity estimate
+    "vs": ("n",),                  # neuron output V_s
+    "tracking_error": ("n", "3"),  # [x̃, ỹ, θ̃] body frame
+    "formation_error": ("n",),     # |p_i − (p_r − Δ_i)| m, against the true leader
+    "estimation_error": ("n",),    # |P_ir[:2] − p_r| m
+    "saturated": ("n",),           # any wheel at its limit
+}
+
+
+class Observer(Protocol):
+    """Something that watches a run (video, rerun) at its own period, without slowing a run that has none."""
+
+    period: float  # s of simulated time between calls
+
+    def start(self, run: "RunState") -> None: ...
+    def sample(self, run: "RunState") -> None: ...
+    def finish(self, run: "RunState") -> None: ...
+
+
+@dataclass
+class RunState:
+    """What observers may read during a run (the live objects, not copies)."""
+
+    scenario: Scenario
+    plant: Plant
+    stack: ControlStack
+    t: float = 0.0
+    leader_pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    leader_vel: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    pose: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    vel: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    @property
+    def slots(self) -> np.ndarray:
+        """Formation slots (n, 2): the true leader's position minus each offset (m)."""
+        return self.leader_pose[None, :2] - np.asarray(self.scenario.formation.offsets)
+
+
+@dataclass
+class RunResult:
+    """The log (time series at ``log_dt``), the summary dict and, if it happened, the divergence."""
+
+    scenario: Scenario
+    log: dict[str, np.ndarray]
+    summary: dict[str, Any]
+    plant: Plant
+    diverged: Diverged | None = None
+
+
+def make_plant(sc: Scenario) -> Plant:
+    """The plant named by ``sc.plant.kind``, at the scenario's initial poses."""
+    poses = sc.initial_poses()
+    dist = HarmonicDisturbance(sc.n, sc.disturbance.bias, sc.disturbance.amp, sc.disturbance.freq, sc.disturbance.phase)
+    if sc.plant.kind == "ideal":
+        return IdealPlant(np.array(sc.plant.c_true), poses, sc.sim.control_dt, sc.sim.physics_dt, dist,
+                          mass=sc.plant.mass, inertia=sc.plant.inertia)
+    from .plants.mujoco_plant import MujocoPlant  # imported only when asked: the ideal plant needs no MuJoCo
+    from .robots import resolve_robot
+
+    robots = list(sc.plant.robots) * (sc.n if len(sc.plant.robots) == 1 else 1)
+    return MujocoPlant([resolve_robot(r) for r in robots], poses, sc.sim.control_dt, sc.sim.physics_dt, dist)
+
+
+def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = None) -> StackParams:
+    """Resolve the scenario's numbers into the control stack's per-follower arrays."""
+    law, learning = parse_method(sc.method)
+    n = sc.n
+    c_hat0 = np.asarray(sc.learner.c_hat0_scale) * c_true
+    lo, hi = sc.learner.c_bounds
+    return StackParams(
+        offsets=np.array(sc.formation.offsets, dtype=float),
+        kp=np.array(sc.estimator.kp), ka=np.array(sc.estimator.ka), kb=np.array(sc.estimator.kb),
+        est_phi=np.array(sc.estimator.phi),
+        k1=sc.kinematic.k1, k2=sc.kinematic.k2, k3=sc.kinematic.k3,
+        A=sc.kinematic.A, B=sc.kinematic.B, D=sc.kinematic.D,
+        law=law, learning=learning,
+        c_gain=np.array(sc.torque.c), torque_phi=sc.torque.phi,
+        tau_max=np.full(n, sc.torque.tau_max) if tau_max is None else np.asarray(tau_max, dtype=float),
+        deriv_wn=sc.torque.deriv_wn,
+        k4=np.array(sc.learner.k4), k5=np.array(sc.learner.k5),
+        c_hat0=c_hat0, c_min=lo * c_hat0, c_max=hi * c_hat0,
+        dt=sc.sim.control_dt,
+    )
+
+
+def initial_estimates(sc: Scenario, pose0: np.ndarray, leader_pose0: np.ndarray) -> np.ndarray:
+    """``P_ir(0)`` (n, 3) per ``estimator.init``: ``zero``, ``self`` (own pose + offset) or ``leader``."""
+    n = sc.n
+    if sc.estimator.init == "zero":
+        return np.zeros((n, 3))
+    if sc.estimator.init == "leader":
+        return np.tile(leader_pose0, (n, 1))
+    est = pose0.copy()
+    est[:, :2] += np.asarray(sc.formation.offsets)
+    return est
+
+
+def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = None) -> RunResult:
+    """Run the closed loop of ``sc`` and return its log and summary.
+
+    A divergence (NaN/inf or a state beyond ``sc.limits``) stops the loop; the
+    result then holds the log up to that point and ``diverged`` says why.
+    ``progress``, if given, is called as ``progress(k, N)`` every log sample.
+    """
+    graph = sc.build_graph()
+    traj = sc.build_leader()
+    plant = make_plant(sc)
+    stack = ControlStack(graph, stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None)))
+    n = sc.n
+    dt = sc.sim.control_dt
+    N = max(1, int(round(sc.sim.duration / dt)))
+    stride = max(1, int(round(sc.sim.log_dt / dt)))
+    t_all = np.arange(N + 1) * dt
+    L_pose, L_vel, _ = traj.states(t_all)  # analytic, all steps at once
+    offsets = np.asarray(sc.formation.offsets, dtype=float)
+
+    plant.reset()
+    pose, vel = plant.observe()
+    stack.reset(initial_estimates(sc, pose, L_pose[0]), vel)
+    K = (N - 1) // stride + 1
+    shapes = {"n": n, "3": 3, "2": 2}
+    logd: dict[str, np.ndarray] = {"t": np.zeros(K), "leader_pose": np.zeros((K, 3)), "leader_vel": np.zeros((K, 2))}
+    for name, shp in CHANNELS.items():
+        logd[name] = np.zeros((K,) + tuple(shapes[s] for s in shp), dtype=bool if name == "saturated" else float)
+
+    vel_err_int = np.zeros(n)
+    sat_steps = np.zeros(n)
+    max_vcmd = np.zeros(n)
+    peak_tau = np.zeros(n)
+    peak_tau_raw = np.zeros(n)
+    events = sorted(sc.events, key=lambda e: e.time)
+    ev_i = 0
+    state = RunState(sc, plant, stack)
+    obs_next = [0.0] * len(observers)
+    for o in observers:
+        o.start(state)
+    lim = sc.limits
+    diverged: Diverged | None = None
+    k_done = 0
+    j = 0
+    wall0 = time.perf_counter()
+    for k in range(N):
+        t = k * dt
+        while ev_i < len(events) and events[ev_i].time <= t + 1e-12:
+            ev = events[ev_i]
+            plant.add_payload(ev.follower - 1, ev.mass, ev.inertia)
+            ev_i += 1
+        tau = stack.step(L_pose[k], L_vel[k], pose, vel)
+        cmd = stack.cmd
+        vel_err_int += np.abs(cmd - vel).sum(axis=1)  # SPEC §7 metric, integrated below with dt
+        sat_steps += stack.saturated
+        np.maximum(max_vcmd, np.abs(cmd[:, 0]), out=max_vcmd)
+        np.maximum(peak_tau, np.abs(tau).max(axis=1), out=peak_tau)
+        np.maximum(peak_tau_raw, np.abs(stack.tau_raw).max(axis=1), out=peak_tau_raw)
+        if k % stride == 0:
+            _record(logd, j, t, L_pose[k], L_vel[k], pose, vel, stack, plant, offsets)
+            diverged = _guard(logd, j, t, k, lim)
+            j += 1
+            if progress is not None:
+                progress(k, N)
+            if diverged is not None:
+                break
+        if observers:
+            state.t, state.leader_pose, state.leader_vel, state.pose, state.vel = t, L_pose[k], L_vel[k], pose, vel
+            for i, o in enumerate(observers):
+                if t >= obs_next[i] - 1e-12:
+                    o.sample(state)
+                    obs_next[i] += o.period
+        plant.step(tau, t)
+        pose, vel = plant.observe()
+        k_done = k + 1
+    wall = time.perf_counter() - wall0
+    if diverged is None and not (np.all(np.isfinite(pose)) and np.all(np.isfinite(vel))):
+        diverged = Diverged(f"non-finite robot state at the end of the run (t = {N * dt:g} s)", step=N, time=N * dt)
+    if progress is not None:
+        progress(N, N)
+    state.t, state.pose, state.vel = k_done * dt, pose, vel
+    state.leader_pose, state.leader_vel = L_pose[k_done], L_vel[k_done]
+    for o in observers:
+        o.finish(state)
+    logd = {key: v[:j] for key, v in logd.items()}
+    logd["offsets"] = offsets
+    logd["edges"] = graph.edges + 1
+    logd["leader_access"] = graph.leader_access
+    sim_time = k_done * dt
+    final_form = np.linalg.norm(pose[:, :2] - (L_pose[k_done, None, :2] - offsets), axis=1)
+    final_est = np.linalg.norm(stack.estimator.pose[:, :2] - L_pose[k_done, None, :2], axis=1)
+    fe = logd["formation_error"]
+    half = fe[len(fe) // 2:] if len(fe) else fe
+    followers = []
+    c_true = plant.c_true()
+    for i in range(n):
+        followers.append({
+            "id": i + 1,
+            "total_velocity_error": float(vel_err_int[i] * dt),
+            "final_formation_error_m": float(final_form[i]),
+            "rms_formation_error_m": float(np.sqrt(np.mean(fe[:, i] ** 2))) if len(fe) else float("nan"),
+            "rms_formation_error_last_half_m": float(np.sqrt(np.mean(half[:, i] ** 2))) if len(half) else float("nan"),
+            "final_estimation_error_m": float(final_est[i]),
+            "max_abs_v_cmd": float(max_vcmd[i]),
+            "peak_abs_torque": float(peak_tau[i]),
+            "peak_abs_torque_commanded": float(peak_tau_raw[i]),
+            "saturation_fraction": float(sat_steps[i] / max(1, k_done)),
+            "c_hat": [float(v) for v in stack.c_hat[i]],
+            "c_true": [float(v) for v in c_true[i]],
+            "c_hat_rel_error": [float(v) for v in (stack.c_hat[i] / c_true[i] - 1.0)],
+        })
+    summary = {
+        "scenario": sc.name,
+        "plant": sc.plant.kind,
+        "method": sc.method,
+        "seed": sc.sim.seed,
+        "sim_time_s": sim_time,
+        "wall_time_s": wall,
+        "steps": k_done,
+        "diverged": None if diverged is None else {"message": str(diverged), "time_s": diverged.time, "step": diverged.step},
+        "versions": _versions(),
+        "config": sc.to_dict(),
+        "followers": followers,
+    }
+    return RunResult(sc, logd, summary, plant, diverged)
+
+
+def _record(logd, j, t, lp, lv, pose, vel, stack: ControlStack, plant: Plant, offsets) -> None:
+    logd["t"][j] = t
+    logd["leader_pose"][j] = lp
+    logd["leader_vel"][j] = lv
+    logd["pose"][j] = pose
+    logd["vel"][j] = vel
+    logd["est_pose"][j] = stack.estimator.pose
+    logd["est_vel"][j] = stack.estimator.vel
+    logd["cmd"][j] = stack.cmd
+    logd["dcmd"][j] = stack.dcmd
+    logd["tau"][j] = stack.tau
+    logd["tau_raw"][j] = stack.tau_raw
+    logd["c_hat"][j] = stack.c_hat
+    logd["c_true"][j] = plant.c_true()
+    logd["z_hat"][j] = stack.learner.z_hat
+    logd["vs"][j] = stack.vs
+    logd["tracking_error"][j] = stack.err
+    logd["formation_error"][j] = np.linalg.norm(pose[:, :2] - (lp[None, :2] - offsets), axis=1)
+    logd["estimation_error"][j] = np.linalg.norm(stack.estimator.pose[:, :2] - lp[None, :2], axis=1)
+    logd["saturated"][j] = stack.saturated
+
+
+_GUARDS = (
+    # channel, column (None = all), limit attribute, what
+    ("pose", slice(0, 2), "position", "position"),
+    ("est_pose", slice(0, 2), "position", "leader-pose estimate"),
+    ("vel", slice(0, 1), "speed", "speed υ"),
+    ("cmd", slice(0, 1), "speed", "commanded speed υ_cmd"),
+    ("est_vel", slice(0, 1), "speed", "leader-speed estimate υ_ir"),
+    ("tau_raw", slice(0, 2), "torque", "commanded wheel torque"),
+)
+
+
+def _guard(logd, j: int, t: float, k: int, lim) -> Diverged | None:
+    """Check sample ``j`` for NaN/inf and magnitudes beyond ``lim``; return a diagnosis or None."""
+    for name in ("pose", "vel", "est_pose", "est_vel", "cmd", "tau_raw", "c_hat", "vs"):
+        row = logd[name][j]
+        bad = ~np.isfinite(row)
+        if bad.any():
+            i = int(np.flatnonzero(bad.reshape(row.shape[0], -1).any(axis=1))[0])
+            return Diverged(f"follower {i + 1}: signal '{name}' is not finite ({row[i]}) at t = {t:.4f} s", step=k, time=t)
+    for name, cols, attr, what in _GUARDS:
+        mag = np.abs(logd[name][j][:, cols]).max(axis=1)
+        limit = getattr(lim, attr)
+        over = np.flatnonzero(mag > limit)
+        if over.size:
+            i = int(over[0])
+            return Diverged(
+                f"follower {i + 1}: {what} |{name}| = {mag[i]:.3g} exceeds limits.{attr} = {limit:g} at t = {t:.4f} s",
+                step=k, time=t)
+    return None
+
+
+def _versions() -> dict[str, str]:
+    out = {"bioform_mj": __version__, "numpy": np.__version__, "python": platform.python_version()}
+    try:
+        import mujoco
+
+        out["mujoco"] = mujoco.__version__
+    except ImportError:  # pragma: no cover - mujoco is a dependency
+        out["mujoco"] = "not installed"
+    return out

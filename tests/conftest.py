@@ -1,0 +1,24 @@
+"""Shared fixtures: the paper scenario's Table I on the ideal plant is run once per session."""
+from __future__ import annotations
+
+import os
+
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+
+@pytest.fixture(scope="session")
+def table1_ideal(tmp_path_factory):
+    """``bioform table1 paper --plant ideal`` through the CLI; returns (out_dir, table dict, logs)."""
+    import json
+
+    import numpy as np
+
+    from bioform_mj.cli import main
+
+    out = tmp_path_factory.mktemp("table1_ideal")
+    code = main(["table1", "paper", "--plant", "ideal", "--out", str(out), "--quiet"])
+    assert code == 0
+    table = json.loads((out / "table1.json").read_text())
+    return out, table
