@@ -57,6 +57,18 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("model", help="shipped robot name or path to an MJCF file")
     ident.add_argument("--out", type=Path, help="write the result as JSON to this file")
 
+    sw = sub.add_parser("sweep", help="many runs: methods x varied keys x seeds, on a process pool or Ray")
+    _scenario_args(sw)
+    sw.add_argument("--seeds", type=int, default=1, help="seeds per configuration, 0..K-1 (default 1)")
+    sw.add_argument("--methods", default="bioinspired-learning",
+                    help="comma-separated methods, or 'all' (default: bioinspired-learning)")
+    sw.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...",
+                    help="vary a scenario key over values (repeatable; ';' separates array values)")
+    sw.add_argument("--backend", choices=("local", "ray"), default="local")
+    sw.add_argument("--workers", type=int, help="parallel workers (default: CPU count)")
+    sw.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray)")
+    sw.add_argument("--out", type=Path, required=True, help="sweep directory (rerunning resumes it)")
+
     sub.add_parser("presets", help="list the shipped scenario presets")
     return parser
 
@@ -75,6 +87,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. `bioform ... | head`
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - silence the flush at exit
+        return EXIT_OK
+    except Exception as exc:  # noqa: BLE001 - a bug: one line, full traceback on request
+        if os.environ.get("BIOFORM_DEBUG"):
+            raise
+        print(f"error: internal error {type(exc).__name__}: {exc} (set BIOFORM_DEBUG=1 for a traceback)", file=sys.stderr)
+        return EXIT_OTHER
 
 
 def _dispatch(args: argparse.Namespace) -> int:
@@ -85,6 +105,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         return EXIT_OK
     if args.command == "identify":
         return _identify(args)
+    if args.command == "sweep":
+        return _sweep(args)
     sc = _load(args)
     if args.command == "run":
         return _run(args, sc)
@@ -193,6 +215,30 @@ def _table1(args: argparse.Namespace, sc) -> int:
     if diverged:
         print(f"error: simulation diverged for {', '.join(diverged)}: {results[diverged[0]].diverged}", file=sys.stderr)
         return EXIT_DIVERGED
+    return EXIT_OK
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from .sweep import expand, sweep
+
+    methods = list(METHODS) if args.methods == "all" else [m.strip() for m in args.methods.split(",") if m.strip()]
+    for m in methods:
+        if m not in METHODS:
+            raise InputError(f"--methods: unknown method '{m}' (expected one of: {', '.join(METHODS)}, or all)")
+    if args.workers is not None and args.workers < 1:
+        raise InputError(f"--workers must be >= 1, got {args.workers}")
+    overrides = list(args.overrides)
+    if args.duration is not None:
+        overrides.append(f"sim.duration={args.duration!r}")
+    specs = expand(args.scenario, args.seeds, methods, args.vary, overrides, plant=args.plant,
+                   seed0=args.seed or 0)
+    out = _prepare_out(args.out, "sweep")
+    res = sweep(specs, out, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
+                progress=_progress(not args.quiet, "sweep"))
+    if not args.quiet:
+        print(f"{len(specs)} runs ({res['ran']} run now, {res['skipped']} already done)")
+        print((out / "stats.md").read_text())
+        print(f"outputs in {out}/ (runs.csv, stats.json, stats.md)")
     return EXIT_OK
 
 
