@@ -125,14 +125,21 @@ def _load(args: argparse.Namespace):
 
 
 def _prepare_out(out: Path | None, default: str) -> Path:
-    """Create the output directory (after validation, so bad input writes nothing)."""
+    """Check that the output directory can be created or written, without creating it yet.
+
+    Nothing is written before the run has validated its input and built its plant,
+    so bad input leaves no directory behind; call ``.mkdir`` just before writing.
+    """
     path = Path(out) if out is not None else Path("runs") / default
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"output directory '{path}' cannot be created: {exc.strerror}") from None
-    if not path.is_dir() or not os.access(path, os.W_OK | os.X_OK):
-        raise InputError(f"output directory '{path}' is not a writable directory")
+    probe = path
+    while not probe.exists():
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if path.exists() and not path.is_dir():
+        raise InputError(f"output directory '{path}' exists and is not a directory")
+    if not probe.is_dir() or not os.access(probe, os.W_OK | os.X_OK):
+        raise InputError(f"output directory '{path}' cannot be created: '{probe}' is not a writable directory")
     return path
 
 
@@ -162,6 +169,7 @@ def _run(args: argparse.Namespace, sc) -> int:
     out = _prepare_out(args.out, f"{sc.name}-{sc.plant.kind}-{sc.method}")
     observers: list[Any] = []
     result = simulate(sc, observers=observers, progress=_progress(not args.quiet, f"{sc.name} {sc.method}"))
+    out.mkdir(parents=True, exist_ok=True)
     write_npz(out / "log.npz", result.log)
     if sc.plant.kind == "mujoco":
         write_text(out / "scene.xml", result.plant.model_xml())
@@ -201,6 +209,7 @@ def _table1(args: argparse.Namespace, sc) -> int:
             print(f"  {m}: done in {res.summary['wall_time_s']:.1f} s", file=sys.stderr)
 
     table = run_table1(sc, on_result=keep)
+    out.mkdir(parents=True, exist_ok=True)
     if args.figures:
         from .outputs.figures import table1_figures
 
@@ -233,6 +242,7 @@ def _sweep(args: argparse.Namespace) -> int:
     specs = expand(args.scenario, args.seeds, methods, args.vary, overrides, plant=args.plant,
                    seed0=args.seed or 0)
     out = _prepare_out(args.out, "sweep")
+    out.mkdir(parents=True, exist_ok=True)
     res = sweep(specs, out, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
                 progress=_progress(not args.quiet, "sweep"))
     if not args.quiet:

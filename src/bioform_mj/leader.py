@@ -71,7 +71,8 @@ class Trajectory:
     def min_speed(self, duration: float, samples_per_s: int = 200) -> float:
         """Smallest ``υ_r`` over ``[0, duration]`` (m/s); heading is undefined where it is 0."""
         t = np.linspace(0.0, duration, max(2, int(duration * samples_per_s) + 1))
-        _, vel, _ = self.states(t)
+        with np.errstate(divide="ignore", invalid="ignore"):  # a stopping leader gives 0/0 in ω
+            _, vel, _ = self.states(t)
         return float(np.min(vel[:, 0]))
 
 

@@ -498,6 +498,11 @@ def validate(sc: Scenario) -> None:
     _positive("plant.inertia", pc.inertia)
     if len(pc.robots) not in (1, n):
         raise ScenarioError("plant.robots", f"expected 1 or {n} robot models, got {len(pc.robots)}")
+    if pc.kind == "mujoco":
+        from .robots import resolve_robot
+
+        for r in pc.robots:
+            resolve_robot(r)  # raises InputError naming an unknown robot or a missing file
 
     d = sc.disturbance
     for key in ("bias", "amp", "freq", "phase"):
@@ -511,9 +516,9 @@ def validate(sc: Scenario) -> None:
         key = f"events[{i}]"
         if ev.kind not in EVENT_KINDS:
             raise ScenarioError(f"{key}.kind", f"unknown event '{ev.kind}' (expected one of: {', '.join(EVENT_KINDS)})")
-        if not 0 <= ev.time <= s.duration:
-            raise ScenarioError(f"{key}.time", f"must lie in [0, sim.duration = {s.duration:g}], got {ev.time:g}")
         if not 1 <= ev.follower <= n:
             raise ScenarioError(f"{key}.follower", f"must be a follower id in 1..{n}, got {ev.follower}")
+        if not 0 <= ev.time <= s.duration:
+            raise ScenarioError(f"{key}.time", f"must lie in [0, sim.duration = {s.duration:g}], got {ev.time:g}")
         _positive(f"{key}.mass", ev.mass, strict=False)
         _positive(f"{key}.inertia", ev.inertia, strict=False)

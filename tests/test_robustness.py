@@ -1,0 +1,153 @@
+"""Robustness: a battery of bad inputs (exit 2, one line, nothing written), fuzzed scenarios, SIGKILL."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from bioform_mj.cli import main
+
+# (description, scenario-file text or None, extra argv, substring the error line must contain)
+BAD = [
+    ("malformed toml", "[sim\nduration=1", [], "not valid TOML"),
+    ("unknown top-level key", "colour = 'red'", [], "'colour'"),
+    ("unknown nested key", "[kinematic]\nk7 = 1.0", [], "kinematic.k7"),
+    ("wrong type string for float", "[kinematic]\nk1 = 'two'", [], "kinematic.k1"),
+    ("wrong type table for array", "[estimator]\nkp = 3.0", [], "estimator.kp"),
+    ("nan gain", "[kinematic]\nk2 = nan", [], "kinematic.k2"),
+    ("inf gain", "[torque]\nc = [inf, 3.0]", [], "torque.c"),
+    ("zero gain", "[kinematic]\nk3 = 0.0", [], "kinematic.k3"),
+    ("negative estimator gain", "[estimator]\nkp = [15.0, -1.0, 15.0]", [], "estimator.kp"),
+    ("negative learner gain", "[learner]\nk4 = [6.0, -50.0]", [], "learner.k4"),
+    ("negative neuron A", "[kinematic]\nA = -2.0", [], "kinematic.A"),
+    ("zero duration", "[sim]\nduration = 0.0", [], "sim.duration"),
+    ("negative duration", "[sim]\nduration = -5.0", [], "sim.duration"),
+    ("physics step larger than control", "[sim]\nphysics_dt = 0.002", [], "sim.physics_dt"),
+    ("physics step not dividing control", "[sim]\ncontrol_dt = 0.001\nphysics_dt = 0.0003", [], "sim.physics_dt"),
+    ("duplicate edge", "[graph]\nedges = [[1, 2], [2, 1], [1, 3]]", [], "more than once"),
+    ("out-of-range follower in edge", "[graph]\nedges = [[1, 2], [1, 7]]", [], "outside 1..3"),
+    ("self-loop", "[graph]\nedges = [[1, 1], [1, 2], [1, 3]]", [], "self-loop"),
+    ("disconnected graph", "[graph]\nedges = [[1, 2]]", [], "follower(s) 3 cannot reach"),
+    ("no leader access", "[graph]\nleader_access = []", [], "no follower has leader access"),
+    ("duplicate leader access id", "[graph]\nleader_access = [1, 1]", [], "more than once"),
+    ("same formation slot", "[formation]\noffsets = [[3.0, 0.0], [4.0, 5.0], [3.0, 0.0]]", [], "same formation slot"),
+    ("initial poses count mismatch", "[formation]\ninitial_poses = [[0.0, 0.0, 0.0]]", [], "formation.initial_poses"),
+    ("offset with three numbers", "[formation]\noffsets = [[3.0, 0.0, 1.0], [4.0, 5.0], [4.0, -5.0]]", [], "formation.offsets[0]"),
+    ("unknown method in file", "method = 'pid'", [], "unknown method 'pid'"),
+    ("unknown plant in file", "[plant]\nkind = 'gazebo'", [], "unknown plant 'gazebo'"),
+    ("unknown trajectory", "[leader]\nkind = 'spiral'", [], "leader.kind"),
+    ("leader that stops", "[leader]\nkind = 'harmonic'\nvx = 0.0", [], "leader"),
+    ("unknown estimator init", "[estimator]\ninit = 'random'", [], "estimator.init"),
+    ("event for a missing follower", "[[events]]\ntime = 1.0\nfollower = 9\nmass = 1.0", [], "events[0].follower"),
+    ("event after the end", "[[events]]\ntime = 99.0\nfollower = 1\nmass = 1.0", [], "events[0].time"),
+    ("unknown robot model", "[plant]\nrobots = ['tank']", ["--plant", "mujoco"], "unknown robot 'tank'"),
+    ("missing model file", "[plant]\nrobots = ['/nonexistent/robot.xml']", ["--plant", "mujoco"], "/nonexistent/robot.xml"),
+    ("negative seed", "[sim]\nseed = -1", [], "sim.seed"),
+    ("bool for float", "[torque]\ntau_max = true", [], "torque.tau_max"),
+]
+
+
+@pytest.mark.parametrize("desc,text,argv,needle", BAD, ids=[b[0] for b in BAD])
+def test_bad_scenario_file(desc, text, argv, needle, tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    out = tmp_path / "out"
+    dur = [] if "duration" in text else ["--duration", "0.05"]
+    code = main(["run", str(path), *dur, "--out", str(out), *argv])
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert code == 2, err
+    assert len(lines) == 1 and lines[0].startswith("error:") and needle in lines[0], err
+    assert "Traceback" not in err
+    assert not out.exists()
+
+
+def test_battery_is_large_enough():
+    assert len({b[0] for b in BAD}) >= 25
+
+
+# ---- fuzz: any generated scenario runs or exits 2 cleanly ------------------------------------
+_num = st.one_of(st.floats(-50, 50), st.just(0.0), st.just(float("nan")), st.integers(-3, 30))
+_vec = lambda k: st.lists(_num, min_size=k - 1, max_size=k + 1)  # noqa: E731
+
+FUZZ = st.fixed_dictionaries({}, optional={
+    "kinematic": st.fixed_dictionaries({}, optional={"k1": _num, "k2": _num, "A": _num, "B": _num}),
+    "estimator": st.fixed_dictionaries({}, optional={"kp": _vec(3), "ka": _vec(2), "phi": _vec(2),
+                                                      "init": st.sampled_from(["zero", "self", "leader", "x"])}),
+    "torque": st.fixed_dictionaries({}, optional={"c": _vec(2), "phi": _num, "tau_max": _num}),
+    "learner": st.fixed_dictionaries({}, optional={"k4": _vec(2), "k5": _vec(2), "c_hat0_scale": _vec(2)}),
+    "graph": st.fixed_dictionaries({}, optional={
+        "kind": st.sampled_from(["explicit", "chain", "ring", "star", "complete", "mesh"]),
+        "edges": st.lists(st.lists(st.integers(0, 4), min_size=2, max_size=2), max_size=4),
+        "leader_access": st.lists(st.integers(0, 4), max_size=3)}),
+    "sim": st.fixed_dictionaries({}, optional={"control_dt": st.sampled_from([0.001, 0.002, -0.001, 0.0]),
+                                                "physics_dt": st.sampled_from([0.001, 0.0005, 0.003])}),
+    "leader": st.fixed_dictionaries({}, optional={"kind": st.sampled_from(["paper", "line", "circle", "figure8", "x"]),
+                                                   "speed": _num, "radius": _num}),
+})
+
+
+def _toml(d, prefix=""):
+    out = []
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.append(f"[{k}]")
+            for kk, vv in v.items():
+                out.append(f"{kk} = {_val(vv)}")
+    return "\n".join(out) + "\n"
+
+
+def _val(v):
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, float) and np.isnan(v):
+        return "nan"
+    if isinstance(v, list):
+        return "[" + ", ".join(_val(x) for x in v) + "]"
+    return repr(v)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(FUZZ)
+def test_fuzzed_scenarios_run_or_fail_cleanly(tmp_path, capsys, data):
+    text = _toml(data)
+    tomllib.loads(text)  # the generator itself writes valid TOML
+    path = tmp_path / "fuzz.toml"
+    path.write_text(text)
+    out = tmp_path / "o"
+    code = main(["run", str(path), "--duration", "0.02", "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code in (0, 2, 3), err
+    assert "Traceback" not in err
+    if code == 2:
+        assert err.startswith("error:") and err.count("\n") == 1
+    else:
+        assert json.loads((out / "summary.json").read_text())["steps"] > 0
+
+
+def test_sigkill_leaves_no_partial_file(tmp_path):
+    """Kill runs at several moments; any file present is complete (temporary names are hidden)."""
+    for delay in (0.8, 1.6, 2.4):
+        out = tmp_path / f"k{delay}"
+        proc = subprocess.Popen([sys.executable, "-m", "bioform_mj.cli", "run", "--duration", "3", "--quiet",
+                                 "--out", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(delay)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        for f in out.glob("*") if out.exists() else []:
+            if f.name.startswith("."):
+                continue  # a temporary file killed mid-write; never the real name
+            if f.suffix == ".json":
+                json.loads(f.read_text())
+            elif f.suffix == ".npz":
+                with np.load(f) as z:
+                    assert "pose" in z.files
