@@ -1,0 +1,310 @@
+"""MuJoCo plant: ``n`` MJCF differential-drive robots on a floor, driven by wheel torques (SPEC §8).
+
+Reads each robot's pose ``(x, y, θ)`` of the axle midpoint and its body-frame ``(υ, ω)``
+from the free joint's ``qpos``/``qvel``; writes the wheel motor ``ctrl`` (N·m). The
+disturbance accelerations ``d = (d1, d2)`` of eq. 34 enter as ``xfrc_applied`` on each
+chassis: a force ``M_eff d1`` along the heading and a yaw torque ``I_eff d2``, with
+``M_eff = 1/(a_eff r)``, ``I_eff = l/(b_eff r)``, so that they are accelerations as in the
+paper. Torque and disturbance are held over one control period (zero-order hold at ``t``).
+
+Every id and address is looked up once, by name, at construction; ``observe``/``step`` are
+vectorised over robots through the precomputed index arrays.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from bioform_mj.errors import Diverged
+from bioform_mj.identify import RobotParams, robot_parameters
+from bioform_mj.scene import (
+    MARKER_Z,
+    ROBOT,
+    build_scene,
+    compile_scene,
+    follower_prefix,
+    payload_inertial,
+)
+
+log = logging.getLogger(__name__)
+
+__all__ = ["MujocoPlant"]
+
+_WARNING_NAMES = {int(w): w.name for w in mujoco.mjtWarning.__members__.values() if w.name != "mjNWARNING"}
+
+
+# (w, x, y, z) ⊗ (w, x, y, z) flattened (16) → H = [R00, R10, 0, R20, R21, R22] of a unit
+# quaternion: (R00, R10) is the heading direction, R2· the third row of the rotation
+_QUAT_TO_H = np.zeros((16, 6))
+for _col, _terms in enumerate((
+    {(0, 0): 1, (1, 1): 1, (2, 2): -1, (3, 3): -1},  # R00 = w² + x² − y² − z²
+    {(0, 3): 2, (1, 2): 2},  # R10 = 2(wz + xy)
+    {},  # 0: pairs with the vertical velocity
+    {(1, 3): 2, (0, 2): -2},  # R20 = 2(xz − wy)
+    {(2, 3): 2, (0, 1): 2},  # R21 = 2(yz + wx)
+    {(0, 0): 1, (1, 1): -1, (2, 2): -1, (3, 3): 1},  # R22 = w² − x² − y² + z²
+)):
+    for (_a, _b), _coef in _terms.items():
+        _QUAT_TO_H[4 * _a + _b, _col] = _coef
+# (qvel_free * H) (n, 6) → [υ·|h|, ω]: sums of the linear (0:3) and angular (3:6) parts
+_SUM_LIN_ANG = np.zeros((6, 2))
+_SUM_LIN_ANG[:3, 0] = 1.0
+_SUM_LIN_ANG[3:, 1] = 1.0
+
+
+class MujocoPlant:
+    """A team of ``n`` MuJoCo robots behind the :class:`~bioform_mj.plants.base.Plant` interface.
+
+    Parameters
+    ----------
+    robot_files : sequence of str or Path, length n
+        One MJCF file (or shipped model name) per follower; robots may differ.
+    initial_poses : array (n, 3)
+        ``(x m, y m, θ rad)`` of each follower's axle midpoint.
+    control_dt : float
+        Control period, s.
+    physics_dt : float
+        MuJoCo time step, s; ``control_dt`` must be an integer multiple of it.
+    disturbance : callable ``t -> (n, 2)`` or None
+        Disturbance accelerations ``[d1 m/s², d2 rad/s²]`` at time ``t`` s (None: zero).
+    slots : bool
+        Show mocap markers for the formation slots.
+    floor_friction : float, optional
+        Override of the floor's sliding friction (see :func:`bioform_mj.scene.build_scene`).
+
+    Attributes
+    ----------
+    model, data, spec : the compiled ``MjModel``, its ``MjData`` and the scene ``MjSpec``.
+    n_substeps : int, physics steps per control period.
+    tau_max : array (n,), torque limit of each follower's motors, N·m.
+    params : list of :class:`~bioform_mj.identify.RobotParams`, current per follower.
+    """
+
+    def __init__(
+        self,
+        robot_files: Sequence[str | Path],
+        initial_poses: np.ndarray,
+        control_dt: float,
+        physics_dt: float,
+        disturbance: Callable[[float], np.ndarray] | None = None,
+        *,
+        slots: bool = True,
+        floor_friction: float | None = None,
+    ) -> None:
+        if not (physics_dt > 0 and control_dt > 0):
+            raise ValueError(f"control_dt and physics_dt must be > 0, got {control_dt}, {physics_dt}")
+        if physics_dt > control_dt * (1 + 1e-9):
+            raise ValueError(f"physics_dt {physics_dt} s exceeds control_dt {control_dt} s")
+        n_sub = round(control_dt / physics_dt)
+        if abs(n_sub * physics_dt - control_dt) > 1e-9 * control_dt:
+            raise ValueError(
+                f"control_dt {control_dt} s is not an integer multiple of physics_dt {physics_dt} s"
+            )
+        self.n = len(robot_files)
+        self.control_dt = float(control_dt)
+        self.physics_dt = float(physics_dt)
+        self.n_substeps = int(n_sub)
+        self.robot_files = [str(f) for f in robot_files]
+        self.initial_poses = np.array(initial_poses, dtype=float)
+        self.disturbance = disturbance  # None: no disturbance (skips the xfrc_applied work)
+
+        self.spec = build_scene(
+            robot_files, self.initial_poses, slots=slots, floor_friction=floor_friction,
+            timestep=physics_dt,
+        )
+        self.model, self.data = compile_scene(self.spec)
+        m = self.model
+        n = self.n
+        prefixes = [follower_prefix(i) for i in range(n)]
+
+        # ids and addresses, once, by name
+        self._base = np.array([m.body(p + ROBOT.base).id for p in prefixes])
+        roots = m.body_jntadr[self._base]  # the base's free joint (checked by the scene)
+        qadr = m.jnt_qposadr[roots]
+        dadr = m.jnt_dofadr[roots]
+        self._q7 = qadr[:, None] + np.arange(7)  # (n, 7) into qpos: x y z, quaternion w x y z
+        self._v6 = dadr[:, None] + np.arange(6)  # (n, 6) into qvel: world-frame linear, body-frame angular
+        self._ctrl = np.array([[m.actuator(p + a).id for a in ROBOT.motors] for p in prefixes])  # (n, 2)
+        self._mocap_leader = int(m.body_mocapid[m.body("leader").id])
+        self._mocap_centroid = int(m.body_mocapid[m.body("centroid").id])
+        self._mocap_slots = (
+            np.array([m.body_mocapid[m.body(f"slot_{i + 1}").id] for i in range(n)]) if slots else None
+        )
+        self._heading = (self._base[:, None], np.array([0, 3]))  # (R00, R10) of each base in xmat
+        self._xfrc = np.zeros((n, 6))  # buffer: applied force/torque per base
+        self._mean_w = np.full(n, 1.0 / n)  # formation centroid weights
+        self._warnings = [self.data.warning[i] for i in range(int(mujoco.mjtWarning.mjNWARNING))]
+
+        # nominal inertial properties of each base, restored by reset()
+        b = self._base
+        self._nominal = (
+            m.body_mass[b].copy(), m.body_ipos[b].copy(), m.body_iquat[b].copy(), m.body_inertia[b].copy()
+        )
+        self._payload_added = False
+        self._prefixes = prefixes
+        self._update_params()
+        self.tau_max = np.array([min(p.tau_max) for p in self.params])
+        for i, p in enumerate(self.params):
+            limit = p.traction_limit * self._wheel_friction(i)
+            if max(p.tau_max) > limit:
+                log.warning(
+                    "follower %d: torque limit %.3g N·m exceeds the traction limit μ m g r/2 = %.3g N·m: "
+                    "the wheels can skid", i + 1, max(p.tau_max), limit,
+                )
+        self._step_count = 0
+        self.reset()
+
+    # ------------------------------------------------------------------ parameters
+    def _update_params(self) -> None:
+        scratch = mujoco.MjData(self.model)  # kinematics at qpos0, shared by all robots
+        mujoco.mj_kinematics(self.model, scratch)
+        self.params: list[RobotParams] = [robot_parameters(self.model, p, scratch) for p in self._prefixes]
+        self._c = np.array([[p.a_eff, p.b_eff] for p in self.params])
+        self._m_eff = np.array([p.mass_eff for p in self.params])  # kg
+        self._i_eff = np.array([p.inertia_eff for p in self.params])  # kg·m²
+
+    def _wheel_friction(self, i: int) -> float:
+        """Sliding friction μ of follower ``i``'s wheel–floor contact (MuJoCo's priority/max rule)."""
+        m = self.model
+        floor = m.geom("floor").id
+        wheel = m.geom(self._prefixes[i] + ROBOT.wheel_geoms[0]).id
+        if m.geom_priority[floor] != m.geom_priority[wheel]:
+            winner = floor if m.geom_priority[floor] > m.geom_priority[wheel] else wheel
+            return float(m.geom_friction[winner, 0])
+        return float(max(m.geom_friction[floor, 0], m.geom_friction[wheel, 0]))
+
+    def _set_const(self) -> None:
+        """Recompute the model's derived constants (subtree masses …), keeping the state."""
+        m, d = self.model, self.data
+        spec = int(mujoco.mjtState.mjSTATE_INTEGRATION)
+        state = np.empty(mujoco.mj_stateSize(m, spec))
+        mujoco.mj_getState(m, d, state, spec)
+        mujoco.mj_setConst(m, d)
+        mujoco.mj_setState(m, d, state, spec)
+        mujoco.mj_forward(m, d)
+
+    # ------------------------------------------------------------------ Plant interface
+    def reset(self) -> None:
+        """Robots at their initial poses, at rest, nominal masses (payloads removed); time 0."""
+        m, d = self.model, self.data
+        if self._payload_added:
+            b = self._base
+            m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b] = (
+                x.copy() for x in self._nominal
+            )
+            mujoco.mj_setConst(m, d)
+            self._payload_added = False
+            self._update_params()
+        mujoco.mj_resetData(m, d)  # qpos0 = initial poses; mocap bodies at their spec positions
+        mujoco.mj_forward(m, d)
+        self._step_count = 0
+
+    def _frames(self) -> tuple[np.ndarray, np.ndarray]:
+        """Gathered free-joint ``qpos`` (n, 7) and ``H`` (n, 6) = ``[hx, hy, 0, R20, R21, R22]``.
+
+        ``(hx, hy) = (R00, R10)`` is the heading direction (unnormalised if the robot pitches
+        or rolls), ``R2·`` the third row of the rotation, from one matmul on the quaternion's
+        outer product: few numpy calls, since their overhead dominates at small n.
+        """
+        q = self.data.qpos[self._q7]
+        quat = q[:, 3:]
+        outer = (quat[:, :, None] * quat[:, None, :]).reshape(self.n, 16)
+        return q, outer @ _QUAT_TO_H
+
+    def observe(self) -> tuple[np.ndarray, np.ndarray]:
+        """Pose (n, 3) ``[x, y, θ ∈ (−π, π]]`` and body-frame velocity (n, 2) ``[υ, ω]``."""
+        q, h = self._frames()
+        hx, hy = h[:, 0], h[:, 1]
+        pose = np.empty((self.n, 3))
+        pose[:, :2] = q[:, :2]
+        pose[:, 2] = np.arctan2(hy + 0.0, hx)  # + 0.0 turns −0.0 into +0.0: θ ≠ −π
+        # υ = world velocity of the axle midpoint · unit heading; ω = R[2, :] · ω_body
+        vel = (self.data.qvel[self._v6] * h) @ _SUM_LIN_ANG
+        vel[:, 0] /= np.hypot(hx, hy)
+        return pose, vel
+
+    def step(self, tau: np.ndarray, t: float) -> None:
+        """Apply wheel torques (n, 2) ``[τ_L, τ_R]`` N·m and ``d(t)`` for one control period."""
+        m, d = self.model, self.data
+        tau = np.asarray(tau, dtype=float)
+        if tau.shape != (self.n, 2):
+            raise ValueError(f"tau must have shape ({self.n}, 2), got {tau.shape}")
+        d.ctrl[self._ctrl] = tau
+        if self.disturbance is not None:
+            dist = np.asarray(self.disturbance(t), dtype=float)
+            # M_eff d1 along the heading, I_eff d2 about z: accelerations as in eq. 34 (SPEC §8).
+            # Heading (R00, R10) from xmat of the last forward pass (at most one physics step
+            # old; held over the control period like d itself); |(R00, R10)| = cos(pitch) ≈ 1.
+            xfrc = self._xfrc
+            xfrc[:, :2] = d.xmat[self._heading] * (self._m_eff * dist[:, 0])[:, None]
+            xfrc[:, 5] = self._i_eff * dist[:, 1]
+            d.xfrc_applied[self._base] = xfrc
+        # cameras follow the formation centroid (from the last forward pass)
+        np.matmul(self._mean_w, d.xpos[self._base, :2], out=d.mocap_pos[self._mocap_centroid, :2])
+        mujoco.mj_step(m, d, self.n_substeps)
+        self._step_count += 1
+        for i, w_ in enumerate(self._warnings):
+            if w_.number:
+                self._raise_warning(i, w_)
+
+    def _raise_warning(self, kind: int, stat) -> None:
+        name = _WARNING_NAMES.get(kind, str(kind))
+        where = ""
+        if kind in (int(mujoco.mjtWarning.mjWARN_BADQACC), int(mujoco.mjtWarning.mjWARN_BADQVEL)):
+            dof = int(stat.lastinfo)
+            if 0 <= dof < self.model.nv:
+                where = f" at joint '{self.model.joint(self.model.dof_jntid[dof]).name}'"
+        raise Diverged(
+            f"MuJoCo warning {name}{where} after control step {self._step_count} "
+            f"(sim time {self._step_count * self.control_dt:.4f} s); the simulation is unstable or "
+            "overflowed (MuJoCo resets the state on bad values)",
+            step=self._step_count,
+            time=self._step_count * self.control_dt,
+        )
+
+    def c_true(self) -> np.ndarray:
+        """Ground truth ``[a_eff, b_eff]`` (n, 2) from the compiled model (SPEC §8)."""
+        return self._c.copy()
+
+    def set_leader(self, pose: np.ndarray, slots: np.ndarray | None) -> None:
+        """Move the ghost leader to ``pose`` (3,) ``[x, y, θ]`` and the slot markers to ``slots`` (n, 2)."""
+        d = self.data
+        d.mocap_pos[self._mocap_leader] = (pose[0], pose[1], MARKER_Z)
+        d.mocap_quat[self._mocap_leader] = (np.cos(pose[2] / 2), 0.0, 0.0, np.sin(pose[2] / 2))
+        if slots is not None and self._mocap_slots is not None:
+            d.mocap_pos[self._mocap_slots, :2] = slots
+
+    def add_payload(self, i: int, mass_kg: float, inertia_kgm2: float) -> None:
+        """Follower ``i`` (0-based) picks up a payload at its axle midpoint; ``c_true`` updates.
+
+        ``inertia_kgm2`` is the payload's yaw inertia about its own centre (kg·m²). The
+        compiled model is changed in place (mass, centre of mass, inertia of the base,
+        then ``mj_setConst``); the state is kept. ``reset()`` removes payloads.
+        """
+        if not 0 <= i < self.n:
+            raise IndexError(f"follower index {i} out of range 0..{self.n - 1}")
+        m = self.model
+        b = self._base[i]
+        mass, ipos, iquat, inertia = payload_inertial(
+            m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b],
+            float(mass_kg), float(inertia_kgm2),
+        )
+        m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b] = mass, ipos, iquat, inertia
+        self._set_const()
+        self._payload_added = True
+        self._update_params()
+
+    # ------------------------------------------------------------------ extras
+    @property
+    def time(self) -> float:
+        """MuJoCo's simulation time, s."""
+        return float(self.data.time)
+
+    def model_xml(self) -> str:
+        """The composed scene as MJCF (as built: payloads added later are not in it)."""
+        return self.spec.to_xml()
