@@ -129,10 +129,12 @@ class TorqueCfg:
 @dataclass(frozen=True)
 class LearnerCfg:
     """Eq. 37 gains; ``ĉ(0) = c_hat0_scale ⊙ c_true`` per follower; projection onto
-    ``[c_bounds[0], c_bounds[1]] × ĉ(0)``."""
+    ``[c_bounds[0], c_bounds[1]] × ĉ(0)``. ``kd > 0`` (not in the paper) also estimates the
+    disturbance ``d̂' = −kd S`` so that ``d`` does not bias ``ĉ``."""
 
     k4: tuple[float, ...] = (6.0, 50.0)
     k5: tuple[float, ...] = (25.0, 50.0)
+    kd: tuple[float, ...] = (0.0, 0.0)
     c_hat0_scale: tuple[float, ...] = (0.5, 0.5)
     c_bounds: tuple[float, ...] = (0.1, 10.0)
 
@@ -488,6 +490,8 @@ def validate(sc: Scenario) -> None:
     for key in ("k4", "k5", "c_hat0_scale", "c_bounds"):
         _length(f"learner.{key}", getattr(lc, key), 2)
         _positive(f"learner.{key}", getattr(lc, key))
+    _length("learner.kd", lc.kd, 2)
+    _positive("learner.kd", lc.kd, strict=False)
     if not lc.c_bounds[0] <= 1.0 <= lc.c_bounds[1]:
         raise ScenarioError("learner.c_bounds", f"must satisfy lower <= 1 <= upper (factors of c_hat0), got {list(lc.c_bounds)}")
 

@@ -10,6 +10,12 @@ For a frozen ``τ`` this is linear in ``(ẑ, E, ĉ)``; explicit Euler diverges 
 ``|τ|`` exceeds about ``sqrt(k5/(k4 dt))`` (SPEC §8), so each step is one
 backward-Euler solve, done in closed form (A-stable for any ``τ`` and ``dt``).
 ``ĉ`` is then projected onto ``[c_min, c_max]`` because it divides in eqs. 38–39.
+
+Extension (not in the paper, off by default): with ``kd > 0`` the learner also
+estimates the disturbance, ``ẑ' = τ ĉ + d̂ − k4 e − k5 S``, ``d̂' = −kd S``; the
+Lyapunov function ``S²/2 + c̃²/(2 k4) + d̃²/(2 kd)`` still decreases as ``−k5 S²``
+for a constant ``d``. Without it a constant ``d`` and a slowly varying ``τ`` leave
+``ĉ`` biased by about ``E[τ d]/E[τ²]`` (SPEC §8).
 """
 from __future__ import annotations
 
@@ -25,9 +31,11 @@ class Learner:
     c_min, c_max : (n, 2) projection bounds of ``ĉ``.
     """
 
-    def __init__(self, n: int, k4, k5, c_min: np.ndarray, c_max: np.ndarray) -> None:
+    def __init__(self, n: int, k4, k5, c_min: np.ndarray, c_max: np.ndarray, kd=(0.0, 0.0)) -> None:
         self.k4 = np.asarray(k4, dtype=float)
         self.k5 = np.asarray(k5, dtype=float)
+        self.kd = np.asarray(kd, dtype=float)
+        self.d_hat = np.zeros((n, 2))
         self.c_min = np.broadcast_to(np.asarray(c_min, dtype=float), (n, 2)).copy()
         self.c_max = np.broadcast_to(np.asarray(c_max, dtype=float), (n, 2)).copy()
         self.z_hat = np.zeros((n, 2))
@@ -39,6 +47,7 @@ class Learner:
         self.z_hat[:] = z0
         self.e_int[:] = 0.0
         self.c_hat[:] = np.clip(c_hat0, self.c_min, self.c_max)
+        self.d_hat[:] = 0.0
 
     def step(self, tau: np.ndarray, z: np.ndarray, dt: float) -> None:
         """One backward-Euler step of eq. 37 over ``dt`` (s).
@@ -47,15 +56,19 @@ class Learner:
         ``z`` (n, 2) the velocities measured at its end (so the implicit step uses
         them consistently).
         """
-        h, k4, k5 = dt, self.k4, self.k5
-        z_hat0, e0, c0 = self.z_hat, self.e_int, self.c_hat
-        # Eliminate E = R + h ẑ and ĉ = P − Q ẑ, then solve for ẑ.
-        R = e0 - h * z
+        h, k4, k5, kd = dt, self.k4, self.k5, self.kd
+        # Unknowns at the step end: ẑ, E = R + h ẑ, S = S0 + S1 ẑ, ĉ = P − Q ẑ, d̂ = Pd − Qd ẑ.
+        R = self.e_int - h * z
+        S0 = k4 * R - z
+        S1 = 1.0 + h * k4
         hk4t = h * k4 * tau
-        P = c0 + hk4t * (z - k4 * e0 + h * k4 * z)
-        Q = hk4t * (1.0 + h * k4)
-        den = 1.0 + h * (k4 + k5) + h * h * k4 * k5 + h * tau * Q
-        z_new = (z_hat0 + h * (k4 + k5) * z - h * k4 * k5 * R + h * tau * P) / den
+        P = self.c_hat - hk4t * S0
+        Q = hk4t * S1
+        Pd = self.d_hat - h * kd * S0
+        Qd = h * kd * S1
+        den = 1.0 + h * k4 + h * k5 * S1 + h * tau * Q + h * Qd
+        z_new = (self.z_hat + h * (tau * P + Pd + k4 * z - k5 * S0)) / den
         self.z_hat = z_new
         self.e_int = R + h * z_new
         self.c_hat = np.clip(P - Q * z_new, self.c_min, self.c_max)  # projection onto the bounds
+        self.d_hat = Pd - Qd * z_new

@@ -44,7 +44,7 @@ class StackParams:
     law: 'bioinspired' or 'backstepping'; learning: run eq. 37 or keep ``ĉ = ĉ(0)``.
     c_gain (2,) [m/s², rad/s²]: ``c_a, c_b``; torque_phi: boundary layer of eqs. 38–39 (0 = sgn).
     tau_max (n,) [N·m]: wheel torque limit; deriv_wn [rad/s]: command-derivative filter.
-    k4, k5 (2,) [1/s]: learner gains; c_hat0, c_min, c_max (n,2): initial estimate and bounds.
+    k4, k5 (2,) [1/s]: learner gains; kd (2,): disturbance-estimate gain (0 = the paper); c_hat0, c_min, c_max (n,2): initial estimate and bounds.
     dt [s]: control period.
     """
 
@@ -67,6 +67,7 @@ class StackParams:
     deriv_wn: float
     k4: np.ndarray
     k5: np.ndarray
+    kd: np.ndarray
     c_hat0: np.ndarray
     c_min: np.ndarray
     c_max: np.ndarray
@@ -86,7 +87,7 @@ class ControlStack:
         self.n = n
         self.p = p
         self.estimator = Estimator(graph, p.kp, p.ka, p.kb, p.est_phi)
-        self.learner = Learner(n, p.k4, p.k5, p.c_min, p.c_max)
+        self.learner = Learner(n, p.k4, p.k5, p.c_min, p.c_max, p.kd)
         self.dfilter = DerivativeFilter(n, p.deriv_wn, p.dt)
         self.vs = np.zeros(n)
         self.err = np.zeros((n, 3))
