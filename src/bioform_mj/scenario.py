@@ -28,6 +28,7 @@ LEADER_KINDS = ("paper", "line", "circle", "figure8", "harmonic")
 GRAPH_KINDS = ("explicit", "chain", "ring", "star", "complete")
 ESTIMATOR_INITS = ("zero", "self", "leader")
 EVENT_KINDS = ("payload",)
+SATURATIONS = ("steer-priority", "wheel")
 
 
 @dataclass(frozen=True)
@@ -118,12 +119,14 @@ class KinematicCfg:
 @dataclass(frozen=True)
 class TorqueCfg:
     """Eqs. 38–39: ``c = (c_a, c_b)``, boundary layer ``phi`` (0 = sgn), wheel limit ``tau_max`` (N·m),
-    command-derivative filter natural frequency ``deriv_wn`` (rad/s)."""
+    command-derivative filter natural frequency ``deriv_wn`` (rad/s). ``saturation``: ``wheel``
+    clips each wheel alone; ``steer-priority`` keeps the differential torque and clips the common mode."""
 
     c: tuple[float, ...] = (3.0, 3.0)
     phi: float = 0.0
     tau_max: float = 20.0
     deriv_wn: float = 50.0
+    saturation: str = "steer-priority"
 
 
 @dataclass(frozen=True)
@@ -485,6 +488,8 @@ def validate(sc: Scenario) -> None:
     _positive("torque.phi", t.phi, strict=False)
     _positive("torque.tau_max", t.tau_max)
     _positive("torque.deriv_wn", t.deriv_wn)
+    if t.saturation not in SATURATIONS:
+        raise ScenarioError("torque.saturation", f"unknown '{t.saturation}' (expected one of: {', '.join(SATURATIONS)})")
 
     lc = sc.learner
     for key in ("k4", "k5", "c_hat0_scale", "c_bounds"):

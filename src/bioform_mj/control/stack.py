@@ -21,7 +21,7 @@ from ..graph import Graph
 from .estimator import Estimator
 from .kinematic import shunting_step, tracking_error, velocity_command
 from .learning import Learner
-from .torque import DerivativeFilter, sliding_mode_torques, wheel_to_body
+from .torque import DerivativeFilter, saturate, sliding_mode_torques, wheel_to_body
 
 METHODS = ("backstepping", "bioinspired", "backstepping-learning", "bioinspired-learning")
 
@@ -43,7 +43,7 @@ class StackParams:
     k1 [1/s], k2 [1/m²·…], k3 [1/m]: kinematic gains of eq. 31; A, B, D: neuron (eq. 32).
     law: 'bioinspired' or 'backstepping'; learning: run eq. 37 or keep ``ĉ = ĉ(0)``.
     c_gain (2,) [m/s², rad/s²]: ``c_a, c_b``; torque_phi: boundary layer of eqs. 38–39 (0 = sgn).
-    tau_max (n,) [N·m]: wheel torque limit; deriv_wn [rad/s]: command-derivative filter.
+    tau_max (n,) [N·m]: wheel torque limit; steer_priority: keep τ_b when saturating; deriv_wn [rad/s]: command-derivative filter.
     k4, k5 (2,) [1/s]: learner gains; kd (2,): disturbance-estimate gain (0 = the paper); c_hat0, c_min, c_max (n,2): initial estimate and bounds.
     dt [s]: control period.
     """
@@ -64,6 +64,7 @@ class StackParams:
     c_gain: np.ndarray
     torque_phi: float
     tau_max: np.ndarray
+    steer_priority: bool
     deriv_wn: float
     k4: np.ndarray
     k5: np.ndarray
@@ -129,7 +130,7 @@ class ControlStack:
         self.dcmd = self.dfilter.step(self.cmd)
         self.tau_raw = sliding_mode_torques(self.cmd, self.dcmd, vel, self.learner.c_hat, p.c_gain, p.torque_phi)
         self.saturated = np.any(np.abs(self.tau_raw) > self._lim, axis=1)
-        self.tau = np.clip(self.tau_raw, -self._lim, self._lim)
+        self.tau = saturate(self.tau_raw, self._lim, p.steer_priority)
         self.tau_body = wheel_to_body(self.tau)
         est.step(leader_pose, leader_vel, p.dt)
         if p.law == "bioinspired":

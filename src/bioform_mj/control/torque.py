@@ -66,6 +66,27 @@ def sliding_mode_torques(
     return tau
 
 
+def saturate(tau: np.ndarray, lim: np.ndarray, steer_priority: bool) -> np.ndarray:
+    """Clip wheel torques ``[τ_L, τ_R]`` (n, 2) to ``±lim`` (n, 1) N·m.
+
+    ``steer_priority=False`` clips each wheel on its own, which also clips the
+    differential torque: a large common-mode command (the ``c_a sgn`` term at a
+    poor ``â``) then leaves no torque to turn with. ``steer_priority=True`` keeps
+    ``τ_b = τ_R − τ_L`` (clipped to ``±2 lim``) and gives ``τ_a`` what remains,
+    ``|τ_a| ≤ 2 lim − |τ_b|``; both results lie within the wheel limits.
+    """
+    if not steer_priority:
+        return np.clip(tau, -lim, lim)
+    lim1 = lim[:, 0]
+    tb = np.clip(tau[:, 1] - tau[:, 0], -2.0 * lim1, 2.0 * lim1)
+    room = 2.0 * lim1 - np.abs(tb)
+    ta = np.clip(tau[:, 0] + tau[:, 1], -room, room)
+    out = np.empty_like(tau)
+    out[:, 0] = 0.5 * (ta - tb)
+    out[:, 1] = 0.5 * (ta + tb)
+    return out
+
+
 def wheel_to_body(tau: np.ndarray) -> np.ndarray:
     """``[τ_L, τ_R]`` → ``[τ_a, τ_b] = [τ_L + τ_R, τ_R − τ_L]`` (n, 2), SPEC §5."""
     out = np.empty_like(tau)
