@@ -7,27 +7,56 @@ which run over graph edges (``O(edges)``) and the leader-access vector.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..graph import Graph
 from .common import sat_sign, wrap
 
 
-def consensus_error(graph: Graph, est: np.ndarray, ref: np.ndarray, angle_cols: tuple[int, ...] = ()) -> np.ndarray:
+@dataclass
+class Comm:
+    """What each follower received this control step, for faulty communication.
+
+    The default (no ``Comm``) is the paper's perfect network: follower ``i`` reads
+    its neighbours' current estimates and, if ``a_ir = 1``, the leader's current state.
+
+    edge_w : (m,) weight of each graph edge ``src ← dst`` this step (1 = link up, 0 = link down).
+    leader_w : (n,) weight of each follower's leader link (multiplies ``a_ir``).
+    recv_pose : (m, 3) or None: the pose estimate of ``dst`` as ``src`` last received it
+        (delayed or held after packet loss); None = ``dst``'s current estimate.
+    recv_vel : (m, 2) or None: the same for the velocity estimates.
+    """
+
+    edge_w: np.ndarray
+    leader_w: np.ndarray
+    recv_pose: np.ndarray | None = None
+    recv_vel: np.ndarray | None = None
+
+
+def consensus_error(graph: Graph, est: np.ndarray, ref: np.ndarray, angle_cols: tuple[int, ...] = (),
+                    recv: np.ndarray | None = None, edge_w: np.ndarray | None = None,
+                    leader_w: np.ndarray | None = None) -> np.ndarray:
     """``Σ_j a_ij (X_i − X_j) + a_ir (X_i − X_r)`` for every follower.
 
     Parameters
     ----------
     est : (n, k) follower estimates ``X_i``.
-    ref : (k,) the leader's true value ``X_r`` (only read through ``a_ir``).
+    ref : (k,) the leader's value ``X_r`` (only read through ``a_ir``).
     angle_cols : columns holding angles; their differences are wrapped to (−π, π].
+    recv : (m, k) ``X_j`` as received over each edge (default: ``est[dst]``).
+    edge_w : (m,) per-edge weights (default 1); leader_w : (n,) leader-link weights (default 1).
     """
-    diff = est[graph.src] - est[graph.dst]
+    diff = est[graph.src] - (est[graph.dst] if recv is None else recv)
     lead = est - ref
     for c in angle_cols:
         diff[:, c] = wrap(diff[:, c])
         lead[:, c] = wrap(lead[:, c])
-    out = graph.leader_access[:, None] * lead
+    if edge_w is not None:
+        diff *= edge_w[:, None]
+    acc = graph.leader_access if leader_w is None else graph.leader_access * leader_w
+    out = acc[:, None] * lead
     for c in range(est.shape[1]):
         out[:, c] += np.bincount(graph.src, weights=diff[:, c], minlength=graph.n)
     return out
@@ -60,10 +89,17 @@ class Estimator:
         self.pose[:, 2] = wrap(self.pose[:, 2])
         self.vel[:] = 0.0
 
-    def step(self, leader_pose: np.ndarray, leader_vel: np.ndarray, dt: float) -> None:
-        """Advance estimates by ``dt`` (s) with explicit Euler, reading the leader at the step start."""
-        p_err = consensus_error(self.graph, self.pose, leader_pose, angle_cols=(2,))  # P̃_i
-        v_err = consensus_error(self.graph, self.vel, leader_vel)  # [e_iυ, e_iω]
+    def step(self, leader_pose: np.ndarray, leader_vel: np.ndarray, dt: float, comm: Comm | None = None) -> None:
+        """Advance estimates by ``dt`` (s) with explicit Euler, reading the leader at the step start.
+
+        ``comm`` (optional) describes a faulty network this step (see :class:`Comm`).
+        """
+        if comm is None:
+            p_err = consensus_error(self.graph, self.pose, leader_pose, angle_cols=(2,))  # P̃_i
+            v_err = consensus_error(self.graph, self.vel, leader_vel)  # [e_iυ, e_iω]
+        else:
+            p_err = consensus_error(self.graph, self.pose, leader_pose, (2,), comm.recv_pose, comm.edge_w, comm.leader_w)
+            v_err = consensus_error(self.graph, self.vel, leader_vel, (), comm.recv_vel, comm.edge_w, comm.leader_w)
         th = self.pose[:, 2]
         v = self.vel[:, 0]
         dpose = np.empty_like(self.pose)

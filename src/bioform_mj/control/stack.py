@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..graph import Graph
-from .estimator import Estimator
+from .estimator import Comm, Estimator
 from .kinematic import shunting_step, tracking_error, velocity_command
 from .learning import Learner
 from .torque import DerivativeFilter, saturate, sliding_mode_torques, wheel_to_body
@@ -106,6 +106,10 @@ class ControlStack:
         """Current ``[â, b̂]`` (n, 2)."""
         return self.learner.c_hat
 
+    def set_tau_max(self, tau_max: np.ndarray) -> None:
+        """Change the wheel torque limits (n,) N·m in place (e.g. an actuator fault mid-run)."""
+        self._lim[:, 0] = tau_max
+
     def reset(self, est_pose0: np.ndarray, vel0: np.ndarray) -> None:
         """Initial estimates ``P_ir(0)`` (n,3), measured velocities (n,2); ``V_s(0) = 0``."""
         self.estimator.reset(est_pose0)
@@ -115,8 +119,13 @@ class ControlStack:
         self.tau_body[:] = 0.0
         self._first = True
 
-    def step(self, leader_pose: np.ndarray, leader_vel: np.ndarray, pose: np.ndarray, vel: np.ndarray) -> np.ndarray:
-        """Torques ``[τ_L, τ_R]`` (n, 2, N·m) to hold over the next control period."""
+    def step(self, leader_pose: np.ndarray, leader_vel: np.ndarray, pose: np.ndarray, vel: np.ndarray,
+             comm: Comm | None = None) -> np.ndarray:
+        """Torques ``[τ_L, τ_R]`` (n, 2, N·m) to hold over the next control period.
+
+        ``comm`` (optional): link weights and received neighbour estimates of a faulty
+        network for this step's estimator update; None = the paper's perfect network.
+        """
         p = self.p
         if p.learning and not self._first:
             self.learner.step(self.tau_body, vel, p.dt)
@@ -132,7 +141,7 @@ class ControlStack:
         self.saturated = np.any(np.abs(self.tau_raw) > self._lim, axis=1)
         self.tau = saturate(self.tau_raw, self._lim, p.steer_priority)
         self.tau_body = wheel_to_body(self.tau)
-        est.step(leader_pose, leader_vel, p.dt)
+        est.step(leader_pose, leader_vel, p.dt, comm)
         if p.law == "bioinspired":
             self.vs = shunting_step(self.vs, err[:, 0], p.A, p.B, p.D, p.dt)
         return self.tau
