@@ -30,6 +30,7 @@ test-fast: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) scripts/bench_control_step.py
+	$(VENV)/bin/bioform bench --json runs/bench.json
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

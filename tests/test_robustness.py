@@ -54,6 +54,18 @@ BAD = [
     ("negative seed", "[sim]\nseed = -1", [], "sim.seed"),
     ("bool for float", "[torque]\ntau_max = true", [], "torque.tau_max"),
 ]
+BAD += [  # faults (issue 6)
+    ("failing link not in the graph", "[faults]\nlink_fail = [[2, 3, 1.0, 2.0]]", [], "faults.link_fail[0]"),
+    ("link recovers before it fails", "[faults]\nlink_fail = [[1, 2, 2.0, 1.0]]", [], "t_fail < t_recover"),
+    ("packet loss of one", "[faults]\npacket_loss = 1.0", [], "faults.packet_loss"),
+    ("negative delay", "[faults]\ndelay = -0.1", [], "faults.delay"),
+    ("pose noise with two numbers", "[faults]\nnoise_pose = [0.1, 0.1]", [], "faults.noise_pose"),
+    ("actuator fault for a missing follower", "[faults]\nactuator = [[5, 1.0, 2.0, 0.5]]", [], "faults.actuator[0]"),
+    ("push without duration", "[faults]\npush = [[1, 1.0, 0.0, 10.0, 0.0, 0.0]]", [], "faults.push[0]"),
+    ("friction patch on the ideal plant", "[faults]\nfriction_patch = [0.0, 0.0, 1.0, 1.0, 0.1]", [],
+     "faults.friction_patch"),
+    ("unknown fault key", "[faults]\nmeteor = 1.0", [], "faults.meteor"),
+]
 
 
 @pytest.mark.parametrize("desc,text,argv,needle", BAD, ids=[b[0] for b in BAD])

@@ -44,9 +44,22 @@ def build_parser() -> argparse.ArgumentParser:
     _scenario_args(run)
     run.add_argument("--method", choices=METHODS, help="control method (default: the scenario's)")
     run.add_argument("--out", type=Path, help="output directory (default: runs/<scenario>-<plant>-<method>)")
-    run.add_argument("--video", action="store_true", help="write video.mp4 (MuJoCo plant)")
+    run.add_argument("--video", action="store_true",
+                     help="write video.mp4 (off-screen MuJoCo rendering, MUJOCO_GL=egl by default; "
+                          "the ideal plant is shown in a composed scene)")
     run.add_argument("--rrd", action="store_true", help="write run.rrd (rerun recording)")
     run.add_argument("--figures", action="store_true", help="write figures/*.png")
+    run.add_argument("--rerun-spawn", action="store_true", help="stream the run live to a rerun viewer spawned for it")
+    run.add_argument("--rerun-connect", metavar="ADDR",
+                     help="stream the run live to a running rerun viewer "
+                          "(rerun+http://HOST:PORT/proxy, HOST:PORT or PORT)")
+    vid = run.add_argument_group("video options (with --video)")
+    vid.add_argument("--width", type=int, help="video width in pixels, even (default 960)")
+    vid.add_argument("--height", type=int, help="video height in pixels, even (default 540)")
+    vid.add_argument("--fps", type=float, help="frames per second of simulated time (default 30)")
+    vid.add_argument("--camera", choices=("auto", "track", "top"),
+                     help="auto: free camera keeping leader, followers and slots in view (default); "
+                          "track/top: the scene's cameras on the formation centroid")
 
     t1 = sub.add_parser("table1", help="run the four methods and write table1.json / table1.md")
     _scenario_args(t1)
@@ -70,11 +83,21 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--out", type=Path, required=True, help="sweep directory (rerunning resumes it)")
 
     sub.add_parser("presets", help="list the shipped scenario presets")
+
+    bn = sub.add_parser("bench", help="closed-loop throughput against bare mj_step, n = 3, 16, 64, 256")
+    bn.add_argument("--sizes", default="3,16,64,256", help="comma-separated team sizes (of 3, 16, 64, 256)")
+    bn.add_argument("--duration", type=float, help="simulated seconds per case (default: per size)")
+    bn.add_argument("--reps", type=int, default=2, help="repetitions; the best time counts (default 2)")
+    bn.add_argument("--numpy", action="store_true", help="also time the numpy reference stack")
+    bn.add_argument("--json", type=Path, default=Path("runs/bench.json"), help="output JSON (default runs/bench.json)")
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``bioform`` console script; returns the exit code."""
+    from .outputs.gl import configure_gl_env
+
+    configure_gl_env()  # MUJOCO_GL=egl unless the user chose; before anything imports mujoco
     try:
         args = build_parser().parse_args(argv)
         return _dispatch(args)
@@ -107,6 +130,10 @@ def _dispatch(args: argparse.Namespace) -> int:
         return _identify(args)
     if args.command == "sweep":
         return _sweep(args)
+    if args.command == "bench":
+        from . import bench
+
+        return bench.run(args)
     sc = _load(args)
     if args.command == "run":
         return _run(args, sc)
@@ -163,27 +190,92 @@ def _progress(enabled: bool, label: str):
 
 
 def _run(args: argparse.Namespace, sc) -> int:
+    import time
+
     from .outputs.files import write_json, write_npz, write_text
+    from .outputs.progress import progress_bar
     from .sim import simulate
 
+    video_opts = None
+    if args.video:
+        from .outputs.video import VideoOptions
+
+        video_opts = VideoOptions(**{k: v for k, v in (("width", args.width), ("height", args.height),
+                                                       ("fps", args.fps), ("camera", args.camera)) if v is not None})
+        video_opts.validate()
+    else:
+        given = [f"--{k}" for k in ("width", "height", "fps", "camera") if getattr(args, k) is not None]
+        if given:
+            raise InputError(f"{', '.join(given)} only apply to --video")
+    live_url = None
+    if args.rerun_spawn and args.rerun_connect:
+        raise InputError("--rerun-spawn and --rerun-connect exclude each other")
+    if args.rerun_connect:
+        from .outputs.rerun_log import connect_url
+
+        live_url = connect_url(args.rerun_connect)
+    if args.rerun_spawn:
+        from .outputs.rerun_log import check_can_spawn
+
+        check_can_spawn()
     out = _prepare_out(args.out, f"{sc.name}-{sc.plant.kind}-{sc.method}")
-    observers: list[Any] = []
-    result = simulate(sc, observers=observers, progress=_progress(not args.quiet, f"{sc.name} {sc.method}"))
+
+    observers: list[Any] = []  # none unless asked: the loop then has no per-step observer cost
+    capture = live = None
+    if video_opts is not None:
+        from .outputs.video import FrameCapture
+
+        capture = FrameCapture(video_opts.fps)  # snapshots only; frames are rendered after the loop
+        observers.append(capture)
+    if args.rerun_spawn or live_url:
+        from .outputs.rerun_log import RerunLive
+
+        live = RerunLive(spawn=args.rerun_spawn, url=live_url, period=max(sc.sim.log_dt, 1 / 30))
+        observers.append(live)
+    with progress_bar(f"{sc.name} {sc.method}", not args.quiet) as cb:
+        result = simulate(sc, observers=observers, progress=cb)
     out.mkdir(parents=True, exist_ok=True)
     write_npz(out / "log.npz", result.log)
     if sc.plant.kind == "mujoco":
         write_text(out / "scene.xml", result.plant.model_xml())
+    write_json(out / "summary.json", result.summary)
+
+    problems: list[str] = []  # what was asked for and could not be made: error lines, exit 2
+    notes: list[str] = []
+    if args.rrd:
+        from .outputs.rerun_log import write_rrd
+
+        t0 = time.perf_counter()
+        write_rrd(result, out / "run.rrd")
+        notes.append(f"run.rrd written in {time.perf_counter() - t0:.1f} s")
     if args.figures:
         from .outputs.figures import run_figures
 
-        run_figures(result.log, result.summary, out / "figures")
-    write_json(out / "summary.json", result.summary)
+        t0 = time.perf_counter()
+        figs = run_figures(result, out / "figures")
+        notes.append(f"figures/: {len(figs)} PNGs in {time.perf_counter() - t0:.1f} s")
+    if capture is not None:
+        from .outputs.video import render_video
+
+        try:
+            with progress_bar("video.mp4", not args.quiet, unit="frame") as cb:
+                info = render_video(capture, result, out / "video.mp4", video_opts, progress=cb)
+            notes.append(f"video.mp4: {info.frames} frames {info.width}x{info.height} at {info.fps:g} fps "
+                         f"rendered in {info.render_s:.1f} s ({info.gl_renderer or 'OpenGL'})")
+        except InputError as exc:  # no OpenGL context (GLUnavailable), or nothing to show
+            problems.append(str(exc))
+    if live is not None and live.error:
+        problems.append(live.error)
+    for p in problems:
+        print(f"error: {p}", file=sys.stderr)
     if result.diverged is not None:
         print(f"error: simulation diverged: {result.diverged}; log kept in {out}", file=sys.stderr)
         return EXIT_DIVERGED
     if not args.quiet:
+        for note in notes:
+            print(note)
         _print_summary(result.summary, out)
-    return EXIT_OK
+    return EXIT_INPUT if problems else EXIT_OK
 
 
 def _print_summary(summary: dict[str, Any], out: Path) -> None:
@@ -198,25 +290,34 @@ def _print_summary(summary: dict[str, Any], out: Path) -> None:
 
 def _table1(args: argparse.Namespace, sc) -> int:
     from .outputs.files import write_json, write_text
+    from .outputs.progress import progress_bar
     from .table1 import markdown, run_table1
 
     out = _prepare_out(args.out, f"table1-{sc.plant.kind}")
     results = {}
 
-    def keep(m, res):
-        results[m] = res
-        if not args.quiet:
-            print(f"  {m}: done in {res.summary['wall_time_s']:.1f} s", file=sys.stderr)
+    with progress_bar(f"table1 {sc.name} {sc.plant.kind}", not args.quiet) as cb:
+        def keep(m, res):
+            results[m] = res
+            if not args.quiet:
+                line = f"  {m}: done in {res.summary['wall_time_s']:.1f} s"
+                cb.write(line) if cb is not None else print(line, file=sys.stderr)
 
-    table = run_table1(sc, on_result=keep)
+        def per_method(m: str):  # one bar over the four runs: method i fills [i/4, (i+1)/4]
+            i, total = list(METHODS).index(m), len(METHODS)
+            return lambda k, n: cb(i * n + k, total * n)
+
+        table = run_table1(sc, on_result=keep, progress=None if cb is None else per_method)
     out.mkdir(parents=True, exist_ok=True)
-    if args.figures:
-        from .outputs.figures import table1_figures
-
-        table1_figures({m: r.log for m, r in results.items()}, table, out / "figures")
     write_json(out / "table1.json", table)
     md = markdown(table)
     write_text(out / "table1.md", md)
+    if args.figures:
+        from .outputs.figures import table1_figures
+
+        figs = table1_figures(results, out / "figures")
+        if not args.quiet:
+            print(f"figures/: {len(figs)} PNGs")
     diverged = [m for m, r in results.items() if r.diverged is not None]
     if not args.quiet:
         print(md)

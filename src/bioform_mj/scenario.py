@@ -186,6 +186,47 @@ class LimitsCfg:
 
 
 @dataclass(frozen=True)
+class FaultsCfg:
+    """Injected faults (issue 6, ``faults.py``); the defaults inject none. Follower ids 1-based, times in s.
+
+    ``link_fail = [[i, j, t_fail, t_recover], …]``: the undirected link i–j is down in
+    ``[t_fail, t_recover)`` (``j = 0``: follower i's leader link); the follower knows (weight 0).
+    ``packet_loss``: probability that a packet on any link is lost in a control step (the
+    receiver keeps the last value it got). ``delay``: every link delivers values this old
+    (s, rounded to control steps). ``noise_pose = [σx m, σy m, σθ rad]``, ``noise_vel = [συ m/s, σω rad/s]``:
+    Gaussian noise on what the controller measures. ``window = [t0, t1]``: when packet loss, delay
+    and noise act (empty: the whole run). ``actuator = [[i, t_start, t_end, scale], …]``: follower i's
+    wheel torque limit times ``scale`` ∈ [0, 1]; ``actuator_known``: the controller is told (its own
+    limit changes too) or not (only the motors weaken). ``push = [[i, t, duration, fx, fy, tz], …]``:
+    external force (N, world frame) and yaw torque (N·m) on follower i's chassis. ``friction_patch =
+    [x0, y0, x1, y1, mu]``: a floor rectangle with sliding friction ``mu`` (MuJoCo only).
+    """
+
+    link_fail: tuple[tuple[float, ...], ...] = ()
+    packet_loss: float = 0.0
+    delay: float = 0.0
+    noise_pose: tuple[float, ...] = (0.0, 0.0, 0.0)
+    noise_vel: tuple[float, ...] = (0.0, 0.0)
+    window: tuple[float, ...] = ()
+    actuator: tuple[tuple[float, ...], ...] = ()
+    actuator_known: bool = True
+    push: tuple[tuple[float, ...], ...] = ()
+    friction_patch: tuple[float, ...] = ()
+
+    @property
+    def configured(self) -> bool:
+        """True when any fault is injected."""
+        return self.per_step or bool(self.friction_patch)
+
+    @property
+    def per_step(self) -> bool:
+        """True when a fault acts in the loop (it then builds :class:`~bioform_mj.faults.Faults`);
+        a friction patch is part of the MuJoCo scene and needs nothing per step."""
+        return bool(self.link_fail or self.packet_loss > 0 or self.delay > 0 or any(self.noise_pose)
+                    or any(self.noise_vel) or self.actuator or self.push)
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A complete, validated run description."""
 
@@ -204,6 +245,7 @@ class Scenario:
     disturbance: DisturbanceCfg = field(default_factory=DisturbanceCfg)
     limits: LimitsCfg = field(default_factory=LimitsCfg)
     events: tuple[EventCfg, ...] = ()
+    faults: FaultsCfg = field(default_factory=FaultsCfg)
 
     @property
     def n(self) -> int:
@@ -531,3 +573,76 @@ def validate(sc: Scenario) -> None:
             raise ScenarioError(f"{key}.time", f"must lie in [0, sim.duration = {s.duration:g}], got {ev.time:g}")
         _positive(f"{key}.mass", ev.mass, strict=False)
         _positive(f"{key}.inertia", ev.inertia, strict=False)
+
+    _validate_faults(sc)
+
+
+def _follower_id(key: str, value: float, n: int, lo: int = 1, what: str = "a follower id") -> int:
+    if not float(value).is_integer() or not lo <= value <= n:
+        raise ScenarioError(key, f"must be {what} in {lo}..{n}, got {value:g}")
+    return int(value)
+
+
+def _rows(key: str, rows: tuple, width: int, fields: str) -> None:
+    for r, row in enumerate(rows):
+        if len(row) != width:
+            raise ScenarioError(f"{key}[{r}]", f"expected [{fields}], got {list(row)}")
+
+
+def _validate_faults(sc: Scenario) -> None:
+    """Faults: ids in range, links that exist, times >= 0 and ordered, probabilities in [0, 1)."""
+    fc, n, dt = sc.faults, sc.n, sc.sim.control_dt
+    graph = sc.build_graph()
+    edges = {tuple(e) for e in (graph.edges + 1).tolist()}
+    _rows("faults.link_fail", fc.link_fail, 4, "i, j, t_fail, t_recover")
+    for r, (i, j, t0, t1) in enumerate(fc.link_fail):
+        key = f"faults.link_fail[{r}]"
+        i = _follower_id(key, i, n)
+        j = _follower_id(key, j, n, lo=0, what="0 (the leader) or a follower id")
+        if j == 0 and not graph.leader_access[i - 1] > 0:
+            raise ScenarioError(key, f"follower {i} has no leader link to fail (leader access: "
+                                     f"{(np.flatnonzero(graph.leader_access) + 1).tolist()})")
+        if j > 0 and (min(i, j), max(i, j)) not in edges:
+            raise ScenarioError(key, f"there is no link {i}-{j} in the graph (links: "
+                                     f"{', '.join(f'{a}-{b}' for a, b in sorted(edges))})")
+        if not 0 <= t0 < t1:
+            raise ScenarioError(key, f"needs 0 <= t_fail < t_recover, got t_fail = {t0:g}, t_recover = {t1:g}")
+    if not 0 <= fc.packet_loss < 1:
+        raise ScenarioError("faults.packet_loss", f"must be a probability in [0, 1), got {fc.packet_loss:g}")
+    _positive("faults.delay", fc.delay, strict=False)
+    if fc.delay > 0 and round(fc.delay / dt) < 1:
+        raise ScenarioError("faults.delay", f"must be 0 or at least one control period ({dt:g} s), got {fc.delay:g}")
+    if fc.delay > sc.sim.duration:
+        raise ScenarioError("faults.delay", f"must not exceed sim.duration = {sc.sim.duration:g} s, got {fc.delay:g}")
+    _length("faults.noise_pose", fc.noise_pose, 3)
+    _positive("faults.noise_pose", fc.noise_pose, strict=False)
+    _length("faults.noise_vel", fc.noise_vel, 2)
+    _positive("faults.noise_vel", fc.noise_vel, strict=False)
+    if fc.window:
+        if len(fc.window) != 2 or not 0 <= fc.window[0] < fc.window[1]:
+            raise ScenarioError("faults.window", f"expected [t_start, t_end] with 0 <= t_start < t_end, or [], "
+                                                 f"got {list(fc.window)}")
+    _rows("faults.actuator", fc.actuator, 4, "i, t_start, t_end, scale")
+    for r, (i, t0, t1, scale) in enumerate(fc.actuator):
+        key = f"faults.actuator[{r}]"
+        _follower_id(key, i, n)
+        if not 0 <= t0 < t1:
+            raise ScenarioError(key, f"needs 0 <= t_start < t_end, got {t0:g}, {t1:g}")
+        if not 0 <= scale <= 1:
+            raise ScenarioError(key, f"scale of the torque limit must lie in [0, 1], got {scale:g}")
+    _rows("faults.push", fc.push, 6, "i, t, duration, fx, fy, tz")
+    for r, (i, t0, dur, *_w) in enumerate(fc.push):
+        key = f"faults.push[{r}]"
+        _follower_id(key, i, n)
+        if not t0 >= 0:
+            raise ScenarioError(key, f"time must be >= 0, got {t0:g}")
+        if not dur > 0:
+            raise ScenarioError(key, f"duration must be > 0, got {dur:g}")
+    if fc.friction_patch:
+        p = fc.friction_patch
+        if len(p) != 5 or not (p[0] < p[2] and p[1] < p[3]) or p[4] < 0:
+            raise ScenarioError("faults.friction_patch", f"expected [x0, y0, x1, y1, mu] with x0 < x1, y0 < y1, "
+                                                         f"mu >= 0, or [], got {list(p)}")
+        if sc.plant.kind != "mujoco":
+            raise ScenarioError("faults.friction_patch", "needs plant.kind = 'mujoco': the ideal plant's wheels "
+                                                         "cannot slip")

@@ -42,11 +42,15 @@ __all__ = [
     "yaw_quat",
     "payload_inertial",
     "MARKER_Z",
+    "PATCH_THICKNESS",
 ]
 
 
 #: height of the leader ghost / slot markers above the floor, m
 MARKER_Z = 0.002
+#: thickness of a low-friction floor patch, m: far above a wheel's contact penetration (~1 µm),
+#: below the paper robot's caster clearance (0.5 mm), so only the wheels touch it
+PATCH_THICKNESS = 0.0002
 
 
 class ModelError(InputError):
@@ -248,6 +252,7 @@ def build_scene(
     floor_friction: float | None = None,
     payloads: Sequence[tuple[float, float]] | None = None,
     timestep: float | None = None,
+    friction_patch: Sequence[float] | None = None,
 ) -> mujoco.MjSpec:
     """Compose the scene of ``n`` followers; returns an uncompiled ``MjSpec``.
 
@@ -266,6 +271,10 @@ def build_scene(
         Extra payload on each follower's base at its axle midpoint.
     timestep : float, optional
         Physics step, s. Default: the first robot file's ``<option timestep>``.
+    friction_patch : (x0, y0, x1, y1, mu), optional
+        A low-friction floor rectangle (m; sliding friction ``mu``): a box geom
+        ``friction_patch`` :data:`PATCH_THICKNESS` thick on the floor whose friction decides
+        the wheel contacts (priority 1; casters keep theirs with priority 2).
 
     The scene's ``<option>`` (integrator, solver, …) is the first robot file's.
     """
@@ -306,6 +315,17 @@ def build_scene(
             raise ValueError(f"floor_friction must be >= 0, got {floor_friction}")
         floor.friction = [floor_friction, 0.005, 0.0001]
         floor.priority = 1  # floor decides the wheel contacts; casters use priority 2
+    if friction_patch is not None:  # faults: wheel slip on a low-friction rectangle of floor
+        x0, y0, x1, y1, mu = (float(v) for v in friction_patch)
+        if not (x0 < x1 and y0 < y1 and mu >= 0):
+            raise ValueError(f"friction_patch must be (x0, y0, x1, y1, mu) with x0 < x1, y0 < y1, mu >= 0, "
+                             f"got {tuple(friction_patch)}")
+        h = PATCH_THICKNESS / 2
+        world.add_geom(
+            name="friction_patch", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[(x0 + x1) / 2, (y0 + y1) / 2, h],
+            size=[(x1 - x0) / 2, (y1 - y0) / 2, h], friction=[mu, 0.005, 0.0001], priority=1, condim=3,
+            rgba=[0.55, 0.8, 1.0, 0.45],
+        )
     world.add_light(
         name="sun", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, pos=[0, 0, 10],
         dir=[-0.3, 0.2, -1.0], diffuse=[0.8, 0.8, 0.8], specular=[0.2, 0.2, 0.2],

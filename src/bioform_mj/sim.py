@@ -92,7 +92,8 @@ def make_plant(sc: Scenario) -> Plant:
     from .robots import resolve_robot
 
     robots = list(sc.plant.robots) * (sc.n if len(sc.plant.robots) == 1 else 1)
-    return MujocoPlant([resolve_robot(r) for r in robots], poses, sc.sim.control_dt, sc.sim.physics_dt, dist)
+    return MujocoPlant([resolve_robot(r) for r in robots], poses, sc.sim.control_dt, sc.sim.physics_dt, dist,
+                       friction_patch=sc.faults.friction_patch or None)  # faults: low-friction floor patch
 
 
 def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = None) -> StackParams:
@@ -130,8 +131,19 @@ def initial_estimates(sc: Scenario, pose0: np.ndarray, leader_pose0: np.ndarray)
     return est
 
 
-def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = None) -> RunResult:
+ENGINES = ("auto", "fused", "numpy")
+
+
+def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = None,
+             engine: str = "auto", record_inputs: tuple[np.ndarray, np.ndarray] | None = None) -> RunResult:
     """Run the closed loop of ``sc`` and return its log and summary.
+
+    ``engine``: ``numpy`` runs the reference :class:`ControlStack` with a Python loop;
+    ``fused`` the numba-compiled stack, and the whole loop compiled in chunks between
+    log samples where the plant allows (see ``fastloop``); ``auto`` = fused if numba
+    imports. Both compute the same equations; results agree to rounding.
+    ``record_inputs`` (compiled MuJoCo loop only): arrays ``(N, nu)``, ``(N, n, 6)`` that
+    receive each step's ``ctrl`` and chassis ``xfrc_applied``, for a bare replay.
 
     A divergence (NaN/inf or a state beyond ``sc.limits``) stops the loop; the
     result then holds the log up to that point and ``diverged`` says why.
@@ -140,7 +152,13 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     graph = sc.build_graph()
     traj = sc.build_leader()
     plant = make_plant(sc)
-    stack = ControlStack(graph, stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None)))
+    if engine not in ENGINES:
+        raise ValueError(f"unknown engine '{engine}' (expected one of: {', '.join(ENGINES)})")
+    from .control.fused import HAVE_NUMBA, FusedControlStack
+
+    fused = engine == "fused" or (engine == "auto" and HAVE_NUMBA)
+    stack_cls = FusedControlStack if fused else ControlStack
+    stack = stack_cls(graph, stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None)))
     n = sc.n
     dt = sc.sim.control_dt
     N = max(1, int(round(sc.sim.duration / dt)))
@@ -152,6 +170,11 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     plant.reset()
     pose, vel = plant.observe()
     stack.reset(initial_estimates(sc, pose, L_pose[0]), vel)
+    faults = None  # fault injection (faults.py): built only when configured, else no per-step cost
+    if sc.faults.per_step:  # (a friction patch is in the MuJoCo scene: nothing per step)
+        from .faults import Faults
+
+        faults = Faults(sc, graph, stack.p.tau_max)
     K = (N - 1) // stride + 1
     shapes = {"n": n, "3": 3, "2": 2}
     logd: dict[str, np.ndarray] = {"t": np.zeros(K), "leader_pose": np.zeros((K, 3)), "leader_vel": np.zeros((K, 2))}
@@ -174,13 +197,24 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     k_done = 0
     j = 0
     wall0 = time.perf_counter()
-    for k in range(N):
+    from . import fastloop
+
+    fast = fused and faults is None and fastloop.supported(plant, stack)  # (and no per-step hooks)
+    if fast:
+        k_done, j, diverged, pose, vel, met = fastloop.run(
+            sc, plant, stack, L_pose, L_vel, N, stride, events, observers, state, progress, logd, _guard,
+            record_inputs)
+        vel_err_int, sat_steps, max_vcmd, peak_tau, peak_tau_raw = (met[:, c].copy() for c in range(5))
+    for k in range(0 if fast else N):
         t = k * dt
         while ev_i < len(events) and events[ev_i].time <= t + 1e-12:
             ev = events[ev_i]
             plant.add_payload(ev.follower - 1, ev.mass, ev.inertia)
             ev_i += 1
-        tau = stack.step(L_pose[k], L_vel[k], pose, vel)
+        if faults is None:
+            tau = stack.step(L_pose[k], L_vel[k], pose, vel)
+        else:  # faults: noisy sensing, faulty network, weakened motors, pushes; tau = what reaches the plant
+            tau = faults.step(k, t, stack, plant, L_pose[k], L_vel[k], pose, vel)
         cmd = stack.cmd
         vel_err_int += np.abs(cmd - vel).sum(axis=1)  # SPEC §7 metric, integrated below with dt
         sat_steps += stack.saturated
@@ -201,7 +235,11 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
                 if t >= obs_next[i] - 1e-12:
                     o.sample(state)
                     obs_next[i] += o.period
-        plant.step(tau, t)
+        try:
+            plant.step(tau, t)
+        except Diverged as e:  # e.g. a MuJoCo warning: keep the log so far
+            diverged = e
+            break
         pose, vel = plant.observe()
         k_done = k + 1
     wall = time.perf_counter() - wall0

@@ -21,11 +21,15 @@ PAPER_TABLE1: dict[str, tuple[float, float, float]] = {
 }
 
 
-def run_table1(sc: Scenario, on_result: Callable[[str, RunResult], None] | None = None) -> dict[str, Any]:
-    """Run the four methods on ``sc``; returns ``{"plant", "scenario", "methods": {METHOD: summary}}``."""
+def run_table1(sc: Scenario, on_result: Callable[[str, RunResult], None] | None = None,
+               progress: Callable[[str], Callable[[int, int], None] | None] | None = None) -> dict[str, Any]:
+    """Run the four methods on ``sc``; returns ``{"plant", "scenario", "methods": {METHOD: summary}}``.
+
+    ``progress(method)``, if given, returns the ``progress(k, N)`` callback for that run.
+    """
     out: dict[str, Any] = {"plant": sc.plant.kind, "scenario": sc.name, "methods": {}}
     for m in METHODS:
-        res = simulate(dataclasses.replace(sc, method=m))
+        res = simulate(dataclasses.replace(sc, method=m), progress=None if progress is None else progress(m))
         out["methods"][m] = res.summary
         if on_result is not None:
             on_result(m, res)

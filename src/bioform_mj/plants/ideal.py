@@ -46,6 +46,7 @@ class IdealPlant:
         self.x[:, :3] = self.initial_poses
         self.x[:, 2] = wrap(self.x[:, 2])
         self.x[:, 3:] = 0.0
+        self._push_until: np.ndarray | None = None  # pushes (faults): see push()
 
     def observe(self) -> tuple[np.ndarray, np.ndarray]:
         return self.x[:, :3].copy(), self.x[:, 3:].copy()
@@ -63,6 +64,8 @@ class IdealPlant:
 
     def step(self, tau: np.ndarray, t: float) -> None:
         acc = wheel_to_body(tau) * self._c  # diag(τ_a, τ_b) c
+        if self._push_until is not None:  # faults: an external push (push())
+            acc = acc + self._push_acc(t)
         h = self.h
         x = self.x
         for k in range(self.n_substeps):
@@ -87,3 +90,35 @@ class IdealPlant:
         self.inertia[i] += inertia_kgm2
         self._c[i, 0] *= m0 / self.mass[i]
         self._c[i, 1] *= i0 / self.inertia[i]
+
+    # ------------------------------------------------------------------ faults
+    def push(self, i: int, force_xy, torque_z: float, until_t: float) -> None:
+        """Push follower ``i`` (0-based) with a world-frame force ``force_xy`` (N) and yaw torque
+        ``torque_z`` (N·m) in every control step that starts before ``until_t`` (s).
+
+        A unicycle cannot move sideways: only the force along the heading acts, as the
+        acceleration ``F·h/m``, with ``ω̇ += τ_z/I`` (needs ``mass`` and ``inertia``). A new push on
+        the same follower replaces the old one; ``reset()`` removes all.
+        """
+        if self.mass is None or self.inertia is None:
+            raise ValueError("the ideal plant needs robot mass and inertia to be pushed")
+        if not 0 <= i < self.n:
+            raise IndexError(f"follower index {i} out of range 0..{self.n - 1}")
+        if self._push_until is None:
+            self._push_until = np.full(self.n, -np.inf)
+            self._push_wrench = np.zeros((self.n, 3))
+        self._push_wrench[i] = (force_xy[0], force_xy[1], torque_z)
+        self._push_until[i] = until_t
+
+    def _push_acc(self, t: float) -> np.ndarray:
+        """(n, 2) accelerations of the active pushes, heading held over the control period."""
+        active = self._push_until > t + 1e-12
+        if not active.any():
+            self._push_until = None
+            return np.zeros((self.n, 2))
+        w = self._push_wrench * active[:, None]
+        th = self.x[:, 2]
+        acc = np.empty((self.n, 2))
+        acc[:, 0] = (w[:, 0] * np.cos(th) + w[:, 1] * np.sin(th)) / self.mass
+        acc[:, 1] = w[:, 2] / self.inertia
+        return acc

@@ -76,6 +76,8 @@ class MujocoPlant:
         Show mocap markers for the formation slots.
     floor_friction : float, optional
         Override of the floor's sliding friction (see :func:`bioform_mj.scene.build_scene`).
+    friction_patch : (x0, y0, x1, y1, mu), optional
+        A low-friction floor rectangle (see :func:`bioform_mj.scene.build_scene`).
 
     Attributes
     ----------
@@ -95,6 +97,7 @@ class MujocoPlant:
         *,
         slots: bool = True,
         floor_friction: float | None = None,
+        friction_patch: Sequence[float] | None = None,
     ) -> None:
         if not (physics_dt > 0 and control_dt > 0):
             raise ValueError(f"control_dt and physics_dt must be > 0, got {control_dt}, {physics_dt}")
@@ -115,7 +118,7 @@ class MujocoPlant:
 
         self.spec = build_scene(
             robot_files, self.initial_poses, slots=slots, floor_friction=floor_friction,
-            timestep=physics_dt,
+            timestep=physics_dt, friction_patch=friction_patch,
         )
         self.model, self.data = compile_scene(self.spec)
         m = self.model
@@ -203,6 +206,7 @@ class MujocoPlant:
         mujoco.mj_resetData(m, d)  # qpos0 = initial poses; mocap bodies at their spec positions
         mujoco.mj_forward(m, d)
         self._step_count = 0
+        self._push_until: np.ndarray | None = None  # pushes (faults): see push()
 
     def _frames(self) -> tuple[np.ndarray, np.ndarray]:
         """Gathered free-joint ``qpos`` (n, 7) and ``H`` (n, 6) = ``[hx, hy, 0, R20, R21, R22]``.
@@ -244,6 +248,8 @@ class MujocoPlant:
             xfrc[:, :2] = d.xmat[self._heading] * (self._m_eff * dist[:, 0])[:, None]
             xfrc[:, 5] = self._i_eff * dist[:, 1]
             d.xfrc_applied[self._base] = xfrc
+        if self._push_until is not None:  # faults: an external push on some chassis (push())
+            self._apply_push(t)
         # cameras follow the formation centroid (from the last forward pass)
         np.matmul(self._mean_w, d.xpos[self._base, :2], out=d.mocap_pos[self._mocap_centroid, :2])
         mujoco.mj_step(m, d, self.n_substeps)
@@ -308,3 +314,30 @@ class MujocoPlant:
     def model_xml(self) -> str:
         """The composed scene as MJCF (as built: payloads added later are not in it)."""
         return self.spec.to_xml()
+
+    # ------------------------------------------------------------------ faults
+    def upright(self) -> np.ndarray:
+        """(n,) cosine of each chassis' tilt from upright: 1 level, 0 on its side, −1 upside down."""
+        return self._frames()[1][:, 5].copy()
+
+    def push(self, i: int, force_xy, torque_z: float, until_t: float) -> None:
+        """Push follower ``i`` (0-based): world-frame force ``force_xy`` (N) and yaw torque
+        ``torque_z`` (N·m) on its chassis (at its centre of mass, ``xfrc_applied``), added to the
+        disturbance in every control step that starts before ``until_t`` (s). A new push on the same
+        follower replaces the old one; ``reset()`` removes all."""
+        if not 0 <= i < self.n:
+            raise IndexError(f"follower index {i} out of range 0..{self.n - 1}")
+        if self._push_until is None:
+            self._push_until = np.full(self.n, -np.inf)
+            self._push_wrench = np.zeros((self.n, 6))
+        self._push_wrench[i] = (force_xy[0], force_xy[1], 0.0, 0.0, 0.0, torque_z)
+        self._push_until[i] = until_t
+
+    def _apply_push(self, t: float) -> None:
+        active = self._push_until > t + 1e-12
+        xf = self.data.xfrc_applied
+        if self.disturbance is None:
+            xf[self._base] = 0.0  # nothing else writes xfrc_applied: clear the last push
+        xf[self._base[active]] += self._push_wrench[active]
+        if not active.any():
+            self._push_until = None
