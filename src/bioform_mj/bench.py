@@ -51,7 +51,7 @@ def _bare(sc: Any, reps: int) -> float:
     steps = int(round(sc.sim.duration / sc.sim.control_dt))
     rec = (np.zeros((steps, m.nu)), np.zeros((steps, plant.n, 6)))
     simulate(sc, record_inputs=rec)
-    replay = mujoco_replay()
+    replay = mujoco_replay
     base = np.ascontiguousarray(plant._base, dtype=np.int64)
     replay(m._address, d._address, plant.n_substeps, d.ctrl, d.xfrc_applied, base, rec[0][:0], rec[1][:0])  # compile
     best = float("inf")

@@ -9,7 +9,7 @@ order (see ``stack.py``), as scalar loops compiled by numba:
   kernel call (used when a run needs a Python hook every step, e.g. injected faults);
 * :func:`run_ideal_chunk` and :func:`run_mujoco_chunk` run many control steps of the
   closed loop without returning to Python: the MuJoCo one calls ``mj_step`` of
-  ``libmujoco`` through ctypes on the very ``MjModel``/``MjData`` the Python bindings
+  ``libmujoco`` by symbol (numba ExternalFunction) on the very ``MjModel``/``MjData`` the Python bindings
   own, so the state stays shared and bit-identical to stepping from Python.
 
 Results agree with the numpy stack to rounding (the transcendental functions of numba
@@ -406,24 +406,35 @@ def _finite(pose, vel):
 
 
 # ----------------------------------------------------------------------- MuJoCo plant
-def _load_mj_step():
-    """``mj_step`` of the libmujoco the Python bindings loaded, callable from numba."""
-    import mujoco
+def _libmujoco_path() -> str | None:
+    """Path of the libmujoco shipped with the ``mujoco`` Python package (without importing it)."""
+    import importlib.util
 
-    d = os.path.dirname(mujoco.__file__)
-    names = sorted(f for f in os.listdir(d) if f.startswith("libmujoco.so") or f.startswith("libmujoco.")
-                   and f.endswith(".dylib"))
-    if not names:
+    spec = importlib.util.find_spec("mujoco")
+    if spec is None or not spec.submodule_search_locations:
         return None
-    lib = ctypes.CDLL(os.path.join(d, names[-1]))
-    fn = lib.mj_step
-    fn.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
-    fn.restype = None
-    return fn
+    d = list(spec.submodule_search_locations)[0]
+    names = sorted(f for f in os.listdir(d) if f.startswith("libmujoco.so") or
+                   (f.startswith("libmujoco.") and f.endswith(".dylib")))
+    return os.path.join(d, names[-1]) if names else None
 
 
-_MJ_STEP = None
-_MUJOCO_CHUNK = None
+# ``mj_step(const mjModel*, mjData*)`` of that library, called from compiled code by symbol
+# name (so the kernels below can be cached on disk); pointers are passed as integers, which
+# is the same calling convention on the 64-bit platforms MuJoCo supports. The Python
+# bindings load the same file, so both act on the same MjModel/MjData.
+HAVE_MJ_STEP = False
+if HAVE_NUMBA:
+    _mj_step = numba.types.ExternalFunction("mj_step", numba.types.void(numba.types.intp, numba.types.intp))
+    try:
+        import llvmlite.binding as _llvm
+
+        _lib = _libmujoco_path()
+        if _lib is not None and ctypes.sizeof(ctypes.c_void_p) == 8:
+            _llvm.load_library_permanently(_lib)
+            HAVE_MJ_STEP = True
+    except (OSError, RuntimeError, ImportError):  # pragma: no cover - the generic loop still works
+        HAVE_MJ_STEP = False
 
 
 @_njit
@@ -445,97 +456,75 @@ def mujoco_observe(qpos, qvel, q7, v6, pose, vel):
         vel[i, 1] = qvel[b + 3] * r20 + qvel[b + 4] * r21 + qvel[b + 5] * r22
 
 
-def _make_mujoco_chunk(mj_step):
-    """Compile the MuJoCo loop around this process's ``mj_step`` (not cached: it holds a C pointer)."""
+@_njit
+def run_mujoco_chunk(st, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qvel, q7, v6,
+                     ctrl, ctrl_id, xfrc, xmat, xpos, base, m_eff, i_eff, dist, mocap_pos, centroid,
+                     pose, vel, met, ew, lw, rp, rv, lg, j0, stride, lim3, c_true, rec_ctrl, rec_xfrc):
+    """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by
+    the control step of ``k+1`` (if ``k+1 < N``): the control step of ``k0`` must be done.
 
-    @numba.njit(cache=False, nogil=True, error_model="numpy")
-    def run_mujoco_chunk(st, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qvel, q7, v6,
-                         ctrl, ctrl_id, xfrc, xmat, xpos, base, m_eff, i_eff, dist, mocap_pos, centroid,
-                         pose, vel, met, ew, lw, rp, rv, lg, j0, stride, lim3, c_true, rec_ctrl, rec_xfrc):
-        """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by
-        the control step of ``k+1`` (if ``k+1 < N``): the control step of ``k0`` must be done.
-
-        Equivalent to ``MujocoPlant.step``/``observe`` around :func:`control_step`:
-        wheel torques to ``ctrl``, the disturbance accelerations as chassis force
-        ``M_eff d1`` along the heading and yaw torque ``I_eff d2`` (held over the period),
-        the cameras' centroid mocap, then ``mj_step`` on the shared ``MjData``.
-        Log samples as in :func:`run_ideal_chunk`; returns ``(steps done, next log row, status)``.
-        If ``rec_ctrl`` has rows, the inputs of step ``k`` (``ctrl`` and each base's
-        ``xfrc_applied``) are copied to ``rec_ctrl[k]``, ``rec_xfrc[k]`` (for a bare replay).
-        """
-        j = j0
-        n = pose.shape[0]
-        tau = st[21]
-        for k in range(k0, k1):
-            t = k * dt
-            d0 = dist[0, 0] + dist[0, 1] * math.cos(dist[0, 2] * t + dist[0, 3])
-            d1 = dist[1, 0] + dist[1, 1] * math.cos(dist[1, 2] * t + dist[1, 3])
-            cx = 0.0
-            cy = 0.0
+    Equivalent to ``MujocoPlant.step``/``observe`` around :func:`control_step`:
+    wheel torques to ``ctrl``, the disturbance accelerations as chassis force
+    ``M_eff d1`` along the heading and yaw torque ``I_eff d2`` (held over the period),
+    the cameras' centroid mocap, then ``mj_step`` on the shared ``MjData``.
+    Log samples as in :func:`run_ideal_chunk`; returns ``(steps done, next log row, status)``.
+    If ``rec_ctrl`` has rows, the inputs of step ``k`` (``ctrl`` and each base's
+    ``xfrc_applied``) are copied to ``rec_ctrl[k]``, ``rec_xfrc[k]`` (for a bare replay).
+    """
+    j = j0
+    n = pose.shape[0]
+    tau = st[21]
+    for k in range(k0, k1):
+        t = k * dt
+        d0 = dist[0, 0] + dist[0, 1] * math.cos(dist[0, 2] * t + dist[0, 3])
+        d1 = dist[1, 0] + dist[1, 1] * math.cos(dist[1, 2] * t + dist[1, 3])
+        cx = 0.0
+        cy = 0.0
+        for i in range(n):
+            ctrl[ctrl_id[i, 0]] = tau[i, 0]
+            ctrl[ctrl_id[i, 1]] = tau[i, 1]
+            b = base[i]
+            xfrc[b, 0] = xmat[b, 0] * (m_eff[i] * d0)
+            xfrc[b, 1] = xmat[b, 3] * (m_eff[i] * d0)
+            xfrc[b, 5] = i_eff[i] * d1
+            cx += xpos[b, 0]
+            cy += xpos[b, 1]
+        mocap_pos[centroid, 0] = cx / n
+        mocap_pos[centroid, 1] = cy / n
+        if rec_ctrl.shape[0] > k:
+            rec_ctrl[k, :] = ctrl
             for i in range(n):
-                ctrl[ctrl_id[i, 0]] = tau[i, 0]
-                ctrl[ctrl_id[i, 1]] = tau[i, 1]
-                b = base[i]
-                xfrc[b, 0] = xmat[b, 0] * (m_eff[i] * d0)
-                xfrc[b, 1] = xmat[b, 3] * (m_eff[i] * d0)
-                xfrc[b, 5] = i_eff[i] * d1
-                cx += xpos[b, 0]
-                cy += xpos[b, 1]
-            mocap_pos[centroid, 0] = cx / n
-            mocap_pos[centroid, 1] = cy / n
-            if rec_ctrl.shape[0] > k:
-                rec_ctrl[k, :] = ctrl
-                for i in range(n):
-                    rec_xfrc[k, i, :] = xfrc[base[i], :]
-            for s in range(n_sub):
-                mj_step(mp, dp)
-            mujoco_observe(qpos, qvel, q7, v6, pose, vel)
-            if not _finite(pose, vel):
-                return k + 1 - k0, j, 2
-            if k + 1 < N:
-                control_step(st, L_pose[k + 1], L_vel[k + 1], pose, vel, False, ew, lw, rp, rv)
-                _accumulate(st, vel, met)
-                j, ok = _after_control(k + 1, N, stride, lg, j, lim3, L_pose, L_vel, dt, pose, vel, st, c_true)
-                if not ok:
-                    return k + 1 - k0, j, 1
-        return k1 - k0, j, 0
-
-    return run_mujoco_chunk
+                rec_xfrc[k, i, :] = xfrc[base[i], :]
+        for s in range(n_sub):
+            _mj_step(mp, dp)
+        mujoco_observe(qpos, qvel, q7, v6, pose, vel)
+        if not _finite(pose, vel):
+            return k + 1 - k0, j, 2
+        if k + 1 < N:
+            control_step(st, L_pose[k + 1], L_vel[k + 1], pose, vel, False, ew, lw, rp, rv)
+            _accumulate(st, vel, met)
+            j, ok = _after_control(k + 1, N, stride, lg, j, lim3, L_pose, L_vel, dt, pose, vel, st, c_true)
+            if not ok:
+                return k + 1 - k0, j, 1
+    return k1 - k0, j, 0
 
 
-def _make_replay(mj_step):
-    @numba.njit(cache=False, nogil=True)
-    def replay(mp, dp, n_sub, ctrl, xfrc, base, rec_ctrl, rec_xfrc):
-        """Bare physics: step ``n_sub`` times per recorded row of ``ctrl``/``xfrc_applied`` inputs."""
-        for k in range(rec_ctrl.shape[0]):
-            ctrl[:] = rec_ctrl[k]
-            for i in range(base.shape[0]):
-                xfrc[base[i], :] = rec_xfrc[k, i]
-            for s in range(n_sub):
-                mj_step(mp, dp)
 
-    return replay
-
-
-_REPLAY = None
-
-
-def mujoco_replay():
-    """A compiled loop that replays recorded inputs with bare ``mj_step`` (the benchmark's baseline)."""
-    global _REPLAY
-    if _REPLAY is None and mujoco_chunk() is not None:
-        _REPLAY = _make_replay(_MJ_STEP)
-    return _REPLAY
+@_njit
+def mujoco_replay(mp, dp, n_sub, ctrl, xfrc, base, rec_ctrl, rec_xfrc):
+    """Bare physics for the benchmark: ``n_sub`` ``mj_step`` per recorded row of ``ctrl`` and
+    chassis ``xfrc_applied`` inputs (see ``record_inputs`` of :func:`bioform_mj.sim.simulate`)."""
+    for k in range(rec_ctrl.shape[0]):
+        ctrl[:] = rec_ctrl[k]
+        for i in range(base.shape[0]):
+            xfrc[base[i], :] = rec_xfrc[k, i]
+        for s in range(n_sub):
+            _mj_step(mp, dp)
 
 
 def mujoco_chunk():
-    """The compiled MuJoCo loop kernel of this process, or None if it cannot be built."""
-    global _MJ_STEP, _MUJOCO_CHUNK
-    if _MUJOCO_CHUNK is None and HAVE_NUMBA:
-        _MJ_STEP = _load_mj_step()
-        if _MJ_STEP is not None:
-            _MUJOCO_CHUNK = _make_mujoco_chunk(_MJ_STEP)
-    return _MUJOCO_CHUNK
+    """The compiled MuJoCo loop kernel, or None if libmujoco cannot be called from numba."""
+    return run_mujoco_chunk if HAVE_MJ_STEP else None
 
 
 # ------------------------------------------------------------------ the stack object
