@@ -148,10 +148,13 @@ def test_fuzzed_scenarios_run_or_fail_cleanly(tmp_path, capsys, data):
 
 def test_sigkill_leaves_no_partial_file(tmp_path):
     """Kill runs at several moments; any file present is complete (temporary names are hidden)."""
-    for delay in (0.8, 1.6, 2.4):
+    # the compiled loop runs the ideal plant ~200x faster than real time: 400 s of simulated
+    # time (~2 s of wall time after ~1.5 s of start-up) is still running at these moments
+    for delay in (0.8, 1.6, 2.4, 3.2):
         out = tmp_path / f"k{delay}"
-        proc = subprocess.Popen([sys.executable, "-m", "bioform_mj.cli", "run", "--duration", "3", "--quiet",
-                                 "--out", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        proc = subprocess.Popen([sys.executable, "-m", "bioform_mj.cli", "run", "--duration", "400", "--quiet",
+                                 "--set", "sim.log_dt=0.05", "--out", str(out)],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         time.sleep(delay)
         proc.send_signal(signal.SIGKILL)
         proc.wait()
@@ -163,3 +166,31 @@ def test_sigkill_leaves_no_partial_file(tmp_path):
             elif f.suffix == ".npz":
                 with np.load(f) as z:
                     assert "pose" in z.files
+
+
+def test_sigkill_mid_sweep_then_resume(tmp_path):
+    """Kill a sweep after some runs finished; rerunning keeps their rows and runs only the rest."""
+    out = tmp_path / "sw"
+    cmd = [sys.executable, "-m", "bioform_mj.cli", "sweep", "paper", "--seeds", "6", "--workers", "1", "--quiet",
+           "--set", "sim.duration=40", "--out", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    runs = out / "runs"
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list(runs.glob("*.json")) if runs.exists() else []) < 2:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    finished = {f.name: f.stat().st_mtime_ns for f in runs.glob("*.json")}
+    assert 2 <= len(finished) < 6, "the kill should land mid-sweep"
+    for f in runs.glob("*.json"):
+        assert json.loads(f.read_text())["status"] == "ok"  # complete rows only
+    assert not (out / "runs.csv").exists()
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert {f.name: f.stat().st_mtime_ns for f in runs.glob("*.json") if f.name in finished} == finished
+    import csv
+
+    rows = list(csv.DictReader((out / "runs.csv").open()))
+    assert len(rows) == 6 and {r["seed"] for r in rows} == {str(i) for i in range(6)}
+    timing = json.loads((out / "sweep.json").read_text())
+    assert timing["ran"] == 6 - len(finished) and timing["skipped"] == len(finished)

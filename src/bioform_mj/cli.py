@@ -347,9 +347,11 @@ def _sweep(args: argparse.Namespace) -> int:
     res = sweep(specs, out, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
                 progress=_progress(not args.quiet, "sweep"))
     if not args.quiet:
-        print(f"{len(specs)} runs ({res['ran']} run now, {res['skipped']} already done)")
+        tm = res["timing"]
+        rate = f", {tm['wall_s']:.1f} s, {tm['runs_per_s']:.2f} runs/s on {tm['workers']} worker(s)" if tm["runs_per_s"] else ""
+        print(f"{len(specs)} runs ({res['ran']} run now, {res['skipped']} already done{rate})")
         print((out / "stats.md").read_text())
-        print(f"outputs in {out}/ (runs.csv, stats.json, stats.md)")
+        print(f"outputs in {out}/ (runs.csv, stats.json, stats.md, sweep.json)")
     return EXIT_OK
 
 

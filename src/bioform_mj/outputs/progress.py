@@ -37,6 +37,7 @@ def progress_bar(label: str, enabled: bool = True, *, unit: str = "%", stream: T
         return
     from tqdm import tqdm
 
+    tqdm.monitor_interval = 0  # no monitor thread: `bioform sweep` forks its workers
     percent = unit == "%"
     bar = tqdm(total=100 if percent else 1, desc=label, file=stream, leave=True, dynamic_ncols=True,
                unit="%" if percent else unit,
