@@ -29,6 +29,9 @@ GRAPH_KINDS = ("explicit", "chain", "ring", "star", "complete")
 ESTIMATOR_INITS = ("zero", "self", "leader")
 EVENT_KINDS = ("payload",)
 SATURATIONS = ("steer-priority", "wheel")
+GAIN_SCALINGS = ("none", "c_hat0")
+#: the robot the paper's learner gains were tuned for: ``c = (a, b)`` of Sec. IV
+PAPER_C = (0.4, 10.0)
 
 
 @dataclass(frozen=True)
@@ -133,13 +136,18 @@ class TorqueCfg:
 class LearnerCfg:
     """Eq. 37 gains; ``ĉ(0) = c_hat0_scale ⊙ c_true`` per follower; projection onto
     ``[c_bounds[0], c_bounds[1]] × ĉ(0)``. ``kd > 0`` (not in the paper) also estimates the
-    disturbance ``d̂' = −kd S`` so that ``d`` does not bias ``ĉ``."""
+    disturbance ``d̂' = −kd S`` so that ``d`` does not bias ``ĉ``. ``gain_scaling = "c_hat0"``
+    (not in the paper) gives follower ``i`` the gain ``k4 ⊙ (ĉ_i(0) / ĉ_paper(0))²`` with
+    ``ĉ_paper(0) = c_hat0_scale ⊙ (0.4, 10)``: a channel learns at a rate ∝ ``k4 τ²`` and the
+    torques scale as ``1/c``, so every robot then learns as fast as the paper's robot does
+    with the paper's gains (which it keeps)."""
 
     k4: tuple[float, ...] = (6.0, 50.0)
     k5: tuple[float, ...] = (25.0, 50.0)
     kd: tuple[float, ...] = (0.0, 0.0)
     c_hat0_scale: tuple[float, ...] = (0.5, 0.5)
     c_bounds: tuple[float, ...] = (0.1, 10.0)
+    gain_scaling: str = "none"
 
 
 @dataclass(frozen=True)
@@ -539,6 +547,9 @@ def validate(sc: Scenario) -> None:
         _positive(f"learner.{key}", getattr(lc, key))
     _length("learner.kd", lc.kd, 2)
     _positive("learner.kd", lc.kd, strict=False)
+    if lc.gain_scaling not in GAIN_SCALINGS:
+        raise ScenarioError("learner.gain_scaling",
+                            f"unknown '{lc.gain_scaling}' (expected one of: {', '.join(GAIN_SCALINGS)})")
     if not lc.c_bounds[0] <= 1.0 <= lc.c_bounds[1]:
         raise ScenarioError("learner.c_bounds", f"must satisfy lower <= 1 <= upper (factors of c_hat0), got {list(lc.c_bounds)}")
 

@@ -113,10 +113,23 @@ def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = 
         tau_max=np.full(n, sc.torque.tau_max) if tau_max is None else np.asarray(tau_max, dtype=float),
         steer_priority=sc.torque.saturation == "steer-priority",
         deriv_wn=sc.torque.deriv_wn,
-        k4=np.array(sc.learner.k4), k5=np.array(sc.learner.k5), kd=np.array(sc.learner.kd),
+        k4=_learner_k4(sc, c_hat0), k5=np.array(sc.learner.k5), kd=np.array(sc.learner.kd),
         c_hat0=c_hat0, c_min=lo * c_hat0, c_max=hi * c_hat0,
         dt=sc.sim.control_dt,
     )
+
+
+def _learner_k4(sc: Scenario, c_hat0: np.ndarray) -> np.ndarray:
+    """``k4`` (2,) as configured, or (n, 2) per robot for ``gain_scaling = "c_hat0"``:
+    ``k4 ⊙ (ĉ_i(0) / ĉ_paper(0))²`` with ``ĉ_paper(0) = c_hat0_scale ⊙ PAPER_C``, the initial
+    estimate the paper's robot gets, so that robot keeps the paper's gains exactly."""
+    from .scenario import PAPER_C
+
+    k4 = np.array(sc.learner.k4, dtype=float)
+    if sc.learner.gain_scaling == "c_hat0":
+        ref = np.asarray(sc.learner.c_hat0_scale, dtype=float) * np.asarray(PAPER_C)
+        return k4 * (np.asarray(c_hat0, dtype=float) / ref) ** 2
+    return k4
 
 
 def initial_estimates(sc: Scenario, pose0: np.ndarray, leader_pose0: np.ndarray) -> np.ndarray:

@@ -100,7 +100,7 @@ def control_step(st, lp, lv, pose, vel, use_comm, ew, lw, rp, rv):
     """
     (g, flags, offsets, lim, src, dst, lacc,
      est_pose, est_vel, z_hat, e_int, c_hat, d_hat, c_min, c_max, fy, fdy,
-     vs, err, cmd, dcmd, tau, tau_raw, tau_body, saturated, p_err, v_err) = st
+     vs, err, cmd, dcmd, tau, tau_raw, tau_body, saturated, p_err, v_err, k4n) = st
     n = pose.shape[0]
     dt = g[G_DT]
     first = flags[0] == 1
@@ -113,7 +113,7 @@ def control_step(st, lp, lv, pose, vel, use_comm, ew, lw, rp, rv):
         h = dt
         for i in range(n):
             for c in range(2):
-                k4 = g[G_K4 + c]
+                k4 = k4n[i, c]
                 k5 = g[G_K5 + c]
                 kd = g[G_KD + c]
                 t_ = tau_body[i, c]
@@ -537,7 +537,7 @@ def pack_scalars(p: StackParams, filt_phi: np.ndarray, filt_gam: np.ndarray) -> 
     g[G_KA:G_KA + 2] = p.ka
     g[G_KB:G_KB + 2] = p.kb
     g[G_CG:G_CG + 2] = p.c_gain
-    g[G_K4:G_K4 + 2] = p.k4
+    g[G_K4:G_K4 + 2] = np.asarray(p.k4, dtype=float).reshape(-1, 2)[0]  # (per follower: the state tuple)
     g[G_K5:G_K5 + 2] = p.k5
     g[G_KD:G_KD + 2] = np.broadcast_to(p.kd, (2,))
     g[G_FPHI:G_FPHI + 4] = np.asarray(filt_phi).ravel()
@@ -565,6 +565,7 @@ class FusedControlStack(ControlStack):
         self._lim1 = np.ascontiguousarray(np.asarray(p.tau_max, dtype=float).reshape(n))
         self._p_err = np.zeros((n, 3))
         self._v_err = np.zeros((n, 2))
+        self._k4n = np.ascontiguousarray(np.broadcast_to(np.asarray(p.k4, dtype=float), (n, 2)))
         self.saturated = np.zeros(n, dtype=np.bool_)
         m = graph.src.shape[0]
         self._no_ew = np.ones(m)
@@ -583,7 +584,7 @@ class FusedControlStack(ControlStack):
                 np.ascontiguousarray(gr.leader_access, dtype=float),
                 e.pose, e.vel, ln.z_hat, ln.e_int, ln.c_hat, ln.d_hat, ln.c_min, ln.c_max, f.y, f.dy,
                 self.vs, self.err, self.cmd, self.dcmd, self.tau, self.tau_raw, self.tau_body, self.saturated,
-                self._p_err, self._v_err)
+                self._p_err, self._v_err, self._k4n)
 
     def set_tau_max(self, tau_max: np.ndarray) -> None:
         """Change the wheel torque limits (n,) N·m in place."""
