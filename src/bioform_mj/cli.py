@@ -44,6 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     _scenario_args(run)
     run.add_argument("--method", choices=METHODS, help="control method (default: the scenario's)")
     run.add_argument("--out", type=Path, help="output directory (default: runs/<scenario>-<plant>-<method>)")
+    run.add_argument("--engine", choices=("auto", "fused", "numpy"), default="auto",
+                     help="fused: the numba-compiled loop (default when numba imports); numpy: the reference stack")
     run.add_argument("--video", action="store_true",
                      help="write video.mp4 (off-screen MuJoCo rendering, MUJOCO_GL=egl by default; "
                           "the ideal plant is shown in a composed scene)")
@@ -233,7 +235,7 @@ def _run(args: argparse.Namespace, sc) -> int:
         live = RerunLive(spawn=args.rerun_spawn, url=live_url, period=max(sc.sim.log_dt, 1 / 30))
         observers.append(live)
     with progress_bar(f"{sc.name} {sc.method}", not args.quiet) as cb:
-        result = simulate(sc, observers=observers, progress=cb)
+        result = simulate(sc, observers=observers, progress=cb, engine=args.engine)
     out.mkdir(parents=True, exist_ok=True)
     write_npz(out / "log.npz", result.log)
     if sc.plant.kind == "mujoco":
