@@ -14,8 +14,7 @@ Events only change the plant's parameters, so applying them after the control st
 """
 from __future__ import annotations
 
-import math
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 import numpy as np
 
@@ -25,10 +24,12 @@ from .control.fused import (
     _accumulate,
     _after_control,
     control_step,
-    mujoco_chunk,
+    HAVE_MJ_STEP,
     record_row,
     run_ideal_chunk,
+    run_mujoco_chunk,
 )
+from .disturbance import Harmonic
 from .errors import Diverged
 from .plants.ideal import IdealPlant
 
@@ -38,7 +39,7 @@ def _dist_terms(plant: Any) -> np.ndarray | None:
     d = getattr(plant, "disturbance", None)
     if d is None:
         return np.zeros((2, 4))
-    if type(d).__name__ != "Harmonic":
+    if not isinstance(d, Harmonic):
         return None
     return np.array(d.terms, dtype=float).reshape(2, 4)
 
@@ -51,12 +52,7 @@ def supported(plant: Any, stack: Any) -> bool:
         return True
     from .plants.mujoco_plant import MujocoPlant
 
-    return type(plant) is MujocoPlant and mujoco_chunk() is not None
-
-
-def _first_step_at(t: float, dt: float) -> int:
-    """The first control step ``k`` with ``k·dt ≥ t − 1e-12``."""
-    return max(0, int(math.ceil((t - 1e-12) / dt - 1e-9)))
+    return type(plant) is MujocoPlant and HAVE_MJ_STEP
 
 
 #: longest stretch of simulated time between two visits to Python (s): bounds the delay of
@@ -65,12 +61,13 @@ MAX_CHUNK_S = 0.1
 
 
 def run(sc, plant, stack: FusedControlStack, L_pose: np.ndarray, L_vel: np.ndarray, N: int, stride: int,
-        events: Sequence[Any], observers: Sequence[Any], state: Any, progress: Callable | None,
+        evq: Any, obs: Any, progress: Callable | None,
         logd: dict[str, np.ndarray], guard: Callable[..., Diverged | None],
         record_inputs: tuple[np.ndarray, np.ndarray] | None = None,
         ) -> tuple[int, int, Diverged | None, np.ndarray, np.ndarray, np.ndarray]:
     """Run the closed loop from the state after ``plant.reset`` and ``stack.reset``.
 
+    ``evq`` and ``obs`` are the run's ``sim.EventQueue`` and ``sim.ObserverClock``.
     Log samples go into the preallocated ``logd`` (``sim.CHANNELS``); the kernels check
     each one, and on a failed check ``guard(logd, j, t, k, limits)`` writes the diagnosis.
     ``record_inputs = (ctrl (N, nu), xfrc (N, n, 6))`` (MuJoCo only) receives every step's
@@ -101,22 +98,21 @@ def run(sc, plant, stack: FusedControlStack, L_pose: np.ndarray, L_vel: np.ndarr
         def check(k: int) -> None:
             return None
     else:
-        kern = mujoco_chunk()
         m, d = plant.model, plant.data
         q7 = np.ascontiguousarray(plant._q7, dtype=np.int64)
         v6 = np.ascontiguousarray(plant._v6, dtype=np.int64)
         ctrl_id = np.ascontiguousarray(plant._ctrl, dtype=np.int64)
         base = np.ascontiguousarray(plant._base, dtype=np.int64)
-        arrays = (d.qpos, d.qvel, d.ctrl, d.xfrc_applied, d.xmat, d.xpos, d.mocap_pos)
+        arrays = (d.qpos, d.qvel, d.ctrl, d.xfrc_applied, d.xmat)
         warnings = plant._warnings
         rec = record_inputs if record_inputs is not None else (np.zeros((0, m.nu)), np.zeros((0, n, 6)))
 
         def chunk(k0: int, k1: int, j: int) -> tuple[int, int, int]:
-            qpos, qvel, ctrl, xfrc, xmat, xpos, mocap = arrays
-            return kern(stack.st, k0, k1, N, dt, plant.n_substeps, Lp, Lv, m._address, d._address,
-                        qpos, qvel, q7, v6, ctrl, ctrl_id, xfrc, xmat, xpos, base,
+            qpos, qvel, ctrl, xfrc, xmat = arrays
+            return run_mujoco_chunk(stack.st, k0, k1, N, dt, plant.n_substeps, Lp, Lv, m._address, d._address,
+                        qpos, qvel, q7, v6, ctrl, ctrl_id, xfrc, xmat, base,
                         np.ascontiguousarray(plant._m_eff), np.ascontiguousarray(plant._i_eff), dist,
-                        mocap, plant._mocap_centroid, pose, vel, met, ew, lw, rp, rv, lg, j, stride, lim3,
+                        pose, vel, met, ew, lw, rp, rv, lg, j, stride, lim3,
                         np.ascontiguousarray(plant._c), rec[0], rec[1])
 
         def check(k: int) -> None:
@@ -137,32 +133,21 @@ def run(sc, plant, stack: FusedControlStack, L_pose: np.ndarray, L_vel: np.ndarr
     j, ok = _after_control(0, N, stride, lg, 0, lim3, Lp, Lv, dt, pose, vel, stack.st, np.ascontiguousarray(plant._c))
     if not ok:
         return 0, j, diagnose(j), pose, vel, met
-    ev_steps = [_first_step_at(e.time, dt) for e in events]
-    ev_i = 0
-    obs_next = [0.0] * len(observers)
+    from .sim import first_step_at
+
     max_chunk = max(1, int(round(MAX_CHUNK_S / dt)))
     k = 0
     while k < N:
         t = k * dt
-        if ev_i < len(events) and ev_steps[ev_i] <= k:
-            while ev_i < len(events) and ev_steps[ev_i] <= k:
-                ev = events[ev_i]
-                plant.add_payload(ev.follower - 1, ev.mass, ev.inertia)
-                ev_i += 1
-            if k % stride == 0:  # the sample of this step shows the new plant, as in the generic loop
-                logd["c_true"][j - 1] = plant.c_true()
-        if observers:
-            state.t, state.leader_pose, state.leader_vel, state.pose, state.vel = t, L_pose[k], L_vel[k], pose, vel
-            for i, o in enumerate(observers):
-                if t >= obs_next[i] - 1e-12:
-                    o.sample(state)
-                    obs_next[i] += o.period
+        if evq.apply(k, plant) and k % stride == 0:
+            logd["c_true"][j - 1] = plant.c_true()  # this step's sample shows the new plant, as stepwise
+        obs.sample(t, L_pose[k], L_vel[k], pose, vel)
         # the next step at which Python must act
         k1 = min(N, k + max_chunk)
-        if ev_i < len(events):
-            k1 = min(k1, max(k + 1, ev_steps[ev_i]))
-        for tn in obs_next:
-            k1 = min(k1, max(k + 1, _first_step_at(tn, dt)))
+        if evq.next_step() is not None:
+            k1 = min(k1, max(k + 1, evq.next_step()))
+        for tn in obs.next:
+            k1 = min(k1, max(k + 1, first_step_at(tn, dt)))
         done, j, status = chunk(k, k1, j)
         k += done
         try:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import platform
 import time
 from dataclasses import dataclass, field
@@ -10,7 +11,7 @@ from typing import Any, Protocol, Sequence
 import numpy as np
 
 from . import __version__
-from .control.common import wrap
+from .control.fused import M_SAT, M_TAU, M_TAURAW, M_VERR, M_VMAX
 from .control.stack import ControlStack, StackParams, parse_method
 from .disturbance import Harmonic as HarmonicDisturbance
 from .errors import Diverged
@@ -194,67 +195,20 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     for name, shp in CHANNELS.items():
         logd[name] = np.zeros((K,) + tuple(shapes[s] for s in shp), dtype=bool if name == "saturated" else float)
 
-    vel_err_int = np.zeros(n)
-    sat_steps = np.zeros(n)
-    max_vcmd = np.zeros(n)
-    peak_tau = np.zeros(n)
-    peak_tau_raw = np.zeros(n)
-    events = sorted(sc.events, key=lambda e: e.time)
-    ev_i = 0
     state = RunState(sc, plant, stack)
-    obs_next = [0.0] * len(observers)
     for o in observers:
         o.start(state)
-    lim = sc.limits
-    diverged: Diverged | None = None
-    k_done = 0
-    j = 0
+    obs = ObserverClock(observers, state)
+    evq = EventQueue(sc.events, dt)
     wall0 = time.perf_counter()
     from . import fastloop
 
-    fast = fused and faults is None and fastloop.supported(plant, stack)  # (and no per-step hooks)
-    if fast:
+    if fused and faults is None and fastloop.supported(plant, stack):  # no per-step Python hooks
         k_done, j, diverged, pose, vel, met = fastloop.run(
-            sc, plant, stack, L_pose, L_vel, N, stride, events, observers, state, progress, logd, _guard,
-            record_inputs)
-        vel_err_int, sat_steps, max_vcmd, peak_tau, peak_tau_raw = (met[:, c].copy() for c in range(5))
-    for k in range(0 if fast else N):
-        t = k * dt
-        while ev_i < len(events) and events[ev_i].time <= t + 1e-12:
-            ev = events[ev_i]
-            plant.add_payload(ev.follower - 1, ev.mass, ev.inertia)
-            ev_i += 1
-        if faults is None:
-            tau = stack.step(L_pose[k], L_vel[k], pose, vel)
-        else:  # faults: noisy sensing, faulty network, weakened motors, pushes; tau = what reaches the plant
-            tau = faults.step(k, t, stack, plant, L_pose[k], L_vel[k], pose, vel)
-        cmd = stack.cmd
-        vel_err_int += np.abs(cmd - vel).sum(axis=1)  # SPEC §7 metric, integrated below with dt
-        sat_steps += stack.saturated
-        np.maximum(max_vcmd, np.abs(cmd[:, 0]), out=max_vcmd)
-        np.maximum(peak_tau, np.abs(tau).max(axis=1), out=peak_tau)
-        np.maximum(peak_tau_raw, np.abs(stack.tau_raw).max(axis=1), out=peak_tau_raw)
-        if k % stride == 0:
-            _record(logd, j, t, L_pose[k], L_vel[k], pose, vel, stack, plant, offsets)
-            diverged = _guard(logd, j, t, k, lim)
-            j += 1
-            if progress is not None:
-                progress(k, N)
-            if diverged is not None:
-                break
-        if observers:
-            state.t, state.leader_pose, state.leader_vel, state.pose, state.vel = t, L_pose[k], L_vel[k], pose, vel
-            for i, o in enumerate(observers):
-                if t >= obs_next[i] - 1e-12:
-                    o.sample(state)
-                    obs_next[i] += o.period
-        try:
-            plant.step(tau, t)
-        except Diverged as e:  # e.g. a MuJoCo warning: keep the log so far
-            diverged = e
-            break
-        pose, vel = plant.observe()
-        k_done = k + 1
+            sc, plant, stack, L_pose, L_vel, N, stride, evq, obs, progress, logd, _guard, record_inputs)
+    else:
+        k_done, j, diverged, pose, vel, met = _run_stepwise(
+            sc, plant, stack, faults, L_pose, L_vel, N, stride, evq, obs, progress, logd)
     wall = time.perf_counter() - wall0
     if diverged is None and not (np.all(np.isfinite(pose)) and np.all(np.isfinite(vel))):
         diverged = Diverged(f"non-finite robot state at the end of the run (t = {N * dt:g} s)", step=N, time=N * dt)
@@ -278,15 +232,15 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     for i in range(n):
         followers.append({
             "id": i + 1,
-            "total_velocity_error": float(vel_err_int[i] * dt),
+            "total_velocity_error": float(met[i, M_VERR] * dt),
             "final_formation_error_m": float(final_form[i]),
             "rms_formation_error_m": float(np.sqrt(np.mean(fe[:, i] ** 2))) if len(fe) else float("nan"),
             "rms_formation_error_last_half_m": float(np.sqrt(np.mean(half[:, i] ** 2))) if len(half) else float("nan"),
             "final_estimation_error_m": float(final_est[i]),
-            "max_abs_v_cmd": float(max_vcmd[i]),
-            "peak_abs_torque": float(peak_tau[i]),
-            "peak_abs_torque_commanded": float(peak_tau_raw[i]),
-            "saturation_fraction": float(sat_steps[i] / max(1, k_done)),
+            "max_abs_v_cmd": float(met[i, M_VMAX]),
+            "peak_abs_torque": float(met[i, M_TAU]),
+            "peak_abs_torque_commanded": float(met[i, M_TAURAW]),
+            "saturation_fraction": float(met[i, M_SAT] / max(1, k_done)),
             "c_hat": [float(v) for v in stack.c_hat[i]],
             "c_true": [float(v) for v in c_true[i]],
             "c_hat_rel_error": [float(v) for v in (stack.c_hat[i] / c_true[i] - 1.0)],
@@ -305,6 +259,98 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
         "followers": followers,
     }
     return RunResult(sc, logd, summary, plant, diverged)
+
+
+class ObserverClock:
+    """Calls each observer's ``sample`` once its period of simulated time has passed."""
+
+    def __init__(self, observers: Sequence[Observer], state: RunState) -> None:
+        self.observers = list(observers)
+        self.state = state
+        self.next = [0.0] * len(self.observers)  # s, next due time of each
+
+    def sample(self, t: float, leader_pose, leader_vel, pose, vel) -> None:
+        """At control time ``t`` (s), before the plant step: sample the observers that are due."""
+        if not self.observers:
+            return
+        st = self.state
+        st.t, st.leader_pose, st.leader_vel, st.pose, st.vel = t, leader_pose, leader_vel, pose, vel
+        for i, o in enumerate(self.observers):
+            if t >= self.next[i] - 1e-12:
+                o.sample(st)
+                self.next[i] += o.period
+
+
+class EventQueue:
+    """The scenario's timed events, applied to the plant at the first control step at or after their time."""
+
+    def __init__(self, events: Sequence[Any], dt: float) -> None:
+        self.events = sorted(events, key=lambda e: e.time)
+        self.steps = [first_step_at(e.time, dt) for e in self.events]
+        self.i = 0
+
+    def next_step(self) -> int | None:
+        """Control step of the next pending event (None: no more)."""
+        return self.steps[self.i] if self.i < len(self.steps) else None
+
+    def apply(self, k: int, plant: Plant) -> bool:
+        """Apply every event due at step ``k``; True if any was."""
+        applied = False
+        while self.i < len(self.events) and self.steps[self.i] <= k:
+            ev = self.events[self.i]
+            plant.add_payload(ev.follower - 1, ev.mass, ev.inertia)
+            self.i += 1
+            applied = True
+        return applied
+
+
+def first_step_at(t: float, dt: float) -> int:
+    """The first control step ``k`` with ``k·dt ≥ t`` (to 1e-12 s)."""
+    return max(0, int(math.ceil((t - 1e-12) / dt - 1e-9)))
+
+
+def _run_stepwise(sc: Scenario, plant: Plant, stack: ControlStack, faults: Any, L_pose: np.ndarray,
+                  L_vel: np.ndarray, N: int, stride: int, evq: EventQueue, obs: ObserverClock, progress: Any,
+                  logd: dict[str, np.ndarray]) -> tuple[int, int, Diverged | None, np.ndarray, np.ndarray, np.ndarray]:
+    """The closed loop one control step at a time in Python: the numpy reference engine, and
+    every run with per-step hooks (faults). Same contract as :func:`bioform_mj.fastloop.run`:
+    returns ``(steps done, log rows, divergence, pose, vel, metrics (n, 5))``."""
+    dt = sc.sim.control_dt
+    offsets = np.asarray(sc.formation.offsets, dtype=float)
+    met = np.zeros((plant.n, 5))
+    pose, vel = plant.observe()
+    diverged: Diverged | None = None
+    j = k_done = 0
+    for k in range(N):
+        t = k * dt
+        evq.apply(k, plant)
+        if faults is None:
+            tau = stack.step(L_pose[k], L_vel[k], pose, vel)
+        else:  # faults: noisy sensing, faulty network, weakened motors, pushes; tau = what reaches the plant
+            tau = faults.step(k, t, stack, plant, L_pose[k], L_vel[k], pose, vel)
+        cmd = stack.cmd
+        met[:, M_VERR] += np.abs(cmd - vel).sum(axis=1)  # SPEC §7 metric, times dt in the summary
+        met[:, M_SAT] += stack.saturated
+        np.maximum(met[:, M_VMAX], np.abs(cmd[:, 0]), out=met[:, M_VMAX])
+        np.maximum(met[:, M_TAU], np.abs(tau).max(axis=1), out=met[:, M_TAU])
+        np.maximum(met[:, M_TAURAW], np.abs(stack.tau_raw).max(axis=1), out=met[:, M_TAURAW])
+        if k % stride == 0:
+            _record(logd, j, t, L_pose[k], L_vel[k], pose, vel, stack, plant, offsets)
+            diverged = _guard(logd, j, t, k, sc.limits)
+            j += 1
+            if progress is not None:
+                progress(k, N)
+            if diverged is not None:
+                break
+        obs.sample(t, L_pose[k], L_vel[k], pose, vel)
+        try:
+            plant.step(tau, t)
+        except Diverged as e:  # e.g. a MuJoCo warning: keep the log so far
+            diverged = e
+            break
+        pose, vel = plant.observe()
+        k_done = k + 1
+    return k_done, j, diverged, pose, vel, met
 
 
 def _record(logd, j, t, lp, lv, pose, vel, stack: ControlStack, plant: Plant, offsets) -> None:

@@ -44,24 +44,20 @@ G_KP = 10  # 3
 G_KA = 13  # 2
 G_KB = 15  # 2
 G_CG = 17  # 2
-G_K4 = 19  # 2
-G_K5 = 21  # 2
-G_KD = 23  # 2
-G_FPHI = 25  # 4: filter transition matrix, row-major
-G_FGAM = 29  # 2
-G_BIO, G_LEARN, G_STEER = 31, 32, 33
-G_SIZE = 34
+G_K5 = 19  # 2 (k4 may differ per follower: it is in the state tuple)
+G_KD = 21  # 2
+G_FPHI = 23  # 4: filter transition matrix, row-major
+G_FGAM = 27  # 2
+G_BIO, G_LEARN, G_STEER = 29, 30, 31
+G_SIZE = 32
 
 # ---- columns of the per-follower metric accumulator ``met`` (n, 5) -----------------
 M_VERR, M_SAT, M_VMAX, M_TAU, M_TAURAW = range(5)
 
 
-def _njit(fn=None, **kw):
-    if not HAVE_NUMBA:
-        return fn if fn is not None else (lambda f: f)
-    opts = dict(cache=True, nogil=True, fastmath=False, error_model="numpy")
-    opts.update(kw)
-    return numba.njit(**opts)(fn) if fn is not None else numba.njit(**opts)
+def _njit(fn):
+    """Compile ``fn`` (cached on disk; IEEE semantics, no fastmath); plain Python without numba."""
+    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn) if HAVE_NUMBA else fn
 
 
 @_njit
@@ -319,10 +315,33 @@ def _after_control(k, N, stride, lg, j, lim3, L_pose, L_vel, dt, pose, vel, st, 
 
 # ------------------------------------------------------------------------ ideal plant
 @_njit
+def _disturbance(dist, c, t):
+    """Channel ``c`` of the harmonic disturbance ``bias + amp cos(freq t + phase)`` (rows of ``dist``)."""
+    return dist[c, 0] + dist[c, 1] * math.cos(dist[c, 2] * t + dist[c, 3])
+
+
+@_njit
+def _after_plant_step(k, N, dt, st, L_pose, L_vel, pose, vel, met, ew, lw, rp, rv, lg, j, stride, lim3, c_true):
+    """Common to both plants after plant step ``k`` observed ``pose``, ``vel``: stop on a
+    non-finite state, else the control step of ``k+1`` (if any), its metrics and log sample.
+    Returns ``(next log row, status)`` (status as in :func:`run_ideal_chunk`)."""
+    if not _finite(pose, vel):
+        return j, 2
+    if k + 1 < N:
+        control_step(st, L_pose[k + 1], L_vel[k + 1], pose, vel, False, ew, lw, rp, rv)
+        _accumulate(st, vel, met)
+        j, ok = _after_control(k + 1, N, stride, lg, j, lim3, L_pose, L_vel, dt, pose, vel, st, c_true)
+        if not ok:
+            return j, 1
+    return j, 0
+
+
+@_njit
 def _ideal_f(x, acc, dist, t, dx):
+    """RK4 right-hand side of ``IdealPlant``: unicycle kinematics, ``ż = acc + d(t)``."""
     n = x.shape[0]
-    d0 = dist[0, 0] + dist[0, 1] * math.cos(dist[0, 2] * t + dist[0, 3])
-    d1 = dist[1, 0] + dist[1, 1] * math.cos(dist[1, 2] * t + dist[1, 3])
+    d0 = _disturbance(dist, 0, t)
+    d1 = _disturbance(dist, 1, t)
     for i in range(n):
         dx[i, 0] = x[i, 3] * math.cos(x[i, 2])
         dx[i, 1] = x[i, 3] * math.sin(x[i, 2])
@@ -385,14 +404,10 @@ def run_ideal_chunk(st, k0, k1, N, dt, n_sub, L_pose, L_vel, c, dist, x, pose, v
             pose[i, 2] = x[i, 2]
             vel[i, 0] = x[i, 3]
             vel[i, 1] = x[i, 4]
-        if not _finite(pose, vel):
-            return k + 1 - k0, j, 2
-        if k + 1 < N:
-            control_step(st, L_pose[k + 1], L_vel[k + 1], pose, vel, False, ew, lw, rp, rv)
-            _accumulate(st, vel, met)
-            j, ok = _after_control(k + 1, N, stride, lg, j, lim3, L_pose, L_vel, dt, pose, vel, st, c)
-            if not ok:
-                return k + 1 - k0, j, 1
+        j, status = _after_plant_step(k, N, dt, st, L_pose, L_vel, pose, vel, met, ew, lw, rp, rv, lg, j,
+                                      stride, lim3, c)
+        if status:
+            return k + 1 - k0, j, status
     return k1 - k0, j, 0
 
 
@@ -458,15 +473,14 @@ def mujoco_observe(qpos, qvel, q7, v6, pose, vel):
 
 @_njit
 def run_mujoco_chunk(st, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qvel, q7, v6,
-                     ctrl, ctrl_id, xfrc, xmat, xpos, base, m_eff, i_eff, dist, mocap_pos, centroid,
-                     pose, vel, met, ew, lw, rp, rv, lg, j0, stride, lim3, c_true, rec_ctrl, rec_xfrc):
+                     ctrl, ctrl_id, xfrc, xmat, base, m_eff, i_eff, dist, pose, vel, met, ew, lw, rp, rv, lg, j0, stride, lim3, c_true, rec_ctrl, rec_xfrc):
     """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by
     the control step of ``k+1`` (if ``k+1 < N``): the control step of ``k0`` must be done.
 
     Equivalent to ``MujocoPlant.step``/``observe`` around :func:`control_step`:
     wheel torques to ``ctrl``, the disturbance accelerations as chassis force
     ``M_eff d1`` along the heading and yaw torque ``I_eff d2`` (held over the period),
-    the cameras' centroid mocap, then ``mj_step`` on the shared ``MjData``.
+    then ``mj_step`` on the shared ``MjData``.
     Log samples as in :func:`run_ideal_chunk`; returns ``(steps done, next log row, status)``.
     If ``rec_ctrl`` has rows, the inputs of step ``k`` (``ctrl`` and each base's
     ``xfrc_applied``) are copied to ``rec_ctrl[k]``, ``rec_xfrc[k]`` (for a bare replay).
@@ -476,10 +490,8 @@ def run_mujoco_chunk(st, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qvel
     tau = st[21]
     for k in range(k0, k1):
         t = k * dt
-        d0 = dist[0, 0] + dist[0, 1] * math.cos(dist[0, 2] * t + dist[0, 3])
-        d1 = dist[1, 0] + dist[1, 1] * math.cos(dist[1, 2] * t + dist[1, 3])
-        cx = 0.0
-        cy = 0.0
+        d0 = _disturbance(dist, 0, t)
+        d1 = _disturbance(dist, 1, t)
         for i in range(n):
             ctrl[ctrl_id[i, 0]] = tau[i, 0]
             ctrl[ctrl_id[i, 1]] = tau[i, 1]
@@ -487,10 +499,6 @@ def run_mujoco_chunk(st, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qvel
             xfrc[b, 0] = xmat[b, 0] * (m_eff[i] * d0)
             xfrc[b, 1] = xmat[b, 3] * (m_eff[i] * d0)
             xfrc[b, 5] = i_eff[i] * d1
-            cx += xpos[b, 0]
-            cy += xpos[b, 1]
-        mocap_pos[centroid, 0] = cx / n
-        mocap_pos[centroid, 1] = cy / n
         if rec_ctrl.shape[0] > k:
             rec_ctrl[k, :] = ctrl
             for i in range(n):
@@ -498,33 +506,28 @@ def run_mujoco_chunk(st, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qvel
         for s in range(n_sub):
             _mj_step(mp, dp)
         mujoco_observe(qpos, qvel, q7, v6, pose, vel)
-        if not _finite(pose, vel):
-            return k + 1 - k0, j, 2
-        if k + 1 < N:
-            control_step(st, L_pose[k + 1], L_vel[k + 1], pose, vel, False, ew, lw, rp, rv)
-            _accumulate(st, vel, met)
-            j, ok = _after_control(k + 1, N, stride, lg, j, lim3, L_pose, L_vel, dt, pose, vel, st, c_true)
-            if not ok:
-                return k + 1 - k0, j, 1
+        j, status = _after_plant_step(k, N, dt, st, L_pose, L_vel, pose, vel, met, ew, lw, rp, rv, lg, j,
+                                      stride, lim3, c_true)
+        if status:
+            return k + 1 - k0, j, status
     return k1 - k0, j, 0
 
 
 
 @_njit
-def mujoco_replay(mp, dp, n_sub, ctrl, xfrc, base, rec_ctrl, rec_xfrc):
+def mujoco_replay(mp, dp, n_sub, ctrl, xfrc, base, rec_ctrl, rec_xfrc, solver_niter):
     """Bare physics for the benchmark: ``n_sub`` ``mj_step`` per recorded row of ``ctrl`` and
-    chassis ``xfrc_applied`` inputs (see ``record_inputs`` of :func:`bioform_mj.sim.simulate`)."""
+    chassis ``xfrc_applied`` inputs (see ``record_inputs`` of :func:`bioform_mj.sim.simulate`).
+    Returns the total of the constraint solver's iterations (``data.solver_niter[0]``)."""
+    iters = 0
     for k in range(rec_ctrl.shape[0]):
         ctrl[:] = rec_ctrl[k]
         for i in range(base.shape[0]):
             xfrc[base[i], :] = rec_xfrc[k, i]
         for s in range(n_sub):
             _mj_step(mp, dp)
-
-
-def mujoco_chunk():
-    """The compiled MuJoCo loop kernel, or None if libmujoco cannot be called from numba."""
-    return run_mujoco_chunk if HAVE_MJ_STEP else None
+            iters += solver_niter[0]
+    return iters
 
 
 # ------------------------------------------------------------------ the stack object
@@ -537,7 +540,6 @@ def pack_scalars(p: StackParams, filt_phi: np.ndarray, filt_gam: np.ndarray) -> 
     g[G_KA:G_KA + 2] = p.ka
     g[G_KB:G_KB + 2] = p.kb
     g[G_CG:G_CG + 2] = p.c_gain
-    g[G_K4:G_K4 + 2] = np.asarray(p.k4, dtype=float).reshape(-1, 2)[0]  # (per follower: the state tuple)
     g[G_K5:G_K5 + 2] = p.k5
     g[G_KD:G_KD + 2] = np.broadcast_to(p.kd, (2,))
     g[G_FPHI:G_FPHI + 4] = np.asarray(filt_phi).ravel()
