@@ -42,6 +42,7 @@ __all__ = [
     "yaw_quat",
     "payload_inertial",
     "MARKER_Z",
+    "Markers",
     "PATCH_THICKNESS",
 ]
 
@@ -336,7 +337,7 @@ def build_scene(
         dir=[0.4, -0.3, -1.0], diffuse=[0.3, 0.3, 0.3], specular=[0, 0, 0], castshadow=False,
     )
 
-    # cameras ride on a mocap body that the plant keeps on the formation centroid
+    # cameras ride on a mocap body that whoever renders keeps on the formation centroid (Markers)
     centre = poses[:, :2].mean(axis=0)
     centroid = world.add_body(name="centroid", mocap=True, pos=[centre[0], centre[1], 0.0])
     chase = np.array([-6.0, -6.0, 6.0])
@@ -376,3 +377,34 @@ def compile_scene(spec: mujoco.MjSpec) -> tuple[mujoco.MjModel, mujoco.MjData]:
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     return model, data
+
+
+class Markers:
+    """The scene's visual mocap bodies: the leader's ghost, the slot markers and the camera
+    carrier ``centroid``. Ids are looked up once; :meth:`place` moves them for a frame.
+
+    They have no collisions and no mass, so moving them never changes the physics: only
+    renderers need them, and they set them per rendered frame, not per control step.
+    """
+
+    def __init__(self, model: mujoco.MjModel, n: int) -> None:
+        def mocap(name: str) -> int:
+            bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
+            return int(model.body_mocapid[bid]) if bid >= 0 else -1
+
+        self.leader = mocap("leader")
+        self.centroid = mocap("centroid")
+        slots = [mocap(f"slot_{i + 1}") for i in range(n)]
+        self.slots = np.array(slots) if min(slots, default=-1) >= 0 else None
+
+    def place(self, data: mujoco.MjData, leader_pose: np.ndarray, slots: np.ndarray | None = None,
+              centroid: np.ndarray | None = None) -> None:
+        """Ghost at ``leader_pose`` ``[x, y, θ]``, slot markers at ``slots`` (n, 2), cameras over
+        ``centroid`` (2,) (m, rad); ``None`` leaves that marker where it is."""
+        if self.leader >= 0:
+            data.mocap_pos[self.leader] = (leader_pose[0], leader_pose[1], MARKER_Z)
+            data.mocap_quat[self.leader] = (np.cos(leader_pose[2] / 2), 0.0, 0.0, np.sin(leader_pose[2] / 2))
+        if slots is not None and self.slots is not None:
+            data.mocap_pos[self.slots, :2] = slots
+        if centroid is not None and self.centroid >= 0:
+            data.mocap_pos[self.centroid, :2] = centroid

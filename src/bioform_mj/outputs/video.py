@@ -120,10 +120,9 @@ class _Replay:
     def __init__(self, result: Any, capture: FrameCapture) -> None:
         import mujoco
 
-        from ..scene import MARKER_Z, build_scene, compile_scene, follower_prefix
+        from ..scene import Markers, build_scene, compile_scene, follower_prefix
 
         self.mujoco = mujoco
-        self.marker_z = MARKER_Z  # m, height of the ghost and slot markers
         sc = result.scenario
         n = sc.n
         self.n = n
@@ -140,10 +139,7 @@ class _Replay:
         m = self.model
         self.data = mujoco.MjData(m)
         mujoco.mj_forward(m, self.data)
-        self.mocap_leader = int(m.body_mocapid[m.body("leader").id])
-        self.mocap_centroid = int(m.body_mocapid[m.body("centroid").id])
-        slot_ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"slot_{i + 1}") for i in range(n)]
-        self.mocap_slots = np.array([m.body_mocapid[b] for b in slot_ids]) if min(slot_ids) >= 0 else None
+        self.markers = Markers(m, n)
         prefixes = [follower_prefix(i) for i in range(n)]
         base = [m.body(p + "base").id for p in prefixes]
         self.base_q = np.array([m.jnt_qposadr[m.body_jntadr[b]] for b in base])  # free joint qpos address
@@ -174,12 +170,7 @@ class _Replay:
                 th = pose[i, 2]
                 d.qpos[a:a + 7] = (pose[i, 0], pose[i, 1], self.base_z[i], np.cos(th / 2), 0.0, 0.0, np.sin(th / 2))
                 d.qpos[self.wheel_q[i]] = self.wheel[i]
-        lp = capture.leader[k]
-        d.mocap_pos[self.mocap_leader] = (lp[0], lp[1], self.marker_z)
-        d.mocap_quat[self.mocap_leader] = (np.cos(lp[2] / 2), 0.0, 0.0, np.sin(lp[2] / 2))
-        if self.mocap_slots is not None:
-            d.mocap_pos[self.mocap_slots, :2] = capture.slots[k]
-        d.mocap_pos[self.mocap_centroid, :2] = capture.pose[k][:, :2].mean(axis=0)
+        self.markers.place(d, capture.leader[k], capture.slots[k], capture.pose[k][:, :2].mean(axis=0))
         mj.mj_kinematics(m, d)
         mj.mj_camlight(m, d)
 

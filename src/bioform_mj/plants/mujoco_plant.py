@@ -23,8 +23,8 @@ import numpy as np
 from bioform_mj.errors import Diverged
 from bioform_mj.identify import RobotParams, robot_parameters
 from bioform_mj.scene import (
-    MARKER_Z,
     ROBOT,
+    Markers,
     build_scene,
     compile_scene,
     follower_prefix,
@@ -133,14 +133,9 @@ class MujocoPlant:
         self._q7 = qadr[:, None] + np.arange(7)  # (n, 7) into qpos: x y z, quaternion w x y z
         self._v6 = dadr[:, None] + np.arange(6)  # (n, 6) into qvel: world-frame linear, body-frame angular
         self._ctrl = np.array([[m.actuator(p + a).id for a in ROBOT.motors] for p in prefixes])  # (n, 2)
-        self._mocap_leader = int(m.body_mocapid[m.body("leader").id])
-        self._mocap_centroid = int(m.body_mocapid[m.body("centroid").id])
-        self._mocap_slots = (
-            np.array([m.body_mocapid[m.body(f"slot_{i + 1}").id] for i in range(n)]) if slots else None
-        )
+        self._markers = Markers(m, n)
         self._heading = (self._base[:, None], np.array([0, 3]))  # (R00, R10) of each base in xmat
         self._xfrc = np.zeros((n, 6))  # buffer: applied force/torque per base
-        self._mean_w = np.full(n, 1.0 / n)  # formation centroid weights
         self._warnings = [self.data.warning[i] for i in range(int(mujoco.mjtWarning.mjNWARNING))]
 
         # nominal inertial properties of each base, restored by reset()
@@ -250,8 +245,6 @@ class MujocoPlant:
             d.xfrc_applied[self._base] = xfrc
         if self._push_until is not None:  # faults: an external push on some chassis (push())
             self._apply_push(t)
-        # cameras follow the formation centroid (from the last forward pass)
-        np.matmul(self._mean_w, d.xpos[self._base, :2], out=d.mocap_pos[self._mocap_centroid, :2])
         mujoco.mj_step(m, d, self.n_substeps)
         self._step_count += 1
         for i, w_ in enumerate(self._warnings):
@@ -279,11 +272,7 @@ class MujocoPlant:
 
     def set_leader(self, pose: np.ndarray, slots: np.ndarray | None) -> None:
         """Move the ghost leader to ``pose`` (3,) ``[x, y, θ]`` and the slot markers to ``slots`` (n, 2)."""
-        d = self.data
-        d.mocap_pos[self._mocap_leader] = (pose[0], pose[1], MARKER_Z)
-        d.mocap_quat[self._mocap_leader] = (np.cos(pose[2] / 2), 0.0, 0.0, np.sin(pose[2] / 2))
-        if slots is not None and self._mocap_slots is not None:
-            d.mocap_pos[self._mocap_slots, :2] = slots
+        self._markers.place(self.data, pose, slots)
 
     def add_payload(self, i: int, mass_kg: float, inertia_kgm2: float) -> None:
         """Follower ``i`` (0-based) picks up a payload at its axle midpoint; ``c_true`` updates.
