@@ -18,6 +18,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from ..control.common import wrap
+
 from .files import atomic_path
 
 #: Leader colour (the ghost's orange), RGB in 0..1.
@@ -39,10 +41,6 @@ def follower_rgb(i: int) -> tuple[float, float, float]:
     """Colour of follower ``i`` (0-based), RGB in 0..1 (tab10 without the leader's orange)."""
     return _FOLLOWER_RGB[i % len(_FOLLOWER_RGB)]
 
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    """Angles wrapped to (−π, π]."""
-    return np.pi - np.mod(np.pi - a, 2 * np.pi)
 
 
 def _figure(rows: int, cols: int = 1, *, width: float = 8.0, row_h: float = 2.2, sharex: bool = True) -> tuple[Any, np.ndarray]:
@@ -101,7 +99,7 @@ def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
     lp, lv = log["leader_pose"], log["leader_vel"]
     fig, ax = _figure(4)
     rows = [("position (m)", log["estimation_error"]),
-            ("heading (rad)", _wrap(log["est_pose"][:, :, 2] - lp[:, None, 2])),
+            ("heading (rad)", wrap(log["est_pose"][:, :, 2] - lp[:, None, 2])),
             ("υ_ir − υ_r (m/s)", log["est_vel"][:, :, 0] - lv[:, None, 0]),
             ("ω_ir − ω_r (rad/s)", log["est_vel"][:, :, 1] - lv[:, None, 1])]
     for r, (lab, y) in enumerate(rows):

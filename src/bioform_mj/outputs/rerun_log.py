@@ -42,6 +42,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from ..control.common import wrap
 from ..errors import InputError
 from .figures import LEADER_RGB, follower_rgb
 
@@ -96,9 +97,6 @@ def _quat_xyzw(theta: np.ndarray) -> np.ndarray:
     return np.column_stack([np.zeros_like(th), np.zeros_like(th), np.sin(th / 2), np.cos(th / 2)])
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return np.pi - np.mod(np.pi - a, 2 * np.pi)
-
 
 def _u8(rgb: tuple[float, float, float], alpha: float = 1.0) -> list[int]:
     return [int(round(255 * c)) for c in rgb] + [int(round(255 * alpha))]
@@ -108,7 +106,7 @@ def _u8(rgb: tuple[float, float, float], alpha: float = 1.0) -> list[int]:
 _SERIES: list[tuple[str, Callable[[Mapping[str, np.ndarray], int], np.ndarray], tuple[str, ...]]] = [
     ("formation_error", lambda g, i: g["formation_error"][:, i, None], ("|p − slot| (m)",)),
     ("estimation_error", lambda g, i: np.column_stack([
-        g["estimation_error"][:, i], _wrap(g["est_pose"][:, i, 2] - g["leader_pose"][:, 2])]),
+        g["estimation_error"][:, i], wrap(g["est_pose"][:, i, 2] - g["leader_pose"][:, 2])]),
      ("position (m)", "heading (rad)")),
     ("tracking_error", lambda g, i: g["tracking_error"][:, i, :], ("x̃ (m)", "ỹ (m)", "θ̃ (rad)")),
     ("v", lambda g, i: np.column_stack([g["cmd"][:, i, 0], g["vel"][:, i, 0], g["est_vel"][:, i, 0]]),
