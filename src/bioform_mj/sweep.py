@@ -115,6 +115,16 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
     return row
 
 
+def _load_kernels() -> None:
+    """Run both compiled loops for a moment, so that numba's cached machine code is loaded
+    in this process (and inherited by forked workers instead of loaded once per worker)."""
+    from .scenario import load
+    from .sim import simulate
+
+    for plant in ("ideal", "mujoco"):
+        simulate(load("paper", plant=plant, overrides=["sim.duration=0.01"]))
+
+
 def _run_local(todo: list[RunSpec], workers: int, done: Callable[[dict], None]) -> None:
     if workers <= 1:
         for sp in todo:
@@ -127,7 +137,7 @@ def _run_local(todo: list[RunSpec], workers: int, done: Callable[[dict], None]) 
         # fork after loading MuJoCo, numba and the compiled kernels here: workers start in
         # milliseconds instead of ~2 s each (spawn). This process runs no threads of its own
         # at this point (the progress bar has no monitor thread), so fork is safe.
-        import bioform_mj._warm  # noqa: F401 - loads the kernels
+        _load_kernels()
 
         ctx = mp.get_context("fork")
     else:  # pragma: no cover - macOS/Windows
