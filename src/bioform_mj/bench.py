@@ -34,14 +34,15 @@ CASES: dict[int, tuple[str, float]] = {3: ("paper", 5.0), 16: ("large16", 5.0), 
                                        256: ("large256", 2.0)}
 
 
-def _bare(sc: Any, reps: int) -> float:
-    """Seconds of bare ``mj_step`` replaying the closed loop's own inputs (best of ``reps``).
+def _bare(sc: Any, reps: int) -> dict[str, float]:
+    """Bare ``mj_step`` replaying the closed loop's own inputs: best seconds of ``reps``, and the
+    solver's iterations per physics step, also under constant torques for comparison.
 
     The closed loop runs once recording every step's ``ctrl`` and chassis forces; then a
     compiled loop replays them into ``mj_step`` on the same scene from the same initial
-    state. Constant torques are not a fair baseline: the contact solver needs ~2.4
-    Newton iterations per step under the controller's changing torques against ~0.9
-    under constant ones (measured, 64 robots), so physics itself costs more in closed loop.
+    state. Constant torques (0.1 of the limit, no disturbance) are not a fair baseline: the
+    contact solver iterates less when the torques do not change (``solver_iters_*`` in the
+    JSON), so physics itself costs more in closed loop.
     """
     from .control.fused import mujoco_replay
     from .sim import make_plant, simulate
@@ -53,14 +54,24 @@ def _bare(sc: Any, reps: int) -> float:
     simulate(sc, record_inputs=rec)
     replay = mujoco_replay
     base = np.ascontiguousarray(plant._base, dtype=np.int64)
-    replay(m._address, d._address, plant.n_substeps, d.ctrl, d.xfrc_applied, base, rec[0][:0], rec[1][:0])  # compile
-    best = float("inf")
+    args = (m._address, d._address, plant.n_substeps, d.ctrl, d.xfrc_applied, base)
+    replay(*args, rec[0][:0], rec[1][:0], d.solver_niter)  # compile
+    best, iters = float("inf"), 0
     for _ in range(reps):
         plant.reset()
         t0 = time.perf_counter()
-        replay(m._address, d._address, plant.n_substeps, d.ctrl, d.xfrc_applied, base, rec[0], rec[1])
+        iters = replay(*args, rec[0], rec[1], d.solver_niter)
         best = min(best, time.perf_counter() - t0)
-    return best
+    c0 = np.zeros(m.nu)
+    c0[plant._ctrl] = 0.1 * plant.tau_max[:, None]
+    const = (np.tile(c0, (steps, 1)), np.zeros_like(rec[1]))
+    plant.reset()
+    t0 = time.perf_counter()
+    c_iters = replay(*args, const[0], const[1], d.solver_niter)
+    c_time = time.perf_counter() - t0
+    physics_steps = steps * plant.n_substeps
+    return {"bare_s": best, "solver_iters_per_step": iters / physics_steps,
+            "constant_torque_bare_s": c_time, "constant_torque_solver_iters_per_step": c_iters / physics_steps}
 
 
 def _loop(sc: Any, reps: int, engine: str = "auto") -> tuple[float, dict]:
@@ -85,13 +96,14 @@ def bench_case(n: int, duration: float | None = None, reps: int = 2, numpy_too: 
     steps = int(round(dur / sc.sim.control_dt))
     n_sub = int(round(sc.sim.control_dt / sc.sim.physics_dt))
     _loop(load(preset, overrides=["sim.duration=0.05"], plant="mujoco"), 1)  # compile the kernels
-    bare = _bare(sc, reps)
+    bare_d = _bare(sc, reps)
+    bare = bare_d["bare_s"]
     loop, summ = _loop(sc, reps)
     ideal, _ = _loop(load(preset, overrides=[f"sim.duration={dur}"], plant="ideal"), reps)
     row: dict[str, Any] = {
         "n": n, "preset": preset, "sim_s": dur, "control_dt_s": sc.sim.control_dt, "physics_dt_s": sc.sim.physics_dt,
         "substeps": n_sub, "control_steps": steps,
-        "bare_s": bare, "loop_s": loop, "ratio": bare / loop,
+        **bare_d, "loop_s": loop, "ratio": bare / loop,
         "bare_steps_per_s": steps / bare, "loop_steps_per_s": steps / loop,
         "us_per_robot_step": loop / (steps * n) * 1e6, "bare_us_per_robot_step": bare / (steps * n) * 1e6,
         "realtime_factor": dur / loop, "bare_realtime_factor": dur / bare,
@@ -146,7 +158,9 @@ def run(args: argparse.Namespace) -> int:
         rows.append(bench_case(n, args.duration, args.reps, numpy_too=getattr(args, "numpy", False)))
         r = rows[-1]
         print(f"n={n:4d}: ratio {r['ratio']:.2f}, {r['us_per_robot_step']:.2f} µs/robot-step, "
-              f"real-time factor {r['realtime_factor']:.2f}", flush=True)
+              f"real-time factor {r['realtime_factor']:.2f}; solver iterations per physics step "
+              f"{r['solver_iters_per_step']:.2f} (constant torques: {r['constant_torque_solver_iters_per_step']:.2f})",
+              flush=True)
     import mujoco
 
     from . import __version__
