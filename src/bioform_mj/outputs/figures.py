@@ -144,14 +144,22 @@ def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
 
     # torques and neuron output
     fig, ax = _figure(3)
+    # the log holds each interval's mean torque and its min/max (design §9): the line is the
+    # mean, the shaded band the chatter envelope, so a chattering torque is not aliased
+    env = "tau_min" in log and "tau_max" in log
     for i in range(n):
-        ax[0, 0].plot(t, log["tau"][:, i, 0], color=follower_rgb(i), lw=1.0, label=f"follower {i + 1}")
-        ax[1, 0].plot(t, log["tau"][:, i, 1], color=follower_rgb(i), lw=1.0)
+        for r in range(2):
+            ax[r, 0].plot(t, log["tau"][:, i, r], color=follower_rgb(i), lw=1.0,
+                          label=f"follower {i + 1}" if r == 0 else None)
+            if env:
+                ax[r, 0].fill_between(t, log["tau_min"][:, i, r], log["tau_max"][:, i, r], color=follower_rgb(i),
+                                      alpha=0.18, lw=0)
         ax[2, 0].plot(t, log["vs"][:, i], color=follower_rgb(i), lw=1.2)
     ax[0, 0].set_ylabel("τ_L (N·m)")
     ax[1, 0].set_ylabel("τ_R (N·m)")
     ax[2, 0].set_ylabel("V_s")
-    _finish(fig, ax, title + ": wheel torques (applied) and neuron output")
+    what = "mean per log interval, band = min..max" if env else "point samples"
+    _finish(fig, ax, title + f": wheel torques applied ({what}) and neuron output")
     paths.append(_save(fig, out / "torques.png"))
     return paths
 

@@ -113,12 +113,15 @@ _SERIES: list[tuple[str, Callable[[Mapping[str, np.ndarray], int], np.ndarray], 
      ("υ_cmd", "υ", "υ_ir (estimate of υ_r)")),
     ("omega", lambda g, i: np.column_stack([g["cmd"][:, i, 1], g["vel"][:, i, 1], g["est_vel"][:, i, 1]]),
      ("ω_cmd", "ω", "ω_ir (estimate of ω_r)")),
-    ("torque", lambda g, i: g["tau"][:, i, :], ("τ_L (N·m)", "τ_R (N·m)")),
+    ("torque", lambda g, i: (np.column_stack([g["tau"][:, i, :], g["tau_min"][:, i, :], g["tau_max"][:, i, :]])
+                             if "tau_min" in g else g["tau"][:, i, :]),
+     ("τ_L mean (N·m)", "τ_R mean (N·m)", "τ_L min", "τ_R min", "τ_L max", "τ_R max")),
     ("a", lambda g, i: np.column_stack([g["c_hat"][:, i, 0], g["c_true"][:, i, 0]]), ("â", "a (true)")),
     ("b", lambda g, i: np.column_stack([g["c_hat"][:, i, 1], g["c_true"][:, i, 1]]), ("b̂", "b (true)")),
     ("vs", lambda g, i: g["vs"][:, i, None], ("V_s",)),
 ]
-_LINE_COLORS = [(0.84, 0.15, 0.16), (0.12, 0.47, 0.71), (0.5, 0.5, 0.5)]
+_LINE_COLORS = [(0.84, 0.15, 0.16), (0.12, 0.47, 0.71), (0.5, 0.5, 0.5), (0.12, 0.47, 0.71), (0.95, 0.6, 0.6),
+                (0.6, 0.75, 0.9)]
 
 
 def blueprint(n: int) -> Any:
@@ -368,6 +371,7 @@ def state_row(run: Any) -> dict[str, np.ndarray]:
         "pose": pose, "vel": np.asarray(run.vel, dtype=float),
         "est_pose": est, "est_vel": get("est_vel", (n, 2)),
         "cmd": get("cmd", (n, 2)), "tau": get("tau", (n, 2)),
+        "tau_min": get("tau", (n, 2)), "tau_max": get("tau", (n, 2)),  # live: the instant's torque
         "c_hat": get("c_hat", (n, 2)), "c_true": np.asarray(run.plant.c_true(), dtype=float),
         "vs": get("vs", (n,)), "tracking_error": get("tracking_error", (n, 3)),
         "formation_error": np.linalg.norm(pose[:, :2] - slots, axis=1),
