@@ -22,6 +22,7 @@ from . import graph as graph_mod
 from . import leader as leader_mod
 from .control.stack import METHODS
 from .errors import GraphError, InputError, ScenarioError
+from .robots import RobotRef, as_ref, rebase_entries
 
 PLANTS = ("ideal", "mujoco")
 LEADER_KINDS = ("paper", "line", "circle", "figure8", "harmonic")
@@ -153,14 +154,18 @@ class LearnerCfg:
 @dataclass(frozen=True)
 class PlantCfg:
     """Plant. Ideal: ``c_true = (a, b)`` and the mass (kg) / yaw inertia (kg·m²) consistent with
-    them for r = 0.1 m, l = 0.2 m (used by payload events). MuJoCo: ``robots`` are shipped model
-    names or MJCF paths, one per follower or one for all."""
+    them for r = 0.1 m, l = 0.2 m (used by payload events). ``robots``: shipped names, MJCF paths
+    or tables ``{model, base, left_wheel, right_wheel, wheel_radius, half_track, tau_max}``
+    (:mod:`bioform_mj.robots`), one per follower or one for all; relative paths in a TOML file
+    are relative to that file. On the ideal plant a robot other than ``paper`` gives ``c_true``
+    (and ``mass``, ``inertia`` = ``M_eff``, ``I_eff``) from its compiled model
+    (:func:`apply_robots_to_ideal`)."""
 
     kind: str = "ideal"
     c_true: tuple[float, ...] = (0.4, 10.0)
     mass: float = 25.0
     inertia: float = 0.2
-    robots: tuple[str, ...] = ("paper",)
+    robots: tuple[RobotRef, ...] = (RobotRef("paper"),)
 
 
 @dataclass(frozen=True)
@@ -261,8 +266,12 @@ class Scenario:
         return len(self.formation.offsets)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain nested dict (JSON/TOML-able) of every resolved value."""
-        return _to_plain(dataclasses.asdict(self))
+        """Plain nested dict (JSON/TOML-able) of every resolved value (a robot without a mapping
+        as its name or path, one with a mapping as a table)."""
+        d = _to_plain(dataclasses.asdict(self))
+        d["plant"]["robots"] = [r.model if not r.mapped else _to_plain(dataclasses.asdict(r))
+                                for r in self.plant.robots]
+        return d
 
     # ---- derived objects -------------------------------------------------------------
     def build_graph(self) -> graph_mod.Graph:
@@ -321,6 +330,8 @@ def load(source: str | Path | None = None, overrides: Mapping[str, Any] | list[s
         if not path.is_file():
             raise InputError(f"scenario file '{path}' does not exist")
         data = _read_toml(path.read_bytes(), str(path))
+        if isinstance(data.get("plant"), dict) and "robots" in data["plant"]:  # SPEC §10: relative to the file
+            data["plant"]["robots"] = rebase_entries(data["plant"]["robots"], path.parent.resolve())
     else:
         names = preset_names()
         if src not in names:
@@ -336,7 +347,7 @@ def load(source: str | Path | None = None, overrides: Mapping[str, Any] | list[s
         data.setdefault("plant", {})["kind"] = plant
     sc = from_dict(data)
     validate(sc)
-    return sc
+    return apply_robots_to_ideal(sc)
 
 
 def _read_toml(raw: bytes, where: str) -> dict[str, Any]:
@@ -394,6 +405,8 @@ def _build(cls: Any, data: Any, prefix: str) -> Any:
 
 
 def _convert(value: Any, tp: Any, key: str) -> Any:
+    if tp is RobotRef:  # a name, a path or a mapping table (robots.py)
+        return as_ref(value, key)
     if dataclasses.is_dataclass(tp):
         return _build(tp, value, key + ".")
     origin = typing.get_origin(tp)
@@ -401,7 +414,7 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
         (inner, *_rest) = typing.get_args(tp)
         if not isinstance(value, (list, tuple)):
             raise ScenarioError(key, f"expected an array, got {type(value).__name__} {value!r}")
-        if dataclasses.is_dataclass(inner):
+        if dataclasses.is_dataclass(inner) and inner is not RobotRef:
             return tuple(_build(inner, v, f"{key}[{i}].") for i, v in enumerate(value))
         return tuple(_convert(v, inner, f"{key}[{i}]") for i, v in enumerate(value))
     if tp is float:
@@ -657,3 +670,42 @@ def _validate_faults(sc: Scenario) -> None:
         if sc.plant.kind != "mujoco":
             raise ScenarioError("faults.friction_patch", "needs plant.kind = 'mujoco': the ideal plant's wheels "
                                                          "cannot slip")
+
+
+# ---------------------------------------------------------------------------------------
+# Robots on the ideal plant (issue 10: plant.robots is never ignored)
+# ---------------------------------------------------------------------------------------
+
+def apply_robots_to_ideal(sc: Scenario) -> Scenario:
+    """On the ideal plant, ``plant.robots`` other than the shipped ``paper`` robot decide ``c_true``.
+
+    The ideal plant is then the paper's model of that robot: ``c_true = (a_eff, b_eff)`` from its
+    compiled model, ``mass = M_eff = 1/(a_eff r)`` and ``inertia = I_eff = l/(b_eff r)`` (for
+    payload events). The ``paper`` robot (the default) leaves ``plant.c_true`` as given, so the
+    paper's abstract plant keeps ``--set plant.c_true=…``. Refused (ScenarioError): robots whose
+    ``c_true`` differ (the ideal plant takes one ``c_true``), and a ``plant.c_true`` other than the
+    paper's that disagrees with the robots. The MuJoCo plant is returned unchanged.
+    """
+    pc = sc.plant
+    if pc.kind != "ideal":
+        return sc
+    from .robots import resolve_robot
+
+    refs = [resolve_robot(r) for r in pc.robots]
+    paper = resolve_robot("paper")
+    if all(Path(r.model).resolve() == Path(paper.model).resolve() and not r.mapped for r in refs):
+        return sc
+    from .identify import robot_truth  # MuJoCo only when a robot asks for it
+
+    truths = [robot_truth(r) for r in refs]
+    c = np.array([t.c for t in truths])
+    if np.any(np.abs(c / c[0] - 1) > 1e-6):
+        raise ScenarioError("plant.robots", "the ideal plant takes one c_true, but the robots differ "
+                            f"({'; '.join(f'{r.model}: a={x[0]:.4g}, b={x[1]:.4g}' for r, x in zip(refs, c))}); "
+                            "use plant.kind = 'mujoco' for a heterogeneous team")
+    if tuple(pc.c_true) != PAPER_C and np.any(np.abs(np.asarray(pc.c_true) / c[0] - 1) > 1e-3):
+        raise ScenarioError("plant.c_true", f"{list(pc.c_true)} disagrees with plant.robots ({refs[0].model}: "
+                            f"a={c[0, 0]:.4g}, b={c[0, 1]:.4g}); give one of them")
+    t = truths[0]
+    plant = dataclasses.replace(pc, c_true=(float(c[0, 0]), float(c[0, 1])), mass=t.mass_eff, inertia=t.inertia_eff)
+    return dataclasses.replace(sc, plant=plant)

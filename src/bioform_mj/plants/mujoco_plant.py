@@ -1,7 +1,9 @@
 """MuJoCo plant: ``n`` MJCF differential-drive robots on a floor, driven by wheel torques (SPEC §8).
 
 Reads each robot's pose ``(x, y, θ)`` of the axle midpoint and its body-frame ``(υ, ω)``
-from the free joint's ``qpos``/``qvel``; writes the wheel motor ``ctrl`` (N·m). The
+from the free joint's ``qpos``/``qvel`` and the axle midpoint's position in the base frame
+(:meth:`MujocoPlant.observe` has the formula); writes the wheel motor ``ctrl`` (N·m; the
+motors' gear sign makes positive torque drive forward whichever way a joint axis points). The
 disturbance accelerations ``d = (d1, d2)`` of eq. 34 enter as ``xfrc_applied`` on each
 chassis: a force ``M_eff d1`` along the heading and a yaw torque ``I_eff d2``, with
 ``M_eff = 1/(a_eff r)``, ``I_eff = l/(b_eff r)``, so that they are accelerations as in the
@@ -23,11 +25,12 @@ import numpy as np
 from bioform_mj.errors import Diverged
 from bioform_mj.identify import RobotParams, robot_parameters
 from bioform_mj.scene import (
-    ROBOT,
     Markers,
+    RobotLayout,
     build_scene,
     compile_scene,
     follower_prefix,
+    layout_of,
     payload_inertial,
 )
 
@@ -62,8 +65,8 @@ class MujocoPlant:
 
     Parameters
     ----------
-    robot_files : sequence of str or Path, length n
-        One MJCF file (or shipped model name) per follower; robots may differ.
+    robot_files : sequence of str, Path or :class:`~bioform_mj.robots.RobotRef`, length n
+        One robot per follower (shipped name, MJCF path, or file + mapping); robots may differ.
     initial_poses : array (n, 3)
         ``(x m, y m, θ rad)`` of each follower's axle midpoint.
     control_dt : float
@@ -85,7 +88,32 @@ class MujocoPlant:
     n_substeps : int, physics steps per control period.
     tau_max : array (n,), torque limit of each follower's motors, N·m.
     params : list of :class:`~bioform_mj.identify.RobotParams`, current per follower.
+    layouts : list of :class:`~bioform_mj.scene.RobotLayout` (names prefixed), per follower.
+
+    Index arrays (looked up once; read by the compiled loop kernels, keep their meaning):
+
+    - ``_q7`` (n, 7): ``qpos`` addresses of each base's free joint (x y z, quaternion w x y z);
+    - ``_v6`` (n, 6): its ``qvel`` addresses (world-frame linear velocity of the base origin,
+      base-frame angular velocity);
+    - ``_ctrl`` (n, 2): actuator ids of the [left, right] wheel torque motors (ctrl in N·m,
+      positive = forward: the gear carries the wheel sign);
+    - ``_base`` (n,): base body ids; ``_m_eff`` (n,) kg, ``_i_eff`` (n,) kg·m², ``_c`` (n, 2);
+    - ``_axle`` (n, 3): the axle midpoint (midpoint of the wheel joint anchors) in the base
+      body's frame, m — the reference point of pose and ``υ``;
+    - ``_wheel_dof`` (n, 2): ``qvel`` addresses of the [left, right] wheel joints;
+    - ``_wheel_sign`` (n, 2): ±1 such that ``sign · qvel[_wheel_dof]`` is the forward wheel rate, rad/s;
+    - ``_wheel_radius`` (n,) m, ``_half_track`` (n,) m.
     """
+
+    #: a chassis whose z axis is tilted more than this from vertical has tipped over (rad);
+    #: compare ``upright()`` (cos tilt) with ``cos(TIP_ANGLE)``
+    TIP_ANGLE = float(np.radians(30.0))
+    #: wheel slip ratio |r φ̇ − v_contact| / max(|r φ̇|, |v_contact|, SLIP_V_FLOOR) beyond which a wheel
+    #: is slipping (see :meth:`wheel_slip`), and how long it must last to count, s
+    SLIP_RATIO = 0.2
+    SLIP_TIME = 0.5
+    #: speed below which slip is measured against this floor instead of the speed itself, m/s
+    SLIP_V_FLOOR = 0.05
 
     def __init__(
         self,
@@ -126,13 +154,21 @@ class MujocoPlant:
         prefixes = [follower_prefix(i) for i in range(n)]
 
         # ids and addresses, once, by name
-        self._base = np.array([m.body(p + ROBOT.base).id for p in prefixes])
+        self.layouts: list[RobotLayout] = [layout_of(m, p) for p in prefixes]
+        self._base = np.array([m.body(lay.base).id for lay in self.layouts])
         roots = m.body_jntadr[self._base]  # the base's free joint (checked by the scene)
         qadr = m.jnt_qposadr[roots]
         dadr = m.jnt_dofadr[roots]
         self._q7 = qadr[:, None] + np.arange(7)  # (n, 7) into qpos: x y z, quaternion w x y z
         self._v6 = dadr[:, None] + np.arange(6)  # (n, 6) into qvel: world-frame linear, body-frame angular
-        self._ctrl = np.array([[m.actuator(p + a).id for a in ROBOT.motors] for p in prefixes])  # (n, 2)
+        lays = self.layouts
+        self._ctrl = np.array([[m.actuator(a).id for a in lay.motors] for lay in lays])  # (n, 2)
+        self._axle = np.array([lay.axle for lay in lays], dtype=float)  # (n, 3) base frame, m
+        self._wheel_dof = np.array([[m.jnt_dofadr[m.joint(j).id] for j in lay.wheel_joints] for lay in lays])
+        self._wheel_sign = np.array([lay.wheel_sign for lay in lays], dtype=float)  # (n, 2)
+        self._wheel_radius = np.array([lay.wheel_radius for lay in lays], dtype=float)
+        self._half_track = np.array([lay.half_track for lay in lays], dtype=float)
+        self._axle_zero = not np.any(self._axle)  # shipped robots: base origin on the axle
         self._markers = Markers(m, n)
         self._heading = (self._base[:, None], np.array([0, 3]))  # (R00, R10) of each base in xmat
         self._xfrc = np.zeros((n, 6))  # buffer: applied force/torque per base
@@ -170,7 +206,7 @@ class MujocoPlant:
         """Sliding friction μ of follower ``i``'s wheel–floor contact (MuJoCo's priority/max rule)."""
         m = self.model
         floor = m.geom("floor").id
-        wheel = m.geom(self._prefixes[i] + ROBOT.wheel_geoms[0]).id
+        wheel = m.geom(self.layouts[i].wheel_geoms[0]).id
         if m.geom_priority[floor] != m.geom_priority[wheel]:
             winner = floor if m.geom_priority[floor] > m.geom_priority[wheel] else wheel
             return float(m.geom_friction[winner, 0])
@@ -216,16 +252,73 @@ class MujocoPlant:
         return q, outer @ _QUAT_TO_H
 
     def observe(self) -> tuple[np.ndarray, np.ndarray]:
-        """Pose (n, 3) ``[x, y, θ ∈ (−π, π]]`` and body-frame velocity (n, 2) ``[υ, ω]``."""
+        """Pose (n, 3) ``[x, y, θ ∈ (−π, π]]`` and body-frame velocity (n, 2) ``[υ, ω]`` of each
+        robot's axle midpoint.
+
+        For robot ``i`` with free-joint ``q = qpos[_q7[i]]`` (position ``p``, unit quaternion
+        ``(w, x, y, z)`` → rotation ``R``), ``u = qvel[_v6[i]]`` (``v = u[0:3]`` world-frame
+        velocity of the base origin, ``Ω = u[3:6]`` base-frame angular velocity) and
+        ``a = _axle[i]``:
+
+        - ``R00 = w²+x²−y²−z²``, ``R01 = 2(xy−wz)``, ``R02 = 2(xz+wy)``,
+          ``R10 = 2(xy+wz)``, ``R11 = w²−x²+y²−z²``, ``R12 = 2(yz−wx)``,
+          ``R20 = 2(xz−wy)``, ``R21 = 2(yz+wx)``, ``R22 = w²−x²−y²+z²``;
+        - position: ``x = p0 + R00 a0 + R01 a1 + R02 a2``, ``y = p1 + R10 a0 + R11 a1 + R12 a2``;
+        - heading: ``θ = atan2(R10 + 0.0, R00)`` (the base's x axis; ``+ 0.0``: θ ≠ −π);
+        - ``c = Ω × a = (Ω1 a2 − Ω2 a1, Ω2 a0 − Ω0 a2, Ω0 a1 − Ω1 a0)`` (base frame), the axle
+          midpoint's world velocity ``v_a = v + R c``: ``vx = v0 + R00 c0 + R01 c1 + R02 c2``,
+          ``vy = v1 + R10 c0 + R11 c1 + R12 c2``;
+        - ``υ = (vx R00 + vy R10) / hypot(R00, R10)``, ``ω = R20 Ω0 + R21 Ω1 + R22 Ω2``.
+
+        With ``a = 0`` (the shipped robots) this is the base origin's pose and velocity.
+        """
         q, h = self._frames()
         hx, hy = h[:, 0], h[:, 1]
         pose = np.empty((self.n, 3))
         pose[:, :2] = q[:, :2]
         pose[:, 2] = np.arctan2(hy + 0.0, hx)  # + 0.0 turns −0.0 into +0.0: θ ≠ −π
         # υ = world velocity of the axle midpoint · unit heading; ω = R[2, :] · ω_body
-        vel = (self.data.qvel[self._v6] * h) @ _SUM_LIN_ANG
-        vel[:, 0] /= np.hypot(hx, hy)
+        u = self.data.qvel[self._v6]
+        if self._axle_zero:
+            vel = (u * h) @ _SUM_LIN_ANG
+            vel[:, 0] /= np.hypot(hx, hy)
+            return pose, vel
+        rot = self._rotations(q[:, 3:])
+        a = self._axle
+        pose[:, :2] += np.einsum("nij,nj->ni", rot[:, :2, :], a)
+        c = np.cross(u[:, 3:], a)
+        v = u[:, :2] + np.einsum("nij,nj->ni", rot[:, :2, :], c)
+        vel = np.empty((self.n, 2))
+        vel[:, 0] = (v[:, 0] * hx + v[:, 1] * hy) / np.hypot(hx, hy)
+        vel[:, 1] = np.einsum("ni,ni->n", rot[:, 2, :], u[:, 3:])
         return pose, vel
+
+    @staticmethod
+    def _rotations(quat: np.ndarray) -> np.ndarray:
+        """(n, 3, 3) rotation matrices of unit quaternions (n, 4) ``[w, x, y, z]``."""
+        w, x, y, z = quat.T
+        return np.stack([
+            np.stack([w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z], -1),
+        ], axis=1)
+
+    def wheel_slip(self) -> np.ndarray:
+        """(n, 2) slip ratio of the [left, right] wheels: ``|r φ̇ − v_c| / max(|r φ̇|, |v_c|, SLIP_V_FLOOR)``
+        with ``φ̇ = sign · qvel`` the forward wheel rate and ``v_c = υ ∓ l ω`` the forward speed of
+        the wheel's contact point if it rolled (left: −, right: +). 0 when rolling; compare with
+        :attr:`SLIP_RATIO` held for :attr:`SLIP_TIME` s."""
+        _, vel = self.observe()
+        rate = self.data.qvel[self._wheel_dof] * self._wheel_sign * self._wheel_radius[:, None]
+        lw = self._half_track * vel[:, 1]
+        vc = np.stack([vel[:, 0] - lw, vel[:, 0] + lw], axis=1)
+        return np.abs(rate - vc) / np.maximum(np.maximum(np.abs(rate), np.abs(vc)), self.SLIP_V_FLOOR)
+
+    def unmodelled(self, v: float, w: float) -> list[dict]:
+        """Per follower: wheel damping, armature and frictionloss and their size at speeds
+        ``v`` m/s, ``w`` rad/s, with what ``ĉ`` should converge to
+        (:meth:`~bioform_mj.identify.RobotParams.unmodelled`); for ``summary.json``."""
+        return [p.unmodelled(v, w) for p in self.params]
 
     def step(self, tau: np.ndarray, t: float) -> None:
         """Apply wheel torques (n, 2) ``[τ_L, τ_R]`` N·m and ``d(t)`` for one control period."""
@@ -287,7 +380,7 @@ class MujocoPlant:
         b = self._base[i]
         mass, ipos, iquat, inertia = payload_inertial(
             m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b],
-            float(mass_kg), float(inertia_kgm2),
+            float(mass_kg), float(inertia_kgm2), self._axle[i],
         )
         m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b] = mass, ipos, iquat, inertia
         self._set_const()
