@@ -30,6 +30,8 @@ __all__ = ["RobotParams", "robot_parameters", "robot_truth", "ground_truth", "id
 
 #: a centre of mass farther than this from the axle midpoint (m) makes the formula approximate
 COM_TOLERANCE_M = 1e-3
+#: the turn test of :func:`identify` ends below this yaw rate, rad/s
+OMEGA_ID = 2.0
 
 
 @dataclass(frozen=True)
@@ -222,7 +224,8 @@ def identify(
     midpoint). Per run a least-squares fit of ``υ̇ = α + β υ`` (likewise ω) separates the drive
     from a velocity-proportional drag (``β = −k``, joint damping); the two torque levels separate
     ``a`` from a dead band (frictionloss): ``a = (α₁ − α₂)/(τ_a1 − τ_a2)``. Without damping and
-    frictionloss this is the slope of υ(t) over the torque. ``T`` defaults to half the motor limit.
+    frictionloss this is the slope of υ(t) over the torque. ``T`` defaults to half the motor limit or
+    half the traction limit ``μ m g r / 2``, whichever is lower.
     ``payload`` = (mass kg, yaw inertia kg·m²) adds a payload at the axle midpoint first.
 
     Returns a dict with the formula values, the identified values, their relative differences,
@@ -238,8 +241,11 @@ def identify(
     if payload is not None:
         plant.add_payload(0, *payload)
     params = plant.params[0]
-    if torque is None:
-        torque = 0.5 * min(params.tau_max)
+    if torque is None:  # half the motor limit, at most a quarter of the static traction limit μ N r
+        for k in range(round(0.2 / timestep)):
+            plant.step(np.zeros((1, 2)), k * timestep)
+        traction = plant._wheel_friction(0) * float(plant.wheel_loads()[0].min()) * params.wheel_radius
+        torque = min(0.5 * min(params.tau_max), 0.25 * traction)
     if not 0 < torque <= min(params.tau_max):
         raise ValueError(f"torque must be in (0, {min(params.tau_max)}] N·m, got {torque}")
     if not duration > 0 or settle < 0:
@@ -277,12 +283,15 @@ def identify(
         return dict(fit=out, lateral_m=lateral, warnings=n_warn,
                     heading_change_rad=float(np.angle(np.exp(1j * (pose[0, 2] - th0)))))
 
+    # turn torque: ω at the end at most OMEGA_ID rad/s, so the υ·ω coupling of a centre of mass
+    # off the axle (∝ ω²) stays small
+    t_turn = min(torque, OMEGA_ID / (2 * params.b_eff * duration))
     drive = [run(torque, torque), run(0.5 * torque, 0.5 * torque)]
-    turn = [run(-torque, torque), run(-0.5 * torque, 0.5 * torque)]
+    turn = [run(-t_turn, t_turn), run(-0.5 * t_turn, 0.5 * t_turn)]
     (al1, be1), (al2, be2) = drive[0]["fit"]["v"], drive[1]["fit"]["v"]
     (bl1, ge1), (bl2, ge2) = turn[0]["fit"]["omega"], turn[1]["fit"]["omega"]
     a_id = (al1 - al2) / (2 * torque - torque)  # τ_a = τ_L + τ_R
-    b_id = (bl1 - bl2) / (2 * torque - torque)  # τ_b = τ_R − τ_L (SPEC §5 sign fix)
+    b_id = (bl1 - bl2) / (2 * t_turn - t_turn)  # τ_b = τ_R − τ_L (SPEC §5 sign fix)
     truth = params.unmodelled(0.0, 0.0)
     return {
         "model": str(plant.layouts[0].file),
@@ -291,11 +300,12 @@ def identify(
         "relative_error": {"a": a_id / params.a_eff - 1, "b": b_id / params.b_eff - 1},
         "drag_rate_per_s": {"formula": truth["drag_rate_per_s"], "identified": [-(be1 + be2) / 2, -(ge1 + ge2) / 2]},
         "deadband_torque_Nm": {"formula": truth["deadband_torque_Nm"],
-                               "identified": [2 * torque - al1 / a_id, 2 * torque - bl1 / b_id]},
+                               "identified": [2 * torque - al1 / a_id, 2 * t_turn - bl1 / b_id]},
         "params": asdict(params),
         "layout": asdict(plant.layouts[0]),
         "test": {
             "torque_Nm": torque,
+            "turn_torque_Nm": t_turn,
             "duration_s": duration,
             "settle_s": settle,
             "timestep_s": dt,

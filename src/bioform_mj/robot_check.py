@@ -4,8 +4,9 @@
 the ground truth from the compiled model, identifies ``a, b`` (constant torques from rest,
 :func:`bioform_mj.identify.identify`), and measures what the paper's model leaves out:
 
-- **traction limit** per wheel ``μ m g r / 2`` (N·m; μ of the wheel–floor contact as the
-  scene composes it) against the **motor limit** (N·m);
+- **traction limit** per wheel ``μ N r`` (N·m; ``N`` the wheel's load at rest, from the
+  contact forces, ``= m g / 2`` when the wheels carry all the weight; μ of the wheel–floor
+  contact as the scene composes it) against the **motor limit** (N·m);
 - **static tip-over margins**: the forward, backward and lateral accelerations (m/s²) at which
   the chassis tips, from the centre of mass (height ``h``, position ``c`` from the axle midpoint)
   and the support rectangle of every collision geom within :data:`SUPPORT_CLEARANCE` of the
@@ -119,7 +120,10 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     mujoco.mj_kinematics(plant.model, scratch)
     tips = tip_margins(plant.model, scratch, "f1/")
     mu = plant._wheel_friction(0)
-    traction = mu * p.traction_limit
+    for k in range(200):  # settle at rest: the wheels' share of the weight
+        plant.step(np.zeros((1, 2)), k * 0.001)
+    loads = plant.wheel_loads()[0]
+    traction = mu * float(loads.min()) * p.wheel_radius  # μ N r per wheel (μ m g r / 2 if the wheels carry all)
     motor = float(min(p.tau_max))
     motor_accel = 2 * motor * p.a_eff  # υ̇ at full torque on both wheels, m/s²
     notes = list(lay.notes)
@@ -140,7 +144,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         if acc <= 0:
             reasons_fail.append(f"statically unstable: the centre of mass is outside the support ({way})")
     if motor > traction:
-        reasons_warn.append(f"motor limit {motor:.3g} N·m exceeds the traction limit μ m g r/2 = {traction:.3g} N·m: "
+        reasons_warn.append(f"motor limit {motor:.3g} N·m exceeds the traction limit μ N r = {traction:.3g} N·m: "
                             "the wheels can skid at full torque")
     if motor_accel > min(ta["forward"], ta["backward"]) > 0:
         reasons_warn.append(f"full torque accelerates the robot at {motor_accel:.3g} m/s², more than tips it "
@@ -174,6 +178,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         "wheel_radius_m": p.wheel_radius, "half_track_m": p.half_track,
         "friction_mu": mu,
         "traction_limit_nm": traction, "motor_limit_nm": motor,
+        "wheel_load_n": loads.tolist(), "weight_on_wheels": float(loads.sum() / (p.mass * G)),
         "motor_accel_mps2": motor_accel,
         "tip_accel_mps2": ta,
         "support_m": tips["support_m"], "support_geoms": [g[len("f1/"):] for g in tips["support_geoms"]],

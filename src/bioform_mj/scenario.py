@@ -85,11 +85,14 @@ class FormationCfg:
     """Offsets ``(Δx, Δy)`` (m, world frame) and initial poses ``(x, y, θ)`` (m, m, rad), one row per follower.
 
     ``init_jitter`` (m for x/y, rad for θ) adds a seeded uniform perturbation to the initial poses.
+    ``scale`` (not in the paper) maps the experiment to a robot ``scale`` times the size of the
+    paper's, when the scenario is loaded (:func:`apply_scale`).
     """
 
     offsets: tuple[tuple[float, ...], ...] = ((3.0, 0.0), (4.0, 5.0), (4.0, -5.0))
     initial_poses: tuple[tuple[float, ...], ...] = ((0.0, 0.0, 0.0), (-1.0, -4.0, 0.0), (-1.0, 4.0, 0.0))
     init_jitter: float = 0.0
+    scale: float = 1.0  # the whole experiment at a robot's scale (apply_scale); 1 = as written
 
 
 @dataclass(frozen=True)
@@ -345,7 +348,7 @@ def load(source: str | Path | None = None, overrides: Mapping[str, Any] | list[s
         data["method"] = method
     if plant is not None:
         data.setdefault("plant", {})["kind"] = plant
-    sc = from_dict(data)
+    sc = apply_scale(from_dict(data))
     validate(sc)
     return apply_robots_to_ideal(sc)
 
@@ -709,3 +712,52 @@ def apply_robots_to_ideal(sc: Scenario) -> Scenario:
     t = truths[0]
     plant = dataclasses.replace(pc, c_true=(float(c[0, 0]), float(c[0, 1])), mass=t.mass_eff, inertia=t.inertia_eff)
     return dataclasses.replace(sc, plant=plant)
+
+
+# ---------------------------------------------------------------------------------------
+# The paper's experiment at a robot's scale (issue 10)
+# ---------------------------------------------------------------------------------------
+
+def apply_scale(sc: Scenario) -> Scenario:
+    """Scale the experiment by ``s = formation.scale``: every length × s, every time unchanged.
+
+    So every speed and acceleration is × s and every angle, rate and time constant stays: the
+    leader (``x0, y0, speed, amplitude, radius, vx, vy`` and the amplitudes of ``x_terms`` /
+    ``y_terms``), the offsets and initial positions (and ``init_jitter``), and the gains that
+    carry a length so that the closed loop is the paper's, shrunk: the estimator's ``υ``-channel
+    sign gain ``ka[0]`` and boundary layer ``phi[0]`` (m/s², m/s), the torque law's ``c[0]``
+    (m/s²), the disturbance's ``υ`` channel (m/s²) × s; ``k2 / s²`` and ``k3 / s`` (eq. 31:
+    ``ω_cmd = ω_ir + k2 υ_ir ỹ + k3 υ_ir sin θ̃`` is then unchanged). ``k1`` stays: the neuron
+    (eq. 32) works in metres, and in its linear range (``|x̃| ≪ A``, which a small robot's
+    errors are) ``k1 V_s ≈ k1 B x̃ / A`` already scales with the error; its bound ``k1 B`` does
+    not shrink. The torque law's ``phi`` (one layer on both channels) and the learner's gains
+    are not scaled: use ``learner.gain_scaling = "c_hat0"`` (the scaled presets do). The values
+    are those written (file and ``--set``); the resolved configuration holds the scaled values
+    and ``scale`` for the record (loading a resolved configuration again would scale twice).
+    """
+    s = sc.formation.scale
+    if s == 1.0:
+        return sc
+    if not (math.isfinite(s) and s > 0):
+        raise ScenarioError("formation.scale", f"must be a number > 0, got {s:g}")
+
+    def rows(values: tuple, cols: int) -> tuple:
+        return tuple(tuple(v * s if j < cols else v for j, v in enumerate(r)) for r in values)
+
+    ld = sc.leader
+    leader = dataclasses.replace(
+        ld, x0=ld.x0 * s, y0=ld.y0 * s, speed=ld.speed * s, amplitude=ld.amplitude * s, radius=ld.radius * s,
+        vx=ld.vx * s, vy=ld.vy * s, x_terms=rows(ld.x_terms, 1), y_terms=rows(ld.y_terms, 1))
+    f = sc.formation
+    formation = dataclasses.replace(f, offsets=rows(f.offsets, 2), initial_poses=rows(f.initial_poses, 2),
+                                    init_jitter=f.init_jitter * s)
+    e = sc.estimator
+    first = lambda v: (v[0] * s, *v[1:]) if v else v  # noqa: E731 - the υ channel of a (υ, ω) pair
+    estimator = dataclasses.replace(e, ka=first(e.ka), phi=first(e.phi))
+    k = sc.kinematic
+    kinematic = dataclasses.replace(k, k2=k.k2 / s**2, k3=k.k3 / s)
+    torque = dataclasses.replace(sc.torque, c=first(sc.torque.c))
+    d = sc.disturbance
+    disturbance = dataclasses.replace(d, bias=first(d.bias), amp=first(d.amp))
+    return dataclasses.replace(sc, leader=leader, formation=formation, estimator=estimator, kinematic=kinematic,
+                               torque=torque, disturbance=disturbance)

@@ -506,6 +506,10 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
             gear = np.array(act.gear, float)
             gear[0] = sgn * abs(gear[0])
             act.gear = gear
+            if ref.tau_max > 0:  # the mapping's limit replaces the model's (gear ±1: ctrl is N·m)
+                act.ctrlrange = [-tau, tau]
+                act.forcelimited = 1
+                act.forcerange = [-tau, tau]
     else:
         for name, j, sgn in zip(layout.motors, layout.wheel_joints, layout.wheel_sign):
             spec.add_actuator(name=name, target=j, trntype=mujoco.mjtTrn.mjTRN_JOINT,

@@ -314,6 +314,25 @@ class MujocoPlant:
         vc = np.stack([vel[:, 0] - lw, vel[:, 0] + lw], axis=1)
         return np.abs(rate - vc) / np.maximum(np.maximum(np.abs(rate), np.abs(vc)), self.SLIP_V_FLOOR)
 
+    def wheel_loads(self) -> np.ndarray:
+        """(n, 2) normal force on the [left, right] wheels' floor contacts now, N (``mj_contactForce``).
+
+        Call it after the robots settled at rest (e.g. 0.2 s of zero torque): then it says how the
+        weight is shared between wheels and casters, which sets the real traction limit
+        ``μ N r`` per wheel (``μ m g r / 2`` only when the wheels carry all the weight).
+        """
+        m, d = self.model, self.data
+        gid = {m.geom(g).id: (i, k) for i, lay in enumerate(self.layouts) for k, g in enumerate(lay.wheel_geoms)}
+        out = np.zeros((self.n, 2))
+        f = np.zeros(6)
+        for c in range(d.ncon):
+            con = d.contact[c]
+            hit = gid.get(int(con.geom1)) or gid.get(int(con.geom2))
+            if hit is not None:
+                mujoco.mj_contactForce(m, d, c, f)
+                out[hit] += f[0]
+        return out
+
     def unmodelled(self, v: float, w: float) -> list[dict]:
         """Per follower: wheel damping, armature and frictionloss and their size at speeds
         ``v`` m/s, ``w`` rad/s, with what ``ĉ`` should converge to
