@@ -71,6 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
     ident = sub.add_parser("identify", help="system identification of a robot MJCF: formula vs measured a, b")
     ident.add_argument("model", help="shipped robot name or path to an MJCF file")
     ident.add_argument("--out", type=Path, help="write the result as JSON to this file")
+    from .robot_check import add_parser as _robot_parser, mapping_args
+
+    mapping_args(ident)
+    _robot_parser(sub)  # bioform robot check MODEL.xml [--base B] [--left-wheel J] [--right-wheel J] [--json FILE]
 
     sw = sub.add_parser("sweep", help="many runs: methods x varied keys x seeds, on a process pool or Ray")
     _scenario_args(sw)
@@ -130,6 +134,10 @@ def _dispatch(args: argparse.Namespace) -> int:
         return EXIT_OK
     if args.command == "identify":
         return _identify(args)
+    if args.command == "robot":
+        from .robot_check import main as robot_main
+
+        return robot_main(args)
     if args.command == "sweep":
         return _sweep(args)
     if args.command == "bench":
@@ -359,9 +367,9 @@ def _sweep(args: argparse.Namespace) -> int:
 
 def _identify(args: argparse.Namespace) -> int:
     from .identify import identify_main
-    from .robots import resolve_robot
+    from .robot_check import ref_from_args
 
-    result = identify_main(resolve_robot(args.model))
+    result = identify_main(ref_from_args(args.model, args))
     text = json.dumps(result, indent=2)
     if args.out is not None:
         from .outputs.files import write_text

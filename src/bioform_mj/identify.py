@@ -22,14 +22,16 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from bioform_mj.scene import ROBOT, build_scene, compile_scene, model_path
+from bioform_mj.scene import build_scene, compile_scene, layout_of
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RobotParams", "robot_parameters", "ground_truth", "identify", "identify_main"]
+__all__ = ["RobotParams", "robot_parameters", "robot_truth", "ground_truth", "identify", "identify_main"]
 
 #: a centre of mass farther than this from the axle midpoint (m) makes the formula approximate
 COM_TOLERANCE_M = 1e-3
+#: the turn test of :func:`identify` ends below this yaw rate, rad/s
+OMEGA_ID = 2.0
 
 
 @dataclass(frozen=True)
@@ -42,9 +44,18 @@ class RobotParams:
     wheel_radius: float  # r, m
     half_track: float  # l, m
     com_offset: float  # m: horizontal distance of the centre of mass from the axle midpoint
-    tau_max: tuple[float, float]  # N·m: upper ctrl limit of left/right motor
+    tau_max: tuple[float, float]  # N·m: torque limit of left/right motor
     a_eff: float  # 1/(kg·m)
     b_eff: float  # 1/(kg·m²)
+    com_xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m: CoM from the axle midpoint, base frame
+    wheel_damping: float = 0.0  # N·m·s/rad per wheel joint (mean of the two)
+    wheel_armature: float = 0.0  # kg·m² per wheel joint (included in wheel_inertia)
+    wheel_frictionloss: float = 0.0  # N·m per wheel joint
+
+    @property
+    def c(self) -> tuple[float, float]:
+        """``(a_eff, b_eff)``."""
+        return (self.a_eff, self.b_eff)
 
     @property
     def mass_eff(self) -> float:
@@ -61,6 +72,39 @@ class RobotParams:
         """``μ m g r / 2`` per wheel for μ = 1, N·m (scale by the floor's μ)."""
         return self.mass * 9.81 * self.wheel_radius / 2
 
+    def unmodelled(self, v: float, w: float) -> dict:
+        """Wheel damping and frictionloss as the paper's model sees them (design §8, issue 10).
+
+        A joint damping ``c`` (N·m·s/rad) on each wheel is a torque ``−c φ̇`` with wheel rates
+        ``φ̇_{R,L} = (υ ± l ω)/r``, so ``υ̇ = a τ_a − k_υ υ`` and ``ω̇ = b τ_b − k_ω ω`` with
+        ``k_υ = 2 a c / r`` and ``k_ω = 2 b c l / r`` (1/s); at speeds ``v`` m/s, ``w`` rad/s that
+        is a drag of ``k_υ v`` m/s² and ``k_ω w`` rad/s². A frictionloss ``f`` (N·m) per wheel is
+        a dead band: up to ``2 f`` of ``τ_a`` resp. ``τ_b`` moves nothing, ``2 a f`` m/s² resp.
+        ``2 b f`` rad/s². Neither is in ``υ̇ = a τ_a + d``: the learner meets them as a
+        disturbance, and where the torque is nearly constant (cruising at ``v``, torque
+        ``τ_a ≈ k_υ v / a``) it cannot tell them from ``a τ_a`` (the constant-disturbance bias of
+        design §8): ``â`` then tends to ``a − k_υ v/τ_a``, which is ``0`` for pure cruising, i.e.
+        it stays where the projection and the excitation put it. Armature is in ``a_eff, b_eff``.
+        """
+        a, b, r, l = self.a_eff, self.b_eff, self.wheel_radius, self.half_track
+        c, f = self.wheel_damping, self.wheel_frictionloss
+        k_v, k_w = 2 * a * c / r, 2 * b * c * l / r
+        return {
+            "damping_Nms_per_rad": c, "armature_kgm2": self.wheel_armature, "frictionloss_Nm": f,
+            "armature_in_c_true": "I_w includes armature: a = 1/(m r + 2 I_w/r), b = l/(I r + 2 I_w l²/r)",
+            "drag_rate_per_s": [k_v, k_w],
+            "drag_time_constant_s": [1 / k_v if k_v else None, 1 / k_w if k_w else None],
+            "at_speed": [v, w],
+            "drag_accel_at_speed": [k_v * v, k_w * w],
+            "deadband_torque_Nm": [2 * f, 2 * f],
+            "deadband_accel": [2 * a * f, 2 * b * f],
+            "c_hat_converges_to": (
+                "c_true = (a_eff, b_eff) under exciting motion, the drag and dead band acting as a "
+                "disturbance d; with a nearly constant torque they bias c_hat like a constant d: "
+                "a_hat ~ a - (k_v v + 2 a f)/tau_a, b_hat ~ b - (k_w w + 2 b f)/tau_b"
+                if (c or f) else "c_true = (a_eff, b_eff): no wheel damping or frictionloss"),
+        }
+
 
 def _subtree(model: mujoco.MjModel, root: int) -> np.ndarray:
     """Ids of ``root`` and all its descendants."""
@@ -71,35 +115,28 @@ def _subtree(model: mujoco.MjModel, root: int) -> np.ndarray:
     return ids[inside]
 
 
-def _support(model: mujoco.MjModel, data: mujoco.MjData, geom: int, direction: np.ndarray) -> float:
-    """Extent of a sphere/ellipsoid geom from its centre along unit ``direction``, m."""
-    size = model.geom_size[geom]
-    if model.geom_type[geom] == int(mujoco.mjtGeom.mjGEOM_SPHERE):
-        return float(size[0])
-    local = data.geom_xmat[geom].reshape(3, 3).T @ direction
-    return float(np.sqrt(np.sum((size * local) ** 2)))
-
-
 def robot_parameters(
     model: mujoco.MjModel, prefix: str = "", data: mujoco.MjData | None = None
 ) -> RobotParams:
     """Read one robot's parameters from a compiled model (robot names start with ``prefix``).
 
-    Evaluated at ``qpos0`` (robot level on the floor); yaw inertia uses every body's
-    inertia rotated to the world frame plus the parallel-axis term about the vertical
-    through the axle midpoint (midpoint of the two wheel joint anchors). ``data``: a
-    scratch ``MjData`` on which ``mj_kinematics`` ran at ``qpos0`` (saves the work when
-    reading many robots); by default one is made.
+    The parts come from the robot's layout (:func:`bioform_mj.scene.layout_of`: mapping, wheel
+    radius, half track, axle midpoint). Evaluated at ``qpos0``; yaw inertia uses every body's
+    inertia rotated to the world frame plus the parallel-axis term about the vertical through
+    the axle midpoint (midpoint of the two wheel joint anchors). ``I_w`` is a wheel's spin
+    inertia about its joint axis plus the joint's armature. ``data``: a scratch ``MjData`` on
+    which ``mj_kinematics`` ran at ``qpos0`` (saves the work when reading many robots).
     """
-    base = model.body(prefix + ROBOT.base).id
-    jl, jr = (model.joint(prefix + n).id for n in ROBOT.wheel_joints)
-    gl, gr = (model.geom(prefix + n).id for n in ROBOT.wheel_geoms)
-    al, ar = (model.actuator(prefix + n).id for n in ROBOT.motors)
+    lay = layout_of(model, prefix)
+    base = model.body(lay.base).id
+    jl, jr = (model.joint(n).id for n in lay.wheel_joints)
+    al, ar = (model.actuator(n).id for n in lay.motors)
 
     if data is None:
         data = mujoco.MjData(model)
         mujoco.mj_kinematics(model, data)
-    up = data.xmat[base].reshape(3, 3)[:, 2]  # robot's vertical axis
+    rot_b = data.xmat[base].reshape(3, 3)
+    up = rot_b[:, 2]  # robot's vertical axis
     mid = 0.5 * (data.xanchor[jl] + data.xanchor[jr])
 
     bodies = _subtree(model, base)
@@ -115,25 +152,41 @@ def robot_parameters(
     com = (masses[:, None] * data.xipos[bodies]).sum(axis=0) / mass - mid
     com_offset = float(np.linalg.norm(com - (com @ up) * up))
 
-    spins, radii = [], []
-    for j, g in ((jl, gl), (jr, gr)):
+    spins, damp, arm, fl = [], [], [], []
+    for j in (jl, jr):
         wb = model.jnt_bodyid[j]
+        dof = model.jnt_dofadr[j]
         axis_local = data.ximat[wb].reshape(3, 3).T @ data.xaxis[j]
-        spins.append(axis_local @ (model.body_inertia[wb] * axis_local) + model.dof_armature[model.jnt_dofadr[j]])
-        radii.append(_support(model, data, g, up))
-    i_w, r = float(np.mean(spins)), float(np.mean(radii))
-    l = float(0.5 * np.linalg.norm(data.xanchor[jl] - data.xanchor[jr]))
-    if abs(spins[0] - spins[1]) > 1e-9 * max(spins) or abs(radii[0] - radii[1]) > 1e-9:
+        spins.append(axis_local @ (model.body_inertia[wb] * axis_local) + model.dof_armature[dof])
+        damp.append(float(model.dof_damping[dof]))
+        arm.append(float(model.dof_armature[dof]))
+        fl.append(float(model.dof_frictionloss[dof]))
+    i_w, r, l = float(np.mean(spins)), lay.wheel_radius, lay.half_track
+    if abs(spins[0] - spins[1]) > 1e-9 * max(spins):
         warnings.warn(f"{prefix or 'robot'}: left and right wheels differ; using their mean", stacklevel=2)
     if com_offset > COM_TOLERANCE_M:
-        log.warning(
-            "%s: centre of mass %.1f mm off the axle midpoint; a_eff, b_eff are approximate "
-            "(unmodelled υ·ω coupling)", prefix or "robot", 1e3 * com_offset,
+        log.info(
+            "%s: centre of mass %.1f mm off the axle midpoint; a_eff, b_eff hold from rest "
+            "(an unmodelled υ·ω coupling acts while moving)", prefix or "robot", 1e3 * com_offset,
         )
     a_eff = 1.0 / (mass * r + 2.0 * i_w / r)  # design §8
     b_eff = l / (yaw * r + 2.0 * i_w * l**2 / r)  # design §8
-    tau_max = (float(model.actuator_ctrlrange[al, 1]), float(model.actuator_ctrlrange[ar, 1]))
-    return RobotParams(mass, float(yaw), i_w, r, l, com_offset, tau_max, float(a_eff), float(b_eff))
+
+    def limit(a: int) -> float:
+        lim = float(model.actuator_ctrlrange[a, 1] * abs(model.actuator_gear[a, 0]))
+        if model.actuator_forcelimited[a]:
+            lim = min(lim, float(model.actuator_forcerange[a, 1]))
+        return lim
+
+    return RobotParams(mass, float(yaw), i_w, r, l, com_offset, (limit(al), limit(ar)), float(a_eff), float(b_eff),
+                       tuple(float(x) for x in rot_b.T @ com), float(np.mean(damp)), float(np.mean(arm)),
+                       float(np.mean(fl)))
+
+
+def robot_truth(entry) -> RobotParams:
+    """:class:`RobotParams` of one robot entry (name, path, table or RobotRef), as the plant builds it."""
+    model = compile_scene(build_scene([entry], np.zeros((1, 3)), slots=False))[0]
+    return robot_parameters(model, "f1/")
 
 
 def ground_truth(model: mujoco.MjModel, prefix: str = "") -> tuple[float, float]:
@@ -154,7 +207,7 @@ def _yaw_and_rates(qpos: np.ndarray, qvel: np.ndarray) -> tuple[float, float, fl
 
 
 def identify(
-    model_file: str | Path,
+    model_file,
     *,
     torque: float | None = None,
     duration: float = 0.2,
@@ -164,84 +217,106 @@ def identify(
 ) -> dict:
     """Identify ``(a, b)`` of one robot by constant wheel torques from rest.
 
-    Drive test ``τ_L = τ_R = torque`` (so ``τ_a = 2 torque``), then turn test
-    ``τ_R = −τ_L = torque`` (``τ_b = 2 torque``), each for ``duration`` s after ``settle``
-    s at rest on the floor; a least-squares line through υ(t) resp. ω(t) gives the
-    accelerations. ``torque`` defaults to half the motor limit. ``payload`` = (mass kg,
-    yaw inertia kg·m²) adds a payload at the axle midpoint first.
+    ``model_file``: a shipped name, an MJCF path or a :class:`~bioform_mj.robots.RobotRef` with a
+    mapping. Drive tests ``τ_L = τ_R = T`` and ``T/2`` (``τ_a = 2T, T``), then turn tests
+    ``τ_R = −τ_L = T`` and ``T/2``, each for ``duration`` s after ``settle`` s at rest on the floor,
+    read through :class:`~bioform_mj.plants.mujoco_plant.MujocoPlant` (υ and ω of the axle
+    midpoint). Per run a least-squares fit of ``υ̇ = α + β υ`` (likewise ω) separates the drive
+    from a velocity-proportional drag (``β = −k``, joint damping); the two torque levels separate
+    ``a`` from a dead band (frictionloss): ``a = (α₁ − α₂)/(τ_a1 − τ_a2)``. Without damping and
+    frictionloss this is the slope of υ(t) over the torque. ``T`` defaults to half the motor limit or
+    half the traction limit ``μ m g r / 2``, whichever is lower.
+    ``payload`` = (mass kg, yaw inertia kg·m²) adds a payload at the axle midpoint first.
 
-    Returns a dict with the formula values, the identified values, their relative
-    differences, and the drive test's lateral drift and heading change.
+    Returns a dict with the formula values, the identified values, their relative differences,
+    the identified drag and dead band beside their formulas, and the drive test's lateral drift
+    and heading change.
     """
-    path = model_path(model_file)
-    spec = build_scene(
-        [path], np.zeros((1, 3)), slots=False, timestep=timestep,
-        payloads=None if payload is None else [payload],
-    )
-    model, data = compile_scene(spec)
-    prefix = "f1/"
-    params = robot_parameters(model, prefix)
-    if torque is None:
-        torque = 0.5 * min(params.tau_max)
+    from bioform_mj.plants.mujoco_plant import MujocoPlant  # the plant imports this module
+    from bioform_mj.scene import prepare_robot
+
+    if timestep is None:
+        timestep = float(prepare_robot(model_file)[0].option.timestep)
+    plant = MujocoPlant([model_file], np.zeros((1, 3)), timestep, timestep, None, slots=False)
+    if payload is not None:
+        plant.add_payload(0, *payload)
+    params = plant.params[0]
+    if torque is None:  # half the motor limit, at most a quarter of the static traction limit μ N r
+        for k in range(round(0.2 / timestep)):
+            plant.step(np.zeros((1, 2)), k * timestep)
+        traction = plant._wheel_friction(0) * float(plant.wheel_loads()[0].min()) * params.wheel_radius
+        torque = min(0.5 * min(params.tau_max), 0.25 * traction)
     if not 0 < torque <= min(params.tau_max):
         raise ValueError(f"torque must be in (0, {min(params.tau_max)}] N·m, got {torque}")
     if not duration > 0 or settle < 0:
         raise ValueError("duration must be > 0 and settle >= 0")
-
-    root = model.joint(prefix + "root")
-    qa, va = root.qposadr[0], root.dofadr[0]
-    ctrl = [model.actuator(prefix + n).id for n in ROBOT.motors]
+    model, data = plant.model, plant.data
     dt = model.opt.timestep
-    n_settle, n_run = round(settle / dt), max(round(duration / dt), 2)
+    n_settle, n_run = round(settle / dt), max(round(duration / dt), 3)
 
     def run(tau_l: float, tau_r: float) -> dict:
-        mujoco.mj_resetData(model, data)
-        mujoco.mj_step(model, data, nstep=n_settle) if n_settle else None
-        theta0, *_ = _yaw_and_rates(data.qpos[qa : qa + 7], data.qvel[va : va + 6])
-        xy0 = data.qpos[qa : qa + 2].copy()
-        data.ctrl[ctrl] = (tau_l, tau_r)
-        t = np.empty(n_run)
-        v = np.empty(n_run)
-        om = np.empty(n_run)
+        mujoco.mj_resetData(model, data)  # not plant.reset(): that would remove the payload
+        mujoco.mj_forward(model, data)
+        zero = np.zeros((1, 2))
+        for k in range(n_settle):
+            plant.step(zero, k * dt)
+        pose0, _ = plant.observe()
+        tau = np.array([[tau_l, tau_r]])
+        z = np.empty((n_run + 1, 2))
+        z[0] = plant.observe()[1][0]
         for k in range(n_run):
-            mujoco.mj_step(model, data)
-            t[k] = (k + 1) * dt
-            _, v[k], _, om[k] = _yaw_and_rates(data.qpos[qa : qa + 7], data.qvel[va : va + 6])
-        theta, *_ = _yaw_and_rates(data.qpos[qa : qa + 7], data.qvel[va : va + 6])
-        d = data.qpos[qa : qa + 2] - xy0
-        lateral = float(-np.sin(theta0) * d[0] + np.cos(theta0) * d[1])
+            plant.step(tau, k * dt)
+            z[k + 1] = plant.observe()[1][0]
+        pose, _ = plant.observe()
+        d = pose[0, :2] - pose0[0, :2]
+        th0 = pose0[0, 2]
+        lateral = float(-np.sin(th0) * d[0] + np.cos(th0) * d[1])
         n_warn = sum(int(w.number) for w in data.warning)
-        return dict(
-            v_dot=float(np.polyfit(t, v, 1)[0]),
-            omega_dot=float(np.polyfit(t, om, 1)[0]),
-            lateral_m=lateral,
-            heading_change_rad=float(np.angle(np.exp(1j * (theta - theta0)))),
-            warnings=n_warn,
-        )
+        # υ̇ = α + β υ: forward differences against midpoints (exact for a line in t)
+        out = {}
+        for k, name in ((0, "v"), (1, "omega")):
+            rate = np.diff(z[:, k]) / dt
+            mids = 0.5 * (z[1:, k] + z[:-1, k])
+            A = np.column_stack([np.ones_like(mids), mids])
+            (alpha, beta), *_ = np.linalg.lstsq(A, rate, rcond=None)
+            out[name] = (float(alpha), float(beta))
+        return dict(fit=out, lateral_m=lateral, warnings=n_warn,
+                    heading_change_rad=float(np.angle(np.exp(1j * (pose[0, 2] - th0)))))
 
-    drive = run(torque, torque)
-    turn = run(-torque, torque)
-    a_id = drive["v_dot"] / (2 * torque)  # τ_a = τ_L + τ_R
-    b_id = turn["omega_dot"] / (2 * torque)  # τ_b = τ_R − τ_L (design §5 sign fix)
+    # turn torque: ω at the end at most OMEGA_ID rad/s, so the υ·ω coupling of a centre of mass
+    # off the axle (∝ ω²) stays small
+    t_turn = min(torque, OMEGA_ID / (2 * params.b_eff * duration))
+    drive = [run(torque, torque), run(0.5 * torque, 0.5 * torque)]
+    turn = [run(-t_turn, t_turn), run(-0.5 * t_turn, 0.5 * t_turn)]
+    (al1, be1), (al2, be2) = drive[0]["fit"]["v"], drive[1]["fit"]["v"]
+    (bl1, ge1), (bl2, ge2) = turn[0]["fit"]["omega"], turn[1]["fit"]["omega"]
+    a_id = (al1 - al2) / (2 * torque - torque)  # τ_a = τ_L + τ_R
+    b_id = (bl1 - bl2) / (2 * t_turn - t_turn)  # τ_b = τ_R − τ_L (design §5 sign fix)
+    truth = params.unmodelled(0.0, 0.0)
     return {
-        "model": str(path),
+        "model": str(plant.layouts[0].file),
         "formula": {"a": params.a_eff, "b": params.b_eff},
         "identified": {"a": a_id, "b": b_id},
         "relative_error": {"a": a_id / params.a_eff - 1, "b": b_id / params.b_eff - 1},
+        "drag_rate_per_s": {"formula": truth["drag_rate_per_s"], "identified": [-(be1 + be2) / 2, -(ge1 + ge2) / 2]},
+        "deadband_torque_Nm": {"formula": truth["deadband_torque_Nm"],
+                               "identified": [2 * torque - al1 / a_id, 2 * t_turn - bl1 / b_id]},
         "params": asdict(params),
+        "layout": asdict(plant.layouts[0]),
         "test": {
             "torque_Nm": torque,
+            "turn_torque_Nm": t_turn,
             "duration_s": duration,
             "settle_s": settle,
             "timestep_s": dt,
             "integrator": mujoco.mjtIntegrator(model.opt.integrator).name,
-            "drive_lateral_drift_m": drive["lateral_m"],
-            "drive_heading_change_rad": drive["heading_change_rad"],
-            "mujoco_warnings": drive["warnings"] + turn["warnings"],
+            "drive_lateral_drift_m": drive[0]["lateral_m"],
+            "drive_heading_change_rad": drive[0]["heading_change_rad"],
+            "mujoco_warnings": sum(r["warnings"] for r in drive + turn),
         },
     }
 
 
-def identify_main(model_path_: str | Path) -> dict:
-    """JSON-able identification report of one model file (for ``bioform identify``)."""
-    return identify(model_path_)
+def identify_main(model) -> dict:
+    """JSON-able identification report of one robot (name, path or RobotRef; for ``bioform identify``)."""
+    return identify(model)

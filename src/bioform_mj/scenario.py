@@ -22,6 +22,7 @@ from . import graph as graph_mod
 from . import leader as leader_mod
 from .control.stack import METHODS
 from .errors import GraphError, InputError, ScenarioError
+from .robots import RobotRef, as_ref, rebase_entries
 
 PLANTS = ("ideal", "mujoco")
 LEADER_KINDS = ("paper", "line", "circle", "figure8", "harmonic")
@@ -84,11 +85,14 @@ class FormationCfg:
     """Offsets ``(Δx, Δy)`` (m, world frame) and initial poses ``(x, y, θ)`` (m, m, rad), one row per follower.
 
     ``init_jitter`` (m for x/y, rad for θ) adds a seeded uniform perturbation to the initial poses.
+    ``scale`` (not in the paper) maps the experiment to a robot ``scale`` times the size of the
+    paper's, when the scenario is loaded (:func:`apply_scale`).
     """
 
     offsets: tuple[tuple[float, ...], ...] = ((3.0, 0.0), (4.0, 5.0), (4.0, -5.0))
     initial_poses: tuple[tuple[float, ...], ...] = ((0.0, 0.0, 0.0), (-1.0, -4.0, 0.0), (-1.0, 4.0, 0.0))
     init_jitter: float = 0.0
+    scale: float = 1.0  # the whole experiment at a robot's scale (apply_scale); 1 = as written
 
 
 @dataclass(frozen=True)
@@ -153,14 +157,18 @@ class LearnerCfg:
 @dataclass(frozen=True)
 class PlantCfg:
     """Plant. Ideal: ``c_true = (a, b)`` and the mass (kg) / yaw inertia (kg·m²) consistent with
-    them for r = 0.1 m, l = 0.2 m (used by payload events). MuJoCo: ``robots`` are shipped model
-    names or MJCF paths, one per follower or one for all."""
+    them for r = 0.1 m, l = 0.2 m (used by payload events). ``robots``: shipped names, MJCF paths
+    or tables ``{model, base, left_wheel, right_wheel, wheel_radius, half_track, tau_max}``
+    (:mod:`bioform_mj.robots`), one per follower or one for all; relative paths in a TOML file
+    are relative to that file. On the ideal plant a robot other than ``paper`` gives ``c_true``
+    (and ``mass``, ``inertia`` = ``M_eff``, ``I_eff``) from its compiled model
+    (:func:`apply_robots_to_ideal`)."""
 
     kind: str = "ideal"
     c_true: tuple[float, ...] = (0.4, 10.0)
     mass: float = 25.0
     inertia: float = 0.2
-    robots: tuple[str, ...] = ("paper",)
+    robots: tuple[RobotRef, ...] = (RobotRef("paper"),)
 
 
 @dataclass(frozen=True)
@@ -261,8 +269,12 @@ class Scenario:
         return len(self.formation.offsets)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain nested dict (JSON/TOML-able) of every resolved value."""
-        return _to_plain(dataclasses.asdict(self))
+        """Plain nested dict (JSON/TOML-able) of every resolved value (a robot without a mapping
+        as its name or path, one with a mapping as a table)."""
+        d = _to_plain(dataclasses.asdict(self))
+        d["plant"]["robots"] = [r.model if not r.mapped else _to_plain(dataclasses.asdict(r))
+                                for r in self.plant.robots]
+        return d
 
     # ---- derived objects -------------------------------------------------------------
     def build_graph(self) -> graph_mod.Graph:
@@ -321,6 +333,8 @@ def load(source: str | Path | None = None, overrides: Mapping[str, Any] | list[s
         if not path.is_file():
             raise InputError(f"scenario file '{path}' does not exist")
         data = _read_toml(path.read_bytes(), str(path))
+        if isinstance(data.get("plant"), dict) and "robots" in data["plant"]:  # design §10: relative to the file
+            data["plant"]["robots"] = rebase_entries(data["plant"]["robots"], path.parent.resolve())
     else:
         names = preset_names()
         if src not in names:
@@ -334,9 +348,9 @@ def load(source: str | Path | None = None, overrides: Mapping[str, Any] | list[s
         data["method"] = method
     if plant is not None:
         data.setdefault("plant", {})["kind"] = plant
-    sc = from_dict(data)
+    sc = apply_scale(from_dict(data))
     validate(sc)
-    return sc
+    return apply_robots_to_ideal(sc)
 
 
 def _read_toml(raw: bytes, where: str) -> dict[str, Any]:
@@ -394,6 +408,8 @@ def _build(cls: Any, data: Any, prefix: str) -> Any:
 
 
 def _convert(value: Any, tp: Any, key: str) -> Any:
+    if tp is RobotRef:  # a name, a path or a mapping table (robots.py)
+        return as_ref(value, key)
     if dataclasses.is_dataclass(tp):
         return _build(tp, value, key + ".")
     origin = typing.get_origin(tp)
@@ -401,7 +417,7 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
         (inner, *_rest) = typing.get_args(tp)
         if not isinstance(value, (list, tuple)):
             raise ScenarioError(key, f"expected an array, got {type(value).__name__} {value!r}")
-        if dataclasses.is_dataclass(inner):
+        if dataclasses.is_dataclass(inner) and inner is not RobotRef:
             return tuple(_build(inner, v, f"{key}[{i}].") for i, v in enumerate(value))
         return tuple(_convert(v, inner, f"{key}[{i}]") for i, v in enumerate(value))
     if tp is float:
@@ -657,3 +673,91 @@ def _validate_faults(sc: Scenario) -> None:
         if sc.plant.kind != "mujoco":
             raise ScenarioError("faults.friction_patch", "needs plant.kind = 'mujoco': the ideal plant's wheels "
                                                          "cannot slip")
+
+
+# ---------------------------------------------------------------------------------------
+# Robots on the ideal plant (issue 10: plant.robots is never ignored)
+# ---------------------------------------------------------------------------------------
+
+def apply_robots_to_ideal(sc: Scenario) -> Scenario:
+    """On the ideal plant, ``plant.robots`` other than the shipped ``paper`` robot decide ``c_true``.
+
+    The ideal plant is then the paper's model of that robot: ``c_true = (a_eff, b_eff)`` from its
+    compiled model, ``mass = M_eff = 1/(a_eff r)`` and ``inertia = I_eff = l/(b_eff r)`` (for
+    payload events). The ``paper`` robot (the default) leaves ``plant.c_true`` as given, so the
+    paper's abstract plant keeps ``--set plant.c_true=…``. Refused (ScenarioError): robots whose
+    ``c_true`` differ (the ideal plant takes one ``c_true``), and a ``plant.c_true`` other than the
+    paper's that disagrees with the robots. The MuJoCo plant is returned unchanged.
+    """
+    pc = sc.plant
+    if pc.kind != "ideal":
+        return sc
+    from .robots import resolve_robot
+
+    refs = [resolve_robot(r) for r in pc.robots]
+    paper = resolve_robot("paper")
+    if all(Path(r.model).resolve() == Path(paper.model).resolve() and not r.mapped for r in refs):
+        return sc
+    from .identify import robot_truth  # MuJoCo only when a robot asks for it
+
+    truths = [robot_truth(r) for r in refs]
+    c = np.array([t.c for t in truths])
+    if np.any(np.abs(c / c[0] - 1) > 1e-6):
+        raise ScenarioError("plant.robots", "the ideal plant takes one c_true, but the robots differ "
+                            f"({'; '.join(f'{r.model}: a={x[0]:.4g}, b={x[1]:.4g}' for r, x in zip(refs, c))}); "
+                            "use plant.kind = 'mujoco' for a heterogeneous team")
+    if tuple(pc.c_true) != PAPER_C and np.any(np.abs(np.asarray(pc.c_true) / c[0] - 1) > 1e-3):
+        raise ScenarioError("plant.c_true", f"{list(pc.c_true)} disagrees with plant.robots ({refs[0].model}: "
+                            f"a={c[0, 0]:.4g}, b={c[0, 1]:.4g}); give one of them")
+    t = truths[0]
+    plant = dataclasses.replace(pc, c_true=(float(c[0, 0]), float(c[0, 1])), mass=t.mass_eff, inertia=t.inertia_eff)
+    return dataclasses.replace(sc, plant=plant)
+
+
+# ---------------------------------------------------------------------------------------
+# The paper's experiment at a robot's scale (issue 10)
+# ---------------------------------------------------------------------------------------
+
+def apply_scale(sc: Scenario) -> Scenario:
+    """Scale the experiment by ``s = formation.scale``: every length × s, every time unchanged.
+
+    So every speed and acceleration is × s and every angle, rate and time constant stays: the
+    leader (``x0, y0, speed, amplitude, radius, vx, vy`` and the amplitudes of ``x_terms`` /
+    ``y_terms``), the offsets and initial positions (and ``init_jitter``), and the gains that
+    carry a length so that the closed loop is the paper's, shrunk: the estimator's ``υ``-channel
+    sign gain ``ka[0]`` and boundary layer ``phi[0]`` (m/s², m/s), the torque law's ``c[0]``
+    (m/s²), the disturbance's ``υ`` channel (m/s²) × s; ``k2 / s²`` and ``k3 / s`` (eq. 31:
+    ``ω_cmd = ω_ir + k2 υ_ir ỹ + k3 υ_ir sin θ̃`` is then unchanged). ``k1`` stays: the neuron
+    (eq. 32) works in metres, and in its linear range (``|x̃| ≪ A``, which a small robot's
+    errors are) ``k1 V_s ≈ k1 B x̃ / A`` already scales with the error; its bound ``k1 B`` does
+    not shrink. The torque law's ``phi`` (one layer on both channels) and the learner's gains
+    are not scaled: use ``learner.gain_scaling = "c_hat0"`` (the scaled presets do). The values
+    are those written (file and ``--set``); the resolved configuration holds the scaled values
+    and ``scale`` for the record (loading a resolved configuration again would scale twice).
+    """
+    s = sc.formation.scale
+    if s == 1.0:
+        return sc
+    if not (math.isfinite(s) and s > 0):
+        raise ScenarioError("formation.scale", f"must be a number > 0, got {s:g}")
+
+    def rows(values: tuple, cols: int) -> tuple:
+        return tuple(tuple(v * s if j < cols else v for j, v in enumerate(r)) for r in values)
+
+    ld = sc.leader
+    leader = dataclasses.replace(
+        ld, x0=ld.x0 * s, y0=ld.y0 * s, speed=ld.speed * s, amplitude=ld.amplitude * s, radius=ld.radius * s,
+        vx=ld.vx * s, vy=ld.vy * s, x_terms=rows(ld.x_terms, 1), y_terms=rows(ld.y_terms, 1))
+    f = sc.formation
+    formation = dataclasses.replace(f, offsets=rows(f.offsets, 2), initial_poses=rows(f.initial_poses, 2),
+                                    init_jitter=f.init_jitter * s)
+    e = sc.estimator
+    first = lambda v: (v[0] * s, *v[1:]) if v else v  # noqa: E731 - the υ channel of a (υ, ω) pair
+    estimator = dataclasses.replace(e, ka=first(e.ka), phi=first(e.phi))
+    k = sc.kinematic
+    kinematic = dataclasses.replace(k, k2=k.k2 / s**2, k3=k.k3 / s)
+    torque = dataclasses.replace(sc.torque, c=first(sc.torque.c))
+    d = sc.disturbance
+    disturbance = dataclasses.replace(d, bias=first(d.bias), amp=first(d.amp))
+    return dataclasses.replace(sc, leader=leader, formation=formation, estimator=estimator, kinematic=kinematic,
+                               torque=torque, disturbance=disturbance)

@@ -1,32 +1,50 @@
 """Compose a MuJoCo scene of ``n`` differential-drive followers with ``mujoco.MjSpec``.
 
-A robot model (MJCF, see ``models/``) must provide, by name:
+A robot is an MJCF file plus a mapping (:class:`bioform_mj.robots.RobotRef`); see the README,
+"What a robot needs". :func:`prepare_robot` resolves it once, from the compiled model:
 
-- body ``base`` with a free joint, its origin on the axle midpoint (x forward, z up);
-- hinge joints ``left_wheel`` / ``right_wheel`` (positive rotation drives forward);
-- torque actuators ``left_motor`` / ``right_motor`` on those joints (gear 1: ctrl is N·m);
-- geoms ``left_wheel_collision`` / ``right_wheel_collision`` (single-contact sphere or
-  ellipsoid; design §8 pitfall: a cylinder scrubs and biases ``b``).
+- the base body (``base`` by convention) carrying a free joint (one is added to a top-level
+  base that has none); it is taken as x forward, y left, z up;
+- the two wheel hinges (``left_wheel``/``right_wheel`` by convention): the wheel radius from
+  the wheels' collision geoms (their extent below the joint anchor), the half track from the
+  joint anchors, the axle midpoint (the reference point of pose and ``υ``, wherever the base
+  origin is), and each wheel's forward sign (a joint axis may point either way);
+- torque motors on the two wheel joints with ``gear = ±1`` (so that positive ``ctrl`` drives
+  forward, in N·m): a plain motor of the model on the joint is kept (its gear sign fixed),
+  otherwise ``left_motor``/``right_motor`` are added and the model's own wheel drives (joint or
+  tendon velocity/position/motor actuators) get zero gain and bias: they exert no force but stay
+  in the model, so sensors that name them still compile. Other actuators are left as they are
+  (a position actuator keeps holding its ctrl = 0 target);
+- a wheel collision shape that scrubs when turning (cylinder, capsule, box, mesh: several
+  contact points across the tread) is switched off for contacts (kept for looks) and replaced
+  by a single-contact ellipsoid proxy of the same radius (design §8 pitfall);
+- keyframes are dropped (the scene sets its own initial poses).
+
+What was found is stored in the robot's spec as the custom text ``bioform_layout`` (JSON of
+:class:`RobotLayout`), so a compiled scene carries it (``f1/bioform_layout``, …) and
+:func:`layout_of` reads it back.
 
 The scene adds a floor, lights, a skybox, the virtual leader as a mocap "ghost" body
 ``leader`` (no collisions), optional mocap slot markers ``slot_1 … slot_n``, a mocap body
 ``centroid`` carrying the cameras ``track`` (chase view) and ``top`` (top-down) that the
 plant moves to the formation centroid, and the followers attached with prefixes
-``f1/``, ``f2/``, … (1-based). Nothing here edits XML strings.
+``f1/``, ``f2/``, … (1-based), each placed so that its axle midpoint is at the initial
+pose and its wheels touch the floor. Nothing here edits XML strings.
 """
 
 from __future__ import annotations
 
 import logging
+import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from bioform_mj.errors import InputError
-from bioform_mj.robots import models_dir, robot_names
+from bioform_mj.robots import RobotRef, models_dir, resolve_robot, robot_names
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +52,9 @@ __all__ = [
     "ModelError",
     "RobotNames",
     "ROBOT",
+    "RobotLayout",
+    "layout_of",
+    "prepare_robot",
     "model_path",
     "load_robot",
     "build_scene",
@@ -101,76 +122,415 @@ def _one_line(msg: str) -> str:
     return " ".join(str(msg).split())
 
 
-_WHEEL_GEOM_TYPES = (int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_ELLIPSOID))
+_SINGLE_CONTACT = (int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_ELLIPSOID))
+_LAYOUT_TEXT = "bioform_layout"
+_FREE, _HINGE = int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_HINGE)
 
 
-def _check_compiled(path: Path, model: mujoco.MjModel) -> None:
-    """Raise ModelError naming ``path`` unless ``model`` has what the plant needs."""
+@dataclass(frozen=True)
+class RobotLayout:
+    """What the plant needs of one robot, resolved once from its MJCF and mapping.
 
-    def need(objtype: mujoco.mjtObj, name: str, what: str) -> int:
-        i = mujoco.mj_name2id(model, objtype, name)
-        if i < 0:
-            raise ModelError(f"{path}: missing {what} '{name}'")
-        return i
+    Names are the robot file's (the scene adds its prefix). Lengths in m, in the base body's
+    frame where a frame matters; ``tau_max`` in N·m.
+    """
 
-    base = need(mujoco.mjtObj.mjOBJ_BODY, ROBOT.base, "body")
+    file: str
+    base: str
+    wheel_joints: tuple[str, str]  # [left, right] hinge joints
+    motors: tuple[str, str]  # the torque motors the plant writes (gear = wheel_sign)
+    wheel_geoms: tuple[str, str]  # the geom that touches the floor, per wheel
+    wheel_radius: float
+    half_track: float
+    axle: tuple[float, float, float]  # axle midpoint in the base body's frame
+    wheel_sign: tuple[int, int]  # +1/−1: sign · joint velocity = forward wheel rate
+    tau_max: float
+    disabled_actuators: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self))
+
+    @classmethod
+    def from_json(cls, text: str) -> "RobotLayout":
+        d = json.loads(text)
+        for k in ("wheel_joints", "motors", "wheel_geoms", "axle", "wheel_sign", "disabled_actuators", "notes"):
+            d[k] = tuple(d[k])
+        return cls(**d)
+
+
+def layout_of(model: mujoco.MjModel, prefix: str = "") -> RobotLayout:
+    """The :class:`RobotLayout` of the robot named with ``prefix`` in a compiled model.
+
+    Names in the returned layout carry ``prefix``. A model without the ``bioform_layout`` text
+    (an MJCF compiled without :func:`prepare_robot`) gets the shipped convention, read directly.
+    """
+    tid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, prefix + _LAYOUT_TEXT)
+    if tid < 0:
+        lay = _analyse(model, Path("<model>"), _convention_ref(), add_motors=False)[0]
+    else:
+        adr, size = model.text_adr[tid], model.text_size[tid]
+        lay = RobotLayout.from_json(bytes(model.text_data[adr: adr + size - 1]).decode())
+    if not prefix:
+        return lay
+    return replace(
+        lay, base=prefix + lay.base, wheel_joints=tuple(prefix + j for j in lay.wheel_joints),
+        motors=tuple(prefix + a for a in lay.motors), wheel_geoms=tuple(prefix + g for g in lay.wheel_geoms),
+        disabled_actuators=tuple(prefix + a for a in lay.disabled_actuators),
+    )
+
+
+def _convention_ref() -> RobotRef:
+    return RobotRef(model="", base=ROBOT.base, left_wheel=ROBOT.wheel_joints[0], right_wheel=ROBOT.wheel_joints[1])
+
+
+def _geom_support(model: mujoco.MjModel, data: mujoco.MjData, g: int, d: np.ndarray) -> float:
+    """Extent of geom ``g`` from its centre along the world unit vector ``d``, m (support function)."""
+    size = model.geom_size[g]
+    rot = data.geom_xmat[g].reshape(3, 3)
+    loc = rot.T @ d
+    t = int(model.geom_type[g])
+    if t == int(mujoco.mjtGeom.mjGEOM_SPHERE):
+        return float(size[0])
+    if t == int(mujoco.mjtGeom.mjGEOM_ELLIPSOID):
+        return float(np.sqrt(np.sum((size * loc) ** 2)))
+    if t == int(mujoco.mjtGeom.mjGEOM_CYLINDER):
+        return float(abs(loc[2]) * size[1] + np.hypot(loc[0], loc[1]) * size[0])
+    if t == int(mujoco.mjtGeom.mjGEOM_CAPSULE):
+        return float(abs(loc[2]) * size[1] + size[0])
+    if t == int(mujoco.mjtGeom.mjGEOM_BOX):
+        return float(np.sum(np.abs(loc) * size[:3]))
+    if t == int(mujoco.mjtGeom.mjGEOM_MESH):
+        mid = model.geom_dataid[g]
+        va, vn = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
+        return float(np.max(model.mesh_vert[va: va + vn] @ loc))
+    raise ValueError(f"geom type {mujoco.mjtGeom(t).name} cannot be a wheel")
+
+
+def _name(model: mujoco.MjModel, objtype: mujoco.mjtObj, i: int) -> str:
+    return mujoco.mj_id2name(model, objtype, i) or f"#{i}"
+
+
+def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bool = True):
+    """Resolve ``ref``'s mapping on the compiled robot ``model``; returns ``(layout, plan)``.
+
+    ``plan`` says what :func:`prepare_robot` must change in the spec. Raises ModelError naming
+    the element and the file.
+    """
+    base_name = ref.base or ROBOT.base
+    jl_name = ref.left_wheel or ROBOT.wheel_joints[0]
+    jr_name = ref.right_wheel or ROBOT.wheel_joints[1]
+    notes: list[str] = []
+
+    base = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, base_name)
+    if base < 0:
+        raise ModelError(f"{path}: no body '{base_name}' (the base; map it with base = \"BODY\")")
     jnt_adr, jnt_num = model.body_jntadr[base], model.body_jntnum[base]
-    if jnt_num != 1 or model.jnt_type[jnt_adr] != int(mujoco.mjtJoint.mjJNT_FREE):
-        raise ModelError(f"{path}: body '{ROBOT.base}' needs exactly one free joint")
-    for jname, aname, gname in zip(ROBOT.wheel_joints, ROBOT.motors, ROBOT.wheel_geoms):
-        j = need(mujoco.mjtObj.mjOBJ_JOINT, jname, "joint")
-        if model.jnt_type[j] != int(mujoco.mjtJoint.mjJNT_HINGE):
-            raise ModelError(f"{path}: joint '{jname}' must be a hinge")
-        a = need(mujoco.mjtObj.mjOBJ_ACTUATOR, aname, "actuator")
-        if (
-            model.actuator_trntype[a] != int(mujoco.mjtTrn.mjTRN_JOINT)
-            or model.actuator_trnid[a, 0] != j
-        ):
-            raise ModelError(f"{path}: actuator '{aname}' must drive joint '{jname}'")
-        if model.actuator_dyntype[a] != int(mujoco.mjtDyn.mjDYN_NONE) or model.actuator_gear[a, 0] != 1:
-            raise ModelError(f"{path}: actuator '{aname}' must be a torque motor with gear 1")
-        if not model.actuator_ctrllimited[a]:
-            raise ModelError(f"{path}: actuator '{aname}' needs a ctrlrange (torque limit)")
-        g = need(mujoco.mjtObj.mjOBJ_GEOM, gname, "geom")
-        if model.geom_bodyid[g] != model.jnt_bodyid[j]:
-            raise ModelError(f"{path}: geom '{gname}' must belong to the body of joint '{jname}'")
-        if int(model.geom_type[g]) not in _WHEEL_GEOM_TYPES:
-            raise ModelError(
-                f"{path}: geom '{gname}' must be a sphere or ellipsoid (single contact; "
-                "a cylinder scrubs when turning)"
-            )
-    # the plant observes the base origin: it must be the axle midpoint
+    has_free = jnt_num >= 1 and model.jnt_type[jnt_adr] == _FREE
+    if jnt_num > (1 if has_free else 0):
+        raise ModelError(f"{path}: body '{base_name}' has joints other than a free joint; the base must be one rigid chassis")
+    if not has_free and model.body_parentid[base] != 0:
+        raise ModelError(f"{path}: body '{base_name}' has no free joint and is not a child of the world body")
+    if not has_free:
+        notes.append(f"body '{base_name}' had no free joint: one was added")
+
+    joints = []
+    for side, jname in (("left_wheel", jl_name), ("right_wheel", jr_name)):
+        j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, jname)
+        if j < 0:
+            raise ModelError(f"{path}: no joint '{jname}' ({side}; map it with {side} = \"JOINT\")")
+        if model.jnt_type[j] != _HINGE:
+            raise ModelError(f"{path}: joint '{jname}' ({side}) is not a hinge "
+                             f"(type {mujoco.mjtJoint(model.jnt_type[j]).name})")
+        b = model.jnt_bodyid[j]
+        while b not in (0, base):
+            b = model.body_parentid[b]
+        if b != base:
+            raise ModelError(f"{path}: joint '{jname}' ({side}) is not on a body below '{base_name}'")
+        joints.append(j)
+    if joints[0] == joints[1]:
+        raise ModelError(f"{path}: left_wheel and right_wheel are the same joint '{jl_name}'")
+
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
-    jl, jr = (model.joint(n).id for n in ROBOT.wheel_joints)
-    mid = 0.5 * (data.xanchor[jl] + data.xanchor[jr])
-    mid_local = data.xmat[base].reshape(3, 3).T @ (mid - data.xpos[base])
-    if np.linalg.norm(mid_local) > 1e-6:
-        raise ModelError(
-            f"{path}: the origin of body '{ROBOT.base}' must be the axle midpoint "
-            f"(offset {np.round(mid_local, 6).tolist()} m)"
-        )
+    rot = data.xmat[base].reshape(3, 3)
+    fwd, left, up = rot[:, 0], rot[:, 1], rot[:, 2]
+    if up[2] < 0.999:
+        raise ModelError(f"{path}: body '{base_name}' is not level in the model file (its z axis is "
+                         f"{np.round(up, 3).tolist()}); the base frame must be x forward, z up")
+    anchors = np.array([data.xanchor[j] for j in joints])
+    axes = np.array([data.xaxis[j] for j in joints])
+    signs = []
+    for j, ax in zip(joints, axes):
+        c = float(ax @ left)
+        if abs(c) < 0.99:
+            raise ModelError(f"{path}: joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}' axis "
+                             f"{np.round(rot.T @ ax, 3).tolist()} (base frame) is not along the base's y axis")
+        signs.append(1 if c > 0 else -1)
+    for j, sgn in zip(joints, signs):
+        if sgn < 0:
+            notes.append(f"joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}' axis points right (−y): "
+                         "its motor gets gear −1 so that positive torque drives forward")
+    if (anchors[0] - anchors[1]) @ left <= 0:
+        raise ModelError(f"{path}: left_wheel '{jl_name}' is not to the left of right_wheel '{jr_name}' "
+                         "(swapped mapping, or the base's x axis is not forward)")
+    mid = anchors.mean(axis=0)
+    axle = rot.T @ (mid - data.xpos[base])
+    if np.linalg.norm(axle) > 1e-6:
+        notes.append(f"base origin is off the axle midpoint (axle midpoint at {np.round(axle, 4).tolist()} m in "
+                     f"'{base_name}'): pose and υ refer to the axle midpoint")
+    half_track = float(0.5 * np.linalg.norm(anchors[0] - anchors[1]))
+    if ref.half_track > 0:
+        if abs(ref.half_track / half_track - 1) > 0.01:
+            notes.append(f"half_track {ref.half_track:g} m given; the joint anchors say {half_track:.4g} m")
+        half_track = float(ref.half_track)
+
+    # wheel contact geoms: collision geoms on each wheel's body; radius = extent below the anchor
+    radii, geoms, proxies = [], [], []
+    for j, anchor in zip(joints, anchors):
+        wb = model.jnt_bodyid[j]
+        jname = _name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+        cand = [g for g in range(model.ngeom)
+                if model.geom_bodyid[g] == wb and (model.geom_contype[g] or model.geom_conaffinity[g])]
+        if not cand:
+            if ref.wheel_radius <= 0:
+                raise ModelError(f"{path}: the body of wheel joint '{jname}' has no collision geom; "
+                                 "give wheel_radius in the robot's mapping")
+            radii.append(float(ref.wheel_radius))
+            geoms.append(-1)
+            proxies.append((j, None))
+            notes.append(f"wheel '{jname}' has no collision geom: a single-contact proxy of radius "
+                         f"{ref.wheel_radius:g} m was added")
+            continue
+        ext = [float((data.geom_xpos[g] - anchor) @ -up + _geom_support(model, data, g, -up)) for g in cand]
+        k = int(np.argmax(ext))
+        g = cand[k]
+        radii.append(ext[k])
+        geoms.append(g)
+        gtype = int(model.geom_type[g])
+        if gtype not in _SINGLE_CONTACT or len(cand) > 1:
+            proxies.append((j, cand))
+            kind = mujoco.mjtGeom(gtype).name[len("mjGEOM_"):].lower()
+            notes.append(f"wheel '{jname}': collision {kind} '{_name(model, mujoco.mjtObj.mjOBJ_GEOM, g)}'"
+                         f"{f' (+{len(cand) - 1} more)' if len(cand) > 1 else ''} replaced by a single-contact "
+                         f"ellipsoid proxy of radius {ext[k]:.4g} m (a {kind} touches the floor at several "
+                         "points whose scrub resists turning; the original is kept for looks)")
+        else:
+            proxies.append(None)
+    if ref.wheel_radius > 0:
+        if abs(ref.wheel_radius / max(radii) - 1) > 0.01:
+            notes.append(f"wheel_radius {ref.wheel_radius:g} m given; the collision geoms say {max(radii):.4g} m")
+        radii = [float(ref.wheel_radius)] * 2
+    if abs(radii[0] - radii[1]) > 1e-6 * max(radii):
+        notes.append(f"left and right wheel radii differ ({radii[0]:.5g}, {radii[1]:.5g} m): using their mean")
+    r = float(np.mean(radii))
+    if not r > 0:
+        raise ModelError(f"{path}: wheel radius from the collision geoms is {r:g} m (are the wheel geoms "
+                         "centred on their joints?)")
+
+    # actuators on the wheels: keep a plain motor, neutralise every other drive
+    wheel_set = set(joints)
+    def drives_wheel(a: int) -> bool:
+        trn, tid = int(model.actuator_trntype[a]), int(model.actuator_trnid[a, 0])
+        if trn in (int(mujoco.mjtTrn.mjTRN_JOINT), int(mujoco.mjtTrn.mjTRN_JOINTINPARENT)):
+            return tid in wheel_set
+        if trn == int(mujoco.mjtTrn.mjTRN_TENDON):
+            adr, num = model.tendon_adr[tid], model.tendon_num[tid]
+            return any(model.wrap_type[w] == int(mujoco.mjtWrap.mjWRAP_JOINT) and model.wrap_objid[w] in wheel_set
+                       for w in range(adr, adr + num))
+        return False
+
+    def plain_motor(a: int, j: int) -> bool:
+        return (int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT) and model.actuator_trnid[a, 0] == j
+                and model.actuator_dyntype[a] == int(mujoco.mjtDyn.mjDYN_NONE)
+                and model.actuator_gaintype[a] == int(mujoco.mjtGain.mjGAIN_FIXED) and model.actuator_gainprm[a, 0] == 1
+                and model.actuator_biastype[a] == int(mujoco.mjtBias.mjBIAS_NONE)
+                and abs(abs(model.actuator_gear[a, 0]) - 1) < 1e-12 and bool(model.actuator_ctrllimited[a]))
+
+    drives = [a for a in range(model.nu) if drives_wheel(a)]
+    keep = []
+    for j in joints:
+        mine = [a for a in drives if plain_motor(a, j)]
+        keep.append(mine[0] if mine else -1)
+    if min(keep) < 0 or len(drives) != 2:
+        keep = [-1, -1]
+    limits = []
+    if ref.tau_max > 0:
+        tau_max = float(ref.tau_max)
+    elif min(keep) >= 0:
+        for a in keep:
+            lim = float(min(abs(model.actuator_ctrlrange[a, 0]), abs(model.actuator_ctrlrange[a, 1])))
+            if model.actuator_forcelimited[a]:
+                lim = min(lim, float(min(-model.actuator_forcerange[a, 0], model.actuator_forcerange[a, 1])))
+            limits.append(lim)
+        tau_max = min(limits)
+    else:
+        for a in drives:
+            if model.actuator_forcelimited[a]:
+                lim = float(min(-model.actuator_forcerange[a, 0], model.actuator_forcerange[a, 1]))
+                limits.append(lim * abs(float(model.actuator_gear[a, 0])))
+        for j in joints:
+            if model.jnt_actfrclimited[j]:
+                limits.append(float(min(-model.jnt_actfrcrange[j, 0], model.jnt_actfrcrange[j, 1])))
+        if not limits:
+            raise ModelError(f"{path}: cannot tell the wheel torque limit: no drive actuator on "
+                             f"'{jl_name}'/'{jr_name}' has a forcerange and the joints have no actuatorfrcrange; "
+                             "give tau_max (N·m) in the robot's mapping")
+        tau_max = min(limits)
+        notes.append(f"wheel torque limit {tau_max:g} N·m taken from the model's own drive "
+                     "(forcerange × gear, or the joints' actuatorfrcrange)")
+    for j in joints:
+        if model.jnt_actfrclimited[j]:
+            lim = float(min(-model.jnt_actfrcrange[j, 0], model.jnt_actfrcrange[j, 1]))
+            if lim < tau_max:
+                notes.append(f"joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}' actuatorfrcrange {lim:g} N·m "
+                             f"caps the motor limit {tau_max:g} N·m")
+                tau_max = lim
+    if not tau_max > 0:
+        raise ModelError(f"{path}: wheel torque limit is {tau_max:g} N·m; give tau_max in the robot's mapping")
+
+    disabled = [a for a in drives if a not in keep]
+    act_names = {_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in range(model.nu)}
+    if min(keep) >= 0:
+        motors = tuple(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in keep)
+    else:
+        motors = tuple(n if n not in act_names else f"bioform_{n}" for n in ROBOT.motors)
+        if add_motors:
+            notes.append(f"torque motors '{motors[0]}', '{motors[1]}' (±{tau_max:g} N·m) attached to the wheel joints")
+    if disabled:
+        notes.append("the model's own wheel drive " + ", ".join(
+            f"'{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)}'" for a in disabled)
+            + " is left unused (zero gain and bias: no force)")
+    others = model.nu - len(drives)
+    if others:
+        notes.append(f"{others} other actuator(s) left as they are (ctrl stays 0: position actuators hold 0)")
+    for j in joints:
+        dof = model.jnt_dofadr[j]
+        parts = [f"{k} {v:g}" for k, v in (("damping", model.dof_damping[dof]), ("armature", model.dof_armature[dof]),
+                                            ("frictionloss", model.dof_frictionloss[dof])) if v]
+        if parts:
+            notes.append(f"joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}': " + ", ".join(parts)
+                         + " (armature enters a_eff, b_eff; damping and frictionloss are a drag and a dead band "
+                           "the paper's model lacks)")
+
+    jn = tuple(_name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints)
+    gnames = []
+    for j, g, pr in zip(jn, geoms, proxies):
+        gnames.append(f"{j}_contact" if pr is not None else _name(model, mujoco.mjtObj.mjOBJ_GEOM, g))
+    layout = RobotLayout(
+        file=str(path), base=base_name, wheel_joints=jn, motors=motors, wheel_geoms=tuple(gnames),
+        wheel_radius=r, half_track=half_track, axle=tuple(float(x) for x in axle),
+        wheel_sign=tuple(signs), tau_max=float(tau_max),
+        disabled_actuators=tuple(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in disabled),
+        notes=tuple(notes),
+    )
+    plan = dict(has_free=has_free, keep=keep, disabled=disabled, proxies=proxies, geoms=geoms, radius=r,
+                joints=joints, axle_world=mid, base_yaw=float(np.arctan2(fwd[1], fwd[0])))
+    return layout, plan
 
 
-def load_robot(path: str | Path) -> mujoco.MjSpec:
-    """Load one robot MJCF as a fresh ``MjSpec`` and check it (raises ``ModelError``)."""
-    path = model_path(path)
-    if not path.is_file():
-        raise ModelError(f"{path}: no such model file")
+def _wheel_proxy(spec: mujoco.MjSpec, model: mujoco.MjModel, j: int, cand: list[int] | None, r: float,
+                 name: str) -> None:
+    """Switch the wheel's collision geoms ``cand`` off and add a single-contact ellipsoid ``name``
+    of radius ``r`` centred on the joint anchor, its short axis along the joint axis (mass 0)."""
+    wb_name = _name(model, mujoco.mjtObj.mjOBJ_BODY, model.jnt_bodyid[j])
+    body = spec.body(wb_name)
+    src = None
+    width = 0.25 * r
+    for g in cand or []:
+        gs = spec.geom(_name(model, mujoco.mjtObj.mjOBJ_GEOM, g))
+        if src is None:
+            src = gs
+        if int(model.geom_type[g]) in (int(mujoco.mjtGeom.mjGEOM_CYLINDER), int(mujoco.mjtGeom.mjGEOM_CAPSULE)):
+            width = float(model.geom_size[g, 1])
+        gs.contype, gs.conaffinity = 0, 0
+    width = min(max(width, 0.05 * r), r)
+    quat = np.zeros(4)
+    axis = np.asarray(model.jnt_axis[j], float)
+    mujoco.mju_quatZ2Vec(quat, axis / np.linalg.norm(axis))
+    g = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_ELLIPSOID, size=[r, r, width],
+                      pos=np.asarray(model.jnt_pos[j], float), quat=quat, mass=0, density=0,
+                      contype=1, conaffinity=1, group=3, rgba=[0.2, 0.6, 0.2, 0.3])
+    if src is not None:
+        g.contype, g.conaffinity = int(model.geom_contype[cand[0]]) or 1, int(model.geom_conaffinity[cand[0]]) or 1
+        g.condim = int(model.geom_condim[cand[0]])
+        g.friction = np.array(model.geom_friction[cand[0]], float)
+        g.solref = np.array(model.geom_solref[cand[0]], float)
+        g.solimp = np.array(model.geom_solimp[cand[0]], float)
+        g.solmix = float(model.geom_solmix[cand[0]])
+        g.priority = int(model.geom_priority[cand[0]])
+        g.margin, g.gap = float(model.geom_margin[cand[0]]), float(model.geom_gap[cand[0]])
+    else:
+        g.condim = 3
+        g.friction = [1.0, 0.005, 0.0001]
+
+
+def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLayout, np.ndarray, float]:
+    """Load one robot, resolve its mapping and make its spec drivable (see the module docstring).
+
+    Returns ``(spec, layout, axle_world, base_yaw)``: a fresh ``MjSpec`` (motors attached, wheel
+    drives neutralised, proxies added, the layout stored as text), the layout, and the axle
+    midpoint (m) and base heading (rad) in the model file's world frame at ``qpos0`` (to place the
+    robot). Raises :class:`ModelError` (exit 2) naming the element and the file.
+    """
+    try:
+        ref = resolve_robot(entry)
+    except ModelError:
+        raise
+    except InputError as exc:
+        raise ModelError(str(exc)) from None
+    path = Path(ref.model)
     try:
         spec = mujoco.MjSpec.from_file(str(path))
         model = spec.compile()
     except Exception as exc:  # mujoco raises ValueError; be robust to other types
         raise ModelError(f"{path}: does not compile: {_one_line(exc)}") from exc
-    _check_compiled(path, model)
-    return spec
+    layout, plan = _analyse(model, path, ref)
+
+    base = spec.body(layout.base)
+    if not plan["has_free"]:
+        base.add_freejoint(name=f"{layout.base}_free")
+    for key in list(spec.keys):
+        spec.delete(key)
+    for j, pr, gname in zip(plan["joints"], plan["proxies"], layout.wheel_geoms):
+        if pr is not None:
+            _wheel_proxy(spec, model, j, pr[1] if isinstance(pr, tuple) else None, layout.wheel_radius, gname)
+    for a in plan["disabled"]:
+        act = spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a))
+        act.gainprm = np.zeros(len(act.gainprm))
+        act.biasprm = np.zeros(len(act.biasprm))
+    tau = layout.tau_max
+    if min(plan["keep"]) >= 0:
+        for a, sgn in zip(plan["keep"], layout.wheel_sign):
+            act = spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a))
+            gear = np.array(act.gear, float)
+            gear[0] = sgn * abs(gear[0])
+            act.gear = gear
+            if ref.tau_max > 0:  # the mapping's limit replaces the model's (gear ±1: ctrl is N·m)
+                act.ctrlrange = [-tau, tau]
+                act.forcelimited = 1
+                act.forcerange = [-tau, tau]
+    else:
+        for name, j, sgn in zip(layout.motors, layout.wheel_joints, layout.wheel_sign):
+            spec.add_actuator(name=name, target=j, trntype=mujoco.mjtTrn.mjTRN_JOINT,
+                              gear=[float(sgn), 0, 0, 0, 0, 0], ctrllimited=1, ctrlrange=[-tau, tau],
+                              forcelimited=1, forcerange=[-tau, tau])
+    spec.add_text(name=_LAYOUT_TEXT, data=layout.to_json())
+    return spec, layout, np.asarray(plan["axle_world"], float), plan["base_yaw"]
 
 
-def _add_payload_to_body(body: mujoco.MjsBody, mass_kg: float, inertia_kgm2: float) -> None:
-    """Add a point-like payload (mass, yaw inertia about its own centre) at the body origin."""
+def load_robot(entry: RobotRef | str | Path) -> mujoco.MjSpec:
+    """Load one robot MJCF as a fresh, drivable ``MjSpec`` (see :func:`prepare_robot`; raises ``ModelError``)."""
+    return prepare_robot(entry)[0]
+
+
+def _add_payload_to_body(body: mujoco.MjsBody, mass_kg: float, inertia_kgm2: float,
+                         at: np.ndarray | None = None) -> None:
+    """Add a point-like payload (mass, yaw inertia about its own centre) at ``at`` (body frame, m;
+    default the body origin)."""
     mass, ipos, iquat, inertia = payload_inertial(
         body.mass, np.asarray(body.ipos), np.asarray(body.iquat), np.asarray(body.inertia),
-        mass_kg, inertia_kgm2,
+        mass_kg, inertia_kgm2, at,
     )
     body.mass, body.ipos, body.iquat, body.inertia = mass, ipos, iquat, inertia
 
@@ -182,10 +542,12 @@ def payload_inertial(
     inertia: np.ndarray,
     payload_mass: float,
     payload_inertia: float,
+    at: np.ndarray | None = None,
 ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """New ``(mass, ipos, iquat, diag inertia)`` of a body after adding a payload.
 
-    The payload sits at the body origin (the axle midpoint for ``base``) and has yaw
+    The payload sits at ``at`` (body frame, m; default the body origin; the plant puts it on
+    the axle midpoint) and has yaw
     inertia ``payload_inertia`` kg·m² about the body z axis through its own centre. It is
     flat (a plate lying on the robot: roll and pitch inertia half the yaw inertia), which
     keeps the body's inertia physical (A + B >= C). Handles an off-origin centre of mass
@@ -200,8 +562,10 @@ def payload_inertial(
     # inertia tensor about the body origin, body frame
     i_origin = rot @ np.diag(inertia) @ rot.T + mass * (ipos @ ipos * np.eye(3) - np.outer(ipos, ipos))
     i_origin += np.diag([0.5, 0.5, 1.0]) * payload_inertia  # flat payload: Izz = Ixx + Iyy
+    p = np.zeros(3) if at is None else np.asarray(at, float)
+    i_origin += payload_mass * (p @ p * np.eye(3) - np.outer(p, p))
     new_mass = mass + payload_mass
-    new_ipos = mass * ipos / new_mass
+    new_ipos = (mass * ipos + payload_mass * p) / new_mass
     i_com = i_origin - new_mass * (new_ipos @ new_ipos * np.eye(3) - np.outer(new_ipos, new_ipos))
     evals, evecs = np.linalg.eigh(i_com)
     if np.allclose(i_com, np.diag(np.diag(i_com)), atol=1e-12):
@@ -259,10 +623,12 @@ def build_scene(
 
     Parameters
     ----------
-    robot_files : sequence of str or Path, length n
-        One MJCF file (or shipped model name) per follower; robots may differ.
+    robot_files : sequence of str, Path or RobotRef, length n
+        One robot per follower (shipped name, MJCF path, or :class:`~bioform_mj.robots.RobotRef`
+        with a mapping); robots may differ.
     initial_poses : array (n, 3)
-        ``(x m, y m, θ rad)`` of each follower's axle midpoint, world frame.
+        ``(x m, y m, θ rad)`` of each follower's axle midpoint, world frame; each robot is
+        placed so that its axle midpoint is there, heading ``θ``, wheels on the floor.
     slots : bool
         Add mocap markers ``slot_1 … slot_n`` (visual only) for the formation slots.
     floor_friction : float, optional
@@ -290,7 +656,8 @@ def build_scene(
     if timestep is not None and not timestep > 0:
         raise ValueError(f"timestep must be > 0, got {timestep}")
 
-    robots = [load_robot(f) for f in robot_files]
+    prepared = [prepare_robot(f) for f in robot_files]
+    robots = [p[0] for p in prepared]
 
     spec = mujoco.MjSpec()
     spec.modelname = "bioform_scene"
@@ -358,12 +725,17 @@ def build_scene(
                           size=[0.12, 0.002, 0], contype=0, conaffinity=0, group=1,
                           material="slot", mass=0, density=0)
 
-    for i, (robot, pose) in enumerate(zip(robots, poses)):
+    for i, ((robot, layout, axle_world, base_yaw), pose) in enumerate(zip(prepared, poses)):
         if payloads is not None:
             mass_kg, inertia_kgm2 = payloads[i]
-            _add_payload_to_body(robot.body(ROBOT.base), float(mass_kg), float(inertia_kgm2))
+            _add_payload_to_body(robot.body(layout.base), float(mass_kg), float(inertia_kgm2), np.array(layout.axle))
         robot.option = spec.option  # avoid MuJoCo 4 attach-conflict warnings: the scene decides
-        frame = world.add_frame(pos=[pose[0], pose[1], 0.0], quat=yaw_quat(pose[2]))
+        # the file's axle midpoint goes to (x, y), its wheels' lowest point to the floor, heading θ
+        yaw = pose[2] - base_yaw
+        c, s_ = np.cos(yaw), np.sin(yaw)
+        mx, my = c * axle_world[0] - s_ * axle_world[1], s_ * axle_world[0] + c * axle_world[1]
+        frame = world.add_frame(pos=[pose[0] - mx, pose[1] - my, layout.wheel_radius - axle_world[2]],
+                                quat=yaw_quat(yaw))
         spec.attach(robot, prefix=follower_prefix(i), frame=frame)
     return spec
 

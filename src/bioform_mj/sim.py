@@ -216,6 +216,13 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     L_vel = np.ascontiguousarray(L_vel, dtype=float)
     offsets = np.ascontiguousarray(sc.formation.offsets, dtype=float).reshape(n, 2)
 
+    feasibility: list[str] = []
+    if hasattr(plant, "params") and hasattr(plant, "model"):  # MuJoCo robots: what the scenario asks of them
+        from .robot_check import feasibility as _feasibility
+
+        feasibility = _feasibility(sc, plant)
+        for line in feasibility:
+            log.warning("%s", line)
     plant.reset()
     pose0, vel0 = plant.observe()
     controller.reset(initial_estimates(sc, pose0, L_pose[0]), vel0)
@@ -344,6 +351,13 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     logd["leader_access"] = graph.leader_access
     summary = _summary(sc, plant, controller, state, ctx.met, logd, L_pose[k_done], pose, vel, offsets, k_done,
                        dt, wall, setup_s, diverged, interrupted, missing, engine="compiled" if chunk else "stepwise")
+    summary["feasibility_warnings"] = feasibility
+    unmodelled = getattr(plant, "unmodelled", None)
+    if unmodelled is not None and len(logd["vel"]):  # damping and frictionloss at the run's speeds
+        v = float(np.abs(logd["vel"][:, :, 0]).max())
+        w = float(np.abs(logd["vel"][:, :, 1]).max())
+        for f, u in zip(summary["followers"], unmodelled(v, w)):
+            f["unmodelled"] = u
     return RunResult(sc, logd, summary, plant, diverged, interrupted)
 
 
@@ -441,12 +455,14 @@ def _robot_used(sc: Scenario, plant: Any, controller: Any, i: int) -> dict[str, 
 def follower_outcomes(sc: Scenario, plant: Any, controller: Any, logd: dict[str, np.ndarray],
                       final_form: np.ndarray, c_hat: np.ndarray, dt: float) -> list[tuple[str, str]]:
     """Per follower ``(outcome, detail)``: ``ok`` or the first failure of ``tipped`` (tilt beyond
-    the plant's ``TIP_ANGLE_DEG``, with the time), ``spinning`` (|ω| > :data:`SPIN_RAD_S` over
+    the plant's ``TIP_ANGLE_DEG``, with the time), ``slipping`` (a wheel's slip ratio beyond the
+    plant's ``SLIP_RATIO`` for ``SLIP_TIME`` s), ``spinning`` (|ω| > :data:`SPIN_RAD_S` over
     the last second), ``lost`` (final formation error > :data:`LOST_M`), ``c_hat_at_bound``
     (a learned parameter at its projection bound at the end)."""
     n = sc.n
     out: list[tuple[str, str]] = []
     tip = getattr(plant, "tip_step", None)
+    slip = getattr(plant, "slip_step", None)
     p = getattr(controller, "p", None)
     t = logd["t"]
     last = t >= (t[-1] - 1.0) if len(t) else np.zeros(0, bool)
@@ -455,6 +471,10 @@ def follower_outcomes(sc: Scenario, plant: Any, controller: Any, logd: dict[str,
             from .plants.mujoco_plant import TIP_ANGLE_DEG
 
             out.append(("tipped", f"tilt beyond {TIP_ANGLE_DEG:g} deg at t = {tip[i] * dt:.3f} s"))
+            continue
+        if slip is not None and slip[i] >= 0:
+            out.append(("slipping", f"wheel slip ratio > {plant.SLIP_RATIO:g} for {plant.SLIP_TIME:g} s, "
+                                    f"by t = {slip[i] * dt:.3f} s"))
             continue
         if len(t) and np.all(np.abs(logd["vel"][last, i, 1]) > SPIN_RAD_S):
             out.append(("spinning", f"|omega| > {SPIN_RAD_S:g} rad/s over the last second"))

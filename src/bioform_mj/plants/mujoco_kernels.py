@@ -102,8 +102,30 @@ def watch_tilt(up, tilt_cos, tip_step, k):
 
 
 @njit
+def watch_slip(qvel, wheel_dof, wheel_sign, radius, half_track, vel, ratio, v_floor, need, slip_run, slip_step, k):
+    """Wheel slip of each robot after step ``k``: ``|r φ̇ − v_c| / max(|r φ̇|, |v_c|, v_floor)`` per
+    wheel (``φ̇ = sign · qvel`` the forward wheel rate, ``v_c = υ ∓ l ω`` its contact point's
+    forward speed if it rolled). ``slip_run`` (n,) counts consecutive steps with a wheel beyond
+    ``ratio``; ``slip_step`` (n,) records the step at which a run first reached ``need`` steps."""
+    for i in range(vel.shape[0]):
+        worst = 0.0
+        for w in range(2):
+            rate = qvel[wheel_dof[i, w]] * wheel_sign[i, w] * radius[i]
+            vc = vel[i, 0] + (2 * w - 1) * half_track[i] * vel[i, 1]
+            sl = abs(rate - vc) / max(max(abs(rate), abs(vc)), v_floor)
+            worst = max(worst, sl)
+        if worst > ratio:
+            slip_run[i] += 1
+            if slip_run[i] >= need and slip_step[i] < 0:
+                slip_step[i] = k
+        else:
+            slip_run[i] = 0
+
+
+@njit
 def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qvel, q7, v6, axle, up,
-              tilt_cos, tip_step,
+              tilt_cos, tip_step, wheel_dof, wheel_sign, radius, half_track, slip_ratio, v_floor, slip_need,
+              slip_run, slip_step,
               ctrl, ctrl_id, xfrc, xmat, base, m_eff, i_eff, dist, use_dist, warn, c_true,
               pose, vel, met, acc, lg, j0, stride, offsets, lim, diag, rec_ctrl, rec_xfrc):
     """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by the
@@ -129,6 +151,8 @@ def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qve
                 return k - k0, j, PLANT_FAILED
         observe(qpos, qvel, q7, v6, axle, pose, vel, up)
         watch_tilt(up, tilt_cos, tip_step, k + 1)
+        watch_slip(qvel, wheel_dof, wheel_sign, radius, half_track, vel, slip_ratio, v_floor, slip_need, slip_run,
+                   slip_step, k + 1)
         if k + 1 < N:
             control_step(g, s, L_pose[k + 1], L_vel[k + 1], pose, vel, comm)
             j, status = after_control(k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c_true,

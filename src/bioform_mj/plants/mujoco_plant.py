@@ -1,7 +1,9 @@
 """MuJoCo plant: ``n`` MJCF differential-drive robots on a floor, driven by wheel torques (design §8).
 
 Reads each robot's pose ``(x, y, θ)`` of the axle midpoint and its body-frame ``(υ, ω)``
-from the free joint's ``qpos``/``qvel``; writes the wheel motor ``ctrl`` (N·m). The
+from the free joint's ``qpos``/``qvel`` and the axle midpoint's position in the base frame
+(:meth:`MujocoPlant.observe` has the formula); writes the wheel motor ``ctrl`` (N·m; the
+motors' gear sign makes positive torque drive forward whichever way a joint axis points). The
 disturbance accelerations ``d = (d1, d2)`` of eq. 34 enter as ``xfrc_applied`` on each
 chassis: a force ``M_eff d1`` along the heading and a yaw torque ``I_eff d2``, with
 ``M_eff = 1/(a_eff r)``, ``I_eff = l/(b_eff r)``, so that they are accelerations as in the
@@ -24,20 +26,21 @@ from bioform_mj.disturbance import Harmonic
 from bioform_mj.errors import Diverged
 from bioform_mj.identify import RobotParams, robot_parameters
 from bioform_mj.scene import (
-    ROBOT,
     Markers,
+    RobotLayout,
     build_scene,
     compile_scene,
     follower_prefix,
+    layout_of,
     payload_inertial,
 )
 
-from .mujoco_kernels import HAVE_MJ_STEP, apply_inputs, observe, run_chunk, watch_tilt
+from .mujoco_kernels import HAVE_MJ_STEP, apply_inputs, observe, run_chunk, watch_slip, watch_tilt
 
 log = logging.getLogger(__name__)
 
 #: a chassis tilted further than this from upright (deg) counts as tipped over (outcome ``tipped``)
-TIP_ANGLE_DEG = 45.0
+TIP_ANGLE_DEG = 30.0
 
 __all__ = ["MujocoPlant"]
 
@@ -49,8 +52,8 @@ class MujocoPlant:
 
     Parameters
     ----------
-    robot_files : sequence of str or Path, length n
-        One MJCF file (or shipped model name) per follower; robots may differ.
+    robot_files : sequence of str, Path or :class:`~bioform_mj.robots.RobotRef`, length n
+        One robot per follower (shipped name, MJCF path, or file + mapping); robots may differ.
     initial_poses : array (n, 3)
         ``(x m, y m, θ rad)`` of each follower's axle midpoint.
     control_dt : float
@@ -72,7 +75,32 @@ class MujocoPlant:
     n_substeps : int, physics steps per control period.
     tau_max : array (n,), torque limit of each follower's motors, N·m.
     params : list of :class:`~bioform_mj.identify.RobotParams`, current per follower.
+    layouts : list of :class:`~bioform_mj.scene.RobotLayout` (names prefixed), per follower.
+
+    Index arrays (looked up once; read by the compiled loop kernels, keep their meaning):
+
+    - ``_q7`` (n, 7): ``qpos`` addresses of each base's free joint (x y z, quaternion w x y z);
+    - ``_v6`` (n, 6): its ``qvel`` addresses (world-frame linear velocity of the base origin,
+      base-frame angular velocity);
+    - ``_ctrl`` (n, 2): actuator ids of the [left, right] wheel torque motors (ctrl in N·m,
+      positive = forward: the gear carries the wheel sign);
+    - ``_base`` (n,): base body ids; ``_m_eff`` (n,) kg, ``_i_eff`` (n,) kg·m², ``_c`` (n, 2);
+    - ``_axle`` (n, 3): the axle midpoint (midpoint of the wheel joint anchors) in the base
+      body's frame, m — the reference point of pose and ``υ``;
+    - ``_wheel_dof`` (n, 2): ``qvel`` addresses of the [left, right] wheel joints;
+    - ``_wheel_sign`` (n, 2): ±1 such that ``sign · qvel[_wheel_dof]`` is the forward wheel rate, rad/s;
+    - ``_wheel_radius`` (n,) m, ``_half_track`` (n,) m.
     """
+
+    #: a chassis whose z axis is tilted more than this from vertical has tipped over (rad);
+    #: compare ``upright()`` (cos tilt) with ``cos(TIP_ANGLE)``
+    TIP_ANGLE = float(np.radians(TIP_ANGLE_DEG))
+    #: wheel slip ratio |r φ̇ − v_contact| / max(|r φ̇|, |v_contact|, SLIP_V_FLOOR) beyond which a wheel
+    #: is slipping (see :meth:`wheel_slip`), and how long it must last to count, s
+    SLIP_RATIO = 0.2
+    SLIP_TIME = 0.5
+    #: speed below which slip is measured against this floor instead of the speed itself, m/s
+    SLIP_V_FLOOR = 0.05
 
     def __init__(
         self,
@@ -113,19 +141,30 @@ class MujocoPlant:
         prefixes = [follower_prefix(i) for i in range(n)]
 
         # ids and addresses, once, by name
-        self._base = np.array([m.body(p + ROBOT.base).id for p in prefixes])
+        self.layouts: list[RobotLayout] = [layout_of(m, p) for p in prefixes]
+        self._base = np.array([m.body(lay.base).id for lay in self.layouts])
         roots = m.body_jntadr[self._base]  # the base's free joint (checked by the scene)
         qadr = m.jnt_qposadr[roots]
         dadr = m.jnt_dofadr[roots]
         self._q7 = qadr[:, None] + np.arange(7)  # (n, 7) into qpos: x y z, quaternion w x y z
         self._v6 = dadr[:, None] + np.arange(6)  # (n, 6) into qvel: world-frame linear, body-frame angular
-        self._ctrl = np.array([[m.actuator(p + a).id for a in ROBOT.motors] for p in prefixes])  # (n, 2)
+        lays = self.layouts
+        self._ctrl = np.array([[m.actuator(a).id for a in lay.motors] for lay in lays])  # (n, 2)
+        self._axle = np.array([lay.axle for lay in lays], dtype=float)  # (n, 3) base frame, m
+        self._wheel_dof = np.array([[m.jnt_dofadr[m.joint(j).id] for j in lay.wheel_joints] for lay in lays])
+        self._wheel_sign = np.array([lay.wheel_sign for lay in lays], dtype=float)  # (n, 2)
+        self._wheel_radius = np.array([lay.wheel_radius for lay in lays], dtype=float)
+        self._half_track = np.array([lay.half_track for lay in lays], dtype=float)
+        self._axle_zero = not np.any(self._axle)  # shipped robots: base origin on the axle
         self._markers = Markers(m, n)
         self._heading = (self._base[:, None], np.array([0, 3]))  # (R00, R10) of each base in xmat
-        self._axle = np.zeros((n, 3))  # axle midpoint in each base's frame (m): the reference of pose and υ
         self._up = np.ones(n)  # cosine of each chassis' tilt at the last observe()
         self.tip_step = np.full(n, -1, dtype=np.int64)  # first control step each robot was found tipped
         self.tilt_cos = float(np.cos(np.radians(TIP_ANGLE_DEG)))
+        self.slip_run = np.zeros(n, dtype=np.int64)  # consecutive control steps with a wheel slipping
+        self.slip_step = np.full(n, -1, dtype=np.int64)  # step at which a slip first lasted SLIP_TIME
+        self._slip_need = max(1, int(round(self.SLIP_TIME / self.control_dt)))
+        self._wdof = np.ascontiguousarray(self._wheel_dof, dtype=np.int64)
         self._warnings = [self.data.warning[i] for i in range(int(mujoco.mjtWarning.mjNWARNING))]
         self._warn = self.data.warning.number  # view of the warning counters, read by the compiled loop
         self._dist = self._dist_rows()
@@ -162,7 +201,7 @@ class MujocoPlant:
         """Sliding friction μ of follower ``i``'s wheel–floor contact (MuJoCo's priority/max rule)."""
         m = self.model
         floor = m.geom("floor").id
-        wheel = m.geom(self._prefixes[i] + ROBOT.wheel_geoms[0]).id
+        wheel = m.geom(self.layouts[i].wheel_geoms[0]).id
         if m.geom_priority[floor] != m.geom_priority[wheel]:
             winner = floor if m.geom_priority[floor] > m.geom_priority[wheel] else wheel
             return float(m.geom_friction[winner, 0])
@@ -194,17 +233,85 @@ class MujocoPlant:
         mujoco.mj_forward(m, d)
         self._step_count = 0
         self.tip_step[:] = -1
+        self.slip_run[:] = 0
+        self.slip_step[:] = -1
         self._push_until: np.ndarray | None = None  # pushes (faults): see push()
 
     def observe(self) -> tuple[np.ndarray, np.ndarray]:
         """Pose (n, 3) ``[x, y, θ ∈ (−π, π]]`` and body-frame velocity (n, 2) ``[υ, ω]`` of each
-        axle midpoint (:func:`~bioform_mj.control.equations.planar_state`); new arrays."""
+        robot's axle midpoint (:func:`~bioform_mj.control.equations.planar_state`, compiled); new arrays.
+
+        For robot ``i`` with free-joint ``q = qpos[_q7[i]]`` (position ``p``, unit quaternion
+        ``(w, x, y, z)`` → rotation ``R``), ``u = qvel[_v6[i]]`` (``v = u[0:3]`` world-frame
+        velocity of the base origin, ``Ω = u[3:6]`` base-frame angular velocity) and
+        ``a = _axle[i]``:
+
+        - ``R00 = w²+x²−y²−z²``, ``R01 = 2(xy−wz)``, ``R02 = 2(xz+wy)``,
+          ``R10 = 2(xy+wz)``, ``R11 = w²−x²+y²−z²``, ``R12 = 2(yz−wx)``,
+          ``R20 = 2(xz−wy)``, ``R21 = 2(yz+wx)``, ``R22 = w²−x²−y²+z²``;
+        - position: ``x = p0 + R00 a0 + R01 a1 + R02 a2``, ``y = p1 + R10 a0 + R11 a1 + R12 a2``;
+        - heading: ``θ = atan2(R10 + 0.0, R00)`` (the base's x axis; ``+ 0.0``: θ ≠ −π);
+        - ``c = Ω × a = (Ω1 a2 − Ω2 a1, Ω2 a0 − Ω0 a2, Ω0 a1 − Ω1 a0)`` (base frame), the axle
+          midpoint's world velocity ``v_a = v + R c``: ``vx = v0 + R00 c0 + R01 c1 + R02 c2``,
+          ``vy = v1 + R10 c0 + R11 c1 + R12 c2``;
+        - ``υ = (vx R00 + vy R10) / hypot(R00, R10)``, ``ω = R20 Ω0 + R21 Ω1 + R22 Ω2``.
+
+        With ``a = 0`` (the shipped robots) this is the base origin's pose and velocity.
+        """
         pose = np.empty((self.n, 3))
         vel = np.empty((self.n, 2))
         d = self.data
         observe(d.qpos, d.qvel, self._q7[:, 0], self._v6[:, 0], self._axle, pose, vel, self._up)
         watch_tilt(self._up, self.tilt_cos, self.tip_step, self._step_count)
+        watch_slip(d.qvel, self._wdof, self._wheel_sign, self._wheel_radius, self._half_track, vel, self.SLIP_RATIO,
+                   self.SLIP_V_FLOOR, self._slip_need, self.slip_run, self.slip_step, self._step_count)
         return pose, vel
+
+    @staticmethod
+    def _rotations(quat: np.ndarray) -> np.ndarray:
+        """(n, 3, 3) rotation matrices of unit quaternions (n, 4) ``[w, x, y, z]``."""
+        w, x, y, z = quat.T
+        return np.stack([
+            np.stack([w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z], -1),
+        ], axis=1)
+
+    def wheel_slip(self) -> np.ndarray:
+        """(n, 2) slip ratio of the [left, right] wheels: ``|r φ̇ − v_c| / max(|r φ̇|, |v_c|, SLIP_V_FLOOR)``
+        with ``φ̇ = sign · qvel`` the forward wheel rate and ``v_c = υ ∓ l ω`` the forward speed of
+        the wheel's contact point if it rolled (left: −, right: +). 0 when rolling; compare with
+        :attr:`SLIP_RATIO` held for :attr:`SLIP_TIME` s."""
+        _, vel = self.observe()
+        rate = self.data.qvel[self._wheel_dof] * self._wheel_sign * self._wheel_radius[:, None]
+        lw = self._half_track * vel[:, 1]
+        vc = np.stack([vel[:, 0] - lw, vel[:, 0] + lw], axis=1)
+        return np.abs(rate - vc) / np.maximum(np.maximum(np.abs(rate), np.abs(vc)), self.SLIP_V_FLOOR)
+
+    def wheel_loads(self) -> np.ndarray:
+        """(n, 2) normal force on the [left, right] wheels' floor contacts now, N (``mj_contactForce``).
+
+        Call it after the robots settled at rest (e.g. 0.2 s of zero torque): then it says how the
+        weight is shared between wheels and casters, which sets the real traction limit
+        ``μ N r`` per wheel (``μ m g r / 2`` only when the wheels carry all the weight).
+        """
+        m, d = self.model, self.data
+        gid = {m.geom(g).id: (i, k) for i, lay in enumerate(self.layouts) for k, g in enumerate(lay.wheel_geoms)}
+        out = np.zeros((self.n, 2))
+        f = np.zeros(6)
+        for c in range(d.ncon):
+            con = d.contact[c]
+            hit = gid.get(int(con.geom1)) or gid.get(int(con.geom2))
+            if hit is not None:
+                mujoco.mj_contactForce(m, d, c, f)
+                out[hit] += f[0]
+        return out
+
+    def unmodelled(self, v: float, w: float) -> list[dict]:
+        """Per follower: wheel damping, armature and frictionloss and their size at speeds
+        ``v`` m/s, ``w`` rad/s, with what ``ĉ`` should converge to
+        (:meth:`~bioform_mj.identify.RobotParams.unmodelled`); for ``summary.json``."""
+        return [p.unmodelled(v, w) for p in self.params]
 
     def step(self, tau: np.ndarray, t: float) -> None:
         """Apply wheel torques (n, 2) ``[τ_L, τ_R]`` N·m and ``d(t)`` for one control period."""
@@ -264,7 +371,7 @@ class MujocoPlant:
         b = self._base[i]
         mass, ipos, iquat, inertia = payload_inertial(
             m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b],
-            float(mass_kg), float(inertia_kgm2),
+            float(mass_kg), float(inertia_kgm2), self._axle[i],
         )
         m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b] = mass, ipos, iquat, inertia
         self._set_const()
@@ -316,7 +423,8 @@ class MujocoPlant:
             done, j, status = run_chunk(
                 ctx.gains, ctx.state, ctx.comm, k0, k1, ctx.N, self.control_dt, self.n_substeps, ctx.L_pose,
                 ctx.L_vel, m._address, d._address, d.qpos, d.qvel, q7, v6, self._axle, self._up, self.tilt_cos,
-                self.tip_step, d.ctrl, ctrl_id,
+                self.tip_step, self._wdof, self._wheel_sign, self._wheel_radius, self._half_track, self.SLIP_RATIO,
+                self.SLIP_V_FLOOR, self._slip_need, self.slip_run, self.slip_step, d.ctrl, ctrl_id,
                 d.xfrc_applied, d.xmat, base, self._m_eff, self._i_eff, self._dist, use, self._warn, self._c,
                 ctx.pose, ctx.vel, ctx.met, ctx.acc, ctx.log, j, ctx.stride, ctx.offsets, ctx.bounds, ctx.diag,
                 rec[0], rec[1])

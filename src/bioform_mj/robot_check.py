@@ -1,0 +1,320 @@
+"""``bioform robot check``: what the project finds in a robot model, and whether a scenario can ask it.
+
+:func:`check` resolves a robot (MJCF + mapping, :func:`bioform_mj.scene.prepare_robot`), reads
+the ground truth from the compiled model, identifies ``a, b`` (constant torques from rest,
+:func:`bioform_mj.identify.identify`), and measures what the paper's model leaves out:
+
+- **traction limit** per wheel ``μ N r`` (N·m; ``N`` the wheel's load at rest, from the
+  contact forces, ``= m g / 2`` when the wheels carry all the weight; μ of the wheel–floor
+  contact as the scene composes it) against the **motor limit** (N·m);
+- **static tip-over margins**: the forward, backward and lateral accelerations (m/s²) at which
+  the chassis tips, from the centre of mass (height ``h``, position ``c`` from the axle midpoint)
+  and the support rectangle of every collision geom within :data:`SUPPORT_CLEARANCE` of the
+  floor (wheels, casters): accelerating forward tips it backwards about the rearmost support
+  ``x_rear`` once ``a > g (c_x − x_rear)/h``; braking tips it forwards once
+  ``a > g (x_front − c_x)/h``; turning tips it sideways once ``υω > g min(y_left − c_y, c_y − y_right)/h``;
+- the centre of mass's offset from the axle, and the wheel joints' damping, armature and
+  frictionloss with how each enters the ground truth (:meth:`~bioform_mj.identify.RobotParams.unmodelled`).
+
+Verdict: ``fail`` when the robot cannot do the paper's experiment at all (statically unstable,
+identification more than 10 % off the formula, a dead band at least the motor limit); ``warn``
+when it can, with a caveat (motor limit above the traction limit, full torque tips the chassis,
+identification 3–10 % off, centre of mass more than 1 cm off the axle, damping time constant
+under 5 s); else ``pass``. :func:`feasibility` is the pre-run estimate for a scenario.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from dataclasses import asdict
+from typing import Any
+
+import numpy as np
+
+from .robots import RobotRef
+
+__all__ = ["check", "tip_margins", "feasibility", "add_parser", "mapping_args", "ref_from_args", "main",
+           "EXIT_FAIL", "G", "SUPPORT_CLEARANCE"]
+
+#: exit code of ``bioform robot check`` for a ``fail`` verdict (0: pass or warn, 2: bad input)
+EXIT_FAIL = 4
+#: gravity, m/s²
+G = 9.81
+#: a collision geom whose lowest point is within this of the floor (m, or 0.25 r if larger) supports the chassis
+SUPPORT_CLEARANCE = 0.005
+#: identification vs formula: above WARN_ID the verdict is warn, above FAIL_ID fail (relative)
+WARN_ID, FAIL_ID = 0.03, 0.10
+
+
+def _subtree(model: Any, root: int) -> np.ndarray:
+    ids = np.arange(model.nbody)
+    inside = ids == root
+    for b in ids[root + 1:]:
+        inside[b] = inside[model.body_parentid[b]]
+    return ids[inside]
+
+
+def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
+    """Static tip-over margins of the robot ``prefix`` standing at ``qpos0`` on a floor at z = 0.
+
+    Returns ``tip_accel_mps2`` ``{forward, backward, lateral}`` (m/s², ≤ 0: statically
+    unstable that way), the support rectangle (m, base frame, from the axle midpoint),
+    ``com_height_m`` and the supporting geoms. ``data`` must hold ``mj_kinematics`` at qpos0.
+    """
+    import mujoco
+
+    from .scene import layout_of, _geom_support
+
+    lay = layout_of(model, prefix)
+    base = model.body(lay.base).id
+    rot = data.xmat[base].reshape(3, 3)
+    jl, jr = (model.joint(j).id for j in lay.wheel_joints)
+    mid = 0.5 * (data.xanchor[jl] + data.xanchor[jr])
+    bodies = _subtree(model, base)
+    masses = model.body_mass[bodies]
+    com = (masses[:, None] * data.xipos[bodies]).sum(axis=0) / masses.sum()
+    floor_z = mid[2] - lay.wheel_radius
+    tol = max(SUPPORT_CLEARANCE, 0.25 * lay.wheel_radius)
+    pts, names = [], []
+    body_set = set(bodies.tolist())
+    down = np.array([0.0, 0.0, -1.0])
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] not in body_set or not (model.geom_contype[g] or model.geom_conaffinity[g]):
+            continue
+        low = data.geom_xpos[g][2] - _geom_support(model, data, g, down)
+        if low - floor_z <= tol:
+            pts.append(rot.T @ (data.geom_xpos[g] - mid))
+            names.append(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"#{g}")
+    pts = np.array(pts)
+    c = rot.T @ (com - mid)
+    h = float(com[2] - floor_z)
+    x_front, x_rear = float(pts[:, 0].max()), float(pts[:, 0].min())
+    y_left, y_right = float(pts[:, 1].max()), float(pts[:, 1].min())
+    return {
+        "tip_accel_mps2": {
+            "forward": G * (c[0] - x_rear) / h,  # accelerating forward tips it backwards
+            "backward": G * (x_front - c[0]) / h,  # braking tips it forwards
+            "lateral": G * min(y_left - c[1], c[1] - y_right) / h,
+        },
+        "support_m": {"x_front": x_front, "x_rear": x_rear, "y_left": y_left, "y_right": y_right},
+        "support_geoms": names,
+        "com_height_m": h,
+    }
+
+
+def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
+    """Everything :mod:`bioform_mj.robot_check` reports about one robot, with the verdict.
+
+    ``entry``: shipped name, MJCF path or :class:`~bioform_mj.robots.RobotRef`. Raises
+    :class:`~bioform_mj.errors.InputError` (exit 2) for a model that cannot be used at all.
+    """
+    import mujoco
+
+    from .identify import identify
+    from .plants.mujoco_plant import MujocoPlant
+
+    plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
+    p, lay = plant.params[0], plant.layouts[0]
+    scratch = mujoco.MjData(plant.model)
+    mujoco.mj_kinematics(plant.model, scratch)
+    tips = tip_margins(plant.model, scratch, "f1/")
+    mu = plant._wheel_friction(0)
+    for k in range(200):  # settle at rest: the wheels' share of the weight
+        plant.step(np.zeros((1, 2)), k * 0.001)
+    loads = plant.wheel_loads()[0]
+    traction = mu * float(loads.min()) * p.wheel_radius  # μ N r per wheel (μ m g r / 2 if the wheels carry all)
+    motor = float(min(p.tau_max))
+    motor_accel = 2 * motor * p.a_eff  # υ̇ at full torque on both wheels, m/s²
+    notes = list(lay.notes)
+    reasons_fail, reasons_warn = [], []
+
+    ident = identify(entry) if identify_ else None
+    a_id = ident["identified"]["a"] if ident else None
+    b_id = ident["identified"]["b"] if ident else None
+    if ident:
+        worst = max(abs(ident["relative_error"]["a"]), abs(ident["relative_error"]["b"]))
+        if worst > FAIL_ID:
+            reasons_fail.append(f"identification differs from the formula by {100 * worst:.1f} % (> {100 * FAIL_ID:g} %): "
+                                "the wheels do not roll as the model of design §8 assumes")
+        elif worst > WARN_ID:
+            reasons_warn.append(f"identification differs from the formula by {100 * worst:.1f} %")
+    ta = tips["tip_accel_mps2"]
+    for way, acc in ta.items():
+        if acc <= 0:
+            reasons_fail.append(f"statically unstable: the centre of mass is outside the support ({way})")
+    if motor > traction:
+        reasons_warn.append(f"motor limit {motor:.3g} N·m exceeds the traction limit μ N r = {traction:.3g} N·m: "
+                            "the wheels can skid at full torque")
+    if motor_accel > min(ta["forward"], ta["backward"]) > 0:
+        reasons_warn.append(f"full torque accelerates the robot at {motor_accel:.3g} m/s², more than tips it "
+                            f"(forward {ta['forward']:.3g}, backward {ta['backward']:.3g} m/s²): a start-up transient "
+                            "at the torque limit can overturn it")
+    if p.com_offset > 0.01:
+        reasons_warn.append(f"centre of mass {1e3 * p.com_offset:.0f} mm off the axle midpoint: a_eff, b_eff hold from "
+                            "rest; moving, an unmodelled υ·ω coupling acts (design §8.1: b̂ biased)")
+    um = p.unmodelled(1.0, 1.0)
+    if p.wheel_frictionloss and 2 * p.wheel_frictionloss >= motor:
+        reasons_fail.append(f"wheel frictionloss {p.wheel_frictionloss:g} N·m per wheel: the dead band reaches "
+                            "the motor limit")
+    tcs = [t for t in um["drag_time_constant_s"] if t is not None]
+    if tcs and min(tcs) < 5.0:
+        reasons_warn.append(f"wheel damping: drag time constant {min(tcs):.2g} s (< 5 s), a large unmodelled term")
+    verdict = "fail" if reasons_fail else "warn" if reasons_warn else "pass"
+    layout = asdict(lay)
+    layout["file"] = lay.file
+    for k in ("base", "wheel_joints", "motors", "wheel_geoms", "disabled_actuators"):  # without the scene prefix
+        v = layout[k]
+        layout[k] = [x[len("f1/"):] for x in v] if isinstance(v, (list, tuple)) else v[len("f1/"):]
+    return {
+        "verdict": verdict,
+        "reasons": reasons_fail + reasons_warn,
+        "model": lay.file,
+        "parts": layout,
+        "a_eff": p.a_eff, "b_eff": p.b_eff,
+        "a_identified": a_id, "b_identified": b_id,
+        "relative_error": ident["relative_error"] if ident else None,
+        "mass_kg": p.mass, "yaw_inertia_kgm2": p.yaw_inertia, "wheel_inertia_kgm2": p.wheel_inertia,
+        "wheel_radius_m": p.wheel_radius, "half_track_m": p.half_track,
+        "friction_mu": mu,
+        "traction_limit_nm": traction, "motor_limit_nm": motor,
+        "wheel_load_n": loads.tolist(), "weight_on_wheels": float(loads.sum() / (p.mass * G)),
+        "motor_accel_mps2": motor_accel,
+        "tip_accel_mps2": ta,
+        "support_m": tips["support_m"], "support_geoms": [g[len("f1/"):] for g in tips["support_geoms"]],
+        "com_height_m": tips["com_height_m"],
+        "com_offset_m": p.com_offset, "com_from_axle_m": list(p.com_xyz),
+        "wheel_joints": {
+            "damping_Nms_per_rad": p.wheel_damping, "armature_kgm2": p.wheel_armature,
+            "frictionloss_Nm": p.wheel_frictionloss,
+            "how_they_enter": {
+                "armature": um["armature_in_c_true"],
+                "damping": "a drag υ̇ = a τ_a − k_υ υ, ω̇ = b τ_b − k_ω ω with k_υ = 2 a c/r, k_ω = 2 b c l/r "
+                           f"(here {um['drag_rate_per_s'][0]:.3g}, {um['drag_rate_per_s'][1]:.3g} 1/s)",
+                "frictionloss": f"a dead band of 2 f = {um['deadband_torque_Nm'][0]:.3g} N·m on τ_a and on τ_b",
+                "c_hat": um["c_hat_converges_to"],
+            },
+            "identified": {"drag_rate_per_s": ident["drag_rate_per_s"]["identified"],
+                           "deadband_torque_Nm": ident["deadband_torque_Nm"]["identified"]} if ident else None,
+        },
+        "notes": notes,
+    }
+
+
+def feasibility(scenario: Any, plant: Any) -> list[str]:
+    """Pre-run estimate: ``warning`` lines for what the scenario asks beyond a robot's margins.
+
+    ``scenario``: a :class:`~bioform_mj.scenario.Scenario`; ``plant``: its built
+    :class:`~bioform_mj.plants.mujoco_plant.MujocoPlant`. Per follower, compares
+
+    - the leader's largest acceleration ``max sqrt(υ̇_r² + (υ_r ω_r)²)`` over the run (with
+      world-frame offsets every follower's slot moves with the leader) against the traction
+      limit ``μ g`` (m/s²), its tangential part against the forward/backward tip margins and its
+      centripetal part ``υ_r ω_r`` against the lateral tip margin;
+    - the start-up transient: followers start at rest off their slots and the torque law meets
+      the jump of the command at the motor limit, so full torque ``2 a_eff τ_max`` (m/s²) is
+      compared with the tip margins, and ``τ_max`` with the traction limit ``μ m g r / 2``.
+
+    Returns an empty list when nothing is at risk. The estimate is static (no pitch dynamics).
+    """
+    import mujoco
+
+    t = np.linspace(0.0, scenario.sim.duration, max(200, int(scenario.sim.duration * 200)) + 1)
+    _, vel, acc = scenario.build_leader().states(t)
+    tangential = float(np.max(np.abs(acc[:, 0])))
+    centripetal = float(np.max(np.abs(vel[:, 0] * vel[:, 1])))
+    total = float(np.max(np.hypot(acc[:, 0], vel[:, 0] * vel[:, 1])))
+    scratch = mujoco.MjData(plant.model)
+    mujoco.mj_kinematics(plant.model, scratch)
+    out: list[str] = []
+    for i, p in enumerate(plant.params):
+        tips = tip_margins(plant.model, scratch, f"f{i + 1}/")["tip_accel_mps2"]
+        mu = plant._wheel_friction(i)
+        who = f"follower {i + 1}"
+        if total > mu * G:
+            out.append(f"{who}: the leader accelerates at up to {total:.3g} m/s², beyond the traction limit "
+                       f"μ g = {mu * G:.3g} m/s²: the wheels will slip")
+        if tangential > min(tips["forward"], tips["backward"]):
+            out.append(f"{who}: the leader's tangential acceleration {tangential:.3g} m/s² exceeds the tip-over margin "
+                       f"(forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²)")
+        if centripetal > tips["lateral"]:
+            out.append(f"{who}: the leader's turns need {centripetal:.3g} m/s² sideways, beyond the lateral tip-over "
+                       f"margin {tips['lateral']:.3g} m/s²")
+        motor = float(min(p.tau_max))
+        full = 2 * p.a_eff * motor
+        if full > min(tips["forward"], tips["backward"]):
+            out.append(f"{who}: a start-up transient at the torque limit accelerates at {full:.3g} m/s², beyond the "
+                       f"tip-over margin (forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²): "
+                       "the chassis can tip (scale the scenario, formation.scale, or lower the torque limit)")
+        if motor > mu * p.traction_limit:
+            out.append(f"{who}: torque limit {motor:.3g} N·m exceeds the traction limit μ m g r/2 = "
+                       f"{mu * p.traction_limit:.3g} N·m: the wheels can skid at full torque")
+    return out
+
+
+# ------------------------------------------------------------------ command line
+def mapping_args(p: argparse.ArgumentParser) -> None:
+    """The mapping flags shared by ``robot check`` and ``identify``."""
+    p.add_argument("--base", help="the chassis body (default: 'base')")
+    p.add_argument("--left-wheel", help="left wheel hinge joint (default: 'left_wheel')")
+    p.add_argument("--right-wheel", help="right wheel hinge joint (default: 'right_wheel')")
+    p.add_argument("--wheel-radius", type=float, help="wheel radius in m (default: from the wheels' collision geoms)")
+    p.add_argument("--half-track", type=float, help="half the track in m (default: from the wheel joint anchors)")
+    p.add_argument("--tau-max", type=float, help="wheel torque limit in N·m (default: the model's own drive limit)")
+
+
+def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
+    """A :class:`RobotRef` from a model argument and the :func:`mapping_args` flags."""
+    from .errors import InputError
+    from .robots import resolve_robot
+
+    for flag in ("wheel_radius", "half_track", "tau_max"):
+        v = getattr(args, flag, None)
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise InputError(f"--{flag.replace('_', '-')} must be a number > 0, got {v}")
+    return resolve_robot(RobotRef(
+        model=model, base=args.base or "", left_wheel=args.left_wheel or "", right_wheel=args.right_wheel or "",
+        wheel_radius=args.wheel_radius or 0.0, half_track=args.half_track or 0.0, tau_max=args.tau_max or 0.0,
+    ))
+
+
+def add_parser(sub: Any) -> None:
+    """Add ``bioform robot check`` to the CLI's subparsers."""
+    robot = sub.add_parser("robot", help="robot models: check what the project finds in one")
+    rsub = robot.add_subparsers(dest="robot_command", required=True, parser_class=type(robot))
+    chk = rsub.add_parser("check", help="parts, a_eff/b_eff (formula and identified), traction and tip-over "
+                                        "margins, damping/armature/frictionloss; verdict pass/warn/fail "
+                                        f"(exit 0 pass or warn, 2 bad input, {EXIT_FAIL} fail)")
+    chk.add_argument("model", help="shipped robot name or path to an MJCF file")
+    mapping_args(chk)
+    chk.add_argument("--json", type=str, metavar="FILE", help="write the report as JSON to FILE")
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run ``bioform robot check``; prints a short report, returns the exit code."""
+    from .outputs.files import write_json
+
+    report = check(ref_from_args(args.model, args))
+    if args.json:
+        write_json(args.json, report)
+    ta = report["tip_accel_mps2"]
+    lines = [
+        f"{report['verdict']}: {report['model']}",
+        f"  parts: base '{report['parts']['base']}', wheels '{report['parts']['wheel_joints'][0]}' / "
+        f"'{report['parts']['wheel_joints'][1]}' (sign {report['parts']['wheel_sign'][0]:+d}/"
+        f"{report['parts']['wheel_sign'][1]:+d}), r = {report['wheel_radius_m']:.4g} m, l = {report['half_track_m']:.4g} m",
+        f"  a_eff = {report['a_eff']:.5g} (identified {report['a_identified']:.5g}), "
+        f"b_eff = {report['b_eff']:.5g} (identified {report['b_identified']:.5g})",
+        f"  motor limit {report['motor_limit_nm']:.3g} N·m, traction limit {report['traction_limit_nm']:.3g} N·m "
+        f"(μ = {report['friction_mu']:g})",
+        f"  tips at forward {ta['forward']:.3g}, backward {ta['backward']:.3g}, lateral {ta['lateral']:.3g} m/s² "
+        f"(full torque: {report['motor_accel_mps2']:.3g} m/s²); CoM {1e3 * report['com_offset_m']:.1f} mm off the axle, "
+        f"{report['com_height_m']:.3g} m high",
+    ]
+    lines += [f"  {r}" for r in report["reasons"]]
+    lines += [f"  note: {n}" for n in report["notes"]]
+    print("\n".join(lines))
+    if report["verdict"] == "fail":
+        print(f"error: robot check failed: {'; '.join(report['reasons'])}", file=sys.stderr)
+        return EXIT_FAIL
+    return 0

@@ -1,0 +1,258 @@
+"""Issue 10: any differential-drive robot as it is published (an MJCF file plus a mapping).
+
+Numbers, not smoke: flipped wheel axes identify the same ``a_eff, b_eff``; damping and
+armature: formula and identification within 3 %; a base origin off the axle: pose and ``υ``
+are the axle midpoint's (checked against a MuJoCo site there); bad mappings exit 2 naming
+the element and the file, writing nothing.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from bioform_mj import cli
+from bioform_mj.identify import identify, robot_truth
+from bioform_mj.plants.mujoco_plant import MujocoPlant
+from bioform_mj.robot_check import EXIT_FAIL, check, feasibility
+from bioform_mj.robots import RobotRef, models_dir
+from bioform_mj.scenario import load
+from bioform_mj.scene import ModelError, prepare_robot
+
+DATA = Path(__file__).parent / "data"
+TP_FILE = DATA / "thirdparty_base.xml"
+TP = RobotRef(str(TP_FILE), base="base_link", left_wheel="joint_left_wheel", right_wheel="joint_right_wheel")
+TP_FLAGS = ["--base", "base_link", "--left-wheel", "joint_left_wheel", "--right-wheel", "joint_right_wheel"]
+
+
+def _flipped_paper(tmp_path: Path) -> Path:
+    src = (models_dir() / "paper_robot.xml").read_text()
+    assert '<joint type="hinge" axis="0 1 0"' in src
+    out = tmp_path / "flipped.xml"
+    out.write_text(src.replace('<joint type="hinge" axis="0 1 0"', '<joint type="hinge" axis="0 -1 0"'))
+    return out
+
+
+def test_flipped_wheel_axes_identify_the_same_a_b(tmp_path):
+    flipped = _flipped_paper(tmp_path)
+    lay = prepare_robot(flipped)[1]
+    assert lay.wheel_sign == (-1, -1) and any("gear −1" in n for n in lay.notes)
+    orig, flip = identify("paper"), identify(str(flipped))
+    for k in ("a", "b"):
+        assert flip["formula"][k] == pytest.approx(orig["formula"][k], rel=1e-12)
+        assert flip["identified"][k] == pytest.approx(orig["identified"][k], rel=1e-9)  # measured: equal to 1e-15
+        assert flip["identified"][k] > 0
+    # positive torque drives forward on both
+    plant = MujocoPlant(["paper", str(flipped)], np.array([[0.0, 0, 0], [0, 2, 0]]), 0.001, 0.001)
+    for k in range(200):
+        plant.step(np.full((2, 2), 1.0), k * 0.001)
+    _, vel = plant.observe()
+    assert vel[0, 0] > 0.07 and vel[1, 0] == pytest.approx(vel[0, 0], rel=1e-9)
+    assert np.all(plant._wheel_sign[1] == -1) and np.all(plant._wheel_sign[0] == 1)
+    # the wheel rate contract: sign · qvel · r = forward speed while rolling
+    rate = plant.data.qvel[plant._wheel_dof] * plant._wheel_sign * plant._wheel_radius[:, None]
+    np.testing.assert_allclose(rate, vel[:, :1].repeat(2, axis=1), rtol=1e-3)
+
+
+def test_third_party_mapping_found_as_published():
+    spec, lay, axle_world, _ = prepare_robot(TP)
+    assert lay.base == "base_link" and lay.wheel_joints == ("joint_left_wheel", "joint_right_wheel")
+    assert lay.wheel_radius == pytest.approx(0.05, abs=1e-12)
+    assert lay.half_track == pytest.approx(0.16, abs=1e-12)
+    np.testing.assert_allclose(lay.axle, [0.1, 0.0, 0.05], atol=1e-12)
+    assert lay.wheel_sign == (-1, -1)
+    assert lay.tau_max == 4.0  # the joints' actuatorfrcrange
+    assert set(lay.disabled_actuators) == {"drive_forward", "drive_turn"}
+    model = spec.compile()
+    for name in ("drive_forward", "drive_turn"):  # kept (a sensor names one) but without force
+        assert np.all(model.actuator(name).gainprm == 0) and np.all(model.actuator(name).biasprm == 0)
+    assert model.actuator("head_pan").gainprm[0] == 5  # other actuators as published
+    assert model.nkey == 0
+    assert model.geom("left_tire").contype[0] == 0 and model.geom("joint_left_wheel_contact").contype[0] == 1
+
+
+def test_damping_and_armature_formula_vs_identification_within_3_percent():
+    p = robot_truth(TP)
+    # armature is in I_w: I_w = 0.001 (spin) + 0.0005 (armature)
+    assert p.wheel_inertia == pytest.approx(0.0015, rel=1e-9)
+    m, r, l = 12 + 2 * 0.8 + 0.3, 0.05, 0.16  # chassis, wheels, head
+    assert p.a_eff == pytest.approx(1 / (m * r + 2 * 0.0015 / r), rel=1e-9)
+    rep = identify(TP)
+    assert abs(rep["relative_error"]["a"]) < 0.03 and abs(rep["relative_error"]["b"]) < 0.03
+    # measured: a −0.9 %, b +0.2 %; the drag (joint damping 0.02 N·m·s/rad) within 5 %
+    k_formula, k_id = rep["drag_rate_per_s"]["formula"], rep["drag_rate_per_s"]["identified"]
+    np.testing.assert_allclose(k_id, k_formula, rtol=0.05)
+    assert k_formula[0] == pytest.approx(2 * p.a_eff * 0.02 / r, rel=1e-12)
+    assert k_formula[1] == pytest.approx(2 * p.b_eff * 0.02 * l / r, rel=1e-12)
+    um = p.unmodelled(0.5, 1.0)
+    assert um["drag_accel_at_speed"][0] == pytest.approx(k_formula[0] * 0.5)
+    assert um["deadband_torque_Nm"] == [0.02, 0.02]
+
+
+def test_base_origin_off_axle_pose_and_velocity_are_the_axle_midpoint():
+    pose0 = np.array([[1.0, -2.0, 0.7]])
+    plant = MujocoPlant([TP], pose0, 0.002, 0.002)
+    m, d = plant.model, plant.data
+    site = m.site("f1/axle_mid").id
+    pose, vel = plant.observe()
+    np.testing.assert_allclose(pose, pose0, atol=1e-9)  # placed by its axle midpoint
+    np.testing.assert_allclose(d.site_xpos[site][:2], pose0[0, :2], atol=1e-9)
+    rng = np.random.default_rng(5)
+    worst_p = worst_v = 0.0
+    for k in range(600):
+        plant.step(rng.uniform(-0.2, 1.0, (1, 2)) * 1.5, k * 0.002)
+        if k % 50 == 49:
+            mujoco.mj_forward(m, d)
+            pose, vel = plant.observe()
+            sv = np.zeros(6)
+            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, site, sv, 0)  # world frame [ang, lin]
+            h = np.array([np.cos(pose[0, 2]), np.sin(pose[0, 2])])
+            worst_p = max(worst_p, float(np.max(np.abs(pose[0, :2] - d.site_xpos[site][:2]))))
+            worst_v = max(worst_v, abs(float(vel[0, 0] - sv[3:5] @ h)))
+            assert vel[0, 1] == pytest.approx(sv[2], abs=1e-9)
+    assert worst_p < 1e-9 and worst_v < 1e-9  # measured ~1e-16
+    _, vel = plant.observe()
+    assert vel[0, 0] > 0.1  # it did move
+
+
+@pytest.mark.parametrize("flags,what", [
+    (["--base", "chassis"], "no body 'chassis'"),
+    (["--left-wheel", "joint_head_pan"], "joint 'joint_head_pan' .*is not on a body below|not along"),
+    (["--right-wheel", "no_such_joint"], "no joint 'no_such_joint'"),
+    (["--left-wheel", "joint_right_wheel"], "same joint 'joint_right_wheel'"),
+    (["--left-wheel", "base_free"], "joint 'base_free' .*is not a hinge"),
+])
+def test_bad_mapping_exits_2_naming_element_and_file(tmp_path, capsys, flags, what):
+    base = dict(zip(TP_FLAGS[::2], TP_FLAGS[1::2]))
+    base.update(dict(zip(flags[::2], flags[1::2])))
+    argv = ["robot", "check", str(TP_FILE), *[x for kv in base.items() for x in kv], "--json", str(tmp_path / "r.json")]
+    rc = cli.main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2
+    assert len(err) == 1 and err[0].startswith("error:") and "thirdparty_base.xml" in err[0]
+    import re
+
+    assert re.search(what, err[0]), err[0]
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_no_collision_geom_and_no_radius_and_not_compiling_exit_2(tmp_path, capsys):
+    src = TP_FILE.read_text()
+    bare = tmp_path / "bare.xml"
+    bare.write_text(src.replace('<geom name="left_tire" class="drive_wheel"/>', ""))
+    assert cli.main(["robot", "check", str(bare), *TP_FLAGS]) == 2
+    err = capsys.readouterr().err
+    assert "bare.xml" in err and "joint_left_wheel" in err and "wheel_radius" in err
+    # with a radius given, a proxy is added and the robot works
+    rep = check(RobotRef(str(bare), "base_link", "joint_left_wheel", "joint_right_wheel", wheel_radius=0.05),
+                identify_=False)
+    assert rep["wheel_radius_m"] == pytest.approx(0.05)
+    broken = tmp_path / "broken.xml"
+    broken.write_text(src.replace("</worldbody>", ""))
+    assert cli.main(["robot", "check", str(broken), *TP_FLAGS]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "broken.xml" in err[0] and "does not compile" in err[0]
+
+
+def test_robot_check_json_and_verdicts(tmp_path, capsys):
+    out = tmp_path / "check.json"
+    assert cli.main(["robot", "check", str(TP_FILE), *TP_FLAGS, "--json", str(out)]) == 0
+    rep = json.loads(out.read_text())
+    for key in ("verdict", "a_eff", "b_eff", "a_identified", "b_identified", "traction_limit_nm", "motor_limit_nm",
+                "tip_accel_mps2", "notes", "parts", "com_offset_m", "wheel_joints"):
+        assert key in rep
+    assert rep["verdict"] == "warn"  # skids and tips at full torque, 2 cm CoM offset, damping
+    assert rep["tip_accel_mps2"]["backward"] == pytest.approx(9.81 * 0.0205 / 0.1024, rel=0.02)
+    # the caster carries part of the weight: traction μ N r with N the lighter wheel's load at rest
+    assert rep["traction_limit_nm"] == pytest.approx(min(rep["wheel_load_n"]) * 0.05, rel=1e-9)
+    assert 0.5 < rep["weight_on_wheels"] < 1.0  # statics: (0.25 - 0.0205) / 0.25 = 0.92 of 13.9 kg
+    assert rep["weight_on_wheels"] == pytest.approx(0.92, abs=0.02)
+    assert rep["motor_limit_nm"] == 4.0
+    assert cli.main(["robot", "check", "paper"]) == 0
+    assert "pass:" in capsys.readouterr().out
+    # no rear caster: the centre of mass (2 cm behind the axle) has no support behind it
+    tipsy = tmp_path / "tipsy.xml"
+    tipsy.write_text(TP_FILE.read_text().replace('<geom name="rear_caster" class="caster_tp" pos="-0.15 0 0.025"/>', ""))
+    assert cli.main(["robot", "check", str(tipsy), *TP_FLAGS]) == EXIT_FAIL
+    assert "statically unstable" in capsys.readouterr().err
+
+
+def test_identify_cli_takes_the_mapping(capsys):
+    assert cli.main(["identify", str(TP_FILE), *TP_FLAGS]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["identified"]["a"] > 0 and rep["identified"]["b"] > 0
+
+
+def test_toml_paths_are_relative_to_the_file(tmp_path, monkeypatch):
+    sub = tmp_path / "cfg"
+    sub.mkdir()
+    (sub / "robot.xml").write_text((models_dir() / "lab_robot.xml").read_text())
+    (sub / "s.toml").write_text(
+        '[plant]\nkind = "mujoco"\nrobots = ["robot.xml", {model = "robot.xml", base = "base"}, "lab"]\n')
+    monkeypatch.chdir(tmp_path)  # not the file's directory
+    sc = load(str(sub / "s.toml"))
+    assert [Path(r.model) for r in sc.plant.robots[:2]] == [(sub / "robot.xml").resolve()] * 2
+    assert sc.plant.robots[2].model == "lab"
+    cfg = sc.to_dict()["plant"]["robots"]
+    assert cfg[0] == str((sub / "robot.xml").resolve()) and cfg[1]["base"] == "base" and cfg[2] == "lab"
+
+
+def test_robots_on_the_ideal_plant_give_c_true():
+    sc = load("paper", overrides=["plant.robots=['lab']"])
+    lab = robot_truth("lab")
+    np.testing.assert_allclose(sc.plant.c_true, lab.c, rtol=1e-12)
+    assert sc.plant.mass == pytest.approx(lab.mass_eff) and sc.plant.inertia == pytest.approx(lab.inertia_eff)
+    assert load("paper").plant.c_true == (0.4, 10.0)  # the paper robot: as given
+    assert load("paper", overrides=["plant.c_true=[1.0, 5.0]"]).plant.c_true == (1.0, 5.0)
+    from bioform_mj.errors import ScenarioError
+
+    with pytest.raises(ScenarioError, match="one c_true"):
+        load("hetero", plant="ideal")
+    with pytest.raises(ScenarioError, match="disagrees with plant.robots"):
+        load("paper", overrides=["plant.robots=['lab']", "plant.c_true=[1.0, 5.0]"])
+
+
+def test_feasibility_warns_about_a_robot_that_tips():
+    sc = load("paper", plant="mujoco", overrides=["formation.initial_poses=[[0,0,0]]", "formation.offsets=[[3,0]]",
+                                                   "graph.edges=[]"])
+    plant = MujocoPlant([TP], sc.initial_poses(), 0.002, 0.002)
+    warn = feasibility(sc, plant)
+    assert any("start-up transient" in w and "tip" in w for w in warn)
+    assert any("traction limit" in w for w in warn)
+    assert feasibility(sc, MujocoPlant(["paper"], sc.initial_poses(), 0.001, 0.001)) == []
+
+
+@pytest.mark.parametrize("preset,robot", [("tb3", "tb3"), ("stretch", "stretch")])
+def test_shipped_robot_scaled_paper_scenario_holds_formation(preset, robot):
+    """Each shipped robot's scaled paper scenario holds its formation within 0.1 m in MuJoCo, upright.
+
+    Measured (20 s): tb3 final errors 3.8-4.6 mm, c_hat within 7 %; stretch 6-7.5 mm, b_hat 13-15 % low
+    (centre of mass 4 cm behind the axle, design §8.1)."""
+    from bioform_mj.sim import simulate
+
+    sc = load(preset, overrides=["sim.duration=12"])
+    assert sc.plant.kind == "mujoco" and sc.formation.scale < 1
+    res = simulate(sc)
+    assert res.diverged is None
+    assert feasibility(sc, res.plant) == []
+    final = [f["final_formation_error_m"] for f in res.summary["followers"]]
+    assert max(final) < 0.1, final  # measured < 1 cm
+    assert np.min(res.plant.upright()) > np.cos(res.plant.TIP_ANGLE)
+    np.testing.assert_allclose(res.plant.c_true()[0], robot_truth(robot if preset != "tb3" else
+                                                                  RobotRef("tb3", tau_max=0.05)).c, rtol=1e-6)
+
+
+def test_scale_maps_lengths_and_keeps_times():
+    p, s = load("paper"), load("paper", overrides=["formation.scale=0.1"])
+    assert s.leader.speed == pytest.approx(0.1 * p.leader.speed) and s.leader.frequency == p.leader.frequency
+    np.testing.assert_allclose(s.formation.offsets, 0.1 * np.array(p.formation.offsets))
+    np.testing.assert_allclose(np.array(s.formation.initial_poses)[:, :2], 0.1 * np.array(p.formation.initial_poses)[:, :2])
+    assert s.kinematic.k2 == pytest.approx(p.kinematic.k2 / 0.01) and s.kinematic.k1 == p.kinematic.k1
+    assert s.disturbance.bias[0] == pytest.approx(0.1 * p.disturbance.bias[0])
+    from bioform_mj.errors import ScenarioError
+
+    with pytest.raises(ScenarioError, match="formation.scale"):
+        load("paper", overrides=["formation.scale=-1"])
