@@ -256,3 +256,43 @@ def test_scale_maps_lengths_and_keeps_times():
 
     with pytest.raises(ScenarioError, match="formation.scale"):
         load("paper", overrides=["formation.scale=-1"])
+
+
+def test_a_robot_the_scenario_overturns_is_reported_tipped_at_the_moment_it_tips():
+    """tb3 in the unscaled paper scenario: the start-up transient at its motor limit tips it.
+    The outcome names the time; it lies within 0.1 s of the first control step at which the
+    chassis tilt (measured every step by an observer of the step-by-step loop) crossed 30°."""
+    import math
+
+    from bioform_mj.plants.mujoco_plant import TIP_ANGLE_DEG
+    from bioform_mj.scenario import load
+    from bioform_mj.sim import simulate
+
+    sc = load("paper", plant="mujoco", overrides=['plant.robots=["tb3"]', "sim.duration=0.5"])
+
+    class Tilt:
+        period = sc.sim.control_dt
+
+        def __init__(self):
+            self.rows = []
+
+        def start(self, run):
+            pass
+
+        def sample(self, run):
+            self.rows.append((run.t, run.plant._up.copy()))
+
+        def finish(self, run):
+            pass
+
+    probe = Tilt()
+    ref = simulate(sc, [probe], engine="stepwise")
+    fast = simulate(sc)
+    cos_lim = math.cos(math.radians(TIP_ANGLE_DEG))
+    for i, f in enumerate(fast.summary["followers"]):
+        crossed = [t for t, up in probe.rows if up[i] < cos_lim]
+        assert crossed, "the scenario must overturn every tb3 (measured: 0.15-0.2 s)"
+        assert f["outcome"] == "tipped"
+        t_reported = float(f["outcome_detail"].split("t = ")[1].split(" s")[0])
+        assert abs(t_reported - crossed[0]) <= 0.1
+        assert ref.summary["followers"][i]["outcome_detail"] == f["outcome_detail"]  # both loops agree
