@@ -467,7 +467,7 @@ def _run_ray(todo: list[RunSpec], workers: int, address: str | None, sig: _Signa
 def _read_row(path: Path, spec: RunSpec, warn: Callable[[str], None] | None) -> dict[str, Any] | None:
     """A finished row from an earlier invocation, or None when the run must be done (again)."""
     try:
-        text = path.read_text()
+        text = path.read_bytes()
     except FileNotFoundError:
         return None
     except OSError as exc:
