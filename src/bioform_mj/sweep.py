@@ -17,7 +17,8 @@ own row (``status = failed``, the reason in ``error``, ``worker_died = true``; a
 it again) and the sweep goes on. SIGINT/SIGTERM stop the sweep: running workers are
 terminated (SIGTERM, then SIGKILL after a grace period; they also die with the sweep via
 ``PR_SET_PDEATHSIG`` if it is killed), finished rows are kept, the tables are written for
-them and :class:`SweepInterrupted` is raised. One worker runs in this process.
+them and :class:`SweepInterrupted` is raised. One worker (and, off Linux, every sweep) runs in
+this process, where a signal abandons the run in progress.
 """
 from __future__ import annotations
 
@@ -157,12 +158,12 @@ def expand(source: str, seeds: int, methods: Sequence[str], vary: Sequence[str],
     for method in methods:
         for combo in itertools.product(*axes) if axes else [()]:
             ov = tuple(overrides) + tuple(f"{k}={v}" for k, v in combo)
-            base = load(source, list(ov), method=method, plant=plant)
+            base = load(source, list(ov) + [f"sim.seed={seed0}"], method=method, plant=plant)
             n_configs += 1
             if not randomness(base):
                 no_random.append(", ".join([method] + [f"{k}={v}" for k, v in combo]))
             for s in range(seed0, seed0 + seeds):
-                # the seed is the only difference between a configuration's runs (it is validated as >= 0)
+                # the seed is the only difference between a configuration's runs (seed0 was validated)
                 sc = dataclasses.replace(base, sim=dataclasses.replace(base.sim, seed=s))
                 run_ov = ov + (f"sim.seed={s}",)
                 specs.append(RunSpec(source, run_ov, method, s, plant, tuple(combo), content_key(sc, run_ov), sc))
@@ -268,6 +269,11 @@ class _Signals:
                 break
         return self
 
+    def reinstall(self) -> None:
+        """Take the signals back from a library that installed its own handlers (ray.init does, for SIGTERM)."""
+        for s in self._old:
+            signal.signal(s, self._handler)
+
     def __exit__(self, *exc: Any) -> None:
         for s, h in self._old.items():
             signal.signal(s, h)
@@ -315,7 +321,7 @@ def _child(spec: RunSpec, w: int, parent: int) -> None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group; the sweep decides
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         _die_with_parent(parent)
-        data = json.dumps(run_one(spec)).encode()
+        data = json.dumps(run_one(spec), default=lambda o: o.item() if hasattr(o, "item") else str(o)).encode()
         with os.fdopen(w, "wb") as fh:
             fh.write(data)
         code = 0
@@ -413,10 +419,14 @@ def _reap(pids: list[int]) -> None:
 
 
 def _run_local(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable[[dict], None]) -> None:
-    if workers <= 1 or not hasattr(os, "fork"):
+    if workers <= 1 or not sys.platform.startswith("linux"):  # forking a process that loaded MuJoCo: Linux only
         _run_serial(todo, sig, done)
     else:
         _run_forked(todo, workers, sig, done)
+
+
+#: Ray errors meaning the process running the task died (the run did not fail on its own).
+_RAY_DIED = {"WorkerCrashedError", "OutOfMemoryError", "NodeDiedError", "ObjectLostError", "LocalRayletDiedError"}
 
 
 def _run_ray(todo: list[RunSpec], workers: int, address: str | None, sig: _Signals,
@@ -434,6 +444,7 @@ def _run_ray(todo: list[RunSpec], workers: int, address: str | None, sig: _Signa
                     kwargs["num_cpus"] = workers
                 ray.init(**kwargs)
                 started = True
+        sig.reinstall()
     except _Stop:
         if started:
             ray.shutdown()
@@ -450,7 +461,11 @@ def _run_ray(todo: list[RunSpec], workers: int, address: str | None, sig: _Signa
                 try:
                     row = ray.get(r)
                 except Exception as exc:  # noqa: BLE001 - WorkerCrashedError, OutOfMemoryError, ...
-                    row = _died_row(sp, f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}")
+                    msg = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+                    if type(exc).__name__ in _RAY_DIED:
+                        row = _died_row(sp, msg)
+                    else:
+                        row = {**_base_row(sp), "status": "failed", "outcome": "failed", "error": msg}
                 done(row)
     finally:
         if pending and sig.signum is not None:
