@@ -38,12 +38,21 @@ def test_local_sweep_table_and_stats(local_sweep):
     by = {(r["method"], r["kinematic.k1"], r["seed"]): float(r["total_velocity_error_mean"]) for r in rows}
     assert by[("bioinspired", "1", "0")] != by[("bioinspired", "1", "1")]
     stats = json.loads((local_sweep / "stats.json").read_text())
-    assert stats["bioinspired"]["runs"] == 4 and stats["bioinspired"]["ok"] == 4
-    m = stats["bioinspired"]["metrics"]["total_velocity_error_mean"]
-    vals = [by[k] for k in by if k[0] == "bioinspired"]
-    assert m["mean"] == pytest.approx(sum(vals) / 4)
+    # one group per (method, varied value), not merged per method
+    assert stats["group_by"] == ["method", "kinematic.k1"]
+    groups = {(g["method"], g["kinematic.k1"]): g for g in stats["groups"]}
+    assert set(groups) == {(m, k) for m in ("bioinspired", "bioinspired-learning") for k in ("1", "2")}
+    g = groups[("bioinspired", "2")]
+    assert g["runs"] == 2 and g["ok"] == 2 and g["outcomes"] == {"ok": 2}
+    m = g["metrics"]["total_velocity_error_mean"]
+    vals = [by[k] for k in by if k[:2] == ("bioinspired", "2")]
+    assert m["mean"] == pytest.approx(sum(vals) / 2)
     assert m["p5"] <= m["p50"] <= m["p95"]
-    assert "bioinspired-learning" in (local_sweep / "stats.md").read_text()
+    md = (local_sweep / "stats.md").read_text().splitlines()
+    assert md[0].startswith("| method | kinematic.k1 | runs") and "outcomes" in md[0]
+    body = [ln for ln in md[2:] if ln.startswith("| ")]
+    assert len(body) == 4
+    assert any(ln.startswith("| bioinspired-learning | 2 | 2 (2/0/0) | ok 2 |") for ln in body)
 
 
 def test_serial_equals_parallel(local_sweep, tmp_path):
@@ -78,7 +87,8 @@ def test_failed_run_recorded_not_fatal(tmp_path):
     assert row["status"] == "failed" and "kinematic.k1" in row["error"]
     res = sweep(good + bad, tmp_path / "mixed", workers=1)
     assert sorted(r["status"] for r in res["rows"]) == ["failed", "ok"]
-    assert res["stats"]["bioinspired"]["failed"] == 1
+    (g,) = res["stats"]["groups"]
+    assert g["method"] == "bioinspired" and g["failed"] == 1 and g["outcomes"] == {"ok": 1, "failed": 1}
 
 
 def test_sweep_bad_vary_exit_2(tmp_path, capsys):

@@ -339,7 +339,9 @@ def _table1(args: argparse.Namespace, sc) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from .sweep import expand, sweep
+    import shlex
+
+    from .sweep import SweepInterrupted, expand, sweep
 
     methods = list(METHODS) if args.methods == "all" else [m.strip() for m in args.methods.split(",") if m.strip()]
     for m in methods:
@@ -354,12 +356,40 @@ def _sweep(args: argparse.Namespace) -> int:
                    seed0=args.seed or 0)
     out = _prepare_out(args.out, "sweep")
     out.mkdir(parents=True, exist_ok=True)
-    res = sweep(specs, out, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
-                progress=_progress(not args.quiet, "sweep"))
+    progress = _progress(not args.quiet, "sweep")
+    try:
+        res = sweep(specs, out, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
+                    progress=progress)
+    except SweepInterrupted as exc:
+        # the same command resumes: finished rows are skipped by their content key
+        cmd = ["bioform", "sweep", args.scenario]
+        for flag, val in (("--plant", args.plant), ("--duration", args.duration), ("--seed", args.seed)):
+            if val is not None:
+                cmd += [flag, str(val)]
+        for ov in args.overrides:
+            cmd += ["--set", ov]
+        cmd += ["--seeds", str(args.seeds), "--methods", args.methods]
+        for v in args.vary:
+            cmd += ["--vary", v]
+        cmd += ["--backend", args.backend]
+        for flag, val in (("--workers", args.workers), ("--ray-address", args.ray_address)):
+            if val is not None:
+                cmd += [flag, str(val)]
+        cmd += ["--out", str(out)]
+        if args.quiet:
+            cmd.append("--quiet")
+        if progress is not None:
+            sys.stderr.write("\n")
+        print(f"{exc}; finished rows kept in {out}/runs/. Resume with:\n  {shlex.join(cmd)}", file=sys.stderr)
+        return 128 + exc.signum
+    tm = res["timing"]
+    if tm["workers_died"]:
+        print(f"warning: {tm['workers_died']} run(s) failed because their worker process died (see 'error' in "
+              f"{out}/runs.csv); rerun the sweep to retry them", file=sys.stderr)
     if not args.quiet:
-        tm = res["timing"]
         rate = f", {tm['wall_s']:.1f} s, {tm['runs_per_s']:.2f} runs/s on {tm['workers']} worker(s)" if tm["runs_per_s"] else ""
-        print(f"{len(specs)} runs ({res['ran']} run now, {res['skipped']} already done{rate})")
+        died = f", {tm['workers_died']} worker(s) died (rerun to retry)" if tm["workers_died"] else ""
+        print(f"{tm['runs']} runs ({res['ran']} run now, {res['skipped']} already done{rate}{died})")
         print((out / "stats.md").read_text())
         print(f"outputs in {out}/ (runs.csv, stats.json, stats.md, sweep.json)")
     return EXIT_OK

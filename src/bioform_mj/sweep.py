@@ -1,30 +1,50 @@
-"""Monte Carlo sweeps: every combination of methods × varied keys × seeds, on a process pool or Ray.
+"""Monte Carlo sweeps: every combination of methods × varied keys × seeds, on forked workers or Ray.
 
-Each run is identified by a key derived from its settings; its result row is written
-atomically to ``DIR/runs/<key>.json`` as soon as it finishes, so an interrupted sweep
-resumes by skipping keys already there. At the end the rows are collected into
-``DIR/runs.csv`` (one row per run: settings, seed, status, metrics) and aggregated per
-method into ``DIR/stats.json`` and ``DIR/stats.md``.
+Each run is identified by a key hashed from the *content* of its resolved scenario
+(``Scenario.to_dict()`` as canonical JSON, the overrides, the robot model files it uses
+and the package version), not from the scenario's file path: an edited scenario runs
+again. Its result row is written atomically to ``DIR/runs/<key>.json`` as soon as it
+finishes, so an interrupted sweep resumes by skipping keys already there; a row file that
+cannot be read is reported (``warning:`` on stderr) and its run redone. At the end the rows
+are collected into ``DIR/runs.csv`` (one row per run: settings, seed, status, outcome,
+metrics) and aggregated per group, method × every ``--vary`` value, into ``DIR/stats.json``
+and ``DIR/stats.md``.
+
+Processes (``backend="local"``): with more than one worker, every run is a process forked
+from this one after it has loaded the compiled kernels, so a worker starts in milliseconds
+with the kernels in memory. A worker that dies (SIGKILL, the OOM killer) fails only its
+own row (``status = failed``, the reason in ``error``, ``worker_died = true``; a resume runs
+it again) and the sweep goes on. SIGINT/SIGTERM stop the sweep: running workers are
+terminated (SIGTERM, then SIGKILL after a grace period; they also die with the sweep via
+``PR_SET_PDEATHSIG`` if it is killed), finished rows are kept, the tables are written for
+them and :class:`SweepInterrupted` is raised. One worker (and, off Linux, every sweep) runs in
+this process, where a signal abandons the run in progress.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
+import dataclasses
 import hashlib
 import io
 import itertools
 import json
 import os
+import select
+import signal
 import sys
 import time
-from dataclasses import dataclass
+import traceback
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
-from .errors import InputError
+from . import __version__
+from .errors import BioformError, InputError
 from .outputs.files import write_json, write_text
-from .scenario import load
+from .scenario import Scenario, load
 
 #: Per-follower metrics of ``summary.json`` that a sweep row carries (mean and max over followers).
 METRICS = (
@@ -37,10 +57,26 @@ METRICS = (
     "saturation_fraction",
 )
 
+#: Seconds a terminated worker gets to exit before it is killed.
+GRACE_S = 2.0
+
+
+class SweepInterrupted(BioformError):
+    """SIGINT/SIGTERM stopped the sweep; finished rows are kept (``done`` of ``total``)."""
+
+    def __init__(self, signum: int, done: int, total: int) -> None:
+        self.signum, self.done, self.total = signum, done, total
+        super().__init__(f"interrupted ({signal.Signals(signum).name}): {done} of {total} runs done")
+
 
 @dataclass(frozen=True)
 class RunSpec:
-    """One run of a sweep: scenario source, overrides (``KEY=VALUE`` strings), method, seed."""
+    """One run of a sweep: scenario source, overrides (``KEY=VALUE`` strings), method, seed.
+
+    :func:`expand` also sets ``scenario`` (the resolved scenario the run uses) and ``digest``
+    (its content hash, the run's key); a spec made without them loads its scenario when it
+    runs and is keyed by its settings.
+    """
 
     source: str
     overrides: tuple[str, ...]
@@ -48,20 +84,64 @@ class RunSpec:
     seed: int
     plant: str | None
     vary: tuple[tuple[str, str], ...]  # the varied (key, raw value) pairs, for the table
+    digest: str = ""
+    scenario: Scenario | None = field(default=None, compare=False, hash=False, repr=False)
 
     @property
     def key(self) -> str:
-        """Stable identifier of the run (its settings hashed), used as file name."""
+        """Stable identifier of the run, used as file name: the content hash when known."""
+        if self.digest:
+            return self.digest
         text = json.dumps([self.source, self.overrides, self.method, self.seed, self.plant], sort_keys=True)
         return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
+def content_key(sc: Scenario, overrides: Sequence[str] = ()) -> str:
+    """Hash of what a run computes: the resolved scenario, the overrides, robot model files, package version."""
+    models: dict[str, str] = {}
+    if sc.plant.kind == "mujoco":
+        from .robots import resolve_robot
+
+        for r in sc.plant.robots:
+            with contextlib.suppress(BioformError, OSError):
+                models[r] = hashlib.sha1(resolve_robot(r).read_bytes()).hexdigest()
+    doc = {"scenario": sc.to_dict(), "overrides": list(overrides), "models": models, "version": __version__}
+    text = json.dumps(doc, sort_keys=True, separators=(",", ":"), default=repr)
+    return hashlib.sha1(text.encode()).hexdigest()[:16]
+
+
+def randomness(sc: Scenario) -> list[str]:
+    """The scenario keys through which ``sim.seed`` changes a run (empty: every seed gives the same run).
+
+    The seed draws the initial-pose jitter and, inside the fault window, sensor noise and packet loss.
+    """
+    out = []
+    if sc.formation.init_jitter > 0:
+        out.append("formation.init_jitter")
+    f = sc.faults
+    w0, w1 = f.window if f.window else (-np.inf, np.inf)
+    if w0 < min(w1, sc.sim.duration):  # the noise/loss window overlaps the run
+        if f.packet_loss > 0:
+            out.append("faults.packet_loss")
+        if any(v > 0 for v in f.noise_pose):
+            out.append("faults.noise_pose")
+        if any(v > 0 for v in f.noise_vel):
+            out.append("faults.noise_vel")
+    return out
+
+
+def _warn(msg: str) -> None:
+    print(f"warning: {msg}", file=sys.stderr, flush=True)
+
+
 def expand(source: str, seeds: int, methods: Sequence[str], vary: Sequence[str], overrides: Sequence[str] = (),
-           plant: str | None = None, seed0: int = 0) -> list[RunSpec]:
+           plant: str | None = None, seed0: int = 0, warn: Callable[[str], None] | None = _warn) -> list[RunSpec]:
     """All combinations; ``vary`` items are ``KEY=V1,V2,...`` (values as in ``--set``).
 
     Arrays in a value list must not contain commas at the top level; use ``;`` to
-    separate array values instead (``estimator.phi=[0,0];[0.1,0.1]``).
+    separate array values instead (``estimator.phi=[0,0];[0.1,0.1]``). Every configuration
+    is loaded and validated here, so bad input fails before any run starts. ``warn`` is
+    told when ``seeds > 1`` is asked of configurations that have no randomness.
     """
     if seeds < 1:
         raise InputError(f"--seeds must be >= 1, got {seeds}")
@@ -73,34 +153,58 @@ def expand(source: str, seeds: int, methods: Sequence[str], vary: Sequence[str],
         values = raw.split(";") if ";" in raw else raw.split(",")
         axes.append([(key.strip(), v.strip()) for v in values])
     specs = []
+    no_random: list[str] = []
+    n_configs = 0
     for method in methods:
         for combo in itertools.product(*axes) if axes else [()]:
             ov = tuple(overrides) + tuple(f"{k}={v}" for k, v in combo)
+            base = load(source, list(ov) + [f"sim.seed={seed0}"], method=method, plant=plant)
+            n_configs += 1
+            if not randomness(base):
+                no_random.append(", ".join([method] + [f"{k}={v}" for k, v in combo]))
             for s in range(seed0, seed0 + seeds):
-                specs.append(RunSpec(source, ov + (f"sim.seed={s}",), method, s, plant, tuple(combo)))
-    # validate every distinct configuration up front: bad input fails before any run starts
-    seen = set()
-    for sp in specs:
-        sig = (sp.overrides[:-1], sp.method)
-        if sig not in seen:
-            seen.add(sig)
-            load(sp.source, list(sp.overrides), method=sp.method, plant=sp.plant)
+                # the seed is the only difference between a configuration's runs (seed0 was validated)
+                sc = dataclasses.replace(base, sim=dataclasses.replace(base.sim, seed=s))
+                run_ov = ov + (f"sim.seed={s}",)
+                specs.append(RunSpec(source, run_ov, method, s, plant, tuple(combo), content_key(sc, run_ov), sc))
+    if seeds > 1 and no_random and warn is not None:
+        which, its = ("the scenario has", "its") if len(no_random) == n_configs else \
+            (f"{len(no_random)} of {n_configs} configurations ({'; '.join(no_random[:3])}"
+             f"{'; …' if len(no_random) > 3 else ''}) have", "their")
+        warn(f"--seeds {seeds}: {which} no randomness (no formation.init_jitter, faults.noise_pose/noise_vel "
+             f"or faults.packet_loss), so {its} {seeds} seeds give identical runs")
     return specs
+
+
+# ------------------------------------------------------------------------------------------
+# One run
+
+def _base_row(spec: RunSpec) -> dict[str, Any]:
+    row: dict[str, Any] = {"key": spec.key, "method": spec.method, "seed": spec.seed}
+    row.update({k: v for k, v in spec.vary})
+    return row
 
 
 def run_one(spec: RunSpec) -> dict[str, Any]:
     """Run one spec; never raises: a failure becomes a row with ``status = failed`` and the error."""
-    row: dict[str, Any] = {"key": spec.key, "method": spec.method, "seed": spec.seed}
-    row.update({k: v for k, v in spec.vary})
+    row = _base_row(spec)
     try:
         from .sim import simulate
 
-        sc = load(spec.source, list(spec.overrides), method=spec.method, plant=spec.plant)
+        sc = spec.scenario if spec.scenario is not None else \
+            load(spec.source, list(spec.overrides), method=spec.method, plant=spec.plant)
         res = simulate(sc)
         s = res.summary
         row["plant"] = s["plant"]
-        row["status"] = "diverged" if res.diverged is not None else "ok"
-        row["error"] = s["diverged"]["message"] if res.diverged is not None else ""
+        div = s.get("diverged")
+        row["status"] = "diverged" if div is not None else "ok"
+        row["error"] = div["message"] if div is not None else ""
+        row["diverged_at_s"] = div["time_s"] if div is not None else None
+        fo = [f.get("outcome") for f in s["followers"]]
+        if all(o is not None for o in fo):
+            row["follower_outcomes"] = ";".join(str(o) for o in fo)
+        bad = sorted({str(o) for o in fo if o is not None and o != "ok"})
+        row["outcome"] = "diverged" if div is not None else (",".join(bad) if bad else "ok")
         row["sim_time_s"] = s["sim_time_s"]
         row["wall_time_s"] = s["wall_time_s"]
         for m in METRICS:
@@ -111,9 +215,84 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
         row["c_hat_abs_rel_error_max"] = float(np.max(np.abs(ch)))
     except Exception as exc:  # noqa: BLE001 - a failed run must not sink the sweep
         row["status"] = "failed"
+        row["outcome"] = "failed"
         row["error"] = f"{type(exc).__name__}: {exc}"
     return row
 
+
+def _died_row(spec: RunSpec, reason: str) -> dict[str, Any]:
+    """The row of a run whose worker process died; a resume runs it again."""
+    row = _base_row(spec)
+    row.update(status="failed", outcome="failed", error=f"worker died: {reason}", worker_died=True)
+    return row
+
+
+def _exit_reason(status: int) -> str:
+    if os.WIFSIGNALED(status):
+        sig = os.WTERMSIG(status)
+        try:
+            name = signal.Signals(sig).name
+        except ValueError:
+            name = f"signal {sig}"
+        hint = " (out of memory? the kernel's OOM killer sends SIGKILL)" if sig == signal.SIGKILL else ""
+        return f"killed by {name}{hint}"
+    return f"exited with code {os.waitstatus_to_exitcode(status)} without a result"
+
+
+# ------------------------------------------------------------------------------------------
+# Signals
+
+class _Stop(BaseException):
+    """Raised by the signal handler to abandon the in-process run (not an Exception: run_one lets it through)."""
+
+
+class _Signals:
+    """SIGINT/SIGTERM → ``signum`` set (first one wins); while ``raising``, also raise :class:`_Stop`."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self.raising = False
+        self._old: dict[int, Any] = {}
+
+    def _handler(self, signum: int, frame: Any) -> None:
+        if self.signum is None:
+            self.signum = signum
+        if self.raising:
+            self.raising = False
+            raise _Stop()
+
+    def __enter__(self) -> "_Signals":
+        for s in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self._old[s] = signal.signal(s, self._handler)
+            except ValueError:  # not the main thread: leave signals to the caller
+                break
+        return self
+
+    def reinstall(self) -> None:
+        """Take the signals back from a library that installed its own handlers (ray.init does, for SIGTERM)."""
+        for s in self._old:
+            signal.signal(s, self._handler)
+
+    def __exit__(self, *exc: Any) -> None:
+        for s, h in self._old.items():
+            signal.signal(s, h)
+
+
+@contextlib.contextmanager
+def _raising(sig: _Signals) -> Iterator[None]:
+    """Let a signal abandon what runs inside (checked on entry too)."""
+    if sig.signum is not None:
+        raise _Stop()
+    sig.raising = True
+    try:
+        yield
+    finally:
+        sig.raising = False
+
+
+# ------------------------------------------------------------------------------------------
+# Backends
 
 def _load_kernels() -> None:
     """Run both compiled loops for a moment, so that numba's cached machine code is loaded
@@ -125,87 +304,266 @@ def _load_kernels() -> None:
         simulate(load("paper", plant=plant, overrides=["sim.duration=0.01"]))
 
 
-def _run_local(todo: list[RunSpec], workers: int, done: Callable[[dict], None]) -> None:
-    if workers <= 1:
-        for sp in todo:
-            done(run_one(sp))
-        return
-    import concurrent.futures as cf
-    import multiprocessing as mp
+def _die_with_parent(parent: int) -> None:
+    """In a worker: SIGKILL when the sweep process dies, however it dies (Linux)."""
+    with contextlib.suppress(Exception):
+        import ctypes
 
-    if sys.platform.startswith("linux"):
-        # fork after loading MuJoCo, numba and the compiled kernels here: workers start in
-        # milliseconds instead of ~2 s each (spawn). This process runs no threads of its own
-        # at this point (the progress bar has no monitor thread), so fork is safe.
-        _load_kernels()
-
-        ctx = mp.get_context("fork")
-    else:  # pragma: no cover - macOS/Windows
-        ctx = mp.get_context("spawn")
-    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
-        futures = [pool.submit(run_one, sp) for sp in todo]
-        for fut in cf.as_completed(futures):
-            done(fut.result())
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # the sweep died before prctl
+        os._exit(1)
 
 
-def _run_ray(todo: list[RunSpec], workers: int, address: str | None, done: Callable[[dict], None]) -> None:
+def _child(spec: RunSpec, w: int, parent: int) -> None:
+    """Body of a forked worker: run ``spec``, write its row as JSON to ``w``, exit. Never returns."""
+    code = 1
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group; the sweep decides
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        _die_with_parent(parent)
+        data = json.dumps(run_one(spec), default=lambda o: o.item() if hasattr(o, "item") else str(o)).encode()
+        with os.fdopen(w, "wb") as fh:
+            fh.write(data)
+        code = 0
+    except BaseException:  # noqa: BLE001 - report and exit; never run the parent's code
+        with contextlib.suppress(Exception):
+            traceback.print_exc()
+    finally:
+        os._exit(code)
+
+
+def _run_serial(todo: list[RunSpec], sig: _Signals, done: Callable[[dict], None]) -> None:
+    for sp in todo:
+        try:
+            with _raising(sig):
+                row = run_one(sp)
+        except _Stop:
+            return
+        done(row)
+
+
+def _run_forked(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable[[dict], None]) -> None:
+    """Each run in a process forked from this one; at most ``workers`` at a time."""
+    _load_kernels()  # before forking: workers inherit the loaded kernels (start in ms, not ~1 s each)
+    parent = os.getpid()
+    queue = list(reversed(todo))
+    active: dict[int, tuple[int, RunSpec, bytearray]] = {}  # read fd -> (pid, spec, data so far)
+    try:
+        while (queue or active) and sig.signum is None:
+            while queue and len(active) < workers and sig.signum is None:
+                sp = queue.pop()
+                r, w = os.pipe()
+                sys.stdout.flush()
+                sys.stderr.flush()
+                pid = os.fork()
+                if pid == 0:  # pragma: no cover - runs in the worker
+                    os.close(r)
+                    _child(sp, w, parent)
+                os.close(w)
+                active[r] = (pid, sp, bytearray())
+            try:
+                ready, _, _ = select.select(list(active), [], [], 0.25)
+            except InterruptedError:  # pragma: no cover - PEP 475 retries; kept for safety
+                continue
+            for r in ready:
+                pid, sp, buf = active[r]
+                chunk = os.read(r, 1 << 16)
+                if chunk:
+                    buf += chunk
+                    continue
+                # EOF: the worker has written its row and exited, or it died
+                del active[r]
+                os.close(r)
+                _, status = os.waitpid(pid, 0)
+                row = None
+                if os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0:
+                    with contextlib.suppress(ValueError):
+                        row = json.loads(buf.decode())
+                if row is None:
+                    if sig.signum is not None:  # may have died of the signal that stops the sweep: no result
+                        continue
+                    row = _died_row(sp, _exit_reason(status))
+                done(row)
+    finally:
+        _reap([pid for pid, _, _ in active.values()])
+        for r in active:
+            with contextlib.suppress(OSError):
+                os.close(r)
+
+
+def _reap(pids: list[int]) -> None:
+    """Terminate worker processes: SIGTERM, then SIGKILL those still alive after :data:`GRACE_S`."""
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGTERM)
+    left = set(pids)
+    deadline = time.monotonic() + GRACE_S
+    while left:
+        for pid in list(left):
+            try:
+                if os.waitpid(pid, os.WNOHANG)[0] != 0:
+                    left.discard(pid)
+            except ChildProcessError:
+                left.discard(pid)
+        if not left:
+            break
+        if time.monotonic() > deadline:
+            for pid in left:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGKILL)
+            for pid in left:
+                with contextlib.suppress(ChildProcessError):
+                    os.waitpid(pid, 0)
+            break
+        time.sleep(0.01)
+
+
+def _run_local(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable[[dict], None]) -> None:
+    if workers <= 1 or not sys.platform.startswith("linux"):  # forking a process that loaded MuJoCo: Linux only
+        _run_serial(todo, sig, done)
+    else:
+        _run_forked(todo, workers, sig, done)
+
+
+#: Ray errors meaning the process running the task died (the run did not fail on its own).
+_RAY_DIED = {"WorkerCrashedError", "OutOfMemoryError", "NodeDiedError", "ObjectLostError", "LocalRayletDiedError"}
+
+
+def _run_ray(todo: list[RunSpec], workers: int, address: str | None, sig: _Signals,
+             done: Callable[[dict], None]) -> None:
     try:
         import ray
     except ImportError:
         raise InputError("--backend ray needs Ray: pip install 'bioform-mj[ray]'") from None
     started = False
-    if not ray.is_initialized():
-        kwargs: dict[str, Any] = {"address": address, "include_dashboard": False, "log_to_driver": False}
-        if address is None:
-            kwargs["num_cpus"] = workers
-        ray.init(**kwargs)
-        started = True
     try:
-        remote = ray.remote(num_cpus=1)(run_one)
-        pending = [remote.remote(sp) for sp in todo]
-        while pending:
-            ready, pending = ray.wait(pending, num_returns=1)
+        with _raising(sig):
+            if not ray.is_initialized():
+                kwargs: dict[str, Any] = {"address": address, "include_dashboard": False, "log_to_driver": False}
+                if address is None:
+                    kwargs["num_cpus"] = workers
+                ray.init(**kwargs)
+                started = True
+        sig.reinstall()
+    except _Stop:
+        if started:
+            ray.shutdown()
+        return
+    pending: dict[Any, RunSpec] = {}
+    try:
+        # no retries: a run whose worker dies is recorded as failed, like the local backend does
+        remote = ray.remote(num_cpus=1, max_retries=0)(run_one)
+        pending = {remote.remote(sp): sp for sp in todo}
+        while pending and sig.signum is None:
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.25)
             for r in ready:
-                done(ray.get(r))
+                sp = pending.pop(r)
+                try:
+                    row = ray.get(r)
+                except Exception as exc:  # noqa: BLE001 - WorkerCrashedError, OutOfMemoryError, ...
+                    msg = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+                    if type(exc).__name__ in _RAY_DIED:
+                        row = _died_row(sp, msg)
+                    else:
+                        row = {**_base_row(sp), "status": "failed", "outcome": "failed", "error": msg}
+                done(row)
     finally:
+        if pending and sig.signum is not None:
+            for r in pending:
+                with contextlib.suppress(Exception):
+                    ray.cancel(r, force=True)
         if started:
             ray.shutdown()
 
 
+# ------------------------------------------------------------------------------------------
+# The sweep
+
+def _read_row(path: Path, spec: RunSpec, warn: Callable[[str], None] | None) -> dict[str, Any] | None:
+    """A finished row from an earlier invocation, or None when the run must be done (again)."""
+    try:
+        text = path.read_bytes()
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        problem = f"cannot be read ({exc.strerror or exc})"
+    else:
+        try:
+            row = json.loads(text)
+        except ValueError as exc:
+            problem = f"is damaged ({exc})"
+        else:
+            if isinstance(row, dict) and row.get("key") == spec.key and "status" in row:
+                return None if row.get("worker_died") else row
+            problem = "is damaged (not a row of this run)"
+    if warn is not None:
+        warn(f"row file '{path}' {problem}; its run is redone")
+    return None
+
+
 def sweep(specs: list[RunSpec], out: Path, backend: str = "local", workers: int | None = None,
-          ray_address: str | None = None, progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
-    """Run ``specs`` (skipping those already in ``out/runs``), then write the table and statistics."""
+          ray_address: str | None = None, progress: Callable[[int, int], None] | None = None,
+          warn: Callable[[str], None] | None = _warn) -> dict[str, Any]:
+    """Run ``specs`` (skipping those already in ``out/runs``), then write the table and statistics.
+
+    Raises :class:`SweepInterrupted` after SIGINT/SIGTERM, with the finished rows kept and
+    the tables written for them.
+    """
+    if backend not in ("local", "ray"):
+        raise InputError(f"unknown backend '{backend}' (expected local or ray)")
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
-    todo = [sp for sp in specs if not (runs_dir / f"{sp.key}.json").exists()]
+    rows: dict[str, dict[str, Any]] = {}
+    todo: list[RunSpec] = []
+    keys = list(dict.fromkeys(sp.key for sp in specs))  # identical runs (same content) run once
+    seen: set[str] = set()
+    for sp in specs:
+        if sp.key in seen:
+            continue
+        seen.add(sp.key)
+        row = _read_row(runs_dir / f"{sp.key}.json", sp, warn)
+        if row is None:
+            todo.append(sp)
+        else:
+            rows[sp.key] = row
     workers = workers or os.cpu_count() or 1
-    count = {"n": len(specs) - len(todo)}
+    skipped = len(rows)
 
     def done(row: dict) -> None:
         write_json(runs_dir / f"{row['key']}.json", row)
-        count["n"] += 1
+        rows[row["key"]] = row
         if progress is not None:
-            progress(count["n"], len(specs))
+            progress(len(rows), len(keys))
 
     if progress is not None:
-        progress(count["n"], len(specs))
+        progress(len(rows), len(keys))
     t0 = time.perf_counter()
-    if backend == "local":
-        _run_local(todo, workers, done)
-    elif backend == "ray":
-        _run_ray(todo, workers, ray_address, done)
-    else:
-        raise InputError(f"unknown backend '{backend}' (expected local or ray)")
-    wall = time.perf_counter() - t0
-    rows = [json.loads((runs_dir / f"{sp.key}.json").read_text()) for sp in specs]
-    timing = {"backend": backend, "workers": workers, "ran": len(todo), "skipped": len(specs) - len(todo),
-              "wall_s": wall, "runs_per_s": len(todo) / wall if todo and wall > 0 else None}
-    write_json(out / "sweep.json", timing)
-    write_text(out / "runs.csv", to_csv(rows))
-    stats = aggregate(rows)
-    write_json(out / "stats.json", stats)
-    write_text(out / "stats.md", stats_markdown(stats))
-    return {"rows": rows, "stats": stats, "ran": len(todo), "skipped": len(specs) - len(todo), "timing": timing}
+    with _Signals() as sig:
+        if backend == "local":
+            _run_local(todo, workers, sig, done)
+        else:
+            _run_ray(todo, workers, ray_address, sig, done)
+        wall = time.perf_counter() - t0
+        ran = len(rows) - skipped
+        interrupted = sig.signum
+        # the tables are written before the handlers are restored: a second signal cannot cut them short
+        got = [rows[k] for k in keys if k in rows]
+        group_by = ["method"] + list(dict.fromkeys(k for sp in specs for k, _ in sp.vary))
+        timing = {"backend": backend, "workers": workers, "ran": ran, "skipped": skipped, "wall_s": wall,
+                  "runs_per_s": ran / wall if ran and wall > 0 else None, "runs": len(keys), "done": len(got),
+                  "complete": len(got) == len(keys),
+                  "interrupted": None if interrupted is None else signal.Signals(interrupted).name,
+                  "workers_died": sum(1 for r in got if r.get("worker_died"))}
+        write_json(out / "sweep.json", timing)
+        write_text(out / "runs.csv", to_csv(got))
+        stats = aggregate(got, group_by)
+        write_json(out / "stats.json", stats)
+        note = "" if len(got) == len(keys) else \
+            f"\n**Incomplete: {len(got)} of {len(keys)} runs done** (rerun the sweep to resume).\n"
+        write_text(out / "stats.md", stats_markdown(stats) + note)
+    if interrupted is not None:
+        raise SweepInterrupted(interrupted, len(got), len(keys))
+    return {"rows": got, "stats": stats, "ran": ran, "skipped": skipped, "timing": timing}
 
 
 def to_csv(rows: list[dict[str, Any]]) -> str:
@@ -217,36 +575,50 @@ def to_csv(rows: list[dict[str, Any]]) -> str:
     w = csv.DictWriter(buf, fieldnames=cols)
     w.writeheader()
     for r in rows:
-        w.writerow({c: r.get(c, "") for c in cols})
+        w.writerow({c: "" if r.get(c) is None else r.get(c) for c in cols})
     return buf.getvalue()
 
 
-def aggregate(rows: list[dict[str, Any]]) -> dict[str, Any]:
-    """Per method: run counts by status and mean/std/p5/p50/p95 of every metric column over ok runs."""
-    out: dict[str, Any] = {}
-    for method in sorted({r["method"] for r in rows}):
-        rs = [r for r in rows if r["method"] == method]
+def aggregate(rows: list[dict[str, Any]], group_by: Sequence[str] = ("method",)) -> dict[str, Any]:
+    """Per group (one per distinct value of ``group_by``, e.g. method and every varied key): run counts
+    by status and by outcome, and mean/std/p5/p50/p95 of every metric column over runs that finished
+    (``status = ok``, whatever their outcome)."""
+    group_by = list(group_by)
+    order: dict[tuple, list[dict[str, Any]]] = {}
+    for r in rows:
+        order.setdefault(tuple(str(r.get(k, "")) for k in group_by), []).append(r)
+    groups = []
+    for gkey, rs in order.items():
         ok = [r for r in rs if r.get("status") == "ok"]
-        entry: dict[str, Any] = {"runs": len(rs), "ok": len(ok), "diverged": sum(r.get("status") == "diverged" for r in rs),
-                                 "failed": sum(r.get("status") == "failed" for r in rs), "metrics": {}}
+        outcomes: dict[str, int] = {}
+        for r in rs:
+            o = r.get("outcome") or r.get("status", "?")
+            outcomes[o] = outcomes.get(o, 0) + 1
+        entry: dict[str, Any] = dict(zip(group_by, gkey))
+        entry.update({"runs": len(rs), "ok": len(ok), "diverged": sum(r.get("status") == "diverged" for r in rs),
+                      "failed": sum(r.get("status") == "failed" for r in rs), "outcomes": outcomes, "metrics": {}})
         cols = [c for c in (ok[0] if ok else {}) if c.endswith(("_mean", "_max"))]
         for c in cols:
             v = np.array([r[c] for r in ok], dtype=float)
             entry["metrics"][c] = {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if len(v) > 1 else 0.0,
                                    "p5": float(np.percentile(v, 5)), "p50": float(np.percentile(v, 50)),
                                    "p95": float(np.percentile(v, 95))}
-        out[method] = entry
-    return out
+        groups.append(entry)
+    return {"group_by": group_by, "groups": groups}
 
 
 def stats_markdown(stats: dict[str, Any]) -> str:
-    """The headline statistics as a Markdown table."""
-    lines = ["| method | runs (ok/diverged/failed) | total velocity error, mean ± std | final formation error max [m], p50 (p95) |",
-             "|---|---|---|---|"]
-    for m, e in stats.items():
+    """The headline statistics as a Markdown table, one row per group."""
+    gb = stats["group_by"]
+    head = [*gb, "runs (ok/diverged/failed)", "outcomes", "total velocity error, mean ± std",
+            "final formation error max [m], p50 (p95)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for e in stats["groups"]:
         tv = e["metrics"].get("total_velocity_error_mean")
         fe = e["metrics"].get("final_formation_error_m_max")
         tv_s = f"{tv['mean']:.3g} ± {tv['std']:.2g}" if tv else "–"
         fe_s = f"{fe['p50']:.3g} ({fe['p95']:.3g})" if fe else "–"
-        lines.append(f"| {m} | {e['runs']} ({e['ok']}/{e['diverged']}/{e['failed']}) | {tv_s} | {fe_s} |")
+        oc = ", ".join(f"{k} {v}" for k, v in sorted(e["outcomes"].items(), key=lambda kv: (kv[0] != "ok", kv[0])))
+        cells = [str(e[k]) for k in gb] + [f"{e['runs']} ({e['ok']}/{e['diverged']}/{e['failed']})", oc, tv_s, fe_s]
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
