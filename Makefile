@@ -1,31 +1,38 @@
 # Two commands do all the set-up on a fresh machine (Python 3.11 with venv):
-#   make demo   - create .venv if needed, install, run the paper scenario, say where the outputs are
-#   make test   - same set-up, run the test suite
+#   make demo   - create .venv if needed, install what the demo needs, run the paper scenario, say where the outputs are
+#   make test   - same set-up plus the test extras (pytest, hypothesis, ray), run the test suite
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+TEST_STAMP := $(VENV)/.installed-test
 
 .PHONY: demo test test-fast bench install clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
 
+# the package and its runtime dependencies only (no pytest, ray, pyarrow: the demo needs none)
 $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e .
 	touch $(STAMP)
+
+# the test extras on top
+$(TEST_STAMP): $(STAMP) pyproject.toml
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(TEST_STAMP)
 
 install: $(STAMP)
 
 demo: $(STAMP)
-	MUJOCO_GL=$${MUJOCO_GL:-egl} $(VENV)/bin/bioform run paper --plant mujoco --out runs/demo --video --rrd --figures
+	MUJOCO_GL=$${MUJOCO_GL:-egl} $(VENV)/bin/bioform run paper --plant mujoco --out runs/demo --overwrite --video --rrd --figures
 	@echo "demo outputs: runs/demo/ (summary.json, log.npz, scene.xml, video.mp4, run.rrd, figures/)"
 
-test: $(STAMP)
+test: $(TEST_STAMP)
 	$(PY) -m pytest -q
 
-test-fast: $(STAMP)
+test-fast: $(TEST_STAMP)
 	$(PY) -m pytest -q -m "not slow"
 
 bench: $(STAMP)
