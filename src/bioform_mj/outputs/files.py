@@ -109,7 +109,7 @@ def _nearest_existing(p: Path, what: str, orig: str) -> Path:
         if probe.parent == probe:
             break
         probe = probe.parent
-    if probe != p and not probe.is_dir():
+    if not probe.is_dir():
         raise _bad(what, orig, f"cannot be created: '{probe}' is not a directory")
     return probe
 
