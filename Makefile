@@ -1,25 +1,32 @@
 # Two commands do all the set-up on a fresh machine (Python 3.11 with venv):
-#   make demo   - create .venv if needed, install, run the paper scenario, say where the outputs are
-#   make test   - same set-up, run the test suite
+#   make demo   - create .venv if needed, install what the demo needs, run the paper scenario, say where the outputs are
+#   make test   - same set-up plus the test extras (pytest, hypothesis, ray), run the test suite
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+TEST_STAMP := $(VENV)/.installed-test
 
 .PHONY: demo test test-fast bench install clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
 
+# the package and its runtime dependencies only (no pytest, ray, pyarrow: the demo needs none)
 $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e .
 	touch $(STAMP)
+
+# the test extras on top
+$(TEST_STAMP): $(STAMP) pyproject.toml
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(TEST_STAMP)
 
 install: $(STAMP)
 
 demo: $(STAMP)
-	MUJOCO_GL=$${MUJOCO_GL:-egl} $(VENV)/bin/bioform run paper --plant mujoco --out runs/demo --video --rrd --figures
+	MUJOCO_GL=$${MUJOCO_GL:-egl} $(VENV)/bin/bioform run paper --plant mujoco --out runs/demo --overwrite --video --rrd --figures
 	@echo "demo outputs: runs/demo/ (summary.json, log.npz, scene.xml, video.mp4, run.rrd, figures/)"
 
 # numpy's AVX-512 paths, where this CPU has them: the equivalence tests run again without them,
@@ -27,11 +34,11 @@ demo: $(STAMP)
 NPY_AVX512 = $(PY) -c "from numpy._core._multiarray_umath import __cpu_features__ as f; \
 	print(' '.join(k for k in ('AVX512F','AVX512CD','AVX512_SKX','AVX512_CLX','AVX512_CNL','AVX512_ICL','AVX512_SPR','X86_V4') if f.get(k)))"
 
-test: $(STAMP)
+test: $(TEST_STAMP)
 	$(PY) -m pytest -q
 	NPY_DISABLE_CPU_FEATURES="$$($(NPY_AVX512))" $(PY) -m pytest -q -m equivalence -p no:cacheprovider
 
-test-fast: $(STAMP)
+test-fast: $(TEST_STAMP)
 	$(PY) -m pytest -q -m "not slow"
 
 bench: $(STAMP)

@@ -67,6 +67,28 @@ BAD += [  # faults (issue 6)
     ("unknown fault key", "[faults]\nmeteor = 1.0", [], "faults.meteor"),
 ]
 
+BAD += [  # issue 11: types anywhere, names, sizes beyond reason
+    ("table given a number, then --duration", "sim = 3", ["--duration", "1"], "'sim': expected a table"),
+    ("table given a string, then --set", "kinematic = 'x'", ["--set", "kinematic.k1=3"], "'kinematic': expected a table"),
+    ("array of tables given a number", "events = 3", [], "events"),
+    ("array of tables given numbers", "events = [3]", [], "events[0]"),
+    ("name not a string", "name = 3", [], "'name'"),
+    ("description not a string", "description = [1]", [], "'description'"),
+    ("method not a string", "method = 1.5", [], "'method'"),
+    ("integer too large", "[sim]\nseed = 1e30", [], "sim.seed"),
+    ("follower id too large", "[graph]\nleader_access = [99999999999999999999]", [], "graph.leader_access"),
+    ("name with a path", "name = '../../x'", [], "plain file name"),
+    ("absolute name", "name = '/tmp/x'", [], "plain file name"),
+    ("name with a NUL", "name = \"a\\u0000b\"", [], "'name'"),
+    ("empty name", "name = ''", [], "is empty"),
+    ("physics step 1e-300", "[sim]\nphysics_dt = 1e-300", [], "sim.physics_dt"),
+    ("physics step 1e-12", "[sim]\nphysics_dt = 1e-12\ncontrol_dt = 1e-12", [], "sim.physics_dt"),
+    ("duration beyond reason", "[sim]\nduration = 1e9", [], "1e+12 steps"),
+    ("log beyond reason", "[sim]\nduration = 3e4\nlog_dt = 0.001", [], "GB of log"),
+    ("physics steps beyond reason", "[sim]\nduration = 5e4\nphysics_dt = 1e-5\ncontrol_dt = 1e-3\nlog_dt = 1.0", [],
+     "physics steps"),
+]
+
 
 @pytest.mark.parametrize("desc,text,argv,needle", BAD, ids=[b[0] for b in BAD])
 def test_bad_scenario_file(desc, text, argv, needle, tmp_path, capsys):
@@ -81,6 +103,74 @@ def test_bad_scenario_file(desc, text, argv, needle, tmp_path, capsys):
     assert len(lines) == 1 and lines[0].startswith("error:") and needle in lines[0], err
     assert "Traceback" not in err
     assert not out.exists()
+
+
+def test_unreadable_scenario_file(tmp_path, capsys, monkeypatch):
+    """PermissionError (root reads everything, so the refusal is simulated) is bad input, not a crash."""
+    from pathlib import Path
+
+    path = tmp_path / "locked.toml"
+    path.write_text("[sim]\nduration = 1.0\n")
+    real = Path.read_bytes
+
+    def refuse(self):
+        if self.name == "locked.toml":
+            raise PermissionError(13, "Permission denied", str(self))
+        return real(self)
+
+    monkeypatch.setattr(Path, "read_bytes", refuse)
+    out = tmp_path / "o"
+    code = main(["run", str(path), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("error:") and "cannot be read: Permission denied" in err
+    assert err.count("\n") == 1 and not out.exists()
+
+
+def test_scenario_that_is_a_directory(tmp_path, capsys):
+    d = tmp_path / "dir.toml"
+    d.mkdir()
+    assert main(["run", str(d), "--out", str(tmp_path / "o")]) == 2
+    assert "is a directory" in capsys.readouterr().err
+
+
+def _leaf_keys(cls=None, prefix=""):
+    import dataclasses
+    import typing
+
+    from bioform_mj.scenario import Scenario
+
+    cls = cls or Scenario
+    for name, tp in typing.get_type_hints(cls).items():
+        if dataclasses.is_dataclass(tp):
+            yield prefix + name, True
+            yield from _leaf_keys(tp, prefix + name + ".")
+        else:
+            yield prefix + name, False
+
+
+WRONG = ["x", 3, -1, 2.5, True, [1, 2], [[1, 2], [3, 4]], {"a": 1}, [], 1e300, 10**30, [{"a": 1}]]
+
+
+@pytest.mark.parametrize("key,is_table", list(_leaf_keys()), ids=[k for k, _ in _leaf_keys()])
+def test_any_type_anywhere_loads_or_is_refused(key, is_table):
+    """Every key of a scenario, given values of every type: a Scenario or an InputError, never another
+    exception (a TypeError would be exit 1). Tables also get a scalar then a key below them."""
+    from bioform_mj.errors import InputError
+    from bioform_mj.scenario import load
+
+    for value in WRONG:
+        overrides = {key: value}
+        if is_table:
+            overrides = {key: value, f"{key}.x": 1}
+        try:
+            load("paper", overrides)
+        except InputError:
+            pass
+        if is_table:
+            try:
+                load("paper", {key: value})
+            except InputError:
+                pass
 
 
 def test_battery_is_large_enough():

@@ -152,8 +152,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--sizes: {bad or sizes} not available (choose from {', '.join(map(str, CASES))})")
     if args.reps < 1:
         raise InputError(f"--reps must be >= 1, got {args.reps}")
-    if args.duration is not None and not args.duration > 0:
-        raise InputError(f"--duration must be > 0, got {args.duration}")
+    if args.duration is not None and not (args.duration > 0 and args.duration <= 3600):
+        raise InputError(f"--duration must be in (0, 3600] s, got {args.duration}")
+    from .outputs.files import check_out_file
+
+    json_path = check_out_file(args.json, "--json")  # before the work: its folder is made when written
     rows = []
     for n in sizes:
         rows.append(bench_case(n, args.duration, args.reps, numpy_too=getattr(args, "numpy", False)))
@@ -178,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
     print(format_table(rows))
     if "cost_per_robot_step_256_over_16" in out:
         print(f"cost per robot-step, n=256 / n=16: {out['cost_per_robot_step_256_over_16']:.2f}")
-    write_json(args.json, out)
+    write_json(json_path, out)
     print(f"wrote {args.json}")
     return 0
 

@@ -1,22 +1,26 @@
 """The ``bioform`` command (design §10).
 
-Exit codes: 0 done; 2 bad input (one ``error:`` line on stderr, no traceback);
-3 the simulation diverged (diagnosis on stderr, log kept); 1 anything else.
+Exit codes: 0 done; 2 bad input (one ``error:`` line on stderr, no traceback, before any
+work); 3 the simulation diverged (diagnosis on stderr, log kept); 130/143 interrupted by
+SIGINT/SIGTERM (a message on stderr, no temporary files left, the log so far kept where the
+run returned one); 1 anything else.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import signal
 import sys
 from pathlib import Path
 from typing import Any, Sequence
 
 from .control.stack import METHODS
-from .errors import BioformError, InputError
+from .errors import BioformError, InputError, Interrupted
 from .scenario import PLANTS
 
 EXIT_OK, EXIT_OTHER, EXIT_INPUT, EXIT_DIVERGED = 0, 1, 2, 3
+_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -43,7 +47,10 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="run one scenario and write summary.json and log.npz")
     _scenario_args(run)
     run.add_argument("--method", choices=METHODS, help="control method (default: the scenario's)")
-    run.add_argument("--out", type=Path, help="output directory (default: runs/<scenario>-<plant>-<method>)")
+    run.add_argument("--out", type=Path, help="output directory (default: runs/<scenario>-<plant>-<method>); "
+                                              "one run per folder")
+    run.add_argument("--overwrite", action="store_true",
+                     help="replace the run already in --out (its files only; a folder holding other files is refused)")
     run.add_argument("--engine", choices=("auto", "compiled", "stepwise"), default="auto",
                      help="fused: the numba-compiled loop (default when numba imports); numpy: the reference stack")
     run.add_argument("--video", action="store_true",
@@ -66,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     t1 = sub.add_parser("table1", help="run the four methods and write table1.json / table1.md")
     _scenario_args(t1)
     t1.add_argument("--out", type=Path, help="output directory (default: runs/table1-<plant>)")
+    t1.add_argument("--overwrite", action="store_true", help="replace the table already in --out (its files only)")
     t1.add_argument("--figures", action="store_true", help="write figures/*.png comparing the methods")
 
     ident = sub.add_parser("identify", help="system identification of a robot MJCF: formula vs measured a, b")
@@ -88,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray)")
     sw.add_argument("--out", type=Path, required=True, help="sweep directory (rerunning resumes it)")
 
-    sub.add_parser("presets", help="list the shipped scenario presets")
+    sub.add_parser("presets", help="list the shipped scenario presets, each with its description")
 
     bn = sub.add_parser("bench", help="closed-loop throughput against bare mj_step, n = 3, 16, 64, 256")
     bn.add_argument("--sizes", default="3,16,64,256", help="comma-separated team sizes (of 3, 16, 64, 256)")
@@ -104,6 +112,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from .outputs.gl import configure_gl_env
 
     configure_gl_env()  # MUJOCO_GL=egl unless the user chose; before anything imports mujoco
+    restore = _catch_signals()
     try:
         args = build_parser().parse_args(argv)
         return _dispatch(args)
@@ -113,9 +122,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BioformError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_OTHER
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM through _catch_signals
+        _ignore_signals()
+        signum = getattr(exc, "signum", signal.SIGINT)
+        print(f"error: interrupted by {signal.Signals(signum).name}; {getattr(exc, 'kept', 'nothing written')}",
+              file=sys.stderr)
+        return 128 + signum
     except BrokenPipeError:  # e.g. `bioform ... | head`
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - silence the flush at exit
         return EXIT_OK
@@ -124,30 +136,73 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(f"error: internal error {type(exc).__name__}: {exc} (set BIOFORM_DEBUG=1 for a traceback)", file=sys.stderr)
         return EXIT_OTHER
+    finally:
+        restore()
+
+
+def _catch_signals():
+    """SIGINT and SIGTERM raise :class:`Interrupted` (a ``KeyboardInterrupt``) once; signals that
+    arrive while the run cleans up are ignored. Returns the function restoring the old handlers.
+
+    Python runs the handler between bytecodes: inside the compiled loop it waits for the end
+    of the chunk in progress (at most one log interval of simulated time).
+    """
+    def handler(signum, _frame):
+        _ignore_signals()
+        raise Interrupted(signum)
+
+    try:
+        old = {s: signal.signal(s, handler) for s in _SIGNALS}
+    except ValueError:  # not the main thread (an embedding application): leave signals alone
+        return lambda: None
+
+    def restore() -> None:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+    return restore
+
+
+def _ignore_signals() -> None:
+    try:
+        for s in _SIGNALS:
+            signal.signal(s, signal.SIG_IGN)
+    except ValueError:
+        pass
+
+
+def _mujoco_log():
+    """MuJoCo's warnings: echoed on stderr and kept for the run folder, never MUJOCO_LOG.TXT in the cwd."""
+    from .outputs.mjlog import capture
+
+    return capture()
 
 
 def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "presets":
-        from .scenario import preset_names
+        from .scenario import preset_descriptions
 
-        print("\n".join(preset_names()))
+        desc = preset_descriptions()
+        width = max(map(len, desc))
+        print("\n".join(f"{name:<{width}}  {text}" for name, text in desc.items()))
         return EXIT_OK
-    if args.command == "identify":
-        return _identify(args)
-    if args.command == "robot":
-        from .robot_check import main as robot_main
+    with _mujoco_log() as mjlog:
+        if args.command == "identify":
+            return _identify(args)
+        if args.command == "robot":
+            from .robot_check import main as robot_main
 
-        return robot_main(args)
-    if args.command == "sweep":
-        return _sweep(args)
-    if args.command == "bench":
-        from . import bench
+            return robot_main(args)
+        if args.command == "sweep":
+            return _sweep(args)
+        if args.command == "bench":
+            from . import bench
 
-        return bench.run(args)
-    sc = _load(args)
-    if args.command == "run":
-        return _run(args, sc)
-    return _table1(args, sc)
+            return bench.run(args)
+        sc = _load(args)
+        if args.command == "run":
+            return _run(args, sc, mjlog)
+        return _table1(args, sc, mjlog)
 
 
 def _load(args: argparse.Namespace):
@@ -161,23 +216,32 @@ def _load(args: argparse.Namespace):
     return load(args.scenario, overrides, method=getattr(args, "method", None), plant=args.plant)
 
 
+def _out_path(out: Path | None, default: str) -> Path:
+    """``--out``, or ``runs/<default>`` (``default`` is built from a validated plain file name)."""
+    if out is not None:
+        return Path(out)
+    if Path(default).name != default or default in ("", ".", ".."):  # scenario.validate makes this unreachable
+        raise InputError(f"output name '{default}' is not a plain file name")
+    return Path("runs") / default
+
+
 def _prepare_out(out: Path | None, default: str) -> Path:
     """Check that the output directory can be created or written, without creating it yet.
 
     Nothing is written before the run has validated its input and built its plant,
     so bad input leaves no directory behind; call ``.mkdir`` just before writing.
     """
-    path = Path(out) if out is not None else Path("runs") / default
-    probe = path
-    while not probe.exists():
-        if probe.parent == probe:
-            break
-        probe = probe.parent
-    if path.exists() and not path.is_dir():
-        raise InputError(f"output directory '{path}' exists and is not a directory")
-    if not probe.is_dir() or not os.access(probe, os.W_OK | os.X_OK):
-        raise InputError(f"output directory '{path}' cannot be created: '{probe}' is not a writable directory")
-    return path
+    from .outputs.files import check_out_dir
+
+    return check_out_dir(_out_path(out, default))
+
+
+def _claim(out: Path | None, default: str, overwrite: bool):
+    """The run folder, checked now (exit 2 before any work): writable, and empty or holding only
+    an earlier run's files, which ``--overwrite`` allows to replace."""
+    from .outputs.rundir import RunDir
+
+    return RunDir(_out_path(out, default), overwrite=overwrite).check()
 
 
 def _progress(enabled: bool, label: str):
@@ -185,6 +249,11 @@ def _progress(enabled: bool, label: str):
     if not enabled or not sys.stderr.isatty():
         return None
     state = {"last": -1}
+
+    def phase(text: str | None) -> None:  # what happens before the steps (a compile): one line
+        if text:
+            sys.stderr.write(f"\r{label}: {text}\n")
+            sys.stderr.flush()
 
     def cb(k: int, n: int) -> None:
         pct = int(100 * k / max(1, n))
@@ -196,16 +265,11 @@ def _progress(enabled: bool, label: str):
                 sys.stderr.write("\n")
             sys.stderr.flush()
 
+    cb.phase = phase  # type: ignore[attr-defined]
     return cb
 
 
-def _run(args: argparse.Namespace, sc) -> int:
-    import time
-
-    from .outputs.files import write_json, write_npz, write_text
-    from .outputs.progress import progress_bar
-    from .sim import simulate
-
+def _run(args: argparse.Namespace, sc, mjlog) -> int:
     video_opts = None
     if args.video:
         from .outputs.video import VideoOptions
@@ -228,7 +292,21 @@ def _run(args: argparse.Namespace, sc) -> int:
         from .outputs.rerun_log import check_can_spawn
 
         check_can_spawn()
-    out = _prepare_out(args.out, f"{sc.name}-{sc.plant.kind}-{sc.method}")
+    rundir = _claim(args.out, f"{sc.name}-{sc.plant.kind}-{sc.method}", args.overwrite)
+    with rundir:  # created and locked from here on (exit 2 if another run holds it); lock released at the end
+        try:
+            return _run_in(args, sc, mjlog, rundir.path, video_opts, live_url)
+        finally:
+            if rundir.written:  # MuJoCo's warnings join a run's files (a folder left empty is removed)
+                mjlog.write(rundir.path)
+
+
+def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url) -> int:
+    import time
+
+    from .outputs.files import write_json, write_npz, write_text
+    from .outputs.progress import progress_bar
+    from .sim import simulate
 
     observers: list[Any] = []  # none unless asked: the loop then has no per-step observer cost
     capture = live = None
@@ -242,42 +320,68 @@ def _run(args: argparse.Namespace, sc) -> int:
 
         live = RerunLive(spawn=args.rerun_spawn, url=live_url, period=max(sc.sim.log_dt, 1 / 30))
         observers.append(live)
-    with progress_bar(f"{sc.name} {sc.method}", not args.quiet) as cb:
-        result = simulate(sc, observers=observers, progress=cb, engine=args.engine)
-    out.mkdir(parents=True, exist_ok=True)
+    interrupted: KeyboardInterrupt | None = None
+    try:
+        with progress_bar(f"{sc.name} {sc.method}", not args.quiet) as cb:
+            result = simulate(sc, observers=observers, progress=cb, engine=args.engine)
+    except KeyboardInterrupt as exc:  # SIGINT/SIGTERM mid-run: keep what the loop returns with it
+        result = getattr(exc, "result", None)
+        if result is None:
+            exc.kept = "no log kept (the run was stopped before it returned a result)"  # type: ignore[attr-defined]
+            raise
+        interrupted = exc
+    if interrupted is None and getattr(result, "interrupted", None) is not None:  # or a result that says so
+        interrupted = result.interrupted
+    if interrupted is not None:
+        result.summary.setdefault("interrupted", {"signal": signal.Signals(getattr(interrupted, "signum", 2)).name,
+                                                  "time_s": result.summary.get("sim_time_s")})
     write_npz(out / "log.npz", result.log)
     if sc.plant.kind == "mujoco":
         write_text(out / "scene.xml", result.plant.model_xml())
     write_json(out / "summary.json", result.summary)
+    mjlog.write(out)
+    if interrupted is not None:
+        _ignore_signals()
+        signum = getattr(interrupted, "signum", signal.SIGINT)
+        print(f"error: interrupted by {signal.Signals(signum).name} at t = {result.summary.get('sim_time_s', 0):g} s; "
+              f"log so far kept in {out} (summary.json, log.npz)", file=sys.stderr)
+        return 128 + signum
 
     problems: list[str] = []  # what was asked for and could not be made: error lines, exit 2
     notes: list[str] = []
-    if args.rrd:
-        from .outputs.rerun_log import write_rrd
+    try:
+        if args.rrd:
+            from .outputs.rerun_log import write_rrd
 
-        t0 = time.perf_counter()
-        write_rrd(result, out / "run.rrd")
-        notes.append(f"run.rrd written in {time.perf_counter() - t0:.1f} s")
-    if args.figures:
-        from .outputs.figures import run_figures
+            t0 = time.perf_counter()
+            write_rrd(result, out / "run.rrd")
+            notes.append(f"run.rrd written in {time.perf_counter() - t0:.1f} s")
+        if args.figures:
+            from .outputs.figures import run_figures
 
-        t0 = time.perf_counter()
-        figs = run_figures(result, out / "figures")
-        notes.append(f"figures/: {len(figs)} PNGs in {time.perf_counter() - t0:.1f} s")
-    if capture is not None:
-        from .outputs.video import render_video
+            t0 = time.perf_counter()
+            figs = run_figures(result, out / "figures")
+            notes.append(f"figures/: {len(figs)} PNGs in {time.perf_counter() - t0:.1f} s")
+        if capture is not None:
+            from .outputs.video import render_video
 
-        try:
-            with progress_bar("video.mp4", not args.quiet, unit="frame") as cb:
-                info = render_video(capture, result, out / "video.mp4", video_opts, progress=cb)
-            notes.append(f"video.mp4: {info.frames} frames {info.width}x{info.height} at {info.fps:g} fps "
-                         f"rendered in {info.render_s:.1f} s ({info.gl_renderer or 'OpenGL'})")
-        except InputError as exc:  # no OpenGL context (GLUnavailable), or nothing to show
-            problems.append(str(exc))
+            try:
+                with progress_bar("video.mp4", not args.quiet, unit="frame") as cb:
+                    info = render_video(capture, result, out / "video.mp4", video_opts, progress=cb)
+                notes.append(f"video.mp4: {info.frames} frames {info.width}x{info.height} at {info.fps:g} fps "
+                             f"rendered in {info.render_s:.1f} s ({info.gl_renderer or 'OpenGL'})")
+            except InputError as exc:  # no OpenGL context (GLUnavailable), or nothing to show
+                problems.append(str(exc))
+    except KeyboardInterrupt as exc:  # while writing the extras: the run itself is complete
+        exc.kept = (f"the run completed: summary.json and log.npz are in {out}; "  # type: ignore[attr-defined]
+                    f"{', '.join(n.split(':')[0].split(' ')[0] for n in notes) or 'no extra output'} written, "
+                    "the rest not")
+        raise
     if live is not None and live.error:
         problems.append(live.error)
     for p in problems:
         print(f"error: {p}", file=sys.stderr)
+    _warn_outcomes(result.summary)
     if result.diverged is not None:
         print(f"error: simulation diverged: {result.diverged}; log kept in {out}", file=sys.stderr)
         return EXIT_DIVERGED
@@ -286,6 +390,16 @@ def _run(args: argparse.Namespace, sc) -> int:
             print(note)
         _print_summary(result.summary, out)
     return EXIT_INPUT if problems else EXIT_OK
+
+
+def _warn_outcomes(summary: dict[str, Any]) -> None:
+    """A ``warning:`` line on stderr for what the scenario asked beyond the robots (before the run)
+    and for every follower whose outcome is not ``ok`` (never silent: design §9)."""
+    for line in summary.get("feasibility_warnings") or ():
+        print(f"warning: {line}", file=sys.stderr)
+    for f in summary["followers"]:
+        if f.get("outcome", "ok") != "ok":
+            print(f"warning: follower {f['id']}: {f['outcome']} ({f.get('outcome_detail', '')})", file=sys.stderr)
 
 
 def _print_summary(summary: dict[str, Any], out: Path) -> None:
@@ -298,12 +412,21 @@ def _print_summary(summary: dict[str, Any], out: Path) -> None:
     print(f"outputs in {out}/")
 
 
-def _table1(args: argparse.Namespace, sc) -> int:
+def _table1(args: argparse.Namespace, sc, mjlog) -> int:
+    rundir = _claim(args.out, f"table1-{sc.plant.kind}", args.overwrite)
+    with rundir:
+        try:
+            return _table1_in(args, sc, rundir.path)
+        finally:
+            if rundir.written:  # MuJoCo's warnings join a run's files (a folder left empty is removed)
+                mjlog.write(rundir.path)
+
+
+def _table1_in(args: argparse.Namespace, sc, out: Path) -> int:
     from .outputs.files import write_json, write_text
     from .outputs.progress import progress_bar
     from .table1 import markdown, run_table1
 
-    out = _prepare_out(args.out, f"table1-{sc.plant.kind}")
     results = {}
 
     with progress_bar(f"table1 {sc.name} {sc.plant.kind}", not args.quiet) as cb:
@@ -317,8 +440,12 @@ def _table1(args: argparse.Namespace, sc) -> int:
             i, total = list(METHODS).index(m), len(METHODS)
             return lambda k, n: cb(i * n + k, total * n)
 
-        table = run_table1(sc, on_result=keep, progress=None if cb is None else per_method)
-    out.mkdir(parents=True, exist_ok=True)
+        try:
+            table = run_table1(sc, on_result=keep, progress=None if cb is None else per_method)
+        except KeyboardInterrupt as exc:
+            done = ", ".join(results) or "none"
+            exc.kept = f"no table written (methods finished: {done})"  # type: ignore[attr-defined]
+            raise
     write_json(out / "table1.json", table)
     md = markdown(table)
     write_text(out / "table1.md", md)
@@ -399,6 +526,10 @@ def _identify(args: argparse.Namespace) -> int:
     from .identify import identify_main
     from .robot_check import ref_from_args
 
+    if args.out is not None:
+        from .outputs.files import check_out_file
+
+        args.out = check_out_file(args.out, "--out")
     result = identify_main(ref_from_args(args.model, args))
     text = json.dumps(result, indent=2)
     if args.out is not None:

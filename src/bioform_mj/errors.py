@@ -33,3 +33,18 @@ class Diverged(BioformError, RuntimeError):
         self.step = step
         self.time = time
         super().__init__(message)
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM arrived (the CLI exits ``128 + signum``: 130 or 143).
+
+    A ``KeyboardInterrupt``, so code that cleans up on Ctrl-C cleans up on SIGTERM too.
+    ``result``: a partial run result, if whoever caught it on the way attached one.
+    """
+
+    def __init__(self, signum: int) -> None:
+        import signal
+
+        self.signum = signum
+        self.result = None
+        super().__init__(signal.Signals(signum).name)

@@ -34,6 +34,22 @@ GAIN_SCALINGS = ("none", "c_hat0")
 #: the robot the paper's learner gains were tuned for: ``c = (a, b)`` of Sec. IV
 PAPER_C = (0.4, 10.0)
 
+# Bounds on the time axis: beyond them a run would not finish or would not fit in memory
+# (issue 11). Refused up front with the estimate, before any work.
+#: smallest physics step, s (below it the step count is beyond reason and the substep count
+#: overflows the compiled loop's integers: 1e-300 used to be a numba typing error)
+MIN_PHYSICS_DT = 1e-6
+#: most control steps in one run (1e8 = 28 h simulated at the default 1 ms)
+MAX_CONTROL_STEPS = 1e8
+#: most physics steps in one run
+MAX_PHYSICS_STEPS = 1e9
+#: most memory for the in-memory log and the precomputed leader trajectory, bytes
+MAX_RUN_BYTES = 4e9
+#: integers anywhere in a scenario
+MAX_INT = 2**62
+#: longest scenario name (it becomes a folder name, with plant and method appended)
+MAX_NAME = 120
+
 
 @dataclass(frozen=True)
 class SimCfg:
@@ -318,6 +334,16 @@ def preset_names() -> list[str]:
     return sorted(p.name[:-5] for p in d.iterdir() if p.name.endswith(".toml"))
 
 
+def preset_descriptions() -> dict[str, str]:
+    """``{preset name: its one-line description}`` (the file's ``description``, else the default's)."""
+    out = {}
+    for name in preset_names():
+        raw = (resources.files("bioform_mj") / "scenarios" / f"{name}.toml").read_bytes()
+        text = _read_toml(raw, f"preset {name}").get("description", Scenario.description)
+        out[name] = " ".join(str(text).split())
+    return out
+
+
 def load(source: str | Path | None = None, overrides: Mapping[str, Any] | list[str] | None = None,
          method: str | None = None, plant: str | None = None) -> Scenario:
     """Load a preset name or TOML path, apply ``--set`` overrides, method and plant; validate.
@@ -328,11 +354,19 @@ def load(source: str | Path | None = None, overrides: Mapping[str, Any] | list[s
     if source is None:
         source = "paper"
     src = str(source)
+    if "\x00" in src:
+        raise InputError(f"scenario {src!r} contains a NUL character")
     if src.endswith(".toml") or "/" in src or Path(src).is_file():
         path = Path(src)
-        if not path.is_file():
+        if path.is_dir():
+            raise InputError(f"scenario file '{path}' is a directory")
+        if not path.exists():
             raise InputError(f"scenario file '{path}' does not exist")
-        data = _read_toml(path.read_bytes(), str(path))
+        try:
+            raw = path.read_bytes()
+        except OSError as exc:  # PermissionError, a FIFO that errors, an I/O error
+            raise InputError(f"scenario file '{path}' cannot be read: {exc.strerror or exc}") from None
+        data = _read_toml(raw, str(path))
         if isinstance(data.get("plant"), dict) and "robots" in data["plant"]:  # design §10: relative to the file
             data["plant"]["robots"] = rebase_entries(data["plant"]["robots"], path.parent.resolve())
     else:
@@ -389,6 +423,8 @@ def _set_path(data: dict[str, Any], key: str, value: Any) -> None:
         if not dataclasses.is_dataclass(cls):
             raise ScenarioError(key, f"'{'.'.join(parts[: i + 1])}' is a value, not a table")
         node = node.setdefault(part, {})
+        if not isinstance(node, dict):  # e.g. `sim = 3` in the file, then --duration
+            raise ScenarioError(".".join(parts[: i + 1]), f"expected a table, got {type(node).__name__} {node!r}")
 
 
 def from_dict(data: Mapping[str, Any]) -> Scenario:
@@ -429,8 +465,11 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             if isinstance(value, float) and value.is_integer():
-                return int(value)
-            raise ScenarioError(key, f"expected an integer, got {type(value).__name__} {value!r}")
+                value = int(value)
+            else:
+                raise ScenarioError(key, f"expected an integer, got {type(value).__name__} {value!r}")
+        if not -MAX_INT <= value <= MAX_INT:  # numpy and the compiled loop take 64-bit integers
+            raise ScenarioError(key, f"integer out of range (|value| <= 2^62), got {value}")
         return value
     if tp is str:
         if not isinstance(value, str):
@@ -472,6 +511,7 @@ def validate(sc: Scenario) -> None:
         raise ScenarioError("method", f"unknown method '{sc.method}' (expected one of: {', '.join(METHODS)})")
     if sc.plant.kind not in PLANTS:
         raise ScenarioError("plant.kind", f"unknown plant '{sc.plant.kind}' (expected one of: {', '.join(PLANTS)})")
+    _validate_text(sc)
     s = sc.sim
     _positive("sim.duration", s.duration)
     _positive("sim.control_dt", s.control_dt)
@@ -488,6 +528,7 @@ def validate(sc: Scenario) -> None:
         raise ScenarioError("sim.duration", f"must be at least one control period ({s.control_dt:g} s), got {s.duration:g}")
     if s.seed < 0:
         raise ScenarioError("sim.seed", f"must be >= 0, got {s.seed}")
+    _validate_size(sc)
 
     ld = sc.leader
     if ld.kind not in LEADER_KINDS:
@@ -602,6 +643,75 @@ def validate(sc: Scenario) -> None:
         _positive(f"{key}.inertia", ev.inertia, strict=False)
 
     _validate_faults(sc)
+
+
+def _validate_text(sc: Scenario) -> None:
+    """``name`` becomes the default output folder ``runs/<name>-<plant>-<method>``: a plain file name."""
+    name = sc.name
+    bad = None
+    if not name.strip():
+        bad = "is empty"
+    elif any(c in name for c in "/\\") or "\x00" in name:
+        bad = "contains a path separator or NUL; it names the output folder under runs/ and must be a plain file name"
+    elif name.startswith("."):
+        bad = "starts with '.'; it names the output folder under runs/ and must be a plain, visible file name"
+    elif any(ord(c) < 32 or ord(c) == 127 for c in name):
+        bad = "contains a control character"
+    elif len(name) > MAX_NAME:
+        bad = f"is longer than {MAX_NAME} characters"
+    if bad:
+        raise ScenarioError("name", f"{bad}, got {name!r}")
+    if "\x00" in sc.description:
+        raise ScenarioError("description", "contains a NUL character")
+
+
+def _fmt_bytes(b: float) -> str:
+    for unit, size in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
+        if b >= size:
+            return f"{b / size:.3g} {unit}"
+    return f"{b / 1e3:.3g} kB"
+
+
+def run_size(sc: Scenario) -> dict[str, float]:
+    """Estimated size of a run: control and physics steps, log rows, and memory in bytes.
+
+    Memory: the log (``sim.CHANNELS`` per follower plus time and leader, every ``log_dt``)
+    and the leader trajectory precomputed for every control step (t, pose, velocity).
+    """
+    from .sim import CHANNELS  # here, not at import: sim imports this module
+
+    s = sc.sim
+    steps = s.duration / s.control_dt
+    substeps = max(1.0, round(s.control_dt / s.physics_dt))
+    stride = max(1.0, round(s.log_dt / s.control_dt))
+    rows = steps / stride + 1
+    dims = {"n": sc.n, "3": 3, "2": 2}
+    per_row = 8 * (1 + 3 + 2)
+    for name, shp in CHANNELS.items():
+        per_row += (1 if name == "saturated" else 8) * int(np.prod([dims[d] for d in shp]))
+    log_bytes = rows * per_row
+    traj_bytes = (steps + 1) * 8 * (1 + 3 + 2)
+    return {"control_steps": steps, "physics_steps": steps * substeps, "log_rows": rows,
+            "log_bytes": log_bytes, "trajectory_bytes": traj_bytes, "bytes": log_bytes + traj_bytes}
+
+
+def _validate_size(sc: Scenario) -> None:
+    """Refuse a time axis whose step count or memory is beyond reason, saying so with the estimate."""
+    s = sc.sim
+    if s.physics_dt < MIN_PHYSICS_DT:
+        raise ScenarioError("sim.physics_dt", f"must be >= {MIN_PHYSICS_DT:g} s, got {s.physics_dt:g}")
+    est = run_size(sc)
+    what = f"sim.duration {s.duration:g} s at control_dt {s.control_dt * 1e3:g} ms is {est['control_steps']:.3g} steps"
+    mem = f"~{_fmt_bytes(est['bytes'])} of log and trajectory in memory"
+    if est["control_steps"] > MAX_CONTROL_STEPS:
+        raise ScenarioError("sim.duration", f"{what} ({mem}); at most {MAX_CONTROL_STEPS:.0e} control steps")
+    if est["physics_steps"] > MAX_PHYSICS_STEPS:
+        raise ScenarioError("sim.physics_dt", f"sim.duration {s.duration:g} s at physics_dt {s.physics_dt:g} s is "
+                                              f"{est['physics_steps']:.3g} physics steps; at most {MAX_PHYSICS_STEPS:.0e}")
+    if est["bytes"] > MAX_RUN_BYTES:
+        hint = " (raise sim.log_dt for a smaller log)" if est["log_bytes"] > est["trajectory_bytes"] else ""
+        raise ScenarioError("sim.duration", f"{what}, log every {s.log_dt:g} s for {sc.n} followers: {mem}; "
+                                            f"at most {_fmt_bytes(MAX_RUN_BYTES)}{hint}")
 
 
 def _follower_id(key: str, value: float, n: int, lo: int = 1, what: str = "a follower id") -> int:

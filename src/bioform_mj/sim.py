@@ -82,7 +82,7 @@ class RunResult:
     summary: dict[str, Any]
     plant: Plant
     diverged: Diverged | None = None
-    interrupted: bool = False  # stopped by KeyboardInterrupt (SIGINT/SIGTERM): log and summary so far
+    interrupted: KeyboardInterrupt | None = None  # what stopped the loop (SIGINT/SIGTERM): log and summary so far
 
 
 def make_plant(sc: Scenario) -> Plant:
@@ -220,9 +220,7 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     if hasattr(plant, "params") and hasattr(plant, "model"):  # MuJoCo robots: what the scenario asks of them
         from .robot_check import feasibility as _feasibility
 
-        feasibility = _feasibility(sc, plant)
-        for line in feasibility:
-            log.warning("%s", line)
+        feasibility = _feasibility(sc, plant)  # in summary.json; the CLI prints them as warning: lines
     plant.reset()
     pose0, vel0 = plant.observe()
     controller.reset(initial_estimates(sc, pose0, L_pose[0]), vel0)
@@ -301,7 +299,7 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     evq = EventQueue(sc.events, dt)
     wall0 = time.perf_counter()
     diverged: Diverged | None = None
-    interrupted = False
+    interrupted: KeyboardInterrupt | None = None
     k = 0
     if status != OK:
         diverged = Diverged(describe(ctx.diag, 0.0, ctx.bounds), step=0, time=0.0)
@@ -330,8 +328,8 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
                 diverged = Diverged(describe(ctx.diag, k * dt, ctx.bounds), step=k, time=k * dt)
             if progress is not None:
                 progress(k, N)
-    except KeyboardInterrupt:
-        interrupted = True
+    except KeyboardInterrupt as exc:
+        interrupted = exc
     wall = time.perf_counter() - wall0
     pose, vel = ctx.pose.copy(), ctx.vel.copy()
     k_done = min(k, N)
@@ -426,7 +424,8 @@ def _summary(sc, plant, controller, state, met, logd, lp_end, pose, vel, offsets
         "steps": k_done,
         "diverged": None if diverged is None else {"message": str(diverged), "time_s": diverged.time,
                                                    "step": diverged.step},
-        "interrupted": interrupted,
+        "interrupted": None if interrupted is None else {
+            "signal": _signal_name(getattr(interrupted, "signum", 2)), "time_s": k_done * dt},
         "log_channels": {name: CHANNELS[name][1] for name in CHANNELS},
         "log_interval_means": list(MEAN_CHANNELS),
         "versions": _versions(),
@@ -539,6 +538,15 @@ class EventQueue:
 def first_step_at(t: float, dt: float) -> int:
     """The first control step ``k`` with ``k·dt ≥ t`` (to 1e-12 s)."""
     return max(0, int(math.ceil((t - 1e-12) / dt - 1e-9)))
+
+
+def _signal_name(signum: int) -> str:
+    import signal
+
+    try:
+        return signal.Signals(signum).name
+    except ValueError:
+        return str(signum)
 
 
 def _versions() -> dict[str, str]:

@@ -44,8 +44,27 @@ def ordering_holds(table: dict[str, Any]) -> bool:
     return all(best[i] <= min(v[i] for v in per.values()) for i in range(len(best)))
 
 
+def _diverged(summary: dict[str, Any]) -> dict[str, Any] | None:
+    return summary.get("diverged") or None
+
+
+def _mark(summary: dict[str, Any], follower: dict[str, Any]) -> str:
+    """`` [diverged]`` for a run that diverged, `` [tipped]`` etc. for a follower whose
+    ``outcome`` is not ``ok`` (a summary without ``outcome`` is taken as ok); else ``""``."""
+    if _diverged(summary):
+        return " [diverged]"
+    outcome = follower.get("outcome")
+    return f" [{outcome}]" if outcome not in (None, "ok") else ""
+
+
 def markdown(table: dict[str, Any]) -> str:
-    """Table I as Markdown: our numbers, with the paper's beside them for followers 1–3."""
+    """Table I as Markdown: our numbers, with the paper's beside them for followers 1–3.
+
+    A method whose run diverged is marked ``[diverged]`` in every cell (its numbers cover
+    the run up to the divergence), a follower whose ``outcome`` is not ``ok`` is marked with
+    it (``[tipped]``, ``[slipping]``, …), and the notes under the table say what happened;
+    the ordering claim is then qualified.
+    """
     methods = list(table["methods"])
     lines = [
         f"# Table I: total velocity error ({table['plant']} plant, scenario '{table['scenario']}')",
@@ -59,17 +78,37 @@ def markdown(table: dict[str, Any]) -> str:
     for i in range(n):
         cells = []
         for m in methods:
-            ours = table["methods"][m]["followers"][i]["total_velocity_error"]
+            summ = table["methods"][m]
+            f = summ["followers"][i]
+            ours = f["total_velocity_error"]
             paper = PAPER_TABLE1.get(m)
             ref = f" ({paper[i]})" if paper and i < len(paper) and n == 3 else ""
-            cells.append(f"{ours:.2f}{ref}")
+            cells.append(f"{ours:.2f}{ref}{_mark(summ, f)}")
         lines.append(f"| {i + 1} | " + " | ".join(cells) + " |")
-    lines += ["", f"Ordering (bioinspired-learning lowest for every follower): "
-              f"{'holds' if table.get('ordering_holds') else 'does NOT hold'}.", ""]
+    notes = []
+    for m in methods:
+        summ = table["methods"][m]
+        d = _diverged(summ)
+        if d:
+            when = d.get("time_s") if isinstance(d, dict) else None
+            msg = d.get("message", "") if isinstance(d, dict) else str(d)
+            notes.append(f"- **{m} diverged**" + (f" at t = {when:.3g} s" if isinstance(when, (int, float)) else "")
+                         + (f": {msg}" if msg else "") + "; its numbers cover the run up to then, not a result.")
+        bad = [(f["id"], f["outcome"]) for f in summ["followers"] if f.get("outcome") not in (None, "ok")]
+        if bad and not d:
+            notes.append(f"- **{m}**: " + ", ".join(f"follower {i} {o}" for i, o in bad) + ".")
+    holds = "holds" if table.get("ordering_holds") else "does NOT hold"
+    lines += [""]
+    if notes:
+        lines += ["Failed runs:", "", *notes, ""]
+        holds += " (but see the failed runs above: the comparison is not valid for them)"
+    lines += [f"Ordering (bioinspired-learning lowest for every follower): {holds}.", ""]
     lines += ["| method | final formation error (m) per follower | max abs v_cmd (m/s) | saturation fraction |", "|---|---|---|---|"]
     for m in methods:
-        fs = table["methods"][m]["followers"]
-        lines.append(f"| {m} | " + ", ".join(f"{f['final_formation_error_m']:.3f}" for f in fs)
+        summ = table["methods"][m]
+        fs = summ["followers"]
+        lines.append(f"| {m}{' [diverged]' if _diverged(summ) else ''} | "
+                     + ", ".join(f"{f['final_formation_error_m']:.3f}{_mark({}, f)}" for f in fs)
                      + f" | {max(f['max_abs_v_cmd'] for f in fs):.2f} | "
                      + ", ".join(f"{f['saturation_fraction']:.2f}" for f in fs) + " |")
     return "\n".join(lines) + "\n"

@@ -23,6 +23,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     reader never sees a half-written file (SIGKILL leaves at most a hidden ``.tmp``).
     """
     path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)  # checked up front (check_out_file); made only now
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
@@ -65,3 +66,98 @@ def _clean(obj: Any) -> Any:
     if isinstance(obj, np.generic):
         return _clean(obj.item())
     return obj
+
+
+# ---- output paths checked before any work (SPEC §10: bad input exits 2 before anything runs) ----
+
+#: Trees no output of ours belongs in: kernel and device file systems.
+_SPECIAL_ROOTS = ("/proc", "/sys", "/dev")
+
+
+def _bad(what: str, path: str, why: str) -> Exception:
+    from ..errors import InputError
+
+    return InputError(f"{what} '{path}' {why}")
+
+
+def _plain_checks(path: str | Path, what: str) -> Path:
+    s = str(path)
+    if s == "" or s.strip() == "":
+        raise _bad(what, s, "is empty")
+    if "\x00" in s:
+        raise _bad(what, s.replace("\x00", "\\0"), "contains a NUL character")
+    p = Path(s)
+    try:
+        resolved = p.resolve()
+    except (OSError, RuntimeError) as exc:  # a symlink loop
+        raise _bad(what, s, f"cannot be resolved: {exc}") from None
+    for root in _SPECIAL_ROOTS:
+        if resolved == Path(root) or Path(root) in resolved.parents:
+            raise _bad(what, s, f"is under {root}, a special file system, not a place for output files")
+    return p
+
+
+def _nearest_existing(p: Path, what: str, orig: str) -> Path:
+    """The deepest existing ancestor of ``p`` (``p`` itself if it exists); a dangling symlink on
+    the way is an error, and so is a file where a directory is needed."""
+    probe = p
+    while True:
+        if probe.is_symlink() and not probe.exists():
+            raise _bad(what, orig, f"cannot be created: '{probe}' is a dangling symlink (to '{os.readlink(probe)}')")
+        if probe.exists():
+            break
+        if probe.parent == probe:
+            break
+        probe = probe.parent
+    if not probe.is_dir():
+        raise _bad(what, orig, f"cannot be created: '{probe}' is not a directory")
+    return probe
+
+
+def _probe_writable(d: Path, what: str, orig: str) -> None:
+    """Create and remove a hidden directory in ``d``: the only reliable test (root passes every
+    ``os.access`` check, read-only mounts and /proc-like trees refuse only when asked)."""
+    try:
+        tmp = tempfile.mkdtemp(prefix=".bioform-probe-", dir=d)
+    except OSError as exc:
+        raise _bad(what, orig, f"is not writable: cannot create anything in '{d}' ({exc.strerror or exc})") from None
+    with contextlib.suppress(OSError):
+        os.rmdir(tmp)
+
+
+def check_out_dir(path: str | Path, what: str = "output directory") -> Path:
+    """Check that the directory ``path`` exists or can be created, and can be written; create nothing.
+
+    Raises :class:`~bioform_mj.errors.InputError` (exit 2) for an empty or NUL-containing
+    name, a path under /proc, /sys or /dev, a dangling symlink, a file where a directory is
+    needed, or a place the process cannot write.
+    """
+    orig = str(path)
+    p = _plain_checks(path, what)
+    if p.is_symlink() and not p.exists():
+        raise _bad(what, orig, f"is a dangling symlink (to '{os.readlink(p)}')")
+    if p.exists() and not p.is_dir():
+        raise _bad(what, orig, "exists and is not a directory")
+    _probe_writable(_nearest_existing(p, what, orig), what, orig)
+    return p
+
+
+def check_out_file(path: str | Path, what: str = "output file") -> Path:
+    """Check that the file ``path`` can be written (its folder created if need be); create nothing.
+
+    An existing target must be a regular file (never a directory, device or FIFO: the
+    atomic rename would replace the node itself); a symlink to one is followed, and the
+    resolved path is returned. Raises :class:`~bioform_mj.errors.InputError` (exit 2).
+    """
+    orig = str(path)
+    p = _plain_checks(path, what)
+    if p.is_symlink():
+        if not p.exists():
+            raise _bad(what, orig, f"is a dangling symlink (to '{os.readlink(p)}')")
+        p = p.resolve()
+    if p.exists() and not p.is_file():
+        raise _bad(what, orig, "exists and is not a regular file")
+    if orig.endswith(os.sep):
+        raise _bad(what, orig, "names a directory, not a file")
+    _probe_writable(_nearest_existing(p.parent, what, orig), what, orig)
+    return p

@@ -4,6 +4,12 @@
 :func:`bioform_mj.sim.simulate` calls with ``k`` of ``n`` control steps done) when
 stderr is a terminal and progress is wanted, and ``None`` otherwise, so a run piped to
 a file, a test or CI prints nothing and pays nothing.
+
+The callback also has ``cb.phase(text)``: what the run is doing before (or between) its
+steps, shown beside the label, e.g. ``cb.phase("compiling numba kernels (first run only)")``.
+A phase ends at ``cb.phase(None)`` or when the count next advances; either way the bar's
+clock restarts, so the rate and the time left describe the stepping alone and not the
+compile that came before it. ``cb.write(msg)`` prints a line above the bar.
 """
 from __future__ import annotations
 
@@ -42,9 +48,21 @@ def progress_bar(label: str, enabled: bool = True, *, unit: str = "%", stream: T
     bar = tqdm(total=100 if percent else 1, desc=label, file=stream, leave=True, dynamic_ncols=True,
                unit="%" if percent else unit,
                bar_format="{l_bar}{bar}| {n:.0f}% [{elapsed}<{remaining}]" if percent else None)
-    state = {"n": 0}
+    state: dict = {"n": 0, "phase": None}
 
-    def cb(k: int, n: int) -> None:  # (cb.write(msg) prints a line above the bar)
+    def restart_clock() -> None:
+        """Rate and time left from now on (what went before, e.g. a compile, does not count)."""
+        total, n_now = bar.total, state["n"]
+        bar.reset(total=total)
+        bar.initial = bar.n = bar.last_print_n = n_now
+        bar.refresh()
+
+    def phase(text: str | None) -> None:
+        state["phase"] = text or None
+        bar.set_description_str(f"{label} — {text}" if text else label, refresh=False)
+        restart_clock()
+
+    def cb(k: int, n: int) -> None:
         if percent:
             pos = int(100 * k / max(1, n))
         else:
@@ -52,10 +70,15 @@ def progress_bar(label: str, enabled: bool = True, *, unit: str = "%", stream: T
                 bar.total = n
             pos = int(k)
         if pos != state["n"]:
+            if state["phase"] is not None and k < n:  # stepping has begun: the phase is over
+                state["n"] = pos
+                phase(None)
+                return
             bar.update(pos - state["n"])
             state["n"] = pos
 
     cb.write = lambda msg: bar.write(msg, file=stream)  # type: ignore[attr-defined]
+    cb.phase = phase  # type: ignore[attr-defined]
     try:
         yield cb
     finally:

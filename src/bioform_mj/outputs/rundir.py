@@ -1,0 +1,181 @@
+"""One run per output folder (SPEC §10): claim a folder, lock it, clear an old run with ``--overwrite``.
+
+A folder is refused when it holds another run's files, unless ``overwrite`` is asked, which
+first removes exactly those files (the names in :data:`RUN_FILES`, a ``figures/`` folder of
+PNGs, our own stale temporary files). A folder that holds anything else (the user's files) is
+refused in both cases: nothing we did not write is ever deleted.
+
+Concurrent writers are refused with an ``fcntl.flock`` on ``DIR/.bioform.lock``: the kernel
+drops the lock when its holder dies, so a killed run leaves no stale lock (at most the empty
+lock file, which the next run reuses). The lock file is removed when the run ends.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import shutil
+from pathlib import Path
+
+from ..errors import InputError
+from .files import check_out_dir
+
+#: Files a run or a table1 writes into its folder (extend when a command writes a new one).
+RUN_FILES = frozenset({"summary.json", "log.npz", "scene.xml", "video.mp4", "run.rrd", "MUJOCO_LOG.TXT",
+                       "table1.json", "table1.md"})
+#: Folders a run writes, and the file suffixes they may hold.
+RUN_DIRS = {"figures": (".png",)}
+LOCK_NAME = ".bioform.lock"
+#: the temporary names of :func:`~bioform_mj.outputs.files.atomic_path` (``.NAME.XXXXXXXX.tmp``)
+_TMP = re.compile(r"^\.(?P<name>.+)\.[A-Za-z0-9_]+\.tmp$")
+
+
+class FolderBusy(InputError):
+    """Another process holds the folder's lock (exit 2)."""
+
+
+def _is_tmp(name: str, allowed: frozenset[str] | tuple[str, ...]) -> bool:
+    m = _TMP.match(name)
+    if not m:
+        return False
+    inner = m.group("name")
+    return inner in allowed if isinstance(allowed, frozenset) else inner.endswith(allowed)
+
+
+def survey(path: Path) -> tuple[list[str], list[str]]:
+    """``(run files, foreign entries)`` in ``path`` (names; folders end with ``/``)."""
+    ours: list[str] = []
+    foreign: list[str] = []
+    if not path.is_dir():
+        return ours, foreign
+    for entry in sorted(os.scandir(path), key=lambda e: e.name):
+        name = entry.name
+        if name == LOCK_NAME:
+            continue
+        if name in RUN_FILES or _is_tmp(name, RUN_FILES):
+            (ours if entry.is_file(follow_symlinks=False) else foreign).append(name)
+        elif name in RUN_DIRS and entry.is_dir(follow_symlinks=False):
+            sfx = RUN_DIRS[name]
+            inner = [e for e in os.scandir(entry.path)]
+            if all(e.is_file(follow_symlinks=False) and (e.name.endswith(sfx) or _is_tmp(e.name, sfx))
+                   for e in inner):
+                ours.append(name + "/")
+            else:
+                bad = next(e.name for e in inner if not (e.is_file(follow_symlinks=False) and
+                                                         (e.name.endswith(sfx) or _is_tmp(e.name, sfx))))
+                foreign.append(f"{name}/{bad}")
+        else:
+            foreign.append(name + ("/" if entry.is_dir(follow_symlinks=False) else ""))
+    return ours, foreign
+
+
+def _short(names: list[str], k: int = 4) -> str:
+    return ", ".join(names[:k]) + (f" and {len(names) - k} more" if len(names) > k else "")
+
+
+class RunDir:
+    """The output folder of one run: :meth:`check` before any work, then ``with`` it while writing.
+
+    ``with RunDir(...)`` creates the folder, takes the lock (or raises :class:`FolderBusy`),
+    checks the contents again under the lock and, with ``overwrite``, removes the old run's
+    files. On leaving, the lock is released and its file removed; a folder this object created
+    and nothing was written to is removed again.
+    """
+
+    def __init__(self, path: str | Path, overwrite: bool = False, what: str = "output directory") -> None:
+        self.path = Path(path)
+        self.overwrite = overwrite
+        self.what = what
+        self._fd: int | None = None
+        self._created: list[Path] = []
+
+    # -- before any work ---------------------------------------------------------------
+    def check(self) -> "RunDir":
+        """Raise :class:`InputError` if the folder cannot be written or holds what we must not touch."""
+        check_out_dir(self.path, self.what)
+        self._check_contents()
+        return self
+
+    def _check_contents(self) -> None:
+        ours, foreign = survey(self.path)
+        real = [n for n in ours if not _TMP.match(n)]
+        if foreign:
+            raise InputError(f"{self.what} '{self.path}' holds files that are not a run's ({_short(foreign)}); "
+                             f"choose an empty or new folder (nothing there is deleted, even with --overwrite)")
+        if real and not self.overwrite:
+            raise InputError(f"{self.what} '{self.path}' holds another run's files ({_short(real)}); "
+                             f"use --overwrite to replace them, or choose another --out")
+
+    # -- while writing -----------------------------------------------------------------
+    def __enter__(self) -> "RunDir":
+        missing = []
+        p = self.path
+        while not p.exists() and p.parent != p:
+            missing.append(p)
+            p = p.parent
+        self.path.mkdir(parents=True, exist_ok=True)
+        self._created = missing  # deepest first
+        try:
+            self._lock()
+            self._check_contents()  # again, under the lock: another run may have written meanwhile
+            self._clear()
+        except BaseException:
+            self.__exit__(None, None, None)
+            raise
+        return self
+
+    def _lock(self) -> None:
+        import fcntl
+
+        lock = self.path / LOCK_NAME
+        while True:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                try:
+                    pid = os.read(fd, 32).decode(errors="replace").strip()
+                finally:
+                    os.close(fd)
+                who = f"process {pid}" if pid.isdigit() else "another process"
+                raise FolderBusy(f"{self.what} '{self.path}' is in use: {who} is writing a run there") from None
+            try:  # the holder we waited on may have removed the file: then lock the new one
+                same = os.fstat(fd).st_ino == os.stat(lock).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+        self._fd = fd
+
+    def _clear(self) -> None:
+        """Remove stale temporaries always, and the old run's files with ``overwrite``."""
+        ours, _ = survey(self.path)
+        for name in ours:
+            target = self.path / name.rstrip("/")
+            if not (self.overwrite or _TMP.match(name)):
+                continue
+            if name.endswith("/"):
+                shutil.rmtree(target)
+            else:
+                with contextlib.suppress(FileNotFoundError):
+                    target.unlink()
+
+    def __exit__(self, *exc) -> None:
+        if self._fd is not None:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(self.path / LOCK_NAME)  # before unlocking: a waiter then sees the inode change
+            os.close(self._fd)
+            self._fd = None
+        for d in self._created:  # nothing written: leave no folder behind
+            try:
+                d.rmdir()
+            except OSError:
+                break
+
+    @property
+    def written(self) -> bool:
+        """True when the folder holds any file of a run."""
+        return bool(survey(self.path)[0])
