@@ -273,11 +273,11 @@ def _check_interrupted_folder(out: Path, err: str) -> None:
         assert not out.exists() or not any(out.iterdir())
 
 
-@pytest.mark.parametrize("sig,code,engine,duration", [(signal.SIGTERM, 143, "fused", "400"),
-                                                     (signal.SIGINT, 130, "numpy", "10")])
+@pytest.mark.parametrize("sig,code,engine,duration", [(signal.SIGTERM, 143, "compiled", "400"),
+                                                     (signal.SIGINT, 130, "stepwise", "10")])
 def test_signal_mid_run(sig, code, engine, duration, tmp_path):
     """The signal lands while the loop steps: the progress bar (on a pseudo-terminal) shows >= 2 %.
-    (fused: between two compiled chunks; numpy: anywhere in the Python loop)."""
+    (compiled: between two compiled chunks; stepwise: anywhere in the Python loop)."""
     import fcntl
     import struct
     import termios
@@ -359,7 +359,7 @@ def test_interrupt_in_process_keeps_a_partial_result_when_simulate_returns_one(t
     real = sim.simulate
 
     def partial(sc, **kw):
-        res = real(sc, engine="numpy")
+        res = real(sc, engine="stepwise")
         exc = Interrupted(signal.SIGTERM)
         exc.result = res
         raise exc
@@ -425,10 +425,10 @@ def test_mujoco_warnings_of_the_compiled_loop_are_captured(tmp_path):
     """The compiled loop calls mj_step from numba without the GIL: the handler still gets the message."""
     import mujoco
 
-    from bioform_mj.control import fused
     from bioform_mj.outputs.mjlog import MujocoLog
+    from bioform_mj.plants import mujoco_kernels as fused
 
-    if not fused.HAVE_NUMBA or getattr(fused, "_mj_step", None) is None:
+    if not fused.HAVE_MJ_STEP:
         pytest.skip("no compiled mj_step")
     import numba
 

@@ -678,7 +678,7 @@ def run_size(sc: Scenario) -> dict[str, float]:
     Memory: the log (``sim.CHANNELS`` per follower plus time and leader, every ``log_dt``)
     and the leader trajectory precomputed for every control step (t, pose, velocity).
     """
-    from .sim import CHANNELS  # here, not at import: sim imports this module
+    from .engine import CHANNELS  # name -> (trailing shape, meaning), every channel of the log
 
     s = sc.sim
     steps = s.duration / s.control_dt
@@ -686,9 +686,9 @@ def run_size(sc: Scenario) -> dict[str, float]:
     stride = max(1.0, round(s.log_dt / s.control_dt))
     rows = steps / stride + 1
     dims = {"n": sc.n, "3": 3, "2": 2}
-    per_row = 8 * (1 + 3 + 2)
-    for name, shp in CHANNELS.items():
-        per_row += (1 if name == "saturated" else 8) * int(np.prod([dims[d] for d in shp]))
+    per_row = 0
+    for shp, _ in CHANNELS.values():
+        per_row += 8 * int(np.prod([dims[d] for d in shp]))
     log_bytes = rows * per_row
     traj_bytes = (steps + 1) * 8 * (1 + 3 + 2)
     return {"control_steps": steps, "physics_steps": steps * substeps, "log_rows": rows,
@@ -848,8 +848,8 @@ def apply_scale(sc: Scenario) -> Scenario:
     s = sc.formation.scale
     if s == 1.0:
         return sc
-    if not (math.isfinite(s) and s > 0):
-        raise ScenarioError("formation.scale", f"must be a number > 0, got {s:g}")
+    if not (math.isfinite(s) and 1e-3 <= s <= 1e3):
+        raise ScenarioError("formation.scale", f"must be a number in [0.001, 1000], got {s:g}")
 
     def rows(values: tuple, cols: int) -> tuple:
         return tuple(tuple(v * s if j < cols else v for j, v in enumerate(r)) for r in values)

@@ -375,7 +375,8 @@ def _shadow(state: StackState, sig: Any, tau: np.ndarray, missing: set[str]) -> 
 
 
 #: follower outcomes (design §8): thresholds
-LOST_M = 1.0  # m: final formation error beyond this → lost
+LOST_M = 1.0  # m: final formation error beyond this → lost ...
+LOST_AFTER_S = 10.0  # s: ... once the run has had this long to converge (or if the error grew over the run)
 SPIN_RAD_S = 6.0  # rad/s: |ω| beyond this over the last second → spinning
 
 
@@ -456,7 +457,8 @@ def follower_outcomes(sc: Scenario, plant: Any, controller: Any, logd: dict[str,
     """Per follower ``(outcome, detail)``: ``ok`` or the first failure of ``tipped`` (tilt beyond
     the plant's ``TIP_ANGLE_DEG``, with the time), ``slipping`` (a wheel's slip ratio beyond the
     plant's ``SLIP_RATIO`` for ``SLIP_TIME`` s), ``spinning`` (|ω| > :data:`SPIN_RAD_S` over
-    the last second), ``lost`` (final formation error > :data:`LOST_M`), ``c_hat_at_bound``
+    the last second), ``lost`` (final formation error > :data:`LOST_M` after
+    :data:`LOST_AFTER_S` s, or grown by half over a shorter run), ``c_hat_at_bound``
     (a learned parameter at its projection bound at the end)."""
     n = sc.n
     out: list[tuple[str, str]] = []
@@ -478,7 +480,9 @@ def follower_outcomes(sc: Scenario, plant: Any, controller: Any, logd: dict[str,
         if len(t) and np.all(np.abs(logd["vel"][last, i, 1]) > SPIN_RAD_S):
             out.append(("spinning", f"|omega| > {SPIN_RAD_S:g} rad/s over the last second"))
             continue
-        if final_form[i] > LOST_M:
+        fe0 = float(logd["formation_error"][0, i]) if len(t) else 0.0
+        t_end = float(t[-1]) if len(t) else 0.0
+        if final_form[i] > LOST_M and (t_end >= LOST_AFTER_S - 1e-9 or final_form[i] > 1.5 * fe0):
             out.append(("lost", f"final formation error {final_form[i]:.3g} m > {LOST_M:g} m"))
             continue
         if p is not None and p.learning:
