@@ -22,8 +22,14 @@ demo: $(STAMP)
 	MUJOCO_GL=$${MUJOCO_GL:-egl} $(VENV)/bin/bioform run paper --plant mujoco --out runs/demo --video --rrd --figures
 	@echo "demo outputs: runs/demo/ (summary.json, log.npz, scene.xml, video.mp4, run.rrd, figures/)"
 
+# numpy's AVX-512 paths, where this CPU has them: the equivalence tests run again without them,
+# so both numpy code paths are compared with the compiled equations wherever the suite runs
+NPY_AVX512 = $(PY) -c "from numpy._core._multiarray_umath import __cpu_features__ as f; \
+	print(' '.join(k for k in ('AVX512F','AVX512CD','AVX512_SKX','AVX512_CLX','AVX512_CNL','AVX512_ICL','AVX512_SPR','X86_V4') if f.get(k)))"
+
 test: $(STAMP)
 	$(PY) -m pytest -q
+	NPY_DISABLE_CPU_FEATURES="$$($(NPY_AVX512))" $(PY) -m pytest -q -m equivalence -p no:cacheprovider
 
 test-fast: $(STAMP)
 	$(PY) -m pytest -q -m "not slow"

@@ -1,8 +1,10 @@
 #!/usr/bin/env python3
 """Cost of one control step (the hot path) for n = 3 … 256 followers, plant excluded.
 
-Times the numpy reference stack and the numba-compiled one (one kernel call per step from
-Python; inside ``bioform run`` the compiled loop calls it without leaving machine code).
+Times the compiled stack through its Python method (``ControlStack.step``: one kernel call
+per step, as the step-by-step loop uses it), the bare kernel call (``control_step``, as the
+compiled loops call it, here still from Python), and with ``--oracle`` the numpy oracle of
+``tests/oracle.py``.
 Prints µs per step and µs per follower-step; writes JSON with --json PATH.
 """
 from __future__ import annotations
@@ -34,29 +36,49 @@ def stack_for(n: int, cls=ControlStack) -> ControlStack:
     return st
 
 
-def bench(n: int, steps: int, cls=ControlStack) -> dict:
+def bench(n: int, steps: int, cls=ControlStack, bare: bool = False) -> dict:
     st = stack_for(n, cls)
     rng = np.random.default_rng(0)
     pose = rng.normal(size=(n, 3))
     vel = rng.normal(size=(n, 2)) * 0.1
     lp, lv = np.array([0.0, 3.0, 0.1]), np.array([1.0, 0.1])
+    if bare:
+        from bioform_mj.control.kernel import control_step
+
+        g, s = st.kernel
+        comm = st._no_comm
+
+        def step() -> None:
+            control_step(g, s, lp, lv, pose, vel, comm)
+    else:
+        def step() -> None:
+            st.step(lp, lv, pose, vel)
     for _ in range(50):
-        st.step(lp, lv, pose, vel)
+        step()
     t0 = time.perf_counter()
     for _ in range(steps):
-        st.step(lp, lv, pose, vel)
+        step()
     dt = (time.perf_counter() - t0) / steps
-    return {"n": n, "stack": cls.__name__, "us_per_step": dt * 1e6, "us_per_follower_step": dt * 1e6 / n}
+    name = "control_step" if bare else cls.__name__
+    return {"n": n, "stack": name, "us_per_step": dt * 1e6, "us_per_follower_step": dt * 1e6 / n}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--steps", type=int, default=3000)
     ap.add_argument("--json", help="write results here")
+    ap.add_argument("--oracle", action="store_true", help="also time the numpy oracle (tests/oracle.py)")
     args = ap.parse_args()
-    from bioform_mj.control.fused import FusedControlStack
+    sizes = (3, 16, 64, 256)
+    rows = [bench(n, args.steps) for n in sizes] + [bench(n, args.steps, bare=True) for n in sizes]
+    if args.oracle:
+        import pathlib
+        import sys
 
-    rows = [bench(n, args.steps, cls) for cls in (ControlStack, FusedControlStack) for n in (3, 16, 64, 256)]
+        sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent / "tests"))
+        from oracle import OracleStack
+
+        rows += [bench(n, args.steps, OracleStack) for n in sizes]
     print(f"control step, {platform.processor() or platform.machine()}, {args.steps} steps")
     print(f"{'stack':>18} {'n':>5} {'us/step':>10} {'us/follower-step':>18}")
     for r in rows:

@@ -1,4 +1,4 @@
-"""The ``bioform`` command: outputs, schema, exit codes (SPEC §10)."""
+"""The ``bioform`` command: outputs, schema, exit codes (design §10)."""
 from __future__ import annotations
 
 import json
@@ -113,13 +113,13 @@ def test_console_script_entry_point(tmp_path):
 
 
 def test_run_engines_give_identical_logs_on_the_ideal_plant(tmp_path):
-    """`--engine numpy` (the reference) and `--engine fused` (compiled): same bits on the ideal plant."""
+    """`--engine stepwise` and `--engine compiled`: the same compiled equations, the same bits."""
     logs = {}
-    for eng in ("numpy", "fused"):
+    for eng in ("stepwise", "compiled"):
         out = tmp_path / eng
         assert main(["run", "paper", "--duration", "1", "--engine", eng, "--quiet", "--out", str(out)]) == 0
         with np.load(out / "log.npz") as z:
             logs[eng] = {k: z[k] for k in z.files}
         logs[eng]["_tve"] = [f["total_velocity_error"] for f in json.loads((out / "summary.json").read_text())["followers"]]
     for k in ("pose", "vel", "est_pose", "cmd", "tau", "c_hat", "_tve"):
-        assert np.array_equal(logs["numpy"][k], logs["fused"][k]), k
+        assert np.array_equal(logs["stepwise"][k], logs["compiled"][k]), k

@@ -1,4 +1,4 @@
-"""Communication graph: Laplacian, H, Assumption 1 (SPEC §1)."""
+"""Communication graph: Laplacian, H, Assumption 1 (design §1)."""
 from __future__ import annotations
 
 import numpy as np

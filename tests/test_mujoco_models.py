@@ -1,8 +1,8 @@
 """MuJoCo side: shipped robot models, scene composition, ground truth, identification, plant.
 
 Numbers, not smoke: open-loop motion is compared with the unicycle ``υ̇ = a τ_a + d1``,
-``ω̇ = b τ_b + d2`` (``τ_a = τ_L + τ_R``, ``τ_b = τ_R − τ_L``, SPEC §5) with ``a, b`` from the
-formula of SPEC §8 read off the compiled model.
+``ω̇ = b τ_b + d2`` (``τ_a = τ_L + τ_R``, ``τ_b = τ_R − τ_L``, design §5) with ``a, b`` from the
+formula of design §8 read off the compiled model.
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def test_compiles_and_steps_under_random_torques_without_warnings(files):
     tau_max = plant.tau_max[:, None]
     steps = round(2.0 / plant.control_dt)
     min_up = 1.0
-    for k in range(steps):  # chattering full-range torques, the harsh case of SPEC §8.1
+    for k in range(steps):  # chattering full-range torques, the harsh case of design §8.1
         plant.step(rng.uniform(-1, 1, (n, 2)) * tau_max, k * plant.control_dt)
         q = plant.data.qpos[plant._q7]
         min_up = min(min_up, float(np.min(1 - 2 * (q[:, 4] ** 2 + q[:, 5] ** 2))))  # R22
@@ -130,7 +130,7 @@ def test_straight_line_matches_unicycle(name):
 
 @pytest.mark.parametrize("name", ["paper_robot", "lab_robot"])
 def test_turn_in_place_matches_unicycle(name):
-    """τ_R = −τ_L > 0: ω(t) = b τ_b t counter-clockwise (τ_b = τ_R − τ_L, SPEC's sign fix)."""
+    """τ_R = −τ_L > 0: ω(t) = b τ_b t counter-clockwise (τ_b = τ_R − τ_L, design §5 sign fix)."""
     tau = 0.3 * robot_parameters(compile_scene(build_scene([name], np.zeros((1, 3))))[0], "f1/").tau_max[0]
     t, pose, vel, (a, b), _ = _run_open_loop(name, (0.5, 0.5, -0.4), (-tau, tau), 0.5)
     omega_ref = b * (2 * tau) * t
@@ -189,7 +189,7 @@ def test_identify_main_is_json_able():
 
 
 def test_wheel_cylinder_collision_is_refused(tmp_path):
-    """SPEC §8 pitfall: cylinder wheels scrub; the scene refuses them."""
+    """design §8 pitfall: cylinder wheels scrub; the scene refuses them."""
     src = (MODELS_DIR / "paper_robot.xml").read_text()
     bad = tmp_path / "cyl.xml"
     bad.write_text(src.replace('<geom type="ellipsoid" size="0.1 0.02 0.1"', '<geom type="cylinder" size="0.1 0.02"'))

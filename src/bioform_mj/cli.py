@@ -1,4 +1,4 @@
-"""The ``bioform`` command (SPEC §10).
+"""The ``bioform`` command (design §10).
 
 Exit codes: 0 done; 2 bad input (one ``error:`` line on stderr, no traceback);
 3 the simulation diverged (diagnosis on stderr, log kept); 1 anything else.
@@ -44,7 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     _scenario_args(run)
     run.add_argument("--method", choices=METHODS, help="control method (default: the scenario's)")
     run.add_argument("--out", type=Path, help="output directory (default: runs/<scenario>-<plant>-<method>)")
-    run.add_argument("--engine", choices=("auto", "fused", "numpy"), default="auto",
+    run.add_argument("--engine", choices=("auto", "compiled", "stepwise"), default="auto",
                      help="fused: the numba-compiled loop (default when numba imports); numpy: the reference stack")
     run.add_argument("--video", action="store_true",
                      help="write video.mp4 (off-screen MuJoCo rendering, MUJOCO_GL=egl by default; "

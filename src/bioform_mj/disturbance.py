@@ -1,9 +1,10 @@
 """Disturbance accelerations ``d(t) = [d1, d2]`` of eq. 34."""
 from __future__ import annotations
 
-import math
 
 import numpy as np
+
+from .control.equations import harmonic
 
 
 class Harmonic:
@@ -20,5 +21,5 @@ class Harmonic:
     def __call__(self, t: float) -> np.ndarray:
         """(n, 2) accelerations at time ``t`` (s). The returned array is reused: copy to keep it."""
         for k, (b, a, f, p) in enumerate(self.terms):
-            self._out[:, k] = b + a * math.cos(f * t + p)
+            self._out[:, k] = harmonic(b, a, f, p, t)  # the compiled equation (design §2)
         return self._out

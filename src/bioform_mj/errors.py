@@ -1,6 +1,6 @@
 """Exception types shared by the library and the CLI.
 
-Each maps to one exit code of the ``bioform`` command (SPEC §10): input errors
+Each maps to one exit code of the ``bioform`` command (design §10): input errors
 exit 2 with a single ``error:`` line, a diverging simulation exits 3.
 """
 from __future__ import annotations

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from .control.common import wrap
-from .control.estimator import Comm
+from .control.base import Comm
 from .control.stack import ControlStack
 from .graph import Graph
 from .scenario import Scenario
@@ -130,7 +130,7 @@ class Faults:
             pose, vel = self.sense(t, pose, vel)
         comm = None
         if self.has_comm:
-            comm, leader_pose, leader_vel = self.comm(k, t, stack.estimator.pose, stack.estimator.vel,
+            comm, leader_pose, leader_vel = self.comm(k, t, stack.signals()["est_pose"], stack.signals()["est_vel"],
                                                       leader_pose, leader_vel)
         tau = stack.step(leader_pose, leader_vel, pose, vel, comm)
         if self._lim is not None:

@@ -1,7 +1,7 @@
 """Ground-truth dynamics parameters of a MuJoCo robot, and their check by identification.
 
-SPEC §5/§8: ``υ̇ = a τ_a + d1``, ``ω̇ = b τ_b + d2`` with ``τ_a = τ_L + τ_R`` and
-``τ_b = τ_R − τ_L`` (SPEC's sign fix of the paper's eq. 34: CCW-positive ω). With rolling
+design §5/§8: ``υ̇ = a τ_a + d1``, ``ω̇ = b τ_b + d2`` with ``τ_a = τ_L + τ_R`` and
+``τ_b = τ_R − τ_L`` (design §5 sign fix of the paper's eq. 34: CCW-positive ω). With rolling
 without slip and the centre of mass on the axle midpoint, Lagrange's equations give
 
     a_eff = 1 / (m r + 2 I_w / r),      b_eff = l / (I r + 2 I_w l² / r)
@@ -130,14 +130,14 @@ def robot_parameters(
             "%s: centre of mass %.1f mm off the axle midpoint; a_eff, b_eff are approximate "
             "(unmodelled υ·ω coupling)", prefix or "robot", 1e3 * com_offset,
         )
-    a_eff = 1.0 / (mass * r + 2.0 * i_w / r)  # SPEC §8
-    b_eff = l / (yaw * r + 2.0 * i_w * l**2 / r)  # SPEC §8
+    a_eff = 1.0 / (mass * r + 2.0 * i_w / r)  # design §8
+    b_eff = l / (yaw * r + 2.0 * i_w * l**2 / r)  # design §8
     tau_max = (float(model.actuator_ctrlrange[al, 1]), float(model.actuator_ctrlrange[ar, 1]))
     return RobotParams(mass, float(yaw), i_w, r, l, com_offset, tau_max, float(a_eff), float(b_eff))
 
 
 def ground_truth(model: mujoco.MjModel, prefix: str = "") -> tuple[float, float]:
-    """``(a_eff, b_eff)`` of the robot named with ``prefix`` in a compiled model (SPEC §8)."""
+    """``(a_eff, b_eff)`` of the robot named with ``prefix`` in a compiled model (design §8)."""
     p = robot_parameters(model, prefix)
     return p.a_eff, p.b_eff
 
@@ -222,7 +222,7 @@ def identify(
     drive = run(torque, torque)
     turn = run(-torque, torque)
     a_id = drive["v_dot"] / (2 * torque)  # τ_a = τ_L + τ_R
-    b_id = turn["omega_dot"] / (2 * torque)  # τ_b = τ_R − τ_L (SPEC §5 sign fix)
+    b_id = turn["omega_dot"] / (2 * torque)  # τ_b = τ_R − τ_L (design §5 sign fix)
     return {
         "model": str(path),
         "formula": {"a": params.a_eff, "b": params.b_eff},

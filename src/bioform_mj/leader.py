@@ -1,4 +1,4 @@
-"""Virtual-leader trajectories with analytic velocities (SPEC §2).
+"""Virtual-leader trajectories with analytic velocities (design §2).
 
 A trajectory is a planar curve ``p(t) = (x(t), y(t))`` given with its first three
 time derivatives. From them, exactly (no finite differences):

@@ -47,7 +47,7 @@ class SimCfg:
 
 @dataclass(frozen=True)
 class LeaderCfg:
-    """Virtual leader (SPEC §2). Lengths in m, speeds in m/s, angles in rad, rates in rad/s.
+    """Virtual leader (design §2). Lengths in m, speeds in m/s, angles in rad, rates in rad/s.
 
     paper: ``x = x0 + speed t``, ``y = y0 + amplitude cos(frequency t − π/2)``;
     line: from (x0, y0) at ``speed`` along ``heading``; circle: centre (x0, y0),
@@ -71,7 +71,7 @@ class LeaderCfg:
 
 @dataclass(frozen=True)
 class GraphCfg:
-    """Communication graph (SPEC §1). The paper's Fig. 1 is missing; default: leader → 1, edges 1–2, 1–3."""
+    """Communication graph (design §1). The paper's Fig. 1 is missing; default: leader → 1, edges 1–2, 1–3."""
 
     kind: str = "explicit"
     edges: tuple[tuple[int, ...], ...] = ((1, 2), (1, 3))

@@ -6,7 +6,7 @@ A robot model (MJCF, see ``models/``) must provide, by name:
 - hinge joints ``left_wheel`` / ``right_wheel`` (positive rotation drives forward);
 - torque actuators ``left_motor`` / ``right_motor`` on those joints (gear 1: ctrl is N·m);
 - geoms ``left_wheel_collision`` / ``right_wheel_collision`` (single-contact sphere or
-  ellipsoid; SPEC §8 pitfall: a cylinder scrubs and biases ``b``).
+  ellipsoid; design §8 pitfall: a cylinder scrubs and biases ``b``).
 
 The scene adds a floor, lights, a skybox, the virtual leader as a mocap "ghost" body
 ``leader`` (no collisions), optional mocap slot markers ``slot_1 … slot_n``, a mocap body

@@ -1,4 +1,14 @@
-"""The closed loop: scenario in, plant and control stack built, log and summary out."""
+"""The closed loop: scenario in, plant and controller built (or given), log and summary out.
+
+One driver runs every loop: between the points where Python must act (events,
+observers, progress, interrupts) it calls a *chunk* of control periods. Where the plant
+offers a compiled chunk (``plant.compiled_chunk``) and the controller exposes a compiled
+kernel (``controller.kernel``), the chunk runs in machine code; otherwise (injected
+faults, a user's controller, ``engine="stepwise"``, ``NUMBA_DISABLE_JIT=1``) it runs step
+by step in Python. Both call the same compiled equations and the same metric, log and
+guard functions (``engine.py``), so the two engines agree bit for bit on one machine
+(docs/design.md §9).
+"""
 from __future__ import annotations
 
 import logging
@@ -6,41 +16,33 @@ import math
 import platform
 import time
 from dataclasses import dataclass, field
-from typing import Any, Protocol, Sequence
+from typing import Any, NamedTuple, Protocol, Sequence
 
 import numpy as np
 
 from . import __version__
-from .control.fused import M_SAT, M_TAU, M_TAURAW, M_VERR, M_VMAX
+from .control.kernel import Gains, StackState, new_state
 from .control.stack import ControlStack, StackParams, parse_method
 from .disturbance import Harmonic as HarmonicDisturbance
+from .engine import (
+    CHANNELS,
+    GUARD_FAILED,
+    MEAN_CHANNELS,
+    OK,
+    Bounds,
+    LogArrays,
+    after_control,
+    describe,
+    new_acc,
+    new_log,
+    new_metrics,
+)
 from .errors import Diverged
 from .plants.base import Plant
 from .plants.ideal import IdealPlant
 from .scenario import Scenario
 
 log = logging.getLogger(__name__)
-
-#: Time-series channels of ``log.npz``: name → trailing shape (``n`` = followers).
-CHANNELS: dict[str, tuple[str, ...]] = {
-    "pose": ("n", "3"),            # [x, y, θ] m, m, rad
-    "vel": ("n", "2"),             # [υ, ω] m/s, rad/s (measured)
-    "est_pose": ("n", "3"),        # P_ir, each follower's estimate of the leader's pose
-    "est_vel": ("n", "2"),         # [υ_ir, ω_ir]
-    "cmd": ("n", "2"),             # [υ_cmd, ω_cmd]
-    "dcmd": ("n", "2"),            # filtered [υ̇_cmd, ω̇_cmd]
-    "tau": ("n", "2"),             # applied [τ_L, τ_R] N·m
-    "tau_raw": ("n", "2"),         # commanded before saturation
-    "c_hat": ("n", "2"),           # [â, b̂]
-    "c_true": ("n", "2"),          # [a, b] of the plant
-    "z_hat": ("n", "2"),           # learner's velocity estimate
-    "vs": ("n",),                  # neuron output V_s
-    "tracking_error": ("n", "3"),  # [x̃, ỹ, θ̃] body frame
-    "formation_error": ("n",),     # |p_i − (p_r − Δ_i)| m, against the true leader
-    "estimation_error": ("n",),    # |P_ir[:2] − p_r| m
-    "saturated": ("n",),           # any wheel at its limit
-}
-
 
 class Observer(Protocol):
     """Something that watches a run (video, rerun) at its own period, without slowing a run that has none."""
@@ -58,7 +60,7 @@ class RunState:
 
     scenario: Scenario
     plant: Plant
-    stack: ControlStack
+    stack: Any  # the controller (a control.base.Controller)
     t: float = 0.0
     leader_pose: np.ndarray = field(default_factory=lambda: np.zeros(3))
     leader_vel: np.ndarray = field(default_factory=lambda: np.zeros(2))
@@ -80,6 +82,7 @@ class RunResult:
     summary: dict[str, Any]
     plant: Plant
     diverged: Diverged | None = None
+    interrupted: bool = False  # stopped by KeyboardInterrupt (SIGINT/SIGTERM): log and summary so far
 
 
 def make_plant(sc: Scenario) -> Plant:
@@ -145,120 +148,329 @@ def initial_estimates(sc: Scenario, pose0: np.ndarray, leader_pose0: np.ndarray)
     return est
 
 
-ENGINES = ("auto", "fused", "numpy")
+ENGINES = ("auto", "compiled", "stepwise")
+
+#: longest stretch of simulated time between two visits to Python (s): bounds the delay of
+#: progress reports and of interrupts
+MAX_CHUNK_S = 0.1
+
+
+class LoopContext(NamedTuple):
+    """What a plant's compiled chunk needs from the loop (all arrays updated in place)."""
+
+    gains: Gains
+    state: StackState
+    comm: Any
+    N: int
+    L_pose: np.ndarray
+    L_vel: np.ndarray
+    pose: np.ndarray
+    vel: np.ndarray
+    met: Any
+    acc: Any
+    log: LogArrays
+    stride: int
+    offsets: np.ndarray
+    bounds: Bounds
+    diag: np.ndarray
 
 
 def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = None,
-             engine: str = "auto", record_inputs: tuple[np.ndarray, np.ndarray] | None = None) -> RunResult:
+             engine: str = "auto", record_inputs: tuple[np.ndarray, np.ndarray] | None = None, *,
+             plant: Plant | None = None, controller: Any = None) -> RunResult:
     """Run the closed loop of ``sc`` and return its log and summary.
 
-    ``engine``: ``numpy`` runs the reference :class:`ControlStack` with a Python loop;
-    ``fused`` the numba-compiled stack, and the whole loop compiled in chunks between
-    log samples where the plant allows (see ``fastloop``); ``auto`` = fused if numba
-    imports. Both compute the same equations; results agree to rounding.
-    ``record_inputs`` (compiled MuJoCo loop only): arrays ``(N, nu)``, ``(N, n, 6)`` that
-    receive each step's ``ctrl`` and chassis ``xfrc_applied``, for a bare replay.
+    ``plant``: a :class:`~bioform_mj.plants.base.Plant` (default: built from ``sc.plant``);
+    ``controller``: a :class:`~bioform_mj.control.base.Controller` (default: the paper's
+    stack for ``sc.method``). ``engine``: ``auto`` (compiled where plant and controller
+    allow it), ``compiled`` (refuse if they do not) or ``stepwise`` (one Python call per
+    control step; the same compiled equations, the same bits). ``record_inputs`` (compiled
+    MuJoCo loop only): arrays ``(N, nu)``, ``(N, n, 6)`` that receive each step's ``ctrl``
+    and chassis ``xfrc_applied``, for a bare replay.
 
-    A divergence (NaN/inf or a state beyond ``sc.limits``) stops the loop; the
-    result then holds the log up to that point and ``diverged`` says why.
-    ``progress``, if given, is called as ``progress(k, N)`` every log sample.
+    A divergence (NaN/inf or a state beyond ``sc.limits``, checked after every control
+    step; a MuJoCo warning) stops the loop; the result then holds the log up to the last
+    good row and ``diverged`` says why. A ``KeyboardInterrupt`` stops it too
+    (``interrupted``). ``progress``, if given, is called as ``progress(k, N)``; if it has a
+    ``phase(text)`` method it is told when kernels load or compile.
     """
-    graph = sc.build_graph()
-    traj = sc.build_leader()
-    plant = make_plant(sc)
     if engine not in ENGINES:
         raise ValueError(f"unknown engine '{engine}' (expected one of: {', '.join(ENGINES)})")
-    from .control.fused import HAVE_NUMBA, FusedControlStack
-
-    fused = engine == "fused" or (engine == "auto" and HAVE_NUMBA)
-    stack_cls = FusedControlStack if fused else ControlStack
-    stack = stack_cls(graph, stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None)))
+    t_setup = time.perf_counter()
+    graph = sc.build_graph()
+    traj = sc.build_leader()
+    if plant is None:
+        plant = make_plant(sc)
+    own_stack = controller is None
+    if own_stack:
+        controller = ControlStack(graph, stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None)))
     n = sc.n
+    if getattr(controller, "n", n) != n or getattr(plant, "n", n) != n:
+        raise ValueError(f"the scenario has {n} followers, the plant {plant.n} and the controller {controller.n}")
     dt = sc.sim.control_dt
     N = max(1, int(round(sc.sim.duration / dt)))
     stride = max(1, int(round(sc.sim.log_dt / dt)))
     t_all = np.arange(N + 1) * dt
     L_pose, L_vel, _ = traj.states(t_all)  # analytic, all steps at once
-    offsets = np.asarray(sc.formation.offsets, dtype=float)
+    L_pose = np.ascontiguousarray(L_pose, dtype=float)
+    L_vel = np.ascontiguousarray(L_vel, dtype=float)
+    offsets = np.ascontiguousarray(sc.formation.offsets, dtype=float).reshape(n, 2)
 
     plant.reset()
-    pose, vel = plant.observe()
-    stack.reset(initial_estimates(sc, pose, L_pose[0]), vel)
+    pose0, vel0 = plant.observe()
+    controller.reset(initial_estimates(sc, pose0, L_pose[0]), vel0)
     faults = None  # fault injection (faults.py): built only when configured, else no per-step cost
     if sc.faults.per_step:  # (a friction patch is in the MuJoCo scene: nothing per step)
         from .faults import Faults
 
-        faults = Faults(sc, graph, stack.p.tau_max)
+        p = getattr(controller, "p", None)
+        faults = Faults(sc, graph, np.asarray(p.tau_max if p is not None else np.full(n, sc.torque.tau_max)))
     K = (N - 1) // stride + 1
-    shapes = {"n": n, "3": 3, "2": 2}
-    logd: dict[str, np.ndarray] = {"t": np.zeros(K), "leader_pose": np.zeros((K, 3)), "leader_vel": np.zeros((K, 2))}
-    for name, shp in CHANNELS.items():
-        logd[name] = np.zeros((K,) + tuple(shapes[s] for s in shp), dtype=bool if name == "saturated" else float)
+    lg = new_log(K, n)
+    kernel = getattr(controller, "kernel", None)
+    missing: set[str] = set()
+    if kernel is not None:
+        gains, state = kernel
+    else:  # a user's controller: its signals are copied into a shadow state each step
+        gains, state = None, new_state(n)
+    lim = sc.limits
+    ctx = LoopContext(gains, state, getattr(controller, "_no_comm", None), N, L_pose, L_vel,
+                      np.ascontiguousarray(pose0, dtype=float), np.ascontiguousarray(vel0, dtype=float),
+                      new_metrics(n), new_acc(n), lg, stride, offsets,
+                      Bounds(float(lim.position), float(lim.speed), float(lim.torque)), np.zeros(3))
 
-    state = RunState(sc, plant, stack)
+    chunk = None
+    if engine != "stepwise" and kernel is not None and faults is None and hasattr(plant, "compiled_chunk"):
+        chunk = plant.compiled_chunk(ctx, record_inputs) if record_inputs is not None else plant.compiled_chunk(ctx)
+    if engine == "compiled" and chunk is None:
+        raise ValueError("engine 'compiled' needs a plant and a controller with compiled kernels, and no "
+                         "per-step faults (use engine 'auto' or 'stepwise')")
+    c_true = np.ascontiguousarray(plant.c_true(), dtype=float)
+
+    def control(k: int) -> np.ndarray:
+        """Control step ``k`` on the current measurements; the torques to apply."""
+        if faults is None:
+            tau = controller.step(L_pose[k], L_vel[k], ctx.pose, ctx.vel)
+        else:  # noisy sensing, faulty network, weakened motors, pushes; tau = what reaches the plant
+            tau = faults.step(k, k * dt, controller, plant, L_pose[k], L_vel[k], ctx.pose, ctx.vel)
+        if kernel is None:
+            _shadow(state, controller.signals(), tau, missing)
+        return np.array(tau, dtype=float)
+
+    applied = [np.zeros((n, 2))]
+
+    def python_chunk(k0: int, k1: int, j: int) -> tuple[int, int, int]:
+        """The same contract as a compiled chunk, one Python call per step."""
+        for k in range(k0, k1):
+            plant.step(applied[0], k * dt)  # may raise Diverged (MuJoCo warnings)
+            p, v = plant.observe()
+            ctx.pose[:] = p
+            ctx.vel[:] = v
+            if k + 1 < N:
+                applied[0] = control(k + 1)
+                j, status = after_control(k + 1, N, stride, state, ctx.pose, ctx.vel, ctx.met, ctx.acc, lg, j,
+                                          L_pose, L_vel, dt, c_true, offsets, ctx.bounds, ctx.diag)
+                if status != OK:
+                    return k + 1 - k0, j, status
+        return k1 - k0, j, OK
+
+    if progress is not None and hasattr(progress, "phase"):
+        progress.phase("loading compiled kernels (compiling them on the first run)")
+    # control step 0 and its row, then a zero-length chunk: kernels are loaded (or compiled) here,
+    # outside the timed loop
+    applied[0] = control(0)
+    j, status = after_control(0, N, stride, state, ctx.pose, ctx.vel, ctx.met, ctx.acc, lg, 0, L_pose, L_vel, dt,
+                              c_true, offsets, ctx.bounds, ctx.diag)
+    run_chunk = chunk if chunk is not None else python_chunk
+    run_chunk(0, 0, j)
+    setup_s = time.perf_counter() - t_setup
+    if progress is not None and hasattr(progress, "phase"):
+        progress.phase(None)
+
+    state_obs = RunState(sc, plant, controller)
     for o in observers:
-        o.start(state)
-    obs = ObserverClock(observers, state)
+        o.start(state_obs)
+    obs = ObserverClock(observers, state_obs)
     evq = EventQueue(sc.events, dt)
     wall0 = time.perf_counter()
-    from . import fastloop
-
-    if fused and faults is None and fastloop.supported(plant, stack):  # no per-step Python hooks
-        k_done, j, diverged, pose, vel, met = fastloop.run(
-            sc, plant, stack, L_pose, L_vel, N, stride, evq, obs, progress, logd, _guard, record_inputs)
-    else:
-        k_done, j, diverged, pose, vel, met = _run_stepwise(
-            sc, plant, stack, faults, L_pose, L_vel, N, stride, evq, obs, progress, logd)
+    diverged: Diverged | None = None
+    interrupted = False
+    k = 0
+    if status != OK:
+        diverged = Diverged(describe(ctx.diag, 0.0, ctx.bounds), step=0, time=0.0)
+    try:
+        max_chunk = max(1, int(round(MAX_CHUNK_S / dt)))
+        while k < N and diverged is None:
+            if evq.apply(k, plant):
+                c_true[:] = plant.c_true()
+                if k % stride == 0 and j > 0:
+                    lg.c_true[j - 1] = c_true  # this step's row shows the new plant
+            obs.sample(k * dt, L_pose[k], L_vel[k], ctx.pose, ctx.vel)
+            k1 = min(N, k + max_chunk)
+            nxt = evq.next_step()
+            if nxt is not None:
+                k1 = min(k1, max(k + 1, nxt))
+            for tn in obs.next:
+                k1 = min(k1, max(k + 1, first_step_at(tn, dt)))
+            try:
+                done, j, status = run_chunk(k, k1, j)
+            except Diverged as e:  # a MuJoCo warning: keep the log so far
+                diverged = e
+                k = e.step
+                break
+            k += done
+            if status == GUARD_FAILED:
+                diverged = Diverged(describe(ctx.diag, k * dt, ctx.bounds), step=k, time=k * dt)
+            if progress is not None:
+                progress(k, N)
+    except KeyboardInterrupt:
+        interrupted = True
     wall = time.perf_counter() - wall0
-    if diverged is None and not (np.all(np.isfinite(pose)) and np.all(np.isfinite(vel))):
+    pose, vel = ctx.pose.copy(), ctx.vel.copy()
+    k_done = min(k, N)
+    if diverged is None and not interrupted and not (np.all(np.isfinite(pose)) and np.all(np.isfinite(vel))):
         diverged = Diverged(f"non-finite robot state at the end of the run (t = {N * dt:g} s)", step=N, time=N * dt)
-    if progress is not None:
+    if progress is not None and diverged is None and not interrupted:
         progress(N, N)
-    state.t, state.pose, state.vel = k_done * dt, pose, vel
-    state.leader_pose, state.leader_vel = L_pose[k_done], L_vel[k_done]
+    state_obs.t, state_obs.pose, state_obs.vel = k_done * dt, pose, vel
+    state_obs.leader_pose, state_obs.leader_vel = L_pose[k_done], L_vel[k_done]
     for o in observers:
-        o.finish(state)
-    logd = {key: v[:j] for key, v in logd.items()}
+        o.finish(state_obs)
+    logd = {name: getattr(lg, name)[:j] for name in LogArrays._fields}
+    for name in missing:
+        logd[name] = np.full_like(logd[name], np.nan)
     logd["offsets"] = offsets
     logd["edges"] = graph.edges + 1
     logd["leader_access"] = graph.leader_access
-    sim_time = k_done * dt
-    final_form = np.linalg.norm(pose[:, :2] - (L_pose[k_done, None, :2] - offsets), axis=1)
-    final_est = np.linalg.norm(stack.estimator.pose[:, :2] - L_pose[k_done, None, :2], axis=1)
+    summary = _summary(sc, plant, controller, state, ctx.met, logd, L_pose[k_done], pose, vel, offsets, k_done,
+                       dt, wall, setup_s, diverged, interrupted, missing, engine="compiled" if chunk else "stepwise")
+    return RunResult(sc, logd, summary, plant, diverged, interrupted)
+
+
+def _shadow(state: StackState, sig: Any, tau: np.ndarray, missing: set[str]) -> None:
+    """Copy a user controller's signals into the shadow state the metrics, guards and log read."""
+    fields = {"est_pose": "est_pose", "est_vel": "est_vel", "cmd": "cmd", "dcmd": "dcmd", "tau_raw": "tau_raw",
+              "c_hat": "c_hat", "z_hat": "z_hat", "vs": "vs", "tracking_error": "err", "saturated": "saturated"}
+    for name, attr in fields.items():
+        v = sig.get(name)
+        if v is None:
+            missing.add(name)
+            if name == "tau_raw":
+                state.tau_raw[:] = tau
+            continue
+        getattr(state, attr)[:] = v
+    state.tau[:] = tau
+
+
+#: follower outcomes (design §8): thresholds
+LOST_M = 1.0  # m: final formation error beyond this → lost
+SPIN_RAD_S = 6.0  # rad/s: |ω| beyond this over the last second → spinning
+
+
+def _summary(sc, plant, controller, state, met, logd, lp_end, pose, vel, offsets, k_done, dt, wall, setup_s,
+             diverged, interrupted, missing, engine) -> dict[str, Any]:
+    n = sc.n
+    final_form = np.linalg.norm(pose[:, :2] - (lp_end[None, :2] - offsets), axis=1)
+    est = state.est_pose if "est_pose" not in missing else np.full((n, 3), np.nan)
+    final_est = np.linalg.norm(est[:, :2] - lp_end[None, :2], axis=1)
     fe = logd["formation_error"]
     half = fe[len(fe) // 2:] if len(fe) else fe
-    followers = []
     c_true = plant.c_true()
+    c_hat = state.c_hat if "c_hat" not in missing else np.full((n, 2), np.nan)
+    nan_if = (lambda name, v: float("nan") if name in missing else float(v))  # noqa: E731
+    outcomes = follower_outcomes(sc, plant, controller, logd, final_form, c_hat, dt)
+    followers = []
     for i in range(n):
         followers.append({
             "id": i + 1,
-            "total_velocity_error": float(met[i, M_VERR] * dt),
+            "outcome": outcomes[i][0],
+            "outcome_detail": outcomes[i][1],
+            "total_velocity_error": nan_if("cmd", met.verr[i] * dt),
             "final_formation_error_m": float(final_form[i]),
             "rms_formation_error_m": float(np.sqrt(np.mean(fe[:, i] ** 2))) if len(fe) else float("nan"),
             "rms_formation_error_last_half_m": float(np.sqrt(np.mean(half[:, i] ** 2))) if len(half) else float("nan"),
             "final_estimation_error_m": float(final_est[i]),
-            "max_abs_v_cmd": float(met[i, M_VMAX]),
-            "peak_abs_torque": float(met[i, M_TAU]),
-            "peak_abs_torque_commanded": float(met[i, M_TAURAW]),
-            "saturation_fraction": float(met[i, M_SAT] / max(1, k_done)),
-            "c_hat": [float(v) for v in stack.c_hat[i]],
+            "max_abs_v_cmd": nan_if("cmd", met.vmax[i]),
+            "peak_abs_torque": float(met.tau[i]),
+            "peak_abs_torque_commanded": float(met.tau_raw[i]),
+            "saturation_fraction": nan_if("saturated", met.sat[i] / max(1, k_done)),
+            "c_hat": [float(v) for v in c_hat[i]],
             "c_true": [float(v) for v in c_true[i]],
-            "c_hat_rel_error": [float(v) for v in (stack.c_hat[i] / c_true[i] - 1.0)],
+            "c_hat_rel_error": [float(v) for v in (c_hat[i] / c_true[i] - 1.0)],
+            **_robot_used(sc, plant, controller, i),
         })
-    summary = {
+    return {
         "scenario": sc.name,
         "plant": sc.plant.kind,
-        "method": sc.method,
+        "method": sc.method if getattr(controller, "p", None) is not None else type(controller).__name__,
+        "controller": type(controller).__name__,
+        "engine": engine,
         "seed": sc.sim.seed,
-        "sim_time_s": sim_time,
+        "sim_time_s": k_done * dt,
         "wall_time_s": wall,
+        "setup_time_s": setup_s,
         "steps": k_done,
-        "diverged": None if diverged is None else {"message": str(diverged), "time_s": diverged.time, "step": diverged.step},
+        "diverged": None if diverged is None else {"message": str(diverged), "time_s": diverged.time,
+                                                   "step": diverged.step},
+        "interrupted": interrupted,
+        "log_channels": {name: CHANNELS[name][1] for name in CHANNELS},
+        "log_interval_means": list(MEAN_CHANNELS),
         "versions": _versions(),
         "config": sc.to_dict(),
         "followers": followers,
     }
-    return RunResult(sc, logd, summary, plant, diverged)
+
+
+def _robot_used(sc: Scenario, plant: Any, controller: Any, i: int) -> dict[str, Any]:
+    """What follower ``i``'s robot really was: torque limit, mass, yaw inertia (design §9)."""
+    p = getattr(controller, "p", None)
+    out: dict[str, Any] = {"tau_max_nm": float(np.broadcast_to(p.tau_max, (sc.n,))[i]) if p is not None else None}
+    params = getattr(plant, "params", None)
+    if params is not None:
+        rp = params[i]
+        out["mass_kg"] = float(rp.mass)
+        out["yaw_inertia_kgm2"] = float(rp.yaw_inertia)
+    else:
+        mass = getattr(plant, "mass", None)
+        inertia = getattr(plant, "inertia", None)
+        out["mass_kg"] = None if mass is None else float(mass[i])
+        out["yaw_inertia_kgm2"] = None if inertia is None else float(inertia[i])
+    return out
+
+
+def follower_outcomes(sc: Scenario, plant: Any, controller: Any, logd: dict[str, np.ndarray],
+                      final_form: np.ndarray, c_hat: np.ndarray, dt: float) -> list[tuple[str, str]]:
+    """Per follower ``(outcome, detail)``: ``ok`` or the first failure of ``tipped`` (tilt beyond
+    the plant's ``TIP_ANGLE_DEG``, with the time), ``spinning`` (|ω| > :data:`SPIN_RAD_S` over
+    the last second), ``lost`` (final formation error > :data:`LOST_M`), ``c_hat_at_bound``
+    (a learned parameter at its projection bound at the end)."""
+    n = sc.n
+    out: list[tuple[str, str]] = []
+    tip = getattr(plant, "tip_step", None)
+    p = getattr(controller, "p", None)
+    t = logd["t"]
+    last = t >= (t[-1] - 1.0) if len(t) else np.zeros(0, bool)
+    for i in range(n):
+        if tip is not None and tip[i] >= 0:
+            from .plants.mujoco_plant import TIP_ANGLE_DEG
+
+            out.append(("tipped", f"tilt beyond {TIP_ANGLE_DEG:g} deg at t = {tip[i] * dt:.3f} s"))
+            continue
+        if len(t) and np.all(np.abs(logd["vel"][last, i, 1]) > SPIN_RAD_S):
+            out.append(("spinning", f"|omega| > {SPIN_RAD_S:g} rad/s over the last second"))
+            continue
+        if final_form[i] > LOST_M:
+            out.append(("lost", f"final formation error {final_form[i]:.3g} m > {LOST_M:g} m"))
+            continue
+        if p is not None and p.learning:
+            lo = np.broadcast_to(p.c_min, (n, 2))[i]
+            hi = np.broadcast_to(p.c_max, (n, 2))[i]
+            at = [k for k in range(2) if c_hat[i, k] <= lo[k] * (1 + 1e-9) or c_hat[i, k] >= hi[k] * (1 - 1e-9)]
+            if at:
+                out.append(("c_hat_at_bound", "learned " + ", ".join("ab"[k] for k in at) + " at its bound"))
+                continue
+        out.append(("ok", ""))
+    return out
 
 
 class ObserverClock:
@@ -307,103 +519,6 @@ class EventQueue:
 def first_step_at(t: float, dt: float) -> int:
     """The first control step ``k`` with ``k·dt ≥ t`` (to 1e-12 s)."""
     return max(0, int(math.ceil((t - 1e-12) / dt - 1e-9)))
-
-
-def _run_stepwise(sc: Scenario, plant: Plant, stack: ControlStack, faults: Any, L_pose: np.ndarray,
-                  L_vel: np.ndarray, N: int, stride: int, evq: EventQueue, obs: ObserverClock, progress: Any,
-                  logd: dict[str, np.ndarray]) -> tuple[int, int, Diverged | None, np.ndarray, np.ndarray, np.ndarray]:
-    """The closed loop one control step at a time in Python: the numpy reference engine, and
-    every run with per-step hooks (faults). Same contract as :func:`bioform_mj.fastloop.run`:
-    returns ``(steps done, log rows, divergence, pose, vel, metrics (n, 5))``."""
-    dt = sc.sim.control_dt
-    offsets = np.asarray(sc.formation.offsets, dtype=float)
-    met = np.zeros((plant.n, 5))
-    pose, vel = plant.observe()
-    diverged: Diverged | None = None
-    j = k_done = 0
-    for k in range(N):
-        t = k * dt
-        evq.apply(k, plant)
-        if faults is None:
-            tau = stack.step(L_pose[k], L_vel[k], pose, vel)
-        else:  # faults: noisy sensing, faulty network, weakened motors, pushes; tau = what reaches the plant
-            tau = faults.step(k, t, stack, plant, L_pose[k], L_vel[k], pose, vel)
-        cmd = stack.cmd
-        met[:, M_VERR] += np.abs(cmd - vel).sum(axis=1)  # SPEC §7 metric, times dt in the summary
-        met[:, M_SAT] += stack.saturated
-        np.maximum(met[:, M_VMAX], np.abs(cmd[:, 0]), out=met[:, M_VMAX])
-        np.maximum(met[:, M_TAU], np.abs(tau).max(axis=1), out=met[:, M_TAU])
-        np.maximum(met[:, M_TAURAW], np.abs(stack.tau_raw).max(axis=1), out=met[:, M_TAURAW])
-        if k % stride == 0:
-            _record(logd, j, t, L_pose[k], L_vel[k], pose, vel, stack, plant, offsets)
-            diverged = _guard(logd, j, t, k, sc.limits)
-            j += 1
-            if progress is not None:
-                progress(k, N)
-            if diverged is not None:
-                break
-        obs.sample(t, L_pose[k], L_vel[k], pose, vel)
-        try:
-            plant.step(tau, t)
-        except Diverged as e:  # e.g. a MuJoCo warning: keep the log so far
-            diverged = e
-            break
-        pose, vel = plant.observe()
-        k_done = k + 1
-    return k_done, j, diverged, pose, vel, met
-
-
-def _record(logd, j, t, lp, lv, pose, vel, stack: ControlStack, plant: Plant, offsets) -> None:
-    logd["t"][j] = t
-    logd["leader_pose"][j] = lp
-    logd["leader_vel"][j] = lv
-    logd["pose"][j] = pose
-    logd["vel"][j] = vel
-    logd["est_pose"][j] = stack.estimator.pose
-    logd["est_vel"][j] = stack.estimator.vel
-    logd["cmd"][j] = stack.cmd
-    logd["dcmd"][j] = stack.dcmd
-    logd["tau"][j] = stack.tau
-    logd["tau_raw"][j] = stack.tau_raw
-    logd["c_hat"][j] = stack.c_hat
-    logd["c_true"][j] = plant.c_true()
-    logd["z_hat"][j] = stack.learner.z_hat
-    logd["vs"][j] = stack.vs
-    logd["tracking_error"][j] = stack.err
-    logd["formation_error"][j] = np.linalg.norm(pose[:, :2] - (lp[None, :2] - offsets), axis=1)
-    logd["estimation_error"][j] = np.linalg.norm(stack.estimator.pose[:, :2] - lp[None, :2], axis=1)
-    logd["saturated"][j] = stack.saturated
-
-
-_GUARDS = (
-    # channel, column (None = all), limit attribute, what
-    ("pose", slice(0, 2), "position", "position"),
-    ("est_pose", slice(0, 2), "position", "leader-pose estimate"),
-    ("vel", slice(0, 1), "speed", "speed υ"),
-    ("cmd", slice(0, 1), "speed", "commanded speed υ_cmd"),
-    ("est_vel", slice(0, 1), "speed", "leader-speed estimate υ_ir"),
-    ("tau_raw", slice(0, 2), "torque", "commanded wheel torque"),
-)
-
-
-def _guard(logd, j: int, t: float, k: int, lim) -> Diverged | None:
-    """Check sample ``j`` for NaN/inf and magnitudes beyond ``lim``; return a diagnosis or None."""
-    for name in ("pose", "vel", "est_pose", "est_vel", "cmd", "tau_raw", "c_hat", "vs"):
-        row = logd[name][j]
-        bad = ~np.isfinite(row)
-        if bad.any():
-            i = int(np.flatnonzero(bad.reshape(row.shape[0], -1).any(axis=1))[0])
-            return Diverged(f"follower {i + 1}: signal '{name}' is not finite ({row[i]}) at t = {t:.4f} s", step=k, time=t)
-    for name, cols, attr, what in _GUARDS:
-        mag = np.abs(logd[name][j][:, cols]).max(axis=1)
-        limit = getattr(lim, attr)
-        over = np.flatnonzero(mag > limit)
-        if over.size:
-            i = int(over[0])
-            return Diverged(
-                f"follower {i + 1}: {what} |{name}| = {mag[i]:.3g} exceeds limits.{attr} = {limit:g} at t = {t:.4f} s",
-                step=k, time=t)
-    return None
 
 
 def _versions() -> dict[str, str]:

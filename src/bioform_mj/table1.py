@@ -1,4 +1,4 @@
-"""Table I of the paper: the four methods side by side (SPEC §7).
+"""Table I of the paper: the four methods side by side (design §7).
 
 Our metric is ``∫₀ᵀ (|υ_cmd − υ| + |ω_cmd − ω|) dt`` per follower (the paper gives
 none); the claim to reproduce is the ordering, bioinspired-learning lowest.

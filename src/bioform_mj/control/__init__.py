@@ -1,6 +1,8 @@
-"""The paper's control stack as vectorised numpy pieces (no knowledge of any plant).
+"""The paper's control stack (no knowledge of any plant).
 
-Arrays are shaped ``(n, …)`` over followers. ``stack.ControlStack`` chains them into
-one control step: estimator (eqs. 12–13), bioinspired/backstepping kinematics
-(eqs. 27–33), online learner (eq. 37) and sliding-mode torque law (eqs. 38–39).
+``equations.py``: every equation once, as scalar functions (compiled by numba);
+``kernel.py``: one control step of ``n`` followers on named structures;
+``stack.py``: :class:`ControlStack`, the paper's controller; ``base.py``: the
+:class:`Controller` protocol a user's controller implements; ``common.py``: array helpers
+for outputs. See docs/design.md.
 """

@@ -7,7 +7,7 @@ TWO_PI = 2.0 * np.pi
 
 
 def wrap(angle: np.ndarray | float) -> np.ndarray:
-    """Wrap angles (rad) to (−π, π]. SPEC §3: every heading difference is wrapped."""
+    """Wrap angles (rad) to (−π, π]. design §3: every heading difference is wrapped."""
     return np.pi - np.mod(np.pi - np.asarray(angle, dtype=float), TWO_PI)
 
 

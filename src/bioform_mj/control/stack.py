@@ -1,15 +1,10 @@
-"""One vectorised control step of the whole stack, for any plant.
+"""The paper's control stack for ``n`` followers, as a :class:`~.base.Controller`.
 
-Order within a step at time ``t_k`` (inputs: leader state at ``t_k`` for the
-leader-connected followers, measured poses and velocities at ``t_k``):
-
-1. learner: backward-Euler step over ``(t_{k−1}, t_k]`` with the torques applied
-   then and the velocities measured now (learning methods only);
-2. kinematics: tracking error from the current estimates, ``[υ_cmd, ω_cmd]``
-   from the current neuron state ``V_s`` (so ``υ_cmd(0) = 0`` for the bioinspired law);
-3. filtered command derivative;
-4. sliding-mode torques with ``ĉ``, saturated at the actuator limits;
-5. estimator and neuron advance to ``t_{k+1}``.
+:class:`ControlStack` holds the resolved gains (:class:`~.kernel.Gains`) and the state
+(:class:`~.kernel.StackState`) and advances them with the compiled
+:func:`~.kernel.control_step`, whose equations are in ``equations.py`` (written once).
+The same object runs in the step-by-step loop (faults, debugging) and, because it
+exposes :attr:`ControlStack.kernel`, in the compiled loops of the plants.
 """
 from __future__ import annotations
 
@@ -18,10 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..graph import Graph
-from .estimator import Comm, Estimator
-from .kinematic import shunting_step, tracking_error, velocity_command
-from .learning import Learner
-from .torque import DerivativeFilter, saturate, sliding_mode_torques, wheel_to_body
+from .base import Comm
+from .equations import filter_coefficients
+from .kernel import CommIn, Gains, StackState, control_step, new_state, perfect_comm, reset_state
 
 METHODS = ("backstepping", "bioinspired", "backstepping-learning", "bioinspired-learning")
 
@@ -76,48 +70,54 @@ class StackParams:
 
 
 class ControlStack:
-    """The distributed formation controller of all ``n`` followers.
+    """The distributed formation controller of all ``n`` followers (a :class:`~.base.Controller`).
 
-    Knows nothing of the plant: it maps measured ``pose`` (n,3) and ``vel`` (n,2)
-    to wheel torques ``[τ_L, τ_R]`` (n,2). Every intermediate signal of the last
-    step is kept as an attribute for logging.
+    Knows nothing of the plant: it maps measured ``pose`` (n,3) and ``vel`` (n,2) to wheel
+    torques ``[τ_L, τ_R]`` (n,2). Every state and signal of the last step is an array of
+    :attr:`state`, updated in place (views stay valid).
     """
 
     def __init__(self, graph: Graph, p: StackParams) -> None:
         n = graph.n
         self.n = n
         self.p = p
-        self.estimator = Estimator(graph, p.kp, p.ka, p.kb, p.est_phi)
-        self.learner = Learner(n, p.k4, p.k5, p.c_min, p.c_max, p.kd)
-        self.dfilter = DerivativeFilter(n, p.deriv_wn, p.dt)
-        self.vs = np.zeros(n)
-        self.err = np.zeros((n, 3))
-        self.cmd = np.zeros((n, 2))
-        self.dcmd = np.zeros((n, 2))
-        self.tau = np.zeros((n, 2))  # applied (saturated) [τ_L, τ_R]
-        self.tau_raw = np.zeros((n, 2))  # before saturation
-        self._lim = np.asarray(p.tau_max, dtype=float)[:, None]
-        self.tau_body = np.zeros((n, 2))
-        self.saturated = np.zeros(n, dtype=bool)
-        self._first = True
+        self.graph = graph
+        f00, f01, f10, f11, g0, g1 = filter_coefficients(p.deriv_wn, p.dt)
+        c = np.ascontiguousarray
+        self.gains = Gains(
+            k1=float(p.k1), k2=float(p.k2), k3=float(p.k3), A=float(p.A), B=float(p.B), D=float(p.D),
+            kx=float(p.kp[0]), ky=float(p.kp[1]), kth=float(p.kp[2]),
+            ka0=float(p.ka[0]), ka1=float(p.ka[1]), kb0=float(p.kb[0]), kb1=float(p.kb[1]),
+            ephi0=float(p.est_phi[0]), ephi1=float(p.est_phi[1]),
+            ca=float(p.c_gain[0]), cb=float(p.c_gain[1]), tphi=float(p.torque_phi),
+            f00=f00, f01=f01, f10=f10, f11=f11, g0=g0, g1=g1,
+            k5a=float(p.k5[0]), k5b=float(p.k5[1]),
+            kda=float(np.broadcast_to(p.kd, (2,))[0]), kdb=float(np.broadcast_to(p.kd, (2,))[1]),
+            dt=float(p.dt), bio=p.law == "bioinspired", learning=bool(p.learning), steer=bool(p.steer_priority),
+            k4=c(np.broadcast_to(np.asarray(p.k4, dtype=float), (n, 2)), dtype=float),
+            c_min=c(np.broadcast_to(p.c_min, (n, 2)), dtype=float),
+            c_max=c(np.broadcast_to(p.c_max, (n, 2)), dtype=float),
+            lim=np.array(np.broadcast_to(np.asarray(p.tau_max, dtype=float), (n,)), dtype=float),
+            offsets=c(p.offsets, dtype=float).reshape(n, 2),
+            src=c(graph.src, dtype=np.int64), dst=c(graph.dst, dtype=np.int64),
+            lacc=c(graph.leader_access, dtype=float),
+        )
+        self.state: StackState = new_state(n)
+        self._no_comm = perfect_comm(n, int(graph.src.shape[0]))
+        self._pose_in = np.zeros((n, 3))
+        self._vel_in = np.zeros((n, 2))
 
+    # ------------------------------------------------------------------ Controller
     @property
-    def c_hat(self) -> np.ndarray:
-        """Current ``[â, b̂]`` (n, 2)."""
-        return self.learner.c_hat
-
-    def set_tau_max(self, tau_max: np.ndarray) -> None:
-        """Change the wheel torque limits (n,) N·m in place (e.g. an actuator fault mid-run)."""
-        self._lim[:, 0] = tau_max
+    def kernel(self) -> tuple[Gains, StackState]:
+        """``(gains, state)`` for :func:`~.kernel.control_step`: lets compiled loops run this stack."""
+        return self.gains, self.state
 
     def reset(self, est_pose0: np.ndarray, vel0: np.ndarray) -> None:
         """Initial estimates ``P_ir(0)`` (n,3), measured velocities (n,2); ``V_s(0) = 0``."""
-        self.estimator.reset(est_pose0)
-        self.learner.reset(vel0, self.p.c_hat0)
-        self.vs[:] = 0.0
-        self.tau[:] = 0.0
-        self.tau_body[:] = 0.0
-        self._first = True
+        reset_state(self.gains, self.state, np.ascontiguousarray(est_pose0, dtype=float),
+                    np.ascontiguousarray(vel0, dtype=float),
+                    np.ascontiguousarray(np.broadcast_to(self.p.c_hat0, (self.n, 2)), dtype=float))
 
     def step(self, leader_pose: np.ndarray, leader_vel: np.ndarray, pose: np.ndarray, vel: np.ndarray,
              comm: Comm | None = None) -> np.ndarray:
@@ -126,22 +126,62 @@ class ControlStack:
         ``comm`` (optional): link weights and received neighbour estimates of a faulty
         network for this step's estimator update; None = the paper's perfect network.
         """
-        p = self.p
-        if p.learning and not self._first:
-            self.learner.step(self.tau_body, vel, p.dt)
-        est = self.estimator
-        self.err = err = tracking_error(est.pose, pose, p.offsets)
-        u = self.vs if p.law == "bioinspired" else err[:, 0]
-        self.cmd = velocity_command(err, est.vel, u, p.k1, p.k2, p.k3)
-        if self._first:
-            self.dfilter.reset(self.cmd)
-            self._first = False
-        self.dcmd = self.dfilter.step(self.cmd)
-        self.tau_raw = sliding_mode_torques(self.cmd, self.dcmd, vel, self.learner.c_hat, p.c_gain, p.torque_phi)
-        self.saturated = np.any(np.abs(self.tau_raw) > self._lim, axis=1)
-        self.tau = saturate(self.tau_raw, self._lim, p.steer_priority)
-        self.tau_body = wheel_to_body(self.tau)
-        est.step(leader_pose, leader_vel, p.dt, comm)
-        if p.law == "bioinspired":
-            self.vs = shunting_step(self.vs, err[:, 0], p.A, p.B, p.D, p.dt)
-        return self.tau
+        self._pose_in[:] = pose
+        self._vel_in[:] = vel
+        lp = np.ascontiguousarray(leader_pose, dtype=float)
+        lv = np.ascontiguousarray(leader_vel, dtype=float)
+        control_step(self.gains, self.state, lp, lv, self._pose_in, self._vel_in, self._comm_in(comm))
+        return self.state.tau
+
+    def _comm_in(self, comm: Comm | None) -> CommIn:
+        if comm is None:
+            return self._no_comm
+        g = self.graph
+        m = int(g.src.shape[0])
+        s = self.state
+        rp = s.est_pose[g.dst] if comm.recv_pose is None else comm.recv_pose
+        rv = s.est_vel[g.dst] if comm.recv_vel is None else comm.recv_vel
+        c = np.ascontiguousarray
+        return CommIn(True, c(comm.edge_w, dtype=float), c(comm.leader_w, dtype=float),
+                      c(rp, dtype=float).reshape(m, 3), c(rv, dtype=float).reshape(m, 2))
+
+    def set_tau_max(self, tau_max: np.ndarray) -> None:
+        """Change the wheel torque limits (n,) N·m in place (e.g. an actuator fault mid-run)."""
+        self.gains.lim[:] = tau_max
+
+    def signals(self) -> dict[str, np.ndarray]:
+        """The stack's signals of the last step, by log channel name (views)."""
+        s = self.state
+        return {"est_pose": s.est_pose, "est_vel": s.est_vel, "cmd": s.cmd, "dcmd": s.dcmd, "tau": s.tau,
+                "tau_raw": s.tau_raw, "c_hat": s.c_hat, "z_hat": s.z_hat, "vs": s.vs,
+                "tracking_error": s.err, "saturated": s.saturated}
+
+    # ------------------------------------------------------------------ conveniences
+    @property
+    def c_hat(self) -> np.ndarray:
+        """Current ``[â, b̂]`` (n, 2)."""
+        return self.state.c_hat
+
+    @property
+    def est_pose(self) -> np.ndarray:
+        return self.state.est_pose
+
+    @property
+    def est_vel(self) -> np.ndarray:
+        return self.state.est_vel
+
+    @property
+    def cmd(self) -> np.ndarray:
+        return self.state.cmd
+
+    @property
+    def tau(self) -> np.ndarray:
+        return self.state.tau
+
+    @property
+    def tau_raw(self) -> np.ndarray:
+        return self.state.tau_raw
+
+    @property
+    def saturated(self) -> np.ndarray:
+        return self.state.saturated

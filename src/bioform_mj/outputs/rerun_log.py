@@ -351,19 +351,25 @@ class RerunLive:
 
 def state_row(run: Any) -> dict[str, np.ndarray]:
     """The log channels of one instant of a live run (:class:`~bioform_mj.sim.RunState`), with a time axis of 1."""
-    st = run.stack
+    sig = run.stack.signals()
+    n = run.pose.shape[0]
+
+    def get(name: str, shape: tuple[int, ...]) -> np.ndarray:
+        v = sig.get(name)
+        return np.full(shape, np.nan) if v is None else np.asarray(v, dtype=float)
+
     lp = np.asarray(run.leader_pose, dtype=float)
     pose = np.asarray(run.pose, dtype=float)
-    est = np.asarray(st.estimator.pose, dtype=float)
+    est = get("est_pose", (n, 3))
     slots = np.asarray(run.slots, dtype=float)
     row = {
         "t": np.array([run.t]),
         "leader_pose": lp, "leader_vel": np.asarray(run.leader_vel, dtype=float),
         "pose": pose, "vel": np.asarray(run.vel, dtype=float),
-        "est_pose": est, "est_vel": np.asarray(st.estimator.vel, dtype=float),
-        "cmd": np.asarray(st.cmd, dtype=float), "tau": np.asarray(st.tau, dtype=float),
-        "c_hat": np.asarray(st.c_hat, dtype=float), "c_true": np.asarray(run.plant.c_true(), dtype=float),
-        "vs": np.asarray(st.vs, dtype=float), "tracking_error": np.asarray(st.err, dtype=float),
+        "est_pose": est, "est_vel": get("est_vel", (n, 2)),
+        "cmd": get("cmd", (n, 2)), "tau": get("tau", (n, 2)),
+        "c_hat": get("c_hat", (n, 2)), "c_true": np.asarray(run.plant.c_true(), dtype=float),
+        "vs": get("vs", (n,)), "tracking_error": get("tracking_error", (n, 3)),
         "formation_error": np.linalg.norm(pose[:, :2] - slots, axis=1),
         "estimation_error": np.linalg.norm(est[:, :2] - lp[None, :2], axis=1),
         "slots": slots,

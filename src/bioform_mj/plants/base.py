@@ -1,4 +1,4 @@
-"""The small interface every plant implements (SPEC §8, STYLE: plants behind one interface)."""
+"""The small interface every plant implements (design §8, STYLE: plants behind one interface)."""
 from __future__ import annotations
 
 from typing import Callable, Protocol

@@ -1,11 +1,65 @@
-"""The paper's idealised plant: unicycle kinematics with ``ż = diag(τ_a, τ_b) c + d`` (eq. 34)."""
+"""The paper's idealised plant: unicycle kinematics with ``ż = diag(τ_a, τ_b) c + d`` (eq. 34).
+
+The RK4 step is :func:`~bioform_mj.control.equations.unicycle_rk4` (written once); the
+plant object and the compiled chunk kernel :func:`run_chunk` both call it, so the
+step-by-step loop and the compiled loop compute the same bits.
+"""
 from __future__ import annotations
+
+from typing import Any, Callable
 
 import numpy as np
 
-from ..control.common import wrap
-from ..control.torque import wheel_to_body
+from ..control.equations import njit, unicycle_rk4, wrap
+from ..control.kernel import control_step
+from ..disturbance import Harmonic
+from ..engine import OK, after_control
 from .base import DisturbanceFn
+
+
+@njit
+def ideal_step(x, tau, c, extra, dist, t, dt, n_sub):
+    """Advance ``x`` (n, 5) ``[x, y, θ, υ, ω]`` in place over one control period ``dt`` (s) from
+    ``t``: ``n_sub`` RK4 steps with ``acc = diag(τ_a, τ_b) c + extra`` held, the harmonic
+    disturbance rows ``dist`` (2, 4) ``bias, amp, freq, phase``; heading wrapped at the end."""
+    h = dt / n_sub
+    for i in range(x.shape[0]):
+        tl = tau[i, 0]
+        tr = tau[i, 1]
+        av = (tl + tr) * c[i, 0] + extra[i, 0]
+        aw = (tr - tl) * c[i, 1] + extra[i, 1]
+        xi, yi, th, v, w = x[i, 0], x[i, 1], x[i, 2], x[i, 3], x[i, 4]
+        for s in range(n_sub):
+            xi, yi, th, v, w = unicycle_rk4(xi, yi, th, v, w, av, aw, dist[0, 0], dist[0, 1], dist[0, 2],
+                                           dist[0, 3], dist[1, 0], dist[1, 1], dist[1, 2], dist[1, 3],
+                                           t + s * h, h)
+        x[i, 0], x[i, 1], x[i, 2], x[i, 3], x[i, 4] = xi, yi, wrap(th), v, w
+
+
+@njit
+def _observe(x, pose, vel):
+    for i in range(x.shape[0]):
+        pose[i, 0], pose[i, 1], pose[i, 2] = x[i, 0], x[i, 1], x[i, 2]
+        vel[i, 0], vel[i, 1] = x[i, 3], x[i, 4]
+
+
+@njit
+def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, c, dist, x, extra, pose, vel, met, acc,
+              lg, j0, stride, offsets, lim, diag):
+    """Plant steps ``k0 … k1−1`` of the closed loop, each followed by the control step of
+    ``k+1`` (if ``k+1 < N``; the control step of ``k0`` must be done). Returns
+    ``(plant steps done, next log row, status)`` (status: ``engine.OK`` or a failed guard)."""
+    j = j0
+    for k in range(k0, k1):
+        ideal_step(x, s.tau, c, extra, dist, k * dt, dt, n_sub)
+        _observe(x, pose, vel)
+        if k + 1 < N:
+            control_step(g, s, L_pose[k + 1], L_vel[k + 1], pose, vel, comm)
+            j, status = after_control(k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c,
+                                      offsets, lim, diag)
+            if status != OK:
+                return k + 1 - k0, j, status
+    return k1 - k0, j, OK
 
 
 class IdealPlant:
@@ -39,12 +93,15 @@ class IdealPlant:
         self.disturbance = disturbance
         self.mass = None if mass is None else np.array(np.broadcast_to(mass, (self.n,)), dtype=float)
         self.inertia = None if inertia is None else np.array(np.broadcast_to(inertia, (self.n,)), dtype=float)
-        self.x = np.zeros((self.n, 5))  # [x, y, θ, υ, ω]
+        self.x = np.zeros((self.n, 5))  # [x, y, θ, υ, ω], updated in place
+        self._zero_acc = np.zeros((self.n, 2))
+        self._dist = self._dist_rows()
         self.reset()
 
     def reset(self) -> None:
         self.x[:, :3] = self.initial_poses
-        self.x[:, 2] = wrap(self.x[:, 2])
+        for i in range(self.n):
+            self.x[i, 2] = wrap(float(self.x[i, 2]))
         self.x[:, 3:] = 0.0
         self._push_until: np.ndarray | None = None  # pushes (faults): see push()
 
@@ -54,29 +111,37 @@ class IdealPlant:
     def c_true(self) -> np.ndarray:
         return self._c.copy()
 
-    def _f(self, x: np.ndarray, acc: np.ndarray, t: float) -> np.ndarray:
-        dx = np.empty_like(x)
-        dx[:, 0] = x[:, 3] * np.cos(x[:, 2])
-        dx[:, 1] = x[:, 3] * np.sin(x[:, 2])
-        dx[:, 2] = x[:, 4]
-        dx[:, 3:] = acc + self.disturbance(t)
-        return dx
+    def _dist_rows(self) -> np.ndarray | None:
+        """(2, 4) ``bias, amp, freq, phase`` of a harmonic disturbance (zeros if none), None otherwise."""
+        d = self.disturbance
+        if d is None:
+            return np.zeros((2, 4))
+        if isinstance(d, Harmonic):
+            return np.array(d.terms, dtype=float).reshape(2, 4)
+        return None
 
     def step(self, tau: np.ndarray, t: float) -> None:
-        acc = wheel_to_body(tau) * self._c  # diag(τ_a, τ_b) c
-        if self._push_until is not None:  # faults: an external push (push())
-            acc = acc + self._push_acc(t)
-        h = self.h
+        """Apply wheel torques (n, 2) ``[τ_L, τ_R]`` N·m for one control period from ``t`` (s)."""
+        extra = self._push_acc(t) if self._push_until is not None else self._zero_acc  # faults: push()
+        dist = self._dist
+        if dist is None:  # a disturbance given as a function: fold it into `extra`, held over the period
+            extra = extra + np.asarray(self.disturbance(t), dtype=float)
+            dist = np.zeros((2, 4))
+        ideal_step(self.x, np.ascontiguousarray(tau, dtype=float), self._c, np.ascontiguousarray(extra),
+                   dist, float(t), self.control_dt, self.n_substeps)
+
+    def compiled_chunk(self, ctx: Any) -> Callable[[int, int, int], tuple[int, int, int]] | None:
+        """The compiled loop over this plant (see ``sim``), or None if a disturbance is not harmonic."""
+        if self._dist is None:
+            return None
         x = self.x
-        for k in range(self.n_substeps):
-            tk = t + k * h
-            k1 = self._f(x, acc, tk)
-            k2 = self._f(x + 0.5 * h * k1, acc, tk + 0.5 * h)
-            k3 = self._f(x + 0.5 * h * k2, acc, tk + 0.5 * h)
-            k4 = self._f(x + h * k3, acc, tk + h)
-            x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
-        x[:, 2] = wrap(x[:, 2])
-        self.x = x
+        pose, vel = ctx.pose, ctx.vel
+
+        def chunk(k0: int, k1: int, j: int) -> tuple[int, int, int]:
+            return run_chunk(ctx.gains, ctx.state, ctx.comm, k0, k1, ctx.N, self.control_dt, self.n_substeps,
+                             ctx.L_pose, ctx.L_vel, self._c, self._dist, x, self._zero_acc, pose, vel, ctx.met,
+                             ctx.acc, ctx.log, j, ctx.stride, ctx.offsets, ctx.bounds, ctx.diag)
+        return chunk
 
     def set_leader(self, pose: np.ndarray, slots: np.ndarray | None) -> None:
         """Nothing to show on the ideal plant."""

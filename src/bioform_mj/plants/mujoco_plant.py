@@ -1,4 +1,4 @@
-"""MuJoCo plant: ``n`` MJCF differential-drive robots on a floor, driven by wheel torques (SPEC §8).
+"""MuJoCo plant: ``n`` MJCF differential-drive robots on a floor, driven by wheel torques (design §8).
 
 Reads each robot's pose ``(x, y, θ)`` of the axle midpoint and its body-frame ``(υ, ω)``
 from the free joint's ``qpos``/``qvel``; writes the wheel motor ``ctrl`` (N·m). The
@@ -20,6 +20,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from bioform_mj.disturbance import Harmonic
 from bioform_mj.errors import Diverged
 from bioform_mj.identify import RobotParams, robot_parameters
 from bioform_mj.scene import (
@@ -31,30 +32,16 @@ from bioform_mj.scene import (
     payload_inertial,
 )
 
+from .mujoco_kernels import HAVE_MJ_STEP, apply_inputs, observe, run_chunk, watch_tilt
+
 log = logging.getLogger(__name__)
+
+#: a chassis tilted further than this from upright (deg) counts as tipped over (outcome ``tipped``)
+TIP_ANGLE_DEG = 45.0
 
 __all__ = ["MujocoPlant"]
 
 _WARNING_NAMES = {int(w): w.name for w in mujoco.mjtWarning.__members__.values() if w.name != "mjNWARNING"}
-
-
-# (w, x, y, z) ⊗ (w, x, y, z) flattened (16) → H = [R00, R10, 0, R20, R21, R22] of a unit
-# quaternion: (R00, R10) is the heading direction, R2· the third row of the rotation
-_QUAT_TO_H = np.zeros((16, 6))
-for _col, _terms in enumerate((
-    {(0, 0): 1, (1, 1): 1, (2, 2): -1, (3, 3): -1},  # R00 = w² + x² − y² − z²
-    {(0, 3): 2, (1, 2): 2},  # R10 = 2(wz + xy)
-    {},  # 0: pairs with the vertical velocity
-    {(1, 3): 2, (0, 2): -2},  # R20 = 2(xz − wy)
-    {(2, 3): 2, (0, 1): 2},  # R21 = 2(yz + wx)
-    {(0, 0): 1, (1, 1): -1, (2, 2): -1, (3, 3): 1},  # R22 = w² − x² − y² + z²
-)):
-    for (_a, _b), _coef in _terms.items():
-        _QUAT_TO_H[4 * _a + _b, _col] = _coef
-# (qvel_free * H) (n, 6) → [υ·|h|, ω]: sums of the linear (0:3) and angular (3:6) parts
-_SUM_LIN_ANG = np.zeros((6, 2))
-_SUM_LIN_ANG[:3, 0] = 1.0
-_SUM_LIN_ANG[3:, 1] = 1.0
 
 
 class MujocoPlant:
@@ -135,8 +122,13 @@ class MujocoPlant:
         self._ctrl = np.array([[m.actuator(p + a).id for a in ROBOT.motors] for p in prefixes])  # (n, 2)
         self._markers = Markers(m, n)
         self._heading = (self._base[:, None], np.array([0, 3]))  # (R00, R10) of each base in xmat
-        self._xfrc = np.zeros((n, 6))  # buffer: applied force/torque per base
+        self._axle = np.zeros((n, 3))  # axle midpoint in each base's frame (m): the reference of pose and υ
+        self._up = np.ones(n)  # cosine of each chassis' tilt at the last observe()
+        self.tip_step = np.full(n, -1, dtype=np.int64)  # first control step each robot was found tipped
+        self.tilt_cos = float(np.cos(np.radians(TIP_ANGLE_DEG)))
         self._warnings = [self.data.warning[i] for i in range(int(mujoco.mjtWarning.mjNWARNING))]
+        self._warn = self.data.warning.number  # view of the warning counters, read by the compiled loop
+        self._dist = self._dist_rows()
 
         # nominal inertial properties of each base, restored by reset()
         b = self._base
@@ -201,30 +193,17 @@ class MujocoPlant:
         mujoco.mj_resetData(m, d)  # qpos0 = initial poses; mocap bodies at their spec positions
         mujoco.mj_forward(m, d)
         self._step_count = 0
+        self.tip_step[:] = -1
         self._push_until: np.ndarray | None = None  # pushes (faults): see push()
 
-    def _frames(self) -> tuple[np.ndarray, np.ndarray]:
-        """Gathered free-joint ``qpos`` (n, 7) and ``H`` (n, 6) = ``[hx, hy, 0, R20, R21, R22]``.
-
-        ``(hx, hy) = (R00, R10)`` is the heading direction (unnormalised if the robot pitches
-        or rolls), ``R2·`` the third row of the rotation, from one matmul on the quaternion's
-        outer product: few numpy calls, since their overhead dominates at small n.
-        """
-        q = self.data.qpos[self._q7]
-        quat = q[:, 3:]
-        outer = (quat[:, :, None] * quat[:, None, :]).reshape(self.n, 16)
-        return q, outer @ _QUAT_TO_H
-
     def observe(self) -> tuple[np.ndarray, np.ndarray]:
-        """Pose (n, 3) ``[x, y, θ ∈ (−π, π]]`` and body-frame velocity (n, 2) ``[υ, ω]``."""
-        q, h = self._frames()
-        hx, hy = h[:, 0], h[:, 1]
+        """Pose (n, 3) ``[x, y, θ ∈ (−π, π]]`` and body-frame velocity (n, 2) ``[υ, ω]`` of each
+        axle midpoint (:func:`~bioform_mj.control.equations.planar_state`); new arrays."""
         pose = np.empty((self.n, 3))
-        pose[:, :2] = q[:, :2]
-        pose[:, 2] = np.arctan2(hy + 0.0, hx)  # + 0.0 turns −0.0 into +0.0: θ ≠ −π
-        # υ = world velocity of the axle midpoint · unit heading; ω = R[2, :] · ω_body
-        vel = (self.data.qvel[self._v6] * h) @ _SUM_LIN_ANG
-        vel[:, 0] /= np.hypot(hx, hy)
+        vel = np.empty((self.n, 2))
+        d = self.data
+        observe(d.qpos, d.qvel, self._q7[:, 0], self._v6[:, 0], self._axle, pose, vel, self._up)
+        watch_tilt(self._up, self.tilt_cos, self.tip_step, self._step_count)
         return pose, vel
 
     def step(self, tau: np.ndarray, t: float) -> None:
@@ -233,16 +212,14 @@ class MujocoPlant:
         tau = np.asarray(tau, dtype=float)
         if tau.shape != (self.n, 2):
             raise ValueError(f"tau must have shape ({self.n}, 2), got {tau.shape}")
-        d.ctrl[self._ctrl] = tau
-        if self.disturbance is not None:
-            dist = np.asarray(self.disturbance(t), dtype=float)
-            # M_eff d1 along the heading, I_eff d2 about z: accelerations as in eq. 34 (SPEC §8).
-            # Heading (R00, R10) from xmat of the last forward pass (at most one physics step
-            # old; held over the control period like d itself); |(R00, R10)| = cos(pitch) ≈ 1.
-            xfrc = self._xfrc
-            xfrc[:, :2] = d.xmat[self._heading] * (self._m_eff * dist[:, 0])[:, None]
-            xfrc[:, 5] = self._i_eff * dist[:, 1]
-            d.xfrc_applied[self._base] = xfrc
+        dist = self._dist
+        use = self.disturbance is not None
+        if use and dist is None:  # a disturbance given as a function: its value at t, held
+            vals = np.asarray(self.disturbance(t), dtype=float)
+            dist = np.zeros((2, 4))
+            dist[:, 0] = vals[0]
+        apply_inputs(np.ascontiguousarray(tau), float(t), d.ctrl, self._ctrl, d.xfrc_applied, d.xmat, self._base,
+                     self._m_eff, self._i_eff, np.zeros((2, 4)) if dist is None else dist, use)
         if self._push_until is not None:  # faults: an external push on some chassis (push())
             self._apply_push(t)
         mujoco.mj_step(m, d, self.n_substeps)
@@ -267,7 +244,7 @@ class MujocoPlant:
         )
 
     def c_true(self) -> np.ndarray:
-        """Ground truth ``[a_eff, b_eff]`` (n, 2) from the compiled model (SPEC §8)."""
+        """Ground truth ``[a_eff, b_eff]`` (n, 2) from the compiled model (design §8)."""
         return self._c.copy()
 
     def set_leader(self, pose: np.ndarray, slots: np.ndarray | None) -> None:
@@ -307,7 +284,50 @@ class MujocoPlant:
     # ------------------------------------------------------------------ faults
     def upright(self) -> np.ndarray:
         """(n,) cosine of each chassis' tilt from upright: 1 level, 0 on its side, −1 upside down."""
-        return self._frames()[1][:, 5].copy()
+        self.observe()
+        return self._up.copy()
+
+    # ------------------------------------------------------------------ compiled loop
+    def _dist_rows(self) -> np.ndarray | None:
+        """(2, 4) rows of a harmonic disturbance; zeros if none; None if not harmonic."""
+        d = self.disturbance
+        if d is None:
+            return np.zeros((2, 4))
+        if isinstance(d, Harmonic):
+            return np.array(d.terms, dtype=float).reshape(2, 4)
+        return None
+
+    def compiled_chunk(self, ctx, record_inputs=None):
+        """The compiled loop over this plant (see ``sim``); None where it cannot run
+        (no libmujoco symbol, a non-harmonic disturbance, pushes)."""
+        import numba
+
+        if not HAVE_MJ_STEP or self._dist is None or numba.config.DISABLE_JIT:
+            return None
+        m, d = self.model, self.data
+        q7 = np.ascontiguousarray(self._q7[:, 0], dtype=np.int64)
+        v6 = np.ascontiguousarray(self._v6[:, 0], dtype=np.int64)
+        ctrl_id = np.ascontiguousarray(self._ctrl, dtype=np.int64)
+        base = np.ascontiguousarray(self._base, dtype=np.int64)
+        rec = record_inputs if record_inputs is not None else (np.zeros((0, m.nu)), np.zeros((0, self.n, 6)))
+        use = self.disturbance is not None
+
+        def chunk(k0: int, k1: int, j: int) -> tuple[int, int, int]:
+            done, j, status = run_chunk(
+                ctx.gains, ctx.state, ctx.comm, k0, k1, ctx.N, self.control_dt, self.n_substeps, ctx.L_pose,
+                ctx.L_vel, m._address, d._address, d.qpos, d.qvel, q7, v6, self._axle, self._up, self.tilt_cos,
+                self.tip_step, d.ctrl, ctrl_id,
+                d.xfrc_applied, d.xmat, base, self._m_eff, self._i_eff, self._dist, use, self._warn, self._c,
+                ctx.pose, ctx.vel, ctx.met, ctx.acc, ctx.log, j, ctx.stride, ctx.offsets, ctx.bounds, ctx.diag,
+                rec[0], rec[1])
+            self._step_count = k0 + done
+            if status == 2:  # engine.PLANT_FAILED: a MuJoCo warning in step k0 + done
+                self._step_count += 1
+                for i, w_ in enumerate(self._warnings):
+                    if w_.number:
+                        self._raise_warning(i, w_)
+            return done, j, status
+        return chunk
 
     def push(self, i: int, force_xy, torque_z: float, until_t: float) -> None:
         """Push follower ``i`` (0-based): world-frame force ``force_xy`` (N) and yaw torque

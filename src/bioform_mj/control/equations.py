@@ -1,0 +1,311 @@
+"""The paper's equations, each written once, as small functions on scalars.
+
+This module is the single source of every equation of the control law and of the
+ideal plant (docs/design.md §2 maps each equation to its function here). Each function
+takes floats and returns a float or a tuple of floats; it uses only ``+ − × ÷``,
+comparisons, ``min``/``max``/``abs`` and the names ``cos, sin, exp, atan2, hypot, sqrt``
+imported below. That restricted form is what lets one source serve three engines:
+
+* the compiled CPU engine: :func:`equation` compiles each function with numba
+  (cached on disk, IEEE semantics, no fastmath), and the kernels in ``kernel.py`` and
+  in each plant call them inside their loops;
+* a readable Python path for debugging: run with ``NUMBA_DISABLE_JIT=1`` and the very
+  same functions execute as plain Python (``math`` functions, libm);
+* a batch engine can re-read the plain source (:data:`EQUATIONS`) and compile it for
+  another target (e.g. Warp functions), instead of a third copy.
+
+Vectorised numpy forms of the same equations live only in ``tests/oracle.py``, as
+independent oracles compared with stated tolerances.
+"""
+from __future__ import annotations
+
+from math import atan2, cos, exp, hypot, pi, sin, sqrt  # noqa: F401  (the names equations may use)
+from typing import Callable
+
+try:  # numba is a dependency; without it everything still runs as plain Python
+    import numba
+
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover
+    numba = None
+    HAVE_NUMBA = False
+
+#: name -> plain Python function of every equation (for engines that compile the source elsewhere)
+EQUATIONS: dict[str, Callable] = {}
+
+
+def njit(fn: Callable) -> Callable:
+    """numba-compile ``fn`` (cached on disk, no fastmath: IEEE results); identity without numba."""
+    if not HAVE_NUMBA:  # pragma: no cover
+        return fn
+    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+
+
+def equation(fn: Callable) -> Callable:
+    """Register ``fn`` as an equation (plain source kept in :data:`EQUATIONS`) and compile it."""
+    EQUATIONS[fn.__name__] = fn
+    return njit(fn)
+
+
+# ----------------------------------------------------------------------------- helpers
+@equation
+def wrap(a: float) -> float:
+    """Angle ``a`` (rad) wrapped to (−π, π] (design §3: every heading difference is wrapped)."""
+    return pi - (pi - a) % (2.0 * pi)
+
+
+@equation
+def sat(x: float, phi: float) -> float:
+    """``sgn(x)`` for ``phi == 0`` (the paper), else the boundary layer ``clip(x/phi, −1, 1)``.
+
+    ``phi`` has the units of ``x``. In discrete time a term ``−k sat(x/φ)`` is stable only
+    while ``k·dt/φ < 2`` (design §4).
+    """
+    if phi == 0.0:
+        if x > 0.0:
+            return 1.0
+        if x < 0.0:
+            return -1.0
+        return 0.0
+    return min(max(x / phi, -1.0), 1.0)
+
+
+@equation
+def clip(x: float, lo: float, hi: float) -> float:
+    """``x`` limited to ``[lo, hi]``."""
+    return min(max(x, lo), hi)
+
+
+# -------------------------------------------------------------- estimator (eqs. 12–13)
+@equation
+def estimator_step(px: float, py: float, pth: float, v: float, w: float,
+                   ep0: float, ep1: float, ep2: float, ev0: float, ev1: float,
+                   kx: float, ky: float, kth: float, ka0: float, ka1: float, kb0: float, kb1: float,
+                   phi0: float, phi1: float, dt: float) -> tuple[float, float, float, float, float]:
+    """One explicit-Euler step of the distributed estimator of follower ``i``.
+
+    ``(px, py, pth)`` = ``P_ir`` (m, m, rad), ``(v, w)`` = ``[υ_ir, ω_ir]``; ``ep*`` the
+    consensus errors ``Σ_j a_ij (P_i − P_j) + a_ir (P_i − P_r)`` (heading wrapped), ``ev*``
+    the same for the velocities. Eq. 12: ``Ṗ = [υ cos θ, υ sin θ, ω] − k_p ⊙ P̃``;
+    eq. 13: ``[υ̇, ω̇] = −k_a ⊙ sgn(e_v) − k_b ⊙ e_v`` (``sgn`` → :func:`sat` with ``phi``).
+    Returns the new ``(px, py, pth, v, w)``, ``pth`` wrapped.
+    """
+    dpx = v * cos(pth) - kx * ep0
+    dpy = v * sin(pth) - ky * ep1
+    dpth = w - kth * ep2
+    dv = -ka0 * sat(ev0, phi0) - kb0 * ev0
+    dw = -ka1 * sat(ev1, phi1) - kb1 * ev1
+    return px + dt * dpx, py + dt * dpy, wrap(pth + dt * dpth), v + dt * dv, w + dt * dw
+
+
+# ------------------------------------------------------- kinematic control (eqs. 27–33)
+@equation
+def tracking_error(xr: float, yr: float, thr: float, x: float, y: float, th: float,
+                   dx: float, dy: float) -> tuple[float, float, float]:
+    """Body-frame tracking error ``[x̃, ỹ, θ̃]`` of eqs. 27–28 (m, m, rad).
+
+    ``(xr, yr, thr)`` the follower's estimate of the leader, ``(x, y, th)`` its pose,
+    ``(dx, dy)`` its formation offset (world frame): ``e = P_ir − P_i − Δ_i`` rotated into
+    the body frame, ``θ̃`` wrapped.
+    """
+    ex = xr - x - dx
+    ey = yr - y - dy
+    c = cos(th)
+    s = sin(th)
+    return c * ex + s * ey, -s * ex + c * ey, wrap(thr - th)
+
+
+@equation
+def velocity_command(ey: float, eth: float, u: float, v_ir: float, w_ir: float,
+                     k1: float, k2: float, k3: float) -> tuple[float, float]:
+    """``[υ_cmd, ω_cmd]`` of eq. 31 (m/s, rad/s).
+
+    ``υ_cmd = υ_ir cos θ̃ + k1 u``, ``ω_cmd = ω_ir + k2 υ_ir ỹ + k3 υ_ir sin θ̃``, with
+    ``u = V_s`` (bioinspired) or ``u = x̃`` (conventional backstepping).
+    """
+    return v_ir * cos(eth) + k1 * u, w_ir + k2 * v_ir * ey + k3 * v_ir * sin(eth)
+
+
+@equation
+def neuron_step(vs: float, x: float, A: float, B: float, D: float, dt: float) -> float:
+    """The shunting neuron (eq. 32) advanced by ``dt`` (s) for a frozen input ``x``.
+
+    ``V̇ = −A V + (B − V) f(x) − (D + V) g(x)``, ``f = max(x, 0)``, ``g = max(−x, 0)``
+    (the paper's ``V_s1`` is a typo for ``V_si``). Linear in ``V`` for frozen ``x``, so it
+    is integrated exactly: ``V`` stays in ``(−D, B)`` for any step and input.
+    """
+    f = max(x, 0.0)
+    g = max(-x, 0.0)
+    lam = A + f + g
+    v_inf = (B * f - D * g) / lam
+    return v_inf + (vs - v_inf) * exp(-lam * dt)
+
+
+# ------------------------------------------------- command derivative (design §6)
+@equation
+def filter_step(y: float, dy: float, u: float, f00: float, f01: float, f10: float, f11: float,
+                g0: float, g1: float) -> tuple[float, float]:
+    """One exact-discretisation step of ``ÿ = ω_n² (u − y) − 2 ω_n ẏ`` (u held over the step).
+
+    ``(f00 … f11)``, ``(g0, g1)`` are the transition matrix and input vector
+    (:func:`filter_coefficients`). Returns the new ``(y, ẏ)``.
+    """
+    return f00 * y + f01 * dy + g0 * u, f10 * y + f11 * dy + g1 * u
+
+
+def filter_coefficients(wn: float, dt: float) -> tuple[float, float, float, float, float, float]:
+    """``(f00, f01, f10, f11, g0, g1)`` of :func:`filter_step` for ``ω_n`` (rad/s) and ``dt`` (s)."""
+    a = exp(-wn * dt)
+    return (a * (1 + wn * dt), a * dt, -(wn ** 2) * dt * a, a * (1 - wn * dt),
+            1.0 - a * (1 + wn * dt), wn * wn * dt * a)
+
+
+# ---------------------------------------------------------- torque law (eqs. 38–39)
+@equation
+def sliding_mode(v_cmd: float, w_cmd: float, dv_cmd: float, dw_cmd: float, v: float, w: float,
+                 a_hat: float, b_hat: float, ca: float, cb: float, phi: float) -> tuple[float, float]:
+    """Unsaturated wheel torques ``(τ_L, τ_R)`` (N·m) of eqs. 38–39.
+
+    ``U = ż_cmd + c ⊙ sgn(z_cmd − z)``; ``τ_L = U_a/(2â) − U_b/(2b̂)``,
+    ``τ_R = U_a/(2â) + U_b/(2b̂)``: this pairs with ``τ_b = τ_R − τ_L`` (design §5, the
+    paper's ``τ_L − τ_R`` turns the robot the wrong way).
+    """
+    half_a = (dv_cmd + ca * sat(v_cmd - v, phi)) / (2.0 * a_hat)
+    half_b = (dw_cmd + cb * sat(w_cmd - w, phi)) / (2.0 * b_hat)
+    return half_a - half_b, half_a + half_b
+
+
+@equation
+def saturate(tl: float, tr: float, lim: float, steer: bool) -> tuple[float, float]:
+    """Wheel torques ``(τ_L, τ_R)`` limited to ``±lim`` (N·m) (design §5).
+
+    ``steer = False`` clips each wheel alone. ``steer = True`` (steer priority) keeps
+    ``τ_b = τ_R − τ_L`` (clipped to ``±2 lim``) and gives ``τ_a`` what remains,
+    ``|τ_a| ≤ 2 lim − |τ_b|``; both keep each wheel within its limit.
+    """
+    if not steer:
+        return clip(tl, -lim, lim), clip(tr, -lim, lim)
+    tb = clip(tr - tl, -2.0 * lim, 2.0 * lim)
+    room = 2.0 * lim - abs(tb)
+    ta = clip(tl + tr, -room, room)
+    return 0.5 * (ta - tb), 0.5 * (ta + tb)
+
+
+# ----------------------------------------------------------------- learner (eq. 37)
+@equation
+def learner_step(z_hat: float, e_int: float, c_hat: float, d_hat: float, tau: float, z: float,
+                 k4: float, k5: float, kd: float, c_min: float, c_max: float,
+                 h: float) -> tuple[float, float, float, float]:
+    """One backward-Euler step of eq. 37 for one channel (``υ`` with ``τ_a``, or ``ω`` with ``τ_b``).
+
+    ``e = ẑ − z``, ``E = ∫e``, ``S = k4 E + e``; ``ẑ' = τ ĉ + d̂ − k4 e − k5 S``,
+    ``E' = e``, ``ĉ' = −τ k4 S``, ``d̂' = −kd S`` (``kd = 0``: the paper). Linear in
+    ``(ẑ, E, ĉ, d̂)`` for the frozen ``τ`` applied over the step and the velocity ``z``
+    measured at its end, so solved in closed form (A-stable, design §5); ``ĉ`` is then
+    projected onto ``[c_min, c_max]``. Returns the new ``(ẑ, E, ĉ, d̂)``.
+    """
+    R = e_int - h * z
+    S0 = k4 * R - z
+    S1 = 1.0 + h * k4
+    hk4t = h * k4 * tau
+    P = c_hat - hk4t * S0
+    Q = hk4t * S1
+    Pd = d_hat - h * kd * S0
+    Qd = h * kd * S1
+    den = 1.0 + h * k4 + h * k5 * S1 + h * tau * Q + h * Qd
+    zn = (z_hat + h * (tau * P + Pd + k4 * z - k5 * S0)) / den
+    return zn, R + h * zn, clip(P - Q * zn, c_min, c_max), Pd - Qd * zn
+
+
+# ------------------------------------------------------------- ideal plant (eq. 34)
+@equation
+def harmonic(bias: float, amp: float, freq: float, phase: float, t: float) -> float:
+    """Disturbance ``bias + amp cos(freq t + phase)`` at time ``t`` (s)."""
+    return bias + amp * cos(freq * t + phase)
+
+
+@equation
+def unicycle_rk4(x: float, y: float, th: float, v: float, w: float, acc_v: float, acc_w: float,
+                 d0: float, d1: float, d2: float, d3: float, e0: float, e1: float, e2: float, e3: float,
+                 t: float, h: float) -> tuple[float, float, float, float, float]:
+    """One RK4 step of length ``h`` (s) from ``t`` of the paper's plant for one robot.
+
+    ``ẋ = υ cos θ``, ``ẏ = υ sin θ``, ``θ̇ = ω``, ``υ̇ = acc_v + d1(t)``, ``ω̇ = acc_w + d2(t)``
+    with ``acc = diag(τ_a, τ_b) c`` held over the step and the harmonic disturbances
+    ``d1 = harmonic(d0..d3)``, ``d2 = harmonic(e0..e3)``. The heading is not wrapped here.
+    """
+    hh = 0.5 * h
+    a1 = acc_v + harmonic(d0, d1, d2, d3, t)
+    b1 = acc_w + harmonic(e0, e1, e2, e3, t)
+    am = acc_v + harmonic(d0, d1, d2, d3, t + hh)
+    bm = acc_w + harmonic(e0, e1, e2, e3, t + hh)
+    a4 = acc_v + harmonic(d0, d1, d2, d3, t + h)
+    b4 = acc_w + harmonic(e0, e1, e2, e3, t + h)
+    # stage 1
+    kx1 = v * cos(th)
+    ky1 = v * sin(th)
+    kt1 = w
+    # stage 2
+    th2 = th + hh * kt1
+    v2 = v + hh * a1
+    kx2 = v2 * cos(th2)
+    ky2 = v2 * sin(th2)
+    kt2 = w + hh * b1
+    # stage 3
+    th3 = th + hh * kt2
+    v3 = v + hh * am
+    kx3 = v3 * cos(th3)
+    ky3 = v3 * sin(th3)
+    kt3 = w + hh * bm
+    # stage 4
+    th4 = th + h * kt3
+    v4 = v + h * am
+    kx4 = v4 * cos(th4)
+    ky4 = v4 * sin(th4)
+    kt4 = w + h * bm
+    s = h / 6.0
+    return (x + s * (kx1 + 2.0 * kx2 + 2.0 * kx3 + kx4),
+            y + s * (ky1 + 2.0 * ky2 + 2.0 * ky3 + ky4),
+            th + s * (kt1 + 2.0 * kt2 + 2.0 * kt3 + kt4),
+            v + s * (a1 + 2.0 * am + 2.0 * am + a4),
+            w + s * (b1 + 2.0 * bm + 2.0 * bm + b4))
+
+
+# ------------------------------------------------------- measurement of a rigid chassis
+@equation
+def planar_state(px: float, py: float, qw: float, qx: float, qy: float, qz: float,
+                 vx: float, vy: float, vz: float, wx: float, wy: float, wz: float,
+                 cx: float, cy: float, cz: float) -> tuple[float, float, float, float, float, float]:
+    """Pose and body-frame velocity of a chassis point, from a free joint's state.
+
+    ``(px, py)`` the body origin (m), ``(qw, qx, qy, qz)`` its orientation, ``(vx, vy, vz)``
+    the origin's world-frame velocity (m/s), ``(wx, wy, wz)`` the body-frame angular
+    velocity (rad/s) — MuJoCo's free-joint ``qpos``/``qvel`` — and ``(cx, cy, cz)`` the
+    reference point (the axle midpoint) in the body frame (m).
+
+    Returns ``(x, y, θ, υ, ω, up)``: the point's world position ``p + R c``; the heading
+    ``θ = atan2(R10, R00)``; ``υ`` = the point's velocity ``v + ω_w × (R c)`` along the unit
+    heading; ``ω`` = the world-z component of the angular velocity; ``up = R22`` the cosine
+    of the chassis tilt (1 level, 0 on its side).
+    """
+    r00 = qw * qw + qx * qx - qy * qy - qz * qz
+    r01 = 2.0 * (qx * qy - qw * qz)
+    r02 = 2.0 * (qx * qz + qw * qy)
+    r10 = 2.0 * (qw * qz + qx * qy)
+    r11 = qw * qw - qx * qx + qy * qy - qz * qz
+    r12 = 2.0 * (qy * qz - qw * qx)
+    r20 = 2.0 * (qx * qz - qw * qy)
+    r21 = 2.0 * (qy * qz + qw * qx)
+    r22 = qw * qw - qx * qx - qy * qy + qz * qz
+    # the reference point in world axes, relative to the origin
+    ox = r00 * cx + r01 * cy + r02 * cz
+    oy = r10 * cx + r11 * cy + r12 * cz
+    # angular velocity in world axes
+    gx = r00 * wx + r01 * wy + r02 * wz
+    gy = r10 * wx + r11 * wy + r12 * wz
+    gz = r20 * wx + r21 * wy + r22 * wz
+    oz = r20 * cx + r21 * cy + r22 * cz
+    ux = vx + gy * oz - gz * oy
+    uy = vy + gz * ox - gx * oz
+    n = hypot(r00, r10)
+    return (px + ox, py + oy, atan2(r10 + 0.0, r00), (ux * r00 + uy * r10) / n, gz, r22)

@@ -1,0 +1,278 @@
+"""One control step of the whole stack, compiled: the paper's controller for ``n`` followers.
+
+The equations are those of ``equations.py`` (written once); this module only loops them
+over followers and graph edges, on named structures that numba compiles:
+
+* :class:`Gains`: every number of the stack, resolved per follower (read-only in the
+  kernel, except ``lim`` which an actuator fault may change);
+* :class:`StackState`: every state and every intermediate signal of the last step,
+  updated in place (so views taken once by a logger stay valid);
+* :class:`CommIn`: what each follower received this step (faulty networks; design §8).
+
+Order within a step at time ``t_k`` (design §2): learner over ``(t_{k−1}, t_k]`` with
+the torques applied then and the velocities measured now; tracking error from the
+current estimates; velocity command from the current neuron state; command derivative;
+sliding-mode torques with ``ĉ``; saturation; estimator and neuron advance to ``t_{k+1}``.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .equations import (
+    estimator_step,
+    filter_step,
+    learner_step,
+    neuron_step,
+    njit,
+    saturate,
+    sliding_mode,
+    tracking_error,
+    velocity_command,
+    wrap,
+)
+
+
+class Gains(NamedTuple):
+    """Numbers of the stack (units in brackets); arrays are per follower ``(n, …)`` or per edge ``(m,)``.
+
+    Kinematics (eq. 31–32): ``k1`` [1/s], ``k2`` [rad/m²], ``k3`` [rad/m]; neuron ``A, B, D``.
+    Estimator (eqs. 12–13): ``kx, ky, kth`` [1/s]; sign gains ``ka0, ka1`` [m/s², rad/s²];
+    linear gains ``kb0, kb1`` [1/s]; boundary layers ``ephi0, ephi1`` (0 = ``sgn``).
+    Torque law (eqs. 38–39): ``ca, cb``; boundary layer ``tphi`` (0 = ``sgn``);
+    command-derivative filter coefficients ``f00 … g1`` (:func:`~.equations.filter_coefficients`).
+    Learner (eq. 37): ``k4`` (n, 2), ``k5a, k5b`` [1/s], ``kda, kdb`` (0 = the paper),
+    bounds ``c_min, c_max`` (n, 2). ``lim`` (n,) wheel torque limit [N·m]; ``steer``: steer-priority
+    saturation; ``bio``: bioinspired law (else backstepping); ``learning``: run eq. 37.
+    ``offsets`` (n, 2) [m]; graph edges ``src ← dst`` (m,); ``lacc`` (n,) leader access ``a_ir``.
+    ``dt`` [s] the control period.
+    """
+
+    k1: float
+    k2: float
+    k3: float
+    A: float
+    B: float
+    D: float
+    kx: float
+    ky: float
+    kth: float
+    ka0: float
+    ka1: float
+    kb0: float
+    kb1: float
+    ephi0: float
+    ephi1: float
+    ca: float
+    cb: float
+    tphi: float
+    f00: float
+    f01: float
+    f10: float
+    f11: float
+    g0: float
+    g1: float
+    k5a: float
+    k5b: float
+    kda: float
+    kdb: float
+    dt: float
+    bio: bool
+    learning: bool
+    steer: bool
+    k4: np.ndarray
+    c_min: np.ndarray
+    c_max: np.ndarray
+    lim: np.ndarray
+    offsets: np.ndarray
+    src: np.ndarray
+    dst: np.ndarray
+    lacc: np.ndarray
+
+
+class StackState(NamedTuple):
+    """State and last-step signals of the stack, arrays over followers.
+
+    ``est_pose`` (n,3) ``P_ir``; ``est_vel`` (n,2) ``[υ_ir, ω_ir]``; learner ``z_hat, e_int,
+    c_hat, d_hat`` (n,2); filter ``fy, fdy`` (n,2); neuron ``vs`` (n,); last step's
+    ``err`` (n,3) ``[x̃, ỹ, θ̃]``, ``cmd``, ``dcmd`` (n,2), ``tau`` (applied) and ``tau_raw``
+    (commanded) ``[τ_L, τ_R]`` and ``tau_body`` ``[τ_a, τ_b]`` (n,2), ``saturated`` (n,);
+    scratch ``p_err`` (n,3), ``v_err`` (n,2); ``first`` (1,) 1 until the first step.
+    """
+
+    est_pose: np.ndarray
+    est_vel: np.ndarray
+    z_hat: np.ndarray
+    e_int: np.ndarray
+    c_hat: np.ndarray
+    d_hat: np.ndarray
+    fy: np.ndarray
+    fdy: np.ndarray
+    vs: np.ndarray
+    err: np.ndarray
+    cmd: np.ndarray
+    dcmd: np.ndarray
+    tau: np.ndarray
+    tau_raw: np.ndarray
+    tau_body: np.ndarray
+    saturated: np.ndarray
+    p_err: np.ndarray
+    v_err: np.ndarray
+    first: np.ndarray
+
+
+class CommIn(NamedTuple):
+    """What the network delivered this step (design §8). ``use = False``: the paper's perfect
+    network (the arrays are then ignored). ``ew`` (m,) edge weights, ``lw`` (n,) leader-link
+    weights, ``rp`` (m,3) / ``rv`` (m,2) the neighbour estimates as received over each edge."""
+
+    use: bool
+    ew: np.ndarray
+    lw: np.ndarray
+    rp: np.ndarray
+    rv: np.ndarray
+
+
+def new_state(n: int) -> StackState:
+    """A zeroed :class:`StackState` for ``n`` followers."""
+    z2 = lambda: np.zeros((n, 2))  # noqa: E731
+    return StackState(np.zeros((n, 3)), z2(), z2(), z2(), z2(), z2(), z2(), z2(), np.zeros(n),
+                      np.zeros((n, 3)), z2(), z2(), z2(), z2(), z2(), np.zeros(n, dtype=np.bool_),
+                      np.zeros((n, 3)), z2(), np.ones(1, dtype=np.int64))
+
+
+def perfect_comm(n: int, m: int) -> CommIn:
+    """The :class:`CommIn` of a perfect network."""
+    return CommIn(False, np.ones(m), np.ones(n), np.zeros((m, 3)), np.zeros((m, 2)))
+
+
+@njit
+def reset_state(g, s, est_pose0, vel0, c_hat0):
+    """Initial estimates ``P_ir(0)`` (n,3) (heading wrapped), ``[υ_ir, ω_ir](0) = 0`` (Remark 5),
+    ``ẑ = vel0`` (measured), ``∫e = 0``, ``ĉ = clip(c_hat0)``, ``d̂ = 0``, ``V_s = 0``, no torque."""
+    n = est_pose0.shape[0]
+    for i in range(n):
+        s.est_pose[i, 0] = est_pose0[i, 0]
+        s.est_pose[i, 1] = est_pose0[i, 1]
+        s.est_pose[i, 2] = wrap(est_pose0[i, 2])
+        for c in range(2):
+            s.est_vel[i, c] = 0.0
+            s.z_hat[i, c] = vel0[i, c]
+            s.e_int[i, c] = 0.0
+            s.c_hat[i, c] = min(max(c_hat0[i, c], g.c_min[i, c]), g.c_max[i, c])
+            s.d_hat[i, c] = 0.0
+            s.fy[i, c] = 0.0
+            s.fdy[i, c] = 0.0
+            s.cmd[i, c] = 0.0
+            s.dcmd[i, c] = 0.0
+            s.tau[i, c] = 0.0
+            s.tau_raw[i, c] = 0.0
+            s.tau_body[i, c] = 0.0
+        for c in range(3):
+            s.err[i, c] = 0.0
+        s.vs[i] = 0.0
+        s.saturated[i] = False
+    s.first[0] = 1
+
+
+@njit
+def control_step(g, s, lp, lv, pose, vel, comm):
+    """One control step of every follower, in place on ``s`` (:class:`StackState`).
+
+    ``lp`` (3,), ``lv`` (2,): the leader's pose and velocities (read only through ``a_ir``);
+    ``pose`` (n,3), ``vel`` (n,2): what each follower measures of itself; ``comm``
+    (:class:`CommIn`). The torques to hold over the next period are ``s.tau`` (n,2).
+    """
+    if g.learning and s.first[0] == 0:
+        learner_update(g, s, vel)
+    command_and_torques(g, s, pose, vel)
+    estimator_update(g, s, lp, lv, comm)
+
+
+@njit
+def learner_update(g, s, vel):
+    """Eq. 37 over the last period for every follower, with the torques applied then
+    (``s.tau_body``) and the velocities ``vel`` (n, 2) measured now."""
+    dt = g.dt
+    for i in range(vel.shape[0]):
+        zn, en, cn, dn = learner_step(s.z_hat[i, 0], s.e_int[i, 0], s.c_hat[i, 0], s.d_hat[i, 0],
+                                      s.tau_body[i, 0], vel[i, 0], g.k4[i, 0], g.k5a, g.kda,
+                                      g.c_min[i, 0], g.c_max[i, 0], dt)
+        s.z_hat[i, 0], s.e_int[i, 0], s.c_hat[i, 0], s.d_hat[i, 0] = zn, en, cn, dn
+        zn, en, cn, dn = learner_step(s.z_hat[i, 1], s.e_int[i, 1], s.c_hat[i, 1], s.d_hat[i, 1],
+                                      s.tau_body[i, 1], vel[i, 1], g.k4[i, 1], g.k5b, g.kdb,
+                                      g.c_min[i, 1], g.c_max[i, 1], dt)
+        s.z_hat[i, 1], s.e_int[i, 1], s.c_hat[i, 1], s.d_hat[i, 1] = zn, en, cn, dn
+
+
+@njit
+def command_and_torques(g, s, pose, vel):
+    """Tracking error, velocity command (eq. 31), command derivative, sliding-mode torques
+    (eqs. 38–39) and saturation for every follower, from the current estimates."""
+    first = s.first[0] == 1
+    for i in range(pose.shape[0]):
+        e0, e1, e2 = tracking_error(s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2],
+                                    pose[i, 0], pose[i, 1], pose[i, 2], g.offsets[i, 0], g.offsets[i, 1])
+        s.err[i, 0], s.err[i, 1], s.err[i, 2] = e0, e1, e2
+        u = s.vs[i] if g.bio else e0
+        vc, wc = velocity_command(e1, e2, u, s.est_vel[i, 0], s.est_vel[i, 1], g.k1, g.k2, g.k3)
+        s.cmd[i, 0], s.cmd[i, 1] = vc, wc
+        for c in range(2):  # command derivative (design §6)
+            if first:
+                s.fy[i, c] = s.cmd[i, c]
+                s.fdy[i, c] = 0.0
+            y, dy = filter_step(s.fy[i, c], s.fdy[i, c], s.cmd[i, c], g.f00, g.f01, g.f10, g.f11, g.g0, g.g1)
+            s.fy[i, c], s.fdy[i, c] = y, dy
+            s.dcmd[i, c] = dy
+        r0, r1 = sliding_mode(vc, wc, s.dcmd[i, 0], s.dcmd[i, 1], vel[i, 0], vel[i, 1],
+                              s.c_hat[i, 0], s.c_hat[i, 1], g.ca, g.cb, g.tphi)
+        s.tau_raw[i, 0], s.tau_raw[i, 1] = r0, r1
+        L = g.lim[i]
+        s.saturated[i] = abs(r0) > L or abs(r1) > L
+        t0, t1 = saturate(r0, r1, L, g.steer)
+        s.tau[i, 0], s.tau[i, 1] = t0, t1
+        s.tau_body[i, 0] = t0 + t1  # τ_a = τ_L + τ_R
+        s.tau_body[i, 1] = t1 - t0  # τ_b = τ_R − τ_L (design §5)
+    s.first[0] = 0
+
+
+@njit
+def estimator_update(g, s, lp, lv, comm):
+    """The distributed estimator (eqs. 12–13) and the neuron (eq. 32) advanced to the next step:
+    consensus errors over the graph edges (and the leader for ``a_ir = 1``), one Euler step."""
+    n = s.est_pose.shape[0]
+    dt = g.dt
+    for i in range(n):
+        for c in range(3):
+            s.p_err[i, c] = 0.0
+        for c in range(2):
+            s.v_err[i, c] = 0.0
+    for e in range(g.src.shape[0]):
+        i = g.src[e]
+        j = g.dst[e]
+        w = comm.ew[e] if comm.use else 1.0
+        for c in range(3):
+            xj = comm.rp[e, c] if comm.use else s.est_pose[j, c]
+            d = s.est_pose[i, c] - xj
+            if c == 2:
+                d = wrap(d)
+            s.p_err[i, c] += d * w
+        for c in range(2):
+            xj = comm.rv[e, c] if comm.use else s.est_vel[j, c]
+            s.v_err[i, c] += (s.est_vel[i, c] - xj) * w
+    for i in range(n):
+        a = g.lacc[i] * comm.lw[i] if comm.use else g.lacc[i]
+        ep0 = a * (s.est_pose[i, 0] - lp[0]) + s.p_err[i, 0]
+        ep1 = a * (s.est_pose[i, 1] - lp[1]) + s.p_err[i, 1]
+        ep2 = a * wrap(s.est_pose[i, 2] - lp[2]) + s.p_err[i, 2]
+        ev0 = a * (s.est_vel[i, 0] - lv[0]) + s.v_err[i, 0]
+        ev1 = a * (s.est_vel[i, 1] - lv[1]) + s.v_err[i, 1]
+        px, py, pth, v, w = estimator_step(s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2],
+                                           s.est_vel[i, 0], s.est_vel[i, 1], ep0, ep1, ep2, ev0, ev1,
+                                           g.kx, g.ky, g.kth, g.ka0, g.ka1, g.kb0, g.kb1,
+                                           g.ephi0, g.ephi1, dt)
+        s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2] = px, py, pth
+        s.est_vel[i, 0], s.est_vel[i, 1] = v, w
+        if g.bio:  # neuron (eq. 32), exact for the frozen input x̃
+            s.vs[i] = neuron_step(s.vs[i], s.err[i, 0], g.A, g.B, g.D, dt)

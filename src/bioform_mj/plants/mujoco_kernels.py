@@ -1,0 +1,153 @@
+"""Compiled kernels of the MuJoCo plant: observe, apply inputs, and the closed loop in chunks.
+
+``MujocoPlant.observe``/``step`` call :func:`observe` and :func:`apply_inputs` from
+Python; :func:`run_chunk` runs many control periods without returning to Python, calling
+``mj_step`` of ``libmujoco`` by symbol (numba ExternalFunction, so the kernels are cached
+on disk) on the very ``MjModel``/``MjData`` the Python bindings own. Both paths run the
+same functions, so the step-by-step and the compiled loop compute the same bits.
+"""
+from __future__ import annotations
+
+import ctypes
+import importlib.util
+import os
+
+from ..control.equations import HAVE_NUMBA, harmonic, njit, planar_state
+from ..control.kernel import control_step
+from ..engine import OK, PLANT_FAILED, after_control
+
+if HAVE_NUMBA:
+    import numba
+
+
+def _libmujoco_path() -> str | None:
+    """Path of the libmujoco shipped with the ``mujoco`` Python package (without importing it)."""
+    spec = importlib.util.find_spec("mujoco")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    d = list(spec.submodule_search_locations)[0]
+    names = sorted(f for f in os.listdir(d) if f.startswith("libmujoco.so") or
+                   (f.startswith("libmujoco.") and f.endswith(".dylib")))
+    return os.path.join(d, names[-1]) if names else None
+
+
+# ``mj_step(const mjModel*, mjData*)`` called by symbol name; pointers passed as integers (the
+# same calling convention on the 64-bit platforms MuJoCo supports). The Python bindings load
+# the same file, so both act on the same MjModel/MjData.
+HAVE_MJ_STEP = False
+if HAVE_NUMBA:
+    _mj_step = numba.types.ExternalFunction("mj_step", numba.types.void(numba.types.intp, numba.types.intp))
+    try:
+        import llvmlite.binding as _llvm
+
+        _lib = _libmujoco_path()
+        if _lib is not None and ctypes.sizeof(ctypes.c_void_p) == 8:
+            _llvm.load_library_permanently(_lib)
+            HAVE_MJ_STEP = True
+    except (OSError, RuntimeError, ImportError):  # pragma: no cover - the step-by-step loop still works
+        HAVE_MJ_STEP = False
+
+
+@njit
+def observe(qpos, qvel, q7, v6, axle, pose, vel, up):
+    """Pose ``[x, y, θ]`` and body-frame ``[υ, ω]`` of each robot's axle midpoint, and the
+    cosine of its tilt ``up`` (n,), from the free joints (:func:`~..equations.planar_state`).
+    ``q7`` (n,) / ``v6`` (n,): first qpos / qvel address of each base's free joint;
+    ``axle`` (n, 3): the axle midpoint in the base body's frame (m)."""
+    for i in range(pose.shape[0]):
+        a = q7[i]
+        b = v6[i]
+        x, y, th, v, w, u = planar_state(qpos[a], qpos[a + 1], qpos[a + 3], qpos[a + 4], qpos[a + 5], qpos[a + 6],
+                                         qvel[b], qvel[b + 1], qvel[b + 2], qvel[b + 3], qvel[b + 4], qvel[b + 5],
+                                         axle[i, 0], axle[i, 1], axle[i, 2])
+        pose[i, 0], pose[i, 1], pose[i, 2] = x, y, th
+        vel[i, 0], vel[i, 1] = v, w
+        up[i] = u
+
+
+@njit
+def apply_inputs(tau, t, ctrl, ctrl_id, xfrc, xmat, base, m_eff, i_eff, dist, use_dist):
+    """Wheel torques ``tau`` (n, 2) to the motors ``ctrl[ctrl_id]``; with ``use_dist`` the
+    disturbance accelerations of eq. 34 at ``t`` (s) as chassis ``xfrc_applied``: a force
+    ``M_eff d1`` along the heading (from ``xmat`` of the last forward pass, held over the
+    period like ``d``) and a yaw torque ``I_eff d2`` (design §8)."""
+    for i in range(tau.shape[0]):
+        ctrl[ctrl_id[i, 0]] = tau[i, 0]
+        ctrl[ctrl_id[i, 1]] = tau[i, 1]
+    if use_dist:
+        d0 = harmonic(dist[0, 0], dist[0, 1], dist[0, 2], dist[0, 3], t)
+        d1 = harmonic(dist[1, 0], dist[1, 1], dist[1, 2], dist[1, 3], t)
+        for i in range(tau.shape[0]):
+            b = base[i]
+            xfrc[b, 0] = xmat[b, 0] * (m_eff[i] * d0)
+            xfrc[b, 1] = xmat[b, 3] * (m_eff[i] * d0)
+            xfrc[b, 5] = i_eff[i] * d1
+
+
+@njit
+def _warned(warn):
+    for w in range(warn.shape[0]):
+        if warn[w] != 0:
+            return True
+    return False
+
+
+@njit
+def watch_tilt(up, tilt_cos, tip_step, k):
+    """Record in ``tip_step`` (n,) the first step ``k`` at which a chassis' tilt cosine ``up``
+    fell below ``tilt_cos`` (entries still −1 have not tipped)."""
+    for i in range(up.shape[0]):
+        if tip_step[i] < 0 and up[i] < tilt_cos:
+            tip_step[i] = k
+
+
+@njit
+def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qvel, q7, v6, axle, up,
+              tilt_cos, tip_step,
+              ctrl, ctrl_id, xfrc, xmat, base, m_eff, i_eff, dist, use_dist, warn, c_true,
+              pose, vel, met, acc, lg, j0, stride, offsets, lim, diag, rec_ctrl, rec_xfrc):
+    """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by the
+    control step of ``k+1`` (if ``k+1 < N``; the control step of ``k0`` must be done).
+
+    Stops at the first physics step that raised a MuJoCo warning (``warn``, the counters of
+    ``MjData.warning``): status ``engine.PLANT_FAILED``, with the state before MuJoCo's reset
+    not observed. If ``rec_ctrl`` has rows, the inputs of step ``k`` are copied to
+    ``rec_ctrl[k]``, ``rec_xfrc[k]`` (for a bare-physics replay). Returns ``(steps done, next
+    log row, status)``.
+    """
+    j = j0
+    n = pose.shape[0]
+    for k in range(k0, k1):
+        apply_inputs(s.tau, k * dt, ctrl, ctrl_id, xfrc, xmat, base, m_eff, i_eff, dist, use_dist)
+        if rec_ctrl.shape[0] > k:
+            rec_ctrl[k, :] = ctrl
+            for i in range(n):
+                rec_xfrc[k, i, :] = xfrc[base[i], :]
+        for _ in range(n_sub):
+            _mj_step(mp, dp)
+            if _warned(warn):
+                return k - k0, j, PLANT_FAILED
+        observe(qpos, qvel, q7, v6, axle, pose, vel, up)
+        watch_tilt(up, tilt_cos, tip_step, k + 1)
+        if k + 1 < N:
+            control_step(g, s, L_pose[k + 1], L_vel[k + 1], pose, vel, comm)
+            j, status = after_control(k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c_true,
+                                      offsets, lim, diag)
+            if status != OK:
+                return k + 1 - k0, j, status
+    return k1 - k0, j, OK
+
+
+@njit
+def replay(mp, dp, n_sub, ctrl, xfrc, base, rec_ctrl, rec_xfrc, solver_niter):
+    """Bare physics for the benchmark: ``n_sub`` ``mj_step`` per recorded row of ``ctrl`` and
+    chassis ``xfrc_applied`` inputs. Returns the total of the solver's iterations."""
+    iters = 0
+    for k in range(rec_ctrl.shape[0]):
+        ctrl[:] = rec_ctrl[k]
+        for i in range(base.shape[0]):
+            xfrc[base[i], :] = rec_xfrc[k, i]
+        for _ in range(n_sub):
+            _mj_step(mp, dp)
+            iters += solver_niter[0]
+    return iters
