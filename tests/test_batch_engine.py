@@ -9,7 +9,7 @@ pytest.importorskip("mujoco_warp")
 
 import mujoco  # noqa: E402
 
-from bioform_mj.batch import standin_equations as E  # noqa: E402
+from bioform_mj.control import equations as E  # noqa: E402
 from bioform_mj.scene import build_scene, compile_scene  # noqa: E402
 
 wp.config.quiet = True
@@ -26,8 +26,8 @@ def mjm():
 def _xy_th(mjm, qpos, idx):
     out = []
     for a in idx.qadr:
-        th = E.body_state(*qpos[a + 3:a + 7], 0.0, 0.0, 0.0, 0.0, 0.0)[0]
-        out.append((qpos[a], qpos[a + 1], th))
+        x, y, th = E.planar_state(*qpos[a:a + 2], *qpos[a + 3:a + 7], *([0.0] * 9))[:3]
+        out.append((x, y, th))
     return np.array(out)
 
 
@@ -56,7 +56,7 @@ def test_constant_torques_match_c_mujoco(mjm):
 
 
 def test_closed_loop_on_device_with_per_world_masses(mjm):
-    """A velocity loop (``wheel_torques`` of the shared equations) runs per world between
+    """A velocity loop (``sliding_mode``/``saturate`` of the shared equations) runs per world between
     physics steps; world w has its own base masses (batched model fields + set_const)."""
     from bioform_mj.batch.engine import WarpBatch
 
@@ -69,7 +69,7 @@ def test_closed_loop_on_device_with_per_world_masses(mjm):
     cmd = np.zeros((nw, B.n, 2))
     cmd[:, :, 0] = [0.5, 0.3, -0.2]
     cmd[:, :, 1] = [0.3, -0.4, 0.0]
-    gains = (20.0, 2.0, 0.4, 10.0)
+    gains = (0.4, 10.0, 3.0, 0.5)
     B.run_tracking(cmd, nstep, gains)
     qw = B.qpos()
     finals = []
@@ -82,9 +82,11 @@ def test_closed_loop_on_device_with_per_world_masses(mjm):
         mujoco.mj_forward(m, d)
         for _ in range(nstep):
             for r, (a, v) in enumerate(zip(B.idx.qadr, B.idx.dadr)):
-                _, ups, om = E.body_state(*d.qpos[a + 3:a + 7], *d.qvel[v:v + 2], *d.qvel[v + 3:v + 6])
-                tl, tr, _ = E.wheel_torques(gains[0] * (cmd[w, r, 0] - ups), gains[1] * (cmd[w, r, 1] - om),
-                                            gains[2], gains[3], 20.0, 1.0)
+                _, _, _, ups, om, _ = E.planar_state(*d.qpos[a:a + 2], *d.qpos[a + 3:a + 7], *d.qvel[v:v + 6],
+                                                     0.0, 0.0, 0.0)
+                r0, r1 = E.sliding_mode(cmd[w, r, 0], cmd[w, r, 1], 0.0, 0.0, ups, om, gains[0], gains[1],
+                                        gains[2], gains[2], gains[3])
+                tl, tr = E.saturate(r0, r1, 20.0, True)
                 d.ctrl[B.idx.act[r]] = (tl, tr)
             mujoco.mj_step(m, d)
         ref = _xy_th(m, d.qpos, B.idx)

@@ -2,7 +2,7 @@
 
 * :mod:`.samesource`: the control equations' one source, compiled for Warp (and numba);
 * :mod:`.engine`: many worlds of a composed scene, observed/driven by Warp kernels;
-* :mod:`.standin_equations`: stand-in for ``control/equations.py`` until it lands.
+* :mod:`.control`: the control step of every world (one thread per world), and :func:`run_batch`.
 
 Importing this package imports nothing optional; see ``docs/warp_engine.md``.
 """

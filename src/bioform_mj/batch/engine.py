@@ -24,14 +24,15 @@ import warp as wp
 import mujoco_warp as mjw
 
 from ..scene import ROBOT, follower_prefix
-from . import standin_equations as _E
+from ..control import equations as _E
 from .samesource import warp_equations
 
 __all__ = ["RobotIndex", "WarpBatch", "robot_index", "HETERO_FIELDS"]
 
 EQ = warp_equations(_E, wp.float32)
-body_state = EQ.body_state  # module globals: Warp resolves kernel globals at build time
-wheel_torques = EQ.wheel_torques
+planar_state = EQ.planar_state  # module globals: Warp resolves kernel globals at build time
+sliding_mode = EQ.sliding_mode
+saturate = EQ.saturate
 
 #: Model fields (and the derived fields ``mjw.set_const`` rewrites) that must be batched
 #: per world for per-world masses/inertias of the robots.
@@ -83,11 +84,12 @@ def _observe(
     w, r = wp.tid()
     q = qadr[r]
     v = dadr[r]
-    th, ups, om = body_state(
-        qpos[w, q + 3], qpos[w, q + 4], qpos[w, q + 5], qpos[w, q + 6],
-        qvel[w, v], qvel[w, v + 1], qvel[w, v + 3], qvel[w, v + 4], qvel[w, v + 5],
+    x, y, th, ups, om, up = planar_state(
+        qpos[w, q], qpos[w, q + 1], qpos[w, q + 3], qpos[w, q + 4], qpos[w, q + 5], qpos[w, q + 6],
+        qvel[w, v], qvel[w, v + 1], qvel[w, v + 2], qvel[w, v + 3], qvel[w, v + 4], qvel[w, v + 5],
+        0.0, 0.0, 0.0,
     )
-    pose[w, r] = wp.vec3(qpos[w, q], qpos[w, q + 1], th)
+    pose[w, r] = wp.vec3(x, y, th)
     vel[w, r] = wp.vec2(ups, om)
 
 
@@ -107,22 +109,25 @@ def _track(
     dadr: wp.array(dtype=int),
     act: wp.array2d(dtype=int),
     cmd: wp.array2d(dtype=wp.vec2),
-    gains: wp.vec4,  # kv, kw, c_a, c_b
+    gains: wp.vec4,  # â, b̂, c (both channels), φ
     lim: float,
     ctrl: wp.array2d(dtype=float),
     vel: wp.array2d(dtype=wp.vec2),
 ):
-    """Stand-in control law: observe, ``ua = kv (υ_c − υ)``, ``ub = kw (ω_c − ω)``,
-    wheel split + steer-priority saturation (``wheel_torques``), write ``ctrl``."""
+    """A plain velocity loop (test fixture): observe (``planar_state``), the sliding-mode
+    torques with a boundary layer and zero command derivative (``sliding_mode``),
+    steer-priority saturation (``saturate``), write ``ctrl``."""
     w, r = wp.tid()
     q = qadr[r]
     v = dadr[r]
-    th, ups, om = body_state(
-        qpos[w, q + 3], qpos[w, q + 4], qpos[w, q + 5], qpos[w, q + 6],
-        qvel[w, v], qvel[w, v + 1], qvel[w, v + 3], qvel[w, v + 4], qvel[w, v + 5],
+    x, y, th, ups, om, up = planar_state(
+        qpos[w, q], qpos[w, q + 1], qpos[w, q + 3], qpos[w, q + 4], qpos[w, q + 5], qpos[w, q + 6],
+        qvel[w, v], qvel[w, v + 1], qvel[w, v + 2], qvel[w, v + 3], qvel[w, v + 4], qvel[w, v + 5],
+        0.0, 0.0, 0.0,
     )
     c = cmd[w, r]
-    tl, tr, sat = wheel_torques(gains[0] * (c[0] - ups), gains[1] * (c[1] - om), gains[2], gains[3], lim, 1.0)
+    r0, r1 = sliding_mode(c[0], c[1], 0.0, 0.0, ups, om, gains[0], gains[1], gains[2], gains[2], gains[3])
+    tl, tr = saturate(r0, r1, lim, True)
     ctrl[w, act[r, 0]] = tl
     ctrl[w, act[r, 1]] = tr
     vel[w, r] = wp.vec2(ups, om)
@@ -206,7 +211,7 @@ class WarpBatch:
             for _ in range(nstep):
                 mjw.step(self.m, self.d)
 
-    def run_tracking(self, cmd: np.ndarray, nstep: int, gains=(20.0, 2.0, 0.4, 10.0), lim: float = 20.0) -> None:
+    def run_tracking(self, cmd: np.ndarray, nstep: int, gains=(0.4, 10.0, 3.0, 0.1), lim: float = 20.0) -> None:
         """``nstep`` × [stand-in control kernel, physics step], all on the device."""
         c = wp.array(np.asarray(cmd, dtype=np.float32).reshape(self.nworld, self.n, 2), dtype=wp.vec2,
                      device=self.device)

@@ -1,7 +1,7 @@
 """One equation source, two compilers: numba (CPU engine) and Warp (batch engine).
 
 The control law is written once as small scalar Python functions (see
-``standin_equations.py`` for the contract). :func:`warp_equations` turns such a module
+``bioform_mj.control.equations``, registry ``EQUATIONS``). :func:`warp_equations` turns such a module
 into ``wp.func`` objects *from the same source text*; :func:`numba_equations` does the
 same for numba (used by the tests as the CPU reference). What the Warp translation does,
 and nothing more:
@@ -45,12 +45,18 @@ def _plain(obj):
 
 
 def equation_functions(module: types.ModuleType, names: Iterable[str] | None = None) -> dict[str, types.FunctionType]:
-    """The equations of ``module``: its functions defined in it (not imported), by name."""
+    """The equations of ``module``, by name: its registry ``EQUATIONS`` (name → plain function,
+    as in ``bioform_mj.control.equations``) if it has one, else its functions defined in it
+    (not imported, not ``_private``)."""
     out = {}
-    for name, obj in vars(module).items():
-        f = _plain(obj)
-        if isinstance(f, types.FunctionType) and f.__module__ == module.__name__ and not name.startswith("_"):
-            out[name] = f
+    registry = getattr(module, "EQUATIONS", None)
+    if isinstance(registry, dict):
+        out = {name: _plain(f) for name, f in registry.items()}
+    else:
+        for name, obj in vars(module).items():
+            f = _plain(obj)
+            if isinstance(f, types.FunctionType) and f.__module__ == module.__name__ and not name.startswith("_"):
+                out[name] = f
     if names is not None:
         names = list(names)
         missing = [n for n in names if n not in out]
@@ -149,6 +155,8 @@ def warp_equations(module: types.ModuleType, dtype=None, names: Iterable[str] | 
             ns[name] = shim
         elif isinstance(val, types.BuiltinFunctionType) and val in table:
             ns[name] = table[val]
+        elif val is math.hypot:  # no Warp builtin: sqrt(a² + b²) (no overflow guard; our inputs are O(1))
+            ns[name] = _hypot_func(wp, dtype, wmod)
         elif isinstance(val, bool):
             ns[name] = wp.constant(val)
         elif isinstance(val, float):
@@ -176,6 +184,16 @@ def warp_equations(module: types.ModuleType, dtype=None, names: Iterable[str] | 
     else:
         _CACHE[key] = result
     return result
+
+
+def _hypot_func(wp, dtype, wmod):
+    """``math.hypot(a, b)`` as a Warp function: ``sqrt(a² + b²)``."""
+    src = "def _hypot(a, b):\n    return wp.sqrt(a * a + b * b)\n"
+    ns = {"wp": wp, "__name__": wmod}
+    f = _compile_in(src, f"<bioform_mj.batch:_hypot:{dtype.__name__}>", ns, "_hypot")
+    f.__annotations__ = {"a": dtype, "b": dtype}
+    f.__module__ = wmod
+    return wp.func(f, module=wmod)
 
 
 def _pymod_func(wp, dtype, wmod):
@@ -215,18 +233,20 @@ def numba_equations(module: types.ModuleType) -> types.SimpleNamespace:
 _MAP_KERNELS: dict = {}
 
 
-def warp_map(wfunc, nargs: int, nout: int, dtype=None, device: str | None = None):
+def warp_map(wfunc, nargs: int, nout: int, dtype=None, device: str | None = None, bool_args=()):
     """A callable ``f(*arrays) -> ndarray (N, nout)`` that evaluates the Warp function
     ``wfunc`` (``nargs`` scalar inputs, ``nout`` scalar outputs) elementwise on the device.
-    Used to check a translation against its numba twin."""
+    Used to check a translation against its numba twin. ``bool_args``: indices of the
+    arguments that are ``bool`` in the source (passed as ``a != 0``)."""
     import numpy as np
     import warp as wp
 
     dtype = wp.float32 if dtype is None else dtype
-    k = (id(wfunc), nargs, nout, dtype.__name__)
+    bool_args = tuple(bool_args)
+    k = (id(wfunc), nargs, nout, dtype.__name__, bool_args)
     if k not in _MAP_KERNELS:
         args = ", ".join(f"a{i}: wp.array(dtype=F)" for i in range(nargs))
-        call = ", ".join(f"a{i}[i]" for i in range(nargs))
+        call = ", ".join(f"a{i}[i] != F(0.0)" if i in bool_args else f"a{i}[i]" for i in range(nargs))
         outs = ", ".join(f"r{j}" for j in range(nout))
         body = "".join(f"    out[i, {j}] = F(r{j})\n" for j in range(nout))
         name = f"_map_{abs(hash(k))}"
