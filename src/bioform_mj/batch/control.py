@@ -505,7 +505,7 @@ class BatchRun:
             self.m = mjw.put_model(mjm)
             self.d = mjw.put_data(mjm, plant.data, nworld=W, nconmax=nconmax, njmax=njmax)
             self.d.qpos.assign(qpos.astype(np.float32))
-            mjw.forward(self.m, self.d)
+            self._qpos0 = wp.clone(self.d.qpos)
             A = lambda x, dtype=F: wp.array(np.ascontiguousarray(x), dtype=dtype)  # noqa: E731
             g = BatchGains()
             g.sc = A(sc_rows)
@@ -554,20 +554,35 @@ class BatchRun:
                 mjw.step(self.m, self.d)
             self._launch_control()
 
-    def run(self, chunk: int = 100, capture: bool | None = None) -> float:
-        """Reset (control step 0) and run all ``N`` periods; returns the wall seconds of the
-        step loop. On CUDA (``capture`` None or True) ``chunk`` periods are captured once as
-        a CUDA graph and replayed."""
+    def reset(self) -> None:
+        """Physics back to the initial state of every world, then control step 0 (on the device)."""
+        d = self.d
         with wp.ScopedDevice(self.device):
+            wp.copy(d.qpos, self._qpos0)
+            d.qvel.zero_()
+            d.time.zero_()
+            d.ctrl.zero_()
+            d.xfrc_applied.zero_()
+            d.qacc_warmstart.zero_()
+            mjw.forward(self.m, d)
             self.s.k.zero_()
             self._launch_control()  # k = 0: observe, reset, control step 0, torques
-            use_graph = self.device.is_cuda if capture is None else capture
-            full, rest = divmod(self.N, chunk)
+
+    def run(self, chunk: int = 100, capture: bool | None = None) -> float:
+        """Reset and run all ``N`` control periods; returns the wall seconds of the step loop.
+        On CUDA (``capture`` None or True) ``chunk`` periods are captured once as a CUDA
+        graph (after one eager warm-up step that loads every kernel) and replayed."""
+        use_graph = self.device.is_cuda if capture is None else capture
+        full, rest = divmod(self.N, chunk)
+        with wp.ScopedDevice(self.device):
             if use_graph and full and self.graph is None:
+                self.reset()
+                self._steps(1)  # load every module outside the capture
+                wp.synchronize_device(self.device)
                 with wp.ScopedCapture() as cap:
                     self._steps(chunk)
                 self.graph = cap.graph
-                # the capture recorded but did not execute the chunk
+            self.reset()
             wp.synchronize_device(self.device)
             t0 = time.perf_counter()
             if use_graph and full:
@@ -576,6 +591,44 @@ class BatchRun:
                 self._steps(rest)
             else:
                 self._steps(self.N)
+            wp.synchronize_device(self.device)
+            return time.perf_counter() - t0
+
+    def run_physics(self, nsteps: int, ctrl: np.ndarray, chunk: int = 100, capture: bool | None = None) -> float:
+        """Physics alone on the same worlds (for the benchmark): from the initial state,
+        ``nsteps`` physics steps with the constant inputs ``ctrl`` (nworld, nu), no disturbance;
+        returns the wall seconds (CUDA: a captured chunk of ``chunk`` steps, replayed)."""
+        use_graph = self.device.is_cuda if capture is None else capture
+        full, rest = divmod(nsteps, chunk)
+        d = self.d
+
+        def steps(k):
+            for _ in range(k):
+                mjw.step(self.m, d)
+
+        def start():
+            self.reset()
+            d.ctrl.assign(np.asarray(ctrl, dtype=np.float32))
+            d.xfrc_applied.zero_()
+
+        with wp.ScopedDevice(self.device):
+            graph = None
+            if use_graph and full:
+                start()
+                steps(1)
+                wp.synchronize_device(self.device)
+                with wp.ScopedCapture() as cap:
+                    steps(chunk)
+                graph = cap.graph
+            start()
+            wp.synchronize_device(self.device)
+            t0 = time.perf_counter()
+            if graph is not None:
+                for _ in range(full):
+                    wp.capture_launch(graph)
+                steps(rest)
+            else:
+                steps(nsteps)
             wp.synchronize_device(self.device)
             return time.perf_counter() - t0
 
