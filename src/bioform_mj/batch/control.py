@@ -1,0 +1,687 @@
+"""The control step of many formations on MuJoCo Warp: one thread per world.
+
+:func:`_control` is ``control/kernel.py``'s ``control_step`` (learner, command and torques,
+estimator) plus the loop bookkeeping of ``engine.py`` (run metrics, divergence guards)
+and the plant glue of ``plants/mujoco_kernels.py`` (observe, wheel torques and the
+eq. 34 disturbance as chassis ``xfrc_applied``), for one world per thread, looping over
+its followers and graph edges in the same order as the CPU kernels. Every equation is
+the Warp translation (:mod:`.samesource`) of ``control/equations.py``: only loops,
+indexing and bookkeeping are written here.
+
+Precision: controller state, gains and metrics are float64 (the learner is stiff and
+``ĉ`` must match the CPU engine to 0.5 %); MuJoCo Warp's physics is float32, converted at
+the boundary (``qpos``/``qvel`` in, ``ctrl``/``xfrc_applied`` out).
+
+:func:`run_batch` runs a list of scenarios (one world each) of one composed scene. The
+step loop (``n_substeps`` × ``mjw.step`` + one ``_control`` launch per control step) reads
+nothing back to the host; the step counter lives on the device, so on CUDA a chunk of
+control steps is captured once as a CUDA graph and replayed.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Sequence
+
+import mujoco
+import numpy as np
+import warp as wp
+
+import mujoco_warp as mjw
+
+from ..control import equations as _E
+from ..control.stack import ControlStack
+from ..disturbance import Harmonic
+from ..engine import GUARDS
+from ..scenario import Scenario
+from .engine import robot_index
+from .samesource import warp_equations
+
+__all__ = ["run_batch", "BatchRun", "SCALARS"]
+
+F = wp.float64
+EQ = warp_equations(_E, F)
+# module globals: Warp resolves a kernel's globals when it builds the kernel
+wrap = EQ.wrap
+estimator_step = EQ.estimator_step
+tracking_error = EQ.tracking_error
+velocity_command = EQ.velocity_command
+neuron_step = EQ.neuron_step
+filter_step = EQ.filter_step
+sliding_mode = EQ.sliding_mode
+saturate = EQ.saturate
+learner_step = EQ.learner_step
+harmonic = EQ.harmonic
+planar_state = EQ.planar_state
+
+#: per-world scalar gains, columns of ``BatchGains.sc`` (names of ``control.kernel.Gains``,
+#: then the flags as 0/1, then ``scenario.limits``, then the disturbance rows of eq. 34)
+SCALARS = ("k1", "k2", "k3", "A", "B", "D", "kx", "ky", "kth", "ka0", "ka1", "kb0", "kb1", "ephi0", "ephi1",
+           "ca", "cb", "tphi", "f00", "f01", "f10", "f11", "g0", "g1", "k5a", "k5b", "kda", "kdb", "dt",
+           "bio", "learning", "steer", "lim_position", "lim_speed", "lim_torque",
+           "d0", "d1", "d2", "d3", "e0", "e1", "e2", "e3", "use_dist")
+_I = {name: wp.constant(i) for i, name in enumerate(SCALARS)}
+K1, K2, K3, A_, B_, D_ = (_I[x] for x in ("k1", "k2", "k3", "A", "B", "D"))
+KX, KY, KTH, KA0, KA1, KB0, KB1, EPHI0, EPHI1 = (_I[x] for x in ("kx", "ky", "kth", "ka0", "ka1", "kb0", "kb1",
+                                                                  "ephi0", "ephi1"))
+CA, CB, TPHI, F00, F01, F10, F11, G0, G1 = (_I[x] for x in ("ca", "cb", "tphi", "f00", "f01", "f10", "f11", "g0", "g1"))
+K5A, K5B, KDA, KDB, DT, BIO, LEARN, STEER = (_I[x] for x in ("k5a", "k5b", "kda", "kdb", "dt", "bio", "learning",
+                                                              "steer"))
+LPOS, LSPD, LTRQ = _I["lim_position"], _I["lim_speed"], _I["lim_torque"]
+DD0, DE0, USED = _I["d0"], _I["e0"], _I["use_dist"]
+
+
+@wp.struct
+class BatchGains:
+    """Per-world numbers (``W`` worlds, ``n`` followers, ``m`` edges)."""
+
+    sc: wp.array2d(dtype=F)  # (W, len(SCALARS))
+    k4: wp.array3d(dtype=F)  # (W, n, 2)
+    c_min: wp.array3d(dtype=F)
+    c_max: wp.array3d(dtype=F)
+    offsets: wp.array3d(dtype=F)  # (W, n, 2)
+    lim: wp.array2d(dtype=F)  # (W, n) wheel torque limit
+    lacc: wp.array2d(dtype=F)  # (W, n) leader access a_ir
+    c_hat0: wp.array3d(dtype=F)  # (W, n, 2)
+    est0: wp.array3d(dtype=F)  # (W, n, 3) P_ir(0)
+    m_eff: wp.array2d(dtype=F)  # (W, n)
+    i_eff: wp.array2d(dtype=F)
+    src: wp.array(dtype=int)  # (m,) graph edges src ← dst, shared by all worlds
+    dst: wp.array(dtype=int)
+
+
+@wp.struct
+class BatchState:
+    """``control.kernel.StackState`` with a leading world axis, plus the loop's own state."""
+
+    pose: wp.array3d(dtype=F)  # (W, n, 3) measured
+    vel: wp.array3d(dtype=F)  # (W, n, 2)
+    est_pose: wp.array3d(dtype=F)
+    est_vel: wp.array3d(dtype=F)
+    z_hat: wp.array3d(dtype=F)
+    e_int: wp.array3d(dtype=F)
+    c_hat: wp.array3d(dtype=F)
+    d_hat: wp.array3d(dtype=F)
+    fy: wp.array3d(dtype=F)
+    fdy: wp.array3d(dtype=F)
+    vs: wp.array2d(dtype=F)
+    err: wp.array3d(dtype=F)
+    cmd: wp.array3d(dtype=F)
+    dcmd: wp.array3d(dtype=F)
+    tau: wp.array3d(dtype=F)
+    tau_raw: wp.array3d(dtype=F)
+    tau_body: wp.array3d(dtype=F)
+    saturated: wp.array2d(dtype=int)
+    p_err: wp.array3d(dtype=F)
+    v_err: wp.array3d(dtype=F)
+    first: wp.array(dtype=int)  # (W,)
+    k: wp.array(dtype=int)  # (W,) the control step this world computes next
+    status: wp.array(dtype=int)  # (W,) 0 running, 1 a guard failed
+    k_done: wp.array(dtype=int)  # (W,) control steps done (N, or the step whose guard failed)
+    diag: wp.array2d(dtype=F)  # (W, 3) guard code (engine.GUARDS index + 1), follower, value
+    # metrics (engine.Metrics), per world and follower
+    verr: wp.array2d(dtype=F)
+    nsat: wp.array2d(dtype=F)
+    vmax: wp.array2d(dtype=F)
+    taumax: wp.array2d(dtype=F)
+    tauraw_max: wp.array2d(dtype=F)
+    ferr: wp.array2d(dtype=F)  # (W, n) formation error at the last observation
+
+
+@wp.func
+def _finite3(a: wp.array3d(dtype=F), w: int, i: int, nc: int) -> bool:
+    ok = bool(True)
+    for c in range(nc):
+        if not wp.isfinite(a[w, i, c]):
+            ok = False
+    return ok
+
+
+@wp.func
+def _check(g: BatchGains, s: BatchState, w: int, n: int) -> int:
+    """``engine.check`` for world ``w``: 0 if all guards pass, else writes ``s.diag[w]``."""
+    for i in range(n):
+        bad = int(0)
+        if not _finite3(s.pose, w, i, 3):
+            bad = 1
+        elif not _finite3(s.vel, w, i, 2):
+            bad = 2
+        elif not _finite3(s.est_pose, w, i, 3):
+            bad = 3
+        elif not _finite3(s.est_vel, w, i, 2):
+            bad = 4
+        elif not _finite3(s.cmd, w, i, 2):
+            bad = 5
+        elif not _finite3(s.tau_raw, w, i, 2):
+            bad = 6
+        elif not _finite3(s.c_hat, w, i, 2):
+            bad = 7
+        elif not wp.isfinite(s.vs[w, i]):
+            bad = 8
+        if bad != 0:
+            s.diag[w, 0] = F(bad)
+            s.diag[w, 1] = F(i)
+            s.diag[w, 2] = F(0.0)
+            return bad
+    for i in range(n):
+        val = F(0.0)
+        bad = int(0)
+        pmag = wp.max(wp.abs(s.pose[w, i, 0]), wp.abs(s.pose[w, i, 1]))
+        emag = wp.max(wp.abs(s.est_pose[w, i, 0]), wp.abs(s.est_pose[w, i, 1]))
+        tmag = wp.max(wp.abs(s.tau_raw[w, i, 0]), wp.abs(s.tau_raw[w, i, 1]))
+        if pmag > g.sc[w, LPOS]:
+            bad = 9
+            val = pmag
+        elif emag > g.sc[w, LPOS]:
+            bad = 10
+            val = emag
+        elif wp.abs(s.vel[w, i, 0]) > g.sc[w, LSPD]:
+            bad = 11
+            val = wp.abs(s.vel[w, i, 0])
+        elif wp.abs(s.cmd[w, i, 0]) > g.sc[w, LSPD]:
+            bad = 12
+            val = wp.abs(s.cmd[w, i, 0])
+        elif wp.abs(s.est_vel[w, i, 0]) > g.sc[w, LSPD]:
+            bad = 13
+            val = wp.abs(s.est_vel[w, i, 0])
+        elif tmag > g.sc[w, LTRQ]:
+            bad = 14
+            val = tmag
+        if bad != 0:
+            s.diag[w, 0] = F(bad)
+            s.diag[w, 1] = F(i)
+            s.diag[w, 2] = val
+            return bad
+    return 0
+
+
+@wp.kernel
+def _control(
+    g: BatchGains,
+    s: BatchState,
+    N: int,
+    L_pose: wp.array2d(dtype=F),  # (N + 1, 3) the leader, shared by all worlds
+    L_vel: wp.array2d(dtype=F),  # (N + 1, 2)
+    qpos: wp.array2d(dtype=float),
+    qvel: wp.array2d(dtype=float),
+    xmat: wp.array2d(dtype=wp.mat33),
+    qadr: wp.array(dtype=int),
+    dadr: wp.array(dtype=int),
+    base: wp.array(dtype=int),
+    act: wp.array2d(dtype=int),
+    axle: wp.array2d(dtype=F),  # (n, 3) reference point in the base frame
+    ctrl: wp.array2d(dtype=float),
+    xfrc: wp.array2d(dtype=wp.spatial_vector),
+):
+    """World ``w``: observe; at ``k = 0`` reset the stack (``kernel.reset_state``); for
+    ``k < N`` run control step ``k`` (``kernel.control_step``), the metrics and guards
+    (``engine.accumulate``/``check``) and apply its torques and ``d(k dt)`` to the plant
+    (``mujoco_kernels.apply_inputs``); then ``k += 1``."""
+    w = wp.tid()
+    k = s.k[w]
+    n = s.pose.shape[1]
+    dt = g.sc[w, DT]
+    zero = F(0.0)
+    # ---- observe (mujoco_kernels.observe)
+    for i in range(n):
+        qa = qadr[i]
+        qb = dadr[i]
+        x, y, th, v, om, up = planar_state(
+            F(qpos[w, qa]), F(qpos[w, qa + 1]), F(qpos[w, qa + 3]), F(qpos[w, qa + 4]), F(qpos[w, qa + 5]),
+            F(qpos[w, qa + 6]), F(qvel[w, qb]), F(qvel[w, qb + 1]), F(qvel[w, qb + 2]), F(qvel[w, qb + 3]),
+            F(qvel[w, qb + 4]), F(qvel[w, qb + 5]), axle[i, 0], axle[i, 1], axle[i, 2])
+        s.pose[w, i, 0] = x
+        s.pose[w, i, 1] = y
+        s.pose[w, i, 2] = th
+        s.vel[w, i, 0] = v
+        s.vel[w, i, 1] = om
+    kl = wp.min(k, N)
+    for i in range(n):  # formation error against the true leader at this observation
+        dx = s.pose[w, i, 0] - (L_pose[kl, 0] - g.offsets[w, i, 0])
+        dy = s.pose[w, i, 1] - (L_pose[kl, 1] - g.offsets[w, i, 1])
+        s.ferr[w, i] = wp.sqrt(dx * dx + dy * dy)
+    # ---- reset (kernel.reset_state)
+    if k == 0:
+        for i in range(n):
+            s.est_pose[w, i, 0] = g.est0[w, i, 0]
+            s.est_pose[w, i, 1] = g.est0[w, i, 1]
+            s.est_pose[w, i, 2] = wrap(g.est0[w, i, 2])
+            for c in range(2):
+                s.est_vel[w, i, c] = zero
+                s.z_hat[w, i, c] = s.vel[w, i, c]
+                s.e_int[w, i, c] = zero
+                s.c_hat[w, i, c] = wp.min(wp.max(g.c_hat0[w, i, c], g.c_min[w, i, c]), g.c_max[w, i, c])
+                s.d_hat[w, i, c] = zero
+                s.fy[w, i, c] = zero
+                s.fdy[w, i, c] = zero
+                s.cmd[w, i, c] = zero
+                s.dcmd[w, i, c] = zero
+                s.tau[w, i, c] = zero
+                s.tau_raw[w, i, c] = zero
+                s.tau_body[w, i, c] = zero
+            for c in range(3):
+                s.err[w, i, c] = zero
+            s.vs[w, i] = zero
+            s.saturated[w, i] = 0
+            s.verr[w, i] = zero
+            s.nsat[w, i] = zero
+            s.vmax[w, i] = zero
+            s.taumax[w, i] = zero
+            s.tauraw_max[w, i] = zero
+        s.first[w] = 1
+        s.status[w] = 0
+        s.k_done[w] = 0
+    running = s.status[w] == 0 and k < N
+    if running:
+        # ---- learner_update
+        if g.sc[w, LEARN] != zero and s.first[w] == 0:
+            for i in range(n):
+                zn, en, cn, dn = learner_step(s.z_hat[w, i, 0], s.e_int[w, i, 0], s.c_hat[w, i, 0], s.d_hat[w, i, 0],
+                                              s.tau_body[w, i, 0], s.vel[w, i, 0], g.k4[w, i, 0], g.sc[w, K5A],
+                                              g.sc[w, KDA], g.c_min[w, i, 0], g.c_max[w, i, 0], dt)
+                s.z_hat[w, i, 0] = zn
+                s.e_int[w, i, 0] = en
+                s.c_hat[w, i, 0] = cn
+                s.d_hat[w, i, 0] = dn
+                zn, en, cn, dn = learner_step(s.z_hat[w, i, 1], s.e_int[w, i, 1], s.c_hat[w, i, 1], s.d_hat[w, i, 1],
+                                              s.tau_body[w, i, 1], s.vel[w, i, 1], g.k4[w, i, 1], g.sc[w, K5B],
+                                              g.sc[w, KDB], g.c_min[w, i, 1], g.c_max[w, i, 1], dt)
+                s.z_hat[w, i, 1] = zn
+                s.e_int[w, i, 1] = en
+                s.c_hat[w, i, 1] = cn
+                s.d_hat[w, i, 1] = dn
+        # ---- command_and_torques
+        first = s.first[w] == 1
+        steer = g.sc[w, STEER] != zero
+        for i in range(n):
+            e0, e1, e2 = tracking_error(s.est_pose[w, i, 0], s.est_pose[w, i, 1], s.est_pose[w, i, 2],
+                                        s.pose[w, i, 0], s.pose[w, i, 1], s.pose[w, i, 2],
+                                        g.offsets[w, i, 0], g.offsets[w, i, 1])
+            s.err[w, i, 0] = e0
+            s.err[w, i, 1] = e1
+            s.err[w, i, 2] = e2
+            u = e0
+            if g.sc[w, BIO] != zero:
+                u = s.vs[w, i]
+            vc, wc = velocity_command(e1, e2, u, s.est_vel[w, i, 0], s.est_vel[w, i, 1],
+                                      g.sc[w, K1], g.sc[w, K2], g.sc[w, K3])
+            s.cmd[w, i, 0] = vc
+            s.cmd[w, i, 1] = wc
+            for c in range(2):
+                if first:
+                    s.fy[w, i, c] = s.cmd[w, i, c]
+                    s.fdy[w, i, c] = zero
+                y, dy = filter_step(s.fy[w, i, c], s.fdy[w, i, c], s.cmd[w, i, c], g.sc[w, F00], g.sc[w, F01],
+                                    g.sc[w, F10], g.sc[w, F11], g.sc[w, G0], g.sc[w, G1])
+                s.fy[w, i, c] = y
+                s.fdy[w, i, c] = dy
+                s.dcmd[w, i, c] = dy
+            r0, r1 = sliding_mode(vc, wc, s.dcmd[w, i, 0], s.dcmd[w, i, 1], s.vel[w, i, 0], s.vel[w, i, 1],
+                                  s.c_hat[w, i, 0], s.c_hat[w, i, 1], g.sc[w, CA], g.sc[w, CB], g.sc[w, TPHI])
+            s.tau_raw[w, i, 0] = r0
+            s.tau_raw[w, i, 1] = r1
+            L = g.lim[w, i]
+            sat = int(0)
+            if wp.abs(r0) > L or wp.abs(r1) > L:
+                sat = 1
+            s.saturated[w, i] = sat
+            t0, t1 = saturate(r0, r1, L, steer)
+            s.tau[w, i, 0] = t0
+            s.tau[w, i, 1] = t1
+            s.tau_body[w, i, 0] = t0 + t1
+            s.tau_body[w, i, 1] = t1 - t0
+        s.first[w] = 0
+        # ---- estimator_update (perfect network)
+        for i in range(n):
+            for c in range(3):
+                s.p_err[w, i, c] = zero
+            for c in range(2):
+                s.v_err[w, i, c] = zero
+        for e in range(g.src.shape[0]):
+            i = g.src[e]
+            j = g.dst[e]
+            for c in range(3):
+                d = s.est_pose[w, i, c] - s.est_pose[w, j, c]
+                if c == 2:
+                    d = wrap(d)
+                s.p_err[w, i, c] = s.p_err[w, i, c] + d
+            for c in range(2):
+                s.v_err[w, i, c] = s.v_err[w, i, c] + (s.est_vel[w, i, c] - s.est_vel[w, j, c])
+        for i in range(n):
+            ai = g.lacc[w, i]
+            ep0 = ai * (s.est_pose[w, i, 0] - L_pose[k, 0]) + s.p_err[w, i, 0]
+            ep1 = ai * (s.est_pose[w, i, 1] - L_pose[k, 1]) + s.p_err[w, i, 1]
+            ep2 = ai * wrap(s.est_pose[w, i, 2] - L_pose[k, 2]) + s.p_err[w, i, 2]
+            ev0 = ai * (s.est_vel[w, i, 0] - L_vel[k, 0]) + s.v_err[w, i, 0]
+            ev1 = ai * (s.est_vel[w, i, 1] - L_vel[k, 1]) + s.v_err[w, i, 1]
+            px, py, pth, v, om = estimator_step(s.est_pose[w, i, 0], s.est_pose[w, i, 1], s.est_pose[w, i, 2],
+                                                s.est_vel[w, i, 0], s.est_vel[w, i, 1], ep0, ep1, ep2, ev0, ev1,
+                                                g.sc[w, KX], g.sc[w, KY], g.sc[w, KTH], g.sc[w, KA0], g.sc[w, KA1],
+                                                g.sc[w, KB0], g.sc[w, KB1], g.sc[w, EPHI0], g.sc[w, EPHI1], dt)
+            s.est_pose[w, i, 0] = px
+            s.est_pose[w, i, 1] = py
+            s.est_pose[w, i, 2] = pth
+            s.est_vel[w, i, 0] = v
+            s.est_vel[w, i, 1] = om
+            if g.sc[w, BIO] != zero:
+                s.vs[w, i] = neuron_step(s.vs[w, i], s.err[w, i, 0], g.sc[w, A_], g.sc[w, B_], g.sc[w, D_], dt)
+        # ---- engine.accumulate (metrics) and engine.check (guards)
+        for i in range(n):
+            s.verr[w, i] = s.verr[w, i] + wp.abs(s.cmd[w, i, 0] - s.vel[w, i, 0]) + wp.abs(s.cmd[w, i, 1] - s.vel[w, i, 1])
+            if s.saturated[w, i] != 0:
+                s.nsat[w, i] = s.nsat[w, i] + F(1.0)
+            s.vmax[w, i] = wp.max(s.vmax[w, i], wp.abs(s.cmd[w, i, 0]))
+            s.taumax[w, i] = wp.max(s.taumax[w, i], wp.max(wp.abs(s.tau[w, i, 0]), wp.abs(s.tau[w, i, 1])))
+            s.tauraw_max[w, i] = wp.max(s.tauraw_max[w, i],
+                                        wp.max(wp.abs(s.tau_raw[w, i, 0]), wp.abs(s.tau_raw[w, i, 1])))
+        s.k_done[w] = k
+        if _check(g, s, w, n) != 0:
+            s.status[w] = 1
+            running = False
+    # ---- apply_inputs: this step's torques and d(k dt), held over the period (zero once stopped)
+    d0 = zero
+    d1 = zero
+    if running and g.sc[w, USED] != zero:
+        t = F(k) * dt
+        d0 = harmonic(g.sc[w, DD0], g.sc[w, DD0 + 1], g.sc[w, DD0 + 2], g.sc[w, DD0 + 3], t)
+        d1 = harmonic(g.sc[w, DE0], g.sc[w, DE0 + 1], g.sc[w, DE0 + 2], g.sc[w, DE0 + 3], t)
+    for i in range(n):
+        t0 = zero
+        t1 = zero
+        if running:
+            t0 = s.tau[w, i, 0]
+            t1 = s.tau[w, i, 1]
+        ctrl[w, act[i, 0]] = wp.float32(t0)
+        ctrl[w, act[i, 1]] = wp.float32(t1)
+        if g.sc[w, USED] != zero:
+            b = base[i]
+            R = xmat[w, b]
+            fa = g.m_eff[w, i] * d0
+            xfrc[w, b] = wp.spatial_vector(wp.float32(F(R[0, 0]) * fa), wp.float32(F(R[1, 0]) * fa), 0.0, 0.0, 0.0,
+                                           wp.float32(g.i_eff[w, i] * d1))
+    if running and k == N - 1:
+        s.k_done[w] = N
+    s.k[w] = k + 1
+
+
+# ------------------------------------------------------------------------------ host side
+def _check_compatible(scs: Sequence[Scenario]) -> None:
+    """All worlds share one composed scene and one leader: say what differs if not."""
+    sc0 = scs[0]
+    if sc0.plant.kind != "mujoco":
+        raise ValueError("the batch engine runs the MuJoCo plant only (plant.kind = 'mujoco')")
+    for sc in scs:
+        if sc.faults.per_step or sc.faults.friction_patch:
+            raise ValueError(f"scenario '{sc.name}': faults are not supported by the batch engine yet")
+        if getattr(sc, "events", None):
+            raise ValueError(f"scenario '{sc.name}': events are not supported by the batch engine yet")
+        for what, a, b in (("plant", sc.plant, sc0.plant), ("sim.control_dt", sc.sim.control_dt, sc0.sim.control_dt),
+                           ("sim.physics_dt", sc.sim.physics_dt, sc0.sim.physics_dt),
+                           ("sim.duration", sc.sim.duration, sc0.sim.duration), ("leader", sc.leader, sc0.leader),
+                           ("graph", sc.graph, sc0.graph), ("n", sc.n, sc0.n)):
+            if a != b:
+                raise ValueError(f"scenario '{sc.name}': {what} differs from the first world's; the batch engine "
+                                 "needs one scene, one leader and one graph for all worlds (not supported yet)")
+
+
+def _yaw_quat(q0: np.ndarray, dth: float) -> np.ndarray:
+    """``q_z(dth) ⊗ q0`` (w, x, y, z)."""
+    c, s = math.cos(dth / 2), math.sin(dth / 2)
+    w0, x0, y0, z0 = q0
+    return np.array([c * w0 - s * z0, c * x0 - s * y0, c * y0 + s * x0, c * z0 + s * w0])
+
+
+class BatchRun:
+    """One batch of worlds on a device: built once, :meth:`run` steps them all.
+
+    Holds the MuJoCo Warp model/data, the per-world gains and state (device arrays), the
+    leader trajectory, and the launch arguments of :func:`_control`.
+    """
+
+    def __init__(self, scenarios: Sequence[Scenario], device: str = "cpu", *, nconmax: int | None = None,
+                 njmax: int | None = None) -> None:
+        from ..sim import initial_estimates, make_plant, stack_params
+
+        scs = list(scenarios)
+        if not scs:
+            raise ValueError("no scenarios")
+        _check_compatible(scs)
+        sc0 = scs[0]
+        W = self.nworld = len(scs)
+        self.scenarios = scs
+        self.device = wp.get_device(device)
+        plant = make_plant(sc0)
+        self.plant = plant
+        mjm = plant.model
+        self.mjm = mjm
+        idx = robot_index(mjm)
+        n = self.n = sc0.n
+        dt = self.dt = sc0.sim.control_dt
+        self.n_sub = plant.n_substeps
+        N = self.N = max(1, int(round(sc0.sim.duration / dt)))
+        L_pose, L_vel, _ = sc0.build_leader().states(np.arange(N + 1) * dt)
+        graph = sc0.build_graph()
+        c_true = plant.c_true()
+        self.c_true = c_true
+
+        sc_rows = np.zeros((W, len(SCALARS)))
+        arr = {k: np.zeros((W, n, 2)) for k in ("k4", "c_min", "c_max", "offsets", "c_hat0")}
+        lim = np.zeros((W, n))
+        lacc = np.zeros((W, n))
+        est0 = np.zeros((W, n, 3))
+        qpos = np.tile(plant.data.qpos, (W, 1))
+        q7 = idx.qadr
+        p0 = plant.initial_poses
+        for w, sc in enumerate(scs):
+            stack = ControlStack(graph if sc is sc0 else sc.build_graph(), stack_params(sc, c_true, plant.tau_max))
+            gn = stack.gains
+            row = {f: float(getattr(gn, f)) for f in SCALARS[:32]}
+            lm = sc.limits
+            row.update(lim_position=lm.position, lim_speed=lm.speed, lim_torque=lm.torque)
+            terms = np.array(Harmonic(n, sc.disturbance.bias, sc.disturbance.amp, sc.disturbance.freq,
+                                      sc.disturbance.phase).terms, dtype=float)  # (2, 4)
+            for c, name in enumerate(("d0", "d1", "d2", "d3")):
+                row[name] = terms[0, c]
+            for c, name in enumerate(("e0", "e1", "e2", "e3")):
+                row[name] = terms[1, c]
+            row["use_dist"] = 1.0
+            sc_rows[w] = [row[f] for f in SCALARS]
+            arr["k4"][w], arr["c_min"][w], arr["c_max"][w] = gn.k4, gn.c_min, gn.c_max
+            arr["offsets"][w] = gn.offsets
+            arr["c_hat0"][w] = np.broadcast_to(stack.p.c_hat0, (n, 2))
+            lim[w], lacc[w] = gn.lim, gn.lacc
+            poses = sc.initial_poses()
+            for i in range(n):  # move each base by the planar motion from the scene's pose to this world's
+                a = q7[i]
+                dth = poses[i, 2] - p0[i, 2]
+                qpos[w, a:a + 2] = poses[i, :2]
+                qpos[w, a + 3:a + 7] = _yaw_quat(plant.data.qpos[a + 3:a + 7], dth)
+            est0[w] = initial_estimates(sc, poses, L_pose[0])
+        self.src, self.dst = graph.src, graph.dst
+
+        nconmax = 8 * n + 16 if nconmax is None else nconmax
+        njmax = 32 * n + 16 if njmax is None else njmax
+        with wp.ScopedDevice(self.device):
+            self.m = mjw.put_model(mjm)
+            self.d = mjw.put_data(mjm, plant.data, nworld=W, nconmax=nconmax, njmax=njmax)
+            self.d.qpos.assign(qpos.astype(np.float32))
+            self._qpos0 = wp.clone(self.d.qpos)
+            A = lambda x, dtype=F: wp.array(np.ascontiguousarray(x), dtype=dtype)  # noqa: E731
+            g = BatchGains()
+            g.sc = A(sc_rows)
+            g.k4, g.c_min, g.c_max, g.offsets = A(arr["k4"]), A(arr["c_min"]), A(arr["c_max"]), A(arr["offsets"])
+            g.lim, g.lacc, g.c_hat0, g.est0 = A(lim), A(lacc), A(arr["c_hat0"]), A(est0)
+            g.m_eff = A(np.tile(plant._m_eff, (W, 1)))
+            g.i_eff = A(np.tile(plant._i_eff, (W, 1)))
+            g.src = A(graph.src.astype(np.int32), int)
+            g.dst = A(graph.dst.astype(np.int32), int)
+            self.g = g
+            s = BatchState()
+            z3 = lambda: wp.zeros((W, n, 3), dtype=F)  # noqa: E731
+            z2 = lambda: wp.zeros((W, n, 2), dtype=F)  # noqa: E731
+            z1 = lambda: wp.zeros((W, n), dtype=F)  # noqa: E731
+            s.pose, s.vel, s.est_pose, s.est_vel = z3(), z2(), z3(), z2()
+            s.z_hat, s.e_int, s.c_hat, s.d_hat, s.fy, s.fdy = z2(), z2(), z2(), z2(), z2(), z2()
+            s.vs, s.err, s.cmd, s.dcmd, s.tau, s.tau_raw, s.tau_body = z1(), z3(), z2(), z2(), z2(), z2(), z2()
+            s.saturated = wp.zeros((W, n), dtype=int)
+            s.p_err, s.v_err = z3(), z2()
+            s.first, s.k, s.status, s.k_done = (wp.zeros(W, dtype=int) for _ in range(4))
+            s.diag = wp.zeros((W, 3), dtype=F)
+            s.verr, s.nsat, s.vmax, s.taumax, s.tauraw_max, s.ferr = z1(), z1(), z1(), z1(), z1(), z1()
+            self.s = s
+            self.L_pose = A(L_pose)
+            self.L_vel = A(L_vel)
+            self.qadr = A(idx.qadr.astype(np.int32), int)
+            self.dadr = A(idx.dadr.astype(np.int32), int)
+            self.base = A(idx.base.astype(np.int32), int)
+            self.act = A(idx.act.astype(np.int32), int)
+            self.axle = A(plant._axle)
+        self.L_pose_host = L_pose
+        self.nconmax, self.njmax = nconmax, njmax
+        self.graph = None
+
+    # -- the step loop (device-side only)
+    def _launch_control(self) -> None:
+        d = self.d
+        wp.launch(_control, dim=self.nworld,
+                  inputs=[self.g, self.s, self.N, self.L_pose, self.L_vel, d.qpos, d.qvel, d.xmat, self.qadr,
+                          self.dadr, self.base, self.act, self.axle, d.ctrl, d.xfrc_applied])
+
+    def _steps(self, nsteps: int) -> None:
+        """``nsteps`` × [``n_substeps`` physics steps, control step]: no host reads."""
+        for _ in range(nsteps):
+            for _ in range(self.n_sub):
+                mjw.step(self.m, self.d)
+            self._launch_control()
+
+    def reset(self) -> None:
+        """Physics back to the initial state of every world, then control step 0 (on the device)."""
+        d = self.d
+        with wp.ScopedDevice(self.device):
+            wp.copy(d.qpos, self._qpos0)
+            d.qvel.zero_()
+            d.time.zero_()
+            d.ctrl.zero_()
+            d.xfrc_applied.zero_()
+            d.qacc_warmstart.zero_()
+            mjw.forward(self.m, d)
+            self.s.k.zero_()
+            self._launch_control()  # k = 0: observe, reset, control step 0, torques
+
+    def run(self, chunk: int = 100, capture: bool | None = None) -> float:
+        """Reset and run all ``N`` control periods; returns the wall seconds of the step loop.
+        On CUDA (``capture`` None or True) ``chunk`` periods are captured once as a CUDA
+        graph (after one eager warm-up step that loads every kernel) and replayed."""
+        use_graph = self.device.is_cuda if capture is None else capture
+        full, rest = divmod(self.N, chunk)
+        with wp.ScopedDevice(self.device):
+            if use_graph and full and self.graph is None:
+                self.reset()
+                self._steps(1)  # load every module outside the capture
+                wp.synchronize_device(self.device)
+                with wp.ScopedCapture() as cap:
+                    self._steps(chunk)
+                self.graph = cap.graph
+            self.reset()
+            wp.synchronize_device(self.device)
+            t0 = time.perf_counter()
+            if use_graph and full:
+                for _ in range(full):
+                    wp.capture_launch(self.graph)
+                self._steps(rest)
+            else:
+                self._steps(self.N)
+            wp.synchronize_device(self.device)
+            return time.perf_counter() - t0
+
+    def run_physics(self, nsteps: int, ctrl: np.ndarray, chunk: int = 100, capture: bool | None = None) -> float:
+        """Physics alone on the same worlds (for the benchmark): from the initial state,
+        ``nsteps`` physics steps with the constant inputs ``ctrl`` (nworld, nu), no disturbance;
+        returns the wall seconds (CUDA: a captured chunk of ``chunk`` steps, replayed)."""
+        use_graph = self.device.is_cuda if capture is None else capture
+        full, rest = divmod(nsteps, chunk)
+        d = self.d
+
+        def steps(k):
+            for _ in range(k):
+                mjw.step(self.m, d)
+
+        def start():
+            self.reset()
+            d.ctrl.assign(np.asarray(ctrl, dtype=np.float32))
+            d.xfrc_applied.zero_()
+
+        with wp.ScopedDevice(self.device):
+            graph = None
+            if use_graph and full:
+                start()
+                steps(1)
+                wp.synchronize_device(self.device)
+                with wp.ScopedCapture() as cap:
+                    steps(chunk)
+                graph = cap.graph
+            start()
+            wp.synchronize_device(self.device)
+            t0 = time.perf_counter()
+            if graph is not None:
+                for _ in range(full):
+                    wp.capture_launch(graph)
+                steps(rest)
+            else:
+                steps(nsteps)
+            wp.synchronize_device(self.device)
+            return time.perf_counter() - t0
+
+    # -- results
+    def summaries(self, wall: float = float("nan")) -> list[dict[str, Any]]:
+        s = self.s
+        ferr, c_hat = s.ferr.numpy(), s.c_hat.numpy()
+        verr, nsat, vmax = s.verr.numpy(), s.nsat.numpy(), s.vmax.numpy()
+        taumax, tauraw = s.taumax.numpy(), s.tauraw_max.numpy()
+        status, k_done, diag = s.status.numpy(), s.k_done.numpy(), s.diag.numpy()
+        est = s.est_pose.numpy()
+        pose = s.pose.numpy()
+        lp_end = self.L_pose_host[self.N]
+        out = []
+        for w, sc in enumerate(self.scenarios):
+            kd = int(k_done[w])
+            reason = None
+            bad = not np.all(np.isfinite(pose[w]))
+            if status[w]:
+                code, i, val = int(diag[w, 0]), int(diag[w, 1]), float(diag[w, 2])
+                signal, what, limit = GUARDS[code - 1]
+                reason = (f"follower {i + 1}: {what} '{signal}' " +
+                          ("is not finite" if limit is None else f"= {val:.3g} exceeds limits.{limit}") +
+                          f" at t = {kd * self.dt:.4f} s")
+            elif bad:
+                reason = f"non-finite robot state at the end of the run (t = {self.N * self.dt:g} s)"
+            fol = []
+            for i in range(self.n):
+                fol.append({
+                    "id": i + 1,
+                    "total_velocity_error": float(verr[w, i] * self.dt),
+                    "final_formation_error_m": float(ferr[w, i]),
+                    "final_estimation_error_m": float(np.hypot(*(est[w, i, :2] - lp_end[:2]))),
+                    "max_abs_v_cmd": float(vmax[w, i]),
+                    "peak_abs_torque": float(taumax[w, i]),
+                    "peak_abs_torque_commanded": float(tauraw[w, i]),
+                    "saturation_fraction": float(nsat[w, i] / max(1, kd)),
+                    "c_hat": [float(v) for v in c_hat[w, i]],
+                    "c_true": [float(v) for v in self.c_true[i]],
+                    "c_hat_rel_error": [float(v) for v in (c_hat[w, i] / self.c_true[i] - 1.0)],
+                })
+            out.append({
+                "scenario": sc.name, "seed": sc.sim.seed, "world": w, "backend": "warp",
+                "device": str(self.device), "diverged": reason is not None, "diverged_reason": reason,
+                "steps": kd, "sim_time": kd * self.dt, "wall_time_s": wall, "followers": fol,
+            })
+        return out
+
+
+def run_batch(scenarios: Sequence[Scenario], device: str = "cpu", **kw) -> list[dict[str, Any]]:
+    """Run every scenario as one world of a MuJoCo Warp batch on ``device``; one summary
+    dict per scenario (the per-follower fields of ``sim.simulate``'s summary that the batch
+    engine computes, plus ``diverged``/``diverged_reason``)."""
+    b = BatchRun(scenarios, device, **kw)
+    wall = b.run()
+    return b.summaries(wall)
