@@ -392,11 +392,18 @@ def _run_forked(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable
         os.close(result_w)
         procs[result_r] = _Proc(pid, task_w, result_r)
 
+    def close_task(p: _Proc) -> None:
+        """EOF on its task pipe: an idle worker exits."""
+        if p.task_w >= 0:
+            with contextlib.suppress(OSError):
+                os.close(p.task_w)
+            p.task_w = -1
+
     def close(p: _Proc) -> None:
         del procs[p.result_r]
-        for fd in (p.task_w, p.result_r):
-            with contextlib.suppress(OSError):
-                os.close(fd)
+        close_task(p)
+        with contextlib.suppress(OSError):
+            os.close(p.result_r)
 
     def assign(p: _Proc) -> None:
         """Give an idle worker the next run, or tell it to exit (EOF) when there is none."""
@@ -408,9 +415,7 @@ def _run_forked(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable
             except OSError:  # it died idle: the run never started, someone else does it
                 queue.append(i)
         else:
-            with contextlib.suppress(OSError):
-                os.close(p.task_w)
-            p.task_w = -1
+            close_task(p)
 
     try:
         while sig.signum is None and (queue or any(p.current is not None for p in procs.values())):
@@ -438,8 +443,7 @@ def _run_forked(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable
                     done(row)
     finally:
         for p in list(procs.values()):
-            with contextlib.suppress(OSError):
-                os.close(p.task_w)  # idle workers exit at EOF
+            close_task(p)
         _reap([p.pid for p in procs.values()], wait_first=sig.signum is None)
         for p in list(procs.values()):
             close(p)
