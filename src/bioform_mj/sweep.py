@@ -168,9 +168,12 @@ def expand(source: str, seeds: int, methods: Sequence[str], vary: Sequence[str],
                 run_ov = ov + (f"sim.seed={s}",)
                 specs.append(RunSpec(source, run_ov, method, s, plant, tuple(combo), content_key(sc, run_ov), sc))
     if seeds > 1 and no_random and warn is not None:
-        which, its = ("the scenario has", "its") if len(no_random) == n_configs else \
-            (f"{len(no_random)} of {n_configs} configurations ({'; '.join(no_random[:3])}"
-             f"{'; …' if len(no_random) > 3 else ''}) have", "their")
+        if len(no_random) == n_configs:
+            which, its = "the scenario has", "its"
+        else:
+            more = "; …" if len(no_random) > 3 else ""
+            which = f"{len(no_random)} of {n_configs} configurations ({'; '.join(no_random[:3])}{more}) have"
+            its = "their"
         warn(f"--seeds {seeds}: {which} no randomness (no formation.init_jitter, faults.noise_pose/noise_vel "
              f"or faults.packet_loss), so {its} {seeds} seeds give identical runs")
     return specs
