@@ -304,7 +304,7 @@ def test_diverged_run_marked_in_tables(tmp_path):
 
 
 def test_follower_outcomes_when_summary_has_them(monkeypatch):
-    import bioform_mj.sim as sim
+    from bioform_mj import sim
 
     real = sim.simulate
 

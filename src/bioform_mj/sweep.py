@@ -168,9 +168,12 @@ def expand(source: str, seeds: int, methods: Sequence[str], vary: Sequence[str],
                 run_ov = ov + (f"sim.seed={s}",)
                 specs.append(RunSpec(source, run_ov, method, s, plant, tuple(combo), content_key(sc, run_ov), sc))
     if seeds > 1 and no_random and warn is not None:
-        which, its = ("the scenario has", "its") if len(no_random) == n_configs else \
-            (f"{len(no_random)} of {n_configs} configurations ({'; '.join(no_random[:3])}"
-             f"{'; …' if len(no_random) > 3 else ''}) have", "their")
+        if len(no_random) == n_configs:
+            which, its = "the scenario has", "its"
+        else:
+            more = "; …" if len(no_random) > 3 else ""
+            which = f"{len(no_random)} of {n_configs} configurations ({'; '.join(no_random[:3])}{more}) have"
+            its = "their"
         warn(f"--seeds {seeds}: {which} no randomness (no formation.init_jitter, faults.noise_pose/noise_vel "
              f"or faults.packet_loss), so {its} {seeds} seeds give identical runs")
     return specs
@@ -314,16 +317,33 @@ def _die_with_parent(parent: int) -> None:
         os._exit(1)
 
 
-def _child(spec: RunSpec, w: int, parent: int) -> None:
-    """Body of a forked worker: run ``spec``, write its row as JSON to ``w``, exit. Never returns."""
+def _read_exact(fd: int, n: int) -> bytes | None:
+    buf = b""
+    while len(buf) < n:
+        chunk = os.read(fd, n - len(buf))
+        if not chunk:
+            return None
+        buf += chunk
+    return buf
+
+
+def _worker(todo: list[RunSpec], task_r: int, result_w: int, parent: int) -> None:
+    """Body of a forked worker: read run indices (4 bytes each) from ``task_r`` until EOF, write each
+    run's row to ``result_w`` as length-prefixed JSON. Never returns."""
     code = 1
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group; the sweep decides
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         _die_with_parent(parent)
-        data = json.dumps(run_one(spec), default=lambda o: o.item() if hasattr(o, "item") else str(o)).encode()
-        with os.fdopen(w, "wb") as fh:
-            fh.write(data)
+        while True:
+            msg = _read_exact(task_r, 4)
+            if msg is None:
+                break
+            row = run_one(todo[int.from_bytes(msg, "little")])
+            data = json.dumps(row, default=lambda o: o.item() if hasattr(o, "item") else str(o)).encode()
+            out = len(data).to_bytes(8, "little") + data
+            while out:
+                out = out[os.write(result_w, out):]
         code = 0
     except BaseException:  # noqa: BLE001 - report and exit; never run the parent's code
         with contextlib.suppress(Exception):
@@ -342,80 +362,125 @@ def _run_serial(todo: list[RunSpec], sig: _Signals, done: Callable[[dict], None]
         done(row)
 
 
+@dataclass
+class _Proc:
+    """A forked worker as the sweep sees it."""
+
+    pid: int
+    task_w: int
+    result_r: int
+    current: int | None = None  # index of the run it is doing
+    buf: bytearray = field(default_factory=bytearray)
+
+
 def _run_forked(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable[[dict], None]) -> None:
-    """Each run in a process forked from this one; at most ``workers`` at a time."""
+    """Runs on ``workers`` processes forked from this one after it loaded the compiled kernels, one run at a
+    time each; a worker that dies fails the run it was doing and is replaced."""
     _load_kernels()  # before forking: workers inherit the loaded kernels (start in ms, not ~1 s each)
     parent = os.getpid()
-    queue = list(reversed(todo))
-    active: dict[int, tuple[int, RunSpec, bytearray]] = {}  # read fd -> (pid, spec, data so far)
-    try:
-        while (queue or active) and sig.signum is None:
-            while queue and len(active) < workers and sig.signum is None:
-                sp = queue.pop()
-                r, w = os.pipe()
-                sys.stdout.flush()
-                sys.stderr.flush()
-                pid = os.fork()
-                if pid == 0:  # pragma: no cover - runs in the worker
-                    os.close(r)
-                    _child(sp, w, parent)
-                os.close(w)
-                active[r] = (pid, sp, bytearray())
-            try:
-                ready, _, _ = select.select(list(active), [], [], 0.25)
-            except InterruptedError:  # pragma: no cover - PEP 475 retries; kept for safety
-                continue
-            for r in ready:
-                pid, sp, buf = active[r]
-                chunk = os.read(r, 1 << 16)
-                if chunk:
-                    buf += chunk
-                    continue
-                # EOF: the worker has written its row and exited, or it died
-                del active[r]
-                os.close(r)
-                _, status = os.waitpid(pid, 0)
-                row = None
-                if os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0:
-                    with contextlib.suppress(ValueError):
-                        row = json.loads(buf.decode())
-                if row is None:
-                    if sig.signum is not None:  # may have died of the signal that stops the sweep: no result
-                        continue
-                    row = _died_row(sp, _exit_reason(status))
-                done(row)
-    finally:
-        _reap([pid for pid, _, _ in active.values()])
-        for r in active:
+    queue = list(range(len(todo) - 1, -1, -1))  # popped from the end: todo order
+    procs: dict[int, _Proc] = {}  # by result fd
+
+    def start() -> None:
+        task_r, task_w = os.pipe()
+        result_r, result_w = os.pipe()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        pid = os.fork()
+        if pid == 0:  # pragma: no cover - runs in the worker
+            for fd in [task_w, result_r] + [fd for p in procs.values() for fd in (p.task_w, p.result_r)]:
+                os.close(fd)
+            _worker(todo, task_r, result_w, parent)
+        os.close(task_r)
+        os.close(result_w)
+        procs[result_r] = _Proc(pid, task_w, result_r)
+
+    def close_task(p: _Proc) -> None:
+        """EOF on its task pipe: an idle worker exits."""
+        if p.task_w >= 0:
             with contextlib.suppress(OSError):
-                os.close(r)
+                os.close(p.task_w)
+            p.task_w = -1
+
+    def close(p: _Proc) -> None:
+        del procs[p.result_r]
+        close_task(p)
+        with contextlib.suppress(OSError):
+            os.close(p.result_r)
+
+    def assign(p: _Proc) -> None:
+        """Give an idle worker the next run, or tell it to exit (EOF) when there is none."""
+        if queue and sig.signum is None:
+            i = queue.pop()
+            try:
+                os.write(p.task_w, i.to_bytes(4, "little"))
+                p.current = i
+            except OSError:  # it died idle: the run never started, someone else does it
+                queue.append(i)
+        else:
+            close_task(p)
+
+    try:
+        while sig.signum is None and (queue or any(p.current is not None for p in procs.values())):
+            while queue and len(procs) < workers and sig.signum is None:
+                start()
+            for p in list(procs.values()):
+                if p.current is None and p.task_w >= 0:
+                    assign(p)
+            ready, _, _ = select.select(list(procs), [], [], 0.25)
+            for fd in ready:
+                p = procs[fd]
+                chunk = os.read(fd, 1 << 16)
+                if not chunk:  # EOF: the worker exited or died
+                    close(p)
+                    _, status = os.waitpid(p.pid, 0)
+                    if p.current is not None and sig.signum is None:
+                        done(_died_row(todo[p.current], _exit_reason(status)))
+                    continue
+                p.buf += chunk
+                while len(p.buf) >= 8 and len(p.buf) >= 8 + int.from_bytes(p.buf[:8], "little"):
+                    n = int.from_bytes(p.buf[:8], "little")
+                    row = json.loads(bytes(p.buf[8:8 + n]).decode())
+                    del p.buf[:8 + n]
+                    p.current = None
+                    done(row)
+    finally:
+        for p in list(procs.values()):
+            close_task(p)
+        _reap([p.pid for p in procs.values()], wait_first=sig.signum is None)
+        for p in list(procs.values()):
+            close(p)
 
 
-def _reap(pids: list[int]) -> None:
-    """Terminate worker processes: SIGTERM, then SIGKILL those still alive after :data:`GRACE_S`."""
-    for pid in pids:
+def _reap(pids: list[int], wait_first: bool = False) -> None:
+    """End worker processes: SIGTERM (after :data:`GRACE_S` for them to exit on their own when
+    ``wait_first``), then SIGKILL those still alive after another :data:`GRACE_S`."""
+    left = set(pids)
+    if wait_first:
+        _wait_gone(left, time.monotonic() + GRACE_S)
+    for pid in left:
         with contextlib.suppress(ProcessLookupError):
             os.kill(pid, signal.SIGTERM)
-    left = set(pids)
-    deadline = time.monotonic() + GRACE_S
-    while left:
+    _wait_gone(left, time.monotonic() + GRACE_S)
+    for pid in left:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+    for pid in left:
+        with contextlib.suppress(ChildProcessError):
+            os.waitpid(pid, 0)
+
+
+def _wait_gone(left: set[int], deadline: float) -> None:
+    """Reap the processes of ``left`` that exit before ``deadline`` (removing them from it)."""
+    while left and time.monotonic() < deadline:
         for pid in list(left):
             try:
                 if os.waitpid(pid, os.WNOHANG)[0] != 0:
                     left.discard(pid)
             except ChildProcessError:
                 left.discard(pid)
-        if not left:
-            break
-        if time.monotonic() > deadline:
-            for pid in left:
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(pid, signal.SIGKILL)
-            for pid in left:
-                with contextlib.suppress(ChildProcessError):
-                    os.waitpid(pid, 0)
-            break
-        time.sleep(0.01)
+        if left:
+            time.sleep(0.005)
 
 
 def _run_local(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable[[dict], None]) -> None:
