@@ -675,10 +675,10 @@ def _fmt_bytes(b: float) -> str:
 def run_size(sc: Scenario) -> dict[str, float]:
     """Estimated size of a run: control and physics steps, log rows, and memory in bytes.
 
-    Memory: the log (``sim.CHANNELS`` per follower plus time and leader, every ``log_dt``)
-    and the leader trajectory precomputed for every control step (t, pose, velocity).
+    Memory: the log (every channel of ``engine.CHANNELS``, float64, every ``log_dt``) and the
+    leader trajectory precomputed for every control step (t, pose, velocity).
     """
-    from .sim import CHANNELS  # here, not at import: sim imports this module
+    from .engine import CHANNELS  # here, not at import: the engine imports this module's users
 
     s = sc.sim
     steps = s.duration / s.control_dt
@@ -686,9 +686,9 @@ def run_size(sc: Scenario) -> dict[str, float]:
     stride = max(1.0, round(s.log_dt / s.control_dt))
     rows = steps / stride + 1
     dims = {"n": sc.n, "3": 3, "2": 2}
-    per_row = 8 * (1 + 3 + 2)
-    for name, shp in CHANNELS.items():
-        per_row += (1 if name == "saturated" else 8) * int(np.prod([dims[d] for d in shp]))
+    per_row = 0
+    for shape, _doc in CHANNELS.values():  # name -> (trailing shape, description)
+        per_row += 8 * int(np.prod([dims[d] for d in shape]))
     log_bytes = rows * per_row
     traj_bytes = (steps + 1) * 8 * (1 + 3 + 2)
     return {"control_steps": steps, "physics_steps": steps * substeps, "log_rows": rows,
