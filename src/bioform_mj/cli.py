@@ -332,9 +332,9 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
         interrupted = exc
     if interrupted is None and getattr(result, "interrupted", None) is not None:  # or a result that says so
         interrupted = result.interrupted
-    if interrupted is not None:
-        result.summary.setdefault("interrupted", {"signal": signal.Signals(getattr(interrupted, "signum", 2)).name,
-                                                  "time_s": result.summary.get("sim_time_s")})
+    if interrupted is not None and not result.summary.get("interrupted"):
+        result.summary["interrupted"] = {"signal": signal.Signals(getattr(interrupted, "signum", 2)).name,
+                                         "time_s": result.summary.get("sim_time_s")}
     write_npz(out / "log.npz", result.log)
     if sc.plant.kind == "mujoco":
         write_text(out / "scene.xml", result.plant.model_xml())

@@ -850,6 +850,8 @@ def apply_scale(sc: Scenario) -> Scenario:
         return sc
     if not (math.isfinite(s) and s > 0):
         raise ScenarioError("formation.scale", f"must be a number > 0, got {s:g}")
+    if not 1e-3 <= s <= 1e3:  # beyond, k2 / s² and the lengths leave floating point's comfortable range
+        raise ScenarioError("formation.scale", f"must lie in [0.001, 1000], got {s:g}")
 
     def rows(values: tuple, cols: int) -> tuple:
         return tuple(tuple(v * s if j < cols else v for j, v in enumerate(r)) for r in values)
