@@ -526,3 +526,32 @@ def test_table1_marks_failed_outcomes_and_handles_their_absence():
     assert "follower 2 tipped" in md
     assert "[ok]" not in md
     assert not [line for line in markdown(_table()).splitlines() if line.startswith("|") and "[" in line]
+
+
+def test_sigterm_stops_table1_after_the_method_in_progress(tmp_path):
+    """simulate() returns the run so far on SIGTERM; table1 must not go on to the next method."""
+    out = tmp_path / "t"
+    proc = subprocess.Popen([sys.executable, "-m", "bioform_mj.cli", "table1", "--duration", "400",
+                             "--set", "sim.log_dt=0.05", "--out", str(out)],
+                            env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        lines = []
+        while proc.poll() is None:
+            line = proc.stderr.readline()
+            lines.append(line)
+            if "backstepping: done" in line:
+                break
+        assert proc.poll() is None, "".join(lines)
+        time.sleep(0.3)  # into the second method
+        t0 = time.time()
+        proc.send_signal(signal.SIGTERM)
+        rc = proc.wait(timeout=60)
+        stopped_in = time.time() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    err = "".join(lines) + proc.stderr.read()
+    assert rc == 143, err
+    assert "interrupted by SIGTERM" in err and "no table written" in err and "Traceback" not in err
+    assert "bioinspired-learning: done" not in err and stopped_in < 5
+    assert not out.exists()

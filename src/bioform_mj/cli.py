@@ -438,7 +438,12 @@ def _table1_in(args: argparse.Namespace, sc, out: Path) -> int:
 
         def per_method(m: str):  # one bar over the four runs: method i fills [i/4, (i+1)/4]
             i, total = list(METHODS).index(m), len(METHODS)
-            return lambda k, n: cb(i * n + k, total * n)
+
+            def part(k: int, n: int) -> None:
+                cb(i * n + k, total * n)
+
+            part.phase = cb.phase  # type: ignore[attr-defined]  # (kernels loading/compiling)
+            return part
 
         try:
             table = run_table1(sc, on_result=keep, progress=None if cb is None else per_method)
