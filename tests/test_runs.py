@@ -41,6 +41,7 @@ def _tmp_files(folder: Path) -> list[Path]:
 def test_second_run_into_a_folder_is_refused_then_overwrite_replaces_it(tmp_path, capsys):
     out = tmp_path / "r"
     assert main(["run", "--duration", "0.1", "--quiet", "--out", str(out)]) == 0
+    capsys.readouterr()  # (its warnings: a 0.1 s run ends far from the formation)
     (out / "figures").mkdir()
     (out / "figures" / "old.png").write_bytes(b"png")
     (out / "video.mp4").write_bytes(b"old video")
@@ -60,6 +61,7 @@ def test_second_run_into_a_folder_is_refused_then_overwrite_replaces_it(tmp_path
 def test_overwrite_never_deletes_files_that_are_not_a_run(tmp_path, capsys):
     out = tmp_path / "r"
     assert main(["run", "--duration", "0.1", "--quiet", "--out", str(out)]) == 0
+    capsys.readouterr()
     (out / "notes.txt").write_text("mine")
     (out / "figures").mkdir()
     (out / "figures" / "draft.svg").write_text("mine too")
@@ -323,6 +325,7 @@ def test_signal_mid_run(sig, code, engine, duration, tmp_path):
     err = seen.decode(errors="replace")
     assert rc == code, err[-500:]
     assert f"interrupted by {signal.Signals(sig).name}" in err and "Traceback" not in err
+    assert "log so far kept" in err, err[-500:]  # simulate returns the run so far (RunResult.interrupted)
     _check_interrupted_folder(out, err)
 
 
@@ -350,16 +353,16 @@ def test_sigterm_while_rendering_the_video_leaves_no_temporary_file(tmp_path):
         assert z["pose"].shape[0] == 1200
 
 
-def test_interrupt_in_process_keeps_a_partial_result_when_simulate_returns_one(tmp_path, capsys, monkeypatch):
-    """The CLI's side of the contract with simulate(): a KeyboardInterrupt carrying ``.result`` is written
-    like a divergence (summary marked ``interrupted``), exit 128 + signum."""
+def test_interrupt_carrying_a_result_is_kept(tmp_path, capsys, monkeypatch):
+    """A KeyboardInterrupt that carries ``.result`` (simulate's alternative to returning a result with
+    ``interrupted`` set) is written like a divergence (summary marked ``interrupted``), exit 128 + signum."""
     import bioform_mj.sim as sim
     from bioform_mj.errors import Interrupted
 
     real = sim.simulate
 
     def partial(sc, **kw):
-        res = real(sc, engine="stepwise")
+        res = real(sc)
         exc = Interrupted(signal.SIGTERM)
         exc.result = res
         raise exc
@@ -426,15 +429,15 @@ def test_mujoco_warnings_of_the_compiled_loop_are_captured(tmp_path):
     import mujoco
 
     from bioform_mj.outputs.mjlog import MujocoLog
-    from bioform_mj.plants import mujoco_kernels as fused
+    from bioform_mj.plants import mujoco_kernels as mk
 
-    if not fused.HAVE_MJ_STEP:
+    numba = pytest.importorskip("numba")
+    if getattr(mk, "_mj_step", None) is None:
         pytest.skip("no compiled mj_step")
-    import numba
 
     @numba.njit(nogil=True)
     def step(mp, dp):
-        fused._mj_step(mp, dp)
+        mk._mj_step(mp, dp)
 
     m = mujoco.MjModel.from_xml_string("<mujoco><worldbody><body><freejoint/><geom size='.1'/></body>"
                                        "</worldbody></mujoco>")
@@ -523,3 +526,32 @@ def test_table1_marks_failed_outcomes_and_handles_their_absence():
     assert "follower 2 tipped" in md
     assert "[ok]" not in md
     assert not [line for line in markdown(_table()).splitlines() if line.startswith("|") and "[" in line]
+
+
+def test_sigterm_stops_table1_after_the_method_in_progress(tmp_path):
+    """simulate() returns the run so far on SIGTERM; table1 must not go on to the next method."""
+    out = tmp_path / "t"
+    proc = subprocess.Popen([sys.executable, "-m", "bioform_mj.cli", "table1", "--duration", "400",
+                             "--set", "sim.log_dt=0.05", "--out", str(out)],
+                            env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        lines = []
+        while proc.poll() is None:
+            line = proc.stderr.readline()
+            lines.append(line)
+            if "backstepping: done" in line:
+                break
+        assert proc.poll() is None, "".join(lines)
+        time.sleep(0.3)  # into the second method
+        t0 = time.time()
+        proc.send_signal(signal.SIGTERM)
+        rc = proc.wait(timeout=60)
+        stopped_in = time.time() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    err = "".join(lines) + proc.stderr.read()
+    assert rc == 143, err
+    assert "interrupted by SIGTERM" in err and "no table written" in err and "Traceback" not in err
+    assert "bioinspired-learning: done" not in err and stopped_in < 5
+    assert not out.exists()

@@ -34,6 +34,16 @@ CASES: dict[int, tuple[str, float]] = {3: ("paper", 5.0), 16: ("large16", 5.0), 
                                        256: ("large256", 2.0)}
 
 
+def stop_if_interrupted(result: Any) -> Any:
+    """``result``, or its interrupt raised again: :func:`simulate` returns the run so far when
+    SIGINT/SIGTERM arrives (``RunResult.interrupted``); a caller with more runs to do must stop."""
+    exc = getattr(result, "interrupted", None)
+    if exc is not None:
+        exc.result = result
+        raise exc
+    return result
+
+
 def _bare(sc: Any, reps: int) -> dict[str, float]:
     """Bare ``mj_step`` replaying the closed loop's own inputs: best seconds of ``reps``, and the
     solver's iterations per physics step, also under constant torques for comparison.
@@ -51,7 +61,7 @@ def _bare(sc: Any, reps: int) -> dict[str, float]:
     m, d = plant.model, plant.data
     steps = int(round(sc.sim.duration / sc.sim.control_dt))
     rec = (np.zeros((steps, m.nu)), np.zeros((steps, plant.n, 6)))
-    simulate(sc, record_inputs=rec)
+    stop_if_interrupted(simulate(sc, record_inputs=rec))
     replay = mujoco_replay
     base = np.ascontiguousarray(plant._base, dtype=np.int64)
     args = (m._address, d._address, plant.n_substeps, d.ctrl, d.xfrc_applied, base)
@@ -80,7 +90,7 @@ def _loop(sc: Any, reps: int, engine: str = "auto") -> tuple[float, dict]:
 
     best, summary = float("inf"), {}
     for _ in range(reps):
-        r = simulate(sc, engine=engine)
+        r = stop_if_interrupted(simulate(sc, engine=engine))
         summary = r.summary
         best = min(best, float(r.summary["wall_time_s"]))
     return best, summary

@@ -332,10 +332,9 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
         interrupted = exc
     if interrupted is None and getattr(result, "interrupted", None) is not None:  # or a result that says so
         interrupted = result.interrupted
-    if interrupted is not None:
-        if not result.summary.get("interrupted"):
-            result.summary["interrupted"] = {"signal": signal.Signals(getattr(interrupted, "signum", 2)).name,
-                                             "time_s": result.summary.get("sim_time_s")}
+    if interrupted is not None and not result.summary.get("interrupted"):
+        result.summary["interrupted"] = {"signal": signal.Signals(getattr(interrupted, "signum", 2)).name,
+                                         "time_s": result.summary.get("sim_time_s")}
     write_npz(out / "log.npz", result.log)
     if sc.plant.kind == "mujoco":
         write_text(out / "scene.xml", result.plant.model_xml())
@@ -439,7 +438,12 @@ def _table1_in(args: argparse.Namespace, sc, out: Path) -> int:
 
         def per_method(m: str):  # one bar over the four runs: method i fills [i/4, (i+1)/4]
             i, total = list(METHODS).index(m), len(METHODS)
-            return lambda k, n: cb(i * n + k, total * n)
+
+            def part(k: int, n: int) -> None:
+                cb(i * n + k, total * n)
+
+            part.phase = cb.phase  # type: ignore[attr-defined]  # (kernels loading/compiling)
+            return part
 
         try:
             table = run_table1(sc, on_result=keep, progress=None if cb is None else per_method)

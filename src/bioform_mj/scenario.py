@@ -675,10 +675,10 @@ def _fmt_bytes(b: float) -> str:
 def run_size(sc: Scenario) -> dict[str, float]:
     """Estimated size of a run: control and physics steps, log rows, and memory in bytes.
 
-    Memory: the log (``sim.CHANNELS`` per follower plus time and leader, every ``log_dt``)
-    and the leader trajectory precomputed for every control step (t, pose, velocity).
+    Memory: the log (every channel of ``engine.CHANNELS``, float64, every ``log_dt``) and the
+    leader trajectory precomputed for every control step (t, pose, velocity).
     """
-    from .engine import CHANNELS  # name -> (trailing shape, meaning), every channel of the log
+    from .engine import CHANNELS  # here, not at import: the engine imports this module's users
 
     s = sc.sim
     steps = s.duration / s.control_dt
@@ -687,8 +687,8 @@ def run_size(sc: Scenario) -> dict[str, float]:
     rows = steps / stride + 1
     dims = {"n": sc.n, "3": 3, "2": 2}
     per_row = 0
-    for shp, _ in CHANNELS.values():
-        per_row += 8 * int(np.prod([dims[d] for d in shp]))
+    for shape, _doc in CHANNELS.values():  # name -> (trailing shape, description)
+        per_row += 8 * int(np.prod([dims[d] for d in shape]))
     log_bytes = rows * per_row
     traj_bytes = (steps + 1) * 8 * (1 + 3 + 2)
     return {"control_steps": steps, "physics_steps": steps * substeps, "log_rows": rows,
@@ -848,8 +848,10 @@ def apply_scale(sc: Scenario) -> Scenario:
     s = sc.formation.scale
     if s == 1.0:
         return sc
-    if not (math.isfinite(s) and 1e-3 <= s <= 1e3):
-        raise ScenarioError("formation.scale", f"must be a number in [0.001, 1000], got {s:g}")
+    if not (math.isfinite(s) and s > 0):
+        raise ScenarioError("formation.scale", f"must be a number > 0, got {s:g}")
+    if not 1e-3 <= s <= 1e3:  # beyond, k2 / s² and the lengths leave floating point's comfortable range
+        raise ScenarioError("formation.scale", f"must lie in [0.001, 1000], got {s:g}")
 
     def rows(values: tuple, cols: int) -> tuple:
         return tuple(tuple(v * s if j < cols else v for j, v in enumerate(r)) for r in values)

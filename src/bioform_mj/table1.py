@@ -30,6 +30,9 @@ def run_table1(sc: Scenario, on_result: Callable[[str, RunResult], None] | None 
     out: dict[str, Any] = {"plant": sc.plant.kind, "scenario": sc.name, "methods": {}}
     for m in METHODS:
         res = simulate(dataclasses.replace(sc, method=m), progress=None if progress is None else progress(m))
+        if getattr(res, "interrupted", None) is not None:  # SIGINT/SIGTERM: no further methods
+            res.interrupted.result = res
+            raise res.interrupted
         out["methods"][m] = res.summary
         if on_result is not None:
             on_result(m, res)

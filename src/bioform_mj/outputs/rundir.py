@@ -50,7 +50,7 @@ def survey(path: Path) -> tuple[list[str], list[str]]:
         return ours, foreign
     for entry in sorted(os.scandir(path), key=lambda e: e.name):
         name = entry.name
-        if name == LOCK_NAME:
+        if name == LOCK_NAME or name.startswith(".bioform-probe-"):  # ours: the lock, a writability probe
             continue
         if name in RUN_FILES or _is_tmp(name, RUN_FILES):
             (ours if entry.is_file(follow_symlinks=False) else foreign).append(name)
