@@ -430,6 +430,33 @@ def _control(
     s.k[w] = k + 1
 
 
+@wp.kernel
+def _record(k: wp.array(dtype=int), ctrl: wp.array2d(dtype=float), xfrc: wp.array2d(dtype=wp.spatial_vector),
+            base: wp.array(dtype=int), rec_ctrl: wp.array3d(dtype=float),
+            rec_xfrc: wp.array3d(dtype=wp.spatial_vector)):
+    """After a ``_control`` launch: the inputs it wrote (for control step ``k − 1``) into the recording."""
+    w = wp.tid()
+    j = k[w] - 1
+    if j < rec_ctrl.shape[0]:
+        for a in range(ctrl.shape[1]):
+            rec_ctrl[j, w, a] = ctrl[w, a]
+        for i in range(base.shape[0]):
+            rec_xfrc[j, w, i] = xfrc[w, base[i]]
+
+
+@wp.kernel
+def _replay(j: wp.array(dtype=int), rec_ctrl: wp.array3d(dtype=float), rec_xfrc: wp.array3d(dtype=wp.spatial_vector),
+            base: wp.array(dtype=int), ctrl: wp.array2d(dtype=float), xfrc: wp.array2d(dtype=wp.spatial_vector)):
+    """Before a control period of the physics-alone replay: that period's recorded inputs (counter on the device)."""
+    w = wp.tid()
+    r = j[w]
+    for a in range(ctrl.shape[1]):
+        ctrl[w, a] = rec_ctrl[r, w, a]
+    for i in range(base.shape[0]):
+        xfrc[w, base[i]] = rec_xfrc[r, w, i]
+    j[w] = r + 1
+
+
 # ------------------------------------------------------------------------------ host side
 def _check_compatible(scs: Sequence[Scenario]) -> None:
     """All worlds share one composed scene and one leader: say what differs if not."""
@@ -662,6 +689,71 @@ class BatchRun:
                 steps(rest)
             else:
                 steps(nsteps)
+            wp.synchronize_device(self.device)
+            return time.perf_counter() - t0
+
+    # -- physics alone on the closed loop's own inputs (benchmark)
+    def record_bytes(self) -> int:
+        """Device bytes :meth:`record` needs (ctrl and chassis forces of every control step)."""
+        return self.N * self.nworld * (self.mjm.nu * 4 + self.n * 24)
+
+    def record(self) -> None:
+        """Run the closed loop once (untimed) recording every control step's ``ctrl`` and chassis
+        ``xfrc_applied`` on the device, for :meth:`run_replay`."""
+        W, N = self.nworld, self.N
+        with wp.ScopedDevice(self.device):
+            self.rec_ctrl = wp.zeros((N, W, self.mjm.nu), dtype=float)
+            self.rec_xfrc = wp.zeros((N, W, self.n), dtype=wp.spatial_vector)
+            self._rec_j = wp.zeros(W, dtype=int)
+            d = self.d
+            rec = lambda: wp.launch(_record, dim=W, inputs=[self.s.k, d.ctrl, d.xfrc_applied, self.base,  # noqa: E731
+                                                            self.rec_ctrl, self.rec_xfrc])
+            self.reset()
+            rec()
+            for _ in range(N - 1):
+                for _ in range(self.n_sub):
+                    mjw.step(self.m, d)
+                self._launch_control()
+                rec()
+            wp.synchronize_device(self.device)
+
+    def run_replay(self, chunk: int = 100, capture: bool | None = None) -> float:
+        """Physics alone, same worlds, same initial state: every control period's recorded inputs
+        (:meth:`record`) then ``n_substeps`` × ``mjw.step``; the wall seconds of the loop (CUDA:
+        ``chunk`` periods captured as a graph and replayed, as :meth:`run`)."""
+        use_graph = self.device.is_cuda if capture is None else capture
+        full, rest = divmod(self.N, chunk)
+        d, W = self.d, self.nworld
+
+        def steps(k):
+            for _ in range(k):
+                wp.launch(_replay, dim=W, inputs=[self._rec_j, self.rec_ctrl, self.rec_xfrc, self.base, d.ctrl,
+                                                  d.xfrc_applied])
+                for _ in range(self.n_sub):
+                    mjw.step(self.m, d)
+
+        def start():
+            self.reset()  # the initial state (its control launch is overwritten by the first replay)
+            self._rec_j.zero_()
+
+        with wp.ScopedDevice(self.device):
+            graph = None
+            if use_graph and full:
+                start()
+                steps(1)
+                wp.synchronize_device(self.device)
+                with wp.ScopedCapture() as cap:
+                    steps(chunk)
+                graph = cap.graph
+            start()
+            wp.synchronize_device(self.device)
+            t0 = time.perf_counter()
+            if graph is not None:
+                for _ in range(full):
+                    wp.capture_launch(graph)
+                steps(rest)
+            else:
+                steps(self.N)
             wp.synchronize_device(self.device)
             return time.perf_counter() - t0
 
