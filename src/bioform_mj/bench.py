@@ -153,6 +153,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 def run(args: argparse.Namespace) -> int:
     from .errors import InputError
 
+    if getattr(args, "backend", "cpu") == "warp":
+        return _run_warp(args)
+    if getattr(args, "device", None) is not None:
+        raise InputError("--device applies to --backend warp only")
+
     try:
         sizes = [int(s) for s in str(args.sizes).split(",") if s.strip()]
     except ValueError:
@@ -193,6 +198,26 @@ def run(args: argparse.Namespace) -> int:
         print(f"cost per robot-step, n=256 / n=16: {out['cost_per_robot_step_256_over_16']:.2f}")
     write_json(json_path, out)
     print(f"wrote {args.json}")
+    return 0
+
+
+def _run_warp(args: argparse.Namespace) -> int:
+    """``--backend warp``: :mod:`bioform_mj.batch.bench` (closed loop vs physics alone, and this CPU engine)."""
+    from .batch.backend import require_warp, resolve_device
+
+    require_warp()  # exit 2 with the install line, before any work
+    from .batch.bench import parse_worlds, run as warp_run
+    from .outputs.files import check_out_file
+
+    worlds = parse_worlds(args.worlds)
+    if args.duration is not None and not (args.duration > 0 and args.duration <= 3600):
+        from .errors import InputError
+
+        raise InputError(f"--duration must be in (0, 3600] s, got {args.duration}")
+    device = resolve_device(args.device)
+    json_path = check_out_file(args.json, "--json")
+    warp_run(worlds, device, duration=args.duration if args.duration is not None else 0.5, json_path=json_path,
+             echo=lambda s: print(s, flush=True))
     return 0
 
 

@@ -91,7 +91,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="comma-separated methods, or 'all' (default: bioinspired-learning)")
     sw.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...",
                     help="vary a scenario key over values (repeatable; ';' separates array values)")
-    sw.add_argument("--backend", choices=("local", "ray"), default="local")
+    sw.add_argument("--backend", choices=("local", "ray", "warp"), default="local",
+                    help="local processes, Ray, or warp: every run a world of a MuJoCo Warp batch "
+                         "(needs pip install 'bioform-mj[gpu]')")
+    sw.add_argument("--device", help="with --backend warp: Warp device, cpu or cuda[:N] (default: cuda if present)")
     sw.add_argument("--workers", type=int, help="parallel workers (default: CPU count)")
     sw.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray)")
     sw.add_argument("--out", type=Path, required=True, help="sweep directory (rerunning resumes it)")
@@ -104,6 +107,12 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("--reps", type=int, default=2, help="repetitions; the best time counts (default 2)")
     bn.add_argument("--numpy", action="store_true", help="also time the numpy reference stack")
     bn.add_argument("--json", type=Path, default=Path("runs/bench.json"), help="output JSON (default runs/bench.json)")
+    bn.add_argument("--backend", choices=("cpu", "warp"), default="cpu",
+                    help="cpu: the compiled loop vs mj_step (default); warp: MuJoCo Warp batches, closed loop vs "
+                         "physics alone, and the CPU engine on this machine")
+    bn.add_argument("--device", help="with --backend warp: Warp device, cpu or cuda[:N] (default: cuda if present)")
+    bn.add_argument("--worlds", default="1024,4096,32768",
+                    help="with --backend warp: comma-separated world counts (default 1024,4096,32768)")
     return parser
 
 
@@ -481,17 +490,28 @@ def _sweep(args: argparse.Namespace) -> int:
             raise InputError(f"--methods: unknown method '{m}' (expected one of: {', '.join(METHODS)}, or all)")
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
+    if args.device is not None and args.backend != "warp":
+        raise InputError("--device applies to --backend warp only")
+    if args.backend == "warp":  # before any work: the extra, then the device
+        from .batch.backend import require_warp, resolve_device
+
+        require_warp()
+        args.device = resolve_device(args.device)
     overrides = list(args.overrides)
     if args.duration is not None:
         overrides.append(f"sim.duration={args.duration!r}")
     specs = expand(args.scenario, args.seeds, methods, args.vary, overrides, plant=args.plant,
                    seed0=args.seed or 0)
+    if args.backend == "warp":  # unsupported features, device memory: before anything is written
+        from .batch.backend import plan
+
+        plan(specs, args.device)
     out = _prepare_out(args.out, "sweep")
     out.mkdir(parents=True, exist_ok=True)
     progress = _progress(not args.quiet, "sweep")
     try:
         res = sweep(specs, out, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
-                    progress=progress)
+                    progress=progress, device=args.device)
     except SweepInterrupted as exc:
         # the same command resumes: finished rows are skipped by their content key
         cmd = ["bioform", "sweep", args.scenario]
@@ -504,7 +524,7 @@ def _sweep(args: argparse.Namespace) -> int:
         for v in args.vary:
             cmd += ["--vary", v]
         cmd += ["--backend", args.backend]
-        for flag, val in (("--workers", args.workers), ("--ray-address", args.ray_address)):
+        for flag, val in (("--device", args.device), ("--workers", args.workers), ("--ray-address", args.ray_address)):
             if val is not None:
                 cmd += [flag, str(val)]
         cmd += ["--out", str(out)]

@@ -104,7 +104,8 @@ def content_key(sc: Scenario, overrides: Sequence[str] = ()) -> str:
 
         for r in sc.plant.robots:
             with contextlib.suppress(BioformError, OSError):
-                models[r] = hashlib.sha1(resolve_robot(r).read_bytes()).hexdigest()
+                path = resolve_robot(r).model  # a RobotRef (model file + mapping; the mapping is in to_dict)
+                models[path] = hashlib.sha1(Path(path).read_bytes()).hexdigest()
     doc = {"scenario": sc.to_dict(), "overrides": list(overrides), "models": models, "version": __version__}
     text = json.dumps(doc, sort_keys=True, separators=(",", ":"), default=repr)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
@@ -566,18 +567,39 @@ def _read_row(path: Path, spec: RunSpec, warn: Callable[[str], None] | None) -> 
     return None
 
 
+def _run_warp(todo: list[RunSpec], groups: Any, device: str, sig: _Signals, done: Callable[[dict], None]) -> None:
+    """The runs as worlds of MuJoCo Warp batches (:mod:`bioform_mj.batch.backend`), one batch per scene."""
+    from .batch.backend import run_warp
+
+    def failed(sp: RunSpec, msg: str) -> dict[str, Any]:
+        return {**_base_row(sp), "status": "failed", "outcome": "failed", "error": msg}
+
+    try:
+        with _raising(sig):
+            run_warp(groups, device, _base_row, METRICS, done, stop=lambda: sig.signum is not None,
+                     failed_row=failed)
+    except _Stop:
+        return
+
+
 def sweep(specs: list[RunSpec], out: Path, backend: str = "local", workers: int | None = None,
           ray_address: str | None = None, progress: Callable[[int, int], None] | None = None,
-          warn: Callable[[str], None] | None = _warn) -> dict[str, Any]:
+          warn: Callable[[str], None] | None = _warn, device: str | None = None) -> dict[str, Any]:
     """Run ``specs`` (skipping those already in ``out/runs``), then write the table and statistics.
 
+    ``backend="warp"`` runs them as worlds of MuJoCo Warp batches on ``device`` (default: the
+    GPU if there is one); every spec is checked first (feature support, device memory).
     Raises :class:`SweepInterrupted` after SIGINT/SIGTERM, with the finished rows kept and
     the tables written for them.
     """
-    if backend not in ("local", "ray"):
-        raise InputError(f"unknown backend '{backend}' (expected local or ray)")
+    if backend not in ("local", "ray", "warp"):
+        raise InputError(f"unknown backend '{backend}' (expected local, ray or warp)")
+    if backend == "warp":
+        from .batch.backend import require_warp, resolve_device
+
+        require_warp()
+        device = resolve_device(device)
     runs_dir = out / "runs"
-    runs_dir.mkdir(parents=True, exist_ok=True)
     rows: dict[str, dict[str, Any]] = {}
     todo: list[RunSpec] = []
     keys = list(dict.fromkeys(sp.key for sp in specs))  # identical runs (same content) run once
@@ -591,6 +613,13 @@ def sweep(specs: list[RunSpec], out: Path, backend: str = "local", workers: int 
             todo.append(sp)
         else:
             rows[sp.key] = row
+    groups = None
+    if backend == "warp":
+        from .batch.backend import plan
+
+        groups = plan(todo, device)  # InputError before any work: unsupported feature, memory
+        workers = 1
+    runs_dir.mkdir(parents=True, exist_ok=True)
     workers = workers or os.cpu_count() or 1
     skipped = len(rows)
 
@@ -606,6 +635,8 @@ def sweep(specs: list[RunSpec], out: Path, backend: str = "local", workers: int 
     with _Signals() as sig:
         if backend == "local":
             _run_local(todo, workers, sig, done)
+        elif backend == "warp":
+            _run_warp(todo, groups, device, sig, done)
         else:
             _run_ray(todo, workers, ray_address, sig, done)
         wall = time.perf_counter() - t0
@@ -614,7 +645,7 @@ def sweep(specs: list[RunSpec], out: Path, backend: str = "local", workers: int 
         # the tables are written before the handlers are restored: a second signal cannot cut them short
         got = [rows[k] for k in keys if k in rows]
         group_by = ["method"] + list(dict.fromkeys(k for sp in specs for k, _ in sp.vary))
-        timing = {"backend": backend, "workers": workers, "ran": ran, "skipped": skipped, "wall_s": wall,
+        timing = {"backend": backend, "workers": workers, **({"device": device} if backend == "warp" else {}), "ran": ran, "skipped": skipped, "wall_s": wall,
                   "runs_per_s": ran / wall if ran and wall > 0 else None, "runs": len(keys), "done": len(got),
                   "complete": len(got) == len(keys),
                   "interrupted": None if interrupted is None else signal.Signals(interrupted).name,

@@ -33,7 +33,9 @@ from ..control import equations as _E
 from ..control.stack import ControlStack
 from ..disturbance import Harmonic
 from ..engine import GUARDS
+from ..plants.mujoco_plant import TIP_ANGLE_DEG
 from ..scenario import Scenario
+from ..sim import LOST_AFTER_S, LOST_M, SPIN_RAD_S
 from .engine import robot_index
 from .samesource import warp_equations
 
@@ -59,7 +61,7 @@ planar_state = EQ.planar_state
 SCALARS = ("k1", "k2", "k3", "A", "B", "D", "kx", "ky", "kth", "ka0", "ka1", "kb0", "kb1", "ephi0", "ephi1",
            "ca", "cb", "tphi", "f00", "f01", "f10", "f11", "g0", "g1", "k5a", "k5b", "kda", "kdb", "dt",
            "bio", "learning", "steer", "lim_position", "lim_speed", "lim_torque",
-           "d0", "d1", "d2", "d3", "e0", "e1", "e2", "e3", "use_dist")
+           "d0", "d1", "d2", "d3", "e0", "e1", "e2", "e3", "use_dist", "stride", "t_spin", "tilt_cos")
 _I = {name: wp.constant(i) for i, name in enumerate(SCALARS)}
 K1, K2, K3, A_, B_, D_ = (_I[x] for x in ("k1", "k2", "k3", "A", "B", "D"))
 KX, KY, KTH, KA0, KA1, KB0, KB1, EPHI0, EPHI1 = (_I[x] for x in ("kx", "ky", "kth", "ka0", "ka1", "kb0", "kb1",
@@ -69,6 +71,8 @@ K5A, K5B, KDA, KDB, DT, BIO, LEARN, STEER = (_I[x] for x in ("k5a", "k5b", "kda"
                                                               "steer"))
 LPOS, LSPD, LTRQ = _I["lim_position"], _I["lim_speed"], _I["lim_torque"]
 DD0, DE0, USED = _I["d0"], _I["e0"], _I["use_dist"]
+STRIDE, TSPIN, TILT = _I["stride"], _I["t_spin"], _I["tilt_cos"]
+SPIN = wp.constant(F(SPIN_RAD_S))
 
 
 @wp.struct
@@ -126,6 +130,12 @@ class BatchState:
     taumax: wp.array2d(dtype=F)
     tauraw_max: wp.array2d(dtype=F)
     ferr: wp.array2d(dtype=F)  # (W, n) formation error at the last observation
+    # the log rows' share of the summary (rows at k % stride == 0, k < N, as sim.simulate logs them):
+    fsq: wp.array2d(dtype=F)  # (W, n) Σ formation error² over the rows
+    fe0: wp.array2d(dtype=F)  # (W, n) formation error of row 0
+    spin_ok: wp.array2d(dtype=F)  # (W, n) rows with t ≥ t_spin and |ω| ≤ SPIN_RAD_S
+    nrow: wp.array(dtype=int)  # (W,) rows
+    tip_step: wp.array2d(dtype=int)  # (W, n) first observation k with the chassis tilted (−1: never)
 
 
 @wp.func
@@ -235,6 +245,9 @@ def _control(
         s.pose[w, i, 2] = th
         s.vel[w, i, 0] = v
         s.vel[w, i, 1] = om
+        # mujoco_kernels.watch_tilt after each plant step (k ≥ 1) until the loop stops
+        if k >= 1 and s.status[w] == 0 and s.tip_step[w, i] < 0 and up < g.sc[w, TILT]:
+            s.tip_step[w, i] = k
     kl = wp.min(k, N)
     for i in range(n):  # formation error against the true leader at this observation
         dx = s.pose[w, i, 0] - (L_pose[kl, 0] - g.offsets[w, i, 0])
@@ -268,6 +281,11 @@ def _control(
             s.vmax[w, i] = zero
             s.taumax[w, i] = zero
             s.tauraw_max[w, i] = zero
+            s.fsq[w, i] = zero
+            s.fe0[w, i] = zero
+            s.spin_ok[w, i] = zero
+            s.tip_step[w, i] = -1
+        s.nrow[w] = 0
         s.first[w] = 1
         s.status[w] = 0
         s.k_done[w] = 0
@@ -378,6 +396,14 @@ def _control(
         if _check(g, s, w, n) != 0:
             s.status[w] = 1
             running = False
+        elif k % int(g.sc[w, STRIDE]) == 0:  # engine.record's row (formation error, vel) for the summary
+            for i in range(n):
+                s.fsq[w, i] = s.fsq[w, i] + s.ferr[w, i] * s.ferr[w, i]
+                if k == 0:
+                    s.fe0[w, i] = s.ferr[w, i]
+                if F(k) * dt >= g.sc[w, TSPIN] and wp.abs(s.vel[w, i, 1]) <= SPIN:
+                    s.spin_ok[w, i] = s.spin_ok[w, i] + F(1.0)
+            s.nrow[w] = s.nrow[w] + 1
     # ---- apply_inputs: this step's torques and d(k dt), held over the period (zero once stopped)
     d0 = zero
     d1 = zero
@@ -402,6 +428,33 @@ def _control(
     if running and k == N - 1:
         s.k_done[w] = N
     s.k[w] = k + 1
+
+
+@wp.kernel
+def _record(k: wp.array(dtype=int), ctrl: wp.array2d(dtype=float), xfrc: wp.array2d(dtype=wp.spatial_vector),
+            base: wp.array(dtype=int), rec_ctrl: wp.array3d(dtype=float),
+            rec_xfrc: wp.array3d(dtype=wp.spatial_vector)):
+    """After a ``_control`` launch: the inputs it wrote (for control step ``k − 1``) into the recording."""
+    w = wp.tid()
+    j = k[w] - 1
+    if j < rec_ctrl.shape[0]:
+        for a in range(ctrl.shape[1]):
+            rec_ctrl[j, w, a] = ctrl[w, a]
+        for i in range(base.shape[0]):
+            rec_xfrc[j, w, i] = xfrc[w, base[i]]
+
+
+@wp.kernel
+def _replay(j: wp.array(dtype=int), rec_ctrl: wp.array3d(dtype=float), rec_xfrc: wp.array3d(dtype=wp.spatial_vector),
+            base: wp.array(dtype=int), ctrl: wp.array2d(dtype=float), xfrc: wp.array2d(dtype=wp.spatial_vector)):
+    """Before a control period of the physics-alone replay: that period's recorded inputs (counter on the device)."""
+    w = wp.tid()
+    r = j[w]
+    for a in range(ctrl.shape[1]):
+        ctrl[w, a] = rec_ctrl[r, w, a]
+    for i in range(base.shape[0]):
+        xfrc[w, base[i]] = rec_xfrc[r, w, i]
+    j[w] = r + 1
 
 
 # ------------------------------------------------------------------------------ host side
@@ -485,6 +538,10 @@ class BatchRun:
             for c, name in enumerate(("e0", "e1", "e2", "e3")):
                 row[name] = terms[1, c]
             row["use_dist"] = 1.0
+            stride = max(1, int(round(sc.sim.log_dt / dt)))
+            row["stride"] = float(stride)
+            row["t_spin"] = ((N - 1) // stride) * stride * dt - 1.0  # sim.follower_outcomes: the last second of rows
+            row["tilt_cos"] = math.cos(math.radians(TIP_ANGLE_DEG))
             sc_rows[w] = [row[f] for f in SCALARS]
             arr["k4"][w], arr["c_min"][w], arr["c_max"][w] = gn.k4, gn.c_min, gn.c_max
             arr["offsets"][w] = gn.offsets
@@ -528,6 +585,9 @@ class BatchRun:
             s.first, s.k, s.status, s.k_done = (wp.zeros(W, dtype=int) for _ in range(4))
             s.diag = wp.zeros((W, 3), dtype=F)
             s.verr, s.nsat, s.vmax, s.taumax, s.tauraw_max, s.ferr = z1(), z1(), z1(), z1(), z1(), z1()
+            s.fsq, s.fe0, s.spin_ok = z1(), z1(), z1()
+            s.nrow = wp.zeros(W, dtype=int)
+            s.tip_step = wp.full((W, n), -1, dtype=int)
             self.s = s
             self.L_pose = A(L_pose)
             self.L_vel = A(L_vel)
@@ -632,7 +692,88 @@ class BatchRun:
             wp.synchronize_device(self.device)
             return time.perf_counter() - t0
 
+    # -- physics alone on the closed loop's own inputs (benchmark)
+    def record_bytes(self) -> int:
+        """Device bytes :meth:`record` needs (ctrl and chassis forces of every control step)."""
+        return self.N * self.nworld * (self.mjm.nu * 4 + self.n * 24)
+
+    def record(self) -> None:
+        """Run the closed loop once (untimed) recording every control step's ``ctrl`` and chassis
+        ``xfrc_applied`` on the device, for :meth:`run_replay`."""
+        W, N = self.nworld, self.N
+        with wp.ScopedDevice(self.device):
+            self.rec_ctrl = wp.zeros((N, W, self.mjm.nu), dtype=float)
+            self.rec_xfrc = wp.zeros((N, W, self.n), dtype=wp.spatial_vector)
+            self._rec_j = wp.zeros(W, dtype=int)
+            d = self.d
+            rec = lambda: wp.launch(_record, dim=W, inputs=[self.s.k, d.ctrl, d.xfrc_applied, self.base,  # noqa: E731
+                                                            self.rec_ctrl, self.rec_xfrc])
+            self.reset()
+            rec()
+            for _ in range(N - 1):
+                for _ in range(self.n_sub):
+                    mjw.step(self.m, d)
+                self._launch_control()
+                rec()
+            wp.synchronize_device(self.device)
+
+    def run_replay(self, chunk: int = 100, capture: bool | None = None) -> float:
+        """Physics alone, same worlds, same initial state: every control period's recorded inputs
+        (:meth:`record`) then ``n_substeps`` × ``mjw.step``; the wall seconds of the loop (CUDA:
+        ``chunk`` periods captured as a graph and replayed, as :meth:`run`)."""
+        use_graph = self.device.is_cuda if capture is None else capture
+        full, rest = divmod(self.N, chunk)
+        d, W = self.d, self.nworld
+
+        def steps(k):
+            for _ in range(k):
+                wp.launch(_replay, dim=W, inputs=[self._rec_j, self.rec_ctrl, self.rec_xfrc, self.base, d.ctrl,
+                                                  d.xfrc_applied])
+                for _ in range(self.n_sub):
+                    mjw.step(self.m, d)
+
+        def start():
+            self.reset()  # the initial state (its control launch is overwritten by the first replay)
+            self._rec_j.zero_()
+
+        with wp.ScopedDevice(self.device):
+            graph = None
+            if use_graph and full:
+                start()
+                steps(1)
+                wp.synchronize_device(self.device)
+                with wp.ScopedCapture() as cap:
+                    steps(chunk)
+                graph = cap.graph
+            start()
+            wp.synchronize_device(self.device)
+            t0 = time.perf_counter()
+            if graph is not None:
+                for _ in range(full):
+                    wp.capture_launch(graph)
+                steps(rest)
+            else:
+                steps(self.N)
+            wp.synchronize_device(self.device)
+            return time.perf_counter() - t0
+
     # -- results
+    def _outcome(self, w, i, diverged, final, fe0, t_end, nrow, spin_ok, tip, learning, c_hat, lo, hi):
+        """``sim.follower_outcomes`` from the device's counters; ``slipping`` is not watched by the
+        batch engine, nor ``spinning`` in a world that diverged (its log would end earlier)."""
+        not_watched = "slipping not watched" + (", spinning not checked (diverged)" if diverged else "")
+        if tip >= 0:
+            return "tipped", f"tilt beyond {TIP_ANGLE_DEG:g} deg at t = {tip * self.dt:.3f} s"
+        if not diverged and nrow and spin_ok == 0:
+            return "spinning", f"|omega| > {SPIN_RAD_S:g} rad/s over the last second"
+        if final > LOST_M and (t_end >= LOST_AFTER_S - 1e-9 or final > 1.5 * fe0):
+            return "lost", f"final formation error {final:.3g} m > {LOST_M:g} m"
+        if learning:
+            at = [k for k in range(2) if c_hat[k] <= lo[k] * (1 + 1e-9) or c_hat[k] >= hi[k] * (1 - 1e-9)]
+            if at:
+                return "c_hat_at_bound", "learned " + ", ".join("ab"[k] for k in at) + " at its bound"
+        return "ok", f"batch engine: {not_watched}"
+
     def summaries(self, wall: float = float("nan")) -> list[dict[str, Any]]:
         s = self.s
         ferr, c_hat = s.ferr.numpy(), s.c_hat.numpy()
@@ -641,6 +782,9 @@ class BatchRun:
         status, k_done, diag = s.status.numpy(), s.k_done.numpy(), s.diag.numpy()
         est = s.est_pose.numpy()
         pose = s.pose.numpy()
+        fsq, fe0, spin_ok, nrow, tip = s.fsq.numpy(), s.fe0.numpy(), s.spin_ok.numpy(), s.nrow.numpy(), s.tip_step.numpy()
+        c_min, c_max = self.g.c_min.numpy(), self.g.c_max.numpy()
+        learning = self.g.sc.numpy()[:, LEARN] != 0
         lp_end = self.L_pose_host[self.N]
         out = []
         for w, sc in enumerate(self.scenarios):
@@ -656,9 +800,17 @@ class BatchRun:
             elif bad:
                 reason = f"non-finite robot state at the end of the run (t = {self.N * self.dt:g} s)"
             fol = []
+            stride = max(1, int(round(sc.sim.log_dt / self.dt)))
+            t_end = (int(nrow[w]) - 1) * stride * self.dt  # the last log row's time (sim.simulate's log)
             for i in range(self.n):
+                outcome, detail = self._outcome(w, i, reason is not None, float(ferr[w, i]), float(fe0[w, i]),
+                                                t_end, int(nrow[w]), float(spin_ok[w, i]), int(tip[w, i]),
+                                                bool(learning[w]), c_hat[w, i], c_min[w, i], c_max[w, i])
                 fol.append({
                     "id": i + 1,
+                    "outcome": outcome,
+                    "outcome_detail": detail,
+                    "rms_formation_error_m": float(np.sqrt(fsq[w, i] / nrow[w])) if nrow[w] else float("nan"),
                     "total_velocity_error": float(verr[w, i] * self.dt),
                     "final_formation_error_m": float(ferr[w, i]),
                     "final_estimation_error_m": float(np.hypot(*(est[w, i, :2] - lp_end[:2]))),

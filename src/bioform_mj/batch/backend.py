@@ -1,0 +1,220 @@
+"""``bioform sweep --backend warp``: the runs of a sweep as worlds of MuJoCo Warp batches.
+
+Importing this module imports nothing optional: :func:`require_warp` says how to install
+the extra, :func:`plan` checks every spec (supported features, one group per distinct
+scene, device memory) before any work, :func:`run_warp` runs the groups one batch each and
+hands back one sweep row per run (the columns of ``sweep.run_one``).
+
+Worlds are grouped by what a batch must share (:func:`group_key`): the plant (robots,
+``c_true``, …), the time axis (``control_dt``, ``physics_dt``, ``duration``), the leader, the
+graph and the team size. Everything else (seed, gains, formation offsets and jitter,
+disturbance, limits, method) varies per world.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+from ..errors import InputError
+
+INSTALL = "pip install 'bioform-mj[gpu]'"
+
+#: Peak device bytes per world during ``mjw.step`` (docs/warp_engine.md, measured with
+#: ``wp.ScopedMemoryTracker``): 255 KB for 3 robots, 3.6 MB for 64 → a + b n.
+WORLD_BYTES_BASE = 90e3
+WORLD_BYTES_PER_ROBOT = 55e3
+#: controller state, gains and metrics per robot (float64), and per world
+CONTROL_BYTES_PER_ROBOT = 1e3
+#: share of the free memory a batch may plan to use
+MEMORY_SHARE = 0.9
+
+
+def require_warp() -> None:
+    """InputError (exit 2) unless ``warp`` and ``mujoco_warp`` import."""
+    try:
+        import warp  # noqa: F401
+
+        import mujoco_warp  # noqa: F401
+    except ImportError as exc:
+        raise InputError(f"--backend warp needs the optional GPU extra (mujoco-warp, warp-lang): {INSTALL} "
+                         f"({exc})") from None
+
+
+def resolve_device(device: str | None) -> str:
+    """The Warp device to use: ``device`` checked, or ``cuda:0`` when there is one, else ``cpu``."""
+    import warp as wp
+
+    wp.config.quiet = True
+    if device is None:
+        return "cuda:0" if wp.is_cuda_available() else "cpu"
+    try:
+        return str(wp.get_device(device))
+    except (RuntimeError, ValueError) as exc:
+        names = ", ".join(str(d) for d in wp.get_devices())
+        raise InputError(f"--device '{device}': not a Warp device here ({exc}; available: {names})") from None
+
+
+def unsupported(sc: Any) -> str | None:
+    """What of scenario ``sc`` the batch engine does not run yet (None: all of it)."""
+    if sc.plant.kind != "mujoco":
+        return (f"plant.kind = '{sc.plant.kind}' (the batch engine runs the MuJoCo plant only; "
+                "use --plant mujoco or --backend local)")
+    f = sc.faults
+    named = [k for k, on in (("faults.link_fail", f.link_fail), ("faults.packet_loss", f.packet_loss > 0),
+                             ("faults.delay", f.delay > 0), ("faults.noise_pose", any(f.noise_pose)),
+                             ("faults.noise_vel", any(f.noise_vel)), ("faults.actuator", f.actuator),
+                             ("faults.push", f.push), ("faults.friction_patch", f.friction_patch)) if on]
+    if named:
+        return f"faults ({', '.join(named)})"
+    if sc.events:
+        return f"events ({len(sc.events)} timed event(s))"
+    return None
+
+
+def group_key(sc: Any) -> str:
+    """What the worlds of one batch share (one composed scene, one time axis, one leader, one graph)."""
+    d = sc.to_dict()
+    return json.dumps({"plant": d["plant"], "control_dt": sc.sim.control_dt, "physics_dt": sc.sim.physics_dt,
+                       "duration": sc.sim.duration, "leader": d["leader"], "graph": d["graph"], "n": sc.n},
+                      sort_keys=True, default=repr)
+
+
+def world_bytes(n_robots: int) -> float:
+    """Estimated peak device bytes of one world of ``n_robots`` followers (see the constants)."""
+    return WORLD_BYTES_BASE + (WORLD_BYTES_PER_ROBOT + CONTROL_BYTES_PER_ROBOT) * n_robots
+
+
+def free_memory(device: str) -> int:
+    """Free bytes on ``device``: CUDA from the driver (Warp), the CPU from /proc/meminfo or psutil."""
+    import warp as wp
+
+    dev = wp.get_device(device)
+    if dev.is_cuda:
+        return int(dev.free_memory)
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        import psutil
+
+        return int(psutil.virtual_memory().available)
+    except ImportError:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+
+
+@dataclass
+class Group:
+    """One batch: specs sharing a scene."""
+
+    key: str
+    specs: list
+    n: int
+
+    @property
+    def bytes(self) -> float:
+        return len(self.specs) * world_bytes(self.n)
+
+
+def plan(specs: Sequence[Any], device: str) -> list[Group]:
+    """Check ``specs`` (with resolved scenarios) for the batch engine and group them; InputError
+    naming the first unsupported feature, or the memory estimate of a batch that does not fit."""
+    from ..scenario import load
+
+    groups: dict[str, Group] = {}
+    for sp in specs:
+        sc = sp.scenario if sp.scenario is not None else \
+            load(sp.source, list(sp.overrides), method=sp.method, plant=sp.plant)
+        why = unsupported(sc)
+        if why is not None:
+            raise InputError(f"--backend warp: the batch engine does not support {why} yet "
+                             f"(run {sp.method}, seed {sp.seed}); use --backend local")
+        k = group_key(sc)
+        groups.setdefault(k, Group(k, [], sc.n)).specs.append(sp)
+    out = list(groups.values())
+    if out:
+        free = free_memory(device)
+        big = max(out, key=lambda g: g.bytes)
+        if big.bytes > MEMORY_SHARE * free:
+            fit = int(MEMORY_SHARE * free // world_bytes(big.n))
+            raise InputError(f"--backend warp: {len(big.specs)} worlds of {big.n} robots need about "
+                             f"{big.bytes / 1e9:.2f} GB on {device} ({world_bytes(big.n) / 1e3:.0f} KB per world, "
+                             f"estimated), {free / 1e9:.2f} GB free: at most {fit} worlds fit; "
+                             "split the sweep (fewer --seeds or --vary values)")
+    return out
+
+
+def rows_from_summaries(specs: Sequence[Any], summaries: Sequence[dict], base_row: Callable[[Any], dict],
+                        metrics: Sequence[str], batch_wall: float, device: str) -> list[dict[str, Any]]:
+    """One sweep row per world, with ``sweep.run_one``'s columns."""
+    import numpy as np
+
+    rows = []
+    W = len(specs)
+    for sp, s in zip(specs, summaries):
+        row = base_row(sp)
+        row["plant"] = "mujoco"
+        div = bool(s["diverged"])
+        row["status"] = "diverged" if div else "ok"
+        row["error"] = s["diverged_reason"] if div else ""
+        row["diverged_at_s"] = s["sim_time"] if div else None
+        fo = [f.get("outcome") for f in s["followers"]]
+        row["follower_outcomes"] = ";".join(str(o) for o in fo)
+        bad = sorted({str(o) for o in fo if o != "ok"})
+        row["outcome"] = "diverged" if div else (",".join(bad) if bad else "ok")
+        row["sim_time_s"] = s["sim_time"]
+        row["wall_time_s"] = batch_wall / W  # the batch's loop time shared out over its worlds
+        for m in metrics:
+            if m not in s["followers"][0]:
+                continue
+            vals = np.array([f[m] for f in s["followers"]], dtype=float)
+            row[f"{m}_mean"] = float(np.mean(vals))
+            row[f"{m}_max"] = float(np.max(vals))
+        ch = np.array([f["c_hat_rel_error"] for f in s["followers"]], dtype=float)
+        row["c_hat_abs_rel_error_max"] = float(np.max(np.abs(ch)))
+        row["backend"] = "warp"
+        row["device"] = device
+        row["batch_worlds"] = W
+        row["batch_wall_time_s"] = batch_wall
+        rows.append(row)
+    return rows
+
+
+def run_warp(groups: Sequence[Group], device: str, base_row: Callable[[Any], dict], metrics: Sequence[str],
+             done: Callable[[dict], None], stop: Callable[[], bool] = lambda: False,
+             failed_row: Callable[[Any, str], dict] | None = None) -> None:
+    """Run every group as one batch on ``device``; ``done(row)`` per world as each batch ends.
+    ``stop()`` is asked between batches. A batch that raises fails its rows (``failed_row``)."""
+    import warp as wp
+
+    from ..scenario import load
+    from .control import BatchRun
+
+    wp.config.quiet = True
+    for g in groups:
+        if stop():
+            return
+        scs = [sp.scenario if sp.scenario is not None else
+               load(sp.source, list(sp.overrides), method=sp.method, plant=sp.plant) for sp in g.specs]
+        try:
+            t0 = time.perf_counter()
+            b = BatchRun(scs, device)
+            setup = time.perf_counter() - t0
+            wall = b.run()
+            summ = b.summaries(wall)
+            rows = rows_from_summaries(g.specs, summ, base_row, metrics, wall, device)
+            for r in rows:
+                r["batch_setup_s"] = setup
+            del b
+        except Exception as exc:  # noqa: BLE001 - a failed batch fails its rows, not the sweep
+            if failed_row is None:
+                raise
+            rows = [failed_row(sp, f"{type(exc).__name__}: {exc}") for sp in g.specs]
+        for r in rows:
+            done(r)
