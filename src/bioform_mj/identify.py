@@ -22,7 +22,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from bioform_mj.scene import build_scene, compile_scene, layout_of
+from bioform_mj.scene import DC_INPUT_VOLTAGE, build_scene, compile_scene, dc_constants, dc_ctrl_scale, layout_of
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +51,11 @@ class RobotParams:
     wheel_damping: float = 0.0  # N·m·s/rad per wheel joint (mean of the two)
     wheel_armature: float = 0.0  # kg·m² per wheel joint (included in wheel_inertia)
     wheel_frictionloss: float = 0.0  # N·m per wheel joint
+    motor: str = "ideal"  # "ideal" (torque source) or "dc" (MuJoCo <dcmotor>, design §8.2)
+    driver: str = ""  # DC motor driver: "current" or "voltage"
+    motor_stall_torque: float = 0.0  # N·m at the wheel: g K V_max / R (DC motor)
+    motor_no_load_speed: float = 0.0  # rad/s at the wheel: V_max / (g K) (DC motor)
+    motor_damping: float = 0.0  # N·m·s/rad per wheel: back-EMF drag (g K)²/R (voltage driver; 0 otherwise)
 
     @property
     def c(self) -> tuple[float, float]:
@@ -87,9 +92,27 @@ class RobotParams:
         it stays where the projection and the excitation put it. Armature is in ``a_eff, b_eff``.
         """
         a, b, r, l = self.a_eff, self.b_eff, self.wheel_radius, self.half_track
-        c, f = self.wheel_damping, self.wheel_frictionloss
+        c, f = self.wheel_damping + self.motor_damping, self.wheel_frictionloss
         k_v, k_w = 2 * a * c / r, 2 * b * c * l / r
-        return {
+        motor = {"motor": self.motor}
+        if self.motor == "dc":
+            ce = self.motor_damping
+            motor.update({
+                "driver": self.driver,
+                "stall_torque_Nm": self.motor_stall_torque,
+                "no_load_speed_rad_s": self.motor_no_load_speed,
+                "back_emf_damping_Nms_per_rad": ce,
+                "back_emf_drag_rate_per_s": [2 * a * ce / r, 2 * b * ce * l / r],
+                "ground_truth": (
+                    "voltage driver: a_eff, b_eff from rest (the stall torque line); moving, back-EMF is a "
+                    "viscous drag (gK)^2/R per wheel: v' = a tau_a - k_v v, w' = b tau_b - k_w w, "
+                    "k_v = 2 a c/r, k_w = 2 b c l/r (c = damping + back-EMF)"
+                    if self.driver == "voltage" else
+                    "current driver: the commanded torque is delivered below the torque-speed line "
+                    "|tau| <= stall (1 - |wheel rate|/no-load speed): a_eff, b_eff and no drag; "
+                    "beyond it the torque is clipped (a saturation, not a drag)"),
+            })
+        return {**motor,
             "damping_Nms_per_rad": c, "armature_kgm2": self.wheel_armature, "frictionloss_Nm": f,
             "armature_in_c_true": "I_w includes armature: a = 1/(m r + 2 I_w/r), b = l/(I r + 2 I_w l²/r)",
             "drag_rate_per_s": [k_v, k_w],
@@ -172,15 +195,29 @@ def robot_parameters(
     a_eff = 1.0 / (mass * r + 2.0 * i_w / r)  # design §8
     b_eff = l / (yaw * r + 2.0 * i_w * l**2 / r)  # design §8
 
+    dc = int(model.actuator_dyntype[al]) == int(mujoco.mjtDyn.mjDYN_DCMOTOR)
+
     def limit(a: int) -> float:
+        if dc:  # ctrl is the driver's input: the wheel torque is ctrl / scale (design §8.2)
+            lim = float(model.actuator_ctrlrange[a, 1] / dc_ctrl_scale(model, a))
+            if model.actuator_forcelimited[a]:
+                lim = min(lim, float(model.actuator_forcerange[a, 1] * abs(model.actuator_gear[a, 0])))
+            R, K, g, vmax = dc_constants(model, a)
+            return min(lim, g * K * vmax / R)
         lim = float(model.actuator_ctrlrange[a, 1] * abs(model.actuator_gear[a, 0]))
         if model.actuator_forcelimited[a]:
             lim = min(lim, float(model.actuator_forcerange[a, 1]))
         return lim
 
+    motor: dict = {}
+    if dc:
+        R, K, g, vmax = dc_constants(model, al)
+        voltage = int(model.actuator_ctrlspec[al]) == DC_INPUT_VOLTAGE
+        motor = dict(motor="dc", driver="voltage" if voltage else "current", motor_stall_torque=g * K * vmax / R,
+                     motor_no_load_speed=vmax / (g * K), motor_damping=(g * K) ** 2 / R if voltage else 0.0)
     return RobotParams(mass, float(yaw), i_w, r, l, com_offset, (limit(al), limit(ar)), float(a_eff), float(b_eff),
                        tuple(float(x) for x in rot_b.T @ com), float(np.mean(damp)), float(np.mean(arm)),
-                       float(np.mean(fl)))
+                       float(np.mean(fl)), **motor)
 
 
 def robot_truth(entry) -> RobotParams:
@@ -250,6 +287,13 @@ def identify(
         raise ValueError(f"torque must be in (0, {min(params.tau_max)}] N·m, got {torque}")
     if not duration > 0 or settle < 0:
         raise ValueError("duration must be > 0 and settle >= 0")
+    if params.motor == "dc":  # design §8.2: stay below the torque–speed line; see the drag's transient
+        um = params.unmodelled(0.0, 0.0)
+        w0 = 0.3 * params.motor_no_load_speed * params.wheel_radius  # 30 % of the no-load wheel speed, m/s
+        duration = min(duration, w0 / (2 * params.a_eff * torque))
+        k_v = um["drag_rate_per_s"][0]
+        if k_v > 0:
+            duration = min(duration, 3.0 / k_v)
     model, data = plant.model, plant.data
     dt = model.opt.timestep
     n_settle, n_run = round(settle / dt), max(round(duration / dt), 3)
@@ -286,6 +330,9 @@ def identify(
     # turn torque: ω at the end at most OMEGA_ID rad/s, so the υ·ω coupling of a centre of mass
     # off the axle (∝ ω²) stays small
     t_turn = min(torque, OMEGA_ID / (2 * params.b_eff * duration))
+    if params.motor == "dc":  # wheel rates l ω / r below 30 % of no-load in the turn tests too
+        t_turn = min(t_turn, 0.3 * params.motor_no_load_speed * params.wheel_radius
+                     / (params.half_track * 2 * params.b_eff * duration))
     drive = [run(torque, torque), run(0.5 * torque, 0.5 * torque)]
     turn = [run(-t_turn, t_turn), run(-0.5 * t_turn, 0.5 * t_turn)]
     (al1, be1), (al2, be2) = drive[0]["fit"]["v"], drive[1]["fit"]["v"]

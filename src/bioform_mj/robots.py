@@ -5,7 +5,8 @@ An entry of ``plant.robots`` is
 - a shipped name (``paper``, ``lab``, ``tb3``, ``jackal``: ``models/<name>_robot.xml``),
 - a path to an MJCF file, or
 - a table ``{model = "path.xml", base = "BODY", left_wheel = "JOINT", right_wheel = "JOINT",
-  wheel_radius = r, half_track = l, tau_max = τ}``: every key but ``model`` optional; an empty
+  wheel_radius = r, half_track = l, tau_max = τ, motor = "ideal" | "dc", driver = "current" |
+  "voltage"}``: every key but ``model`` optional; an empty
   name (or 0 for a number) means "as in the shipped convention" (body ``base``, joints
   ``left_wheel``/``right_wheel``) resp. "read it from the model".
 
@@ -44,6 +45,8 @@ class RobotRef:
     wheel_radius: float = 0.0
     half_track: float = 0.0
     tau_max: float = 0.0
+    motor: str = ""  # "" or "ideal": torque sources (the paper); "dc": the model's <dcmotor> drives
+    driver: str = ""  # with motor = "dc": "current" (default) or "voltage" (design §8.2)
 
     @property
     def mapped(self) -> bool:
@@ -87,9 +90,13 @@ def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:
         raise InputError(f"scenario key '{key}': a robot table needs 'model' (an MJCF path or shipped name)")
     kw: dict[str, Any] = {}
     for name, value in entry.items():
-        if name in ("model", "base", "left_wheel", "right_wheel"):
+        if name in ("model", "base", "left_wheel", "right_wheel", "motor", "driver"):
             if not isinstance(value, str):
                 raise InputError(f"scenario key '{key}.{name}': expected a string, got {value!r}")
+            allowed = {"motor": ("", "ideal", "dc"), "driver": ("", "current", "voltage")}.get(name)
+            if allowed is not None and value not in allowed:
+                raise InputError(f"scenario key '{key}.{name}': expected one of "
+                                 f"{', '.join(repr(a) for a in allowed if a)}, got {value!r}")
             kw[name] = value
         else:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:

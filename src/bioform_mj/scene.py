@@ -348,6 +348,9 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
                 and abs(abs(model.actuator_gear[a, 0]) - 1) < 1e-12 and bool(model.actuator_ctrllimited[a]))
 
     drives = [a for a in range(model.nu) if drives_wheel(a)]
+    # <dcmotor> drives (design §8.2): used with the mapping's motor = "dc", removed otherwise
+    dc_all = [a for a in drives if int(model.actuator_dyntype[a]) == int(mujoco.mjtDyn.mjDYN_DCMOTOR)]
+    drives = [a for a in drives if a not in dc_all]
     keep = []
     for j in joints:
         mine = [a for a in drives if plain_motor(a, j)]
@@ -390,6 +393,11 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         raise ModelError(f"{path}: wheel torque limit is {tau_max:g} N·m; give tau_max in the robot's mapping")
 
     disabled = [a for a in drives if a not in keep]
+    dc_keep: list[int] = []
+    if ref.motor == "dc":
+        tau_max = _dc_plan(model, path, ref, joints, dc_all, dc_keep, notes)
+        disabled = list(drives)
+        keep = dc_keep
     act_names = {_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in range(model.nu)}
     if min(keep) >= 0:
         motors = tuple(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in keep)
@@ -424,7 +432,8 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         disabled_actuators=tuple(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in disabled),
         notes=tuple(notes),
     )
-    plan = dict(has_free=has_free, keep=keep, disabled=disabled, proxies=proxies, geoms=geoms, radius=r,
+    plan = dict(has_free=has_free, keep=keep, disabled=disabled, dc=bool(dc_keep),
+                dc_removed=[] if dc_keep else dc_all, proxies=proxies, geoms=geoms, radius=r,
                 joints=joints, axle_world=mid, base_yaw=float(np.arctan2(fwd[1], fwd[0])))
     return layout, plan
 
@@ -465,6 +474,92 @@ def _wheel_proxy(spec: mujoco.MjSpec, model: mujoco.MjModel, j: int, cand: list[
         g.friction = [1.0, 0.005, 0.0001]
 
 
+def dc_constants(model: mujoco.MjModel, a: int) -> tuple[float, float, float, float]:
+    """``(R Ω, K V·s/rad, |gear|, V_max V)`` of a compiled ``<dcmotor>`` actuator ``a``
+    (``gainprm[0:2]`` hold R and K; ``V_max`` from its voltage ``ctrlrange`` or, with the
+    current driver, the controller's ``Vmax`` in ``gainprm[7]``)."""
+    R, K = float(model.actuator_gainprm[a, 0]), float(model.actuator_gainprm[a, 1])
+    g = abs(float(model.actuator_gear[a, 0]))
+    if int(model.actuator_ctrlspec[a]) == DC_INPUT_FF:
+        vmax = float(model.actuator_gainprm[a, 7])
+    else:
+        vmax = float(min(-model.actuator_ctrlrange[a, 0], model.actuator_ctrlrange[a, 1])) \
+            if model.actuator_ctrllimited[a] else 0.0
+    return R, K, g, vmax
+
+
+#: ``actuator_ctrlspec`` of a ``<dcmotor>`` with ``input="voltage"`` resp. ``input="ff"`` (MuJoCo 4.0)
+DC_INPUT_VOLTAGE = 8
+DC_INPUT_FF = 4
+
+
+def _dc_plan(model, path, ref, joints, dc_all, dc_keep, notes) -> float:
+    """motor = "dc": the ``<dcmotor>`` on each wheel joint (appended to ``dc_keep``), checked; the
+    wheel torque limit (stall torque ``g K V_max / R``, or the mapping's ``tau_max`` if lower)."""
+    limits = []
+    for j in joints:
+        mine = [a for a in dc_all if int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
+                and model.actuator_trnid[a, 0] == j]
+        jname = _name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+        if len(mine) != 1:
+            raise ModelError(f"scenario key 'plant.robots.motor': \"dc\" needs one <dcmotor> on wheel joint "
+                             f"'{jname}' of {path}, found {len(mine)}")
+        a = mine[0]
+        aname = _name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
+        R, K, g, vmax = dc_constants(model, a)
+        for val, what in ((R, "resistance"), (K, "motorconst"), (g, "gear"), (vmax, "ctrlrange (supply voltage)")):
+            if not val > 0:
+                raise ModelError(f"scenario key 'plant.robots.motor': <dcmotor> '{aname}' in {path}: {what} "
+                                 f"must be > 0, got {val:g}")
+        dc_keep.append(a)
+        limits.append(g * K * vmax / R)
+    stall = min(limits)
+    tau = min(stall, ref.tau_max) if ref.tau_max > 0 else stall
+    drv = ref.driver or "current"
+    notes.append(f"DC motors '{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, dc_keep[0])}', "
+                 f"'{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, dc_keep[1])}' ({drv} driver): stall torque "
+                 f"{stall:.4g} N·m at the wheel" + (f", limited to {tau:g} N·m" if tau < stall else ""))
+    return tau
+
+
+def _dc_driver(act, model, a: int, sgn: float, driver: str, tau: float) -> None:
+    """Set the driver of a kept ``<dcmotor>`` (design §8.2). The plant writes ``ctrl = s · τ``
+    with ``τ`` the commanded wheel torque (:func:`dc_ctrl_scale`):
+
+    - ``"voltage"``: ``ctrl`` is the terminal voltage ``V = R τ / (g K)``, clipped to ``±V_max``
+      (the torque ``τ`` at stall; moving, back-EMF takes ``(gK)²/R · φ̇``: a drag);
+    - ``"current"``: ``ctrl`` is the motor torque ``τ/g`` (``input="ff"``): the on-board driver
+      applies ``v = (R/K) τ/g + K g φ̇`` (back-EMF compensated), clamped to ``V_max``, so ``τ`` is
+      delivered exactly up to the torque–speed line; a current limit ``τ_max / (g K)``.
+    """
+    R, K, g, vmax = dc_constants(model, a)
+    gear = np.array(act.gear, float)
+    gear[0] = sgn * abs(gear[0])
+    act.gear = gear
+    gp = np.array(act.gainprm, float)
+    if driver == "voltage":
+        act.ctrlspec = DC_INPUT_VOLTAGE
+        gp[7] = 0.0
+        act.ctrlrange = [-vmax, vmax]
+    else:
+        act.ctrlspec = DC_INPUT_FF
+        gp[7] = vmax
+        act.ctrlrange = [-tau / g, tau / g]
+        act.forcelimited = 1
+        act.forcerange = [-tau / g, tau / g]
+    act.gainprm = gp
+    act.ctrllimited = 1
+
+
+def dc_ctrl_scale(model: mujoco.MjModel, a: int) -> float:
+    """``ctrl`` per N·m of commanded wheel torque of actuator ``a``: 1 for a torque motor,
+    ``R/(g K)`` for a ``<dcmotor>`` with the voltage driver, ``1/g`` with the current driver."""
+    if int(model.actuator_dyntype[a]) != int(mujoco.mjtDyn.mjDYN_DCMOTOR):
+        return 1.0
+    R, K, g, _ = dc_constants(model, a)
+    return R / (g * K) if int(model.actuator_ctrlspec[a]) == DC_INPUT_VOLTAGE else 1.0 / g
+
+
 def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLayout, np.ndarray, float]:
     """Load one robot, resolve its mapping and make its spec drivable (see the module docstring).
 
@@ -499,8 +594,14 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
         act = spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a))
         act.gainprm = np.zeros(len(act.gainprm))
         act.biasprm = np.zeros(len(act.biasprm))
+    for a in plan["dc_removed"]:  # motor = "ideal": the model's DC motors are not used
+        spec.delete(spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)))
     tau = layout.tau_max
-    if min(plan["keep"]) >= 0:
+    if plan["dc"]:
+        for a, sgn in zip(plan["keep"], layout.wheel_sign):
+            _dc_driver(spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)), model, a, sgn,
+                       ref.driver or "current", tau)
+    elif min(plan["keep"]) >= 0:
         for a, sgn in zip(plan["keep"], layout.wheel_sign):
             act = spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a))
             gear = np.array(act.gear, float)

@@ -66,14 +66,15 @@ def observe(qpos, qvel, q7, v6, axle, pose, vel, up):
 
 
 @njit
-def apply_inputs(tau, t, ctrl, ctrl_id, xfrc, xmat, base, m_eff, i_eff, dist, use_dist):
-    """Wheel torques ``tau`` (n, 2) to the motors ``ctrl[ctrl_id]``; with ``use_dist`` the
+def apply_inputs(tau, t, ctrl, ctrl_id, ctrl_scale, xfrc, xmat, base, m_eff, i_eff, dist, use_dist):
+    """Wheel torques ``tau`` (n, 2) to the motors: ``ctrl[ctrl_id] = ctrl_scale · tau`` (1 for a
+    torque motor; a DC motor's driver input per N·m, design §8.2); with ``use_dist`` the
     disturbance accelerations of eq. 34 at ``t`` (s) as chassis ``xfrc_applied``: a force
     ``M_eff d1`` along the heading (from ``xmat`` of the last forward pass, held over the
     period like ``d``) and a yaw torque ``I_eff d2`` (design §8)."""
     for i in range(tau.shape[0]):
-        ctrl[ctrl_id[i, 0]] = tau[i, 0]
-        ctrl[ctrl_id[i, 1]] = tau[i, 1]
+        ctrl[ctrl_id[i, 0]] = ctrl_scale[i, 0] * tau[i, 0]
+        ctrl[ctrl_id[i, 1]] = ctrl_scale[i, 1] * tau[i, 1]
     if use_dist:
         d0 = harmonic(dist[0, 0], dist[0, 1], dist[0, 2], dist[0, 3], t)
         d1 = harmonic(dist[1, 0], dist[1, 1], dist[1, 2], dist[1, 3], t)
@@ -126,7 +127,7 @@ def watch_slip(qvel, wheel_dof, wheel_sign, radius, half_track, vel, ratio, v_fl
 def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qvel, q7, v6, axle, up,
               tilt_cos, tip_step, wheel_dof, wheel_sign, radius, half_track, slip_ratio, v_floor, slip_need,
               slip_run, slip_step,
-              ctrl, ctrl_id, xfrc, xmat, base, m_eff, i_eff, dist, use_dist, warn, c_true,
+              ctrl, ctrl_id, ctrl_scale, xfrc, xmat, base, m_eff, i_eff, dist, use_dist, warn, c_true,
               pose, vel, met, acc, lg, j0, stride, offsets, lim, diag, rec_ctrl, rec_xfrc):
     """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by the
     control step of ``k+1`` (if ``k+1 < N``; the control step of ``k0`` must be done).
@@ -140,7 +141,7 @@ def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qve
     j = j0
     n = pose.shape[0]
     for k in range(k0, k1):
-        apply_inputs(s.tau, k * dt, ctrl, ctrl_id, xfrc, xmat, base, m_eff, i_eff, dist, use_dist)
+        apply_inputs(s.tau, k * dt, ctrl, ctrl_id, ctrl_scale, xfrc, xmat, base, m_eff, i_eff, dist, use_dist)
         if rec_ctrl.shape[0] > k:
             rec_ctrl[k, :] = ctrl
             for i in range(n):

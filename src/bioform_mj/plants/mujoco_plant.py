@@ -30,6 +30,7 @@ from bioform_mj.scene import (
     RobotLayout,
     build_scene,
     compile_scene,
+    dc_ctrl_scale,
     follower_prefix,
     layout_of,
     payload_inertial,
@@ -150,6 +151,8 @@ class MujocoPlant:
         self._v6 = dadr[:, None] + np.arange(6)  # (n, 6) into qvel: world-frame linear, body-frame angular
         lays = self.layouts
         self._ctrl = np.array([[m.actuator(a).id for a in lay.motors] for lay in lays])  # (n, 2)
+        # ctrl per N·m of wheel torque: 1 for torque motors, the DC driver's input otherwise (§8.2)
+        self._ctrl_scale = np.array([[dc_ctrl_scale(m, int(a)) for a in row] for row in self._ctrl])
         self._axle = np.array([lay.axle for lay in lays], dtype=float)  # (n, 3) base frame, m
         self._wheel_dof = np.array([[m.jnt_dofadr[m.joint(j).id] for j in lay.wheel_joints] for lay in lays])
         self._wheel_sign = np.array([lay.wheel_sign for lay in lays], dtype=float)  # (n, 2)
@@ -325,7 +328,7 @@ class MujocoPlant:
             vals = np.asarray(self.disturbance(t), dtype=float)
             dist = np.zeros((2, 4))
             dist[:, 0] = vals[0]
-        apply_inputs(np.ascontiguousarray(tau), float(t), d.ctrl, self._ctrl, d.xfrc_applied, d.xmat, self._base,
+        apply_inputs(np.ascontiguousarray(tau), float(t), d.ctrl, self._ctrl, self._ctrl_scale, d.xfrc_applied, d.xmat, self._base,
                      self._m_eff, self._i_eff, np.zeros((2, 4)) if dist is None else dist, use)
         if self._push_until is not None:  # faults: an external push on some chassis (push())
             self._apply_push(t)
@@ -425,7 +428,7 @@ class MujocoPlant:
                 ctx.L_vel, m._address, d._address, d.qpos, d.qvel, q7, v6, self._axle, self._up, self.tilt_cos,
                 self.tip_step, self._wdof, self._wheel_sign, self._wheel_radius, self._half_track, self.SLIP_RATIO,
                 self.SLIP_V_FLOOR, self._slip_need, self.slip_run, self.slip_step, d.ctrl, ctrl_id,
-                d.xfrc_applied, d.xmat, base, self._m_eff, self._i_eff, self._dist, use, self._warn, self._c,
+                self._ctrl_scale, d.xfrc_applied, d.xmat, base, self._m_eff, self._i_eff, self._dist, use, self._warn, self._c,
                 ctx.pose, ctx.vel, ctx.met, ctx.acc, ctx.log, j, ctx.stride, ctx.offsets, ctx.bounds, ctx.diag,
                 rec[0], rec[1])
             self._step_count = k0 + done

@@ -1,0 +1,117 @@
+"""DC motors (design §8.2, issue 12): datasheet numbers, ground truth, identification, bad input."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from bioform_mj.cli import main
+from bioform_mj.identify import identify, robot_truth
+from bioform_mj.plants.mujoco_plant import MujocoPlant
+from bioform_mj.robots import RobotRef, models_dir
+
+# Dynamixel XL430-W250-T, ROBOTIS e-Manual: 1.4 N·m stall, 57 rpm no load, both at 11.1 V; gear 258.5
+XL430_STALL_NM = 1.4
+XL430_NO_LOAD_RAD_S = 57 * 2 * np.pi / 60
+
+
+def _wheel_torque(driver: str, rate: float, tau_cmd: float) -> float:
+    """Joint torque of the tb3's left DC motor at wheel rate ``rate`` rad/s for command ``tau_cmd`` N·m."""
+    p = MujocoPlant([RobotRef("tb3", motor="dc", driver=driver)], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
+    m, d = p.model, p.data
+    a = int(p._ctrl[0, 0])
+    dof = int(p._wheel_dof[0, 0])
+    d.ctrl[a] = p._ctrl_scale[0, 0] * tau_cmd
+    d.qvel[dof] = rate * p._wheel_sign[0, 0]
+    mujoco.mj_forward(m, d)
+    return float(d.qfrc_actuator[dof] * p._wheel_sign[0, 0])
+
+
+def test_xl430_stall_torque_no_load_speed_and_line_match_the_datasheet():
+    p = robot_truth(RobotRef("tb3", motor="dc", driver="voltage"))
+    assert p.motor == "dc" and p.driver == "voltage"
+    assert p.motor_stall_torque == pytest.approx(XL430_STALL_NM, rel=0.02)
+    assert p.motor_no_load_speed == pytest.approx(XL430_NO_LOAD_RAD_S, rel=0.02)
+    # simulated: full voltage at rest = stall torque; at no-load speed zero; a straight line between
+    assert _wheel_torque("voltage", 0.0, XL430_STALL_NM) == pytest.approx(XL430_STALL_NM, rel=0.02)
+    assert abs(_wheel_torque("voltage", XL430_NO_LOAD_RAD_S, XL430_STALL_NM)) < 0.02 * XL430_STALL_NM
+    for frac in (0.25, 0.5, 0.75):
+        line = XL430_STALL_NM * (1 - frac)
+        assert _wheel_torque("voltage", frac * XL430_NO_LOAD_RAD_S, XL430_STALL_NM) == pytest.approx(line, rel=0.02)
+    # back-EMF drag of the voltage driver: stall / no-load = (gK)²/R
+    assert p.motor_damping == pytest.approx(XL430_STALL_NM / XL430_NO_LOAD_RAD_S, rel=0.02)
+
+
+def test_current_driver_delivers_the_command_up_to_the_torque_speed_line():
+    assert _wheel_torque("current", 0.0, 0.3) == pytest.approx(0.3, rel=1e-9)
+    assert _wheel_torque("current", 3.0, 0.3) == pytest.approx(0.3, rel=1e-9)  # below the line: exact
+    w = 0.9 * XL430_NO_LOAD_RAD_S  # beyond it: clipped to the line (voltage limit)
+    assert _wheel_torque("current", w, 0.3) == pytest.approx(XL430_STALL_NM * 0.1, rel=0.02)
+
+
+def test_ideal_motors_stay_the_default():
+    for name in ("paper", "tb3"):
+        p = robot_truth(name)
+        assert p.motor == "ideal" and p.motor_damping == 0.0
+    assert robot_truth("paper").tau_max == (5.0, 5.0)
+
+
+def test_identification_with_dc_motors_agrees_with_the_stated_ground_truth():
+    # paper robot, voltage driver: a_eff, b_eff from rest and back-EMF drag k = 2 a c/r, 2 b c l/r
+    r = identify(RobotRef("paper", motor="dc", driver="voltage"))
+    assert abs(r["relative_error"]["a"]) < 0.01 and abs(r["relative_error"]["b"]) < 0.01
+    (kv, kw), (kv_id, kw_id) = r["drag_rate_per_s"]["formula"], r["drag_rate_per_s"]["identified"]
+    assert kv == pytest.approx(1.0, rel=1e-6) and kw == pytest.approx(5.0, rel=1e-6)  # c = 0.125 N·m·s
+    assert kv_id == pytest.approx(kv, rel=0.10) and kw_id == pytest.approx(kw, rel=0.02)
+    # tb3, current driver (below the torque–speed line): a_eff, b_eff, no drag
+    r = identify(RobotRef("tb3", motor="dc"))
+    assert abs(r["relative_error"]["a"]) < 0.05 and abs(r["relative_error"]["b"]) < 0.02
+    assert r["drag_rate_per_s"]["formula"] == [0.0, 0.0]
+
+
+def test_summary_reports_the_motor_ground_truth(tmp_path):
+    out = tmp_path / "run"
+    assert main(["run", "tb3", "--quiet", "--out", str(out)]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    for f in s["followers"]:
+        u = f["unmodelled"]
+        assert u["motor"] == "dc" and u["driver"] == "current"
+        assert u["stall_torque_Nm"] == pytest.approx(1.4, rel=0.02)
+        assert f["outcome"] == "ok" and f["final_formation_error_m"] < 0.01  # at 1 s: a_hat at its bound (README)
+
+
+def _scenario(tmp_path: Path, robot: str, model_text: str | None = None) -> Path:
+    if model_text is not None:
+        (tmp_path / "bot.xml").write_text(model_text)
+    toml = tmp_path / "s.toml"
+    toml.write_text(f'[plant]\nkind = "mujoco"\nrobots = [{robot}]\n')
+    return toml
+
+
+@pytest.mark.parametrize("case, key", [
+    ("no_dcmotor", "plant.robots.motor"),
+    ("bad_driver", "].driver"),
+    ("zero_voltage", "plant.robots.motor"),
+    ("negative_constant", "bot.xml"),
+])
+def test_bad_motor_input_exits_2_naming_the_key(tmp_path, capsys, case, key):
+    tb3 = (models_dir() / "tb3_robot.xml").read_text()
+    if case == "no_dcmotor":
+        toml = _scenario(tmp_path, '{ model = "lab", motor = "dc" }')
+    elif case == "bad_driver":
+        toml = _scenario(tmp_path, '{ model = "tb3", motor = "dc", driver = "pwm" }')
+    elif case == "zero_voltage":
+        toml = _scenario(tmp_path, '{ model = "bot.xml", motor = "dc" }',
+                         tb3.replace('ctrlrange="-11.1 11.1"', 'ctrlrange="0 0"'))
+    else:
+        toml = _scenario(tmp_path, '{ model = "bot.xml", motor = "dc" }',
+                         tb3.replace('nominal="11.1 0.0054158607 1542.9932"', 'motorconst="-0.0072 0" resistance="14.7"'))
+    out = tmp_path / "out"
+    code = main(["run", str(toml), "--duration", "0.1", "--quiet", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2, err
+    assert err.count("\n") == 0 and err.startswith("error:") and key in err and "Traceback" not in err
+    assert not out.exists()
