@@ -48,7 +48,8 @@ def test_tiny_calibration_writes_a_complete_report_no_worse_than_the_default(tmp
     assert all(row["ours"] > 0 for row in cells)
     assert r["evaluations"]["search"] == 5
     assert r["objective"] <= r["default"]["objective"]
-    assert {"initial_poses", "c_hat0_scale", "derivative", "tau_max", "saturation", "estimator_gains"} <= set(r["sensitivity"])
+    assert {"initial_poses", "c_hat0_scale", "derivative", "tau_max", "saturation",
+            "estimator_gains"} <= set(r["sensitivity"])
     for e in r["sensitivity"].values():
         assert e["alternatives"] and "max_objective_change" in e
     assert "Sensitivity" in md and "Best conditions" in md

@@ -32,7 +32,8 @@ import multiprocessing
 import os
 import time
 import warnings
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -112,10 +113,12 @@ def build_scenario(source: str, plant: str, c: dict[str, Any], overrides: Sequen
     ov = list(overrides) + [
         f"formation.initial_poses={poses}", f"learner.c_hat0_scale=[{s!r},{s!r}]",
         f'torque.derivative="{c["derivative"]}"', f"torque.deriv_wn={float(c['deriv_wn'])!r}",
-        f"torque.tau_max={float(c['tau_max'])!r}", f'torque.saturation="{c["saturation"]}"',
+        f'torque.saturation="{c["saturation"]}"',
         f"estimator.ka=[{ka},{ka}]", f"estimator.kb=[{kb},{kb}]"]
+    if c["tau_max"] is not None:
+        ov.append(f"torque.tau_max={float(c['tau_max'])!r}")
     sc = load(source, ov, plant=plant)
-    if plant == "mujoco":  # the robots bring their motors: the limit is the motors'
+    if plant == "mujoco" and c["tau_max"] is not None:  # the robots' motors get this limit (None: their own)
         robots = tuple(dataclasses.replace(r, tau_max=float(c["tau_max"])) if isinstance(r, RobotRef)
                        else RobotRef(str(r), tau_max=float(c["tau_max"])) for r in sc.plant.robots)
         sc = dataclasses.replace(sc, plant=dataclasses.replace(sc.plant, robots=robots))
@@ -155,7 +158,10 @@ def evaluate(c: dict[str, Any], source: str = "paper", plant: str = "ideal",
     diverged = [m for m in PAPER_TABLE1 if ms[m].get("diverged")]
     lost = [m for m in PAPER_TABLE1 if not final[m] <= LOST_M]
     sat = {m: max(float(f["saturation_fraction"]) for f in ms[m]["followers"]) for m in PAPER_TABLE1}
+    lim = [f.get("robot", {}).get("tau_max_nm") if isinstance(f.get("robot"), dict) else f.get("tau_max_nm")
+           for f in ms["backstepping"]["followers"]]
     out = {"conditions": c, **score(per, peak, bool(lost), bool(diverged)), "per": per,
+           "robot_tau_max": max((x for x in lim if x is not None), default=None),
            "peak_v_cmd_backstepping": peak, "final_formation_error_m": final, "saturation_fraction": sat,
            "lost": lost, "diverged": diverged, "ordering_holds": bool(tab["ordering_holds"]),
            "stepping_s": sum(float(ms[m].get("wall_time_s") or 0.0) for m in ms),
@@ -235,7 +241,12 @@ def calibrate(target: str = "table1", plant: str = "ideal", budget: int | None =
     t_start = time.perf_counter()
 
     _CTX.update(source=source, plant=plant, overrides=list(overrides))
-    ev_default = evaluate(default, source, plant, overrides)  # loads the kernels before the fork
+    if plant == "mujoco":  # the scenario's own limit there is the robots' motors' (torque.tau_max is the ideal plant's)
+        ev_default = evaluate(dict(default, tau_max=None), source, plant, overrides)
+        default["tau_max"] = float(ev_default.get("robot_tau_max") or default["tau_max"])
+        ev_default["conditions"] = default
+    else:
+        ev_default = evaluate(default, source, plant, overrides)  # loads the kernels before the fork
     history: list[dict[str, Any]] = [ev_default]
     done = [1]
     total = budget
@@ -347,7 +358,8 @@ def markdown(r: dict[str, Any]) -> str:
              f"{r['default']['rms_log_residual']:.3f}, peak {r['default']['peak_v_cmd_backstepping']:.2f} m/s.", "",
              "## Best conditions", "",
              "| condition | value |", "|---|---|",
-             "| initial poses (x, y, θ) | " + "; ".join(f"({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f})" for p in b["initial_poses"]) + " |",
+             "| initial poses (x, y, θ) | "
+             + "; ".join(f"({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f})" for p in b["initial_poses"]) + " |",
              f"| ĉ(0) scale | {b['c_hat0_scale']} |", f"| command derivative | {b['derivative']} |",
              f"| ω_n (filter only) | {b['deriv_wn']} rad/s |", f"| torque limit | {b['tau_max']} N·m |",
              f"| saturation | {b['saturation']} |",

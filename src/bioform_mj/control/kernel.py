@@ -112,7 +112,8 @@ class StackState(NamedTuple):
     ``difference`` ``fy`` is the last command); neuron ``vs`` (n,); last step's
     ``err`` (n,3) ``[x̃, ỹ, θ̃]``, ``cmd``, ``dcmd`` (n,2), ``tau`` (applied) and ``tau_raw``
     (commanded) ``[τ_L, τ_R]`` and ``tau_body`` ``[τ_a, τ_b]`` (n,2), ``saturated`` (n,);
-    consensus errors ``p_err`` (n,3), ``v_err`` (n,2) of this step (eqs. 12–13, leader term included); ``first`` (1,) 1 until the first step.
+    consensus errors ``p_err`` (n,3), ``v_err`` (n,2) of this step (eqs. 12–13, leader term included);
+    ``first`` (1,) 1 until the first step.
     """
 
     est_pose: np.ndarray

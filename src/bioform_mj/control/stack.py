@@ -37,7 +37,8 @@ class StackParams:
     k1 [1/s], k2 [1/m²·…], k3 [1/m]: kinematic gains of eq. 31; A, B, D: neuron (eq. 32).
     law: 'bioinspired' or 'backstepping'; learning: run eq. 37 or keep ``ĉ = ĉ(0)``.
     c_gain (2,) [m/s², rad/s²]: ``c_a, c_b``; torque_phi: boundary layer of eqs. 38–39 (0 = sgn).
-    tau_max (n,) [N·m]: wheel torque limit; steer_priority: keep τ_b when saturating; deriv_wn [rad/s]: command-derivative filter;
+    tau_max (n,) [N·m]: wheel torque limit; steer_priority: keep τ_b when saturating;
+    deriv_wn [rad/s]: command-derivative filter;
     derivative: how ``υ̇_cmd, ω̇_cmd`` are obtained, ``filter``, ``difference`` or ``analytic`` (design §6).
     k4 (2,) or (n,2), k5 (2,) [1/s]: learner gains; kd (2,): disturbance-estimate gain (0 = the paper); c_hat0, c_min, c_max (n,2): initial estimate and bounds.
     dt [s]: control period.
