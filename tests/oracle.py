@@ -215,7 +215,8 @@ class Learner:
 class DerivativeFilter:
     """Critically damped second-order filter giving a smooth derivative of ``[υ_cmd, ω_cmd]``.
 
-    ``ÿ_f = ω_n² (u − y_f) − 2 ω_n ẏ_f``; the derivative estimate is ``ẏ_f``. It is
+    ``ÿ_f = ω_n² (u − y_f) − 2 ω_n ẏ_f``; the derivative estimate is the output's change over
+    the step, ``(y_f[k+1] − y_f[k])/dt`` (tends to the backward difference as ``ω_n → ∞``). It is
     discretised exactly (zero-order hold on ``u``), so it is stable for every step.
     The paper does not say how ``υ̇_cmd, ω̇_cmd`` are obtained (design §6); a raw
     difference of a signal that carries the estimator's sign term would turn its
@@ -235,6 +236,7 @@ class DerivativeFilter:
             [[a * (1 + wn * dt), a * dt], [-(wn**2) * dt * a, a * (1 - wn * dt)]]
         )
         self.gam = np.array([1.0 - a * (1 + wn * dt), wn * wn * dt * a])
+        self.dt = dt
         self.y = np.zeros((n, 2))
         self.dy = np.zeros((n, 2))
 
@@ -248,8 +250,25 @@ class DerivativeFilter:
         p, g = self.phi, self.gam
         y = p[0, 0] * self.y + p[0, 1] * self.dy + g[0] * u
         self.dy = p[1, 0] * self.y + p[1, 1] * self.dy + g[1] * u
+        d = (y - self.y) / self.dt
         self.y = y
-        return self.dy
+        return d
+
+
+class BackwardDifference:
+    """``(u[k] − u[k−1])/dt`` of ``[υ_cmd, ω_cmd]`` (``torque.derivative = "difference"``)."""
+
+    def __init__(self, n: int, dt: float) -> None:
+        self.dt = dt
+        self.prev = np.zeros((n, 2))
+
+    def reset(self, u0: np.ndarray) -> None:
+        self.prev = np.array(u0, dtype=float)
+
+    def step(self, u: np.ndarray) -> np.ndarray:
+        d = (u - self.prev) / self.dt
+        self.prev = np.array(u, dtype=float)
+        return d
 
 
 def sliding_mode_torques(
@@ -308,7 +327,10 @@ class OracleStack:
         self.p = p
         self.estimator = Estimator(graph, p.kp, p.ka, p.kb, p.est_phi)
         self.learner = Learner(n, p.k4, p.k5, p.c_min, p.c_max, p.kd)
-        self.dfilter = DerivativeFilter(n, p.deriv_wn, p.dt)
+        mode = getattr(p, "derivative", "filter")
+        if mode == "analytic":
+            raise NotImplementedError("the oracle has no analytic command derivative (tests compare it otherwise)")
+        self.dfilter = DerivativeFilter(n, p.deriv_wn, p.dt) if mode == "filter" else BackwardDifference(n, p.dt)
         self.vs = np.zeros(n)
         self.tau = np.zeros((n, 2))
         self._lim = np.asarray(p.tau_max, dtype=float)[:, None].copy()

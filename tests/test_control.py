@@ -69,6 +69,7 @@ class DerivativeFilter:
 
     def __init__(self, n, wn, dt):
         self.c = eq.filter_coefficients(wn, dt)
+        self.dt = dt
         self.y = np.zeros((n, 2))
         self.dy = np.zeros((n, 2))
 
@@ -77,9 +78,10 @@ class DerivativeFilter:
         self.dy[:] = 0.0
 
     def step(self, u):
-        f = np.vectorize(lambda y, dy, uu: eq.filter_step(y, dy, uu, *self.c), otypes=[float, float])
-        self.y, self.dy = f(self.y, self.dy, u)
-        return self.dy
+        f = np.vectorize(lambda y, dy, uu: eq.filter_derivative(y, dy, uu, *self.c, self.dt),
+                         otypes=[float, float, float])
+        self.y, self.dy, d = f(self.y, self.dy, u)
+        return d
 from bioform_mj.plants.ideal import IdealPlant
 
 

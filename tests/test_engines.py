@@ -85,12 +85,15 @@ def _random_comm(rng, g, n, k):
 @given(kd=st.sampled_from([0.0, 0.5, 5.0]), est_phi=st.sampled_from([0.0, 0.05]),
        torque_phi=st.sampled_from([0.0, 0.2]), saturation=st.sampled_from(["steer-priority", "wheel"]),
        method=st.sampled_from(["bioinspired-learning", "backstepping", "bioinspired", "backstepping-learning"]),
-       k4_per_follower=st.booleans(), faults=st.booleans(), seed=st.integers(0, 2**16))
+       k4_per_follower=st.booleans(), faults=st.booleans(), seed=st.integers(0, 2**16),
+       derivative=st.sampled_from(["filter", "difference"]))
 def test_control_step_agrees_with_the_oracle(kd, est_phi, torque_phi, saturation, method, k4_per_follower,
-                                             faults, seed):
-    """Per step, on random measurements, leader states and faulty networks, for every option."""
+                                             faults, seed, derivative):
+    """Per step, on random measurements, leader states and faulty networks, for every option
+    (the oracle has no ``analytic`` derivative: tests/test_derivative.py checks it against closed forms)."""
     sc = load("paper", method=method, overrides=[f"learner.kd=[{kd},{kd}]", f"estimator.phi=[{est_phi},{est_phi}]",
-                                                 f"torque.phi={torque_phi}", f'torque.saturation="{saturation}"'])
+                                                 f"torque.phi={torque_phi}", f'torque.saturation="{saturation}"',
+                                                 f'torque.derivative="{derivative}"'])
     g = sc.build_graph()
     rng = np.random.default_rng(seed)
     c = np.abs(rng.normal([0.4, 10.0], [0.1, 2.0], size=(sc.n, 2))) + 0.05
@@ -137,8 +140,10 @@ def test_short_runs_agree_with_the_oracle_for_every_option(kd, phi, gain_scaling
 @EQ
 @pytest.mark.parametrize("plant", ["ideal", "mujoco"])
 @pytest.mark.parametrize("method", ["bioinspired-learning", "backstepping"])
-def test_compiled_and_stepwise_loops_are_bit_identical(plant, method):
-    sc = load("paper", method=method, plant=plant, overrides=["sim.duration=1.5", "learner.kd=[0.5,0.5]"])
+@pytest.mark.parametrize("derivative", ["filter", "difference", "analytic"])
+def test_compiled_and_stepwise_loops_are_bit_identical(plant, method, derivative):
+    sc = load("paper", method=method, plant=plant, overrides=["sim.duration=1.5", "learner.kd=[0.5,0.5]",
+                                                              f'torque.derivative="{derivative}"'])
     a, b = simulate(sc, engine="compiled"), simulate(sc, engine="stepwise")
     assert a.summary["engine"] == "compiled" and b.summary["engine"] == "stepwise"
     assert a.log.keys() == b.log.keys()

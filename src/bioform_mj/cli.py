@@ -99,6 +99,17 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray)")
     sw.add_argument("--out", type=Path, required=True, help="sweep directory (rerunning resumes it)")
 
+    cal = sub.add_parser("calibrate", help="search the paper's unstated conditions for the best fit to Table I")
+    cal.add_argument("target", help="what to fit: table1")
+    cal.add_argument("--scenario", default="paper", help="preset name or TOML file to start from (default: paper)")
+    cal.add_argument("--plant", choices=PLANTS, default="ideal")
+    cal.add_argument("--budget", type=int, help="evaluations in the search (default: 600 ideal, 90 mujoco)")
+    cal.add_argument("--workers", type=int, help="processes (default: up to 2)")
+    cal.add_argument("--seed", type=int, default=0)
+    cal.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    cal.add_argument("--out", type=Path, required=True, help="writes calibration.json and calibration.md here")
+    cal.add_argument("--quiet", action="store_true")
+
     sub.add_parser("presets", help="list the shipped scenario presets, each with its description")
 
     bn = sub.add_parser("bench", help="closed-loop throughput against bare mj_step, n = 3, 16, 64, 256")
@@ -208,6 +219,8 @@ def _dispatch(args: argparse.Namespace) -> int:
             from . import bench
 
             return bench.run(args)
+        if args.command == "calibrate":
+            return _calibrate(args)
         sc = _load(args)
         if args.command == "run":
             return _run(args, sc, mjlog)
@@ -544,6 +557,24 @@ def _sweep(args: argparse.Namespace) -> int:
         print(f"{tm['runs']} runs ({res['ran']} run now, {res['skipped']} already done{rate}{died})")
         print((out / "stats.md").read_text())
         print(f"outputs in {out}/ (runs.csv, stats.json, stats.md, sweep.json)")
+    return EXIT_OK
+
+
+def _calibrate(args: argparse.Namespace) -> int:
+    from . import calibrate as cal
+
+    if args.target not in cal.TARGETS:
+        raise InputError(f"unknown calibration target '{args.target}' (expected one of: {', '.join(cal.TARGETS)})")
+    if args.budget is not None and args.budget < 1:
+        raise InputError(f"--budget must be >= 1 evaluation, got {args.budget}")
+    out = _prepare_out(args.out, "calibration")
+    rep = cal.calibrate(args.target, plant=args.plant, budget=args.budget, source=args.scenario,
+                        overrides=args.overrides, workers=args.workers, seed=args.seed,
+                        progress=_progress(not args.quiet, "calibrate"))
+    cal.write(rep, out)
+    if not args.quiet:
+        print(cal.markdown(rep))
+        print(f"outputs in {out}/ (calibration.json, calibration.md)")
     return EXIT_OK
 
 

@@ -30,6 +30,8 @@ GRAPH_KINDS = ("explicit", "chain", "ring", "star", "complete")
 ESTIMATOR_INITS = ("zero", "self", "leader")
 EVENT_KINDS = ("payload",)
 SATURATIONS = ("steer-priority", "wheel")
+#: how the torque law gets ``υ̇_cmd, ω̇_cmd`` (design §6)
+DERIVATIVES = ("filter", "difference", "analytic")
 GAIN_SCALINGS = ("none", "c_hat0")
 #: the robot the paper's learner gains were tuned for: ``c = (a, b)`` of Sec. IV
 PAPER_C = (0.4, 10.0)
@@ -143,13 +145,17 @@ class KinematicCfg:
 class TorqueCfg:
     """Eqs. 38–39: ``c = (c_a, c_b)``, boundary layer ``phi`` (0 = sgn), wheel limit ``tau_max`` (N·m),
     command-derivative filter natural frequency ``deriv_wn`` (rad/s). ``saturation``: ``wheel``
-    clips each wheel alone; ``steer-priority`` keeps the differential torque and clips the common mode."""
+    clips each wheel alone; ``steer-priority`` keeps the differential torque and clips the common mode.
+    ``derivative`` (design §6): ``filter`` (critically damped 2nd order, ``ω_n = deriv_wn``, the
+    output's change over the step), ``difference`` (backward difference of the command) or
+    ``analytic`` (chain rule through the estimator, neuron and error dynamics)."""
 
     c: tuple[float, ...] = (3.0, 3.0)
     phi: float = 0.0
     tau_max: float = 20.0
     deriv_wn: float = 50.0
     saturation: str = "steer-priority"
+    derivative: str = "filter"
 
 
 @dataclass(frozen=True)
@@ -595,6 +601,8 @@ def validate(sc: Scenario) -> None:
     _positive("torque.phi", t.phi, strict=False)
     _positive("torque.tau_max", t.tau_max)
     _positive("torque.deriv_wn", t.deriv_wn)
+    if t.derivative not in DERIVATIVES:
+        raise ScenarioError("torque.derivative", f"unknown '{t.derivative}' (expected one of: {', '.join(DERIVATIVES)})")
     if t.saturation not in SATURATIONS:
         raise ScenarioError("torque.saturation", f"unknown '{t.saturation}' (expected one of: {', '.join(SATURATIONS)})")
 

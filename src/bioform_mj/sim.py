@@ -116,7 +116,7 @@ def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = 
         c_gain=np.array(sc.torque.c), torque_phi=sc.torque.phi,
         tau_max=np.full(n, sc.torque.tau_max) if tau_max is None else np.asarray(tau_max, dtype=float),
         steer_priority=sc.torque.saturation == "steer-priority",
-        deriv_wn=sc.torque.deriv_wn,
+        deriv_wn=sc.torque.deriv_wn, derivative=sc.torque.derivative,
         k4=_learner_k4(sc, c_hat0), k5=np.array(sc.learner.k5), kd=np.array(sc.learner.kd),
         c_hat0=c_hat0, c_min=lo * c_hat0, c_max=hi * c_hat0,
         dt=sc.sim.control_dt,

@@ -90,12 +90,25 @@ def estimator_step(px: float, py: float, pth: float, v: float, w: float,
     eq. 13: ``[υ̇, ω̇] = −k_a ⊙ sgn(e_v) − k_b ⊙ e_v`` (``sgn`` → :func:`sat` with ``phi``).
     Returns the new ``(px, py, pth, v, w)``, ``pth`` wrapped.
     """
+    dpx, dpy, dpth, dv, dw = estimator_rates(pth, v, w, ep0, ep1, ep2, ev0, ev1, kx, ky, kth,
+                                             ka0, ka1, kb0, kb1, phi0, phi1)
+    return px + dt * dpx, py + dt * dpy, wrap(pth + dt * dpth), v + dt * dv, w + dt * dw
+
+
+@equation
+def estimator_rates(pth: float, v: float, w: float, ep0: float, ep1: float, ep2: float, ev0: float, ev1: float,
+                    kx: float, ky: float, kth: float, ka0: float, ka1: float, kb0: float, kb1: float,
+                    phi0: float, phi1: float) -> tuple[float, float, float, float, float]:
+    """Right-hand sides of eqs. 12–13: ``(ẋ_ir, ẏ_ir, θ̇_ir, υ̇_ir, ω̇_ir)`` (m/s, m/s, rad/s, m/s², rad/s²).
+
+    Arguments as in :func:`estimator_step` (``pth, v, w`` = ``θ_ir, υ_ir, ω_ir``).
+    """
     dpx = v * cos(pth) - kx * ep0
     dpy = v * sin(pth) - ky * ep1
     dpth = w - kth * ep2
     dv = -ka0 * sat(ev0, phi0) - kb0 * ev0
     dw = -ka1 * sat(ev1, phi1) - kb1 * ev1
-    return px + dt * dpx, py + dt * dpy, wrap(pth + dt * dpth), v + dt * dv, w + dt * dw
+    return dpx, dpy, dpth, dv, dw
 
 
 # ------------------------------------------------------- kinematic control (eqs. 27–33)
@@ -141,6 +154,12 @@ def neuron_step(vs: float, x: float, A: float, B: float, D: float, dt: float) ->
     return v_inf + (vs - v_inf) * exp(-lam * dt)
 
 
+@equation
+def neuron_rate(vs: float, x: float, A: float, B: float, D: float) -> float:
+    """``V̇_s`` of eq. 32/33 at the state ``vs`` and input ``x``: ``−A V + (B − V) f(x) − (D + V) g(x)``."""
+    return -A * vs + (B - vs) * max(x, 0.0) - (D + vs) * max(-x, 0.0)
+
+
 # ------------------------------------------------- command derivative (design §6)
 @equation
 def filter_step(y: float, dy: float, u: float, f00: float, f01: float, f10: float, f11: float,
@@ -151,6 +170,57 @@ def filter_step(y: float, dy: float, u: float, f00: float, f01: float, f10: floa
     (:func:`filter_coefficients`). Returns the new ``(y, ẏ)``.
     """
     return f00 * y + f01 * dy + g0 * u, f10 * y + f11 * dy + g1 * u
+
+
+@equation
+def filter_derivative(y: float, dy: float, u: float, f00: float, f01: float, f10: float, f11: float,
+                      g0: float, g1: float, dt: float) -> tuple[float, float, float]:
+    """``torque.derivative = "filter"``: one :func:`filter_step` on ``u`` and the derivative estimate.
+
+    The estimate is the filter output's change over the step, ``(y_f[k+1] − y_f[k])/dt`` (the
+    mean of ``ẏ_f`` over the step), not ``ẏ_f`` at the sample instant: the latter's gain to a
+    step of ``u`` vanishes as ``ω_n·dt`` grows, while this tends to the backward difference
+    ``(u[k] − u[k−1])/dt`` as ``ω_n → ∞`` (``y_f`` then follows ``u`` within the step).
+    Returns the new ``(y_f, ẏ_f, derivative)``.
+    """
+    yn, dyn = filter_step(y, dy, u, f00, f01, f10, f11, g0, g1)
+    return yn, dyn, (yn - y) / dt
+
+
+@equation
+def backward_difference(u: float, u_prev: float, dt: float) -> float:
+    """``torque.derivative = "difference"``: ``(u[k] − u[k−1])/dt``."""
+    return (u - u_prev) / dt
+
+
+@equation
+def error_rate(ex: float, ey: float, v: float, w: float, v_ir: float, dpth: float,
+               eth: float, dpx_b: float, dpy_b: float) -> tuple[float, float, float]:
+    """``(ẋ̃, ẏ̃, θ̃̇)`` of the body-frame error of eq. 28 (m/s, m/s, rad/s).
+
+    ``(ex, ey)`` = ``(x̃, ỹ)``, ``θ̃`` = ``eth``; ``(v, w)`` the measured ``υ, ω``;
+    ``(dpx_b, dpy_b)`` the estimator's position rate (eq. 12) rotated into the robot's body frame,
+    ``dpth`` its heading rate. With ``ė = Ṗ_ir − [υ cos θ, υ sin θ]`` (world) and the rotation:
+    ``ẋ̃ = ω ỹ + dpx_b − υ``, ``ẏ̃ = −ω x̃ + dpy_b``, ``θ̃̇ = θ̇_ir − ω``.
+    (``v_ir`` is unused: kept for the reader; with an exact estimate ``dpx_b = υ_ir cos θ̃``.)
+    """
+    return w * ey + dpx_b - v, -w * ex + dpy_b, dpth - w
+
+
+@equation
+def command_rate(ey: float, eth: float, v_ir: float, dv_ir: float, dw_ir: float,
+                 dey: float, deth: float, du: float, k1: float, k2: float, k3: float) -> tuple[float, float]:
+    """``torque.derivative = "analytic"``: ``(υ̇_cmd, ω̇_cmd)``, eq. 31 differentiated by the chain rule.
+
+    ``υ̇_cmd = υ̇_ir cos θ̃ − υ_ir sin θ̃ θ̃̇ + k1 u̇``;
+    ``ω̇_cmd = ω̇_ir + k2 (υ̇_ir ỹ + υ_ir ẏ̃) + k3 (υ̇_ir sin θ̃ + υ_ir cos θ̃ θ̃̇)``, with the
+    estimator's rates ``υ̇_ir, ω̇_ir`` (eq. 13), the error rates (:func:`error_rate`) and ``u̇`` the
+    neuron's rate (eq. 33, :func:`neuron_rate`) or ``ẋ̃`` (backstepping). No filter, no lag.
+    """
+    c = cos(eth)
+    s = sin(eth)
+    return (dv_ir * c - v_ir * s * deth + k1 * du,
+            dw_ir + k2 * (dv_ir * ey + v_ir * dey) + k3 * (dv_ir * s + v_ir * c * deth))
 
 
 def filter_coefficients(wn: float, dt: float) -> tuple[float, float, float, float, float, float]:

@@ -16,14 +16,20 @@ sliding-mode torques with ``ĉ``; saturation; estimator and neuron advance to ``
 """
 from __future__ import annotations
 
+from math import cos, sin
 from typing import NamedTuple
 
 import numpy as np
 
 from .equations import (
+    backward_difference,
+    command_rate,
+    error_rate,
+    estimator_rates,
     estimator_step,
-    filter_step,
+    filter_derivative,
     learner_step,
+    neuron_rate,
     neuron_step,
     njit,
     saturate,
@@ -34,6 +40,11 @@ from .equations import (
 )
 
 
+#: ``Gains.deriv`` codes of ``torque.derivative`` (design §6)
+DERIV_FILTER, DERIV_DIFFERENCE, DERIV_ANALYTIC = 0, 1, 2
+DERIVATIVES = {"filter": DERIV_FILTER, "difference": DERIV_DIFFERENCE, "analytic": DERIV_ANALYTIC}
+
+
 class Gains(NamedTuple):
     """Numbers of the stack (units in brackets); arrays are per follower ``(n, …)`` or per edge ``(m,)``.
 
@@ -41,7 +52,8 @@ class Gains(NamedTuple):
     Estimator (eqs. 12–13): ``kx, ky, kth`` [1/s]; sign gains ``ka0, ka1`` [m/s², rad/s²];
     linear gains ``kb0, kb1`` [1/s]; boundary layers ``ephi0, ephi1`` (0 = ``sgn``).
     Torque law (eqs. 38–39): ``ca, cb``; boundary layer ``tphi`` (0 = ``sgn``);
-    command-derivative filter coefficients ``f00 … g1`` (:func:`~.equations.filter_coefficients`).
+    command derivative ``deriv`` (design §6): :data:`DERIV_FILTER` (coefficients ``f00 … g1`` of
+    :func:`~.equations.filter_coefficients`), :data:`DERIV_DIFFERENCE` or :data:`DERIV_ANALYTIC`.
     Learner (eq. 37): ``k4`` (n, 2), ``k5a, k5b`` [1/s], ``kda, kdb`` (0 = the paper),
     bounds ``c_min, c_max`` (n, 2). ``lim`` (n,) wheel torque limit [N·m]; ``steer``: steer-priority
     saturation; ``bio``: bioinspired law (else backstepping); ``learning``: run eq. 37.
@@ -73,6 +85,7 @@ class Gains(NamedTuple):
     f11: float
     g0: float
     g1: float
+    deriv: int
     k5a: float
     k5b: float
     kda: float
@@ -95,10 +108,12 @@ class StackState(NamedTuple):
     """State and last-step signals of the stack, arrays over followers.
 
     ``est_pose`` (n,3) ``P_ir``; ``est_vel`` (n,2) ``[υ_ir, ω_ir]``; learner ``z_hat, e_int,
-    c_hat, d_hat`` (n,2); filter ``fy, fdy`` (n,2); neuron ``vs`` (n,); last step's
+    c_hat, d_hat`` (n,2); command-derivative state ``fy, fdy`` (n,2) (filter output and rate; for
+    ``difference`` ``fy`` is the last command); neuron ``vs`` (n,); last step's
     ``err`` (n,3) ``[x̃, ỹ, θ̃]``, ``cmd``, ``dcmd`` (n,2), ``tau`` (applied) and ``tau_raw``
     (commanded) ``[τ_L, τ_R]`` and ``tau_body`` ``[τ_a, τ_b]`` (n,2), ``saturated`` (n,);
-    scratch ``p_err`` (n,3), ``v_err`` (n,2); ``first`` (1,) 1 until the first step.
+    consensus errors ``p_err`` (n,3), ``v_err`` (n,2) of this step (eqs. 12–13, leader term included);
+    ``first`` (1,) 1 until the first step.
     """
 
     est_pose: np.ndarray
@@ -186,8 +201,9 @@ def control_step(g, s, lp, lv, pose, vel, comm):
     """
     if g.learning and s.first[0] == 0:
         learner_update(g, s, vel)
+    estimator_consensus(g, s, lp, lv, comm)
     command_and_torques(g, s, pose, vel)
-    estimator_update(g, s, lp, lv, comm)
+    estimator_advance(g, s)
 
 
 @njit
@@ -218,13 +234,30 @@ def command_and_torques(g, s, pose, vel):
         u = s.vs[i] if g.bio else e0
         vc, wc = velocity_command(e1, e2, u, s.est_vel[i, 0], s.est_vel[i, 1], g.k1, g.k2, g.k3)
         s.cmd[i, 0], s.cmd[i, 1] = vc, wc
-        for c in range(2):  # command derivative (design §6)
-            if first:
-                s.fy[i, c] = s.cmd[i, c]
-                s.fdy[i, c] = 0.0
-            y, dy = filter_step(s.fy[i, c], s.fdy[i, c], s.cmd[i, c], g.f00, g.f01, g.f10, g.f11, g.g0, g.g1)
-            s.fy[i, c], s.fdy[i, c] = y, dy
-            s.dcmd[i, c] = dy
+        if g.deriv == DERIV_ANALYTIC:  # chain rule through the controller's own dynamics (design §6)
+            dpx, dpy, dpth, dv_ir, dw_ir = estimator_rates(
+                s.est_pose[i, 2], s.est_vel[i, 0], s.est_vel[i, 1], s.p_err[i, 0], s.p_err[i, 1], s.p_err[i, 2],
+                s.v_err[i, 0], s.v_err[i, 1], g.kx, g.ky, g.kth, g.ka0, g.ka1, g.kb0, g.kb1, g.ephi0, g.ephi1)
+            ch = cos(pose[i, 2])
+            sh = sin(pose[i, 2])
+            dex, dey, deth = error_rate(e0, e1, vel[i, 0], vel[i, 1], s.est_vel[i, 0], dpth, e2,
+                                        ch * dpx + sh * dpy, -sh * dpx + ch * dpy)
+            du = neuron_rate(s.vs[i], e0, g.A, g.B, g.D) if g.bio else dex
+            s.dcmd[i, 0], s.dcmd[i, 1] = command_rate(e1, e2, s.est_vel[i, 0], dv_ir, dw_ir, dey, deth, du,
+                                                      g.k1, g.k2, g.k3)
+        else:
+            for c in range(2):  # filter or backward difference (design §6)
+                if first:
+                    s.fy[i, c] = s.cmd[i, c]
+                    s.fdy[i, c] = 0.0
+                if g.deriv == DERIV_DIFFERENCE:
+                    s.dcmd[i, c] = backward_difference(s.cmd[i, c], s.fy[i, c], g.dt)
+                    s.fy[i, c] = s.cmd[i, c]
+                else:
+                    y, dy, d = filter_derivative(s.fy[i, c], s.fdy[i, c], s.cmd[i, c], g.f00, g.f01, g.f10,
+                                                 g.f11, g.g0, g.g1, g.dt)
+                    s.fy[i, c], s.fdy[i, c] = y, dy
+                    s.dcmd[i, c] = d
         r0, r1 = sliding_mode(vc, wc, s.dcmd[i, 0], s.dcmd[i, 1], vel[i, 0], vel[i, 1],
                               s.c_hat[i, 0], s.c_hat[i, 1], g.ca, g.cb, g.tphi)
         s.tau_raw[i, 0], s.tau_raw[i, 1] = r0, r1
@@ -241,8 +274,15 @@ def command_and_torques(g, s, pose, vel):
 def estimator_update(g, s, lp, lv, comm):
     """The distributed estimator (eqs. 12–13) and the neuron (eq. 32) advanced to the next step:
     consensus errors over the graph edges (and the leader for ``a_ir = 1``), one Euler step."""
+    estimator_consensus(g, s, lp, lv, comm)
+    estimator_advance(g, s)
+
+
+@njit
+def estimator_consensus(g, s, lp, lv, comm):
+    """Consensus errors of eqs. 12–13 into ``s.p_err`` (n,3) and ``s.v_err`` (n,2): over the graph
+    edges, plus ``a_ir (P_ir − P_r)`` for the leader link; from the estimates before they advance."""
     n = s.est_pose.shape[0]
-    dt = g.dt
     for i in range(n):
         for c in range(3):
             s.p_err[i, c] = 0.0
@@ -263,13 +303,23 @@ def estimator_update(g, s, lp, lv, comm):
             s.v_err[i, c] += (s.est_vel[i, c] - xj) * w
     for i in range(n):
         a = g.lacc[i] * comm.lw[i] if comm.use else g.lacc[i]
-        ep0 = a * (s.est_pose[i, 0] - lp[0]) + s.p_err[i, 0]
-        ep1 = a * (s.est_pose[i, 1] - lp[1]) + s.p_err[i, 1]
-        ep2 = a * wrap(s.est_pose[i, 2] - lp[2]) + s.p_err[i, 2]
-        ev0 = a * (s.est_vel[i, 0] - lv[0]) + s.v_err[i, 0]
-        ev1 = a * (s.est_vel[i, 1] - lv[1]) + s.v_err[i, 1]
+        s.p_err[i, 0] = a * (s.est_pose[i, 0] - lp[0]) + s.p_err[i, 0]
+        s.p_err[i, 1] = a * (s.est_pose[i, 1] - lp[1]) + s.p_err[i, 1]
+        s.p_err[i, 2] = a * wrap(s.est_pose[i, 2] - lp[2]) + s.p_err[i, 2]
+        s.v_err[i, 0] = a * (s.est_vel[i, 0] - lv[0]) + s.v_err[i, 0]
+        s.v_err[i, 1] = a * (s.est_vel[i, 1] - lv[1]) + s.v_err[i, 1]
+
+
+@njit
+def estimator_advance(g, s):
+    """One Euler step of the estimator (eqs. 12–13) with the consensus errors of
+    :func:`estimator_consensus`, and the neuron (eq. 32) for the frozen input ``x̃``."""
+    n = s.est_pose.shape[0]
+    dt = g.dt
+    for i in range(n):
         px, py, pth, v, w = estimator_step(s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2],
-                                           s.est_vel[i, 0], s.est_vel[i, 1], ep0, ep1, ep2, ev0, ev1,
+                                           s.est_vel[i, 0], s.est_vel[i, 1], s.p_err[i, 0], s.p_err[i, 1],
+                                           s.p_err[i, 2], s.v_err[i, 0], s.v_err[i, 1],
                                            g.kx, g.ky, g.kth, g.ka0, g.ka1, g.kb0, g.kb1,
                                            g.ephi0, g.ephi1, dt)
         s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2] = px, py, pth

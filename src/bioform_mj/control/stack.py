@@ -15,7 +15,7 @@ import numpy as np
 from ..graph import Graph
 from .base import Comm
 from .equations import filter_coefficients
-from .kernel import CommIn, Gains, StackState, control_step, new_state, perfect_comm, reset_state
+from .kernel import DERIVATIVES, CommIn, Gains, StackState, control_step, new_state, perfect_comm, reset_state
 
 METHODS = ("backstepping", "bioinspired", "backstepping-learning", "bioinspired-learning")
 
@@ -37,7 +37,9 @@ class StackParams:
     k1 [1/s], k2 [1/m²·…], k3 [1/m]: kinematic gains of eq. 31; A, B, D: neuron (eq. 32).
     law: 'bioinspired' or 'backstepping'; learning: run eq. 37 or keep ``ĉ = ĉ(0)``.
     c_gain (2,) [m/s², rad/s²]: ``c_a, c_b``; torque_phi: boundary layer of eqs. 38–39 (0 = sgn).
-    tau_max (n,) [N·m]: wheel torque limit; steer_priority: keep τ_b when saturating; deriv_wn [rad/s]: command-derivative filter.
+    tau_max (n,) [N·m]: wheel torque limit; steer_priority: keep τ_b when saturating;
+    deriv_wn [rad/s]: command-derivative filter;
+    derivative: how ``υ̇_cmd, ω̇_cmd`` are obtained, ``filter``, ``difference`` or ``analytic`` (design §6).
     k4 (2,) or (n,2), k5 (2,) [1/s]: learner gains; kd (2,): disturbance-estimate gain (0 = the paper); c_hat0, c_min, c_max (n,2): initial estimate and bounds.
     dt [s]: control period.
     """
@@ -67,6 +69,7 @@ class StackParams:
     c_min: np.ndarray
     c_max: np.ndarray
     dt: float
+    derivative: str = "filter"
 
 
 class ControlStack:
@@ -82,6 +85,8 @@ class ControlStack:
         self.n = n
         self.p = p
         self.graph = graph
+        if p.derivative not in DERIVATIVES:
+            raise ValueError(f"unknown derivative '{p.derivative}' (expected one of: {', '.join(DERIVATIVES)})")
         f00, f01, f10, f11, g0, g1 = filter_coefficients(p.deriv_wn, p.dt)
         c = np.ascontiguousarray
         self.gains = Gains(
@@ -90,7 +95,7 @@ class ControlStack:
             ka0=float(p.ka[0]), ka1=float(p.ka[1]), kb0=float(p.kb[0]), kb1=float(p.kb[1]),
             ephi0=float(p.est_phi[0]), ephi1=float(p.est_phi[1]),
             ca=float(p.c_gain[0]), cb=float(p.c_gain[1]), tphi=float(p.torque_phi),
-            f00=f00, f01=f01, f10=f10, f11=f11, g0=g0, g1=g1,
+            f00=f00, f01=f01, f10=f10, f11=f11, g0=g0, g1=g1, deriv=DERIVATIVES[p.derivative],
             k5a=float(p.k5[0]), k5b=float(p.k5[1]),
             kda=float(np.broadcast_to(p.kd, (2,))[0]), kdb=float(np.broadcast_to(p.kd, (2,))[1]),
             dt=float(p.dt), bio=p.law == "bioinspired", learning=bool(p.learning), steer=bool(p.steer_priority),
