@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .control.equations import njit
+from .control.equations import formation_offset, njit
 
 #: Time-series channels of ``log.npz``: name → (trailing shape, meaning). ``n`` = followers.
 CHANNELS: dict[str, tuple[tuple[str, ...], str]] = {
@@ -43,6 +43,7 @@ CHANNELS: dict[str, tuple[tuple[str, ...], str]] = {
     "z_hat": (("n", "2"), "learner's velocity estimate, sample"),
     "vs": (("n",), "neuron output V_s, sample"),
     "tracking_error": (("n", "3"), "[x̃, ỹ, θ̃] body frame, sample"),
+    "slots": (("n", "2"), "formation slots p_r − Δ_i of the true leader (m), sample"),
     "formation_error": (("n",), "|p_i − (p_r − Δ_i)| m against the true leader, sample"),
     "estimation_error": (("n",), "|P_ir[:2] − p_r| m, sample"),
     "saturated": (("n",), "fraction of the interval's steps with a wheel at its limit"),
@@ -75,6 +76,7 @@ class LogArrays(NamedTuple):
     z_hat: np.ndarray
     vs: np.ndarray
     tracking_error: np.ndarray
+    slots: np.ndarray
     formation_error: np.ndarray
     estimation_error: np.ndarray
     saturated: np.ndarray
@@ -113,6 +115,14 @@ class Acc(NamedTuple):
     tau_raw: np.ndarray
     sat: np.ndarray
     count: np.ndarray
+
+
+class Formation(NamedTuple):
+    """Formation offsets ``Δ`` (n, 2) m and their frame (``leader_frame``: rotate with the
+    leader's heading; else world axes, the paper), for the formation error against the true leader."""
+
+    offsets: np.ndarray
+    leader_frame: bool
 
 
 class Bounds(NamedTuple):
@@ -175,9 +185,10 @@ def accumulate(s, vel, met, a):
 
 
 @njit
-def record(lg, j, t, lp, lv, pose, vel, s, c_true, offsets, a):
+def record(lg, j, t, lp, lv, pose, vel, s, c_true, form, a):
     """Write log row ``j`` at time ``t`` (s): samples of the leader ``lp, lv``, the measurements
-    and the stack state ``s``; interval means from ``a`` (then reset)."""
+    and the stack state ``s``; the slots of :class:`Formation` ``form``; interval means from
+    ``a`` (then reset)."""
     lg.t[j] = t
     for c in range(3):
         lg.leader_pose[j, c] = lp[c]
@@ -204,7 +215,10 @@ def record(lg, j, t, lp, lv, pose, vel, s, c_true, offsets, a):
             lg.c_true[j, i, c] = c_true[i, c]
             lg.z_hat[j, i, c] = s.z_hat[i, c]
         lg.vs[j, i] = s.vs[i]
-        lg.formation_error[j, i] = math.hypot(pose[i, 0] - (lp[0] - offsets[i, 0]), pose[i, 1] - (lp[1] - offsets[i, 1]))
+        ox, oy = formation_offset(form.offsets[i, 0], form.offsets[i, 1], lp[2], form.leader_frame)
+        lg.slots[j, i, 0] = lp[0] - ox
+        lg.slots[j, i, 1] = lp[1] - oy
+        lg.formation_error[j, i] = math.hypot(pose[i, 0] - lg.slots[j, i, 0], pose[i, 1] - lg.slots[j, i, 1])
         lg.estimation_error[j, i] = math.hypot(s.est_pose[i, 0] - lp[0], s.est_pose[i, 1] - lp[1])
         lg.saturated[j, i] = a.sat[i] / cnt
     _acc_reset(a)
@@ -309,8 +323,9 @@ OK, GUARD_FAILED, PLANT_FAILED = 0, 1, 2
 
 
 @njit
-def after_control(k, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c_true, offsets, lim, diag):
-    """After the control step of step ``k``: metrics, the guards, and the log row if due.
+def after_control(k, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c_true, form, lim, diag):
+    """After the control step of step ``k``: metrics, the guards, and the log row if due
+    (``form``: the :class:`Formation`, for the slots and the formation error).
 
     Returns ``(next log row, status)``; on a failed guard the row is not written (the log
     ends at the last good row) and ``diag`` holds the diagnosis.
@@ -319,6 +334,6 @@ def after_control(k, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt
     if not check(s, pose, vel, lim, diag):
         return j, GUARD_FAILED
     if k % stride == 0 and k < N:
-        record(lg, j, k * dt, L_pose[k], L_vel[k], pose, vel, s, c_true, offsets, acc)
+        record(lg, j, k * dt, L_pose[k], L_vel[k], pose, vel, s, c_true, form, acc)
         return j + 1, OK
     return j, OK

@@ -103,6 +103,9 @@ class FormationCfg:
     """Offsets ``(Δx, Δy)`` (m, world frame) and initial poses ``(x, y, θ)`` (m, m, rad), one row per follower.
 
     ``init_jitter`` (m for x/y, rad for θ) adds a seeded uniform perturbation to the initial poses.
+    ``frame``: ``"world"`` (the paper: offsets in world axes, the formation keeps its orientation
+    while the leader turns) or ``"leader"`` (offsets in the leader's frame, x forward, y left: the
+    formation turns with its leader).
     ``scale`` (not in the paper) maps the experiment to a robot ``scale`` times the size of the
     paper's, when the scenario is loaded (:func:`apply_scale`).
     """
@@ -111,6 +114,7 @@ class FormationCfg:
     initial_poses: tuple[tuple[float, ...], ...] = ((0.0, 0.0, 0.0), (-1.0, -4.0, 0.0), (-1.0, 4.0, 0.0))
     init_jitter: float = 0.0
     scale: float = 1.0  # the whole experiment at a robot's scale (apply_scale); 1 = as written
+    frame: str = "world"  # offsets in "world" axes (the paper) or in the "leader"'s frame (turns with it)
 
 
 @dataclass(frozen=True)
@@ -566,6 +570,8 @@ def validate(sc: Scenario) -> None:
         if len(p) != 3:
             raise ScenarioError(f"formation.initial_poses[{i}]", f"expected [x, y, theta], got {list(p)}")
     _positive("formation.init_jitter", f.init_jitter, strict=False)
+    if f.frame not in ("world", "leader"):
+        raise ScenarioError("formation.frame", f"must be 'world' or 'leader', got {f.frame!r}")
     offs = np.array(f.offsets)
     uniq, inv, counts = np.unique(np.round(offs, 9), axis=0, return_inverse=True, return_counts=True)
     if np.any(counts > 1):

@@ -30,6 +30,7 @@ from .engine import (
     MEAN_CHANNELS,
     OK,
     Bounds,
+    Formation,
     LogArrays,
     after_control,
     describe,
@@ -70,7 +71,7 @@ class RunState:
     @property
     def slots(self) -> np.ndarray:
         """Formation slots (n, 2): the true leader's position minus each offset (m)."""
-        return self.leader_pose[None, :2] - np.asarray(self.scenario.formation.offsets)
+        return slots_of(self.scenario, self.leader_pose)
 
 
 @dataclass
@@ -120,6 +121,7 @@ def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = 
         k4=_learner_k4(sc, c_hat0), k5=np.array(sc.learner.k5), kd=np.array(sc.learner.kd),
         c_hat0=c_hat0, c_min=lo * c_hat0, c_max=hi * c_hat0,
         dt=sc.sim.control_dt,
+        leader_frame=sc.formation.frame == "leader",
     )
 
 
@@ -136,6 +138,16 @@ def _learner_k4(sc: Scenario, c_hat0: np.ndarray) -> np.ndarray:
     return k4
 
 
+def slots_of(sc: Scenario, leader_pose: np.ndarray) -> np.ndarray:
+    """Formation slots (n, 2) m of the true leader at ``leader_pose`` (3,): ``p_r − Δ_i``, with the
+    offsets rotated by the leader's heading for ``formation.frame = "leader"`` (design §4)."""
+    off = np.asarray(sc.formation.offsets, dtype=float).reshape(sc.n, 2)
+    if sc.formation.frame == "leader":
+        c, s = np.cos(leader_pose[2]), np.sin(leader_pose[2])
+        off = np.column_stack([c * off[:, 0] - s * off[:, 1], s * off[:, 0] + c * off[:, 1]])
+    return np.asarray(leader_pose[:2], dtype=float)[None, :] - off
+
+
 def initial_estimates(sc: Scenario, pose0: np.ndarray, leader_pose0: np.ndarray) -> np.ndarray:
     """``P_ir(0)`` (n, 3) per ``estimator.init``: ``zero``, ``self`` (own pose + offset) or ``leader``."""
     n = sc.n
@@ -144,7 +156,11 @@ def initial_estimates(sc: Scenario, pose0: np.ndarray, leader_pose0: np.ndarray)
     if sc.estimator.init == "leader":
         return np.tile(leader_pose0, (n, 1))
     est = pose0.copy()
-    est[:, :2] += np.asarray(sc.formation.offsets)
+    off = np.asarray(sc.formation.offsets, dtype=float).reshape(n, 2)
+    if sc.formation.frame == "leader":  # own pose + offset, in its own heading's frame
+        c, s = np.cos(pose0[:, 2]), np.sin(pose0[:, 2])
+        off = np.column_stack([c * off[:, 0] - s * off[:, 1], s * off[:, 0] + c * off[:, 1]])
+    est[:, :2] += off
     return est
 
 
@@ -215,6 +231,7 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     L_pose = np.ascontiguousarray(L_pose, dtype=float)
     L_vel = np.ascontiguousarray(L_vel, dtype=float)
     offsets = np.ascontiguousarray(sc.formation.offsets, dtype=float).reshape(n, 2)
+    form = Formation(offsets, sc.formation.frame == "leader")
 
     feasibility: list[str] = []
     if hasattr(plant, "params") and hasattr(plant, "model"):  # MuJoCo robots: what the scenario asks of them
@@ -241,7 +258,7 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     lim = sc.limits
     ctx = LoopContext(gains, state, getattr(controller, "_no_comm", None), N, L_pose, L_vel,
                       np.ascontiguousarray(pose0, dtype=float), np.ascontiguousarray(vel0, dtype=float),
-                      new_metrics(n), new_acc(n), lg, stride, offsets,
+                      new_metrics(n), new_acc(n), lg, stride, form,
                       Bounds(float(lim.position), float(lim.speed), float(lim.torque)), np.zeros(3))
 
     chunk = None
@@ -274,7 +291,7 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
             if k + 1 < N:
                 applied[0] = control(k + 1)
                 j, status = after_control(k + 1, N, stride, state, ctx.pose, ctx.vel, ctx.met, ctx.acc, lg, j,
-                                          L_pose, L_vel, dt, c_true, offsets, ctx.bounds, ctx.diag)
+                                          L_pose, L_vel, dt, c_true, form, ctx.bounds, ctx.diag)
                 if status != OK:
                     return k + 1 - k0, j, status
         return k1 - k0, j, OK
@@ -285,7 +302,7 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     # outside the timed loop
     applied[0] = control(0)
     j, status = after_control(0, N, stride, state, ctx.pose, ctx.vel, ctx.met, ctx.acc, lg, 0, L_pose, L_vel, dt,
-                              c_true, offsets, ctx.bounds, ctx.diag)
+                              c_true, form, ctx.bounds, ctx.diag)
     run_chunk = chunk if chunk is not None else python_chunk
     run_chunk(0, 0, j)
     setup_s = time.perf_counter() - t_setup
@@ -383,7 +400,7 @@ SPIN_RAD_S = 6.0  # rad/s: |ω| beyond this over the last second → spinning
 def _summary(sc, plant, controller, state, met, logd, lp_end, pose, vel, offsets, k_done, dt, wall, setup_s,
              diverged, interrupted, missing, engine) -> dict[str, Any]:
     n = sc.n
-    final_form = np.linalg.norm(pose[:, :2] - (lp_end[None, :2] - offsets), axis=1)
+    final_form = np.linalg.norm(pose[:, :2] - slots_of(sc, lp_end), axis=1)
     est = state.est_pose if "est_pose" not in missing else np.full((n, 3), np.nan)
     final_est = np.linalg.norm(est[:, :2] - lp_end[None, :2], axis=1)
     fe = logd["formation_error"]

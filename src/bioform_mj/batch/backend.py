@@ -71,6 +71,8 @@ def unsupported(sc: Any) -> str | None:
         return f"faults ({', '.join(named)})"
     if sc.events:
         return f"events ({len(sc.events)} timed event(s))"
+    if sc.formation.frame != "world":
+        return "formation.frame = 'leader' (offsets in the leader's frame)"
     return None
 
 

@@ -34,6 +34,28 @@ except ImportError:  # pragma: no cover
 EQUATIONS: dict[str, Callable] = {}
 
 
+def _cache_dir() -> str:
+    """Where numba caches our kernels: a folder keyed by the source of every module that holds
+    kernels. numba invalidates a cached function only when its *own* file changes, not when a
+    function it calls (and inlines) from another file does; a plant's loop kernel would otherwise
+    keep an old control law after an upgrade. ``$NUMBA_CACHE_DIR`` (if set) is the parent."""
+    import hashlib
+    import os
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for f in sorted([*root.glob("control/*.py"), root / "engine.py", *root.glob("plants/*.py")]):
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    base = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(os.path.expanduser("~"), ".cache", "bioform_mj")
+    return os.path.join(base, "numba-" + h.hexdigest()[:16])
+
+
+if HAVE_NUMBA:
+    numba.config.CACHE_DIR = _cache_dir()
+
+
 def njit(fn: Callable) -> Callable:
     """numba-compile ``fn`` (cached on disk, no fastmath: IEEE results); identity without numba."""
     if not HAVE_NUMBA:  # pragma: no cover
@@ -112,6 +134,41 @@ def estimator_rates(pth: float, v: float, w: float, ep0: float, ep1: float, ep2:
 
 
 # ------------------------------------------------------- kinematic control (eqs. 27–33)
+@equation
+def slot_reference(xr: float, yr: float, thr: float, v: float, w: float,
+                   dx: float, dy: float) -> tuple[float, float, float, float, float]:
+    """The reference a follower tracks when its offset ``(dx, dy)`` is in the leader's frame
+    (design §4, not in the paper): the slot ``p_s = p_r − R(θ_r) Δ`` moves at
+    ``ṗ_s = υ_r h_r + ω_r J R Δ`` (``J``: +90° rotation), not at the leader's velocity, so eq. 31's
+    feed-forward takes the slot's own speed ``υ_s = ±|ṗ_s|`` (sign of its component along the
+    leader's heading), heading ``θ_s`` (the direction of ``±ṗ_s``) and ``ω_s = ω_r`` (exact while
+    ``υ_r, ω_r`` are constant). Returns ``(x_s, y_s, θ_s, υ_s, ω_s)``."""
+    c = cos(thr)
+    s = sin(thr)
+    ox = c * dx - s * dy
+    oy = s * dx + c * dy
+    px = v * c + w * oy
+    py = v * s - w * ox
+    sp = hypot(px, py)
+    if sp < 1e-9:
+        return xr - ox, yr - oy, thr, 0.0, w
+    if px * c + py * s < 0.0:
+        return xr - ox, yr - oy, atan2(-py, -px), -sp, w
+    return xr - ox, yr - oy, atan2(py, px), sp, w
+
+
+@equation
+def formation_offset(dx: float, dy: float, th: float, leader_frame: bool) -> tuple[float, float]:
+    """The formation offset ``Δ_i`` in world axes: ``(dx, dy)`` as given (world frame, the paper)
+    or, with ``leader_frame``, rotated by the leader's heading ``th`` (rad) so the formation turns
+    with its leader (design §4)."""
+    if not leader_frame:
+        return dx, dy
+    c = cos(th)
+    s = sin(th)
+    return c * dx - s * dy, s * dx + c * dy
+
+
 @equation
 def tracking_error(xr: float, yr: float, thr: float, x: float, y: float, th: float,
                    dx: float, dy: float) -> tuple[float, float, float]:

@@ -27,6 +27,7 @@ from .equations import (
     error_rate,
     estimator_rates,
     estimator_step,
+    slot_reference,
     filter_derivative,
     learner_step,
     neuron_rate,
@@ -57,7 +58,7 @@ class Gains(NamedTuple):
     Learner (eq. 37): ``k4`` (n, 2), ``k5a, k5b`` [1/s], ``kda, kdb`` (0 = the paper),
     bounds ``c_min, c_max`` (n, 2). ``lim`` (n,) wheel torque limit [N·m]; ``steer``: steer-priority
     saturation; ``bio``: bioinspired law (else backstepping); ``learning``: run eq. 37.
-    ``offsets`` (n, 2) [m]; graph edges ``src ← dst`` (m,); ``lacc`` (n,) leader access ``a_ir``.
+    ``offsets`` (n, 2) [m], in the leader's frame if ``leader_frame`` (else world); graph edges ``src ← dst`` (m,); ``lacc`` (n,) leader access ``a_ir``.
     ``dt`` [s] the control period.
     """
 
@@ -94,6 +95,7 @@ class Gains(NamedTuple):
     bio: bool
     learning: bool
     steer: bool
+    leader_frame: bool
     k4: np.ndarray
     c_min: np.ndarray
     c_max: np.ndarray
@@ -228,11 +230,18 @@ def command_and_torques(g, s, pose, vel):
     (eqs. 38–39) and saturation for every follower, from the current estimates."""
     first = s.first[0] == 1
     for i in range(pose.shape[0]):
-        e0, e1, e2 = tracking_error(s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2],
-                                    pose[i, 0], pose[i, 1], pose[i, 2], g.offsets[i, 0], g.offsets[i, 1])
+        if g.leader_frame:  # the slot's own pose and velocity (design §4)
+            xs, ys, ths, v_ref, w_ref = slot_reference(s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2],
+                                                       s.est_vel[i, 0], s.est_vel[i, 1],
+                                                       g.offsets[i, 0], g.offsets[i, 1])
+            e0, e1, e2 = tracking_error(xs, ys, ths, pose[i, 0], pose[i, 1], pose[i, 2], 0.0, 0.0)
+        else:  # the paper: world-frame offsets, the slot moves with the leader's velocity
+            v_ref, w_ref = s.est_vel[i, 0], s.est_vel[i, 1]
+            e0, e1, e2 = tracking_error(s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2],
+                                        pose[i, 0], pose[i, 1], pose[i, 2], g.offsets[i, 0], g.offsets[i, 1])
         s.err[i, 0], s.err[i, 1], s.err[i, 2] = e0, e1, e2
         u = s.vs[i] if g.bio else e0
-        vc, wc = velocity_command(e1, e2, u, s.est_vel[i, 0], s.est_vel[i, 1], g.k1, g.k2, g.k3)
+        vc, wc = velocity_command(e1, e2, u, v_ref, w_ref, g.k1, g.k2, g.k3)
         s.cmd[i, 0], s.cmd[i, 1] = vc, wc
         if g.deriv == DERIV_ANALYTIC:  # chain rule through the controller's own dynamics (design §6)
             dpx, dpy, dpth, dv_ir, dw_ir = estimator_rates(

@@ -32,7 +32,8 @@ def parse_method(method: str) -> tuple[str, bool]:
 class StackParams:
     """Numbers of the control stack, already resolved per follower. Units in brackets.
 
-    offsets (n,2) [m]: formation offsets ``(Δx, Δy)`` in the world frame.
+    offsets (n,2) [m]: formation offsets ``(Δx, Δy)``, world frame (the paper) or, with
+    leader_frame, the leader's frame (the formation turns with its leader).
     kp (3,) [1/s], ka (2,) [m/s², rad/s²], kb (2,) [1/s], est_phi (2,) [m/s, rad/s]: estimator.
     k1 [1/s], k2 [1/m²·…], k3 [1/m]: kinematic gains of eq. 31; A, B, D: neuron (eq. 32).
     law: 'bioinspired' or 'backstepping'; learning: run eq. 37 or keep ``ĉ = ĉ(0)``.
@@ -69,6 +70,7 @@ class StackParams:
     c_min: np.ndarray
     c_max: np.ndarray
     dt: float
+    leader_frame: bool = False
     derivative: str = "filter"
 
 
@@ -99,6 +101,7 @@ class ControlStack:
             k5a=float(p.k5[0]), k5b=float(p.k5[1]),
             kda=float(np.broadcast_to(p.kd, (2,))[0]), kdb=float(np.broadcast_to(p.kd, (2,))[1]),
             dt=float(p.dt), bio=p.law == "bioinspired", learning=bool(p.learning), steer=bool(p.steer_priority),
+            leader_frame=bool(p.leader_frame),
             k4=c(np.broadcast_to(np.asarray(p.k4, dtype=float), (n, 2)), dtype=float),
             c_min=c(np.broadcast_to(p.c_min, (n, 2)), dtype=float),
             c_max=c(np.broadcast_to(p.c_max, (n, 2)), dtype=float),

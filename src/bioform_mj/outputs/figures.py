@@ -180,7 +180,7 @@ def _trajectories(log: Mapping[str, np.ndarray], title: str, ax: Any = None) -> 
         ax.plot(pose[:, i, 0], pose[:, i, 1], color=follower_rgb(i), lw=1.5, label=f"follower {i + 1}")
         ax.plot(pose[0, i, 0], pose[0, i, 1], "o", color=follower_rgb(i), ms=5)
     for k in np.unique(np.linspace(0, len(t) - 1, 5).round().astype(int)):
-        slots = lp[k, None, :2] - offsets
+        slots = log["slots"][k] if "slots" in log else lp[k, None, :2] - offsets
         for i in range(n):
             ax.plot([lp[k, 0], pose[k, i, 0]], [lp[k, 1], pose[k, i, 1]], color="0.6", lw=0.7, zorder=1)
             ax.plot(slots[i, 0], slots[i, 1], "x", color=follower_rgb(i), ms=6, mew=1.2)
