@@ -103,6 +103,21 @@ def test_video_ideal_plant_is_replayed_in_a_composed_scene(tmp_path, gl_backend)
     assert not (out / "scene.xml").exists()  # the composed scene is for the picture only
 
 
+def test_video_ideal_plant_with_a_mapped_third_party_robot(tmp_path, gl_backend):
+    """The replay scene of the ideal plant uses the robot's own names (its mapping), its wheel
+    signs and its axle midpoint, not the shipped naming convention."""
+    from pathlib import Path
+
+    model = Path(__file__).resolve().parent / "data" / "thirdparty_base.xml"
+    robot = (f'plant.robots=[{{model="{model}", base="base_link", left_wheel="joint_left_wheel", '
+             'right_wheel="joint_right_wheel"}]')
+    out = tmp_path / "tp"
+    code = _run_video(["run", "paper", "--plant", "ideal", *SHORT, "--set", robot, "--out", str(out), "--video",
+                       "--width", "128", "--height", "72", "--fps", "10", "--quiet"], gl_backend)
+    assert code == 0
+    _check_video(out / "video.mp4", 20, 72, 128)
+
+
 # ---------------------------------------------------------------------------- GL failure
 def test_invalid_gl_backend_exit_2_outputs_kept(tmp_path):
     out = tmp_path / "bad_gl"

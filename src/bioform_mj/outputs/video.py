@@ -120,7 +120,7 @@ class _Replay:
     def __init__(self, result: Any, capture: FrameCapture) -> None:
         import mujoco
 
-        from ..scene import Markers, build_scene, compile_scene, follower_prefix
+        from ..scene import Markers, build_scene, compile_scene, follower_prefix, layout_of
 
         self.mujoco = mujoco
         sc = result.scenario
@@ -141,17 +141,16 @@ class _Replay:
         mujoco.mj_forward(m, self.data)
         self.markers = Markers(m, n)
         prefixes = [follower_prefix(i) for i in range(n)]
-        base = [m.body(p + "base").id for p in prefixes]
+        lays = [layout_of(m, p) for p in prefixes]  # the robot's own names, mapped (design §8)
+        base = [m.body(lay.base).id for lay in lays]
         self.base_q = np.array([m.jnt_qposadr[m.body_jntadr[b]] for b in base])  # free joint qpos address
         self.base_z = np.array([m.qpos0[a + 2] for a in self.base_q])
         if not self.live_qpos:
-            from ..identify import robot_parameters
-
-            self.wheel_q = np.array([[m.jnt_qposadr[m.joint(p + j).id] for j in ("left_wheel", "right_wheel")]
-                                     for p in prefixes])
-            params = [robot_parameters(m, p) for p in prefixes]
-            self.r = np.array([p.wheel_radius for p in params])
-            self.l = np.array([p.half_track for p in params])
+            self.wheel_q = np.array([[m.jnt_qposadr[m.joint(j).id] for j in lay.wheel_joints] for lay in lays])
+            self.sign = np.array([lay.wheel_sign for lay in lays], dtype=float)
+            self.axle = np.array([lay.axle for lay in lays], dtype=float)  # the logged pose is the axle's
+            self.r = np.array([lay.wheel_radius for lay in lays])
+            self.l = np.array([lay.half_track for lay in lays])
             self.wheel = np.zeros((n, 2))  # accumulated wheel angles, rad
 
     def pose(self, k: int, capture: FrameCapture) -> None:
@@ -168,8 +167,11 @@ class _Replay:
                 self.wheel[:, 1] += (v[:, 0] + v[:, 1] * self.l) / self.r * dt
             for i, a in enumerate(self.base_q):
                 th = pose[i, 2]
-                d.qpos[a:a + 7] = (pose[i, 0], pose[i, 1], self.base_z[i], np.cos(th / 2), 0.0, 0.0, np.sin(th / 2))
-                d.qpos[self.wheel_q[i]] = self.wheel[i]
+                c, s = np.cos(th), np.sin(th)
+                ax, ay = self.axle[i, 0], self.axle[i, 1]
+                d.qpos[a:a + 7] = (pose[i, 0] - (c * ax - s * ay), pose[i, 1] - (s * ax + c * ay), self.base_z[i],
+                                   np.cos(th / 2), 0.0, 0.0, np.sin(th / 2))
+                d.qpos[self.wheel_q[i]] = self.sign[i] * self.wheel[i]
         self.markers.place(d, capture.leader[k], capture.slots[k], capture.pose[k][:, :2].mean(axis=0))
         mj.mj_kinematics(m, d)
         mj.mj_camlight(m, d)
