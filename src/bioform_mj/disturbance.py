@@ -23,3 +23,14 @@ class Harmonic:
         for k, (b, a, f, p) in enumerate(self.terms):
             self._out[:, k] = harmonic(b, a, f, p, t)  # the compiled equation (design §2)
         return self._out
+
+
+def harmonic_rows(d: object) -> np.ndarray | None:
+    """The (2, 4) rows ``bias, amp, freq, phase`` that the compiled loops take for the disturbance
+    ``d``: zeros for None, the terms of a :class:`Harmonic`, None for anything else (a plant then
+    evaluates ``d(t)`` in Python, step by step)."""
+    if d is None:
+        return np.zeros((2, 4))
+    if isinstance(d, Harmonic):
+        return np.array(d.terms, dtype=float).reshape(2, 4)
+    return None

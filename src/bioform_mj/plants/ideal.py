@@ -12,7 +12,7 @@ import numpy as np
 
 from ..control.equations import njit, unicycle_rk4, wrap
 from ..control.kernel import control_step
-from ..disturbance import Harmonic
+from ..disturbance import harmonic_rows
 from ..engine import OK, after_control
 from .base import DisturbanceFn
 
@@ -112,13 +112,8 @@ class IdealPlant:
         return self._c.copy()
 
     def _dist_rows(self) -> np.ndarray | None:
-        """(2, 4) ``bias, amp, freq, phase`` of a harmonic disturbance (zeros if none), None otherwise."""
-        d = self.disturbance
-        if d is None:
-            return np.zeros((2, 4))
-        if isinstance(d, Harmonic):
-            return np.array(d.terms, dtype=float).reshape(2, 4)
-        return None
+        """Rows of a harmonic disturbance for the compiled loop (:func:`~bioform_mj.disturbance.harmonic_rows`)."""
+        return harmonic_rows(self.disturbance)
 
     def step(self, tau: np.ndarray, t: float) -> None:
         """Apply wheel torques (n, 2) ``[τ_L, τ_R]`` N·m for one control period from ``t`` (s)."""

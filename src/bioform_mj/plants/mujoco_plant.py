@@ -22,7 +22,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from bioform_mj.disturbance import Harmonic
+from bioform_mj.disturbance import harmonic_rows
 from bioform_mj.errors import Diverged
 from bioform_mj.identify import RobotParams, robot_parameters
 from bioform_mj.scene import (
@@ -399,13 +399,8 @@ class MujocoPlant:
 
     # ------------------------------------------------------------------ compiled loop
     def _dist_rows(self) -> np.ndarray | None:
-        """(2, 4) rows of a harmonic disturbance; zeros if none; None if not harmonic."""
-        d = self.disturbance
-        if d is None:
-            return np.zeros((2, 4))
-        if isinstance(d, Harmonic):
-            return np.array(d.terms, dtype=float).reshape(2, 4)
-        return None
+        """Rows of a harmonic disturbance for the compiled loop (:func:`~bioform_mj.disturbance.harmonic_rows`)."""
+        return harmonic_rows(self.disturbance)
 
     def compiled_chunk(self, ctx, record_inputs=None):
         """The compiled loop over this plant (see ``sim``); None where it cannot run
