@@ -1,9 +1,10 @@
 """The control step of many formations on MuJoCo Warp: one thread per world.
 
-:func:`_control` is ``control/kernel.py``'s ``control_step`` (learner, command and torques,
-estimator) plus the loop bookkeeping of ``engine.py`` (run metrics, divergence guards)
+:func:`_control` is ``control/kernel.py``'s ``control_step`` (learner, estimator consensus,
+command and torques with the world's ``torque.derivative`` mode, estimator advance) plus the loop bookkeeping of ``engine.py`` (run metrics, divergence guards)
 and the plant glue of ``plants/mujoco_kernels.py`` (observe, wheel torques and the
-eq. 34 disturbance as chassis ``xfrc_applied``), for one world per thread, looping over
+eq. 34 disturbance as chassis ``xfrc_applied``; ``ctrl = scale · τ``, the DC motors' driver
+input per N·m, design §8.2), for one world per thread, looping over
 its followers and graph edges in the same order as the CPU kernels. Every equation is
 the Warp translation (:mod:`.samesource`) of ``control/equations.py``: only loops,
 indexing and bookkeeping are written here.
@@ -30,6 +31,7 @@ import warp as wp
 import mujoco_warp as mjw
 
 from ..control import equations as _E
+from ..control.kernel import DERIV_ANALYTIC, DERIV_DIFFERENCE
 from ..control.stack import ControlStack
 from ..disturbance import Harmonic
 from ..engine import GUARDS
@@ -49,18 +51,25 @@ estimator_step = EQ.estimator_step
 tracking_error = EQ.tracking_error
 velocity_command = EQ.velocity_command
 neuron_step = EQ.neuron_step
-filter_step = EQ.filter_step
+filter_derivative = EQ.filter_derivative
+backward_difference = EQ.backward_difference
+estimator_rates = EQ.estimator_rates
+error_rate = EQ.error_rate
+neuron_rate = EQ.neuron_rate
+command_rate = EQ.command_rate
 sliding_mode = EQ.sliding_mode
 saturate = EQ.saturate
 learner_step = EQ.learner_step
 harmonic = EQ.harmonic
 planar_state = EQ.planar_state
 
-#: per-world scalar gains, columns of ``BatchGains.sc`` (names of ``control.kernel.Gains``,
-#: then the flags as 0/1, then ``scenario.limits``, then the disturbance rows of eq. 34)
-SCALARS = ("k1", "k2", "k3", "A", "B", "D", "kx", "ky", "kth", "ka0", "ka1", "kb0", "kb1", "ephi0", "ephi1",
-           "ca", "cb", "tphi", "f00", "f01", "f10", "f11", "g0", "g1", "k5a", "k5b", "kda", "kdb", "dt",
-           "bio", "learning", "steer", "lim_position", "lim_speed", "lim_torque",
+#: per-world scalar gains, columns of ``BatchGains.sc``: the scalar fields of ``control.kernel.Gains``
+#: (``deriv`` the ``DERIV_*`` code, the flags as 0/1), then ``scenario.limits``, then the
+#: disturbance rows of eq. 34, then the loop's own numbers
+GAIN_SCALARS = ("k1", "k2", "k3", "A", "B", "D", "kx", "ky", "kth", "ka0", "ka1", "kb0", "kb1", "ephi0", "ephi1",
+                "ca", "cb", "tphi", "f00", "f01", "f10", "f11", "g0", "g1", "deriv", "k5a", "k5b", "kda", "kdb",
+                "dt", "bio", "learning", "steer")
+SCALARS = (*GAIN_SCALARS, "lim_position", "lim_speed", "lim_torque",
            "d0", "d1", "d2", "d3", "e0", "e1", "e2", "e3", "use_dist", "stride", "t_spin", "tilt_cos")
 _I = {name: wp.constant(i) for i, name in enumerate(SCALARS)}
 K1, K2, K3, A_, B_, D_ = (_I[x] for x in ("k1", "k2", "k3", "A", "B", "D"))
@@ -69,6 +78,9 @@ KX, KY, KTH, KA0, KA1, KB0, KB1, EPHI0, EPHI1 = (_I[x] for x in ("kx", "ky", "kt
 CA, CB, TPHI, F00, F01, F10, F11, G0, G1 = (_I[x] for x in ("ca", "cb", "tphi", "f00", "f01", "f10", "f11", "g0", "g1"))
 K5A, K5B, KDA, KDB, DT, BIO, LEARN, STEER = (_I[x] for x in ("k5a", "k5b", "kda", "kdb", "dt", "bio", "learning",
                                                               "steer"))
+DERIV = _I["deriv"]
+DERIV_A = wp.constant(F(DERIV_ANALYTIC))
+DERIV_D = wp.constant(F(DERIV_DIFFERENCE))
 LPOS, LSPD, LTRQ = _I["lim_position"], _I["lim_speed"], _I["lim_torque"]
 DD0, DE0, USED = _I["d0"], _I["e0"], _I["use_dist"]
 STRIDE, TSPIN, TILT = _I["stride"], _I["t_spin"], _I["tilt_cos"]
@@ -219,14 +231,16 @@ def _control(
     dadr: wp.array(dtype=int),
     base: wp.array(dtype=int),
     act: wp.array2d(dtype=int),
+    cscale: wp.array2d(dtype=F),  # (n, 2) ctrl per N·m (1: torque motor; DC driver's input, design §8.2)
     axle: wp.array2d(dtype=F),  # (n, 3) reference point in the base frame
     ctrl: wp.array2d(dtype=float),
     xfrc: wp.array2d(dtype=wp.spatial_vector),
 ):
     """World ``w``: observe; at ``k = 0`` reset the stack (``kernel.reset_state``); for
     ``k < N`` run control step ``k`` (``kernel.control_step``), the metrics and guards
-    (``engine.accumulate``/``check``) and apply its torques and ``d(k dt)`` to the plant
-    (``mujoco_kernels.apply_inputs``); then ``k += 1``."""
+    (``engine.accumulate``/``check``) and apply its torques (``ctrl = cscale · τ``) and ``d(k dt)``
+    to the plant (``mujoco_kernels.apply_inputs``); then ``k += 1``. The command derivative is
+    the world's ``deriv`` code (``kernel.DERIV_*``): filter, backward difference or analytic."""
     w = wp.tid()
     k = s.k[w]
     n = s.pose.shape[1]
@@ -308,48 +322,7 @@ def _control(
                 s.e_int[w, i, 1] = en
                 s.c_hat[w, i, 1] = cn
                 s.d_hat[w, i, 1] = dn
-        # ---- command_and_torques
-        first = s.first[w] == 1
-        steer = g.sc[w, STEER] != zero
-        for i in range(n):
-            e0, e1, e2 = tracking_error(s.est_pose[w, i, 0], s.est_pose[w, i, 1], s.est_pose[w, i, 2],
-                                        s.pose[w, i, 0], s.pose[w, i, 1], s.pose[w, i, 2],
-                                        g.offsets[w, i, 0], g.offsets[w, i, 1])
-            s.err[w, i, 0] = e0
-            s.err[w, i, 1] = e1
-            s.err[w, i, 2] = e2
-            u = e0
-            if g.sc[w, BIO] != zero:
-                u = s.vs[w, i]
-            vc, wc = velocity_command(e1, e2, u, s.est_vel[w, i, 0], s.est_vel[w, i, 1],
-                                      g.sc[w, K1], g.sc[w, K2], g.sc[w, K3])
-            s.cmd[w, i, 0] = vc
-            s.cmd[w, i, 1] = wc
-            for c in range(2):
-                if first:
-                    s.fy[w, i, c] = s.cmd[w, i, c]
-                    s.fdy[w, i, c] = zero
-                y, dy = filter_step(s.fy[w, i, c], s.fdy[w, i, c], s.cmd[w, i, c], g.sc[w, F00], g.sc[w, F01],
-                                    g.sc[w, F10], g.sc[w, F11], g.sc[w, G0], g.sc[w, G1])
-                s.fy[w, i, c] = y
-                s.fdy[w, i, c] = dy
-                s.dcmd[w, i, c] = dy
-            r0, r1 = sliding_mode(vc, wc, s.dcmd[w, i, 0], s.dcmd[w, i, 1], s.vel[w, i, 0], s.vel[w, i, 1],
-                                  s.c_hat[w, i, 0], s.c_hat[w, i, 1], g.sc[w, CA], g.sc[w, CB], g.sc[w, TPHI])
-            s.tau_raw[w, i, 0] = r0
-            s.tau_raw[w, i, 1] = r1
-            L = g.lim[w, i]
-            sat = int(0)
-            if wp.abs(r0) > L or wp.abs(r1) > L:
-                sat = 1
-            s.saturated[w, i] = sat
-            t0, t1 = saturate(r0, r1, L, steer)
-            s.tau[w, i, 0] = t0
-            s.tau[w, i, 1] = t1
-            s.tau_body[w, i, 0] = t0 + t1
-            s.tau_body[w, i, 1] = t1 - t0
-        s.first[w] = 0
-        # ---- estimator_update (perfect network)
+        # ---- estimator_consensus (perfect network): p_err, v_err of this step, leader term included
         for i in range(n):
             for c in range(3):
                 s.p_err[w, i, c] = zero
@@ -367,21 +340,91 @@ def _control(
                 s.v_err[w, i, c] = s.v_err[w, i, c] + (s.est_vel[w, i, c] - s.est_vel[w, j, c])
         for i in range(n):
             ai = g.lacc[w, i]
-            ep0 = ai * (s.est_pose[w, i, 0] - L_pose[k, 0]) + s.p_err[w, i, 0]
-            ep1 = ai * (s.est_pose[w, i, 1] - L_pose[k, 1]) + s.p_err[w, i, 1]
-            ep2 = ai * wrap(s.est_pose[w, i, 2] - L_pose[k, 2]) + s.p_err[w, i, 2]
-            ev0 = ai * (s.est_vel[w, i, 0] - L_vel[k, 0]) + s.v_err[w, i, 0]
-            ev1 = ai * (s.est_vel[w, i, 1] - L_vel[k, 1]) + s.v_err[w, i, 1]
+            s.p_err[w, i, 0] = ai * (s.est_pose[w, i, 0] - L_pose[k, 0]) + s.p_err[w, i, 0]
+            s.p_err[w, i, 1] = ai * (s.est_pose[w, i, 1] - L_pose[k, 1]) + s.p_err[w, i, 1]
+            s.p_err[w, i, 2] = ai * wrap(s.est_pose[w, i, 2] - L_pose[k, 2]) + s.p_err[w, i, 2]
+            s.v_err[w, i, 0] = ai * (s.est_vel[w, i, 0] - L_vel[k, 0]) + s.v_err[w, i, 0]
+            s.v_err[w, i, 1] = ai * (s.est_vel[w, i, 1] - L_vel[k, 1]) + s.v_err[w, i, 1]
+        # ---- command_and_torques
+        first = s.first[w] == 1
+        steer = g.sc[w, STEER] != zero
+        bio = g.sc[w, BIO] != zero
+        deriv = g.sc[w, DERIV]
+        for i in range(n):
+            e0, e1, e2 = tracking_error(s.est_pose[w, i, 0], s.est_pose[w, i, 1], s.est_pose[w, i, 2],
+                                        s.pose[w, i, 0], s.pose[w, i, 1], s.pose[w, i, 2],
+                                        g.offsets[w, i, 0], g.offsets[w, i, 1])
+            s.err[w, i, 0] = e0
+            s.err[w, i, 1] = e1
+            s.err[w, i, 2] = e2
+            u = e0
+            if bio:
+                u = s.vs[w, i]
+            vc, wc = velocity_command(e1, e2, u, s.est_vel[w, i, 0], s.est_vel[w, i, 1],
+                                      g.sc[w, K1], g.sc[w, K2], g.sc[w, K3])
+            s.cmd[w, i, 0] = vc
+            s.cmd[w, i, 1] = wc
+            if deriv == DERIV_A:  # chain rule through the controller's own dynamics (design §6)
+                dpx, dpy, dpth, dv_ir, dw_ir = estimator_rates(
+                    s.est_pose[w, i, 2], s.est_vel[w, i, 0], s.est_vel[w, i, 1], s.p_err[w, i, 0],
+                    s.p_err[w, i, 1], s.p_err[w, i, 2], s.v_err[w, i, 0], s.v_err[w, i, 1],
+                    g.sc[w, KX], g.sc[w, KY], g.sc[w, KTH], g.sc[w, KA0], g.sc[w, KA1], g.sc[w, KB0], g.sc[w, KB1],
+                    g.sc[w, EPHI0], g.sc[w, EPHI1])
+                ch = wp.cos(s.pose[w, i, 2])
+                sh = wp.sin(s.pose[w, i, 2])
+                dex, dey, deth = error_rate(e0, e1, s.vel[w, i, 0], s.vel[w, i, 1], s.est_vel[w, i, 0], dpth, e2,
+                                            ch * dpx + sh * dpy, -sh * dpx + ch * dpy)
+                du = dex
+                if bio:
+                    du = neuron_rate(s.vs[w, i], e0, g.sc[w, A_], g.sc[w, B_], g.sc[w, D_])
+                dvc, dwc = command_rate(e1, e2, s.est_vel[w, i, 0], dv_ir, dw_ir, dey, deth, du,
+                                        g.sc[w, K1], g.sc[w, K2], g.sc[w, K3])
+                s.dcmd[w, i, 0] = dvc
+                s.dcmd[w, i, 1] = dwc
+            else:
+                for c in range(2):  # filter or backward difference (design §6)
+                    if first:
+                        s.fy[w, i, c] = s.cmd[w, i, c]
+                        s.fdy[w, i, c] = zero
+                    if deriv == DERIV_D:
+                        s.dcmd[w, i, c] = backward_difference(s.cmd[w, i, c], s.fy[w, i, c], dt)
+                        s.fy[w, i, c] = s.cmd[w, i, c]
+                    else:
+                        y, dy, dd = filter_derivative(s.fy[w, i, c], s.fdy[w, i, c], s.cmd[w, i, c], g.sc[w, F00],
+                                                      g.sc[w, F01], g.sc[w, F10], g.sc[w, F11], g.sc[w, G0],
+                                                      g.sc[w, G1], dt)
+                        s.fy[w, i, c] = y
+                        s.fdy[w, i, c] = dy
+                        s.dcmd[w, i, c] = dd
+            r0, r1 = sliding_mode(vc, wc, s.dcmd[w, i, 0], s.dcmd[w, i, 1], s.vel[w, i, 0], s.vel[w, i, 1],
+                                  s.c_hat[w, i, 0], s.c_hat[w, i, 1], g.sc[w, CA], g.sc[w, CB], g.sc[w, TPHI])
+            s.tau_raw[w, i, 0] = r0
+            s.tau_raw[w, i, 1] = r1
+            L = g.lim[w, i]
+            sat = int(0)
+            if wp.abs(r0) > L or wp.abs(r1) > L:
+                sat = 1
+            s.saturated[w, i] = sat
+            t0, t1 = saturate(r0, r1, L, steer)
+            s.tau[w, i, 0] = t0
+            s.tau[w, i, 1] = t1
+            s.tau_body[w, i, 0] = t0 + t1
+            s.tau_body[w, i, 1] = t1 - t0
+        s.first[w] = 0
+        # ---- estimator_advance: one Euler step with this step's consensus errors; the neuron (eq. 32)
+        for i in range(n):
             px, py, pth, v, om = estimator_step(s.est_pose[w, i, 0], s.est_pose[w, i, 1], s.est_pose[w, i, 2],
-                                                s.est_vel[w, i, 0], s.est_vel[w, i, 1], ep0, ep1, ep2, ev0, ev1,
-                                                g.sc[w, KX], g.sc[w, KY], g.sc[w, KTH], g.sc[w, KA0], g.sc[w, KA1],
-                                                g.sc[w, KB0], g.sc[w, KB1], g.sc[w, EPHI0], g.sc[w, EPHI1], dt)
+                                                s.est_vel[w, i, 0], s.est_vel[w, i, 1], s.p_err[w, i, 0],
+                                                s.p_err[w, i, 1], s.p_err[w, i, 2], s.v_err[w, i, 0],
+                                                s.v_err[w, i, 1], g.sc[w, KX], g.sc[w, KY], g.sc[w, KTH],
+                                                g.sc[w, KA0], g.sc[w, KA1], g.sc[w, KB0], g.sc[w, KB1],
+                                                g.sc[w, EPHI0], g.sc[w, EPHI1], dt)
             s.est_pose[w, i, 0] = px
             s.est_pose[w, i, 1] = py
             s.est_pose[w, i, 2] = pth
             s.est_vel[w, i, 0] = v
             s.est_vel[w, i, 1] = om
-            if g.sc[w, BIO] != zero:
+            if bio:
                 s.vs[w, i] = neuron_step(s.vs[w, i], s.err[w, i, 0], g.sc[w, A_], g.sc[w, B_], g.sc[w, D_], dt)
         # ---- engine.accumulate (metrics) and engine.check (guards)
         for i in range(n):
@@ -417,8 +460,8 @@ def _control(
         if running:
             t0 = s.tau[w, i, 0]
             t1 = s.tau[w, i, 1]
-        ctrl[w, act[i, 0]] = wp.float32(t0)
-        ctrl[w, act[i, 1]] = wp.float32(t1)
+        ctrl[w, act[i, 0]] = wp.float32(cscale[i, 0] * t0)
+        ctrl[w, act[i, 1]] = wp.float32(cscale[i, 1] * t1)
         if g.sc[w, USED] != zero:
             b = base[i]
             R = xmat[w, b]
@@ -528,7 +571,7 @@ class BatchRun:
         for w, sc in enumerate(scs):
             stack = ControlStack(graph if sc is sc0 else sc.build_graph(), stack_params(sc, c_true, plant.tau_max))
             gn = stack.gains
-            row = {f: float(getattr(gn, f)) for f in SCALARS[:32]}
+            row = {f: float(getattr(gn, f)) for f in GAIN_SCALARS}
             lm = sc.limits
             row.update(lim_position=lm.position, lim_speed=lm.speed, lim_torque=lm.torque)
             terms = np.array(Harmonic(n, sc.disturbance.bias, sc.disturbance.amp, sc.disturbance.freq,
@@ -594,7 +637,8 @@ class BatchRun:
             self.qadr = A(idx.qadr.astype(np.int32), int)
             self.dadr = A(idx.dadr.astype(np.int32), int)
             self.base = A(idx.base.astype(np.int32), int)
-            self.act = A(idx.act.astype(np.int32), int)
+            self.act = A(np.asarray(plant._ctrl).astype(np.int32), int)  # the plant's own motor ids
+            self.cscale = A(np.asarray(plant._ctrl_scale, dtype=float))
             self.axle = A(plant._axle)
         self.L_pose_host = L_pose
         self.nconmax, self.njmax = nconmax, njmax
@@ -605,7 +649,7 @@ class BatchRun:
         d = self.d
         wp.launch(_control, dim=self.nworld,
                   inputs=[self.g, self.s, self.N, self.L_pose, self.L_vel, d.qpos, d.qvel, d.xmat, self.qadr,
-                          self.dadr, self.base, self.act, self.axle, d.ctrl, d.xfrc_applied])
+                          self.dadr, self.base, self.act, self.cscale, self.axle, d.ctrl, d.xfrc_applied])
 
     def _steps(self, nsteps: int) -> None:
         """``nsteps`` × [``n_substeps`` physics steps, control step]: no host reads."""
