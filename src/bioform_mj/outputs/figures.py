@@ -158,8 +158,8 @@ def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
     ax[0, 0].set_ylabel("τ_L (N·m)")
     ax[1, 0].set_ylabel("τ_R (N·m)")
     ax[2, 0].set_ylabel("V_s")
-    what = "mean per log interval, band = min..max" if env else "point samples"
-    _finish(fig, ax, title + f": wheel torques applied ({what}) and neuron output")
+    what = "line: interval mean, band: min..max" if env else "point samples"
+    _finish(fig, ax, title + f": torques ({what}), V_s")
     paths.append(_save(fig, out / "torques.png"))
     return paths
 
