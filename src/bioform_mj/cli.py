@@ -132,6 +132,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from .outputs.gl import configure_gl_env
 
     configure_gl_env()  # MUJOCO_GL=egl unless the user chose; before anything imports mujoco
+    _show_robot_warnings()
     restore = _catch_signals()
     try:
         args = build_parser().parse_args(argv)
@@ -414,11 +415,28 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
     return EXIT_INPUT if problems else EXIT_OK
 
 
+def _show_robot_warnings() -> None:
+    """Print every :class:`~bioform_mj.errors.RobotWarning` (issued before a run) as one
+    ``warning:`` line on stderr, each time it is issued."""
+    import warnings
+
+    from .errors import RobotWarning
+
+    show = warnings.showwarning
+
+    def showwarning(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+        if issubclass(category, RobotWarning):
+            print(f"warning: {message}", file=sys.stderr)
+        else:
+            show(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = showwarning
+    warnings.simplefilter("always", RobotWarning)
+
+
 def _warn_outcomes(summary: dict[str, Any]) -> None:
-    """A ``warning:`` line on stderr for what the scenario asked beyond the robots (before the run)
-    and for every follower whose outcome is not ``ok`` (never silent: design §9)."""
-    for line in summary.get("feasibility_warnings") or ():
-        print(f"warning: {line}", file=sys.stderr)
+    """A ``warning:`` line on stderr for every follower whose outcome is not ``ok`` (never
+    silent: design §9); what the scenario asked beyond the robots was said before the run."""
     for f in summary["followers"]:
         if f.get("outcome", "ok") != "ok":
             print(f"warning: follower {f['id']}: {f['outcome']} ({f.get('outcome_detail', '')})", file=sys.stderr)

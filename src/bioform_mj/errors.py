@@ -26,6 +26,11 @@ class GraphError(InputError):
     """The communication graph violates Assumption 1 or is malformed."""
 
 
+class RobotWarning(UserWarning):
+    """What a scenario asks beyond a robot's margins (traction, tip-over), said before the run;
+    the CLI prints each as one ``warning:`` line on stderr."""
+
+
 class Diverged(BioformError, RuntimeError):
     """The closed loop produced NaN/inf or a state beyond the configured limits (exit 3)."""
 

@@ -15,6 +15,7 @@ import logging
 import math
 import platform
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple, Protocol, Sequence
 
@@ -38,7 +39,7 @@ from .engine import (
     new_log,
     new_metrics,
 )
-from .errors import Diverged
+from .errors import Diverged, RobotWarning
 from .plants.base import Plant
 from .plants.ideal import IdealPlant
 from .scenario import Scenario
@@ -237,7 +238,9 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     if hasattr(plant, "params") and hasattr(plant, "model"):  # MuJoCo robots: what the scenario asks of them
         from .robot_check import feasibility as _feasibility
 
-        feasibility = _feasibility(sc, plant)  # in summary.json; the CLI prints them as warning: lines
+        feasibility = _feasibility(sc, plant)  # in summary.json too
+        for line in feasibility:
+            warnings.warn(line, RobotWarning, stacklevel=2)  # before the run (the CLI prints warning: lines)
     plant.reset()
     pose0, vel0 = plant.observe()
     controller.reset(initial_estimates(sc, pose0, L_pose[0]), vel0)
