@@ -96,10 +96,11 @@ def test_odometry_compiled_and_stepwise_are_bit_identical():
         [f["odometry_drift_m"] for f in b.summary["followers"]]
 
 
-def test_truth_sensing_logs_no_odometry():
+def test_truth_sensing_logs_the_truth_as_the_measurement():
     r = simulate(S.load("tb3", ["sim.duration=0.2"]))
     assert r.summary["sensing"] == "truth"
-    assert np.all(np.isnan(r.log["odom_pose"])) and all(f["odometry_drift_m"] is None for f in r.summary["followers"])
+    assert np.array_equal(r.log["odom_pose"], r.log["pose"]) and np.array_equal(r.log["odom_vel"], r.log["vel"])
+    assert all(f["odometry_drift_m"] is None for f in r.summary["followers"])
 
 
 @pytest.mark.parametrize("sets,key", [

@@ -46,8 +46,8 @@ CHANNELS: dict[str, tuple[tuple[str, ...], str]] = {
     "formation_error": (("n",), "|p_i − (p_r − Δ_i)| m against the true leader, sample"),
     "estimation_error": (("n",), "|P_ir[:2] − p_r| m, sample"),
     "saturated": (("n",), "fraction of the interval's steps with a wheel at its limit"),
-    "odom_pose": (("n", "3"), "[x, y, θ] of the follower's odometry, what its controller used (NaN: sensing = truth), sample"),
-    "odom_vel": (("n", "2"), "[υ, ω] of the odometry over the last control period (NaN: sensing = truth), sample"),
+    "odom_pose": (("n", "3"), "[x, y, θ] its controller used: the odometry (sensing = odometry), else = pose, sample"),
+    "odom_vel": (("n", "2"), "[υ, ω] its controller used: odometry mean over the control period, else = vel, sample"),
 }
 
 #: channels that are interval means (the others are point samples)

@@ -366,9 +366,9 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     logd = {name: getattr(lg, name)[:j] for name in LogArrays._fields}
     for name in missing:
         logd[name] = np.full_like(logd[name], np.nan)
-    if not odometry:
-        logd["odom_pose"] = np.full_like(logd["odom_pose"], np.nan)
-        logd["odom_vel"] = np.full_like(logd["odom_vel"], np.nan)
+    if not odometry:  # the controllers used the truth
+        logd["odom_pose"] = logd["pose"].copy()
+        logd["odom_vel"] = logd["vel"].copy()
     logd["offsets"] = offsets
     logd["edges"] = graph.edges + 1
     logd["leader_access"] = graph.leader_access
