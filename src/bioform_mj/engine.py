@@ -47,6 +47,8 @@ CHANNELS: dict[str, tuple[tuple[str, ...], str]] = {
     "formation_error": (("n",), "|p_i − (p_r − Δ_i)| m against the true leader, sample"),
     "estimation_error": (("n",), "|P_ir[:2] − p_r| m, sample"),
     "saturated": (("n",), "fraction of the interval's steps with a wheel at its limit"),
+    "odom_pose": (("n", "3"), "[x, y, θ] its controller used: the odometry (sensing = odometry), else = pose, sample"),
+    "odom_vel": (("n", "2"), "[υ, ω] its controller used: odometry mean over the control period, else = vel, sample"),
 }
 
 #: channels that are interval means (the others are point samples)
@@ -80,6 +82,8 @@ class LogArrays(NamedTuple):
     formation_error: np.ndarray
     estimation_error: np.ndarray
     saturated: np.ndarray
+    odom_pose: np.ndarray
+    odom_vel: np.ndarray
 
 
 def new_log(K: int, n: int) -> LogArrays:
@@ -222,6 +226,16 @@ def record(lg, j, t, lp, lv, pose, vel, s, c_true, form, a):
         lg.estimation_error[j, i] = math.hypot(s.est_pose[i, 0] - lp[0], s.est_pose[i, 1] - lp[1])
         lg.saturated[j, i] = a.sat[i] / cnt
     _acc_reset(a)
+
+
+@njit
+def record_odometry(lg, j, mpose, mvel):
+    """Log row ``j``'s odometry channels: the pose and velocity the controllers were given (design §8.3)."""
+    for i in range(mpose.shape[0]):
+        for c in range(3):
+            lg.odom_pose[j, i, c] = mpose[i, c]
+        for c in range(2):
+            lg.odom_vel[j, i, c] = mvel[i, c]
 
 
 #: The divergence guards, in the order they are checked (code = index + 1):

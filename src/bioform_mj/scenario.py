@@ -195,6 +195,34 @@ class PlantCfg:
     mass: float = 25.0
     inertia: float = 0.2
     robots: tuple[RobotRef, ...] = (RobotRef("paper"),)
+    # design §8.3, MuJoCo only: what the controllers are given ("truth" or "odometry")
+    sensing: str = "truth"
+    encoder_cpr: int = -1  # counts per wheel revolution; -1: each robot file's <numeric name="encoder_cpr">
+    sensor_dt: float = 0.0  # s, encoder and gyro period; 0: every physics step
+    gyro_noise: float = 0.0  # rad/s, standard deviation per sample
+    gyro_bias: float = 0.0  # rad/s, constant
+
+
+SENSINGS = ("truth", "odometry")
+
+
+def robot_encoder_cpr(model: str) -> float | None:
+    """Encoder counts per revolution an MJCF robot file declares (``<custom><numeric
+    name="encoder_cpr" data="4096"/>``), None if it has no encoders (design §8.3). Read with
+    ElementTree: no MuJoCo needed to validate a scenario."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(model).getroot()
+    except (OSError, ET.ParseError):
+        return None  # the scene reports an unreadable file
+    for num in root.iter("numeric"):
+        if num.get("name") == "encoder_cpr":
+            try:
+                return float((num.get("data") or "").split()[0])
+            except (ValueError, IndexError):
+                return 0.0
+    return None
 
 
 @dataclass(frozen=True)
@@ -636,6 +664,7 @@ def validate(sc: Scenario) -> None:
 
         for r in pc.robots:
             resolve_robot(r)  # raises InputError naming an unknown robot or a missing file
+    _validate_sensing(sc)
 
     d = sc.disturbance
     for key in ("bias", "amp", "freq", "phase"):
@@ -657,6 +686,46 @@ def validate(sc: Scenario) -> None:
         _positive(f"{key}.inertia", ev.inertia, strict=False)
 
     _validate_faults(sc)
+
+
+def _validate_sensing(sc: Scenario) -> None:
+    """``plant.sensing`` and the sensor keys (design §8.3)."""
+    pc, s = sc.plant, sc.sim
+    if pc.sensing not in SENSINGS:
+        raise ScenarioError("plant.sensing", f"unknown '{pc.sensing}' (expected one of: {', '.join(SENSINGS)})")
+    if pc.encoder_cpr == 0 or pc.encoder_cpr < -1:
+        raise ScenarioError("plant.encoder_cpr", f"must be >= 1 count per revolution (or -1: each robot file's), "
+                                                 f"got {pc.encoder_cpr}")
+    _positive("plant.gyro_noise", pc.gyro_noise, strict=False)
+    _positive("plant.sensor_dt", pc.sensor_dt, strict=False)
+    if pc.sensor_dt > 0:
+        ratio = pc.sensor_dt / s.physics_dt
+        if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-9 * ratio:
+            raise ScenarioError("plant.sensor_dt", f"must be a multiple of sim.physics_dt = {s.physics_dt:g} s, "
+                                                   f"got {pc.sensor_dt:g}")
+        per = s.control_dt / pc.sensor_dt
+        if per < 1 - 1e-9 or abs(per - round(per)) > 1e-9 * per:
+            raise ScenarioError("plant.sensor_dt", f"must divide sim.control_dt = {s.control_dt:g} s into whole "
+                                                   f"sensor periods, got {pc.sensor_dt:g}")
+    if pc.sensing != "odometry":
+        return
+    if pc.kind != "mujoco":
+        raise ScenarioError("plant.sensing", "\"odometry\" needs plant.kind = \"mujoco\" (encoders and gyro are "
+                                             "MuJoCo sensors)")
+    if pc.encoder_cpr > 0:
+        return
+    from .robots import resolve_robot
+
+    for r in pc.robots:
+        ref = resolve_robot(r)
+        cpr = robot_encoder_cpr(ref.model)
+        if cpr is None:
+            raise ScenarioError("plant.sensing", f"\"odometry\" needs wheel encoders, and robot '{r.model}' "
+                                                 f"({ref.model}) declares none (no <numeric name=\"encoder_cpr\">): "
+                                                 "set plant.encoder_cpr")
+        if not cpr >= 1:
+            raise ScenarioError("plant.encoder_cpr", f"robot '{r.model}' ({ref.model}) declares {cpr:g} encoder "
+                                                     "counts per revolution; must be >= 1")
 
 
 def _validate_text(sc: Scenario) -> None:

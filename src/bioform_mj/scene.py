@@ -719,6 +719,7 @@ def build_scene(
     payloads: Sequence[tuple[float, float]] | None = None,
     timestep: float | None = None,
     friction_patch: Sequence[float] | None = None,
+    sensors: bool = False,
 ) -> mujoco.MjSpec:
     """Compose the scene of ``n`` followers; returns an uncompiled ``MjSpec``.
 
@@ -743,6 +744,9 @@ def build_scene(
         A low-friction floor rectangle (m; sliding friction ``mu``): a box geom
         ``friction_patch`` :data:`PATCH_THICKNESS` thick on the floor whose friction decides
         the wheel contacts (priority 1; casters keep theirs with priority 2).
+    sensors : bool
+        Add each robot's odometry sensors (:func:`add_sensors`: wheel encoders, gyro,
+        accelerometer; design §8.3). Off, the scene has no sensors of ours (no cost per step).
 
     The scene's ``<option>`` (integrator, solver, …) is the first robot file's.
     """
@@ -830,6 +834,8 @@ def build_scene(
         if payloads is not None:
             mass_kg, inertia_kgm2 = payloads[i]
             _add_payload_to_body(robot.body(layout.base), float(mass_kg), float(inertia_kgm2), np.array(layout.axle))
+        if sensors:
+            add_sensors(robot, layout)
         robot.option = spec.option  # avoid MuJoCo 4 attach-conflict warnings: the scene decides
         # the file's axle midpoint goes to (x, y), its wheels' lowest point to the floor, heading θ
         yaw = pose[2] - base_yaw
@@ -839,6 +845,29 @@ def build_scene(
                                 quat=yaw_quat(yaw))
         spec.attach(robot, prefix=follower_prefix(i), frame=frame)
     return spec
+
+
+#: names of the sensors :func:`add_sensors` puts on a robot (the follower prefix is added on attach)
+SENSORS = ("bioform_left_encoder", "bioform_right_encoder", "bioform_gyro", "bioform_accel")
+IMU_SITE = "bioform_imu"
+
+
+def add_sensors(spec: mujoco.MjSpec, layout: RobotLayout) -> None:
+    """The odometry sensors of one robot (design §8.3), added to its prepared spec: an IMU site
+    ``bioform_imu`` on the base at the axle midpoint (axes of the base), ``jointpos`` on the left and
+    right wheel joints (the encoders' shafts; the plant quantises them), a ``gyro`` and an
+    ``accelerometer`` on the site. MuJoCo computes them in the forward pass at the start of each
+    ``mj_step`` (the values after a step are those of the state it started from) and adds no noise
+    (MuJoCo 4.0's sensor ``noise`` attribute is metadata only): quantisation, bias and noise are the
+    plant's (``plants/mujoco_kernels.py: sense``)."""
+    site = spec.body(layout.base).add_site(name=IMU_SITE, pos=list(layout.axle), size=[0.005, 0, 0], group=4)
+    del site
+    for name, j in zip(SENSORS[:2], layout.wheel_joints):
+        spec.add_sensor(name=name, type=mujoco.mjtSensor.mjSENS_JOINTPOS, objtype=mujoco.mjtObj.mjOBJ_JOINT, objname=j)
+    spec.add_sensor(name=SENSORS[2], type=mujoco.mjtSensor.mjSENS_GYRO, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                    objname=IMU_SITE)
+    spec.add_sensor(name=SENSORS[3], type=mujoco.mjtSensor.mjSENS_ACCELEROMETER, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                    objname=IMU_SITE)
 
 
 def compile_scene(spec: mujoco.MjSpec) -> tuple[mujoco.MjModel, mujoco.MjData]:

@@ -38,6 +38,7 @@ from .engine import (
     new_acc,
     new_log,
     new_metrics,
+    record_odometry,
 )
 from .errors import Diverged, RobotWarning
 from .plants.base import Plant
@@ -98,8 +99,17 @@ def make_plant(sc: Scenario) -> Plant:
     from .robots import resolve_robot
 
     robots = list(sc.plant.robots) * (sc.n if len(sc.plant.robots) == 1 else 1)
-    return MujocoPlant([resolve_robot(r) for r in robots], poses, sc.sim.control_dt, sc.sim.physics_dt, dist,
-                       friction_patch=sc.faults.friction_patch or None)  # faults: low-friction floor patch
+    refs = [resolve_robot(r) for r in robots]
+    pc = sc.plant
+    sensing = {}
+    if pc.sensing == "odometry":  # design §8.3: encoders (the scenario's cpr or each robot file's) and gyro
+        from .scenario import robot_encoder_cpr
+
+        cpr = [float(pc.encoder_cpr) if pc.encoder_cpr > 0 else robot_encoder_cpr(r.model) for r in refs]
+        sensing = dict(sensing="odometry", encoder_cpr=cpr, sensor_dt=pc.sensor_dt, gyro_noise=pc.gyro_noise,
+                       gyro_bias=pc.gyro_bias, seed=sc.sim.seed)
+    return MujocoPlant(refs, poses, sc.sim.control_dt, sc.sim.physics_dt, dist,
+                       friction_patch=sc.faults.friction_patch or None, **sensing)  # faults: low-friction floor patch
 
 
 def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = None) -> StackParams:
@@ -271,13 +281,20 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
         raise ValueError("engine 'compiled' needs a plant and a controller with compiled kernels, and no "
                          "per-step faults (use engine 'auto' or 'stepwise')")
     c_true = np.ascontiguousarray(plant.c_true(), dtype=float)
+    # design §8.3: with sensing = "odometry" the controllers get each robot's dead reckoning
+    # (plant.measurement), everything else (metrics, guards, formation error, outcomes) the truth
+    odometry = getattr(plant, "sensing", "truth") == "odometry"
+
+    def measure() -> tuple[np.ndarray, np.ndarray]:
+        return plant.measurement(ctx.pose, ctx.vel) if odometry else (ctx.pose, ctx.vel)
 
     def control(k: int) -> np.ndarray:
         """Control step ``k`` on the current measurements; the torques to apply."""
+        mp, mv = measure()
         if faults is None:
-            tau = controller.step(L_pose[k], L_vel[k], ctx.pose, ctx.vel)
+            tau = controller.step(L_pose[k], L_vel[k], mp, mv)
         else:  # noisy sensing, faulty network, weakened motors, pushes; tau = what reaches the plant
-            tau = faults.step(k, k * dt, controller, plant, L_pose[k], L_vel[k], ctx.pose, ctx.vel)
+            tau = faults.step(k, k * dt, controller, plant, L_pose[k], L_vel[k], mp, mv)
         if kernel is None:
             _shadow(state, controller.signals(), tau, missing)
         return np.array(tau, dtype=float)
@@ -293,8 +310,11 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
             ctx.vel[:] = v
             if k + 1 < N:
                 applied[0] = control(k + 1)
-                j, status = after_control(k + 1, N, stride, state, ctx.pose, ctx.vel, ctx.met, ctx.acc, lg, j,
-                                          L_pose, L_vel, dt, c_true, form, ctx.bounds, ctx.diag)
+                j1, status = after_control(k + 1, N, stride, state, ctx.pose, ctx.vel, ctx.met, ctx.acc, lg, j,
+                                           L_pose, L_vel, dt, c_true, form, ctx.bounds, ctx.diag)
+                if odometry and j1 > j:
+                    record_odometry(lg, j, plant.odo.mpose, plant.odo.mvel)
+                j = j1
                 if status != OK:
                     return k + 1 - k0, j, status
         return k1 - k0, j, OK
@@ -306,6 +326,8 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     applied[0] = control(0)
     j, status = after_control(0, N, stride, state, ctx.pose, ctx.vel, ctx.met, ctx.acc, lg, 0, L_pose, L_vel, dt,
                               c_true, form, ctx.bounds, ctx.diag)
+    if odometry and j > 0:
+        record_odometry(lg, 0, plant.odo.mpose, plant.odo.mvel)
     run_chunk = chunk if chunk is not None else python_chunk
     run_chunk(0, 0, j)
     setup_s = time.perf_counter() - t_setup
@@ -364,12 +386,20 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     logd = {name: getattr(lg, name)[:j] for name in LogArrays._fields}
     for name in missing:
         logd[name] = np.full_like(logd[name], np.nan)
+    if not odometry:  # the controllers used the truth
+        logd["odom_pose"] = logd["pose"].copy()
+        logd["odom_vel"] = logd["vel"].copy()
     logd["offsets"] = offsets
     logd["edges"] = graph.edges + 1
     logd["leader_access"] = graph.leader_access
     summary = _summary(sc, plant, controller, state, ctx.met, logd, L_pose[k_done], pose, vel, offsets, k_done,
                        dt, wall, setup_s, diverged, interrupted, missing, engine="compiled" if chunk else "stepwise")
     summary["feasibility_warnings"] = feasibility
+    summary["sensing"] = "odometry" if odometry else "truth"
+    drift = plant.odometry_drift() if odometry else None
+    for i, f in enumerate(summary["followers"]):  # pose error of the odometry at the end (design §8.3)
+        f["odometry_drift_m"] = None if drift is None else float(drift[i, 0])
+        f["odometry_heading_drift_rad"] = None if drift is None else float(drift[i, 1])
     unmodelled = getattr(plant, "unmodelled", None)
     if unmodelled is not None and len(logd["vel"]):  # damping and frictionloss at the run's speeds
         v = float(np.abs(logd["vel"][:, :, 0]).max())

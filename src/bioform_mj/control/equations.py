@@ -436,3 +436,76 @@ def planar_state(px: float, py: float, qw: float, qx: float, qy: float, qz: floa
     uy = vy + gz * ox - gx * oz
     n = hypot(r00, r10)
     return (px + ox, py + oy, atan2(r10 + 0.0, r00), (ux * r00 + uy * r10) / n, gz, r22)
+
+
+# ------------------------------------------------------- sensors and odometry (design §8.3)
+#: modulus of the counter hash (2^31 − 1): every product below stays under 2^53, exact in doubles
+HASH_M = 2147483647.0
+
+
+@equation
+def hash_round(x: float, a: float, c: float) -> float:
+    """One nonlinear round of the counter hash on ``x ∈ [0, 2^31−1)``: split into 16-bit ``lo`` and
+    15-bit ``hi`` (exact: a power-of-two division), mix ``(a·lo + hi·lo + hi·hi + c)`` (< 2^34,
+    exact), then a MINSTD multiply by 48271 (< 2^47, exact), both mod ``2^31 − 1``."""
+    lo = x % 65536.0
+    hi = (x - lo) / 65536.0
+    y = (a * lo + hi * lo + hi * hi + c) % 2147483647.0
+    return (48271.0 * y + x) % 2147483647.0
+
+
+@equation
+def hash_uniform(seed: float, i: float, k: float) -> float:
+    """Counter-based uniform variate in (0, 1) of ``(seed, i, k)`` (non-negative integers as floats;
+    ``seed`` taken mod 2^31 − 1, ``i`` < 2^20, ``k`` < 2^31): four :func:`hash_round` s of a
+    combined key. Pure arithmetic on floats, exact in IEEE doubles, so every engine (compiled,
+    step by step, a GPU port of this source) draws the same numbers for the same counter."""
+    x = (seed % 2147483647.0 + 1.0) % 2147483647.0
+    x = hash_round(x, 40692.0, i * 2053.0 + 12345.0)
+    x = (x + k) % 2147483647.0
+    x = hash_round(x, 39373.0, 7.0)
+    x = hash_round(x, 48271.0, 11.0)
+    x = hash_round(x, 16807.0, 13.0)
+    return (x + 0.5) / 2147483647.0
+
+
+@equation
+def hash_normal(seed: float, i: float, k: float) -> float:
+    """Zero-mean, unit-variance variate of the counter ``(seed, i, k)``: the sum of four
+    :func:`hash_uniform` draws (counters ``4k … 4k+3``) centred and scaled by √3 (Irwin–Hall;
+    bounded at ±2√3 ≈ ±3.46 σ; no ``log`` in the equation set, so no Box–Muller)."""
+    k4 = 4.0 * k
+    s = (hash_uniform(seed, i, k4) + hash_uniform(seed, i, k4 + 1.0)
+         + hash_uniform(seed, i, k4 + 2.0) + hash_uniform(seed, i, k4 + 3.0))
+    return (s - 2.0) * 1.7320508075688772
+
+
+@equation
+def encoder_angle(phi: float, cpr: float) -> float:
+    """Wheel angle ``phi`` (rad) as an incremental encoder of ``cpr`` counts per revolution reports
+    it: ``floor(phi·cpr/2π) · 2π/cpr`` (``x − x mod 1`` is ``floor``: Python's and numba's ``%``
+    take the divisor's sign)."""
+    c = phi * cpr / (2.0 * pi)
+    return (c - c % 1.0) * (2.0 * pi) / cpr
+
+
+@equation
+def gyro_reading(wz: float, bias: float, sigma: float, seed: float, i: float, k: float) -> float:
+    """Gyro z of robot ``i`` at sample ``k``: the true yaw rate ``wz`` (rad/s) plus a constant ``bias``
+    and white noise of standard deviation ``sigma`` (rad/s, per sample; :func:`hash_normal`)."""
+    if sigma == 0.0:
+        return wz + bias
+    return wz + bias + sigma * hash_normal(seed, i, k)
+
+
+@equation
+def odometry_step(x: float, y: float, th: float, ql0: float, qr0: float, ql1: float, qr1: float,
+                  wz: float, r: float, ts: float) -> tuple[float, float, float, float, float]:
+    """Dead reckoning over one sensor period ``ts`` (s): the distance ``Δs = r (Δφ_L + Δφ_R)/2`` from
+    the quantised forward wheel angles ``q·0 → q·1`` (rad; radius ``r`` m), the heading change
+    ``Δθ = wz ts`` from the gyro (rad/s), the position advanced along the mid-period heading
+    ``θ + Δθ/2``. Returns ``(x, y, θ wrapped, Δs, Δθ)``."""
+    ds = 0.5 * r * ((ql1 - ql0) + (qr1 - qr0))
+    dth = wz * ts
+    hm = th + 0.5 * dth
+    return x + ds * cos(hm), y + ds * sin(hm), wrap(th + dth), ds, dth

@@ -12,9 +12,13 @@ import ctypes
 import importlib.util
 import os
 
-from ..control.equations import HAVE_NUMBA, harmonic, njit, planar_state
+from typing import NamedTuple
+
+import numpy as np
+
+from ..control.equations import HAVE_NUMBA, encoder_angle, gyro_reading, harmonic, njit, odometry_step, planar_state
 from ..control.kernel import control_step
-from ..engine import OK, PLANT_FAILED, after_control
+from ..engine import OK, PLANT_FAILED, after_control, record_odometry
 
 if HAVE_NUMBA:
     import numba
@@ -46,6 +50,100 @@ if HAVE_NUMBA:
             HAVE_MJ_STEP = True
     except (OSError, RuntimeError, ImportError):  # pragma: no cover - the step-by-step loop still works
         HAVE_MJ_STEP = False
+
+
+class Sensors(NamedTuple):
+    """The odometry sensors of ``n`` robots (design §8.3); read by :func:`sense`.
+
+    ``on``: sensing = "odometry" (False: nothing is sampled, the loops skip all of it);
+    ``enc`` (n, 2): ``sensordata`` addresses of the [left, right] wheel ``jointpos`` sensors;
+    ``gyro`` (n,): address of each gyro (3 values, site frame; z is used); ``sign`` (n, 2): ±1,
+    forward wheel direction; ``radius`` (n,) m; ``cpr`` (n,) encoder counts per revolution;
+    ``bias`` rad/s, ``sigma`` rad/s (gyro noise per sample), ``seed``; ``every``: physics steps per
+    sensor sample; ``ts`` s: the sensor period."""
+
+    on: bool
+    enc: np.ndarray
+    gyro: np.ndarray
+    sign: np.ndarray
+    radius: np.ndarray
+    cpr: np.ndarray
+    bias: float
+    sigma: float
+    seed: float
+    every: int
+    ts: float
+
+
+class Odometry(NamedTuple):
+    """Each follower's dead reckoning (design §8.3), updated in place.
+
+    ``pose`` (n, 3) the odometry's ``[x, y, θ]``; ``q`` (n, 2) the last quantised forward wheel
+    angles (rad); ``dist`` (n,) m and ``turn`` (n,) rad since the last control step; ``count`` (1,)
+    physics steps since reset; ``mpose`` (n, 3), ``mvel`` (n, 2): what the controller is given at
+    the control step (pose, and ``[Δs, Δθ]`` over the control period divided by it)."""
+
+    pose: np.ndarray
+    q: np.ndarray
+    dist: np.ndarray
+    turn: np.ndarray
+    count: np.ndarray
+    mpose: np.ndarray
+    mvel: np.ndarray
+
+
+def new_odometry(n: int) -> Odometry:
+    return Odometry(np.zeros((n, 3)), np.zeros((n, 2)), np.zeros(n), np.zeros(n), np.zeros(1, dtype=np.int64),
+                    np.zeros((n, 3)), np.zeros((n, 2)))
+
+
+@njit
+def odometry_reset(sd, sen, odo, pose):
+    """Odometry at the true initial ``pose`` (n, 3), wheel angles from the current ``sensordata``."""
+    odo.count[0] = 0
+    for i in range(pose.shape[0]):
+        for c in range(3):
+            odo.pose[i, c] = pose[i, c]
+            odo.mpose[i, c] = pose[i, c]
+        for w in range(2):
+            odo.q[i, w] = encoder_angle(sen.sign[i, w] * sd[sen.enc[i, w]], sen.cpr[i])
+            odo.mvel[i, w] = 0.0
+        odo.dist[i] = 0.0
+        odo.turn[i] = 0.0
+
+
+@njit
+def sense(sd, sen, odo):
+    """After one physics step: count it, and every ``sen.every`` steps sample the encoders and the
+    gyro and advance each robot's dead reckoning (:func:`~..equations.odometry_step`)."""
+    odo.count[0] += 1
+    c = odo.count[0]
+    if c % sen.every != 0:
+        return
+    k = float(c // sen.every)
+    for i in range(odo.pose.shape[0]):
+        ql = encoder_angle(sen.sign[i, 0] * sd[sen.enc[i, 0]], sen.cpr[i])
+        qr = encoder_angle(sen.sign[i, 1] * sd[sen.enc[i, 1]], sen.cpr[i])
+        wz = gyro_reading(sd[sen.gyro[i] + 2], sen.bias, sen.sigma, sen.seed, float(i), k)
+        x, y, th, ds, dth = odometry_step(odo.pose[i, 0], odo.pose[i, 1], odo.pose[i, 2], odo.q[i, 0], odo.q[i, 1],
+                                          ql, qr, wz, sen.radius[i], sen.ts)
+        odo.pose[i, 0], odo.pose[i, 1], odo.pose[i, 2] = x, y, th
+        odo.q[i, 0], odo.q[i, 1] = ql, qr
+        odo.dist[i] += ds
+        odo.turn[i] += dth
+
+
+@njit
+def odometry_read(odo, dt):
+    """At a control step: the controller's measurement ``mpose`` = the odometry's pose, ``mvel`` =
+    ``[Δs, Δθ]`` since the last control step over ``dt`` (the period's mean ``υ, ω``)."""
+    for i in range(odo.pose.shape[0]):
+        for c in range(3):
+            odo.mpose[i, c] = odo.pose[i, c]
+        odo.mvel[i, 0] = odo.dist[i] / dt
+        odo.mvel[i, 1] = odo.turn[i] / dt
+        odo.dist[i] = 0.0
+        odo.turn[i] = 0.0
 
 
 @njit
@@ -128,13 +226,15 @@ def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qve
               tilt_cos, tip_step, wheel_dof, wheel_sign, radius, half_track, slip_ratio, v_floor, slip_need,
               slip_run, slip_step,
               ctrl, ctrl_id, ctrl_scale, xfrc, xmat, base, m_eff, i_eff, dist, use_dist, warn, c_true,
-              pose, vel, met, acc, lg, j0, stride, offsets, lim, diag, rec_ctrl, rec_xfrc):
+              pose, vel, met, acc, lg, j0, stride, offsets, lim, diag, rec_ctrl, rec_xfrc, sd, sen, odo):
     """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by the
     control step of ``k+1`` (if ``k+1 < N``; the control step of ``k0`` must be done).
 
     Stops at the first physics step that raised a MuJoCo warning (``warn``, the counters of
     ``MjData.warning``): status ``engine.PLANT_FAILED``, with the state before MuJoCo's reset
-    not observed. If ``rec_ctrl`` has rows, the inputs of step ``k`` are copied to
+    not observed. With ``sen.on`` the sensors are sampled after each physics step (:func:`sense`)
+    and the controller is given the odometry (:func:`odometry_read`) instead of the truth; metrics,
+    guards, the formation error and the outcome watches stay on the truth. If ``rec_ctrl`` has rows, the inputs of step ``k`` are copied to
     ``rec_ctrl[k]``, ``rec_xfrc[k]`` (for a bare-physics replay). Returns ``(steps done, next
     log row, status)``.
     """
@@ -150,14 +250,23 @@ def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qve
             _mj_step(mp, dp)
             if _warned(warn):
                 return k - k0, j, PLANT_FAILED
+            if sen.on:
+                sense(sd, sen, odo)
         observe(qpos, qvel, q7, v6, axle, pose, vel, up)
         watch_tilt(up, tilt_cos, tip_step, k + 1)
         watch_slip(qvel, wheel_dof, wheel_sign, radius, half_track, vel, slip_ratio, v_floor, slip_need, slip_run,
                    slip_step, k + 1)
         if k + 1 < N:
-            control_step(g, s, L_pose[k + 1], L_vel[k + 1], pose, vel, comm)
-            j, status = after_control(k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c_true,
-                                      offsets, lim, diag)
+            if sen.on:
+                odometry_read(odo, dt)
+                control_step(g, s, L_pose[k + 1], L_vel[k + 1], odo.mpose, odo.mvel, comm)
+            else:
+                control_step(g, s, L_pose[k + 1], L_vel[k + 1], pose, vel, comm)
+            j1, status = after_control(k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c_true,
+                                       offsets, lim, diag)
+            if sen.on and j1 > j:
+                record_odometry(lg, j, odo.mpose, odo.mvel)
+            j = j1
             if status != OK:
                 return k + 1 - k0, j, status
     return k1 - k0, j, OK

@@ -36,7 +36,19 @@ from bioform_mj.scene import (
     payload_inertial,
 )
 
-from .mujoco_kernels import HAVE_MJ_STEP, apply_inputs, observe, run_chunk, watch_slip, watch_tilt
+from .mujoco_kernels import (
+    HAVE_MJ_STEP,
+    Sensors,
+    apply_inputs,
+    new_odometry,
+    observe,
+    odometry_read,
+    odometry_reset,
+    run_chunk,
+    sense,
+    watch_slip,
+    watch_tilt,
+)
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +81,17 @@ class MujocoPlant:
         Override of the floor's sliding friction (see :func:`bioform_mj.scene.build_scene`).
     friction_patch : (x0, y0, x1, y1, mu), optional
         A low-friction floor rectangle (see :func:`bioform_mj.scene.build_scene`).
+    sensing : "truth" or "odometry"
+        What the controller is given (design §8.3): the simulator's pose and velocity, or each
+        robot's dead reckoning from its wheel encoders and gyro (:attr:`odo`, :meth:`measurement`).
+    encoder_cpr : float or array (n,)
+        Encoder counts per wheel revolution (odometry only).
+    sensor_dt : float
+        Sensor period, s (0: every physics step); a multiple of ``physics_dt`` dividing ``control_dt``.
+    gyro_noise, gyro_bias : float
+        Gyro z white-noise standard deviation per sample and constant bias, rad/s.
+    seed : int
+        Seed of the gyro noise (a counter hash of ``(seed, robot, sample)``).
 
     Attributes
     ----------
@@ -114,6 +137,12 @@ class MujocoPlant:
         slots: bool = True,
         floor_friction: float | None = None,
         friction_patch: Sequence[float] | None = None,
+        sensing: str = "truth",
+        encoder_cpr: float | Sequence[float] = 4096.0,
+        sensor_dt: float = 0.0,
+        gyro_noise: float = 0.0,
+        gyro_bias: float = 0.0,
+        seed: int = 0,
     ) -> None:
         if not (physics_dt > 0 and control_dt > 0):
             raise ValueError(f"control_dt and physics_dt must be > 0, got {control_dt}, {physics_dt}")
@@ -131,10 +160,18 @@ class MujocoPlant:
         self.robot_files = [str(f) for f in robot_files]
         self.initial_poses = np.array(initial_poses, dtype=float)
         self.disturbance = disturbance  # None: no disturbance (skips the xfrc_applied work)
+        if sensing not in ("truth", "odometry"):
+            raise ValueError(f"sensing must be 'truth' or 'odometry', got {sensing!r}")
+        self.sensing = sensing
+        every = 1 if not sensor_dt else round(sensor_dt / physics_dt)
+        if sensor_dt and (every < 1 or abs(every * physics_dt - sensor_dt) > 1e-9 * sensor_dt
+                          or self.n_substeps % every):
+            raise ValueError(f"sensor_dt {sensor_dt} s must be a multiple of physics_dt {physics_dt} s "
+                             f"that divides control_dt {control_dt} s")
 
         self.spec = build_scene(
             robot_files, self.initial_poses, slots=slots, floor_friction=floor_friction,
-            timestep=physics_dt, friction_patch=friction_patch,
+            timestep=physics_dt, friction_patch=friction_patch, sensors=sensing == "odometry",
         )
         self.model, self.data = compile_scene(self.spec)
         m = self.model
@@ -171,6 +208,21 @@ class MujocoPlant:
         self._warnings = [self.data.warning[i] for i in range(int(mujoco.mjtWarning.mjNWARNING))]
         self._warn = self.data.warning.number  # view of the warning counters, read by the compiled loop
         self._dist = self._dist_rows()
+        cpr = np.broadcast_to(np.asarray(encoder_cpr, dtype=float), (n,)).copy()
+        if sensing == "odometry" and not np.all(cpr >= 1):
+            raise ValueError(f"encoder_cpr must be >= 1 count per revolution, got {cpr.tolist()}")
+        if sensing == "odometry":
+            from bioform_mj.scene import SENSORS
+
+            adr = np.array([[m.sensor_adr[m.sensor(p + s_).id] for s_ in SENSORS[:3]] for p in prefixes],
+                           dtype=np.int64)
+            enc, gyro = np.ascontiguousarray(adr[:, :2]), np.ascontiguousarray(adr[:, 2])
+        else:
+            enc, gyro = np.zeros((n, 2), dtype=np.int64), np.zeros(n, dtype=np.int64)
+        self.sensors = Sensors(sensing == "odometry", enc, gyro, self._wheel_sign.copy(), self._wheel_radius.copy(),
+                               cpr, float(gyro_bias), float(gyro_noise), float(seed % 2147483647), int(every),
+                               float(every * physics_dt))
+        self.odo = new_odometry(n)
 
         # nominal inertial properties of each base, restored by reset()
         b = self._base
@@ -235,6 +287,11 @@ class MujocoPlant:
         mujoco.mj_resetData(m, d)  # qpos0 = initial poses; mocap bodies at their spec positions
         mujoco.mj_forward(m, d)
         self._step_count = 0
+        if self.sensors.on:  # dead reckoning starts at the true initial pose (sensordata of mj_forward)
+            pose = np.empty((self.n, 3))
+            vel = np.empty((self.n, 2))
+            observe(d.qpos, d.qvel, self._q7[:, 0], self._v6[:, 0], self._axle, pose, vel, self._up)
+            odometry_reset(d.sensordata, self.sensors, self.odo, pose)
         self.tip_step[:] = -1
         self.slip_run[:] = 0
         self.slip_step[:] = -1
@@ -332,7 +389,12 @@ class MujocoPlant:
                      self._m_eff, self._i_eff, np.zeros((2, 4)) if dist is None else dist, use)
         if self._push_until is not None:  # faults: an external push on some chassis (push())
             self._apply_push(t)
-        mujoco.mj_step(m, d, self.n_substeps)
+        if self.sensors.on:  # the sensors after every physics step, as in the compiled loop
+            for _ in range(self.n_substeps):
+                mujoco.mj_step(m, d)
+                sense(d.sensordata, self.sensors, self.odo)
+        else:
+            mujoco.mj_step(m, d, self.n_substeps)
         self._step_count += 1
         for i, w_ in enumerate(self._warnings):
             if w_.number:
@@ -352,6 +414,21 @@ class MujocoPlant:
             step=self._step_count,
             time=self._step_count * self.control_dt,
         )
+
+    def measurement(self, pose: np.ndarray, vel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """What the controllers are given at a control step: ``(pose, vel)`` (the truth, as passed)
+        with sensing = "truth"; with "odometry" the dead reckoning's pose and its mean ``[υ, ω]`` over
+        the control period (:func:`~.mujoco_kernels.odometry_read`; call once per control step)."""
+        if not self.sensors.on:
+            return pose, vel
+        odometry_read(self.odo, self.control_dt)
+        return self.odo.mpose, self.odo.mvel
+
+    def odometry_drift(self) -> np.ndarray:
+        """(n, 2): each robot's odometry error now, ``[|Δ(x, y)| m, |Δθ| rad]`` against the truth."""
+        pose, _ = self.observe()
+        dth = np.angle(np.exp(1j * (self.odo.pose[:, 2] - pose[:, 2])))
+        return np.stack([np.hypot(*(self.odo.pose[:, :2] - pose[:, :2]).T), np.abs(dth)], axis=1)
 
     def c_true(self) -> np.ndarray:
         """Ground truth ``[a_eff, b_eff]`` (n, 2) from the compiled model (design §8)."""
@@ -425,7 +502,7 @@ class MujocoPlant:
                 self.SLIP_V_FLOOR, self._slip_need, self.slip_run, self.slip_step, d.ctrl, ctrl_id,
                 self._ctrl_scale, d.xfrc_applied, d.xmat, base, self._m_eff, self._i_eff, self._dist, use, self._warn, self._c,
                 ctx.pose, ctx.vel, ctx.met, ctx.acc, ctx.log, j, ctx.stride, ctx.offsets, ctx.bounds, ctx.diag,
-                rec[0], rec[1])
+                rec[0], rec[1], d.sensordata, self.sensors, self.odo)
             self._step_count = k0 + done
             if status == 2:  # engine.PLANT_FAILED: a MuJoCo warning in step k0 + done
                 self._step_count += 1
