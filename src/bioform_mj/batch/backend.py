@@ -71,6 +71,8 @@ def unsupported(sc: Any) -> str | None:
         return f"faults ({', '.join(named)})"
     if sc.events:
         return f"events ({len(sc.events)} timed event(s))"
+    if getattr(sc.plant, "sensing", "truth") != "truth":
+        return f"plant.sensing = '{sc.plant.sensing}' (the batch engine feeds the controller the true state)"
     if sc.formation.frame != "world":
         return "formation.frame = 'leader' (offsets in the leader's frame)"
     return None
