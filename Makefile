@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: demo test test-fast bench install clean
+.PHONY: demo test test-fast lint bench install clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -35,8 +35,14 @@ NPY_AVX512 = $(PY) -c "from numpy._core._multiarray_umath import __cpu_features_
 	print(' '.join(k for k in ('AVX512F','AVX512CD','AVX512_SKX','AVX512_CLX','AVX512_CNL','AVX512_ICL','AVX512_SPR','X86_V4') if f.get(k)))"
 
 test: $(TEST_STAMP)
+	$(VENV)/bin/ruff check src tests scripts examples
+	$(VENV)/bin/ruff format --check src tests scripts examples
 	$(PY) -m pytest -q
 	NPY_DISABLE_CPU_FEATURES="$$($(NPY_AVX512))" $(PY) -m pytest -q -m equivalence -p no:cacheprovider
+
+lint: $(TEST_STAMP)
+	$(VENV)/bin/ruff check --fix src tests scripts examples
+	$(VENV)/bin/ruff format src tests scripts examples
 
 test-fast: $(TEST_STAMP)
 	$(PY) -m pytest -q -m "not slow"

@@ -16,6 +16,7 @@ estimator kernel and equations; nothing of the loop is copied. Run:
 It prints, and writes to ``DIR/table.md``, the Table I metric and the final formation
 error of this controller beside the paper's four methods, in ``bioform table1``'s format.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,8 +35,17 @@ from bioform_mj.sim import make_plant, simulate, stack_params
 class Kanayama:
     """Kanayama tracking + proportional velocity loop, fed by the paper's distributed estimator."""
 
-    def __init__(self, sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray,
-                 kx: float = 2.0, ky: float = 8.0, kth: float = 4.0, kv: float = 10.0, kw: float = 10.0) -> None:
+    def __init__(
+        self,
+        sc: Scenario,
+        c_true: np.ndarray,
+        tau_max: np.ndarray,
+        kx: float = 2.0,
+        ky: float = 8.0,
+        kth: float = 4.0,
+        kv: float = 10.0,
+        kw: float = 10.0,
+    ) -> None:
         self.n = sc.n
         # the paper's estimator: its gains and state come from the package's own stack
         self._est = ControlStack(sc.build_graph(), stack_params(sc, c_true, tau_max))
@@ -48,8 +58,13 @@ class Kanayama:
         self.saturated = np.zeros(self.n, dtype=bool)
 
     def reset(self, est_pose0: np.ndarray, vel0: np.ndarray) -> None:
-        reset_state(self.gains, self.state, np.ascontiguousarray(est_pose0, dtype=float),
-                    np.ascontiguousarray(vel0, dtype=float), np.ascontiguousarray(self.c0, dtype=float))
+        reset_state(
+            self.gains,
+            self.state,
+            np.ascontiguousarray(est_pose0, dtype=float),
+            np.ascontiguousarray(vel0, dtype=float),
+            np.ascontiguousarray(self.c0, dtype=float),
+        )
 
     def step(self, leader_pose, leader_vel, pose, vel, comm: Comm | None = None) -> np.ndarray:
         kx, ky, kth, kv, kw = self.k
@@ -64,14 +79,18 @@ class Kanayama:
             lim = g.lim[i]
             self.saturated[i] = np.abs(self.tau_raw[i]).max() > lim
             self.tau[i] = saturate(self.tau_raw[i, 0], self.tau_raw[i, 1], lim, True)
-        estimator_update(g, s, np.asarray(leader_pose, float), np.asarray(leader_vel, float),
-                         self._est._comm_in(comm))
+        estimator_update(g, s, np.asarray(leader_pose, float), np.asarray(leader_vel, float), self._est._comm_in(comm))
         return self.tau
 
     def signals(self) -> dict[str, np.ndarray]:
         s = self.state
-        return {"est_pose": s.est_pose, "est_vel": s.est_vel, "cmd": self.cmd, "tau_raw": self.tau_raw,
-                "saturated": self.saturated}
+        return {
+            "est_pose": s.est_pose,
+            "est_vel": s.est_vel,
+            "cmd": self.cmd,
+            "tau_raw": self.tau_raw,
+            "saturated": self.saturated,
+        }
 
     def set_tau_max(self, tau_max: np.ndarray) -> None:
         self.gains.lim[:] = tau_max
@@ -97,9 +116,15 @@ def table(summaries: dict[str, dict]) -> str:
     for name, s in summaries.items():
         f = s["followers"]
         mark = " (diverged)" if s["diverged"] else ""
-        rows.append(f"| {name}{mark} | " + " | ".join(f"{x['total_velocity_error']:.2f}" for x in f)
-                    + " | " + ", ".join(f"{x['final_formation_error_m']:.3f}" for x in f)
-                    + " | " + ", ".join(x["outcome"] for x in f) + " |")
+        rows.append(
+            f"| {name}{mark} | "
+            + " | ".join(f"{x['total_velocity_error']:.2f}" for x in f)
+            + " | "
+            + ", ".join(f"{x['final_formation_error_m']:.3f}" for x in f)
+            + " | "
+            + ", ".join(x["outcome"] for x in f)
+            + " |"
+        )
     return head + "\n".join(rows) + "\n"
 
 

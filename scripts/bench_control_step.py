@@ -7,6 +7,7 @@ compiled loops call it, here still from Python), and with ``--oracle`` the numpy
 ``tests/oracle.py``.
 Prints µs per step and µs per follower-step; writes JSON with --json PATH.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -28,8 +29,12 @@ def stack_for(n: int, cls=ControlStack) -> ControlStack:
     offs = np.array([[2.0 * (i // side + 1), 2.0 * (i % side - side / 2)] for i in range(n)])
     import dataclasses
 
-    sc = dataclasses.replace(sc, formation=dataclasses.replace(sc.formation, offsets=tuple(map(tuple, offs)),
-                                                               initial_poses=tuple((0.0, 0.0, 0.0) for _ in range(n))))
+    sc = dataclasses.replace(
+        sc,
+        formation=dataclasses.replace(
+            sc.formation, offsets=tuple(map(tuple, offs)), initial_poses=tuple((0.0, 0.0, 0.0) for _ in range(n))
+        ),
+    )
     g = graph.chain(n, leader_access=range(1, n + 1, max(1, n // 8)))
     st = cls(g, stack_params(sc, np.tile([0.4, 10.0], (n, 1))))
     st.reset(np.zeros((n, 3)), np.zeros((n, 2)))
@@ -51,8 +56,10 @@ def bench(n: int, steps: int, cls=ControlStack, bare: bool = False) -> dict:
         def step() -> None:
             control_step(g, s, lp, lv, pose, vel, comm)
     else:
+
         def step() -> None:
             st.step(lp, lv, pose, vel)
+
     for _ in range(50):
         step()
     t0 = time.perf_counter()

@@ -4,6 +4,7 @@ and the CPU engine. A thin wrapper of :mod:`bioform_mj.batch.bench` (``bioform b
 
     python scripts/bench_warp.py --device cuda --worlds 1024,4096,32768 --duration 1 --json $OUT/warp.json
 """
+
 import sys
 
 from bioform_mj.batch.bench import main

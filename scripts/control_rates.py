@@ -6,9 +6,11 @@ scenario and tb3, with ideal and DC motors; writes a markdown table.
 
 Cell: final formation error (max over followers, m, on the truth), and the outcome when not ``ok``;
 with odometry also the largest ``odometry_drift_m``. Sensing: ``truth`` or ``odometry`` (encoders
-and gyro, design §8.3; gyro noise 0.004 rad/s and bias 0.001 rad/s, the tb3's IMU class). Physics stays at 1 ms; the controller runs
+and gyro, design §8.3; gyro noise 0.004 rad/s and bias 0.001 rad/s, the tb3's IMU class).
+Physics stays at 1 ms; the controller runs
 every ``control_dt`` with zero-order hold over ``control_dt / 1 ms`` physics steps.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,16 +47,34 @@ def cell(out: Path) -> str:
 def run(args: argparse.Namespace) -> str:
     rates = [r for r in RATES if not args.rates or str(int(round(1 / r[0]))) in args.rates.split(",")]
     cases = [c for c in CASES if not args.cases or c[0] in args.cases.split(",")]
-    rows = ["| scenario | motors | sensing | method | " + " | ".join(r[1] for r in rates) + " |",
-            "|---|---|---|---|" + "---|" * len(rates)]
-    for (scen, label, robots), sensing, meth in ((c, se, m) for c in cases for se in args.sensing.split(",")
-                                                 for m in METHODS):
+    rows = [
+        "| scenario | motors | sensing | method | " + " | ".join(r[1] for r in rates) + " |",
+        "|---|---|---|---|" + "---|" * len(rates),
+    ]
+    for (scen, label, robots), sensing, meth in (
+        (c, se, m) for c in cases for se in args.sensing.split(",") for m in METHODS
+    ):
         if True:
             cells = []
             for dt, _ in rates:
                 out = args.out / f"{scen}_{label.split(',')[0].split()[0]}_{sensing}_{meth}_{int(round(1 / dt))}"
-                argv = ["run", scen, "--plant", "mujoco", "--method", meth, "--duration", str(args.duration),
-                        "--set", f"sim.control_dt={dt}", "--set", f"sim.log_dt={max(dt, 0.01)}", "--quiet", "--out", str(out)]
+                argv = [
+                    "run",
+                    scen,
+                    "--plant",
+                    "mujoco",
+                    "--method",
+                    meth,
+                    "--duration",
+                    str(args.duration),
+                    "--set",
+                    f"sim.control_dt={dt}",
+                    "--set",
+                    f"sim.log_dt={max(dt, 0.01)}",
+                    "--quiet",
+                    "--out",
+                    str(out),
+                ]
                 if robots:
                     argv += ["--set", f"plant.robots={robots}"]
                 for kv in SENSING[sensing]:

@@ -9,6 +9,7 @@ the README); prints both.
 
     .venv/bin/python scripts/fault_table.py --out runs/fault_table --jobs 2
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,7 +30,10 @@ SEVERE = {
     "leader link of 1 down 6–9 s (the whole team cut off)": ("fault_link", {"faults.link_fail": [[1, 0, 6.0, 9.0]]}),
     "99.9 % packet loss 6–9 s": ("fault_packet_loss", {"faults.packet_loss": 0.999}),
     "0.3 s delay 6–9 s": ("fault_delay", {"faults.delay": 0.3}),
-    "noise ×5 (10 cm, 0.1 rad, 0.25 m/s, 0.25 rad/s) 6–9 s": ("fault_noise", {"faults.noise_pose": [0.1, 0.1, 0.1], "faults.noise_vel": [0.25, 0.25]}),
+    "noise ×5 (10 cm, 0.1 rad, 0.25 m/s, 0.25 rad/s) 6–9 s": (
+        "fault_noise",
+        {"faults.noise_pose": [0.1, 0.1, 0.1], "faults.noise_vel": [0.25, 0.25]},
+    ),
     "follower 1 motors dead (scale 0) 6–9 s": ("fault_actuator", {"faults.actuator": [[1, 6.0, 9.0, 0.0]]}),
     "follower 1 motors at 20 %, known to the controller": ("fault_actuator", {"faults.actuator_known": True}),
     "μ = 0.01 patch": ("fault_friction", {"faults.friction_patch": [3.0, -10.0, 6.0, 10.0, 0.01]}),
@@ -53,8 +57,9 @@ def run_one(job: tuple[str, str]) -> dict:
     row["scenario"] = label
     row["wall_s"] = time.perf_counter() - t0
     learning = method.endswith("-learning")
-    row["c_hat_rel_error_max"] = (max(abs(v) for f in res.summary["followers"] for v in f["c_hat_rel_error"])
-                                  if learning else None)
+    row["c_hat_rel_error_max"] = (
+        max(abs(v) for f in res.summary["followers"] for v in f["c_hat_rel_error"]) if learning else None
+    )
     return row
 
 
@@ -63,9 +68,11 @@ def _m(v: float | None) -> str:
 
 
 def markdown(rows: list[dict]) -> str:
-    head = ("| fault | method | peak before (m) | peak during (m) | peak after (m) | final (m) | back under "
-            f"{TOLERANCE:g} m after (s) | recovered | max abs(ĉ/c − 1) at end |\n"
-            "|---|---|---|---|---|---|---|---|---|\n")
+    head = (
+        "| fault | method | peak before (m) | peak during (m) | peak after (m) | final (m) | back under "
+        f"{TOLERANCE:g} m after (s) | recovered | max abs(ĉ/c − 1) at end |\n"
+        "|---|---|---|---|---|---|---|---|---|\n"
+    )
     lines = []
     for r in rows:
         rec = "diverged" if r["diverged"] else ("yes" if r["recovered"] else "**no**")
@@ -75,8 +82,10 @@ def markdown(rows: list[dict]) -> str:
             rec += f" (spinning: {', '.join(map(str, r['spinning']))})"
         chat = "–" if r["c_hat_rel_error_max"] is None else f"{r['c_hat_rel_error_max']:.2f}"
         back = "never" if r["recovery_s"] is None else f"{r['recovery_s']:.2f}"
-        lines.append(f"| {r['scenario']} | {r['method']} | {_m(r['before'])} | {_m(r['peak_during'])} | "
-                     f"{_m(r['peak_after'])} | {_m(r['final'])} | {back} | {rec} | {chat} |")
+        lines.append(
+            f"| {r['scenario']} | {r['method']} | {_m(r['before'])} | {_m(r['peak_during'])} | "
+            f"{_m(r['peak_after'])} | {_m(r['final'])} | {back} | {rec} | {chat} |"
+        )
     return head + "\n".join(lines) + "\n"
 
 

@@ -10,6 +10,7 @@ slower than real time on one core; see README, Performance).
 
 Run from the repository root: ``python scripts/make_large_presets.py``.
 """
+
 from __future__ import annotations
 
 import math

@@ -7,6 +7,7 @@ poses). Serial and parallel alternate ``--reps`` times; the best wall time of ea
 ratio and the load average, and writes JSON (``--json``). The issue's target on a 2-core
 machine: >= 1.7x with 8+ runs.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -42,15 +43,19 @@ def main() -> int:
     s = min(t["wall_s"] for t in serial)
     p = min(t["wall_s"] for t in pool)
     ratio = s / p
+
     def fmt(vals: list[float], digits: int = 2) -> str:
         return ", ".join(f"{v:.{digits}f}" for v in vals)
 
-    print(f"{args.runs} runs: serial {s:.2f} s, {args.workers} workers {p:.2f} s -> speed-up {ratio:.2f}x "
-          f"(best of {args.reps}; serial {fmt([t['wall_s'] for t in serial])}; pool {fmt([t['wall_s'] for t in pool])}; "
-          f"1-min load average {fmt(load, 1)})")
+    print(
+        f"{args.runs} runs: serial {s:.2f} s, {args.workers} workers {p:.2f} s -> speed-up {ratio:.2f}x "
+        f"(best of {args.reps}; serial {fmt([t['wall_s'] for t in serial])}; pool {fmt([t['wall_s'] for t in pool])}; "
+        f"1-min load average {fmt(load, 1)})"
+    )
     if args.json:
-        args.json.write_text(json.dumps({"serial": serial, "pool": pool, "speedup": ratio, "loadavg": load},
-                                        indent=2) + "\n")
+        args.json.write_text(
+            json.dumps({"serial": serial, "pool": pool, "speedup": ratio, "loadavg": load}, indent=2) + "\n"
+        )
     return 0
 
 

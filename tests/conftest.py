@@ -1,4 +1,5 @@
 """Shared fixtures: the paper scenario's Table I on the ideal plant is run once per session."""
+
 from __future__ import annotations
 
 import os
@@ -12,8 +13,6 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 def table1_ideal(tmp_path_factory):
     """``bioform table1 paper --plant ideal`` through the CLI; returns (out_dir, table dict, logs)."""
     import json
-
-    import numpy as np
 
     from bioform_mj.cli import main
 

@@ -6,10 +6,10 @@ package, to check the compiled equations against a second, independent reading o
 paper, with stated tolerances (numpy and libm may differ in the last bit, and do on
 CPUs with AVX-512).
 """
+
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -35,9 +35,15 @@ def sat_sign(x: np.ndarray, phi: float) -> np.ndarray:
     return np.clip(x / phi, -1.0, 1.0)
 
 
-def consensus_error(graph: Graph, est: np.ndarray, ref: np.ndarray, angle_cols: tuple[int, ...] = (),
-                    recv: np.ndarray | None = None, edge_w: np.ndarray | None = None,
-                    leader_w: np.ndarray | None = None) -> np.ndarray:
+def consensus_error(
+    graph: Graph,
+    est: np.ndarray,
+    ref: np.ndarray,
+    angle_cols: tuple[int, ...] = (),
+    recv: np.ndarray | None = None,
+    edge_w: np.ndarray | None = None,
+    leader_w: np.ndarray | None = None,
+) -> np.ndarray:
     """``Σ_j a_ij (X_i − X_j) + a_ir (X_i − X_r)`` for every follower.
 
     Parameters
@@ -98,7 +104,9 @@ class Estimator:
             p_err = consensus_error(self.graph, self.pose, leader_pose, angle_cols=(2,))  # P̃_i
             v_err = consensus_error(self.graph, self.vel, leader_vel)  # [e_iυ, e_iω]
         else:
-            p_err = consensus_error(self.graph, self.pose, leader_pose, (2,), comm.recv_pose, comm.edge_w, comm.leader_w)
+            p_err = consensus_error(
+                self.graph, self.pose, leader_pose, (2,), comm.recv_pose, comm.edge_w, comm.leader_w
+            )
             v_err = consensus_error(self.graph, self.vel, leader_vel, (), comm.recv_vel, comm.edge_w, comm.leader_w)
         th = self.pose[:, 2]
         v = self.vel[:, 0]
@@ -232,9 +240,7 @@ class DerivativeFilter:
     def __init__(self, n: int, wn: float, dt: float) -> None:
         a = math.exp(-wn * dt)
         # Exact discretisation of x' = [[0, 1], [-wn², -2wn]] x + [0, wn²] u.
-        self.phi = np.array(
-            [[a * (1 + wn * dt), a * dt], [-(wn**2) * dt * a, a * (1 - wn * dt)]]
-        )
+        self.phi = np.array([[a * (1 + wn * dt), a * dt], [-(wn**2) * dt * a, a * (1 - wn * dt)]])
         self.gam = np.array([1.0 - a * (1 + wn * dt), wn * wn * dt * a])
         self.dt = dt
         self.y = np.zeros((n, 2))

@@ -1,6 +1,7 @@
 """``bioform sweep/bench --backend warp`` through the CLI: rows agree with the local backend
 (Warp's CPU device, a few worlds), and the exit-2 paths. The tests that need no Warp (the
 missing extra, monkeypatched away) run in every venv."""
+
 import csv
 import sys
 
@@ -9,8 +10,19 @@ import pytest
 
 from bioform_mj.cli import main
 
-SWEEP = ["sweep", "paper", "--plant", "mujoco", "--duration", "0.3", "--seeds", "2",
-         "--set", "formation.init_jitter=0.05", "--quiet"]
+SWEEP = [
+    "sweep",
+    "paper",
+    "--plant",
+    "mujoco",
+    "--duration",
+    "0.3",
+    "--seeds",
+    "2",
+    "--set",
+    "formation.init_jitter=0.05",
+    "--quiet",
+]
 
 
 def _rows(out):
@@ -23,8 +35,9 @@ def _no_warp(monkeypatch):
         monkeypatch.setitem(sys.modules, mod, None)  # import raises ImportError
 
 
-@pytest.mark.parametrize("cmd", [SWEEP + ["--backend", "warp"], ["bench", "--backend", "warp", "--worlds", "2"]],
-                         ids=["sweep", "bench"])
+@pytest.mark.parametrize(
+    "cmd", [SWEEP + ["--backend", "warp"], ["bench", "--backend", "warp", "--worlds", "2"]], ids=["sweep", "bench"]
+)
 def test_without_the_extra_exit_2(cmd, monkeypatch, tmp_path, capsys):
     _no_warp(monkeypatch)
     out = tmp_path / "sw"
@@ -44,9 +57,14 @@ def _need_warp():
     wp.config.quiet = True
 
 
-@pytest.mark.parametrize("extra,what", [(["--plant", "ideal"], "plant.kind = 'ideal'"),
-                                        (["--set", "faults.packet_loss=0.1"], "faults.packet_loss"),
-                                        (["--set", "faults.delay=0.01"], "faults.delay")])
+@pytest.mark.parametrize(
+    "extra,what",
+    [
+        (["--plant", "ideal"], "plant.kind = 'ideal'"),
+        (["--set", "faults.packet_loss=0.1"], "faults.packet_loss"),
+        (["--set", "faults.delay=0.01"], "faults.delay"),
+    ],
+)
 def test_unsupported_feature_exit_2(extra, what, tmp_path, capsys):
     _need_warp()
     out = tmp_path / "sw"
@@ -91,8 +109,12 @@ def test_warp_sweep_rows_agree_with_local(tmp_path):
         assert a["outcome"] == b["outcome"] and a["follower_outcomes"] == b["follower_outcomes"]
         assert a["backend"] == "warp" and a["device"] == "cpu" and a["batch_worlds"] == "2"
         f = lambda r, c: float(r[c])  # noqa: E731
-        for c in ("final_formation_error_m_mean", "final_formation_error_m_max", "rms_formation_error_m_max",
-                  "final_estimation_error_m_max"):
+        for c in (
+            "final_formation_error_m_mean",
+            "final_formation_error_m_max",
+            "rms_formation_error_m_max",
+            "final_estimation_error_m_max",
+        ):
             assert abs(f(a, c) - f(b, c)) < 5e-3, c
         for c in ("total_velocity_error_mean", "total_velocity_error_max", "max_abs_v_cmd_max"):
             assert f(a, c) == pytest.approx(f(b, c), rel=1e-2), c
@@ -109,8 +131,21 @@ def test_warp_sweep_groups_per_scene(tmp_path):
     """Two durations: two scenes (time axes), two batches; both land in one table."""
     _need_warp()
     out = tmp_path / "sw"
-    args = ["sweep", "paper", "--plant", "mujoco", "--vary", "sim.duration=0.05,0.1", "--quiet",
-            "--backend", "warp", "--device", "cpu", "--out", str(out)]
+    args = [
+        "sweep",
+        "paper",
+        "--plant",
+        "mujoco",
+        "--vary",
+        "sim.duration=0.05,0.1",
+        "--quiet",
+        "--backend",
+        "warp",
+        "--device",
+        "cpu",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     with open(out / "runs.csv") as fh:
         rows = list(csv.DictReader(fh))

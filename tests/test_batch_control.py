@@ -2,6 +2,7 @@
 engine (``sim.simulate``, C MuJoCo) world by world on the paper scenario: every world is
 its own seed (jittered initial poses). Tolerances of issue 13: final formation error
 within 1 mm, ``ĉ`` within 0.5 %, total velocity error within 1 %."""
+
 import numpy as np
 import pytest
 
@@ -43,8 +44,11 @@ def _compare(batch, ref, form_tol, chat_tol=5e-3):
 # sharper signal than the old ẏ_f): boundary layers, 8 of 9 followers ≤ 1e-5 m, ĉ ≤ 2e-6, but
 # seed 1 follower 2 (saturated 98 %) ends 0.3 mm off with ĉ_b 0.92 % off. So: every follower
 # within 5 mm and ĉ 2 %, and at most one of the 9 beyond the issue's ĉ 0.5 %.
-@pytest.mark.parametrize("extra,form_tol", [((), 5e-3), (("estimator.phi=[0.02,0.02]", "torque.phi=0.02"), 5e-3)],
-                         ids=["paper-sgn", "boundary-layer"])
+@pytest.mark.parametrize(
+    "extra,form_tol",
+    [((), 5e-3), (("estimator.phi=[0.02,0.02]", "torque.phi=0.02"), 5e-3)],
+    ids=["paper-sgn", "boundary-layer"],
+)
 def test_batch_matches_cpu_engine(extra, form_tol):
     from bioform_mj.batch.control import run_batch
 
@@ -102,8 +106,12 @@ def test_dc_motors_scale_ctrl():
     Measured 0.5 s, 2 worlds: formation ≤ 3.1e-5 m, ĉ ≤ 2.2e-4, velocity error ≤ 4.9e-4 rel."""
     from bioform_mj.batch.control import BatchRun
 
-    ov = ["plant.kind=mujoco", "sim.duration=0.5", "formation.init_jitter=0.05",
-          'plant.robots=[{model="paper", motor="dc", driver="voltage"}]']
+    ov = [
+        "plant.kind=mujoco",
+        "sim.duration=0.5",
+        "formation.init_jitter=0.05",
+        'plant.robots=[{model="paper", motor="dc", driver="voltage"}]',
+    ]
     scs = [load("paper", overrides=[*ov, f"sim.seed={s}"]) for s in range(2)]
     b = BatchRun(scs, device="cpu")
     np.testing.assert_allclose(b.cscale.numpy(), b.plant._ctrl_scale)

@@ -1,6 +1,7 @@
 """Batch engine prototype on Warp's CPU device: many worlds of a composed scene agree
 with C MuJoCo (float32 vs float64 physics), with constant torques and with a control
 law running per world on the device; heterogeneous robot masses per world."""
+
 import numpy as np
 import pytest
 
@@ -26,7 +27,7 @@ def mjm():
 def _xy_th(mjm, qpos, idx):
     out = []
     for a in idx.qadr:
-        x, y, th = E.planar_state(*qpos[a:a + 2], *qpos[a + 3:a + 7], *([0.0] * 9))[:3]
+        x, y, th = E.planar_state(*qpos[a : a + 2], *qpos[a + 3 : a + 7], *([0.0] * 9))[:3]
         out.append((x, y, th))
     return np.array(out)
 
@@ -82,10 +83,12 @@ def test_closed_loop_on_device_with_per_world_masses(mjm):
         mujoco.mj_forward(m, d)
         for _ in range(nstep):
             for r, (a, v) in enumerate(zip(B.idx.qadr, B.idx.dadr)):
-                _, _, _, ups, om, _ = E.planar_state(*d.qpos[a:a + 2], *d.qpos[a + 3:a + 7], *d.qvel[v:v + 6],
-                                                     0.0, 0.0, 0.0)
-                r0, r1 = E.sliding_mode(cmd[w, r, 0], cmd[w, r, 1], 0.0, 0.0, ups, om, gains[0], gains[1],
-                                        gains[2], gains[2], gains[3])
+                _, _, _, ups, om, _ = E.planar_state(
+                    *d.qpos[a : a + 2], *d.qpos[a + 3 : a + 7], *d.qvel[v : v + 6], 0.0, 0.0, 0.0
+                )
+                r0, r1 = E.sliding_mode(
+                    cmd[w, r, 0], cmd[w, r, 1], 0.0, 0.0, ups, om, gains[0], gains[1], gains[2], gains[2], gains[3]
+                )
                 tl, tr = E.saturate(r0, r1, 20.0, True)
                 d.ctrl[B.idx.act[r]] = (tl, tr)
             mujoco.mj_step(m, d)

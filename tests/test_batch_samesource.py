@@ -1,6 +1,7 @@
 """The batch engine's equations are the CPU engine's, from the same source: numba and Warp
 versions of every scalar equation agree on random inputs (float64: to rounding; float32:
 within float32 tolerance)."""
+
 import math
 
 import numpy as np
@@ -9,8 +10,8 @@ import pytest
 wp = pytest.importorskip("warp")
 pytest.importorskip("numba")
 
-from bioform_mj.control import equations as E  # noqa: E402
 from bioform_mj.batch.samesource import warp_equations, warp_map  # noqa: E402
+from bioform_mj.control import equations as E  # noqa: E402
 
 wp.config.quiet = True
 N = 400
@@ -30,37 +31,179 @@ SPECS = {
     "wrap": ([_u(-30, 30)], 1, (0,)),
     "sat": ([_u(-3, 3), _choice(0.0, 0.1, 1.0)], 1, ()),
     "clip": ([_u(-3, 3), _u(-2, -0.5), _u(0.5, 2)], 1, ()),
-    "estimator_step": ([_u(-5, 5), _u(-5, 5), _u(-3, 3), _u(-2, 2), _u(-2, 2), _u(-1, 1), _u(-1, 1), _u(-1, 1),
-                        _u(-1, 1), _u(-1, 1), _u(0, 20), _u(0, 20), _u(0, 20), _u(0, 30), _u(0, 30), _u(0, 2),
-                        _u(0, 2), _phi, _phi, _choice(1e-3, 1e-2)], 5, (2,)),
-    "tracking_error": ([_u(-5, 5), _u(-5, 5), _u(-9, 9), _u(-5, 5), _u(-5, 5), _u(-4, 4), _u(-5, 5),
-                        _u(-5, 5)], 3, (2,)),
-    "velocity_command": ([_u(-2, 2), _u(-3.1, 3.1), _u(-2, 2), _u(-1, 3), _u(-1, 1),
-                          _u(0, 5), _u(0, 50), _u(0, 10)], 2, ()),
+    "estimator_step": (
+        [
+            _u(-5, 5),
+            _u(-5, 5),
+            _u(-3, 3),
+            _u(-2, 2),
+            _u(-2, 2),
+            _u(-1, 1),
+            _u(-1, 1),
+            _u(-1, 1),
+            _u(-1, 1),
+            _u(-1, 1),
+            _u(0, 20),
+            _u(0, 20),
+            _u(0, 20),
+            _u(0, 30),
+            _u(0, 30),
+            _u(0, 2),
+            _u(0, 2),
+            _phi,
+            _phi,
+            _choice(1e-3, 1e-2),
+        ],
+        5,
+        (2,),
+    ),
+    "tracking_error": (
+        [_u(-5, 5), _u(-5, 5), _u(-9, 9), _u(-5, 5), _u(-5, 5), _u(-4, 4), _u(-5, 5), _u(-5, 5)],
+        3,
+        (2,),
+    ),
+    "velocity_command": (
+        [_u(-2, 2), _u(-3.1, 3.1), _u(-2, 2), _u(-1, 3), _u(-1, 1), _u(0, 5), _u(0, 50), _u(0, 10)],
+        2,
+        (),
+    ),
     "neuron_step": ([_u(-1, 2), _u(-3, 3), _u(0.5, 20), _u(0.1, 5), _u(0.1, 5), _choice(1e-3, 1e-2, 0.1)], 1, ()),
-    "filter_step": ([_u(-2, 2), _u(-20, 20), _u(-2, 2), _u(0.5, 1), _u(0, 1e-3), _u(-3, 0), _u(0.5, 1),
-                     _u(0, 0.1), _u(0, 3)], 2, ()),
-    "filter_derivative": ([_u(-2, 2), _u(-20, 20), _u(-2, 2), _u(0.5, 1), _u(0, 1e-3), _u(-3, 0), _u(0.5, 1),
-                           _u(0, 0.1), _u(0, 3), _choice(1e-3, 1e-2)], 3, ()),
+    "filter_step": (
+        [_u(-2, 2), _u(-20, 20), _u(-2, 2), _u(0.5, 1), _u(0, 1e-3), _u(-3, 0), _u(0.5, 1), _u(0, 0.1), _u(0, 3)],
+        2,
+        (),
+    ),
+    "filter_derivative": (
+        [
+            _u(-2, 2),
+            _u(-20, 20),
+            _u(-2, 2),
+            _u(0.5, 1),
+            _u(0, 1e-3),
+            _u(-3, 0),
+            _u(0.5, 1),
+            _u(0, 0.1),
+            _u(0, 3),
+            _choice(1e-3, 1e-2),
+        ],
+        3,
+        (),
+    ),
     "backward_difference": ([_u(-2, 2), _u(-2, 2), _choice(1e-3, 1e-2)], 1, ()),
-    "estimator_rates": ([_u(-3, 3), _u(-2, 2), _u(-2, 2), _u(-1, 1), _u(-1, 1), _u(-1, 1), _u(-1, 1), _u(-1, 1),
-                         _u(0, 20), _u(0, 20), _u(0, 20), _u(0, 30), _u(0, 30), _u(0, 2), _u(0, 2), _phi, _phi],
-                        5, ()),
+    "estimator_rates": (
+        [
+            _u(-3, 3),
+            _u(-2, 2),
+            _u(-2, 2),
+            _u(-1, 1),
+            _u(-1, 1),
+            _u(-1, 1),
+            _u(-1, 1),
+            _u(-1, 1),
+            _u(0, 20),
+            _u(0, 20),
+            _u(0, 20),
+            _u(0, 30),
+            _u(0, 30),
+            _u(0, 2),
+            _u(0, 2),
+            _phi,
+            _phi,
+        ],
+        5,
+        (),
+    ),
     "neuron_rate": ([_u(-1, 2), _u(-3, 3), _u(0.5, 20), _u(0.1, 5), _u(0.1, 5)], 1, ()),
-    "error_rate": ([_u(-2, 2), _u(-2, 2), _u(-2, 2), _u(-3, 3), _u(-2, 2), _u(-3, 3), _u(-3.1, 3.1), _u(-2, 2),
-                    _u(-2, 2)], 3, ()),
-    "command_rate": ([_u(-2, 2), _u(-3.1, 3.1), _u(-1, 3), _u(-5, 5), _u(-5, 5), _u(-2, 2), _u(-3, 3), _u(-5, 5),
-                      _u(0, 5), _u(0, 50), _u(0, 10)], 2, ()),
-    "sliding_mode": ([_u(-2, 2), _u(-2, 2), _u(-5, 5), _u(-5, 5), _u(-2, 2), _u(-2, 2), _u(0.1, 1), _u(2, 20),
-                      _u(0, 5), _u(0, 5), _phi], 2, ()),
+    "error_rate": (
+        [_u(-2, 2), _u(-2, 2), _u(-2, 2), _u(-3, 3), _u(-2, 2), _u(-3, 3), _u(-3.1, 3.1), _u(-2, 2), _u(-2, 2)],
+        3,
+        (),
+    ),
+    "command_rate": (
+        [
+            _u(-2, 2),
+            _u(-3.1, 3.1),
+            _u(-1, 3),
+            _u(-5, 5),
+            _u(-5, 5),
+            _u(-2, 2),
+            _u(-3, 3),
+            _u(-5, 5),
+            _u(0, 5),
+            _u(0, 50),
+            _u(0, 10),
+        ],
+        2,
+        (),
+    ),
+    "sliding_mode": (
+        [
+            _u(-2, 2),
+            _u(-2, 2),
+            _u(-5, 5),
+            _u(-5, 5),
+            _u(-2, 2),
+            _u(-2, 2),
+            _u(0.1, 1),
+            _u(2, 20),
+            _u(0, 5),
+            _u(0, 5),
+            _phi,
+        ],
+        2,
+        (),
+    ),
     "saturate": ([_u(-50, 50), _u(-50, 50), _u(1, 20), _choice(0.0, 1.0)], 2, ()),
-    "learner_step": ([_u(-2, 2), _u(-1, 1), _u(0.1, 10), _u(-1, 1), _u(-20, 20), _u(-2, 2),
-                      _u(1, 500), _u(0, 50), _u(0, 1), _u(0.01, 0.1), _u(10, 20), _choice(1e-3, 5e-3)], 4, ()),
+    "learner_step": (
+        [
+            _u(-2, 2),
+            _u(-1, 1),
+            _u(0.1, 10),
+            _u(-1, 1),
+            _u(-20, 20),
+            _u(-2, 2),
+            _u(1, 500),
+            _u(0, 50),
+            _u(0, 1),
+            _u(0.01, 0.1),
+            _u(10, 20),
+            _choice(1e-3, 5e-3),
+        ],
+        4,
+        (),
+    ),
     "harmonic": ([_u(-1, 1), _u(-1, 1), _u(0, 3), _u(-3, 3), _u(0, 20)], 1, ()),
-    "unicycle_rk4": ([_u(-5, 5), _u(-5, 5), _u(-3, 3), _u(-2, 2), _u(-2, 2), _u(-5, 5), _u(-5, 5),
-                      *[_u(-1, 1)] * 8, _u(0, 20), _choice(1e-3, 1e-2)], 5, ()),
-    "planar_state": ([_u(-5, 5), _u(-5, 5), _u(-1, 1), _u(-0.2, 0.2), _u(-0.2, 0.2), _u(-1, 1),
-                      *[_u(-2, 2)] * 3, *[_u(-3, 3)] * 3, *[_u(-0.2, 0.2)] * 3], 6, (2,)),
+    "unicycle_rk4": (
+        [
+            _u(-5, 5),
+            _u(-5, 5),
+            _u(-3, 3),
+            _u(-2, 2),
+            _u(-2, 2),
+            _u(-5, 5),
+            _u(-5, 5),
+            *[_u(-1, 1)] * 8,
+            _u(0, 20),
+            _choice(1e-3, 1e-2),
+        ],
+        5,
+        (),
+    ),
+    "planar_state": (
+        [
+            _u(-5, 5),
+            _u(-5, 5),
+            _u(-1, 1),
+            _u(-0.2, 0.2),
+            _u(-0.2, 0.2),
+            _u(-1, 1),
+            *[_u(-2, 2)] * 3,
+            *[_u(-3, 3)] * 3,
+            *[_u(-0.2, 0.2)] * 3,
+        ],
+        6,
+        (2,),
+    ),
 }
 #: arguments that are ``bool`` in the source (passed as ``x != 0``)
 BOOL_ARGS = {"saturate": (3,)}
@@ -68,9 +211,9 @@ BOOL_ARGS = {"saturate": (3,)}
 
 def _unit_quat(args, at):
     """Normalise the inputs ``at … at+3`` into a unit quaternion."""
-    q = np.stack(args[at:at + 4])
+    q = np.stack(args[at : at + 4])
     q /= np.linalg.norm(q, axis=0)
-    return [*args[:at], *q, *args[at + 4:]]
+    return [*args[:at], *q, *args[at + 4 :]]
 
 
 @pytest.fixture(scope="module")
@@ -97,8 +240,9 @@ def _inputs(name, seed):
 def _reference(nb, name, args, nout):
     f = getattr(nb, name)
     bools = BOOL_ARGS.get(name, ())
-    out = np.array([f(*[bool(a[i]) if k in bools else float(a[i]) for k, a in enumerate(args)])
-                    for i in range(N)], dtype=float)
+    out = np.array(
+        [f(*[bool(a[i]) if k in bools else float(a[i]) for k, a in enumerate(args)]) for i in range(N)], dtype=float
+    )
     return out.reshape(N, nout)
 
 
@@ -113,7 +257,9 @@ def _diff(a, b, angles):
 def test_warp_float64_matches_numba(nb, name):
     args, nout, angles = _inputs(name, 1)
     ref = _reference(nb, name, args, nout)
-    got = warp_map(getattr(warp_equations(E, wp.float64), name), len(args), nout, wp.float64, bool_args=BOOL_ARGS.get(name, ()))(*args)
+    got = warp_map(
+        getattr(warp_equations(E, wp.float64), name), len(args), nout, wp.float64, bool_args=BOOL_ARGS.get(name, ())
+    )(*args)
     np.testing.assert_array_less(_diff(got, ref, angles), 1e-12 * (1.0 + np.abs(ref)))
 
 
@@ -121,7 +267,9 @@ def test_warp_float64_matches_numba(nb, name):
 def test_warp_float32_matches_numba(nb, name):
     args, nout, angles = _inputs(name, 2)
     ref = _reference(nb, name, args, nout)
-    got = warp_map(getattr(warp_equations(E, wp.float32), name), len(args), nout, wp.float32, bool_args=BOOL_ARGS.get(name, ()))(*args)
+    got = warp_map(
+        getattr(warp_equations(E, wp.float32), name), len(args), nout, wp.float32, bool_args=BOOL_ARGS.get(name, ())
+    )(*args)
     # float32: a few ulps of the largest intermediate; the inputs span |x| <= 50
     tol = 2e-5 * (1.0 + np.abs(ref)) if name != "learner_step" else 2e-4 * (1.0 + np.abs(ref))
     np.testing.assert_array_less(_diff(got, ref, angles), tol)

@@ -1,4 +1,5 @@
 """The ``bioform`` command: outputs, schema, exit codes (design §10)."""
+
 from __future__ import annotations
 
 import json
@@ -11,9 +12,18 @@ import pytest
 from bioform_mj.cli import main
 from bioform_mj.scenario import Scenario, load
 
-SUMMARY_KEYS = {"id", "total_velocity_error", "final_formation_error_m", "rms_formation_error_m",
-                "final_estimation_error_m", "max_abs_v_cmd", "peak_abs_torque", "saturation_fraction",
-                "c_hat", "c_true"}
+SUMMARY_KEYS = {
+    "id",
+    "total_velocity_error",
+    "final_formation_error_m",
+    "rms_formation_error_m",
+    "final_estimation_error_m",
+    "max_abs_v_cmd",
+    "peak_abs_torque",
+    "saturation_fraction",
+    "c_hat",
+    "c_true",
+}
 
 
 def test_paper_toml_equals_dataclass_defaults():
@@ -22,8 +32,24 @@ def test_paper_toml_equals_dataclass_defaults():
 
 def test_run_writes_summary_and_log(tmp_path, capsys):
     out = tmp_path / "run"
-    code = main(["run", "paper", "--plant", "ideal", "--method", "bioinspired", "--duration", "2", "--seed", "3",
-                 "--set", "kinematic.k1=2.5", "--out", str(out)])
+    code = main(
+        [
+            "run",
+            "paper",
+            "--plant",
+            "ideal",
+            "--method",
+            "bioinspired",
+            "--duration",
+            "2",
+            "--seed",
+            "3",
+            "--set",
+            "kinematic.k1=2.5",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     s = json.loads((out / "summary.json").read_text())
     assert {"scenario", "plant", "method", "sim_time_s", "wall_time_s", "config", "followers"} <= set(s)
@@ -53,22 +79,25 @@ def test_presets_lists_paper(capsys):
     assert "paper" in capsys.readouterr().out.split()
 
 
-@pytest.mark.parametrize("argv,needle", [
-    (["run", "nosuchpreset"], "unknown preset 'nosuchpreset'"),
-    (["run", "--method", "pid"], "invalid choice: 'pid'"),
-    (["run", "--plant", "gazebo"], "invalid choice: 'gazebo'"),
-    (["run", "--set", "kinematic.k1=-1"], "kinematic.k1"),
-    (["run", "--set", "kinematic.k9=1"], "kinematic.k9"),
-    (["run", "--set", "graph.edges=[[1,2]]"], "follower(s) 3 cannot reach the leader"),
-    (["run", "--set", "graph.leader_access=[]"], "no follower has leader access"),
-    (["run", "--set", "sim.duration=0"], "sim.duration"),
-    (["run", "--set", "sim.physics_dt=0.0007"], "sim.physics_dt"),
-    (["run", "--set", "torque.c=[3, nan]"], "torque.c"),
-    (["run", "--set", "formation.offsets=[[3,0],[3,0],[4,-5]]"], "same formation slot"),
-    (["run", "missing.toml"], "missing.toml"),
-    (["run", "--set", "nokey"], "KEY=VALUE"),
-    (["run", "--duration", "-1"], "sim.duration"),
-])
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["run", "nosuchpreset"], "unknown preset 'nosuchpreset'"),
+        (["run", "--method", "pid"], "invalid choice: 'pid'"),
+        (["run", "--plant", "gazebo"], "invalid choice: 'gazebo'"),
+        (["run", "--set", "kinematic.k1=-1"], "kinematic.k1"),
+        (["run", "--set", "kinematic.k9=1"], "kinematic.k9"),
+        (["run", "--set", "graph.edges=[[1,2]]"], "follower(s) 3 cannot reach the leader"),
+        (["run", "--set", "graph.leader_access=[]"], "no follower has leader access"),
+        (["run", "--set", "sim.duration=0"], "sim.duration"),
+        (["run", "--set", "sim.physics_dt=0.0007"], "sim.physics_dt"),
+        (["run", "--set", "torque.c=[3, nan]"], "torque.c"),
+        (["run", "--set", "formation.offsets=[[3,0],[3,0],[4,-5]]"], "same formation slot"),
+        (["run", "missing.toml"], "missing.toml"),
+        (["run", "--set", "nokey"], "KEY=VALUE"),
+        (["run", "--duration", "-1"], "sim.duration"),
+    ],
+)
 def test_bad_input_exit_2_one_line(argv, needle, tmp_path, capsys):
     out = tmp_path / "never"
     code = main(argv + ["--out", str(out)])
@@ -106,8 +135,12 @@ def test_divergence_exit_3_keeps_log(tmp_path, capsys):
 
 def test_console_script_entry_point(tmp_path):
     """The installed ``bioform`` script (through ``python -m``) gives the same exit code and one line."""
-    r = subprocess.run([sys.executable, "-m", "bioform_mj.cli", "run", "--set", "kinematic.k2=0"],
-                       capture_output=True, text=True, cwd=tmp_path)
+    r = subprocess.run(
+        [sys.executable, "-m", "bioform_mj.cli", "run", "--set", "kinematic.k2=0"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
     assert r.returncode == 2
     assert r.stderr.strip().count("\n") == 0 and "kinematic.k2" in r.stderr and "Traceback" not in r.stderr
 
@@ -120,6 +153,8 @@ def test_run_engines_give_identical_logs_on_the_ideal_plant(tmp_path):
         assert main(["run", "paper", "--duration", "1", "--engine", eng, "--quiet", "--out", str(out)]) == 0
         with np.load(out / "log.npz") as z:
             logs[eng] = {k: z[k] for k in z.files}
-        logs[eng]["_tve"] = [f["total_velocity_error"] for f in json.loads((out / "summary.json").read_text())["followers"]]
+        logs[eng]["_tve"] = [
+            f["total_velocity_error"] for f in json.loads((out / "summary.json").read_text())["followers"]
+        ]
     for k in ("pose", "vel", "est_pose", "cmd", "tau", "c_hat", "_tve"):
         assert np.array_equal(logs["stepwise"][k], logs["compiled"][k]), k

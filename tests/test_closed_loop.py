@@ -1,4 +1,5 @@
 """The whole stack closed-loop on the paper's ideal plant (issue 2, item 11)."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -64,8 +65,17 @@ def test_bioinspired_learning_holds_formation(paper_runs):
 
 def test_learner_converges_on_exciting_trajectory():
     """Figure-eight leader, the paper's disturbances: ĉ within 5 % of (0.4, 10) for every follower."""
-    sc = load("paper", overrides=["leader.kind=figure8", "leader.x0=0", "leader.y0=0", "leader.radius=4",
-                                  "leader.frequency=0.4", "sim.duration=30"])
+    sc = load(
+        "paper",
+        overrides=[
+            "leader.kind=figure8",
+            "leader.x0=0",
+            "leader.y0=0",
+            "leader.radius=4",
+            "leader.frequency=0.4",
+            "sim.duration=30",
+        ],
+    )
     res = simulate(sc)
     for f in res.summary["followers"]:
         np.testing.assert_allclose(f["c_hat"], [0.4, 10.0], rtol=0.05)
@@ -114,9 +124,16 @@ def test_offsets_in_the_leader_frame_turn_the_formation_with_its_leader():
     """formation.frame = "leader": on a circle the slots rotate with the leader's heading (their
     position in the leader's frame stays the offset), and the followers hold them; the default
     world frame keeps the slots' world orientation while the leader turns."""
-    ov = ['leader.kind="circle"', "leader.radius=8", "leader.speed=1", "leader.x0=0", "leader.y0=0",
-          "formation.offsets=[[1.5,1.5],[1.5,-1.5],[3.0,0.0]]",
-          "formation.initial_poses=[[6.0,-2.0,1.57],[9.0,-2.0,1.57],[8.0,-4.0,1.57]]", "sim.duration=20"]
+    ov = [
+        'leader.kind="circle"',
+        "leader.radius=8",
+        "leader.speed=1",
+        "leader.x0=0",
+        "leader.y0=0",
+        "formation.offsets=[[1.5,1.5],[1.5,-1.5],[3.0,0.0]]",
+        "formation.initial_poses=[[6.0,-2.0,1.57],[9.0,-2.0,1.57],[8.0,-4.0,1.57]]",
+        "sim.duration=20",
+    ]
     lead = simulate(load("paper", overrides=ov + ['formation.frame="leader"']))
     world = simulate(load("paper", overrides=ov))
     for res, frame in ((lead, "leader"), (world, "world")):

@@ -1,4 +1,5 @@
 """Control blocks against closed forms: neuron, estimator locality, learner, derivative filter, torque law."""
+
 from __future__ import annotations
 
 import math
@@ -7,10 +8,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from oracle import Estimator, wheel_to_body  # the estimator's graph sums are checked against the kernel in test_engines
 
 from bioform_mj import graph
 from bioform_mj.control import equations as eq
-from oracle import Estimator, wheel_to_body  # the estimator's graph sums are checked against the kernel in test_engines
+from bioform_mj.plants.ideal import IdealPlant
 
 # The properties below are asserted on the package's own equations (control/equations.py),
 # applied elementwise; the numpy oracle is only used where a test needs the graph sums.
@@ -38,8 +40,19 @@ def tracking_error(est, pose, off):
 def sliding_mode_torques(cmd, dcmd, vel, c_hat, c_gain, phi):
     out = np.empty_like(np.asarray(cmd, dtype=float))
     for i in range(out.shape[0]):
-        out[i] = eq.sliding_mode(cmd[i, 0], cmd[i, 1], dcmd[i, 0], dcmd[i, 1], vel[i, 0], vel[i, 1],
-                                 c_hat[i, 0], c_hat[i, 1], c_gain[0], c_gain[1], phi)
+        out[i] = eq.sliding_mode(
+            cmd[i, 0],
+            cmd[i, 1],
+            dcmd[i, 0],
+            dcmd[i, 1],
+            vel[i, 0],
+            vel[i, 1],
+            c_hat[i, 0],
+            c_hat[i, 1],
+            c_gain[0],
+            c_gain[1],
+            phi,
+        )
     return out
 
 
@@ -59,9 +72,20 @@ class Learner:
         self.d_hat[:] = 0.0
 
     def step(self, tau, z, dt):
-        self.z_hat, self.e_int, self.c_hat, self.d_hat = _learn(self.z_hat, self.e_int, self.c_hat, self.d_hat, tau,
-                                                                z, self.k4, self.k5, self.kd, self.c_min,
-                                                                self.c_max, dt)
+        self.z_hat, self.e_int, self.c_hat, self.d_hat = _learn(
+            self.z_hat,
+            self.e_int,
+            self.c_hat,
+            self.d_hat,
+            tau,
+            z,
+            self.k4,
+            self.k5,
+            self.kd,
+            self.c_min,
+            self.c_max,
+            dt,
+        )
 
 
 class DerivativeFilter:
@@ -78,11 +102,11 @@ class DerivativeFilter:
         self.dy[:] = 0.0
 
     def step(self, u):
-        f = np.vectorize(lambda y, dy, uu: eq.filter_derivative(y, dy, uu, *self.c, self.dt),
-                         otypes=[float, float, float])
+        f = np.vectorize(
+            lambda y, dy, uu: eq.filter_derivative(y, dy, uu, *self.c, self.dt), otypes=[float, float, float]
+        )
         self.y, self.dy, d = f(self.y, self.dy, u)
         return d
-from bioform_mj.plants.ideal import IdealPlant
 
 
 def test_wrap_range():
@@ -96,8 +120,11 @@ def test_wrap_range():
 @settings(max_examples=300, deadline=None)
 @given(
     x=st.lists(st.floats(-1e6, 1e6), min_size=1, max_size=20),
-    A=st.floats(0.01, 50), B=st.floats(0.01, 50), D=st.floats(0.01, 50),
-    dt=st.floats(1e-5, 10.0), steps=st.integers(1, 30),
+    A=st.floats(0.01, 50),
+    B=st.floats(0.01, 50),
+    D=st.floats(0.01, 50),
+    dt=st.floats(1e-5, 10.0),
+    steps=st.integers(1, 30),
 )
 def test_neuron_output_stays_in_open_interval(x, A, B, D, dt, steps):
     x = np.array(x)
@@ -229,7 +256,9 @@ def test_sat_sign():
 def test_torque_law_sign_fix_turns_the_right_way():
     """design §5: with τ_b = τ_R − τ_L, a positive ω error must raise ω on the plant."""
     cmd = np.array([[0.0, 1.0]])
-    tau = sliding_mode_torques(cmd, np.zeros((1, 2)), np.zeros((1, 2)), np.array([[0.4, 10.0]]), np.array([3.0, 3.0]), 0.0)
+    tau = sliding_mode_torques(
+        cmd, np.zeros((1, 2)), np.zeros((1, 2)), np.array([[0.4, 10.0]]), np.array([3.0, 3.0]), 0.0
+    )
     assert tau[0, 1] > tau[0, 0]
     np.testing.assert_allclose(wheel_to_body(tau), [[0.0, 0.3]])
     plant = IdealPlant(np.array([0.4, 10.0]), np.zeros((1, 3)), 1e-3, 1e-3, lambda t: np.zeros((1, 2)))

@@ -1,5 +1,6 @@
 """The command derivative (design §6, issue 14): each option against closed forms, the filter's
 limit as ω_n → ∞, the analytic derivative against a finite difference of a logged run, bad input."""
+
 from __future__ import annotations
 
 import math
@@ -89,8 +90,9 @@ def _analytic(t, du=None):
     ex, ey, eth = eq.tracking_error(px, py, pth, x, y, th, 0.5, -0.3)
     c, s = math.cos(th), math.sin(th)
     dex, dey, deth = eq.error_rate(ex, ey, v, w, v_ir, dpth, eth, c * dpx + s * dpy, -s * dpx + c * dpy)
-    return np.array(eq.command_rate(ey, eth, v_ir, dv_ir, dw_ir, dey, deth, dex if du is None else du(t),
-                                    2.0, 3.0, 4.0))
+    return np.array(
+        eq.command_rate(ey, eth, v_ir, dv_ir, dw_ir, dey, deth, dex if du is None else du(t), 2.0, 3.0, 4.0)
+    )
 
 
 @pytest.mark.parametrize("t", [0.3, 1.7, 4.2])
@@ -113,9 +115,19 @@ def test_neuron_rate_is_the_limit_of_the_exact_step():
 def test_analytic_agrees_with_a_fine_difference_of_a_logged_smooth_run(method):
     """With smooth sign terms (boundary layers) the logged analytic derivative at ``t_k`` equals
     the central difference of the logged command ``(cmd[k+1] − cmd[k−1]) / 2dt``."""
-    sc = load("paper", method=method, overrides=[
-        "sim.duration=4", "sim.log_dt=0.001", 'torque.derivative="analytic"', "torque.phi=0.05",
-        "estimator.phi=[0.1,0.1]", "estimator.ka=[1,1]", "estimator.kb=[25,25]"])
+    sc = load(
+        "paper",
+        method=method,
+        overrides=[
+            "sim.duration=4",
+            "sim.log_dt=0.001",
+            'torque.derivative="analytic"',
+            "torque.phi=0.05",
+            "estimator.phi=[0.1,0.1]",
+            "estimator.ka=[1,1]",
+            "estimator.kb=[25,25]",
+        ],
+    )
     r = simulate(sc)
     cmd, dcmd = r.log["cmd"], r.log["dcmd"]
     fd = (cmd[2:] - cmd[:-2]) / (2 * sc.sim.control_dt)
@@ -126,9 +138,14 @@ def test_analytic_agrees_with_a_fine_difference_of_a_logged_smooth_run(method):
     assert np.all(err <= 0.02 * scale), (err, scale)
 
 
-@pytest.mark.parametrize("setting,needle", [('torque.derivative="exact"', "torque.derivative"),
-                                            ("torque.deriv_wn=0", "torque.deriv_wn"),
-                                            ("torque.deriv_wn=-5", "torque.deriv_wn")])
+@pytest.mark.parametrize(
+    "setting,needle",
+    [
+        ('torque.derivative="exact"', "torque.derivative"),
+        ("torque.deriv_wn=0", "torque.deriv_wn"),
+        ("torque.deriv_wn=-5", "torque.deriv_wn"),
+    ],
+)
 def test_bad_derivative_settings_exit_2_with_one_error_line(tmp_path, capsys, setting, needle):
     code = main(["run", "paper", "--duration", "0.1", "--set", setting, "--out", str(tmp_path / "r"), "--quiet"])
     err = capsys.readouterr().err.strip().splitlines()

@@ -5,6 +5,7 @@ SIMD transcendental functions may differ from libm's in the last bit, e.g. with 
 ``make test`` runs the tests marked ``equivalence`` a second time with numpy's AVX-512 paths
 disabled, so both code paths of numpy are compared wherever the suite runs.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -75,25 +76,43 @@ def _random_comm(rng, g, n, k):
     m = len(g.src)
     if k % 3 == 0:
         return None
-    return Comm(edge_w=(rng.random(m) > 0.3).astype(float), leader_w=(rng.random(n) > 0.3).astype(float),
-                recv_pose=rng.normal(size=(m, 3)) if k % 2 else None,
-                recv_vel=rng.normal(size=(m, 2)) if k % 2 else None)
+    return Comm(
+        edge_w=(rng.random(m) > 0.3).astype(float),
+        leader_w=(rng.random(n) > 0.3).astype(float),
+        recv_pose=rng.normal(size=(m, 3)) if k % 2 else None,
+        recv_vel=rng.normal(size=(m, 2)) if k % 2 else None,
+    )
 
 
 @EQ
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(kd=st.sampled_from([0.0, 0.5, 5.0]), est_phi=st.sampled_from([0.0, 0.05]),
-       torque_phi=st.sampled_from([0.0, 0.2]), saturation=st.sampled_from(["steer-priority", "wheel"]),
-       method=st.sampled_from(["bioinspired-learning", "backstepping", "bioinspired", "backstepping-learning"]),
-       k4_per_follower=st.booleans(), faults=st.booleans(), seed=st.integers(0, 2**16),
-       derivative=st.sampled_from(["filter", "difference"]))
-def test_control_step_agrees_with_the_oracle(kd, est_phi, torque_phi, saturation, method, k4_per_follower,
-                                             faults, seed, derivative):
+@given(
+    kd=st.sampled_from([0.0, 0.5, 5.0]),
+    est_phi=st.sampled_from([0.0, 0.05]),
+    torque_phi=st.sampled_from([0.0, 0.2]),
+    saturation=st.sampled_from(["steer-priority", "wheel"]),
+    method=st.sampled_from(["bioinspired-learning", "backstepping", "bioinspired", "backstepping-learning"]),
+    k4_per_follower=st.booleans(),
+    faults=st.booleans(),
+    seed=st.integers(0, 2**16),
+    derivative=st.sampled_from(["filter", "difference"]),
+)
+def test_control_step_agrees_with_the_oracle(
+    kd, est_phi, torque_phi, saturation, method, k4_per_follower, faults, seed, derivative
+):
     """Per step, on random measurements, leader states and faulty networks, for every option
     (the oracle has no ``analytic`` derivative: tests/test_derivative.py checks it against closed forms)."""
-    sc = load("paper", method=method, overrides=[f"learner.kd=[{kd},{kd}]", f"estimator.phi=[{est_phi},{est_phi}]",
-                                                 f"torque.phi={torque_phi}", f'torque.saturation="{saturation}"',
-                                                 f'torque.derivative="{derivative}"'])
+    sc = load(
+        "paper",
+        method=method,
+        overrides=[
+            f"learner.kd=[{kd},{kd}]",
+            f"estimator.phi=[{est_phi},{est_phi}]",
+            f"torque.phi={torque_phi}",
+            f'torque.saturation="{saturation}"',
+            f'torque.derivative="{derivative}"',
+        ],
+    )
     g = sc.build_graph()
     rng = np.random.default_rng(seed)
     c = np.abs(rng.normal([0.4, 10.0], [0.1, 2.0], size=(sc.n, 2))) + 0.05
@@ -122,11 +141,20 @@ def test_control_step_agrees_with_the_oracle(kd, est_phi, torque_phi, saturation
 
 @EQ
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(kd=st.sampled_from([0.0, 2.0]), phi=st.sampled_from([0.0, 0.1]), gain_scaling=st.booleans(),
-       saturation=st.sampled_from(["steer-priority", "wheel"]))
+@given(
+    kd=st.sampled_from([0.0, 2.0]),
+    phi=st.sampled_from([0.0, 0.1]),
+    gain_scaling=st.booleans(),
+    saturation=st.sampled_from(["steer-priority", "wheel"]),
+)
 def test_short_runs_agree_with_the_oracle_for_every_option(kd, phi, gain_scaling, saturation):
-    ov = ["sim.duration=1", f"learner.kd=[{kd},{kd}]", f"torque.phi={phi}", f'torque.saturation="{saturation}"',
-          "torque.tau_max=3"]
+    ov = [
+        "sim.duration=1",
+        f"learner.kd=[{kd},{kd}]",
+        f"torque.phi={phi}",
+        f'torque.saturation="{saturation}"',
+        "torque.tau_max=3",
+    ]
     if gain_scaling:
         ov.append('learner.gain_scaling="c_hat0"')
     sc = load("paper", overrides=ov)
@@ -142,8 +170,12 @@ def test_short_runs_agree_with_the_oracle_for_every_option(kd, phi, gain_scaling
 @pytest.mark.parametrize("method", ["bioinspired-learning", "backstepping"])
 @pytest.mark.parametrize("derivative", ["filter", "difference", "analytic"])
 def test_compiled_and_stepwise_loops_are_bit_identical(plant, method, derivative):
-    sc = load("paper", method=method, plant=plant, overrides=["sim.duration=1.5", "learner.kd=[0.5,0.5]",
-                                                              f'torque.derivative="{derivative}"'])
+    sc = load(
+        "paper",
+        method=method,
+        plant=plant,
+        overrides=["sim.duration=1.5", "learner.kd=[0.5,0.5]", f'torque.derivative="{derivative}"'],
+    )
     a, b = simulate(sc, engine="compiled"), simulate(sc, engine="stepwise")
     assert a.summary["engine"] == "compiled" and b.summary["engine"] == "stepwise"
     assert a.log.keys() == b.log.keys()
@@ -237,8 +269,25 @@ def test_large256_converges_on_the_ideal_plant():
 
 def test_bench_cli_writes_ratios(tmp_path):
     out = tmp_path / "bench.json"
-    proc = subprocess.run([sys.executable, "-m", "bioform_mj.cli", "bench", "--sizes", "3", "--duration", "0.3",
-                           "--reps", "1", "--json", str(out)], capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "bioform_mj.cli",
+            "bench",
+            "--sizes",
+            "3",
+            "--duration",
+            "0.3",
+            "--reps",
+            "1",
+            "--json",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr
     data = json.loads(out.read_text())
     (row,) = data["rows"]
@@ -249,7 +298,8 @@ def test_bench_cli_writes_ratios(tmp_path):
 
 
 def test_bench_cli_rejects_unknown_size(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "bioform_mj.cli", "bench", "--sizes", "5"],
-                          capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "bioform_mj.cli", "bench", "--sizes", "5"], capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 2
     assert proc.stderr.startswith("error:") and "--sizes" in proc.stderr and len(proc.stderr.splitlines()) == 1

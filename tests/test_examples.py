@@ -1,4 +1,5 @@
 """The user-written controller of examples/ plugs into simulate() without copying the loop."""
+
 from __future__ import annotations
 
 import importlib.util

@@ -5,6 +5,7 @@ t = 6 s to 9 s) shortened to 15 s, and asserts the formation error (max over fol
 during and after the fault. Honest failures are asserted as failures. The table over all four
 methods is ``scripts/fault_table.py`` (README, "Faults").
 """
+
 from __future__ import annotations
 
 import functools
@@ -22,7 +23,7 @@ DURATION = 15.0  # s: 6 s of recovery after the fault window [6, 9] s
 FAULT_PRESETS = [p for p in preset_names() if p.startswith("fault_")]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _run(preset: str, overrides: tuple = (), method: str | None = None):
     ov = {"sim.duration": DURATION, **dict(overrides)}
     res = simulate(load(preset, ov, method=method))
@@ -45,6 +46,7 @@ def _assert_survives(o: dict, during_max: float, recovery_max: float) -> None:
 
 # ---- configuration -----------------------------------------------------------------------------
 
+
 def test_presets_load_round_trip_and_are_faulty():
     from bioform_mj.scenario import preset_names
 
@@ -61,23 +63,26 @@ def test_friction_patch_refused_on_the_ideal_plant():
         load("fault_friction", plant="ideal")
 
 
-@pytest.mark.parametrize("key,value,needle", [
-    ("faults.link_fail", [[2, 3, 1.0, 2.0]], "no link 2-3"),
-    ("faults.link_fail", [[2, 0, 1.0, 2.0]], "no leader link"),
-    ("faults.link_fail", [[1, 2, 3.0, 2.0]], "t_fail < t_recover"),
-    ("faults.link_fail", [[1, 2, 3.0]], "link_fail[0]"),
-    ("faults.link_fail", [[1.5, 2, 1.0, 2.0]], "follower id"),
-    ("faults.packet_loss", 1.0, "[0, 1)"),
-    ("faults.delay", -0.1, "faults.delay"),
-    ("faults.delay", 0.0001, "control period"),
-    ("faults.noise_pose", [0.1, 0.1], "expected 3"),
-    ("faults.noise_vel", [0.1, -0.1], ">= 0"),
-    ("faults.window", [5.0, 4.0], "faults.window"),
-    ("faults.actuator", [[4, 1.0, 2.0, 0.5]], "1..3"),
-    ("faults.actuator", [[1, 1.0, 2.0, 1.5]], "[0, 1]"),
-    ("faults.push", [[1, 1.0, 0.0, 10.0, 0.0, 0.0]], "duration"),
-    ("faults.friction_patch", [3.0, 0.0, 1.0, 2.0, 0.1], "x0 < x1"),
-])
+@pytest.mark.parametrize(
+    "key,value,needle",
+    [
+        ("faults.link_fail", [[2, 3, 1.0, 2.0]], "no link 2-3"),
+        ("faults.link_fail", [[2, 0, 1.0, 2.0]], "no leader link"),
+        ("faults.link_fail", [[1, 2, 3.0, 2.0]], "t_fail < t_recover"),
+        ("faults.link_fail", [[1, 2, 3.0]], "link_fail[0]"),
+        ("faults.link_fail", [[1.5, 2, 1.0, 2.0]], "follower id"),
+        ("faults.packet_loss", 1.0, "[0, 1)"),
+        ("faults.delay", -0.1, "faults.delay"),
+        ("faults.delay", 0.0001, "control period"),
+        ("faults.noise_pose", [0.1, 0.1], "expected 3"),
+        ("faults.noise_vel", [0.1, -0.1], ">= 0"),
+        ("faults.window", [5.0, 4.0], "faults.window"),
+        ("faults.actuator", [[4, 1.0, 2.0, 0.5]], "1..3"),
+        ("faults.actuator", [[1, 1.0, 2.0, 1.5]], "[0, 1]"),
+        ("faults.push", [[1, 1.0, 0.0, 10.0, 0.0, 0.0]], "duration"),
+        ("faults.friction_patch", [3.0, 0.0, 1.0, 2.0, 0.1], "x0 < x1"),
+    ],
+)
 def test_bad_fault_values_name_the_key(key, value, needle):
     with pytest.raises(ScenarioError) as exc:
         load("paper", {key: value}, plant="mujoco")
@@ -97,6 +102,7 @@ def test_no_faults_means_no_fault_code(monkeypatch):
 
 
 # ---- the pieces, without a closed loop ---------------------------------------------------------
+
 
 def _faults(**kw) -> tuple[Faults, Scenario]:
     sc = load("paper", {"sim.duration": 1.0, **{f"faults.{k}": v for k, v in kw.items()}})
@@ -142,6 +148,7 @@ def test_seeded_noise_streams():
         sc = load("paper", {"sim.seed": seed, "faults.noise_pose": [0.1, 0.1, 0.1], "faults.noise_vel": [0.2, 0.2]})
         f = Faults(sc, sc.build_graph(), np.full(3, 20.0))
         return f.sense(0.0, np.zeros((3, 3)), np.zeros((3, 2)))
+
     a, b, c = draw(0), draw(0), draw(1)
     assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
     assert not np.array_equal(a[0], c[0]) and not np.array_equal(a[1], c[1])
@@ -149,8 +156,15 @@ def test_seeded_noise_streams():
 
 
 def test_ideal_plant_push_acts_along_the_heading_only():
-    p = IdealPlant(np.array([0.4, 10.0]), np.array([[0.0, 0.0, 0.0], [0.0, 5.0, np.pi / 2]]), 0.001, 0.001,
-                   lambda t: np.zeros((2, 2)), mass=25.0, inertia=0.2)
+    p = IdealPlant(
+        np.array([0.4, 10.0]),
+        np.array([[0.0, 0.0, 0.0], [0.0, 5.0, np.pi / 2]]),
+        0.001,
+        0.001,
+        lambda t: np.zeros((2, 2)),
+        mass=25.0,
+        inertia=0.2,
+    )
     p.push(0, (100.0, 300.0), 0.0, 0.1)  # heading +x: only the 100 N act
     p.push(1, (100.0, 300.0), 0.02, 0.1)  # heading +y: only the 300 N act, and the yaw torque
     for k in range(200):
@@ -183,6 +197,7 @@ def test_mujoco_push_and_friction_patch():
 
 
 # ---- closed loop: what the method survives -----------------------------------------------------
+
 
 def test_link_failure_cut_off_follower_drifts_then_rejoins():
     res, o = _run("fault_link")
@@ -247,6 +262,7 @@ def test_push_is_survived():
 
 # ---- closed loop: where it breaks (honest failures) --------------------------------------------
 
+
 def test_friction_patch_mu_001_loses_the_formation():
     """On μ = 0.01 the wheels cannot give the accelerations the leader's curve needs; a follower slides off."""
     res, o = _run("fault_friction", (("faults.friction_patch", (3.0, -10.0, 6.0, 10.0, 0.01)),))
@@ -263,13 +279,17 @@ def test_hard_sideways_push_flips_a_robot():
 
 # ---- seeds --------------------------------------------------------------------------------------
 
+
 def test_same_seed_bit_identical_different_seeds_differ():
     def run(seed):
-        sc = load("fault_noise", {"sim.duration": 0.3, "sim.seed": seed, "faults.window": [0.0, 1.0],
-                                  "faults.packet_loss": 0.5}, plant="ideal")
+        sc = load(
+            "fault_noise",
+            {"sim.duration": 0.3, "sim.seed": seed, "faults.window": [0.0, 1.0], "faults.packet_loss": 0.5},
+            plant="ideal",
+        )
         return simulate(sc).log
+
     a, b, c = run(0), run(0), run(1)
     for key in ("pose", "vel", "tau", "est_pose"):
         assert np.array_equal(a[key], b[key]), key
     assert not np.array_equal(a["tau"], c["tau"]) and not np.array_equal(a["est_pose"], c["est_pose"])
-

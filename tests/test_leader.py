@@ -1,4 +1,5 @@
 """Virtual-leader trajectories: analytic velocities against closed forms and finite differences."""
+
 from __future__ import annotations
 
 import math
@@ -21,14 +22,22 @@ def test_paper_leader_closed_form():
     np.testing.assert_allclose(pose[:, 2], np.arctan2(ydot, 1.0), atol=1e-12)
 
 
-@pytest.mark.parametrize("traj", [leader.paper(), leader.line(1, 2, 0.7, 0.3), leader.circle(0, 0, 3, 1.5), leader.figure_eight(0, 0, 4, 0.4)])
+@pytest.mark.parametrize(
+    "traj",
+    [leader.paper(), leader.line(1, 2, 0.7, 0.3), leader.circle(0, 0, 3, 1.5), leader.figure_eight(0, 0, 4, 0.4)],
+)
 def test_derivatives_match_finite_differences(traj):
     t = np.linspace(0.3, 9.7, 50)
     h = 1e-5
     pose, vel, acc = traj.states(t)
     pp, vp, _ = traj.states(t + h)
     pm, vm, _ = traj.states(t - h)
-    np.testing.assert_allclose(vel[:, 1], (np.unwrap(np.stack([pm[:, 2], pp[:, 2]]), axis=0)[1] - np.unwrap(np.stack([pm[:, 2], pp[:, 2]]), axis=0)[0]) / (2 * h), atol=1e-6)
+    np.testing.assert_allclose(
+        vel[:, 1],
+        (np.unwrap(np.stack([pm[:, 2], pp[:, 2]]), axis=0)[1] - np.unwrap(np.stack([pm[:, 2], pp[:, 2]]), axis=0)[0])
+        / (2 * h),
+        atol=1e-6,
+    )
     np.testing.assert_allclose(acc, (vp - vm) / (2 * h), atol=1e-5)
     speed = np.hypot(pp[:, 0] - pm[:, 0], pp[:, 1] - pm[:, 1]) / (2 * h)
     np.testing.assert_allclose(vel[:, 0], speed, atol=1e-6)

@@ -1,4 +1,5 @@
 """DC motors (design §8.2, issue 12): datasheet numbers, ground truth, identification, bad input."""
+
 from __future__ import annotations
 
 import json
@@ -91,12 +92,15 @@ def _scenario(tmp_path: Path, robot: str, model_text: str | None = None) -> Path
     return toml
 
 
-@pytest.mark.parametrize("case, key", [
-    ("no_dcmotor", "plant.robots.motor"),
-    ("bad_driver", "].driver"),
-    ("zero_voltage", "plant.robots.motor"),
-    ("negative_constant", "bot.xml"),
-])
+@pytest.mark.parametrize(
+    "case, key",
+    [
+        ("no_dcmotor", "plant.robots.motor"),
+        ("bad_driver", "].driver"),
+        ("zero_voltage", "plant.robots.motor"),
+        ("negative_constant", "bot.xml"),
+    ],
+)
 def test_bad_motor_input_exits_2_naming_the_key(tmp_path, capsys, case, key):
     tb3 = (models_dir() / "tb3_robot.xml").read_text()
     if case == "no_dcmotor":
@@ -104,11 +108,15 @@ def test_bad_motor_input_exits_2_naming_the_key(tmp_path, capsys, case, key):
     elif case == "bad_driver":
         toml = _scenario(tmp_path, '{ model = "tb3", motor = "dc", driver = "pwm" }')
     elif case == "zero_voltage":
-        toml = _scenario(tmp_path, '{ model = "bot.xml", motor = "dc" }',
-                         tb3.replace('ctrlrange="-11.1 11.1"', 'ctrlrange="0 0"'))
+        toml = _scenario(
+            tmp_path, '{ model = "bot.xml", motor = "dc" }', tb3.replace('ctrlrange="-11.1 11.1"', 'ctrlrange="0 0"')
+        )
     else:
-        toml = _scenario(tmp_path, '{ model = "bot.xml", motor = "dc" }',
-                         tb3.replace('nominal="11.1 0.0054158607 1542.9932"', 'motorconst="-0.0072 0" resistance="14.7"'))
+        toml = _scenario(
+            tmp_path,
+            '{ model = "bot.xml", motor = "dc" }',
+            tb3.replace('nominal="11.1 0.0054158607 1542.9932"', 'motorconst="-0.0072 0" resistance="14.7"'),
+        )
     out = tmp_path / "out"
     code = main(["run", str(toml), "--duration", "0.1", "--quiet", "--out", str(out)])
     err = capsys.readouterr().err.strip()

@@ -6,6 +6,7 @@ shared through module-scoped fixtures: Table I in MuJoCo (4 × 20 s, whose
 bioinspired-learning run also serves the learner and formation checks), the payload preset
 (120 s) and the heterogeneous preset (2 × 20 s). Measured values are quoted at each bound.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -35,6 +36,7 @@ def _rel(c_hat, c_true) -> np.ndarray:
 # ---------------------------------------------------------------------------------------
 # The paper scenario in MuJoCo: Table I and the learner
 # ---------------------------------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def table1_mujoco():
@@ -97,9 +99,11 @@ def test_same_seed_identical_logs_in_mujoco():
 
     With jittered initial poses and a payload event, so that both seeded and event paths run.
     """
+
     def run(seed: int):
-        sc = load("paper", plant="mujoco",
-                  overrides=["sim.duration=1.5", "formation.init_jitter=0.2", f"sim.seed={seed}"])
+        sc = load(
+            "paper", plant="mujoco", overrides=["sim.duration=1.5", "formation.init_jitter=0.2", f"sim.seed={seed}"]
+        )
         sc = dataclasses.replace(sc, events=(EventCfg(time=0.5, follower=2, mass=12.0, inertia=0.3),))
         return simulate(sc)
 
@@ -119,6 +123,7 @@ def test_same_seed_identical_logs_in_mujoco():
 # ---------------------------------------------------------------------------------------
 # Payload preset: follower 2 picks up 12 kg + 0.3 kg·m² at t = 10 s
 # ---------------------------------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def payload_run():
@@ -165,6 +170,7 @@ def test_payload_c_hat_tracks_new_values(payload_run):
     np.testing.assert_allclose(f2["c_true"], [1 / 3.7, 4.0], rtol=1e-6)
     err = _rel(f2["c_hat"], f2["c_true"])
     assert np.all(np.abs(err) < 0.15), err
+
     # â re-converges fast (measured −7 % at 20 s), b̂'s error shrinks all the way (+123 %, +32 %, −1 %)
     def err_at(time: float) -> np.ndarray:
         k = np.searchsorted(t, time)
@@ -183,6 +189,7 @@ def test_payload_c_hat_tracks_new_values(payload_run):
 # ---------------------------------------------------------------------------------------
 # Heterogeneous preset: paper robot, lab robot, paper robot
 # ---------------------------------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def hetero_runs():
@@ -248,6 +255,7 @@ def test_hetero_gain_scaling_learns_every_robot_and_keeps_the_paper_robots(heter
 # CLI: run --plant mujoco writes scene.xml; identify
 # ---------------------------------------------------------------------------------------
 
+
 def test_run_mujoco_writes_scene_xml_that_compiles(tmp_path):
     out = tmp_path / "run"
     code = main(["run", "paper", "--plant", "mujoco", "--set", "sim.duration=1", "--out", str(out), "--quiet"])
@@ -266,7 +274,7 @@ def test_run_mujoco_writes_scene_xml_that_compiles(tmp_path):
     sc = load("paper")
     for i, pose in enumerate(sc.initial_poses()):
         adr = model.jnt_qposadr[model.body_jntadr[model.body(f"f{i + 1}/base").id]]
-        np.testing.assert_allclose(model.qpos0[adr:adr + 2], pose[:2], atol=1e-6)
+        np.testing.assert_allclose(model.qpos0[adr : adr + 2], pose[:2], atol=1e-6)
     for i, f in enumerate(summary["followers"]):
         np.testing.assert_allclose(ground_truth(model, f"f{i + 1}/"), f["c_true"], rtol=1e-5)  # to_xml: ~7 digits
 
@@ -280,8 +288,13 @@ def test_identify_cli_on_model_file(tmp_path, name, expected):
     out_json = tmp_path / "ident.json"
     exe = Path(sys.executable).with_name("bioform")
     cmd = [str(exe)] if exe.is_file() else [sys.executable, "-m", "bioform_mj.cli"]
-    r = subprocess.run(cmd + ["identify", str(model), "--out", str(out_json)],
-                       capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    r = subprocess.run(
+        cmd + ["identify", str(model), "--out", str(out_json)],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=120,
+    )
     assert r.returncode == 0, r.stderr
     rep = json.loads(r.stdout)
     assert rep == json.loads(out_json.read_text())
@@ -303,11 +316,14 @@ NO_WHEELS = """<mujoco model="no_wheels">
 """
 
 
-@pytest.mark.parametrize("case,needle", [
-    ("missing", "does not exist"),
-    ("no wheels", "left_wheel"),
-    ("not xml", "MODEL.xml"),
-])
+@pytest.mark.parametrize(
+    "case,needle",
+    [
+        ("missing", "does not exist"),
+        ("no wheels", "left_wheel"),
+        ("not xml", "MODEL.xml"),
+    ],
+)
 def test_identify_cli_bad_model_exit_2_one_line(tmp_path, capsys, case, needle):
     model = tmp_path / "MODEL.xml"
     if case == "no wheels":

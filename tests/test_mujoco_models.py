@@ -16,8 +16,8 @@ import pytest
 
 from bioform_mj.errors import Diverged
 from bioform_mj.identify import ground_truth, identify, identify_main, robot_parameters
-from bioform_mj.robots import models_dir, robot_names
 from bioform_mj.plants.mujoco_plant import MujocoPlant
+from bioform_mj.robots import models_dir, robot_names
 from bioform_mj.scene import ModelError, build_scene, compile_scene, load_robot, model_path, prepare_robot
 
 MODELS_DIR = models_dir()
@@ -47,9 +47,12 @@ def test_models_are_shipped():
 def test_every_element_is_named_and_classes_exist(path: Path):
     model = load_robot(path).compile()
     for objtype, count in [
-        (mujoco.mjtObj.mjOBJ_BODY, model.nbody), (mujoco.mjtObj.mjOBJ_JOINT, model.njnt),
-        (mujoco.mjtObj.mjOBJ_GEOM, model.ngeom), (mujoco.mjtObj.mjOBJ_SITE, model.nsite),
-        (mujoco.mjtObj.mjOBJ_ACTUATOR, model.nu), (mujoco.mjtObj.mjOBJ_SENSOR, model.nsensor),
+        (mujoco.mjtObj.mjOBJ_BODY, model.nbody),
+        (mujoco.mjtObj.mjOBJ_JOINT, model.njnt),
+        (mujoco.mjtObj.mjOBJ_GEOM, model.ngeom),
+        (mujoco.mjtObj.mjOBJ_SITE, model.nsite),
+        (mujoco.mjtObj.mjOBJ_ACTUATOR, model.nu),
+        (mujoco.mjtObj.mjOBJ_SENSOR, model.nsensor),
     ]:
         start = 1 if objtype == mujoco.mjtObj.mjOBJ_BODY else 0  # body 0 is the world
         for i in range(start, count):
@@ -74,7 +77,9 @@ def test_every_element_is_named_and_classes_exist(path: Path):
         assert params.com_offset < 1e-9
 
 
-@pytest.mark.parametrize("files", [[f] for f in SHIPPED_FILES] + [HETERO], ids=lambda f: "+".join(Path(x).stem for x in f))
+@pytest.mark.parametrize(
+    "files", [[f] for f in SHIPPED_FILES] + [HETERO], ids=lambda f: "+".join(Path(x).stem for x in f)
+)
 def test_compiles_and_steps_under_random_torques_without_warnings(files):
     n = len(files)
     poses = HETERO_POSES[:n]
@@ -199,8 +204,9 @@ def test_wheel_cylinder_collision_gets_a_single_contact_proxy(tmp_path):
     (the cylinder stays for looks) and says so; ``b`` then identifies as the formula says."""
     src = (MODELS_DIR / "paper_robot.xml").read_text()
     cyl = tmp_path / "cyl.xml"
-    cyl.write_text(src.replace('<geom type="ellipsoid" size="0.1 0.02 0.1"',
-                               '<geom type="cylinder" size="0.1 0.02" zaxis="0 1 0"'))
+    cyl.write_text(
+        src.replace('<geom type="ellipsoid" size="0.1 0.02 0.1"', '<geom type="cylinder" size="0.1 0.02" zaxis="0 1 0"')
+    )
     spec, layout, *_ = prepare_robot(cyl)
     assert layout.wheel_radius == pytest.approx(0.1, abs=1e-12)
     assert any("replaced by a single-contact ellipsoid proxy" in n for n in layout.notes)
@@ -270,7 +276,7 @@ def test_observe_matches_mujoco_sensors():
         plant.step(rng.uniform(-0.5, 1, (3, 2)) * plant.tau_max[:, None], k * DT)
     mujoco.mj_forward(plant.model, plant.data)  # sensors at the current state
     pose, vel = plant.observe()
-    m, d = plant.model, plant.data
+    d = plant.data
     for i in range(3):
         quat = d.sensor(f"f{i + 1}/base_quat").data
         w, x, y, z = quat
@@ -294,7 +300,7 @@ def test_same_seed_bit_identical():
         plant.reset()
         return np.array(out), plant.observe()
 
-    (a, start_a), (b, start_b) = run(), run()
+    (a, start_a), (b, _) = run(), run()
     assert np.array_equal(a, b)
     np.testing.assert_array_equal(start_a[0], HETERO_POSES)
     np.testing.assert_array_equal(start_a[1], 0.0)
@@ -364,10 +370,16 @@ def test_unstable_simulation_raises_diverged():
 # ------------------------------------------------------------------ bad model files
 INCOMPLETE = {  # what no mapping can fix (the mapping cases are in test_robots.py)
     "no base": ('<body name="base"', '<body name="chassis"', "body 'base'"),
-    "wheel not a hinge": ('<joint name="left_wheel"/>', '<joint name="left_wheel" type="slide"/>',
-                          "joint 'left_wheel' .*is not a hinge"),
-    "wheel without collision geom": ('<geom name="right_wheel_collision"/>', "",
-                                     "wheel joint 'right_wheel' has no collision geom"),
+    "wheel not a hinge": (
+        '<joint name="left_wheel"/>',
+        '<joint name="left_wheel" type="slide"/>',
+        "joint 'left_wheel' .*is not a hinge",
+    ),
+    "wheel without collision geom": (
+        '<geom name="right_wheel_collision"/>',
+        "",
+        "wheel joint 'right_wheel' has no collision geom",
+    ),
 }
 
 

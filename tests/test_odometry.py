@@ -1,7 +1,6 @@
 """Sensors and odometry (design §8.3, issue 12 items 3, 4, 6): encoders, gyro, dead reckoning, bad input."""
-from __future__ import annotations
 
-import json
+from __future__ import annotations
 
 import numpy as np
 import pytest
@@ -23,8 +22,16 @@ def _scripted(wheel_tau, T=20.0, **sensing):
     wheel speed, design §8.2), the command ramped over 2 s (no wheel slip), control at 100 Hz.
     Returns the true path length (m) and the odometry's error at the end ``[m, rad]``."""
     dt = 0.01
-    p = MujocoPlant([RobotRef("tb3", motor="dc", driver="voltage")], np.zeros((1, 3)), dt, 0.001, None, slots=False,
-                    sensing="odometry", **{"encoder_cpr": 4096.0, **sensing})
+    p = MujocoPlant(
+        [RobotRef("tb3", motor="dc", driver="voltage")],
+        np.zeros((1, 3)),
+        dt,
+        0.001,
+        None,
+        slots=False,
+        sensing="odometry",
+        **{"encoder_cpr": 4096.0, **sensing},
+    )
     p.reset()
     last = p.observe()[0].copy()
     dist = 0.0
@@ -69,8 +76,17 @@ def test_counter_hash_noise_statistics_and_quantisation():
 
 
 def _tb3(*extra):
-    return S.load("tb3", ['plant.sensing="odometry"', "sim.control_dt=0.01", "sim.log_dt=0.01",
-                          f"plant.gyro_noise={GYRO_NOISE}", f"plant.gyro_bias={GYRO_BIAS}", *extra])
+    return S.load(
+        "tb3",
+        [
+            'plant.sensing="odometry"',
+            "sim.control_dt=0.01",
+            "sim.log_dt=0.01",
+            f"plant.gyro_noise={GYRO_NOISE}",
+            f"plant.gyro_bias={GYRO_BIAS}",
+            *extra,
+        ],
+    )
 
 
 def test_tb3_holds_its_formation_on_odometry_at_100_hz():
@@ -92,8 +108,9 @@ def test_odometry_compiled_and_stepwise_are_bit_identical():
     a, b = simulate(sc, engine="compiled"), simulate(sc, engine="stepwise")
     for k in a.log:
         assert np.array_equal(a.log[k], b.log[k], equal_nan=True), k
-    assert [f["odometry_drift_m"] for f in a.summary["followers"]] == \
-        [f["odometry_drift_m"] for f in b.summary["followers"]]
+    assert [f["odometry_drift_m"] for f in a.summary["followers"]] == [
+        f["odometry_drift_m"] for f in b.summary["followers"]
+    ]
 
 
 def test_truth_sensing_logs_the_truth_as_the_measurement():
@@ -103,13 +120,16 @@ def test_truth_sensing_logs_the_truth_as_the_measurement():
     assert all(f["odometry_drift_m"] is None for f in r.summary["followers"])
 
 
-@pytest.mark.parametrize("sets,key", [
-    (["plant.sensing=\"odometry\"", "plant.encoder_cpr=0"], "plant.encoder_cpr"),
-    (["plant.sensing=\"odometry\"", "plant.sensor_dt=0.0015"], "plant.sensor_dt"),
-    (["plant.sensing=\"odometry\"", "plant.robots=[\"lab\"]"], "plant.sensing"),
-    (["plant.sensing=\"gps\""], "plant.sensing"),
-    (["plant.sensing=\"odometry\"", "plant.kind=\"ideal\"", "plant.robots=[\"paper\"]"], "plant.sensing"),
-])
+@pytest.mark.parametrize(
+    "sets,key",
+    [
+        (['plant.sensing="odometry"', "plant.encoder_cpr=0"], "plant.encoder_cpr"),
+        (['plant.sensing="odometry"', "plant.sensor_dt=0.0015"], "plant.sensor_dt"),
+        (['plant.sensing="odometry"', 'plant.robots=["lab"]'], "plant.sensing"),
+        (['plant.sensing="gps"'], "plant.sensing"),
+        (['plant.sensing="odometry"', 'plant.kind="ideal"', 'plant.robots=["paper"]'], "plant.sensing"),
+    ],
+)
 def test_bad_sensor_input_exit_2(sets, key, tmp_path, capsys):
     out = tmp_path / "o"
     argv = ["run", "tb3", "--duration", "0.1", "--out", str(out)]

@@ -4,6 +4,7 @@ Short runs (2 s simulated) at small resolutions keep this file well under a minu
 CPU cores with Mesa's software EGL. Rendering tests skip, naming the reason, only when no
 OpenGL backend (egl, osmesa, glfw) can make a context on this machine.
 """
+
 from __future__ import annotations
 
 import io
@@ -36,8 +37,9 @@ def _env(**extra: str) -> dict[str, str]:
 
 def _cli(args: list[str], **env: str) -> subprocess.CompletedProcess:
     """``bioform ARGS`` in a fresh interpreter (MUJOCO_GL is read once per process)."""
-    return subprocess.run([sys.executable, "-m", "bioform_mj.cli", *args], capture_output=True, text=True,
-                          env=_env(**env), timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "bioform_mj.cli", *args], capture_output=True, text=True, env=_env(**env), timeout=300
+    )
 
 
 # ---------------------------------------------------------------------------- rendering backend
@@ -53,13 +55,16 @@ def gl_backend() -> str | None:
         errors = [f"{os.environ.get('MUJOCO_GL', 'unset')}: {exc}"]
     code = "from bioform_mj.outputs.gl import configure_gl_env, probe; configure_gl_env(); print(probe())"
     for backend in ("egl", "osmesa", "glfw"):
-        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=_env(MUJOCO_GL=backend),
-                           timeout=120)
+        r = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, env=_env(MUJOCO_GL=backend), timeout=120
+        )
         if r.returncode == 0:
             return backend
         errors.append(f"{backend}: {(r.stderr.strip().splitlines() or ['?'])[-1]}")
-    pytest.skip("no OpenGL backend can make a context here (install libegl1 + libgl1-mesa-dri, or libosmesa6): "
-                + " | ".join(errors))
+    pytest.skip(
+        "no OpenGL backend can make a context here (install libegl1 + libgl1-mesa-dri, or libosmesa6): "
+        + " | ".join(errors)
+    )
 
 
 def _run_video(args: list[str], backend: str | None) -> int:
@@ -86,8 +91,26 @@ def _check_video(path: Path, frames: int, height: int, width: int) -> np.ndarray
 
 def test_video_mujoco_plant(tmp_path, gl_backend):
     out = tmp_path / "mj"
-    code = _run_video(["run", "paper", "--plant", "mujoco", *SHORT, "--out", str(out), "--video",
-                       "--width", "160", "--height", "96", "--fps", "15", "--quiet"], gl_backend)
+    code = _run_video(
+        [
+            "run",
+            "paper",
+            "--plant",
+            "mujoco",
+            *SHORT,
+            "--out",
+            str(out),
+            "--video",
+            "--width",
+            "160",
+            "--height",
+            "96",
+            "--fps",
+            "15",
+            "--quiet",
+        ],
+        gl_backend,
+    )
     assert code == 0
     _check_video(out / "video.mp4", 30, 96, 160)  # 2 s at 15 fps
     assert (out / "summary.json").is_file() and (out / "scene.xml").is_file()
@@ -96,8 +119,28 @@ def test_video_mujoco_plant(tmp_path, gl_backend):
 
 def test_video_ideal_plant_is_replayed_in_a_composed_scene(tmp_path, gl_backend):
     out = tmp_path / "ideal"
-    code = _run_video(["run", "paper", "--plant", "ideal", *SHORT, "--out", str(out), "--video",
-                       "--width", "128", "--height", "72", "--fps", "10", "--camera", "top", "--quiet"], gl_backend)
+    code = _run_video(
+        [
+            "run",
+            "paper",
+            "--plant",
+            "ideal",
+            *SHORT,
+            "--out",
+            str(out),
+            "--video",
+            "--width",
+            "128",
+            "--height",
+            "72",
+            "--fps",
+            "10",
+            "--camera",
+            "top",
+            "--quiet",
+        ],
+        gl_backend,
+    )
     assert code == 0
     _check_video(out / "video.mp4", 20, 72, 128)
     assert not (out / "scene.xml").exists()  # the composed scene is for the picture only
@@ -109,11 +152,33 @@ def test_video_ideal_plant_with_a_mapped_third_party_robot(tmp_path, gl_backend)
     from pathlib import Path
 
     model = Path(__file__).resolve().parent / "data" / "thirdparty_base.xml"
-    robot = (f'plant.robots=[{{model="{model}", base="base_link", left_wheel="joint_left_wheel", '
-             'right_wheel="joint_right_wheel"}]')
+    robot = (
+        f'plant.robots=[{{model="{model}", base="base_link", left_wheel="joint_left_wheel", '
+        'right_wheel="joint_right_wheel"}]'
+    )
     out = tmp_path / "tp"
-    code = _run_video(["run", "paper", "--plant", "ideal", *SHORT, "--set", robot, "--out", str(out), "--video",
-                       "--width", "128", "--height", "72", "--fps", "10", "--quiet"], gl_backend)
+    code = _run_video(
+        [
+            "run",
+            "paper",
+            "--plant",
+            "ideal",
+            *SHORT,
+            "--set",
+            robot,
+            "--out",
+            str(out),
+            "--video",
+            "--width",
+            "128",
+            "--height",
+            "72",
+            "--fps",
+            "10",
+            "--quiet",
+        ],
+        gl_backend,
+    )
     assert code == 0
     _check_video(out / "video.mp4", 20, 72, 128)
 
@@ -121,8 +186,22 @@ def test_video_ideal_plant_with_a_mapped_third_party_robot(tmp_path, gl_backend)
 # ---------------------------------------------------------------------------- GL failure
 def test_invalid_gl_backend_exit_2_outputs_kept(tmp_path):
     out = tmp_path / "bad_gl"
-    r = _cli(["run", "paper", "--plant", "ideal", "--set", "sim.duration=0.5", "--out", str(out), "--video",
-              "--rrd", "--quiet"], MUJOCO_GL="invalid_backend")
+    r = _cli(
+        [
+            "run",
+            "paper",
+            "--plant",
+            "ideal",
+            "--set",
+            "sim.duration=0.5",
+            "--out",
+            str(out),
+            "--video",
+            "--rrd",
+            "--quiet",
+        ],
+        MUJOCO_GL="invalid_backend",
+    )
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2, r.stderr
     assert len(lines) == 1 and lines[0].startswith("error:") and "MUJOCO_GL" in lines[0], r.stderr
@@ -142,7 +221,9 @@ def test_no_gl_context_exit_2_outputs_kept(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(mujoco, "GLContext", no_context)
     monkeypatch.setattr(mujoco, "Renderer", no_context)
     out = tmp_path / "no_ctx"
-    code = main(["run", "paper", "--plant", "mujoco", "--set", "sim.duration=0.3", "--out", str(out), "--video", "--quiet"])
+    code = main(
+        ["run", "paper", "--plant", "mujoco", "--set", "sim.duration=0.3", "--out", str(out), "--video", "--quiet"]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2
     assert len(err) == 1 and err[0].startswith("error:") and "no display" in err[0] and "libegl1" in err[0]
@@ -157,7 +238,8 @@ def boom(*a, **k):
     raise AssertionError("renderer touched")
 mujoco.Renderer = mujoco.GLContext = boom
 from bioform_mj.cli import main
-rc = main(["run", "paper", "--plant", "mujoco", "--set", "sim.duration=0.2", "--out", {str(tmp_path / 'plain')!r}, "--quiet"])
+out = {str(tmp_path / "plain")!r}
+rc = main(["run", "paper", "--plant", "mujoco", "--set", "sim.duration=0.2", "--out", out, "--quiet"])
 loaded = [m for m in ("rerun", "mediapy", "matplotlib", "tqdm", "bioform_mj.outputs.video",
                       "bioform_mj.outputs.rerun_log", "bioform_mj.outputs.figures") if m in sys.modules]
 print(rc, loaded)
@@ -220,8 +302,11 @@ def test_rerun_connect_streams_live(tmp_path):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     saved = tmp_path / "live.rrd"
-    server = subprocess.Popen([exe, "--serve-grpc", "--bind", "127.0.0.1", "--port", str(port), "--save", str(saved)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    server = subprocess.Popen(
+        [exe, "--serve-grpc", "--bind", "127.0.0.1", "--port", str(port), "--save", str(saved)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         for _ in range(100):  # wait until it listens
             with socket.socket() as s:
@@ -229,8 +314,23 @@ def test_rerun_connect_streams_live(tmp_path):
                     break
             time.sleep(0.1)
         out = tmp_path / "live"
-        assert main(["run", "paper", "--plant", "ideal", *SHORT, "--out", str(out), "--quiet",
-                     "--rerun-connect", f"rerun+http://127.0.0.1:{port}/proxy"]) == 0
+        assert (
+            main(
+                [
+                    "run",
+                    "paper",
+                    "--plant",
+                    "ideal",
+                    *SHORT,
+                    "--out",
+                    str(out),
+                    "--quiet",
+                    "--rerun-connect",
+                    f"rerun+http://127.0.0.1:{port}/proxy",
+                ]
+            )
+            == 0
+        )
         time.sleep(0.5)
     finally:
         server.send_signal(signal.SIGINT)
@@ -261,8 +361,14 @@ def test_run_figures(tmp_path):
     out = tmp_path / "figs"
     assert main(["run", "paper", "--plant", "ideal", *SHORT, "--out", str(out), "--figures", "--quiet"]) == 0
     names = {p.name for p in (out / "figures").glob("*.png")}
-    assert {"trajectories.png", "tracking_errors.png", "estimation_errors.png", "velocities.png",
-            "learning.png", "velocity_errors.png"} <= names
+    assert {
+        "trajectories.png",
+        "tracking_errors.png",
+        "estimation_errors.png",
+        "velocities.png",
+        "learning.png",
+        "velocity_errors.png",
+    } <= names
     for p in (out / "figures").glob("*.png"):
         _assert_png(p)
     assert not list((out / "figures").glob(".*tmp"))
@@ -272,23 +378,31 @@ def test_table1_figures(tmp_path):
     out = tmp_path / "t1"
     assert main(["table1", "paper", "--plant", "ideal", *SHORT, "--out", str(out), "--figures", "--quiet"]) == 0
     names = {p.name for p in (out / "figures").glob("*.png")}
-    assert {"table1_velocity_commands.png", "table1_velocity_error_learning.png", "table1_total_velocity_error.png",
-            "table1_learning.png", "table1_trajectories.png"} <= names
+    assert {
+        "table1_velocity_commands.png",
+        "table1_velocity_error_learning.png",
+        "table1_total_velocity_error.png",
+        "table1_learning.png",
+        "table1_trajectories.png",
+    } <= names
     for p in (out / "figures").glob("*.png"):
         _assert_png(p)
     assert (out / "table1.json").is_file()
 
 
 # ---------------------------------------------------------------------------- options, progress
-@pytest.mark.parametrize("argv,needle", [
-    (["--video", "--width", "161"], "--width must be an even number"),
-    (["--video", "--height", "0"], "--height must be an even number"),
-    (["--video", "--fps", "0"], "--fps must be in 1..240"),
-    (["--width", "320"], "--width only apply to --video"),
-    (["--video", "--camera", "side"], "invalid choice: 'side'"),
-    (["--rerun-connect", "not a url"], "is not a rerun address"),
-    (["--rerun-spawn", "--rerun-connect", "9876"], "exclude each other"),
-])
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["--video", "--width", "161"], "--width must be an even number"),
+        (["--video", "--height", "0"], "--height must be an even number"),
+        (["--video", "--fps", "0"], "--fps must be in 1..240"),
+        (["--width", "320"], "--width only apply to --video"),
+        (["--video", "--camera", "side"], "invalid choice: 'side'"),
+        (["--rerun-connect", "not a url"], "is not a rerun address"),
+        (["--rerun-spawn", "--rerun-connect", "9876"], "exclude each other"),
+    ],
+)
 def test_bad_output_options_exit_2(argv, needle, tmp_path, capsys):
     out = tmp_path / "never"
     code = main(["run", "paper", "--plant", "ideal", "--out", str(out), *argv])

@@ -5,6 +5,7 @@ armature: formula and identification within 3 %; a base origin off the axle: pos
 are the axle midpoint's (checked against a MuJoCo site there); bad mappings exit 2 naming
 the element and the file, writing nothing.
 """
+
 from __future__ import annotations
 
 import json
@@ -20,7 +21,7 @@ from bioform_mj.plants.mujoco_plant import MujocoPlant
 from bioform_mj.robot_check import EXIT_FAIL, check, feasibility
 from bioform_mj.robots import RobotRef, models_dir
 from bioform_mj.scenario import load
-from bioform_mj.scene import ModelError, prepare_robot
+from bioform_mj.scene import prepare_robot
 
 DATA = Path(__file__).parent / "data"
 TP_FILE = DATA / "thirdparty_base.xml"
@@ -118,13 +119,16 @@ def test_base_origin_off_axle_pose_and_velocity_are_the_axle_midpoint():
     assert vel[0, 0] > 0.1  # it did move
 
 
-@pytest.mark.parametrize("flags,what", [
-    (["--base", "chassis"], "no body 'chassis'"),
-    (["--left-wheel", "joint_head_pan"], "joint 'joint_head_pan' .*is not on a body below|not along"),
-    (["--right-wheel", "no_such_joint"], "no joint 'no_such_joint'"),
-    (["--left-wheel", "joint_right_wheel"], "same joint 'joint_right_wheel'"),
-    (["--left-wheel", "base_free"], "joint 'base_free' .*is not a hinge"),
-])
+@pytest.mark.parametrize(
+    "flags,what",
+    [
+        (["--base", "chassis"], "no body 'chassis'"),
+        (["--left-wheel", "joint_head_pan"], "joint 'joint_head_pan' .*is not on a body below|not along"),
+        (["--right-wheel", "no_such_joint"], "no joint 'no_such_joint'"),
+        (["--left-wheel", "joint_right_wheel"], "same joint 'joint_right_wheel'"),
+        (["--left-wheel", "base_free"], "joint 'base_free' .*is not a hinge"),
+    ],
+)
 def test_bad_mapping_exits_2_naming_element_and_file(tmp_path, capsys, flags, what):
     base = dict(zip(TP_FLAGS[::2], TP_FLAGS[1::2]))
     base.update(dict(zip(flags[::2], flags[1::2])))
@@ -147,8 +151,9 @@ def test_no_collision_geom_and_no_radius_and_not_compiling_exit_2(tmp_path, caps
     err = capsys.readouterr().err
     assert "bare.xml" in err and "joint_left_wheel" in err and "wheel_radius" in err
     # with a radius given, a proxy is added and the robot works
-    rep = check(RobotRef(str(bare), "base_link", "joint_left_wheel", "joint_right_wheel", wheel_radius=0.05),
-                identify_=False)
+    rep = check(
+        RobotRef(str(bare), "base_link", "joint_left_wheel", "joint_right_wheel", wheel_radius=0.05), identify_=False
+    )
     assert rep["wheel_radius_m"] == pytest.approx(0.05)
     broken = tmp_path / "broken.xml"
     broken.write_text(src.replace("</worldbody>", ""))
@@ -161,8 +166,20 @@ def test_robot_check_json_and_verdicts(tmp_path, capsys):
     out = tmp_path / "check.json"
     assert cli.main(["robot", "check", str(TP_FILE), *TP_FLAGS, "--json", str(out)]) == 0
     rep = json.loads(out.read_text())
-    for key in ("verdict", "a_eff", "b_eff", "a_identified", "b_identified", "traction_limit_nm", "motor_limit_nm",
-                "tip_accel_mps2", "notes", "parts", "com_offset_m", "wheel_joints"):
+    for key in (
+        "verdict",
+        "a_eff",
+        "b_eff",
+        "a_identified",
+        "b_identified",
+        "traction_limit_nm",
+        "motor_limit_nm",
+        "tip_accel_mps2",
+        "notes",
+        "parts",
+        "com_offset_m",
+        "wheel_joints",
+    ):
         assert key in rep
     assert rep["verdict"] == "warn"  # skids and tips at full torque, 2 cm CoM offset, damping
     assert rep["tip_accel_mps2"]["backward"] == pytest.approx(9.81 * 0.0205 / 0.1024, rel=0.02)
@@ -175,7 +192,9 @@ def test_robot_check_json_and_verdicts(tmp_path, capsys):
     assert "pass:" in capsys.readouterr().out
     # no rear caster: the centre of mass (2 cm behind the axle) has no support behind it
     tipsy = tmp_path / "tipsy.xml"
-    tipsy.write_text(TP_FILE.read_text().replace('<geom name="rear_caster" class="caster_tp" pos="-0.15 0 0.025"/>', ""))
+    tipsy.write_text(
+        TP_FILE.read_text().replace('<geom name="rear_caster" class="caster_tp" pos="-0.15 0 0.025"/>', "")
+    )
     assert cli.main(["robot", "check", str(tipsy), *TP_FLAGS]) == EXIT_FAIL
     assert "statically unstable" in capsys.readouterr().err
 
@@ -191,7 +210,8 @@ def test_toml_paths_are_relative_to_the_file(tmp_path, monkeypatch):
     sub.mkdir()
     (sub / "robot.xml").write_text((models_dir() / "lab_robot.xml").read_text())
     (sub / "s.toml").write_text(
-        '[plant]\nkind = "mujoco"\nrobots = ["robot.xml", {model = "robot.xml", base = "base"}, "lab"]\n')
+        '[plant]\nkind = "mujoco"\nrobots = ["robot.xml", {model = "robot.xml", base = "base"}, "lab"]\n'
+    )
     monkeypatch.chdir(tmp_path)  # not the file's directory
     sc = load(str(sub / "s.toml"))
     assert [Path(r.model) for r in sc.plant.robots[:2]] == [(sub / "robot.xml").resolve()] * 2
@@ -216,8 +236,11 @@ def test_robots_on_the_ideal_plant_give_c_true():
 
 
 def test_feasibility_warns_about_a_robot_that_tips():
-    sc = load("paper", plant="mujoco", overrides=["formation.initial_poses=[[0,0,0]]", "formation.offsets=[[3,0]]",
-                                                   "graph.edges=[]"])
+    sc = load(
+        "paper",
+        plant="mujoco",
+        overrides=["formation.initial_poses=[[0,0,0]]", "formation.offsets=[[3,0]]", "graph.edges=[]"],
+    )
     plant = MujocoPlant([TP], sc.initial_poses(), 0.002, 0.002)
     warn = feasibility(sc, plant)
     assert any("start-up transient" in w and "tip" in w for w in warn)
@@ -241,15 +264,18 @@ def test_shipped_robot_scaled_paper_scenario_holds_formation(preset, robot):
     final = [f["final_formation_error_m"] for f in res.summary["followers"]]
     assert max(final) < 0.1, final  # measured < 1 cm
     assert np.min(res.plant.upright()) > np.cos(res.plant.TIP_ANGLE)
-    np.testing.assert_allclose(res.plant.c_true()[0], robot_truth(robot if preset != "tb3" else
-                                                                  RobotRef("tb3", tau_max=0.05)).c, rtol=1e-6)
+    np.testing.assert_allclose(
+        res.plant.c_true()[0], robot_truth(robot if preset != "tb3" else RobotRef("tb3", tau_max=0.05)).c, rtol=1e-6
+    )
 
 
 def test_scale_maps_lengths_and_keeps_times():
     p, s = load("paper"), load("paper", overrides=["formation.scale=0.1"])
     assert s.leader.speed == pytest.approx(0.1 * p.leader.speed) and s.leader.frequency == p.leader.frequency
     np.testing.assert_allclose(s.formation.offsets, 0.1 * np.array(p.formation.offsets))
-    np.testing.assert_allclose(np.array(s.formation.initial_poses)[:, :2], 0.1 * np.array(p.formation.initial_poses)[:, :2])
+    np.testing.assert_allclose(
+        np.array(s.formation.initial_poses)[:, :2], 0.1 * np.array(p.formation.initial_poses)[:, :2]
+    )
     assert s.kinematic.k2 == pytest.approx(p.kinematic.k2 / 0.01) and s.kinematic.k1 == p.kinematic.k1
     assert s.disturbance.bias[0] == pytest.approx(0.1 * p.disturbance.bias[0])
     from bioform_mj.errors import ScenarioError

@@ -1,8 +1,8 @@
 """Robustness: a battery of bad inputs (exit 2, one line, nothing written), fuzzed scenarios, SIGKILL."""
+
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -41,7 +41,12 @@ BAD = [
     ("duplicate leader access id", "[graph]\nleader_access = [1, 1]", [], "more than once"),
     ("same formation slot", "[formation]\noffsets = [[3.0, 0.0], [4.0, 5.0], [3.0, 0.0]]", [], "same formation slot"),
     ("initial poses count mismatch", "[formation]\ninitial_poses = [[0.0, 0.0, 0.0]]", [], "formation.initial_poses"),
-    ("offset with three numbers", "[formation]\noffsets = [[3.0, 0.0, 1.0], [4.0, 5.0], [4.0, -5.0]]", [], "formation.offsets[0]"),
+    (
+        "offset with three numbers",
+        "[formation]\noffsets = [[3.0, 0.0, 1.0], [4.0, 5.0], [4.0, -5.0]]",
+        [],
+        "formation.offsets[0]",
+    ),
     ("unknown method in file", "method = 'pid'", [], "unknown method 'pid'"),
     ("unknown plant in file", "[plant]\nkind = 'gazebo'", [], "unknown plant 'gazebo'"),
     ("unknown trajectory", "[leader]\nkind = 'spiral'", [], "leader.kind"),
@@ -50,7 +55,12 @@ BAD = [
     ("event for a missing follower", "[[events]]\ntime = 1.0\nfollower = 9\nmass = 1.0", [], "events[0].follower"),
     ("event after the end", "[[events]]\ntime = 99.0\nfollower = 1\nmass = 1.0", [], "events[0].time"),
     ("unknown robot model", "[plant]\nrobots = ['tank']", ["--plant", "mujoco"], "unknown robot 'tank'"),
-    ("missing model file", "[plant]\nrobots = ['/nonexistent/robot.xml']", ["--plant", "mujoco"], "/nonexistent/robot.xml"),
+    (
+        "missing model file",
+        "[plant]\nrobots = ['/nonexistent/robot.xml']",
+        ["--plant", "mujoco"],
+        "/nonexistent/robot.xml",
+    ),
     ("negative seed", "[sim]\nseed = -1", [], "sim.seed"),
     ("bool for float", "[torque]\ntau_max = true", [], "torque.tau_max"),
 ]
@@ -62,14 +72,23 @@ BAD += [  # faults (issue 6)
     ("pose noise with two numbers", "[faults]\nnoise_pose = [0.1, 0.1]", [], "faults.noise_pose"),
     ("actuator fault for a missing follower", "[faults]\nactuator = [[5, 1.0, 2.0, 0.5]]", [], "faults.actuator[0]"),
     ("push without duration", "[faults]\npush = [[1, 1.0, 0.0, 10.0, 0.0, 0.0]]", [], "faults.push[0]"),
-    ("friction patch on the ideal plant", "[faults]\nfriction_patch = [0.0, 0.0, 1.0, 1.0, 0.1]", [],
-     "faults.friction_patch"),
+    (
+        "friction patch on the ideal plant",
+        "[faults]\nfriction_patch = [0.0, 0.0, 1.0, 1.0, 0.1]",
+        [],
+        "faults.friction_patch",
+    ),
     ("unknown fault key", "[faults]\nmeteor = 1.0", [], "faults.meteor"),
 ]
 
 BAD += [  # issue 11: types anywhere, names, sizes beyond reason
     ("table given a number, then --duration", "sim = 3", ["--duration", "1"], "'sim': expected a table"),
-    ("table given a string, then --set", "kinematic = 'x'", ["--set", "kinematic.k1=3"], "'kinematic': expected a table"),
+    (
+        "table given a string, then --set",
+        "kinematic = 'x'",
+        ["--set", "kinematic.k1=3"],
+        "'kinematic': expected a table",
+    ),
     ("array of tables given a number", "events = 3", [], "events"),
     ("array of tables given numbers", "events = [3]", [], "events[0]"),
     ("name not a string", "name = 3", [], "'name'"),
@@ -79,14 +98,18 @@ BAD += [  # issue 11: types anywhere, names, sizes beyond reason
     ("follower id too large", "[graph]\nleader_access = [99999999999999999999]", [], "graph.leader_access"),
     ("name with a path", "name = '../../x'", [], "plain file name"),
     ("absolute name", "name = '/tmp/x'", [], "plain file name"),
-    ("name with a NUL", "name = \"a\\u0000b\"", [], "'name'"),
+    ("name with a NUL", 'name = "a\\u0000b"', [], "'name'"),
     ("empty name", "name = ''", [], "is empty"),
     ("physics step 1e-300", "[sim]\nphysics_dt = 1e-300", [], "sim.physics_dt"),
     ("physics step 1e-12", "[sim]\nphysics_dt = 1e-12\ncontrol_dt = 1e-12", [], "sim.physics_dt"),
     ("duration beyond reason", "[sim]\nduration = 1e9", [], "1e+12 steps"),
     ("log beyond reason", "[sim]\nduration = 3e4\nlog_dt = 0.001", [], "GB of log"),
-    ("physics steps beyond reason", "[sim]\nduration = 5e4\nphysics_dt = 1e-5\ncontrol_dt = 1e-3\nlog_dt = 1.0", [],
-     "physics steps"),
+    (
+        "physics steps beyond reason",
+        "[sim]\nduration = 5e4\nphysics_dt = 1e-5\ncontrol_dt = 1e-3\nlog_dt = 1.0",
+        [],
+        "physics steps",
+    ),
 ]
 
 
@@ -177,21 +200,46 @@ def test_any_type_anywhere_loads_or_is_refused(key, is_table):
 _num = st.one_of(st.floats(-50, 50), st.just(0.0), st.just(float("nan")), st.integers(-3, 30))
 _vec = lambda k: st.lists(_num, min_size=k - 1, max_size=k + 1)  # noqa: E731
 
-FUZZ = st.fixed_dictionaries({}, optional={
-    "kinematic": st.fixed_dictionaries({}, optional={"k1": _num, "k2": _num, "A": _num, "B": _num}),
-    "estimator": st.fixed_dictionaries({}, optional={"kp": _vec(3), "ka": _vec(2), "phi": _vec(2),
-                                                      "init": st.sampled_from(["zero", "self", "leader", "x"])}),
-    "torque": st.fixed_dictionaries({}, optional={"c": _vec(2), "phi": _num, "tau_max": _num}),
-    "learner": st.fixed_dictionaries({}, optional={"k4": _vec(2), "k5": _vec(2), "c_hat0_scale": _vec(2)}),
-    "graph": st.fixed_dictionaries({}, optional={
-        "kind": st.sampled_from(["explicit", "chain", "ring", "star", "complete", "mesh"]),
-        "edges": st.lists(st.lists(st.integers(0, 4), min_size=2, max_size=2), max_size=4),
-        "leader_access": st.lists(st.integers(0, 4), max_size=3)}),
-    "sim": st.fixed_dictionaries({}, optional={"control_dt": st.sampled_from([0.001, 0.002, -0.001, 0.0]),
-                                                "physics_dt": st.sampled_from([0.001, 0.0005, 0.003])}),
-    "leader": st.fixed_dictionaries({}, optional={"kind": st.sampled_from(["paper", "line", "circle", "figure8", "x"]),
-                                                   "speed": _num, "radius": _num}),
-})
+FUZZ = st.fixed_dictionaries(
+    {},
+    optional={
+        "kinematic": st.fixed_dictionaries({}, optional={"k1": _num, "k2": _num, "A": _num, "B": _num}),
+        "estimator": st.fixed_dictionaries(
+            {},
+            optional={
+                "kp": _vec(3),
+                "ka": _vec(2),
+                "phi": _vec(2),
+                "init": st.sampled_from(["zero", "self", "leader", "x"]),
+            },
+        ),
+        "torque": st.fixed_dictionaries({}, optional={"c": _vec(2), "phi": _num, "tau_max": _num}),
+        "learner": st.fixed_dictionaries({}, optional={"k4": _vec(2), "k5": _vec(2), "c_hat0_scale": _vec(2)}),
+        "graph": st.fixed_dictionaries(
+            {},
+            optional={
+                "kind": st.sampled_from(["explicit", "chain", "ring", "star", "complete", "mesh"]),
+                "edges": st.lists(st.lists(st.integers(0, 4), min_size=2, max_size=2), max_size=4),
+                "leader_access": st.lists(st.integers(0, 4), max_size=3),
+            },
+        ),
+        "sim": st.fixed_dictionaries(
+            {},
+            optional={
+                "control_dt": st.sampled_from([0.001, 0.002, -0.001, 0.0]),
+                "physics_dt": st.sampled_from([0.001, 0.0005, 0.003]),
+            },
+        ),
+        "leader": st.fixed_dictionaries(
+            {},
+            optional={
+                "kind": st.sampled_from(["paper", "line", "circle", "figure8", "x"]),
+                "speed": _num,
+                "radius": _num,
+            },
+        ),
+    },
+)
 
 
 def _toml(d, prefix=""):
@@ -238,17 +286,20 @@ def test_sigkill_mid_write_leaves_the_old_file_or_the_new_one_never_a_partial_on
     kills must land mid-write at least once (a temporary file left behind), or the test proves
     nothing."""
     out = tmp_path / "log.npz"
-    code = ("import sys, numpy as np\n"
-            "from bioform_mj.outputs.files import write_npz\n"
-            "k = 0\n"
-            "while True:\n"
-            "    k += 1\n"
-            "    write_npz(sys.argv[1], {'pose': np.full(2_000_000 + 1000 * k, float(k))})\n"
-            "    print(k, flush=True)\n")
+    code = (
+        "import sys, numpy as np\n"
+        "from bioform_mj.outputs.files import write_npz\n"
+        "k = 0\n"
+        "while True:\n"
+        "    k += 1\n"
+        "    write_npz(sys.argv[1], {'pose': np.full(2_000_000 + 1000 * k, float(k))})\n"
+        "    print(k, flush=True)\n"
+    )
     mid_write = 0
     for delay in (0.5, 0.9, 1.3, 1.7, 2.1, 2.5):
-        proc = subprocess.Popen([sys.executable, "-c", code, str(out)], stdout=subprocess.PIPE,
-                                stderr=subprocess.DEVNULL, text=True)
+        proc = subprocess.Popen(
+            [sys.executable, "-c", code, str(out)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
+        )
         proc.stdout.readline()  # one version is complete: the kill lands in a later write
         time.sleep(delay % 0.4)
         proc.send_signal(signal.SIGKILL)
@@ -267,8 +318,22 @@ def test_sigkill_mid_write_leaves_the_old_file_or_the_new_one_never_a_partial_on
 def test_sigkill_mid_sweep_then_resume(tmp_path):
     """Kill a sweep after some runs finished; rerunning keeps their rows and runs only the rest."""
     out = tmp_path / "sw"
-    cmd = [sys.executable, "-m", "bioform_mj.cli", "sweep", "paper", "--seeds", "6", "--workers", "1", "--quiet",
-           "--set", "sim.duration=40", "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "bioform_mj.cli",
+        "sweep",
+        "paper",
+        "--seeds",
+        "6",
+        "--workers",
+        "1",
+        "--quiet",
+        "--set",
+        "sim.duration=40",
+        "--out",
+        str(out),
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     runs = out / "runs"
     deadline = time.time() + 120

@@ -1,4 +1,5 @@
 """Run folders, locks, signals, MuJoCo's log, up-front path checks (issue 11). All on the ideal plant, short runs."""
+
 from __future__ import annotations
 
 import json
@@ -37,6 +38,7 @@ def _tmp_files(folder: Path) -> list[Path]:
 
 
 # ---- one run per folder -----------------------------------------------------------------------
+
 
 def test_second_run_into_a_folder_is_refused_then_overwrite_replaces_it(tmp_path, capsys):
     out = tmp_path / "r"
@@ -112,8 +114,19 @@ def test_concurrent_writer_is_refused(tmp_path, capsys):
 def test_two_processes_into_one_folder(tmp_path):
     """Two real runs started together: one writes, the other is refused (exit 2); never mixed files."""
     out = tmp_path / "r"
-    cmd = [sys.executable, "-m", "bioform_mj.cli", "run", "--duration", "60", "--quiet",
-           "--set", "sim.log_dt=0.05", "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "bioform_mj.cli",
+        "run",
+        "--duration",
+        "60",
+        "--quiet",
+        "--set",
+        "sim.log_dt=0.05",
+        "--out",
+        str(out),
+    ]
     procs = [subprocess.Popen(cmd, env=ENV, stderr=subprocess.PIPE, text=True) for _ in range(2)]
     res = [(p.wait(timeout=120), p.stderr.read()) for p in procs]
     codes = sorted(r[0] for r in res)
@@ -144,11 +157,21 @@ def test_failed_start_leaves_no_folder(tmp_path, capsys, monkeypatch):
 
 # ---- the output name stays under runs/ ----------------------------------------------------------
 
-@pytest.mark.parametrize("name,needle", [
-    ('"../../x"', "plain file name"), ('"/etc/x"', "plain file name"), ('"a/b"', "plain file name"),
-    ('""', "is empty"), ('"  "', "is empty"), ('"a\\u0000b"', "plain file name"), ('".hidden"', "starts with '.'"),
-    ('"tab\\there"', "control character"), ('"' + "x" * 200 + '"', "longer than"),
-])
+
+@pytest.mark.parametrize(
+    "name,needle",
+    [
+        ('"../../x"', "plain file name"),
+        ('"/etc/x"', "plain file name"),
+        ('"a/b"', "plain file name"),
+        ('""', "is empty"),
+        ('"  "', "is empty"),
+        ('"a\\u0000b"', "plain file name"),
+        ('".hidden"', "starts with '.'"),
+        ('"tab\\there"', "control character"),
+        ('"' + "x" * 200 + '"', "longer than"),
+    ],
+)
 def test_scenario_name_must_be_a_plain_file_name(name, needle, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     f = tmp_path / "s.toml"
@@ -167,20 +190,24 @@ def test_default_output_is_under_runs(tmp_path, monkeypatch):
 
 # ---- bad paths, up front -------------------------------------------------------------------------
 
+
 def _dangling(tmp_path):
     link = tmp_path / "dangling"
     link.symlink_to(tmp_path / "nowhere")
     return link
 
 
-@pytest.mark.parametrize("make,needle", [
-    (lambda t: Path("/proc/bioform-out"), "special file system"),
-    (lambda t: Path("/sys/bioform-out"), "special file system"),
-    (lambda t: _dangling(t), "dangling symlink"),
-    (lambda t: _dangling(t) / "sub", "dangling symlink"),
-    (lambda t: (t / "f").write_text("x") and t / "f", "not a directory"),
-    (lambda t: (t / "g").write_text("x") and t / "g" / "sub", "not a directory"),
-])
+@pytest.mark.parametrize(
+    "make,needle",
+    [
+        (lambda t: Path("/proc/bioform-out"), "special file system"),
+        (lambda t: Path("/sys/bioform-out"), "special file system"),
+        (lambda t: _dangling(t), "dangling symlink"),
+        (lambda t: _dangling(t) / "sub", "dangling symlink"),
+        (lambda t: (t / "f").write_text("x") and t / "f", "not a directory"),
+        (lambda t: (t / "g").write_text("x") and t / "g" / "sub", "not a directory"),
+    ],
+)
 def test_bad_out_dir(make, needle, tmp_path, capsys):
     out = make(tmp_path)
     t0 = time.perf_counter()
@@ -209,10 +236,15 @@ def test_read_only_out_dir(tmp_path, capsys, monkeypatch):
     _one_error(err, "not writable")
 
 
-@pytest.mark.parametrize("target,needle", [
-    ("/proc/bench.json", "special file system"), ("DANGLING", "dangling symlink"), ("DIR", "not a regular file"),
-    ("/dev/null", "special file system"),
-])
+@pytest.mark.parametrize(
+    "target,needle",
+    [
+        ("/proc/bench.json", "special file system"),
+        ("DANGLING", "dangling symlink"),
+        ("DIR", "not a regular file"),
+        ("/dev/null", "special file system"),
+    ],
+)
 def test_bench_json_checked_before_the_work(target, needle, tmp_path, capsys, monkeypatch):
     import bioform_mj.bench as bench
 
@@ -227,16 +259,27 @@ def test_bench_in_a_folder_without_runs_writes_its_json(tmp_path, capsys, monkey
     import bioform_mj.bench as bench
 
     monkeypatch.chdir(tmp_path)
-    row = {"n": 3, "ratio": 1.0, "us_per_robot_step": 1.0, "realtime_factor": 1.0, "solver_iters_per_step": 1.0,
-           "constant_torque_solver_iters_per_step": 1.0, "physics_dt_s": 0.001, "bare_steps_per_s": 1.0,
-           "loop_steps_per_s": 1.0, "ideal_us_per_robot_step": 1.0}
+    row = {
+        "n": 3,
+        "ratio": 1.0,
+        "us_per_robot_step": 1.0,
+        "realtime_factor": 1.0,
+        "solver_iters_per_step": 1.0,
+        "constant_torque_solver_iters_per_step": 1.0,
+        "physics_dt_s": 0.001,
+        "bare_steps_per_s": 1.0,
+        "loop_steps_per_s": 1.0,
+        "ideal_us_per_robot_step": 1.0,
+    }
     monkeypatch.setattr(bench, "bench_case", lambda *a, **k: dict(row))
     assert main(["bench", "--sizes", "3"]) == 0
     assert json.loads((tmp_path / "runs" / "bench.json").read_text())["rows"][0]["n"] == 3
 
 
-@pytest.mark.parametrize("target,needle", [("/proc/id.json", "special file system"), ("DANGLING", "dangling symlink"),
-                                           ("FILEDIR", "not a directory")])
+@pytest.mark.parametrize(
+    "target,needle",
+    [("/proc/id.json", "special file system"), ("DANGLING", "dangling symlink"), ("FILEDIR", "not a directory")],
+)
 def test_identify_out_checked_before_the_work(target, needle, tmp_path, capsys, monkeypatch):
     import bioform_mj.identify as identify
 
@@ -250,6 +293,7 @@ def test_identify_out_checked_before_the_work(target, needle, tmp_path, capsys, 
 
 
 # ---- signals --------------------------------------------------------------------------------------
+
 
 def _wait_for(cond, proc, timeout=60.0):
     deadline = time.time() + timeout
@@ -275,8 +319,9 @@ def _check_interrupted_folder(out: Path, err: str) -> None:
         assert not out.exists() or not any(out.iterdir())
 
 
-@pytest.mark.parametrize("sig,code,engine,duration", [(signal.SIGTERM, 143, "compiled", "400"),
-                                                     (signal.SIGINT, 130, "stepwise", "10")])
+@pytest.mark.parametrize(
+    "sig,code,engine,duration", [(signal.SIGTERM, 143, "compiled", "400"), (signal.SIGINT, 130, "stepwise", "10")]
+)
 def test_signal_mid_run(sig, code, engine, duration, tmp_path):
     """The signal lands while the loop steps: the progress bar (on a pseudo-terminal) shows >= 2 %.
     (compiled: between two compiled chunks; stepwise: anywhere in the Python loop)."""
@@ -287,9 +332,26 @@ def test_signal_mid_run(sig, code, engine, duration, tmp_path):
     out = tmp_path / "r"
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # tqdm draws nothing at width 0
-    proc = subprocess.Popen([sys.executable, "-m", "bioform_mj.cli", "run", "--duration", duration,
-                             "--engine", engine, "--set", "sim.log_dt=0.05", "--out", str(out)],
-                            env=ENV, stdout=subprocess.DEVNULL, stderr=slave, stdin=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "bioform_mj.cli",
+            "run",
+            "--duration",
+            duration,
+            "--engine",
+            engine,
+            "--set",
+            "sim.log_dt=0.05",
+            "--out",
+            str(out),
+        ],
+        env=ENV,
+        stdout=subprocess.DEVNULL,
+        stderr=slave,
+        stdin=subprocess.DEVNULL,
+    )
     os.close(slave)
     seen = b""
     deadline = time.time() + 90
@@ -333,9 +395,28 @@ def test_sigterm_while_rendering_the_video_leaves_no_temporary_file(tmp_path):
     """The signal lands while video.mp4 is being written (its temporary file exists): the run's
     summary and log are complete, no video and no temporary file."""
     out = tmp_path / "r"
-    proc = subprocess.Popen([sys.executable, "-m", "bioform_mj.cli", "run", "--duration", "12", "--quiet",
-                             "--video", "--width", "320", "--height", "240", "--out", str(out)],
-                            env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "bioform_mj.cli",
+            "run",
+            "--duration",
+            "12",
+            "--quiet",
+            "--video",
+            "--width",
+            "320",
+            "--height",
+            "240",
+            "--out",
+            str(out),
+        ],
+        env=ENV,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert _wait_for(lambda: bool(list(out.glob(".video.mp4.*.tmp"))), proc, 90), proc.stderr.read()
         time.sleep(0.3)
@@ -392,6 +473,7 @@ def test_interrupt_without_result_leaves_no_folder(tmp_path, capsys, monkeypatch
 
 # ---- MuJoCo's own log ----------------------------------------------------------------------------
 
+
 def test_mujoco_warnings_go_to_the_run_folder_not_the_cwd(tmp_path, monkeypatch, capsys):
     """A MuJoCo warning raised during a run (here: from the plant's first step) lands in
     DIR/MUJOCO_LOG.TXT and on stderr as a warning line; the working directory stays clean."""
@@ -402,8 +484,9 @@ def test_mujoco_warnings_go_to_the_run_folder_not_the_cwd(tmp_path, monkeypatch,
     real = sim.simulate
 
     def noisy(sc, **kw):
-        m = mujoco.MjModel.from_xml_string("<mujoco><worldbody><body><freejoint/><geom size='.1'/></body>"
-                                           "</worldbody></mujoco>")
+        m = mujoco.MjModel.from_xml_string(
+            "<mujoco><worldbody><body><freejoint/><geom size='.1'/></body></worldbody></mujoco>"
+        )
         d = mujoco.MjData(m)
         d.qvel[:] = 1e20
         mujoco.mj_step(m, d)  # "Nan, Inf or huge value in QVEL": MuJoCo's default handler writes ./MUJOCO_LOG.TXT
@@ -421,7 +504,8 @@ def test_mujoco_warnings_go_to_the_run_folder_not_the_cwd(tmp_path, monkeypatch,
     from bioform_mj.outputs import mjlog
 
     assert mujoco.get_mju_user_warning() is None or not isinstance(
-        getattr(mujoco.get_mju_user_warning(), "__self__", None), mjlog.MujocoLog)
+        getattr(mujoco.get_mju_user_warning(), "__self__", None), mjlog.MujocoLog
+    )
 
 
 def test_mujoco_warnings_of_the_compiled_loop_are_captured(tmp_path):
@@ -439,8 +523,9 @@ def test_mujoco_warnings_of_the_compiled_loop_are_captured(tmp_path):
     def step(mp, dp):
         mk._mj_step(mp, dp)
 
-    m = mujoco.MjModel.from_xml_string("<mujoco><worldbody><body><freejoint/><geom size='.1'/></body>"
-                                       "</worldbody></mujoco>")
+    m = mujoco.MjModel.from_xml_string(
+        "<mujoco><worldbody><body><freejoint/><geom size='.1'/></body></worldbody></mujoco>"
+    )
     d = mujoco.MjData(m)
     d.qvel[:] = 1e20
     with MujocoLog(echo=False) as log:
@@ -450,6 +535,7 @@ def test_mujoco_warnings_of_the_compiled_loop_are_captured(tmp_path):
 
 
 # ---- the progress bar says what it is doing -------------------------------------------------------
+
 
 def test_progress_phase_is_shown_and_ends_when_stepping_starts():
     import io
@@ -469,11 +555,12 @@ def test_progress_phase_is_shown_and_ends_when_stepping_starts():
             cb(k, 100)
     text = tty.getvalue()
     assert "paper run — compiling numba kernels (first run only)" in text
-    tail = text[text.rindex("compiling"):]
-    assert "100%" in tail and "compiling" not in tail[len("compiling"):]  # the phase ended with the stepping
+    tail = text[text.rindex("compiling") :]
+    assert "100%" in tail and "compiling" not in tail[len("compiling") :]  # the phase ended with the stepping
 
 
 # ---- presets and table1 ---------------------------------------------------------------------------
+
 
 def test_presets_have_descriptions(capsys):
     from bioform_mj.scenario import load, preset_descriptions, preset_names
@@ -500,8 +587,12 @@ def _table(diverged=None, outcome=None):
             fs[outcome[1]]["outcome"] = outcome[2]
         for ff in fs:
             ff.setdefault("outcome", "ok") if outcome else None
-        methods[m] = {"followers": fs, "diverged": ({"message": "follower 2: speed 120 m/s", "time_s": 3.2, "step": 3200}
-                                                    if m == diverged else None)}
+        methods[m] = {
+            "followers": fs,
+            "diverged": (
+                {"message": "follower 2: speed 120 m/s", "time_s": 3.2, "step": 3200} if m == diverged else None
+            ),
+        }
     return {"plant": "mujoco", "scenario": "paper", "methods": methods, "ordering_holds": True}
 
 
@@ -531,9 +622,24 @@ def test_table1_marks_failed_outcomes_and_handles_their_absence():
 def test_sigterm_stops_table1_after_the_method_in_progress(tmp_path):
     """simulate() returns the run so far on SIGTERM; table1 must not go on to the next method."""
     out = tmp_path / "t"
-    proc = subprocess.Popen([sys.executable, "-m", "bioform_mj.cli", "table1", "--duration", "400",
-                             "--set", "sim.log_dt=0.05", "--out", str(out)],
-                            env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "bioform_mj.cli",
+            "table1",
+            "--duration",
+            "400",
+            "--set",
+            "sim.log_dt=0.05",
+            "--out",
+            str(out),
+        ],
+        env=ENV,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         lines = []
         while proc.poll() is None:

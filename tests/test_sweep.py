@@ -1,4 +1,5 @@
 """Sweeps: local pool vs Ray give identical metrics; resume skips finished runs; failures are recorded."""
+
 from __future__ import annotations
 
 import csv
@@ -9,8 +10,19 @@ import pytest
 from bioform_mj.cli import main
 from bioform_mj.sweep import expand, run_one, sweep
 
-ARGS = ["--seeds", "2", "--methods", "bioinspired,bioinspired-learning", "--duration", "0.5",
-        "--set", "formation.init_jitter=0.3", "--vary", "kinematic.k1=1,2", "--quiet"]
+ARGS = [
+    "--seeds",
+    "2",
+    "--methods",
+    "bioinspired,bioinspired-learning",
+    "--duration",
+    "0.5",
+    "--set",
+    "formation.init_jitter=0.3",
+    "--vary",
+    "kinematic.k1=1,2",
+    "--quiet",
+]
 
 
 def _rows(out):

@@ -1,4 +1,5 @@
 """Sweeps a user can trust (issue 11): interrupts, dead workers, stale or damaged rows, grouping, outcomes."""
+
 from __future__ import annotations
 
 import csv
@@ -86,17 +87,39 @@ LONG = ["--plant", "ideal", "--duration", "20", "--set", "formation.init_jitter=
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc and fork")
-@pytest.mark.parametrize("sig,workers,backend", [(signal.SIGINT, 2, "local"), (signal.SIGTERM, 2, "local"),
-                                                 (signal.SIGINT, 1, "local"), (signal.SIGTERM, 2, "ray")])
+@pytest.mark.parametrize(
+    "sig,workers,backend",
+    [
+        (signal.SIGINT, 2, "local"),
+        (signal.SIGTERM, 2, "local"),
+        (signal.SIGINT, 1, "local"),
+        (signal.SIGTERM, 2, "ray"),
+    ],
+)
 def test_signal_stops_sweep_keeps_rows_no_orphans(tmp_path, sig, workers, backend):
     if backend == "ray":
         pytest.importorskip("ray")
     out = tmp_path / f"sw_{sig.name}_{workers}_{backend}"
-    cmd = [sys.executable, "-m", "bioform_mj.cli", "sweep", "paper", "--seeds", str(N_LONG if backend == "local" else 400),
-           "--workers", str(workers), "--backend", backend, *LONG, "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "bioform_mj.cli",
+        "sweep",
+        "paper",
+        "--seeds",
+        str(N_LONG if backend == "local" else 400),
+        "--workers",
+        str(workers),
+        "--backend",
+        backend,
+        *LONG,
+        "--out",
+        str(out),
+    ]
     # its own process group: SIGINT goes to the whole group, as Ctrl-C in a terminal does
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(),
-                            start_new_session=True)
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(), start_new_session=True
+    )
     runs = out / "runs"
     deadline = time.time() + 90
     while time.time() < deadline and (len(list(runs.glob("*.json"))) if runs.exists() else 0) < 3:
@@ -132,11 +155,18 @@ def test_signal_stops_sweep_keeps_rows_no_orphans(tmp_path, sig, workers, backen
     timing = json.loads((out / "sweep.json").read_text())
     assert timing["interrupted"] == sig.name and timing["complete"] is False and timing["done"] == len(finished)
     assert len(_rows(out)) == len(finished)  # the tables cover the finished rows
-    if sig == signal.SIGINT and workers == 2 and backend == "local":  # the printed command resumes; finished rows are not rerun
+    if (
+        sig == signal.SIGINT and workers == 2 and backend == "local"
+    ):  # the printed command resumes; finished rows are not rerun
         resume = err.split("Resume with:")[1].strip().splitlines()[0].split()
         assert resume[:2] == ["bioform", "sweep"]
-        res = subprocess.run([sys.executable, "-m", "bioform_mj.cli", *resume[1:]], capture_output=True,
-                             text=True, timeout=120, env=_env())
+        res = subprocess.run(
+            [sys.executable, "-m", "bioform_mj.cli", *resume[1:]],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env=_env(),
+        )
         assert res.returncode == 0, res.stderr
         assert {f.name: f.stat().st_mtime_ns for f in runs.glob("*.json") if f.name in finished} == finished
         assert len(_rows(out)) == N_LONG
@@ -173,11 +203,32 @@ def test_dead_worker_fails_its_row_only(tmp_path, monkeypatch):
 
 def test_dead_worker_via_cli_warns(tmp_path, monkeypatch, capsys):
     real = sweep_mod.run_one
-    monkeypatch.setattr(sweep_mod, "run_one",
-                        lambda spec: os.kill(os.getpid(), signal.SIGKILL) if spec.seed == 0 else real(spec))
+    monkeypatch.setattr(
+        sweep_mod, "run_one", lambda spec: os.kill(os.getpid(), signal.SIGKILL) if spec.seed == 0 else real(spec)
+    )
     out = tmp_path / "cli"
-    assert main(["sweep", "paper", "--plant", "ideal", "--duration", "0.3", "--seeds", "2", "--workers", "2",
-                 "--set", "formation.init_jitter=0.1", "--quiet", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                "paper",
+                "--plant",
+                "ideal",
+                "--duration",
+                "0.3",
+                "--seeds",
+                "2",
+                "--workers",
+                "2",
+                "--set",
+                "formation.init_jitter=0.1",
+                "--quiet",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert "warning:" in err and "worker process died" in err
 
@@ -221,8 +272,23 @@ def test_key_includes_package_version(monkeypatch):
 @pytest.mark.parametrize("damage", ["truncate", "garbage", "wrong_key"])
 def test_damaged_row_redone_with_warning(tmp_path, capsys, damage):
     out = tmp_path / "sw"
-    args = ["sweep", "paper", "--plant", "ideal", "--duration", "0.3", "--seeds", "3", "--workers", "1",
-            "--set", "formation.init_jitter=0.1", "--quiet", "--out", str(out)]
+    args = [
+        "sweep",
+        "paper",
+        "--plant",
+        "ideal",
+        "--duration",
+        "0.3",
+        "--seeds",
+        "3",
+        "--workers",
+        "1",
+        "--set",
+        "formation.init_jitter=0.1",
+        "--quiet",
+        "--out",
+        str(out),
+    ]
     assert main(args) == 0
     files = sorted((out / "runs").glob("*.json"))
     victim = files[1]
@@ -239,7 +305,10 @@ def test_damaged_row_redone_with_warning(tmp_path, capsys, damage):
     assert "warning:" in err and victim.name in err and "redone" in err
     timing = json.loads((out / "sweep.json").read_text())
     assert timing["ran"] == 1 and timing["skipped"] == 2
-    assert json.loads(victim.read_text()) == {**json.loads(good), "wall_time_s": json.loads(victim.read_text())["wall_time_s"]}
+    assert json.loads(victim.read_text()) == {
+        **json.loads(good),
+        "wall_time_s": json.loads(victim.read_text())["wall_time_s"],
+    }
     assert len(_rows(out)) == 3
     assert main(args) == 0  # repaired: no warning, nothing to run
     assert "warning" not in capsys.readouterr().err
@@ -248,10 +317,34 @@ def test_damaged_row_redone_with_warning(tmp_path, capsys, damage):
 
 def test_stats_group_by_every_varied_key(tmp_path):
     out = tmp_path / "g"
-    assert main(["sweep", "paper", "--plant", "ideal", "--duration", "0.3", "--seeds", "2", "--workers", "2",
-                 "--set", "formation.init_jitter=0.1", "--methods", "bioinspired,backstepping",
-                 "--vary", "kinematic.k1=1,2", "--vary", "learner.k4=[6,50];[6,500]", "--quiet",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                "paper",
+                "--plant",
+                "ideal",
+                "--duration",
+                "0.3",
+                "--seeds",
+                "2",
+                "--workers",
+                "2",
+                "--set",
+                "formation.init_jitter=0.1",
+                "--methods",
+                "bioinspired,backstepping",
+                "--vary",
+                "kinematic.k1=1,2",
+                "--vary",
+                "learner.k4=[6,50];[6,500]",
+                "--quiet",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     stats = json.loads((out / "stats.json").read_text())
     assert stats["group_by"] == ["method", "kinematic.k1", "learner.k4"]
     keys = [(g["method"], g["kinematic.k1"], g["learner.k4"]) for g in stats["groups"]]

@@ -15,23 +15,28 @@ nothing beyond physics), microseconds per robot-step, and the real-time factor
 (simulated s per wall s). Absolute times drift on shared machines; the ratio is
 measured back to back in one process and is the number to compare.
 """
+
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
 from .outputs.files import write_json
 
 #: team size → (preset, default simulated seconds)
-CASES: dict[int, tuple[str, float]] = {3: ("paper", 5.0), 16: ("large16", 5.0), 64: ("large64", 4.0),
-                                       256: ("large256", 2.0)}
+CASES: dict[int, tuple[str, float]] = {
+    3: ("paper", 5.0),
+    16: ("large16", 5.0),
+    64: ("large64", 4.0),
+    256: ("large256", 2.0),
+}
 
 
 def stop_if_interrupted(result: Any) -> Any:
@@ -80,8 +85,12 @@ def _bare(sc: Any, reps: int) -> dict[str, float]:
     c_iters = replay(*args, const[0], const[1], d.solver_niter)
     c_time = time.perf_counter() - t0
     physics_steps = steps * plant.n_substeps
-    return {"bare_s": best, "solver_iters_per_step": iters / physics_steps,
-            "constant_torque_bare_s": c_time, "constant_torque_solver_iters_per_step": c_iters / physics_steps}
+    return {
+        "bare_s": best,
+        "solver_iters_per_step": iters / physics_steps,
+        "constant_torque_bare_s": c_time,
+        "constant_torque_solver_iters_per_step": c_iters / physics_steps,
+    }
 
 
 def _loop(sc: Any, reps: int, engine: str = "auto") -> tuple[float, dict]:
@@ -111,13 +120,25 @@ def bench_case(n: int, duration: float | None = None, reps: int = 2, numpy_too: 
     loop, summ = _loop(sc, reps)
     ideal, _ = _loop(load(preset, overrides=[f"sim.duration={dur}"], plant="ideal"), reps)
     row: dict[str, Any] = {
-        "n": n, "preset": preset, "sim_s": dur, "control_dt_s": sc.sim.control_dt, "physics_dt_s": sc.sim.physics_dt,
-        "substeps": n_sub, "control_steps": steps,
-        **bare_d, "loop_s": loop, "ratio": bare / loop,
-        "bare_steps_per_s": steps / bare, "loop_steps_per_s": steps / loop,
-        "us_per_robot_step": loop / (steps * n) * 1e6, "bare_us_per_robot_step": bare / (steps * n) * 1e6,
-        "realtime_factor": dur / loop, "bare_realtime_factor": dur / bare,
-        "ideal_s": ideal, "ideal_us_per_robot_step": ideal / (steps * n) * 1e6, "ideal_realtime_factor": dur / ideal,
+        "n": n,
+        "preset": preset,
+        "sim_s": dur,
+        "control_dt_s": sc.sim.control_dt,
+        "physics_dt_s": sc.sim.physics_dt,
+        "substeps": n_sub,
+        "control_steps": steps,
+        **bare_d,
+        "loop_s": loop,
+        "ratio": bare / loop,
+        "bare_steps_per_s": steps / bare,
+        "loop_steps_per_s": steps / loop,
+        "us_per_robot_step": loop / (steps * n) * 1e6,
+        "bare_us_per_robot_step": bare / (steps * n) * 1e6,
+        "realtime_factor": dur / loop,
+        "bare_realtime_factor": dur / bare,
+        "ideal_s": ideal,
+        "ideal_us_per_robot_step": ideal / (steps * n) * 1e6,
+        "ideal_realtime_factor": dur / ideal,
         "max_final_formation_error_m": max(f["final_formation_error_m"] for f in summ["followers"]),
     }
     if numpy_too:
@@ -129,12 +150,16 @@ def bench_case(n: int, duration: float | None = None, reps: int = 2, numpy_too: 
 
 def format_table(rows: Sequence[dict[str, Any]]) -> str:
     """The rows as a Markdown table."""
-    head = ("| n | physics dt | bare steps/s | loop steps/s | ratio (bare/loop) | µs per robot-step "
-            "| real-time factor | ideal µs per robot-step |\n|---|---|---|---|---|---|---|---|\n")
+    head = (
+        "| n | physics dt | bare steps/s | loop steps/s | ratio (bare/loop) | µs per robot-step "
+        "| real-time factor | ideal µs per robot-step |\n|---|---|---|---|---|---|---|---|\n"
+    )
     body = "".join(
         f"| {r['n']} | {r['physics_dt_s'] * 1e3:g} ms | {r['bare_steps_per_s']:.0f} | {r['loop_steps_per_s']:.0f} "
         f"| **{r['ratio']:.2f}** | {r['us_per_robot_step']:.2f} | {r['realtime_factor']:.2f} "
-        f"| {r['ideal_us_per_robot_step']:.2f} |\n" for r in rows)
+        f"| {r['ideal_us_per_robot_step']:.2f} |\n"
+        for r in rows
+    )
     return head + body
 
 
@@ -144,8 +169,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--sizes", default="3,16,64,256", help="comma-separated team sizes (of 3, 16, 64, 256)")
     ap.add_argument("--duration", type=float, help="simulated seconds per case (default: per size)")
     ap.add_argument("--reps", type=int, default=2, help="repetitions; the best time counts (default 2)")
-    ap.add_argument("--numpy", "--stepwise", dest="numpy", action="store_true",
-                    help="also time the step-by-step engine (one Python call per control step)")
+    ap.add_argument(
+        "--numpy",
+        "--stepwise",
+        dest="numpy",
+        action="store_true",
+        help="also time the step-by-step engine (one Python call per control step)",
+    )
     ap.add_argument("--json", type=Path, default=Path("runs/bench.json"), help="output JSON")
     return run(ap.parse_args(argv))
 
@@ -176,18 +206,27 @@ def run(args: argparse.Namespace) -> int:
     for n in sizes:
         rows.append(bench_case(n, args.duration, args.reps, numpy_too=getattr(args, "numpy", False)))
         r = rows[-1]
-        print(f"n={n:4d}: ratio {r['ratio']:.2f}, {r['us_per_robot_step']:.2f} µs/robot-step, "
-              f"real-time factor {r['realtime_factor']:.2f}; solver iterations per physics step "
-              f"{r['solver_iters_per_step']:.2f} (constant torques: {r['constant_torque_solver_iters_per_step']:.2f})",
-              flush=True)
+        print(
+            f"n={n:4d}: ratio {r['ratio']:.2f}, {r['us_per_robot_step']:.2f} µs/robot-step, "
+            f"real-time factor {r['realtime_factor']:.2f}; solver iterations per physics step "
+            f"{r['solver_iters_per_step']:.2f} (constant torques: {r['constant_torque_solver_iters_per_step']:.2f})",
+            flush=True,
+        )
     import mujoco
 
     from . import __version__
 
-    out = {"machine": {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-                       "python": platform.python_version(), "mujoco": mujoco.__version__,
-                       "bioform_mj": __version__, "numpy": np.__version__},
-           "rows": rows}
+    out = {
+        "machine": {
+            "cpu": platform.processor() or platform.machine(),
+            "cores": os.cpu_count(),
+            "python": platform.python_version(),
+            "mujoco": mujoco.__version__,
+            "bioform_mj": __version__,
+            "numpy": np.__version__,
+        },
+        "rows": rows,
+    }
     if len(rows) > 1 and 16 in sizes and 256 in sizes:
         r16 = next(r for r in rows if r["n"] == 16)
         r256 = next(r for r in rows if r["n"] == 256)
@@ -206,7 +245,8 @@ def _run_warp(args: argparse.Namespace) -> int:
     from .batch.backend import require_warp, resolve_device
 
     require_warp()  # exit 2 with the install line, before any work
-    from .batch.bench import parse_worlds, run as warp_run
+    from .batch.bench import parse_worlds
+    from .batch.bench import run as warp_run
     from .outputs.files import check_out_file
 
     worlds = parse_worlds(args.worlds)
@@ -216,8 +256,13 @@ def _run_warp(args: argparse.Namespace) -> int:
         raise InputError(f"--duration must be in (0, 3600] s, got {args.duration}")
     device = resolve_device(args.device)
     json_path = check_out_file(args.json, "--json")
-    warp_run(worlds, device, duration=args.duration if args.duration is not None else 0.5, json_path=json_path,
-             echo=lambda s: print(s, flush=True))
+    warp_run(
+        worlds,
+        device,
+        duration=args.duration if args.duration is not None else 0.5,
+        json_path=json_path,
+        echo=lambda s: print(s, flush=True),
+    )
     return 0
 
 

@@ -24,6 +24,7 @@ run on a fork-based process pool, forked after the kernels are loaded (as ``swee
 Then every condition is moved alone from the best (``sensitivity``). Output:
 ``DIR/calibration.json`` and ``DIR/calibration.md``.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -64,8 +65,11 @@ _LOG_TAU = (math.log10(2.0), 4.0)
 def _bounds(base_poses: np.ndarray) -> list[tuple[float, float]]:
     b: list[tuple[float, float]] = []
     for x, y, _ in base_poses:
-        b += [(x - POSE_HALF_RANGE, x + POSE_HALF_RANGE), (y - POSE_HALF_RANGE, y + POSE_HALF_RANGE),
-              (-math.pi / 2, math.pi / 2)]
+        b += [
+            (x - POSE_HALF_RANGE, x + POSE_HALF_RANGE),
+            (y - POSE_HALF_RANGE, y + POSE_HALF_RANGE),
+            (-math.pi / 2, math.pi / 2),
+        ]
     return b + [_LOG_C, (0, len(DERIVS) - 1), _LOG_WN, _LOG_TAU, (0, len(SATS) - 1), (0, len(ESTS) - 1)]
 
 
@@ -79,16 +83,28 @@ def to_conditions(x: Sequence[float], n: int) -> dict[str, Any]:
     k = 3 * n
     poses = [[round(x[3 * i], 4), round(x[3 * i + 1], 4), round(x[3 * i + 2], 4)] for i in range(n)]
     pick = lambda v, opts: opts[int(min(max(round(v), 0), len(opts) - 1))]  # noqa: E731
-    return {"initial_poses": poses, "c_hat0_scale": round(10 ** x[k], 4), "derivative": pick(x[k + 1], DERIVS),
-            "deriv_wn": round(10 ** x[k + 2], 2), "tau_max": round(10 ** x[k + 3], 3),
-            "saturation": pick(x[k + 4], SATS), "estimator_gains": pick(x[k + 5], ESTS)}
+    return {
+        "initial_poses": poses,
+        "c_hat0_scale": round(10 ** x[k], 4),
+        "derivative": pick(x[k + 1], DERIVS),
+        "deriv_wn": round(10 ** x[k + 2], 2),
+        "tau_max": round(10 ** x[k + 3], 3),
+        "saturation": pick(x[k + 4], SATS),
+        "estimator_gains": pick(x[k + 5], ESTS),
+    }
 
 
 def to_vector(c: dict[str, Any]) -> np.ndarray:
     """Inverse of :func:`to_conditions`."""
     v = [float(p) for pose in c["initial_poses"] for p in pose]
-    v += [math.log10(c["c_hat0_scale"]), DERIVS.index(c["derivative"]), math.log10(c["deriv_wn"]),
-          math.log10(c["tau_max"]), SATS.index(c["saturation"]), ESTS.index(c["estimator_gains"])]
+    v += [
+        math.log10(c["c_hat0_scale"]),
+        DERIVS.index(c["derivative"]),
+        math.log10(c["deriv_wn"]),
+        math.log10(c["tau_max"]),
+        SATS.index(c["saturation"]),
+        ESTS.index(c["estimator_gains"]),
+    ]
     return np.array(v)
 
 
@@ -96,10 +112,15 @@ def scenario_conditions(sc) -> dict[str, Any]:
     """The conditions a scenario already has (the starting point and the comparison)."""
     ka, kb = sc.estimator.ka[0], sc.estimator.kb[0]
     est = "eq15" if ka < kb else "eq13"
-    return {"initial_poses": [list(map(float, p)) for p in sc.formation.initial_poses],
-            "c_hat0_scale": float(sc.learner.c_hat0_scale[0]), "derivative": sc.torque.derivative,
-            "deriv_wn": float(sc.torque.deriv_wn), "tau_max": float(sc.torque.tau_max),
-            "saturation": sc.torque.saturation, "estimator_gains": est}
+    return {
+        "initial_poses": [list(map(float, p)) for p in sc.formation.initial_poses],
+        "c_hat0_scale": float(sc.learner.c_hat0_scale[0]),
+        "derivative": sc.torque.derivative,
+        "deriv_wn": float(sc.torque.deriv_wn),
+        "tau_max": float(sc.torque.tau_max),
+        "saturation": sc.torque.saturation,
+        "estimator_gains": est,
+    }
 
 
 def build_scenario(source: str, plant: str, c: dict[str, Any], overrides: Sequence[str] = ()):
@@ -111,16 +132,24 @@ def build_scenario(source: str, plant: str, c: dict[str, Any], overrides: Sequen
     s = c["c_hat0_scale"]
     poses = "[" + ",".join("[" + ",".join(repr(float(v)) for v in p) + "]" for p in c["initial_poses"]) + "]"
     ov = list(overrides) + [
-        f"formation.initial_poses={poses}", f"learner.c_hat0_scale=[{s!r},{s!r}]",
-        f'torque.derivative="{c["derivative"]}"', f"torque.deriv_wn={float(c['deriv_wn'])!r}",
+        f"formation.initial_poses={poses}",
+        f"learner.c_hat0_scale=[{s!r},{s!r}]",
+        f'torque.derivative="{c["derivative"]}"',
+        f"torque.deriv_wn={float(c['deriv_wn'])!r}",
         f'torque.saturation="{c["saturation"]}"',
-        f"estimator.ka=[{ka},{ka}]", f"estimator.kb=[{kb},{kb}]"]
+        f"estimator.ka=[{ka},{ka}]",
+        f"estimator.kb=[{kb},{kb}]",
+    ]
     if c["tau_max"] is not None:
         ov.append(f"torque.tau_max={float(c['tau_max'])!r}")
     sc = load(source, ov, plant=plant)
     if plant == "mujoco" and c["tau_max"] is not None:  # the robots' motors get this limit (None: their own)
-        robots = tuple(dataclasses.replace(r, tau_max=float(c["tau_max"])) if isinstance(r, RobotRef)
-                       else RobotRef(str(r), tau_max=float(c["tau_max"])) for r in sc.plant.robots)
+        robots = tuple(
+            dataclasses.replace(r, tau_max=float(c["tau_max"]))
+            if isinstance(r, RobotRef)
+            else RobotRef(str(r), tau_max=float(c["tau_max"]))
+            for r in sc.plant.robots
+        )
         sc = dataclasses.replace(sc, plant=dataclasses.replace(sc.plant, robots=robots))
     return sc
 
@@ -140,8 +169,9 @@ def score(per: dict[str, list[float]], peak: float, lost: bool, diverged: bool) 
 _CTX: dict[str, Any] = {}
 
 
-def evaluate(c: dict[str, Any], source: str = "paper", plant: str = "ideal",
-             overrides: Sequence[str] = ()) -> dict[str, Any]:
+def evaluate(
+    c: dict[str, Any], source: str = "paper", plant: str = "ideal", overrides: Sequence[str] = ()
+) -> dict[str, Any]:
     """One evaluation: Table I (four methods) under the conditions ``c``."""
     from .table1 import run_table1
 
@@ -149,8 +179,12 @@ def evaluate(c: dict[str, Any], source: str = "paper", plant: str = "ideal",
     try:
         tab = run_table1(build_scenario(source, plant, c, overrides))
     except Exception as exc:  # noqa: BLE001 - a failed evaluation is a bad point, not the end of the search
-        return {"conditions": c, "objective": DIVERGED_PENALTY * 2, "error": f"{type(exc).__name__}: {exc}",
-                "wall_s": time.perf_counter() - t0}
+        return {
+            "conditions": c,
+            "objective": DIVERGED_PENALTY * 2,
+            "error": f"{type(exc).__name__}: {exc}",
+            "wall_s": time.perf_counter() - t0,
+        }
     ms = tab["methods"]
     per = {m: [float(f["total_velocity_error"]) for f in ms[m]["followers"]] for m in PAPER_TABLE1}
     peak = max(float(f["max_abs_v_cmd"]) for f in ms["backstepping"]["followers"])
@@ -158,14 +192,24 @@ def evaluate(c: dict[str, Any], source: str = "paper", plant: str = "ideal",
     diverged = [m for m in PAPER_TABLE1 if ms[m].get("diverged")]
     lost = [m for m in PAPER_TABLE1 if not final[m] <= LOST_M]
     sat = {m: max(float(f["saturation_fraction"]) for f in ms[m]["followers"]) for m in PAPER_TABLE1}
-    lim = [f.get("robot", {}).get("tau_max_nm") if isinstance(f.get("robot"), dict) else f.get("tau_max_nm")
-           for f in ms["backstepping"]["followers"]]
-    out = {"conditions": c, **score(per, peak, bool(lost), bool(diverged)), "per": per,
-           "robot_tau_max": max((x for x in lim if x is not None), default=None),
-           "peak_v_cmd_backstepping": peak, "final_formation_error_m": final, "saturation_fraction": sat,
-           "lost": lost, "diverged": diverged, "ordering_holds": bool(tab["ordering_holds"]),
-           "stepping_s": sum(float(ms[m].get("wall_time_s") or 0.0) for m in ms),
-           "wall_s": time.perf_counter() - t0}
+    lim = [
+        f.get("robot", {}).get("tau_max_nm") if isinstance(f.get("robot"), dict) else f.get("tau_max_nm")
+        for f in ms["backstepping"]["followers"]
+    ]
+    out = {
+        "conditions": c,
+        **score(per, peak, bool(lost), bool(diverged)),
+        "per": per,
+        "robot_tau_max": max((x for x in lim if x is not None), default=None),
+        "peak_v_cmd_backstepping": peak,
+        "final_formation_error_m": final,
+        "saturation_fraction": sat,
+        "lost": lost,
+        "diverged": diverged,
+        "ordering_holds": bool(tab["ordering_holds"]),
+        "stepping_s": sum(float(ms[m].get("wall_time_s") or 0.0) for m in ms),
+        "wall_s": time.perf_counter() - t0,
+    }
     return out
 
 
@@ -178,11 +222,25 @@ def _table_rows(ev: dict[str, Any]) -> list[dict[str, Any]]:
     for m, paper in PAPER_TABLE1.items():
         for i, p in enumerate(paper):
             ours = ev["per"][m][i] if "per" in ev else float("nan")
-            rows.append({"method": m, "follower": i + 1, "ours": round(ours, 4), "paper": p,
-                         "log_residual": round(math.log(ours / p), 4) if ours > 0 else None})
-    rows.append({"method": "backstepping", "follower": "max", "quantity": "peak |v_cmd| (m/s), Fig. 4",
-                 "ours": round(ev.get("peak_v_cmd_backstepping", float("nan")), 3),
-                 "paper": "over 8 (read as 8-10)", "log_residual": round(ev.get("peak_log_residual", float("nan")), 4)})
+            rows.append(
+                {
+                    "method": m,
+                    "follower": i + 1,
+                    "ours": round(ours, 4),
+                    "paper": p,
+                    "log_residual": round(math.log(ours / p), 4) if ours > 0 else None,
+                }
+            )
+    rows.append(
+        {
+            "method": "backstepping",
+            "follower": "max",
+            "quantity": "peak |v_cmd| (m/s), Fig. 4",
+            "ours": round(ev.get("peak_v_cmd_backstepping", float("nan")), 3),
+            "paper": "over 8 (read as 8-10)",
+            "log_residual": round(ev.get("peak_log_residual", float("nan")), 4),
+        }
+    )
     return rows
 
 
@@ -213,9 +271,16 @@ def _sensitivity_points(best: dict[str, Any], default: dict[str, Any]) -> list[t
     return pts
 
 
-def calibrate(target: str = "table1", plant: str = "ideal", budget: int | None = None, source: str = "paper",
-              overrides: Sequence[str] = (), workers: int | None = None, seed: int = 0,
-              progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+def calibrate(
+    target: str = "table1",
+    plant: str = "ideal",
+    budget: int | None = None,
+    source: str = "paper",
+    overrides: Sequence[str] = (),
+    workers: int | None = None,
+    seed: int = 0,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict[str, Any]:
     """Run the search and the sensitivity analysis; returns the report (see module doc)."""
     from scipy.optimize import differential_evolution
     from scipy.stats import qmc
@@ -283,9 +348,22 @@ def calibrate(target: str = "table1", plant: str = "ideal", budget: int | None =
                 ints = _integrality(3 * n)
                 init[:, ints] = np.round(init[:, ints])
                 maxiter = max(budget // pop - 1, 0)
-                differential_evolution(lambda x: 0.0, bounds, init=init, maxiter=maxiter, popsize=pop,
-                                       integrality=ints, workers=de_map, updating="deferred", polish=False,
-                                       tol=0.0, atol=0.0, seed=seed, mutation=(0.5, 1.0), recombination=0.7)
+                differential_evolution(
+                    lambda x: 0.0,
+                    bounds,
+                    init=init,
+                    maxiter=maxiter,
+                    popsize=pop,
+                    integrality=ints,
+                    workers=de_map,
+                    updating="deferred",
+                    polish=False,
+                    tol=0.0,
+                    atol=0.0,
+                    seed=seed,
+                    mutation=(0.5, 1.0),
+                    recombination=0.7,
+                )
         search_evals = len(history)
         good = [h for h in history if "per" in h]
         best = min(good or history, key=lambda h: h["objective"])
@@ -298,46 +376,80 @@ def calibrate(target: str = "table1", plant: str = "ideal", budget: int | None =
 
     sensitivity: dict[str, Any] = {}
     for (name, value, _), r in zip(sens_pts, sens_res):
-        e = sensitivity.setdefault(name, {"best_value": best["conditions"][name] if name != "initial_poses"
-                                          else "calibrated", "alternatives": []})
-        e["alternatives"].append({"value": value, "objective": round(r["objective"], 4),
-                                  "rms_log_residual": round(r.get("rms_log_residual", float("nan")), 4),
-                                  "peak_v_cmd_backstepping": round(r.get("peak_v_cmd_backstepping", float("nan")), 3),
-                                  "lost": r.get("lost", []), "ordering_holds": r.get("ordering_holds")})
+        e = sensitivity.setdefault(
+            name,
+            {"best_value": best["conditions"][name] if name != "initial_poses" else "calibrated", "alternatives": []},
+        )
+        e["alternatives"].append(
+            {
+                "value": value,
+                "objective": round(r["objective"], 4),
+                "rms_log_residual": round(r.get("rms_log_residual", float("nan")), 4),
+                "peak_v_cmd_backstepping": round(r.get("peak_v_cmd_backstepping", float("nan")), 3),
+                "lost": r.get("lost", []),
+                "ordering_holds": r.get("ordering_holds"),
+            }
+        )
     for e in sensitivity.values():
         e["max_objective_change"] = round(max(a["objective"] for a in e["alternatives"]) - best["objective"], 4)
     stepping = [h["stepping_s"] for h in history if "stepping_s" in h]
     report = {
-        "target": target, "plant": plant, "scenario": source, "overrides": list(overrides), "seed": seed,
-        "budget": budget, "evaluations": {"search": search_evals, "sensitivity": len(sens_res), "total": len(history)},
-        "optimiser": method, "workers": workers,
+        "target": target,
+        "plant": plant,
+        "scenario": source,
+        "overrides": list(overrides),
+        "seed": seed,
+        "budget": budget,
+        "evaluations": {"search": search_evals, "sensitivity": len(sens_res), "total": len(history)},
+        "optimiser": method,
+        "workers": workers,
         "wall_s": round(time.perf_counter() - t_start, 2),
-        "stepping_s_per_evaluation": {"median": round(float(np.median(stepping)), 4) if stepping else None,
-                                      "max": round(float(np.max(stepping)), 4) if stepping else None},
-        "objective_definition": ("RMS of 13 log residuals: log(ours/paper) for the 12 Table I cells and, for "
-                                 "backstepping's peak |v_cmd|, log(peak/8) below 8 m/s, log(peak/10) above 10, 0 "
-                                 f"between; + {LOST_PENALTY} when a method ends > {LOST_M} m off the formation, "
-                                 f"+ {DIVERGED_PENALTY} when a run diverges"),
-        "search_space": {"initial_poses": f"paper.toml's ±{POSE_HALF_RANGE} m in x and y, heading in [-pi/2, pi/2]",
-                         "c_hat0_scale": [0.25, 2.0], "derivative": list(DERIVS), "deriv_wn": [10.0, 1e4],
-                         "tau_max": [2.0, 1e4], "saturation": list(SATS),
-                         "estimator_gains": {k: {"ka": v[0], "kb": v[1]} for k, v in EST_GAINS.items()}},
+        "stepping_s_per_evaluation": {
+            "median": round(float(np.median(stepping)), 4) if stepping else None,
+            "max": round(float(np.max(stepping)), 4) if stepping else None,
+        },
+        "objective_definition": (
+            "RMS of 13 log residuals: log(ours/paper) for the 12 Table I cells and, for "
+            "backstepping's peak |v_cmd|, log(peak/8) below 8 m/s, log(peak/10) above 10, 0 "
+            f"between; + {LOST_PENALTY} when a method ends > {LOST_M} m off the formation, "
+            f"+ {DIVERGED_PENALTY} when a run diverges"
+        ),
+        "search_space": {
+            "initial_poses": f"paper.toml's ±{POSE_HALF_RANGE} m in x and y, heading in [-pi/2, pi/2]",
+            "c_hat0_scale": [0.25, 2.0],
+            "derivative": list(DERIVS),
+            "deriv_wn": [10.0, 1e4],
+            "tau_max": [2.0, 1e4],
+            "saturation": list(SATS),
+            "estimator_gains": {k: {"ka": v[0], "kb": v[1]} for k, v in EST_GAINS.items()},
+        },
         "best": best["conditions"],
         "objective": round(best["objective"], 4),
         "rms_log_residual": round(best["rms_log_residual"], 4),
         "peak_v_cmd_backstepping": round(best["peak_v_cmd_backstepping"], 3),
-        "ordering_holds": best["ordering_holds"], "lost": best["lost"], "diverged": best["diverged"],
+        "ordering_holds": best["ordering_holds"],
+        "lost": best["lost"],
+        "diverged": best["diverged"],
         "final_formation_error_m": {m: round(v, 4) for m, v in best["final_formation_error_m"].items()},
         "saturation_fraction": {m: round(v, 3) for m, v in best["saturation_fraction"].items()},
         "table": _table_rows(best),
-        "default": {"conditions": default, "objective": round(ev_default["objective"], 4),
-                    "rms_log_residual": round(ev_default.get("rms_log_residual", float("nan")), 4),
-                    "peak_v_cmd_backstepping": round(ev_default.get("peak_v_cmd_backstepping", float("nan")), 3),
-                    "lost": ev_default.get("lost"), "table": _table_rows(ev_default)},
+        "default": {
+            "conditions": default,
+            "objective": round(ev_default["objective"], 4),
+            "rms_log_residual": round(ev_default.get("rms_log_residual", float("nan")), 4),
+            "peak_v_cmd_backstepping": round(ev_default.get("peak_v_cmd_backstepping", float("nan")), 3),
+            "lost": ev_default.get("lost"),
+            "table": _table_rows(ev_default),
+        },
         "sensitivity": sensitivity,
-        "top": [{"objective": round(h["objective"], 4), "rms_log_residual": round(h.get("rms_log_residual", 99), 4),
-                 "conditions": h["conditions"]}
-                for h in sorted(history[:search_evals], key=lambda h: h["objective"])[:10]],
+        "top": [
+            {
+                "objective": round(h["objective"], 4),
+                "rms_log_residual": round(h.get("rms_log_residual", 99), 4),
+                "conditions": h["conditions"],
+            }
+            for h in sorted(history[:search_evals], key=lambda h: h["objective"])[:10]
+        ],
     }
     return report
 
@@ -345,36 +457,60 @@ def calibrate(target: str = "table1", plant: str = "ideal", budget: int | None =
 def markdown(r: dict[str, Any]) -> str:
     """``calibration.md``: best conditions, the table beside the paper's, the sensitivity."""
     b = r["best"]
-    lines = [f"# Calibration of Table I's unstated conditions ({r['plant']} plant, scenario '{r['scenario']}')", "",
-             f"{r['optimiser']}; {r['evaluations']['search']} evaluations in the search + "
-             f"{r['evaluations']['sensitivity']} for the sensitivity on {r['workers']} worker(s), {r['wall_s']:.0f} s; "
-             f"median stepping per evaluation (4 methods × 20 s) {r['stepping_s_per_evaluation']['median']} s.", "",
-             f"Objective: {r['objective_definition']}.", "",
-             f"**Best: objective {r['objective']:.3f}, RMS log residual over the 12 cells {r['rms_log_residual']:.3f} "
-             f"(×{math.exp(r['rms_log_residual']):.2f} typical factor); backstepping peak |υ_cmd| "
-             f"{r['peak_v_cmd_backstepping']:.2f} m/s; ordering {'holds' if r['ordering_holds'] else 'does NOT hold'}"
-             + (f"; lost formation: {', '.join(r['lost'])}" if r["lost"] else "") + ".** "
-             f"The scenario's own conditions: objective {r['default']['objective']:.3f}, RMS "
-             f"{r['default']['rms_log_residual']:.3f}, peak {r['default']['peak_v_cmd_backstepping']:.2f} m/s.", "",
-             "## Best conditions", "",
-             "| condition | value |", "|---|---|",
-             "| initial poses (x, y, θ) | "
-             + "; ".join(f"({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f})" for p in b["initial_poses"]) + " |",
-             f"| ĉ(0) scale | {b['c_hat0_scale']} |", f"| command derivative | {b['derivative']} |",
-             f"| ω_n (filter only) | {b['deriv_wn']} rad/s |", f"| torque limit | {b['tau_max']} N·m |",
-             f"| saturation | {b['saturation']} |",
-             f"| estimator gains | {b['estimator_gains']} (ka, kb = {EST_GAINS[b['estimator_gains']]}) |", "",
-             "## Table I, ours (best) beside the paper's", "",
-             "| method | follower | ours | paper | log(ours/paper) | scenario's own |", "|---|---|---|---|---|---|"]
+    lines = [
+        f"# Calibration of Table I's unstated conditions ({r['plant']} plant, scenario '{r['scenario']}')",
+        "",
+        f"{r['optimiser']}; {r['evaluations']['search']} evaluations in the search + "
+        f"{r['evaluations']['sensitivity']} for the sensitivity on {r['workers']} worker(s), {r['wall_s']:.0f} s; "
+        f"median stepping per evaluation (4 methods × 20 s) {r['stepping_s_per_evaluation']['median']} s.",
+        "",
+        f"Objective: {r['objective_definition']}.",
+        "",
+        f"**Best: objective {r['objective']:.3f}, RMS log residual over the 12 cells {r['rms_log_residual']:.3f} "
+        f"(×{math.exp(r['rms_log_residual']):.2f} typical factor); backstepping peak |υ_cmd| "
+        f"{r['peak_v_cmd_backstepping']:.2f} m/s; ordering {'holds' if r['ordering_holds'] else 'does NOT hold'}"
+        + (f"; lost formation: {', '.join(r['lost'])}" if r["lost"] else "")
+        + ".** "
+        f"The scenario's own conditions: objective {r['default']['objective']:.3f}, RMS "
+        f"{r['default']['rms_log_residual']:.3f}, peak {r['default']['peak_v_cmd_backstepping']:.2f} m/s.",
+        "",
+        "## Best conditions",
+        "",
+        "| condition | value |",
+        "|---|---|",
+        "| initial poses (x, y, θ) | "
+        + "; ".join(f"({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f})" for p in b["initial_poses"])
+        + " |",
+        f"| ĉ(0) scale | {b['c_hat0_scale']} |",
+        f"| command derivative | {b['derivative']} |",
+        f"| ω_n (filter only) | {b['deriv_wn']} rad/s |",
+        f"| torque limit | {b['tau_max']} N·m |",
+        f"| saturation | {b['saturation']} |",
+        f"| estimator gains | {b['estimator_gains']} (ka, kb = {EST_GAINS[b['estimator_gains']]}) |",
+        "",
+        "## Table I, ours (best) beside the paper's",
+        "",
+        "| method | follower | ours | paper | log(ours/paper) | scenario's own |",
+        "|---|---|---|---|---|---|",
+    ]
     for row, d in zip(r["table"], r["default"]["table"]):
         lr = row["log_residual"]
-        lines.append(f"| {row['method']} | {row['follower']} | {row['ours']} | {row['paper']} | "
-                     f"{'' if lr is None else f'{lr:+.3f}'} | {d['ours']} |")
-    lines += ["", "## Sensitivity (one condition moved from the best)", "",
-              "| condition | best | moved to → objective (RMS of the 12) | largest increase |", "|---|---|---|---|"]
+        lines.append(
+            f"| {row['method']} | {row['follower']} | {row['ours']} | {row['paper']} | "
+            f"{'' if lr is None else f'{lr:+.3f}'} | {d['ours']} |"
+        )
+    lines += [
+        "",
+        "## Sensitivity (one condition moved from the best)",
+        "",
+        "| condition | best | moved to → objective (RMS of the 12) | largest increase |",
+        "|---|---|---|---|",
+    ]
     for name, e in sorted(r["sensitivity"].items(), key=lambda kv: -kv[1]["max_objective_change"]):
-        alts = "; ".join(f"{a['value']} → {a['objective']:.2f} ({a['rms_log_residual']:.2f})"
-                         + (" lost" if a["lost"] else "") for a in e["alternatives"])
+        alts = "; ".join(
+            f"{a['value']} → {a['objective']:.2f} ({a['rms_log_residual']:.2f})" + (" lost" if a["lost"] else "")
+            for a in e["alternatives"]
+        )
         lines.append(f"| {name} | {e['best_value']} | {alts} | {e['max_objective_change']:+.2f} |")
     return "\n".join(lines) + "\n"
 

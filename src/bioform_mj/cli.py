@@ -5,6 +5,7 @@ work); 3 the simulation diverged (diagnosis on stderr, log kept); 130/143 interr
 SIGINT/SIGTERM (a message on stderr, no temporary files left, the log so far kept where the
 run returned one); 1 anything else.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -12,8 +13,9 @@ import json
 import os
 import signal
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from .control.stack import METHODS
 from .errors import BioformError, InputError, Interrupted
@@ -35,40 +37,64 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plant", choices=PLANTS, help="plant to drive (default: the scenario's)")
     p.add_argument("--duration", type=float, help="simulated time in s (overrides sim.duration)")
     p.add_argument("--seed", type=int, help="random seed (overrides sim.seed)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scenario value, e.g. --set kinematic.k1=3 (repeatable)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario value, e.g. --set kinematic.k1=3 (repeatable)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar, no result lines")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="bioform", description="Distributed bioinspired formation control on ideal and MuJoCo plants.")
+    parser = _Parser(
+        prog="bioform", description="Distributed bioinspired formation control on ideal and MuJoCo plants."
+    )
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="run one scenario and write summary.json and log.npz")
     _scenario_args(run)
     run.add_argument("--method", choices=METHODS, help="control method (default: the scenario's)")
-    run.add_argument("--out", type=Path, help="output directory (default: runs/<scenario>-<plant>-<method>); "
-                                              "one run per folder")
-    run.add_argument("--overwrite", action="store_true",
-                     help="replace the run already in --out (its files only; a folder holding other files is refused)")
-    run.add_argument("--engine", choices=("auto", "compiled", "stepwise"), default="auto",
-                     help="fused: the numba-compiled loop (default when numba imports); numpy: the reference stack")
-    run.add_argument("--video", action="store_true",
-                     help="write video.mp4 (off-screen MuJoCo rendering, MUJOCO_GL=egl by default; "
-                          "the ideal plant is shown in a composed scene)")
+    run.add_argument(
+        "--out", type=Path, help="output directory (default: runs/<scenario>-<plant>-<method>); one run per folder"
+    )
+    run.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the run already in --out (its files only; a folder holding other files is refused)",
+    )
+    run.add_argument(
+        "--engine",
+        choices=("auto", "compiled", "stepwise"),
+        default="auto",
+        help="fused: the numba-compiled loop (default when numba imports); numpy: the reference stack",
+    )
+    run.add_argument(
+        "--video",
+        action="store_true",
+        help="write video.mp4 (off-screen MuJoCo rendering, MUJOCO_GL=egl by default; "
+        "the ideal plant is shown in a composed scene)",
+    )
     run.add_argument("--rrd", action="store_true", help="write run.rrd (rerun recording)")
     run.add_argument("--figures", action="store_true", help="write figures/*.png")
     run.add_argument("--rerun-spawn", action="store_true", help="stream the run live to a rerun viewer spawned for it")
-    run.add_argument("--rerun-connect", metavar="ADDR",
-                     help="stream the run live to a running rerun viewer "
-                          "(rerun+http://HOST:PORT/proxy, HOST:PORT or PORT)")
+    run.add_argument(
+        "--rerun-connect",
+        metavar="ADDR",
+        help="stream the run live to a running rerun viewer (rerun+http://HOST:PORT/proxy, HOST:PORT or PORT)",
+    )
     vid = run.add_argument_group("video options (with --video)")
     vid.add_argument("--width", type=int, help="video width in pixels, even (default 960)")
     vid.add_argument("--height", type=int, help="video height in pixels, even (default 540)")
     vid.add_argument("--fps", type=float, help="frames per second of simulated time (default 30)")
-    vid.add_argument("--camera", choices=("auto", "track", "top"),
-                     help="auto: free camera keeping leader, followers and slots in view (default); "
-                          "track/top: the scene's cameras on the formation centroid")
+    vid.add_argument(
+        "--camera",
+        choices=("auto", "track", "top"),
+        help="auto: free camera keeping leader, followers and slots in view (default); "
+        "track/top: the scene's cameras on the formation centroid",
+    )
 
     t1 = sub.add_parser("table1", help="run the four methods and write table1.json / table1.md")
     _scenario_args(t1)
@@ -79,7 +105,8 @@ def build_parser() -> argparse.ArgumentParser:
     ident = sub.add_parser("identify", help="system identification of a robot MJCF: formula vs measured a, b")
     ident.add_argument("model", help="shipped robot name or path to an MJCF file")
     ident.add_argument("--out", type=Path, help="write the result as JSON to this file")
-    from .robot_check import add_parser as _robot_parser, mapping_args
+    from .robot_check import add_parser as _robot_parser
+    from .robot_check import mapping_args
 
     mapping_args(ident)
     _robot_parser(sub)  # bioform robot check MODEL.xml [--base B] [--left-wheel J] [--right-wheel J] [--json FILE]
@@ -87,13 +114,25 @@ def build_parser() -> argparse.ArgumentParser:
     sw = sub.add_parser("sweep", help="many runs: methods x varied keys x seeds, on a process pool or Ray")
     _scenario_args(sw)
     sw.add_argument("--seeds", type=int, default=1, help="seeds per configuration, 0..K-1 (default 1)")
-    sw.add_argument("--methods", default="bioinspired-learning",
-                    help="comma-separated methods, or 'all' (default: bioinspired-learning)")
-    sw.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...",
-                    help="vary a scenario key over values (repeatable; ';' separates array values)")
-    sw.add_argument("--backend", choices=("local", "ray", "warp"), default="local",
-                    help="local processes, Ray, or warp: every run a world of a MuJoCo Warp batch "
-                         "(needs pip install 'bioform-mj[gpu]')")
+    sw.add_argument(
+        "--methods",
+        default="bioinspired-learning",
+        help="comma-separated methods, or 'all' (default: bioinspired-learning)",
+    )
+    sw.add_argument(
+        "--vary",
+        action="append",
+        default=[],
+        metavar="KEY=V1,V2,...",
+        help="vary a scenario key over values (repeatable; ';' separates array values)",
+    )
+    sw.add_argument(
+        "--backend",
+        choices=("local", "ray", "warp"),
+        default="local",
+        help="local processes, Ray, or warp: every run a world of a MuJoCo Warp batch "
+        "(needs pip install 'bioform-mj[gpu]')",
+    )
     sw.add_argument("--device", help="with --backend warp: Warp device, cpu or cuda[:N] (default: cuda if present)")
     sw.add_argument("--workers", type=int, help="parallel workers (default: CPU count)")
     sw.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray)")
@@ -118,12 +157,19 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("--reps", type=int, default=2, help="repetitions; the best time counts (default 2)")
     bn.add_argument("--numpy", action="store_true", help="also time the numpy reference stack")
     bn.add_argument("--json", type=Path, default=Path("runs/bench.json"), help="output JSON (default runs/bench.json)")
-    bn.add_argument("--backend", choices=("cpu", "warp"), default="cpu",
-                    help="cpu: the compiled loop vs mj_step (default); warp: MuJoCo Warp batches, closed loop vs "
-                         "physics alone, and the CPU engine on this machine")
+    bn.add_argument(
+        "--backend",
+        choices=("cpu", "warp"),
+        default="cpu",
+        help="cpu: the compiled loop vs mj_step (default); warp: MuJoCo Warp batches, closed loop vs "
+        "physics alone, and the CPU engine on this machine",
+    )
     bn.add_argument("--device", help="with --backend warp: Warp device, cpu or cuda[:N] (default: cuda if present)")
-    bn.add_argument("--worlds", default="1024,4096,32768",
-                    help="with --backend warp: comma-separated world counts (default 1024,4096,32768)")
+    bn.add_argument(
+        "--worlds",
+        default="1024,4096,32768",
+        help="with --backend warp: comma-separated world counts (default 1024,4096,32768)",
+    )
     return parser
 
 
@@ -146,8 +192,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM through _catch_signals
         _ignore_signals()
         signum = getattr(exc, "signum", signal.SIGINT)
-        print(f"error: interrupted by {signal.Signals(signum).name}; {getattr(exc, 'kept', 'nothing written')}",
-              file=sys.stderr)
+        print(
+            f"error: interrupted by {signal.Signals(signum).name}; {getattr(exc, 'kept', 'nothing written')}",
+            file=sys.stderr,
+        )
         return 128 + signum
     except BrokenPipeError:  # e.g. `bioform ... | head`
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - silence the flush at exit
@@ -155,7 +203,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - a bug: one line, full traceback on request
         if os.environ.get("BIOFORM_DEBUG"):
             raise
-        print(f"error: internal error {type(exc).__name__}: {exc} (set BIOFORM_DEBUG=1 for a traceback)", file=sys.stderr)
+        print(
+            f"error: internal error {type(exc).__name__}: {exc} (set BIOFORM_DEBUG=1 for a traceback)", file=sys.stderr
+        )
         return EXIT_OTHER
     finally:
         restore()
@@ -168,6 +218,7 @@ def _catch_signals():
     Python runs the handler between bytecodes: inside the compiled loop it waits for the end
     of the chunk in progress (at most one log interval of simulated time).
     """
+
     def handler(signum, _frame):
         _ignore_signals()
         raise Interrupted(signum)
@@ -297,8 +348,13 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
     if args.video:
         from .outputs.video import VideoOptions
 
-        video_opts = VideoOptions(**{k: v for k, v in (("width", args.width), ("height", args.height),
-                                                       ("fps", args.fps), ("camera", args.camera)) if v is not None})
+        video_opts = VideoOptions(
+            **{
+                k: v
+                for k, v in (("width", args.width), ("height", args.height), ("fps", args.fps), ("camera", args.camera))
+                if v is not None
+            }
+        )
         video_opts.validate()
     else:
         given = [f"--{k}" for k in ("width", "height", "fps", "camera") if getattr(args, k) is not None]
@@ -356,8 +412,10 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
     if interrupted is None and getattr(result, "interrupted", None) is not None:  # or a result that says so
         interrupted = result.interrupted
     if interrupted is not None and not result.summary.get("interrupted"):
-        result.summary["interrupted"] = {"signal": signal.Signals(getattr(interrupted, "signum", 2)).name,
-                                         "time_s": result.summary.get("sim_time_s")}
+        result.summary["interrupted"] = {
+            "signal": signal.Signals(getattr(interrupted, "signum", 2)).name,
+            "time_s": result.summary.get("sim_time_s"),
+        }
     write_npz(out / "log.npz", result.log)
     if sc.plant.kind == "mujoco":
         write_text(out / "scene.xml", result.plant.model_xml())
@@ -366,8 +424,11 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
     if interrupted is not None:
         _ignore_signals()
         signum = getattr(interrupted, "signum", signal.SIGINT)
-        print(f"error: interrupted by {signal.Signals(signum).name} at t = {result.summary.get('sim_time_s', 0):g} s; "
-              f"log so far kept in {out} (summary.json, log.npz)", file=sys.stderr)
+        print(
+            f"error: interrupted by {signal.Signals(signum).name} at t = {result.summary.get('sim_time_s', 0):g} s; "
+            f"log so far kept in {out} (summary.json, log.npz)",
+            file=sys.stderr,
+        )
         return 128 + signum
 
     problems: list[str] = []  # what was asked for and could not be made: error lines, exit 2
@@ -391,14 +452,18 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
             try:
                 with progress_bar("video.mp4", not args.quiet, unit="frame") as cb:
                     info = render_video(capture, result, out / "video.mp4", video_opts, progress=cb)
-                notes.append(f"video.mp4: {info.frames} frames {info.width}x{info.height} at {info.fps:g} fps "
-                             f"rendered in {info.render_s:.1f} s ({info.gl_renderer or 'OpenGL'})")
+                notes.append(
+                    f"video.mp4: {info.frames} frames {info.width}x{info.height} at {info.fps:g} fps "
+                    f"rendered in {info.render_s:.1f} s ({info.gl_renderer or 'OpenGL'})"
+                )
             except InputError as exc:  # no OpenGL context (GLUnavailable), or nothing to show
                 problems.append(str(exc))
     except KeyboardInterrupt as exc:  # while writing the extras: the run itself is complete
-        exc.kept = (f"the run completed: summary.json and log.npz are in {out}; "  # type: ignore[attr-defined]
-                    f"{', '.join(n.split(':')[0].split(' ')[0] for n in notes) or 'no extra output'} written, "
-                    "the rest not")
+        exc.kept = (
+            f"the run completed: summary.json and log.npz are in {out}; "  # type: ignore[attr-defined]
+            f"{', '.join(n.split(':')[0].split(' ')[0] for n in notes) or 'no extra output'} written, "
+            "the rest not"
+        )
         raise
     if live is not None and live.error:
         problems.append(live.error)
@@ -443,12 +508,16 @@ def _warn_outcomes(summary: dict[str, Any]) -> None:
 
 
 def _print_summary(summary: dict[str, Any], out: Path) -> None:
-    print(f"{summary['scenario']} / {summary['plant']} / {summary['method']}: "
-          f"{summary['sim_time_s']:.2f} s simulated in {summary['wall_time_s']:.2f} s")
+    print(
+        f"{summary['scenario']} / {summary['plant']} / {summary['method']}: "
+        f"{summary['sim_time_s']:.2f} s simulated in {summary['wall_time_s']:.2f} s"
+    )
     for f in summary["followers"]:
-        print(f"  follower {f['id']}: formation error {f['final_formation_error_m']:.4f} m, "
-              f"total velocity error {f['total_velocity_error']:.2f}, "
-              f"c_hat {f['c_hat'][0]:.4g}, {f['c_hat'][1]:.4g} (true {f['c_true'][0]:.4g}, {f['c_true'][1]:.4g})")
+        print(
+            f"  follower {f['id']}: formation error {f['final_formation_error_m']:.4f} m, "
+            f"total velocity error {f['total_velocity_error']:.2f}, "
+            f"c_hat {f['c_hat'][0]:.4g}, {f['c_hat'][1]:.4g} (true {f['c_true'][0]:.4g}, {f['c_true'][1]:.4g})"
+        )
     print(f"outputs in {out}/")
 
 
@@ -470,6 +539,7 @@ def _table1_in(args: argparse.Namespace, sc, out: Path) -> int:
     results = {}
 
     with progress_bar(f"table1 {sc.name} {sc.plant.kind}", not args.quiet) as cb:
+
         def keep(m, res):
             results[m] = res
             if not args.quiet:
@@ -531,8 +601,7 @@ def _sweep(args: argparse.Namespace) -> int:
     overrides = list(args.overrides)
     if args.duration is not None:
         overrides.append(f"sim.duration={args.duration!r}")
-    specs = expand(args.scenario, args.seeds, methods, args.vary, overrides, plant=args.plant,
-                   seed0=args.seed or 0)
+    specs = expand(args.scenario, args.seeds, methods, args.vary, overrides, plant=args.plant, seed0=args.seed or 0)
     if args.backend == "warp":  # unsupported features, device memory: before anything is written
         from .batch.backend import plan
 
@@ -541,8 +610,15 @@ def _sweep(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     progress = _progress(not args.quiet, "sweep")
     try:
-        res = sweep(specs, out, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
-                    progress=progress, device=args.device)
+        res = sweep(
+            specs,
+            out,
+            backend=args.backend,
+            workers=args.workers,
+            ray_address=args.ray_address,
+            progress=progress,
+            device=args.device,
+        )
     except SweepInterrupted as exc:
         # the same command resumes: finished rows are skipped by their content key
         cmd = ["bioform", "sweep", args.scenario]
@@ -567,10 +643,17 @@ def _sweep(args: argparse.Namespace) -> int:
         return 128 + exc.signum
     tm = res["timing"]
     if tm["workers_died"]:
-        print(f"warning: {tm['workers_died']} run(s) failed because their worker process died (see 'error' in "
-              f"{out}/runs.csv); rerun the sweep to retry them", file=sys.stderr)
+        print(
+            f"warning: {tm['workers_died']} run(s) failed because their worker process died (see 'error' in "
+            f"{out}/runs.csv); rerun the sweep to retry them",
+            file=sys.stderr,
+        )
     if not args.quiet:
-        rate = f", {tm['wall_s']:.1f} s, {tm['runs_per_s']:.2f} runs/s on {tm['workers']} worker(s)" if tm["runs_per_s"] else ""
+        rate = (
+            f", {tm['wall_s']:.1f} s, {tm['runs_per_s']:.2f} runs/s on {tm['workers']} worker(s)"
+            if tm["runs_per_s"]
+            else ""
+        )
         died = f", {tm['workers_died']} worker(s) died (rerun to retry)" if tm["workers_died"] else ""
         print(f"{tm['runs']} runs ({res['ran']} run now, {res['skipped']} already done{rate}{died})")
         print((out / "stats.md").read_text())
@@ -586,9 +669,16 @@ def _calibrate(args: argparse.Namespace) -> int:
     if args.budget is not None and args.budget < 1:
         raise InputError(f"--budget must be >= 1 evaluation, got {args.budget}")
     out = _prepare_out(args.out, "calibration")
-    rep = cal.calibrate(args.target, plant=args.plant, budget=args.budget, source=args.scenario,
-                        overrides=args.overrides, workers=args.workers, seed=args.seed,
-                        progress=_progress(not args.quiet, "calibrate"))
+    rep = cal.calibrate(
+        args.target,
+        plant=args.plant,
+        budget=args.budget,
+        source=args.scenario,
+        overrides=args.overrides,
+        workers=args.workers,
+        seed=args.seed,
+        progress=_progress(not args.quiet, "calibrate"),
+    )
     cal.write(rep, out)
     if not args.quiet:
         print(cal.markdown(rep))

@@ -1,6 +1,6 @@
 """Disturbance accelerations ``d(t) = [d1, d2]`` of eq. 34."""
-from __future__ import annotations
 
+from __future__ import annotations
 
 import numpy as np
 

@@ -12,6 +12,7 @@ torques, saturation) are the **mean over the steps since the previous row**
 (``(t_{j−1}, t_j]``), with the minimum and maximum of the commands and torques beside
 them, so a chattering torque is not shown as whatever value it had at the sample instant.
 """
+
 from __future__ import annotations
 
 import math
@@ -328,8 +329,10 @@ def describe(diag: np.ndarray, t: float, lim: Bounds) -> str:
     signal, what, limit = GUARDS[code - 1]
     if limit is None:
         return f"follower {i + 1}: {what} '{signal}' is not finite at t = {t:.4f} s"
-    return (f"follower {i + 1}: {what} |{signal}| = {val:.3g} exceeds limits.{limit} = "
-            f"{getattr(lim, limit):g} at t = {t:.4f} s")
+    return (
+        f"follower {i + 1}: {what} |{signal}| = {val:.3g} exceeds limits.{limit} = "
+        f"{getattr(lim, limit):g} at t = {t:.4f} s"
+    )
 
 
 #: status codes of the chunk kernels

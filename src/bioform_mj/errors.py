@@ -3,6 +3,7 @@
 Each maps to one exit code of the ``bioform`` command (design §10): input errors
 exit 2 with a single ``error:`` line, a diverging simulation exits 3.
 """
+
 from __future__ import annotations
 
 

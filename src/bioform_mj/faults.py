@@ -27,14 +27,15 @@ without faults executes none of this. Every step here is vectorised over followe
 Randomness comes from ``numpy.random.default_rng([sim.seed, STREAM])``, one stream per source,
 so runs are bit-identical for a seed and differ between seeds where noise or loss is on.
 """
+
 from __future__ import annotations
 
 from typing import Any
 
 import numpy as np
 
-from .control.common import wrap
 from .control.base import Comm
+from .control.common import wrap
 from .control.stack import ControlStack
 from .graph import Graph
 from .scenario import Scenario
@@ -71,10 +72,14 @@ class Faults:
         for i, j, t0, t1 in fc.link_fail:
             i, j = int(i) - 1, int(j) - 1
             if j < 0:
-                l_idx.append(i); l_t0.append(t0); l_t1.append(t1)  # noqa: E702
+                l_idx.append(i)
+                l_t0.append(t0)
+                l_t1.append(t1)  # noqa: E702
                 continue
             rows = np.flatnonzero(((graph.src == i) & (graph.dst == j)) | ((graph.src == j) & (graph.dst == i)))
-            e_idx += rows.tolist(); e_t0 += [t0] * len(rows); e_t1 += [t1] * len(rows)  # noqa: E702
+            e_idx += rows.tolist()
+            e_t0 += [t0] * len(rows)
+            e_t1 += [t1] * len(rows)  # noqa: E702
         self._e_fail = (np.array(e_idx, dtype=int), np.array(e_t0), np.array(e_t1))
         self._l_fail = (np.array(l_idx, dtype=int), np.array(l_t0), np.array(l_t1))
         self.loss = fc.packet_loss
@@ -113,8 +118,17 @@ class Faults:
         self._push_i = 0
 
     # ------------------------------------------------------------------ the loop's hook
-    def step(self, k: int, t: float, stack: ControlStack, plant: Any, leader_pose: np.ndarray,
-             leader_vel: np.ndarray, pose: np.ndarray, vel: np.ndarray) -> np.ndarray:
+    def step(
+        self,
+        k: int,
+        t: float,
+        stack: ControlStack,
+        plant: Any,
+        leader_pose: np.ndarray,
+        leader_vel: np.ndarray,
+        pose: np.ndarray,
+        vel: np.ndarray,
+    ) -> np.ndarray:
         """One control step at ``t = k dt`` under the faults; returns the torques (n, 2) reaching the plant.
 
         ``pose``/``vel`` are the true states (not modified); the stack sees them with noise, and
@@ -130,16 +144,24 @@ class Faults:
             pose, vel = self.sense(t, pose, vel)
         comm = None
         if self.has_comm:
-            comm, leader_pose, leader_vel = self.comm(k, t, stack.signals()["est_pose"], stack.signals()["est_vel"],
-                                                      leader_pose, leader_vel)
+            comm, leader_pose, leader_vel = self.comm(
+                k, t, stack.signals()["est_pose"], stack.signals()["est_vel"], leader_pose, leader_vel
+            )
         tau = stack.step(leader_pose, leader_vel, pose, vel, comm)
         if self._lim is not None:
             tau = np.clip(tau, -self._lim, self._lim)  # the weakened motors deliver no more, per wheel
         return tau
 
     # ------------------------------------------------------------------ pieces
-    def comm(self, k: int, t: float, est_pose: np.ndarray, est_vel: np.ndarray, leader_pose: np.ndarray,
-             leader_vel: np.ndarray) -> tuple[Comm, np.ndarray, np.ndarray]:
+    def comm(
+        self,
+        k: int,
+        t: float,
+        est_pose: np.ndarray,
+        est_vel: np.ndarray,
+        leader_pose: np.ndarray,
+        leader_vel: np.ndarray,
+    ) -> tuple[Comm, np.ndarray, np.ndarray]:
         """The network of step ``k``: a :class:`Comm` and the leader state ``(3,)``, ``(2,)`` as received."""
         ei, et0, et1 = self._e_fail
         li, lt0, lt1 = self._l_fail
@@ -204,34 +226,41 @@ class Faults:
 # Outcome of a run under faults
 # ---------------------------------------------------------------------------------------
 
+
 def fault_interval(sc: Scenario, log: dict[str, np.ndarray]) -> tuple[float, float]:
     """``(t_start, t_end)`` s of the configured faults; for a friction patch, while any follower is on it."""
     fc = sc.faults
     starts: list[float] = []
     ends: list[float] = []
     for _i, _j, t0, t1 in fc.link_fail:
-        starts.append(t0); ends.append(t1)  # noqa: E702
+        starts.append(t0)
+        ends.append(t1)  # noqa: E702
     if fc.packet_loss > 0 or fc.delay > 0 or any(fc.noise_pose) or any(fc.noise_vel):
         w0, w1 = fc.window if fc.window else (0.0, sc.sim.duration)
-        starts.append(w0); ends.append(w1)  # noqa: E702
+        starts.append(w0)
+        ends.append(w1)  # noqa: E702
     for _i, t0, t1, _s in fc.actuator:
-        starts.append(t0); ends.append(t1)  # noqa: E702
+        starts.append(t0)
+        ends.append(t1)  # noqa: E702
     for _i, t0, dur, *_f in fc.push:
-        starts.append(t0); ends.append(t0 + dur)  # noqa: E702
+        starts.append(t0)
+        ends.append(t0 + dur)  # noqa: E702
     if fc.friction_patch and len(log["t"]):
         x0, y0, x1, y1, _mu = fc.friction_patch
         p = log["pose"]
         on = ((p[..., 0] >= x0) & (p[..., 0] <= x1) & (p[..., 1] >= y0) & (p[..., 1] <= y1)).any(axis=1)
         if on.any():
             t = log["t"][on]
-            starts.append(float(t[0])); ends.append(float(t[-1]))  # noqa: E702
+            starts.append(float(t[0]))
+            ends.append(float(t[-1]))  # noqa: E702
     if not starts:
         return (0.0, 0.0)
     return float(min(starts)), float(min(max(ends), sc.sim.duration))
 
 
-def outcome(result: Any, tol: float = TOLERANCE, final_window: float = 2.0,
-            interval: tuple[float, float] | None = None) -> dict[str, Any]:
+def outcome(
+    result: Any, tol: float = TOLERANCE, final_window: float = 2.0, interval: tuple[float, float] | None = None
+) -> dict[str, Any]:
     """Measured outcome of a run under faults (all errors are formation errors, m, max over followers).
 
     ``before``: peak in the second before the fault; ``peak_during``: peak in the fault interval;
@@ -262,8 +291,11 @@ def outcome(result: Any, tol: float = TOLERANCE, final_window: float = 2.0,
     last = t >= T - final_window
     recovered = (not diverged) and T >= sc.sim.duration - sc.sim.log_dt - 1e-9 and bool(fe[last].max() < tol)
     return {
-        "scenario": sc.name, "plant": sc.plant.kind, "method": sc.method,
-        "fault_start_s": t0, "fault_end_s": t1,
+        "scenario": sc.name,
+        "plant": sc.plant.kind,
+        "method": sc.method,
+        "fault_start_s": t0,
+        "fault_end_s": t1,
         "before": peak((t >= t0 - 1.0) & (t < t0)),
         "peak_during": peak((t >= t0) & (t <= t1)),
         "peak_after": peak(t > t1),

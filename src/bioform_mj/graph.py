@@ -8,10 +8,11 @@ Everything the control step needs is kept as edge lists (``O(edges)``); the dens
 Laplacian ``L`` and ``H = L + diag(a)`` (eq. 2) are built only on request, for
 analysis and tests.
 """
+
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -50,9 +51,7 @@ class Graph:
     def __post_init__(self) -> None:
         e = np.asarray(self.edges, dtype=np.int64).reshape(-1, 2)
         object.__setattr__(self, "edges", e)
-        object.__setattr__(
-            self, "leader_access", np.asarray(self.leader_access, dtype=float).reshape(-1)
-        )
+        object.__setattr__(self, "leader_access", np.asarray(self.leader_access, dtype=float).reshape(-1))
         # Both directions: row k says "follower src[k] reads follower dst[k]".
         object.__setattr__(self, "src", np.concatenate([e[:, 0], e[:, 1]]))
         object.__setattr__(self, "dst", np.concatenate([e[:, 1], e[:, 0]]))
@@ -88,7 +87,9 @@ class Graph:
         starts = np.searchsorted(self.src[order], np.arange(self.n + 1))
         dst_sorted = self.dst[order]
         while frontier.size:
-            nb = np.concatenate([dst_sorted[starts[i] : starts[i + 1]] for i in frontier]) if frontier.size else frontier
+            nb = (
+                np.concatenate([dst_sorted[starts[i] : starts[i + 1]] for i in frontier]) if frontier.size else frontier
+            )
             nb = np.unique(nb)
             nb = nb[~reached[nb]]
             reached[nb] = True
@@ -109,8 +110,7 @@ class Graph:
         if cut.size:
             ids = ", ".join(str(i + 1) for i in cut[:20]) + (" …" if cut.size > 20 else "")
             raise GraphError(
-                f"follower(s) {ids} cannot reach the leader: no path to a follower with "
-                "leader access (Assumption 1)"
+                f"follower(s) {ids} cannot reach the leader: no path to a follower with leader access (Assumption 1)"
             )
 
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 import logging
 import warnings
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -97,23 +96,29 @@ class RobotParams:
         motor = {"motor": self.motor}
         if self.motor == "dc":
             ce = self.motor_damping
-            motor.update({
-                "driver": self.driver,
-                "stall_torque_Nm": self.motor_stall_torque,
-                "no_load_speed_rad_s": self.motor_no_load_speed,
-                "back_emf_damping_Nms_per_rad": ce,
-                "back_emf_drag_rate_per_s": [2 * a * ce / r, 2 * b * ce * l / r],
-                "ground_truth": (
-                    "voltage driver: a_eff, b_eff from rest (the stall torque line); moving, back-EMF is a "
-                    "viscous drag (gK)^2/R per wheel: v' = a tau_a - k_v v, w' = b tau_b - k_w w, "
-                    "k_v = 2 a c/r, k_w = 2 b c l/r (c = damping + back-EMF)"
-                    if self.driver == "voltage" else
-                    "current driver: the commanded torque is delivered below the torque-speed line "
-                    "|tau| <= stall (1 - |wheel rate|/no-load speed): a_eff, b_eff and no drag; "
-                    "beyond it the torque is clipped (a saturation, not a drag)"),
-            })
-        return {**motor,
-            "damping_Nms_per_rad": c, "armature_kgm2": self.wheel_armature, "frictionloss_Nm": f,
+            motor.update(
+                {
+                    "driver": self.driver,
+                    "stall_torque_Nm": self.motor_stall_torque,
+                    "no_load_speed_rad_s": self.motor_no_load_speed,
+                    "back_emf_damping_Nms_per_rad": ce,
+                    "back_emf_drag_rate_per_s": [2 * a * ce / r, 2 * b * ce * l / r],
+                    "ground_truth": (
+                        "voltage driver: a_eff, b_eff from rest (the stall torque line); moving, back-EMF is a "
+                        "viscous drag (gK)^2/R per wheel: v' = a tau_a - k_v v, w' = b tau_b - k_w w, "
+                        "k_v = 2 a c/r, k_w = 2 b c l/r (c = damping + back-EMF)"
+                        if self.driver == "voltage"
+                        else "current driver: the commanded torque is delivered below the torque-speed line "
+                        "|tau| <= stall (1 - |wheel rate|/no-load speed): a_eff, b_eff and no drag; "
+                        "beyond it the torque is clipped (a saturation, not a drag)"
+                    ),
+                }
+            )
+        return {
+            **motor,
+            "damping_Nms_per_rad": c,
+            "armature_kgm2": self.wheel_armature,
+            "frictionloss_Nm": f,
             "armature_in_c_true": "I_w includes armature: a = 1/(m r + 2 I_w/r), b = l/(I r + 2 I_w l²/r)",
             "drag_rate_per_s": [k_v, k_w],
             "drag_time_constant_s": [1 / k_v if k_v else None, 1 / k_w if k_w else None],
@@ -125,7 +130,9 @@ class RobotParams:
                 "c_true = (a_eff, b_eff) under exciting motion, the drag and dead band acting as a "
                 "disturbance d; with a nearly constant torque they bias c_hat like a constant d: "
                 "a_hat ~ a - (k_v v + 2 a f)/tau_a, b_hat ~ b - (k_w w + 2 b f)/tau_b"
-                if (c or f) else "c_true = (a_eff, b_eff): no wheel damping or frictionloss"),
+                if (c or f)
+                else "c_true = (a_eff, b_eff): no wheel damping or frictionloss"
+            ),
         }
 
 
@@ -138,9 +145,7 @@ def _subtree(model: mujoco.MjModel, root: int) -> np.ndarray:
     return ids[inside]
 
 
-def robot_parameters(
-    model: mujoco.MjModel, prefix: str = "", data: mujoco.MjData | None = None
-) -> RobotParams:
+def robot_parameters(model: mujoco.MjModel, prefix: str = "", data: mujoco.MjData | None = None) -> RobotParams:
     """Read one robot's parameters from a compiled model (robot names start with ``prefix``).
 
     The parts come from the robot's layout (:func:`bioform_mj.scene.layout_of`: mapping, wheel
@@ -190,7 +195,9 @@ def robot_parameters(
     if com_offset > COM_TOLERANCE_M:
         log.info(
             "%s: centre of mass %.1f mm off the axle midpoint; a_eff, b_eff hold from rest "
-            "(an unmodelled υ·ω coupling acts while moving)", prefix or "robot", 1e3 * com_offset,
+            "(an unmodelled υ·ω coupling acts while moving)",
+            prefix or "robot",
+            1e3 * com_offset,
         )
     a_eff = 1.0 / (mass * r + 2.0 * i_w / r)  # design §8
     b_eff = l / (yaw * r + 2.0 * i_w * l**2 / r)  # design §8
@@ -213,11 +220,29 @@ def robot_parameters(
     if dc:
         R, K, g, vmax = dc_constants(model, al)
         voltage = int(model.actuator_ctrlspec[al]) == DC_INPUT_VOLTAGE
-        motor = dict(motor="dc", driver="voltage" if voltage else "current", motor_stall_torque=g * K * vmax / R,
-                     motor_no_load_speed=vmax / (g * K), motor_damping=(g * K) ** 2 / R if voltage else 0.0)
-    return RobotParams(mass, float(yaw), i_w, r, l, com_offset, (limit(al), limit(ar)), float(a_eff), float(b_eff),
-                       tuple(float(x) for x in rot_b.T @ com), float(np.mean(damp)), float(np.mean(arm)),
-                       float(np.mean(fl)), **motor)
+        motor = dict(
+            motor="dc",
+            driver="voltage" if voltage else "current",
+            motor_stall_torque=g * K * vmax / R,
+            motor_no_load_speed=vmax / (g * K),
+            motor_damping=(g * K) ** 2 / R if voltage else 0.0,
+        )
+    return RobotParams(
+        mass,
+        float(yaw),
+        i_w,
+        r,
+        l,
+        com_offset,
+        (limit(al), limit(ar)),
+        float(a_eff),
+        float(b_eff),
+        tuple(float(x) for x in rot_b.T @ com),
+        float(np.mean(damp)),
+        float(np.mean(arm)),
+        float(np.mean(fl)),
+        **motor,
+    )
 
 
 def robot_truth(entry) -> RobotParams:
@@ -324,15 +349,21 @@ def identify(
             A = np.column_stack([np.ones_like(mids), mids])
             (alpha, beta), *_ = np.linalg.lstsq(A, rate, rcond=None)
             out[name] = (float(alpha), float(beta))
-        return dict(fit=out, lateral_m=lateral, warnings=n_warn,
-                    heading_change_rad=float(np.angle(np.exp(1j * (pose[0, 2] - th0)))))
+        return dict(
+            fit=out,
+            lateral_m=lateral,
+            warnings=n_warn,
+            heading_change_rad=float(np.angle(np.exp(1j * (pose[0, 2] - th0)))),
+        )
 
     # turn torque: ω at the end at most OMEGA_ID rad/s, so the υ·ω coupling of a centre of mass
     # off the axle (∝ ω²) stays small
     t_turn = min(torque, OMEGA_ID / (2 * params.b_eff * duration))
     if params.motor == "dc":  # wheel rates l ω / r below 30 % of no-load in the turn tests too
-        t_turn = min(t_turn, 0.3 * params.motor_no_load_speed * params.wheel_radius
-                     / (params.half_track * 2 * params.b_eff * duration))
+        t_turn = min(
+            t_turn,
+            0.3 * params.motor_no_load_speed * params.wheel_radius / (params.half_track * 2 * params.b_eff * duration),
+        )
     drive = [run(torque, torque), run(0.5 * torque, 0.5 * torque)]
     turn = [run(-t_turn, t_turn), run(-0.5 * t_turn, 0.5 * t_turn)]
     (al1, be1), (al2, be2) = drive[0]["fit"]["v"], drive[1]["fit"]["v"]
@@ -346,8 +377,10 @@ def identify(
         "identified": {"a": a_id, "b": b_id},
         "relative_error": {"a": a_id / params.a_eff - 1, "b": b_id / params.b_eff - 1},
         "drag_rate_per_s": {"formula": truth["drag_rate_per_s"], "identified": [-(be1 + be2) / 2, -(ge1 + ge2) / 2]},
-        "deadband_torque_Nm": {"formula": truth["deadband_torque_Nm"],
-                               "identified": [2 * torque - al1 / a_id, 2 * t_turn - bl1 / b_id]},
+        "deadband_torque_Nm": {
+            "formula": truth["deadband_torque_Nm"],
+            "identified": [2 * torque - al1 / a_id, 2 * t_turn - bl1 / b_id],
+        },
         "params": asdict(params),
         "layout": asdict(plant.layouts[0]),
         "test": {

@@ -13,11 +13,12 @@ cosines in each coordinate; the paper's sinusoid, a line, a circle and a
 figure-eight are special cases, and users supply their own terms in TOML or
 subclass :class:`Trajectory` in Python.
 """
+
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -112,7 +113,9 @@ class Harmonic(Trajectory):
         )
 
 
-def paper(x0: float = 0.0, y0: float = 3.0, speed: float = 1.0, amplitude: float = 0.4, frequency: float = 1.0) -> Harmonic:
+def paper(
+    x0: float = 0.0, y0: float = 3.0, speed: float = 1.0, amplitude: float = 0.4, frequency: float = 1.0
+) -> Harmonic:
     """The paper's leader: ``x_r = t``, ``y_r = 3 + 0.4 cos(t − π/2)`` (Sec. IV), generalised."""
     return Harmonic(x0, y0, speed, 0.0, (), ((amplitude, frequency, -math.pi / 2),))
 
@@ -131,7 +134,10 @@ def circle(cx: float = 0.0, cy: float = 0.0, radius: float = 5.0, speed: float =
 def figure_eight(cx: float = 0.0, cy: float = 0.0, radius: float = 5.0, frequency: float = 0.2) -> Harmonic:
     """Lemniscate of Gerono ``x = R sin(Ωt)``, ``y = (R/2) sin(2Ωt)``; ``υ_r > 0`` everywhere."""
     return Harmonic(
-        cx, cy, 0.0, 0.0,
+        cx,
+        cy,
+        0.0,
+        0.0,
         ((radius, frequency, -math.pi / 2),),
         ((radius / 2, 2 * frequency, -math.pi / 2),),
     )

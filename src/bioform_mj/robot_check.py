@@ -22,6 +22,7 @@ when it can, with a caveat (motor limit above the traction limit, full torque ti
 identification 3–10 % off, centre of mass more than 1 cm off the axle, damping time constant
 under 5 s); else ``pass``. :func:`feasibility` is the pre-run estimate for a scenario.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,8 +35,18 @@ import numpy as np
 
 from .robots import RobotRef
 
-__all__ = ["check", "tip_margins", "feasibility", "add_parser", "mapping_args", "ref_from_args", "main",
-           "EXIT_FAIL", "G", "SUPPORT_CLEARANCE"]
+__all__ = [
+    "check",
+    "tip_margins",
+    "feasibility",
+    "add_parser",
+    "mapping_args",
+    "ref_from_args",
+    "main",
+    "EXIT_FAIL",
+    "G",
+    "SUPPORT_CLEARANCE",
+]
 
 #: exit code of ``bioform robot check`` for a ``fail`` verdict (0: pass or warn, 2: bad input)
 EXIT_FAIL = 4
@@ -50,7 +61,7 @@ WARN_ID, FAIL_ID = 0.03, 0.10
 def _subtree(model: Any, root: int) -> np.ndarray:
     ids = np.arange(model.nbody)
     inside = ids == root
-    for b in ids[root + 1:]:
+    for b in ids[root + 1 :]:
         inside[b] = inside[model.body_parentid[b]]
     return ids[inside]
 
@@ -64,7 +75,7 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
     """
     import mujoco
 
-    from .scene import layout_of, _geom_support
+    from .scene import _geom_support, layout_of
 
     lay = layout_of(model, prefix)
     base = model.body(lay.base).id
@@ -135,8 +146,10 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     if ident:
         worst = max(abs(ident["relative_error"]["a"]), abs(ident["relative_error"]["b"]))
         if worst > FAIL_ID:
-            reasons_fail.append(f"identification differs from the formula by {100 * worst:.1f} % (> {100 * FAIL_ID:g} %): "
-                                "the wheels do not roll as the model of design §8 assumes")
+            reasons_fail.append(
+                f"identification differs from the formula by {100 * worst:.1f} % (> {100 * FAIL_ID:g} %): "
+                "the wheels do not roll as the model of design §8 assumes"
+            )
         elif worst > WARN_ID:
             reasons_warn.append(f"identification differs from the formula by {100 * worst:.1f} %")
     ta = tips["tip_accel_mps2"]
@@ -144,19 +157,26 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         if acc <= 0:
             reasons_fail.append(f"statically unstable: the centre of mass is outside the support ({way})")
     if motor > traction:
-        reasons_warn.append(f"motor limit {motor:.3g} N·m exceeds the traction limit μ N r = {traction:.3g} N·m: "
-                            "the wheels can skid at full torque")
+        reasons_warn.append(
+            f"motor limit {motor:.3g} N·m exceeds the traction limit μ N r = {traction:.3g} N·m: "
+            "the wheels can skid at full torque"
+        )
     if motor_accel > min(ta["forward"], ta["backward"]) > 0:
-        reasons_warn.append(f"full torque accelerates the robot at {motor_accel:.3g} m/s², more than tips it "
-                            f"(forward {ta['forward']:.3g}, backward {ta['backward']:.3g} m/s²): a start-up transient "
-                            "at the torque limit can overturn it")
+        reasons_warn.append(
+            f"full torque accelerates the robot at {motor_accel:.3g} m/s², more than tips it "
+            f"(forward {ta['forward']:.3g}, backward {ta['backward']:.3g} m/s²): a start-up transient "
+            "at the torque limit can overturn it"
+        )
     if p.com_offset > 0.01:
-        reasons_warn.append(f"centre of mass {1e3 * p.com_offset:.0f} mm off the axle midpoint: a_eff, b_eff hold from "
-                            "rest; moving, an unmodelled υ·ω coupling acts (design §8.1: b̂ biased)")
+        reasons_warn.append(
+            f"centre of mass {1e3 * p.com_offset:.0f} mm off the axle midpoint: a_eff, b_eff hold from "
+            "rest; moving, an unmodelled υ·ω coupling acts (design §8.1: b̂ biased)"
+        )
     um = p.unmodelled(1.0, 1.0)
     if p.wheel_frictionloss and 2 * p.wheel_frictionloss >= motor:
-        reasons_fail.append(f"wheel frictionloss {p.wheel_frictionloss:g} N·m per wheel: the dead band reaches "
-                            "the motor limit")
+        reasons_fail.append(
+            f"wheel frictionloss {p.wheel_frictionloss:g} N·m per wheel: the dead band reaches the motor limit"
+        )
     tcs = [t for t in um["drag_time_constant_s"] if t is not None]
     if tcs and min(tcs) < 5.0:
         reasons_warn.append(f"wheel damping: drag time constant {min(tcs):.2g} s (< 5 s), a large unmodelled term")
@@ -165,37 +185,51 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     layout["file"] = lay.file
     for k in ("base", "wheel_joints", "motors", "wheel_geoms", "disabled_actuators"):  # without the scene prefix
         v = layout[k]
-        layout[k] = [x[len("f1/"):] for x in v] if isinstance(v, (list, tuple)) else v[len("f1/"):]
+        layout[k] = [x[len("f1/") :] for x in v] if isinstance(v, (list, tuple)) else v[len("f1/") :]
     return {
         "verdict": verdict,
         "reasons": reasons_fail + reasons_warn,
         "model": lay.file,
         "parts": layout,
-        "a_eff": p.a_eff, "b_eff": p.b_eff,
-        "a_identified": a_id, "b_identified": b_id,
+        "a_eff": p.a_eff,
+        "b_eff": p.b_eff,
+        "a_identified": a_id,
+        "b_identified": b_id,
         "relative_error": ident["relative_error"] if ident else None,
-        "mass_kg": p.mass, "yaw_inertia_kgm2": p.yaw_inertia, "wheel_inertia_kgm2": p.wheel_inertia,
-        "wheel_radius_m": p.wheel_radius, "half_track_m": p.half_track,
+        "mass_kg": p.mass,
+        "yaw_inertia_kgm2": p.yaw_inertia,
+        "wheel_inertia_kgm2": p.wheel_inertia,
+        "wheel_radius_m": p.wheel_radius,
+        "half_track_m": p.half_track,
         "friction_mu": mu,
-        "traction_limit_nm": traction, "motor_limit_nm": motor,
-        "wheel_load_n": loads.tolist(), "weight_on_wheels": float(loads.sum() / (p.mass * G)),
+        "traction_limit_nm": traction,
+        "motor_limit_nm": motor,
+        "wheel_load_n": loads.tolist(),
+        "weight_on_wheels": float(loads.sum() / (p.mass * G)),
         "motor_accel_mps2": motor_accel,
         "tip_accel_mps2": ta,
-        "support_m": tips["support_m"], "support_geoms": [g[len("f1/"):] for g in tips["support_geoms"]],
+        "support_m": tips["support_m"],
+        "support_geoms": [g[len("f1/") :] for g in tips["support_geoms"]],
         "com_height_m": tips["com_height_m"],
-        "com_offset_m": p.com_offset, "com_from_axle_m": list(p.com_xyz),
+        "com_offset_m": p.com_offset,
+        "com_from_axle_m": list(p.com_xyz),
         "wheel_joints": {
-            "damping_Nms_per_rad": p.wheel_damping, "armature_kgm2": p.wheel_armature,
+            "damping_Nms_per_rad": p.wheel_damping,
+            "armature_kgm2": p.wheel_armature,
             "frictionloss_Nm": p.wheel_frictionloss,
             "how_they_enter": {
                 "armature": um["armature_in_c_true"],
                 "damping": "a drag υ̇ = a τ_a − k_υ υ, ω̇ = b τ_b − k_ω ω with k_υ = 2 a c/r, k_ω = 2 b c l/r "
-                           f"(here {um['drag_rate_per_s'][0]:.3g}, {um['drag_rate_per_s'][1]:.3g} 1/s)",
+                f"(here {um['drag_rate_per_s'][0]:.3g}, {um['drag_rate_per_s'][1]:.3g} 1/s)",
                 "frictionloss": f"a dead band of 2 f = {um['deadband_torque_Nm'][0]:.3g} N·m on τ_a and on τ_b",
                 "c_hat": um["c_hat_converges_to"],
             },
-            "identified": {"drag_rate_per_s": ident["drag_rate_per_s"]["identified"],
-                           "deadband_torque_Nm": ident["deadband_torque_Nm"]["identified"]} if ident else None,
+            "identified": {
+                "drag_rate_per_s": ident["drag_rate_per_s"]["identified"],
+                "deadband_torque_Nm": ident["deadband_torque_Nm"]["identified"],
+            }
+            if ident
+            else None,
         },
         "notes": notes,
     }
@@ -232,23 +266,33 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
         mu = plant._wheel_friction(i)
         who = f"follower {i + 1}"
         if total > mu * G:
-            out.append(f"{who}: the leader accelerates at up to {total:.3g} m/s², beyond the traction limit "
-                       f"μ g = {mu * G:.3g} m/s²: the wheels will slip")
+            out.append(
+                f"{who}: the leader accelerates at up to {total:.3g} m/s², beyond the traction limit "
+                f"μ g = {mu * G:.3g} m/s²: the wheels will slip"
+            )
         if tangential > min(tips["forward"], tips["backward"]):
-            out.append(f"{who}: the leader's tangential acceleration {tangential:.3g} m/s² exceeds the tip-over margin "
-                       f"(forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²)")
+            out.append(
+                f"{who}: the leader's tangential acceleration {tangential:.3g} m/s² exceeds the tip-over margin "
+                f"(forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²)"
+            )
         if centripetal > tips["lateral"]:
-            out.append(f"{who}: the leader's turns need {centripetal:.3g} m/s² sideways, beyond the lateral tip-over "
-                       f"margin {tips['lateral']:.3g} m/s²")
+            out.append(
+                f"{who}: the leader's turns need {centripetal:.3g} m/s² sideways, beyond the lateral tip-over "
+                f"margin {tips['lateral']:.3g} m/s²"
+            )
         motor = float(min(p.tau_max))
         full = 2 * p.a_eff * motor
         if full > min(tips["forward"], tips["backward"]):
-            out.append(f"{who}: a start-up transient at the torque limit accelerates at {full:.3g} m/s², beyond the "
-                       f"tip-over margin (forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²): "
-                       "the chassis can tip (scale the scenario, formation.scale, or lower the torque limit)")
+            out.append(
+                f"{who}: a start-up transient at the torque limit accelerates at {full:.3g} m/s², beyond the "
+                f"tip-over margin (forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²): "
+                "the chassis can tip (scale the scenario, formation.scale, or lower the torque limit)"
+            )
         if motor > mu * p.traction_limit:
-            out.append(f"{who}: torque limit {motor:.3g} N·m exceeds the traction limit μ m g r/2 = "
-                       f"{mu * p.traction_limit:.3g} N·m: the wheels can skid at full torque")
+            out.append(
+                f"{who}: torque limit {motor:.3g} N·m exceeds the traction limit μ m g r/2 = "
+                f"{mu * p.traction_limit:.3g} N·m: the wheels can skid at full torque"
+            )
     return out
 
 
@@ -272,19 +316,29 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
         v = getattr(args, flag, None)
         if v is not None and not (math.isfinite(v) and v > 0):
             raise InputError(f"--{flag.replace('_', '-')} must be a number > 0, got {v}")
-    return resolve_robot(RobotRef(
-        model=model, base=args.base or "", left_wheel=args.left_wheel or "", right_wheel=args.right_wheel or "",
-        wheel_radius=args.wheel_radius or 0.0, half_track=args.half_track or 0.0, tau_max=args.tau_max or 0.0,
-    ))
+    return resolve_robot(
+        RobotRef(
+            model=model,
+            base=args.base or "",
+            left_wheel=args.left_wheel or "",
+            right_wheel=args.right_wheel or "",
+            wheel_radius=args.wheel_radius or 0.0,
+            half_track=args.half_track or 0.0,
+            tau_max=args.tau_max or 0.0,
+        )
+    )
 
 
 def add_parser(sub: Any) -> None:
     """Add ``bioform robot check`` to the CLI's subparsers."""
     robot = sub.add_parser("robot", help="robot models: check what the project finds in one")
     rsub = robot.add_subparsers(dest="robot_command", required=True, parser_class=type(robot))
-    chk = rsub.add_parser("check", help="parts, a_eff/b_eff (formula and identified), traction and tip-over "
-                                        "margins, damping/armature/frictionloss; verdict pass/warn/fail "
-                                        f"(exit 0 pass or warn, 2 bad input, {EXIT_FAIL} fail)")
+    chk = rsub.add_parser(
+        "check",
+        help="parts, a_eff/b_eff (formula and identified), traction and tip-over "
+        "margins, damping/armature/frictionloss; verdict pass/warn/fail "
+        f"(exit 0 pass or warn, 2 bad input, {EXIT_FAIL} fail)",
+    )
     chk.add_argument("model", help="shipped robot name or path to an MJCF file")
     mapping_args(chk)
     chk.add_argument("--json", type=str, metavar="FILE", help="write the report as JSON to FILE")
@@ -302,13 +356,15 @@ def main(args: argparse.Namespace) -> int:
         f"{report['verdict']}: {report['model']}",
         f"  parts: base '{report['parts']['base']}', wheels '{report['parts']['wheel_joints'][0]}' / "
         f"'{report['parts']['wheel_joints'][1]}' (sign {report['parts']['wheel_sign'][0]:+d}/"
-        f"{report['parts']['wheel_sign'][1]:+d}), r = {report['wheel_radius_m']:.4g} m, l = {report['half_track_m']:.4g} m",
+        f"{report['parts']['wheel_sign'][1]:+d}), r = {report['wheel_radius_m']:.4g} m, "
+        f"l = {report['half_track_m']:.4g} m",
         f"  a_eff = {report['a_eff']:.5g} (identified {report['a_identified']:.5g}), "
         f"b_eff = {report['b_eff']:.5g} (identified {report['b_identified']:.5g})",
         f"  motor limit {report['motor_limit_nm']:.3g} N·m, traction limit {report['traction_limit_nm']:.3g} N·m "
         f"(μ = {report['friction_mu']:g})",
         f"  tips at forward {ta['forward']:.3g}, backward {ta['backward']:.3g}, lateral {ta['lateral']:.3g} m/s² "
-        f"(full torque: {report['motor_accel_mps2']:.3g} m/s²); CoM {1e3 * report['com_offset_m']:.1f} mm off the axle, "
+        f"(full torque: {report['motor_accel_mps2']:.3g} m/s²); "
+        f"CoM {1e3 * report['com_offset_m']:.1f} mm off the axle, "
         f"{report['com_height_m']:.3g} m high",
     ]
     lines += [f"  {r}" for r in report["reasons"]]

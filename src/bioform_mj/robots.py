@@ -15,12 +15,14 @@ Relative paths inside a TOML file resolve against the directory of that file
 working directory. What the project then reads from the model is :mod:`bioform_mj.scene`'s
 job (:func:`bioform_mj.scene.prepare_robot`). This module imports nothing of MuJoCo.
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from .errors import InputError
 
@@ -81,8 +83,10 @@ def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:
     if isinstance(entry, (str, Path)):
         return RobotRef(model=str(entry))
     if not isinstance(entry, Mapping):
-        raise InputError(f"scenario key '{key}': expected a robot name, an MJCF path or a table "
-                         f"{{model = ..., base = ..., left_wheel = ..., right_wheel = ...}}, got {entry!r}")
+        raise InputError(
+            f"scenario key '{key}': expected a robot name, an MJCF path or a table "
+            f"{{model = ..., base = ..., left_wheel = ..., right_wheel = ...}}, got {entry!r}"
+        )
     unknown = [k for k in entry if k not in _KEYS]
     if unknown:
         raise InputError(f"scenario key '{key}.{unknown[0]}': unknown key (expected one of: {', '.join(_KEYS)})")
@@ -95,8 +99,10 @@ def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:
                 raise InputError(f"scenario key '{key}.{name}': expected a string, got {value!r}")
             allowed = {"motor": ("", "ideal", "dc"), "driver": ("", "current", "voltage")}.get(name)
             if allowed is not None and value not in allowed:
-                raise InputError(f"scenario key '{key}.{name}': expected one of "
-                                 f"{', '.join(repr(a) for a in allowed if a)}, got {value!r}")
+                raise InputError(
+                    f"scenario key '{key}.{name}': expected one of "
+                    f"{', '.join(repr(a) for a in allowed if a)}, got {value!r}"
+                )
             kw[name] = value
         else:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:

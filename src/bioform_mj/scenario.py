@@ -5,16 +5,18 @@ shipped ``scenarios/paper.toml`` restates them with the choices the paper leaves
 open, and a test keeps the two equal. Unknown keys are an error, never ignored.
 Follower ids are 1-based in files and messages.
 """
+
 from __future__ import annotations
 
 import dataclasses
 import math
 import tomllib
 import typing
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -292,8 +294,15 @@ class FaultsCfg:
     def per_step(self) -> bool:
         """True when a fault acts in the loop (it then builds :class:`~bioform_mj.faults.Faults`);
         a friction patch is part of the MuJoCo scene and needs nothing per step."""
-        return bool(self.link_fail or self.packet_loss > 0 or self.delay > 0 or any(self.noise_pose)
-                    or any(self.noise_vel) or self.actuator or self.push)
+        return bool(
+            self.link_fail
+            or self.packet_loss > 0
+            or self.delay > 0
+            or any(self.noise_pose)
+            or any(self.noise_vel)
+            or self.actuator
+            or self.push
+        )
 
 
 @dataclass(frozen=True)
@@ -326,8 +335,9 @@ class Scenario:
         """Plain nested dict (JSON/TOML-able) of every resolved value (a robot without a mapping
         as its name or path, one with a mapping as a table)."""
         d = _to_plain(dataclasses.asdict(self))
-        d["plant"]["robots"] = [r.model if not r.mapped else _to_plain(dataclasses.asdict(r))
-                                for r in self.plant.robots]
+        d["plant"]["robots"] = [
+            r.model if not r.mapped else _to_plain(dataclasses.asdict(r)) for r in self.plant.robots
+        ]
         return d
 
     # ---- derived objects -------------------------------------------------------------
@@ -366,6 +376,7 @@ class Scenario:
 # Loading
 # ---------------------------------------------------------------------------------------
 
+
 def preset_names() -> list[str]:
     """Names of the shipped presets (``scenarios/*.toml`` inside the package)."""
     d = resources.files("bioform_mj") / "scenarios"
@@ -382,8 +393,12 @@ def preset_descriptions() -> dict[str, str]:
     return out
 
 
-def load(source: str | Path | None = None, overrides: Mapping[str, Any] | list[str] | None = None,
-         method: str | None = None, plant: str | None = None) -> Scenario:
+def load(
+    source: str | Path | None = None,
+    overrides: Mapping[str, Any] | list[str] | None = None,
+    method: str | None = None,
+    plant: str | None = None,
+) -> Scenario:
     """Load a preset name or TOML path, apply ``--set`` overrides, method and plant; validate.
 
     Raises :class:`InputError` (or a subclass) with one line naming the problem.
@@ -532,6 +547,7 @@ def _to_plain(obj: Any) -> Any:
 # Validation
 # ---------------------------------------------------------------------------------------
 
+
 def _positive(key: str, values: Any, strict: bool = True) -> None:
     for v in np.atleast_1d(values):
         if (v <= 0) if strict else (v < 0):
@@ -556,21 +572,30 @@ def validate(sc: Scenario) -> None:
     _positive("sim.physics_dt", s.physics_dt)
     _positive("sim.log_dt", s.log_dt)
     if s.physics_dt > s.control_dt * (1 + 1e-9):
-        raise ScenarioError("sim.physics_dt", f"must not exceed sim.control_dt = {s.control_dt:g} s, got {s.physics_dt:g}")
+        raise ScenarioError(
+            "sim.physics_dt", f"must not exceed sim.control_dt = {s.control_dt:g} s, got {s.physics_dt:g}"
+        )
     ratio = s.control_dt / s.physics_dt
     if abs(ratio - round(ratio)) > 1e-6:
-        raise ScenarioError("sim.physics_dt", f"must divide sim.control_dt = {s.control_dt:g} s into whole substeps, got {s.physics_dt:g}")
+        raise ScenarioError(
+            "sim.physics_dt",
+            f"must divide sim.control_dt = {s.control_dt:g} s into whole substeps, got {s.physics_dt:g}",
+        )
     if s.log_dt < s.control_dt * (1 - 1e-9):
         raise ScenarioError("sim.log_dt", f"must be >= sim.control_dt = {s.control_dt:g} s, got {s.log_dt:g}")
     if s.duration < s.control_dt:
-        raise ScenarioError("sim.duration", f"must be at least one control period ({s.control_dt:g} s), got {s.duration:g}")
+        raise ScenarioError(
+            "sim.duration", f"must be at least one control period ({s.control_dt:g} s), got {s.duration:g}"
+        )
     if s.seed < 0:
         raise ScenarioError("sim.seed", f"must be >= 0, got {s.seed}")
     _validate_size(sc)
 
     ld = sc.leader
     if ld.kind not in LEADER_KINDS:
-        raise ScenarioError("leader.kind", f"unknown trajectory '{ld.kind}' (expected one of: {', '.join(LEADER_KINDS)})")
+        raise ScenarioError(
+            "leader.kind", f"unknown trajectory '{ld.kind}' (expected one of: {', '.join(LEADER_KINDS)})"
+        )
     if ld.kind in ("circle", "figure8"):
         _positive("leader.radius", ld.radius)
     if ld.kind in ("paper", "line", "circle"):
@@ -584,7 +609,9 @@ def validate(sc: Scenario) -> None:
     traj = sc.build_leader()
     vmin = traj.min_speed(s.duration)
     if not vmin > 1e-6:
-        raise ScenarioError("leader", f"the leader's speed reaches {vmin:g} m/s; its heading is undefined where it stops")
+        raise ScenarioError(
+            "leader", f"the leader's speed reaches {vmin:g} m/s; its heading is undefined where it stops"
+        )
 
     n = sc.n
     f = sc.formation
@@ -604,7 +631,9 @@ def validate(sc: Scenario) -> None:
     uniq, inv, counts = np.unique(np.round(offs, 9), axis=0, return_inverse=True, return_counts=True)
     if np.any(counts > 1):
         dup = np.flatnonzero(counts[inv.reshape(-1)] > 1)[:2] + 1
-        raise ScenarioError("formation.offsets", f"followers {dup[0]} and {dup[1]} are assigned the same formation slot")
+        raise ScenarioError(
+            "formation.offsets", f"followers {dup[0]} and {dup[1]} are assigned the same formation slot"
+        )
 
     g = sc.graph
     if g.kind not in GRAPH_KINDS:
@@ -636,9 +665,13 @@ def validate(sc: Scenario) -> None:
     _positive("torque.tau_max", t.tau_max)
     _positive("torque.deriv_wn", t.deriv_wn)
     if t.derivative not in DERIVATIVES:
-        raise ScenarioError("torque.derivative", f"unknown '{t.derivative}' (expected one of: {', '.join(DERIVATIVES)})")
+        raise ScenarioError(
+            "torque.derivative", f"unknown '{t.derivative}' (expected one of: {', '.join(DERIVATIVES)})"
+        )
     if t.saturation not in SATURATIONS:
-        raise ScenarioError("torque.saturation", f"unknown '{t.saturation}' (expected one of: {', '.join(SATURATIONS)})")
+        raise ScenarioError(
+            "torque.saturation", f"unknown '{t.saturation}' (expected one of: {', '.join(SATURATIONS)})"
+        )
 
     lc = sc.learner
     for key in ("k4", "k5", "c_hat0_scale", "c_bounds"):
@@ -647,10 +680,13 @@ def validate(sc: Scenario) -> None:
     _length("learner.kd", lc.kd, 2)
     _positive("learner.kd", lc.kd, strict=False)
     if lc.gain_scaling not in GAIN_SCALINGS:
-        raise ScenarioError("learner.gain_scaling",
-                            f"unknown '{lc.gain_scaling}' (expected one of: {', '.join(GAIN_SCALINGS)})")
+        raise ScenarioError(
+            "learner.gain_scaling", f"unknown '{lc.gain_scaling}' (expected one of: {', '.join(GAIN_SCALINGS)})"
+        )
     if not lc.c_bounds[0] <= 1.0 <= lc.c_bounds[1]:
-        raise ScenarioError("learner.c_bounds", f"must satisfy lower <= 1 <= upper (factors of c_hat0), got {list(lc.c_bounds)}")
+        raise ScenarioError(
+            "learner.c_bounds", f"must satisfy lower <= 1 <= upper (factors of c_hat0), got {list(lc.c_bounds)}"
+        )
 
     pc = sc.plant
     _length("plant.c_true", pc.c_true, 2)
@@ -694,24 +730,29 @@ def _validate_sensing(sc: Scenario) -> None:
     if pc.sensing not in SENSINGS:
         raise ScenarioError("plant.sensing", f"unknown '{pc.sensing}' (expected one of: {', '.join(SENSINGS)})")
     if pc.encoder_cpr == 0 or pc.encoder_cpr < -1:
-        raise ScenarioError("plant.encoder_cpr", f"must be >= 1 count per revolution (or -1: each robot file's), "
-                                                 f"got {pc.encoder_cpr}")
+        raise ScenarioError(
+            "plant.encoder_cpr", f"must be >= 1 count per revolution (or -1: each robot file's), got {pc.encoder_cpr}"
+        )
     _positive("plant.gyro_noise", pc.gyro_noise, strict=False)
     _positive("plant.sensor_dt", pc.sensor_dt, strict=False)
     if pc.sensor_dt > 0:
         ratio = pc.sensor_dt / s.physics_dt
         if ratio < 1 - 1e-9 or abs(ratio - round(ratio)) > 1e-9 * ratio:
-            raise ScenarioError("plant.sensor_dt", f"must be a multiple of sim.physics_dt = {s.physics_dt:g} s, "
-                                                   f"got {pc.sensor_dt:g}")
+            raise ScenarioError(
+                "plant.sensor_dt", f"must be a multiple of sim.physics_dt = {s.physics_dt:g} s, got {pc.sensor_dt:g}"
+            )
         per = s.control_dt / pc.sensor_dt
         if per < 1 - 1e-9 or abs(per - round(per)) > 1e-9 * per:
-            raise ScenarioError("plant.sensor_dt", f"must divide sim.control_dt = {s.control_dt:g} s into whole "
-                                                   f"sensor periods, got {pc.sensor_dt:g}")
+            raise ScenarioError(
+                "plant.sensor_dt",
+                f"must divide sim.control_dt = {s.control_dt:g} s into whole sensor periods, got {pc.sensor_dt:g}",
+            )
     if pc.sensing != "odometry":
         return
     if pc.kind != "mujoco":
-        raise ScenarioError("plant.sensing", "\"odometry\" needs plant.kind = \"mujoco\" (encoders and gyro are "
-                                             "MuJoCo sensors)")
+        raise ScenarioError(
+            "plant.sensing", '"odometry" needs plant.kind = "mujoco" (encoders and gyro are MuJoCo sensors)'
+        )
     if pc.encoder_cpr > 0:
         return
     from .robots import resolve_robot
@@ -720,12 +761,17 @@ def _validate_sensing(sc: Scenario) -> None:
         ref = resolve_robot(r)
         cpr = robot_encoder_cpr(ref.model)
         if cpr is None:
-            raise ScenarioError("plant.sensing", f"\"odometry\" needs wheel encoders, and robot '{r.model}' "
-                                                 f"({ref.model}) declares none (no <numeric name=\"encoder_cpr\">): "
-                                                 "set plant.encoder_cpr")
+            raise ScenarioError(
+                "plant.sensing",
+                f"\"odometry\" needs wheel encoders, and robot '{r.model}' "
+                f'({ref.model}) declares none (no <numeric name="encoder_cpr">): '
+                "set plant.encoder_cpr",
+            )
         if not cpr >= 1:
-            raise ScenarioError("plant.encoder_cpr", f"robot '{r.model}' ({ref.model}) declares {cpr:g} encoder "
-                                                     "counts per revolution; must be >= 1")
+            raise ScenarioError(
+                "plant.encoder_cpr",
+                f"robot '{r.model}' ({ref.model}) declares {cpr:g} encoder counts per revolution; must be >= 1",
+            )
 
 
 def _validate_text(sc: Scenario) -> None:
@@ -774,8 +820,14 @@ def run_size(sc: Scenario) -> dict[str, float]:
         per_row += 8 * int(np.prod([dims[d] for d in shape]))
     log_bytes = rows * per_row
     traj_bytes = (steps + 1) * 8 * (1 + 3 + 2)
-    return {"control_steps": steps, "physics_steps": steps * substeps, "log_rows": rows,
-            "log_bytes": log_bytes, "trajectory_bytes": traj_bytes, "bytes": log_bytes + traj_bytes}
+    return {
+        "control_steps": steps,
+        "physics_steps": steps * substeps,
+        "log_rows": rows,
+        "log_bytes": log_bytes,
+        "trajectory_bytes": traj_bytes,
+        "bytes": log_bytes + traj_bytes,
+    }
 
 
 def _validate_size(sc: Scenario) -> None:
@@ -789,12 +841,17 @@ def _validate_size(sc: Scenario) -> None:
     if est["control_steps"] > MAX_CONTROL_STEPS:
         raise ScenarioError("sim.duration", f"{what} ({mem}); at most {MAX_CONTROL_STEPS:.0e} control steps")
     if est["physics_steps"] > MAX_PHYSICS_STEPS:
-        raise ScenarioError("sim.physics_dt", f"sim.duration {s.duration:g} s at physics_dt {s.physics_dt:g} s is "
-                                              f"{est['physics_steps']:.3g} physics steps; at most {MAX_PHYSICS_STEPS:.0e}")
+        raise ScenarioError(
+            "sim.physics_dt",
+            f"sim.duration {s.duration:g} s at physics_dt {s.physics_dt:g} s is "
+            f"{est['physics_steps']:.3g} physics steps; at most {MAX_PHYSICS_STEPS:.0e}",
+        )
     if est["bytes"] > MAX_RUN_BYTES:
         hint = " (raise sim.log_dt for a smaller log)" if est["log_bytes"] > est["trajectory_bytes"] else ""
-        raise ScenarioError("sim.duration", f"{what}, log every {s.log_dt:g} s for {sc.n} followers: {mem}; "
-                                            f"at most {_fmt_bytes(MAX_RUN_BYTES)}{hint}")
+        raise ScenarioError(
+            "sim.duration",
+            f"{what}, log every {s.log_dt:g} s for {sc.n} followers: {mem}; at most {_fmt_bytes(MAX_RUN_BYTES)}{hint}",
+        )
 
 
 def _follower_id(key: str, value: float, n: int, lo: int = 1, what: str = "a follower id") -> int:
@@ -820,11 +877,15 @@ def _validate_faults(sc: Scenario) -> None:
         i = _follower_id(key, i, n)
         j = _follower_id(key, j, n, lo=0, what="0 (the leader) or a follower id")
         if j == 0 and not graph.leader_access[i - 1] > 0:
-            raise ScenarioError(key, f"follower {i} has no leader link to fail (leader access: "
-                                     f"{(np.flatnonzero(graph.leader_access) + 1).tolist()})")
+            raise ScenarioError(
+                key,
+                f"follower {i} has no leader link to fail (leader access: "
+                f"{(np.flatnonzero(graph.leader_access) + 1).tolist()})",
+            )
         if j > 0 and (min(i, j), max(i, j)) not in edges:
-            raise ScenarioError(key, f"there is no link {i}-{j} in the graph (links: "
-                                     f"{', '.join(f'{a}-{b}' for a, b in sorted(edges))})")
+            raise ScenarioError(
+                key, f"there is no link {i}-{j} in the graph (links: {', '.join(f'{a}-{b}' for a, b in sorted(edges))})"
+            )
         if not 0 <= t0 < t1:
             raise ScenarioError(key, f"needs 0 <= t_fail < t_recover, got t_fail = {t0:g}, t_recover = {t1:g}")
     if not 0 <= fc.packet_loss < 1:
@@ -840,8 +901,9 @@ def _validate_faults(sc: Scenario) -> None:
     _positive("faults.noise_vel", fc.noise_vel, strict=False)
     if fc.window:
         if len(fc.window) != 2 or not 0 <= fc.window[0] < fc.window[1]:
-            raise ScenarioError("faults.window", f"expected [t_start, t_end] with 0 <= t_start < t_end, or [], "
-                                                 f"got {list(fc.window)}")
+            raise ScenarioError(
+                "faults.window", f"expected [t_start, t_end] with 0 <= t_start < t_end, or [], got {list(fc.window)}"
+            )
     _rows("faults.actuator", fc.actuator, 4, "i, t_start, t_end, scale")
     for r, (i, t0, t1, scale) in enumerate(fc.actuator):
         key = f"faults.actuator[{r}]"
@@ -861,16 +923,20 @@ def _validate_faults(sc: Scenario) -> None:
     if fc.friction_patch:
         p = fc.friction_patch
         if len(p) != 5 or not (p[0] < p[2] and p[1] < p[3]) or p[4] < 0:
-            raise ScenarioError("faults.friction_patch", f"expected [x0, y0, x1, y1, mu] with x0 < x1, y0 < y1, "
-                                                         f"mu >= 0, or [], got {list(p)}")
+            raise ScenarioError(
+                "faults.friction_patch",
+                f"expected [x0, y0, x1, y1, mu] with x0 < x1, y0 < y1, mu >= 0, or [], got {list(p)}",
+            )
         if sc.plant.kind != "mujoco":
-            raise ScenarioError("faults.friction_patch", "needs plant.kind = 'mujoco': the ideal plant's wheels "
-                                                         "cannot slip")
+            raise ScenarioError(
+                "faults.friction_patch", "needs plant.kind = 'mujoco': the ideal plant's wheels cannot slip"
+            )
 
 
 # ---------------------------------------------------------------------------------------
 # Robots on the ideal plant (issue 10: plant.robots is never ignored)
 # ---------------------------------------------------------------------------------------
+
 
 def apply_robots_to_ideal(sc: Scenario) -> Scenario:
     """On the ideal plant, ``plant.robots`` other than the shipped ``paper`` robot decide ``c_true``.
@@ -896,12 +962,18 @@ def apply_robots_to_ideal(sc: Scenario) -> Scenario:
     truths = [robot_truth(r) for r in refs]
     c = np.array([t.c for t in truths])
     if np.any(np.abs(c / c[0] - 1) > 1e-6):
-        raise ScenarioError("plant.robots", "the ideal plant takes one c_true, but the robots differ "
-                            f"({'; '.join(f'{r.model}: a={x[0]:.4g}, b={x[1]:.4g}' for r, x in zip(refs, c))}); "
-                            "use plant.kind = 'mujoco' for a heterogeneous team")
+        raise ScenarioError(
+            "plant.robots",
+            "the ideal plant takes one c_true, but the robots differ "
+            f"({'; '.join(f'{r.model}: a={x[0]:.4g}, b={x[1]:.4g}' for r, x in zip(refs, c))}); "
+            "use plant.kind = 'mujoco' for a heterogeneous team",
+        )
     if tuple(pc.c_true) != PAPER_C and np.any(np.abs(np.asarray(pc.c_true) / c[0] - 1) > 1e-3):
-        raise ScenarioError("plant.c_true", f"{list(pc.c_true)} disagrees with plant.robots ({refs[0].model}: "
-                            f"a={c[0, 0]:.4g}, b={c[0, 1]:.4g}); give one of them")
+        raise ScenarioError(
+            "plant.c_true",
+            f"{list(pc.c_true)} disagrees with plant.robots ({refs[0].model}: "
+            f"a={c[0, 0]:.4g}, b={c[0, 1]:.4g}); give one of them",
+        )
     t = truths[0]
     plant = dataclasses.replace(pc, c_true=(float(c[0, 0]), float(c[0, 1])), mass=t.mass_eff, inertia=t.inertia_eff)
     return dataclasses.replace(sc, plant=plant)
@@ -910,6 +982,7 @@ def apply_robots_to_ideal(sc: Scenario) -> Scenario:
 # ---------------------------------------------------------------------------------------
 # The paper's experiment at a robot's scale (issue 10)
 # ---------------------------------------------------------------------------------------
+
 
 def apply_scale(sc: Scenario) -> Scenario:
     """Scale the experiment by ``s = formation.scale``: every length × s, every time unchanged.
@@ -941,11 +1014,21 @@ def apply_scale(sc: Scenario) -> Scenario:
 
     ld = sc.leader
     leader = dataclasses.replace(
-        ld, x0=ld.x0 * s, y0=ld.y0 * s, speed=ld.speed * s, amplitude=ld.amplitude * s, radius=ld.radius * s,
-        vx=ld.vx * s, vy=ld.vy * s, x_terms=rows(ld.x_terms, 1), y_terms=rows(ld.y_terms, 1))
+        ld,
+        x0=ld.x0 * s,
+        y0=ld.y0 * s,
+        speed=ld.speed * s,
+        amplitude=ld.amplitude * s,
+        radius=ld.radius * s,
+        vx=ld.vx * s,
+        vy=ld.vy * s,
+        x_terms=rows(ld.x_terms, 1),
+        y_terms=rows(ld.y_terms, 1),
+    )
     f = sc.formation
-    formation = dataclasses.replace(f, offsets=rows(f.offsets, 2), initial_poses=rows(f.initial_poses, 2),
-                                    init_jitter=f.init_jitter * s)
+    formation = dataclasses.replace(
+        f, offsets=rows(f.offsets, 2), initial_poses=rows(f.initial_poses, 2), init_jitter=f.init_jitter * s
+    )
     e = sc.estimator
     first = lambda v: (v[0] * s, *v[1:]) if v else v  # noqa: E731 - the υ channel of a (υ, ω) pair
     estimator = dataclasses.replace(e, ka=first(e.ka), phi=first(e.phi))
@@ -954,5 +1037,12 @@ def apply_scale(sc: Scenario) -> Scenario:
     torque = dataclasses.replace(sc.torque, c=first(sc.torque.c))
     d = sc.disturbance
     disturbance = dataclasses.replace(d, bias=first(d.bias), amp=first(d.amp))
-    return dataclasses.replace(sc, leader=leader, formation=formation, estimator=estimator, kinematic=kinematic,
-                               torque=torque, disturbance=disturbance)
+    return dataclasses.replace(
+        sc,
+        leader=leader,
+        formation=formation,
+        estimator=estimator,
+        kinematic=kinematic,
+        torque=torque,
+        disturbance=disturbance,
+    )

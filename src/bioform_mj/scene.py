@@ -34,8 +34,8 @@ pose and its wheels touch the floor. Nothing here edits XML strings.
 
 from __future__ import annotations
 
-import logging
 import json
+import logging
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -152,7 +152,7 @@ class RobotLayout:
         return json.dumps(asdict(self))
 
     @classmethod
-    def from_json(cls, text: str) -> "RobotLayout":
+    def from_json(cls, text: str) -> RobotLayout:
         d = json.loads(text)
         for k in ("wheel_joints", "motors", "wheel_geoms", "axle", "wheel_sign", "disabled_actuators", "notes"):
             d[k] = tuple(d[k])
@@ -170,12 +170,15 @@ def layout_of(model: mujoco.MjModel, prefix: str = "") -> RobotLayout:
         lay = _analyse(model, Path("<model>"), _convention_ref(), add_motors=False)[0]
     else:
         adr, size = model.text_adr[tid], model.text_size[tid]
-        lay = RobotLayout.from_json(bytes(model.text_data[adr: adr + size - 1]).decode())
+        lay = RobotLayout.from_json(bytes(model.text_data[adr : adr + size - 1]).decode())
     if not prefix:
         return lay
     return replace(
-        lay, base=prefix + lay.base, wheel_joints=tuple(prefix + j for j in lay.wheel_joints),
-        motors=tuple(prefix + a for a in lay.motors), wheel_geoms=tuple(prefix + g for g in lay.wheel_geoms),
+        lay,
+        base=prefix + lay.base,
+        wheel_joints=tuple(prefix + j for j in lay.wheel_joints),
+        motors=tuple(prefix + a for a in lay.motors),
+        wheel_geoms=tuple(prefix + g for g in lay.wheel_geoms),
         disabled_actuators=tuple(prefix + a for a in lay.disabled_actuators),
     )
 
@@ -203,7 +206,7 @@ def _geom_support(model: mujoco.MjModel, data: mujoco.MjData, g: int, d: np.ndar
     if t == int(mujoco.mjtGeom.mjGEOM_MESH):
         mid = model.geom_dataid[g]
         va, vn = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
-        return float(np.max(model.mesh_vert[va: va + vn] @ loc))
+        return float(np.max(model.mesh_vert[va : va + vn] @ loc))
     raise ValueError(f"geom type {mujoco.mjtGeom(t).name} cannot be a wheel")
 
 
@@ -228,7 +231,9 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
     jnt_adr, jnt_num = model.body_jntadr[base], model.body_jntnum[base]
     has_free = jnt_num >= 1 and model.jnt_type[jnt_adr] == _FREE
     if jnt_num > (1 if has_free else 0):
-        raise ModelError(f"{path}: body '{base_name}' has joints other than a free joint; the base must be one rigid chassis")
+        raise ModelError(
+            f"{path}: body '{base_name}' has joints other than a free joint; the base must be one rigid chassis"
+        )
     if not has_free and model.body_parentid[base] != 0:
         raise ModelError(f"{path}: body '{base_name}' has no free joint and is not a child of the world body")
     if not has_free:
@@ -240,8 +245,9 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         if j < 0:
             raise ModelError(f"{path}: no joint '{jname}' ({side}; map it with {side} = \"JOINT\")")
         if model.jnt_type[j] != _HINGE:
-            raise ModelError(f"{path}: joint '{jname}' ({side}) is not a hinge "
-                             f"(type {mujoco.mjtJoint(model.jnt_type[j]).name})")
+            raise ModelError(
+                f"{path}: joint '{jname}' ({side}) is not a hinge (type {mujoco.mjtJoint(model.jnt_type[j]).name})"
+            )
         b = model.jnt_bodyid[j]
         while b not in (0, base):
             b = model.body_parentid[b]
@@ -256,29 +262,39 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
     rot = data.xmat[base].reshape(3, 3)
     fwd, left, up = rot[:, 0], rot[:, 1], rot[:, 2]
     if up[2] < 0.999:
-        raise ModelError(f"{path}: body '{base_name}' is not level in the model file (its z axis is "
-                         f"{np.round(up, 3).tolist()}); the base frame must be x forward, z up")
+        raise ModelError(
+            f"{path}: body '{base_name}' is not level in the model file (its z axis is "
+            f"{np.round(up, 3).tolist()}); the base frame must be x forward, z up"
+        )
     anchors = np.array([data.xanchor[j] for j in joints])
     axes = np.array([data.xaxis[j] for j in joints])
     signs = []
     for j, ax in zip(joints, axes):
         c = float(ax @ left)
         if abs(c) < 0.99:
-            raise ModelError(f"{path}: joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}' axis "
-                             f"{np.round(rot.T @ ax, 3).tolist()} (base frame) is not along the base's y axis")
+            raise ModelError(
+                f"{path}: joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}' axis "
+                f"{np.round(rot.T @ ax, 3).tolist()} (base frame) is not along the base's y axis"
+            )
         signs.append(1 if c > 0 else -1)
     for j, sgn in zip(joints, signs):
         if sgn < 0:
-            notes.append(f"joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}' axis points right (−y): "
-                         "its motor gets gear −1 so that positive torque drives forward")
+            notes.append(
+                f"joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}' axis points right (−y): "
+                "its motor gets gear −1 so that positive torque drives forward"
+            )
     if (anchors[0] - anchors[1]) @ left <= 0:
-        raise ModelError(f"{path}: left_wheel '{jl_name}' is not to the left of right_wheel '{jr_name}' "
-                         "(swapped mapping, or the base's x axis is not forward)")
+        raise ModelError(
+            f"{path}: left_wheel '{jl_name}' is not to the left of right_wheel '{jr_name}' "
+            "(swapped mapping, or the base's x axis is not forward)"
+        )
     mid = anchors.mean(axis=0)
     axle = rot.T @ (mid - data.xpos[base])
     if np.linalg.norm(axle) > 1e-6:
-        notes.append(f"base origin is off the axle midpoint (axle midpoint at {np.round(axle, 4).tolist()} m in "
-                     f"'{base_name}'): pose and υ refer to the axle midpoint")
+        notes.append(
+            f"base origin is off the axle midpoint (axle midpoint at {np.round(axle, 4).tolist()} m in "
+            f"'{base_name}'): pose and υ refer to the axle midpoint"
+        )
     half_track = float(0.5 * np.linalg.norm(anchors[0] - anchors[1]))
     if ref.half_track > 0:
         if abs(ref.half_track / half_track - 1) > 0.01:
@@ -290,17 +306,24 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
     for j, anchor in zip(joints, anchors):
         wb = model.jnt_bodyid[j]
         jname = _name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
-        cand = [g for g in range(model.ngeom)
-                if model.geom_bodyid[g] == wb and (model.geom_contype[g] or model.geom_conaffinity[g])]
+        cand = [
+            g
+            for g in range(model.ngeom)
+            if model.geom_bodyid[g] == wb and (model.geom_contype[g] or model.geom_conaffinity[g])
+        ]
         if not cand:
             if ref.wheel_radius <= 0:
-                raise ModelError(f"{path}: the body of wheel joint '{jname}' has no collision geom; "
-                                 "give wheel_radius in the robot's mapping")
+                raise ModelError(
+                    f"{path}: the body of wheel joint '{jname}' has no collision geom; "
+                    "give wheel_radius in the robot's mapping"
+                )
             radii.append(float(ref.wheel_radius))
             geoms.append(-1)
             proxies.append((j, None))
-            notes.append(f"wheel '{jname}' has no collision geom: a single-contact proxy of radius "
-                         f"{ref.wheel_radius:g} m was added")
+            notes.append(
+                f"wheel '{jname}' has no collision geom: a single-contact proxy of radius "
+                f"{ref.wheel_radius:g} m was added"
+            )
             continue
         ext = [float((data.geom_xpos[g] - anchor) @ -up + _geom_support(model, data, g, -up)) for g in cand]
         k = int(np.argmax(ext))
@@ -310,11 +333,13 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         gtype = int(model.geom_type[g])
         if gtype not in _SINGLE_CONTACT or len(cand) > 1:
             proxies.append((j, cand))
-            kind = mujoco.mjtGeom(gtype).name[len("mjGEOM_"):].lower()
-            notes.append(f"wheel '{jname}': collision {kind} '{_name(model, mujoco.mjtObj.mjOBJ_GEOM, g)}'"
-                         f"{f' (+{len(cand) - 1} more)' if len(cand) > 1 else ''} replaced by a single-contact "
-                         f"ellipsoid proxy of radius {ext[k]:.4g} m (a {kind} touches the floor at several "
-                         "points whose scrub resists turning; the original is kept for looks)")
+            kind = mujoco.mjtGeom(gtype).name[len("mjGEOM_") :].lower()
+            notes.append(
+                f"wheel '{jname}': collision {kind} '{_name(model, mujoco.mjtObj.mjOBJ_GEOM, g)}'"
+                f"{f' (+{len(cand) - 1} more)' if len(cand) > 1 else ''} replaced by a single-contact "
+                f"ellipsoid proxy of radius {ext[k]:.4g} m (a {kind} touches the floor at several "
+                "points whose scrub resists turning; the original is kept for looks)"
+            )
         else:
             proxies.append(None)
     if ref.wheel_radius > 0:
@@ -325,27 +350,36 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         notes.append(f"left and right wheel radii differ ({radii[0]:.5g}, {radii[1]:.5g} m): using their mean")
     r = float(np.mean(radii))
     if not r > 0:
-        raise ModelError(f"{path}: wheel radius from the collision geoms is {r:g} m (are the wheel geoms "
-                         "centred on their joints?)")
+        raise ModelError(
+            f"{path}: wheel radius from the collision geoms is {r:g} m (are the wheel geoms centred on their joints?)"
+        )
 
     # actuators on the wheels: keep a plain motor, neutralise every other drive
     wheel_set = set(joints)
+
     def drives_wheel(a: int) -> bool:
         trn, tid = int(model.actuator_trntype[a]), int(model.actuator_trnid[a, 0])
         if trn in (int(mujoco.mjtTrn.mjTRN_JOINT), int(mujoco.mjtTrn.mjTRN_JOINTINPARENT)):
             return tid in wheel_set
         if trn == int(mujoco.mjtTrn.mjTRN_TENDON):
             adr, num = model.tendon_adr[tid], model.tendon_num[tid]
-            return any(model.wrap_type[w] == int(mujoco.mjtWrap.mjWRAP_JOINT) and model.wrap_objid[w] in wheel_set
-                       for w in range(adr, adr + num))
+            return any(
+                model.wrap_type[w] == int(mujoco.mjtWrap.mjWRAP_JOINT) and model.wrap_objid[w] in wheel_set
+                for w in range(adr, adr + num)
+            )
         return False
 
     def plain_motor(a: int, j: int) -> bool:
-        return (int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT) and model.actuator_trnid[a, 0] == j
-                and model.actuator_dyntype[a] == int(mujoco.mjtDyn.mjDYN_NONE)
-                and model.actuator_gaintype[a] == int(mujoco.mjtGain.mjGAIN_FIXED) and model.actuator_gainprm[a, 0] == 1
-                and model.actuator_biastype[a] == int(mujoco.mjtBias.mjBIAS_NONE)
-                and abs(abs(model.actuator_gear[a, 0]) - 1) < 1e-12 and bool(model.actuator_ctrllimited[a]))
+        return (
+            int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
+            and model.actuator_trnid[a, 0] == j
+            and model.actuator_dyntype[a] == int(mujoco.mjtDyn.mjDYN_NONE)
+            and model.actuator_gaintype[a] == int(mujoco.mjtGain.mjGAIN_FIXED)
+            and model.actuator_gainprm[a, 0] == 1
+            and model.actuator_biastype[a] == int(mujoco.mjtBias.mjBIAS_NONE)
+            and abs(abs(model.actuator_gear[a, 0]) - 1) < 1e-12
+            and bool(model.actuator_ctrllimited[a])
+        )
 
     drives = [a for a in range(model.nu) if drives_wheel(a)]
     # <dcmotor> drives (design §8.2): used with the mapping's motor = "dc", removed otherwise
@@ -376,18 +410,24 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
             if model.jnt_actfrclimited[j]:
                 limits.append(float(min(-model.jnt_actfrcrange[j, 0], model.jnt_actfrcrange[j, 1])))
         if not limits:
-            raise ModelError(f"{path}: cannot tell the wheel torque limit: no drive actuator on "
-                             f"'{jl_name}'/'{jr_name}' has a forcerange and the joints have no actuatorfrcrange; "
-                             "give tau_max (N·m) in the robot's mapping")
+            raise ModelError(
+                f"{path}: cannot tell the wheel torque limit: no drive actuator on "
+                f"'{jl_name}'/'{jr_name}' has a forcerange and the joints have no actuatorfrcrange; "
+                "give tau_max (N·m) in the robot's mapping"
+            )
         tau_max = min(limits)
-        notes.append(f"wheel torque limit {tau_max:g} N·m taken from the model's own drive "
-                     "(forcerange × gear, or the joints' actuatorfrcrange)")
+        notes.append(
+            f"wheel torque limit {tau_max:g} N·m taken from the model's own drive "
+            "(forcerange × gear, or the joints' actuatorfrcrange)"
+        )
     for j in joints:
         if model.jnt_actfrclimited[j]:
             lim = float(min(-model.jnt_actfrcrange[j, 0], model.jnt_actfrcrange[j, 1]))
             if lim < tau_max:
-                notes.append(f"joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}' actuatorfrcrange {lim:g} N·m "
-                             f"caps the motor limit {tau_max:g} N·m")
+                notes.append(
+                    f"joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}' actuatorfrcrange {lim:g} N·m "
+                    f"caps the motor limit {tau_max:g} N·m"
+                )
                 tau_max = lim
     if not tau_max > 0:
         raise ModelError(f"{path}: wheel torque limit is {tau_max:g} N·m; give tau_max in the robot's mapping")
@@ -406,40 +446,70 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         if add_motors:
             notes.append(f"torque motors '{motors[0]}', '{motors[1]}' (±{tau_max:g} N·m) attached to the wheel joints")
     if disabled:
-        notes.append("the model's own wheel drive " + ", ".join(
-            f"'{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)}'" for a in disabled)
-            + " is left unused (zero gain and bias: no force)")
+        notes.append(
+            "the model's own wheel drive "
+            + ", ".join(f"'{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)}'" for a in disabled)
+            + " is left unused (zero gain and bias: no force)"
+        )
     others = model.nu - len(drives)
     if others:
         notes.append(f"{others} other actuator(s) left as they are (ctrl stays 0: position actuators hold 0)")
     for j in joints:
         dof = model.jnt_dofadr[j]
-        parts = [f"{k} {v:g}" for k, v in (("damping", model.dof_damping[dof]), ("armature", model.dof_armature[dof]),
-                                            ("frictionloss", model.dof_frictionloss[dof])) if v]
+        parts = [
+            f"{k} {v:g}"
+            for k, v in (
+                ("damping", model.dof_damping[dof]),
+                ("armature", model.dof_armature[dof]),
+                ("frictionloss", model.dof_frictionloss[dof]),
+            )
+            if v
+        ]
         if parts:
-            notes.append(f"joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}': " + ", ".join(parts)
-                         + " (armature enters a_eff, b_eff; damping and frictionloss are a drag and a dead band "
-                           "the paper's model lacks)")
+            notes.append(
+                f"joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}': "
+                + ", ".join(parts)
+                + " (armature enters a_eff, b_eff; damping and frictionloss are a drag and a dead band "
+                "the paper's model lacks)"
+            )
 
     jn = tuple(_name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints)
     gnames = []
     for j, g, pr in zip(jn, geoms, proxies):
         gnames.append(f"{j}_contact" if pr is not None else _name(model, mujoco.mjtObj.mjOBJ_GEOM, g))
     layout = RobotLayout(
-        file=str(path), base=base_name, wheel_joints=jn, motors=motors, wheel_geoms=tuple(gnames),
-        wheel_radius=r, half_track=half_track, axle=tuple(float(x) for x in axle),
-        wheel_sign=tuple(signs), tau_max=float(tau_max),
+        file=str(path),
+        base=base_name,
+        wheel_joints=jn,
+        motors=motors,
+        wheel_geoms=tuple(gnames),
+        wheel_radius=r,
+        half_track=half_track,
+        axle=tuple(float(x) for x in axle),
+        wheel_sign=tuple(signs),
+        tau_max=float(tau_max),
         disabled_actuators=tuple(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in disabled),
         notes=tuple(notes),
     )
-    plan = dict(has_free=has_free, keep=keep, disabled=disabled, dc=bool(dc_keep),
-                dc_removed=[] if dc_keep else dc_all, proxies=proxies, geoms=geoms, radius=r,
-                joints=joints, axle_world=mid, base_yaw=float(np.arctan2(fwd[1], fwd[0])))
+    plan = dict(
+        has_free=has_free,
+        keep=keep,
+        disabled=disabled,
+        dc=bool(dc_keep),
+        dc_removed=[] if dc_keep else dc_all,
+        proxies=proxies,
+        geoms=geoms,
+        radius=r,
+        joints=joints,
+        axle_world=mid,
+        base_yaw=float(np.arctan2(fwd[1], fwd[0])),
+    )
     return layout, plan
 
 
-def _wheel_proxy(spec: mujoco.MjSpec, model: mujoco.MjModel, j: int, cand: list[int] | None, r: float,
-                 name: str) -> None:
+def _wheel_proxy(
+    spec: mujoco.MjSpec, model: mujoco.MjModel, j: int, cand: list[int] | None, r: float, name: str
+) -> None:
     """Switch the wheel's collision geoms ``cand`` off and add a single-contact ellipsoid ``name``
     of radius ``r`` centred on the joint anchor, its short axis along the joint axis (mass 0)."""
     wb_name = _name(model, mujoco.mjtObj.mjOBJ_BODY, model.jnt_bodyid[j])
@@ -457,9 +527,19 @@ def _wheel_proxy(spec: mujoco.MjSpec, model: mujoco.MjModel, j: int, cand: list[
     quat = np.zeros(4)
     axis = np.asarray(model.jnt_axis[j], float)
     mujoco.mju_quatZ2Vec(quat, axis / np.linalg.norm(axis))
-    g = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_ELLIPSOID, size=[r, r, width],
-                      pos=np.asarray(model.jnt_pos[j], float), quat=quat, mass=0, density=0,
-                      contype=1, conaffinity=1, group=3, rgba=[0.2, 0.6, 0.2, 0.3])
+    g = body.add_geom(
+        name=name,
+        type=mujoco.mjtGeom.mjGEOM_ELLIPSOID,
+        size=[r, r, width],
+        pos=np.asarray(model.jnt_pos[j], float),
+        quat=quat,
+        mass=0,
+        density=0,
+        contype=1,
+        conaffinity=1,
+        group=3,
+        rgba=[0.2, 0.6, 0.2, 0.3],
+    )
     if src is not None:
         g.contype, g.conaffinity = int(model.geom_contype[cand[0]]) or 1, int(model.geom_conaffinity[cand[0]]) or 1
         g.condim = int(model.geom_condim[cand[0]])
@@ -483,8 +563,11 @@ def dc_constants(model: mujoco.MjModel, a: int) -> tuple[float, float, float, fl
     if int(model.actuator_ctrlspec[a]) == DC_INPUT_FF:
         vmax = float(model.actuator_gainprm[a, 7])
     else:
-        vmax = float(min(-model.actuator_ctrlrange[a, 0], model.actuator_ctrlrange[a, 1])) \
-            if model.actuator_ctrllimited[a] else 0.0
+        vmax = (
+            float(min(-model.actuator_ctrlrange[a, 0], model.actuator_ctrlrange[a, 1]))
+            if model.actuator_ctrllimited[a]
+            else 0.0
+        )
     return R, K, g, vmax
 
 
@@ -498,27 +581,35 @@ def _dc_plan(model, path, ref, joints, dc_all, dc_keep, notes) -> float:
     wheel torque limit (stall torque ``g K V_max / R``, or the mapping's ``tau_max`` if lower)."""
     limits = []
     for j in joints:
-        mine = [a for a in dc_all if int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
-                and model.actuator_trnid[a, 0] == j]
+        mine = [
+            a
+            for a in dc_all
+            if int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT) and model.actuator_trnid[a, 0] == j
+        ]
         jname = _name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
         if len(mine) != 1:
-            raise ModelError(f"scenario key 'plant.robots.motor': \"dc\" needs one <dcmotor> on wheel joint "
-                             f"'{jname}' of {path}, found {len(mine)}")
+            raise ModelError(
+                f"scenario key 'plant.robots.motor': \"dc\" needs one <dcmotor> on wheel joint "
+                f"'{jname}' of {path}, found {len(mine)}"
+            )
         a = mine[0]
         aname = _name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
         R, K, g, vmax = dc_constants(model, a)
         for val, what in ((R, "resistance"), (K, "motorconst"), (g, "gear"), (vmax, "ctrlrange (supply voltage)")):
             if not val > 0:
-                raise ModelError(f"scenario key 'plant.robots.motor': <dcmotor> '{aname}' in {path}: {what} "
-                                 f"must be > 0, got {val:g}")
+                raise ModelError(
+                    f"scenario key 'plant.robots.motor': <dcmotor> '{aname}' in {path}: {what} must be > 0, got {val:g}"
+                )
         dc_keep.append(a)
         limits.append(g * K * vmax / R)
     stall = min(limits)
     tau = min(stall, ref.tau_max) if ref.tau_max > 0 else stall
     drv = ref.driver or "current"
-    notes.append(f"DC motors '{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, dc_keep[0])}', "
-                 f"'{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, dc_keep[1])}' ({drv} driver): stall torque "
-                 f"{stall:.4g} N·m at the wheel" + (f", limited to {tau:g} N·m" if tau < stall else ""))
+    notes.append(
+        f"DC motors '{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, dc_keep[0])}', "
+        f"'{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, dc_keep[1])}' ({drv} driver): stall torque "
+        f"{stall:.4g} N·m at the wheel" + (f", limited to {tau:g} N·m" if tau < stall else "")
+    )
     return tau
 
 
@@ -599,8 +690,14 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
     tau = layout.tau_max
     if plan["dc"]:
         for a, sgn in zip(plan["keep"], layout.wheel_sign):
-            _dc_driver(spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)), model, a, sgn,
-                       ref.driver or "current", tau)
+            _dc_driver(
+                spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)),
+                model,
+                a,
+                sgn,
+                ref.driver or "current",
+                tau,
+            )
     elif min(plan["keep"]) >= 0:
         for a, sgn in zip(plan["keep"], layout.wheel_sign):
             act = spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a))
@@ -613,9 +710,16 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
                 act.forcerange = [-tau, tau]
     else:
         for name, j, sgn in zip(layout.motors, layout.wheel_joints, layout.wheel_sign):
-            spec.add_actuator(name=name, target=j, trntype=mujoco.mjtTrn.mjTRN_JOINT,
-                              gear=[float(sgn), 0, 0, 0, 0, 0], ctrllimited=1, ctrlrange=[-tau, tau],
-                              forcelimited=1, forcerange=[-tau, tau])
+            spec.add_actuator(
+                name=name,
+                target=j,
+                trntype=mujoco.mjtTrn.mjTRN_JOINT,
+                gear=[float(sgn), 0, 0, 0, 0, 0],
+                ctrllimited=1,
+                ctrlrange=[-tau, tau],
+                forcelimited=1,
+                forcerange=[-tau, tau],
+            )
     spec.add_text(name=_LAYOUT_TEXT, data=layout.to_json())
     return spec, layout, np.asarray(plan["axle_world"], float), plan["base_yaw"]
 
@@ -625,13 +729,19 @@ def load_robot(entry: RobotRef | str | Path) -> mujoco.MjSpec:
     return prepare_robot(entry)[0]
 
 
-def _add_payload_to_body(body: mujoco.MjsBody, mass_kg: float, inertia_kgm2: float,
-                         at: np.ndarray | None = None) -> None:
+def _add_payload_to_body(
+    body: mujoco.MjsBody, mass_kg: float, inertia_kgm2: float, at: np.ndarray | None = None
+) -> None:
     """Add a point-like payload (mass, yaw inertia about its own centre) at ``at`` (body frame, m;
     default the body origin)."""
     mass, ipos, iquat, inertia = payload_inertial(
-        body.mass, np.asarray(body.ipos), np.asarray(body.iquat), np.asarray(body.inertia),
-        mass_kg, inertia_kgm2, at,
+        body.mass,
+        np.asarray(body.ipos),
+        np.asarray(body.iquat),
+        np.asarray(body.inertia),
+        mass_kg,
+        inertia_kgm2,
+        at,
     )
     body.mass, body.ipos, body.iquat, body.inertia = mass, ipos, iquat, inertia
 
@@ -681,15 +791,24 @@ def payload_inertial(
 
 def _add_assets(spec: mujoco.MjSpec) -> None:
     spec.add_texture(
-        name="skybox", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
+        name="skybox",
+        type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
         builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
-        rgb1=[0.35, 0.5, 0.7], rgb2=[0.05, 0.05, 0.1], width=512, height=3072,
+        rgb1=[0.35, 0.5, 0.7],
+        rgb2=[0.05, 0.05, 0.1],
+        width=512,
+        height=3072,
     )
     spec.add_texture(
-        name="grid", type=mujoco.mjtTexture.mjTEXTURE_2D,
-        builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, mark=mujoco.mjtMark.mjMARK_EDGE,
-        rgb1=[0.22, 0.25, 0.28], rgb2=[0.16, 0.18, 0.2], markrgb=[0.7, 0.7, 0.7],
-        width=300, height=300,
+        name="grid",
+        type=mujoco.mjtTexture.mjTEXTURE_2D,
+        builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+        mark=mujoco.mjtMark.mjMARK_EDGE,
+        rgb1=[0.22, 0.25, 0.28],
+        rgb2=[0.16, 0.18, 0.2],
+        markrgb=[0.7, 0.7, 0.7],
+        width=300,
+        height=300,
     )
     grid = spec.add_material(name="grid", texrepeat=[1, 1], texuniform=True, reflectance=0.15)
     grid.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "grid"
@@ -780,7 +899,10 @@ def build_scene(
 
     world = spec.worldbody
     floor = world.add_geom(
-        name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05], material="grid",
+        name="floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0, 0, 0.05],
+        material="grid",
         condim=3,
     )
     if floor_friction is not None:
@@ -791,22 +913,38 @@ def build_scene(
     if friction_patch is not None:  # faults: wheel slip on a low-friction rectangle of floor
         x0, y0, x1, y1, mu = (float(v) for v in friction_patch)
         if not (x0 < x1 and y0 < y1 and mu >= 0):
-            raise ValueError(f"friction_patch must be (x0, y0, x1, y1, mu) with x0 < x1, y0 < y1, mu >= 0, "
-                             f"got {tuple(friction_patch)}")
+            raise ValueError(
+                f"friction_patch must be (x0, y0, x1, y1, mu) with x0 < x1, y0 < y1, mu >= 0, "
+                f"got {tuple(friction_patch)}"
+            )
         h = PATCH_THICKNESS / 2
         world.add_geom(
-            name="friction_patch", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[(x0 + x1) / 2, (y0 + y1) / 2, h],
-            size=[(x1 - x0) / 2, (y1 - y0) / 2, h], friction=[mu, 0.005, 0.0001], priority=1, condim=3,
+            name="friction_patch",
+            type=mujoco.mjtGeom.mjGEOM_BOX,
+            pos=[(x0 + x1) / 2, (y0 + y1) / 2, h],
+            size=[(x1 - x0) / 2, (y1 - y0) / 2, h],
+            friction=[mu, 0.005, 0.0001],
+            priority=1,
+            condim=3,
             rgba=[0.55, 0.8, 1.0, 0.45],
         )
     world.add_light(
-        name="sun", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, pos=[0, 0, 10],
-        dir=[-0.3, 0.2, -1.0], diffuse=[0.8, 0.8, 0.8], specular=[0.2, 0.2, 0.2],
+        name="sun",
+        type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
+        pos=[0, 0, 10],
+        dir=[-0.3, 0.2, -1.0],
+        diffuse=[0.8, 0.8, 0.8],
+        specular=[0.2, 0.2, 0.2],
         castshadow=False,  # a directional shadow map over a many-metre floor shows acne
     )
     world.add_light(
-        name="fill", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL, pos=[0, 0, 10],
-        dir=[0.4, -0.3, -1.0], diffuse=[0.3, 0.3, 0.3], specular=[0, 0, 0], castshadow=False,
+        name="fill",
+        type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
+        pos=[0, 0, 10],
+        dir=[0.4, -0.3, -1.0],
+        diffuse=[0.3, 0.3, 0.3],
+        specular=[0, 0, 0],
+        castshadow=False,
     )
 
     # cameras ride on a mocap body that whoever renders keeps on the formation centroid (Markers)
@@ -818,17 +956,26 @@ def build_scene(
 
     leader = world.add_body(name="leader", mocap=True, pos=[centre[0], centre[1], MARKER_Z])
     ghost = dict(contype=0, conaffinity=0, group=1, material="ghost", mass=0, density=0)
-    leader.add_geom(name="leader_ghost", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.15, 0.12, 0.05],
-                    pos=[0, 0, 0.05], **ghost)
-    leader.add_geom(name="leader_heading", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.12, 0.025, 0.01],
-                    pos=[0.2, 0, 0.05], **ghost)
+    leader.add_geom(
+        name="leader_ghost", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.15, 0.12, 0.05], pos=[0, 0, 0.05], **ghost
+    )
+    leader.add_geom(
+        name="leader_heading", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.12, 0.025, 0.01], pos=[0.2, 0, 0.05], **ghost
+    )
     if slots:
         for i in range(n):
-            slot = world.add_body(name=f"slot_{i + 1}", mocap=True,
-                                  pos=[poses[i, 0], poses[i, 1], MARKER_Z])
-            slot.add_geom(name=f"slot_{i + 1}_marker", type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                          size=[0.12, 0.002, 0], contype=0, conaffinity=0, group=1,
-                          material="slot", mass=0, density=0)
+            slot = world.add_body(name=f"slot_{i + 1}", mocap=True, pos=[poses[i, 0], poses[i, 1], MARKER_Z])
+            slot.add_geom(
+                name=f"slot_{i + 1}_marker",
+                type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+                size=[0.12, 0.002, 0],
+                contype=0,
+                conaffinity=0,
+                group=1,
+                material="slot",
+                mass=0,
+                density=0,
+            )
 
     for i, ((robot, layout, axle_world, base_yaw), pose) in enumerate(zip(prepared, poses)):
         if payloads is not None:
@@ -841,8 +988,9 @@ def build_scene(
         yaw = pose[2] - base_yaw
         c, s_ = np.cos(yaw), np.sin(yaw)
         mx, my = c * axle_world[0] - s_ * axle_world[1], s_ * axle_world[0] + c * axle_world[1]
-        frame = world.add_frame(pos=[pose[0] - mx, pose[1] - my, layout.wheel_radius - axle_world[2]],
-                                quat=yaw_quat(yaw))
+        frame = world.add_frame(
+            pos=[pose[0] - mx, pose[1] - my, layout.wheel_radius - axle_world[2]], quat=yaw_quat(yaw)
+        )
         spec.attach(robot, prefix=follower_prefix(i), frame=frame)
     return spec
 
@@ -864,10 +1012,12 @@ def add_sensors(spec: mujoco.MjSpec, layout: RobotLayout) -> None:
     del site
     for name, j in zip(SENSORS[:2], layout.wheel_joints):
         spec.add_sensor(name=name, type=mujoco.mjtSensor.mjSENS_JOINTPOS, objtype=mujoco.mjtObj.mjOBJ_JOINT, objname=j)
-    spec.add_sensor(name=SENSORS[2], type=mujoco.mjtSensor.mjSENS_GYRO, objtype=mujoco.mjtObj.mjOBJ_SITE,
-                    objname=IMU_SITE)
-    spec.add_sensor(name=SENSORS[3], type=mujoco.mjtSensor.mjSENS_ACCELEROMETER, objtype=mujoco.mjtObj.mjOBJ_SITE,
-                    objname=IMU_SITE)
+    spec.add_sensor(
+        name=SENSORS[2], type=mujoco.mjtSensor.mjSENS_GYRO, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=IMU_SITE
+    )
+    spec.add_sensor(
+        name=SENSORS[3], type=mujoco.mjtSensor.mjSENS_ACCELEROMETER, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=IMU_SITE
+    )
 
 
 def compile_scene(spec: mujoco.MjSpec) -> tuple[mujoco.MjModel, mujoco.MjData]:
@@ -899,8 +1049,13 @@ class Markers:
         slots = [mocap(f"slot_{i + 1}") for i in range(n)]
         self.slots = np.array(slots) if min(slots, default=-1) >= 0 else None
 
-    def place(self, data: mujoco.MjData, leader_pose: np.ndarray, slots: np.ndarray | None = None,
-              centroid: np.ndarray | None = None) -> None:
+    def place(
+        self,
+        data: mujoco.MjData,
+        leader_pose: np.ndarray,
+        slots: np.ndarray | None = None,
+        centroid: np.ndarray | None = None,
+    ) -> None:
         """Ghost at ``leader_pose`` ``[x, y, θ]``, slot markers at ``slots`` (n, 2), cameras over
         ``centroid`` (2,) (m, rad); ``None`` leaves that marker where it is."""
         if self.leader >= 0:

@@ -9,6 +9,7 @@ by step in Python. Both call the same compiled equations and the same metric, lo
 guard functions (``engine.py``), so the two engines agree bit for bit on one machine
 (docs/design.md §9).
 """
+
 from __future__ import annotations
 
 import logging
@@ -16,8 +17,9 @@ import math
 import platform
 import time
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Protocol, Sequence
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -47,14 +49,15 @@ from .scenario import Scenario
 
 log = logging.getLogger(__name__)
 
+
 class Observer(Protocol):
     """Something that watches a run (video, rerun) at its own period, without slowing a run that has none."""
 
     period: float  # s of simulated time between calls
 
-    def start(self, run: "RunState") -> None: ...
-    def sample(self, run: "RunState") -> None: ...
-    def finish(self, run: "RunState") -> None: ...
+    def start(self, run: RunState) -> None: ...
+    def sample(self, run: RunState) -> None: ...
+    def finish(self, run: RunState) -> None: ...
 
 
 @dataclass
@@ -93,8 +96,15 @@ def make_plant(sc: Scenario) -> Plant:
     poses = sc.initial_poses()
     dist = HarmonicDisturbance(sc.n, sc.disturbance.bias, sc.disturbance.amp, sc.disturbance.freq, sc.disturbance.phase)
     if sc.plant.kind == "ideal":
-        return IdealPlant(np.array(sc.plant.c_true), poses, sc.sim.control_dt, sc.sim.physics_dt, dist,
-                          mass=sc.plant.mass, inertia=sc.plant.inertia)
+        return IdealPlant(
+            np.array(sc.plant.c_true),
+            poses,
+            sc.sim.control_dt,
+            sc.sim.physics_dt,
+            dist,
+            mass=sc.plant.mass,
+            inertia=sc.plant.inertia,
+        )
     from .plants.mujoco_plant import MujocoPlant  # imported only when asked: the ideal plant needs no MuJoCo
     from .robots import resolve_robot
 
@@ -106,10 +116,23 @@ def make_plant(sc: Scenario) -> Plant:
         from .scenario import robot_encoder_cpr
 
         cpr = [float(pc.encoder_cpr) if pc.encoder_cpr > 0 else robot_encoder_cpr(r.model) for r in refs]
-        sensing = dict(sensing="odometry", encoder_cpr=cpr, sensor_dt=pc.sensor_dt, gyro_noise=pc.gyro_noise,
-                       gyro_bias=pc.gyro_bias, seed=sc.sim.seed)
-    return MujocoPlant(refs, poses, sc.sim.control_dt, sc.sim.physics_dt, dist,
-                       friction_patch=sc.faults.friction_patch or None, **sensing)  # faults: low-friction floor patch
+        sensing = dict(
+            sensing="odometry",
+            encoder_cpr=cpr,
+            sensor_dt=pc.sensor_dt,
+            gyro_noise=pc.gyro_noise,
+            gyro_bias=pc.gyro_bias,
+            seed=sc.sim.seed,
+        )
+    return MujocoPlant(
+        refs,
+        poses,
+        sc.sim.control_dt,
+        sc.sim.physics_dt,
+        dist,
+        friction_patch=sc.faults.friction_patch or None,
+        **sensing,
+    )  # faults: low-friction floor patch
 
 
 def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = None) -> StackParams:
@@ -120,17 +143,30 @@ def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = 
     lo, hi = sc.learner.c_bounds
     return StackParams(
         offsets=np.array(sc.formation.offsets, dtype=float),
-        kp=np.array(sc.estimator.kp), ka=np.array(sc.estimator.ka), kb=np.array(sc.estimator.kb),
+        kp=np.array(sc.estimator.kp),
+        ka=np.array(sc.estimator.ka),
+        kb=np.array(sc.estimator.kb),
         est_phi=np.array(sc.estimator.phi),
-        k1=sc.kinematic.k1, k2=sc.kinematic.k2, k3=sc.kinematic.k3,
-        A=sc.kinematic.A, B=sc.kinematic.B, D=sc.kinematic.D,
-        law=law, learning=learning,
-        c_gain=np.array(sc.torque.c), torque_phi=sc.torque.phi,
+        k1=sc.kinematic.k1,
+        k2=sc.kinematic.k2,
+        k3=sc.kinematic.k3,
+        A=sc.kinematic.A,
+        B=sc.kinematic.B,
+        D=sc.kinematic.D,
+        law=law,
+        learning=learning,
+        c_gain=np.array(sc.torque.c),
+        torque_phi=sc.torque.phi,
         tau_max=np.full(n, sc.torque.tau_max) if tau_max is None else np.asarray(tau_max, dtype=float),
         steer_priority=sc.torque.saturation == "steer-priority",
-        deriv_wn=sc.torque.deriv_wn, derivative=sc.torque.derivative,
-        k4=_learner_k4(sc, c_hat0), k5=np.array(sc.learner.k5), kd=np.array(sc.learner.kd),
-        c_hat0=c_hat0, c_min=lo * c_hat0, c_max=hi * c_hat0,
+        deriv_wn=sc.torque.deriv_wn,
+        derivative=sc.torque.derivative,
+        k4=_learner_k4(sc, c_hat0),
+        k5=np.array(sc.learner.k5),
+        kd=np.array(sc.learner.kd),
+        c_hat0=c_hat0,
+        c_min=lo * c_hat0,
+        c_max=hi * c_hat0,
         dt=sc.sim.control_dt,
         leader_frame=sc.formation.frame == "leader",
     )
@@ -202,9 +238,16 @@ class LoopContext(NamedTuple):
     diag: np.ndarray
 
 
-def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = None,
-             engine: str = "auto", record_inputs: tuple[np.ndarray, np.ndarray] | None = None, *,
-             plant: Plant | None = None, controller: Any = None) -> RunResult:
+def simulate(
+    sc: Scenario,
+    observers: Sequence[Observer] = (),
+    progress: Any = None,
+    engine: str = "auto",
+    record_inputs: tuple[np.ndarray, np.ndarray] | None = None,
+    *,
+    plant: Plant | None = None,
+    controller: Any = None,
+) -> RunResult:
     """Run the closed loop of ``sc`` and return its log and summary.
 
     ``plant``: a :class:`~bioform_mj.plants.base.Plant` (default: built from ``sc.plant``);
@@ -269,17 +312,32 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     else:  # a user's controller: its signals are copied into a shadow state each step
         gains, state = None, new_state(n)
     lim = sc.limits
-    ctx = LoopContext(gains, state, getattr(controller, "_no_comm", None), N, L_pose, L_vel,
-                      np.ascontiguousarray(pose0, dtype=float), np.ascontiguousarray(vel0, dtype=float),
-                      new_metrics(n), new_acc(n), lg, stride, form,
-                      Bounds(float(lim.position), float(lim.speed), float(lim.torque)), np.zeros(3))
+    ctx = LoopContext(
+        gains,
+        state,
+        getattr(controller, "_no_comm", None),
+        N,
+        L_pose,
+        L_vel,
+        np.ascontiguousarray(pose0, dtype=float),
+        np.ascontiguousarray(vel0, dtype=float),
+        new_metrics(n),
+        new_acc(n),
+        lg,
+        stride,
+        form,
+        Bounds(float(lim.position), float(lim.speed), float(lim.torque)),
+        np.zeros(3),
+    )
 
     chunk = None
     if engine != "stepwise" and kernel is not None and faults is None and hasattr(plant, "compiled_chunk"):
         chunk = plant.compiled_chunk(ctx, record_inputs) if record_inputs is not None else plant.compiled_chunk(ctx)
     if engine == "compiled" and chunk is None:
-        raise ValueError("engine 'compiled' needs a plant and a controller with compiled kernels, and no "
-                         "per-step faults (use engine 'auto' or 'stepwise')")
+        raise ValueError(
+            "engine 'compiled' needs a plant and a controller with compiled kernels, and no "
+            "per-step faults (use engine 'auto' or 'stepwise')"
+        )
     c_true = np.ascontiguousarray(plant.c_true(), dtype=float)
     # design §8.3: with sensing = "odometry" the controllers get each robot's dead reckoning
     # (plant.measurement), everything else (metrics, guards, formation error, outcomes) the truth
@@ -310,8 +368,25 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
             ctx.vel[:] = v
             if k + 1 < N:
                 applied[0] = control(k + 1)
-                j1, status = after_control(k + 1, N, stride, state, ctx.pose, ctx.vel, ctx.met, ctx.acc, lg, j,
-                                           L_pose, L_vel, dt, c_true, form, ctx.bounds, ctx.diag)
+                j1, status = after_control(
+                    k + 1,
+                    N,
+                    stride,
+                    state,
+                    ctx.pose,
+                    ctx.vel,
+                    ctx.met,
+                    ctx.acc,
+                    lg,
+                    j,
+                    L_pose,
+                    L_vel,
+                    dt,
+                    c_true,
+                    form,
+                    ctx.bounds,
+                    ctx.diag,
+                )
                 if odometry and j1 > j:
                     record_odometry(lg, j, plant.odo.mpose, plant.odo.mvel)
                 j = j1
@@ -324,8 +399,25 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     # control step 0 and its row, then a zero-length chunk: kernels are loaded (or compiled) here,
     # outside the timed loop
     applied[0] = control(0)
-    j, status = after_control(0, N, stride, state, ctx.pose, ctx.vel, ctx.met, ctx.acc, lg, 0, L_pose, L_vel, dt,
-                              c_true, form, ctx.bounds, ctx.diag)
+    j, status = after_control(
+        0,
+        N,
+        stride,
+        state,
+        ctx.pose,
+        ctx.vel,
+        ctx.met,
+        ctx.acc,
+        lg,
+        0,
+        L_pose,
+        L_vel,
+        dt,
+        c_true,
+        form,
+        ctx.bounds,
+        ctx.diag,
+    )
     if odometry and j > 0:
         record_odometry(lg, 0, plant.odo.mpose, plant.odo.mvel)
     run_chunk = chunk if chunk is not None else python_chunk
@@ -392,8 +484,26 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
     logd["offsets"] = offsets
     logd["edges"] = graph.edges + 1
     logd["leader_access"] = graph.leader_access
-    summary = _summary(sc, plant, controller, state, ctx.met, logd, L_pose[k_done], pose, vel, offsets, k_done,
-                       dt, wall, setup_s, diverged, interrupted, missing, engine="compiled" if chunk else "stepwise")
+    summary = _summary(
+        sc,
+        plant,
+        controller,
+        state,
+        ctx.met,
+        logd,
+        L_pose[k_done],
+        pose,
+        vel,
+        offsets,
+        k_done,
+        dt,
+        wall,
+        setup_s,
+        diverged,
+        interrupted,
+        missing,
+        engine="compiled" if chunk else "stepwise",
+    )
     summary["feasibility_warnings"] = feasibility
     summary["sensing"] = "odometry" if odometry else "truth"
     drift = plant.odometry_drift() if odometry else None
@@ -411,8 +521,18 @@ def simulate(sc: Scenario, observers: Sequence[Observer] = (), progress: Any = N
 
 def _shadow(state: StackState, sig: Any, tau: np.ndarray, missing: set[str]) -> None:
     """Copy a user controller's signals into the shadow state the metrics, guards and log read."""
-    fields = {"est_pose": "est_pose", "est_vel": "est_vel", "cmd": "cmd", "dcmd": "dcmd", "tau_raw": "tau_raw",
-              "c_hat": "c_hat", "z_hat": "z_hat", "vs": "vs", "tracking_error": "err", "saturated": "saturated"}
+    fields = {
+        "est_pose": "est_pose",
+        "est_vel": "est_vel",
+        "cmd": "cmd",
+        "dcmd": "dcmd",
+        "tau_raw": "tau_raw",
+        "c_hat": "c_hat",
+        "z_hat": "z_hat",
+        "vs": "vs",
+        "tracking_error": "err",
+        "saturated": "saturated",
+    }
     for name, attr in fields.items():
         v = sig.get(name)
         if v is None:
@@ -430,38 +550,60 @@ LOST_AFTER_S = 10.0  # s: ... once the run has had this long to converge (or if 
 SPIN_RAD_S = 6.0  # rad/s: |ω| beyond this over the last second → spinning
 
 
-def _summary(sc, plant, controller, state, met, logd, lp_end, pose, vel, offsets, k_done, dt, wall, setup_s,
-             diverged, interrupted, missing, engine) -> dict[str, Any]:
+def _summary(
+    sc,
+    plant,
+    controller,
+    state,
+    met,
+    logd,
+    lp_end,
+    pose,
+    vel,
+    offsets,
+    k_done,
+    dt,
+    wall,
+    setup_s,
+    diverged,
+    interrupted,
+    missing,
+    engine,
+) -> dict[str, Any]:
     n = sc.n
     final_form = np.linalg.norm(pose[:, :2] - slots_of(sc, lp_end), axis=1)
     est = state.est_pose if "est_pose" not in missing else np.full((n, 3), np.nan)
     final_est = np.linalg.norm(est[:, :2] - lp_end[None, :2], axis=1)
     fe = logd["formation_error"]
-    half = fe[len(fe) // 2:] if len(fe) else fe
+    half = fe[len(fe) // 2 :] if len(fe) else fe
     c_true = plant.c_true()
     c_hat = state.c_hat if "c_hat" not in missing else np.full((n, 2), np.nan)
-    nan_if = (lambda name, v: float("nan") if name in missing else float(v))  # noqa: E731
+    nan_if = lambda name, v: float("nan") if name in missing else float(v)  # noqa: E731
     outcomes = follower_outcomes(sc, plant, controller, logd, final_form, c_hat, dt)
     followers = []
     for i in range(n):
-        followers.append({
-            "id": i + 1,
-            "outcome": outcomes[i][0],
-            "outcome_detail": outcomes[i][1],
-            "total_velocity_error": nan_if("cmd", met.verr[i] * dt),
-            "final_formation_error_m": float(final_form[i]),
-            "rms_formation_error_m": float(np.sqrt(np.mean(fe[:, i] ** 2))) if len(fe) else float("nan"),
-            "rms_formation_error_last_half_m": float(np.sqrt(np.mean(half[:, i] ** 2))) if len(half) else float("nan"),
-            "final_estimation_error_m": float(final_est[i]),
-            "max_abs_v_cmd": nan_if("cmd", met.vmax[i]),
-            "peak_abs_torque": float(met.tau[i]),
-            "peak_abs_torque_commanded": float(met.tau_raw[i]),
-            "saturation_fraction": nan_if("saturated", met.sat[i] / max(1, k_done)),
-            "c_hat": [float(v) for v in c_hat[i]],
-            "c_true": [float(v) for v in c_true[i]],
-            "c_hat_rel_error": [float(v) for v in (c_hat[i] / c_true[i] - 1.0)],
-            **_robot_used(sc, plant, controller, i),
-        })
+        followers.append(
+            {
+                "id": i + 1,
+                "outcome": outcomes[i][0],
+                "outcome_detail": outcomes[i][1],
+                "total_velocity_error": nan_if("cmd", met.verr[i] * dt),
+                "final_formation_error_m": float(final_form[i]),
+                "rms_formation_error_m": float(np.sqrt(np.mean(fe[:, i] ** 2))) if len(fe) else float("nan"),
+                "rms_formation_error_last_half_m": float(np.sqrt(np.mean(half[:, i] ** 2)))
+                if len(half)
+                else float("nan"),
+                "final_estimation_error_m": float(final_est[i]),
+                "max_abs_v_cmd": nan_if("cmd", met.vmax[i]),
+                "peak_abs_torque": float(met.tau[i]),
+                "peak_abs_torque_commanded": float(met.tau_raw[i]),
+                "saturation_fraction": nan_if("saturated", met.sat[i] / max(1, k_done)),
+                "c_hat": [float(v) for v in c_hat[i]],
+                "c_true": [float(v) for v in c_true[i]],
+                "c_hat_rel_error": [float(v) for v in (c_hat[i] / c_true[i] - 1.0)],
+                **_robot_used(sc, plant, controller, i),
+            }
+        )
     return {
         "scenario": sc.name,
         "plant": sc.plant.kind,
@@ -473,10 +615,12 @@ def _summary(sc, plant, controller, state, met, logd, lp_end, pose, vel, offsets
         "wall_time_s": wall,
         "setup_time_s": setup_s,
         "steps": k_done,
-        "diverged": None if diverged is None else {"message": str(diverged), "time_s": diverged.time,
-                                                   "step": diverged.step},
-        "interrupted": None if interrupted is None else {
-            "signal": _signal_name(getattr(interrupted, "signum", 2)), "time_s": k_done * dt},
+        "diverged": None
+        if diverged is None
+        else {"message": str(diverged), "time_s": diverged.time, "step": diverged.step},
+        "interrupted": None
+        if interrupted is None
+        else {"signal": _signal_name(getattr(interrupted, "signum", 2)), "time_s": k_done * dt},
         "log_channels": {name: CHANNELS[name][1] for name in CHANNELS},
         "log_interval_means": list(MEAN_CHANNELS),
         "versions": _versions(),
@@ -502,8 +646,15 @@ def _robot_used(sc: Scenario, plant: Any, controller: Any, i: int) -> dict[str, 
     return out
 
 
-def follower_outcomes(sc: Scenario, plant: Any, controller: Any, logd: dict[str, np.ndarray],
-                      final_form: np.ndarray, c_hat: np.ndarray, dt: float) -> list[tuple[str, str]]:
+def follower_outcomes(
+    sc: Scenario,
+    plant: Any,
+    controller: Any,
+    logd: dict[str, np.ndarray],
+    final_form: np.ndarray,
+    c_hat: np.ndarray,
+    dt: float,
+) -> list[tuple[str, str]]:
     """Per follower ``(outcome, detail)``: ``ok`` or the first failure of ``tipped`` (tilt beyond
     the plant's ``TIP_ANGLE_DEG``, with the time), ``slipping`` (a wheel's slip ratio beyond the
     plant's ``SLIP_RATIO`` for ``SLIP_TIME`` s), ``spinning`` (|ω| > :data:`SPIN_RAD_S` over
@@ -524,8 +675,12 @@ def follower_outcomes(sc: Scenario, plant: Any, controller: Any, logd: dict[str,
             out.append(("tipped", f"tilt beyond {TIP_ANGLE_DEG:g} deg at t = {tip[i] * dt:.3f} s"))
             continue
         if slip is not None and slip[i] >= 0:
-            out.append(("slipping", f"wheel slip ratio > {plant.SLIP_RATIO:g} for {plant.SLIP_TIME:g} s, "
-                                    f"by t = {slip[i] * dt:.3f} s"))
+            out.append(
+                (
+                    "slipping",
+                    f"wheel slip ratio > {plant.SLIP_RATIO:g} for {plant.SLIP_TIME:g} s, by t = {slip[i] * dt:.3f} s",
+                )
+            )
             continue
         if len(t) and np.all(np.abs(logd["vel"][last, i, 1]) > SPIN_RAD_S):
             out.append(("spinning", f"|omega| > {SPIN_RAD_S:g} rad/s over the last second"))

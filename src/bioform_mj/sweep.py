@@ -20,6 +20,7 @@ terminated (SIGTERM, then SIGKILL after a grace period; they also die with the s
 them and :class:`SweepInterrupted` is raised. One worker (and, off Linux, every sweep) runs in
 this process, where a signal abandons the run in progress.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -35,9 +36,10 @@ import signal
 import sys
 import time
 import traceback
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -135,8 +137,16 @@ def _warn(msg: str) -> None:
     print(f"warning: {msg}", file=sys.stderr, flush=True)
 
 
-def expand(source: str, seeds: int, methods: Sequence[str], vary: Sequence[str], overrides: Sequence[str] = (),
-           plant: str | None = None, seed0: int = 0, warn: Callable[[str], None] | None = _warn) -> list[RunSpec]:
+def expand(
+    source: str,
+    seeds: int,
+    methods: Sequence[str],
+    vary: Sequence[str],
+    overrides: Sequence[str] = (),
+    plant: str | None = None,
+    seed0: int = 0,
+    warn: Callable[[str], None] | None = _warn,
+) -> list[RunSpec]:
     """All combinations; ``vary`` items are ``KEY=V1,V2,...`` (values as in ``--set``).
 
     Arrays in a value list must not contain commas at the top level; use ``;`` to
@@ -175,13 +185,16 @@ def expand(source: str, seeds: int, methods: Sequence[str], vary: Sequence[str],
             more = "; …" if len(no_random) > 3 else ""
             which = f"{len(no_random)} of {n_configs} configurations ({'; '.join(no_random[:3])}{more}) have"
             its = "their"
-        warn(f"--seeds {seeds}: {which} no randomness (no formation.init_jitter, faults.noise_pose/noise_vel "
-             f"or faults.packet_loss), so {its} {seeds} seeds give identical runs")
+        warn(
+            f"--seeds {seeds}: {which} no randomness (no formation.init_jitter, faults.noise_pose/noise_vel "
+            f"or faults.packet_loss), so {its} {seeds} seeds give identical runs"
+        )
     return specs
 
 
 # ------------------------------------------------------------------------------------------
 # One run
+
 
 def _base_row(spec: RunSpec) -> dict[str, Any]:
     row: dict[str, Any] = {"key": spec.key, "method": spec.method, "seed": spec.seed}
@@ -195,8 +208,11 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
     try:
         from .sim import simulate
 
-        sc = spec.scenario if spec.scenario is not None else \
-            load(spec.source, list(spec.overrides), method=spec.method, plant=spec.plant)
+        sc = (
+            spec.scenario
+            if spec.scenario is not None
+            else load(spec.source, list(spec.overrides), method=spec.method, plant=spec.plant)
+        )
         res = simulate(sc)
         s = res.summary
         row["plant"] = s["plant"]
@@ -246,6 +262,7 @@ def _exit_reason(status: int) -> str:
 # ------------------------------------------------------------------------------------------
 # Signals
 
+
 class _Stop(BaseException):
     """Raised by the signal handler to abandon the in-process run (not an Exception: run_one lets it through)."""
 
@@ -265,7 +282,7 @@ class _Signals:
             self.raising = False
             raise _Stop()
 
-    def __enter__(self) -> "_Signals":
+    def __enter__(self) -> _Signals:
         for s in (signal.SIGINT, signal.SIGTERM):
             try:
                 self._old[s] = signal.signal(s, self._handler)
@@ -297,6 +314,7 @@ def _raising(sig: _Signals) -> Iterator[None]:
 
 # ------------------------------------------------------------------------------------------
 # Backends
+
 
 def _load_kernels() -> None:
     """Run both compiled loops for a moment, so that numba's cached machine code is loaded
@@ -344,7 +362,7 @@ def _worker(todo: list[RunSpec], task_r: int, result_w: int, parent: int) -> Non
             data = json.dumps(row, default=lambda o: o.item() if hasattr(o, "item") else str(o)).encode()
             out = len(data).to_bytes(8, "little") + data
             while out:
-                out = out[os.write(result_w, out):]
+                out = out[os.write(result_w, out) :]
         code = 0
     except BaseException:  # noqa: BLE001 - report and exit; never run the parent's code
         with contextlib.suppress(Exception):
@@ -441,8 +459,8 @@ def _run_forked(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable
                 p.buf += chunk
                 while len(p.buf) >= 8 and len(p.buf) >= 8 + int.from_bytes(p.buf[:8], "little"):
                     n = int.from_bytes(p.buf[:8], "little")
-                    row = json.loads(bytes(p.buf[8:8 + n]).decode())
-                    del p.buf[:8 + n]
+                    row = json.loads(bytes(p.buf[8 : 8 + n]).decode())
+                    del p.buf[: 8 + n]
                     p.current = None
                     done(row)
     finally:
@@ -495,8 +513,9 @@ def _run_local(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable[
 _RAY_DIED = {"WorkerCrashedError", "OutOfMemoryError", "NodeDiedError", "ObjectLostError", "LocalRayletDiedError"}
 
 
-def _run_ray(todo: list[RunSpec], workers: int, address: str | None, sig: _Signals,
-             done: Callable[[dict], None]) -> None:
+def _run_ray(
+    todo: list[RunSpec], workers: int, address: str | None, sig: _Signals, done: Callable[[dict], None]
+) -> None:
     try:
         import ray
     except ImportError:
@@ -545,6 +564,7 @@ def _run_ray(todo: list[RunSpec], workers: int, address: str | None, sig: _Signa
 # ------------------------------------------------------------------------------------------
 # The sweep
 
+
 def _read_row(path: Path, spec: RunSpec, warn: Callable[[str], None] | None) -> dict[str, Any] | None:
     """A finished row from an earlier invocation, or None when the run must be done (again)."""
     try:
@@ -576,15 +596,21 @@ def _run_warp(todo: list[RunSpec], groups: Any, device: str, sig: _Signals, done
 
     try:
         with _raising(sig):
-            run_warp(groups, device, _base_row, METRICS, done, stop=lambda: sig.signum is not None,
-                     failed_row=failed)
+            run_warp(groups, device, _base_row, METRICS, done, stop=lambda: sig.signum is not None, failed_row=failed)
     except _Stop:
         return
 
 
-def sweep(specs: list[RunSpec], out: Path, backend: str = "local", workers: int | None = None,
-          ray_address: str | None = None, progress: Callable[[int, int], None] | None = None,
-          warn: Callable[[str], None] | None = _warn, device: str | None = None) -> dict[str, Any]:
+def sweep(
+    specs: list[RunSpec],
+    out: Path,
+    backend: str = "local",
+    workers: int | None = None,
+    ray_address: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    warn: Callable[[str], None] | None = _warn,
+    device: str | None = None,
+) -> dict[str, Any]:
     """Run ``specs`` (skipping those already in ``out/runs``), then write the table and statistics.
 
     ``backend="warp"`` runs them as worlds of MuJoCo Warp batches on ``device`` (default: the
@@ -645,17 +671,29 @@ def sweep(specs: list[RunSpec], out: Path, backend: str = "local", workers: int 
         # the tables are written before the handlers are restored: a second signal cannot cut them short
         got = [rows[k] for k in keys if k in rows]
         group_by = ["method"] + list(dict.fromkeys(k for sp in specs for k, _ in sp.vary))
-        timing = {"backend": backend, "workers": workers, **({"device": device} if backend == "warp" else {}), "ran": ran, "skipped": skipped, "wall_s": wall,
-                  "runs_per_s": ran / wall if ran and wall > 0 else None, "runs": len(keys), "done": len(got),
-                  "complete": len(got) == len(keys),
-                  "interrupted": None if interrupted is None else signal.Signals(interrupted).name,
-                  "workers_died": sum(1 for r in got if r.get("worker_died"))}
+        timing = {
+            "backend": backend,
+            "workers": workers,
+            **({"device": device} if backend == "warp" else {}),
+            "ran": ran,
+            "skipped": skipped,
+            "wall_s": wall,
+            "runs_per_s": ran / wall if ran and wall > 0 else None,
+            "runs": len(keys),
+            "done": len(got),
+            "complete": len(got) == len(keys),
+            "interrupted": None if interrupted is None else signal.Signals(interrupted).name,
+            "workers_died": sum(1 for r in got if r.get("worker_died")),
+        }
         write_json(out / "sweep.json", timing)
         write_text(out / "runs.csv", to_csv(got))
         stats = aggregate(got, group_by)
         write_json(out / "stats.json", stats)
-        note = "" if len(got) == len(keys) else \
-            f"\n**Incomplete: {len(got)} of {len(keys)} runs done** (rerun the sweep to resume).\n"
+        note = (
+            ""
+            if len(got) == len(keys)
+            else f"\n**Incomplete: {len(got)} of {len(keys)} runs done** (rerun the sweep to resume).\n"
+        )
         write_text(out / "stats.md", stats_markdown(stats) + note)
     if interrupted is not None:
         raise SweepInterrupted(interrupted, len(got), len(keys))
@@ -691,14 +729,26 @@ def aggregate(rows: list[dict[str, Any]], group_by: Sequence[str] = ("method",))
             o = r.get("outcome") or r.get("status", "?")
             outcomes[o] = outcomes.get(o, 0) + 1
         entry: dict[str, Any] = dict(zip(group_by, gkey))
-        entry.update({"runs": len(rs), "ok": len(ok), "diverged": sum(r.get("status") == "diverged" for r in rs),
-                      "failed": sum(r.get("status") == "failed" for r in rs), "outcomes": outcomes, "metrics": {}})
+        entry.update(
+            {
+                "runs": len(rs),
+                "ok": len(ok),
+                "diverged": sum(r.get("status") == "diverged" for r in rs),
+                "failed": sum(r.get("status") == "failed" for r in rs),
+                "outcomes": outcomes,
+                "metrics": {},
+            }
+        )
         cols = [c for c in (ok[0] if ok else {}) if c.endswith(("_mean", "_max"))]
         for c in cols:
             v = np.array([r[c] for r in ok], dtype=float)
-            entry["metrics"][c] = {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if len(v) > 1 else 0.0,
-                                   "p5": float(np.percentile(v, 5)), "p50": float(np.percentile(v, 50)),
-                                   "p95": float(np.percentile(v, 95))}
+            entry["metrics"][c] = {
+                "mean": float(v.mean()),
+                "std": float(v.std(ddof=1)) if len(v) > 1 else 0.0,
+                "p5": float(np.percentile(v, 5)),
+                "p50": float(np.percentile(v, 50)),
+                "p95": float(np.percentile(v, 95)),
+            }
         groups.append(entry)
     return {"group_by": group_by, "groups": groups}
 
@@ -706,8 +756,13 @@ def aggregate(rows: list[dict[str, Any]], group_by: Sequence[str] = ("method",))
 def stats_markdown(stats: dict[str, Any]) -> str:
     """The headline statistics as a Markdown table, one row per group."""
     gb = stats["group_by"]
-    head = [*gb, "runs (ok/diverged/failed)", "outcomes", "total velocity error, mean ± std",
-            "final formation error max [m], p50 (p95)"]
+    head = [
+        *gb,
+        "runs (ok/diverged/failed)",
+        "outcomes",
+        "total velocity error, mean ± std",
+        "final formation error max [m], p50 (p95)",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for e in stats["groups"]:
         tv = e["metrics"].get("total_velocity_error_mean")

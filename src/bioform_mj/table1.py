@@ -3,10 +3,12 @@
 Our metric is ``∫₀ᵀ (|υ_cmd − υ| + |ω_cmd − ω|) dt`` per follower (the paper gives
 none); the claim to reproduce is the ordering, bioinspired-learning lowest.
 """
+
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from .control.stack import METHODS
 from .scenario import Scenario
@@ -21,8 +23,11 @@ PAPER_TABLE1: dict[str, tuple[float, float, float]] = {
 }
 
 
-def run_table1(sc: Scenario, on_result: Callable[[str, RunResult], None] | None = None,
-               progress: Callable[[str], Callable[[int, int], None] | None] | None = None) -> dict[str, Any]:
+def run_table1(
+    sc: Scenario,
+    on_result: Callable[[str, RunResult], None] | None = None,
+    progress: Callable[[str], Callable[[int, int], None] | None] | None = None,
+) -> dict[str, Any]:
     """Run the four methods on ``sc``; returns ``{"plant", "scenario", "methods": {METHOD: summary}}``.
 
     ``progress(method)``, if given, returns the ``progress(k, N)`` callback for that run.
@@ -95,8 +100,12 @@ def markdown(table: dict[str, Any]) -> str:
         if d:
             when = d.get("time_s") if isinstance(d, dict) else None
             msg = d.get("message", "") if isinstance(d, dict) else str(d)
-            notes.append(f"- **{m} diverged**" + (f" at t = {when:.3g} s" if isinstance(when, (int, float)) else "")
-                         + (f": {msg}" if msg else "") + "; its numbers cover the run up to then, not a result.")
+            notes.append(
+                f"- **{m} diverged**"
+                + (f" at t = {when:.3g} s" if isinstance(when, (int, float)) else "")
+                + (f": {msg}" if msg else "")
+                + "; its numbers cover the run up to then, not a result."
+            )
         bad = [(f["id"], f["outcome"]) for f in summ["followers"] if f.get("outcome") not in (None, "ok")]
         if bad and not d:
             notes.append(f"- **{m}**: " + ", ".join(f"follower {i} {o}" for i, o in bad) + ".")
@@ -106,12 +115,18 @@ def markdown(table: dict[str, Any]) -> str:
         lines += ["Failed runs:", "", *notes, ""]
         holds += " (but see the failed runs above: the comparison is not valid for them)"
     lines += [f"Ordering (bioinspired-learning lowest for every follower): {holds}.", ""]
-    lines += ["| method | final formation error (m) per follower | max abs v_cmd (m/s) | saturation fraction |", "|---|---|---|---|"]
+    lines += [
+        "| method | final formation error (m) per follower | max abs v_cmd (m/s) | saturation fraction |",
+        "|---|---|---|---|",
+    ]
     for m in methods:
         summ = table["methods"][m]
         fs = summ["followers"]
-        lines.append(f"| {m}{' [diverged]' if _diverged(summ) else ''} | "
-                     + ", ".join(f"{f['final_formation_error_m']:.3f}{_mark({}, f)}" for f in fs)
-                     + f" | {max(f['max_abs_v_cmd'] for f in fs):.2f} | "
-                     + ", ".join(f"{f['saturation_fraction']:.2f}" for f in fs) + " |")
+        lines.append(
+            f"| {m}{' [diverged]' if _diverged(summ) else ''} | "
+            + ", ".join(f"{f['final_formation_error_m']:.3f}{_mark({}, f)}" for f in fs)
+            + f" | {max(f['max_abs_v_cmd'] for f in fs):.2f} | "
+            + ", ".join(f"{f['saturation_fraction']:.2f}" for f in fs)
+            + " |"
+        )
     return "\n".join(lines) + "\n"

@@ -10,13 +10,15 @@ Worlds are grouped by what a batch must share (:func:`group_key`): the plant (ro
 graph and the team size. Everything else (seed, gains, formation offsets and jitter,
 disturbance, limits, method) varies per world.
 """
+
 from __future__ import annotations
 
 import json
 import os
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from ..errors import InputError
 
@@ -35,12 +37,12 @@ MEMORY_SHARE = 0.9
 def require_warp() -> None:
     """InputError (exit 2) unless ``warp`` and ``mujoco_warp`` import."""
     try:
-        import warp  # noqa: F401
-
         import mujoco_warp  # noqa: F401
+        import warp  # noqa: F401
     except ImportError as exc:
-        raise InputError(f"--backend warp needs the optional GPU extra (mujoco-warp, warp-lang): {INSTALL} "
-                         f"({exc})") from None
+        raise InputError(
+            f"--backend warp needs the optional GPU extra (mujoco-warp, warp-lang): {INSTALL} ({exc})"
+        ) from None
 
 
 def resolve_device(device: str | None) -> str:
@@ -60,13 +62,25 @@ def resolve_device(device: str | None) -> str:
 def unsupported(sc: Any) -> str | None:
     """What of scenario ``sc`` the batch engine does not run yet (None: all of it)."""
     if sc.plant.kind != "mujoco":
-        return (f"plant.kind = '{sc.plant.kind}' (the batch engine runs the MuJoCo plant only; "
-                "use --plant mujoco or --backend local)")
+        return (
+            f"plant.kind = '{sc.plant.kind}' (the batch engine runs the MuJoCo plant only; "
+            "use --plant mujoco or --backend local)"
+        )
     f = sc.faults
-    named = [k for k, on in (("faults.link_fail", f.link_fail), ("faults.packet_loss", f.packet_loss > 0),
-                             ("faults.delay", f.delay > 0), ("faults.noise_pose", any(f.noise_pose)),
-                             ("faults.noise_vel", any(f.noise_vel)), ("faults.actuator", f.actuator),
-                             ("faults.push", f.push), ("faults.friction_patch", f.friction_patch)) if on]
+    named = [
+        k
+        for k, on in (
+            ("faults.link_fail", f.link_fail),
+            ("faults.packet_loss", f.packet_loss > 0),
+            ("faults.delay", f.delay > 0),
+            ("faults.noise_pose", any(f.noise_pose)),
+            ("faults.noise_vel", any(f.noise_vel)),
+            ("faults.actuator", f.actuator),
+            ("faults.push", f.push),
+            ("faults.friction_patch", f.friction_patch),
+        )
+        if on
+    ]
     if named:
         return f"faults ({', '.join(named)})"
     if sc.events:
@@ -81,9 +95,19 @@ def unsupported(sc: Any) -> str | None:
 def group_key(sc: Any) -> str:
     """What the worlds of one batch share (one composed scene, one time axis, one leader, one graph)."""
     d = sc.to_dict()
-    return json.dumps({"plant": d["plant"], "control_dt": sc.sim.control_dt, "physics_dt": sc.sim.physics_dt,
-                       "duration": sc.sim.duration, "leader": d["leader"], "graph": d["graph"], "n": sc.n},
-                      sort_keys=True, default=repr)
+    return json.dumps(
+        {
+            "plant": d["plant"],
+            "control_dt": sc.sim.control_dt,
+            "physics_dt": sc.sim.physics_dt,
+            "duration": sc.sim.duration,
+            "leader": d["leader"],
+            "graph": d["graph"],
+            "n": sc.n,
+        },
+        sort_keys=True,
+        default=repr,
+    )
 
 
 def world_bytes(n_robots: int) -> float:
@@ -133,12 +157,17 @@ def plan(specs: Sequence[Any], device: str) -> list[Group]:
 
     groups: dict[str, Group] = {}
     for sp in specs:
-        sc = sp.scenario if sp.scenario is not None else \
-            load(sp.source, list(sp.overrides), method=sp.method, plant=sp.plant)
+        sc = (
+            sp.scenario
+            if sp.scenario is not None
+            else load(sp.source, list(sp.overrides), method=sp.method, plant=sp.plant)
+        )
         why = unsupported(sc)
         if why is not None:
-            raise InputError(f"--backend warp: the batch engine does not support {why} yet "
-                             f"(run {sp.method}, seed {sp.seed}); use --backend local")
+            raise InputError(
+                f"--backend warp: the batch engine does not support {why} yet "
+                f"(run {sp.method}, seed {sp.seed}); use --backend local"
+            )
         k = group_key(sc)
         groups.setdefault(k, Group(k, [], sc.n)).specs.append(sp)
     out = list(groups.values())
@@ -147,15 +176,23 @@ def plan(specs: Sequence[Any], device: str) -> list[Group]:
         big = max(out, key=lambda g: g.bytes)
         if big.bytes > MEMORY_SHARE * free:
             fit = int(MEMORY_SHARE * free // world_bytes(big.n))
-            raise InputError(f"--backend warp: {len(big.specs)} worlds of {big.n} robots need about "
-                             f"{big.bytes / 1e9:.2f} GB on {device} ({world_bytes(big.n) / 1e3:.0f} KB per world, "
-                             f"estimated), {free / 1e9:.2f} GB free: at most {fit} worlds fit; "
-                             "split the sweep (fewer --seeds or --vary values)")
+            raise InputError(
+                f"--backend warp: {len(big.specs)} worlds of {big.n} robots need about "
+                f"{big.bytes / 1e9:.2f} GB on {device} ({world_bytes(big.n) / 1e3:.0f} KB per world, "
+                f"estimated), {free / 1e9:.2f} GB free: at most {fit} worlds fit; "
+                "split the sweep (fewer --seeds or --vary values)"
+            )
     return out
 
 
-def rows_from_summaries(specs: Sequence[Any], summaries: Sequence[dict], base_row: Callable[[Any], dict],
-                        metrics: Sequence[str], batch_wall: float, device: str) -> list[dict[str, Any]]:
+def rows_from_summaries(
+    specs: Sequence[Any],
+    summaries: Sequence[dict],
+    base_row: Callable[[Any], dict],
+    metrics: Sequence[str],
+    batch_wall: float,
+    device: str,
+) -> list[dict[str, Any]]:
     """One sweep row per world, with ``sweep.run_one``'s columns."""
     import numpy as np
 
@@ -190,9 +227,15 @@ def rows_from_summaries(specs: Sequence[Any], summaries: Sequence[dict], base_ro
     return rows
 
 
-def run_warp(groups: Sequence[Group], device: str, base_row: Callable[[Any], dict], metrics: Sequence[str],
-             done: Callable[[dict], None], stop: Callable[[], bool] = lambda: False,
-             failed_row: Callable[[Any, str], dict] | None = None) -> None:
+def run_warp(
+    groups: Sequence[Group],
+    device: str,
+    base_row: Callable[[Any], dict],
+    metrics: Sequence[str],
+    done: Callable[[dict], None],
+    stop: Callable[[], bool] = lambda: False,
+    failed_row: Callable[[Any, str], dict] | None = None,
+) -> None:
     """Run every group as one batch on ``device``; ``done(row)`` per world as each batch ends.
     ``stop()`` is asked between batches. A batch that raises fails its rows (``failed_row``)."""
     import warp as wp
@@ -204,8 +247,12 @@ def run_warp(groups: Sequence[Group], device: str, base_row: Callable[[Any], dic
     for g in groups:
         if stop():
             return
-        scs = [sp.scenario if sp.scenario is not None else
-               load(sp.source, list(sp.overrides), method=sp.method, plant=sp.plant) for sp in g.specs]
+        scs = [
+            sp.scenario
+            if sp.scenario is not None
+            else load(sp.source, list(sp.overrides), method=sp.method, plant=sp.plant)
+            for sp in g.specs
+        ]
         try:
             t0 = time.perf_counter()
             b = BatchRun(scs, device)

@@ -16,6 +16,7 @@ initial poses), ``duration`` s simulated.
 Robot-steps/s = W × robots × control steps / wall seconds, timed warm (kernels loaded and
 graphs captured before the timed run).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -23,14 +24,22 @@ import os
 import platform
 import sys
 import time
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 #: share of the free device memory the replay recording may take
 RECORD_SHARE = 0.5
 
 
-def bench_worlds(W: int, scenario: str = "paper", duration: float = 0.5, device: str = "cpu", chunk: int = 100,
-                 capture: bool | None = None, physics: str = "auto") -> dict[str, Any]:
+def bench_worlds(
+    W: int,
+    scenario: str = "paper",
+    duration: float = 0.5,
+    device: str = "cpu",
+    chunk: int = 100,
+    capture: bool | None = None,
+    physics: str = "auto",
+) -> dict[str, Any]:
     """One row: closed loop and physics alone of ``W`` worlds. ``physics``: ``replay``,
     ``constant`` or ``auto`` (replay when the recording fits)."""
     import numpy as np
@@ -49,8 +58,10 @@ def bench_worlds(W: int, scenario: str = "paper", duration: float = 0.5, device:
     if need > 0.9 * free:
         from ..errors import InputError
 
-        raise InputError(f"--worlds {W}: about {need / 1e9:.2f} GB needed on {device} "
-                         f"({world_bytes(base.n) / 1e3:.0f} KB per world, estimated), {free / 1e9:.2f} GB free")
+        raise InputError(
+            f"--worlds {W}: about {need / 1e9:.2f} GB needed on {device} "
+            f"({world_bytes(base.n) / 1e3:.0f} KB per world, estimated), {free / 1e9:.2f} GB free"
+        )
     b = BatchRun(scs, device)
     setup = time.perf_counter() - t0
     b.run(chunk=chunk, capture=capture)  # warm-up: loads kernels, captures the graph
@@ -75,10 +86,20 @@ def bench_worlds(W: int, scenario: str = "paper", duration: float = 0.5, device:
     rs = W * n * N
     dev = wp.get_device(device)
     row = {
-        "worlds": W, "robots": n, "control_steps": N, "physics_steps_per_control_step": b.n_sub,
-        "setup_s": setup, "closed_loop_s": wall, "closed_loop_robot_steps_per_s": rs / wall,
-        "physics_inputs": mode, "physics_s": pwall, "physics_robot_steps_per_s": rs / pwall,
-        "closed_over_physics": pwall / wall, "diverged_worlds": ndiv, "nconmax": b.nconmax, "njmax": b.njmax,
+        "worlds": W,
+        "robots": n,
+        "control_steps": N,
+        "physics_steps_per_control_step": b.n_sub,
+        "setup_s": setup,
+        "closed_loop_s": wall,
+        "closed_loop_robot_steps_per_s": rs / wall,
+        "physics_inputs": mode,
+        "physics_s": pwall,
+        "physics_robot_steps_per_s": rs / pwall,
+        "closed_over_physics": pwall / wall,
+        "diverged_worlds": ndiv,
+        "nconmax": b.nconmax,
+        "njmax": b.njmax,
         "graph_capture": bool(dev.is_cuda and capture is not False),
     }
     del b
@@ -96,29 +117,51 @@ def cpu_engine(scenario: str = "paper", duration: float = 1.0) -> dict[str, Any]
     steps = int(round(duration / sc.sim.control_dt))
     rps = steps * sc.n / loop
     cores = os.cpu_count() or 1
-    return {"scenario": scenario, "sim_s": duration, "loop_s": loop, "robot_steps_per_s_one_core": rps,
-            "cores": cores, "robot_steps_per_s_all_cores_ideal": rps * cores,
-            "us_per_robot_step": 1e6 / rps}
+    return {
+        "scenario": scenario,
+        "sim_s": duration,
+        "loop_s": loop,
+        "robot_steps_per_s_one_core": rps,
+        "cores": cores,
+        "robot_steps_per_s_all_cores_ideal": rps * cores,
+        "us_per_robot_step": 1e6 / rps,
+    }
 
 
 def format_table(rows: Sequence[dict[str, Any]], cpu: dict[str, Any] | None) -> str:
-    head = ("| worlds | robots | control steps | closed loop robot-steps/s | physics alone robot-steps/s "
-            "| physics inputs | closed / physics | diverged worlds |\n|---|---|---|---|---|---|---|---|\n")
+    head = (
+        "| worlds | robots | control steps | closed loop robot-steps/s | physics alone robot-steps/s "
+        "| physics inputs | closed / physics | diverged worlds |\n|---|---|---|---|---|---|---|---|\n"
+    )
     body = "".join(
         f"| {r['worlds']} | {r['robots']} | {r['control_steps']} | {r['closed_loop_robot_steps_per_s']:.4g} "
         f"| {r['physics_robot_steps_per_s']:.4g} | {r['physics_inputs']} | **{r['closed_over_physics']:.2f}** "
-        f"| {r['diverged_worlds']} |\n" for r in rows)
+        f"| {r['diverged_worlds']} |\n"
+        for r in rows
+    )
     tail = ""
     if cpu is not None:
-        tail = (f"\nCPU engine (compiled loop, C MuJoCo), same machine: {cpu['robot_steps_per_s_one_core']:.4g} "
-                f"robot-steps/s on one core ({cpu['us_per_robot_step']:.2f} µs per robot-step); "
-                f"{cpu['cores']} cores, ideal scaling: {cpu['robot_steps_per_s_all_cores_ideal']:.4g}\n")
+        tail = (
+            f"\nCPU engine (compiled loop, C MuJoCo), same machine: {cpu['robot_steps_per_s_one_core']:.4g} "
+            f"robot-steps/s on one core ({cpu['us_per_robot_step']:.2f} µs per robot-step); "
+            f"{cpu['cores']} cores, ideal scaling: {cpu['robot_steps_per_s_all_cores_ideal']:.4g}\n"
+        )
     return head + body + tail
 
 
-def run(worlds: Sequence[int], device: str | None = None, scenario: str = "paper", duration: float = 0.5,
-        chunk: int = 100, capture: bool | None = None, physics: str = "auto", cpu_too: bool = True,
-        cpu_duration: float = 1.0, json_path: Any = None, echo: Any = print) -> dict[str, Any]:
+def run(
+    worlds: Sequence[int],
+    device: str | None = None,
+    scenario: str = "paper",
+    duration: float = 0.5,
+    chunk: int = 100,
+    capture: bool | None = None,
+    physics: str = "auto",
+    cpu_too: bool = True,
+    cpu_duration: float = 1.0,
+    json_path: Any = None,
+    echo: Any = print,
+) -> dict[str, Any]:
     """All world counts, then the CPU engine; prints the table, writes ``json_path``; returns the document."""
     import mujoco
     import warp as wp
@@ -129,22 +172,35 @@ def run(worlds: Sequence[int], device: str | None = None, scenario: str = "paper
     require_warp()
     device = resolve_device(device)
     dev = wp.get_device(device)
-    echo(f"device {dev} ({dev.name}), scenario {scenario}, {duration:g} s simulated, graph capture "
-         f"{'on' if dev.is_cuda and capture is not False else 'off'}")
+    echo(
+        f"device {dev} ({dev.name}), scenario {scenario}, {duration:g} s simulated, graph capture "
+        f"{'on' if dev.is_cuda and capture is not False else 'off'}"
+    )
     rows = []
     for W in worlds:
         r = bench_worlds(W, scenario, duration, device, chunk, capture, physics)
         rows.append(r)
-        echo(f"W={W}: closed loop {r['closed_loop_robot_steps_per_s']:.4g} robot-steps/s, physics alone "
-             f"({r['physics_inputs']} inputs) {r['physics_robot_steps_per_s']:.4g}, ratio "
-             f"{r['closed_over_physics']:.2f}, {r['diverged_worlds']} diverged")
+        echo(
+            f"W={W}: closed loop {r['closed_loop_robot_steps_per_s']:.4g} robot-steps/s, physics alone "
+            f"({r['physics_inputs']} inputs) {r['physics_robot_steps_per_s']:.4g}, ratio "
+            f"{r['closed_over_physics']:.2f}, {r['diverged_worlds']} diverged"
+        )
     cpu = cpu_engine(scenario, cpu_duration) if cpu_too else None
     out = {
-        "device": str(dev), "device_name": dev.name, "scenario": scenario, "duration_s": duration, "chunk": chunk,
-        "versions": {"warp": wp.config.version, "mujoco": mujoco.__version__, "bioform_mj": __version__,
-                     "python": platform.python_version()},
+        "device": str(dev),
+        "device_name": dev.name,
+        "scenario": scenario,
+        "duration_s": duration,
+        "chunk": chunk,
+        "versions": {
+            "warp": wp.config.version,
+            "mujoco": mujoco.__version__,
+            "bioform_mj": __version__,
+            "python": platform.python_version(),
+        },
         "host": {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count()},
-        "rows": rows, "cpu_engine": cpu,
+        "rows": rows,
+        "cpu_engine": cpu,
     }
     echo("")
     echo(format_table(rows, cpu))
@@ -169,15 +225,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--scenario", default="paper", help="scenario name or TOML (default paper)")
     ap.add_argument("--chunk", type=int, default=100, help="control steps per captured CUDA graph (default 100)")
     ap.add_argument("--no-capture", action="store_true", help="no CUDA graph capture (eager launches)")
-    ap.add_argument("--physics", choices=("auto", "replay", "constant"), default="auto",
-                    help="physics-alone inputs (default auto: replay if the recording fits)")
+    ap.add_argument(
+        "--physics",
+        choices=("auto", "replay", "constant"),
+        default="auto",
+        help="physics-alone inputs (default auto: replay if the recording fits)",
+    )
     ap.add_argument("--no-cpu", action="store_true", help="skip the CPU engine")
     ap.add_argument("--json", default=None, help="write the results as JSON here")
     a = ap.parse_args(argv)
     try:
         worlds = parse_worlds(a.worlds)
-        run(worlds, a.device, a.scenario, a.duration, a.chunk, False if a.no_capture else None, a.physics,
-            cpu_too=not a.no_cpu, json_path=a.json)
+        run(
+            worlds,
+            a.device,
+            a.scenario,
+            a.duration,
+            a.chunk,
+            False if a.no_capture else None,
+            a.physics,
+            cpu_too=not a.no_cpu,
+            json_path=a.json,
+        )
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

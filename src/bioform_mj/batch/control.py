@@ -1,7 +1,8 @@
 """The control step of many formations on MuJoCo Warp: one thread per world.
 
 :func:`_control` is ``control/kernel.py``'s ``control_step`` (learner, estimator consensus,
-command and torques with the world's ``torque.derivative`` mode, estimator advance) plus the loop bookkeeping of ``engine.py`` (run metrics, divergence guards)
+command and torques with the world's ``torque.derivative`` mode, estimator advance) plus the loop
+bookkeeping of ``engine.py`` (run metrics, divergence guards)
 and the plant glue of ``plants/mujoco_kernels.py`` (observe, wheel torques and the
 eq. 34 disturbance as chassis ``xfrc_applied``; ``ctrl = scale · τ``, the DC motors' driver
 input per N·m, design §8.2), for one world per thread, looping over
@@ -18,17 +19,17 @@ step loop (``n_substeps`` × ``mjw.step`` + one ``_control`` launch per control 
 nothing back to the host; the step counter lives on the device, so on CUDA a chunk of
 control steps is captured once as a CUDA graph and replayed.
 """
+
 from __future__ import annotations
 
 import math
 import time
-from typing import Any, Sequence
-
-import mujoco
-import numpy as np
-import warp as wp
+from collections.abc import Sequence
+from typing import Any
 
 import mujoco_warp as mjw
+import numpy as np
+import warp as wp
 
 from ..control import equations as _E
 from ..control.kernel import DERIV_ANALYTIC, DERIV_DIFFERENCE
@@ -66,18 +67,68 @@ planar_state = EQ.planar_state
 #: per-world scalar gains, columns of ``BatchGains.sc``: the scalar fields of ``control.kernel.Gains``
 #: (``deriv`` the ``DERIV_*`` code, the flags as 0/1), then ``scenario.limits``, then the
 #: disturbance rows of eq. 34, then the loop's own numbers
-GAIN_SCALARS = ("k1", "k2", "k3", "A", "B", "D", "kx", "ky", "kth", "ka0", "ka1", "kb0", "kb1", "ephi0", "ephi1",
-                "ca", "cb", "tphi", "f00", "f01", "f10", "f11", "g0", "g1", "deriv", "k5a", "k5b", "kda", "kdb",
-                "dt", "bio", "learning", "steer")
-SCALARS = (*GAIN_SCALARS, "lim_position", "lim_speed", "lim_torque",
-           "d0", "d1", "d2", "d3", "e0", "e1", "e2", "e3", "use_dist", "stride", "t_spin", "tilt_cos")
+GAIN_SCALARS = (
+    "k1",
+    "k2",
+    "k3",
+    "A",
+    "B",
+    "D",
+    "kx",
+    "ky",
+    "kth",
+    "ka0",
+    "ka1",
+    "kb0",
+    "kb1",
+    "ephi0",
+    "ephi1",
+    "ca",
+    "cb",
+    "tphi",
+    "f00",
+    "f01",
+    "f10",
+    "f11",
+    "g0",
+    "g1",
+    "deriv",
+    "k5a",
+    "k5b",
+    "kda",
+    "kdb",
+    "dt",
+    "bio",
+    "learning",
+    "steer",
+)
+SCALARS = (
+    *GAIN_SCALARS,
+    "lim_position",
+    "lim_speed",
+    "lim_torque",
+    "d0",
+    "d1",
+    "d2",
+    "d3",
+    "e0",
+    "e1",
+    "e2",
+    "e3",
+    "use_dist",
+    "stride",
+    "t_spin",
+    "tilt_cos",
+)
 _I = {name: wp.constant(i) for i, name in enumerate(SCALARS)}
 K1, K2, K3, A_, B_, D_ = (_I[x] for x in ("k1", "k2", "k3", "A", "B", "D"))
-KX, KY, KTH, KA0, KA1, KB0, KB1, EPHI0, EPHI1 = (_I[x] for x in ("kx", "ky", "kth", "ka0", "ka1", "kb0", "kb1",
-                                                                  "ephi0", "ephi1"))
+KX, KY, KTH, KA0, KA1, KB0, KB1, EPHI0, EPHI1 = (
+    _I[x] for x in ("kx", "ky", "kth", "ka0", "ka1", "kb0", "kb1", "ephi0", "ephi1")
+)
 CA, CB, TPHI, F00, F01, F10, F11, G0, G1 = (_I[x] for x in ("ca", "cb", "tphi", "f00", "f01", "f10", "f11", "g0", "g1"))
-K5A, K5B, KDA, KDB, DT, BIO, LEARN, STEER = (_I[x] for x in ("k5a", "k5b", "kda", "kdb", "dt", "bio", "learning",
-                                                              "steer"))
+K5A, K5B, KDA, KDB, DT, BIO, LEARN, STEER = (
+    _I[x] for x in ("k5a", "k5b", "kda", "kdb", "dt", "bio", "learning", "steer")
+)
 DERIV = _I["deriv"]
 DERIV_A = wp.constant(F(DERIV_ANALYTIC))
 DERIV_D = wp.constant(F(DERIV_DIFFERENCE))
@@ -152,7 +203,7 @@ class BatchState:
 
 @wp.func
 def _finite3(a: wp.array3d(dtype=F), w: int, i: int, nc: int) -> bool:
-    ok = bool(True)
+    ok = True
     for c in range(nc):
         if not wp.isfinite(a[w, i, c]):
             ok = False
@@ -163,7 +214,7 @@ def _finite3(a: wp.array3d(dtype=F), w: int, i: int, nc: int) -> bool:
 def _check(g: BatchGains, s: BatchState, w: int, n: int) -> int:
     """``engine.check`` for world ``w``: 0 if all guards pass, else writes ``s.diag[w]``."""
     for i in range(n):
-        bad = int(0)
+        bad = 0
         if not _finite3(s.pose, w, i, 3):
             bad = 1
         elif not _finite3(s.vel, w, i, 2):
@@ -187,7 +238,7 @@ def _check(g: BatchGains, s: BatchState, w: int, n: int) -> int:
             return bad
     for i in range(n):
         val = F(0.0)
-        bad = int(0)
+        bad = 0
         pmag = wp.max(wp.abs(s.pose[w, i, 0]), wp.abs(s.pose[w, i, 1]))
         emag = wp.max(wp.abs(s.est_pose[w, i, 0]), wp.abs(s.est_pose[w, i, 1]))
         tmag = wp.max(wp.abs(s.tau_raw[w, i, 0]), wp.abs(s.tau_raw[w, i, 1]))
@@ -251,9 +302,22 @@ def _control(
         qa = qadr[i]
         qb = dadr[i]
         x, y, th, v, om, up = planar_state(
-            F(qpos[w, qa]), F(qpos[w, qa + 1]), F(qpos[w, qa + 3]), F(qpos[w, qa + 4]), F(qpos[w, qa + 5]),
-            F(qpos[w, qa + 6]), F(qvel[w, qb]), F(qvel[w, qb + 1]), F(qvel[w, qb + 2]), F(qvel[w, qb + 3]),
-            F(qvel[w, qb + 4]), F(qvel[w, qb + 5]), axle[i, 0], axle[i, 1], axle[i, 2])
+            F(qpos[w, qa]),
+            F(qpos[w, qa + 1]),
+            F(qpos[w, qa + 3]),
+            F(qpos[w, qa + 4]),
+            F(qpos[w, qa + 5]),
+            F(qpos[w, qa + 6]),
+            F(qvel[w, qb]),
+            F(qvel[w, qb + 1]),
+            F(qvel[w, qb + 2]),
+            F(qvel[w, qb + 3]),
+            F(qvel[w, qb + 4]),
+            F(qvel[w, qb + 5]),
+            axle[i, 0],
+            axle[i, 1],
+            axle[i, 2],
+        )
         s.pose[w, i, 0] = x
         s.pose[w, i, 1] = y
         s.pose[w, i, 2] = th
@@ -308,16 +372,38 @@ def _control(
         # ---- learner_update
         if g.sc[w, LEARN] != zero and s.first[w] == 0:
             for i in range(n):
-                zn, en, cn, dn = learner_step(s.z_hat[w, i, 0], s.e_int[w, i, 0], s.c_hat[w, i, 0], s.d_hat[w, i, 0],
-                                              s.tau_body[w, i, 0], s.vel[w, i, 0], g.k4[w, i, 0], g.sc[w, K5A],
-                                              g.sc[w, KDA], g.c_min[w, i, 0], g.c_max[w, i, 0], dt)
+                zn, en, cn, dn = learner_step(
+                    s.z_hat[w, i, 0],
+                    s.e_int[w, i, 0],
+                    s.c_hat[w, i, 0],
+                    s.d_hat[w, i, 0],
+                    s.tau_body[w, i, 0],
+                    s.vel[w, i, 0],
+                    g.k4[w, i, 0],
+                    g.sc[w, K5A],
+                    g.sc[w, KDA],
+                    g.c_min[w, i, 0],
+                    g.c_max[w, i, 0],
+                    dt,
+                )
                 s.z_hat[w, i, 0] = zn
                 s.e_int[w, i, 0] = en
                 s.c_hat[w, i, 0] = cn
                 s.d_hat[w, i, 0] = dn
-                zn, en, cn, dn = learner_step(s.z_hat[w, i, 1], s.e_int[w, i, 1], s.c_hat[w, i, 1], s.d_hat[w, i, 1],
-                                              s.tau_body[w, i, 1], s.vel[w, i, 1], g.k4[w, i, 1], g.sc[w, K5B],
-                                              g.sc[w, KDB], g.c_min[w, i, 1], g.c_max[w, i, 1], dt)
+                zn, en, cn, dn = learner_step(
+                    s.z_hat[w, i, 1],
+                    s.e_int[w, i, 1],
+                    s.c_hat[w, i, 1],
+                    s.d_hat[w, i, 1],
+                    s.tau_body[w, i, 1],
+                    s.vel[w, i, 1],
+                    g.k4[w, i, 1],
+                    g.sc[w, K5B],
+                    g.sc[w, KDB],
+                    g.c_min[w, i, 1],
+                    g.c_max[w, i, 1],
+                    dt,
+                )
                 s.z_hat[w, i, 1] = zn
                 s.e_int[w, i, 1] = en
                 s.c_hat[w, i, 1] = cn
@@ -351,34 +437,66 @@ def _control(
         bio = g.sc[w, BIO] != zero
         deriv = g.sc[w, DERIV]
         for i in range(n):
-            e0, e1, e2 = tracking_error(s.est_pose[w, i, 0], s.est_pose[w, i, 1], s.est_pose[w, i, 2],
-                                        s.pose[w, i, 0], s.pose[w, i, 1], s.pose[w, i, 2],
-                                        g.offsets[w, i, 0], g.offsets[w, i, 1])
+            e0, e1, e2 = tracking_error(
+                s.est_pose[w, i, 0],
+                s.est_pose[w, i, 1],
+                s.est_pose[w, i, 2],
+                s.pose[w, i, 0],
+                s.pose[w, i, 1],
+                s.pose[w, i, 2],
+                g.offsets[w, i, 0],
+                g.offsets[w, i, 1],
+            )
             s.err[w, i, 0] = e0
             s.err[w, i, 1] = e1
             s.err[w, i, 2] = e2
             u = e0
             if bio:
                 u = s.vs[w, i]
-            vc, wc = velocity_command(e1, e2, u, s.est_vel[w, i, 0], s.est_vel[w, i, 1],
-                                      g.sc[w, K1], g.sc[w, K2], g.sc[w, K3])
+            vc, wc = velocity_command(
+                e1, e2, u, s.est_vel[w, i, 0], s.est_vel[w, i, 1], g.sc[w, K1], g.sc[w, K2], g.sc[w, K3]
+            )
             s.cmd[w, i, 0] = vc
             s.cmd[w, i, 1] = wc
             if deriv == DERIV_A:  # chain rule through the controller's own dynamics (design §6)
                 dpx, dpy, dpth, dv_ir, dw_ir = estimator_rates(
-                    s.est_pose[w, i, 2], s.est_vel[w, i, 0], s.est_vel[w, i, 1], s.p_err[w, i, 0],
-                    s.p_err[w, i, 1], s.p_err[w, i, 2], s.v_err[w, i, 0], s.v_err[w, i, 1],
-                    g.sc[w, KX], g.sc[w, KY], g.sc[w, KTH], g.sc[w, KA0], g.sc[w, KA1], g.sc[w, KB0], g.sc[w, KB1],
-                    g.sc[w, EPHI0], g.sc[w, EPHI1])
+                    s.est_pose[w, i, 2],
+                    s.est_vel[w, i, 0],
+                    s.est_vel[w, i, 1],
+                    s.p_err[w, i, 0],
+                    s.p_err[w, i, 1],
+                    s.p_err[w, i, 2],
+                    s.v_err[w, i, 0],
+                    s.v_err[w, i, 1],
+                    g.sc[w, KX],
+                    g.sc[w, KY],
+                    g.sc[w, KTH],
+                    g.sc[w, KA0],
+                    g.sc[w, KA1],
+                    g.sc[w, KB0],
+                    g.sc[w, KB1],
+                    g.sc[w, EPHI0],
+                    g.sc[w, EPHI1],
+                )
                 ch = wp.cos(s.pose[w, i, 2])
                 sh = wp.sin(s.pose[w, i, 2])
-                dex, dey, deth = error_rate(e0, e1, s.vel[w, i, 0], s.vel[w, i, 1], s.est_vel[w, i, 0], dpth, e2,
-                                            ch * dpx + sh * dpy, -sh * dpx + ch * dpy)
+                dex, dey, deth = error_rate(
+                    e0,
+                    e1,
+                    s.vel[w, i, 0],
+                    s.vel[w, i, 1],
+                    s.est_vel[w, i, 0],
+                    dpth,
+                    e2,
+                    ch * dpx + sh * dpy,
+                    -sh * dpx + ch * dpy,
+                )
                 du = dex
                 if bio:
                     du = neuron_rate(s.vs[w, i], e0, g.sc[w, A_], g.sc[w, B_], g.sc[w, D_])
-                dvc, dwc = command_rate(e1, e2, s.est_vel[w, i, 0], dv_ir, dw_ir, dey, deth, du,
-                                        g.sc[w, K1], g.sc[w, K2], g.sc[w, K3])
+                dvc, dwc = command_rate(
+                    e1, e2, s.est_vel[w, i, 0], dv_ir, dw_ir, dey, deth, du, g.sc[w, K1], g.sc[w, K2], g.sc[w, K3]
+                )
                 s.dcmd[w, i, 0] = dvc
                 s.dcmd[w, i, 1] = dwc
             else:
@@ -390,18 +508,38 @@ def _control(
                         s.dcmd[w, i, c] = backward_difference(s.cmd[w, i, c], s.fy[w, i, c], dt)
                         s.fy[w, i, c] = s.cmd[w, i, c]
                     else:
-                        y, dy, dd = filter_derivative(s.fy[w, i, c], s.fdy[w, i, c], s.cmd[w, i, c], g.sc[w, F00],
-                                                      g.sc[w, F01], g.sc[w, F10], g.sc[w, F11], g.sc[w, G0],
-                                                      g.sc[w, G1], dt)
+                        y, dy, dd = filter_derivative(
+                            s.fy[w, i, c],
+                            s.fdy[w, i, c],
+                            s.cmd[w, i, c],
+                            g.sc[w, F00],
+                            g.sc[w, F01],
+                            g.sc[w, F10],
+                            g.sc[w, F11],
+                            g.sc[w, G0],
+                            g.sc[w, G1],
+                            dt,
+                        )
                         s.fy[w, i, c] = y
                         s.fdy[w, i, c] = dy
                         s.dcmd[w, i, c] = dd
-            r0, r1 = sliding_mode(vc, wc, s.dcmd[w, i, 0], s.dcmd[w, i, 1], s.vel[w, i, 0], s.vel[w, i, 1],
-                                  s.c_hat[w, i, 0], s.c_hat[w, i, 1], g.sc[w, CA], g.sc[w, CB], g.sc[w, TPHI])
+            r0, r1 = sliding_mode(
+                vc,
+                wc,
+                s.dcmd[w, i, 0],
+                s.dcmd[w, i, 1],
+                s.vel[w, i, 0],
+                s.vel[w, i, 1],
+                s.c_hat[w, i, 0],
+                s.c_hat[w, i, 1],
+                g.sc[w, CA],
+                g.sc[w, CB],
+                g.sc[w, TPHI],
+            )
             s.tau_raw[w, i, 0] = r0
             s.tau_raw[w, i, 1] = r1
             L = g.lim[w, i]
-            sat = int(0)
+            sat = 0
             if wp.abs(r0) > L or wp.abs(r1) > L:
                 sat = 1
             s.saturated[w, i] = sat
@@ -413,12 +551,28 @@ def _control(
         s.first[w] = 0
         # ---- estimator_advance: one Euler step with this step's consensus errors; the neuron (eq. 32)
         for i in range(n):
-            px, py, pth, v, om = estimator_step(s.est_pose[w, i, 0], s.est_pose[w, i, 1], s.est_pose[w, i, 2],
-                                                s.est_vel[w, i, 0], s.est_vel[w, i, 1], s.p_err[w, i, 0],
-                                                s.p_err[w, i, 1], s.p_err[w, i, 2], s.v_err[w, i, 0],
-                                                s.v_err[w, i, 1], g.sc[w, KX], g.sc[w, KY], g.sc[w, KTH],
-                                                g.sc[w, KA0], g.sc[w, KA1], g.sc[w, KB0], g.sc[w, KB1],
-                                                g.sc[w, EPHI0], g.sc[w, EPHI1], dt)
+            px, py, pth, v, om = estimator_step(
+                s.est_pose[w, i, 0],
+                s.est_pose[w, i, 1],
+                s.est_pose[w, i, 2],
+                s.est_vel[w, i, 0],
+                s.est_vel[w, i, 1],
+                s.p_err[w, i, 0],
+                s.p_err[w, i, 1],
+                s.p_err[w, i, 2],
+                s.v_err[w, i, 0],
+                s.v_err[w, i, 1],
+                g.sc[w, KX],
+                g.sc[w, KY],
+                g.sc[w, KTH],
+                g.sc[w, KA0],
+                g.sc[w, KA1],
+                g.sc[w, KB0],
+                g.sc[w, KB1],
+                g.sc[w, EPHI0],
+                g.sc[w, EPHI1],
+                dt,
+            )
             s.est_pose[w, i, 0] = px
             s.est_pose[w, i, 1] = py
             s.est_pose[w, i, 2] = pth
@@ -428,13 +582,16 @@ def _control(
                 s.vs[w, i] = neuron_step(s.vs[w, i], s.err[w, i, 0], g.sc[w, A_], g.sc[w, B_], g.sc[w, D_], dt)
         # ---- engine.accumulate (metrics) and engine.check (guards)
         for i in range(n):
-            s.verr[w, i] = s.verr[w, i] + wp.abs(s.cmd[w, i, 0] - s.vel[w, i, 0]) + wp.abs(s.cmd[w, i, 1] - s.vel[w, i, 1])
+            s.verr[w, i] = (
+                s.verr[w, i] + wp.abs(s.cmd[w, i, 0] - s.vel[w, i, 0]) + wp.abs(s.cmd[w, i, 1] - s.vel[w, i, 1])
+            )
             if s.saturated[w, i] != 0:
                 s.nsat[w, i] = s.nsat[w, i] + F(1.0)
             s.vmax[w, i] = wp.max(s.vmax[w, i], wp.abs(s.cmd[w, i, 0]))
             s.taumax[w, i] = wp.max(s.taumax[w, i], wp.max(wp.abs(s.tau[w, i, 0]), wp.abs(s.tau[w, i, 1])))
-            s.tauraw_max[w, i] = wp.max(s.tauraw_max[w, i],
-                                        wp.max(wp.abs(s.tau_raw[w, i, 0]), wp.abs(s.tau_raw[w, i, 1])))
+            s.tauraw_max[w, i] = wp.max(
+                s.tauraw_max[w, i], wp.max(wp.abs(s.tau_raw[w, i, 0]), wp.abs(s.tau_raw[w, i, 1]))
+            )
         s.k_done[w] = k
         if _check(g, s, w, n) != 0:
             s.status[w] = 1
@@ -466,17 +623,23 @@ def _control(
             b = base[i]
             R = xmat[w, b]
             fa = g.m_eff[w, i] * d0
-            xfrc[w, b] = wp.spatial_vector(wp.float32(F(R[0, 0]) * fa), wp.float32(F(R[1, 0]) * fa), 0.0, 0.0, 0.0,
-                                           wp.float32(g.i_eff[w, i] * d1))
+            xfrc[w, b] = wp.spatial_vector(
+                wp.float32(F(R[0, 0]) * fa), wp.float32(F(R[1, 0]) * fa), 0.0, 0.0, 0.0, wp.float32(g.i_eff[w, i] * d1)
+            )
     if running and k == N - 1:
         s.k_done[w] = N
     s.k[w] = k + 1
 
 
 @wp.kernel
-def _record(k: wp.array(dtype=int), ctrl: wp.array2d(dtype=float), xfrc: wp.array2d(dtype=wp.spatial_vector),
-            base: wp.array(dtype=int), rec_ctrl: wp.array3d(dtype=float),
-            rec_xfrc: wp.array3d(dtype=wp.spatial_vector)):
+def _record(
+    k: wp.array(dtype=int),
+    ctrl: wp.array2d(dtype=float),
+    xfrc: wp.array2d(dtype=wp.spatial_vector),
+    base: wp.array(dtype=int),
+    rec_ctrl: wp.array3d(dtype=float),
+    rec_xfrc: wp.array3d(dtype=wp.spatial_vector),
+):
     """After a ``_control`` launch: the inputs it wrote (for control step ``k − 1``) into the recording."""
     w = wp.tid()
     j = k[w] - 1
@@ -488,8 +651,14 @@ def _record(k: wp.array(dtype=int), ctrl: wp.array2d(dtype=float), xfrc: wp.arra
 
 
 @wp.kernel
-def _replay(j: wp.array(dtype=int), rec_ctrl: wp.array3d(dtype=float), rec_xfrc: wp.array3d(dtype=wp.spatial_vector),
-            base: wp.array(dtype=int), ctrl: wp.array2d(dtype=float), xfrc: wp.array2d(dtype=wp.spatial_vector)):
+def _replay(
+    j: wp.array(dtype=int),
+    rec_ctrl: wp.array3d(dtype=float),
+    rec_xfrc: wp.array3d(dtype=wp.spatial_vector),
+    base: wp.array(dtype=int),
+    ctrl: wp.array2d(dtype=float),
+    xfrc: wp.array2d(dtype=wp.spatial_vector),
+):
     """Before a control period of the physics-alone replay: that period's recorded inputs (counter on the device)."""
     w = wp.tid()
     r = j[w]
@@ -511,13 +680,20 @@ def _check_compatible(scs: Sequence[Scenario]) -> None:
             raise ValueError(f"scenario '{sc.name}': faults are not supported by the batch engine yet")
         if getattr(sc, "events", None):
             raise ValueError(f"scenario '{sc.name}': events are not supported by the batch engine yet")
-        for what, a, b in (("plant", sc.plant, sc0.plant), ("sim.control_dt", sc.sim.control_dt, sc0.sim.control_dt),
-                           ("sim.physics_dt", sc.sim.physics_dt, sc0.sim.physics_dt),
-                           ("sim.duration", sc.sim.duration, sc0.sim.duration), ("leader", sc.leader, sc0.leader),
-                           ("graph", sc.graph, sc0.graph), ("n", sc.n, sc0.n)):
+        for what, a, b in (
+            ("plant", sc.plant, sc0.plant),
+            ("sim.control_dt", sc.sim.control_dt, sc0.sim.control_dt),
+            ("sim.physics_dt", sc.sim.physics_dt, sc0.sim.physics_dt),
+            ("sim.duration", sc.sim.duration, sc0.sim.duration),
+            ("leader", sc.leader, sc0.leader),
+            ("graph", sc.graph, sc0.graph),
+            ("n", sc.n, sc0.n),
+        ):
             if a != b:
-                raise ValueError(f"scenario '{sc.name}': {what} differs from the first world's; the batch engine "
-                                 "needs one scene, one leader and one graph for all worlds (not supported yet)")
+                raise ValueError(
+                    f"scenario '{sc.name}': {what} differs from the first world's; the batch engine "
+                    "needs one scene, one leader and one graph for all worlds (not supported yet)"
+                )
 
 
 def _yaw_quat(q0: np.ndarray, dth: float) -> np.ndarray:
@@ -534,8 +710,14 @@ class BatchRun:
     leader trajectory, and the launch arguments of :func:`_control`.
     """
 
-    def __init__(self, scenarios: Sequence[Scenario], device: str = "cpu", *, nconmax: int | None = None,
-                 njmax: int | None = None) -> None:
+    def __init__(
+        self,
+        scenarios: Sequence[Scenario],
+        device: str = "cpu",
+        *,
+        nconmax: int | None = None,
+        njmax: int | None = None,
+    ) -> None:
         from ..sim import initial_estimates, make_plant, stack_params
 
         scs = list(scenarios)
@@ -574,8 +756,10 @@ class BatchRun:
             row = {f: float(getattr(gn, f)) for f in GAIN_SCALARS}
             lm = sc.limits
             row.update(lim_position=lm.position, lim_speed=lm.speed, lim_torque=lm.torque)
-            terms = np.array(Harmonic(n, sc.disturbance.bias, sc.disturbance.amp, sc.disturbance.freq,
-                                      sc.disturbance.phase).terms, dtype=float)  # (2, 4)
+            terms = np.array(
+                Harmonic(n, sc.disturbance.bias, sc.disturbance.amp, sc.disturbance.freq, sc.disturbance.phase).terms,
+                dtype=float,
+            )  # (2, 4)
             for c, name in enumerate(("d0", "d1", "d2", "d3")):
                 row[name] = terms[0, c]
             for c, name in enumerate(("e0", "e1", "e2", "e3")):
@@ -594,8 +778,8 @@ class BatchRun:
             for i in range(n):  # move each base by the planar motion from the scene's pose to this world's
                 a = q7[i]
                 dth = poses[i, 2] - p0[i, 2]
-                qpos[w, a:a + 2] = poses[i, :2]
-                qpos[w, a + 3:a + 7] = _yaw_quat(plant.data.qpos[a + 3:a + 7], dth)
+                qpos[w, a : a + 2] = poses[i, :2]
+                qpos[w, a + 3 : a + 7] = _yaw_quat(plant.data.qpos[a + 3 : a + 7], dth)
             est0[w] = initial_estimates(sc, poses, L_pose[0])
         self.src, self.dst = graph.src, graph.dst
 
@@ -647,9 +831,28 @@ class BatchRun:
     # -- the step loop (device-side only)
     def _launch_control(self) -> None:
         d = self.d
-        wp.launch(_control, dim=self.nworld,
-                  inputs=[self.g, self.s, self.N, self.L_pose, self.L_vel, d.qpos, d.qvel, d.xmat, self.qadr,
-                          self.dadr, self.base, self.act, self.cscale, self.axle, d.ctrl, d.xfrc_applied])
+        wp.launch(
+            _control,
+            dim=self.nworld,
+            inputs=[
+                self.g,
+                self.s,
+                self.N,
+                self.L_pose,
+                self.L_vel,
+                d.qpos,
+                d.qvel,
+                d.xmat,
+                self.qadr,
+                self.dadr,
+                self.base,
+                self.act,
+                self.cscale,
+                self.axle,
+                d.ctrl,
+                d.xfrc_applied,
+            ],
+        )
 
     def _steps(self, nsteps: int) -> None:
         """``nsteps`` × [``n_substeps`` physics steps, control step]: no host reads."""
@@ -750,8 +953,18 @@ class BatchRun:
             self.rec_xfrc = wp.zeros((N, W, self.n), dtype=wp.spatial_vector)
             self._rec_j = wp.zeros(W, dtype=int)
             d = self.d
-            rec = lambda: wp.launch(_record, dim=W, inputs=[self.s.k, d.ctrl, d.xfrc_applied, self.base,  # noqa: E731
-                                                            self.rec_ctrl, self.rec_xfrc])
+            rec = lambda: wp.launch(
+                _record,
+                dim=W,
+                inputs=[
+                    self.s.k,
+                    d.ctrl,
+                    d.xfrc_applied,
+                    self.base,  # noqa: E731
+                    self.rec_ctrl,
+                    self.rec_xfrc,
+                ],
+            )
             self.reset()
             rec()
             for _ in range(N - 1):
@@ -771,8 +984,11 @@ class BatchRun:
 
         def steps(k):
             for _ in range(k):
-                wp.launch(_replay, dim=W, inputs=[self._rec_j, self.rec_ctrl, self.rec_xfrc, self.base, d.ctrl,
-                                                  d.xfrc_applied])
+                wp.launch(
+                    _replay,
+                    dim=W,
+                    inputs=[self._rec_j, self.rec_ctrl, self.rec_xfrc, self.base, d.ctrl, d.xfrc_applied],
+                )
                 for _ in range(self.n_sub):
                     mjw.step(self.m, d)
 
@@ -826,7 +1042,13 @@ class BatchRun:
         status, k_done, diag = s.status.numpy(), s.k_done.numpy(), s.diag.numpy()
         est = s.est_pose.numpy()
         pose = s.pose.numpy()
-        fsq, fe0, spin_ok, nrow, tip = s.fsq.numpy(), s.fe0.numpy(), s.spin_ok.numpy(), s.nrow.numpy(), s.tip_step.numpy()
+        fsq, fe0, spin_ok, nrow, tip = (
+            s.fsq.numpy(),
+            s.fe0.numpy(),
+            s.spin_ok.numpy(),
+            s.nrow.numpy(),
+            s.tip_step.numpy(),
+        )
         c_min, c_max = self.g.c_min.numpy(), self.g.c_max.numpy()
         learning = self.g.sc.numpy()[:, LEARN] != 0
         lp_end = self.L_pose_host[self.N]
@@ -838,39 +1060,65 @@ class BatchRun:
             if status[w]:
                 code, i, val = int(diag[w, 0]), int(diag[w, 1]), float(diag[w, 2])
                 signal, what, limit = GUARDS[code - 1]
-                reason = (f"follower {i + 1}: {what} '{signal}' " +
-                          ("is not finite" if limit is None else f"= {val:.3g} exceeds limits.{limit}") +
-                          f" at t = {kd * self.dt:.4f} s")
+                reason = (
+                    f"follower {i + 1}: {what} '{signal}' "
+                    + ("is not finite" if limit is None else f"= {val:.3g} exceeds limits.{limit}")
+                    + f" at t = {kd * self.dt:.4f} s"
+                )
             elif bad:
                 reason = f"non-finite robot state at the end of the run (t = {self.N * self.dt:g} s)"
             fol = []
             stride = max(1, int(round(sc.sim.log_dt / self.dt)))
             t_end = (int(nrow[w]) - 1) * stride * self.dt  # the last log row's time (sim.simulate's log)
             for i in range(self.n):
-                outcome, detail = self._outcome(w, i, reason is not None, float(ferr[w, i]), float(fe0[w, i]),
-                                                t_end, int(nrow[w]), float(spin_ok[w, i]), int(tip[w, i]),
-                                                bool(learning[w]), c_hat[w, i], c_min[w, i], c_max[w, i])
-                fol.append({
-                    "id": i + 1,
-                    "outcome": outcome,
-                    "outcome_detail": detail,
-                    "rms_formation_error_m": float(np.sqrt(fsq[w, i] / nrow[w])) if nrow[w] else float("nan"),
-                    "total_velocity_error": float(verr[w, i] * self.dt),
-                    "final_formation_error_m": float(ferr[w, i]),
-                    "final_estimation_error_m": float(np.hypot(*(est[w, i, :2] - lp_end[:2]))),
-                    "max_abs_v_cmd": float(vmax[w, i]),
-                    "peak_abs_torque": float(taumax[w, i]),
-                    "peak_abs_torque_commanded": float(tauraw[w, i]),
-                    "saturation_fraction": float(nsat[w, i] / max(1, kd)),
-                    "c_hat": [float(v) for v in c_hat[w, i]],
-                    "c_true": [float(v) for v in self.c_true[i]],
-                    "c_hat_rel_error": [float(v) for v in (c_hat[w, i] / self.c_true[i] - 1.0)],
-                })
-            out.append({
-                "scenario": sc.name, "seed": sc.sim.seed, "world": w, "backend": "warp",
-                "device": str(self.device), "diverged": reason is not None, "diverged_reason": reason,
-                "steps": kd, "sim_time": kd * self.dt, "wall_time_s": wall, "followers": fol,
-            })
+                outcome, detail = self._outcome(
+                    w,
+                    i,
+                    reason is not None,
+                    float(ferr[w, i]),
+                    float(fe0[w, i]),
+                    t_end,
+                    int(nrow[w]),
+                    float(spin_ok[w, i]),
+                    int(tip[w, i]),
+                    bool(learning[w]),
+                    c_hat[w, i],
+                    c_min[w, i],
+                    c_max[w, i],
+                )
+                fol.append(
+                    {
+                        "id": i + 1,
+                        "outcome": outcome,
+                        "outcome_detail": detail,
+                        "rms_formation_error_m": float(np.sqrt(fsq[w, i] / nrow[w])) if nrow[w] else float("nan"),
+                        "total_velocity_error": float(verr[w, i] * self.dt),
+                        "final_formation_error_m": float(ferr[w, i]),
+                        "final_estimation_error_m": float(np.hypot(*(est[w, i, :2] - lp_end[:2]))),
+                        "max_abs_v_cmd": float(vmax[w, i]),
+                        "peak_abs_torque": float(taumax[w, i]),
+                        "peak_abs_torque_commanded": float(tauraw[w, i]),
+                        "saturation_fraction": float(nsat[w, i] / max(1, kd)),
+                        "c_hat": [float(v) for v in c_hat[w, i]],
+                        "c_true": [float(v) for v in self.c_true[i]],
+                        "c_hat_rel_error": [float(v) for v in (c_hat[w, i] / self.c_true[i] - 1.0)],
+                    }
+                )
+            out.append(
+                {
+                    "scenario": sc.name,
+                    "seed": sc.sim.seed,
+                    "world": w,
+                    "backend": "warp",
+                    "device": str(self.device),
+                    "diverged": reason is not None,
+                    "diverged_reason": reason,
+                    "steps": kd,
+                    "sim_time": kd * self.dt,
+                    "wall_time_s": wall,
+                    "followers": fol,
+                }
+            )
         return out
 
 

@@ -12,19 +12,19 @@ law running per world on the device between physics steps, with no host round tr
 Everything here is float32 (MuJoCo Warp's precision). Nothing imports this module
 unless ``warp`` and ``mujoco_warp`` are installed.
 """
+
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
 
 import mujoco
+import mujoco_warp as mjw
 import numpy as np
 import warp as wp
 
-import mujoco_warp as mjw
-
-from ..scene import ROBOT, follower_prefix
 from ..control import equations as _E
+from ..scene import ROBOT, follower_prefix
 from .samesource import warp_equations
 
 __all__ = ["RobotIndex", "WarpBatch", "robot_index", "HETERO_FIELDS"]
@@ -37,8 +37,13 @@ saturate = EQ.saturate
 #: Model fields (and the derived fields ``mjw.set_const`` rewrites) that must be batched
 #: per world for per-world masses/inertias of the robots.
 HETERO_FIELDS = (
-    "body_mass", "body_inertia", "body_ipos", "body_iquat",
-    "body_subtreemass", "body_invweight0", "dof_invweight0",
+    "body_mass",
+    "body_inertia",
+    "body_ipos",
+    "body_iquat",
+    "body_subtreemass",
+    "body_invweight0",
+    "dof_invweight0",
 )
 
 
@@ -85,9 +90,21 @@ def _observe(
     q = qadr[r]
     v = dadr[r]
     x, y, th, ups, om, up = planar_state(
-        qpos[w, q], qpos[w, q + 1], qpos[w, q + 3], qpos[w, q + 4], qpos[w, q + 5], qpos[w, q + 6],
-        qvel[w, v], qvel[w, v + 1], qvel[w, v + 2], qvel[w, v + 3], qvel[w, v + 4], qvel[w, v + 5],
-        0.0, 0.0, 0.0,
+        qpos[w, q],
+        qpos[w, q + 1],
+        qpos[w, q + 3],
+        qpos[w, q + 4],
+        qpos[w, q + 5],
+        qpos[w, q + 6],
+        qvel[w, v],
+        qvel[w, v + 1],
+        qvel[w, v + 2],
+        qvel[w, v + 3],
+        qvel[w, v + 4],
+        qvel[w, v + 5],
+        0.0,
+        0.0,
+        0.0,
     )
     pose[w, r] = wp.vec3(x, y, th)
     vel[w, r] = wp.vec2(ups, om)
@@ -121,9 +138,21 @@ def _track(
     q = qadr[r]
     v = dadr[r]
     x, y, th, ups, om, up = planar_state(
-        qpos[w, q], qpos[w, q + 1], qpos[w, q + 3], qpos[w, q + 4], qpos[w, q + 5], qpos[w, q + 6],
-        qvel[w, v], qvel[w, v + 1], qvel[w, v + 2], qvel[w, v + 3], qvel[w, v + 4], qvel[w, v + 5],
-        0.0, 0.0, 0.0,
+        qpos[w, q],
+        qpos[w, q + 1],
+        qpos[w, q + 3],
+        qpos[w, q + 4],
+        qpos[w, q + 5],
+        qpos[w, q + 6],
+        qvel[w, v],
+        qvel[w, v + 1],
+        qvel[w, v + 2],
+        qvel[w, v + 3],
+        qvel[w, v + 4],
+        qvel[w, v + 5],
+        0.0,
+        0.0,
+        0.0,
     )
     c = cmd[w, r]
     r0, r1 = sliding_mode(c[0], c[1], 0.0, 0.0, ups, om, gains[0], gains[1], gains[2], gains[2], gains[3])
@@ -150,8 +179,16 @@ class WarpBatch:
         with only a printed warning); ours: 8 contacts and 32 rows per robot, + 16.
     """
 
-    def __init__(self, mjm: mujoco.MjModel, nworld: int, device: str = "cpu", *, hetero: bool = False,
-                 nconmax: int | None = None, njmax: int | None = None) -> None:
+    def __init__(
+        self,
+        mjm: mujoco.MjModel,
+        nworld: int,
+        device: str = "cpu",
+        *,
+        hetero: bool = False,
+        nconmax: int | None = None,
+        njmax: int | None = None,
+    ) -> None:
         self.mjm = mjm
         self.nworld = int(nworld)
         self.device = wp.get_device(device)
@@ -195,16 +232,21 @@ class WarpBatch:
     # -- plant interface
     def observe(self) -> tuple[np.ndarray, np.ndarray]:
         """Pose ``(nworld, n, 3)`` and body-frame velocity ``(nworld, n, 2)`` (host copies)."""
-        wp.launch(_observe, dim=(self.nworld, self.n),
-                  inputs=[self.d.qpos, self.d.qvel, self.qadr, self.dadr], outputs=[self.pose, self.vel],
-                  device=self.device)
+        wp.launch(
+            _observe,
+            dim=(self.nworld, self.n),
+            inputs=[self.d.qpos, self.d.qvel, self.qadr, self.dadr],
+            outputs=[self.pose, self.vel],
+            device=self.device,
+        )
         return self.pose.numpy(), self.vel.numpy()
 
     def set_torques(self, tau: np.ndarray) -> None:
         """Wheel torques ``(nworld, n, 2)`` ``[τ_L, τ_R]`` N·m, held until changed."""
         self.tau.assign(np.asarray(tau, dtype=np.float32).reshape(self.nworld, self.n, 2))
-        wp.launch(_apply, dim=(self.nworld, self.n), inputs=[self.tau, self.act], outputs=[self.d.ctrl],
-                  device=self.device)
+        wp.launch(
+            _apply, dim=(self.nworld, self.n), inputs=[self.tau, self.act], outputs=[self.d.ctrl], device=self.device
+        )
 
     def step(self, nstep: int = 1) -> None:
         with wp.ScopedDevice(self.device):
@@ -213,14 +255,18 @@ class WarpBatch:
 
     def run_tracking(self, cmd: np.ndarray, nstep: int, gains=(0.4, 10.0, 3.0, 0.1), lim: float = 20.0) -> None:
         """``nstep`` × [stand-in control kernel, physics step], all on the device."""
-        c = wp.array(np.asarray(cmd, dtype=np.float32).reshape(self.nworld, self.n, 2), dtype=wp.vec2,
-                     device=self.device)
+        c = wp.array(
+            np.asarray(cmd, dtype=np.float32).reshape(self.nworld, self.n, 2), dtype=wp.vec2, device=self.device
+        )
         g = wp.vec4(*[float(x) for x in gains])
         with wp.ScopedDevice(self.device):
             for _ in range(nstep):
-                wp.launch(_track, dim=(self.nworld, self.n),
-                          inputs=[self.d.qpos, self.d.qvel, self.qadr, self.dadr, self.act, c, g, float(lim)],
-                          outputs=[self.d.ctrl, self.vel])
+                wp.launch(
+                    _track,
+                    dim=(self.nworld, self.n),
+                    inputs=[self.d.qpos, self.d.qvel, self.qadr, self.dadr, self.act, c, g, float(lim)],
+                    outputs=[self.d.ctrl, self.vel],
+                )
                 mjw.step(self.m, self.d)
 
     def qpos(self) -> np.ndarray:

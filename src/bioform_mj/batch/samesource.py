@@ -26,6 +26,7 @@ and nothing more:
 Everything else (tuple returns, ``if``/early ``return``, ``min``/``max``/``abs``,
 ``and``/``or``) is Warp's own Python subset, unchanged.
 """
+
 from __future__ import annotations
 
 import ast
@@ -115,11 +116,26 @@ def _compile_in(source: str, filename: str, ns: dict, name: str) -> types.Functi
 def _math_table(wp) -> dict:
     """``math`` function (by identity) → Warp builtin."""
     pairs = {
-        "cos": wp.cos, "sin": wp.sin, "tan": wp.tan, "exp": wp.exp, "log": wp.log,
-        "atan2": wp.atan2, "atan": wp.atan, "asin": wp.asin, "acos": wp.acos,
-        "sqrt": wp.sqrt, "floor": wp.floor, "ceil": wp.ceil, "fabs": wp.abs,
-        "tanh": wp.tanh, "cosh": wp.cosh, "sinh": wp.sinh, "trunc": wp.trunc,
-        "isfinite": wp.isfinite, "isnan": wp.isnan, "isinf": wp.isinf,
+        "cos": wp.cos,
+        "sin": wp.sin,
+        "tan": wp.tan,
+        "exp": wp.exp,
+        "log": wp.log,
+        "atan2": wp.atan2,
+        "atan": wp.atan,
+        "asin": wp.asin,
+        "acos": wp.acos,
+        "sqrt": wp.sqrt,
+        "floor": wp.floor,
+        "ceil": wp.ceil,
+        "fabs": wp.abs,
+        "tanh": wp.tanh,
+        "cosh": wp.cosh,
+        "sinh": wp.sinh,
+        "trunc": wp.trunc,
+        "isfinite": wp.isfinite,
+        "isnan": wp.isnan,
+        "isinf": wp.isinf,
     }
     return {getattr(math, k): v for k, v in pairs.items()}
 

@@ -19,10 +19,12 @@ A controller that also has ``kernel`` (a ``(Gains, StackState)`` pair for
 :class:`~bioform_mj.control.stack.ControlStack`, can be run by the plants' compiled loops.
 See ``examples/`` for a user-written controller.
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -56,8 +58,14 @@ class Controller(Protocol):
     def reset(self, est_pose0: np.ndarray, vel0: np.ndarray) -> None:
         """Start of a run: initial leader estimates ``P_ir(0)`` (n,3) and measured velocities (n,2)."""
 
-    def step(self, leader_pose: np.ndarray, leader_vel: np.ndarray, pose: np.ndarray, vel: np.ndarray,
-             comm: Comm | None = None) -> np.ndarray:
+    def step(
+        self,
+        leader_pose: np.ndarray,
+        leader_vel: np.ndarray,
+        pose: np.ndarray,
+        vel: np.ndarray,
+        comm: Comm | None = None,
+    ) -> np.ndarray:
         """Wheel torques ``[τ_L, τ_R]`` (n, 2, N·m) to hold over the next control period."""
 
     def signals(self) -> Mapping[str, np.ndarray]:

@@ -1,4 +1,5 @@
 """Array helpers for outputs and fault injection (the control law itself is in ``equations.py``)."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -17,10 +17,11 @@ imported below. That restricted form is what lets one source serve three engines
 Vectorised numpy forms of the same equations live only in ``tests/oracle.py``, as
 independent oracles compared with stated tolerances.
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable
 from math import atan2, cos, exp, hypot, pi, sin, sqrt  # noqa: F401  (the names equations may use)
-from typing import Callable
 
 try:  # numba is a dependency; without it everything still runs as plain Python
     import numba
@@ -100,10 +101,28 @@ def clip(x: float, lo: float, hi: float) -> float:
 
 # -------------------------------------------------------------- estimator (eqs. 12–13)
 @equation
-def estimator_step(px: float, py: float, pth: float, v: float, w: float,
-                   ep0: float, ep1: float, ep2: float, ev0: float, ev1: float,
-                   kx: float, ky: float, kth: float, ka0: float, ka1: float, kb0: float, kb1: float,
-                   phi0: float, phi1: float, dt: float) -> tuple[float, float, float, float, float]:
+def estimator_step(
+    px: float,
+    py: float,
+    pth: float,
+    v: float,
+    w: float,
+    ep0: float,
+    ep1: float,
+    ep2: float,
+    ev0: float,
+    ev1: float,
+    kx: float,
+    ky: float,
+    kth: float,
+    ka0: float,
+    ka1: float,
+    kb0: float,
+    kb1: float,
+    phi0: float,
+    phi1: float,
+    dt: float,
+) -> tuple[float, float, float, float, float]:
     """One explicit-Euler step of the distributed estimator of follower ``i``.
 
     ``(px, py, pth)`` = ``P_ir`` (m, m, rad), ``(v, w)`` = ``[υ_ir, ω_ir]``; ``ep*`` the
@@ -112,15 +131,32 @@ def estimator_step(px: float, py: float, pth: float, v: float, w: float,
     eq. 13: ``[υ̇, ω̇] = −k_a ⊙ sgn(e_v) − k_b ⊙ e_v`` (``sgn`` → :func:`sat` with ``phi``).
     Returns the new ``(px, py, pth, v, w)``, ``pth`` wrapped.
     """
-    dpx, dpy, dpth, dv, dw = estimator_rates(pth, v, w, ep0, ep1, ep2, ev0, ev1, kx, ky, kth,
-                                             ka0, ka1, kb0, kb1, phi0, phi1)
+    dpx, dpy, dpth, dv, dw = estimator_rates(
+        pth, v, w, ep0, ep1, ep2, ev0, ev1, kx, ky, kth, ka0, ka1, kb0, kb1, phi0, phi1
+    )
     return px + dt * dpx, py + dt * dpy, wrap(pth + dt * dpth), v + dt * dv, w + dt * dw
 
 
 @equation
-def estimator_rates(pth: float, v: float, w: float, ep0: float, ep1: float, ep2: float, ev0: float, ev1: float,
-                    kx: float, ky: float, kth: float, ka0: float, ka1: float, kb0: float, kb1: float,
-                    phi0: float, phi1: float) -> tuple[float, float, float, float, float]:
+def estimator_rates(
+    pth: float,
+    v: float,
+    w: float,
+    ep0: float,
+    ep1: float,
+    ep2: float,
+    ev0: float,
+    ev1: float,
+    kx: float,
+    ky: float,
+    kth: float,
+    ka0: float,
+    ka1: float,
+    kb0: float,
+    kb1: float,
+    phi0: float,
+    phi1: float,
+) -> tuple[float, float, float, float, float]:
     """Right-hand sides of eqs. 12–13: ``(ẋ_ir, ẏ_ir, θ̇_ir, υ̇_ir, ω̇_ir)`` (m/s, m/s, rad/s, m/s², rad/s²).
 
     Arguments as in :func:`estimator_step` (``pth, v, w`` = ``θ_ir, υ_ir, ω_ir``).
@@ -135,8 +171,9 @@ def estimator_rates(pth: float, v: float, w: float, ep0: float, ep1: float, ep2:
 
 # ------------------------------------------------------- kinematic control (eqs. 27–33)
 @equation
-def slot_reference(xr: float, yr: float, thr: float, v: float, w: float,
-                   dx: float, dy: float) -> tuple[float, float, float, float, float]:
+def slot_reference(
+    xr: float, yr: float, thr: float, v: float, w: float, dx: float, dy: float
+) -> tuple[float, float, float, float, float]:
     """The reference a follower tracks when its offset ``(dx, dy)`` is in the leader's frame
     (design §4, not in the paper): the slot ``p_s = p_r − R(θ_r) Δ`` moves at
     ``ṗ_s = υ_r h_r + ω_r J R Δ`` (``J``: +90° rotation), not at the leader's velocity, so eq. 31's
@@ -170,8 +207,9 @@ def formation_offset(dx: float, dy: float, th: float, leader_frame: bool) -> tup
 
 
 @equation
-def tracking_error(xr: float, yr: float, thr: float, x: float, y: float, th: float,
-                   dx: float, dy: float) -> tuple[float, float, float]:
+def tracking_error(
+    xr: float, yr: float, thr: float, x: float, y: float, th: float, dx: float, dy: float
+) -> tuple[float, float, float]:
     """Body-frame tracking error ``[x̃, ỹ, θ̃]`` of eqs. 27–28 (m, m, rad).
 
     ``(xr, yr, thr)`` the follower's estimate of the leader, ``(x, y, th)`` its pose,
@@ -186,8 +224,9 @@ def tracking_error(xr: float, yr: float, thr: float, x: float, y: float, th: flo
 
 
 @equation
-def velocity_command(ey: float, eth: float, u: float, v_ir: float, w_ir: float,
-                     k1: float, k2: float, k3: float) -> tuple[float, float]:
+def velocity_command(
+    ey: float, eth: float, u: float, v_ir: float, w_ir: float, k1: float, k2: float, k3: float
+) -> tuple[float, float]:
     """``[υ_cmd, ω_cmd]`` of eq. 31 (m/s, rad/s).
 
     ``υ_cmd = υ_ir cos θ̃ + k1 u``, ``ω_cmd = ω_ir + k2 υ_ir ỹ + k3 υ_ir sin θ̃``, with
@@ -219,8 +258,9 @@ def neuron_rate(vs: float, x: float, A: float, B: float, D: float) -> float:
 
 # ------------------------------------------------- command derivative (design §6)
 @equation
-def filter_step(y: float, dy: float, u: float, f00: float, f01: float, f10: float, f11: float,
-                g0: float, g1: float) -> tuple[float, float]:
+def filter_step(
+    y: float, dy: float, u: float, f00: float, f01: float, f10: float, f11: float, g0: float, g1: float
+) -> tuple[float, float]:
     """One exact-discretisation step of ``ÿ = ω_n² (u − y) − 2 ω_n ẏ`` (u held over the step).
 
     ``(f00 … f11)``, ``(g0, g1)`` are the transition matrix and input vector
@@ -230,8 +270,9 @@ def filter_step(y: float, dy: float, u: float, f00: float, f01: float, f10: floa
 
 
 @equation
-def filter_derivative(y: float, dy: float, u: float, f00: float, f01: float, f10: float, f11: float,
-                      g0: float, g1: float, dt: float) -> tuple[float, float, float]:
+def filter_derivative(
+    y: float, dy: float, u: float, f00: float, f01: float, f10: float, f11: float, g0: float, g1: float, dt: float
+) -> tuple[float, float, float]:
     """``torque.derivative = "filter"``: one :func:`filter_step` on ``u`` and the derivative estimate.
 
     The estimate is the filter output's change over the step, ``(y_f[k+1] − y_f[k])/dt`` (the
@@ -251,8 +292,9 @@ def backward_difference(u: float, u_prev: float, dt: float) -> float:
 
 
 @equation
-def error_rate(ex: float, ey: float, v: float, w: float, v_ir: float, dpth: float,
-               eth: float, dpx_b: float, dpy_b: float) -> tuple[float, float, float]:
+def error_rate(
+    ex: float, ey: float, v: float, w: float, v_ir: float, dpth: float, eth: float, dpx_b: float, dpy_b: float
+) -> tuple[float, float, float]:
     """``(ẋ̃, ẏ̃, θ̃̇)`` of the body-frame error of eq. 28 (m/s, m/s, rad/s).
 
     ``(ex, ey)`` = ``(x̃, ỹ)``, ``θ̃`` = ``eth``; ``(v, w)`` the measured ``υ, ω``;
@@ -265,8 +307,19 @@ def error_rate(ex: float, ey: float, v: float, w: float, v_ir: float, dpth: floa
 
 
 @equation
-def command_rate(ey: float, eth: float, v_ir: float, dv_ir: float, dw_ir: float,
-                 dey: float, deth: float, du: float, k1: float, k2: float, k3: float) -> tuple[float, float]:
+def command_rate(
+    ey: float,
+    eth: float,
+    v_ir: float,
+    dv_ir: float,
+    dw_ir: float,
+    dey: float,
+    deth: float,
+    du: float,
+    k1: float,
+    k2: float,
+    k3: float,
+) -> tuple[float, float]:
     """``torque.derivative = "analytic"``: ``(υ̇_cmd, ω̇_cmd)``, eq. 31 differentiated by the chain rule.
 
     ``υ̇_cmd = υ̇_ir cos θ̃ − υ_ir sin θ̃ θ̃̇ + k1 u̇``;
@@ -276,21 +329,33 @@ def command_rate(ey: float, eth: float, v_ir: float, dv_ir: float, dw_ir: float,
     """
     c = cos(eth)
     s = sin(eth)
-    return (dv_ir * c - v_ir * s * deth + k1 * du,
-            dw_ir + k2 * (dv_ir * ey + v_ir * dey) + k3 * (dv_ir * s + v_ir * c * deth))
+    return (
+        dv_ir * c - v_ir * s * deth + k1 * du,
+        dw_ir + k2 * (dv_ir * ey + v_ir * dey) + k3 * (dv_ir * s + v_ir * c * deth),
+    )
 
 
 def filter_coefficients(wn: float, dt: float) -> tuple[float, float, float, float, float, float]:
     """``(f00, f01, f10, f11, g0, g1)`` of :func:`filter_step` for ``ω_n`` (rad/s) and ``dt`` (s)."""
     a = exp(-wn * dt)
-    return (a * (1 + wn * dt), a * dt, -(wn ** 2) * dt * a, a * (1 - wn * dt),
-            1.0 - a * (1 + wn * dt), wn * wn * dt * a)
+    return (a * (1 + wn * dt), a * dt, -(wn**2) * dt * a, a * (1 - wn * dt), 1.0 - a * (1 + wn * dt), wn * wn * dt * a)
 
 
 # ---------------------------------------------------------- torque law (eqs. 38–39)
 @equation
-def sliding_mode(v_cmd: float, w_cmd: float, dv_cmd: float, dw_cmd: float, v: float, w: float,
-                 a_hat: float, b_hat: float, ca: float, cb: float, phi: float) -> tuple[float, float]:
+def sliding_mode(
+    v_cmd: float,
+    w_cmd: float,
+    dv_cmd: float,
+    dw_cmd: float,
+    v: float,
+    w: float,
+    a_hat: float,
+    b_hat: float,
+    ca: float,
+    cb: float,
+    phi: float,
+) -> tuple[float, float]:
     """Unsaturated wheel torques ``(τ_L, τ_R)`` (N·m) of eqs. 38–39.
 
     ``U = ż_cmd + c ⊙ sgn(z_cmd − z)``; ``τ_L = U_a/(2â) − U_b/(2b̂)``,
@@ -320,9 +385,20 @@ def saturate(tl: float, tr: float, lim: float, steer: bool) -> tuple[float, floa
 
 # ----------------------------------------------------------------- learner (eq. 37)
 @equation
-def learner_step(z_hat: float, e_int: float, c_hat: float, d_hat: float, tau: float, z: float,
-                 k4: float, k5: float, kd: float, c_min: float, c_max: float,
-                 h: float) -> tuple[float, float, float, float]:
+def learner_step(
+    z_hat: float,
+    e_int: float,
+    c_hat: float,
+    d_hat: float,
+    tau: float,
+    z: float,
+    k4: float,
+    k5: float,
+    kd: float,
+    c_min: float,
+    c_max: float,
+    h: float,
+) -> tuple[float, float, float, float]:
     """One backward-Euler step of eq. 37 for one channel (``υ`` with ``τ_a``, or ``ω`` with ``τ_b``).
 
     ``e = ẑ − z``, ``E = ∫e``, ``S = k4 E + e``; ``ẑ' = τ ĉ + d̂ − k4 e − k5 S``,
@@ -352,9 +428,25 @@ def harmonic(bias: float, amp: float, freq: float, phase: float, t: float) -> fl
 
 
 @equation
-def unicycle_rk4(x: float, y: float, th: float, v: float, w: float, acc_v: float, acc_w: float,
-                 d0: float, d1: float, d2: float, d3: float, e0: float, e1: float, e2: float, e3: float,
-                 t: float, h: float) -> tuple[float, float, float, float, float]:
+def unicycle_rk4(
+    x: float,
+    y: float,
+    th: float,
+    v: float,
+    w: float,
+    acc_v: float,
+    acc_w: float,
+    d0: float,
+    d1: float,
+    d2: float,
+    d3: float,
+    e0: float,
+    e1: float,
+    e2: float,
+    e3: float,
+    t: float,
+    h: float,
+) -> tuple[float, float, float, float, float]:
     """One RK4 step of length ``h`` (s) from ``t`` of the paper's plant for one robot.
 
     ``ẋ = υ cos θ``, ``ẏ = υ sin θ``, ``θ̇ = ω``, ``υ̇ = acc_v + d1(t)``, ``ω̇ = acc_w + d2(t)``
@@ -391,18 +483,34 @@ def unicycle_rk4(x: float, y: float, th: float, v: float, w: float, acc_v: float
     ky4 = v4 * sin(th4)
     kt4 = w + h * bm
     s = h / 6.0
-    return (x + s * (kx1 + 2.0 * kx2 + 2.0 * kx3 + kx4),
-            y + s * (ky1 + 2.0 * ky2 + 2.0 * ky3 + ky4),
-            th + s * (kt1 + 2.0 * kt2 + 2.0 * kt3 + kt4),
-            v + s * (a1 + 2.0 * am + 2.0 * am + a4),
-            w + s * (b1 + 2.0 * bm + 2.0 * bm + b4))
+    return (
+        x + s * (kx1 + 2.0 * kx2 + 2.0 * kx3 + kx4),
+        y + s * (ky1 + 2.0 * ky2 + 2.0 * ky3 + ky4),
+        th + s * (kt1 + 2.0 * kt2 + 2.0 * kt3 + kt4),
+        v + s * (a1 + 2.0 * am + 2.0 * am + a4),
+        w + s * (b1 + 2.0 * bm + 2.0 * bm + b4),
+    )
 
 
 # ------------------------------------------------------- measurement of a rigid chassis
 @equation
-def planar_state(px: float, py: float, qw: float, qx: float, qy: float, qz: float,
-                 vx: float, vy: float, vz: float, wx: float, wy: float, wz: float,
-                 cx: float, cy: float, cz: float) -> tuple[float, float, float, float, float, float]:
+def planar_state(
+    px: float,
+    py: float,
+    qw: float,
+    qx: float,
+    qy: float,
+    qz: float,
+    vx: float,
+    vy: float,
+    vz: float,
+    wx: float,
+    wy: float,
+    wz: float,
+    cx: float,
+    cy: float,
+    cz: float,
+) -> tuple[float, float, float, float, float, float]:
     """Pose and body-frame velocity of a chassis point, from a free joint's state.
 
     ``(px, py)`` the body origin (m), ``(qw, qx, qy, qz)`` its orientation, ``(vx, vy, vz)``
@@ -475,8 +583,12 @@ def hash_normal(seed: float, i: float, k: float) -> float:
     :func:`hash_uniform` draws (counters ``4k … 4k+3``) centred and scaled by √3 (Irwin–Hall;
     bounded at ±2√3 ≈ ±3.46 σ; no ``log`` in the equation set, so no Box–Muller)."""
     k4 = 4.0 * k
-    s = (hash_uniform(seed, i, k4) + hash_uniform(seed, i, k4 + 1.0)
-         + hash_uniform(seed, i, k4 + 2.0) + hash_uniform(seed, i, k4 + 3.0))
+    s = (
+        hash_uniform(seed, i, k4)
+        + hash_uniform(seed, i, k4 + 1.0)
+        + hash_uniform(seed, i, k4 + 2.0)
+        + hash_uniform(seed, i, k4 + 3.0)
+    )
     return (s - 2.0) * 1.7320508075688772
 
 
@@ -499,8 +611,9 @@ def gyro_reading(wz: float, bias: float, sigma: float, seed: float, i: float, k:
 
 
 @equation
-def odometry_step(x: float, y: float, th: float, ql0: float, qr0: float, ql1: float, qr1: float,
-                  wz: float, r: float, ts: float) -> tuple[float, float, float, float, float]:
+def odometry_step(
+    x: float, y: float, th: float, ql0: float, qr0: float, ql1: float, qr1: float, wz: float, r: float, ts: float
+) -> tuple[float, float, float, float, float]:
     """Dead reckoning over one sensor period ``ts`` (s): the distance ``Δs = r (Δφ_L + Δφ_R)/2`` from
     the quantised forward wheel angles ``q·0 → q·1`` (rad; radius ``r`` m), the heading change
     ``Δθ = wz ts`` from the gyro (rad/s), the position advanced along the mid-period heading

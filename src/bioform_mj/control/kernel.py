@@ -14,6 +14,7 @@ the torques applied then and the velocities measured now; tracking error from th
 current estimates; velocity command from the current neuron state; command derivative;
 sliding-mode torques with ``ĉ``; saturation; estimator and neuron advance to ``t_{k+1}``.
 """
+
 from __future__ import annotations
 
 from math import cos, sin
@@ -27,7 +28,6 @@ from .equations import (
     error_rate,
     estimator_rates,
     estimator_step,
-    slot_reference,
     filter_derivative,
     learner_step,
     neuron_rate,
@@ -35,11 +35,11 @@ from .equations import (
     njit,
     saturate,
     sliding_mode,
+    slot_reference,
     tracking_error,
     velocity_command,
     wrap,
 )
-
 
 #: ``Gains.deriv`` codes of ``torque.derivative`` (design §6)
 DERIV_FILTER, DERIV_DIFFERENCE, DERIV_ANALYTIC = 0, 1, 2
@@ -58,7 +58,8 @@ class Gains(NamedTuple):
     Learner (eq. 37): ``k4`` (n, 2), ``k5a, k5b`` [1/s], ``kda, kdb`` (0 = the paper),
     bounds ``c_min, c_max`` (n, 2). ``lim`` (n,) wheel torque limit [N·m]; ``steer``: steer-priority
     saturation; ``bio``: bioinspired law (else backstepping); ``learning``: run eq. 37.
-    ``offsets`` (n, 2) [m], in the leader's frame if ``leader_frame`` (else world); graph edges ``src ← dst`` (m,); ``lacc`` (n,) leader access ``a_ir``.
+    ``offsets`` (n, 2) [m], in the leader's frame if ``leader_frame`` (else world); graph edges
+    ``src ← dst`` (m,); ``lacc`` (n,) leader access ``a_ir``.
     ``dt`` [s] the control period.
     """
 
@@ -154,9 +155,27 @@ class CommIn(NamedTuple):
 def new_state(n: int) -> StackState:
     """A zeroed :class:`StackState` for ``n`` followers."""
     z2 = lambda: np.zeros((n, 2))  # noqa: E731
-    return StackState(np.zeros((n, 3)), z2(), z2(), z2(), z2(), z2(), z2(), z2(), np.zeros(n),
-                      np.zeros((n, 3)), z2(), z2(), z2(), z2(), z2(), np.zeros(n, dtype=np.bool_),
-                      np.zeros((n, 3)), z2(), np.ones(1, dtype=np.int64))
+    return StackState(
+        np.zeros((n, 3)),
+        z2(),
+        z2(),
+        z2(),
+        z2(),
+        z2(),
+        z2(),
+        z2(),
+        np.zeros(n),
+        np.zeros((n, 3)),
+        z2(),
+        z2(),
+        z2(),
+        z2(),
+        z2(),
+        np.zeros(n, dtype=np.bool_),
+        np.zeros((n, 3)),
+        z2(),
+        np.ones(1, dtype=np.int64),
+    )
 
 
 def perfect_comm(n: int, m: int) -> CommIn:
@@ -214,13 +233,35 @@ def learner_update(g, s, vel):
     (``s.tau_body``) and the velocities ``vel`` (n, 2) measured now."""
     dt = g.dt
     for i in range(vel.shape[0]):
-        zn, en, cn, dn = learner_step(s.z_hat[i, 0], s.e_int[i, 0], s.c_hat[i, 0], s.d_hat[i, 0],
-                                      s.tau_body[i, 0], vel[i, 0], g.k4[i, 0], g.k5a, g.kda,
-                                      g.c_min[i, 0], g.c_max[i, 0], dt)
+        zn, en, cn, dn = learner_step(
+            s.z_hat[i, 0],
+            s.e_int[i, 0],
+            s.c_hat[i, 0],
+            s.d_hat[i, 0],
+            s.tau_body[i, 0],
+            vel[i, 0],
+            g.k4[i, 0],
+            g.k5a,
+            g.kda,
+            g.c_min[i, 0],
+            g.c_max[i, 0],
+            dt,
+        )
         s.z_hat[i, 0], s.e_int[i, 0], s.c_hat[i, 0], s.d_hat[i, 0] = zn, en, cn, dn
-        zn, en, cn, dn = learner_step(s.z_hat[i, 1], s.e_int[i, 1], s.c_hat[i, 1], s.d_hat[i, 1],
-                                      s.tau_body[i, 1], vel[i, 1], g.k4[i, 1], g.k5b, g.kdb,
-                                      g.c_min[i, 1], g.c_max[i, 1], dt)
+        zn, en, cn, dn = learner_step(
+            s.z_hat[i, 1],
+            s.e_int[i, 1],
+            s.c_hat[i, 1],
+            s.d_hat[i, 1],
+            s.tau_body[i, 1],
+            vel[i, 1],
+            g.k4[i, 1],
+            g.k5b,
+            g.kdb,
+            g.c_min[i, 1],
+            g.c_max[i, 1],
+            dt,
+        )
         s.z_hat[i, 1], s.e_int[i, 1], s.c_hat[i, 1], s.d_hat[i, 1] = zn, en, cn, dn
 
 
@@ -231,29 +272,61 @@ def command_and_torques(g, s, pose, vel):
     first = s.first[0] == 1
     for i in range(pose.shape[0]):
         if g.leader_frame:  # the slot's own pose and velocity (design §4)
-            xs, ys, ths, v_ref, w_ref = slot_reference(s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2],
-                                                       s.est_vel[i, 0], s.est_vel[i, 1],
-                                                       g.offsets[i, 0], g.offsets[i, 1])
+            xs, ys, ths, v_ref, w_ref = slot_reference(
+                s.est_pose[i, 0],
+                s.est_pose[i, 1],
+                s.est_pose[i, 2],
+                s.est_vel[i, 0],
+                s.est_vel[i, 1],
+                g.offsets[i, 0],
+                g.offsets[i, 1],
+            )
             e0, e1, e2 = tracking_error(xs, ys, ths, pose[i, 0], pose[i, 1], pose[i, 2], 0.0, 0.0)
         else:  # the paper: world-frame offsets, the slot moves with the leader's velocity
             v_ref, w_ref = s.est_vel[i, 0], s.est_vel[i, 1]
-            e0, e1, e2 = tracking_error(s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2],
-                                        pose[i, 0], pose[i, 1], pose[i, 2], g.offsets[i, 0], g.offsets[i, 1])
+            e0, e1, e2 = tracking_error(
+                s.est_pose[i, 0],
+                s.est_pose[i, 1],
+                s.est_pose[i, 2],
+                pose[i, 0],
+                pose[i, 1],
+                pose[i, 2],
+                g.offsets[i, 0],
+                g.offsets[i, 1],
+            )
         s.err[i, 0], s.err[i, 1], s.err[i, 2] = e0, e1, e2
         u = s.vs[i] if g.bio else e0
         vc, wc = velocity_command(e1, e2, u, v_ref, w_ref, g.k1, g.k2, g.k3)
         s.cmd[i, 0], s.cmd[i, 1] = vc, wc
         if g.deriv == DERIV_ANALYTIC:  # chain rule through the controller's own dynamics (design §6)
             dpx, dpy, dpth, dv_ir, dw_ir = estimator_rates(
-                s.est_pose[i, 2], s.est_vel[i, 0], s.est_vel[i, 1], s.p_err[i, 0], s.p_err[i, 1], s.p_err[i, 2],
-                s.v_err[i, 0], s.v_err[i, 1], g.kx, g.ky, g.kth, g.ka0, g.ka1, g.kb0, g.kb1, g.ephi0, g.ephi1)
+                s.est_pose[i, 2],
+                s.est_vel[i, 0],
+                s.est_vel[i, 1],
+                s.p_err[i, 0],
+                s.p_err[i, 1],
+                s.p_err[i, 2],
+                s.v_err[i, 0],
+                s.v_err[i, 1],
+                g.kx,
+                g.ky,
+                g.kth,
+                g.ka0,
+                g.ka1,
+                g.kb0,
+                g.kb1,
+                g.ephi0,
+                g.ephi1,
+            )
             ch = cos(pose[i, 2])
             sh = sin(pose[i, 2])
-            dex, dey, deth = error_rate(e0, e1, vel[i, 0], vel[i, 1], s.est_vel[i, 0], dpth, e2,
-                                        ch * dpx + sh * dpy, -sh * dpx + ch * dpy)
+            dex, dey, deth = error_rate(
+                e0, e1, vel[i, 0], vel[i, 1], s.est_vel[i, 0], dpth, e2, ch * dpx + sh * dpy, -sh * dpx + ch * dpy
+            )
             du = neuron_rate(s.vs[i], e0, g.A, g.B, g.D) if g.bio else dex
-            s.dcmd[i, 0], s.dcmd[i, 1] = command_rate(e1, e2, s.est_vel[i, 0], dv_ir, dw_ir, dey, deth, du,
-                                                      g.k1, g.k2, g.k3)
+            s.dcmd[i, 0], s.dcmd[i, 1] = command_rate(
+                e1, e2, s.est_vel[i, 0], dv_ir, dw_ir, dey, deth, du, g.k1, g.k2, g.k3
+            )
         else:
             for c in range(2):  # filter or backward difference (design §6)
                 if first:
@@ -263,12 +336,14 @@ def command_and_torques(g, s, pose, vel):
                     s.dcmd[i, c] = backward_difference(s.cmd[i, c], s.fy[i, c], g.dt)
                     s.fy[i, c] = s.cmd[i, c]
                 else:
-                    y, dy, d = filter_derivative(s.fy[i, c], s.fdy[i, c], s.cmd[i, c], g.f00, g.f01, g.f10,
-                                                 g.f11, g.g0, g.g1, g.dt)
+                    y, dy, d = filter_derivative(
+                        s.fy[i, c], s.fdy[i, c], s.cmd[i, c], g.f00, g.f01, g.f10, g.f11, g.g0, g.g1, g.dt
+                    )
                     s.fy[i, c], s.fdy[i, c] = y, dy
                     s.dcmd[i, c] = d
-        r0, r1 = sliding_mode(vc, wc, s.dcmd[i, 0], s.dcmd[i, 1], vel[i, 0], vel[i, 1],
-                              s.c_hat[i, 0], s.c_hat[i, 1], g.ca, g.cb, g.tphi)
+        r0, r1 = sliding_mode(
+            vc, wc, s.dcmd[i, 0], s.dcmd[i, 1], vel[i, 0], vel[i, 1], s.c_hat[i, 0], s.c_hat[i, 1], g.ca, g.cb, g.tphi
+        )
         s.tau_raw[i, 0], s.tau_raw[i, 1] = r0, r1
         L = g.lim[i]
         s.saturated[i] = abs(r0) > L or abs(r1) > L
@@ -326,11 +401,28 @@ def estimator_advance(g, s):
     n = s.est_pose.shape[0]
     dt = g.dt
     for i in range(n):
-        px, py, pth, v, w = estimator_step(s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2],
-                                           s.est_vel[i, 0], s.est_vel[i, 1], s.p_err[i, 0], s.p_err[i, 1],
-                                           s.p_err[i, 2], s.v_err[i, 0], s.v_err[i, 1],
-                                           g.kx, g.ky, g.kth, g.ka0, g.ka1, g.kb0, g.kb1,
-                                           g.ephi0, g.ephi1, dt)
+        px, py, pth, v, w = estimator_step(
+            s.est_pose[i, 0],
+            s.est_pose[i, 1],
+            s.est_pose[i, 2],
+            s.est_vel[i, 0],
+            s.est_vel[i, 1],
+            s.p_err[i, 0],
+            s.p_err[i, 1],
+            s.p_err[i, 2],
+            s.v_err[i, 0],
+            s.v_err[i, 1],
+            g.kx,
+            g.ky,
+            g.kth,
+            g.ka0,
+            g.ka1,
+            g.kb0,
+            g.kb1,
+            g.ephi0,
+            g.ephi1,
+            dt,
+        )
         s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2] = px, py, pth
         s.est_vel[i, 0], s.est_vel[i, 1] = v, w
         if g.bio:  # neuron (eq. 32), exact for the frozen input x̃

@@ -6,6 +6,7 @@
 The same object runs in the step-by-step loop (faults, debugging) and, because it
 exposes :attr:`ControlStack.kernel`, in the compiled loops of the plants.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -41,7 +42,8 @@ class StackParams:
     tau_max (n,) [N·m]: wheel torque limit; steer_priority: keep τ_b when saturating;
     deriv_wn [rad/s]: command-derivative filter;
     derivative: how ``υ̇_cmd, ω̇_cmd`` are obtained, ``filter``, ``difference`` or ``analytic`` (design §6).
-    k4 (2,) or (n,2), k5 (2,) [1/s]: learner gains; kd (2,): disturbance-estimate gain (0 = the paper); c_hat0, c_min, c_max (n,2): initial estimate and bounds.
+    k4 (2,) or (n,2), k5 (2,) [1/s]: learner gains; kd (2,): disturbance-estimate gain (0 = the paper);
+    c_hat0, c_min, c_max (n,2): initial estimate and bounds.
     dt [s]: control period.
     """
 
@@ -92,22 +94,47 @@ class ControlStack:
         f00, f01, f10, f11, g0, g1 = filter_coefficients(p.deriv_wn, p.dt)
         c = np.ascontiguousarray
         self.gains = Gains(
-            k1=float(p.k1), k2=float(p.k2), k3=float(p.k3), A=float(p.A), B=float(p.B), D=float(p.D),
-            kx=float(p.kp[0]), ky=float(p.kp[1]), kth=float(p.kp[2]),
-            ka0=float(p.ka[0]), ka1=float(p.ka[1]), kb0=float(p.kb[0]), kb1=float(p.kb[1]),
-            ephi0=float(p.est_phi[0]), ephi1=float(p.est_phi[1]),
-            ca=float(p.c_gain[0]), cb=float(p.c_gain[1]), tphi=float(p.torque_phi),
-            f00=f00, f01=f01, f10=f10, f11=f11, g0=g0, g1=g1, deriv=DERIVATIVES[p.derivative],
-            k5a=float(p.k5[0]), k5b=float(p.k5[1]),
-            kda=float(np.broadcast_to(p.kd, (2,))[0]), kdb=float(np.broadcast_to(p.kd, (2,))[1]),
-            dt=float(p.dt), bio=p.law == "bioinspired", learning=bool(p.learning), steer=bool(p.steer_priority),
+            k1=float(p.k1),
+            k2=float(p.k2),
+            k3=float(p.k3),
+            A=float(p.A),
+            B=float(p.B),
+            D=float(p.D),
+            kx=float(p.kp[0]),
+            ky=float(p.kp[1]),
+            kth=float(p.kp[2]),
+            ka0=float(p.ka[0]),
+            ka1=float(p.ka[1]),
+            kb0=float(p.kb[0]),
+            kb1=float(p.kb[1]),
+            ephi0=float(p.est_phi[0]),
+            ephi1=float(p.est_phi[1]),
+            ca=float(p.c_gain[0]),
+            cb=float(p.c_gain[1]),
+            tphi=float(p.torque_phi),
+            f00=f00,
+            f01=f01,
+            f10=f10,
+            f11=f11,
+            g0=g0,
+            g1=g1,
+            deriv=DERIVATIVES[p.derivative],
+            k5a=float(p.k5[0]),
+            k5b=float(p.k5[1]),
+            kda=float(np.broadcast_to(p.kd, (2,))[0]),
+            kdb=float(np.broadcast_to(p.kd, (2,))[1]),
+            dt=float(p.dt),
+            bio=p.law == "bioinspired",
+            learning=bool(p.learning),
+            steer=bool(p.steer_priority),
             leader_frame=bool(p.leader_frame),
             k4=c(np.broadcast_to(np.asarray(p.k4, dtype=float), (n, 2)), dtype=float),
             c_min=c(np.broadcast_to(p.c_min, (n, 2)), dtype=float),
             c_max=c(np.broadcast_to(p.c_max, (n, 2)), dtype=float),
             lim=np.array(np.broadcast_to(np.asarray(p.tau_max, dtype=float), (n,)), dtype=float),
             offsets=c(p.offsets, dtype=float).reshape(n, 2),
-            src=c(graph.src, dtype=np.int64), dst=c(graph.dst, dtype=np.int64),
+            src=c(graph.src, dtype=np.int64),
+            dst=c(graph.dst, dtype=np.int64),
             lacc=c(graph.leader_access, dtype=float),
         )
         self.state: StackState = new_state(n)
@@ -123,12 +150,22 @@ class ControlStack:
 
     def reset(self, est_pose0: np.ndarray, vel0: np.ndarray) -> None:
         """Initial estimates ``P_ir(0)`` (n,3), measured velocities (n,2); ``V_s(0) = 0``."""
-        reset_state(self.gains, self.state, np.ascontiguousarray(est_pose0, dtype=float),
-                    np.ascontiguousarray(vel0, dtype=float),
-                    np.ascontiguousarray(np.broadcast_to(self.p.c_hat0, (self.n, 2)), dtype=float))
+        reset_state(
+            self.gains,
+            self.state,
+            np.ascontiguousarray(est_pose0, dtype=float),
+            np.ascontiguousarray(vel0, dtype=float),
+            np.ascontiguousarray(np.broadcast_to(self.p.c_hat0, (self.n, 2)), dtype=float),
+        )
 
-    def step(self, leader_pose: np.ndarray, leader_vel: np.ndarray, pose: np.ndarray, vel: np.ndarray,
-             comm: Comm | None = None) -> np.ndarray:
+    def step(
+        self,
+        leader_pose: np.ndarray,
+        leader_vel: np.ndarray,
+        pose: np.ndarray,
+        vel: np.ndarray,
+        comm: Comm | None = None,
+    ) -> np.ndarray:
         """Torques ``[τ_L, τ_R]`` (n, 2, N·m) to hold over the next control period.
 
         ``comm`` (optional): link weights and received neighbour estimates of a faulty
@@ -150,8 +187,13 @@ class ControlStack:
         rp = s.est_pose[g.dst] if comm.recv_pose is None else comm.recv_pose
         rv = s.est_vel[g.dst] if comm.recv_vel is None else comm.recv_vel
         c = np.ascontiguousarray
-        return CommIn(True, c(comm.edge_w, dtype=float), c(comm.leader_w, dtype=float),
-                      c(rp, dtype=float).reshape(m, 3), c(rv, dtype=float).reshape(m, 2))
+        return CommIn(
+            True,
+            c(comm.edge_w, dtype=float),
+            c(comm.leader_w, dtype=float),
+            c(rp, dtype=float).reshape(m, 3),
+            c(rv, dtype=float).reshape(m, 2),
+        )
 
     def set_tau_max(self, tau_max: np.ndarray) -> None:
         """Change the wheel torque limits (n,) N·m in place (e.g. an actuator fault mid-run)."""
@@ -160,9 +202,19 @@ class ControlStack:
     def signals(self) -> dict[str, np.ndarray]:
         """The stack's signals of the last step, by log channel name (views)."""
         s = self.state
-        return {"est_pose": s.est_pose, "est_vel": s.est_vel, "cmd": s.cmd, "dcmd": s.dcmd, "tau": s.tau,
-                "tau_raw": s.tau_raw, "c_hat": s.c_hat, "z_hat": s.z_hat, "vs": s.vs,
-                "tracking_error": s.err, "saturated": s.saturated}
+        return {
+            "est_pose": s.est_pose,
+            "est_vel": s.est_vel,
+            "cmd": s.cmd,
+            "dcmd": s.dcmd,
+            "tau": s.tau,
+            "tau_raw": s.tau_raw,
+            "c_hat": s.c_hat,
+            "z_hat": s.z_hat,
+            "vs": s.vs,
+            "tracking_error": s.err,
+            "saturated": s.saturated,
+        }
 
     # ------------------------------------------------------------------ conveniences
     @property

@@ -11,22 +11,31 @@ written to a temporary name and renamed.
 The colours (``LEADER_RGB``, :func:`follower_rgb`) are shared with the video and the
 rerun recording so that follower 2 is the same colour everywhere.
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
 from ..control.common import wrap
-
 from .files import atomic_path
 
 #: Leader colour (the ghost's orange), RGB in 0..1.
 LEADER_RGB: tuple[float, float, float] = (1.0, 0.5, 0.05)
-_FOLLOWER_RGB = [(0.12, 0.47, 0.71), (0.17, 0.63, 0.17), (0.84, 0.15, 0.16), (0.58, 0.40, 0.74),
-                 (0.55, 0.34, 0.29), (0.89, 0.47, 0.76), (0.50, 0.50, 0.50), (0.74, 0.74, 0.13),
-                 (0.09, 0.75, 0.81)]
+_FOLLOWER_RGB = [
+    (0.12, 0.47, 0.71),
+    (0.17, 0.63, 0.17),
+    (0.84, 0.15, 0.16),
+    (0.58, 0.40, 0.74),
+    (0.55, 0.34, 0.29),
+    (0.89, 0.47, 0.76),
+    (0.50, 0.50, 0.50),
+    (0.74, 0.74, 0.13),
+    (0.09, 0.75, 0.81),
+]
 #: Colour of each method in the Table I figures.
 METHOD_RGB: dict[str, tuple[float, float, float]] = {
     "backstepping": (0.45, 0.45, 0.45),
@@ -42,8 +51,9 @@ def follower_rgb(i: int) -> tuple[float, float, float]:
     return _FOLLOWER_RGB[i % len(_FOLLOWER_RGB)]
 
 
-
-def _figure(rows: int, cols: int = 1, *, width: float = 8.0, row_h: float = 2.2, sharex: bool = True) -> tuple[Any, np.ndarray]:
+def _figure(
+    rows: int, cols: int = 1, *, width: float = 8.0, row_h: float = 2.2, sharex: bool = True
+) -> tuple[Any, np.ndarray]:
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(width, max(3.0, row_h * rows)), dpi=_DPI, layout="constrained")
@@ -62,7 +72,8 @@ def _save(fig: Any, path: Path) -> Path:
 
 
 def _title(sc_or_summary: Mapping[str, Any]) -> str:
-    return f"{sc_or_summary.get('scenario', '')} / {sc_or_summary.get('plant', '')} plant / {sc_or_summary.get('method', '')}"
+    g = sc_or_summary.get
+    return f"{g('scenario', '')} / {g('plant', '')} plant / {g('method', '')}"
 
 
 # ---------------------------------------------------------------------------- one run
@@ -98,10 +109,12 @@ def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
     # Fig. 4: estimation errors of the distributed estimators
     lp, lv = log["leader_pose"], log["leader_vel"]
     fig, ax = _figure(4)
-    rows = [("position (m)", log["estimation_error"]),
-            ("heading (rad)", wrap(log["est_pose"][:, :, 2] - lp[:, None, 2])),
-            ("υ_ir − υ_r (m/s)", log["est_vel"][:, :, 0] - lv[:, None, 0]),
-            ("ω_ir − ω_r (rad/s)", log["est_vel"][:, :, 1] - lv[:, None, 1])]
+    rows = [
+        ("position (m)", log["estimation_error"]),
+        ("heading (rad)", wrap(log["est_pose"][:, :, 2] - lp[:, None, 2])),
+        ("υ_ir − υ_r (m/s)", log["est_vel"][:, :, 0] - lv[:, None, 0]),
+        ("ω_ir − ω_r (rad/s)", log["est_vel"][:, :, 1] - lv[:, None, 1]),
+    ]
     for r, (lab, y) in enumerate(rows):
         for i in range(n):
             ax[r, 0].plot(t, y[:, i], color=follower_rgb(i), lw=1.2, label=f"follower {i + 1}")
@@ -114,8 +127,15 @@ def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
     for r, lab in enumerate(("υ (m/s)", "ω (rad/s)")):
         for i in range(n):
             ax[r, 0].plot(t, log["cmd"][:, i, r], color=follower_rgb(i), lw=1.4, label=f"follower {i + 1} command")
-            ax[r, 0].plot(t, log["vel"][:, i, r], color=follower_rgb(i), lw=0.9, ls="--", alpha=0.8,
-                          label=f"follower {i + 1} measured")
+            ax[r, 0].plot(
+                t,
+                log["vel"][:, i, r],
+                color=follower_rgb(i),
+                lw=0.9,
+                ls="--",
+                alpha=0.8,
+                label=f"follower {i + 1} measured",
+            )
         ax[r, 0].plot(t, lv[:, r], color="k", lw=0.8, ls=":", label="leader")
         ax[r, 0].set_ylabel(lab)
     _finish(fig, ax, title + ": velocity commands (solid) and velocities (dashed)")
@@ -126,7 +146,9 @@ def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
     for r, lab in enumerate(("â (1/(kg·m))", "b̂ (1/(kg·m²))")):
         for i in range(n):
             ax[r, 0].plot(t, log["c_hat"][:, i, r], color=follower_rgb(i), lw=1.4, label=f"follower {i + 1} estimate")
-            ax[r, 0].plot(t, log["c_true"][:, i, r], color=follower_rgb(i), lw=1.0, ls="--", label=f"follower {i + 1} true")
+            ax[r, 0].plot(
+                t, log["c_true"][:, i, r], color=follower_rgb(i), lw=1.0, ls="--", label=f"follower {i + 1} true"
+            )
         ax[r, 0].set_ylabel(lab)
     _finish(fig, ax, title + ": learning of a, b (dashed: true)")
     paths.append(_save(fig, out / "learning.png"))
@@ -149,11 +171,13 @@ def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
     env = "tau_min" in log and "tau_max" in log
     for i in range(n):
         for r in range(2):
-            ax[r, 0].plot(t, log["tau"][:, i, r], color=follower_rgb(i), lw=1.0,
-                          label=f"follower {i + 1}" if r == 0 else None)
+            ax[r, 0].plot(
+                t, log["tau"][:, i, r], color=follower_rgb(i), lw=1.0, label=f"follower {i + 1}" if r == 0 else None
+            )
             if env:
-                ax[r, 0].fill_between(t, log["tau_min"][:, i, r], log["tau_max"][:, i, r], color=follower_rgb(i),
-                                      alpha=0.18, lw=0)
+                ax[r, 0].fill_between(
+                    t, log["tau_min"][:, i, r], log["tau_max"][:, i, r], color=follower_rgb(i), alpha=0.18, lw=0
+                )
         ax[2, 0].plot(t, log["vs"][:, i], color=follower_rgb(i), lw=1.2)
     ax[0, 0].set_ylabel("τ_L (N·m)")
     ax[1, 0].set_ylabel("τ_R (N·m)")
@@ -192,13 +216,19 @@ def _trajectories(log: Mapping[str, np.ndarray], title: str, ax: Any = None) -> 
     ax.set_ylabel("y (m)")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8, loc="best")
-    ax.set_title(title + ": trajectories (× formation slots, arrows: headings)" if fig is not None else title, fontsize=10)
+    ax.set_title(
+        title + ": trajectories (× formation slots, arrows: headings)" if fig is not None else title, fontsize=10
+    )
     return fig
 
 
 def _arrow(ax: Any, pose: np.ndarray, rgb: tuple[float, float, float], length: float = 0.6) -> None:
-    ax.annotate("", xy=(pose[0] + length * np.cos(pose[2]), pose[1] + length * np.sin(pose[2])),
-                xytext=(pose[0], pose[1]), arrowprops=dict(arrowstyle="->", color=rgb, lw=1.5))
+    ax.annotate(
+        "",
+        xy=(pose[0] + length * np.cos(pose[2]), pose[1] + length * np.sin(pose[2])),
+        xytext=(pose[0], pose[1]),
+        arrowprops=dict(arrowstyle="->", color=rgb, lw=1.5),
+    )
 
 
 def _finish(fig: Any, ax: np.ndarray, title: str, *, legend: bool = True) -> None:
@@ -245,8 +275,11 @@ def table1_figures(results_by_method: Mapping[str, Any], out_dir: str | Path) ->
     paths.append(_save(fig, out / "table1_velocity_commands.png"))
 
     # velocity error with and without learning (paper Fig. 6)
-    pairs = [(a, b) for a, b in (("bioinspired", "bioinspired-learning"), ("backstepping", "backstepping-learning"))
-             if a in logs and b in logs]
+    pairs = [
+        (a, b)
+        for a, b in (("bioinspired", "bioinspired-learning"), ("backstepping", "backstepping-learning"))
+        if a in logs and b in logs
+    ]
     if pairs:
         fig, ax = _figure(len(pairs), n, width=4.0 * n + 1, row_h=2.6)
         for r, pair in enumerate(pairs):
@@ -274,8 +307,15 @@ def table1_figures(results_by_method: Mapping[str, Any], out_dir: str | Path) ->
         ax1.bar(x + (j - (len(methods) - 1) / 2) * width, ours, width * 0.9, color=color[m], label=m)
         paper = PAPER_TABLE1.get(m)
         if paper is not None and n == len(paper):
-            ax1.plot(x + (j - (len(methods) - 1) / 2) * width, paper, "_", color="k", ms=14, mew=2,
-                     label="paper" if j == 0 else None)
+            ax1.plot(
+                x + (j - (len(methods) - 1) / 2) * width,
+                paper,
+                "_",
+                color="k",
+                ms=14,
+                mew=2,
+                label="paper" if j == 0 else None,
+            )
     ax1.set_xticks(x, [f"follower {i + 1}" for i in range(n)])
     ax1.set_ylabel("∫ |υ_cmd−υ| + |ω_cmd−ω| dt")
     ax1.set_yscale("log")
@@ -292,7 +332,9 @@ def table1_figures(results_by_method: Mapping[str, Any], out_dir: str | Path) ->
             lg = logs[m]
             for r in range(2):
                 for i in range(n):
-                    ax[r, c].plot(lg["t"], lg["c_hat"][:, i, r], color=follower_rgb(i), lw=1.3, label=f"follower {i + 1}")
+                    ax[r, c].plot(
+                        lg["t"], lg["c_hat"][:, i, r], color=follower_rgb(i), lw=1.3, label=f"follower {i + 1}"
+                    )
                     ax[r, c].plot(lg["t"], lg["c_true"][:, i, r], color=follower_rgb(i), lw=0.9, ls="--")
             ax[0, c].set_title(m, fontsize=9)
         ax[0, 0].set_ylabel("â (1/(kg·m))")
@@ -307,7 +349,7 @@ def table1_figures(results_by_method: Mapping[str, Any], out_dir: str | Path) ->
     axs = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
     for a, m in zip(axs, methods):
         _trajectories(logs[m], m, ax=a)
-    for a in axs[len(methods):]:
+    for a in axs[len(methods) :]:
         a.set_visible(False)
     fig.suptitle(title + ": trajectories", fontsize=10)
     paths.append(_save(fig, out / "table1_trajectories.png"))

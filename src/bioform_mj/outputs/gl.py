@@ -14,6 +14,7 @@ for, so every other output of the run is still written.
 
 Nothing in this module imports MuJoCo at import time.
 """
+
 from __future__ import annotations
 
 import os
@@ -70,8 +71,10 @@ def backend() -> str:
 
 
 def _advice() -> str:
-    return ("set MUJOCO_GL=egl (Debian/Ubuntu packages libegl1 and libgl1-mesa-dri; a GPU driver's EGL also works) "
-            "or MUJOCO_GL=osmesa (package libosmesa6), or run without --video")
+    return (
+        "set MUJOCO_GL=egl (Debian/Ubuntu packages libegl1 and libgl1-mesa-dri; a GPU driver's EGL also works) "
+        "or MUJOCO_GL=osmesa (package libosmesa6), or run without --video"
+    )
 
 
 def make_renderer(model: Any, width: int, height: int, *, fast: bool | None = None) -> tuple[Any, bool]:
@@ -84,8 +87,10 @@ def make_renderer(model: Any, width: int, height: int, *, fast: bool | None = No
     a GPU.
     """
     if _invalid_value is not None:
-        raise GLUnavailable(f"cannot render: MUJOCO_GL={_invalid_value!r} is not a MuJoCo OpenGL backend "
-                            f"(expected egl, osmesa or glfw); {_advice()}")
+        raise GLUnavailable(
+            f"cannot render: MUJOCO_GL={_invalid_value!r} is not a MuJoCo OpenGL backend "
+            f"(expected egl, osmesa or glfw); {_advice()}"
+        )
     value = backend().lower().strip()
     if value in _DISABLED:
         raise GLUnavailable(f"cannot render: rendering is disabled by MUJOCO_GL={backend()!r}; {_advice()}")
@@ -102,8 +107,10 @@ def make_renderer(model: Any, width: int, height: int, *, fast: bool | None = No
         renderer.render()  # make the context current and prove it draws
     except Exception as exc:  # noqa: BLE001 - every GL platform fails in its own way
         msg = " ".join(str(exc).split()) or type(exc).__name__
-        raise GLUnavailable(f"cannot create an OpenGL context for off-screen rendering (MUJOCO_GL="
-                            f"{backend() or 'unset'}: {type(exc).__name__}: {msg[:200]}); {_advice()}") from exc
+        raise GLUnavailable(
+            f"cannot create an OpenGL context for off-screen rendering (MUJOCO_GL="
+            f"{backend() or 'unset'}: {type(exc).__name__}: {msg[:200]}); {_advice()}"
+        ) from exc
     return renderer, bool(fast)
 
 
@@ -141,7 +148,8 @@ def probe(width: int = 64, height: int = 64) -> str:
     import mujoco
 
     model = mujoco.MjModel.from_xml_string(
-        "<mujoco><worldbody><light pos='0 0 2'/><geom type='sphere' size='0.1'/></worldbody></mujoco>")
+        "<mujoco><worldbody><light pos='0 0 2'/><geom type='sphere' size='0.1'/></worldbody></mujoco>"
+    )
     r, _ = make_renderer(model, width, height, fast=False)
     try:
         return gl_renderer_name()

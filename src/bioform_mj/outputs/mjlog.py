@@ -8,6 +8,7 @@ loop's ``mj_step``) with one that only remembers the message; the CLI echoes eac
 to ``DIR/MUJOCO_LOG.TXT``. Errors need nothing: the Python bindings turn ``mju_error`` into
 an exception and log nothing. No ``chdir``: the working directory stays the user's.
 """
+
 from __future__ import annotations
 
 import sys
@@ -35,7 +36,7 @@ class MujocoLog:
         except Exception:  # noqa: BLE001
             pass
 
-    def install(self) -> "MujocoLog":
+    def install(self) -> MujocoLog:
         import mujoco
 
         mujoco.set_mju_user_warning(self._handler)
@@ -51,7 +52,7 @@ class MujocoLog:
 
     def write(self, folder: str | Path) -> Path | None:
         """Append the messages not yet written to ``folder/MUJOCO_LOG.TXT`` (MuJoCo's format); None if none."""
-        new = self.messages[self.written:]
+        new = self.messages[self.written :]
         if not new:
             return None
         path = Path(folder) / FILENAME
@@ -61,7 +62,7 @@ class MujocoLog:
         self.written += len(new)
         return path
 
-    def __enter__(self) -> "MujocoLog":
+    def __enter__(self) -> MujocoLog:
         return self.install()
 
     def __exit__(self, *exc) -> None:

@@ -11,11 +11,13 @@ A phase ends at ``cb.phase(None)`` or when the count next advances; either way t
 clock restarts, so the rate and the time left describe the stepping alone and not the
 compile that came before it. ``cb.write(msg)`` prints a line above the bar.
 """
+
 from __future__ import annotations
 
 import contextlib
 import sys
-from typing import Callable, Iterator, TextIO
+from collections.abc import Callable, Iterator
+from typing import TextIO
 
 ProgressFn = Callable[[int, int], None]
 
@@ -30,8 +32,9 @@ def wanted(enabled: bool = True, stream: TextIO | None = None) -> bool:
 
 
 @contextlib.contextmanager
-def progress_bar(label: str, enabled: bool = True, *, unit: str = "%", stream: TextIO | None = None
-                 ) -> Iterator[ProgressFn | None]:
+def progress_bar(
+    label: str, enabled: bool = True, *, unit: str = "%", stream: TextIO | None = None
+) -> Iterator[ProgressFn | None]:
     """A tqdm bar labelled ``label`` while the block runs, as a ``cb(k, n)`` callback; ``None`` when not wanted.
 
     ``unit="%"`` shows percent (for control steps, whose count means little); any other
@@ -45,9 +48,15 @@ def progress_bar(label: str, enabled: bool = True, *, unit: str = "%", stream: T
 
     tqdm.monitor_interval = 0  # no monitor thread: `bioform sweep` forks its workers
     percent = unit == "%"
-    bar = tqdm(total=100 if percent else 1, desc=label, file=stream, leave=True, dynamic_ncols=True,
-               unit="%" if percent else unit,
-               bar_format="{l_bar}{bar}| {n:.0f}% [{elapsed}<{remaining}]" if percent else None)
+    bar = tqdm(
+        total=100 if percent else 1,
+        desc=label,
+        file=stream,
+        leave=True,
+        dynamic_ncols=True,
+        unit="%" if percent else unit,
+        bar_format="{l_bar}{bar}| {n:.0f}% [{elapsed}<{remaining}]" if percent else None,
+    )
     state: dict = {"n": 0, "phase": None}
 
     def restart_clock() -> None:

@@ -30,6 +30,7 @@ Layout (timeline ``sim_time``, a duration in s)::
 
 ``<i>`` is 1-based. A default blueprint shows the 3D view beside one tab of plots per follower.
 """
+
 from __future__ import annotations
 
 import json
@@ -37,8 +38,9 @@ import os
 import re
 import shutil
 import sys
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -68,15 +70,18 @@ def connect_url(addr: str) -> str:
         return f"rerun+http://{a}/proxy"
     if _URL.match(a):
         return a if a.endswith("/proxy") else a + "/proxy"
-    raise InputError(f"--rerun-connect: '{addr}' is not a rerun address "
-                     "(expected rerun+http://HOST:PORT/proxy, HOST:PORT or PORT)")
+    raise InputError(
+        f"--rerun-connect: '{addr}' is not a rerun address (expected rerun+http://HOST:PORT/proxy, HOST:PORT or PORT)"
+    )
 
 
 def check_can_spawn() -> None:
     """InputError, before the run, when a spawned viewer could not open a window (Linux without a display)."""
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise InputError("--rerun-spawn needs a display for the viewer window (DISPLAY or WAYLAND_DISPLAY is not set); "
-                         "use --rrd and open run.rrd elsewhere, or --rerun-connect to a viewer on another machine")
+        raise InputError(
+            "--rerun-spawn needs a display for the viewer window (DISPLAY or WAYLAND_DISPLAY is not set); "
+            "use --rrd and open run.rrd elsewhere, or --rerun-connect to a viewer on another machine"
+        )
 
 
 def _viewer_on_path() -> None:
@@ -97,7 +102,6 @@ def _quat_xyzw(theta: np.ndarray) -> np.ndarray:
     return np.column_stack([np.zeros_like(th), np.zeros_like(th), np.sin(th / 2), np.cos(th / 2)])
 
 
-
 def _u8(rgb: tuple[float, float, float], alpha: float = 1.0) -> list[int]:
     return [int(round(255 * c)) for c in rgb] + [int(round(255 * alpha))]
 
@@ -105,23 +109,45 @@ def _u8(rgb: tuple[float, float, float], alpha: float = 1.0) -> list[int]:
 #: Scalar series per follower: entity leaf, extractor (log, i) → (K, m), names, colours of the m lines.
 _SERIES: list[tuple[str, Callable[[Mapping[str, np.ndarray], int], np.ndarray], tuple[str, ...]]] = [
     ("formation_error", lambda g, i: g["formation_error"][:, i, None], ("|p − slot| (m)",)),
-    ("estimation_error", lambda g, i: np.column_stack([
-        g["estimation_error"][:, i], wrap(g["est_pose"][:, i, 2] - g["leader_pose"][:, 2])]),
-     ("position (m)", "heading (rad)")),
+    (
+        "estimation_error",
+        lambda g, i: np.column_stack(
+            [g["estimation_error"][:, i], wrap(g["est_pose"][:, i, 2] - g["leader_pose"][:, 2])]
+        ),
+        ("position (m)", "heading (rad)"),
+    ),
     ("tracking_error", lambda g, i: g["tracking_error"][:, i, :], ("x̃ (m)", "ỹ (m)", "θ̃ (rad)")),
-    ("v", lambda g, i: np.column_stack([g["cmd"][:, i, 0], g["vel"][:, i, 0], g["est_vel"][:, i, 0]]),
-     ("υ_cmd", "υ", "υ_ir (estimate of υ_r)")),
-    ("omega", lambda g, i: np.column_stack([g["cmd"][:, i, 1], g["vel"][:, i, 1], g["est_vel"][:, i, 1]]),
-     ("ω_cmd", "ω", "ω_ir (estimate of ω_r)")),
-    ("torque", lambda g, i: (np.column_stack([g["tau"][:, i, :], g["tau_min"][:, i, :], g["tau_max"][:, i, :]])
-                             if "tau_min" in g else g["tau"][:, i, :]),
-     ("τ_L mean (N·m)", "τ_R mean (N·m)", "τ_L min", "τ_R min", "τ_L max", "τ_R max")),
+    (
+        "v",
+        lambda g, i: np.column_stack([g["cmd"][:, i, 0], g["vel"][:, i, 0], g["est_vel"][:, i, 0]]),
+        ("υ_cmd", "υ", "υ_ir (estimate of υ_r)"),
+    ),
+    (
+        "omega",
+        lambda g, i: np.column_stack([g["cmd"][:, i, 1], g["vel"][:, i, 1], g["est_vel"][:, i, 1]]),
+        ("ω_cmd", "ω", "ω_ir (estimate of ω_r)"),
+    ),
+    (
+        "torque",
+        lambda g, i: (
+            np.column_stack([g["tau"][:, i, :], g["tau_min"][:, i, :], g["tau_max"][:, i, :]])
+            if "tau_min" in g
+            else g["tau"][:, i, :]
+        ),
+        ("τ_L mean (N·m)", "τ_R mean (N·m)", "τ_L min", "τ_R min", "τ_L max", "τ_R max"),
+    ),
     ("a", lambda g, i: np.column_stack([g["c_hat"][:, i, 0], g["c_true"][:, i, 0]]), ("â", "a (true)")),
     ("b", lambda g, i: np.column_stack([g["c_hat"][:, i, 1], g["c_true"][:, i, 1]]), ("b̂", "b (true)")),
     ("vs", lambda g, i: g["vs"][:, i, None], ("V_s",)),
 ]
-_LINE_COLORS = [(0.84, 0.15, 0.16), (0.12, 0.47, 0.71), (0.5, 0.5, 0.5), (0.12, 0.47, 0.71), (0.95, 0.6, 0.6),
-                (0.6, 0.75, 0.9)]
+_LINE_COLORS = [
+    (0.84, 0.15, 0.16),
+    (0.12, 0.47, 0.71),
+    (0.5, 0.5, 0.5),
+    (0.12, 0.47, 0.71),
+    (0.95, 0.6, 0.6),
+    (0.6, 0.75, 0.9),
+]
 
 
 def blueprint(n: int) -> Any:
@@ -132,8 +158,11 @@ def blueprint(n: int) -> Any:
     for i in range(1, n + 1):
         views = [rrb.TimeSeriesView(origin=f"/follower/{i}/{leaf}", name=leaf) for leaf, _, _ in _SERIES]
         tabs.append(rrb.Grid(*views, name=f"follower {i}"))
-    overview = rrb.TimeSeriesView(origin="/follower", name="formation errors",
-                                  contents=[f"/follower/{i}/formation_error" for i in range(1, n + 1)])
+    overview = rrb.TimeSeriesView(
+        origin="/follower",
+        name="formation errors",
+        contents=[f"/follower/{i}/formation_error" for i in range(1, n + 1)],
+    )
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(rrb.Spatial3DView(origin="/world", name="formation"), overview, row_shares=[3, 1]),
@@ -150,27 +179,59 @@ def _log_static(rec: Any, n: int, summary: Mapping[str, Any] | None, label: str)
 
     rec.send_recording_name(label)
     rec.log("/world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    rec.log("/world/leader", rr.Boxes3D(half_sizes=[_LEADER_HALF], centers=[[0, 0, _LEADER_HALF[2]]],
-                                        colors=[_u8(LEADER_RGB, 0.6)], labels=["leader"],
-                                        fill_mode=rr.components.FillMode.Solid), static=True)
+    rec.log(
+        "/world/leader",
+        rr.Boxes3D(
+            half_sizes=[_LEADER_HALF],
+            centers=[[0, 0, _LEADER_HALF[2]]],
+            colors=[_u8(LEADER_RGB, 0.6)],
+            labels=["leader"],
+            fill_mode=rr.components.FillMode.Solid,
+        ),
+        static=True,
+    )
     rec.log("/world/paths/leader", rr.LineStrips3D([], colors=[_u8(LEADER_RGB)], radii=[0.02]), static=True)
     for i in range(n):
         c = follower_rgb(i)
         base = f"/world/follower/{i + 1}"
-        rec.log(f"{base}/robot", rr.Boxes3D(half_sizes=[_ROBOT_HALF], centers=[[0, 0, _ROBOT_HALF[2]]],
-                                            colors=[_u8(c)], labels=[f"F{i + 1}"],
-                                            fill_mode=rr.components.FillMode.Solid), static=True)
-        rec.log(f"{base}/robot/heading", rr.Arrows3D(vectors=[[0.4, 0, 0]], origins=[[0, 0, 0.17]], colors=[_u8(c)]),
-                static=True)
-        rec.log(f"{base}/estimate", rr.Boxes3D(half_sizes=[_LEADER_HALF], centers=[[0, 0, _LEADER_HALF[2]]],
-                                               colors=[_u8(c, 0.5)], labels=[f"F{i + 1}'s leader estimate"]),
-                static=True)
+        rec.log(
+            f"{base}/robot",
+            rr.Boxes3D(
+                half_sizes=[_ROBOT_HALF],
+                centers=[[0, 0, _ROBOT_HALF[2]]],
+                colors=[_u8(c)],
+                labels=[f"F{i + 1}"],
+                fill_mode=rr.components.FillMode.Solid,
+            ),
+            static=True,
+        )
+        rec.log(
+            f"{base}/robot/heading",
+            rr.Arrows3D(vectors=[[0.4, 0, 0]], origins=[[0, 0, 0.17]], colors=[_u8(c)]),
+            static=True,
+        )
+        rec.log(
+            f"{base}/estimate",
+            rr.Boxes3D(
+                half_sizes=[_LEADER_HALF],
+                centers=[[0, 0, _LEADER_HALF[2]]],
+                colors=[_u8(c, 0.5)],
+                labels=[f"F{i + 1}'s leader estimate"],
+            ),
+            static=True,
+        )
         rec.log(f"{base}/slot", rr.Points3D.from_fields(colors=[_u8(c)], radii=[0.12]), static=True)
         rec.log(f"{base}/path", rr.LineStrips3D.from_fields(colors=[_u8(c)], radii=[0.015]), static=True)
         for leaf, _, names in _SERIES:
-            rec.log(f"/follower/{i + 1}/{leaf}",
-                    rr.SeriesLines(names=list(names), colors=[_u8(col) for col in _LINE_COLORS[:len(names)]],
-                                   widths=[1.5] * len(names)), static=True)
+            rec.log(
+                f"/follower/{i + 1}/{leaf}",
+                rr.SeriesLines(
+                    names=list(names),
+                    colors=[_u8(col) for col in _LINE_COLORS[: len(names)]],
+                    widths=[1.5] * len(names),
+                ),
+                static=True,
+            )
     if summary is not None:
         brief = {k: v for k, v in summary.items() if k != "config"}
         text = "```json\n" + json.dumps(brief, indent=1, default=str) + "\n```"
@@ -208,29 +269,49 @@ def send_log(rec: Any, log: Mapping[str, np.ndarray]) -> None:
     n = log["pose"].shape[1]
     idx = [rr.TimeColumn(TIMELINE, duration=t)]
     lp = log["leader_pose"]
-    rec.send_columns("/world/leader", idx, rr.Transform3D.columns(
-        translation=np.column_stack([lp[:, :2], np.zeros(len(t))]), quaternion=_quat_xyzw(lp[:, 2])))
+    rec.send_columns(
+        "/world/leader",
+        idx,
+        rr.Transform3D.columns(
+            translation=np.column_stack([lp[:, :2], np.zeros(len(t))]), quaternion=_quat_xyzw(lp[:, 2])
+        ),
+    )
     ts, strips = _strip_rows(t, lp[:, :2], _PATH_HZ)
-    rec.send_columns("/world/paths/leader", [rr.TimeColumn(TIMELINE, duration=ts)],
-                     rr.LineStrips3D.columns(strips=strips))
+    rec.send_columns(
+        "/world/paths/leader", [rr.TimeColumn(TIMELINE, duration=ts)], rr.LineStrips3D.columns(strips=strips)
+    )
     offsets = np.asarray(log["offsets"], dtype=float) if "offsets" in log else np.zeros((n, 2))
     for i in range(n):
         base = f"/world/follower/{i + 1}"
         p = log["pose"][:, i]
-        rec.send_columns(f"{base}/robot", idx, rr.Transform3D.columns(
-            translation=np.column_stack([p[:, :2], np.zeros(len(t))]), quaternion=_quat_xyzw(p[:, 2])))
+        rec.send_columns(
+            f"{base}/robot",
+            idx,
+            rr.Transform3D.columns(
+                translation=np.column_stack([p[:, :2], np.zeros(len(t))]), quaternion=_quat_xyzw(p[:, 2])
+            ),
+        )
         e = log["est_pose"][:, i]
-        rec.send_columns(f"{base}/estimate", idx, rr.Transform3D.columns(
-            translation=np.column_stack([e[:, :2], np.zeros(len(t))]), quaternion=_quat_xyzw(e[:, 2])))
+        rec.send_columns(
+            f"{base}/estimate",
+            idx,
+            rr.Transform3D.columns(
+                translation=np.column_stack([e[:, :2], np.zeros(len(t))]), quaternion=_quat_xyzw(e[:, 2])
+            ),
+        )
         slot = lp[:, :2] - offsets[i]
-        rec.send_columns(f"{base}/slot", idx, rr.Points3D.columns(
-            positions=np.column_stack([slot, np.full(len(t), 0.01)])))
+        rec.send_columns(
+            f"{base}/slot", idx, rr.Points3D.columns(positions=np.column_stack([slot, np.full(len(t), 0.01)]))
+        )
         ts, strips = _strip_rows(t, p[:, :2], _PATH_HZ)
         rec.send_columns(f"{base}/path", [rr.TimeColumn(TIMELINE, duration=ts)], rr.LineStrips3D.columns(strips=strips))
-        for leaf, fn, names in _SERIES:
+        for leaf, fn, _names in _SERIES:
             vals = np.asarray(fn(log, i), dtype=float)
-            rec.send_columns(f"/follower/{i + 1}/{leaf}", idx,
-                             rr.Scalars.columns(scalars=vals).partition(lengths=np.full(len(t), vals.shape[1])))
+            rec.send_columns(
+                f"/follower/{i + 1}/{leaf}",
+                idx,
+                rr.Scalars.columns(scalars=vals).partition(lengths=np.full(len(t), vals.shape[1])),
+            )
 
 
 def _label(summary: Mapping[str, Any]) -> str:
@@ -367,13 +448,20 @@ def state_row(run: Any) -> dict[str, np.ndarray]:
     slots = np.asarray(run.slots, dtype=float)
     row = {
         "t": np.array([run.t]),
-        "leader_pose": lp, "leader_vel": np.asarray(run.leader_vel, dtype=float),
-        "pose": pose, "vel": np.asarray(run.vel, dtype=float),
-        "est_pose": est, "est_vel": get("est_vel", (n, 2)),
-        "cmd": get("cmd", (n, 2)), "tau": get("tau", (n, 2)),
-        "tau_min": get("tau", (n, 2)), "tau_max": get("tau", (n, 2)),  # live: the instant's torque
-        "c_hat": get("c_hat", (n, 2)), "c_true": np.asarray(run.plant.c_true(), dtype=float),
-        "vs": get("vs", (n,)), "tracking_error": get("tracking_error", (n, 3)),
+        "leader_pose": lp,
+        "leader_vel": np.asarray(run.leader_vel, dtype=float),
+        "pose": pose,
+        "vel": np.asarray(run.vel, dtype=float),
+        "est_pose": est,
+        "est_vel": get("est_vel", (n, 2)),
+        "cmd": get("cmd", (n, 2)),
+        "tau": get("tau", (n, 2)),
+        "tau_min": get("tau", (n, 2)),
+        "tau_max": get("tau", (n, 2)),  # live: the instant's torque
+        "c_hat": get("c_hat", (n, 2)),
+        "c_true": np.asarray(run.plant.c_true(), dtype=float),
+        "vs": get("vs", (n,)),
+        "tracking_error": get("tracking_error", (n, 3)),
         "formation_error": np.linalg.norm(pose[:, :2] - slots, axis=1),
         "estimation_error": np.linalg.norm(est[:, :2] - lp[None, :2], axis=1),
         "slots": slots,

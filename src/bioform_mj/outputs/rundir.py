@@ -9,6 +9,7 @@ Concurrent writers are refused with an ``fcntl.flock`` on ``DIR/.bioform.lock``:
 drops the lock when its holder dies, so a killed run leaves no stale lock (at most the empty
 lock file, which the next run reuses). The lock file is removed when the run ends.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -21,8 +22,9 @@ from ..errors import InputError
 from .files import check_out_dir
 
 #: Files a run or a table1 writes into its folder (extend when a command writes a new one).
-RUN_FILES = frozenset({"summary.json", "log.npz", "scene.xml", "video.mp4", "run.rrd", "MUJOCO_LOG.TXT",
-                       "table1.json", "table1.md"})
+RUN_FILES = frozenset(
+    {"summary.json", "log.npz", "scene.xml", "video.mp4", "run.rrd", "MUJOCO_LOG.TXT", "table1.json", "table1.md"}
+)
 #: Folders a run writes, and the file suffixes they may hold.
 RUN_DIRS = {"figures": (".png",)}
 LOCK_NAME = ".bioform.lock"
@@ -57,12 +59,14 @@ def survey(path: Path) -> tuple[list[str], list[str]]:
         elif name in RUN_DIRS and entry.is_dir(follow_symlinks=False):
             sfx = RUN_DIRS[name]
             inner = [e for e in os.scandir(entry.path)]
-            if all(e.is_file(follow_symlinks=False) and (e.name.endswith(sfx) or _is_tmp(e.name, sfx))
-                   for e in inner):
+            if all(e.is_file(follow_symlinks=False) and (e.name.endswith(sfx) or _is_tmp(e.name, sfx)) for e in inner):
                 ours.append(name + "/")
             else:
-                bad = next(e.name for e in inner if not (e.is_file(follow_symlinks=False) and
-                                                         (e.name.endswith(sfx) or _is_tmp(e.name, sfx))))
+                bad = next(
+                    e.name
+                    for e in inner
+                    if not (e.is_file(follow_symlinks=False) and (e.name.endswith(sfx) or _is_tmp(e.name, sfx)))
+                )
                 foreign.append(f"{name}/{bad}")
         else:
             foreign.append(name + ("/" if entry.is_dir(follow_symlinks=False) else ""))
@@ -90,7 +94,7 @@ class RunDir:
         self._created: list[Path] = []
 
     # -- before any work ---------------------------------------------------------------
-    def check(self) -> "RunDir":
+    def check(self) -> RunDir:
         """Raise :class:`InputError` if the folder cannot be written or holds what we must not touch."""
         check_out_dir(self.path, self.what)
         self._check_contents()
@@ -100,14 +104,18 @@ class RunDir:
         ours, foreign = survey(self.path)
         real = [n for n in ours if not _TMP.match(n)]
         if foreign:
-            raise InputError(f"{self.what} '{self.path}' holds files that are not a run's ({_short(foreign)}); "
-                             f"choose an empty or new folder (nothing there is deleted, even with --overwrite)")
+            raise InputError(
+                f"{self.what} '{self.path}' holds files that are not a run's ({_short(foreign)}); "
+                f"choose an empty or new folder (nothing there is deleted, even with --overwrite)"
+            )
         if real and not self.overwrite:
-            raise InputError(f"{self.what} '{self.path}' holds another run's files ({_short(real)}); "
-                             f"use --overwrite to replace them, or choose another --out")
+            raise InputError(
+                f"{self.what} '{self.path}' holds another run's files ({_short(real)}); "
+                f"use --overwrite to replace them, or choose another --out"
+            )
 
     # -- while writing -----------------------------------------------------------------
-    def __enter__(self) -> "RunDir":
+    def __enter__(self) -> RunDir:
         missing = []
         p = self.path
         while not p.exists() and p.parent != p:

@@ -17,14 +17,16 @@ shape (leader → slots) and a caption with time, method, plant and formation er
 default camera (``auto``) is a free camera that keeps the leader, the followers and the
 slots in view; ``track`` and ``top`` are the scene's cameras riding on the centroid.
 """
+
 from __future__ import annotations
 
 import importlib.util
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -51,7 +53,7 @@ class VideoOptions:
     fps: float = 30.0
     camera: str = "auto"
 
-    def validate(self) -> "VideoOptions":
+    def validate(self) -> VideoOptions:
         """Raise :class:`InputError` for sizes ffmpeg's ``yuv420p`` cannot take or an unknown camera."""
         for name, v in (("width", self.width), ("height", self.height)):
             if not (16 <= v <= 4096) or v % 2:
@@ -169,8 +171,15 @@ class _Replay:
                 th = pose[i, 2]
                 c, s = np.cos(th), np.sin(th)
                 ax, ay = self.axle[i, 0], self.axle[i, 1]
-                d.qpos[a:a + 7] = (pose[i, 0] - (c * ax - s * ay), pose[i, 1] - (s * ax + c * ay), self.base_z[i],
-                                   np.cos(th / 2), 0.0, 0.0, np.sin(th / 2))
+                d.qpos[a : a + 7] = (
+                    pose[i, 0] - (c * ax - s * ay),
+                    pose[i, 1] - (s * ax + c * ay),
+                    self.base_z[i],
+                    np.cos(th / 2),
+                    0.0,
+                    0.0,
+                    np.sin(th / 2),
+                )
                 d.qpos[self.wheel_q[i]] = self.sign[i] * self.wheel[i]
         self.markers.place(d, capture.leader[k], capture.slots[k], capture.pose[k][:, :2].mean(axis=0))
         mj.mj_kinematics(m, d)
@@ -188,8 +197,9 @@ def _camera_basis(az_deg: float, el_deg: float) -> tuple[np.ndarray, np.ndarray,
     return fwd, right, up
 
 
-def auto_camera_path(capture: FrameCapture, fovy_deg: float, aspect: float,
-                     azimuth: float = _AZIMUTH, elevation: float = _ELEVATION) -> tuple[np.ndarray, np.ndarray]:
+def auto_camera_path(
+    capture: FrameCapture, fovy_deg: float, aspect: float, azimuth: float = _AZIMUTH, elevation: float = _ELEVATION
+) -> tuple[np.ndarray, np.ndarray]:
     """Per frame ``lookat`` (K, 3) and ``distance`` (K,) m of a free camera that shows everyone.
 
     Each frame's requirement is the smallest distance at which every follower, the leader
@@ -203,8 +213,15 @@ def auto_camera_path(capture: FrameCapture, fovy_deg: float, aspect: float,
     ground_fwd = np.array([fwd[0], fwd[1], 0.0]) / np.hypot(fwd[0], fwd[1])
     tan_v = np.tan(np.radians(fovy_deg) / 2)
     tan_h = tan_v * aspect
-    pts = [np.column_stack([np.vstack([capture.pose[k][:, :2], capture.leader[k][None, :2], capture.slots[k]]),
-                            np.zeros(2 * capture.pose[k].shape[0] + 1)]) for k in range(K)]
+    pts = [
+        np.column_stack(
+            [
+                np.vstack([capture.pose[k][:, :2], capture.leader[k][None, :2], capture.slots[k]]),
+                np.zeros(2 * capture.pose[k].shape[0] + 1),
+            ]
+        )
+        for k in range(K)
+    ]
     centers = np.zeros((K, 3))
     for k in range(K):
         u, w = pts[k] @ right, pts[k] @ ground_fwd  # ground coordinates across and along the view
@@ -215,8 +232,11 @@ def auto_camera_path(capture: FrameCapture, fovy_deg: float, aspect: float,
     for k in range(K):
         rel = np.vstack([pts[k], pts[k] + [0.0, 0.0, 0.3]]) - centers[k]
         depth = rel @ fwd
-        need[k] = max(np.max((np.abs(rel @ right) + _MARGIN) / tan_h - depth),
-                      np.max((np.abs(rel @ up) + _MARGIN) / tan_v - depth), 2.0)
+        need[k] = max(
+            np.max((np.abs(rel @ right) + _MARGIN) / tan_h - depth),
+            np.max((np.abs(rel @ up) + _MARGIN) / tan_v - depth),
+            2.0,
+        )
     need = _moving_max(need, win)
     dist = np.maximum(_moving_average(need[:, None], win)[:, 0], need)
     return centers, dist
@@ -228,14 +248,14 @@ def _moving_average(x: np.ndarray, half: int) -> np.ndarray:
         return x.copy()
     pad = np.concatenate([np.repeat(x[:1], half, axis=0), x, np.repeat(x[-1:], half, axis=0)])
     c = np.cumsum(np.vstack([np.zeros((1, x.shape[1])), pad]), axis=0)
-    return (c[2 * half + 1:] - c[:-2 * half - 1]) / (2 * half + 1)
+    return (c[2 * half + 1 :] - c[: -2 * half - 1]) / (2 * half + 1)
 
 
 def _moving_max(x: np.ndarray, half: int) -> np.ndarray:
     """Centred moving maximum over ``2·half + 1`` samples."""
     out = np.empty_like(x)
     for k in range(len(x)):
-        out[k] = x[max(0, k - half):k + half + 1].max()
+        out[k] = x[max(0, k - half) : k + half + 1].max()
     return out
 
 
@@ -265,7 +285,7 @@ class _Trails:
             for tr, kept in enumerate(self.kept):
                 a = self.xy[tr, kept[-1]]
                 b = self.xy[tr, j]
-                mid = self.xy[tr, kept[-1] + 1:j]  # the points the chord a→b would skip
+                mid = self.xy[tr, kept[-1] + 1 : j]  # the points the chord a→b would skip
                 if len(mid):
                     ab = b - a
                     L = float(np.hypot(*ab))
@@ -441,8 +461,10 @@ class FrameRenderer:
         _add_geoms(r, cap, self.trails, k, line_px=self.line_px)
         img = r.render()
         fe = np.linalg.norm(cap.pose[k][:, :2] - cap.slots[k], axis=1)
-        lines = [[(f"t = {cap.t[k]:5.2f} s   {sc.method}   {sc.plant.kind} plant", (1.0, 1.0, 1.0))],
-                 [("leader", LEADER_RGB)] + [(f"   F{i + 1} {fe[i]:.2f} m", self.colors[i]) for i in range(sc.n)]]
+        lines = [
+            [(f"t = {cap.t[k]:5.2f} s   {sc.method}   {sc.plant.kind} plant", (1.0, 1.0, 1.0))],
+            [("leader", LEADER_RGB)] + [(f"   F{i + 1} {fe[i]:.2f} m", self.colors[i]) for i in range(sc.n)],
+        ]
         return self.caption.draw(img, lines)
 
     def close(self) -> None:
@@ -450,8 +472,13 @@ class FrameRenderer:
         self.renderer.close()
 
 
-def render_video(capture: FrameCapture, result: Any, path: str | Path, options: VideoOptions,
-                 progress: Callable[[int, int], None] | None = None) -> VideoInfo:
+def render_video(
+    capture: FrameCapture,
+    result: Any,
+    path: str | Path,
+    options: VideoOptions,
+    progress: Callable[[int, int], None] | None = None,
+) -> VideoInfo:
     """Render the snapshots of ``capture`` (from the run ``result``) into an H.264 MP4 at ``path``.
 
     Frames are piped to ffmpeg as they are rendered (it encodes in parallel). Written to a
@@ -467,21 +494,26 @@ def render_video(capture: FrameCapture, result: Any, path: str | Path, options: 
     try:
         set_ffmpeg()
         with atomic_path(path) as tmp:
-            with mediapy.VideoWriter(tmp, shape=(options.height, options.width), fps=options.fps, codec="h264",
-                                     crf=23, ffmpeg_args=["-preset", "veryfast", "-movflags", "+faststart",
-                                                          "-f", "mp4"]) as writer:
+            with mediapy.VideoWriter(
+                tmp,
+                shape=(options.height, options.width),
+                fps=options.fps,
+                codec="h264",
+                crf=23,
+                ffmpeg_args=["-preset", "veryfast", "-movflags", "+faststart", "-f", "mp4"],
+            ) as writer:
                 for k in range(K):
                     writer.add_image(frames.frame(k))
                     if progress is not None:
                         progress(k + 1, K)
     finally:
         frames.close()
-    return VideoInfo(path, K, options.width, options.height, options.fps, time.perf_counter() - t0,
-                     frames.gl_renderer)
+    return VideoInfo(path, K, options.width, options.height, options.fps, time.perf_counter() - t0, frames.gl_renderer)
 
 
-def write_still(capture: FrameCapture, result: Any, path: str | Path, options: VideoOptions,
-                t: float | None = None) -> Path:
+def write_still(
+    capture: FrameCapture, result: Any, path: str | Path, options: VideoOptions, t: float | None = None
+) -> Path:
     """Write one frame (the snapshot nearest to ``t`` s, default the last) as a PNG, atomically."""
     import mediapy
 

@@ -1,7 +1,9 @@
 """The small interface every plant implements (design §8, STYLE: plants behind one interface)."""
+
 from __future__ import annotations
 
-from typing import Callable, Protocol
+from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 

@@ -4,9 +4,11 @@ The RK4 step is :func:`~bioform_mj.control.equations.unicycle_rk4` (written once
 plant object and the compiled chunk kernel :func:`run_chunk` both call it, so the
 step-by-step loop and the compiled loop compute the same bits.
 """
+
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -30,9 +32,25 @@ def ideal_step(x, tau, c, extra, dist, t, dt, n_sub):
         aw = (tr - tl) * c[i, 1] + extra[i, 1]
         xi, yi, th, v, w = x[i, 0], x[i, 1], x[i, 2], x[i, 3], x[i, 4]
         for s in range(n_sub):
-            xi, yi, th, v, w = unicycle_rk4(xi, yi, th, v, w, av, aw, dist[0, 0], dist[0, 1], dist[0, 2],
-                                           dist[0, 3], dist[1, 0], dist[1, 1], dist[1, 2], dist[1, 3],
-                                           t + s * h, h)
+            xi, yi, th, v, w = unicycle_rk4(
+                xi,
+                yi,
+                th,
+                v,
+                w,
+                av,
+                aw,
+                dist[0, 0],
+                dist[0, 1],
+                dist[0, 2],
+                dist[0, 3],
+                dist[1, 0],
+                dist[1, 1],
+                dist[1, 2],
+                dist[1, 3],
+                t + s * h,
+                h,
+            )
         x[i, 0], x[i, 1], x[i, 2], x[i, 3], x[i, 4] = xi, yi, wrap(th), v, w
 
 
@@ -44,8 +62,32 @@ def _observe(x, pose, vel):
 
 
 @njit
-def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, c, dist, x, extra, pose, vel, met, acc,
-              lg, j0, stride, offsets, lim, diag):
+def run_chunk(
+    g,
+    s,
+    comm,
+    k0,
+    k1,
+    N,
+    dt,
+    n_sub,
+    L_pose,
+    L_vel,
+    c,
+    dist,
+    x,
+    extra,
+    pose,
+    vel,
+    met,
+    acc,
+    lg,
+    j0,
+    stride,
+    offsets,
+    lim,
+    diag,
+):
     """Plant steps ``k0 … k1−1`` of the closed loop, each followed by the control step of
     ``k+1`` (if ``k+1 < N``; the control step of ``k0`` must be done). Returns
     ``(plant steps done, next log row, status)`` (status: ``engine.OK`` or a failed guard)."""
@@ -55,8 +97,9 @@ def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, c, dist, x, extra
         _observe(x, pose, vel)
         if k + 1 < N:
             control_step(g, s, L_pose[k + 1], L_vel[k + 1], pose, vel, comm)
-            j, status = after_control(k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c,
-                                      offsets, lim, diag)
+            j, status = after_control(
+                k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c, offsets, lim, diag
+            )
             if status != OK:
                 return k + 1 - k0, j, status
     return k1 - k0, j, OK
@@ -122,8 +165,16 @@ class IdealPlant:
         if dist is None:  # a disturbance given as a function: fold it into `extra`, held over the period
             extra = extra + np.asarray(self.disturbance(t), dtype=float)
             dist = np.zeros((2, 4))
-        ideal_step(self.x, np.ascontiguousarray(tau, dtype=float), self._c, np.ascontiguousarray(extra),
-                   dist, float(t), self.control_dt, self.n_substeps)
+        ideal_step(
+            self.x,
+            np.ascontiguousarray(tau, dtype=float),
+            self._c,
+            np.ascontiguousarray(extra),
+            dist,
+            float(t),
+            self.control_dt,
+            self.n_substeps,
+        )
 
     def compiled_chunk(self, ctx: Any) -> Callable[[int, int, int], tuple[int, int, int]] | None:
         """The compiled loop over this plant (see ``sim``), or None if a disturbance is not harmonic."""
@@ -133,9 +184,33 @@ class IdealPlant:
         pose, vel = ctx.pose, ctx.vel
 
         def chunk(k0: int, k1: int, j: int) -> tuple[int, int, int]:
-            return run_chunk(ctx.gains, ctx.state, ctx.comm, k0, k1, ctx.N, self.control_dt, self.n_substeps,
-                             ctx.L_pose, ctx.L_vel, self._c, self._dist, x, self._zero_acc, pose, vel, ctx.met,
-                             ctx.acc, ctx.log, j, ctx.stride, ctx.offsets, ctx.bounds, ctx.diag)
+            return run_chunk(
+                ctx.gains,
+                ctx.state,
+                ctx.comm,
+                k0,
+                k1,
+                ctx.N,
+                self.control_dt,
+                self.n_substeps,
+                ctx.L_pose,
+                ctx.L_vel,
+                self._c,
+                self._dist,
+                x,
+                self._zero_acc,
+                pose,
+                vel,
+                ctx.met,
+                ctx.acc,
+                ctx.log,
+                j,
+                ctx.stride,
+                ctx.offsets,
+                ctx.bounds,
+                ctx.diag,
+            )
+
         return chunk
 
     def set_leader(self, pose: np.ndarray, slots: np.ndarray | None) -> None:

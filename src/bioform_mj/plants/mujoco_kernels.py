@@ -6,12 +6,12 @@ Python; :func:`run_chunk` runs many control periods without returning to Python,
 on disk) on the very ``MjModel``/``MjData`` the Python bindings own. Both paths run the
 same functions, so the step-by-step and the compiled loop compute the same bits.
 """
+
 from __future__ import annotations
 
 import ctypes
 import importlib.util
 import os
-
 from typing import NamedTuple
 
 import numpy as np
@@ -30,8 +30,11 @@ def _libmujoco_path() -> str | None:
     if spec is None or not spec.submodule_search_locations:
         return None
     d = list(spec.submodule_search_locations)[0]
-    names = sorted(f for f in os.listdir(d) if f.startswith("libmujoco.so") or
-                   (f.startswith("libmujoco.") and f.endswith(".dylib")))
+    names = sorted(
+        f
+        for f in os.listdir(d)
+        if f.startswith("libmujoco.so") or (f.startswith("libmujoco.") and f.endswith(".dylib"))
+    )
     return os.path.join(d, names[-1]) if names else None
 
 
@@ -93,8 +96,15 @@ class Odometry(NamedTuple):
 
 
 def new_odometry(n: int) -> Odometry:
-    return Odometry(np.zeros((n, 3)), np.zeros((n, 2)), np.zeros(n), np.zeros(n), np.zeros(1, dtype=np.int64),
-                    np.zeros((n, 3)), np.zeros((n, 2)))
+    return Odometry(
+        np.zeros((n, 3)),
+        np.zeros((n, 2)),
+        np.zeros(n),
+        np.zeros(n),
+        np.zeros(1, dtype=np.int64),
+        np.zeros((n, 3)),
+        np.zeros((n, 2)),
+    )
 
 
 @njit
@@ -125,8 +135,9 @@ def sense(sd, sen, odo):
         ql = encoder_angle(sen.sign[i, 0] * sd[sen.enc[i, 0]], sen.cpr[i])
         qr = encoder_angle(sen.sign[i, 1] * sd[sen.enc[i, 1]], sen.cpr[i])
         wz = gyro_reading(sd[sen.gyro[i] + 2], sen.bias, sen.sigma, sen.seed, float(i), k)
-        x, y, th, ds, dth = odometry_step(odo.pose[i, 0], odo.pose[i, 1], odo.pose[i, 2], odo.q[i, 0], odo.q[i, 1],
-                                          ql, qr, wz, sen.radius[i], sen.ts)
+        x, y, th, ds, dth = odometry_step(
+            odo.pose[i, 0], odo.pose[i, 1], odo.pose[i, 2], odo.q[i, 0], odo.q[i, 1], ql, qr, wz, sen.radius[i], sen.ts
+        )
         odo.pose[i, 0], odo.pose[i, 1], odo.pose[i, 2] = x, y, th
         odo.q[i, 0], odo.q[i, 1] = ql, qr
         odo.dist[i] += ds
@@ -155,9 +166,23 @@ def observe(qpos, qvel, q7, v6, axle, pose, vel, up):
     for i in range(pose.shape[0]):
         a = q7[i]
         b = v6[i]
-        x, y, th, v, w, u = planar_state(qpos[a], qpos[a + 1], qpos[a + 3], qpos[a + 4], qpos[a + 5], qpos[a + 6],
-                                         qvel[b], qvel[b + 1], qvel[b + 2], qvel[b + 3], qvel[b + 4], qvel[b + 5],
-                                         axle[i, 0], axle[i, 1], axle[i, 2])
+        x, y, th, v, w, u = planar_state(
+            qpos[a],
+            qpos[a + 1],
+            qpos[a + 3],
+            qpos[a + 4],
+            qpos[a + 5],
+            qpos[a + 6],
+            qvel[b],
+            qvel[b + 1],
+            qvel[b + 2],
+            qvel[b + 3],
+            qvel[b + 4],
+            qvel[b + 5],
+            axle[i, 0],
+            axle[i, 1],
+            axle[i, 2],
+        )
         pose[i, 0], pose[i, 1], pose[i, 2] = x, y, th
         vel[i, 0], vel[i, 1] = v, w
         up[i] = u
@@ -222,11 +247,64 @@ def watch_slip(qvel, wheel_dof, wheel_sign, radius, half_track, vel, ratio, v_fl
 
 
 @njit
-def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qvel, q7, v6, axle, up,
-              tilt_cos, tip_step, wheel_dof, wheel_sign, radius, half_track, slip_ratio, v_floor, slip_need,
-              slip_run, slip_step,
-              ctrl, ctrl_id, ctrl_scale, xfrc, xmat, base, m_eff, i_eff, dist, use_dist, warn, c_true,
-              pose, vel, met, acc, lg, j0, stride, offsets, lim, diag, rec_ctrl, rec_xfrc, sd, sen, odo):
+def run_chunk(
+    g,
+    s,
+    comm,
+    k0,
+    k1,
+    N,
+    dt,
+    n_sub,
+    L_pose,
+    L_vel,
+    mp,
+    dp,
+    qpos,
+    qvel,
+    q7,
+    v6,
+    axle,
+    up,
+    tilt_cos,
+    tip_step,
+    wheel_dof,
+    wheel_sign,
+    radius,
+    half_track,
+    slip_ratio,
+    v_floor,
+    slip_need,
+    slip_run,
+    slip_step,
+    ctrl,
+    ctrl_id,
+    ctrl_scale,
+    xfrc,
+    xmat,
+    base,
+    m_eff,
+    i_eff,
+    dist,
+    use_dist,
+    warn,
+    c_true,
+    pose,
+    vel,
+    met,
+    acc,
+    lg,
+    j0,
+    stride,
+    offsets,
+    lim,
+    diag,
+    rec_ctrl,
+    rec_xfrc,
+    sd,
+    sen,
+    odo,
+):
     """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by the
     control step of ``k+1`` (if ``k+1 < N``; the control step of ``k0`` must be done).
 
@@ -234,7 +312,8 @@ def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qve
     ``MjData.warning``): status ``engine.PLANT_FAILED``, with the state before MuJoCo's reset
     not observed. With ``sen.on`` the sensors are sampled after each physics step (:func:`sense`)
     and the controller is given the odometry (:func:`odometry_read`) instead of the truth; metrics,
-    guards, the formation error and the outcome watches stay on the truth. If ``rec_ctrl`` has rows, the inputs of step ``k`` are copied to
+    guards, the formation error and the outcome watches stay on the truth. If ``rec_ctrl`` has rows,
+    the inputs of step ``k`` are copied to
     ``rec_ctrl[k]``, ``rec_xfrc[k]`` (for a bare-physics replay). Returns ``(steps done, next
     log row, status)``.
     """
@@ -254,16 +333,29 @@ def run_chunk(g, s, comm, k0, k1, N, dt, n_sub, L_pose, L_vel, mp, dp, qpos, qve
                 sense(sd, sen, odo)
         observe(qpos, qvel, q7, v6, axle, pose, vel, up)
         watch_tilt(up, tilt_cos, tip_step, k + 1)
-        watch_slip(qvel, wheel_dof, wheel_sign, radius, half_track, vel, slip_ratio, v_floor, slip_need, slip_run,
-                   slip_step, k + 1)
+        watch_slip(
+            qvel,
+            wheel_dof,
+            wheel_sign,
+            radius,
+            half_track,
+            vel,
+            slip_ratio,
+            v_floor,
+            slip_need,
+            slip_run,
+            slip_step,
+            k + 1,
+        )
         if k + 1 < N:
             if sen.on:
                 odometry_read(odo, dt)
                 control_step(g, s, L_pose[k + 1], L_vel[k + 1], odo.mpose, odo.mvel, comm)
             else:
                 control_step(g, s, L_pose[k + 1], L_vel[k + 1], pose, vel, comm)
-            j1, status = after_control(k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c_true,
-                                       offsets, lim, diag)
+            j1, status = after_control(
+                k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c_true, offsets, lim, diag
+            )
             if sen.on and j1 > j:
                 record_odometry(lg, j, odo.mpose, odo.mvel)
             j = j1

@@ -150,9 +150,7 @@ class MujocoPlant:
             raise ValueError(f"physics_dt {physics_dt} s exceeds control_dt {control_dt} s")
         n_sub = round(control_dt / physics_dt)
         if abs(n_sub * physics_dt - control_dt) > 1e-9 * control_dt:
-            raise ValueError(
-                f"control_dt {control_dt} s is not an integer multiple of physics_dt {physics_dt} s"
-            )
+            raise ValueError(f"control_dt {control_dt} s is not an integer multiple of physics_dt {physics_dt} s")
         self.n = len(robot_files)
         self.control_dt = float(control_dt)
         self.physics_dt = float(physics_dt)
@@ -164,14 +162,22 @@ class MujocoPlant:
             raise ValueError(f"sensing must be 'truth' or 'odometry', got {sensing!r}")
         self.sensing = sensing
         every = 1 if not sensor_dt else round(sensor_dt / physics_dt)
-        if sensor_dt and (every < 1 or abs(every * physics_dt - sensor_dt) > 1e-9 * sensor_dt
-                          or self.n_substeps % every):
-            raise ValueError(f"sensor_dt {sensor_dt} s must be a multiple of physics_dt {physics_dt} s "
-                             f"that divides control_dt {control_dt} s")
+        if sensor_dt and (
+            every < 1 or abs(every * physics_dt - sensor_dt) > 1e-9 * sensor_dt or self.n_substeps % every
+        ):
+            raise ValueError(
+                f"sensor_dt {sensor_dt} s must be a multiple of physics_dt {physics_dt} s "
+                f"that divides control_dt {control_dt} s"
+            )
 
         self.spec = build_scene(
-            robot_files, self.initial_poses, slots=slots, floor_friction=floor_friction,
-            timestep=physics_dt, friction_patch=friction_patch, sensors=sensing == "odometry",
+            robot_files,
+            self.initial_poses,
+            slots=slots,
+            floor_friction=floor_friction,
+            timestep=physics_dt,
+            friction_patch=friction_patch,
+            sensors=sensing == "odometry",
         )
         self.model, self.data = compile_scene(self.spec)
         m = self.model
@@ -214,21 +220,30 @@ class MujocoPlant:
         if sensing == "odometry":
             from bioform_mj.scene import SENSORS
 
-            adr = np.array([[m.sensor_adr[m.sensor(p + s_).id] for s_ in SENSORS[:3]] for p in prefixes],
-                           dtype=np.int64)
+            adr = np.array(
+                [[m.sensor_adr[m.sensor(p + s_).id] for s_ in SENSORS[:3]] for p in prefixes], dtype=np.int64
+            )
             enc, gyro = np.ascontiguousarray(adr[:, :2]), np.ascontiguousarray(adr[:, 2])
         else:
             enc, gyro = np.zeros((n, 2), dtype=np.int64), np.zeros(n, dtype=np.int64)
-        self.sensors = Sensors(sensing == "odometry", enc, gyro, self._wheel_sign.copy(), self._wheel_radius.copy(),
-                               cpr, float(gyro_bias), float(gyro_noise), float(seed % 2147483647), int(every),
-                               float(every * physics_dt))
+        self.sensors = Sensors(
+            sensing == "odometry",
+            enc,
+            gyro,
+            self._wheel_sign.copy(),
+            self._wheel_radius.copy(),
+            cpr,
+            float(gyro_bias),
+            float(gyro_noise),
+            float(seed % 2147483647),
+            int(every),
+            float(every * physics_dt),
+        )
         self.odo = new_odometry(n)
 
         # nominal inertial properties of each base, restored by reset()
         b = self._base
-        self._nominal = (
-            m.body_mass[b].copy(), m.body_ipos[b].copy(), m.body_iquat[b].copy(), m.body_inertia[b].copy()
-        )
+        self._nominal = (m.body_mass[b].copy(), m.body_ipos[b].copy(), m.body_iquat[b].copy(), m.body_inertia[b].copy())
         self._payload_added = False
         self._prefixes = prefixes
         self._update_params()
@@ -238,7 +253,10 @@ class MujocoPlant:
             if max(p.tau_max) > limit:
                 log.info(  # said as a RobotWarning before a run (robot_check.feasibility)
                     "follower %d: torque limit %.3g N·m exceeds the traction limit μ m g r/2 = %.3g N·m: "
-                    "the wheels can skid", i + 1, max(p.tau_max), limit,
+                    "the wheels can skid",
+                    i + 1,
+                    max(p.tau_max),
+                    limit,
                 )
         self._step_count = 0
         self.reset()
@@ -278,9 +296,7 @@ class MujocoPlant:
         m, d = self.model, self.data
         if self._payload_added:
             b = self._base
-            m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b] = (
-                x.copy() for x in self._nominal
-            )
+            m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b] = (x.copy() for x in self._nominal)
             mujoco.mj_setConst(m, d)
             self._payload_added = False
             self._update_params()
@@ -323,19 +339,34 @@ class MujocoPlant:
         d = self.data
         observe(d.qpos, d.qvel, self._q7[:, 0], self._v6[:, 0], self._axle, pose, vel, self._up)
         watch_tilt(self._up, self.tilt_cos, self.tip_step, self._step_count)
-        watch_slip(d.qvel, self._wdof, self._wheel_sign, self._wheel_radius, self._half_track, vel, self.SLIP_RATIO,
-                   self.SLIP_V_FLOOR, self._slip_need, self.slip_run, self.slip_step, self._step_count)
+        watch_slip(
+            d.qvel,
+            self._wdof,
+            self._wheel_sign,
+            self._wheel_radius,
+            self._half_track,
+            vel,
+            self.SLIP_RATIO,
+            self.SLIP_V_FLOOR,
+            self._slip_need,
+            self.slip_run,
+            self.slip_step,
+            self._step_count,
+        )
         return pose, vel
 
     @staticmethod
     def _rotations(quat: np.ndarray) -> np.ndarray:
         """(n, 3, 3) rotation matrices of unit quaternions (n, 4) ``[w, x, y, z]``."""
         w, x, y, z = quat.T
-        return np.stack([
-            np.stack([w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z], -1),
-        ], axis=1)
+        return np.stack(
+            [
+                np.stack([w * w + x * x - y * y - z * z, 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+                np.stack([2 * (x * y + w * z), w * w - x * x + y * y - z * z, 2 * (y * z - w * x)], -1),
+                np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), w * w - x * x - y * y + z * z], -1),
+            ],
+            axis=1,
+        )
 
     def wheel_slip(self) -> np.ndarray:
         """(n, 2) slip ratio of the [left, right] wheels: ``|r φ̇ − v_c| / max(|r φ̇|, |v_c|, SLIP_V_FLOOR)``
@@ -385,8 +416,20 @@ class MujocoPlant:
             vals = np.asarray(self.disturbance(t), dtype=float)
             dist = np.zeros((2, 4))
             dist[:, 0] = vals[0]
-        apply_inputs(np.ascontiguousarray(tau), float(t), d.ctrl, self._ctrl, self._ctrl_scale, d.xfrc_applied, d.xmat, self._base,
-                     self._m_eff, self._i_eff, np.zeros((2, 4)) if dist is None else dist, use)
+        apply_inputs(
+            np.ascontiguousarray(tau),
+            float(t),
+            d.ctrl,
+            self._ctrl,
+            self._ctrl_scale,
+            d.xfrc_applied,
+            d.xmat,
+            self._base,
+            self._m_eff,
+            self._i_eff,
+            np.zeros((2, 4)) if dist is None else dist,
+            use,
+        )
         if self._push_until is not None:  # faults: an external push on some chassis (push())
             self._apply_push(t)
         if self.sensors.on:  # the sensors after every physics step, as in the compiled loop
@@ -450,8 +493,13 @@ class MujocoPlant:
         m = self.model
         b = self._base[i]
         mass, ipos, iquat, inertia = payload_inertial(
-            m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b],
-            float(mass_kg), float(inertia_kgm2), self._axle[i],
+            m.body_mass[b],
+            m.body_ipos[b],
+            m.body_iquat[b],
+            m.body_inertia[b],
+            float(mass_kg),
+            float(inertia_kgm2),
+            self._axle[i],
         )
         m.body_mass[b], m.body_ipos[b], m.body_iquat[b], m.body_inertia[b] = mass, ipos, iquat, inertia
         self._set_const()
@@ -496,13 +544,63 @@ class MujocoPlant:
 
         def chunk(k0: int, k1: int, j: int) -> tuple[int, int, int]:
             done, j, status = run_chunk(
-                ctx.gains, ctx.state, ctx.comm, k0, k1, ctx.N, self.control_dt, self.n_substeps, ctx.L_pose,
-                ctx.L_vel, m._address, d._address, d.qpos, d.qvel, q7, v6, self._axle, self._up, self.tilt_cos,
-                self.tip_step, self._wdof, self._wheel_sign, self._wheel_radius, self._half_track, self.SLIP_RATIO,
-                self.SLIP_V_FLOOR, self._slip_need, self.slip_run, self.slip_step, d.ctrl, ctrl_id,
-                self._ctrl_scale, d.xfrc_applied, d.xmat, base, self._m_eff, self._i_eff, self._dist, use, self._warn, self._c,
-                ctx.pose, ctx.vel, ctx.met, ctx.acc, ctx.log, j, ctx.stride, ctx.offsets, ctx.bounds, ctx.diag,
-                rec[0], rec[1], d.sensordata, self.sensors, self.odo)
+                ctx.gains,
+                ctx.state,
+                ctx.comm,
+                k0,
+                k1,
+                ctx.N,
+                self.control_dt,
+                self.n_substeps,
+                ctx.L_pose,
+                ctx.L_vel,
+                m._address,
+                d._address,
+                d.qpos,
+                d.qvel,
+                q7,
+                v6,
+                self._axle,
+                self._up,
+                self.tilt_cos,
+                self.tip_step,
+                self._wdof,
+                self._wheel_sign,
+                self._wheel_radius,
+                self._half_track,
+                self.SLIP_RATIO,
+                self.SLIP_V_FLOOR,
+                self._slip_need,
+                self.slip_run,
+                self.slip_step,
+                d.ctrl,
+                ctrl_id,
+                self._ctrl_scale,
+                d.xfrc_applied,
+                d.xmat,
+                base,
+                self._m_eff,
+                self._i_eff,
+                self._dist,
+                use,
+                self._warn,
+                self._c,
+                ctx.pose,
+                ctx.vel,
+                ctx.met,
+                ctx.acc,
+                ctx.log,
+                j,
+                ctx.stride,
+                ctx.offsets,
+                ctx.bounds,
+                ctx.diag,
+                rec[0],
+                rec[1],
+                d.sensordata,
+                self.sensors,
+                self.odo,
+            )
             self._step_count = k0 + done
             if status == 2:  # engine.PLANT_FAILED: a MuJoCo warning in step k0 + done
                 self._step_count += 1
@@ -510,6 +608,7 @@ class MujocoPlant:
                     if w_.number:
                         self._raise_warning(i, w_)
             return done, j, status
+
         return chunk
 
     def push(self, i: int, force_xy, torque_z: float, until_t: float) -> None:
