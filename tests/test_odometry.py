@@ -139,3 +139,17 @@ def test_bad_sensor_input_exit_2(sets, key, tmp_path, capsys):
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
     assert len(err) == 1 and err[0].startswith("error:") and key in err[0], err
     assert not out.exists()
+
+
+def test_rerun_recording_holds_the_odometry_beside_the_truth(tmp_path):
+    """With sensing = odometry the recording has each follower's dead-reckoned path and its drift
+    from the true pose (the log holds both; the truth is the robot's own entity)."""
+    from bioform_mj.outputs.rerun_log import read_entities, write_rrd
+    from bioform_mj.scenario import load
+    from bioform_mj.sim import simulate
+
+    res = simulate(load("tb3", overrides=['plant.sensing="odometry"', "sim.control_dt=0.01", "sim.duration=1"]))
+    rows = read_entities(write_rrd(res, tmp_path / "run.rrd"))
+    for i in range(1, res.scenario.n + 1):
+        assert rows[f"/follower/{i}/odometry_drift"] == len(res.log["t"])
+        assert rows[f"/world/follower/{i}/odometry_path"] > 0

@@ -299,12 +299,20 @@ def send_log(rec: Any, log: Mapping[str, np.ndarray]) -> None:
                 translation=np.column_stack([e[:, :2], np.zeros(len(t))]), quaternion=_quat_xyzw(e[:, 2])
             ),
         )
-        slot = lp[:, :2] - offsets[i]
+        slot = log["slots"][:, i] if "slots" in log else lp[:, :2] - offsets[i]
         rec.send_columns(
             f"{base}/slot", idx, rr.Points3D.columns(positions=np.column_stack([slot, np.full(len(t), 0.01)]))
         )
         ts, strips = _strip_rows(t, p[:, :2], _PATH_HZ)
         rec.send_columns(f"{base}/path", [rr.TimeColumn(TIMELINE, duration=ts)], rr.LineStrips3D.columns(strips=strips))
+        if "odom_pose" in log and not np.array_equal(log["odom_pose"][:, i], p):  # sensing = odometry
+            o = log["odom_pose"][:, i]
+            ts, strips = _strip_rows(t, o[:, :2], _PATH_HZ)
+            rec.send_columns(
+                f"{base}/odometry_path", [rr.TimeColumn(TIMELINE, duration=ts)], rr.LineStrips3D.columns(strips=strips)
+            )
+            drift = np.hypot(o[:, 0] - p[:, 0], o[:, 1] - p[:, 1])
+            rec.send_columns(f"/follower/{i + 1}/odometry_drift", idx, rr.Scalars.columns(scalars=drift))
         for leaf, fn, _names in _SERIES:
             vals = np.asarray(fn(log, i), dtype=float)
             rec.send_columns(
