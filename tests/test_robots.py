@@ -322,3 +322,91 @@ def test_a_robot_the_scenario_overturns_is_reported_tipped_at_the_moment_it_tips
         t_reported = float(f["outcome_detail"].split("t = ")[1].split(" s")[0])
         assert abs(t_reported - crossed[0]) <= 0.1
         assert ref.summary["followers"][i]["outcome_detail"] == f["outcome_detail"]  # both loops agree
+
+
+# ---------------------------------------------------------------- published-model traits (menagerie)
+# Written for these tests (not a copy of any published file): the traits met when taking
+# mujoco_menagerie's Hello Robot Stretch 3 and Clearpath Jackal as published: unnamed wheel
+# collision geoms and unnamed wheel drives, wheel damping 30 N·m·s/rad with frictionloss 1 N·m and
+# stiffness 0.02 N·m/rad at the model's 2 ms step, and (Jackal) a second pair of fixed wheels.
+_PUBLISHED = """
+<mujoco model="published_traits">
+  <compiler angle="radian" autolimits="true"/>
+  <option integrator="implicitfast" timestep="0.002"/>
+  <default>
+    <geom solref="0.005 1"/>
+    <default class="wheel">
+      <joint axis="0 0 1" damping="30" frictionloss="1" armature="0.1" stiffness="0.02"/>
+      <velocity gear="3" kv="100" ctrlrange="-6 6" forcerange="-100 100"/>
+    </default>
+  </default>
+  <worldbody>
+    <body name="base_link">
+      <freejoint/>
+      <geom type="box" size="0.15 0.15 0.06" pos="-0.02 0 0.12" mass="20"/>
+      <geom type="sphere" size="0.02" pos="-0.2 0 0.02" condim="1" priority="1"/>
+      <body name="link_right_wheel" pos="0 -0.17 0.05" quat="1 -1 0 0">
+        <joint name="joint_right_wheel" class="wheel"/>
+        <geom type="cylinder" size="0.05 0.0125" mass="0.5"/>
+      </body>
+      <body name="link_left_wheel" pos="0 0.17 0.05" quat="1 -1 0 0">
+        <joint name="joint_left_wheel" class="wheel"/>
+        <geom type="cylinder" size="0.05 0.0125" mass="0.5"/>
+      </body>
+      EXTRA
+    </body>
+  </worldbody>
+  <actuator>
+    <velocity joint="joint_left_wheel" class="wheel"/>
+    <velocity joint="joint_right_wheel" class="wheel"/>
+  </actuator>
+</mujoco>
+"""
+_REAR = """
+      <body name="rear_wheel_link" pos="-0.2 0.17 0.05">
+        <joint name="rear_wheel" axis="0 1 0"/>
+        <geom type="sphere" size="0.05" mass="0.5"/>
+      </body>"""
+
+
+def _published(tmp_path, extra=""):
+    path = tmp_path / "published_traits.xml"
+    text = _PUBLISHED.replace("EXTRA", extra)
+    if extra:  # the rear wheel replaces the rear caster
+        text = text.replace('<geom type="sphere" size="0.02" pos="-0.2 0 0.02" condim="1" priority="1"/>', "")
+    path.write_text(text)
+    return RobotRef(model=str(path), base="base_link", left_wheel="joint_left_wheel", right_wheel="joint_right_wheel")
+
+
+def test_published_traits_unnamed_parts_and_strong_damping(tmp_path):
+    """Unnamed wheel geoms and drives no longer crash (was: AttributeError, exit 1); identification
+    clears the dead band and integrates the damping finely (was: a = 3.9e-6, then +86 % at the
+    model's own 2 ms step); check and feasibility say what the paper's model lacks."""
+    ref = _published(tmp_path)
+    spec, lay, _, _ = prepare_robot(ref)
+    model = spec.compile()
+    assert lay.wheel_geoms == ("joint_left_wheel_contact", "joint_right_wheel_contact")
+    assert len(lay.disabled_actuators) == 2 and all(n.startswith("#") for n in lay.disabled_actuators)
+    assert model.actuator("left_motor").id >= 0
+    d = identify(ref)
+    # both torque levels clear the dead band (was: a = 3.9e-6 on the menagerie Stretch 3) and the
+    # damping is integrated at k dt = 0.02; the dead band is found exactly. OPEN: on this fixture a, b
+    # still come out 25 % / 16 % low (the stripped menagerie Stretch 3 itself: +0.9 %, +3.5 %): the
+    # 4 ms drag against the soft contact is not the first-order model the fit assumes
+    assert 0.6 < d["identified"]["a"] / d["formula"]["a"] < 1.1
+    assert d["deadband_torque_Nm"]["identified"][0] == pytest.approx(2.0, rel=0.03)
+    assert d["test"]["timestep_s"] < 0.002
+    rep = check(ref)
+    assert rep["verdict"] != "pass"  # fail here: identification 25 % off (see OPEN above)
+    assert any("k dt" in r for r in rep["reasons"]) and any("stiffness" in r for r in rep["reasons"])
+    plant = MujocoPlant([ref], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
+    assert any("cannot keep up" in w for w in feasibility(load("stretch"), plant))
+
+
+def test_published_traits_second_fixed_axle_fails_check(tmp_path):
+    """A fixed wheel off the driven axle (4-wheel / skid-steer, the menagerie Jackal) is named and fails
+    the check (was: fail only for 'identification 71 % off', with no word of the rear wheels)."""
+    rep = check(_published(tmp_path, _REAR))
+    assert rep["verdict"] == "fail"
+    assert any("skid-steer" in r for r in rep["reasons"])
+    assert any("other wheel 'rear_wheel'" in n for n in rep["notes"])

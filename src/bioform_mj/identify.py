@@ -31,6 +31,9 @@ __all__ = ["RobotParams", "robot_parameters", "robot_truth", "ground_truth", "id
 COM_TOLERANCE_M = 1e-3
 #: the turn test of :func:`identify` ends below this yaw rate, rad/s
 OMEGA_ID = 2.0
+#: :func:`identify` steps at most ``DRAG_STEP / k`` s for a wheel drag rate ``k`` (1/s), so that
+#: MuJoCo integrates the damping finely; robot check warns when the model's own step is coarser
+DRAG_STEP = 0.02
 
 
 @dataclass(frozen=True)
@@ -297,9 +300,18 @@ def identify(
     from bioform_mj.plants.mujoco_plant import MujocoPlant  # the plant imports this module
     from bioform_mj.scene import prepare_robot
 
+    auto_step = timestep is None
     if timestep is None:
         timestep = float(prepare_robot(model_file)[0].option.timestep)
     plant = MujocoPlant([model_file], np.zeros((1, 3)), timestep, timestep, None, slots=False)
+    k_drag = max(plant.params[0].unmodelled(0.0, 0.0)["drag_rate_per_s"])
+    if auto_step and k_drag * timestep > DRAG_STEP:
+        # a wheel damping whose drag rate k is not small against 1/dt is integrated coarsely at the
+        # model's own step (menagerie Stretch 3: k = 232 1/s, dt = 2 ms: a, b come out ~90 % high);
+        # identify the continuous model at a step with k dt = DRAG_STEP (result "test.timestep_s")
+        timestep = DRAG_STEP / k_drag
+        plant = MujocoPlant([model_file], np.zeros((1, 3)), timestep, timestep, None, slots=False)
+        duration = min(duration, max(20.0 / k_drag, 50 * timestep))
     if payload is not None:
         plant.add_payload(0, *payload)
     params = plant.params[0]
@@ -308,6 +320,23 @@ def identify(
             plant.step(np.zeros((1, 2)), k * timestep)
         traction = plant._wheel_friction(0) * float(plant.wheel_loads()[0].min()) * params.wheel_radius
         torque = min(0.5 * min(params.tau_max), 0.25 * traction)
+        f = params.wheel_frictionloss
+        if f > 0 and 0.5 * torque <= 1.2 * f:
+            # both levels must clear the dead band (frictionloss f per wheel), else nothing moves and
+            # ``a`` comes out ~0 (menagerie Stretch 3: f = 1 N·m, a quarter of traction 0.55 N·m)
+            hi = min(min(params.tau_max), 0.5 * traction)
+            if hi <= 1.3 * f:  # closer to the traction limit: the start risks a short skid
+                hi = min(min(params.tau_max), 0.9 * traction)
+            if hi <= 1.3 * f:
+                raise ValueError(
+                    f"cannot identify: the wheel frictionloss {f:g} N·m (dead band) leaves no torque below the "
+                    f"traction limit {traction:.3g} N·m and the motor limit {min(params.tau_max):g} N·m "
+                    "that turns the wheels without skidding"
+                )
+            torque = hi
+    # the second torque level: half the first, or halfway between the dead band and the first
+    f = params.wheel_frictionloss
+    lo_frac = 0.5 if 0.5 * torque > 1.2 * f else (f + 0.5 * (torque - f)) / torque
     if not 0 < torque <= min(params.tau_max):
         raise ValueError(f"torque must be in (0, {min(params.tau_max)}] N·m, got {torque}")
     if not duration > 0 or settle < 0:
@@ -321,6 +350,14 @@ def identify(
             duration = min(duration, 3.0 / k_v)
     model, data = plant.model, plant.data
     dt = model.opt.timestep
+    integ = int(model.opt.integrator)
+    euler = integ == int(mujoco.mjtIntegrator.mjINT_EULER)
+    eulerdamp = not (model.opt.disableflags & int(mujoco.mjtDisableBit.mjDSBL_EULERDAMP))
+    implicit_damping = integ in (
+        int(mujoco.mjtIntegrator.mjINT_IMPLICIT),
+        int(mujoco.mjtIntegrator.mjINT_IMPLICITFAST),
+    ) or (euler and eulerdamp)
+    explicit = euler and not eulerdamp
     n_settle, n_run = round(settle / dt), max(round(duration / dt), 3)
 
     def run(tau_l: float, tau_r: float) -> dict:
@@ -341,11 +378,19 @@ def identify(
         th0 = pose0[0, 2]
         lateral = float(-np.sin(th0) * d[0] + np.cos(th0) * d[1])
         n_warn = sum(int(w.number) for w in data.warning)
-        # υ̇ = α + β υ: forward differences against midpoints (exact for a line in t)
+        # υ̇ = α + β υ: forward differences against the velocity the integrator applies the drag at
+        # (implicit damping: the new one, exact for v' = v + dt (α + β v'); explicit Euler: the old
+        # one; RK4: the midpoint, exact for a line in t); matters once dt·k is not small (damping 30
+        # on the menagerie Stretch 3: k dt ≈ 0.5)
         out = {}
         for k, name in ((0, "v"), (1, "omega")):
             rate = np.diff(z[:, k]) / dt
-            mids = 0.5 * (z[1:, k] + z[:-1, k])
+            if implicit_damping:
+                mids = z[1:, k]
+            elif explicit:
+                mids = z[:-1, k]
+            else:
+                mids = 0.5 * (z[1:, k] + z[:-1, k])
             A = np.column_stack([np.ones_like(mids), mids])
             (alpha, beta), *_ = np.linalg.lstsq(A, rate, rcond=None)
             out[name] = (float(alpha), float(beta))
@@ -364,12 +409,14 @@ def identify(
             t_turn,
             0.3 * params.motor_no_load_speed * params.wheel_radius / (params.half_track * 2 * params.b_eff * duration),
         )
-    drive = [run(torque, torque), run(0.5 * torque, 0.5 * torque)]
-    turn = [run(-t_turn, t_turn), run(-0.5 * t_turn, 0.5 * t_turn)]
+    if f > 0 and lo_frac * t_turn < 1.1 * f:
+        t_turn = torque  # the dead band needs the turn tests at the drive torque
+    drive = [run(torque, torque), run(lo_frac * torque, lo_frac * torque)]
+    turn = [run(-t_turn, t_turn), run(-lo_frac * t_turn, lo_frac * t_turn)]
     (al1, be1), (al2, be2) = drive[0]["fit"]["v"], drive[1]["fit"]["v"]
     (bl1, ge1), (bl2, ge2) = turn[0]["fit"]["omega"], turn[1]["fit"]["omega"]
-    a_id = (al1 - al2) / (2 * torque - torque)  # τ_a = τ_L + τ_R
-    b_id = (bl1 - bl2) / (2 * t_turn - t_turn)  # τ_b = τ_R − τ_L (design §5 sign fix)
+    a_id = (al1 - al2) / (2 * torque * (1 - lo_frac))  # τ_a = τ_L + τ_R
+    b_id = (bl1 - bl2) / (2 * t_turn * (1 - lo_frac))  # τ_b = τ_R − τ_L (design §5 sign fix)
     truth = params.unmodelled(0.0, 0.0)
     return {
         "model": str(plant.layouts[0].file),

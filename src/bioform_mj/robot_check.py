@@ -122,8 +122,9 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     """
     import mujoco
 
-    from .identify import identify
+    from .identify import DRAG_STEP, identify
     from .plants.mujoco_plant import MujocoPlant
+    from .scene import prepare_robot
 
     plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
     p, lay = plant.params[0], plant.layouts[0]
@@ -140,7 +141,12 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     notes = list(lay.notes)
     reasons_fail, reasons_warn = [], []
 
-    ident = identify(entry) if identify_ else None
+    ident = None
+    if identify_:
+        try:
+            ident = identify(entry)
+        except ValueError as exc:  # e.g. a dead band that leaves no usable torque
+            reasons_fail.append(str(exc))
     a_id = ident["identified"]["a"] if ident else None
     b_id = ident["identified"]["b"] if ident else None
     if ident:
@@ -177,6 +183,23 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         reasons_fail.append(
             f"wheel frictionloss {p.wheel_frictionloss:g} N·m per wheel: the dead band reaches the motor limit"
         )
+    k_drag = max(um["drag_rate_per_s"])
+    step = float(plant.model.opt.timestep)
+    model_step = float(prepare_robot(entry)[0].option.timestep)
+    if k_drag * model_step > 0.1:
+        reasons_warn.append(
+            f"wheel drag rate {k_drag:.3g} 1/s against the model's own step {model_step:g} s (k dt = "
+            f"{k_drag * model_step:.2g}): MuJoCo integrates the wheel damping coarsely there (identified a, b "
+            f"off by tens of %); run with sim.physics_dt <= {DRAG_STEP / k_drag:.2g} s (identification used "
+            f"{ident['test']['timestep_s'] if ident else step:.2g} s)"
+        )
+    if any("other wheel" in n for n in lay.notes):
+        reasons_fail.append(
+            "other fixed wheels touch the floor (see notes): a 4-wheel / skid-steer base, not the paper's "
+            "differential drive; map one driven pair and make the others casters, or use another robot"
+        )
+    if any("stiffness" in n for n in lay.notes):
+        reasons_warn.append("wheel joint stiffness: a spring torque that grows with the distance driven (see notes)")
     tcs = [t for t in um["drag_time_constant_s"] if t is not None]
     if tcs and min(tcs) < 5.0:
         reasons_warn.append(f"wheel damping: drag time constant {min(tcs):.2g} s (< 5 s), a large unmodelled term")
@@ -281,6 +304,17 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
                 f"margin {tips['lateral']:.3g} m/s²"
             )
         motor = float(min(p.tau_max))
+        # cruising at the leader's top speed against the wheel damping c and frictionloss f takes
+        # c v / r + f per wheel (menagerie Stretch 3: c = 30 N·m·s/rad, 151 N·m at 0.25 m/s)
+        v_top = float(np.max(np.abs(vel[:, 0])))
+        cruise = p.wheel_damping * v_top / p.wheel_radius + p.wheel_frictionloss
+        if p.wheel_damping and cruise > min(motor, mu * p.traction_limit):
+            out.append(
+                f"{who}: cruising at the leader's {v_top:.3g} m/s against the wheel damping {p.wheel_damping:g} "
+                f"N·m·s/rad and frictionloss {p.wheel_frictionloss:g} N·m takes {cruise:.3g} N·m per wheel, beyond "
+                f"the {'motor' if motor < mu * p.traction_limit else 'traction'} limit "
+                f"{min(motor, mu * p.traction_limit):.3g} N·m: the robot cannot keep up"
+            )
         full = 2 * p.a_eff * motor
         if full > min(tips["forward"], tips["backward"]):
             out.append(
@@ -344,6 +378,10 @@ def add_parser(sub: Any) -> None:
     chk.add_argument("--json", type=str, metavar="FILE", help="write the report as JSON to FILE")
 
 
+def _num(x: float | None) -> str:
+    return "n/a" if x is None else f"{x:.5g}"
+
+
 def main(args: argparse.Namespace) -> int:
     """Run ``bioform robot check``; prints a short report, returns the exit code."""
     from .outputs.files import write_json
@@ -358,8 +396,8 @@ def main(args: argparse.Namespace) -> int:
         f"'{report['parts']['wheel_joints'][1]}' (sign {report['parts']['wheel_sign'][0]:+d}/"
         f"{report['parts']['wheel_sign'][1]:+d}), r = {report['wheel_radius_m']:.4g} m, "
         f"l = {report['half_track_m']:.4g} m",
-        f"  a_eff = {report['a_eff']:.5g} (identified {report['a_identified']:.5g}), "
-        f"b_eff = {report['b_eff']:.5g} (identified {report['b_identified']:.5g})",
+        f"  a_eff = {report['a_eff']:.5g} (identified {_num(report['a_identified'])}), "
+        f"b_eff = {report['b_eff']:.5g} (identified {_num(report['b_identified'])})",
         f"  motor limit {report['motor_limit_nm']:.3g} N·m, traction limit {report['traction_limit_nm']:.3g} N·m "
         f"(μ = {report['friction_mu']:g})",
         f"  tips at forward {ta['forward']:.3g}, backward {ta['backward']:.3g}, lateral {ta['lateral']:.3g} m/s² "

@@ -214,6 +214,24 @@ def _name(model: mujoco.MjModel, objtype: mujoco.mjtObj, i: int) -> str:
     return mujoco.mj_id2name(model, objtype, i) or f"#{i}"
 
 
+# Published models leave many elements unnamed (menagerie wheels: ``<geom class="collision"
+# type="cylinder" .../>``, ``<velocity joint=.../>``): look spec elements up by their compiled
+# index, never by a name that may not exist.
+def _spec_body(spec: mujoco.MjSpec, model: mujoco.MjModel, b: int) -> mujoco.MjsBody:
+    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b)
+    return spec.body(name) if name else spec.bodies[b]
+
+
+def _spec_geom(spec: mujoco.MjSpec, model: mujoco.MjModel, g: int) -> mujoco.MjsGeom:
+    b = int(model.geom_bodyid[g])
+    return _spec_body(spec, model, b).geoms[g - int(model.body_geomadr[b])]
+
+
+def _spec_actuator(spec: mujoco.MjSpec, model: mujoco.MjModel, a: int) -> mujoco.MjsActuator:
+    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
+    return spec.actuator(name) if name else spec.actuators[a]
+
+
 def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bool = True):
     """Resolve ``ref``'s mapping on the compiled robot ``model``; returns ``(layout, plan)``.
 
@@ -439,8 +457,12 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         disabled = list(drives)
         keep = dc_keep
     act_names = {_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in range(model.nu)}
-    if min(keep) >= 0:
-        motors = tuple(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in keep)
+    if min(keep) >= 0:  # an unnamed kept motor gets a name (prepare_robot sets it)
+        motors = tuple(
+            mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
+            or f"{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}_motor"
+            for a, j in zip(keep, joints)
+        )
     else:
         motors = tuple(n if n not in act_names else f"bioform_{n}" for n in ROBOT.motors)
         if add_motors:
@@ -473,10 +495,45 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
                 "the paper's model lacks)"
             )
 
+        if model.jnt_stiffness[j]:
+            notes.append(
+                f"joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}': stiffness {model.jnt_stiffness[j]:g} N·m/rad, "
+                "a spring on a wheel that turns without end: a torque k φ growing with the distance driven "
+                f"(k s / r = {model.jnt_stiffness[j] / r:.3g} N·m per metre), which the paper's model lacks"
+            )
+    # other wheels: hinges below the base, axis along its y, touching the floor (a 4-wheel or skid-steer
+    # base, e.g. the menagerie Jackal); a swivelling caster's wheel sits below a second joint and is fine
+    floor_z = float(np.mean(anchors[:, 2])) - r
+    for j in range(model.njnt):
+        if j in joints or model.jnt_type[j] != _HINGE or abs(float(data.xaxis[j] @ left)) < 0.99:
+            continue
+        b = int(model.jnt_bodyid[j])
+        if model.body_jntnum[b] != 1:
+            continue
+        p_ = int(model.body_parentid[b])
+        while p_ not in (0, base) and model.body_jntnum[p_] == 0:
+            p_ = int(model.body_parentid[p_])
+        if p_ != base:
+            continue
+        touches = [
+            g
+            for g in range(model.ngeom)
+            if model.geom_bodyid[g] == b
+            and (model.geom_contype[g] or model.geom_conaffinity[g])
+            and data.geom_xpos[g][2] - _geom_support(model, data, g, -up) - floor_z <= max(0.005, 0.25 * r)
+        ]
+        if touches:
+            notes.append(
+                f"other wheel '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j)}' (a hinge along the axle direction, not "
+                "mapped) touches the floor: with a fixed wheel off the driven axle the base turns only by "
+                "scrubbing it sideways (skid steer), which the paper's differential-drive model lacks; "
+                "its own actuators, if any, are left as they are"
+            )
     jn = tuple(_name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints)
     gnames = []
     for j, g, pr in zip(jn, geoms, proxies):
-        gnames.append(f"{j}_contact" if pr is not None else _name(model, mujoco.mjtObj.mjOBJ_GEOM, g))
+        named = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) if pr is None else None
+        gnames.append(named or f"{j}_contact")  # an unnamed wheel geom gets a name (prepare_robot)
     layout = RobotLayout(
         file=str(path),
         base=base_name,
@@ -512,12 +569,11 @@ def _wheel_proxy(
 ) -> None:
     """Switch the wheel's collision geoms ``cand`` off and add a single-contact ellipsoid ``name``
     of radius ``r`` centred on the joint anchor, its short axis along the joint axis (mass 0)."""
-    wb_name = _name(model, mujoco.mjtObj.mjOBJ_BODY, model.jnt_bodyid[j])
-    body = spec.body(wb_name)
+    body = _spec_body(spec, model, int(model.jnt_bodyid[j]))
     src = None
     width = 0.25 * r
     for g in cand or []:
-        gs = spec.geom(_name(model, mujoco.mjtObj.mjOBJ_GEOM, g))
+        gs = _spec_geom(spec, model, g)
         if src is None:
             src = gs
         if int(model.geom_type[g]) in (int(mujoco.mjtGeom.mjGEOM_CYLINDER), int(mujoco.mjtGeom.mjGEOM_CAPSULE)):
@@ -673,6 +729,11 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
         raise ModelError(f"{path}: does not compile: {_one_line(exc)}") from exc
     layout, plan = _analyse(model, path, ref)
 
+    # spec elements by compiled index, resolved before anything is deleted (unnamed ones included)
+    acts = {a: _spec_actuator(spec, model, a) for a in range(model.nu)}
+    for g, pr, gname in zip(plan["geoms"], plan["proxies"], layout.wheel_geoms):
+        if pr is None and g >= 0 and not mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g):
+            _spec_geom(spec, model, g).name = gname
     base = spec.body(layout.base)
     if not plan["has_free"]:
         base.add_freejoint(name=f"{layout.base}_free")
@@ -682,16 +743,18 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
         if pr is not None:
             _wheel_proxy(spec, model, j, pr[1] if isinstance(pr, tuple) else None, layout.wheel_radius, gname)
     for a in plan["disabled"]:
-        act = spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a))
+        act = acts[a]
         act.gainprm = np.zeros(len(act.gainprm))
         act.biasprm = np.zeros(len(act.biasprm))
     for a in plan["dc_removed"]:  # motor = "ideal": the model's DC motors are not used
-        spec.delete(spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)))
+        spec.delete(acts[a])
     tau = layout.tau_max
     if plan["dc"]:
-        for a, sgn in zip(plan["keep"], layout.wheel_sign):
+        for a, sgn, mname in zip(plan["keep"], layout.wheel_sign, layout.motors):
+            if not acts[a].name:
+                acts[a].name = mname
             _dc_driver(
-                spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)),
+                acts[a],
                 model,
                 a,
                 sgn,
@@ -699,8 +762,10 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
                 tau,
             )
     elif min(plan["keep"]) >= 0:
-        for a, sgn in zip(plan["keep"], layout.wheel_sign):
-            act = spec.actuator(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a))
+        for a, sgn, mname in zip(plan["keep"], layout.wheel_sign, layout.motors):
+            act = acts[a]
+            if not act.name:
+                act.name = mname
             gear = np.array(act.gear, float)
             gear[0] = sgn * abs(gear[0])
             act.gear = gear
