@@ -270,7 +270,9 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
       centripetal part ``υ_r ω_r`` against the lateral tip margin;
     - the start-up transient: followers start at rest off their slots and the torque law meets
       the jump of the command at the motor limit, so full torque ``2 a_eff τ_max`` (m/s²) is
-      compared with the tip margins, and ``τ_max`` with the traction limit ``μ m g r / 2``.
+      compared with the tip margins, and ``τ_max`` with the traction limit ``μ N r`` (``N`` the
+      least-loaded wheel's share of the weight at rest, measured on a settled copy of the scene:
+      casters and gravity-compensated parts take weight off the wheels).
 
     Returns an empty list when nothing is at risk. The estimate is static (no pitch dynamics).
     """
@@ -284,9 +286,11 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
     scratch = mujoco.MjData(plant.model)
     mujoco.mj_kinematics(plant.model, scratch)
     out: list[str] = []
+    loads = plant.settled_wheel_loads()
     for i, p in enumerate(plant.params):
         tips = tip_margins(plant.model, scratch, f"f{i + 1}/")["tip_accel_mps2"]
         mu = plant._wheel_friction(i)
+        traction = mu * float(loads[i].min()) * p.wheel_radius  # μ N r per wheel
         who = f"follower {i + 1}"
         if total > mu * G:
             out.append(
@@ -308,12 +312,12 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
         # c v / r + f per wheel (menagerie Stretch 3: c = 30 N·m·s/rad, 151 N·m at 0.25 m/s)
         v_top = float(np.max(np.abs(vel[:, 0])))
         cruise = p.wheel_damping * v_top / p.wheel_radius + p.wheel_frictionloss
-        if p.wheel_damping and cruise > min(motor, mu * p.traction_limit):
+        if p.wheel_damping and cruise > min(motor, traction):
             out.append(
                 f"{who}: cruising at the leader's {v_top:.3g} m/s against the wheel damping {p.wheel_damping:g} "
                 f"N·m·s/rad and frictionloss {p.wheel_frictionloss:g} N·m takes {cruise:.3g} N·m per wheel, beyond "
-                f"the {'motor' if motor < mu * p.traction_limit else 'traction'} limit "
-                f"{min(motor, mu * p.traction_limit):.3g} N·m: the robot cannot keep up"
+                f"the {'motor' if motor < traction else 'traction'} limit "
+                f"{min(motor, traction):.3g} N·m: the robot cannot keep up"
             )
         full = 2 * p.a_eff * motor
         if full > min(tips["forward"], tips["backward"]):
@@ -322,10 +326,11 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
                 f"tip-over margin (forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²): "
                 "the chassis can tip (scale the scenario, formation.scale, or lower the torque limit)"
             )
-        if motor > mu * p.traction_limit:
+        if motor > traction:
             out.append(
-                f"{who}: torque limit {motor:.3g} N·m exceeds the traction limit μ m g r/2 = "
-                f"{mu * p.traction_limit:.3g} N·m: the wheels can skid at full torque"
+                f"{who}: torque limit {motor:.3g} N·m exceeds the traction limit μ N r = "
+                f"{traction:.3g} N·m (N = {loads[i].min():.3g} N on the least-loaded wheel at rest): "
+                "the wheels can skid at full torque"
             )
     return out
 

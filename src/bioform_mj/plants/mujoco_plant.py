@@ -379,14 +379,14 @@ class MujocoPlant:
         vc = np.stack([vel[:, 0] - lw, vel[:, 0] + lw], axis=1)
         return np.abs(rate - vc) / np.maximum(np.maximum(np.abs(rate), np.abs(vc)), self.SLIP_V_FLOOR)
 
-    def wheel_loads(self) -> np.ndarray:
+    def wheel_loads(self, data: mujoco.MjData | None = None) -> np.ndarray:
         """(n, 2) normal force on the [left, right] wheels' floor contacts now, N (``mj_contactForce``).
 
         Call it after the robots settled at rest (e.g. 0.2 s of zero torque): then it says how the
         weight is shared between wheels and casters, which sets the real traction limit
         ``μ N r`` per wheel (``μ m g r / 2`` only when the wheels carry all the weight).
         """
-        m, d = self.model, self.data
+        m, d = self.model, (self.data if data is None else data)
         gid = {m.geom(g).id: (i, k) for i, lay in enumerate(self.layouts) for k, g in enumerate(lay.wheel_geoms)}
         out = np.zeros((self.n, 2))
         f = np.zeros(6)
@@ -397,6 +397,16 @@ class MujocoPlant:
                 mujoco.mj_contactForce(m, d, c, f)
                 out[hit] += f[0]
         return out
+
+    def settled_wheel_loads(self, seconds: float = 0.2) -> np.ndarray:
+        """(n, 2) wheel loads, N, after ``seconds`` of zero torque from the initial state, computed on
+        a copy (the run's own state is untouched): the share of the weight the wheels carry."""
+        m = self.model
+        d = mujoco.MjData(m)
+        mujoco.mj_forward(m, d)
+        for _ in range(max(1, int(round(seconds / m.opt.timestep)))):
+            mujoco.mj_step(m, d)
+        return self.wheel_loads(d)
 
     def unmodelled(self, v: float, w: float) -> list[dict]:
         """Per follower: wheel damping, armature and frictionloss and their size at speeds
