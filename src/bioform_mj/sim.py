@@ -358,11 +358,14 @@ def simulate(
         return np.array(tau, dtype=float)
 
     applied = [np.zeros((n, 2))]
+    feed = bool(getattr(plant, "feed_delivered", False))
 
     def python_chunk(k0: int, k1: int, j: int) -> tuple[int, int, int]:
         """The same contract as a compiled chunk, one Python call per step."""
         for k in range(k0, k1):
             plant.step(applied[0], k * dt)  # may raise Diverged (MuJoCo warnings)
+            if feed:  # DC motors: the learner gets the torque delivered over the period (design §8.2)
+                plant.feed_delivered_torque(state.tau_body)
             p, v = plant.observe()
             ctx.pose[:] = p
             ctx.vel[:] = v

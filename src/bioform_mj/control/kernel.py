@@ -230,7 +230,8 @@ def control_step(g, s, lp, lv, pose, vel, comm):
 @njit
 def learner_update(g, s, vel):
     """Eq. 37 over the last period for every follower, with the torques applied then
-    (``s.tau_body``) and the velocities ``vel`` (n, 2) measured now."""
+    (``s.tau_body``: as commanded, or what a plant with DC motors measured as delivered and wrote
+    there after its step, design §8.2) and the velocities ``vel`` (n, 2) measured now."""
     dt = g.dt
     for i in range(vel.shape[0]):
         zn, en, cn, dn = learner_step(

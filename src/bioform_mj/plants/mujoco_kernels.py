@@ -209,6 +209,32 @@ def apply_inputs(tau, t, ctrl, ctrl_id, ctrl_scale, xfrc, xmat, base, m_eff, i_e
 
 
 @njit
+def delivered_add(force, ctrl_id, to_wheel, acc):
+    """After one physics step: add each wheel motor's torque on its wheel, ``to_wheel · force[ctrl_id]``
+    (``force`` = ``MjData.actuator_force`` of the step, ``to_wheel`` (n, 2) = gear × wheel sign: the
+    forward wheel torque, N·m, per unit of actuator force; 0 where not fed), to ``acc`` (n, 2)."""
+    for i in range(acc.shape[0]):
+        acc[i, 0] += to_wheel[i, 0] * force[ctrl_id[i, 0]]
+        acc[i, 1] += to_wheel[i, 1] * force[ctrl_id[i, 1]]
+
+
+@njit
+def delivered_feed(acc, n_sub, feed, tau_body):
+    """At the end of a control period: the wheel torque delivered over it, the mean of ``acc``
+    (:func:`delivered_add`, ``n_sub`` physics steps) ``[τ_L, τ_R]``, written as ``[τ_a, τ_b] =
+    [τ_L + τ_R, τ_R − τ_L]`` into ``tau_body`` (n, 2) (the learner's input, design §8.2) for the
+    robots with ``feed`` (n,) set; ``acc`` is cleared."""
+    for i in range(acc.shape[0]):
+        if feed[i]:
+            tl = acc[i, 0] / n_sub
+            tr = acc[i, 1] / n_sub
+            tau_body[i, 0] = tl + tr  # τ_a = τ_L + τ_R
+            tau_body[i, 1] = tr - tl  # τ_b = τ_R − τ_L (design §5)
+        acc[i, 0] = 0.0
+        acc[i, 1] = 0.0
+
+
+@njit
 def _warned(warn):
     for w in range(warn.shape[0]):
         if warn[w] != 0:
@@ -304,13 +330,22 @@ def run_chunk(
     sd,
     sen,
     odo,
+    act_force,
+    to_wheel,
+    feed,
+    feed_on,
+    dacc,
 ):
     """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by the
     control step of ``k+1`` (if ``k+1 < N``; the control step of ``k0`` must be done).
 
     Stops at the first physics step that raised a MuJoCo warning (``warn``, the counters of
     ``MjData.warning``): status ``engine.PLANT_FAILED``, with the state before MuJoCo's reset
-    not observed. With ``sen.on`` the sensors are sampled after each physics step (:func:`sense`)
+    not observed. With ``feed_on`` (DC motors, design §8.2) the wheel torque each motor delivered
+    (``act_force`` = ``MjData.actuator_force`` × ``to_wheel``) is averaged over the period
+    (:func:`delivered_add` into ``dacc``) and written into ``s.tau_body`` of the robots with ``feed``
+    before the next control step (:func:`delivered_feed`), so the learner sees it. With ``sen.on``
+    the sensors are sampled after each physics step (:func:`sense`)
     and the controller is given the odometry (:func:`odometry_read`) instead of the truth; metrics,
     guards, the formation error and the outcome watches stay on the truth. If ``rec_ctrl`` has rows,
     the inputs of step ``k`` are copied to
@@ -331,6 +366,10 @@ def run_chunk(
                 return k - k0, j, PLANT_FAILED
             if sen.on:
                 sense(sd, sen, odo)
+            if feed_on:
+                delivered_add(act_force, ctrl_id, to_wheel, dacc)
+        if feed_on:
+            delivered_feed(dacc, n_sub, feed, s.tau_body)
         observe(qpos, qvel, q7, v6, axle, pose, vel, up)
         watch_tilt(up, tilt_cos, tip_step, k + 1)
         watch_slip(

@@ -40,6 +40,8 @@ from .mujoco_kernels import (
     HAVE_MJ_STEP,
     Sensors,
     apply_inputs,
+    delivered_add,
+    delivered_feed,
     new_odometry,
     observe,
     odometry_read,
@@ -197,8 +199,15 @@ class MujocoPlant:
         # ctrl per N·m of wheel torque: 1 for torque motors, the DC driver's input otherwise (§8.2)
         self._ctrl_scale = np.array([[dc_ctrl_scale(m, int(a)) for a in row] for row in self._ctrl])
         self._axle = np.array([lay.axle for lay in lays], dtype=float)  # (n, 3) base frame, m
+        # DC motors (design §8.2): the learner is fed the wheel torque delivered, measured as the
+        # driver would (current × k_t × gear): actuator_force × gear × wheel sign, mean over the period
+        dc = int(mujoco.mjtDyn.mjDYN_DCMOTOR)
+        self._feed = np.array([all(int(m.actuator_dyntype[a]) == dc for a in row) for row in self._ctrl])
+        self.feed_delivered = bool(self._feed.any())  # False (all ideal): the commanded torque, as before
         self._wheel_dof = np.array([[m.jnt_dofadr[m.joint(j).id] for j in lay.wheel_joints] for lay in lays])
         self._wheel_sign = np.array([lay.wheel_sign for lay in lays], dtype=float)  # (n, 2)
+        self._to_wheel = np.where(self._feed[:, None], m.actuator_gear[self._ctrl, 0] * self._wheel_sign, 0.0)
+        self._dacc = np.zeros((n, 2))  # delivered wheel torque summed over the period's physics steps
         self._wheel_radius = np.array([lay.wheel_radius for lay in lays], dtype=float)
         self._half_track = np.array([lay.half_track for lay in lays], dtype=float)
         self._axle_zero = not np.any(self._axle)  # shipped robots: base origin on the axle
@@ -311,6 +320,7 @@ class MujocoPlant:
         self.tip_step[:] = -1
         self.slip_run[:] = 0
         self.slip_step[:] = -1
+        self._dacc[:] = 0.0
         self._push_until: np.ndarray | None = None  # pushes (faults): see push()
 
     def observe(self) -> tuple[np.ndarray, np.ndarray]:
@@ -442,10 +452,14 @@ class MujocoPlant:
         )
         if self._push_until is not None:  # faults: an external push on some chassis (push())
             self._apply_push(t)
-        if self.sensors.on:  # the sensors after every physics step, as in the compiled loop
+        self._dacc[:] = 0.0  # this period's delivered torque only (feed_delivered_torque)
+        if self.sensors.on or self.feed_delivered:  # after every physics step, as in the compiled loop
             for _ in range(self.n_substeps):
                 mujoco.mj_step(m, d)
-                sense(d.sensordata, self.sensors, self.odo)
+                if self.sensors.on:
+                    sense(d.sensordata, self.sensors, self.odo)
+                if self.feed_delivered:
+                    delivered_add(d.actuator_force, self._ctrl, self._to_wheel, self._dacc)
         else:
             mujoco.mj_step(m, d, self.n_substeps)
         self._step_count += 1
@@ -467,6 +481,14 @@ class MujocoPlant:
             step=self._step_count,
             time=self._step_count * self.control_dt,
         )
+
+    def feed_delivered_torque(self, tau_body: np.ndarray) -> None:
+        """Write the wheel torque delivered over the last :meth:`step` (mean of each DC motor's
+        ``actuator_force`` × gear × wheel sign over the physics steps) as ``[τ_a, τ_b]`` into
+        ``tau_body`` (n, 2) of the robots with DC motors (design §8.2; the loop passes the stack
+        state's ``tau_body``, the learner's input). Nothing when :attr:`feed_delivered` is False."""
+        if self.feed_delivered:
+            delivered_feed(self._dacc, self.n_substeps, self._feed, tau_body)
 
     def measurement(self, pose: np.ndarray, vel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """What the controllers are given at a control step: ``(pose, vel)`` (the truth, as passed)
@@ -610,6 +632,11 @@ class MujocoPlant:
                 d.sensordata,
                 self.sensors,
                 self.odo,
+                d.actuator_force,
+                self._to_wheel,
+                self._feed,
+                self.feed_delivered,
+                self._dacc,
             )
             self._step_count = k0 + done
             if status == 2:  # engine.PLANT_FAILED: a MuJoCo warning in step k0 + done
