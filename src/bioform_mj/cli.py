@@ -134,6 +134,17 @@ def build_parser() -> argparse.ArgumentParser:
         "(needs pip install 'bioform-mj[gpu]')",
     )
     sw.add_argument("--device", help="with --backend warp: Warp device, cpu or cuda[:N] (default: cuda if present)")
+    sw.add_argument(
+        "--nconmax",
+        type=int,
+        help="with --backend warp: contacts per world MuJoCo Warp allocates (default 8 per robot + 16); "
+        "worlds that overflow it are reported diverged",
+    )
+    sw.add_argument(
+        "--njmax",
+        type=int,
+        help="with --backend warp: constraint rows per world (default 32 per robot + 16); as --nconmax",
+    )
     sw.add_argument("--workers", type=int, help="parallel workers (default: CPU count)")
     sw.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray)")
     sw.add_argument("--out", type=Path, required=True, help="sweep directory (rerunning resumes it)")
@@ -591,8 +602,12 @@ def _sweep(args: argparse.Namespace) -> int:
             raise InputError(f"--methods: unknown method '{m}' (expected one of: {', '.join(METHODS)}, or all)")
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
-    if args.device is not None and args.backend != "warp":
-        raise InputError("--device applies to --backend warp only")
+    for flag, val in (("--device", args.device), ("--nconmax", args.nconmax), ("--njmax", args.njmax)):
+        if val is not None and args.backend != "warp":
+            raise InputError(f"{flag} applies to --backend warp only")
+    for flag, val in (("--nconmax", args.nconmax), ("--njmax", args.njmax)):
+        if val is not None and val < 1:
+            raise InputError(f"{flag} must be >= 1, got {val}")
     if args.backend == "warp":  # before any work: the extra, then the device
         from .batch.backend import require_warp, resolve_device
 
@@ -618,6 +633,8 @@ def _sweep(args: argparse.Namespace) -> int:
             ray_address=args.ray_address,
             progress=progress,
             device=args.device,
+            nconmax=args.nconmax,
+            njmax=args.njmax,
         )
     except SweepInterrupted as exc:
         # the same command resumes: finished rows are skipped by their content key
@@ -631,7 +648,13 @@ def _sweep(args: argparse.Namespace) -> int:
         for v in args.vary:
             cmd += ["--vary", v]
         cmd += ["--backend", args.backend]
-        for flag, val in (("--device", args.device), ("--workers", args.workers), ("--ray-address", args.ray_address)):
+        for flag, val in (
+            ("--device", args.device),
+            ("--nconmax", args.nconmax),
+            ("--njmax", args.njmax),
+            ("--workers", args.workers),
+            ("--ray-address", args.ray_address),
+        ):
             if val is not None:
                 cmd += [flag, str(val)]
         cmd += ["--out", str(out)]

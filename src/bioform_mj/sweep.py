@@ -587,8 +587,11 @@ def _read_row(path: Path, spec: RunSpec, warn: Callable[[str], None] | None) -> 
     return None
 
 
-def _run_warp(todo: list[RunSpec], groups: Any, device: str, sig: _Signals, done: Callable[[dict], None]) -> None:
-    """The runs as worlds of MuJoCo Warp batches (:mod:`bioform_mj.batch.backend`), one batch per scene."""
+def _run_warp(
+    todo: list[RunSpec], groups: Any, device: str, sig: _Signals, done: Callable[[dict], None], capacity: dict
+) -> None:
+    """The runs as worlds of MuJoCo Warp batches (:mod:`bioform_mj.batch.backend`), one batch per scene;
+    ``capacity``: ``nconmax``/``njmax`` per world (None: the batch engine's defaults)."""
     from .batch.backend import run_warp
 
     def failed(sp: RunSpec, msg: str) -> dict[str, Any]:
@@ -596,7 +599,16 @@ def _run_warp(todo: list[RunSpec], groups: Any, device: str, sig: _Signals, done
 
     try:
         with _raising(sig):
-            run_warp(groups, device, _base_row, METRICS, done, stop=lambda: sig.signum is not None, failed_row=failed)
+            run_warp(
+                groups,
+                device,
+                _base_row,
+                METRICS,
+                done,
+                stop=lambda: sig.signum is not None,
+                failed_row=failed,
+                **capacity,
+            )
     except _Stop:
         return
 
@@ -610,11 +622,14 @@ def sweep(
     progress: Callable[[int, int], None] | None = None,
     warn: Callable[[str], None] | None = _warn,
     device: str | None = None,
+    nconmax: int | None = None,
+    njmax: int | None = None,
 ) -> dict[str, Any]:
     """Run ``specs`` (skipping those already in ``out/runs``), then write the table and statistics.
 
     ``backend="warp"`` runs them as worlds of MuJoCo Warp batches on ``device`` (default: the
-    GPU if there is one); every spec is checked first (feature support, device memory).
+    GPU if there is one); every spec is checked first (feature support, device memory); ``nconmax``,
+    ``njmax``: MuJoCo Warp's contact / constraint-row capacity per world (None: the defaults).
     Raises :class:`SweepInterrupted` after SIGINT/SIGTERM, with the finished rows kept and
     the tables written for them.
     """
@@ -662,7 +677,7 @@ def sweep(
         if backend == "local":
             _run_local(todo, workers, sig, done)
         elif backend == "warp":
-            _run_warp(todo, groups, device, sig, done)
+            _run_warp(todo, groups, device, sig, done, {"nconmax": nconmax, "njmax": njmax})
         else:
             _run_ray(todo, workers, ray_address, sig, done)
         wall = time.perf_counter() - t0

@@ -77,7 +77,6 @@ def unsupported(sc: Any) -> str | None:
             ("faults.noise_vel", any(f.noise_vel)),
             ("faults.actuator", f.actuator),
             ("faults.push", f.push),
-            ("faults.friction_patch", f.friction_patch),
         )
         if on
     ]
@@ -98,6 +97,7 @@ def group_key(sc: Any) -> str:
     return json.dumps(
         {
             "plant": d["plant"],
+            "friction_patch": list(sc.faults.friction_patch),  # part of the composed scene
             "control_dt": sc.sim.control_dt,
             "physics_dt": sc.sim.physics_dt,
             "duration": sc.sim.duration,
@@ -235,8 +235,11 @@ def run_warp(
     done: Callable[[dict], None],
     stop: Callable[[], bool] = lambda: False,
     failed_row: Callable[[Any, str], dict] | None = None,
+    nconmax: int | None = None,
+    njmax: int | None = None,
 ) -> None:
     """Run every group as one batch on ``device``; ``done(row)`` per world as each batch ends.
+    ``nconmax``/``njmax``: MuJoCo Warp's capacities per world (None: :class:`~.control.BatchRun`'s).
     ``stop()`` is asked between batches. A batch that raises fails its rows (``failed_row``)."""
     import warp as wp
 
@@ -255,7 +258,7 @@ def run_warp(
         ]
         try:
             t0 = time.perf_counter()
-            b = BatchRun(scs, device)
+            b = BatchRun(scs, device, nconmax=nconmax, njmax=njmax)
             setup = time.perf_counter() - t0
             wall = b.run()
             summ = b.summaries(wall)

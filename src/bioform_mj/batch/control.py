@@ -63,6 +63,7 @@ saturate = EQ.saturate
 learner_step = EQ.learner_step
 harmonic = EQ.harmonic
 planar_state = EQ.planar_state
+slip_ratio = EQ.slip_ratio
 
 #: per-world scalar gains, columns of ``BatchGains.sc``: the scalar fields of ``control.kernel.Gains``
 #: (``deriv`` the ``DERIV_*`` code, the flags as 0/1), then ``scenario.limits``, then the
@@ -119,6 +120,9 @@ SCALARS = (
     "stride",
     "t_spin",
     "tilt_cos",
+    "slip_max",
+    "slip_floor",
+    "slip_need",
 )
 _I = {name: wp.constant(i) for i, name in enumerate(SCALARS)}
 K1, K2, K3, A_, B_, D_ = (_I[x] for x in ("k1", "k2", "k3", "A", "B", "D"))
@@ -135,6 +139,24 @@ DERIV_D = wp.constant(F(DERIV_DIFFERENCE))
 LPOS, LSPD, LTRQ = _I["lim_position"], _I["lim_speed"], _I["lim_torque"]
 DD0, DE0, USED = _I["d0"], _I["e0"], _I["use_dist"]
 STRIDE, TSPIN, TILT = _I["stride"], _I["t_spin"], _I["tilt_cos"]
+SLIPMAX, SLIPFLOOR, SLIPNEED = _I["slip_max"], _I["slip_floor"], _I["slip_need"]
+#: MuJoCo Warp's ``Data.overflow`` bits that mean dropped contacts or constraint rows (capacity), not
+#: the solver's iteration limits: a world with one of them is stopped as the CPU stops on MuJoCo's
+#: ``mjWARN_CONTACTFULL``/``CNSTRFULL`` warnings (``engine.PLANT_FAILED``)
+CAPACITY_BITS = (
+    mjw.OverflowType.NEFC
+    | mjw.OverflowType.NJMAX_NNZ
+    | mjw.OverflowType.BROADPHASE
+    | mjw.OverflowType.NARROWPHASE
+    | mjw.OverflowType.CCD
+    | mjw.OverflowType.HFIELD
+    | mjw.OverflowType.NVMAX
+)
+CAPACITY = wp.constant(int(CAPACITY_BITS))
+#: ``BatchState.status`` codes: running, a guard failed (``diag`` = guard), the physics overflowed
+#: MuJoCo Warp's capacities (``diag[w, 0]`` = the ``Data.overflow`` bits)
+RUNNING, GUARD_FAILED, CAPACITY_EXCEEDED = 0, 1, 2
+ST_CAP = wp.constant(CAPACITY_EXCEEDED)
 SPIN = wp.constant(F(SPIN_RAD_S))
 
 
@@ -183,7 +205,7 @@ class BatchState:
     v_err: wp.array3d(dtype=F)
     first: wp.array(dtype=int)  # (W,)
     k: wp.array(dtype=int)  # (W,) the control step this world computes next
-    status: wp.array(dtype=int)  # (W,) 0 running, 1 a guard failed
+    status: wp.array(dtype=int)  # (W,) RUNNING, GUARD_FAILED or CAPACITY_EXCEEDED
     k_done: wp.array(dtype=int)  # (W,) control steps done (N, or the step whose guard failed)
     diag: wp.array2d(dtype=F)  # (W, 3) guard code (engine.GUARDS index + 1), follower, value
     # metrics (engine.Metrics), per world and follower
@@ -199,15 +221,16 @@ class BatchState:
     spin_ok: wp.array2d(dtype=F)  # (W, n) rows with t ≥ t_spin and |ω| ≤ SPIN_RAD_S
     nrow: wp.array(dtype=int)  # (W,) rows
     tip_step: wp.array2d(dtype=int)  # (W, n) first observation k with the chassis tilted (−1: never)
+    slip_run: wp.array2d(dtype=int)  # (W, n) consecutive observations with a wheel slipping
+    slip_step: wp.array2d(dtype=int)  # (W, n) observation k at which a slip first lasted slip_need (−1: never)
 
 
 @wp.func
 def _finite3(a: wp.array3d(dtype=F), w: int, i: int, nc: int) -> bool:
-    ok = True
-    for c in range(nc):
+    for c in range(nc):  # (no flag mutated in the loop: Warp 1.19 refuses to mutate a constant there)
         if not wp.isfinite(a[w, i, c]):
-            ok = False
-    return ok
+            return False
+    return True
 
 
 @wp.func
@@ -284,6 +307,11 @@ def _control(
     act: wp.array2d(dtype=int),
     cscale: wp.array2d(dtype=F),  # (n, 2) ctrl per N·m (1: torque motor; DC driver's input, design §8.2)
     axle: wp.array2d(dtype=F),  # (n, 3) reference point in the base frame
+    wdof: wp.array2d(dtype=int),  # (n, 2) qvel addresses of the [left, right] wheel joints
+    wsign: wp.array2d(dtype=F),  # (n, 2) ±1: sign · qvel is the forward wheel rate
+    wrad: wp.array(dtype=F),  # (n,) wheel radius, m
+    htrack: wp.array(dtype=F),  # (n,) half track, m
+    overflow: wp.array(dtype=int),  # (W,) MuJoCo Warp's Data.overflow bits (sticky until reset)
     ctrl: wp.array2d(dtype=float),
     xfrc: wp.array2d(dtype=wp.spatial_vector),
 ):
@@ -297,6 +325,14 @@ def _control(
     n = s.pose.shape[1]
     dt = g.sc[w, DT]
     zero = F(0.0)
+    # ---- MuJoCo Warp dropped contacts or constraint rows in the last period: stop this world
+    # (the CPU loop stops on MuJoCo's warnings: engine.PLANT_FAILED), never silently
+    if k >= 1 and s.status[w] == 0 and (overflow[w] & CAPACITY) != 0:
+        s.status[w] = ST_CAP
+        s.diag[w, 0] = F(overflow[w] & CAPACITY)
+        s.diag[w, 1] = F(-1.0)
+        s.diag[w, 2] = F(k) * dt  # the end of the period that overflowed
+        s.k_done[w] = k - 1
     # ---- observe (mujoco_kernels.observe)
     for i in range(n):
         qa = qadr[i]
@@ -323,9 +359,27 @@ def _control(
         s.pose[w, i, 2] = th
         s.vel[w, i, 0] = v
         s.vel[w, i, 1] = om
-        # mujoco_kernels.watch_tilt after each plant step (k ≥ 1) until the loop stops
-        if k >= 1 and s.status[w] == 0 and s.tip_step[w, i] < 0 and up < g.sc[w, TILT]:
-            s.tip_step[w, i] = k
+        # mujoco_kernels.watch_tilt and watch_slip after each plant step (k ≥ 1) until the loop stops
+        if k >= 1 and s.status[w] == 0:
+            if s.tip_step[w, i] < 0 and up < g.sc[w, TILT]:
+                s.tip_step[w, i] = k
+            worst = F(0.0)
+            for c in range(2):
+                sl = slip_ratio(
+                    F(qvel[w, wdof[i, c]]) * wsign[i, c],
+                    wrad[i],
+                    v,
+                    om,
+                    F(2 * c - 1) * htrack[i],
+                    g.sc[w, SLIPFLOOR],
+                )
+                worst = wp.max(worst, sl)
+            if worst > g.sc[w, SLIPMAX]:
+                s.slip_run[w, i] = s.slip_run[w, i] + 1
+                if s.slip_run[w, i] >= int(g.sc[w, SLIPNEED]) and s.slip_step[w, i] < 0:
+                    s.slip_step[w, i] = k
+            else:
+                s.slip_run[w, i] = 0
     kl = wp.min(k, N)
     for i in range(n):  # formation error against the true leader at this observation
         dx = s.pose[w, i, 0] - (L_pose[kl, 0] - g.offsets[w, i, 0])
@@ -363,6 +417,8 @@ def _control(
             s.fe0[w, i] = zero
             s.spin_ok[w, i] = zero
             s.tip_step[w, i] = -1
+            s.slip_run[w, i] = 0
+            s.slip_step[w, i] = -1
         s.nrow[w] = 0
         s.first[w] = 1
         s.status[w] = 0
@@ -594,7 +650,7 @@ def _control(
             )
         s.k_done[w] = k
         if _check(g, s, w, n) != 0:
-            s.status[w] = 1
+            s.status[w] = 1  # GUARD_FAILED
             running = False
         elif k % int(g.sc[w, STRIDE]) == 0:  # engine.record's row (formation error, vel) for the summary
             for i in range(n):
@@ -676,12 +732,13 @@ def _check_compatible(scs: Sequence[Scenario]) -> None:
     if sc0.plant.kind != "mujoco":
         raise ValueError("the batch engine runs the MuJoCo plant only (plant.kind = 'mujoco')")
     for sc in scs:
-        if sc.faults.per_step or sc.faults.friction_patch:
+        if sc.faults.per_step:
             raise ValueError(f"scenario '{sc.name}': faults are not supported by the batch engine yet")
         if getattr(sc, "events", None):
             raise ValueError(f"scenario '{sc.name}': events are not supported by the batch engine yet")
         for what, a, b in (
             ("plant", sc.plant, sc0.plant),
+            ("faults.friction_patch", sc.faults.friction_patch, sc0.faults.friction_patch),  # part of the scene
             ("sim.control_dt", sc.sim.control_dt, sc0.sim.control_dt),
             ("sim.physics_dt", sc.sim.physics_dt, sc0.sim.physics_dt),
             ("sim.duration", sc.sim.duration, sc0.sim.duration),
@@ -769,6 +826,9 @@ class BatchRun:
             row["stride"] = float(stride)
             row["t_spin"] = ((N - 1) // stride) * stride * dt - 1.0  # sim.follower_outcomes: the last second of rows
             row["tilt_cos"] = math.cos(math.radians(TIP_ANGLE_DEG))
+            row["slip_max"] = plant.SLIP_RATIO  # mujoco_plant's watch_slip thresholds
+            row["slip_floor"] = plant.SLIP_V_FLOOR
+            row["slip_need"] = float(plant._slip_need)
             sc_rows[w] = [row[f] for f in SCALARS]
             arr["k4"][w], arr["c_min"][w], arr["c_max"][w] = gn.k4, gn.c_min, gn.c_max
             arr["offsets"][w] = gn.offsets
@@ -785,6 +845,8 @@ class BatchRun:
 
         nconmax = 8 * n + 16 if nconmax is None else nconmax
         njmax = 32 * n + 16 if njmax is None else njmax
+        if nconmax < 1 or njmax < 1:  # njmax = 0 makes MuJoCo Warp skip every constraint, unflagged
+            raise ValueError(f"nconmax and njmax must be >= 1 per world, got {nconmax}, {njmax}")
         with wp.ScopedDevice(self.device):
             self.m = mjw.put_model(mjm)
             self.d = mjw.put_data(mjm, plant.data, nworld=W, nconmax=nconmax, njmax=njmax)
@@ -815,6 +877,8 @@ class BatchRun:
             s.fsq, s.fe0, s.spin_ok = z1(), z1(), z1()
             s.nrow = wp.zeros(W, dtype=int)
             s.tip_step = wp.full((W, n), -1, dtype=int)
+            s.slip_run = wp.zeros((W, n), dtype=int)
+            s.slip_step = wp.full((W, n), -1, dtype=int)
             self.s = s
             self.L_pose = A(L_pose)
             self.L_vel = A(L_vel)
@@ -824,6 +888,10 @@ class BatchRun:
             self.act = A(np.asarray(plant._ctrl).astype(np.int32), int)  # the plant's own motor ids
             self.cscale = A(np.asarray(plant._ctrl_scale, dtype=float))
             self.axle = A(plant._axle)
+            self.wdof = A(np.asarray(plant._wdof).astype(np.int32), int)
+            self.wsign = A(np.asarray(plant._wheel_sign, dtype=float))
+            self.wrad = A(np.asarray(plant._wheel_radius, dtype=float))
+            self.htrack = A(np.asarray(plant._half_track, dtype=float))
         self.L_pose_host = L_pose
         self.nconmax, self.njmax = nconmax, njmax
         self.graph = None
@@ -849,6 +917,11 @@ class BatchRun:
                 self.act,
                 self.cscale,
                 self.axle,
+                self.wdof,
+                self.wsign,
+                self.wrad,
+                self.htrack,
+                d.overflow,
                 d.ctrl,
                 d.xfrc_applied,
             ],
@@ -871,6 +944,7 @@ class BatchRun:
             d.ctrl.zero_()
             d.xfrc_applied.zero_()
             d.qacc_warmstart.zero_()
+            d.overflow.zero_()  # MuJoCo Warp ORs its overflow bits in and never clears them
             mjw.forward(self.m, d)
             self.s.k.zero_()
             self._launch_control()  # k = 0: observe, reset, control step 0, torques
@@ -1018,12 +1092,18 @@ class BatchRun:
             return time.perf_counter() - t0
 
     # -- results
-    def _outcome(self, w, i, diverged, final, fe0, t_end, nrow, spin_ok, tip, learning, c_hat, lo, hi):
-        """``sim.follower_outcomes`` from the device's counters; ``slipping`` is not watched by the
-        batch engine, nor ``spinning`` in a world that diverged (its log would end earlier)."""
-        not_watched = "slipping not watched" + (", spinning not checked (diverged)" if diverged else "")
+    def _outcome(self, w, i, diverged, final, fe0, t_end, nrow, spin_ok, tip, slip, learning, c_hat, lo, hi):
+        """``sim.follower_outcomes`` from the device's counters (tilt and slip watched per world as
+        ``mujoco_kernels.watch_tilt``/``watch_slip`` do); ``spinning`` is not checked in a world that
+        diverged (its log would end earlier)."""
         if tip >= 0:
             return "tipped", f"tilt beyond {TIP_ANGLE_DEG:g} deg at t = {tip * self.dt:.3f} s"
+        if slip >= 0:
+            p = self.plant
+            return (
+                "slipping",
+                f"wheel slip ratio > {p.SLIP_RATIO:g} for {p.SLIP_TIME:g} s, by t = {slip * self.dt:.3f} s",
+            )
         if not diverged and nrow and spin_ok == 0:
             return "spinning", f"|omega| > {SPIN_RAD_S:g} rad/s over the last second"
         if final > LOST_M and (t_end >= LOST_AFTER_S - 1e-9 or final > 1.5 * fe0):
@@ -1032,7 +1112,25 @@ class BatchRun:
             at = [k for k in range(2) if c_hat[k] <= lo[k] * (1 + 1e-9) or c_hat[k] >= hi[k] * (1 - 1e-9)]
             if at:
                 return "c_hat_at_bound", "learned " + ", ".join("ab"[k] for k in at) + " at its bound"
-        return "ok", f"batch engine: {not_watched}"
+        return "ok", ("batch engine: spinning not checked (diverged)" if diverged else "")
+
+    def _capacity_reason(self, bits: int, t: float) -> str:
+        """The ``diverged_reason`` of a world whose physics overflowed MuJoCo Warp's capacities
+        (``Data.overflow`` bits): what overflowed, which option raises it, and when."""
+        O = mjw.OverflowType
+        parts = []
+        if bits & (O.BROADPHASE | O.NARROWPHASE | O.CCD | O.HFIELD):
+            parts.append(f"contact capacity exceeded: raise --nconmax (now {self.nconmax} per world)")
+        if bits & O.NEFC:
+            parts.append(f"constraint capacity exceeded: raise --njmax (now {self.njmax} rows per world)")
+        if bits & O.NJMAX_NNZ:
+            parts.append("constraint Jacobian capacity (njmax_nnz) exceeded: raise --njmax")
+        if bits & O.NVMAX:
+            parts.append("active-DOF capacity (nvmax) exceeded")
+        return (
+            "; ".join(parts) + f"; MuJoCo Warp dropped what did not fit in the control period ending at t = {t:.4f} s "
+            "(world stopped there: its physics is wrong from then on)"
+        )
 
     def summaries(self, wall: float = float("nan")) -> list[dict[str, Any]]:
         s = self.s
@@ -1049,6 +1147,7 @@ class BatchRun:
             s.nrow.numpy(),
             s.tip_step.numpy(),
         )
+        slip = s.slip_step.numpy()
         c_min, c_max = self.g.c_min.numpy(), self.g.c_max.numpy()
         learning = self.g.sc.numpy()[:, LEARN] != 0
         lp_end = self.L_pose_host[self.N]
@@ -1057,7 +1156,9 @@ class BatchRun:
             kd = int(k_done[w])
             reason = None
             bad = not np.all(np.isfinite(pose[w]))
-            if status[w]:
+            if status[w] == CAPACITY_EXCEEDED:
+                reason = self._capacity_reason(int(diag[w, 0]), float(diag[w, 2]))
+            elif status[w]:
                 code, i, val = int(diag[w, 0]), int(diag[w, 1]), float(diag[w, 2])
                 signal, what, limit = GUARDS[code - 1]
                 reason = (
@@ -1081,6 +1182,7 @@ class BatchRun:
                     int(nrow[w]),
                     float(spin_ok[w, i]),
                     int(tip[w, i]),
+                    int(slip[w, i]),
                     bool(learning[w]),
                     c_hat[w, i],
                     c_min[w, i],

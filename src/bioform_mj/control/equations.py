@@ -546,6 +546,20 @@ def planar_state(
     return (px + ox, py + oy, atan2(r10 + 0.0, r00), (ux * r00 + uy * r10) / n, gz, r22)
 
 
+# ------------------------------------------------------- wheel slip (the plant's outcome watch, design §8)
+@equation
+def slip_ratio(phidot: float, r: float, v: float, w: float, y: float, v_floor: float) -> float:
+    """Slip ratio of one wheel: ``|r φ̇ − v_c| / max(|r φ̇|, |v_c|, v_floor)``, with ``φ̇`` the wheel's
+    forward rate (rad/s), ``r`` its radius (m) and ``v_c = υ + y ω`` the forward speed its contact
+    point would have if it rolled (``υ`` m/s, ``ω`` rad/s the chassis' body velocity at the axle
+    midpoint; ``y = −l`` for the left wheel, ``+l`` for the right, ``l`` the half track, m). 0 when
+    rolling, up to 2 when the wheel spins against the motion; below ``v_floor`` (m/s) the speeds are
+    measured against that floor, so creeping at standstill is not slip."""
+    rate = phidot * r
+    vc = v + y * w
+    return abs(rate - vc) / max(max(abs(rate), abs(vc)), v_floor)
+
+
 # ------------------------------------------------------- sensors and odometry (design §8.3)
 #: modulus of the counter hash (2^31 − 1): every product below stays under 2^53, exact in doubles
 HASH_M = 2147483647.0

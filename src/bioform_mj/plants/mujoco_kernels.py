@@ -16,7 +16,16 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..control.equations import HAVE_NUMBA, encoder_angle, gyro_reading, harmonic, njit, odometry_step, planar_state
+from ..control.equations import (
+    HAVE_NUMBA,
+    encoder_angle,
+    gyro_reading,
+    harmonic,
+    njit,
+    odometry_step,
+    planar_state,
+    slip_ratio,
+)
 from ..control.kernel import control_step
 from ..engine import OK, PLANT_FAILED, after_control, record_odometry
 
@@ -253,16 +262,22 @@ def watch_tilt(up, tilt_cos, tip_step, k):
 
 @njit
 def watch_slip(qvel, wheel_dof, wheel_sign, radius, half_track, vel, ratio, v_floor, need, slip_run, slip_step, k):
-    """Wheel slip of each robot after step ``k``: ``|r φ̇ − v_c| / max(|r φ̇|, |v_c|, v_floor)`` per
-    wheel (``φ̇ = sign · qvel`` the forward wheel rate, ``v_c = υ ∓ l ω`` its contact point's
-    forward speed if it rolled). ``slip_run`` (n,) counts consecutive steps with a wheel beyond
-    ``ratio``; ``slip_step`` (n,) records the step at which a run first reached ``need`` steps."""
+    """Wheel slip of each robot after step ``k``: :func:`~..equations.slip_ratio` per wheel
+    (``φ̇ = sign · qvel`` the forward wheel rate, ``v_c = υ ∓ l ω`` its contact point's forward
+    speed if it rolled). ``slip_run`` (n,) counts consecutive steps with a wheel beyond
+    ``ratio``; ``slip_step`` (n,) records the step at which a run first reached ``need`` steps.
+    The batch engine (``batch/control.py``) runs the same watch per world."""
     for i in range(vel.shape[0]):
         worst = 0.0
         for w in range(2):
-            rate = qvel[wheel_dof[i, w]] * wheel_sign[i, w] * radius[i]
-            vc = vel[i, 0] + (2 * w - 1) * half_track[i] * vel[i, 1]
-            sl = abs(rate - vc) / max(max(abs(rate), abs(vc)), v_floor)
+            sl = slip_ratio(
+                qvel[wheel_dof[i, w]] * wheel_sign[i, w],
+                radius[i],
+                vel[i, 0],
+                vel[i, 1],
+                (2 * w - 1) * half_track[i],
+                v_floor,
+            )
             worst = max(worst, sl)
         if worst > ratio:
             slip_run[i] += 1

@@ -22,6 +22,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from bioform_mj.control.equations import slip_ratio
 from bioform_mj.disturbance import harmonic_rows
 from bioform_mj.errors import Diverged
 from bioform_mj.identify import RobotParams, robot_parameters
@@ -384,10 +385,23 @@ class MujocoPlant:
         the wheel's contact point if it rolled (left: −, right: +). 0 when rolling; compare with
         :attr:`SLIP_RATIO` held for :attr:`SLIP_TIME` s."""
         _, vel = self.observe()
-        rate = self.data.qvel[self._wheel_dof] * self._wheel_sign * self._wheel_radius[:, None]
-        lw = self._half_track * vel[:, 1]
-        vc = np.stack([vel[:, 0] - lw, vel[:, 0] + lw], axis=1)
-        return np.abs(rate - vc) / np.maximum(np.maximum(np.abs(rate), np.abs(vc)), self.SLIP_V_FLOOR)
+        qv = self.data.qvel
+        return np.array(
+            [
+                [
+                    slip_ratio(
+                        float(qv[self._wheel_dof[i, w]] * self._wheel_sign[i, w]),
+                        float(self._wheel_radius[i]),
+                        float(vel[i, 0]),
+                        float(vel[i, 1]),
+                        (2 * w - 1) * float(self._half_track[i]),
+                        self.SLIP_V_FLOOR,
+                    )
+                    for w in range(2)
+                ]
+                for i in range(self.n)
+            ]
+        )
 
     def wheel_loads(self, data: mujoco.MjData | None = None) -> np.ndarray:
         """(n, 2) normal force on the [left, right] wheels' floor contacts now, N (``mj_contactForce``).

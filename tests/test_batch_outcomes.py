@@ -1,0 +1,80 @@
+"""Per-world outcomes of the batch engine that the CPU engine also reports: a slipping wheel
+(``mujoco_kernels.watch_slip`` and the batch kernel both call ``equations.slip_ratio``), and
+MuJoCo Warp's contact / constraint capacity overflowing (the CPU stops on MuJoCo's warnings; the
+batch engine stops the world and says which capacity to raise, never silently)."""
+
+import csv
+
+import pytest
+
+wp = pytest.importorskip("warp")
+pytest.importorskip("mujoco_warp")
+
+from bioform_mj.cli import main  # noqa: E402
+from bioform_mj.scenario import load  # noqa: E402
+from bioform_mj.sim import simulate  # noqa: E402
+
+wp.config.quiet = True
+
+#: the paper scenario on a floor of friction 0.02 (a patch under the whole start area), 1 s:
+#: follower 2, saturated from the start, spins its wheels. Measured (Warp CPU device): the CPU engine
+#: reports it slipping by t = 0.715 s, the batch engine by 0.582 s (float32 physics; slip is chaotic,
+#: so the other followers' outcomes differ between the engines and are not compared)
+SLIPPERY = ["plant.kind=mujoco", "sim.duration=1.0", "faults.friction_patch=[-50.0,-50.0,50.0,50.0,0.02]"]
+
+
+def test_slipping_robot_is_reported_by_both_engines():
+    from bioform_mj.batch.control import run_batch
+
+    sc = load("paper", overrides=SLIPPERY)
+    cpu = simulate(sc).summary
+    (bat,) = run_batch([sc])
+    assert cpu["diverged"] is None and not bat["diverged"], bat["diverged_reason"]
+    for s in (cpu, bat):
+        f2 = s["followers"][1]
+        assert f2["outcome"] == "slipping", f2
+        assert f2["outcome_detail"].startswith("wheel slip ratio > 0.2 for 0.5 s, by t = ")
+
+
+def test_no_slip_on_the_paper_floor():
+    """The watch does not fire on the ordinary floor (the batch engine's ok detail is empty, as the CPU's)."""
+    from bioform_mj.batch.control import run_batch
+
+    (bat,) = run_batch([load("paper", overrides=["plant.kind=mujoco", "sim.duration=0.6"])])
+    assert [(f["outcome"], f["outcome_detail"]) for f in bat["followers"]] == [("ok", "")] * 3
+
+
+def test_contact_capacity_overflow_marks_every_affected_world_diverged():
+    """6 contacts per world (the scene has 6 at rest; broadphase finds more candidates): MuJoCo Warp
+    only prints a warning, the batch engine stops both worlds with the reason."""
+    from bioform_mj.batch.control import run_batch
+
+    ov = ["plant.kind=mujoco", "sim.duration=0.02"]
+    out = run_batch([load("paper", overrides=[*ov, f"sim.seed={s}"]) for s in range(2)], nconmax=6)
+    for r in out:
+        assert r["diverged"]
+        assert r["diverged_reason"].startswith("contact capacity exceeded: raise --nconmax (now 6 per world)")
+        assert r["steps"] < 20
+
+
+def test_constraint_capacity_overflow_and_the_sweep_flag(tmp_path):
+    """``bioform sweep --backend warp --njmax 4``: the rows are diverged with the reason in ``error``."""
+    out = tmp_path / "sw"
+    args = ["sweep", "paper", "--plant", "mujoco", "--duration", "0.02", "--seeds", "2", "--quiet"]
+    args += ["--backend", "warp", "--device", "cpu", "--njmax", "4", "--out", str(out)]
+    assert main(args) == 0
+    with open(out / "runs.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 2
+    for r in rows:
+        assert r["status"] == "diverged" and r["outcome"] == "diverged"
+        assert r["error"].startswith("constraint capacity exceeded: raise --njmax (now 4 rows per world)")
+
+
+def test_capacity_flags_need_the_warp_backend(tmp_path, capsys):
+    assert main(["sweep", "paper", "--nconmax", "8", "--out", str(tmp_path / "x")]) == 2
+    assert "--nconmax applies to --backend warp only" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="njmax must be >= 1"):
+        from bioform_mj.batch.control import BatchRun
+
+        BatchRun([load("paper", overrides=["plant.kind=mujoco", "sim.duration=0.01"])], njmax=0)
