@@ -100,25 +100,18 @@ def test_derivative_mode_is_per_world():
     assert np.abs(np.diff(np.array(v), axis=0)).min() > 1e-3 * np.abs(v).max()
 
 
-def test_dc_motors_scale_ctrl():
-    """motor = "dc" (design §8.2): ctrl = scale · τ as mujoco_kernels.apply_inputs; the paper robot
-    with the voltage driver (scale R/(gK) = 4.8 V per N·m) agrees with the CPU engine.
-    Measured 0.5 s, 2 worlds: formation ≤ 3.1e-5 m, ĉ ≤ 2.2e-4, velocity error ≤ 4.9e-4 rel."""
+def test_dc_motors_are_refused_until_the_device_feeds_the_delivered_torque():
+    """motor = "dc": the CPU engine feeds the learner the torque the DC motors deliver (design §8.2);
+    the device kernel still feeds the commanded torque, so the batch engine refuses such robots
+    (it agreed with the CPU engine within 3.1e-5 m while both fed the commanded torque)."""
+    from bioform_mj.batch.backend import unsupported
     from bioform_mj.batch.control import BatchRun
 
-    ov = [
-        "plant.kind=mujoco",
-        "sim.duration=0.5",
-        "formation.init_jitter=0.05",
-        'plant.robots=[{model="paper", motor="dc", driver="voltage"}]',
-    ]
-    scs = [load("paper", overrides=[*ov, f"sim.seed={s}"]) for s in range(2)]
-    b = BatchRun(scs, device="cpu")
-    np.testing.assert_allclose(b.cscale.numpy(), b.plant._ctrl_scale)
-    assert np.all(b.cscale.numpy() > 1.5)  # not the torque motors' 1: a missing scale would show
-    res = b.summaries(b.run())
-    for sc, r in zip(scs, res):
-        _compare(r, simulate(sc).summary, 1e-3)
+    ov = ["plant.kind=mujoco", "sim.duration=0.1", 'plant.robots=[{model="paper", motor="dc", driver="voltage"}]']
+    sc = load("paper", overrides=ov)
+    assert "motor = 'dc'" in unsupported(sc)
+    with pytest.raises(ValueError, match="motor = 'dc'"):
+        BatchRun([sc], device="cpu")
 
 
 def test_guard_marks_the_world_that_diverged():

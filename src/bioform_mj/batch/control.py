@@ -787,6 +787,11 @@ class BatchRun:
         self.device = wp.get_device(device)
         plant = make_plant(sc0)
         self.plant = plant
+        if getattr(plant, "feed_delivered", False):
+            raise ValueError(
+                "motor = 'dc' robots are not supported by the batch engine yet: the CPU engine feeds the "
+                "learner the torque the DC motors deliver (design §8.2), the device kernel does not"
+            )
         mjm = plant.model
         self.mjm = mjm
         idx = robot_index(mjm)
