@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .control.equations import formation_offset, njit
+from .control.kernel import control_step
 
 #: Time-series channels of ``log.npz``: name → (trailing shape, meaning). ``n`` = followers.
 CHANNELS: dict[str, tuple[tuple[str, ...], str]] = {
@@ -354,3 +355,60 @@ def after_control(k, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt
         record(lg, j, k * dt, L_pose[k], L_vel[k], pose, vel, s, c_true, form, acc)
         return j + 1, OK
     return j, OK
+
+
+class Loop(NamedTuple):
+    """What a plant's compiled chunk shares with the loop driver (``sim``); arrays updated in place.
+
+    ``gains``, ``state``, ``comm``: the controller's kernel arguments (``control/kernel.py``);
+    ``N`` control steps of ``dt`` s; ``L_pose`` (N+1, 3), ``L_vel`` (N+1, 2) the leader at every
+    step; ``pose`` (n, 3), ``vel`` (n, 2) the true measurements the plant writes; ``met``, ``acc``,
+    ``log`` (:class:`Metrics`, :class:`Acc`, :class:`LogArrays`), a row every ``stride`` steps;
+    ``form`` (:class:`Formation`), ``bounds`` (:class:`Bounds`), ``diag`` (3,) a failed guard."""
+
+    gains: object
+    state: object
+    comm: object
+    N: int
+    dt: float
+    L_pose: np.ndarray
+    L_vel: np.ndarray
+    pose: np.ndarray
+    vel: np.ndarray
+    met: Metrics
+    acc: Acc
+    log: LogArrays
+    stride: int
+    form: Formation
+    bounds: Bounds
+    diag: np.ndarray
+
+
+@njit
+def control_and_record(lp, k, j, c_true, meas_pose, meas_vel):
+    """After plant step ``k − 1``: the control step of ``k`` (if ``k < N``) on what the controller
+    measures (``meas_pose`` (n,3), ``meas_vel`` (n,2): the truth ``lp.pose``/``lp.vel``, or an
+    estimate such as odometry), then :func:`after_control` on the truth. Every plant's chunk kernel
+    calls this one function. Returns ``(next log row, status)``."""
+    if k >= lp.N:
+        return j, OK
+    control_step(lp.gains, lp.state, lp.L_pose[k], lp.L_vel[k], meas_pose, meas_vel, lp.comm)
+    return after_control(
+        k,
+        lp.N,
+        lp.stride,
+        lp.state,
+        lp.pose,
+        lp.vel,
+        lp.met,
+        lp.acc,
+        lp.log,
+        j,
+        lp.L_pose,
+        lp.L_vel,
+        lp.dt,
+        c_true,
+        lp.form,
+        lp.bounds,
+        lp.diag,
+    )

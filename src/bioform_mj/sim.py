@@ -19,12 +19,12 @@ import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from . import __version__
-from .control.kernel import Gains, StackState, new_state
+from .control.kernel import StackState, new_state
 from .control.stack import ControlStack, StackParams, parse_method
 from .disturbance import Harmonic as HarmonicDisturbance
 from .engine import (
@@ -35,6 +35,7 @@ from .engine import (
     Bounds,
     Formation,
     LogArrays,
+    Loop,
     after_control,
     describe,
     new_acc,
@@ -218,24 +219,8 @@ ENGINES = ("auto", "compiled", "stepwise")
 MAX_CHUNK_S = 0.1
 
 
-class LoopContext(NamedTuple):
-    """What a plant's compiled chunk needs from the loop (all arrays updated in place)."""
-
-    gains: Gains
-    state: StackState
-    comm: Any
-    N: int
-    L_pose: np.ndarray
-    L_vel: np.ndarray
-    pose: np.ndarray
-    vel: np.ndarray
-    met: Any
-    acc: Any
-    log: LogArrays
-    stride: int
-    offsets: np.ndarray
-    bounds: Bounds
-    diag: np.ndarray
+#: what a plant's compiled chunk shares with this driver (kept under its old name)
+LoopContext = Loop
 
 
 def simulate(
@@ -312,11 +297,12 @@ def simulate(
     else:  # a user's controller: its signals are copied into a shadow state each step
         gains, state = None, new_state(n)
     lim = sc.limits
-    ctx = LoopContext(
+    ctx = Loop(
         gains,
         state,
         getattr(controller, "_no_comm", None),
         N,
+        dt,
         L_pose,
         L_vel,
         np.ascontiguousarray(pose0, dtype=float),
@@ -358,6 +344,29 @@ def simulate(
         return np.array(tau, dtype=float)
 
     applied = [np.zeros((n, 2))]
+
+    def record(k: int, j: int) -> tuple[int, int]:
+        """After the control step of ``k``: metrics, guards and the log row (``engine.after_control``)."""
+        return after_control(
+            k,
+            N,
+            stride,
+            state,
+            ctx.pose,
+            ctx.vel,
+            ctx.met,
+            ctx.acc,
+            lg,
+            j,
+            L_pose,
+            L_vel,
+            dt,
+            c_true,
+            form,
+            ctx.bounds,
+            ctx.diag,
+        )
+
     feed = bool(getattr(plant, "feed_delivered", False))
 
     def python_chunk(k0: int, k1: int, j: int) -> tuple[int, int, int]:
@@ -371,25 +380,7 @@ def simulate(
             ctx.vel[:] = v
             if k + 1 < N:
                 applied[0] = control(k + 1)
-                j1, status = after_control(
-                    k + 1,
-                    N,
-                    stride,
-                    state,
-                    ctx.pose,
-                    ctx.vel,
-                    ctx.met,
-                    ctx.acc,
-                    lg,
-                    j,
-                    L_pose,
-                    L_vel,
-                    dt,
-                    c_true,
-                    form,
-                    ctx.bounds,
-                    ctx.diag,
-                )
+                j1, status = record(k + 1, j)
                 if odometry and j1 > j:
                     record_odometry(lg, j, plant.odo.mpose, plant.odo.mvel)
                 j = j1
@@ -402,25 +393,7 @@ def simulate(
     # control step 0 and its row, then a zero-length chunk: kernels are loaded (or compiled) here,
     # outside the timed loop
     applied[0] = control(0)
-    j, status = after_control(
-        0,
-        N,
-        stride,
-        state,
-        ctx.pose,
-        ctx.vel,
-        ctx.met,
-        ctx.acc,
-        lg,
-        0,
-        L_pose,
-        L_vel,
-        dt,
-        c_true,
-        form,
-        ctx.bounds,
-        ctx.diag,
-    )
+    j, status = record(0, 0)
     if odometry and j > 0:
         record_odometry(lg, 0, plant.odo.mpose, plant.odo.mvel)
     run_chunk = chunk if chunk is not None else python_chunk

@@ -13,9 +13,8 @@ from typing import Any
 import numpy as np
 
 from ..control.equations import njit, unicycle_rk4, wrap
-from ..control.kernel import control_step
 from ..disturbance import harmonic_rows
-from ..engine import OK, after_control
+from ..engine import OK, control_and_record
 from .base import DisturbanceFn
 
 
@@ -62,46 +61,18 @@ def _observe(x, pose, vel):
 
 
 @njit
-def run_chunk(
-    g,
-    s,
-    comm,
-    k0,
-    k1,
-    N,
-    dt,
-    n_sub,
-    L_pose,
-    L_vel,
-    c,
-    dist,
-    x,
-    extra,
-    pose,
-    vel,
-    met,
-    acc,
-    lg,
-    j0,
-    stride,
-    offsets,
-    lim,
-    diag,
-):
-    """Plant steps ``k0 … k1−1`` of the closed loop, each followed by the control step of
-    ``k+1`` (if ``k+1 < N``; the control step of ``k0`` must be done). Returns
-    ``(plant steps done, next log row, status)`` (status: ``engine.OK`` or a failed guard)."""
+def run_chunk(lp, k0, k1, n_sub, c, dist, x, extra, j0):
+    """Plant steps ``k0 … k1−1`` of the closed loop (``lp``: :class:`~bioform_mj.engine.Loop`), each
+    followed by the control step of ``k+1`` (the control step of ``k0`` must be done). ``c`` (n, 2)
+    the true ``[a, b]``, ``dist`` (2, 4) the harmonic disturbance, ``x`` (n, 5) the state, ``extra``
+    (n, 2) added accelerations. Returns ``(plant steps done, next log row, status)``."""
     j = j0
     for k in range(k0, k1):
-        ideal_step(x, s.tau, c, extra, dist, k * dt, dt, n_sub)
-        _observe(x, pose, vel)
-        if k + 1 < N:
-            control_step(g, s, L_pose[k + 1], L_vel[k + 1], pose, vel, comm)
-            j, status = after_control(
-                k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c, offsets, lim, diag
-            )
-            if status != OK:
-                return k + 1 - k0, j, status
+        ideal_step(x, lp.state.tau, c, extra, dist, k * lp.dt, lp.dt, n_sub)
+        _observe(x, lp.pose, lp.vel)
+        j, status = control_and_record(lp, k + 1, j, c, lp.pose, lp.vel)
+        if status != OK:
+            return k + 1 - k0, j, status
     return k1 - k0, j, OK
 
 
@@ -181,35 +152,9 @@ class IdealPlant:
         if self._dist is None:
             return None
         x = self.x
-        pose, vel = ctx.pose, ctx.vel
 
         def chunk(k0: int, k1: int, j: int) -> tuple[int, int, int]:
-            return run_chunk(
-                ctx.gains,
-                ctx.state,
-                ctx.comm,
-                k0,
-                k1,
-                ctx.N,
-                self.control_dt,
-                self.n_substeps,
-                ctx.L_pose,
-                ctx.L_vel,
-                self._c,
-                self._dist,
-                x,
-                self._zero_acc,
-                pose,
-                vel,
-                ctx.met,
-                ctx.acc,
-                ctx.log,
-                j,
-                ctx.stride,
-                ctx.offsets,
-                ctx.bounds,
-                ctx.diag,
-            )
+            return run_chunk(ctx, k0, k1, self.n_substeps, self._c, self._dist, x, self._zero_acc, j)
 
         return chunk
 

@@ -26,8 +26,7 @@ from ..control.equations import (
     planar_state,
     slip_ratio,
 )
-from ..control.kernel import control_step
-from ..engine import OK, PLANT_FAILED, after_control, record_odometry
+from ..engine import OK, PLANT_FAILED, control_and_record, record_odometry
 
 if HAVE_NUMBA:
     import numba
@@ -287,134 +286,130 @@ def watch_slip(qvel, wheel_dof, wheel_sign, radius, half_track, vel, ratio, v_fl
             slip_run[i] = 0
 
 
-@njit
-def run_chunk(
-    g,
-    s,
-    comm,
-    k0,
-    k1,
-    N,
-    dt,
-    n_sub,
-    L_pose,
-    L_vel,
-    mp,
-    dp,
-    qpos,
-    qvel,
-    q7,
-    v6,
-    axle,
-    up,
-    tilt_cos,
-    tip_step,
-    wheel_dof,
-    wheel_sign,
-    radius,
-    half_track,
-    slip_ratio,
-    v_floor,
-    slip_need,
-    slip_run,
-    slip_step,
-    ctrl,
-    ctrl_id,
-    ctrl_scale,
-    xfrc,
-    xmat,
-    base,
-    m_eff,
-    i_eff,
-    dist,
-    use_dist,
-    warn,
-    c_true,
-    pose,
-    vel,
-    met,
-    acc,
-    lg,
-    j0,
-    stride,
-    offsets,
-    lim,
-    diag,
-    rec_ctrl,
-    rec_xfrc,
-    sd,
-    sen,
-    odo,
-    act_force,
-    to_wheel,
-    feed,
-    feed_on,
-    dacc,
-):
-    """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by the
-    control step of ``k+1`` (if ``k+1 < N``; the control step of ``k0`` must be done).
+class MjIO(NamedTuple):
+    """The MuJoCo arrays a chunk reads and writes (views of ``MjData`` and the plant's index
+    arrays): free-joint addresses ``q7``, ``v6`` (n,), ``axle`` (n, 3), tilt cosines ``up`` (n,);
+    motors ``ctrl_id`` (n, 2), ``ctrl_scale`` (n, 2); chassis ``base`` (n,), ``m_eff``, ``i_eff``
+    (n,); the disturbance rows ``dist`` (2, 4) and ``use_dist``; the warning counters ``warn``;
+    the delivered-torque feed of DC motors (``act_force``, ``to_wheel``, ``feed``, ``feed_on``,
+    ``dacc``; design §8.2)."""
 
-    Stops at the first physics step that raised a MuJoCo warning (``warn``, the counters of
-    ``MjData.warning``): status ``engine.PLANT_FAILED``, with the state before MuJoCo's reset
-    not observed. With ``feed_on`` (DC motors, design §8.2) the wheel torque each motor delivered
-    (``act_force`` = ``MjData.actuator_force`` × ``to_wheel``) is averaged over the period
-    (:func:`delivered_add` into ``dacc``) and written into ``s.tau_body`` of the robots with ``feed``
+    qpos: np.ndarray
+    qvel: np.ndarray
+    q7: np.ndarray
+    v6: np.ndarray
+    axle: np.ndarray
+    up: np.ndarray
+    ctrl: np.ndarray
+    ctrl_id: np.ndarray
+    ctrl_scale: np.ndarray
+    xfrc: np.ndarray
+    xmat: np.ndarray
+    base: np.ndarray
+    m_eff: np.ndarray
+    i_eff: np.ndarray
+    dist: np.ndarray
+    use_dist: bool
+    warn: np.ndarray
+    act_force: np.ndarray
+    to_wheel: np.ndarray
+    feed: np.ndarray
+    feed_on: bool
+    dacc: np.ndarray
+
+
+class Watch(NamedTuple):
+    """The outcome watches (tilt, wheel slip) of :func:`watch_tilt` and :func:`watch_slip`."""
+
+    tilt_cos: float
+    tip_step: np.ndarray
+    wheel_dof: np.ndarray
+    wheel_sign: np.ndarray
+    radius: np.ndarray
+    half_track: np.ndarray
+    slip_ratio: float
+    v_floor: float
+    slip_need: int
+    slip_run: np.ndarray
+    slip_step: np.ndarray
+
+
+@njit
+def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, sd, sen, odo):
+    """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by the
+    control step of ``k+1`` (``lp``: :class:`~bioform_mj.engine.Loop`; the control step of ``k0``
+    must be done). ``io``: :class:`MjIO`; ``w``: :class:`Watch`; ``c_true`` (n, 2).
+
+    Stops at the first physics step that raised a MuJoCo warning (``io.warn``): status
+    ``engine.PLANT_FAILED``, with the state before MuJoCo's reset not observed. With
+    ``io.feed_on`` (DC motors, design §8.2) the wheel torque each motor delivered is averaged over
+    the period (:func:`delivered_add`) and written into ``tau_body`` of the robots with ``io.feed``
     before the next control step (:func:`delivered_feed`), so the learner sees it. With ``sen.on``
-    the sensors are sampled after each physics step (:func:`sense`)
-    and the controller is given the odometry (:func:`odometry_read`) instead of the truth; metrics,
-    guards, the formation error and the outcome watches stay on the truth. If ``rec_ctrl`` has rows,
-    the inputs of step ``k`` are copied to
-    ``rec_ctrl[k]``, ``rec_xfrc[k]`` (for a bare-physics replay). Returns ``(steps done, next
-    log row, status)``.
+    the sensors are sampled after each physics step (:func:`sense`) and the controller is given the
+    odometry (:func:`odometry_read`) instead of the truth; metrics, guards, the formation error and
+    the outcome watches stay on the truth. If ``rec_ctrl`` has rows, the inputs of step ``k`` are
+    copied to ``rec_ctrl[k]``, ``rec_xfrc[k]`` (for a bare-physics replay). Returns ``(steps done,
+    next log row, status)``.
     """
     j = j0
-    n = pose.shape[0]
+    s = lp.state
+    n = lp.pose.shape[0]
     for k in range(k0, k1):
-        apply_inputs(s.tau, k * dt, ctrl, ctrl_id, ctrl_scale, xfrc, xmat, base, m_eff, i_eff, dist, use_dist)
+        apply_inputs(
+            s.tau,
+            k * lp.dt,
+            io.ctrl,
+            io.ctrl_id,
+            io.ctrl_scale,
+            io.xfrc,
+            io.xmat,
+            io.base,
+            io.m_eff,
+            io.i_eff,
+            io.dist,
+            io.use_dist,
+        )
         if rec_ctrl.shape[0] > k:
-            rec_ctrl[k, :] = ctrl
+            rec_ctrl[k, :] = io.ctrl
             for i in range(n):
-                rec_xfrc[k, i, :] = xfrc[base[i], :]
+                rec_xfrc[k, i, :] = io.xfrc[io.base[i], :]
         for _ in range(n_sub):
             _mj_step(mp, dp)
-            if _warned(warn):
+            if _warned(io.warn):
                 return k - k0, j, PLANT_FAILED
             if sen.on:
                 sense(sd, sen, odo)
-            if feed_on:
-                delivered_add(act_force, ctrl_id, to_wheel, dacc)
-        if feed_on:
-            delivered_feed(dacc, n_sub, feed, s.tau_body)
-        observe(qpos, qvel, q7, v6, axle, pose, vel, up)
-        watch_tilt(up, tilt_cos, tip_step, k + 1)
+            if io.feed_on:
+                delivered_add(io.act_force, io.ctrl_id, io.to_wheel, io.dacc)
+        if io.feed_on:
+            delivered_feed(io.dacc, n_sub, io.feed, s.tau_body)
+        observe(io.qpos, io.qvel, io.q7, io.v6, io.axle, lp.pose, lp.vel, io.up)
+        watch_tilt(io.up, w.tilt_cos, w.tip_step, k + 1)
         watch_slip(
-            qvel,
-            wheel_dof,
-            wheel_sign,
-            radius,
-            half_track,
-            vel,
-            slip_ratio,
-            v_floor,
-            slip_need,
-            slip_run,
-            slip_step,
+            io.qvel,
+            w.wheel_dof,
+            w.wheel_sign,
+            w.radius,
+            w.half_track,
+            lp.vel,
+            w.slip_ratio,
+            w.v_floor,
+            w.slip_need,
+            w.slip_run,
+            w.slip_step,
             k + 1,
         )
-        if k + 1 < N:
-            if sen.on:
-                odometry_read(odo, dt)
-                control_step(g, s, L_pose[k + 1], L_vel[k + 1], odo.mpose, odo.mvel, comm)
-            else:
-                control_step(g, s, L_pose[k + 1], L_vel[k + 1], pose, vel, comm)
-            j1, status = after_control(
-                k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c_true, offsets, lim, diag
-            )
-            if sen.on and j1 > j:
-                record_odometry(lg, j, odo.mpose, odo.mvel)
-            j = j1
-            if status != OK:
-                return k + 1 - k0, j, status
+        if sen.on:
+            if k + 1 < lp.N:
+                odometry_read(odo, lp.dt)
+            j1, status = control_and_record(lp, k + 1, j, c_true, odo.mpose, odo.mvel)
+            if j1 > j:
+                record_odometry(lp.log, j, odo.mpose, odo.mvel)
+        else:
+            j1, status = control_and_record(lp, k + 1, j, c_true, lp.pose, lp.vel)
+        j = j1
+        if status != OK:
+            return k + 1 - k0, j, status
     return k1 - k0, j, OK
 
 
