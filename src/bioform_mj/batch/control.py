@@ -39,7 +39,6 @@ from ..engine import GUARDS
 from ..plants.mujoco_plant import TIP_ANGLE_DEG
 from ..scenario import Scenario
 from ..sim import LOST_AFTER_S, LOST_M, SPIN_RAD_S
-from .engine import robot_index
 from .samesource import warp_equations
 
 __all__ = ["run_batch", "BatchRun", "SCALARS"]
@@ -794,7 +793,6 @@ class BatchRun:
             )
         mjm = plant.model
         self.mjm = mjm
-        idx = robot_index(mjm)
         n = self.n = sc0.n
         dt = self.dt = sc0.sim.control_dt
         self.n_sub = plant.n_substeps
@@ -810,7 +808,7 @@ class BatchRun:
         lacc = np.zeros((W, n))
         est0 = np.zeros((W, n, 3))
         qpos = np.tile(plant.data.qpos, (W, 1))
-        q7 = idx.qadr
+        q7 = plant._q7[:, 0]  # the plant's own ids (the robots' mapping, design §8)
         p0 = plant.initial_poses
         for w, sc in enumerate(scs):
             stack = ControlStack(graph if sc is sc0 else sc.build_graph(), stack_params(sc, c_true, plant.tau_max))
@@ -887,9 +885,9 @@ class BatchRun:
             self.s = s
             self.L_pose = A(L_pose)
             self.L_vel = A(L_vel)
-            self.qadr = A(idx.qadr.astype(np.int32), int)
-            self.dadr = A(idx.dadr.astype(np.int32), int)
-            self.base = A(idx.base.astype(np.int32), int)
+            self.qadr = A(plant._q7[:, 0].astype(np.int32), int)
+            self.dadr = A(plant._v6[:, 0].astype(np.int32), int)
+            self.base = A(plant._base.astype(np.int32), int)
             self.act = A(np.asarray(plant._ctrl).astype(np.int32), int)  # the plant's own motor ids
             self.cscale = A(np.asarray(plant._ctrl_scale, dtype=float))
             self.axle = A(plant._axle)
