@@ -21,7 +21,6 @@ from typing import NamedTuple
 import numpy as np
 
 from .control.equations import formation_offset, njit
-from .control.kernel import control_step
 
 #: Time-series channels of ``log.npz``: name → (trailing shape, meaning). ``n`` = followers.
 CHANNELS: dict[str, tuple[tuple[str, ...], str]] = {
@@ -382,33 +381,3 @@ class Loop(NamedTuple):
     form: Formation
     bounds: Bounds
     diag: np.ndarray
-
-
-@njit
-def control_and_record(lp, k, j, c_true, meas_pose, meas_vel):
-    """After plant step ``k − 1``: the control step of ``k`` (if ``k < N``) on what the controller
-    measures (``meas_pose`` (n,3), ``meas_vel`` (n,2): the truth ``lp.pose``/``lp.vel``, or an
-    estimate such as odometry), then :func:`after_control` on the truth. Every plant's chunk kernel
-    calls this one function. Returns ``(next log row, status)``."""
-    if k >= lp.N:
-        return j, OK
-    control_step(lp.gains, lp.state, lp.L_pose[k], lp.L_vel[k], meas_pose, meas_vel, lp.comm)
-    return after_control(
-        k,
-        lp.N,
-        lp.stride,
-        lp.state,
-        lp.pose,
-        lp.vel,
-        lp.met,
-        lp.acc,
-        lp.log,
-        j,
-        lp.L_pose,
-        lp.L_vel,
-        lp.dt,
-        c_true,
-        lp.form,
-        lp.bounds,
-        lp.diag,
-    )

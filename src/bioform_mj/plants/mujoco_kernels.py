@@ -26,7 +26,8 @@ from ..control.equations import (
     planar_state,
     slip_ratio,
 )
-from ..engine import OK, PLANT_FAILED, control_and_record, record_odometry
+from ..control.kernel import control_step
+from ..engine import OK, PLANT_FAILED, after_control, record_odometry
 
 if HAVE_NUMBA:
     import numba
@@ -351,65 +352,93 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
     copied to ``rec_ctrl[k]``, ``rec_xfrc[k]`` (for a bare-physics replay). Returns ``(steps done,
     next log row, status)``.
     """
+    # unpacked once (see plants/ideal.py: reading a named structure's field increfs its arrays)
+    g, s, comm, N, dt, L_pose, L_vel, pose, vel, met, acc, lg, stride, form, lim, diag = lp
+    (
+        qpos,
+        qvel,
+        q7,
+        v6,
+        axle,
+        up,
+        ctrl,
+        ctrl_id,
+        ctrl_scale,
+        xfrc,
+        xmat,
+        base,
+        m_eff,
+        i_eff,
+        dist,
+        use_dist,
+        warn,
+        act_force,
+        to_wheel,
+        feed,
+        feed_on,
+        dacc,
+    ) = io
+    (
+        tilt_cos,
+        tip_step,
+        wheel_dof,
+        wheel_sign,
+        radius,
+        half_track,
+        slip_ratio,
+        v_floor,
+        slip_need,
+        slip_run,
+        slip_step,
+    ) = w
     j = j0
-    s = lp.state
-    n = lp.pose.shape[0]
+    n = pose.shape[0]
     for k in range(k0, k1):
-        apply_inputs(
-            s.tau,
-            k * lp.dt,
-            io.ctrl,
-            io.ctrl_id,
-            io.ctrl_scale,
-            io.xfrc,
-            io.xmat,
-            io.base,
-            io.m_eff,
-            io.i_eff,
-            io.dist,
-            io.use_dist,
-        )
+        apply_inputs(s.tau, k * dt, ctrl, ctrl_id, ctrl_scale, xfrc, xmat, base, m_eff, i_eff, dist, use_dist)
         if rec_ctrl.shape[0] > k:
-            rec_ctrl[k, :] = io.ctrl
+            rec_ctrl[k, :] = ctrl
             for i in range(n):
-                rec_xfrc[k, i, :] = io.xfrc[io.base[i], :]
+                rec_xfrc[k, i, :] = xfrc[base[i], :]
         for _ in range(n_sub):
             _mj_step(mp, dp)
-            if _warned(io.warn):
+            if _warned(warn):
                 return k - k0, j, PLANT_FAILED
             if sen.on:
                 sense(sd, sen, odo)
-            if io.feed_on:
-                delivered_add(io.act_force, io.ctrl_id, io.to_wheel, io.dacc)
-        if io.feed_on:
-            delivered_feed(io.dacc, n_sub, io.feed, s.tau_body)
-        observe(io.qpos, io.qvel, io.q7, io.v6, io.axle, lp.pose, lp.vel, io.up)
-        watch_tilt(io.up, w.tilt_cos, w.tip_step, k + 1)
+            if feed_on:
+                delivered_add(act_force, ctrl_id, to_wheel, dacc)
+        if feed_on:
+            delivered_feed(dacc, n_sub, feed, s.tau_body)
+        observe(qpos, qvel, q7, v6, axle, pose, vel, up)
+        watch_tilt(up, tilt_cos, tip_step, k + 1)
         watch_slip(
-            io.qvel,
-            w.wheel_dof,
-            w.wheel_sign,
-            w.radius,
-            w.half_track,
-            lp.vel,
-            w.slip_ratio,
-            w.v_floor,
-            w.slip_need,
-            w.slip_run,
-            w.slip_step,
+            qvel,
+            wheel_dof,
+            wheel_sign,
+            radius,
+            half_track,
+            vel,
+            slip_ratio,
+            v_floor,
+            slip_need,
+            slip_run,
+            slip_step,
             k + 1,
         )
-        if sen.on:
-            if k + 1 < lp.N:
-                odometry_read(odo, lp.dt)
-            j1, status = control_and_record(lp, k + 1, j, c_true, odo.mpose, odo.mvel)
-            if j1 > j:
-                record_odometry(lp.log, j, odo.mpose, odo.mvel)
-        else:
-            j1, status = control_and_record(lp, k + 1, j, c_true, lp.pose, lp.vel)
-        j = j1
-        if status != OK:
-            return k + 1 - k0, j, status
+        if k + 1 < N:
+            if sen.on:
+                odometry_read(odo, dt)
+                control_step(g, s, L_pose[k + 1], L_vel[k + 1], odo.mpose, odo.mvel, comm)
+            else:
+                control_step(g, s, L_pose[k + 1], L_vel[k + 1], pose, vel, comm)
+            j1, status = after_control(
+                k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c_true, form, lim, diag
+            )
+            if sen.on and j1 > j:
+                record_odometry(lg, j, odo.mpose, odo.mvel)
+            j = j1
+            if status != OK:
+                return k + 1 - k0, j, status
     return k1 - k0, j, OK
 
 
