@@ -79,7 +79,7 @@ class Kanayama:
             lim = g.lim[i]
             self.saturated[i] = np.abs(self.tau_raw[i]).max() > lim
             self.tau[i] = saturate(self.tau_raw[i, 0], self.tau_raw[i, 1], lim, True)
-        estimator_update(g, s, np.asarray(leader_pose, float), np.asarray(leader_vel, float), self._est._comm_in(comm))
+        estimator_update(g, s, np.asarray(leader_pose, float), np.asarray(leader_vel, float), self._est.comm_in(comm))
         return self.tau
 
     def signals(self) -> dict[str, np.ndarray]:

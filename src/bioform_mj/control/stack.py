@@ -175,10 +175,11 @@ class ControlStack:
         self._vel_in[:] = vel
         lp = np.ascontiguousarray(leader_pose, dtype=float)
         lv = np.ascontiguousarray(leader_vel, dtype=float)
-        control_step(self.gains, self.state, lp, lv, self._pose_in, self._vel_in, self._comm_in(comm))
+        control_step(self.gains, self.state, lp, lv, self._pose_in, self._vel_in, self.comm_in(comm))
         return self.state.tau
 
-    def _comm_in(self, comm: Comm | None) -> CommIn:
+    def comm_in(self, comm: Comm | None) -> CommIn:
+        """The kernel's :class:`~.kernel.CommIn` for ``comm`` (None: the perfect network)."""
         if comm is None:
             return self._no_comm
         g = self.graph
