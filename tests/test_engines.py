@@ -25,7 +25,7 @@ from bioform_mj.control.stack import ControlStack
 from bioform_mj.scenario import EventCfg, load
 from bioform_mj.sim import initial_estimates, simulate, stack_params
 
-#: equations vs oracle: relative tolerance (measured over a 20 s run by scripts/oracle_gap.py: 2.6e-14 m, 0 without AVX-512)
+#: equations vs oracle: relative tolerance (measured over 20 s by scripts/oracle_gap.py: 2.6e-14 m, 0 without AVX-512)
 RTOL = 1e-9
 ATOL = 1e-12
 
