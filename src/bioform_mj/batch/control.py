@@ -952,38 +952,43 @@ class BatchRun:
             self.s.k.zero_()
             self._launch_control()  # k = 0: observe, reset, control step 0, torques
 
-    def run(self, chunk: int = 100, capture: bool | None = None) -> float:
-        """Reset and run all ``N`` control periods; returns the wall seconds of the step loop.
-        On CUDA (``capture`` None or True) ``chunk`` periods are captured once as a CUDA
-        graph (after one eager warm-up step that loads every kernel) and replayed."""
+    def _timed(self, steps, start, total: int, chunk: int, capture: bool | None, graph=None):
+        """``start()`` then ``steps(total)``; returns ``(wall seconds of the stepping, graph)``.
+        On CUDA (``capture`` None or True) ``chunk`` steps are captured once as a CUDA graph (after
+        one eager warm-up step that loads every kernel; ``graph`` reuses an earlier capture) and
+        replayed ``total // chunk`` times, the rest launched eagerly."""
         use_graph = self.device.is_cuda if capture is None else capture
-        full, rest = divmod(self.N, chunk)
+        full, rest = divmod(total, chunk)
         with wp.ScopedDevice(self.device):
-            if use_graph and full and self.graph is None:
-                self.reset()
-                self._steps(1)  # load every module outside the capture
+            if use_graph and full and graph is None:
+                start()
+                steps(1)
                 wp.synchronize_device(self.device)
                 with wp.ScopedCapture() as cap:
-                    self._steps(chunk)
-                self.graph = cap.graph
-            self.reset()
+                    steps(chunk)
+                graph = cap.graph
+            start()
             wp.synchronize_device(self.device)
             t0 = time.perf_counter()
             if use_graph and full:
                 for _ in range(full):
-                    wp.capture_launch(self.graph)
-                self._steps(rest)
+                    wp.capture_launch(graph)
+                steps(rest)
             else:
-                self._steps(self.N)
+                steps(total)
             wp.synchronize_device(self.device)
-            return time.perf_counter() - t0
+            return time.perf_counter() - t0, graph
+
+    def run(self, chunk: int = 100, capture: bool | None = None) -> float:
+        """Reset and run all ``N`` control periods; returns the wall seconds of the step loop
+        (CUDA: ``chunk`` periods as a captured graph, kept for later runs; :meth:`_timed`)."""
+        wall, self.graph = self._timed(self._steps, self.reset, self.N, chunk, capture, self.graph)
+        return wall
 
     def run_physics(self, nsteps: int, ctrl: np.ndarray, chunk: int = 100, capture: bool | None = None) -> float:
         """Physics alone on the same worlds (for the benchmark): from the initial state,
         ``nsteps`` physics steps with the constant inputs ``ctrl`` (nworld, nu), no disturbance;
         returns the wall seconds (CUDA: a captured chunk of ``chunk`` steps, replayed)."""
-        use_graph = self.device.is_cuda if capture is None else capture
-        full, rest = divmod(nsteps, chunk)
         d = self.d
 
         def steps(k):
@@ -995,26 +1000,7 @@ class BatchRun:
             d.ctrl.assign(np.asarray(ctrl, dtype=np.float32))
             d.xfrc_applied.zero_()
 
-        with wp.ScopedDevice(self.device):
-            graph = None
-            if use_graph and full:
-                start()
-                steps(1)
-                wp.synchronize_device(self.device)
-                with wp.ScopedCapture() as cap:
-                    steps(chunk)
-                graph = cap.graph
-            start()
-            wp.synchronize_device(self.device)
-            t0 = time.perf_counter()
-            if graph is not None:
-                for _ in range(full):
-                    wp.capture_launch(graph)
-                steps(rest)
-            else:
-                steps(nsteps)
-            wp.synchronize_device(self.device)
-            return time.perf_counter() - t0
+        return self._timed(steps, start, nsteps, chunk, capture)[0]
 
     # -- physics alone on the closed loop's own inputs (benchmark)
     def record_bytes(self) -> int:
@@ -1055,8 +1041,6 @@ class BatchRun:
         """Physics alone, same worlds, same initial state: every control period's recorded inputs
         (:meth:`record`) then ``n_substeps`` × ``mjw.step``; the wall seconds of the loop (CUDA:
         ``chunk`` periods captured as a graph and replayed, as :meth:`run`)."""
-        use_graph = self.device.is_cuda if capture is None else capture
-        full, rest = divmod(self.N, chunk)
         d, W = self.d, self.nworld
 
         def steps(k):
@@ -1073,26 +1057,7 @@ class BatchRun:
             self.reset()  # the initial state (its control launch is overwritten by the first replay)
             self._rec_j.zero_()
 
-        with wp.ScopedDevice(self.device):
-            graph = None
-            if use_graph and full:
-                start()
-                steps(1)
-                wp.synchronize_device(self.device)
-                with wp.ScopedCapture() as cap:
-                    steps(chunk)
-                graph = cap.graph
-            start()
-            wp.synchronize_device(self.device)
-            t0 = time.perf_counter()
-            if graph is not None:
-                for _ in range(full):
-                    wp.capture_launch(graph)
-                steps(rest)
-            else:
-                steps(self.N)
-            wp.synchronize_device(self.device)
-            return time.perf_counter() - t0
+        return self._timed(steps, start, self.N, chunk, capture)[0]
 
     # -- results
     def _outcome(self, w, i, diverged, final, fe0, t_end, nrow, spin_ok, tip, slip, learning, c_hat, lo, hi):
