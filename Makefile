@@ -1,6 +1,7 @@
 # Two commands do all the set-up on a fresh machine (Python 3.11 with venv):
 #   make demo   - create .venv if needed, install what the demo needs, run the paper scenario, say where the outputs are
-#   make test   - same set-up plus the test extras (pytest, hypothesis, ray), run the test suite
+#   make test   - same set-up plus the test extras (pytest, hypothesis, ray) and the gpu extra (mujoco-warp,
+#                 warp-lang: the batch engine's tests run on Warp's CPU device), run the test suite
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -18,9 +19,9 @@ $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet -e .
 	touch $(STAMP)
 
-# the test extras on top
+# the test extras on top, and the gpu extra: the batch engine's tests run on Warp's CPU device (no GPU needed)
 $(TEST_STAMP): $(STAMP) pyproject.toml
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e '.[test,gpu]'
 	touch $(TEST_STAMP)
 
 install: $(STAMP)
@@ -35,6 +36,7 @@ NPY_AVX512 = $(PY) -c "from numpy._core._multiarray_umath import __cpu_features_
 	print(' '.join(k for k in ('AVX512F','AVX512CD','AVX512_SKX','AVX512_CLX','AVX512_CNL','AVX512_ICL','AVX512_SPR','X86_V4') if f.get(k)))"
 
 test: $(TEST_STAMP)
+	$(PY) -c "import warp, mujoco_warp" || { echo "error: the gpu extra is missing from $(VENV): rm $(TEST_STAMP) and run make test again" >&2; exit 2; }
 	$(VENV)/bin/ruff check src tests scripts examples
 	$(VENV)/bin/ruff format --check src tests scripts examples
 	$(PY) -m pytest -q
