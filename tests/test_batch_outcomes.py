@@ -69,6 +69,27 @@ def test_constraint_capacity_overflow_and_the_sweep_flag(tmp_path):
     for r in rows:
         assert r["status"] == "diverged" and r["outcome"] == "diverged"
         assert r["error"].startswith("constraint capacity exceeded: raise --njmax (now 4 rows per world)")
+        assert r["capacity_exceeded"] == "True" and r["batch_njmax"] == "4"
+
+
+def test_a_resume_with_more_capacity_redoes_the_capacity_stops(tmp_path, capsys):
+    """Rows that stopped on capacity are finished rows, but a resume with other capacities redoes
+    them (a warning per row); the same capacities keep them; healthy rows are always kept."""
+    out = tmp_path / "sw"
+    args = ["sweep", "paper", "--plant", "mujoco", "--duration", "0.02", "--seeds", "2", "--quiet"]
+    args += ["--backend", "warp", "--device", "cpu", "--out", str(out)]
+    assert main([*args, "--njmax", "4"]) == 0
+    capsys.readouterr()
+    assert main([*args, "--njmax", "4"]) == 0  # same capacity: nothing to redo
+    assert "redone" not in capsys.readouterr().err
+    assert main(args) == 0  # the default capacity (112 rows for 3 robots): redone, now healthy
+    err = capsys.readouterr().err
+    assert err.count("its run is redone") == 2 and "njmax 4; now nconmax 40, njmax 112" in err
+    with open(out / "runs.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [r["status"] for r in rows] == ["ok", "ok"] and all(r["capacity_exceeded"] == "False" for r in rows)
+    assert main(args) == 0
+    assert "redone" not in capsys.readouterr().err
 
 
 def test_capacity_flags_need_the_warp_backend(tmp_path, capsys):

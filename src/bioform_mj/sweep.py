@@ -565,8 +565,11 @@ def _run_ray(
 # The sweep
 
 
-def _read_row(path: Path, spec: RunSpec, warn: Callable[[str], None] | None) -> dict[str, Any] | None:
-    """A finished row from an earlier invocation, or None when the run must be done (again)."""
+def _read_row(
+    path: Path, spec: RunSpec, warn: Callable[[str], None] | None, redo: Callable[[dict], str | None] | None = None
+) -> dict[str, Any] | None:
+    """A finished row from an earlier invocation, or None when the run must be done (again):
+    missing, unreadable or damaged, its worker died, or ``redo(row)`` gives a reason (said on stderr)."""
     try:
         text = path.read_bytes()
     except FileNotFoundError:
@@ -580,7 +583,14 @@ def _read_row(path: Path, spec: RunSpec, warn: Callable[[str], None] | None) -> 
             problem = f"is damaged ({exc})"
         else:
             if isinstance(row, dict) and row.get("key") == spec.key and "status" in row:
-                return None if row.get("worker_died") else row
+                if row.get("worker_died"):
+                    return None
+                why = redo(row) if redo is not None else None
+                if why is None:
+                    return row
+                if warn is not None:
+                    warn(f"row file '{path}': {why}; its run is redone")
+                return None
             problem = "is damaged (not a row of this run)"
     if warn is not None:
         warn(f"row file '{path}' {problem}; its run is redone")
@@ -641,6 +651,12 @@ def sweep(
         require_warp()
         device = resolve_device(device)
     runs_dir = out / "runs"
+
+    def redo(row: dict) -> str | None:  # a row stopped on MuJoCo Warp's capacity, resumed with other capacities
+        from .batch.backend import capacity_redo
+
+        return capacity_redo(row, backend, nconmax, njmax)
+
     rows: dict[str, dict[str, Any]] = {}
     todo: list[RunSpec] = []
     keys = list(dict.fromkeys(sp.key for sp in specs))  # identical runs (same content) run once
@@ -649,7 +665,7 @@ def sweep(
         if sp.key in seen:
             continue
         seen.add(sp.key)
-        row = _read_row(runs_dir / f"{sp.key}.json", sp, warn)
+        row = _read_row(runs_dir / f"{sp.key}.json", sp, warn, redo)
         if row is None:
             todo.append(sp)
         else:

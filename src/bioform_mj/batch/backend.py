@@ -34,6 +34,32 @@ CONTROL_BYTES_PER_ROBOT = 1e3
 MEMORY_SHARE = 0.9
 
 
+def default_capacity(n_robots: int) -> tuple[int, int]:
+    """MuJoCo Warp's default ``(nconmax, njmax)`` per world for ``n_robots`` robots (contacts,
+    constraint rows): what :class:`~.control.BatchRun` uses when not told."""
+    return 8 * n_robots + 16, 32 * n_robots + 16
+
+
+def capacity_redo(row: dict[str, Any], backend: str, nconmax: int | None, njmax: int | None) -> str | None:
+    """A finished sweep row that stopped on MuJoCo Warp's capacity (``capacity_exceeded``) is
+    redone when the resumed sweep would run it with other capacities (or on another backend):
+    returns why, or None to keep the row."""
+    if not row.get("capacity_exceeded"):
+        return None
+    if backend != "warp":
+        return f"it stopped on MuJoCo Warp's capacity and now runs on the {backend} backend"
+    n = int(row.get("n_robots") or 0)
+    dc, dj = default_capacity(n)
+    now = (dc if nconmax is None else nconmax, dj if njmax is None else njmax)
+    was = (row.get("batch_nconmax"), row.get("batch_njmax"))
+    if now != was:
+        return (
+            f"it stopped on MuJoCo Warp's capacity with nconmax {was[0]}, njmax {was[1]}; "
+            f"now nconmax {now[0]}, njmax {now[1]}"
+        )
+    return None
+
+
 def require_warp() -> None:
     """InputError (exit 2) unless ``warp`` and ``mujoco_warp`` import."""
     try:
@@ -197,8 +223,10 @@ def rows_from_summaries(
     metrics: Sequence[str],
     batch_wall: float,
     device: str,
+    capacity: tuple[int, int] | None = None,
 ) -> list[dict[str, Any]]:
-    """One sweep row per world, with ``sweep.run_one``'s columns."""
+    """One sweep row per world, with ``sweep.run_one``'s columns; ``capacity`` = the batch's
+    ``(nconmax, njmax)`` per world, recorded so a resume can tell a capacity stop (:func:`capacity_redo`)."""
     import numpy as np
 
     rows = []
@@ -228,6 +256,10 @@ def rows_from_summaries(
         row["device"] = device
         row["batch_worlds"] = W
         row["batch_wall_time_s"] = batch_wall
+        row["n_robots"] = len(s["followers"])
+        row["capacity_exceeded"] = bool(s.get("capacity_exceeded", False))
+        if capacity is not None:
+            row["batch_nconmax"], row["batch_njmax"] = capacity
         rows.append(row)
     return rows
 
@@ -267,7 +299,7 @@ def run_warp(
             setup = time.perf_counter() - t0
             wall = b.run()
             summ = b.summaries(wall)
-            rows = rows_from_summaries(g.specs, summ, base_row, metrics, wall, device)
+            rows = rows_from_summaries(g.specs, summ, base_row, metrics, wall, device, (b.nconmax, b.njmax))
             for r in rows:
                 r["batch_setup_s"] = setup
             del b

@@ -39,6 +39,7 @@ from ..engine import GUARDS
 from ..plants.mujoco_plant import TIP_ANGLE_DEG
 from ..scenario import Scenario
 from ..sim import LOST_AFTER_S, LOST_M, SPIN_RAD_S
+from .backend import default_capacity
 from .samesource import warp_equations
 
 __all__ = ["run_batch", "BatchRun", "SCALARS"]
@@ -846,8 +847,9 @@ class BatchRun:
             est0[w] = initial_estimates(sc, poses, L_pose[0])
         self.src, self.dst = graph.src, graph.dst
 
-        nconmax = 8 * n + 16 if nconmax is None else nconmax
-        njmax = 32 * n + 16 if njmax is None else njmax
+        dc, dj = default_capacity(n)
+        nconmax = dc if nconmax is None else nconmax
+        njmax = dj if njmax is None else njmax
         if nconmax < 1 or njmax < 1:  # njmax = 0 makes MuJoCo Warp skip every constraint, unflagged
             raise ValueError(f"nconmax and njmax must be >= 1 per world, got {nconmax}, {njmax}")
         with wp.ScopedDevice(self.device):
@@ -1183,6 +1185,7 @@ class BatchRun:
                     "device": str(self.device),
                     "diverged": reason is not None,
                     "diverged_reason": reason,
+                    "capacity_exceeded": bool(status[w] == CAPACITY_EXCEEDED),
                     "steps": kd,
                     "sim_time": kd * self.dt,
                     "wall_time_s": wall,
