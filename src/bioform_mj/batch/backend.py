@@ -8,7 +8,7 @@ hands back one sweep row per run (the columns of ``sweep.run_one``).
 Worlds are grouped by what a batch must share (:func:`group_key`): the plant (robots,
 ``c_true``, …), the time axis (``control_dt``, ``physics_dt``, ``duration``), the leader, the
 graph and the team size. Everything else (seed, gains, formation offsets and jitter,
-disturbance, limits, method) varies per world.
+disturbance, limits, method, the offsets' frame) varies per world.
 """
 
 from __future__ import annotations
@@ -117,8 +117,6 @@ def unsupported(sc: Any) -> str | None:
         )
     if getattr(sc.plant, "sensing", "truth") != "truth":
         return f"plant.sensing = '{sc.plant.sensing}' (the batch engine feeds the controller the true state)"
-    if sc.formation.frame != "world":
-        return "formation.frame = 'leader' (offsets in the leader's frame)"
     return None
 
 

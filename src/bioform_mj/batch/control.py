@@ -50,6 +50,8 @@ EQ = warp_equations(_E, F)
 wrap = EQ.wrap
 estimator_step = EQ.estimator_step
 tracking_error = EQ.tracking_error
+slot_reference = EQ.slot_reference
+formation_offset = EQ.formation_offset
 velocity_command = EQ.velocity_command
 neuron_step = EQ.neuron_step
 filter_derivative = EQ.filter_derivative
@@ -102,6 +104,7 @@ GAIN_SCALARS = (
     "bio",
     "learning",
     "steer",
+    "leader_frame",
 )
 SCALARS = (
     *GAIN_SCALARS,
@@ -134,6 +137,7 @@ K5A, K5B, KDA, KDB, DT, BIO, LEARN, STEER = (
     _I[x] for x in ("k5a", "k5b", "kda", "kdb", "dt", "bio", "learning", "steer")
 )
 DERIV = _I["deriv"]
+LFRAME = _I["leader_frame"]  # 1: offsets in the leader's frame (design §4)
 DERIV_A = wp.constant(F(DERIV_ANALYTIC))
 DERIV_D = wp.constant(F(DERIV_DIFFERENCE))
 LPOS, LSPD, LTRQ = _I["lim_position"], _I["lim_speed"], _I["lim_torque"]
@@ -319,7 +323,9 @@ def _control(
     ``k < N`` run control step ``k`` (``kernel.control_step``), the metrics and guards
     (``engine.accumulate``/``check``) and apply its torques (``ctrl = cscale · τ``) and ``d(k dt)``
     to the plant (``mujoco_kernels.apply_inputs``); then ``k += 1``. The command derivative is
-    the world's ``deriv`` code (``kernel.DERIV_*``): filter, backward difference or analytic."""
+    the world's ``deriv`` code (``kernel.DERIV_*``): filter, backward difference or analytic. With
+    the world's ``leader_frame`` flag the offsets are in the leader's frame (design §4): the command
+    step tracks ``slot_reference`` and the formation error rotates them (``formation_offset``)."""
     w = wp.tid()
     k = s.k[w]
     n = s.pose.shape[1]
@@ -381,9 +387,11 @@ def _control(
             else:
                 s.slip_run[w, i] = 0
     kl = wp.min(k, N)
-    for i in range(n):  # formation error against the true leader at this observation
-        dx = s.pose[w, i, 0] - (L_pose[kl, 0] - g.offsets[w, i, 0])
-        dy = s.pose[w, i, 1] - (L_pose[kl, 1] - g.offsets[w, i, 1])
+    lframe = g.sc[w, LFRAME] != zero
+    for i in range(n):  # formation error against the true leader at this observation (engine.record)
+        ox, oy = formation_offset(g.offsets[w, i, 0], g.offsets[w, i, 1], L_pose[kl, 2], lframe)
+        dx = s.pose[w, i, 0] - (L_pose[kl, 0] - ox)
+        dy = s.pose[w, i, 1] - (L_pose[kl, 1] - oy)
         s.ferr[w, i] = wp.sqrt(dx * dx + dy * dy)
     # ---- reset (kernel.reset_state)
     if k == 0:
@@ -493,25 +501,41 @@ def _control(
         bio = g.sc[w, BIO] != zero
         deriv = g.sc[w, DERIV]
         for i in range(n):
-            e0, e1, e2 = tracking_error(
-                s.est_pose[w, i, 0],
-                s.est_pose[w, i, 1],
-                s.est_pose[w, i, 2],
-                s.pose[w, i, 0],
-                s.pose[w, i, 1],
-                s.pose[w, i, 2],
-                g.offsets[w, i, 0],
-                g.offsets[w, i, 1],
-            )
+            # the paper: world-frame offsets, the slot moves with the leader's velocity
+            v_ref = s.est_vel[w, i, 0]
+            w_ref = s.est_vel[w, i, 1]
+            e0 = zero
+            e1 = zero
+            e2 = zero
+            if lframe:  # the slot's own pose and velocity (design §4)
+                xs, ys, ths, v_ref, w_ref = slot_reference(
+                    s.est_pose[w, i, 0],
+                    s.est_pose[w, i, 1],
+                    s.est_pose[w, i, 2],
+                    s.est_vel[w, i, 0],
+                    s.est_vel[w, i, 1],
+                    g.offsets[w, i, 0],
+                    g.offsets[w, i, 1],
+                )
+                e0, e1, e2 = tracking_error(xs, ys, ths, s.pose[w, i, 0], s.pose[w, i, 1], s.pose[w, i, 2], zero, zero)
+            else:
+                e0, e1, e2 = tracking_error(
+                    s.est_pose[w, i, 0],
+                    s.est_pose[w, i, 1],
+                    s.est_pose[w, i, 2],
+                    s.pose[w, i, 0],
+                    s.pose[w, i, 1],
+                    s.pose[w, i, 2],
+                    g.offsets[w, i, 0],
+                    g.offsets[w, i, 1],
+                )
             s.err[w, i, 0] = e0
             s.err[w, i, 1] = e1
             s.err[w, i, 2] = e2
             u = e0
             if bio:
                 u = s.vs[w, i]
-            vc, wc = velocity_command(
-                e1, e2, u, s.est_vel[w, i, 0], s.est_vel[w, i, 1], g.sc[w, K1], g.sc[w, K2], g.sc[w, K3]
-            )
+            vc, wc = velocity_command(e1, e2, u, v_ref, w_ref, g.sc[w, K1], g.sc[w, K2], g.sc[w, K3])
             s.cmd[w, i, 0] = vc
             s.cmd[w, i, 1] = wc
             if deriv == DERIV_A:  # chain rule through the controller's own dynamics (design §6)
