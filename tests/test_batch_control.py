@@ -157,3 +157,6 @@ def test_unsupported_features_are_refused():
     ov = ["plant.kind=mujoco", "sim.duration=0.01"]
     with pytest.raises(ValueError, match="leader"):
         run_batch([load("paper", overrides=ov), load("paper", overrides=[*ov, "leader.speed=0.5"])])
+    # run_batch/BatchRun refuse what the sweep refuses (they used to run odometry on the true state)
+    with pytest.raises(ValueError, match="plant.sensing = 'odometry'"):
+        run_batch([load("paper", overrides=[*ov, "plant.sensing=odometry"])])

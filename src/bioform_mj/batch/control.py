@@ -39,7 +39,7 @@ from ..engine import GUARDS
 from ..plants.mujoco_plant import TIP_ANGLE_DEG
 from ..scenario import Scenario
 from ..sim import LOST_AFTER_S, LOST_M, SPIN_RAD_S
-from .backend import default_capacity
+from .backend import default_capacity, unsupported
 from .samesource import warp_equations
 
 __all__ = ["run_batch", "BatchRun", "SCALARS"]
@@ -758,8 +758,9 @@ def _check_compatible(scs: Sequence[Scenario]) -> None:
     for sc in scs:
         if sc.faults.per_step:
             raise ValueError(f"scenario '{sc.name}': faults are not supported by the batch engine yet")
-        if getattr(sc, "events", None):
-            raise ValueError(f"scenario '{sc.name}': events are not supported by the batch engine yet")
+        what = unsupported(sc)  # the same list the sweep refuses up front (exit 2): never run it silently
+        if what is not None:
+            raise ValueError(f"scenario '{sc.name}': {what} is not supported by the batch engine yet")
         for what, a, b in (
             ("plant", sc.plant, sc0.plant),
             ("faults.friction_patch", sc.faults.friction_patch, sc0.faults.friction_patch),  # part of the scene
