@@ -110,11 +110,6 @@ def unsupported(sc: Any) -> str | None:
         return f"faults ({', '.join(named)})"
     if sc.events:
         return f"events ({len(sc.events)} timed event(s))"
-    if any(getattr(r, "motor", "") == "dc" for r in sc.plant.robots):
-        return (
-            "motor = 'dc' robots (the CPU engine feeds the learner the torque the DC motors deliver; "
-            "the batch engine does not yet)"
-        )
     if getattr(sc.plant, "sensing", "truth") != "truth":
         return f"plant.sensing = '{sc.plant.sensing}' (the batch engine feeds the controller the true state)"
     return None

@@ -15,9 +15,10 @@ Precision: controller state, gains and metrics are float64 (the learner is stiff
 the boundary (``qpos``/``qvel`` in, ``ctrl``/``xfrc_applied`` out).
 
 :func:`run_batch` runs a list of scenarios (one world each) of one composed scene. The
-step loop (``n_substeps`` × ``mjw.step`` + one ``_control`` launch per control step) reads
-nothing back to the host; the step counter lives on the device, so on CUDA a chunk of
-control steps is captured once as a CUDA graph and replayed.
+step loop (``n_substeps`` × ``mjw.step``, each followed for DC motors by :func:`_delivered`,
+which feeds the learner the torque delivered over the period, design §8.2, + one ``_control``
+launch per control step) reads nothing back to the host; the step counter lives on the device,
+so on CUDA a chunk of control steps is captured once as a CUDA graph and replayed.
 """
 
 from __future__ import annotations
@@ -227,6 +228,7 @@ class BatchState:
     tip_step: wp.array2d(dtype=int)  # (W, n) first observation k with the chassis tilted (−1: never)
     slip_run: wp.array2d(dtype=int)  # (W, n) consecutive observations with a wheel slipping
     slip_step: wp.array2d(dtype=int)  # (W, n) observation k at which a slip first lasted slip_need (−1: never)
+    dacc: wp.array3d(dtype=F)  # (W, n, 2) DC motors: delivered wheel torque [τ_L, τ_R], N·m, summed over the period
 
 
 @wp.func
@@ -712,6 +714,37 @@ def _control(
 
 
 @wp.kernel
+def _delivered(
+    force: wp.array2d(dtype=float),  # (W, nu) MuJoCo Warp's Data.actuator_force of the step just taken
+    act: wp.array2d(dtype=int),  # (n, 2) actuator ids of the [left, right] wheel motors
+    to_wheel: wp.array2d(dtype=F),  # (n, 2) forward wheel torque per unit actuator force (gear × sign; 0: not fed)
+    feed: wp.array(dtype=int),  # (n,) 1: the robot's learner is fed the delivered torque (DC motors)
+    n_sub: int,  # physics steps per control period
+    last: int,  # 1 after the period's last physics step
+    dacc: wp.array3d(dtype=F),  # (W, n, 2) delivered [τ_L, τ_R] summed over the period so far, N·m
+    tau_body: wp.array3d(dtype=F),  # (W, n, 2) the learner's input [τ_a, τ_b], N·m
+):
+    """DC motors (design §8.2), after each ``mjw.step`` of world ``w``: add each wheel motor's
+    delivered torque ``to_wheel · actuator_force`` to ``dacc`` (``mujoco_kernels.delivered_add``);
+    after the period's ``last`` step write the period mean as ``[τ_L + τ_R, τ_R − τ_L]`` into
+    ``tau_body`` of the fed robots and clear ``dacc`` (``mujoco_kernels.delivered_feed``), so the
+    next ``_control`` launch's learner sees the delivered, not the commanded, torque: the CPU
+    loop's order (physics steps, feed, observe, control step). Loop glue only, no equation."""
+    w = wp.tid()
+    for i in range(act.shape[0]):
+        for c in range(2):
+            dacc[w, i, c] = dacc[w, i, c] + to_wheel[i, c] * F(force[w, act[i, c]])
+        if last != 0:
+            if feed[i] != 0:
+                tl = dacc[w, i, 0] / F(n_sub)
+                tr = dacc[w, i, 1] / F(n_sub)
+                tau_body[w, i, 0] = tl + tr  # τ_a = τ_L + τ_R
+                tau_body[w, i, 1] = tr - tl  # τ_b = τ_R − τ_L (design §5)
+            dacc[w, i, 0] = F(0.0)
+            dacc[w, i, 1] = F(0.0)
+
+
+@wp.kernel
 def _record(
     k: wp.array(dtype=int),
     ctrl: wp.array2d(dtype=float),
@@ -812,11 +845,8 @@ class BatchRun:
         self.device = wp.get_device(device)
         plant = make_plant(sc0)
         self.plant = plant
-        if getattr(plant, "feed_delivered", False):
-            raise ValueError(
-                "motor = 'dc' robots are not supported by the batch engine yet: the CPU engine feeds the "
-                "learner the torque the DC motors deliver (design §8.2), the device kernel does not"
-            )
+        # DC motors (design §8.2): the learner is fed the torque delivered over each period (_delivered)
+        self.feed_on = bool(getattr(plant, "feed_delivered", False))
         mjm = plant.model
         self.mjm = mjm
         n = self.n = sc0.n
@@ -909,6 +939,7 @@ class BatchRun:
             s.tip_step = wp.full((W, n), -1, dtype=int)
             s.slip_run = wp.zeros((W, n), dtype=int)
             s.slip_step = wp.full((W, n), -1, dtype=int)
+            s.dacc = z2()
             self.s = s
             self.L_pose = A(L_pose)
             self.L_vel = A(L_vel)
@@ -922,6 +953,8 @@ class BatchRun:
             self.wsign = A(np.asarray(plant._wheel_sign, dtype=float))
             self.wrad = A(np.asarray(plant._wheel_radius, dtype=float))
             self.htrack = A(np.asarray(plant._half_track, dtype=float))
+            self.to_wheel = A(np.asarray(plant._to_wheel, dtype=float))  # (n, 2) gear × sign, 0: not fed
+            self.feed = A(np.asarray(plant._feed).astype(np.int32), int)  # (n,)
         self.L_pose_host = L_pose
         self.nconmax, self.njmax = nconmax, njmax
         self.graph = None
@@ -957,11 +990,24 @@ class BatchRun:
             ],
         )
 
+    def _period(self) -> None:
+        """One control period of physics: ``n_substeps`` × ``mjw.step``, each followed (DC motors,
+        design §8.2) by the delivered-torque accumulation, the last also by the feed (:func:`_delivered`)."""
+        d, W, s = self.d, self.nworld, self.s
+        for j in range(self.n_sub):
+            mjw.step(self.m, d)
+            if self.feed_on:
+                last = int(j == self.n_sub - 1)
+                wp.launch(
+                    _delivered,
+                    dim=W,
+                    inputs=[d.actuator_force, self.act, self.to_wheel, self.feed, self.n_sub, last, s.dacc, s.tau_body],
+                )
+
     def _steps(self, nsteps: int) -> None:
         """``nsteps`` × [``n_substeps`` physics steps, control step]: no host reads."""
         for _ in range(nsteps):
-            for _ in range(self.n_sub):
-                mjw.step(self.m, self.d)
+            self._period()
             self._launch_control()
 
     def reset(self) -> None:
@@ -977,6 +1023,7 @@ class BatchRun:
             d.overflow.zero_()  # MuJoCo Warp ORs its overflow bits in and never clears them
             mjw.forward(self.m, d)
             self.s.k.zero_()
+            self.s.dacc.zero_()
             self._launch_control()  # k = 0: observe, reset, control step 0, torques
 
     def _timed(self, steps, start, total: int, chunk: int, capture: bool | None, graph=None):
@@ -1058,8 +1105,7 @@ class BatchRun:
             self.reset()
             rec()
             for _ in range(N - 1):
-                for _ in range(self.n_sub):
-                    mjw.step(self.m, d)
+                self._period()
                 self._launch_control()
                 rec()
             wp.synchronize_device(self.device)
