@@ -8,7 +8,7 @@ hands back one sweep row per run (the columns of ``sweep.run_one``).
 Worlds are grouped by what a batch must share (:func:`group_key`): the plant (robots,
 ``c_true``, …), the time axis (``control_dt``, ``physics_dt``, ``duration``), the leader, the
 graph and the team size. Everything else (seed, gains, formation offsets and jitter,
-disturbance, limits, method, the offsets' frame) varies per world.
+disturbance, limits, method, the offsets' frame, timed payload events) varies per world.
 """
 
 from __future__ import annotations
@@ -108,15 +108,14 @@ def unsupported(sc: Any) -> str | None:
     ]
     if named:
         return f"faults ({', '.join(named)})"
-    if sc.events:
-        return f"events ({len(sc.events)} timed event(s))"
     if getattr(sc.plant, "sensing", "truth") != "truth":
         return f"plant.sensing = '{sc.plant.sensing}' (the batch engine feeds the controller the true state)"
     return None
 
 
 def group_key(sc: Any) -> str:
-    """What the worlds of one batch share (one composed scene, one time axis, one leader, one graph)."""
+    """What the worlds of one batch share (one composed scene, one time axis, one leader, one graph).
+    Not ``events``: payloads change each world's own batched model fields (``control._events``)."""
     d = sc.to_dict()
     return json.dumps(
         {

@@ -744,6 +744,86 @@ def _delivered(
             dacc[w, i, 1] = F(0.0)
 
 
+#: MuJoCo Warp ``Model`` fields a payload event changes (``MujocoPlant.add_payload``: the base body's
+#: inertial, then ``mj_setConst``'s derived constants; measured against C MuJoCo's ``mj_setConst`` on
+#: the paper scene: these, plus ``dof_M0`` and ``light_poscom0`` which MuJoCo Warp does not hold or
+#: uses for rendering only). With events in a batch they get a leading world axis
+#: (``mjw.put_model(..., batch_sizes=...)``) and :func:`_events` writes them per world.
+EVENT_FIELDS = (
+    "body_mass",
+    "body_ipos",
+    "body_iquat",
+    "body_inertia",
+    "body_subtreemass",
+    "body_invweight0",
+    "dof_invweight0",
+    "actuator_acc0",
+)
+
+
+@wp.kernel
+def _events(
+    k: wp.array(dtype=int),  # (W,) the control step (period) about to be computed and stepped
+    status: wp.array(dtype=int),  # (W,) BatchState.status: a stopped world takes no more events
+    N: int,  # control steps of the run
+    ev_step: wp.array2d(dtype=int),  # (W, E) each world's event steps, ascending, padded with -1
+    t_mass: wp.array3d(dtype=float),  # (W, E + 1, nbody) row 0: initial model; row e + 1: after events 0..e
+    t_ipos: wp.array3d(dtype=wp.vec3),
+    t_iquat: wp.array3d(dtype=wp.quat),
+    t_inertia: wp.array3d(dtype=wp.vec3),
+    t_subtree: wp.array3d(dtype=float),
+    t_biw: wp.array3d(dtype=wp.vec2),
+    t_diw: wp.array3d(dtype=float),  # (W, E + 1, nv)
+    t_acc0: wp.array3d(dtype=float),  # (W, E + 1, nu)
+    t_meff: wp.array3d(dtype=F),  # (W, E + 1, n) kg
+    t_ieff: wp.array3d(dtype=F),  # (W, E + 1, n) kg·m²
+    body_mass: wp.array2d(dtype=float),  # (W, nbody) MuJoCo Warp's batched Model fields (EVENT_FIELDS)
+    body_ipos: wp.array2d(dtype=wp.vec3),
+    body_iquat: wp.array2d(dtype=wp.quat),
+    body_inertia: wp.array2d(dtype=wp.vec3),
+    body_subtreemass: wp.array2d(dtype=float),
+    body_invweight0: wp.array2d(dtype=wp.vec2),
+    dof_invweight0: wp.array2d(dtype=float),
+    actuator_acc0: wp.array2d(dtype=float),
+    m_eff: wp.array2d(dtype=F),  # (W, n) BatchGains.m_eff, i_eff (eq. 34's force scale)
+    i_eff: wp.array2d(dtype=F),
+):
+    """Timed payload events (``sim.EventQueue``), before control step ``k`` of world ``w``: at
+    ``k = 0`` the world's initial model, then at the step of each of its events (``sim.first_step_at``)
+    the model after it: the precomputed rows (C MuJoCo's ``add_payload`` + ``mj_setConst``) copied
+    into the batched ``Model`` fields and the chassis' effective mass and inertia. As on the CPU the
+    event lands after control step ``k`` is computed from the observation and before its inputs
+    are applied (``_control`` writes ``xfrc = m_eff · d0`` next) and the period's physics steps;
+    several events at one step all land (the row is cumulative); none once the world stopped or
+    at ``k ≥ N``. Loop glue only, no equation."""
+    w = wp.tid()
+    kw = k[w]
+    if kw >= N or (kw > 0 and status[w] != 0):
+        return
+    row = -1
+    if kw == 0:
+        row = 0
+    for e in range(ev_step.shape[1]):
+        if ev_step[w, e] == kw:
+            row = e + 1
+    if row < 0:
+        return
+    for b in range(body_mass.shape[1]):
+        body_mass[w, b] = t_mass[w, row, b]
+        body_ipos[w, b] = t_ipos[w, row, b]
+        body_iquat[w, b] = t_iquat[w, row, b]
+        body_inertia[w, b] = t_inertia[w, row, b]
+        body_subtreemass[w, b] = t_subtree[w, row, b]
+        body_invweight0[w, b] = t_biw[w, row, b]
+    for j in range(dof_invweight0.shape[1]):
+        dof_invweight0[w, j] = t_diw[w, row, j]
+    for a in range(actuator_acc0.shape[1]):
+        actuator_acc0[w, a] = t_acc0[w, row, a]
+    for i in range(m_eff.shape[1]):
+        m_eff[w, i] = t_meff[w, row, i]
+        i_eff[w, i] = t_ieff[w, row, i]
+
+
 @wp.kernel
 def _record(
     k: wp.array(dtype=int),
@@ -816,6 +896,59 @@ def _yaw_quat(q0: np.ndarray, dth: float) -> np.ndarray:
     c, s = math.cos(dth / 2), math.sin(dth / 2)
     w0, x0, y0, z0 = q0
     return np.array([c * w0 - s * z0, c * x0 - s * y0, c * y0 + s * x0, c * z0 + s * w0])
+
+
+def event_tables(sc0: Scenario, scs: Sequence[Scenario], N: int, dt: float) -> dict[str, np.ndarray] | None:
+    """Each world's model after each of its payload events, from C MuJoCo (None: no world has one).
+
+    One CPU plant of the shared scene (``sim.make_plant(sc0)``) replays every world's events in
+    ``sim.EventQueue``'s order (sorted by time, stable): ``add_payload`` (the base body's inertial,
+    then ``mj_setConst``) and, after each, the :data:`EVENT_FIELDS` and ``_m_eff``, ``_i_eff``,
+    ``c_true()``; ``reset()`` restores the nominal model between worlds (equal payload sequences
+    are computed once). Returns, with ``W`` worlds and ``E`` the most events of a world:
+    ``step`` (W, E) int, each event's control step (``sim.first_step_at``), ascending, padded with
+    −1; per field of :data:`EVENT_FIELDS` an array (W, E + 1, *the field's C shape*): row 0 the
+    initial model, row ``e + 1`` the model after events ``0..e`` (padding rows repeat the last);
+    ``m_eff`` (W, E + 1, n) kg, ``i_eff`` (W, E + 1, n) kg·m², ``c_true`` (W, E + 1, n, 2)."""
+    from ..sim import first_step_at, make_plant
+
+    if not any(sc.events for sc in scs):
+        return None
+    plant = make_plant(sc0)
+    m = plant.model
+    W, E = len(scs), max(len(sc.events) for sc in scs)
+
+    def snap() -> dict[str, np.ndarray]:
+        out = {f: np.array(getattr(m, f), dtype=float) for f in EVENT_FIELDS}
+        out.update(m_eff=plant._m_eff.copy(), i_eff=plant._i_eff.copy(), c_true=plant.c_true())
+        return out
+
+    first = snap()
+    tab = {k: np.empty((W, E + 1, *v.shape)) for k, v in first.items()}
+    tab["step"] = np.full((W, E), -1, dtype=np.int32)
+    cache: dict[tuple, dict[str, np.ndarray]] = {(): first}
+    cur: tuple = ()  # the events the plant's model holds now
+    for w, sc in enumerate(scs):
+        evs = sorted(sc.events, key=lambda e: e.time)  # sim.EventQueue's order
+        rows = [first]
+        for e in range(len(evs)):
+            key = tuple((ev.follower, ev.mass, ev.inertia) for ev in evs[: e + 1])
+            if key not in cache:
+                if cur != key[:-1]:  # else the plant holds this prefix's model already
+                    plant.reset()  # the nominal model
+                    cur = ()
+                for ev in evs[len(cur) : e + 1]:
+                    if ev.kind != "payload":
+                        raise ValueError(f"scenario '{sc.name}': event kind '{ev.kind}' is not supported")
+                    plant.add_payload(ev.follower - 1, ev.mass, ev.inertia)
+                cur = key
+                cache[key] = snap()
+            rows.append(cache[key])
+            tab["step"][w, e] = first_step_at(evs[e].time, dt)
+        rows += [rows[-1]] * (E + 1 - len(rows))
+        for k in first:
+            tab[k][w] = [r[k] for r in rows]
+    return tab
 
 
 class BatchRun:
@@ -907,8 +1040,11 @@ class BatchRun:
         njmax = dj if njmax is None else njmax
         if nconmax < 1 or njmax < 1:  # njmax = 0 makes MuJoCo Warp skip every constraint, unflagged
             raise ValueError(f"nconmax and njmax must be >= 1 per world, got {nconmax}, {njmax}")
+        # payload events (sim.EventQueue): each world's model after each of its events, from C MuJoCo
+        self.events = event_tables(sc0, scs, N, dt)
+        batched = None if self.events is None else dict.fromkeys(EVENT_FIELDS, W)
         with wp.ScopedDevice(self.device):
-            self.m = mjw.put_model(mjm)
+            self.m = mjw.put_model(mjm, batch_sizes=batched)  # events: per-world inertial fields
             self.d = mjw.put_data(mjm, plant.data, nworld=W, nconmax=nconmax, njmax=njmax)
             self.d.qpos.assign(qpos.astype(np.float32))
             self._qpos0 = wp.clone(self.d.qpos)
@@ -941,6 +1077,13 @@ class BatchRun:
             s.slip_step = wp.full((W, n), -1, dtype=int)
             s.dacc = z2()
             self.s = s
+            self.ev_args = None  # _events' table arguments (None: no events in this batch)
+            if self.events is not None:
+                ev = self.events
+                f32 = lambda f: wp.array(  # noqa: E731
+                    np.ascontiguousarray(ev[f], dtype=np.float32), dtype=getattr(self.m, f).dtype
+                )
+                self.ev_args = [A(ev["step"], int), *(f32(f) for f in EVENT_FIELDS), A(ev["m_eff"]), A(ev["i_eff"])]
             self.L_pose = A(L_pose)
             self.L_vel = A(L_vel)
             self.qadr = A(plant._q7[:, 0].astype(np.int32), int)
@@ -990,6 +1133,26 @@ class BatchRun:
             ],
         )
 
+    def _launch_events(self, k: wp.array | None = None) -> None:
+        """:func:`_events` before the control step (or replayed period) ``k`` (W,) (default the
+        worlds' step counters ``BatchState.k``); nothing when no world has events."""
+        if self.ev_args is None:
+            return
+        m = self.m
+        wp.launch(
+            _events,
+            dim=self.nworld,
+            inputs=[
+                self.s.k if k is None else k,
+                self.s.status,
+                self.N,
+                *self.ev_args,
+                *(getattr(m, f) for f in EVENT_FIELDS),
+                self.g.m_eff,
+                self.g.i_eff,
+            ],
+        )
+
     def _period(self) -> None:
         """One control period of physics: ``n_substeps`` × ``mjw.step``, each followed (DC motors,
         design §8.2) by the delivered-torque accumulation, the last also by the feed (:func:`_delivered`)."""
@@ -1008,6 +1171,7 @@ class BatchRun:
         """``nsteps`` × [``n_substeps`` physics steps, control step]: no host reads."""
         for _ in range(nsteps):
             self._period()
+            self._launch_events()  # payload events due at this control step (before its inputs)
             self._launch_control()
 
     def reset(self) -> None:
@@ -1021,8 +1185,9 @@ class BatchRun:
             d.xfrc_applied.zero_()
             d.qacc_warmstart.zero_()
             d.overflow.zero_()  # MuJoCo Warp ORs its overflow bits in and never clears them
-            mjw.forward(self.m, d)
             self.s.k.zero_()
+            self._launch_events()  # each world's initial model (and its events at step 0)
+            mjw.forward(self.m, d)
             self.s.dacc.zero_()
             self._launch_control()  # k = 0: observe, reset, control step 0, torques
 
@@ -1106,6 +1271,7 @@ class BatchRun:
             rec()
             for _ in range(N - 1):
                 self._period()
+                self._launch_events()
                 self._launch_control()
                 rec()
             wp.synchronize_device(self.device)
@@ -1118,6 +1284,7 @@ class BatchRun:
 
         def steps(k):
             for _ in range(k):
+                self._launch_events(self._rec_j)  # the closed loop's model for this period
                 wp.launch(
                     _replay,
                     dim=W,
@@ -1173,6 +1340,16 @@ class BatchRun:
             "(world stopped there: its physics is wrong from then on)"
         )
 
+    def c_true_at_end(self, w: int, k_done: int) -> np.ndarray:
+        """World ``w``'s ground truth ``[a_eff, b_eff]`` (n, 2) when its run stopped after ``k_done``
+        control steps: with the events the CPU loop applied by then (``sim.simulate``: an event at
+        step ``e`` lands at the top of loop iteration ``e``, reached only if no control step before
+        or at ``e`` failed, and only for ``e < N``), i.e. those with step ``< k_done``."""
+        if self.events is None:
+            return self.c_true
+        steps = self.events["step"][w]
+        return self.events["c_true"][w, int(np.count_nonzero((steps >= 0) & (steps < k_done)))]
+
     def summaries(self, wall: float = float("nan")) -> list[dict[str, Any]]:
         s = self.s
         ferr, c_hat = s.ferr.numpy(), s.c_hat.numpy()
@@ -1209,6 +1386,7 @@ class BatchRun:
                 )
             elif bad:
                 reason = f"non-finite robot state at the end of the run (t = {self.N * self.dt:g} s)"
+            c_true = self.c_true_at_end(w, kd)
             fol = []
             stride = max(1, int(round(sc.sim.log_dt / self.dt)))
             t_end = (int(nrow[w]) - 1) * stride * self.dt  # the last log row's time (sim.simulate's log)
@@ -1243,8 +1421,8 @@ class BatchRun:
                         "peak_abs_torque_commanded": float(tauraw[w, i]),
                         "saturation_fraction": float(nsat[w, i] / max(1, kd)),
                         "c_hat": [float(v) for v in c_hat[w, i]],
-                        "c_true": [float(v) for v in self.c_true[i]],
-                        "c_hat_rel_error": [float(v) for v in (c_hat[w, i] / self.c_true[i] - 1.0)],
+                        "c_true": [float(v) for v in c_true[i]],
+                        "c_hat_rel_error": [float(v) for v in (c_hat[w, i] / c_true[i] - 1.0)],
                     }
                 )
             out.append(
