@@ -131,7 +131,7 @@ def test_sensing_separates_sweep_groups_and_truth_worlds_report_no_drift():
 # The CPU engine disagrees with itself by ĉ 0.6–11 % under rounding-sized noise (float32_spread), so
 # the criterion is design §11's: each follower within the tolerance or 2 × that spread. Measured
 # (3 worlds × 3 followers, 0.5 s): final formation error ≤ 0.62 mm, ĉ ≤ 6.3e-2 (4 of 9 followers
-# beyond 0.5 %, each within its spread), velocity error ≤ 2.3e-3, odometry drift ≤ 0.71 mm.
+# beyond 0.5 %, each within 2 × its spread), velocity error ≤ 2.3e-3, odometry drift ≤ 0.71 mm.
 def test_odometry_at_1khz_agrees_within_tolerance_or_float32_spread():
     from bioform_mj.batch.agreement import differences, float32_spread, judge
     from bioform_mj.batch.control import run_batch

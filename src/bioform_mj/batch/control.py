@@ -15,9 +15,10 @@ Precision: controller state, gains and metrics are float64 (the learner is stiff
 the boundary (``qpos``/``qvel`` in, ``ctrl``/``xfrc_applied`` out).
 
 :func:`run_batch` runs a list of scenarios (one world each) of one composed scene. The
-step loop (``n_substeps`` × ``mjw.step``, each followed for DC motors by :func:`_delivered`,
-which feeds the learner the torque delivered over the period, design §8.2, + one ``_control``
-launch per control step) reads nothing back to the host; the step counter lives on the device,
+step loop (``n_substeps`` × ``mjw.step``, each followed with ``plant.sensing = "odometry"`` by
+:func:`_sense`, the encoders, gyro and dead reckoning of design §8.3, and for DC motors by
+:func:`_delivered`, which feeds the learner the torque delivered over the period, design §8.2,
++ one ``_control`` launch per control step) reads nothing back to the host; the step counter lives on the device,
 so on CUDA a chunk of control steps is captured once as a CUDA graph and replayed.
 """
 
