@@ -189,6 +189,9 @@ def test_unsupported_features_are_refused():
     ov = ["plant.kind=mujoco", "sim.duration=0.01"]
     with pytest.raises(ValueError, match="leader"):
         run_batch([load("paper", overrides=ov), load("paper", overrides=[*ov, "leader.speed=0.5"])])
-    # run_batch/BatchRun refuse what the sweep refuses (they used to run odometry on the true state)
-    with pytest.raises(ValueError, match="plant.sensing = 'odometry'"):
-        run_batch([load("paper", overrides=[*ov, "plant.sensing=odometry"])])
+    # run_batch/BatchRun refuse what the sweep refuses; odometry runs now (tests/test_batch_odometry.py)
+    from bioform_mj.batch.backend import unsupported
+
+    with pytest.raises(ValueError, match="faults"):
+        run_batch([load("paper", overrides=[*ov, "faults.delay=0.01"])])
+    assert unsupported(load("paper", overrides=[*ov, "plant.sensing=odometry"])) is None

@@ -7,8 +7,9 @@ hands back one sweep row per run (the columns of ``sweep.run_one``).
 
 Worlds are grouped by what a batch must share (:func:`group_key`): the plant (robots,
 ``c_true``, …), the time axis (``control_dt``, ``physics_dt``, ``duration``), the leader, the
-graph and the team size. Everything else (seed, gains, formation offsets and jitter,
-disturbance, limits, method, the offsets' frame, timed payload events) varies per world.
+graph and the team size (the plant includes ``plant.sensing`` and the sensor keys: a scene has
+the odometry's sensors or not). Everything else (seed, so the gyro noise, gains, formation offsets
+and jitter, disturbance, limits, method, the offsets' frame, timed payload events) varies per world.
 """
 
 from __future__ import annotations
@@ -108,8 +109,8 @@ def unsupported(sc: Any) -> str | None:
     ]
     if named:
         return f"faults ({', '.join(named)})"
-    if getattr(sc.plant, "sensing", "truth") != "truth":
-        return f"plant.sensing = '{sc.plant.sensing}' (the batch engine feeds the controller the true state)"
+    if getattr(sc.plant, "sensing", "truth") not in ("truth", "odometry"):
+        return f"plant.sensing = '{sc.plant.sensing}'"
     return None
 
 

@@ -15,9 +15,10 @@ Precision: controller state, gains and metrics are float64 (the learner is stiff
 the boundary (``qpos``/``qvel`` in, ``ctrl``/``xfrc_applied`` out).
 
 :func:`run_batch` runs a list of scenarios (one world each) of one composed scene. The
-step loop (``n_substeps`` × ``mjw.step``, each followed for DC motors by :func:`_delivered`,
-which feeds the learner the torque delivered over the period, design §8.2, + one ``_control``
-launch per control step) reads nothing back to the host; the step counter lives on the device,
+step loop (``n_substeps`` × ``mjw.step``, each followed with ``plant.sensing = "odometry"`` by
+:func:`_sense`, the encoders, gyro and dead reckoning of design §8.3, and for DC motors by
+:func:`_delivered`, which feeds the learner the torque delivered over the period, design §8.2,
++ one ``_control`` launch per control step) reads nothing back to the host; the step counter lives on the device,
 so on CUDA a chunk of control steps is captured once as a CUDA graph and replayed.
 """
 
@@ -67,6 +68,9 @@ learner_step = EQ.learner_step
 harmonic = EQ.harmonic
 planar_state = EQ.planar_state
 slip_ratio = EQ.slip_ratio
+encoder_angle = EQ.encoder_angle
+gyro_reading = EQ.gyro_reading
+odometry_step = EQ.odometry_step
 
 #: per-world scalar gains, columns of ``BatchGains.sc``: the scalar fields of ``control.kernel.Gains``
 #: (``deriv`` the ``DERIV_*`` code, the flags as 0/1), then ``scenario.limits``, then the
@@ -127,6 +131,10 @@ SCALARS = (
     "slip_max",
     "slip_floor",
     "slip_need",
+    "odometry",
+    "odo_seed",
+    "gyro_bias",
+    "gyro_sigma",
 )
 _I = {name: wp.constant(i) for i, name in enumerate(SCALARS)}
 K1, K2, K3, A_, B_, D_ = (_I[x] for x in ("k1", "k2", "k3", "A", "B", "D"))
@@ -145,6 +153,9 @@ LPOS, LSPD, LTRQ = _I["lim_position"], _I["lim_speed"], _I["lim_torque"]
 DD0, DE0, USED = _I["d0"], _I["e0"], _I["use_dist"]
 STRIDE, TSPIN, TILT = _I["stride"], _I["t_spin"], _I["tilt_cos"]
 SLIPMAX, SLIPFLOOR, SLIPNEED = _I["slip_max"], _I["slip_floor"], _I["slip_need"]
+# plant.sensing = "odometry" (design §8.3): 1 = the controller is fed the dead reckoning; the gyro
+# noise seed (sim.seed mod 2^31 − 1, as MujocoPlant), bias and standard deviation per sample, rad/s
+ODO, OSEED, GBIAS, GSIGMA = _I["odometry"], _I["odo_seed"], _I["gyro_bias"], _I["gyro_sigma"]
 #: MuJoCo Warp's ``Data.overflow`` bits that mean dropped contacts or constraint rows (capacity), not
 #: the solver's iteration limits: a world with one of them is stopped as the CPU stops on MuJoCo's
 #: ``mjWARN_CONTACTFULL``/``CNSTRFULL`` warnings (``engine.PLANT_FAILED``)
@@ -188,8 +199,8 @@ class BatchGains:
 class BatchState:
     """``control.kernel.StackState`` with a leading world axis, plus the loop's own state."""
 
-    pose: wp.array3d(dtype=F)  # (W, n, 3) measured
-    vel: wp.array3d(dtype=F)  # (W, n, 2)
+    pose: wp.array3d(dtype=F)  # (W, n, 3) the true pose at the last observation (the controller's: mpose)
+    vel: wp.array3d(dtype=F)  # (W, n, 2) the true [υ, ω] (the controller's: mvel)
     est_pose: wp.array3d(dtype=F)
     est_vel: wp.array3d(dtype=F)
     z_hat: wp.array3d(dtype=F)
@@ -229,6 +240,15 @@ class BatchState:
     slip_run: wp.array2d(dtype=int)  # (W, n) consecutive observations with a wheel slipping
     slip_step: wp.array2d(dtype=int)  # (W, n) observation k at which a slip first lasted slip_need (−1: never)
     dacc: wp.array3d(dtype=F)  # (W, n, 2) DC motors: delivered wheel torque [τ_L, τ_R], N·m, summed over the period
+    # what the controller is given (design §8.3): the truth (pose, vel) or the odometry's reading
+    mpose: wp.array3d(dtype=F)  # (W, n, 3) [x, y, θ], m, rad
+    mvel: wp.array3d(dtype=F)  # (W, n, 2) [υ, ω], m/s, rad/s (odometry: the period's mean)
+    # plant.sensing = "odometry": each robot's dead reckoning (mujoco_kernels.Odometry), per world
+    odo_pose: wp.array3d(dtype=F)  # (W, n, 3) [x, y, θ], m, rad
+    odo_q: wp.array3d(dtype=F)  # (W, n, 2) last quantised forward wheel angles [q_L, q_R], rad
+    odo_dist: wp.array2d(dtype=F)  # (W, n) distance since the last control step, m
+    odo_turn: wp.array2d(dtype=F)  # (W, n) heading change since the last control step, rad
+    odo_count: wp.array(dtype=int)  # (W,) physics steps since reset
 
 
 @wp.func
@@ -320,9 +340,16 @@ def _control(
     overflow: wp.array(dtype=int),  # (W,) MuJoCo Warp's Data.overflow bits (sticky until reset)
     ctrl: wp.array2d(dtype=float),
     xfrc: wp.array2d(dtype=wp.spatial_vector),
+    sensordata: wp.array2d(dtype=float),  # (W, nsensordata) MuJoCo Warp's Data.sensordata
+    enc: wp.array2d(dtype=int),  # (n, 2) sensordata addresses of the [left, right] wheel encoders
+    osign: wp.array2d(dtype=F),  # (n, 2) ±1: forward wheel direction of each encoder
+    cpr: wp.array(dtype=F),  # (n,) encoder counts per revolution
 ):
-    """World ``w``: observe; at ``k = 0`` reset the stack (``kernel.reset_state``); for
-    ``k < N`` run control step ``k`` (``kernel.control_step``), the metrics and guards
+    """World ``w``: observe; at ``k = 0`` reset the stack (``kernel.reset_state``) and, with the
+    world's ``odometry`` flag, the dead reckoning at the true pose (``mujoco_kernels.odometry_reset``);
+    for ``k < N`` give the controller its measurement (the truth, or ``odometry_read``: the
+    odometry's pose and ``[Δs, Δθ]/dt``; design §8.3; metrics, guards, the formation error and the
+    watches stay on the truth), run control step ``k`` (``kernel.control_step``), the metrics and guards
     (``engine.accumulate``/``check``) and apply its torques (``ctrl = cscale · τ``) and ``d(k dt)``
     to the plant (``mujoco_kernels.apply_inputs``); then ``k += 1``. The command derivative is
     the world's ``deriv`` code (``kernel.DERIV_*``): filter, backward difference or analytic. With
@@ -433,8 +460,31 @@ def _control(
         s.first[w] = 1
         s.status[w] = 0
         s.k_done[w] = 0
+        if g.sc[w, ODO] != zero:  # mujoco_kernels.odometry_reset: the true pose, the sensordata of mjw.forward
+            s.odo_count[w] = 0
+            for i in range(n):
+                for c in range(3):
+                    s.odo_pose[w, i, c] = s.pose[w, i, c]
+                for c in range(2):
+                    s.odo_q[w, i, c] = encoder_angle(osign[i, c] * F(sensordata[w, enc[i, c]]), cpr[i])
+                s.odo_dist[w, i] = zero
+                s.odo_turn[w, i] = zero
     running = s.status[w] == 0 and k < N
     if running:
+        # ---- the measurement (sim.simulate's measure(): plant.measurement, mujoco_kernels.odometry_read)
+        for i in range(n):
+            if g.sc[w, ODO] != zero:
+                for c in range(3):
+                    s.mpose[w, i, c] = s.odo_pose[w, i, c]
+                s.mvel[w, i, 0] = s.odo_dist[w, i] / dt
+                s.mvel[w, i, 1] = s.odo_turn[w, i] / dt
+                s.odo_dist[w, i] = zero
+                s.odo_turn[w, i] = zero
+            else:
+                for c in range(3):
+                    s.mpose[w, i, c] = s.pose[w, i, c]
+                for c in range(2):
+                    s.mvel[w, i, c] = s.vel[w, i, c]
         # ---- learner_update
         if g.sc[w, LEARN] != zero and s.first[w] == 0:
             for i in range(n):
@@ -444,7 +494,7 @@ def _control(
                     s.c_hat[w, i, 0],
                     s.d_hat[w, i, 0],
                     s.tau_body[w, i, 0],
-                    s.vel[w, i, 0],
+                    s.mvel[w, i, 0],
                     g.k4[w, i, 0],
                     g.sc[w, K5A],
                     g.sc[w, KDA],
@@ -462,7 +512,7 @@ def _control(
                     s.c_hat[w, i, 1],
                     s.d_hat[w, i, 1],
                     s.tau_body[w, i, 1],
-                    s.vel[w, i, 1],
+                    s.mvel[w, i, 1],
                     g.k4[w, i, 1],
                     g.sc[w, K5B],
                     g.sc[w, KDB],
@@ -519,15 +569,17 @@ def _control(
                     g.offsets[w, i, 0],
                     g.offsets[w, i, 1],
                 )
-                e0, e1, e2 = tracking_error(xs, ys, ths, s.pose[w, i, 0], s.pose[w, i, 1], s.pose[w, i, 2], zero, zero)
+                e0, e1, e2 = tracking_error(
+                    xs, ys, ths, s.mpose[w, i, 0], s.mpose[w, i, 1], s.mpose[w, i, 2], zero, zero
+                )
             else:
                 e0, e1, e2 = tracking_error(
                     s.est_pose[w, i, 0],
                     s.est_pose[w, i, 1],
                     s.est_pose[w, i, 2],
-                    s.pose[w, i, 0],
-                    s.pose[w, i, 1],
-                    s.pose[w, i, 2],
+                    s.mpose[w, i, 0],
+                    s.mpose[w, i, 1],
+                    s.mpose[w, i, 2],
                     g.offsets[w, i, 0],
                     g.offsets[w, i, 1],
                 )
@@ -560,13 +612,13 @@ def _control(
                     g.sc[w, EPHI0],
                     g.sc[w, EPHI1],
                 )
-                ch = wp.cos(s.pose[w, i, 2])
-                sh = wp.sin(s.pose[w, i, 2])
+                ch = wp.cos(s.mpose[w, i, 2])
+                sh = wp.sin(s.mpose[w, i, 2])
                 dex, dey, deth = error_rate(
                     e0,
                     e1,
-                    s.vel[w, i, 0],
-                    s.vel[w, i, 1],
+                    s.mvel[w, i, 0],
+                    s.mvel[w, i, 1],
                     s.est_vel[w, i, 0],
                     dpth,
                     e2,
@@ -610,8 +662,8 @@ def _control(
                 wc,
                 s.dcmd[w, i, 0],
                 s.dcmd[w, i, 1],
-                s.vel[w, i, 0],
-                s.vel[w, i, 1],
+                s.mvel[w, i, 0],
+                s.mvel[w, i, 1],
                 s.c_hat[w, i, 0],
                 s.c_hat[w, i, 1],
                 g.sc[w, CA],
@@ -825,6 +877,53 @@ def _events(
 
 
 @wp.kernel
+def _sense(
+    sc: wp.array2d(dtype=F),  # (W, len(SCALARS)) BatchGains.sc: the odometry flag, noise seed, gyro bias, sigma
+    sensordata: wp.array2d(dtype=float),  # (W, nsensordata) MuJoCo Warp's Data.sensordata of the step just taken
+    enc: wp.array2d(dtype=int),  # (n, 2) sensordata addresses of the [left, right] wheel encoders (jointpos)
+    gyro: wp.array(dtype=int),  # (n,) sensordata address of each gyro (3 values, IMU site frame; z used)
+    osign: wp.array2d(dtype=F),  # (n, 2) ±1: forward wheel direction
+    orad: wp.array(dtype=F),  # (n,) wheel radius, m
+    cpr: wp.array(dtype=F),  # (n,) encoder counts per revolution
+    every: int,  # physics steps per sensor sample
+    ts: F,  # the sensor period, s
+    count: wp.array(dtype=int),  # (W,) physics steps since reset
+    pose: wp.array3d(dtype=F),  # (W, n, 3) the odometry's [x, y, θ], m, rad
+    q: wp.array3d(dtype=F),  # (W, n, 2) last quantised forward wheel angles, rad
+    dist: wp.array2d(dtype=F),  # (W, n) distance since the last control step, m
+    turn: wp.array2d(dtype=F),  # (W, n) heading change since the last control step, rad
+):
+    """``mujoco_kernels.sense`` for world ``w`` (with its ``odometry`` flag), after each ``mjw.step``:
+    count the step, and every ``every`` steps sample the encoders (``encoder_angle``) and the gyro
+    (``gyro_reading``: bias, and noise from the counter hash of ``(seed, robot, sample)``) and
+    advance each robot's dead reckoning (``odometry_step``), design §8.3. MuJoCo Warp computes the
+    ``jointpos`` and ``gyro`` sensors in the forward pass at the start of ``mjw.step``, as C MuJoCo
+    does in ``mj_step``: the reading after a step is the state it started from."""
+    w = wp.tid()
+    if sc[w, ODO] == F(0.0):
+        return
+    c = count[w] + 1
+    count[w] = c
+    if c % every != 0:
+        return
+    ks = F(c // every)  # the sample's counter, 1, 2, … (mujoco_kernels.sense)
+    for i in range(pose.shape[1]):
+        ql = encoder_angle(osign[i, 0] * F(sensordata[w, enc[i, 0]]), cpr[i])
+        qr = encoder_angle(osign[i, 1] * F(sensordata[w, enc[i, 1]]), cpr[i])
+        wz = gyro_reading(F(sensordata[w, gyro[i] + 2]), sc[w, GBIAS], sc[w, GSIGMA], sc[w, OSEED], F(i), ks)
+        x, y, th, ds, dth = odometry_step(
+            pose[w, i, 0], pose[w, i, 1], pose[w, i, 2], q[w, i, 0], q[w, i, 1], ql, qr, wz, orad[i], ts
+        )
+        pose[w, i, 0] = x
+        pose[w, i, 1] = y
+        pose[w, i, 2] = th
+        q[w, i, 0] = ql
+        q[w, i, 1] = qr
+        dist[w, i] = dist[w, i] + ds
+        turn[w, i] = turn[w, i] + dth
+
+
+@wp.kernel
 def _record(
     k: wp.array(dtype=int),
     ctrl: wp.array2d(dtype=float),
@@ -980,6 +1079,9 @@ class BatchRun:
         self.plant = plant
         # DC motors (design §8.2): the learner is fed the torque delivered over each period (_delivered)
         self.feed_on = bool(getattr(plant, "feed_delivered", False))
+        # plant.sensing = "odometry" (design §8.3; the plant, so the scene's sensors, is one per batch)
+        sen = plant.sensors
+        self.sense_on = bool(sen.on)
         mjm = plant.model
         self.mjm = mjm
         n = self.n = sc0.n
@@ -1021,6 +1123,10 @@ class BatchRun:
             row["slip_max"] = plant.SLIP_RATIO  # mujoco_plant's watch_slip thresholds
             row["slip_floor"] = plant.SLIP_V_FLOOR
             row["slip_need"] = float(plant._slip_need)
+            row["odometry"] = 1.0 if sen.on else 0.0
+            row["odo_seed"] = float(sc.sim.seed % 2147483647)  # as MujocoPlant: the seed of the gyro noise
+            row["gyro_bias"] = float(sc.plant.gyro_bias) if sen.on else 0.0
+            row["gyro_sigma"] = float(sc.plant.gyro_noise) if sen.on else 0.0
             sc_rows[w] = [row[f] for f in SCALARS]
             arr["k4"][w], arr["c_min"][w], arr["c_max"][w] = gn.k4, gn.c_min, gn.c_max
             arr["offsets"][w] = gn.offsets
@@ -1076,6 +1182,9 @@ class BatchRun:
             s.slip_run = wp.zeros((W, n), dtype=int)
             s.slip_step = wp.full((W, n), -1, dtype=int)
             s.dacc = z2()
+            s.mpose, s.mvel = z3(), z2()
+            s.odo_pose, s.odo_q, s.odo_dist, s.odo_turn = z3(), z2(), z1(), z1()
+            s.odo_count = wp.zeros(W, dtype=int)
             self.s = s
             self.ev_args = None  # _events' table arguments (None: no events in this batch)
             if self.events is not None:
@@ -1098,6 +1207,13 @@ class BatchRun:
             self.htrack = A(np.asarray(plant._half_track, dtype=float))
             self.to_wheel = A(np.asarray(plant._to_wheel, dtype=float))  # (n, 2) gear × sign, 0: not fed
             self.feed = A(np.asarray(plant._feed).astype(np.int32), int)  # (n,)
+            # the odometry's sensors (mujoco_kernels.Sensors): sensordata addresses, sign, radius, cpr
+            self.enc = A(np.asarray(sen.enc).astype(np.int32), int)  # (n, 2)
+            self.gyro = A(np.asarray(sen.gyro).astype(np.int32), int)  # (n,)
+            self.osign = A(np.asarray(sen.sign, dtype=float))  # (n, 2)
+            self.orad = A(np.asarray(sen.radius, dtype=float))  # (n,)
+            self.cpr = A(np.asarray(sen.cpr, dtype=float))  # (n,)
+            self.sense_every, self.sense_ts = int(sen.every), float(sen.ts)
         self.L_pose_host = L_pose
         self.nconmax, self.njmax = nconmax, njmax
         self.graph = None
@@ -1130,6 +1246,10 @@ class BatchRun:
                 d.overflow,
                 d.ctrl,
                 d.xfrc_applied,
+                d.sensordata,
+                self.enc,
+                self.osign,
+                self.cpr,
             ],
         )
 
@@ -1154,11 +1274,33 @@ class BatchRun:
         )
 
     def _period(self) -> None:
-        """One control period of physics: ``n_substeps`` × ``mjw.step``, each followed (DC motors,
+        """One control period of physics: ``n_substeps`` × ``mjw.step``, each followed (sensing =
+        odometry, design §8.3) by the sensors' sample and dead reckoning (:func:`_sense`) and (DC motors,
         design §8.2) by the delivered-torque accumulation, the last also by the feed (:func:`_delivered`)."""
         d, W, s = self.d, self.nworld, self.s
         for j in range(self.n_sub):
             mjw.step(self.m, d)
+            if self.sense_on:
+                wp.launch(
+                    _sense,
+                    dim=W,
+                    inputs=[
+                        self.g.sc,
+                        d.sensordata,
+                        self.enc,
+                        self.gyro,
+                        self.osign,
+                        self.orad,
+                        self.cpr,
+                        self.sense_every,
+                        F(self.sense_ts),
+                        s.odo_count,
+                        s.odo_pose,
+                        s.odo_q,
+                        s.odo_dist,
+                        s.odo_turn,
+                    ],
+                )
             if self.feed_on:
                 last = int(j == self.n_sub - 1)
                 wp.launch(
@@ -1189,6 +1331,7 @@ class BatchRun:
             self._launch_events()  # each world's initial model (and its events at step 0)
             mjw.forward(self.m, d)
             self.s.dacc.zero_()
+            self.s.odo_count.zero_()
             self._launch_control()  # k = 0: observe, reset, control step 0, torques
 
     def _timed(self, steps, start, total: int, chunk: int, capture: bool | None, graph=None):
@@ -1350,6 +1493,15 @@ class BatchRun:
         steps = self.events["step"][w]
         return self.events["c_true"][w, int(np.count_nonzero((steps >= 0) & (steps < k_done)))]
 
+    def _odometry_drift(self) -> np.ndarray:
+        """(W, n, 2): each robot's odometry error at the last observation, ``[|Δ(x, y)| m, |Δθ| rad]``
+        against the true pose (``MujocoPlant.odometry_drift``; zeros in worlds without odometry).
+        A world stopped early (guard, capacity) keeps stepping its physics and its odometry with zero
+        torques, so its drift, like its other end values, is at the end of the run, not at the stop."""
+        odo, pose = self.s.odo_pose.numpy(), self.s.pose.numpy()
+        dth = np.angle(np.exp(1j * (odo[..., 2] - pose[..., 2])))
+        return np.stack([np.hypot(*np.moveaxis(odo[..., :2] - pose[..., :2], -1, 0)), np.abs(dth)], axis=-1)
+
     def summaries(self, wall: float = float("nan")) -> list[dict[str, Any]]:
         s = self.s
         ferr, c_hat = s.ferr.numpy(), s.c_hat.numpy()
@@ -1366,6 +1518,8 @@ class BatchRun:
             s.tip_step.numpy(),
         )
         slip = s.slip_step.numpy()
+        odo = self.g.sc.numpy()[:, ODO] != 0
+        drift = self._odometry_drift()
         c_min, c_max = self.g.c_min.numpy(), self.g.c_max.numpy()
         learning = self.g.sc.numpy()[:, LEARN] != 0
         lp_end = self.L_pose_host[self.N]
@@ -1423,6 +1577,9 @@ class BatchRun:
                         "c_hat": [float(v) for v in c_hat[w, i]],
                         "c_true": [float(v) for v in c_true[i]],
                         "c_hat_rel_error": [float(v) for v in (c_hat[w, i] / c_true[i] - 1.0)],
+                        # sim.simulate: the odometry against the truth at the end (design §8.3), None on truth
+                        "odometry_drift_m": float(drift[w, i, 0]) if odo[w] else None,
+                        "odometry_heading_drift_rad": float(drift[w, i, 1]) if odo[w] else None,
                     }
                 )
             out.append(
@@ -1435,6 +1592,7 @@ class BatchRun:
                     "diverged": reason is not None,
                     "diverged_reason": reason,
                     "capacity_exceeded": bool(status[w] == CAPACITY_EXCEEDED),
+                    "sensing": "odometry" if odo[w] else "truth",
                     "steps": kd,
                     "sim_time": kd * self.dt,
                     "wall_time_s": wall,
