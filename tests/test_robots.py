@@ -248,6 +248,24 @@ def test_feasibility_warns_about_a_robot_that_tips():
     assert feasibility(sc, MujocoPlant(["paper"], sc.initial_poses(), 0.001, 0.001)) == []
 
 
+def test_a_mapped_size_far_from_the_geometry_is_said_not_a_crash():
+    """wheel_radius mapped 40 % above the paper robot's wheels: the run used to crash in the tip-over
+    estimate (no geom reached the floor that radius implies). Now: a pre-run warning naming both
+    values, and the run reports the wheels as slipping (their rate × the given radius is not the
+    chassis speed), never silently."""
+    from bioform_mj.sim import make_plant, simulate
+
+    ov = ["plant.kind=mujoco", "sim.duration=0.6", 'plant.robots=[{model="paper", wheel_radius=0.14}]']
+    res = simulate(load("paper", overrides=ov))
+    feas = res.summary["feasibility_warnings"]
+    assert any("wheel_radius 0.14 m given; the collision geoms say 0.1 m (+40%)" in w for w in feas), feas
+    assert [f["outcome"] for f in res.summary["followers"]] == ["slipping"] * 3
+    # within 5 %: the mapping is taken as a correction, no warning
+    ov[-1] = 'plant.robots=[{model="paper", wheel_radius=0.103}]'
+    sc = load("paper", overrides=ov)
+    assert not any("given" in w for w in feasibility(sc, make_plant(sc)))
+
+
 @pytest.mark.parametrize("preset,robot", [("tb3", "tb3"), ("stretch", "stretch")])
 def test_shipped_robot_scaled_paper_scenario_holds_formation(preset, robot):
     """Each shipped robot's scaled paper scenario holds its formation within 0.1 m in MuJoCo, upright.

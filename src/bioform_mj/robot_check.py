@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 from dataclasses import asdict
 from typing import Any
@@ -52,6 +53,12 @@ __all__ = [
 EXIT_FAIL = 4
 #: gravity, m/s²
 G = 9.81
+#: a mapped wheel_radius/half_track this far (relative) from what the model's geometry says is a
+#: pre-run warning (scene.layout_of notes every difference over 1 %)
+GIVEN_TOL = 0.05
+_GIVEN = re.compile(
+    r"(?P<what>wheel_radius|half_track) (?P<given>[-+.\deE]+) m given; the [a-z ]+ say (?P<model>[-+.\deE]+) m$"
+)
 #: a collision geom whose lowest point is within this of the floor (m, or 0.25 r if larger) supports the chassis
 SUPPORT_CLEARANCE = 0.005
 #: identification vs formula: above WARN_ID the verdict is warn, above FAIL_ID fail (relative)
@@ -90,13 +97,21 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
     pts, names = [], []
     body_set = set(bodies.tolist())
     down = np.array([0.0, 0.0, -1.0])
-    for g in range(model.ngeom):
-        if model.geom_bodyid[g] not in body_set or not (model.geom_contype[g] or model.geom_conaffinity[g]):
-            continue
-        low = data.geom_xpos[g][2] - _geom_support(model, data, g, down)
+    lows = {
+        g: data.geom_xpos[g][2] - _geom_support(model, data, g, down)
+        for g in range(model.ngeom)
+        if model.geom_bodyid[g] in body_set and (model.geom_contype[g] or model.geom_conaffinity[g])
+    }
+    if lows and min(lows.values()) - floor_z > tol:
+        # nothing reaches the floor the mapped wheel_radius implies (a radius that disagrees with the
+        # collision geoms: the scene notes it): the robot stands on its lowest geoms
+        floor_z = min(lows.values())
+    for g, low in lows.items():
         if low - floor_z <= tol:
             pts.append(rot.T @ (data.geom_xpos[g] - mid))
             names.append(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"#{g}")
+    if not pts:
+        raise ValueError(f"robot '{prefix.rstrip('/') or lay.base}': no collision geom to stand on")
     pts = np.array(pts)
     c = rot.T @ (com - mid)
     h = float(com[2] - floor_z)
@@ -287,6 +302,19 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
     mujoco.mj_kinematics(plant.model, scratch)
     out: list[str] = []
     loads = plant.settled_wheel_loads()
+    given: dict[str, list[int]] = {}  # a mapped size far from the model's geometry (scene.layout_of's notes)
+    for i, lay in enumerate(plant.layouts):
+        for note in lay.notes:
+            m = _GIVEN.match(note)
+            if m and abs(float(m["given"]) / float(m["model"]) - 1) > GIVEN_TOL:
+                given.setdefault(note, []).append(i + 1)
+    for note, who in given.items():
+        m = _GIVEN.match(note)
+        out.append(
+            f"follower{'s' if len(who) > 1 else ''} {', '.join(map(str, who))}: {note} "
+            f"({float(m['given']) / float(m['model']) - 1:+.0%}): the controller and c_true use the given "
+            "value, the physics the model's"
+        )
     for i, p in enumerate(plant.params):
         tips = tip_margins(plant.model, scratch, f"f{i + 1}/")["tip_accel_mps2"]
         mu = plant._wheel_friction(i)
