@@ -109,6 +109,12 @@ def unsupported(sc: Any) -> str | None:
     ]
     if named:
         return f"faults ({', '.join(named)})"
+    if f.friction_patch:
+        return (
+            "faults.friction_patch (MuJoCo Warp's wheel-on-box contacts differ from C MuJoCo's: one physics step "
+            "from the same state on the patch, velocities differ by up to 35x, against ~1e-6 on the floor; "
+            "use --backend local)"
+        )
     if getattr(sc.plant, "sensing", "truth") not in ("truth", "odometry"):
         return f"plant.sensing = '{sc.plant.sensing}'"
     return None
