@@ -116,3 +116,28 @@ def test_capacity_flags_need_the_warp_backend(tmp_path, capsys):
         from bioform_mj.batch.control import BatchRun
 
         BatchRun([load("paper", overrides=["plant.kind=mujoco", "sim.duration=0.01"])], njmax=0)
+
+
+def test_physics_probe_tells_a_contact_model_apart_from_float32(tmp_path, capsys, monkeypatch):
+    """physics_probe: one step at a time from C MuJoCo's state, MuJoCo Warp's velocities against C
+    MuJoCo's. Float32 on the bare floor: ≤ 2e-3 (measured 1.9e-4 here); a box patch under the wheels
+    (MuJoCo Warp's ellipsoid–box contacts are not C MuJoCo's): ≥ 0.1. A scene beyond PROBE_TOL is
+    refused up front by the sweep (exit 2, one line) and by BatchRun."""
+    from bioform_mj.batch import control
+    from bioform_mj.sim import make_plant
+
+    ok = control.physics_probe(make_plant(load("paper", overrides=["plant.kind=mujoco"])))
+    patch = ["plant.kind=mujoco", "faults.friction_patch=[-50.0,-50.0,50.0,50.0,1.0]"]
+    bad = control.physics_probe(make_plant(load("paper", overrides=patch)))
+    assert ok < control.PROBE_TOL / 10 and bad > 3 * control.PROBE_TOL, (ok, bad)
+    # the refusal path, forced on the paper scene by a limit below its float32 difference
+    monkeypatch.setattr(control, "PROBE_TOL", ok / 2)
+    monkeypatch.setattr(control, "_probed", {})
+    out = tmp_path / "sw"
+    args = ["sweep", "paper", "--plant", "mujoco", "--duration", "0.02", "--seeds", "2", "--quiet"]
+    assert main([*args, "--backend", "warp", "--device", "cpu", "--out", str(out)]) == 2
+    err = [e for e in capsys.readouterr().err.strip().splitlines() if e.startswith("error")]
+    assert len(err) == 1 and err[0].startswith("error: --backend warp: scenario 'paper': MuJoCo Warp's physics")
+    assert not out.exists()
+    with pytest.raises(ValueError, match="differs from C MuJoCo's"):
+        control.BatchRun([load("paper", overrides=["plant.kind=mujoco", "sim.duration=0.01"])])

@@ -199,6 +199,13 @@ def plan(specs: Sequence[Any], device: str) -> list[Group]:
                 f"(run {sp.method}, seed {sp.seed}); use --backend local"
             )
         k = group_key(sc)
+        if k not in groups:  # a new scene: its physics on MuJoCo Warp must be C MuJoCo's
+            from .control import check_physics
+
+            try:
+                check_physics(sc, device)
+            except ValueError as exc:
+                raise InputError(f"--backend warp: {exc}; use --backend local") from None
         groups.setdefault(k, Group(k, [], sc.n)).specs.append(sp)
     out = list(groups.values())
     if out:
