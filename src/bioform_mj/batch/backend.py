@@ -102,8 +102,6 @@ def unsupported(sc: Any) -> str | None:
             ("faults.delay", f.delay > 0),
             ("faults.noise_pose", any(f.noise_pose)),
             ("faults.noise_vel", any(f.noise_vel)),
-            ("faults.actuator", f.actuator),
-            ("faults.push", f.push),
         )
         if on
     ]
