@@ -5,7 +5,8 @@ command and torques with the world's ``torque.derivative`` mode, estimator advan
 bookkeeping of ``engine.py`` (run metrics, divergence guards)
 and the plant glue of ``plants/mujoco_kernels.py`` (observe, wheel torques and the
 eq. 34 disturbance as chassis ``xfrc_applied``; ``ctrl = scale · τ``, the DC motors' driver
-input per N·m, design §8.2), for one world per thread, looping over
+input per N·m, design §8.2; the plant faults of ``faults.py``, actuator limits and pushes, from
+per-world tables, :class:`PlantFaults`), for one world per thread, looping over
 its followers and graph edges in the same order as the CPU kernels. Every equation is
 the Warp translation (:mod:`.samesource`) of ``control/equations.py``: only loops,
 indexing and bookkeeping are written here.
@@ -286,7 +287,7 @@ def _push_row(pf: PlantFaults, w: int, i: int, k: int) -> int:
     """The push acting on follower ``i`` in the period of control step ``k`` (−1: none): the last row
     started by then (``Faults.step`` starts rows in time order, a new one replacing the old one in
     ``MujocoPlant.push``), if it has not ended (``_apply_push``: ``t0 + duration > t + 1e-12``)."""
-    last = int(-1)
+    last = wp.int32(-1)  # typed: mutated in a dynamic loop
     for r in range(pf.push_i.shape[1]):
         if pf.push_i[w, r] == i and pf.push_k0[w, r] <= k:
             last = r
@@ -399,7 +400,12 @@ def _control(
     to the plant (``mujoco_kernels.apply_inputs``); then ``k += 1``. The command derivative is
     the world's ``deriv`` code (``kernel.DERIV_*``): filter, backward difference or analytic. With
     the world's ``leader_frame`` flag the offsets are in the leader's frame (design §4): the command
-    step tracks ``slot_reference`` and the formation error rotates them (``formation_offset``)."""
+    step tracks ``slot_reference`` and the formation error rotates them (``formation_offset``).
+    Plant faults (``faults.Faults.step``, the world's rows in ``pf``): ``faults.actuator`` scales the
+    limit of the stack's own saturation when ``actuator_known``, and, while any follower's limit is
+    reduced, clips every wheel torque reaching the plant to its follower's reduced limit (``s.tau``
+    stays as commanded, as the CPU's stack state); ``faults.push`` adds the acting push's force and
+    yaw torque to the disturbance's ``xfrc_applied`` (``MujocoPlant._apply_push``)."""
     w = wp.tid()
     k = s.k[w]
     n = s.pose.shape[1]
@@ -795,7 +801,7 @@ def _control(
     # faults.actuator (Faults.step): while any follower's limit is reduced, every wheel's torque
     # reaching the plant is clipped to its follower's limit × scale (s.tau stays as commanded: the
     # log, the metrics and, unless a DC motor feeds back what it delivered, the learner see that)
-    weak = int(0)
+    weak = wp.int32(0)  # typed: mutated in a dynamic loop
     pushed = pf.push_i[w, 0] >= 0  # this world has pushes: xfrc_applied is written with them
     if running:
         for r in range(pf.act_i.shape[1]):
