@@ -9,7 +9,8 @@ Worlds are grouped by what a batch must share (:func:`group_key`): the plant (ro
 ``c_true``, …), the time axis (``control_dt``, ``physics_dt``, ``duration``), the leader, the
 graph and the team size (the plant includes ``plant.sensing`` and the sensor keys: a scene has
 the odometry's sensors or not). Everything else (seed, so the gyro noise, gains, formation offsets
-and jitter, disturbance, limits, method, the offsets' frame, timed payload events) varies per world.
+and jitter, disturbance, limits, method, the offsets' frame, timed payload events, actuator faults
+and pushes) varies per world.
 """
 
 from __future__ import annotations
@@ -102,8 +103,6 @@ def unsupported(sc: Any) -> str | None:
             ("faults.delay", f.delay > 0),
             ("faults.noise_pose", any(f.noise_pose)),
             ("faults.noise_vel", any(f.noise_vel)),
-            ("faults.actuator", f.actuator),
-            ("faults.push", f.push),
         )
         if on
     ]

@@ -5,7 +5,8 @@ command and torques with the world's ``torque.derivative`` mode, estimator advan
 bookkeeping of ``engine.py`` (run metrics, divergence guards)
 and the plant glue of ``plants/mujoco_kernels.py`` (observe, wheel torques and the
 eq. 34 disturbance as chassis ``xfrc_applied``; ``ctrl = scale · τ``, the DC motors' driver
-input per N·m, design §8.2), for one world per thread, looping over
+input per N·m, design §8.2; the plant faults of ``faults.py``, actuator limits and pushes, from
+per-world tables, :class:`PlantFaults`), for one world per thread, looping over
 its followers and graph edges in the same order as the CPU kernels. Every equation is
 the Warp translation (:mod:`.samesource`) of ``control/equations.py``: only loops,
 indexing and bookkeeping are written here.
@@ -71,6 +72,7 @@ slip_ratio = EQ.slip_ratio
 encoder_angle = EQ.encoder_angle
 gyro_reading = EQ.gyro_reading
 odometry_step = EQ.odometry_step
+clip = EQ.clip
 
 #: per-world scalar gains, columns of ``BatchGains.sc``: the scalar fields of ``control.kernel.Gains``
 #: (``deriv`` the ``DERIV_*`` code, the flags as 0/1), then ``scenario.limits``, then the
@@ -251,6 +253,49 @@ class BatchState:
     odo_count: wp.array(dtype=int)  # (W,) physics steps since reset
 
 
+@wp.struct
+class PlantFaults:
+    """Per-world actuator faults and pushes (``faults.actuator``, ``faults.push``; ``faults.py``) as
+    padded tables of rows (``W`` worlds; ``Ra``, ``Rp`` the most rows of a world, at least 1; padding
+    rows have follower −1). Times are control steps, resolved on the host exactly as ``Faults.step``
+    compares ``t = k dt`` (:func:`plant_fault_tables`)."""
+
+    act_i: wp.array2d(dtype=int)  # (W, Ra) follower (0-based), −1: padding
+    act_k0: wp.array2d(dtype=int)  # (W, Ra) first control step with t ≥ t_start
+    act_k1: wp.array2d(dtype=int)  # (W, Ra) first control step with t ≥ t_end (active in [k0, k1))
+    act_s: wp.array2d(dtype=F)  # (W, Ra) scale of the wheel torque limit, in [0, 1]
+    act_known: wp.array(dtype=int)  # (W,) 1: faults.actuator_known (the stack's own limit follows)
+    push_i: wp.array2d(dtype=int)  # (W, Rp) follower (0-based), −1: padding; rows sorted by t (stable)
+    push_k0: wp.array2d(dtype=int)  # (W, Rp) control step at which Faults.step starts the push
+    push_k1: wp.array2d(dtype=int)  # (W, Rp) first control step at which it no longer acts
+    push_w: wp.array3d(dtype=F)  # (W, Rp, 3) world-frame force fx, fy (N) and yaw torque tz (N·m)
+
+
+@wp.func
+def _act_scale(pf: PlantFaults, w: int, i: int, k: int) -> F:
+    """Follower ``i``'s torque-limit scale at control step ``k``: the minimum over its active rows, 1
+    without one (``Faults.actuate``: ``np.minimum.at`` on ones)."""
+    sc = F(1.0)
+    for r in range(pf.act_i.shape[1]):
+        if pf.act_i[w, r] == i and pf.act_k0[w, r] <= k and k < pf.act_k1[w, r]:
+            sc = wp.min(sc, pf.act_s[w, r])
+    return sc
+
+
+@wp.func
+def _push_row(pf: PlantFaults, w: int, i: int, k: int) -> int:
+    """The push acting on follower ``i`` in the period of control step ``k`` (−1: none): the last row
+    started by then (``Faults.step`` starts rows in time order, a new one replacing the old one in
+    ``MujocoPlant.push``), if it has not ended (``_apply_push``: ``t0 + duration > t + 1e-12``)."""
+    last = wp.int32(-1)  # typed: mutated in a dynamic loop
+    for r in range(pf.push_i.shape[1]):
+        if pf.push_i[w, r] == i and pf.push_k0[w, r] <= k:
+            last = r
+    if last >= 0 and k >= pf.push_k1[w, last]:
+        last = -1
+    return last
+
+
 @wp.func
 def _finite3(a: wp.array3d(dtype=F), w: int, i: int, nc: int) -> bool:
     for c in range(nc):  # (no flag mutated in the loop: Warp 1.19 refuses to mutate a constant there)
@@ -344,6 +389,7 @@ def _control(
     enc: wp.array2d(dtype=int),  # (n, 2) sensordata addresses of the [left, right] wheel encoders
     osign: wp.array2d(dtype=F),  # (n, 2) ±1: forward wheel direction of each encoder
     cpr: wp.array(dtype=F),  # (n,) encoder counts per revolution
+    pf: PlantFaults,  # actuator faults and pushes (faults.py), per world
 ):
     """World ``w``: observe; at ``k = 0`` reset the stack (``kernel.reset_state``) and, with the
     world's ``odometry`` flag, the dead reckoning at the true pose (``mujoco_kernels.odometry_reset``);
@@ -354,7 +400,12 @@ def _control(
     to the plant (``mujoco_kernels.apply_inputs``); then ``k += 1``. The command derivative is
     the world's ``deriv`` code (``kernel.DERIV_*``): filter, backward difference or analytic. With
     the world's ``leader_frame`` flag the offsets are in the leader's frame (design §4): the command
-    step tracks ``slot_reference`` and the formation error rotates them (``formation_offset``)."""
+    step tracks ``slot_reference`` and the formation error rotates them (``formation_offset``).
+    Plant faults (``faults.Faults.step``, the world's rows in ``pf``): ``faults.actuator`` scales the
+    limit of the stack's own saturation when ``actuator_known``, and, while any follower's limit is
+    reduced, clips every wheel torque reaching the plant to its follower's reduced limit (``s.tau``
+    stays as commanded, as the CPU's stack state); ``faults.push`` adds the acting push's force and
+    yaw torque to the disturbance's ``xfrc_applied`` (``MujocoPlant._apply_push``)."""
     w = wp.tid()
     k = s.k[w]
     n = s.pose.shape[1]
@@ -673,6 +724,8 @@ def _control(
             s.tau_raw[w, i, 0] = r0
             s.tau_raw[w, i, 1] = r1
             L = g.lim[w, i]
+            if pf.act_known[w] != 0:  # faults.actuator_known: the stack's own limit (ControlStack.set_tau_max)
+                L = L * _act_scale(pf, w, i, k)
             sat = 0
             if wp.abs(r0) > L or wp.abs(r1) > L:
                 sat = 1
@@ -745,21 +798,41 @@ def _control(
         t = F(k) * dt
         d0 = harmonic(g.sc[w, DD0], g.sc[w, DD0 + 1], g.sc[w, DD0 + 2], g.sc[w, DD0 + 3], t)
         d1 = harmonic(g.sc[w, DE0], g.sc[w, DE0 + 1], g.sc[w, DE0 + 2], g.sc[w, DE0 + 3], t)
+    # faults.actuator (Faults.step): while any follower's limit is reduced, every wheel's torque
+    # reaching the plant is clipped to its follower's limit × scale (s.tau stays as commanded: the
+    # log, the metrics and, unless a DC motor feeds back what it delivered, the learner see that)
+    weak = wp.int32(0)  # typed: mutated in a dynamic loop
+    pushed = pf.push_i[w, 0] >= 0  # this world has pushes: xfrc_applied is written with them
+    if running:
+        for r in range(pf.act_i.shape[1]):
+            if pf.act_i[w, r] >= 0 and pf.act_k0[w, r] <= k and k < pf.act_k1[w, r] and pf.act_s[w, r] < F(1.0):
+                weak = 1
     for i in range(n):
         t0 = zero
         t1 = zero
         if running:
             t0 = s.tau[w, i, 0]
             t1 = s.tau[w, i, 1]
+            if weak != 0:
+                Lf = g.lim[w, i] * _act_scale(pf, w, i, k)
+                t0 = clip(t0, -Lf, Lf)
+                t1 = clip(t1, -Lf, Lf)
         ctrl[w, act[i, 0]] = wp.float32(cscale[i, 0] * t0)
         ctrl[w, act[i, 1]] = wp.float32(cscale[i, 1] * t1)
-        if g.sc[w, USED] != zero:
+        if g.sc[w, USED] != zero or pushed:
             b = base[i]
             R = xmat[w, b]
             fa = g.m_eff[w, i] * d0
-            xfrc[w, b] = wp.spatial_vector(
-                wp.float32(F(R[0, 0]) * fa), wp.float32(F(R[1, 0]) * fa), 0.0, 0.0, 0.0, wp.float32(g.i_eff[w, i] * d1)
-            )
+            fx = F(R[0, 0]) * fa
+            fy = F(R[1, 0]) * fa
+            tz = g.i_eff[w, i] * d1
+            if running:  # faults.push (MujocoPlant._apply_push): added to the disturbance
+                p = _push_row(pf, w, i, k)
+                if p >= 0:
+                    fx = fx + pf.push_w[w, p, 0]
+                    fy = fy + pf.push_w[w, p, 1]
+                    tz = tz + pf.push_w[w, p, 2]
+            xfrc[w, b] = wp.spatial_vector(wp.float32(fx), wp.float32(fy), 0.0, 0.0, 0.0, wp.float32(tz))
     if running and k == N - 1:
         s.k_done[w] = N
     s.k[w] = k + 1
@@ -968,8 +1041,6 @@ def _check_compatible(scs: Sequence[Scenario]) -> None:
     if sc0.plant.kind != "mujoco":
         raise ValueError("the batch engine runs the MuJoCo plant only (plant.kind = 'mujoco')")
     for sc in scs:
-        if sc.faults.per_step:
-            raise ValueError(f"scenario '{sc.name}': faults are not supported by the batch engine yet")
         what = unsupported(sc)  # the same list the sweep refuses up front (exit 2): never run it silently
         if what is not None:
             raise ValueError(f"scenario '{sc.name}': {what} is not supported by the batch engine yet")
@@ -1048,6 +1119,54 @@ def event_tables(sc0: Scenario, scs: Sequence[Scenario], N: int, dt: float) -> d
         for k in first:
             tab[k][w] = [r[k] for r in rows]
     return tab
+
+
+def _first_step(ok: np.ndarray) -> int:
+    """The first index where ``ok`` (monotone, False then True) holds; ``len(ok)`` if none."""
+    return int(np.argmax(ok)) if ok.any() else len(ok)
+
+
+def plant_fault_tables(scs: Sequence[Scenario], N: int, dt: float) -> dict[str, np.ndarray]:
+    """Each world's ``faults.actuator`` and ``faults.push`` rows as :class:`PlantFaults`' padded tables.
+
+    Row times become control steps by ``Faults.step``'s own float64 comparisons at ``t = k dt``
+    (``k`` = 0..N): an actuator row acts at the steps with ``t_start ≤ t < t_end``; a push row
+    starts at the first step with ``t ≤ t_k + 1e-12`` (``Faults.step``) and acts while
+    ``t + duration > t_k + 1e-12`` (``MujocoPlant._apply_push``). Push rows are sorted by ``t``
+    (stable, as ``Faults``) so that the last started row of a follower is the one acting. Steps
+    ``N + 1`` mean never. Returns ``act_i`` (W, Ra) int32, ``act_k0``, ``act_k1`` (W, Ra) int32,
+    ``act_s`` (W, Ra), ``act_known`` (W,) int32, ``push_i``, ``push_k0``, ``push_k1`` (W, Rp) int32,
+    ``push_w`` (W, Rp, 3) [fx N, fy N, tz N·m]; ``Ra``, ``Rp`` ≥ 1, padding rows with follower −1."""
+    W = len(scs)
+    tk = np.arange(N + 1) * dt  # t = k * dt, as sim.simulate passes it
+    Ra = max(1, *(len(sc.faults.actuator) for sc in scs))
+    Rp = max(1, *(len(sc.faults.push) for sc in scs))
+    never = N + 1
+    out = {
+        "act_i": np.full((W, Ra), -1, dtype=np.int32),
+        "act_k0": np.full((W, Ra), never, dtype=np.int32),
+        "act_k1": np.full((W, Ra), never, dtype=np.int32),
+        "act_s": np.ones((W, Ra)),
+        "act_known": np.zeros(W, dtype=np.int32),
+        "push_i": np.full((W, Rp), -1, dtype=np.int32),
+        "push_k0": np.full((W, Rp), never, dtype=np.int32),
+        "push_k1": np.full((W, Rp), never, dtype=np.int32),
+        "push_w": np.zeros((W, Rp, 3)),
+    }
+    for w, sc in enumerate(scs):
+        fc = sc.faults
+        out["act_known"][w] = int(bool(fc.actuator_known))
+        for r, (i, t0, t1, scale) in enumerate(fc.actuator):
+            out["act_i"][w, r] = int(i) - 1
+            out["act_k0"][w, r] = _first_step(tk >= t0)
+            out["act_k1"][w, r] = _first_step(~(tk < t1))
+            out["act_s"][w, r] = float(scale)
+        for r, (i, t0, dur, fx, fy, tz) in enumerate(sorted(fc.push, key=lambda row: row[1])):
+            out["push_i"][w, r] = int(i) - 1
+            out["push_k0"][w, r] = _first_step(t0 <= tk + 1e-12)
+            out["push_k1"][w, r] = _first_step(~(t0 + dur > tk + 1e-12))
+            out["push_w"][w, r] = (fx, fy, tz)
+    return out
 
 
 class BatchRun:
@@ -1198,6 +1317,11 @@ class BatchRun:
                     np.ascontiguousarray(ev[f], dtype=np.float32), dtype=getattr(self.m, f).dtype
                 )
                 self.ev_args = [A(ev["step"], int), *(f32(f) for f in EVENT_FIELDS), A(ev["m_eff"]), A(ev["i_eff"])]
+            pft = plant_fault_tables(scs, N, dt)  # faults.actuator and faults.push, per world
+            pf = PlantFaults()
+            for f, v in pft.items():
+                setattr(pf, f, A(v, int) if v.dtype == np.int32 else A(v))
+            self.pf = pf
             self.L_pose = A(L_pose)
             self.L_vel = A(L_vel)
             self.qadr = A(plant._q7[:, 0].astype(np.int32), int)
@@ -1255,6 +1379,7 @@ class BatchRun:
                 self.enc,
                 self.osign,
                 self.cpr,
+                self.pf,
             ],
         )
 
