@@ -61,8 +61,8 @@ def _need_warp():
     "extra,what",
     [
         (["--plant", "ideal"], "plant.kind = 'ideal'"),
-        (["--set", "faults.packet_loss=0.1"], "faults.packet_loss"),
-        (["--set", "faults.delay=0.01"], "faults.delay"),
+        (["--set", "faults.actuator=[[1,0.1,0.2,0.5]]"], "faults.actuator"),
+        (["--set", "faults.push=[[1,0.1,0.05,10.0,0.0,0.0]]"], "faults.push"),
     ],
 )
 def test_unsupported_feature_exit_2(extra, what, tmp_path, capsys):

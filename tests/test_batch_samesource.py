@@ -219,6 +219,8 @@ SPECS = {
     "hash_round": ([_int(0, 2**30), _choice(40692.0, 39373.0, 48271.0, 16807.0), _int(0, 2**30)], 1, ()),
     "hash_uniform": ([_int(0, 2**30), _int(0, 2**20), _int(0, 2**30)], 1, ()),
     "hash_normal": ([_int(0, 2**30), _int(0, 2**20), _int(0, 2**28)], 1, ()),
+    "noisy_reading": ([_u(-5, 5), _choice(0.0, 0.01, 0.3), _int(0, 2**30), _int(0, 2**20), _int(0, 2**28)], 1, ()),
+    "packet_received": ([_choice(0.0, 0.2, 0.5, 0.99), _int(0, 2**30), _int(0, 2**20), _int(0, 2**30)], 1, ()),
     "encoder_angle": ([_u(-100, 100), _choice(64.0, 360.0, 4096.0)], 1, ()),
     "gyro_reading": (
         [_u(-3, 3), _u(-0.1, 0.1), _choice(0.0, 0.01), _int(0, 2**20), _int(0, 64), _int(0, 2**20)],
@@ -237,7 +239,15 @@ BOOL_ARGS = {"saturate": (3,), "formation_offset": (3,)}
 #: exact integer arithmetic beyond float32's 24-bit mantissa (the counter hash), or a floor that
 #: float32 rounding moves by a whole encoder count: meaningful in float64 only (the precision the
 #: batch engine's controller state uses)
-FLOAT64_ONLY = {"hash_round", "hash_uniform", "hash_normal", "gyro_reading", "encoder_angle"}
+FLOAT64_ONLY = {
+    "hash_round",
+    "hash_uniform",
+    "hash_normal",
+    "gyro_reading",
+    "encoder_angle",
+    "noisy_reading",
+    "packet_received",
+}
 
 
 def _unit_quat(args, at):

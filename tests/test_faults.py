@@ -147,7 +147,7 @@ def test_seeded_noise_streams():
     def draw(seed):
         sc = load("paper", {"sim.seed": seed, "faults.noise_pose": [0.1, 0.1, 0.1], "faults.noise_vel": [0.2, 0.2]})
         f = Faults(sc, sc.build_graph(), np.full(3, 20.0))
-        return f.sense(0.0, np.zeros((3, 3)), np.zeros((3, 2)))
+        return f.sense(0, 0.0, np.zeros((3, 3)), np.zeros((3, 2)))
 
     a, b, c = draw(0), draw(0), draw(1)
     assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])

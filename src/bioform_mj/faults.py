@@ -24,8 +24,14 @@ without faults executes none of this. Every step here is vectorised over followe
   chassis, on the ideal plant the acceleration its heading component and ``tz`` give.
 - **Friction patch**: built into the MuJoCo scene (``scene.build_scene``), nothing per step.
 
-Randomness comes from ``numpy.random.default_rng([sim.seed, STREAM])``, one stream per source,
-so runs are bit-identical for a seed and differ between seeds where noise or loss is on.
+Randomness comes from the counter hash of ``control/equations.py`` (as the gyro's noise), so the
+batch engine's device draws the very same numbers: packet loss ``packet_received(p, seed, i, k)``,
+sensor noise ``noisy_reading(x, σ, seed, i, k)`` (:func:`~bioform_mj.control.equations.hash_normal`),
+keyed by ``seed = sim.seed mod 2^31 − 1``, the control step ``k`` and a counter index
+``i = STREAM[source] · STREAM_STRIDE + j`` (:func:`counter`): ``j`` the graph edge (``m`` for the
+leader's broadcast), ``3 f + c`` for pose component ``c`` of follower ``f``, ``2 f + c`` for its
+velocity. The gyro draws with ``i`` = robot < ``STREAM_STRIDE`` (stream 0), so no two sources share
+a draw. Runs are bit-identical for a seed and differ between seeds where noise or loss is on.
 """
 
 from __future__ import annotations
@@ -35,13 +41,44 @@ from typing import Any
 import numpy as np
 
 from .control.base import Comm
-from .control.common import wrap
+from .control.equations import njit, noisy_reading, packet_received, wrap
 from .control.stack import ControlStack
 from .graph import Graph
 from .scenario import Scenario
 
-#: Random streams: ``default_rng([seed, STREAM[name]])``.
+#: Streams of the counter hash (the module doc): source -> stream number (0 is the gyro's).
 STREAM = {"packet_loss": 1, "noise_pose": 2, "noise_vel": 3}
+#: counter indices per stream (``hash_uniform`` takes ``i < 2^20``: 16 streams of 2^16)
+STREAM_STRIDE = 65536
+#: the seed's modulus (``sim.seed mod HASH_SEED_MOD``, as the gyro's)
+HASH_SEED_MOD = 2147483647
+
+
+def counter(stream: str, j: int) -> int:
+    """The counter-hash index ``i`` of item ``j`` (< :data:`STREAM_STRIDE`) of random ``stream``."""
+    return STREAM[stream] * STREAM_STRIDE + j
+
+
+@njit
+def add_noise(x, sigma, seed, base, k, angle):
+    """In place on ``x`` (n, nc): ``x[f, c] = noisy_reading(x[f, c], sigma[c], seed, base + nc f + c, k)``
+    (control step ``k``; ``base`` the stream's first counter index); column ``angle`` (−1: none) is
+    then wrapped to (−π, π]."""
+    n, nc = x.shape
+    for f in range(n):
+        for c in range(nc):
+            x[f, c] = noisy_reading(x[f, c], sigma[c], seed, float(base + nc * f + c), float(k))
+        if angle >= 0:
+            x[f, angle] = wrap(x[f, angle])
+
+
+@njit
+def arrivals(out, p, seed, base, k):
+    """``out[j]`` (bool, (m + 1,)) = the packet of counter index ``base + j`` arrives at control step ``k``
+    (:func:`~bioform_mj.control.equations.packet_received` with loss probability ``p``)."""
+    for j in range(out.shape[0]):
+        out[j] = packet_received(p, seed, float(base + j), float(k)) != 0.0
+
 
 #: Formation error (m) under which a follower counts as back in formation.
 TOLERANCE = 0.1
@@ -63,11 +100,13 @@ class Faults:
         fc = sc.faults
         n, dt = sc.n, sc.sim.control_dt
         self.n, self.dt, self.graph = n, dt, graph
-        seed = sc.sim.seed
+        self.seed = float(sc.sim.seed % HASH_SEED_MOD)  # the counter hash's key (as the gyro's)
         self.w0, self.w1 = fc.window if fc.window else (-np.inf, np.inf)
 
         # ---- communication ------------------------------------------------------------
         m = len(graph.src)
+        if max(3 * n, m + 1) > STREAM_STRIDE:
+            raise ValueError(f"faults: {n} followers / {m} links exceed the counter hash's {STREAM_STRIDE} per stream")
         e_idx, e_t0, e_t1, l_idx, l_t0, l_t1 = [], [], [], [], [], []
         for i, j, t0, t1 in fc.link_fail:
             i, j = int(i) - 1, int(j) - 1
@@ -86,7 +125,7 @@ class Faults:
         self.delay_steps = int(round(fc.delay / dt)) if fc.delay > 0 else 0
         self.has_comm = bool(fc.link_fail) or self.loss > 0 or self.delay_steps > 0
         self.has_recv = self.loss > 0 or self.delay_steps > 0  # received values differ from the current ones
-        self._loss_rng = np.random.default_rng([seed, STREAM["packet_loss"]])
+        self._draw = np.ones(m + 1, dtype=bool)  # this step's arrivals: edges, then the leader's broadcast
         self._up_e = np.ones(m, dtype=bool)
         self._up_l = np.ones(n, dtype=bool)
         if self.has_recv:
@@ -101,8 +140,6 @@ class Faults:
         self.noise_pose = np.asarray(fc.noise_pose, dtype=float)
         self.noise_vel = np.asarray(fc.noise_vel, dtype=float)
         self.has_noise = bool(np.any(self.noise_pose > 0) or np.any(self.noise_vel > 0))
-        self._pose_rng = np.random.default_rng([seed, STREAM["noise_pose"]])
-        self._vel_rng = np.random.default_rng([seed, STREAM["noise_vel"]])
 
         # ---- actuators ------------------------------------------------------------------
         self.nominal = np.asarray(nominal_tau_max, dtype=float).copy()
@@ -141,7 +178,7 @@ class Faults:
             plant.push(int(i) - 1, (fx, fy), tz, t0 + dur)
             self._push_i += 1
         if self.has_noise:
-            pose, vel = self.sense(t, pose, vel)
+            pose, vel = self.sense(k, t, pose, vel)
         comm = None
         if self.has_comm:
             comm, leader_pose, leader_vel = self.comm(
@@ -185,7 +222,8 @@ class Faults:
         on = self.w0 <= t < self.w1
         old = (k - self.delay_steps) % R if on else now  # what the links deliver this step
         if on and self.loss > 0:
-            draw = self._loss_rng.random(len(up_e) + 1) >= self.loss
+            draw = self._draw
+            arrivals(draw, self.loss, self.seed, counter("packet_loss", 0), k)
             got_e = draw[:-1] & up_e
             got_l = up_l & draw[-1]  # the leader's broadcast arrives for all or for none
         else:
@@ -198,13 +236,16 @@ class Faults:
         self._valid_l = (self._valid_l | got_l) & up_l
         return Comm(self._valid_e.astype(float), self._valid_l.astype(float), hp, hv), hlp, hlv
 
-    def sense(self, t: float, pose: np.ndarray, vel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pose and velocity as measured: Gaussian noise inside the window (new arrays)."""
+    def sense(self, k: int, t: float, pose: np.ndarray, vel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pose (n, 3) and velocity (n, 2) as measured at control step ``k`` (``t = k dt``): inside the
+        window, Gaussian noise of ``noise_pose``/``noise_vel`` from the counter hash (module doc) and
+        the heading wrapped (new arrays); outside it the arguments themselves."""
         if not self.w0 <= t < self.w1:
             return pose, vel
-        pose = pose + self._pose_rng.standard_normal(pose.shape) * self.noise_pose
-        pose[:, 2] = wrap(pose[:, 2])
-        vel = vel + self._vel_rng.standard_normal(vel.shape) * self.noise_vel
+        pose = np.array(pose, dtype=float)
+        vel = np.array(vel, dtype=float)
+        add_noise(pose, self.noise_pose, self.seed, counter("noise_pose", 0), k, 2)
+        add_noise(vel, self.noise_vel, self.seed, counter("noise_vel", 0), k, -1)
         return pose, vel
 
     def actuate(self, t: float, stack: ControlStack) -> None:

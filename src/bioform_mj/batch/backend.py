@@ -9,8 +9,8 @@ Worlds are grouped by what a batch must share (:func:`group_key`): the plant (ro
 ``c_true``, …), the time axis (``control_dt``, ``physics_dt``, ``duration``), the leader, the
 graph and the team size (the plant includes ``plant.sensing`` and the sensor keys: a scene has
 the odometry's sensors or not). Everything else (seed, so the gyro noise, gains, formation offsets
-and jitter, disturbance, limits, method, the offsets' frame, timed payload events, actuator faults
-and pushes) varies per world.
+and jitter, disturbance, limits, method, the offsets' frame, timed payload events, actuator faults,
+pushes, network faults and sensor noise) varies per world.
 """
 
 from __future__ import annotations
@@ -32,6 +32,10 @@ WORLD_BYTES_BASE = 90e3
 WORLD_BYTES_PER_ROBOT = 55e3
 #: controller state, gains and metrics per robot (float64), and per world
 CONTROL_BYTES_PER_ROBOT = 1e3
+#: the delay's ring of past estimates (``control.CommFaults``): float64 pose and velocity per robot
+#: and row, plus the leader's, per world (rows: the batch's largest delay in control steps + 1)
+RING_BYTES_PER_ROBOT_ROW = 40
+RING_BYTES_PER_ROW = 40
 #: share of the free memory a batch may plan to use
 MEMORY_SHARE = 0.9
 
@@ -95,19 +99,6 @@ def unsupported(sc: Any) -> str | None:
             "use --plant mujoco or --backend local)"
         )
     f = sc.faults
-    named = [
-        k
-        for k, on in (
-            ("faults.link_fail", f.link_fail),
-            ("faults.packet_loss", f.packet_loss > 0),
-            ("faults.delay", f.delay > 0),
-            ("faults.noise_pose", any(f.noise_pose)),
-            ("faults.noise_vel", any(f.noise_vel)),
-        )
-        if on
-    ]
-    if named:
-        return f"faults ({', '.join(named)})"
     if f.friction_patch:
         return (
             "faults.friction_patch (MuJoCo Warp's wheel-on-box contacts differ from C MuJoCo's: one physics step "
@@ -173,10 +164,16 @@ class Group:
     key: str
     specs: list
     n: int
+    ring_rows: int = 1  # the batch's largest faults.delay in control steps + 1
+
+    @property
+    def world_bytes(self) -> float:
+        """Estimated peak device bytes of one of its worlds (with the delay's ring)."""
+        return world_bytes(self.n) + self.ring_rows * (RING_BYTES_PER_ROW + RING_BYTES_PER_ROBOT_ROW * self.n)
 
     @property
     def bytes(self) -> float:
-        return len(self.specs) * world_bytes(self.n)
+        return len(self.specs) * self.world_bytes
 
 
 def plan(specs: Sequence[Any], device: str) -> list[Group]:
@@ -205,16 +202,19 @@ def plan(specs: Sequence[Any], device: str) -> list[Group]:
                 check_physics(sc, device)
             except ValueError as exc:
                 raise InputError(f"--backend warp: {exc}; use --backend local") from None
-        groups.setdefault(k, Group(k, [], sc.n)).specs.append(sp)
+        g = groups.setdefault(k, Group(k, [], sc.n))
+        g.specs.append(sp)
+        if sc.faults.delay > 0:
+            g.ring_rows = max(g.ring_rows, int(round(sc.faults.delay / sc.sim.control_dt)) + 1)
     out = list(groups.values())
     if out:
         free = free_memory(device)
         big = max(out, key=lambda g: g.bytes)
         if big.bytes > MEMORY_SHARE * free:
-            fit = int(MEMORY_SHARE * free // world_bytes(big.n))
+            fit = int(MEMORY_SHARE * free // big.world_bytes)
             raise InputError(
                 f"--backend warp: {len(big.specs)} worlds of {big.n} robots need about "
-                f"{big.bytes / 1e9:.2f} GB on {device} ({world_bytes(big.n) / 1e3:.0f} KB per world, "
+                f"{big.bytes / 1e9:.2f} GB on {device} ({big.world_bytes / 1e3:.0f} KB per world, "
                 f"estimated), {free / 1e9:.2f} GB free: at most {fit} worlds fit; "
                 "split the sweep (fewer --seeds or --vary values)"
             )

@@ -7,7 +7,9 @@ and the plant glue of ``plants/mujoco_kernels.py`` (observe, wheel torques and t
 eq. 34 disturbance as chassis ``xfrc_applied``; ``ctrl = scale · τ``, the DC motors' driver
 input per N·m, design §8.2; the plant faults of ``faults.py``, actuator limits and pushes, from
 per-world tables, :class:`PlantFaults`), for one world per thread, looping over
-its followers and graph edges in the same order as the CPU kernels. Every equation is
+its followers and graph edges in the same order as the CPU kernels; with each world's network
+faults and sensor noise (``faults.Faults.sense``/``comm``: :class:`CommFaults`, :func:`_comm`).
+Every equation is
 the Warp translation (:mod:`.samesource`) of ``control/equations.py``: only loops,
 indexing and bookkeeping are written here.
 
@@ -39,6 +41,7 @@ from ..control.kernel import DERIV_ANALYTIC, DERIV_DIFFERENCE
 from ..control.stack import ControlStack
 from ..disturbance import Harmonic
 from ..engine import GUARDS
+from ..faults import Faults, counter
 from ..plants.mujoco_plant import TIP_ANGLE_DEG
 from ..scenario import Scenario
 from ..sim import LOST_AFTER_S, LOST_M, SPIN_RAD_S
@@ -73,6 +76,8 @@ encoder_angle = EQ.encoder_angle
 gyro_reading = EQ.gyro_reading
 odometry_step = EQ.odometry_step
 clip = EQ.clip
+noisy_reading = EQ.noisy_reading
+packet_received = EQ.packet_received
 
 #: per-world scalar gains, columns of ``BatchGains.sc``: the scalar fields of ``control.kernel.Gains``
 #: (``deriv`` the ``DERIV_*`` code, the flags as 0/1), then ``scenario.limits``, then the
@@ -176,6 +181,35 @@ CAPACITY = wp.constant(int(CAPACITY_BITS))
 RUNNING, GUARD_FAILED, CAPACITY_EXCEEDED = 0, 1, 2
 ST_CAP = wp.constant(CAPACITY_EXCEEDED)
 SPIN = wp.constant(F(SPIN_RAD_S))
+
+#: per-world network and sensor faults (``faults.Faults``), columns of ``CommFaults.sc``: the counter
+#: hash's seed (``sim.seed mod 2^31 − 1``); flags (0/1) ``comm`` (any link failure, loss or delay),
+#: ``recv`` (loss or delay: received values differ from the current ones), ``noise``; the packet loss
+#: probability, the delay in control steps, the window ``[w0, w1)`` s of loss, delay and noise (±inf:
+#: the whole run), the noise standard deviations ``[σx m, σy m, σθ rad]``, ``[συ m/s, σω rad/s]``
+FAULT_SCALARS = (
+    "seed",
+    "comm",
+    "recv",
+    "noise",
+    "loss",
+    "delay",
+    "w0",
+    "w1",
+    "np0",
+    "np1",
+    "np2",
+    "nv0",
+    "nv1",
+)
+_J = {name: wp.constant(i) for i, name in enumerate(FAULT_SCALARS)}
+FSEED, FCOMM, FRECV, FNOISE, FLOSS, FDELAY, FW0, FW1, FNP0, FNV0 = (
+    _J[x] for x in ("seed", "comm", "recv", "noise", "loss", "delay", "w0", "w1", "np0", "nv0")
+)
+#: first counter-hash index of each random stream (``faults.counter``)
+LOSS0 = wp.constant(counter("packet_loss", 0))
+NPOSE0 = wp.constant(counter("noise_pose", 0))
+NVEL0 = wp.constant(counter("noise_vel", 0))
 
 
 @wp.struct
@@ -296,6 +330,143 @@ def _push_row(pf: PlantFaults, w: int, i: int, k: int) -> int:
     return last
 
 
+@wp.struct
+class CommFaults:
+    """Per-world network and sensor faults (``faults.Faults``: link failure, packet loss, delay, noise)
+    and their state (``W`` worlds, ``n`` followers, ``m`` graph edges, ``R`` ring rows: the batch's
+    largest delay in control steps + 1)."""
+
+    sc: wp.array2d(dtype=F)  # (W, len(FAULT_SCALARS))
+    fe: wp.array3d(dtype=F)  # (W, Fe, 3) edge failures [edge, t_fail s, t_recover s]; edge −1: padding
+    fl: wp.array3d(dtype=F)  # (W, Fl, 3) leader-link failures [follower (0-based), t_fail, t_recover]
+    ring_p: wp.array4d(dtype=F)  # (W, R, n, 3) the estimates P_ir of the last R steps, m, m, rad
+    ring_v: wp.array4d(dtype=F)  # (W, R, n, 2) [υ_ir, ω_ir], m/s, rad/s
+    ring_lp: wp.array3d(dtype=F)  # (W, R, 3) the leader's pose
+    ring_lv: wp.array3d(dtype=F)  # (W, R, 2) the leader's [υ_r, ω_r]
+    hp: wp.array3d(dtype=F)  # (W, m, 3) dst's estimate as src last received it
+    hv: wp.array3d(dtype=F)  # (W, m, 2)
+    hlp: wp.array2d(dtype=F)  # (W, 3) the leader's state as last received
+    hlv: wp.array2d(dtype=F)  # (W, 2)
+    valid_e: wp.array2d(dtype=int)  # (W, m) 1: the edge counts (up, and a packet since it came up)
+    valid_l: wp.array2d(dtype=int)  # (W, n) the same for each leader link
+    ew: wp.array2d(dtype=F)  # (W, m) this step's edge weights (Comm.edge_w)
+    lw: wp.array2d(dtype=F)  # (W, n) this step's leader-link weights (Comm.leader_w)
+
+
+@wp.func
+def _link_up(tab: wp.array3d(dtype=F), w: int, idx: int, t: F) -> F:
+    """1 unless a row ``[idx, t_fail, t_recover]`` of world ``w``'s failure table holds ``t`` (then 0)."""
+    for r in range(tab.shape[1]):
+        if int(tab[w, r, 0]) == idx and t >= tab[w, r, 1] and t < tab[w, r, 2]:
+            return F(0.0)
+    return F(1.0)
+
+
+@wp.func
+def _comm(
+    f: CommFaults,
+    g: BatchGains,
+    s: BatchState,
+    w: int,
+    k: int,
+    t: F,
+    L_pose: wp.array2d(dtype=F),
+    L_vel: wp.array2d(dtype=F),
+):
+    """``faults.Faults.comm`` for world ``w`` at control step ``k`` (``t = k dt``): the link weights
+    into ``f.ew``/``f.lw``; with loss or delay (``recv``) the ring of estimates (and of the leader's
+    true state ``L_pose[k]``, ``L_vel[k]``), the held values ``f.hp``, ``f.hv``, ``f.hlp``, ``f.hlv`` (zero-order
+    hold of what arrived) and the ``valid`` flags (a link that was down counts from its first packet).
+    Loop glue; the draws are ``packet_received`` of the counter hash, as on the CPU."""
+    m = g.src.shape[0]
+    n = s.est_pose.shape[1]
+    for e in range(m):
+        f.ew[w, e] = _link_up(f.fe, w, e, t)
+    for i in range(n):
+        f.lw[w, i] = _link_up(f.fl, w, i, t)
+    if f.sc[w, FRECV] == F(0.0):
+        return  # link failures only: the links that are up carry current values
+    D = int(f.sc[w, FDELAY])
+    R = D + 1
+    now = k % R
+    for i in range(n):
+        for c in range(3):
+            f.ring_p[w, now, i, c] = s.est_pose[w, i, c]
+        for c in range(2):
+            f.ring_v[w, now, i, c] = s.est_vel[w, i, c]
+    for c in range(3):
+        f.ring_lp[w, now, c] = L_pose[k, c]
+    for c in range(2):
+        f.ring_lv[w, now, c] = L_vel[k, c]
+    if k == 0:  # before the first step there is no history: the initial values
+        for r in range(R):
+            for i in range(n):
+                for c in range(3):
+                    f.ring_p[w, r, i, c] = s.est_pose[w, i, c]
+                for c in range(2):
+                    f.ring_v[w, r, i, c] = s.est_vel[w, i, c]
+            for c in range(3):
+                f.ring_lp[w, r, c] = L_pose[k, c]
+            for c in range(2):
+                f.ring_lv[w, r, c] = L_vel[k, c]
+        for e in range(m):
+            j = g.dst[e]
+            for c in range(3):
+                f.hp[w, e, c] = s.est_pose[w, j, c]
+            for c in range(2):
+                f.hv[w, e, c] = s.est_vel[w, j, c]
+            f.valid_e[w, e] = 1
+        for c in range(3):
+            f.hlp[w, c] = L_pose[k, c]
+        for c in range(2):
+            f.hlv[w, c] = L_vel[k, c]
+        for i in range(n):
+            f.valid_l[w, i] = 1
+    on = t >= f.sc[w, FW0] and t < f.sc[w, FW1]
+    old = now
+    if on:
+        old = ((k - D) % R + R) % R  # Python's floored modulo (Warp's % is C's)
+    loss = f.sc[w, FLOSS]
+    draw = on and loss > F(0.0)
+    seed = f.sc[w, FSEED]
+    kf = F(k)
+    for e in range(m):
+        up = f.ew[w, e] != F(0.0)
+        got = up
+        if draw and up:
+            got = packet_received(loss, seed, F(LOSS0 + e), kf) != F(0.0)
+        if got:
+            j = g.dst[e]
+            for c in range(3):
+                f.hp[w, e, c] = f.ring_p[w, old, j, c]
+            for c in range(2):
+                f.hv[w, e, c] = f.ring_v[w, old, j, c]
+        v = 0
+        if up and (got or f.valid_e[w, e] != 0):
+            v = 1
+        f.valid_e[w, e] = v
+        f.ew[w, e] = F(v)
+    lead = True  # the leader's broadcast arrives for all leader-connected followers or for none
+    if draw:
+        lead = packet_received(loss, seed, F(LOSS0 + m), kf) != F(0.0)
+    nl = wp.int32(0)  # (a dynamic variable: mutated in the loop)
+    for i in range(n):
+        up = f.lw[w, i] != F(0.0)
+        got = up and lead
+        if got:
+            nl = nl + 1
+        v = 0
+        if up and (got or f.valid_l[w, i] != 0):
+            v = 1
+        f.valid_l[w, i] = v
+        f.lw[w, i] = F(v)
+    if nl > 0:
+        for c in range(3):
+            f.hlp[w, c] = f.ring_lp[w, old, c]
+        for c in range(2):
+            f.hlv[w, c] = f.ring_lv[w, old, c]
+
+
 @wp.func
 def _finite3(a: wp.array3d(dtype=F), w: int, i: int, nc: int) -> bool:
     for c in range(nc):  # (no flag mutated in the loop: Warp 1.19 refuses to mutate a constant there)
@@ -390,12 +561,15 @@ def _control(
     osign: wp.array2d(dtype=F),  # (n, 2) ±1: forward wheel direction of each encoder
     cpr: wp.array(dtype=F),  # (n,) encoder counts per revolution
     pf: PlantFaults,  # actuator faults and pushes (faults.py), per world
+    f: CommFaults,  # network and sensor faults (faults.Faults.comm, .sense)
 ):
     """World ``w``: observe; at ``k = 0`` reset the stack (``kernel.reset_state``) and, with the
     world's ``odometry`` flag, the dead reckoning at the true pose (``mujoco_kernels.odometry_reset``);
     for ``k < N`` give the controller its measurement (the truth, or ``odometry_read``: the
     odometry's pose and ``[Δs, Δθ]/dt``; design §8.3; metrics, guards, the formation error and the
-    watches stay on the truth), run control step ``k`` (``kernel.control_step``), the metrics and guards
+    watches stay on the truth) with the world's sensor noise (``faults.Faults.sense``), the network
+    of step ``k`` (:func:`_comm`, ``faults.Faults.comm``: link weights, held or delayed values),
+    run control step ``k`` (``kernel.control_step``), the metrics and guards
     (``engine.accumulate``/``check``) and apply its torques (``ctrl = cscale · τ``) and ``d(k dt)``
     to the plant (``mujoco_kernels.apply_inputs``); then ``k += 1``. The command derivative is
     the world's ``deriv`` code (``kernel.DERIV_*``): filter, backward difference or analytic. With
@@ -536,6 +710,20 @@ def _control(
                     s.mpose[w, i, c] = s.pose[w, i, c]
                 for c in range(2):
                     s.mvel[w, i, c] = s.vel[w, i, c]
+        # ---- faults.Faults.sense: Gaussian noise on what the controller measures, inside the window
+        tk = F(k) * dt
+        if f.sc[w, FNOISE] != zero and tk >= f.sc[w, FW0] and tk < f.sc[w, FW1]:
+            seed = f.sc[w, FSEED]
+            for i in range(n):
+                for c in range(3):
+                    s.mpose[w, i, c] = noisy_reading(
+                        s.mpose[w, i, c], f.sc[w, FNP0 + c], seed, F(NPOSE0 + 3 * i + c), F(k)
+                    )
+                s.mpose[w, i, 2] = wrap(s.mpose[w, i, 2])
+                for c in range(2):
+                    s.mvel[w, i, c] = noisy_reading(
+                        s.mvel[w, i, c], f.sc[w, FNV0 + c], seed, F(NVEL0 + 2 * i + c), F(k)
+                    )
         # ---- learner_update
         if g.sc[w, LEARN] != zero and s.first[w] == 0:
             for i in range(n):
@@ -575,7 +763,25 @@ def _control(
                 s.e_int[w, i, 1] = en
                 s.c_hat[w, i, 1] = cn
                 s.d_hat[w, i, 1] = dn
-        # ---- estimator_consensus (perfect network): p_err, v_err of this step, leader term included
+        # ---- the network (faults.Faults.comm): link weights, and with loss or delay the values received
+        comm = f.sc[w, FCOMM] != zero
+        recv = comm and f.sc[w, FRECV] != zero
+        if comm:
+            _comm(f, g, s, w, k, tk, L_pose, L_vel)
+        # the leader's state as received (held or delayed with recv; else the true one now)
+        lp0 = L_pose[k, 0]
+        lp1 = L_pose[k, 1]
+        lp2 = L_pose[k, 2]
+        lv0 = L_vel[k, 0]
+        lv1 = L_vel[k, 1]
+        if recv:
+            lp0 = f.hlp[w, 0]
+            lp1 = f.hlp[w, 1]
+            lp2 = f.hlp[w, 2]
+            lv0 = f.hlv[w, 0]
+            lv1 = f.hlv[w, 1]
+        # ---- estimator_consensus: p_err, v_err of this step, leader term included (weights 1 and the
+        # neighbours' current estimates on a perfect network; else Comm's weights and received values)
         for i in range(n):
             for c in range(3):
                 s.p_err[w, i, c] = zero
@@ -584,20 +790,31 @@ def _control(
         for e in range(g.src.shape[0]):
             i = g.src[e]
             j = g.dst[e]
+            we = F(1.0)
+            if comm:
+                we = f.ew[w, e]
             for c in range(3):
-                d = s.est_pose[w, i, c] - s.est_pose[w, j, c]
+                xj = s.est_pose[w, j, c]
+                if recv:
+                    xj = f.hp[w, e, c]
+                d = s.est_pose[w, i, c] - xj
                 if c == 2:
                     d = wrap(d)
-                s.p_err[w, i, c] = s.p_err[w, i, c] + d
+                s.p_err[w, i, c] = s.p_err[w, i, c] + d * we
             for c in range(2):
-                s.v_err[w, i, c] = s.v_err[w, i, c] + (s.est_vel[w, i, c] - s.est_vel[w, j, c])
+                xj = s.est_vel[w, j, c]
+                if recv:
+                    xj = f.hv[w, e, c]
+                s.v_err[w, i, c] = s.v_err[w, i, c] + (s.est_vel[w, i, c] - xj) * we
         for i in range(n):
             ai = g.lacc[w, i]
-            s.p_err[w, i, 0] = ai * (s.est_pose[w, i, 0] - L_pose[k, 0]) + s.p_err[w, i, 0]
-            s.p_err[w, i, 1] = ai * (s.est_pose[w, i, 1] - L_pose[k, 1]) + s.p_err[w, i, 1]
-            s.p_err[w, i, 2] = ai * wrap(s.est_pose[w, i, 2] - L_pose[k, 2]) + s.p_err[w, i, 2]
-            s.v_err[w, i, 0] = ai * (s.est_vel[w, i, 0] - L_vel[k, 0]) + s.v_err[w, i, 0]
-            s.v_err[w, i, 1] = ai * (s.est_vel[w, i, 1] - L_vel[k, 1]) + s.v_err[w, i, 1]
+            if comm:
+                ai = ai * f.lw[w, i]
+            s.p_err[w, i, 0] = ai * (s.est_pose[w, i, 0] - lp0) + s.p_err[w, i, 0]
+            s.p_err[w, i, 1] = ai * (s.est_pose[w, i, 1] - lp1) + s.p_err[w, i, 1]
+            s.p_err[w, i, 2] = ai * wrap(s.est_pose[w, i, 2] - lp2) + s.p_err[w, i, 2]
+            s.v_err[w, i, 0] = ai * (s.est_vel[w, i, 0] - lv0) + s.v_err[w, i, 0]
+            s.v_err[w, i, 1] = ai * (s.est_vel[w, i, 1] - lv1) + s.v_err[w, i, 1]
         # ---- command_and_torques
         first = s.first[w] == 1
         steer = g.sc[w, STEER] != zero
@@ -1222,6 +1439,10 @@ class BatchRun:
         lim = np.zeros((W, n))
         lacc = np.zeros((W, n))
         est0 = np.zeros((W, n, 3))
+        # network and sensor faults (faults.Faults, parsed by it, per world)
+        frows = np.zeros((W, len(FAULT_SCALARS)))
+        fe_rows: list[list[list[float]]] = []
+        fl_rows: list[list[list[float]]] = []
         qpos = np.tile(plant.data.qpos, (W, 1))
         q7 = plant._q7[:, 0]  # the plant's own ids (the robots' mapping, design §8)
         p0 = plant.initial_poses
@@ -1263,6 +1484,21 @@ class BatchRun:
                 qpos[w, a : a + 2] = poses[i, :2]
                 qpos[w, a + 3 : a + 7] = _yaw_quat(plant.data.qpos[a + 3 : a + 7], dth)
             est0[w] = initial_estimates(sc, poses, L_pose[0])
+            fr = dict.fromkeys(FAULT_SCALARS, 0.0)
+            fr.update(w0=-math.inf, w1=math.inf)
+            fe_rows.append([])
+            fl_rows.append([])
+            if sc.faults.per_step:
+                fa = Faults(sc, graph, np.asarray(plant.tau_max, dtype=float))
+                fr.update(seed=fa.seed, comm=float(fa.has_comm), recv=float(fa.has_recv), noise=float(fa.has_noise))
+                fr.update(loss=fa.loss, delay=float(fa.delay_steps), w0=fa.w0, w1=fa.w1)
+                for c in range(3):
+                    fr[f"np{c}"] = float(fa.noise_pose[c])
+                for c in range(2):
+                    fr[f"nv{c}"] = float(fa.noise_vel[c])
+                fe_rows[w] = [[float(e), t0, t1] for e, t0, t1 in zip(*fa._e_fail)]
+                fl_rows[w] = [[float(i), t0, t1] for i, t0, t1 in zip(*fa._l_fail)]
+            frows[w] = [fr[x] for x in FAULT_SCALARS]
         self.src, self.dst = graph.src, graph.dst
 
         dc, dj = default_capacity(n)
@@ -1310,6 +1546,7 @@ class BatchRun:
             s.odo_pose, s.odo_q, s.odo_dist, s.odo_turn = z3(), z2(), z1(), z1()
             s.odo_count = wp.zeros(W, dtype=int)
             self.s = s
+            self.f = self._comm_faults(frows, fe_rows, fl_rows, len(graph.src))
             self.ev_args = None  # _events' table arguments (None: no events in this batch)
             if self.events is not None:
                 ev = self.events
@@ -1347,6 +1584,33 @@ class BatchRun:
         self.nconmax, self.njmax = nconmax, njmax
         self.graph = None
 
+    def _comm_faults(self, rows: np.ndarray, fe: list, fl: list, m: int) -> CommFaults:
+        """The device's :class:`CommFaults` from each world's :data:`FAULT_SCALARS` row ``rows`` (W, ·)
+        and failure rows ``fe[w]``, ``fl[w]`` (lists of ``[edge or follower, t_fail, t_recover]``),
+        padded to the batch's longest (edge −1); the ring holds the batch's largest delay + 1 steps."""
+        W, n = self.nworld, self.n
+        R = int(rows[:, FAULT_SCALARS.index("delay")].max()) + 1
+
+        def table(rs: list) -> np.ndarray:
+            out = np.full((W, max(1, *(len(r) for r in rs)), 3), -1.0)
+            for w, r in enumerate(rs):
+                if r:
+                    out[w, : len(r)] = r
+            return out
+
+        A = lambda x, dtype=F: wp.array(np.ascontiguousarray(x), dtype=dtype)  # noqa: E731
+        f = CommFaults()
+        f.sc, f.fe, f.fl = A(rows), A(table(fe)), A(table(fl))
+        f.ring_p = wp.zeros((W, R, n, 3), dtype=F)
+        f.ring_v = wp.zeros((W, R, n, 2), dtype=F)
+        f.ring_lp = wp.zeros((W, R, 3), dtype=F)
+        f.ring_lv = wp.zeros((W, R, 2), dtype=F)
+        f.hp, f.hv = wp.zeros((W, m, 3), dtype=F), wp.zeros((W, m, 2), dtype=F)
+        f.hlp, f.hlv = wp.zeros((W, 3), dtype=F), wp.zeros((W, 2), dtype=F)
+        f.valid_e, f.valid_l = wp.ones((W, m), dtype=int), wp.ones((W, n), dtype=int)
+        f.ew, f.lw = wp.ones((W, m), dtype=F), wp.ones((W, n), dtype=F)
+        return f
+
     # -- the step loop (device-side only)
     def _launch_control(self) -> None:
         d = self.d
@@ -1380,6 +1644,7 @@ class BatchRun:
                 self.osign,
                 self.cpr,
                 self.pf,
+                self.f,
             ],
         )
 

@@ -607,6 +607,25 @@ def hash_normal(seed: float, i: float, k: float) -> float:
 
 
 @equation
+def noisy_reading(x: float, sigma: float, seed: float, i: float, k: float) -> float:
+    """A measurement of ``x`` with white Gaussian noise of standard deviation ``sigma`` (``x``'s units):
+    ``x + sigma · hash_normal(seed, i, k)``; ``x`` itself, with no draw, for ``sigma = 0``. ``i`` names
+    the measured quantity (and its stream), ``k`` the sample."""
+    if sigma == 0.0:
+        return x
+    return x + sigma * hash_normal(seed, i, k)
+
+
+@equation
+def packet_received(p: float, seed: float, i: float, k: float) -> float:
+    """Packet loss with probability ``p`` ∈ [0, 1): 1.0 when the packet of link ``i`` at control step
+    ``k`` arrives, 0.0 when it is lost (``hash_uniform(seed, i, k) < p``)."""
+    if hash_uniform(seed, i, k) >= p:
+        return 1.0
+    return 0.0
+
+
+@equation
 def encoder_angle(phi: float, cpr: float) -> float:
     """Wheel angle ``phi`` (rad) as an incremental encoder of ``cpr`` counts per revolution reports
     it: ``floor(phi·cpr/2π) · 2π/cpr`` (``x − x mod 1`` is ``floor``: Python's and numba's ``%``
@@ -619,9 +638,7 @@ def encoder_angle(phi: float, cpr: float) -> float:
 def gyro_reading(wz: float, bias: float, sigma: float, seed: float, i: float, k: float) -> float:
     """Gyro z of robot ``i`` at sample ``k``: the true yaw rate ``wz`` (rad/s) plus a constant ``bias``
     and white noise of standard deviation ``sigma`` (rad/s, per sample; :func:`hash_normal`)."""
-    if sigma == 0.0:
-        return wz + bias
-    return wz + bias + sigma * hash_normal(seed, i, k)
+    return noisy_reading(wz + bias, sigma, seed, i, k)
 
 
 @equation
