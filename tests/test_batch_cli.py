@@ -61,8 +61,7 @@ def _need_warp():
     "extra,what",
     [
         (["--plant", "ideal"], "plant.kind = 'ideal'"),
-        (["--set", "faults.actuator=[[1,0.1,0.2,0.5]]"], "faults.actuator"),
-        (["--set", "faults.push=[[1,0.1,0.05,10.0,0.0,0.0]]"], "faults.push"),
+        (["--set", "faults.friction_patch=[-5.0,-5.0,5.0,5.0,0.3]"], "faults.friction_patch"),
     ],
 )
 def test_unsupported_feature_exit_2(extra, what, tmp_path, capsys):

@@ -192,7 +192,8 @@ def test_unsupported_features_are_refused():
     # run_batch/BatchRun refuse what the sweep refuses; odometry runs now (tests/test_batch_odometry.py)
     from bioform_mj.batch.backend import unsupported
 
-    with pytest.raises(ValueError, match="faults"):  # network faults and noise run (test_batch_faults_comm.py)
-        run_batch([load("paper", overrides=[*ov, "faults.push=[[1,0.005,0.002,10.0,0.0,0.0]]"])])
-    assert unsupported(load("paper", overrides=[*ov, "faults.delay=0.01", "faults.packet_loss=0.1"])) is None
+    with pytest.raises(ValueError, match="faults.friction_patch"):  # every per-step fault runs (test_batch_faults_*)
+        run_batch([load("paper", overrides=[*ov, "faults.friction_patch=[-5.0,-5.0,5.0,5.0,0.3]"])])
+    for fault in ("faults.delay=0.01", "faults.packet_loss=0.1", "faults.push=[[1,0.005,0.002,10.0,0.0,0.0]]"):
+        assert unsupported(load("paper", overrides=[*ov, fault])) is None
     assert unsupported(load("paper", overrides=[*ov, "plant.sensing=odometry"])) is None

@@ -88,9 +88,9 @@ def test_plant_faults_are_supported_and_not_part_of_the_scene():
     scs = _scenarios()
     assert all(unsupported(sc) is None for sc in scs)
     assert len({group_key(sc) for sc in scs}) == 1  # one batch for different faults
-    # the network faults and sensor noise stay refused
+    # with the network faults too (tests/test_batch_faults_comm.py)
     sc = load("paper", {**BASE, "faults.push": [[1, 0.1, 0.2, 40.0, 0.0, 0.0]], "faults.packet_loss": 0.1})
-    assert unsupported(sc) == "faults (faults.packet_loss)"
+    assert unsupported(sc) is None
 
 
 def test_fault_tables_resolve_times_as_the_cpu_loop():
