@@ -1,10 +1,11 @@
 """Every feature the batch engine runs, at once, in one batch (Warp's CPU device): DC motors fed
 the delivered torque, odometry sensing with gyro noise and bias, offsets in the leader's frame on
 a turning leader, timed payload events and per-step faults (network, noise, actuator, push)
-differing per world, each world also with its own seed and command-derivative mode. Each world agrees with ``sim.simulate`` of its own scenario by
-the project's per-world criterion (``batch/agreement.py``, design §11: issue 13's tolerances, or
-2 × the world's own float32 spread), and ``odometry_drift_m`` within 1 mm. The features compose:
-a kernel that dropped one of them in combination would fail here although its own test passes."""
+differing per world, each world also with its own seed and command-derivative mode. Each world
+agrees with ``sim.simulate`` of its own scenario by the project's per-world criterion
+(``batch/agreement.py``, design §11: issue 13's tolerances, or 2 × the world's own float32
+spread), and ``odometry_drift_m`` within 1 mm. The features compose: a kernel that dropped one
+of them in combination would fail here although its own test passes."""
 
 import numpy as np
 import pytest
