@@ -92,13 +92,31 @@ def test_bad_device_exit_2(tmp_path, capsys):
     assert capsys.readouterr().err.startswith("error: --device 'tpu'")
 
 
-def test_warp_sweep_rows_agree_with_local(tmp_path):
-    """2 worlds (seeds) of the paper scenario, 0.3 s: the tolerances of docs/warp_engine.md
-    (float32 physics): formation error 5 mm, ĉ 0.5 %, total velocity error 1 %."""
+@pytest.mark.parametrize(
+    "extra",
+    [
+        [],
+        [
+            "--set",
+            "faults.packet_loss=0.2",
+            "--set",
+            "faults.delay=0.005",
+            "--set",
+            "faults.push=[[1,0.1,0.1,40.0,0.0,0.0]]",
+            "--set",
+            "faults.actuator=[[3,0.05,0.2,0.5]]",
+        ],
+    ],
+    ids=["paper", "faults"],
+)
+def test_warp_sweep_rows_agree_with_local(extra, tmp_path):
+    """2 worlds (seeds) of the paper scenario, 0.3 s, without and with per-step faults (the sweep
+    path hands them to the device): issue 13's tolerances, formation error 1 mm, ĉ 0.5 %, total
+    velocity error 1 % (measured: < 1e-5 m at 0.3 s)."""
     _need_warp()
     wa, lo = tmp_path / "warp", tmp_path / "local"
-    assert main(SWEEP + ["--backend", "warp", "--device", "cpu", "--out", str(wa)]) == 0
-    assert main(SWEEP + ["--workers", "1", "--out", str(lo)]) == 0
+    assert main(SWEEP + extra + ["--backend", "warp", "--device", "cpu", "--out", str(wa)]) == 0
+    assert main(SWEEP + extra + ["--workers", "1", "--out", str(lo)]) == 0
     rw, rl = _rows(wa), _rows(lo)
     assert set(rw) == set(rl) == {"0", "1"}
     for seed in rw:
@@ -114,13 +132,13 @@ def test_warp_sweep_rows_agree_with_local(tmp_path):
             "rms_formation_error_m_max",
             "final_estimation_error_m_max",
         ):
-            assert abs(f(a, c) - f(b, c)) < 5e-3, c
+            assert abs(f(a, c) - f(b, c)) < 1e-3, c
         for c in ("total_velocity_error_mean", "total_velocity_error_max", "max_abs_v_cmd_max"):
             assert f(a, c) == pytest.approx(f(b, c), rel=1e-2), c
         assert f(a, "c_hat_abs_rel_error_max") == pytest.approx(f(b, "c_hat_abs_rel_error_max"), abs=5e-3)
     assert (wa / "stats.md").read_text().count("bioinspired-learning") == 1
     # a resume runs nothing
-    assert main(SWEEP + ["--backend", "warp", "--device", "cpu", "--out", str(wa)]) == 0
+    assert main(SWEEP + extra + ["--backend", "warp", "--device", "cpu", "--out", str(wa)]) == 0
     import json
 
     assert json.loads((wa / "sweep.json").read_text())["ran"] == 0
