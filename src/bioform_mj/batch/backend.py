@@ -36,6 +36,9 @@ CONTROL_BYTES_PER_ROBOT = 1e3
 #: and row, plus the leader's, per world (rows: the batch's largest delay in control steps + 1)
 RING_BYTES_PER_ROBOT_ROW = 40
 RING_BYTES_PER_ROW = 40
+#: payload events: bytes per robot per model row (``control.EVENT_FIELDS`` in float32 and the
+#: effective mass/inertia in float64; measured 336 B for the paper scene, 283 B for ``large64``)
+EVENT_BYTES_PER_ROBOT_ROW = 400.0
 #: share of the free memory a batch may plan to use
 MEMORY_SHARE = 0.9
 
@@ -165,11 +168,14 @@ class Group:
     specs: list
     n: int
     ring_rows: int = 1  # the batch's largest faults.delay in control steps + 1
+    events: int = 0  # the most payload events of one of its worlds
 
     @property
     def world_bytes(self) -> float:
-        """Estimated peak device bytes of one of its worlds (with the delay's ring)."""
-        return world_bytes(self.n) + self.ring_rows * (RING_BYTES_PER_ROW + RING_BYTES_PER_ROBOT_ROW * self.n)
+        """Estimated peak device bytes of one of its worlds (with the delay's ring and, with events,
+        the per-world model rows: ``control.event_tables`` (E + 1 rows) and the batched fields)."""
+        ev = (self.events + 2) * EVENT_BYTES_PER_ROBOT_ROW * self.n if self.events else 0.0
+        return world_bytes(self.n) + self.ring_rows * (RING_BYTES_PER_ROW + RING_BYTES_PER_ROBOT_ROW * self.n) + ev
 
     @property
     def bytes(self) -> float:
@@ -206,6 +212,7 @@ def plan(specs: Sequence[Any], device: str) -> list[Group]:
         g.specs.append(sp)
         if sc.faults.delay > 0:
             g.ring_rows = max(g.ring_rows, int(round(sc.faults.delay / sc.sim.control_dt)) + 1)
+        g.events = max(g.events, len(sc.events))
     out = list(groups.values())
     if out:
         free = free_memory(device)
