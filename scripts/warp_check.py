@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Per-world agreement of the MuJoCo Warp batch engine with the CPU engine (issue 13's criterion).
 
-Runs ``--worlds`` seeds of the paper scenario in MuJoCo (jittered initial poses) on the Warp
+Runs ``--worlds`` seeds of a scenario (``--scenario``: a preset or a TOML file; default the paper's)
+in MuJoCo (jittered initial poses) on the Warp
 device and with :func:`bioform_mj.sim.simulate`, measures each world's own float32 spread
 (:func:`bioform_mj.batch.agreement.float32_spread`: the CPU engine perturbed by rounding-sized
 noise) and judges every follower (:func:`~bioform_mj.batch.agreement.judge`): within the issue's
@@ -22,6 +23,7 @@ import numpy as np
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--device", default="cpu")
+    ap.add_argument("--scenario", default="paper", help="a preset name or a scenario TOML file")
     ap.add_argument("--worlds", type=int, default=3)
     ap.add_argument("--duration", type=float, default=1.0)
     ap.add_argument("--realisations", type=int, default=8, help="perturbed CPU runs per world")
@@ -36,7 +38,7 @@ def main() -> int:
     eps = DEFAULT_EPS if a.eps is None else a.eps
     scs = [
         load(
-            "paper",
+            a.scenario,
             overrides=[
                 "plant.kind=mujoco",
                 f"sim.duration={a.duration}",
@@ -67,7 +69,7 @@ def main() -> int:
             f"{len(v) - n_sp - n_f}/{len(v)} within it, {n_sp} within their world's float32 spread, {n_f} failed"
         )
     if a.json:
-        meta = {"device": a.device, "worlds": a.worlds, "duration": a.duration}
+        meta = {"device": a.device, "scenario": a.scenario, "worlds": a.worlds, "duration": a.duration}
         meta.update(realisations=a.realisations, eps=eps, tolerances=TOLERANCES, rows=rows)
         with open(a.json, "w") as fh:
             json.dump(meta, fh, indent=1)
