@@ -54,7 +54,7 @@ F = wp.float64
 EQ = warp_equations(_E, F)
 # module globals: Warp resolves a kernel's globals when it builds the kernel
 wrap = EQ.wrap
-estimator_step = EQ.estimator_step
+estimator_euler = EQ.estimator_euler
 tracking_error = EQ.tracking_error
 slot_reference = EQ.slot_reference
 formation_offset = EQ.formation_offset
@@ -153,6 +153,7 @@ K5A, K5B, KDA, KDB, DT, BIO, LEARN, STEER = (
     _I[x] for x in ("k5a", "k5b", "kda", "kdb", "dt", "bio", "learning", "steer")
 )
 DERIV = _I["deriv"]
+assert K5B == K5A + 1 and KDB == KDA + 1  # the learner's per-component loop indexes K5A + c, KDA + c
 LFRAME = _I["leader_frame"]  # 1: offsets in the leader's frame (design §4)
 DERIV_A = wp.constant(F(DERIV_ANALYTIC))
 DERIV_D = wp.constant(F(DERIV_DIFFERENCE))
@@ -255,6 +256,7 @@ class BatchState:
     saturated: wp.array2d(dtype=int)
     p_err: wp.array3d(dtype=F)
     v_err: wp.array3d(dtype=F)
+    est_rate: wp.array3d(dtype=F)  # (W, n, 5) the estimator's rates of this step (kernel.StackState)
     first: wp.array(dtype=int)  # (W,)
     k: wp.array(dtype=int)  # (W,) the control step this world computes next
     status: wp.array(dtype=int)  # (W,) RUNNING, GUARD_FAILED or CAPACITY_EXCEEDED
@@ -727,42 +729,25 @@ def _control(
         # ---- learner_update
         if g.sc[w, LEARN] != zero and s.first[w] == 0:
             for i in range(n):
-                zn, en, cn, dn = learner_step(
-                    s.z_hat[w, i, 0],
-                    s.e_int[w, i, 0],
-                    s.c_hat[w, i, 0],
-                    s.d_hat[w, i, 0],
-                    s.tau_body[w, i, 0],
-                    s.mvel[w, i, 0],
-                    g.k4[w, i, 0],
-                    g.sc[w, K5A],
-                    g.sc[w, KDA],
-                    g.c_min[w, i, 0],
-                    g.c_max[w, i, 0],
-                    dt,
-                )
-                s.z_hat[w, i, 0] = zn
-                s.e_int[w, i, 0] = en
-                s.c_hat[w, i, 0] = cn
-                s.d_hat[w, i, 0] = dn
-                zn, en, cn, dn = learner_step(
-                    s.z_hat[w, i, 1],
-                    s.e_int[w, i, 1],
-                    s.c_hat[w, i, 1],
-                    s.d_hat[w, i, 1],
-                    s.tau_body[w, i, 1],
-                    s.mvel[w, i, 1],
-                    g.k4[w, i, 1],
-                    g.sc[w, K5B],
-                    g.sc[w, KDB],
-                    g.c_min[w, i, 1],
-                    g.c_max[w, i, 1],
-                    dt,
-                )
-                s.z_hat[w, i, 1] = zn
-                s.e_int[w, i, 1] = en
-                s.c_hat[w, i, 1] = cn
-                s.d_hat[w, i, 1] = dn
+                for c in range(2):  # a (k5a, kda), then b (k5b, kdb): adjacent columns of SCALARS
+                    zn, en, cn, dn = learner_step(
+                        s.z_hat[w, i, c],
+                        s.e_int[w, i, c],
+                        s.c_hat[w, i, c],
+                        s.d_hat[w, i, c],
+                        s.tau_body[w, i, c],
+                        s.mvel[w, i, c],
+                        g.k4[w, i, c],
+                        g.sc[w, K5A + c],
+                        g.sc[w, KDA + c],
+                        g.c_min[w, i, c],
+                        g.c_max[w, i, c],
+                        dt,
+                    )
+                    s.z_hat[w, i, c] = zn
+                    s.e_int[w, i, c] = en
+                    s.c_hat[w, i, c] = cn
+                    s.d_hat[w, i, c] = dn
         # ---- the network (faults.Faults.comm): link weights, and with loss or delay the values received
         comm = f.sc[w, FCOMM] != zero
         recv = comm and f.sc[w, FRECV] != zero
@@ -815,6 +800,32 @@ def _control(
             s.p_err[w, i, 2] = ai * wrap(s.est_pose[w, i, 2] - lp2) + s.p_err[w, i, 2]
             s.v_err[w, i, 0] = ai * (s.est_vel[w, i, 0] - lv0) + s.v_err[w, i, 0]
             s.v_err[w, i, 1] = ai * (s.est_vel[w, i, 1] - lv1) + s.v_err[w, i, 1]
+            # the estimator's rates from them, once (kernel.estimator_consensus): the analytic
+            # derivative and the Euler step below both read them
+            q0, q1, q2, q3, q4 = estimator_rates(
+                s.est_pose[w, i, 2],
+                s.est_vel[w, i, 0],
+                s.est_vel[w, i, 1],
+                s.p_err[w, i, 0],
+                s.p_err[w, i, 1],
+                s.p_err[w, i, 2],
+                s.v_err[w, i, 0],
+                s.v_err[w, i, 1],
+                g.sc[w, KX],
+                g.sc[w, KY],
+                g.sc[w, KTH],
+                g.sc[w, KA0],
+                g.sc[w, KA1],
+                g.sc[w, KB0],
+                g.sc[w, KB1],
+                g.sc[w, EPHI0],
+                g.sc[w, EPHI1],
+            )
+            s.est_rate[w, i, 0] = q0
+            s.est_rate[w, i, 1] = q1
+            s.est_rate[w, i, 2] = q2
+            s.est_rate[w, i, 3] = q3
+            s.est_rate[w, i, 4] = q4
         # ---- command_and_torques
         first = s.first[w] == 1
         steer = g.sc[w, STEER] != zero
@@ -861,25 +872,11 @@ def _control(
             s.cmd[w, i, 0] = vc
             s.cmd[w, i, 1] = wc
             if deriv == DERIV_A:  # chain rule through the controller's own dynamics (design §6)
-                dpx, dpy, dpth, dv_ir, dw_ir = estimator_rates(
-                    s.est_pose[w, i, 2],
-                    s.est_vel[w, i, 0],
-                    s.est_vel[w, i, 1],
-                    s.p_err[w, i, 0],
-                    s.p_err[w, i, 1],
-                    s.p_err[w, i, 2],
-                    s.v_err[w, i, 0],
-                    s.v_err[w, i, 1],
-                    g.sc[w, KX],
-                    g.sc[w, KY],
-                    g.sc[w, KTH],
-                    g.sc[w, KA0],
-                    g.sc[w, KA1],
-                    g.sc[w, KB0],
-                    g.sc[w, KB1],
-                    g.sc[w, EPHI0],
-                    g.sc[w, EPHI1],
-                )
+                dpx = s.est_rate[w, i, 0]  # this step's estimator rates (the consensus above)
+                dpy = s.est_rate[w, i, 1]
+                dpth = s.est_rate[w, i, 2]
+                dv_ir = s.est_rate[w, i, 3]
+                dw_ir = s.est_rate[w, i, 4]
                 ch = wp.cos(s.mpose[w, i, 2])
                 sh = wp.sin(s.mpose[w, i, 2])
                 dex, dey, deth = error_rate(
@@ -953,28 +950,19 @@ def _control(
             s.tau_body[w, i, 0] = t0 + t1
             s.tau_body[w, i, 1] = t1 - t0
         s.first[w] = 0
-        # ---- estimator_advance: one Euler step with this step's consensus errors; the neuron (eq. 32)
+        # ---- estimator_advance: one Euler step with this step's rates; the neuron (eq. 32)
         for i in range(n):
-            px, py, pth, v, om = estimator_step(
+            px, py, pth, v, om = estimator_euler(
                 s.est_pose[w, i, 0],
                 s.est_pose[w, i, 1],
                 s.est_pose[w, i, 2],
                 s.est_vel[w, i, 0],
                 s.est_vel[w, i, 1],
-                s.p_err[w, i, 0],
-                s.p_err[w, i, 1],
-                s.p_err[w, i, 2],
-                s.v_err[w, i, 0],
-                s.v_err[w, i, 1],
-                g.sc[w, KX],
-                g.sc[w, KY],
-                g.sc[w, KTH],
-                g.sc[w, KA0],
-                g.sc[w, KA1],
-                g.sc[w, KB0],
-                g.sc[w, KB1],
-                g.sc[w, EPHI0],
-                g.sc[w, EPHI1],
+                s.est_rate[w, i, 0],
+                s.est_rate[w, i, 1],
+                s.est_rate[w, i, 2],
+                s.est_rate[w, i, 3],
+                s.est_rate[w, i, 4],
                 dt,
             )
             s.est_pose[w, i, 0] = px
@@ -1533,6 +1521,7 @@ class BatchRun:
             s.vs, s.err, s.cmd, s.dcmd, s.tau, s.tau_raw, s.tau_body = z1(), z3(), z2(), z2(), z2(), z2(), z2()
             s.saturated = wp.zeros((W, n), dtype=int)
             s.p_err, s.v_err = z3(), z2()
+            s.est_rate = wp.zeros((W, n, 5), dtype=F)
             s.first, s.k, s.status, s.k_done = (wp.zeros(W, dtype=int) for _ in range(4))
             s.diag = wp.zeros((W, 3), dtype=F)
             s.verr, s.nsat, s.vmax, s.taumax, s.tauraw_max, s.ferr = z1(), z1(), z1(), z1(), z1(), z1()

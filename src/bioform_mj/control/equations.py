@@ -134,6 +134,25 @@ def estimator_step(
     dpx, dpy, dpth, dv, dw = estimator_rates(
         pth, v, w, ep0, ep1, ep2, ev0, ev1, kx, ky, kth, ka0, ka1, kb0, kb1, phi0, phi1
     )
+    return estimator_euler(px, py, pth, v, w, dpx, dpy, dpth, dv, dw, dt)
+
+
+@equation
+def estimator_euler(
+    px: float,
+    py: float,
+    pth: float,
+    v: float,
+    w: float,
+    dpx: float,
+    dpy: float,
+    dpth: float,
+    dv: float,
+    dw: float,
+    dt: float,
+) -> tuple[float, float, float, float, float]:
+    """The explicit-Euler update of :func:`estimator_step` from rates already computed
+    (:func:`estimator_rates`): ``(px, py, pth, v, w) + dt · rates``, ``pth`` wrapped."""
     return px + dt * dpx, py + dt * dpy, wrap(pth + dt * dpth), v + dt * dv, w + dt * dw
 
 

@@ -26,8 +26,8 @@ from .equations import (
     backward_difference,
     command_rate,
     error_rate,
+    estimator_euler,
     estimator_rates,
-    estimator_step,
     filter_derivative,
     learner_step,
     neuron_rate,
@@ -115,7 +115,9 @@ class StackState(NamedTuple):
     ``difference`` ``fy`` is the last command); neuron ``vs`` (n,); last step's
     ``err`` (n,3) ``[x̃, ỹ, θ̃]``, ``cmd``, ``dcmd`` (n,2), ``tau`` (applied) and ``tau_raw``
     (commanded) ``[τ_L, τ_R]`` and ``tau_body`` ``[τ_a, τ_b]`` (n,2), ``saturated`` (n,);
-    consensus errors ``p_err`` (n,3), ``v_err`` (n,2) of this step (eqs. 12–13, leader term included);
+    consensus errors ``p_err`` (n,3), ``v_err`` (n,2) of this step (eqs. 12–13, leader term included)
+    and the estimator's rates from them, ``est_rate`` (n,5) ``(ẋ_ir, ẏ_ir, θ̇_ir, υ̇_ir, ω̇_ir)``
+    (computed once: the analytic command derivative and the Euler step both read them);
     ``first`` (1,) 1 until the first step.
     """
 
@@ -137,6 +139,7 @@ class StackState(NamedTuple):
     saturated: np.ndarray
     p_err: np.ndarray
     v_err: np.ndarray
+    est_rate: np.ndarray
     first: np.ndarray
 
 
@@ -174,6 +177,7 @@ def new_state(n: int) -> StackState:
         np.zeros(n, dtype=np.bool_),
         np.zeros((n, 3)),
         z2(),
+        np.zeros((n, 5)),
         np.ones(1, dtype=np.int64),
     )
 
@@ -233,37 +237,25 @@ def learner_update(g, s, vel):
     (``s.tau_body``: as commanded, or what a plant with DC motors measured as delivered and wrote
     there after its step, design §8.2) and the velocities ``vel`` (n, 2) measured now."""
     dt = g.dt
+    k5 = (g.k5a, g.k5b)
+    kd = (g.kda, g.kdb)
     for i in range(vel.shape[0]):
-        zn, en, cn, dn = learner_step(
-            s.z_hat[i, 0],
-            s.e_int[i, 0],
-            s.c_hat[i, 0],
-            s.d_hat[i, 0],
-            s.tau_body[i, 0],
-            vel[i, 0],
-            g.k4[i, 0],
-            g.k5a,
-            g.kda,
-            g.c_min[i, 0],
-            g.c_max[i, 0],
-            dt,
-        )
-        s.z_hat[i, 0], s.e_int[i, 0], s.c_hat[i, 0], s.d_hat[i, 0] = zn, en, cn, dn
-        zn, en, cn, dn = learner_step(
-            s.z_hat[i, 1],
-            s.e_int[i, 1],
-            s.c_hat[i, 1],
-            s.d_hat[i, 1],
-            s.tau_body[i, 1],
-            vel[i, 1],
-            g.k4[i, 1],
-            g.k5b,
-            g.kdb,
-            g.c_min[i, 1],
-            g.c_max[i, 1],
-            dt,
-        )
-        s.z_hat[i, 1], s.e_int[i, 1], s.c_hat[i, 1], s.d_hat[i, 1] = zn, en, cn, dn
+        for c in range(2):  # a, then b
+            zn, en, cn, dn = learner_step(
+                s.z_hat[i, c],
+                s.e_int[i, c],
+                s.c_hat[i, c],
+                s.d_hat[i, c],
+                s.tau_body[i, c],
+                vel[i, c],
+                g.k4[i, c],
+                k5[c],
+                kd[c],
+                g.c_min[i, c],
+                g.c_max[i, c],
+                dt,
+            )
+            s.z_hat[i, c], s.e_int[i, c], s.c_hat[i, c], s.d_hat[i, c] = zn, en, cn, dn
 
 
 @njit
@@ -300,25 +292,8 @@ def command_and_torques(g, s, pose, vel):
         vc, wc = velocity_command(e1, e2, u, v_ref, w_ref, g.k1, g.k2, g.k3)
         s.cmd[i, 0], s.cmd[i, 1] = vc, wc
         if g.deriv == DERIV_ANALYTIC:  # chain rule through the controller's own dynamics (design §6)
-            dpx, dpy, dpth, dv_ir, dw_ir = estimator_rates(
-                s.est_pose[i, 2],
-                s.est_vel[i, 0],
-                s.est_vel[i, 1],
-                s.p_err[i, 0],
-                s.p_err[i, 1],
-                s.p_err[i, 2],
-                s.v_err[i, 0],
-                s.v_err[i, 1],
-                g.kx,
-                g.ky,
-                g.kth,
-                g.ka0,
-                g.ka1,
-                g.kb0,
-                g.kb1,
-                g.ephi0,
-                g.ephi1,
-            )
+            r = s.est_rate  # this step's estimator rates (estimator_consensus)
+            dpx, dpy, dpth, dv_ir, dw_ir = r[i, 0], r[i, 1], r[i, 2], r[i, 3], r[i, 4]
             ch = cos(pose[i, 2])
             sh = sin(pose[i, 2])
             dex, dey, deth = error_rate(
@@ -366,7 +341,8 @@ def estimator_update(g, s, lp, lv, comm):
 @njit
 def estimator_consensus(g, s, lp, lv, comm):
     """Consensus errors of eqs. 12–13 into ``s.p_err`` (n,3) and ``s.v_err`` (n,2): over the graph
-    edges, plus ``a_ir (P_ir − P_r)`` for the leader link; from the estimates before they advance."""
+    edges, plus ``a_ir (P_ir − P_r)`` for the leader link; from the estimates before they advance.
+    Then the estimator's rates from them into ``s.est_rate`` (n,5) (``estimator_rates``)."""
     n = s.est_pose.shape[0]
     for i in range(n):
         for c in range(3):
@@ -393,18 +369,8 @@ def estimator_consensus(g, s, lp, lv, comm):
         s.p_err[i, 2] = a * wrap(s.est_pose[i, 2] - lp[2]) + s.p_err[i, 2]
         s.v_err[i, 0] = a * (s.est_vel[i, 0] - lv[0]) + s.v_err[i, 0]
         s.v_err[i, 1] = a * (s.est_vel[i, 1] - lv[1]) + s.v_err[i, 1]
-
-
-@njit
-def estimator_advance(g, s):
-    """One Euler step of the estimator (eqs. 12–13) with the consensus errors of
-    :func:`estimator_consensus`, and the neuron (eq. 32) for the frozen input ``x̃``."""
-    n = s.est_pose.shape[0]
-    dt = g.dt
-    for i in range(n):
-        px, py, pth, v, w = estimator_step(
-            s.est_pose[i, 0],
-            s.est_pose[i, 1],
+        r = s.est_rate
+        r[i, 0], r[i, 1], r[i, 2], r[i, 3], r[i, 4] = estimator_rates(
             s.est_pose[i, 2],
             s.est_vel[i, 0],
             s.est_vel[i, 1],
@@ -422,6 +388,28 @@ def estimator_advance(g, s):
             g.kb1,
             g.ephi0,
             g.ephi1,
+        )
+
+
+@njit
+def estimator_advance(g, s):
+    """One Euler step of the estimator (eqs. 12–13) with the rates :func:`estimator_consensus`
+    computed (``s.est_rate``), and the neuron (eq. 32) for the frozen input ``x̃``."""
+    n = s.est_pose.shape[0]
+    dt = g.dt
+    r = s.est_rate
+    for i in range(n):
+        px, py, pth, v, w = estimator_euler(
+            s.est_pose[i, 0],
+            s.est_pose[i, 1],
+            s.est_pose[i, 2],
+            s.est_vel[i, 0],
+            s.est_vel[i, 1],
+            r[i, 0],
+            r[i, 1],
+            r[i, 2],
+            r[i, 3],
+            r[i, 4],
             dt,
         )
         s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2] = px, py, pth
