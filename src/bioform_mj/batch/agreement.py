@@ -25,8 +25,8 @@ The default ``eps = 1e-6`` (about 17 float32 units in the last place) is the siz
 difference float32 physics makes in one control period: MuJoCo Warp against C MuJoCo from the
 same state, one period of the paper scene, measured relative differences of ``qvel`` with median
 1.2e-6 … 2.9e-5 (largest 1.5e-2) and of ``qpos`` median 3e-8 … 7e-8 (largest 5e-6). With
-``eps = 2**-24`` (one unit) and 16 realisations the worst world's spread was 0.98 mm against the
-device's 3.3 mm; with 1e-6, 8.0 mm (docs/warp_engine.md).
+``eps = 2**-24`` (one unit) and 16 realisations the worst world's follower spreads 3.32 mm, the
+device's own difference; with 1e-6, 9.0 mm (``scripts/float32_conditioning.py``, docs/warp_engine.md).
 
 Nothing here needs Warp: the perturbed runs are the CPU engine's (``engine="stepwise"``, which
 is bit-identical to the compiled engine when unperturbed).
