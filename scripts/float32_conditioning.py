@@ -14,6 +14,8 @@ Four measurements on the paper scenario in MuJoCo (``--seed`` jittered start, ``
             spread (ε = 1e-6: 2.9–8.0 mm for follower 2; ε = 2⁻²⁴ with 16 realisations, seed 2: 0.98 mm).
 ``trace``   the batch engine (one world) and the CPU engine step by step: per follower position gap
             (seed 2: 1.6e-6 m at step 400, 4.7e-5 at 450, 7.1e-4 at 550).
+``probe``   ``control.physics_probe`` on our robots and on friction patches (the numbers beside
+            ``PROBE_TOL``: floor 1.9e-4 … 2.0e-3, patches 0.11 … 7.9).
 
     python scripts/float32_conditioning.py local --seed 2 [--set faults.friction_patch=[-50,-50,50,50,1.0]]
     python scripts/float32_conditioning.py noise --seed 2 --eps 5.96e-8 --realisations 16 --duration 2
@@ -164,9 +166,33 @@ def trace(a) -> None:
         print(f"step {k}: position gap per follower " + " ".join(f"{x:.2e}" for x in gap[k]))
 
 
+PROBES = [
+    ("paper", ["plant.kind=mujoco"]),
+    ("paper", ["plant.kind=mujoco", 'plant.robots=[{model="paper", motor="dc", driver="voltage"}]']),
+    ("stretch", []),
+    ("tb3", []),
+    ("paper", ["plant.kind=mujoco", "faults.friction_patch=[-3.0,-3.0,3.0,3.0,0.5]"]),
+    ("paper", ["plant.kind=mujoco", "faults.friction_patch=[-50.0,-50.0,50.0,50.0,1.0]"]),
+    ("tb3", ["faults.friction_patch=[-50.0,-50.0,50.0,50.0,1.0]"]),
+]
+
+
+def probe(a) -> None:
+    import warp as wp
+
+    from bioform_mj.batch.control import PROBE_TOL, physics_probe
+    from bioform_mj.scenario import load
+    from bioform_mj.sim import make_plant
+
+    wp.config.quiet = True
+    for name, ov in PROBES:
+        err = physics_probe(make_plant(load(name, overrides=ov)), a.device)
+        print(f"{name} {' '.join(ov[1:] if name == 'paper' else ov)}: {err:.3g} (limit {PROBE_TOL:g})")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("local", "initial", "noise", "trace"))
+    ap.add_argument("what", choices=("local", "initial", "noise", "trace", "probe"))
     ap.add_argument("--seed", type=int, default=2)
     ap.add_argument("--duration", type=float, default=1.0)
     ap.add_argument("--device", default="cpu")
@@ -175,7 +201,7 @@ def main() -> int:
     ap.add_argument("--eps-qpos", type=float, default=None)
     ap.add_argument("--set", action="append", default=[])
     a = ap.parse_args()
-    {"local": local, "initial": initial, "noise": noise, "trace": trace}[a.what](a)
+    {"local": local, "initial": initial, "noise": noise, "trace": trace, "probe": probe}[a.what](a)
     return 0
 
 
