@@ -5,6 +5,8 @@ batch engine stops the world and says which capacity to raise, never silently)."
 
 import csv
 
+import numpy as np
+
 import pytest
 
 wp = pytest.importorskip("warp")
@@ -35,7 +37,10 @@ def test_slipping_robot_is_reported_by_both_engines():
         for f in s["followers"]:
             assert f["outcome"] == "slipping", f
             assert f["outcome_detail"].startswith("wheel slip ratio > 0.2 for 0.5 s, by t = ")
-    assert [f["outcome_detail"] for f in bat["followers"]] == [f["outcome_detail"] for f in cpu["followers"]]
+    # the same onset on both engines (measured: identical here; float32 physics may move a threshold
+    # crossing by a control step on another CPU, so within 10 steps, not bit for bit)
+    onset = lambda s: [float(f["outcome_detail"].rsplit("t = ", 1)[1].split()[0]) for f in s["followers"]]  # noqa: E731
+    np.testing.assert_allclose(onset(bat), onset(cpu), atol=0.01)
 
 
 def test_friction_patch_is_refused():
