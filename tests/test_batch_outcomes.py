@@ -6,7 +6,6 @@ batch engine stops the world and says which capacity to raise, never silently)."
 import csv
 
 import numpy as np
-
 import pytest
 
 wp = pytest.importorskip("warp")
