@@ -101,43 +101,6 @@ def clip(x: float, lo: float, hi: float) -> float:
 
 # -------------------------------------------------------------- estimator (eqs. 12–13)
 @equation
-def estimator_step(
-    px: float,
-    py: float,
-    pth: float,
-    v: float,
-    w: float,
-    ep0: float,
-    ep1: float,
-    ep2: float,
-    ev0: float,
-    ev1: float,
-    kx: float,
-    ky: float,
-    kth: float,
-    ka0: float,
-    ka1: float,
-    kb0: float,
-    kb1: float,
-    phi0: float,
-    phi1: float,
-    dt: float,
-) -> tuple[float, float, float, float, float]:
-    """One explicit-Euler step of the distributed estimator of follower ``i``.
-
-    ``(px, py, pth)`` = ``P_ir`` (m, m, rad), ``(v, w)`` = ``[υ_ir, ω_ir]``; ``ep*`` the
-    consensus errors ``Σ_j a_ij (P_i − P_j) + a_ir (P_i − P_r)`` (heading wrapped), ``ev*``
-    the same for the velocities. Eq. 12: ``Ṗ = [υ cos θ, υ sin θ, ω] − k_p ⊙ P̃``;
-    eq. 13: ``[υ̇, ω̇] = −k_a ⊙ sgn(e_v) − k_b ⊙ e_v`` (``sgn`` → :func:`sat` with ``phi``).
-    Returns the new ``(px, py, pth, v, w)``, ``pth`` wrapped.
-    """
-    dpx, dpy, dpth, dv, dw = estimator_rates(
-        pth, v, w, ep0, ep1, ep2, ev0, ev1, kx, ky, kth, ka0, ka1, kb0, kb1, phi0, phi1
-    )
-    return estimator_euler(px, py, pth, v, w, dpx, dpy, dpth, dv, dw, dt)
-
-
-@equation
 def estimator_euler(
     px: float,
     py: float,
@@ -151,8 +114,9 @@ def estimator_euler(
     dw: float,
     dt: float,
 ) -> tuple[float, float, float, float, float]:
-    """The explicit-Euler update of :func:`estimator_step` from rates already computed
-    (:func:`estimator_rates`): ``(px, py, pth, v, w) + dt · rates``, ``pth`` wrapped."""
+    """One explicit-Euler step of follower ``i``'s estimator from its rates (:func:`estimator_rates`,
+    computed once per control step): ``(px, py, pth, v, w) + dt · rates`` (``P_ir`` m, m, rad;
+    ``[υ_ir, ω_ir]``), ``pth`` wrapped."""
     return px + dt * dpx, py + dt * dpy, wrap(pth + dt * dpth), v + dt * dv, w + dt * dw
 
 
@@ -176,9 +140,13 @@ def estimator_rates(
     phi0: float,
     phi1: float,
 ) -> tuple[float, float, float, float, float]:
-    """Right-hand sides of eqs. 12–13: ``(ẋ_ir, ẏ_ir, θ̇_ir, υ̇_ir, ω̇_ir)`` (m/s, m/s, rad/s, m/s², rad/s²).
+    """Right-hand sides of eqs. 12–13 of follower ``i``'s distributed estimator: ``(ẋ_ir, ẏ_ir, θ̇_ir,
+    υ̇_ir, ω̇_ir)`` (m/s, m/s, rad/s, m/s², rad/s²).
 
-    Arguments as in :func:`estimator_step` (``pth, v, w`` = ``θ_ir, υ_ir, ω_ir``).
+    ``(pth, v, w)`` = ``θ_ir, υ_ir, ω_ir``; ``ep*`` the consensus errors ``Σ_j a_ij (P_i − P_j) +
+    a_ir (P_i − P_r)`` (heading wrapped), ``ev*`` the same for the velocities. Eq. 12:
+    ``Ṗ = [υ cos θ, υ sin θ, ω] − k_p ⊙ P̃``; eq. 13: ``[υ̇, ω̇] = −k_a ⊙ sgn(e_v) − k_b ⊙ e_v``
+    (``sgn`` → :func:`sat` with ``phi``). One step of the estimator is :func:`estimator_euler` of these.
     """
     dpx = v * cos(pth) - kx * ep0
     dpy = v * sin(pth) - ky * ep1
