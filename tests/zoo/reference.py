@@ -1,0 +1,767 @@
+"""Independent reference for the zoo of published robots (tests/zoo, docs/zoo.md).
+
+This script does NOT import bioform_mj: only mujoco and numpy. For each robot of :data:`ROBOTS` it
+
+1. loads the description as its maker published it (MJCF directly; URDF through MuJoCo's own URDF
+   compiler with ``fusestatic="false" discardvisual="true" strippath="false"
+   inertiafromgeom="false"`` inserted, ``package://NAME/`` rewritten to the zoo's package folder,
+   a free joint added to the root link, links without ``<inertial>`` massless as the URDF
+   specification says, self-collision off as in Gazebo, ``<gazebo><mu1>`` friction applied);
+2. puts it on our own plane floor (friction 1, condim 3); a geom its maker made frictionless
+   (friction < 1e-3 or condim 1, or a Gazebo ``mu1`` < 1e-3) keeps that against the floor through
+   geom ``priority`` (MuJoCo uses the higher-priority geom's friction/condim for a pair);
+3. removes the model's actuators (torques enter as ``qfrc_applied``: a torque source, the
+   paper's model) and welds every joint that is not a wheel (the joint is deleted from the
+   spec, so its child moves with its parent at ``qpos0``);
+4. lets it settle, records the floor contacts (geom, body, normal load, friction as published and
+   as simulated), then drives it from the settled state with constant wheel torques at three
+   levels, ``τ_L = τ_R = T`` (drive) and ``τ_R = −τ_L = T`` (turn), and fits the centre-of-mass
+   forward acceleration and the yaw acceleration over a window after the start-up transient;
+   across the levels ``a_id = d υ̇ / d τ_a`` with ``τ_a = τ_L + τ_R`` and
+   ``b_id = d ω̇ / d τ_b`` with ``τ_b = τ_R − τ_L`` (design §5, CCW-positive ω), so a dead
+   band (wheel frictionloss) or any constant resistance drops out of the slope;
+5. computes the rigid-body formula from the compiled masses and inertias (design §8):
+   ``a = 1/(m r + 2 I_w/r)``, ``b = l/(I r + 2 I_w l²/r)``, ``m`` the total mass, ``I`` the yaw
+   inertia about the vertical through the axle midpoint, ``I_w`` one wheel's spin inertia
+   including everything welded to it and the joint armature, ``r`` the wheel radius from the
+   wheel's collision geometry, ``l`` half the distance between the wheel joint anchors.
+
+``python tests/zoo/reference.py`` prints the table; ``--write`` regenerates
+``tests/zoo/expectations.json``; ``--robot NAME`` limits it to one robot.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+EXPECTATIONS = HERE / "expectations.json"
+
+#: our floor's sliding friction (the other two: MuJoCo's defaults)
+FLOOR_FRICTION = (1.0, 0.005, 0.0001)
+#: a geom whose sliding friction is below this (or condim 1) is frictionless as published
+FRICTIONLESS = 1e-3
+#: at rest before each test, s
+SETTLE_S = 0.5
+#: each constant-torque test, s; the fit uses WINDOW_S of it (after the start-up transient)
+RUN_S = 0.5
+WINDOW_S = (0.15, 0.5)
+#: drive tests: forward accelerations aimed at (m/s², from the formula's a); turn tests: rim accelerations
+#: l ω̇ aimed at, at most TURN_RATE_MAX rad/s of yaw rate at the end of a test
+ACCELS = (0.2, 0.4, 0.6)
+TURN_RATE_MAX = 2.0
+#: identification and formula agree within this (relative)
+AGREE = 0.05
+
+
+@dataclass(frozen=True)
+class Robot:
+    """One zoo robot: where its file is, what drives it, and what we expect of it."""
+
+    name: str
+    file: str  # relative to tests/zoo
+    format: str  # "mjcf" | "urdf"
+    maker: str
+    collection: str
+    source: str  # URL of the published file
+    license: str
+    base: str  # body (MJCF) / link (URDF) of the chassis
+    left: str  # left wheel joint
+    right: str  # right wheel joint
+    kind: str = "differential"  # or "skid-steer"
+    other_wheels: tuple[str, ...] = ()  # further wheel joints left free to roll (skid-steer)
+    packages: dict = field(default_factory=dict)  # package name -> folder (relative to tests/zoo)
+    expected_verdict: str = "pass"
+    expected_cause: str = ""
+
+
+ROBOTS: tuple[Robot, ...] = (
+    Robot(
+        "robotis_tb3_burger",
+        "robotis_tb3_burger/turtlebot3_burger.xml",
+        "mjcf",
+        "ROBOTIS",
+        "ROBOTIS-GIT/robotis_mujoco_menagerie",
+        "https://github.com/ROBOTIS-GIT/robotis_mujoco_menagerie/blob/d8344c0dbe7a00208d0301111523dde65efc174a/robotis_tb3/turtlebot3_burger.xml",
+        "Apache-2.0",
+        "base",
+        "wheel_left",
+        "wheel_right",
+        expected_verdict="warn",
+        expected_cause=(
+            "wheel frictionloss 0.1 N·m (dead band 0.2 N·m on τ_a) and armature 0.01 kg·m² (≈ 10 m r²: most "
+            "torque spins the rotor); the caster is frictionless (friction 1e-4, condim 1) and must stay so"
+        ),
+    ),
+    Robot(
+        "robotis_tb3_waffle_pi",
+        "robotis_tb3_waffle_pi/turtlebot3_waffle_pi.xml",
+        "mjcf",
+        "ROBOTIS",
+        "ROBOTIS-GIT/robotis_mujoco_menagerie",
+        "https://github.com/ROBOTIS-GIT/robotis_mujoco_menagerie/blob/d8344c0dbe7a00208d0301111523dde65efc174a/robotis_tb3/turtlebot3_waffle_pi.xml",
+        "Apache-2.0",
+        "base",
+        "wheel_left",
+        "wheel_right",
+        expected_verdict="warn",
+        expected_cause=(
+            "wheel frictionloss 0.1 N·m (dead band) and armature 0.01 kg·m²; centre of mass 64 mm behind the "
+            "axle (on two frictionless casters, friction 1e-4, condim 1, which must stay frictionless)"
+        ),
+    ),
+    Robot(
+        "tb3_burger_urdf",
+        "tb3_burger_urdf/turtlebot3_burger.urdf",
+        "urdf",
+        "ROBOTIS",
+        "ROBOTIS-GIT/turtlebot3 (turtlebot3_description)",
+        "https://github.com/ROBOTIS-GIT/turtlebot3/blob/754a9ddd937667839d7c38e88ca08ee0d93c08a8/turtlebot3_description/urdf/turtlebot3_burger.urdf",
+        "Apache-2.0",
+        "base_footprint",
+        "wheel_left_joint",
+        "wheel_right_joint",
+    ),
+    Robot(
+        "tb3_waffle_pi_urdf",
+        "tb3_waffle_pi_urdf/turtlebot3_waffle_pi.urdf",
+        "urdf",
+        "ROBOTIS",
+        "ROBOTIS-GIT/turtlebot3 (turtlebot3_description)",
+        "https://github.com/ROBOTIS-GIT/turtlebot3/blob/fd74967cd79cd40cc23d2ae907adda93ea92cece/turtlebot3_description/urdf/turtlebot3_waffle_pi.urdf",
+        "Apache-2.0",
+        "base_footprint",
+        "wheel_left_joint",
+        "wheel_right_joint",
+    ),
+    Robot(
+        "kobuki_urdf",
+        "kobuki_urdf/kobuki_standalone.urdf",
+        "urdf",
+        "Yujin Robot",
+        "yujinrobot/kobuki (kobuki_description)",
+        "https://github.com/yujinrobot/kobuki/blob/4f7f1beea87a970519f8d842be0eb40f0d5cde68/kobuki_description/urdf/kobuki_standalone.urdf.xacro",
+        "BSD",
+        "base_footprint",
+        "wheel_left_joint",
+        "wheel_right_joint",
+    ),
+    Robot(
+        "create3_urdf",
+        "create3_urdf/create3.urdf",
+        "urdf",
+        "iRobot",
+        "iRobotEducation/create3_sim (irobot_create_description)",
+        "https://github.com/iRobotEducation/create3_sim/blob/7df657e1c0dbc7a618e7f12d382dc1676040855a/irobot_create_common/irobot_create_description/urdf/create3.urdf.xacro",
+        "BSD-3-Clause",
+        "base_link",
+        "left_wheel_joint",
+        "right_wheel_joint",
+        packages={"irobot_create_description": "create3_urdf/irobot_create_description"},
+    ),
+    Robot(
+        "husky_urdf",
+        "husky_urdf/husky.urdf",
+        "urdf",
+        "Clearpath Robotics",
+        "husky/husky (husky_description)",
+        "https://github.com/husky/husky/blob/dff7c81a277e916d6169f118ab33809b429d0acf/husky_description/urdf/husky.urdf.xacro",
+        "BSD-3-Clause",
+        "base_link",
+        "front_left_wheel",
+        "front_right_wheel",
+        kind="skid-steer",
+        other_wheels=("rear_left_wheel", "rear_right_wheel"),
+        packages={"husky_description": "husky_urdf/husky_description"},
+        expected_verdict="fail",
+        expected_cause="skid-steer: four fixed wheels on the floor; turning needs lateral wheel slip (refused)",
+    ),
+)
+
+
+# ----------------------------------------------------------------------------------------------- loading
+
+
+def _gazebo_friction(urdf_text: str) -> dict[str, tuple[float, float]]:
+    """``{link: (mu1, mu2)}`` from ``<gazebo reference="LINK"><mu1>…`` (text or ``value=``)."""
+    root = ET.fromstring(urdf_text)
+    out: dict[str, tuple[float, float]] = {}
+    for gz in root.iter("gazebo"):
+        ref = gz.get("reference")
+        if not ref:
+            continue
+        mus = []
+        for tag in ("mu1", "mu2"):
+            el = gz.find(tag)
+            if el is None:
+                mus.append(None)
+                continue
+            txt = (el.text or "").strip() or el.get("value", "")
+            mus.append(float(txt))
+        if mus[0] is not None or mus[1] is not None:
+            mu1 = mus[0] if mus[0] is not None else mus[1]
+            mu2 = mus[1] if mus[1] is not None else mus[0]
+            out[ref] = (mu1, mu2)
+    return out
+
+
+def urdf_text_for_mujoco(robot: Robot) -> str:
+    """The URDF with our minimal fixes for MuJoCo's URDF compiler (see the module docstring)."""
+    text = (HERE / robot.file).read_text()
+    for pkg, folder in robot.packages.items():
+        text = text.replace(f"package://{pkg}/", str((HERE / folder).resolve()) + os.sep)
+    fixes = (
+        '<mujoco><compiler fusestatic="false" discardvisual="true" strippath="false" '
+        'inertiafromgeom="false" angle="radian"/></mujoco>'
+    )
+    text, n = re.subn(r"(<robot\b[^>]*>)", lambda m: m.group(1) + fixes, text, count=1)
+    if n != 1:
+        raise ValueError(f"{robot.file}: no <robot> element")
+    return text
+
+
+@dataclass
+class Loaded:
+    """A robot composed on our floor, ready to step."""
+
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    root: int  # body id of the free-jointed root
+    base: int  # body id of the chassis
+    wheels: tuple[int, int]  # joint ids (left, right)
+    floor: int  # geom id
+    published: dict  # geom name -> {"friction": [...], "condim": int, "source": str}
+    notes: list
+
+
+def _name_geoms(spec: mujoco.MjSpec) -> None:
+    counts: dict[str, int] = {}
+    for g in spec.geoms:
+        if not g.name:
+            body = g.parent.name or "world"
+            k = counts.get(body, 0)
+            counts[body] = k + 1
+            g.name = f"{body}/geom{k}"
+
+
+def _point_wheels(spec: mujoco.MjSpec, joints, notes: list, published: dict) -> None:
+    """Give each wheel one contact point: its collision geoms off, a sphere of the wheel's radius on the axle.
+
+    A cylinder (or a mesh hull) lying on the floor touches it at both edges of the tread, so turning
+    scrubs them sideways: MuJoCo's soft friction then acts like a yaw damper (design §8 pitfall). The
+    sphere (density 0, the first collision geom's friction, condim, priority and solver parameters)
+    rolls on one point, as the rigid-body formula assumes.
+    """
+    model = spec.copy().compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    for jn in joints:
+        j = model.joint(jn).id
+        wb = int(model.jnt_bodyid[j])
+        geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == wb and _collides(model, g)]
+        if not geoms:
+            continue
+        r = max(data.xanchor[j][2] - _lowest(model, data, g) for g in geoms)
+        src = spec.geom(model.geom(geoms[0]).name)
+        body = spec.body(model.body(wb).name)
+        sph = body.add_geom(
+            name=f"{jn}_point_wheel",
+            type=mujoco.mjtGeom.mjGEOM_SPHERE,
+            size=[r, 0, 0],
+            pos=[float(x) for x in model.jnt_pos[j]],
+            density=0,
+            contype=src.contype,
+            conaffinity=src.conaffinity,
+            condim=src.condim,
+            friction=[float(x) for x in src.friction],
+            priority=src.priority,
+            solref=[float(x) for x in src.solref],
+            solimp=[float(x) for x in src.solimp],
+            group=3,
+        )
+        published[sph.name] = published.get(src.name, {})
+        for g in geoms:
+            gs = spec.geom(model.geom(g).name)
+            gs.contype, gs.conaffinity = 0, 0
+    notes.append(f"wheels {list(joints)} touch the floor through one sphere each (point contact)")
+
+
+def load(robot: Robot, point_wheels: bool = True) -> Loaded:
+    """Compose ``robot`` on our floor (steps 1–3 of the module docstring) and place it on the floor.
+
+    ``point_wheels``: the wheels touch the floor through one point each (:func:`_point_wheels`);
+    False keeps their published collision shapes.
+    """
+    notes: list[str] = []
+    published: dict = {}
+    if robot.format == "mjcf":
+        spec = mujoco.MjSpec.from_file(str(HERE / robot.file))
+        _name_geoms(spec)
+        root_spec = spec.body(robot.base)
+        while root_spec.parent is not None and root_spec.parent.name != "world":
+            root_spec = root_spec.parent
+        if not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in root_spec.joints):
+            root_spec.add_freejoint()
+            notes.append(f"free joint added to '{root_spec.name}'")
+        for g in spec.geoms:
+            if g.contype or g.conaffinity:
+                published[g.name] = {"friction": [float(x) for x in g.friction], "condim": int(g.condim)}
+                if g.friction[0] < FRICTIONLESS or g.condim == 1:
+                    g.priority = 1  # keeps its friction/condim against our floor
+    else:
+        text = urdf_text_for_mujoco(robot)
+        gz = _gazebo_friction(text)
+        spec = mujoco.MjSpec.from_string(text)
+        _name_geoms(spec)
+        root_spec = spec.worldbody.first_body()
+        root_spec.add_freejoint()
+        notes.append(f"root link '{root_spec.name}' given a free joint; fixed links kept as welded bodies")
+        heavy = [b.name for b in spec.bodies if b.name != "world" and b.mass == 0 and len(b.geoms)]
+        if heavy:
+            notes.append(f"links without <inertial> but with collision geometry are massless (URDF default): {heavy}")
+        for g in spec.geoms:
+            g.contype, g.conaffinity = 2, 1  # self-collision off (Gazebo's default); floor contacts kept
+            link = g.parent.name
+            if link in gz:
+                mu1, mu2 = gz[link]
+                mu = min(mu1, mu2)
+                published[g.name] = {"friction": [mu1, mu2], "condim": None, "source": "gazebo mu1/mu2"}
+                g.friction = [mu, g.friction[1], g.friction[2]]
+                g.priority = 1
+                if mu < FRICTIONLESS:
+                    g.condim = 1
+                if mu1 != mu2:
+                    notes.append(f"{link}: Gazebo mu1 {mu1} ≠ mu2 {mu2}; simulated isotropic with {mu}")
+            else:
+                published[g.name] = {"friction": None, "condim": None, "source": "none (no <gazebo> mu)"}
+    # the model's own actuators go: torques enter as qfrc_applied (a torque source)
+    acts = list(spec.actuators)
+    for a in acts:
+        spec.delete(a)
+    if acts:
+        notes.append(f"{len(acts)} actuator(s) of the model removed (torque source instead)")
+    keep = {robot.left, robot.right, *robot.other_wheels}
+    locked = []
+    for j in list(spec.joints):
+        if j.type == mujoco.mjtJoint.mjJNT_FREE or j.name in keep:
+            continue
+        locked.append(j.name)
+        spec.delete(j)
+    if locked:
+        notes.append(f"non-wheel joints welded at qpos0: {locked}")
+    if point_wheels:
+        _point_wheels(spec, (robot.left, robot.right, *robot.other_wheels), notes, published)
+    spec.worldbody.add_geom(
+        name="zoo_floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0, 0, 1],
+        friction=list(FLOOR_FRICTION),
+        condim=3,
+        contype=1,
+        conaffinity=1,
+    )
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    root = model.body(root_spec.name).id
+    base = model.body(robot.base).id
+    wheels = (model.joint(robot.left).id, model.joint(robot.right).id)
+    floor = model.geom("zoo_floor").id
+    mujoco.mj_forward(model, data)
+    # stand on the floor: lowest collision point of the robot to z = 0
+    low = min(_lowest(model, data, g) for g in range(model.ngeom) if g != floor and _collides(model, g))
+    free = next(j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE)
+    model.qpos0[model.jnt_qposadr[free] + 2] -= low
+    mujoco.mj_resetData(model, data)
+    mujoco.mj_forward(model, data)
+    return Loaded(model, data, root, base, wheels, floor, published, notes)
+
+
+def _collides(model: mujoco.MjModel, g: int) -> bool:
+    return bool(model.geom_contype[g] or model.geom_conaffinity[g])
+
+
+def _lowest(model: mujoco.MjModel, data: mujoco.MjData, g: int) -> float:
+    """World z of the lowest point of geom ``g`` (exact for primitives, vertices for meshes)."""
+    t = model.geom_type[g]
+    s = model.geom_size[g]
+    R = data.geom_xmat[g].reshape(3, 3)
+    z = data.geom_xpos[g][2]
+    az = R[2]  # z components of the geom's axes
+    G = mujoco.mjtGeom
+    if t == G.mjGEOM_SPHERE:
+        return z - s[0]
+    if t == G.mjGEOM_CAPSULE:
+        return z - abs(az[2]) * s[1] - s[0]
+    if t == G.mjGEOM_CYLINDER:
+        return z - abs(az[2]) * s[1] - s[0] * math.sqrt(max(0.0, 1 - az[2] ** 2))
+    if t == G.mjGEOM_BOX:
+        return z - float(np.abs(az) @ s)
+    if t == G.mjGEOM_ELLIPSOID:
+        return z - float(np.sqrt(((az * s) ** 2).sum()))
+    if t == G.mjGEOM_MESH:
+        mid = model.geom_dataid[g]
+        a, n = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
+        v = model.mesh_vert[a : a + n]
+        return float((v @ R.T)[:, 2].min() + z)
+    return z - float(model.geom_rbound[g])
+
+
+# ----------------------------------------------------------------------------------------------- formula
+
+
+def _subtree(model: mujoco.MjModel, root: int) -> list[int]:
+    inside = [False] * model.nbody
+    inside[root] = True
+    for b in range(root + 1, model.nbody):
+        inside[b] = inside[model.body_parentid[b]]
+    return [b for b in range(model.nbody) if inside[b]]
+
+
+def _welded(model: mujoco.MjModel, body: int) -> list[int]:
+    """``body`` and every descendant joined to it without a joint (they spin with it)."""
+    out = [body]
+    for b in range(body + 1, model.nbody):
+        if model.body_parentid[b] in out and model.body_jntnum[b] == 0:
+            out.append(b)
+    return out
+
+
+def formula(L: Loaded) -> dict:
+    """Rigid-body ``a, b`` and the parts (module docstring, step 5), from the current state of ``L.data``."""
+    m, d = L.model, L.data
+    mujoco.mj_kinematics(m, d)
+    up = np.array([0.0, 0.0, 1.0])
+    jl, jr = L.wheels
+    anchors = d.xanchor[[jl, jr]]
+    mid = anchors.mean(axis=0)
+    bodies = _subtree(m, L.root)
+    mass = float(m.body_mass[bodies].sum())
+    yaw = 0.0
+    for b in bodies:
+        n = d.ximat[b].reshape(3, 3).T @ up
+        rel = d.xipos[b] - mid
+        yaw += float(n @ (m.body_inertia[b] * n)) + float(m.body_mass[b]) * float(rel @ rel - (rel @ up) ** 2)
+    com = (m.body_mass[bodies, None] * d.xipos[bodies]).sum(axis=0) / mass
+    rel = com - mid
+    spins, radii, welded_names = [], [], []
+    for j in (jl, jr):
+        wb = m.jnt_bodyid[j]
+        axis = d.xaxis[j]
+        anchor = d.xanchor[j]
+        i_w = float(m.dof_armature[m.jnt_dofadr[j]])
+        for b in _welded(m, wb):
+            n = d.ximat[b].reshape(3, 3).T @ axis
+            rb = d.xipos[b] - anchor
+            i_w += float(n @ (m.body_inertia[b] * n)) + float(m.body_mass[b]) * float(rb @ rb - (rb @ axis) ** 2)
+            if b != wb:
+                welded_names.append(m.body(b).name)
+        spins.append(i_w)
+        geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] == wb and _collides(m, g)]
+        radii.append(max(anchor[2] - _lowest(m, d, g) for g in geoms) if geoms else float("nan"))
+    i_w = float(np.mean(spins))
+    r = float(np.mean(radii))
+    dl = anchors[0] - anchors[1]
+    l = 0.5 * float(np.linalg.norm(dl - (dl @ up) * up))
+    a = 1.0 / (mass * r + 2 * i_w / r)
+    b = l / (yaw * r + 2 * i_w * l**2 / r)
+    return {
+        "mass_kg": mass,
+        "yaw_inertia_kgm2": yaw,
+        "wheel_inertia_kgm2": i_w,
+        "wheel_inertia_lr_kgm2": spins,
+        "welded_to_wheels": welded_names,
+        "r_m": r,
+        "wheel_radius_lr_m": radii,
+        "l_m": l,
+        "com_from_axle_m": [float(x) for x in rel],
+        "a_formula": a,
+        "b_formula": b,
+    }
+
+
+# ----------------------------------------------------------------------------------------------- tests
+
+
+def _state(L: Loaded) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return L.data.qpos.copy(), L.data.qvel.copy(), L.data.qacc_warmstart.copy()
+
+
+def _restore(L: Loaded, st) -> None:
+    mujoco.mj_resetData(L.model, L.data)
+    L.data.qpos[:], L.data.qvel[:], L.data.qacc_warmstart[:] = st
+    mujoco.mj_forward(L.model, L.data)
+
+
+def _signs(L: Loaded) -> tuple[float, float]:
+    """+1/−1 per wheel so that a positive torque drives forward (base x)."""
+    d = L.data
+    h = d.xmat[L.base].reshape(3, 3)[:, 0]
+    fwd_spin = np.cross([0.0, 0.0, 1.0], h)  # a wheel rolling forward spins about up × heading
+    return tuple(1.0 if float(d.xaxis[j] @ fwd_spin) > 0 else -1.0 for j in L.wheels)
+
+
+def floor_contacts(L: Loaded) -> list[dict]:
+    """Geoms touching our floor in the current state: body, normal load (N), friction published/simulated."""
+    m, d = L.model, L.data
+    agg: dict[int, dict] = {}
+    f6 = np.zeros(6)
+    for i in range(d.ncon):
+        c = d.contact[i]
+        if L.floor not in (c.geom1, c.geom2):
+            continue
+        g = c.geom2 if c.geom1 == L.floor else c.geom1
+        mujoco.mj_contactForce(m, d, i, f6)
+        e = agg.setdefault(
+            int(g), {"load_n": 0.0, "friction_simulated": float(c.friction[0]), "condim_simulated": int(c.dim)}
+        )
+        e["load_n"] += float(f6[0])
+    out = []
+    for g, e in sorted(agg.items()):
+        name = m.geom(g).name
+        pub = L.published.get(name, {})
+        out.append(
+            {
+                "geom": name,
+                "body": m.body(m.geom_bodyid[g]).name,
+                "load_n": round(e["load_n"], 4),
+                "friction_published": pub.get("friction"),
+                "condim_published": pub.get("condim"),
+                "friction_simulated": e["friction_simulated"],
+                "condim_simulated": e["condim_simulated"],
+            }
+        )
+    return out
+
+
+def _run(L: Loaded, st, tau_l: float, tau_r: float, signs) -> dict:
+    """One constant-torque test from the settled state ``st``: CoM forward speed and yaw rate series."""
+    m, d = L.model, L.data
+    _restore(L, st)
+    dl, dr = (m.jnt_dofadr[j] for j in L.wheels)
+    n = round(RUN_S / m.opt.timestep)
+    t = np.empty(n)
+    v = np.empty(n)
+    w = np.empty(n)
+    pitch = np.empty(n)
+    free_dof = m.jnt_dofadr[next(j for j in range(m.njnt) if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE)]
+    for k in range(n):
+        d.qfrc_applied[:] = 0
+        d.qfrc_applied[dl] = signs[0] * tau_l
+        d.qfrc_applied[dr] = signs[1] * tau_r
+        mujoco.mj_step(m, d)
+        mujoco.mj_subtreeVel(m, d)
+        R = d.xmat[L.base].reshape(3, 3)
+        h = R[:, 0].copy()
+        h[2] = 0.0
+        h /= np.linalg.norm(h)
+        t[k] = d.time
+        v[k] = float(d.subtree_linvel[L.root] @ h)
+        Rr = d.xmat[L.root].reshape(3, 3)
+        w[k] = float((Rr @ d.qvel[free_dof + 3 : free_dof + 6])[2])  # free joint: local angular velocity
+        pitch[k] = math.asin(max(-1.0, min(1.0, -R[2, 0])))
+    t -= t[0] - m.opt.timestep
+    return {"t": t, "v": v, "w": w, "pitch": pitch}
+
+
+def _slope(t: np.ndarray, y: np.ndarray) -> float:
+    sel = (t >= WINDOW_S[0]) & (t <= WINDOW_S[1])
+    return float(np.polyfit(t[sel], y[sel], 1)[0])
+
+
+def identify(L: Loaded, f: dict) -> dict:
+    """Settle, record the floor contacts, run the drive and turn tests at three levels; fit ``a_id, b_id``."""
+    m, d = L.model, L.data
+    mujoco.mj_resetData(m, d)
+    mujoco.mj_forward(m, d)
+    for _ in range(round(SETTLE_S / m.opt.timestep)):
+        mujoco.mj_step(m, d)
+    st = _state(L)
+    contacts = floor_contacts(L)
+    f_rest = formula(L)  # the configuration that runs (settled)
+    signs = _signs(L)
+    fl = float(np.mean([m.dof_frictionloss[m.jnt_dofadr[j]] for j in L.wheels]))
+    damp = float(np.mean([m.dof_damping[m.jnt_dofadr[j]] for j in L.wheels]))
+    a_f, b_f, l = f_rest["a_formula"], f_rest["b_formula"], f_rest["l_m"]
+    turn_max = min(max(ACCELS) / l, TURN_RATE_MAX / RUN_S)  # rad/s²
+    drive_t = [fl + acc / (2 * a_f) for acc in ACCELS]
+    turn_t = [fl + turn_max * k / len(ACCELS) / (2 * b_f) for k in range(1, len(ACCELS) + 1)]
+    acc_v, acc_w, pitch_amp = [], [], 0.0
+    for T in drive_t:
+        r = _run(L, st, T, T, signs)
+        acc_v.append(_slope(r["t"], r["v"]))
+        pitch_amp = max(pitch_amp, float(np.ptp(r["pitch"])))
+    for T in turn_t:
+        r = _run(L, st, -T, T, signs)
+        acc_w.append(_slope(r["t"], r["w"]))
+    tau_a = 2 * np.array(drive_t)
+    tau_b = 2 * np.array(turn_t)
+    a_id, c_v = np.polyfit(tau_a, acc_v, 1)
+    b_id, c_w = np.polyfit(tau_b, acc_w, 1)
+    return {
+        "floor_contacts": contacts,
+        "formula_settled": f_rest,
+        "a_identified": float(a_id),
+        "b_identified": float(b_id),
+        "deadband_tau_a_nm": float(-c_v / a_id) if a_id else None,
+        "deadband_tau_b_nm": float(-c_w / b_id) if b_id else None,
+        "test": {
+            "timestep_s": float(m.opt.timestep),
+            "integrator": mujoco.mjtIntegrator(m.opt.integrator).name,
+            "drive_torques_nm": drive_t,
+            "turn_torques_nm": turn_t,
+            "drive_accel_mps2": acc_v,
+            "turn_accel_radps2": acc_w,
+            "pitch_range_deg": math.degrees(pitch_amp),
+            "wheel_frictionloss_nm": fl,
+            "wheel_damping_nms": damp,
+        },
+    }
+
+
+def reference(robot: Robot) -> dict:
+    """The full reference record of one robot (what expectations.json holds per robot)."""
+    L = load(robot)
+    f0 = formula(L)
+    ident = identify(L, f0)
+    fs = ident.pop("formula_settled")
+    Lp = load(robot, point_wheels=False)
+    ident_p = identify(Lp, formula(Lp))
+    fp = ident_p.pop("formula_settled")
+    published_wheels = {
+        "a_identified": ident_p["a_identified"],
+        "b_identified": ident_p["b_identified"],
+        "relative_error": {
+            "a": ident_p["a_identified"] / fp["a_formula"] - 1,
+            "b": ident_p["b_identified"] / fp["b_formula"] - 1,
+        },
+        "floor_contacts": ident_p["floor_contacts"],
+    }
+    ea = ident["a_identified"] / fs["a_formula"] - 1
+    eb = ident["b_identified"] / fs["b_formula"] - 1
+    notes = list(L.notes)
+    for k in ("a_formula", "b_formula"):
+        if abs(fs[k] / f0[k] - 1) > 1e-3:
+            notes.append(f"{k} at rest differs from qpos0 by {100 * (fs[k] / f0[k] - 1):+.2f} %")
+    if fs["welded_to_wheels"]:
+        notes.append(f"bodies welded to the wheels (in I_w): {fs['welded_to_wheels']}")
+    if abs(fs["wheel_radius_lr_m"][0] - fs["wheel_radius_lr_m"][1]) > 1e-6:
+        notes.append(f"left/right wheel radii differ: {fs['wheel_radius_lr_m']} m (mean used)")
+    if abs(fs["wheel_inertia_lr_kgm2"][0] - fs["wheel_inertia_lr_kgm2"][1]) > 1e-12:
+        notes.append(f"left/right wheel inertia differ: {fs['wheel_inertia_lr_kgm2']} (mean used)")
+    wheel_bodies = [L.model.jnt_bodyid[L.model.joint(j).id] for j in (robot.left, robot.right, *robot.other_wheels)]
+    wheel_geoms = {L.model.geom(g).name for g in range(L.model.ngeom) if L.model.geom_bodyid[g] in wheel_bodies}
+    other = [c for c in ident["floor_contacts"] if c["geom"] not in wheel_geoms]
+    braking = [c for c in other if c["friction_simulated"] >= FRICTIONLESS and c["load_n"] > 1e-3]
+    if braking:
+        notes.append(
+            "non-driven geoms with friction carry load at rest (they brake): "
+            + ", ".join(f"{c['geom']} {c['load_n']:.3g} N μ {c['friction_simulated']:g}" for c in braking)
+        )
+    agree = abs(ea) <= AGREE and abs(eb) <= AGREE
+    cause = ""
+    if not agree:
+        if robot.kind == "skid-steer":
+            cause = "skid-steer: the free-rolling wheels resist turning by lateral slip"
+        elif braking:
+            cause = "braking contact: " + ", ".join(c["geom"] for c in braking)
+        else:
+            cause = "unexplained"
+    return {
+        "name": robot.name,
+        "maker": robot.maker,
+        "collection": robot.collection,
+        "format": robot.format,
+        "file": robot.file,
+        "source": robot.source,
+        "license": robot.license,
+        "kind": robot.kind,
+        "mapping": {"base": robot.base, "left_wheel": robot.left, "right_wheel": robot.right},
+        "packages": robot.packages,
+        "mass_kg": fs["mass_kg"],
+        "yaw_inertia_kgm2": fs["yaw_inertia_kgm2"],
+        "wheel_inertia_kgm2": fs["wheel_inertia_kgm2"],
+        "r_m": fs["r_m"],
+        "l_m": fs["l_m"],
+        "com_from_axle_m": fs["com_from_axle_m"],
+        "a_formula": fs["a_formula"],
+        "b_formula": fs["b_formula"],
+        "a_formula_qpos0": f0["a_formula"],
+        "b_formula_qpos0": f0["b_formula"],
+        "a_identified": ident["a_identified"],
+        "b_identified": ident["b_identified"],
+        "relative_error": {"a": ea, "b": eb},
+        "agrees_within_5pct": agree,
+        "disagreement_cause": cause,
+        "deadband_tau_a_nm": ident["deadband_tau_a_nm"],
+        "deadband_tau_b_nm": ident["deadband_tau_b_nm"],
+        "floor_contacts": ident["floor_contacts"],
+        "test": ident["test"],
+        "published_wheel_shapes": published_wheels,
+        "notes": notes,
+        "expected_verdict": robot.expected_verdict,
+        "expected_cause": robot.expected_cause,
+    }
+
+
+def _round(x):
+    if isinstance(x, float):
+        return float(f"{x:.6g}")
+    if isinstance(x, dict):
+        return {k: _round(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_round(v) for v in x]
+    return x
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--write", action="store_true", help=f"write {EXPECTATIONS.name}")
+    p.add_argument("--robot", action="append", help="only this robot (repeatable)")
+    args = p.parse_args(argv)
+    robots = [r for r in ROBOTS if not args.robot or r.name in args.robot]
+    if args.robot and len(robots) != len(args.robot):
+        print(f"error: unknown robot in {args.robot}; known: {[r.name for r in ROBOTS]}", file=sys.stderr)
+        return 2
+    out = {}
+    for r in robots:
+        rec = _round(reference(r))
+        out[r.name] = rec
+        print(
+            f"{r.name:24s} m {rec['mass_kg']:8.3f} kg  a {rec['a_formula']:.5g} id {rec['a_identified']:.5g} "
+            f"({100 * rec['relative_error']['a']:+.2f} %)  b {rec['b_formula']:.5g} id {rec['b_identified']:.5g} "
+            f"({100 * rec['relative_error']['b']:+.2f} %)  {rec['disagreement_cause']}"
+        )
+        pw = rec["published_wheel_shapes"]["relative_error"]
+        print(f"    published wheel shapes: a {100 * pw['a']:+.2f} %  b {100 * pw['b']:+.2f} %")
+        for c in rec["floor_contacts"]:
+            print(
+                f"    {c['geom']:32s} {c['body']:24s} {c['load_n']:9.4f} N  μ pub {c['friction_published']} "
+                f"sim {c['friction_simulated']:g} condim {c['condim_simulated']}"
+            )
+        for n in rec["notes"]:
+            print("    note:", n)
+    if args.write:
+        if args.robot:
+            old = json.loads(EXPECTATIONS.read_text()) if EXPECTATIONS.exists() else {}
+            old.update(out)
+            out = {r.name: old[r.name] for r in ROBOTS if r.name in old}
+        tmp = EXPECTATIONS.with_suffix(".json.tmp")
+        tmp.write_text(json.dumps(out, indent=1, ensure_ascii=False) + "\n")
+        tmp.replace(EXPECTATIONS)
+        print(f"wrote {EXPECTATIONS}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
