@@ -82,110 +82,189 @@ class Robot:
     kind: str = "differential"  # or "skid-steer"
     other_wheels: tuple[str, ...] = ()  # further wheel joints left free to roll (skid-steer)
     packages: dict = field(default_factory=dict)  # package name -> folder (relative to tests/zoo)
+    tau_max: float = 0.0  # N·m per wheel: the motor limit a user maps (the description has none usable)
+    tau_max_source: str = ""
     expected_verdict: str = "pass"
     expected_cause: str = ""
 
 
+_MENAGERIE_TB3 = (
+    "https://github.com/ROBOTIS-GIT/robotis_mujoco_menagerie/blob/d8344c0dbe7a00208d0301111523dde65efc174a/"
+)
+_TB3 = "https://github.com/ROBOTIS-GIT/turtlebot3/blob/"
+
 ROBOTS: tuple[Robot, ...] = (
     Robot(
-        "robotis_tb3_burger",
-        "robotis_tb3_burger/turtlebot3_burger.xml",
-        "mjcf",
-        "ROBOTIS",
-        "ROBOTIS-GIT/robotis_mujoco_menagerie",
-        "https://github.com/ROBOTIS-GIT/robotis_mujoco_menagerie/blob/d8344c0dbe7a00208d0301111523dde65efc174a/robotis_tb3/turtlebot3_burger.xml",
-        "Apache-2.0",
-        "base",
-        "wheel_left",
-        "wheel_right",
+        name="robotis_tb3_burger",
+        file="robotis_tb3_burger/turtlebot3_burger.xml",
+        format="mjcf",
+        maker="ROBOTIS",
+        collection="ROBOTIS-GIT/robotis_mujoco_menagerie",
+        source=_MENAGERIE_TB3 + "robotis_tb3/turtlebot3_burger.xml",
+        license="Apache-2.0",
+        base="base",
+        left="wheel_left",
+        right="wheel_right",
+        tau_max=1.4,
+        tau_max_source="Dynamixel XL430-W250 stall torque, 11.1 V (ROBOTIS e-Manual); the MJCF has velocity servos",
         expected_verdict="warn",
         expected_cause=(
-            "wheel frictionloss 0.1 N·m (dead band 0.2 N·m on τ_a) and armature 0.01 kg·m² (≈ 10 m r²: most "
-            "torque spins the rotor); the caster is frictionless (friction 1e-4, condim 1) and must stay so"
+            "rolls as the formula says once its caster stays frictionless as published (friction 1e-4, condim 1); "
+            "caveats: centre of mass 30 mm behind the axle, wheel frictionloss 0.1 N·m (a dead band of 0.2 N·m "
+            "on τ_a), armature 0.01 kg·m² (≈ 9 m r²: most of the torque spins the rotor, so the traction limit "
+            "is μ N/(m a) ≈ 2 N·m per wheel, not μ N r)"
         ),
     ),
     Robot(
-        "robotis_tb3_waffle_pi",
-        "robotis_tb3_waffle_pi/turtlebot3_waffle_pi.xml",
-        "mjcf",
-        "ROBOTIS",
-        "ROBOTIS-GIT/robotis_mujoco_menagerie",
-        "https://github.com/ROBOTIS-GIT/robotis_mujoco_menagerie/blob/d8344c0dbe7a00208d0301111523dde65efc174a/robotis_tb3/turtlebot3_waffle_pi.xml",
-        "Apache-2.0",
-        "base",
-        "wheel_left",
-        "wheel_right",
+        name="robotis_tb3_waffle_pi",
+        file="robotis_tb3_waffle_pi/turtlebot3_waffle_pi.xml",
+        format="mjcf",
+        maker="ROBOTIS",
+        collection="ROBOTIS-GIT/robotis_mujoco_menagerie",
+        source=_MENAGERIE_TB3 + "robotis_tb3/turtlebot3_waffle_pi.xml",
+        license="Apache-2.0",
+        base="base",
+        left="wheel_left",
+        right="wheel_right",
+        tau_max=3.0,
+        tau_max_source="Dynamixel XM430-W210 stall torque, 12 V (ROBOTIS e-Manual); the MJCF has velocity servos only",
         expected_verdict="warn",
         expected_cause=(
-            "wheel frictionloss 0.1 N·m (dead band) and armature 0.01 kg·m²; centre of mass 64 mm behind the "
-            "axle (on two frictionless casters, friction 1e-4, condim 1, which must stay frictionless)"
+            "rolls as the formula says on its two frictionless casters (friction 1e-4, condim 1); caveats: centre "
+            "of mass 62 mm behind the axle, dead band 0.2 N·m, motor limit 3 N·m above the traction limit "
+            "μ N/(m a) ≈ 2.1 N·m"
         ),
     ),
     Robot(
-        "tb3_burger_urdf",
-        "tb3_burger_urdf/turtlebot3_burger.urdf",
-        "urdf",
-        "ROBOTIS",
-        "ROBOTIS-GIT/turtlebot3 (turtlebot3_description)",
-        "https://github.com/ROBOTIS-GIT/turtlebot3/blob/754a9ddd937667839d7c38e88ca08ee0d93c08a8/turtlebot3_description/urdf/turtlebot3_burger.urdf",
-        "Apache-2.0",
-        "base_footprint",
-        "wheel_left_joint",
-        "wheel_right_joint",
+        name="tb3_burger_urdf",
+        file="tb3_burger_urdf/turtlebot3_burger.urdf",
+        format="urdf",
+        maker="ROBOTIS",
+        collection="ROBOTIS-GIT/turtlebot3 (turtlebot3_description)",
+        source=_TB3 + "754a9ddd937667839d7c38e88ca08ee0d93c08a8/turtlebot3_description/urdf/turtlebot3_burger.urdf",
+        license="Apache-2.0",
+        base="base_footprint",
+        left="wheel_left_joint",
+        right="wheel_right_joint",
+        tau_max=1.4,
+        tau_max_source="Dynamixel XL430-W250 stall torque (ROBOTIS e-Manual); the URDF has no effort limit",
+        expected_verdict="fail",
+        expected_cause=(
+            "braking caster: the caster is a box link 'caster_back_link' with no friction given (no <gazebo> mu, "
+            "so μ 1) carrying 0.41 N at rest: it drags the robot (a 61 % low) and keeps it from turning"
+        ),
     ),
     Robot(
-        "tb3_waffle_pi_urdf",
-        "tb3_waffle_pi_urdf/turtlebot3_waffle_pi.urdf",
-        "urdf",
-        "ROBOTIS",
-        "ROBOTIS-GIT/turtlebot3 (turtlebot3_description)",
-        "https://github.com/ROBOTIS-GIT/turtlebot3/blob/fd74967cd79cd40cc23d2ae907adda93ea92cece/turtlebot3_description/urdf/turtlebot3_waffle_pi.urdf",
-        "Apache-2.0",
-        "base_footprint",
-        "wheel_left_joint",
-        "wheel_right_joint",
+        name="tb3_waffle_pi_urdf",
+        file="tb3_waffle_pi_urdf/turtlebot3_waffle_pi.urdf",
+        format="urdf",
+        maker="ROBOTIS",
+        collection="ROBOTIS-GIT/turtlebot3 (turtlebot3_description)",
+        source=_TB3 + "fd74967cd79cd40cc23d2ae907adda93ea92cece/turtlebot3_description/urdf/turtlebot3_waffle_pi.urdf",
+        license="Apache-2.0",
+        base="base_footprint",
+        left="wheel_left_joint",
+        right="wheel_right_joint",
+        tau_max=3.0,
+        tau_max_source="Dynamixel XM430-W210 stall torque (ROBOTIS e-Manual); the URDF has no effort limit",
+        expected_verdict="fail",
+        expected_cause=(
+            "braking casters: boxes 'caster_back_left_link', 'caster_back_right_link' with no friction given (μ 1) "
+            "carry 0.46 N together: a 32 % low, no turning"
+        ),
     ),
     Robot(
-        "kobuki_urdf",
-        "kobuki_urdf/kobuki_standalone.urdf",
-        "urdf",
-        "Yujin Robot",
-        "yujinrobot/kobuki (kobuki_description)",
-        "https://github.com/yujinrobot/kobuki/blob/4f7f1beea87a970519f8d842be0eb40f0d5cde68/kobuki_description/urdf/kobuki_standalone.urdf.xacro",
-        "BSD",
-        "base_footprint",
-        "wheel_left_joint",
-        "wheel_right_joint",
+        name="kobuki_urdf",
+        file="kobuki_urdf/kobuki_standalone.urdf",
+        format="urdf",
+        maker="Yujin Robot",
+        collection="yujinrobot/kobuki (kobuki_description)",
+        source="https://github.com/yujinrobot/kobuki/blob/4f7f1beea87a970519f8d842be0eb40f0d5cde68/"
+        "kobuki_description/urdf/kobuki_standalone.urdf.xacro",
+        license="BSD",
+        base="base_footprint",
+        left="wheel_left_joint",
+        right="wheel_right_joint",
+        tau_max=1.0,
+        tau_max_source="<torque>1.0</torque> of the gazebo_ros_kobuki plugin in the published URDF (as expanded)",
+        expected_verdict="warn",
+        expected_cause=(
+            "rolls as the formula says once its casters keep the Gazebo mu1 = 0 as published; caveats: motor limit "
+            "1 N·m (the Gazebo plugin's torque) above the traction limit μ N/(m a) ≈ 0.64 N·m, and full torque "
+            "(14 m/s²) beyond the 9.7 m/s² that lifts the front caster (centre of mass 10 mm high, 10 mm ahead "
+            "of the axle, as published); the published wheel inertia 0.001 kg·m² (≈ 80 m r² of its 0.01 kg "
+            "wheel) is 40 % of a's denominator"
+        ),
     ),
     Robot(
-        "create3_urdf",
-        "create3_urdf/create3.urdf",
-        "urdf",
-        "iRobot",
-        "iRobotEducation/create3_sim (irobot_create_description)",
-        "https://github.com/iRobotEducation/create3_sim/blob/7df657e1c0dbc7a618e7f12d382dc1676040855a/irobot_create_common/irobot_create_description/urdf/create3.urdf.xacro",
-        "BSD-3-Clause",
-        "base_link",
-        "left_wheel_joint",
-        "right_wheel_joint",
+        name="create3_urdf",
+        file="create3_urdf/create3.urdf",
+        format="urdf",
+        maker="iRobot",
+        collection="iRobotEducation/create3_sim (irobot_create_description)",
+        source="https://github.com/iRobotEducation/create3_sim/blob/7df657e1c0dbc7a618e7f12d382dc1676040855a/"
+        "irobot_create_common/irobot_create_description/urdf/create3.urdf.xacro",
+        license="BSD-3-Clause",
+        base="base_link",
+        left="left_wheel_joint",
+        right="right_wheel_joint",
         packages={"irobot_create_description": "create3_urdf/irobot_create_description"},
+        tau_max=0.05,
+        tau_max_source=(
+            "our choice (the description publishes none): full torque accelerates at 0.86 m/s², below the margin "
+            "1.1 m/s² at which accelerating lifts the front caster (centre of mass 7 mm ahead of the axle)"
+        ),
+        expected_verdict="warn",
+        expected_cause=(
+            "caster 'front_caster_link' with Gazebo mu1 = 0.1 as published carries 1.7 N (6 % of the weight): a "
+            "drag of 0.17 N whose share changes with the load transfer, identification +5.5 % on a; wheel-drop "
+            "joints locked at qpos0; the wheels sit inside the chassis cylinder (self-contacts off, URDF convention)"
+        ),
     ),
     Robot(
-        "husky_urdf",
-        "husky_urdf/husky.urdf",
-        "urdf",
-        "Clearpath Robotics",
-        "husky/husky (husky_description)",
-        "https://github.com/husky/husky/blob/dff7c81a277e916d6169f118ab33809b429d0acf/husky_description/urdf/husky.urdf.xacro",
-        "BSD-3-Clause",
-        "base_link",
-        "front_left_wheel",
-        "front_right_wheel",
+        name="husky_urdf",
+        file="husky_urdf/husky.urdf",
+        format="urdf",
+        maker="Clearpath Robotics",
+        collection="husky/husky (husky_description)",
+        source="https://github.com/husky/husky/blob/dff7c81a277e916d6169f118ab33809b429d0acf/"
+        "husky_description/urdf/husky.urdf.xacro",
+        license="BSD-3-Clause",
+        base="base_link",
+        left="front_left_wheel",
+        right="front_right_wheel",
         kind="skid-steer",
         other_wheels=("rear_left_wheel", "rear_right_wheel"),
         packages={"husky_description": "husky_urdf/husky_description"},
+        tau_max=20.0,
+        tau_max_source="our choice (the URDF's transmissions give none)",
         expected_verdict="fail",
-        expected_cause="skid-steer: four fixed wheels on the floor; turning needs lateral wheel slip (refused)",
+        expected_cause=(
+            "skid-steer: four fixed wheels on the floor, turning needs lateral wheel slip (it does not turn at the "
+            "test torques): not the paper's differential drive, refused"
+        ),
+    ),
+    Robot(
+        name="diffbot_urdf",
+        file="diffbot_urdf/diffbot.urdf",
+        format="urdf",
+        maker="ros-controls",
+        collection="ros-controls/ros2_control_demos (example_2 DiffBot)",
+        source="https://github.com/ros-controls/ros2_control_demos/blob/0d9df42ab19bc3f8f53b04f8d43ae7ae9857cd64/"
+        "example_2/description/urdf/diffbot.urdf.xacro",
+        license="Apache-2.0",
+        base="base_link",
+        # the joint named 'left_wheel_joint' sits at y = -0.05 (the right-hand side, x forward): mapped by position
+        left="right_wheel_joint",
+        right="left_wheel_joint",
+        tau_max=0.05,
+        tau_max_source="our choice (the URDF's effort limit 100 N·m is a placeholder)",
+        expected_verdict="fail",
+        expected_cause=(
+            "wheel damping 0.2 N·m·s/rad: a drag rate 2 a c/r ≈ 1500 1/s (time constant < 1 ms), the robot "
+            "moves at the speed the damping allows, not as υ̇ = a τ; two sphere casters with friction 1 (no "
+            "<gazebo> mu) level with the wheels carry load and brake"
+        ),
     ),
 )
 
@@ -523,9 +602,16 @@ def floor_contacts(L: Loaded) -> list[dict]:
         g = c.geom2 if c.geom1 == L.floor else c.geom1
         mujoco.mj_contactForce(m, d, i, f6)
         e = agg.setdefault(
-            int(g), {"load_n": 0.0, "friction_simulated": float(c.friction[0]), "condim_simulated": int(c.dim)}
+            int(g),
+            {
+                "load_n": 0.0,
+                "pos": np.zeros(3),
+                "friction_simulated": float(c.friction[0]),
+                "condim_simulated": int(c.dim),
+            },
         )
         e["load_n"] += float(f6[0])
+        e["pos"] += float(f6[0]) * c.pos
     out = []
     for g, e in sorted(agg.items()):
         name = m.geom(g).name
@@ -539,9 +625,55 @@ def floor_contacts(L: Loaded) -> list[dict]:
                 "condim_published": pub.get("condim"),
                 "friction_simulated": e["friction_simulated"],
                 "condim_simulated": e["condim_simulated"],
+                "pos_m": [float(x) for x in e["pos"] / max(e["load_n"], 1e-12)],
             }
         )
     return out
+
+
+def statics(L: Loaded, f: dict, contacts: list[dict], wheel_geoms: set[str], tau_max: float) -> dict:
+    """Traction and tip-over from the contacts at rest (all in the base heading frame, from the axle midpoint).
+
+    Traction: with both wheels at ``τ``, ``υ̇ = 2 a τ`` and each driven wheel pushes ``≈ m a τ`` on the
+    floor (the rest of the torque spins the rotor), so it skids above ``τ_skid = μ N / (m a)`` for its
+    load ``N``. Tip-over: accelerating at ``υ̇`` tips the chassis about its rearmost support once
+    ``υ̇ > g (c_x − x_rear)/h``, braking about the foremost once ``υ̇ > g (x_front − c_x)/h``, turning
+    sideways once ``υω > g min(y_left − c_y, c_y − y_right)/h`` (``c`` the centre of mass, ``h`` its height).
+    """
+    m, d = L.model, L.data
+    g = 9.81
+    R = d.xmat[L.base].reshape(3, 3)
+    hx = R[:, 0].copy()
+    hx[2] = 0
+    hx /= np.linalg.norm(hx)
+    hy = np.cross([0.0, 0.0, 1.0], hx)
+    mid = d.xanchor[list(L.wheels)].mean(axis=0)
+    bodies = _subtree(m, L.root)
+    com = (m.body_mass[bodies, None] * d.xipos[bodies]).sum(axis=0) / m.body_mass[bodies].sum()
+    cx, cy, h = float((com - mid) @ hx), float((com - mid) @ hy), float(com[2])
+    pts = [np.array(c["pos_m"]) - mid for c in contacts if c["load_n"] > 1e-6]
+    xs = [float(p @ hx) for p in pts]
+    ys = [float(p @ hy) for p in pts]
+    wheel = [c for c in contacts if c["geom"] in wheel_geoms]
+    n_min = min((c["load_n"] for c in wheel), default=0.0)
+    mu = min((c["friction_simulated"] for c in wheel), default=0.0)
+    tau_skid = mu * n_min / (f["mass_kg"] * f["a_formula"]) if wheel else 0.0
+    weight = f["mass_kg"] * g
+    return {
+        "com_height_m": h,
+        "support_x_m": [min(xs), max(xs)],
+        "support_y_m": [min(ys), max(ys)],
+        "tip_accel_mps2": {
+            "forward": g * (cx - min(xs)) / h,
+            "backward": g * (max(xs) - cx) / h,
+            "lateral": g * min(max(ys) - cy, cy - min(ys)) / h,
+        },
+        "weight_on_driven_wheels": sum(c["load_n"] for c in wheel) / weight,
+        "traction_torque_nm": tau_skid,
+        "traction_torque_naive_nm": mu * n_min * f["r_m"],
+        "tau_max_nm": tau_max,
+        "full_torque_accel_mps2": 2 * tau_max * f["a_formula"],
+    }
 
 
 def _run(L: Loaded, st, tau_l: float, tau_r: float, signs) -> dict:
@@ -555,6 +687,12 @@ def _run(L: Loaded, st, tau_l: float, tau_r: float, signs) -> dict:
     w = np.empty(n)
     pitch = np.empty(n)
     free_dof = m.jnt_dofadr[next(j for j in range(m.njnt) if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE)]
+    mujoco.mj_subtreeVel(m, d)
+    h0 = d.xmat[L.base].reshape(3, 3)[:, 0].copy()
+    h0[2] = 0.0
+    h0 /= np.linalg.norm(h0)
+    v0 = float(d.subtree_linvel[L.root] @ h0)
+    w0 = float((d.xmat[L.root].reshape(3, 3) @ d.qvel[free_dof + 3 : free_dof + 6])[2])
     for k in range(n):
         d.qfrc_applied[:] = 0
         d.qfrc_applied[dl] = signs[0] * tau_l
@@ -571,12 +709,22 @@ def _run(L: Loaded, st, tau_l: float, tau_r: float, signs) -> dict:
         w[k] = float((Rr @ d.qvel[free_dof + 3 : free_dof + 6])[2])  # free joint: local angular velocity
         pitch[k] = math.asin(max(-1.0, min(1.0, -R[2, 0])))
     t -= t[0] - m.opt.timestep
-    return {"t": t, "v": v, "w": w, "pitch": pitch}
+    return {"t": t, "v": v, "w": w, "pitch": pitch, "v0": v0, "w0": w0}
 
 
-def _slope(t: np.ndarray, y: np.ndarray) -> float:
-    sel = (t >= WINDOW_S[0]) & (t <= WINDOW_S[1])
-    return float(np.polyfit(t[sel], y[sel], 1)[0])
+def _rate(t: np.ndarray, y: np.ndarray, y0: float, damped: bool) -> tuple[float, float]:
+    """``(α, β)`` of ``ẏ = α + β y``: without wheel damping ``β = 0`` and ``α`` is the slope of ``y(t)`` over
+    WINDOW_S; with damping (a drag that settles within milliseconds) a least-squares fit of the forward
+    differences against the new value (MuJoCo integrates joint damping implicitly) over the whole test."""
+    if not damped:
+        sel = (t >= WINDOW_S[0]) & (t <= WINDOW_S[1])
+        return float(np.polyfit(t[sel], y[sel], 1)[0]), 0.0
+    yy = np.concatenate([[y0], y])
+    dt = float(t[1] - t[0])
+    rate = np.diff(yy) / dt
+    A = np.column_stack([np.ones(len(y)), y])
+    (alpha, beta), *_ = np.linalg.lstsq(A, rate, rcond=None)
+    return float(alpha), float(beta)
 
 
 def identify(L: Loaded, f: dict) -> dict:
@@ -596,18 +744,27 @@ def identify(L: Loaded, f: dict) -> dict:
     turn_max = min(max(ACCELS) / l, TURN_RATE_MAX / RUN_S)  # rad/s²
     drive_t = [fl + acc / (2 * a_f) for acc in ACCELS]
     turn_t = [fl + turn_max * k / len(ACCELS) / (2 * b_f) for k in range(1, len(ACCELS) + 1)]
-    acc_v, acc_w, pitch_amp = [], [], 0.0
+    acc_v, acc_w, drag_v, drag_w, pitch_amp = [], [], [], [], 0.0
+    # a drag that settles within the test is fitted as ẏ = α + β y; one that settles within a few steps
+    # (k dt > 0.2) leaves nothing to fit at these torques: the speed is the damping's, the cause is named
+    k_est = 2 * a_f * damp / f_rest["r_m"]
+    damped = damp > 0 and k_est * m.opt.timestep < 0.2
     for T in drive_t:
         r = _run(L, st, T, T, signs)
-        acc_v.append(_slope(r["t"], r["v"]))
+        alpha, beta = _rate(r["t"], r["v"], r["v0"], damped)
+        acc_v.append(alpha)
+        drag_v.append(-beta)
         pitch_amp = max(pitch_amp, float(np.ptp(r["pitch"])))
     for T in turn_t:
         r = _run(L, st, -T, T, signs)
-        acc_w.append(_slope(r["t"], r["w"]))
+        alpha, beta = _rate(r["t"], r["w"], r["w0"], damped)
+        acc_w.append(alpha)
+        drag_w.append(-beta)
     tau_a = 2 * np.array(drive_t)
     tau_b = 2 * np.array(turn_t)
     a_id, c_v = np.polyfit(tau_a, acc_v, 1)
     b_id, c_w = np.polyfit(tau_b, acc_w, 1)
+    _restore(L, st)  # leave the robot at rest where it settled (statics() reads it)
     return {
         "floor_contacts": contacts,
         "formula_settled": f_rest,
@@ -625,6 +782,7 @@ def identify(L: Loaded, f: dict) -> dict:
             "pitch_range_deg": math.degrees(pitch_amp),
             "wheel_frictionloss_nm": fl,
             "wheel_damping_nms": damp,
+            "drag_rate_identified_per_s": [float(np.mean(drag_v)), float(np.mean(drag_w))] if damped else None,
         },
     }
 
@@ -668,15 +826,26 @@ def reference(robot: Robot) -> dict:
             "non-driven geoms with friction carry load at rest (they brake): "
             + ", ".join(f"{c['geom']} {c['load_n']:.3g} N μ {c['friction_simulated']:g}" for c in braking)
         )
+    st = statics(L, fs, ident["floor_contacts"], wheel_geoms, robot.tau_max)
+    damp = ident["test"]["wheel_damping_nms"]
+    if damp:
+        k = 2 * fs["a_formula"] * damp / fs["r_m"]
+        notes.append(f"wheel damping {damp:g} N·m·s/rad: drag rate 2 a c/r = {k:.3g} 1/s (time constant {1 / k:.3g} s)")
+    if st["tau_max_nm"] > st["traction_torque_nm"]:
+        notes.append(
+            f"motor limit {robot.tau_max:g} N·m above the traction limit μ N/(m a) = {st['traction_torque_nm']:.3g} N·m"
+        )
     agree = abs(ea) <= AGREE and abs(eb) <= AGREE
     cause = ""
     if not agree:
+        causes = []
         if robot.kind == "skid-steer":
-            cause = "skid-steer: the free-rolling wheels resist turning by lateral slip"
-        elif braking:
-            cause = "braking contact: " + ", ".join(c["geom"] for c in braking)
-        else:
-            cause = "unexplained"
+            causes.append("skid-steer: the free-rolling wheels resist turning by lateral slip")
+        if braking:
+            causes.append("braking contact: " + ", ".join(c["geom"] for c in braking))
+        if damp and 2 * fs["a_formula"] * damp / fs["r_m"] * RUN_S > 0.1:
+            causes.append("wheel damping")
+        cause = "; ".join(causes) or "unexplained"
     return {
         "name": robot.name,
         "maker": robot.maker,
@@ -706,6 +875,8 @@ def reference(robot: Robot) -> dict:
         "deadband_tau_a_nm": ident["deadband_tau_a_nm"],
         "deadband_tau_b_nm": ident["deadband_tau_b_nm"],
         "floor_contacts": ident["floor_contacts"],
+        "statics": st,
+        "tau_max_source": robot.tau_max_source,
         "test": ident["test"],
         "published_wheel_shapes": published_wheels,
         "notes": notes,
