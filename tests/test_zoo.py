@@ -119,6 +119,15 @@ def test_reference_identification_agrees_with_formula_or_names_the_cause(name, l
         assert err > reference.AGREE, rec["relative_error"]
         assert rec["disagreement_cause"] not in ("", "unexplained")
         assert rec["disagreement_cause"] == EXPECT[name]["disagreement_cause"]
+        cause = rec["disagreement_cause"]
+        if cause.startswith("braking contact") and ";" not in cause:
+            # the named contacts are the whole story: frictionless, the robot rolls as the formula says
+            cf = rec["braking_geoms_frictionless"]["relative_error"]
+            assert max(abs(cf["a"]), abs(cf["b"])) <= reference.AGREE, cf
+        if cause.startswith("skid-steer"):
+            # driving straight it rolls, all four wheels spinning; turning needs lateral slip: it does not turn
+            assert abs(rec["all_wheels"]["relative_error_a"]) <= reference.AGREE
+            assert abs(rec["b_identified"]) < 0.05 * rec["b_formula"]
 
 
 @pytest.mark.parametrize("name", NAMES)

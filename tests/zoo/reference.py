@@ -376,11 +376,12 @@ def _point_wheels(spec: mujoco.MjSpec, joints, notes: list, published: dict) -> 
     notes.append(f"wheels {list(joints)} touch the floor through one sphere each (point contact)")
 
 
-def load(robot: Robot, point_wheels: bool = True) -> Loaded:
+def load(robot: Robot, point_wheels: bool = True, frictionless: tuple[str, ...] = ()) -> Loaded:
     """Compose ``robot`` on our floor (steps 1–3 of the module docstring) and place it on the floor.
 
     ``point_wheels``: the wheels touch the floor through one point each (:func:`_point_wheels`);
-    False keeps their published collision shapes.
+    False keeps their published collision shapes. ``frictionless``: geoms made frictionless (condim 1,
+    priority 1) — the counterfactual that checks a braking contact is the cause.
     """
     notes: list[str] = []
     published: dict = {}
@@ -439,6 +440,12 @@ def load(robot: Robot, point_wheels: bool = True) -> Loaded:
         spec.delete(j)
     if locked:
         notes.append(f"non-wheel joints welded at qpos0: {locked}")
+    for name in frictionless:
+        g = spec.geom(name)
+        g.friction = [0.0, 0.0, 0.0]
+        g.condim, g.priority = 1, 1
+    if frictionless:
+        notes.append(f"counterfactual: {list(frictionless)} made frictionless")
     if point_wheels:
         _point_wheels(spec, (robot.left, robot.right, *robot.other_wheels), notes, published)
     spec.worldbody.add_geom(
@@ -846,6 +853,37 @@ def reference(robot: Robot) -> dict:
         if damp and 2 * fs["a_formula"] * damp / fs["r_m"] * RUN_S > 0.1:
             causes.append("wheel damping")
         cause = "; ".join(causes) or "unexplained"
+    all_wheels = None
+    if robot.other_wheels:  # the free-rolling wheels spin too: their inertia belongs in M_eff when driving straight
+        m_ = L.model
+        extra = 0.0
+        for jn in robot.other_wheels:
+            j = m_.joint(jn).id
+            wb = m_.jnt_bodyid[j]
+            ax = L.data.xaxis[j]
+            for b in _welded(m_, wb):
+                n = L.data.ximat[b].reshape(3, 3).T @ ax
+                extra += float(n @ (m_.body_inertia[b] * n))
+            extra += float(m_.dof_armature[m_.jnt_dofadr[j]])
+        r_ = fs["r_m"]
+        a_all = 1.0 / (fs["mass_kg"] * r_ + (2 * fs["wheel_inertia_kgm2"] + extra) / r_)
+        all_wheels = {"a_formula": a_all, "relative_error_a": ident["a_identified"] / a_all - 1}
+        notes.append(
+            f"with the {len(robot.other_wheels)} free wheels' spin inertia in M_eff, a = {a_all:.4g}: identified "
+            f"{100 * all_wheels['relative_error_a']:+.2f} %"
+        )
+    counterfactual = None
+    if braking:  # the same tests with the braking geoms frictionless: is the named contact the cause?
+        Lc = load(robot, frictionless=tuple(c["geom"] for c in braking))
+        ident_c = identify(Lc, formula(Lc))
+        fc = ident_c.pop("formula_settled")
+        counterfactual = {
+            "frictionless": [c["geom"] for c in braking],
+            "relative_error": {
+                "a": ident_c["a_identified"] / fc["a_formula"] - 1,
+                "b": ident_c["b_identified"] / fc["b_formula"] - 1,
+            },
+        }
     return {
         "name": robot.name,
         "maker": robot.maker,
@@ -879,6 +917,8 @@ def reference(robot: Robot) -> dict:
         "tau_max_source": robot.tau_max_source,
         "test": ident["test"],
         "published_wheel_shapes": published_wheels,
+        "braking_geoms_frictionless": counterfactual,
+        "all_wheels": all_wheels,
         "notes": notes,
         "expected_verdict": robot.expected_verdict,
         "expected_cause": robot.expected_cause,
@@ -915,6 +955,9 @@ def main(argv: list[str] | None = None) -> int:
         )
         pw = rec["published_wheel_shapes"]["relative_error"]
         print(f"    published wheel shapes: a {100 * pw['a']:+.2f} %  b {100 * pw['b']:+.2f} %")
+        if rec["braking_geoms_frictionless"]:
+            cf = rec["braking_geoms_frictionless"]["relative_error"]
+            print(f"    braking geoms frictionless: a {100 * cf['a']:+.2f} %  b {100 * cf['b']:+.2f} %")
         for c in rec["floor_contacts"]:
             print(
                 f"    {c['geom']:32s} {c['body']:24s} {c['load_n']:9.4f} N  μ pub {c['friction_published']} "
