@@ -124,6 +124,10 @@ def test_reference_identification_agrees_with_formula_or_names_the_cause(name, l
             # the named contacts are the whole story: frictionless, the robot rolls as the formula says
             cf = rec["braking_geoms_frictionless"]["relative_error"]
             assert max(abs(cf["a"]), abs(cf["b"])) <= reference.AGREE, cf
+        if rec["named_causes_removed"] is not None:
+            # damping / frictionloss named: with them (and any braking contact) removed it rolls as the formula says
+            cf = rec["named_causes_removed"]["relative_error"]
+            assert max(abs(cf["a"]), abs(cf["b"])) <= reference.AGREE, cf
         if cause.startswith("skid-steer"):
             # driving straight it rolls, all four wheels spinning; turning needs lateral slip: it does not turn
             assert abs(rec["all_wheels"]["relative_error_a"]) <= reference.AGREE

@@ -81,6 +81,7 @@ class Robot:
     right: str  # right wheel joint
     kind: str = "differential"  # or "skid-steer"
     other_wheels: tuple[str, ...] = ()  # further wheel joints left free to roll (skid-steer)
+    free_joints: tuple[str, ...] = ()  # passive joints left free (caster swivels and rollers), not welded
     packages: dict = field(default_factory=dict)  # package name -> folder (relative to tests/zoo)
     tau_max: float = 0.0  # N·m per wheel: the motor limit a user maps (the description has none usable)
     tau_max_source: str = ""
@@ -245,6 +246,34 @@ ROBOTS: tuple[Robot, ...] = (
         ),
     ),
     Robot(
+        name="pmb2_urdf",
+        file="pmb2_urdf/pmb2.urdf",
+        format="urdf",
+        maker="PAL Robotics",
+        collection="pal-robotics/pmb2_robot (pmb2_description)",
+        source="https://github.com/pal-robotics/pmb2_robot/blob/6fcda2695dee70efd3756ee4645b2190462e78ac/"
+        "pmb2_description/robots/pmb2.urdf.xacro",
+        license="Apache-2.0",
+        base="base_footprint",
+        left="wheel_left_joint",
+        right="wheel_right_joint",
+        free_joints=tuple(
+            f"caster_{corner}_{k}_joint"
+            for corner in ("front_right", "front_left", "back_right", "back_left")
+            for k in (1, 2)
+        ),
+        packages={"pmb2_description": "pmb2_urdf/pmb2_description"},
+        tau_max=6.0,
+        tau_max_source="the wheel joints' <limit effort='6.0'> (PAL's wheel_torque)",
+        expected_verdict="warn",
+        expected_cause=(
+            "rolls as the formula says on four passive casters (swivel and roller joints free; welded they brake: "
+            "spheres with Gazebo mu 1); caveats: wheel damping 1 N·m·s/rad (drag time constant ≈ 0.26 s) and "
+            "friction 2 N·m per wheel (a dead band of 4 N·m on τ_a, a third of the motors' 12 N·m); 10 kg "
+            "suspension links on ±5 mm prismatic joints (locked at qpos0)"
+        ),
+    ),
+    Robot(
         name="diffbot_urdf",
         file="diffbot_urdf/diffbot.urdf",
         format="urdf",
@@ -281,8 +310,10 @@ def _gazebo_friction(urdf_text: str) -> dict[str, tuple[float, float]]:
         if not ref:
             continue
         mus = []
-        for tag in ("mu1", "mu2"):
+        for tag, nested in (("mu1", "friction/ode/mu"), ("mu2", "friction/ode/mu2")):
             el = gz.find(tag)
+            if el is None:
+                el = gz.find(nested)  # SDF-style <friction><ode><mu>
             if el is None:
                 mus.append(None)
                 continue
@@ -376,12 +407,13 @@ def _point_wheels(spec: mujoco.MjSpec, joints, notes: list, published: dict) -> 
     notes.append(f"wheels {list(joints)} touch the floor through one sphere each (point contact)")
 
 
-def load(robot: Robot, point_wheels: bool = True, frictionless: tuple[str, ...] = ()) -> Loaded:
+def load(robot: Robot, point_wheels: bool = True, frictionless: tuple[str, ...] = (), lossless: bool = False) -> Loaded:
     """Compose ``robot`` on our floor (steps 1–3 of the module docstring) and place it on the floor.
 
     ``point_wheels``: the wheels touch the floor through one point each (:func:`_point_wheels`);
     False keeps their published collision shapes. ``frictionless``: geoms made frictionless (condim 1,
-    priority 1) — the counterfactual that checks a braking contact is the cause.
+    priority 1) — the counterfactual that checks a braking contact is the cause; ``lossless``: every
+    remaining joint's damping and frictionloss set to 0 (the same check for those terms).
     """
     notes: list[str] = []
     published: dict = {}
@@ -410,6 +442,17 @@ def load(robot: Robot, point_wheels: bool = True, frictionless: tuple[str, ...] 
         heavy = [b.name for b in spec.bodies if b.name != "world" and b.mass == 0 and len(b.geoms)]
         if heavy:
             notes.append(f"links without <inertial> but with collision geometry are massless (URDF default): {heavy}")
+        bad = []
+        for b in spec.bodies:  # an inertia that is not positive definite (Gazebo takes it, MuJoCo does not)
+            fi = np.asarray(b.fullinertia, float)
+            if b.name == "world" or not np.all(np.isfinite(fi)):
+                continue
+            mat = np.array([[fi[0], fi[3], fi[4]], [fi[3], fi[1], fi[5]], [fi[4], fi[5], fi[2]]])
+            if np.linalg.eigvalsh(mat).min() <= 0:
+                bad.append(b.name)
+                b.fullinertia = [float(x) for x in np.abs(fi[:3])] + [0.0, 0.0, 0.0]
+        if bad:
+            notes.append(f"inertia not positive definite, products of inertia dropped: {bad}")
         for g in spec.geoms:
             g.contype, g.conaffinity = 2, 1  # self-collision off (Gazebo's default); floor contacts kept
             link = g.parent.name
@@ -431,7 +474,7 @@ def load(robot: Robot, point_wheels: bool = True, frictionless: tuple[str, ...] 
         spec.delete(a)
     if acts:
         notes.append(f"{len(acts)} actuator(s) of the model removed (torque source instead)")
-    keep = {robot.left, robot.right, *robot.other_wheels}
+    keep = {robot.left, robot.right, *robot.other_wheels, *robot.free_joints}
     locked = []
     for j in list(spec.joints):
         if j.type == mujoco.mjtJoint.mjJNT_FREE or j.name in keep:
@@ -440,6 +483,12 @@ def load(robot: Robot, point_wheels: bool = True, frictionless: tuple[str, ...] 
         spec.delete(j)
     if locked:
         notes.append(f"non-wheel joints welded at qpos0: {locked}")
+    if robot.free_joints:
+        notes.append(f"passive joints left free: {list(robot.free_joints)}")
+    if lossless:
+        for j in spec.joints:
+            j.damping, j.frictionloss = [0.0, 0.0, 0.0], 0.0
+        notes.append("counterfactual: joint damping and frictionloss removed")
     for name in frictionless:
         g = spec.geom(name)
         g.friction = [0.0, 0.0, 0.0]
@@ -826,7 +875,11 @@ def reference(robot: Robot) -> dict:
         notes.append(f"left/right wheel inertia differ: {fs['wheel_inertia_lr_kgm2']} (mean used)")
     wheel_bodies = [L.model.jnt_bodyid[L.model.joint(j).id] for j in (robot.left, robot.right, *robot.other_wheels)]
     wheel_geoms = {L.model.geom(g).name for g in range(L.model.ngeom) if L.model.geom_bodyid[g] in wheel_bodies}
-    other = [c for c in ident["floor_contacts"] if c["geom"] not in wheel_geoms]
+    m_ = L.model
+    passive = set()  # bodies that move on a free passive joint (caster swivel/roller): they roll, not brake
+    for jn in robot.free_joints:
+        passive.update(m_.body(b).name for b in _subtree(m_, m_.jnt_bodyid[m_.joint(jn).id]))
+    other = [c for c in ident["floor_contacts"] if c["geom"] not in wheel_geoms and c["body"] not in passive]
     braking = [c for c in other if c["friction_simulated"] >= FRICTIONLESS and c["load_n"] > 1e-3]
     if braking:
         notes.append(
@@ -852,6 +905,8 @@ def reference(robot: Robot) -> dict:
             causes.append("braking contact: " + ", ".join(c["geom"] for c in braking))
         if damp and 2 * fs["a_formula"] * damp / fs["r_m"] * RUN_S > 0.1:
             causes.append("wheel damping")
+        if ident["test"]["wheel_frictionloss_nm"] and damp:
+            causes.append("wheel frictionloss")
         cause = "; ".join(causes) or "unexplained"
     all_wheels = None
     if robot.other_wheels:  # the free-rolling wheels spin too: their inertia belongs in M_eff when driving straight
@@ -882,6 +937,19 @@ def reference(robot: Robot) -> dict:
             "relative_error": {
                 "a": ident_c["a_identified"] / fc["a_formula"] - 1,
                 "b": ident_c["b_identified"] / fc["b_formula"] - 1,
+            },
+        }
+    removed = None
+    if cause and robot.kind != "skid-steer" and ("damping" in cause or "frictionloss" in cause):
+        Lr = load(robot, frictionless=tuple(c["geom"] for c in braking), lossless=True)
+        ident_r = identify(Lr, formula(Lr))
+        fr = ident_r.pop("formula_settled")
+        removed = {
+            "frictionless": [c["geom"] for c in braking],
+            "joint_damping_and_frictionloss": "removed",
+            "relative_error": {
+                "a": ident_r["a_identified"] / fr["a_formula"] - 1,
+                "b": ident_r["b_identified"] / fr["b_formula"] - 1,
             },
         }
     return {
@@ -918,6 +986,7 @@ def reference(robot: Robot) -> dict:
         "test": ident["test"],
         "published_wheel_shapes": published_wheels,
         "braking_geoms_frictionless": counterfactual,
+        "named_causes_removed": removed,
         "all_wheels": all_wheels,
         "notes": notes,
         "expected_verdict": robot.expected_verdict,
@@ -958,6 +1027,9 @@ def main(argv: list[str] | None = None) -> int:
         if rec["braking_geoms_frictionless"]:
             cf = rec["braking_geoms_frictionless"]["relative_error"]
             print(f"    braking geoms frictionless: a {100 * cf['a']:+.2f} %  b {100 * cf['b']:+.2f} %")
+        if rec["named_causes_removed"]:
+            cf = rec["named_causes_removed"]["relative_error"]
+            print(f"    every named cause removed: a {100 * cf['a']:+.2f} %  b {100 * cf['b']:+.2f} %")
         for c in rec["floor_contacts"]:
             print(
                 f"    {c['geom']:32s} {c['body']:24s} {c['load_n']:9.4f} N  μ pub {c['friction_published']} "
