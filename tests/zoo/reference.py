@@ -137,6 +137,30 @@ ROBOTS: tuple[Robot, ...] = (
         ),
     ),
     Robot(
+        name="menagerie_tiago",
+        file="menagerie_tiago/tiago.xml",
+        format="mjcf",
+        maker="PAL Robotics",
+        collection="google-deepmind/mujoco_menagerie (pal_tiago)",
+        source="https://github.com/google-deepmind/mujoco_menagerie/blob/dd150f1bbf144b86752091a325d2a2c107af9deb/"
+        "pal_tiago/tiago.xml",
+        license="Apache-2.0",
+        base="base_link",
+        left="wheel_left_joint",
+        right="wheel_right_joint",
+        free_joints=tuple(
+            f"caster_{c}_{k}_joint" for c in ("front_right", "front_left", "back_right", "back_left") for k in (1, 2)
+        ),
+        tau_max=100.0,
+        tau_max_source="the wheel joints' actuatorfrcrange (-100, 100) in the published MJCF",
+        expected_verdict="warn",
+        expected_cause=(
+            "rolls as the formula says on four passive casters (left free); caveats: the motor limit 100 N·m is "
+            "far above the traction limit and full torque would tip it; the arm, head and torso joints have "
+            "no actuators in tiago.xml (damping and frictionloss only): they must be held, or the arm drops"
+        ),
+    ),
+    Robot(
         name="tb3_burger_urdf",
         file="tb3_burger_urdf/turtlebot3_burger.urdf",
         format="urdf",
@@ -783,14 +807,62 @@ def _rate(t: np.ndarray, y: np.ndarray, y0: float, damped: bool) -> tuple[float,
     return float(alpha), float(beta)
 
 
-def identify(L: Loaded, f: dict) -> dict:
-    """Settle, record the floor contacts, run the drive and turn tests at three levels; fit ``a_id, b_id``."""
+def _swivels(L: Loaded) -> list[tuple[int, float, np.ndarray]]:
+    """Free vertical hinges carrying a trailing caster: ``(joint id, trail angle at qpos0, anchor)``.
+
+    The trail is the horizontal offset from the swivel axis to the centre of the lowest collision geom
+    below it (the roller); its angle is measured in the base heading frame.
+    """
     m, d = L.model, L.data
     mujoco.mj_resetData(m, d)
     mujoco.mj_forward(m, d)
+    R = d.xmat[L.base].reshape(3, 3)
+    out = []
+    for j in range(m.njnt):
+        if m.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE or j in L.wheels or abs(d.xaxis[j][2]) < 0.9:
+            continue
+        geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] in _subtree(m, m.jnt_bodyid[j]) and _collides(m, g)]
+        if not geoms:
+            continue
+        g = min(geoms, key=lambda g: _lowest(m, d, g))
+        trail = R.T @ (d.geom_xpos[g] - d.xanchor[j])
+        if math.hypot(trail[0], trail[1]) < 1e-4:
+            continue
+        out.append((j, math.atan2(trail[1], trail[0]), R.T @ d.xanchor[j]))
+    return out
+
+
+def _settle(L: Loaded, swivels, turn: bool, mid: np.ndarray) -> tuple:
+    """Reset, set every swivel so its caster trails the motion of the coming test, settle; the state."""
+    m, d = L.model, L.data
+    mujoco.mj_resetData(m, d)
+    for j, theta0, anchor in swivels:
+        rel = anchor - mid
+        v = np.array([-rel[1], rel[0]]) if turn else np.array([1.0, 0.0])  # anchor velocity (base frame)
+        want = math.atan2(-v[1], -v[0])  # the roller behind the swivel axis
+        d.qpos[m.jnt_qposadr[j]] = math.remainder(want - theta0, 2 * math.pi)
+    mujoco.mj_forward(m, d)
     for _ in range(round(SETTLE_S / m.opt.timestep)):
         mujoco.mj_step(m, d)
-    st = _state(L)
+    return _state(L)
+
+
+def identify(L: Loaded, f: dict) -> dict:
+    """Settle, record the floor contacts, run the drive and turn tests at three levels; fit ``a_id, b_id``.
+
+    Free caster swivels (:func:`_swivels`) start each test trailing the motion it makes (their steady
+    state), so the start-up transient is not a caster turning round.
+    """
+    m, d = L.model, L.data
+    swivels = _swivels(L)
+    mujoco.mj_resetData(m, d)
+    mujoco.mj_kinematics(m, d)
+    R0 = d.xmat[L.base].reshape(3, 3)
+    mid0 = R0.T @ d.xanchor[list(L.wheels)].mean(axis=0)
+    st_turn = _settle(L, swivels, True, mid0) if swivels else None
+    st = _settle(L, swivels, False, mid0)
+    if st_turn is None:
+        st_turn = st
     contacts = floor_contacts(L)
     f_rest = formula(L)  # the configuration that runs (settled)
     signs = _signs(L)
@@ -812,7 +884,7 @@ def identify(L: Loaded, f: dict) -> dict:
         drag_v.append(-beta)
         pitch_amp = max(pitch_amp, float(np.ptp(r["pitch"])))
     for T in turn_t:
-        r = _run(L, st, -T, T, signs)
+        r = _run(L, st_turn, -T, T, signs)
         alpha, beta = _rate(r["t"], r["w"], r["w0"], damped)
         acc_w.append(alpha)
         drag_w.append(-beta)
