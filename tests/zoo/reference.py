@@ -431,13 +431,23 @@ def _point_wheels(spec: mujoco.MjSpec, joints, notes: list, published: dict) -> 
     notes.append(f"wheels {list(joints)} touch the floor through one sphere each (point contact)")
 
 
-def load(robot: Robot, point_wheels: bool = True, frictionless: tuple[str, ...] = (), lossless: bool = False) -> Loaded:
+def load(
+    robot: Robot,
+    point_wheels: bool = True,
+    frictionless: tuple[str, ...] = (),
+    lossless: bool = False,
+    self_collision: bool = False,
+    lock: bool = True,
+) -> Loaded:
     """Compose ``robot`` on our floor (steps 1–3 of the module docstring) and place it on the floor.
 
     ``point_wheels``: the wheels touch the floor through one point each (:func:`_point_wheels`);
     False keeps their published collision shapes. ``frictionless``: geoms made frictionless (condim 1,
     priority 1) — the counterfactual that checks a braking contact is the cause; ``lossless``: every
-    remaining joint's damping and frictionloss set to 0 (the same check for those terms).
+    remaining joint's damping and frictionloss set to 0 (the same check for those terms);
+    ``self_collision``: URDF geoms keep MuJoCo's default collision filter (only parent–child pairs
+    excluded) instead of Gazebo's no-self-collision (:func:`self_contacts` uses it); ``lock``: False
+    keeps the non-wheel joints as published.
     """
     notes: list[str] = []
     published: dict = {}
@@ -478,7 +488,8 @@ def load(robot: Robot, point_wheels: bool = True, frictionless: tuple[str, ...] 
         if bad:
             notes.append(f"inertia not positive definite, products of inertia dropped: {bad}")
         for g in spec.geoms:
-            g.contype, g.conaffinity = 2, 1  # self-collision off (Gazebo's default); floor contacts kept
+            if not self_collision:
+                g.contype, g.conaffinity = 2, 1  # self-collision off (Gazebo's default); floor contacts kept
             link = g.parent.name
             if link in gz:
                 mu1, mu2 = gz[link]
@@ -501,7 +512,7 @@ def load(robot: Robot, point_wheels: bool = True, frictionless: tuple[str, ...] 
     keep = {robot.left, robot.right, *robot.other_wheels, *robot.free_joints}
     locked = []
     for j in list(spec.joints):
-        if j.type == mujoco.mjtJoint.mjJNT_FREE or j.name in keep:
+        if j.type == mujoco.mjtJoint.mjJNT_FREE or j.name in keep or not lock:
             continue
         locked.append(j.name)
         spec.delete(j)
@@ -544,6 +555,24 @@ def load(robot: Robot, point_wheels: bool = True, frictionless: tuple[str, ...] 
     mujoco.mj_resetData(model, data)
     mujoco.mj_forward(model, data)
     return Loaded(model, data, root, base, wheels, floor, published, notes)
+
+
+def self_contacts(robot: Robot) -> list[dict]:
+    """Pairs of the robot's own bodies in contact at qpos0 (joints as published) under MuJoCo's rules.
+
+    MJCF as the file says; URDF with MuJoCo's defaults (every pair but parent–child collides), which
+    is what a plain MuJoCo URDF import simulates and what Gazebo does not. ``depth_m`` > 0: overlap.
+    """
+    L = load(robot, point_wheels=False, self_collision=True, lock=False)
+    m, d = L.model, L.data
+    out: dict[tuple[str, str], float] = {}
+    for i in range(d.ncon):
+        c = d.contact[i]
+        if L.floor in (c.geom1, c.geom2) or c.exclude:
+            continue
+        pair = tuple(sorted((m.body(m.geom_bodyid[c.geom1]).name, m.body(m.geom_bodyid[c.geom2]).name)))
+        out[pair] = max(out.get(pair, 0.0), -float(c.dist))
+    return [{"bodies": list(p), "depth_m": v} for p, v in sorted(out.items())]
 
 
 def _collides(model: mujoco.MjModel, g: int) -> bool:
@@ -1057,6 +1086,7 @@ def reference(robot: Robot) -> dict:
         "tau_max_source": robot.tau_max_source,
         "test": ident["test"],
         "published_wheel_shapes": published_wheels,
+        "self_contacts_mujoco_rules": self_contacts(robot),
         "braking_geoms_frictionless": counterfactual,
         "named_causes_removed": removed,
         "all_wheels": all_wheels,
