@@ -226,3 +226,48 @@ def test_project_names_self_contacts_at_rest(name, package_path):
         bodies = c["bodies"] if isinstance(c, dict) else c
         pairs.add(tuple(sorted(b.split("/")[-1] for b in bodies)))
     assert pairs == {tuple(c["bodies"]) for c in EXPECT[name]["self_contacts_mujoco_rules"]}
+
+
+def test_reference_formula_counts_bodies_welded_to_wheels(tmp_path):
+    """The reference's I_w includes a body fixed below a wheel (a hubcap), parallel-axis term included, and the
+    joint armature; m, I, r and l come out as constructed (checked by hand-computed numbers)."""
+    xml = """<mujoco><worldbody><body name="base" pos="0 0 0.05"><freejoint/>
+      <inertial pos="0 0 0" mass="2" diaginertia="0.01 0.01 0.02"/>
+      <geom type="box" size="0.1 0.1 0.02" pos="0 0 0.03" mass="0"/>
+      <body name="wl" pos="0 0.1 0"><joint name="jl" axis="0 1 0" armature="0.001"/>
+        <inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 2e-4 1e-4"/>
+        <geom type="cylinder" size="0.05 0.01" quat="0.7071068 0.7071068 0 0" mass="0"/>
+        <body name="hub_l" pos="0 0.02 0.01"><inertial pos="0 0 0" mass="0.05" diaginertia="2e-5 3e-5 2e-5"/></body>
+      </body>
+      <body name="wr" pos="0 -0.1 0"><joint name="jr" axis="0 1 0" armature="0.001"/>
+        <inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 2e-4 1e-4"/>
+        <geom type="cylinder" size="0.05 0.01" quat="0.7071068 0.7071068 0 0" mass="0"/>
+        <body name="hub_r" pos="0 -0.02 0.01"><inertial pos="0 0 0" mass="0.05" diaginertia="2e-5 3e-5 2e-5"/></body>
+      </body>
+      <geom type="sphere" size="0.01" pos="-0.08 0 -0.04" friction="0" condim="1" mass="0"/>
+    </body></worldbody></mujoco>"""
+    path = tmp_path / "hub.xml"
+    path.write_text(xml)
+    rel = path.relative_to(reference.HERE) if path.is_relative_to(reference.HERE) else path
+    robot = reference.Robot(
+        name="hub",
+        file=str(rel),
+        format="mjcf",
+        maker="test",
+        collection="test",
+        source="",
+        license="MIT",
+        base="base",
+        left="jl",
+        right="jr",
+        expected_cause="test",
+    )
+    f = reference.formula(reference.load(robot, point_wheels=False))
+    i_w = 2e-4 + 0.001 + 3e-5 + 0.05 * 0.01**2  # wheel spin + armature + hubcap spin + hubcap parallel axis
+    assert f["wheel_inertia_kgm2"] == pytest.approx(i_w, rel=1e-9)
+    assert f["welded_to_wheels"] == ["hub_l", "hub_r"]
+    assert f["mass_kg"] == pytest.approx(2.3)
+    yaw = 0.02 + 2 * (1e-4 + 0.1 * 0.1**2) + 2 * (2e-5 + 0.05 * 0.12**2)
+    assert f["yaw_inertia_kgm2"] == pytest.approx(yaw, rel=1e-9)
+    assert f["r_m"] == pytest.approx(0.05, abs=1e-9) and f["l_m"] == pytest.approx(0.1, abs=1e-12)
+    assert f["a_formula"] == pytest.approx(1 / (2.3 * 0.05 + 2 * i_w / 0.05), rel=1e-9)

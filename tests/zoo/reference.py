@@ -11,15 +11,17 @@ This script does NOT import bioform_mj: only mujoco and numpy. For each robot of
    (friction < 1e-3 or condim 1, or a Gazebo ``mu1`` < 1e-3) keeps that against the floor through
    geom ``priority`` (MuJoCo uses the higher-priority geom's friction/condim for a pair);
 3. removes the model's actuators (torques enter as ``qfrc_applied``: a torque source, the
-   paper's model) and welds every joint that is not a wheel (the joint is deleted from the
-   spec, so its child moves with its parent at ``qpos0``);
-4. lets it settle, records the floor contacts (geom, body, normal load, friction as published and
-   as simulated), then drives it from the settled state with constant wheel torques at three
-   levels, ``τ_L = τ_R = T`` (drive) and ``τ_R = −τ_L = T`` (turn), and fits the centre-of-mass
-   forward acceleration and the yaw acceleration over a window after the start-up transient;
-   across the levels ``a_id = d υ̇ / d τ_a`` with ``τ_a = τ_L + τ_R`` and
-   ``b_id = d ω̇ / d τ_b`` with ``τ_b = τ_R − τ_L`` (design §5, CCW-positive ω), so a dead
-   band (wheel frictionloss) or any constant resistance drops out of the slope;
+   paper's model), welds every joint that is not a wheel or a listed passive caster joint (the
+   joint is deleted from the spec, so its child moves with its parent at ``qpos0``), and lets
+   each wheel touch the floor through one sphere of its radius (a flat tread scrubs when turning);
+4. lets it settle (free caster swivels set to trail the coming test's motion), records the floor
+   contacts (geom, body, normal load, friction as published and as simulated), then drives it
+   from the settled state with constant wheel torques at three levels, ``τ_L = τ_R = T`` (drive)
+   and ``τ_R = −τ_L = T`` (turn), and fits the centre-of-mass forward acceleration and the yaw
+   acceleration over a window after the start-up transient; across the levels
+   ``a_id = d υ̇ / d τ_a`` with ``τ_a = τ_L + τ_R`` and ``b_id = d ω̇ / d τ_b`` with
+   ``τ_b = τ_R − τ_L`` (design §5, CCW-positive ω), so a dead band (wheel frictionloss) or any
+   constant resistance drops out of the slope;
 5. computes the rigid-body formula from the compiled masses and inertias (design §8):
    ``a = 1/(m r + 2 I_w/r)``, ``b = l/(I r + 2 I_w l²/r)``, ``m`` the total mass, ``I`` the yaw
    inertia about the vertical through the axle midpoint, ``I_w`` one wheel's spin inertia
