@@ -25,7 +25,7 @@ import numpy as np
 from bioform_mj.control.equations import slip_ratio
 from bioform_mj.disturbance import harmonic_rows
 from bioform_mj.errors import Diverged
-from bioform_mj.identify import RobotParams, robot_parameters
+from bioform_mj.robot_params import RobotParams, robot_parameters
 from bioform_mj.scene import (
     Markers,
     RobotLayout,
@@ -103,7 +103,7 @@ class MujocoPlant:
     model, data, spec : the compiled ``MjModel``, its ``MjData`` and the scene ``MjSpec``.
     n_substeps : int, physics steps per control period.
     tau_max : array (n,), torque limit of each follower's motors, N·m.
-    params : list of :class:`~bioform_mj.identify.RobotParams`, current per follower.
+    params : list of :class:`~bioform_mj.robot_params.RobotParams`, current per follower.
     layouts : list of :class:`~bioform_mj.scene.RobotLayout` (names prefixed), per follower.
 
     Index arrays (looked up once; read by the compiled loop kernels, keep their meaning):
@@ -437,7 +437,7 @@ class MujocoPlant:
     def unmodelled(self, v: float, w: float) -> list[dict]:
         """Per follower: wheel damping, armature and frictionloss and their size at speeds
         ``v`` m/s, ``w`` rad/s, with what ``ĉ`` should converge to
-        (:meth:`~bioform_mj.identify.RobotParams.unmodelled`); for ``summary.json``."""
+        (:meth:`~bioform_mj.robot_params.RobotParams.unmodelled`); for ``summary.json``."""
         return [p.unmodelled(v, w) for p in self.params]
 
     def step(self, tau: np.ndarray, t: float) -> None:
