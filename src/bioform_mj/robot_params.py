@@ -21,7 +21,16 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from bioform_mj.scene import DC_INPUT_VOLTAGE, build_scene, compile_scene, dc_constants, dc_ctrl_scale, layout_of
+from bioform_mj.scene import (
+    DC_INPUT_VOLTAGE,
+    build_scene,
+    compile_scene,
+    dc_constants,
+    dc_ctrl_scale,
+    layout_of,
+    subtree,
+    welded_to,
+)
 
 log = logging.getLogger(__name__)
 
@@ -162,27 +171,7 @@ class RobotParams:
         }
 
 
-def subtree(model: mujoco.MjModel, root: int) -> np.ndarray:
-    """Ids of ``root`` and all its descendants."""
-    ids = np.arange(model.nbody)
-    inside = ids == root
-    for b in ids[root + 1 :]:  # children always come after their parents
-        inside[b] = inside[model.body_parentid[b]]
-    return ids[inside]
-
-
 _subtree = subtree
-
-
-def welded_to(model: mujoco.MjModel, body: int) -> np.ndarray:
-    """Ids of ``body`` and every body welded to it: its descendants reached through bodies
-    without joints (a hubcap on a fixed joint below a wheel; bodies a compiler fused are already
-    part of ``body``). They move rigidly with ``body``."""
-    ids = np.arange(model.nbody)
-    inside = ids == body
-    for b in ids[body + 1 :]:
-        inside[b] = inside[model.body_parentid[b]] and model.body_jntnum[b] == 0
-    return ids[inside]
 
 
 def robot_parameters(model: mujoco.MjModel, prefix: str = "", data: mujoco.MjData | None = None) -> RobotParams:
