@@ -105,7 +105,9 @@ def identify(
     if torque is None:  # half the motor limit, at most a quarter of the static traction limit μ N r
         for k in range(round(0.2 / timestep)):
             plant.step(np.zeros((1, 2)), k * timestep)
-        traction = plant._wheel_friction(0) * float(plant.wheel_loads()[0].min()) * params.wheel_radius
+        # μ N r / f: the least-loaded wheel's own load, and only the share f of the torque that passes
+        # the wheel's rotor pushes on the floor (design §13; a rotor of 10 m r² passes 5 %)
+        traction = params.traction_torque(plant._wheel_friction(0), float(plant.wheel_loads()[0].min()))
         torque = min(0.5 * min(params.tau_max), 0.25 * traction)
         f = params.wheel_frictionloss
         if f > 0 and 0.5 * torque <= 1.2 * f:

@@ -39,6 +39,8 @@ __all__ = [
     "RobotParams",
     "robot_parameters",
     "robot_truth",
+    "running_data",
+    "SETTLE_S",
     "ground_truth",
     "subtree",
     "welded_to",
@@ -282,10 +284,33 @@ def robot_parameters(model: mujoco.MjModel, prefix: str = "", data: mujoco.MjDat
     )
 
 
+#: seconds of zero torque after which a robot with joints beyond its wheels stands as it runs (design §13)
+SETTLE_S = 0.3
+
+
+def running_data(model: mujoco.MjModel, n_robots: int, seconds: float = SETTLE_S) -> mujoco.MjData:
+    """A scratch ``MjData`` with ``mj_kinematics`` done for the configuration the robots run in
+    (design §13: the ground truth is the robot that runs).
+
+    Robots with no joint but their root and wheels (``model.njnt == 3 n``, every shipped robot)
+    run as the file puts them: ``qpos0``. Otherwise (joints held by servos or an equality, left
+    free, caster swivels) the scene settles for ``seconds`` of zero torque from ``qpos0`` and the
+    kinematics are those of the settled state (an arm on weak servos has sagged, a free one dropped).
+    """
+    data = mujoco.MjData(model)
+    if model.njnt > 3 * n_robots:
+        mujoco.mj_forward(model, data)
+        for _ in range(max(1, round(seconds / model.opt.timestep))):
+            mujoco.mj_step(model, data)
+    mujoco.mj_kinematics(model, data)
+    return data
+
+
 def robot_truth(entry) -> RobotParams:
-    """:class:`RobotParams` of one robot entry (name, path, table or RobotRef), as the plant builds it."""
+    """:class:`RobotParams` of one robot entry (name, path, table or RobotRef), as the plant builds it
+    (in the configuration it runs in, :func:`running_data`)."""
     model = compile_scene(build_scene([entry], np.zeros((1, 3)), slots=False))[0]
-    return robot_parameters(model, "f1/")
+    return robot_parameters(model, "f1/", running_data(model, 1))
 
 
 def ground_truth(model: mujoco.MjModel, prefix: str = "") -> tuple[float, float]:

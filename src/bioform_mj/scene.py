@@ -588,7 +588,7 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
                 "scrubbing it sideways (skid steer), which the paper's differential-drive model lacks; "
                 "its own actuators, if any, are left as they are"
             )
-    cj = _contacts_and_joints(model, data, path, ref, base, joints, drives, r, floor_z, up, notes)
+    cj = _contacts_and_joints(model, data, path, ref, base, joints, drives + dc_all, r, floor_z, up, notes)
     jn = tuple(_name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints)
     gnames = []
     for j, g, pr in zip(jn, geoms, proxies):

@@ -25,7 +25,7 @@ import numpy as np
 from bioform_mj.control.equations import slip_ratio
 from bioform_mj.disturbance import harmonic_rows
 from bioform_mj.errors import Diverged
-from bioform_mj.robot_params import RobotParams, robot_parameters
+from bioform_mj.robot_params import RobotParams, robot_parameters, running_data
 from bioform_mj.scene import (
     Markers,
     RobotLayout,
@@ -275,8 +275,9 @@ class MujocoPlant:
 
     # ------------------------------------------------------------------ parameters
     def _update_params(self) -> None:
-        scratch = mujoco.MjData(self.model)  # kinematics at qpos0, shared by all robots
-        mujoco.mj_kinematics(self.model, scratch)
+        # kinematics of the configuration the robots run in (qpos0 unless they have joints beyond
+        # the wheels: then settled, design §13), shared by all robots
+        scratch = running_data(self.model, self.n)
         self.params: list[RobotParams] = [robot_parameters(self.model, p, scratch) for p in self._prefixes]
         self._c = np.array([[p.a_eff, p.b_eff] for p in self.params])
         self._m_eff = np.array([p.mass_eff for p in self.params])  # kg
