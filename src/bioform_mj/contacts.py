@@ -39,7 +39,7 @@ __all__ = [
 CASTER_LOAD = 0.005
 #: a body whose position relative to the base changes by more than this (m) or whose orientation
 #: by more than :data:`MOVE_DEG` (deg) is a moving part
-MOVE_M, MOVE_DEG = 1e-3, 0.5
+MOVE_M, MOVE_DEG = 5e-3, 1.0
 
 
 def _gname(model: mujoco.MjModel, g: int) -> str:
@@ -194,10 +194,10 @@ def still_bodies(model: mujoco.MjModel, lay: RobotLayout) -> np.ndarray:
 
 
 def relative_poses(model: mujoco.MjModel, data: mujoco.MjData, base: int, bodies: np.ndarray):
-    """``(pos (k, 3) m, rot (k, 3, 3))`` of ``bodies`` in the frame of body ``base`` (from
-    ``data.xpos``/``xmat``)."""
+    """``(pos (k, 3) m, rot (k, 3, 3))`` of ``bodies`` in the frame of body ``base``: each body's
+    centre of mass (``data.xipos``: an arm turning about its own origin moves it) and orientation."""
     rb = data.xmat[base].reshape(3, 3)
-    pos = (data.xpos[bodies] - data.xpos[base]) @ rb
+    pos = (data.xipos[bodies] - data.xpos[base]) @ rb
     rot = np.einsum("ji,kjl->kil", rb, data.xmat[bodies].reshape(-1, 3, 3))
     return pos, rot
 

@@ -7,7 +7,8 @@ the ground truth from the compiled model, identifies ``a, b`` (constant torques 
 - **traction limit** per wheel ``μ N r / f`` (N·m; ``N`` the wheel's load at rest, from the
   contact forces, ``= m g / 2`` when the wheels carry all the weight; μ of the wheel–floor
   contact as the scene composes it; ``f`` the share of the wheel torque that reaches the floor past
-  the wheel's rotor, :attr:`~bioform_mj.robot_params.RobotParams.floor_fraction`, design §13) against the **motor limit** (N·m);
+  the wheel's rotor, :attr:`~bioform_mj.robot_params.RobotParams.floor_fraction`, design §13)
+  against the **motor limit** (N·m);
 - **static tip-over margins**: the forward, backward and lateral accelerations (m/s²) at which
   the chassis tips, from the centre of mass (height ``h``, position ``c`` from the axle midpoint)
   and the support rectangle of every collision geom within :data:`SUPPORT_CLEARANCE` of the
@@ -145,15 +146,15 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     from .contacts import floor_contacts, moving_parts, pose_change, relative_poses, self_contacts, still_bodies
     from .identify import DRAG_STEP, identify
     from .plants.mujoco_plant import MujocoPlant
-    from .robot_params import robot_parameters, running_data
+    from .robot_params import robot_parameters
     from .scene import FRICTIONLESS, prepare_robot
 
     plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
     p, lay = plant.params[0], plant.layouts[0]  # p: the configuration that runs (robot_params.running_data)
     model = plant.model
-    tips = tip_margins(model, running_data(model, 1), "f1/")
     scratch = mujoco.MjData(model)
     mujoco.mj_kinematics(model, scratch)  # the file's configuration (qpos0)
+    tips = tip_margins(model, scratch, "f1/")  # static margins as the file stands (a settled copy may have fallen)
     p_file = robot_parameters(model, "f1/", scratch)
     base = model.body(lay.base).id
     still = still_bodies(model, lay)

@@ -683,6 +683,7 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
         named += mine
     published: list[tuple[str, float, int]] = []
     friction: dict[int, list[float]] = {}
+    condim1: list[int] = []
     if ref.caster_friction >= 0:
         targets = named or support
         if not targets:
@@ -695,12 +696,15 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
             published.append((_geom_label(model, g), float(fr[0]), int(model.geom_condim[g])))
             fr[0] = ref.caster_friction
             friction[g] = fr.tolist()
+            if ref.caster_friction < FRICTIONLESS:  # frictionless: condim 1 (a pyramidal cone with μ ≈ 0 is
+                condim1.append(g)  # ill-conditioned: the contact rocks ~10x longer before it settles)
         if targets:
             notes.append(
                 f"caster(s) {_quoted(_geom_label(model, g) for g in targets)}: sliding friction "
                 f"{ref.caster_friction:g} (mapping caster_friction; published "
                 + ", ".join(f"{f:g}" for _, f, _ in published)
                 + f"), priority {CONTACT_PRIORITY} so that it decides the floor contact"
+                + (", condim 1" if condim1 else "")
             )
     # frictionless as published: priority so that MuJoCo's max rule does not give them the floor's μ
     raise_prio = [
@@ -847,6 +851,7 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
             lock=lock_q,
             priority=raise_prio,
             friction=friction,
+            condim1=condim1,
             name_geoms=name_geoms,
             name_joints=name_joints,
         ),
@@ -1091,6 +1096,8 @@ def _hold_and_contacts(spec, model, plan, acts, sjoints, sgeoms) -> None:
     for g, fr in plan["friction"].items():
         sgeoms[g].friction = fr
         sgeoms[g].priority = CONTACT_PRIORITY
+    for g in plan["condim1"]:
+        sgeoms[g].condim = 1
     for j, name in plan["name_joints"].items():
         sjoints[j].name = name
     for a in plan["freeze_acts"]:
