@@ -381,3 +381,28 @@ def test_heavy_rotor_passes_little_torque_to_the_floor(tmp_path):
             mujoco.mj_contactForce(model, data, k, f6)
             fx += abs((con.frame.reshape(3, 3).T @ f6[:3])[0])  # world x of the contact force
     assert fx == pytest.approx(f_drive * 2 * tau / R, rel=0.03)
+
+
+def test_scenario_robot_table_takes_the_keys_and_a_run_says_the_configuration_changed(tmp_path):
+    from bioform_mj.robot_check import feasibility
+    from bioform_mj.scenario import load
+
+    _write(tmp_path, "arm.xml", _robot(extra=ARM, actuators='<motor name="arm_motor" joint="arm_joint"/>'))
+    (tmp_path / "s.toml").write_text(
+        '[plant]\nkind = "mujoco"\nrobots = [{model = "arm.xml", casters = ["caster"], caster_friction = 0.0, '
+        "free_joints = true}]\n"
+        "[formation]\ninitial_poses = [[0, 0, 0]]\noffsets = [[3, 0]]\n[graph]\nedges = []\n"
+    )
+    sc = load(str(tmp_path / "s.toml"))
+    ref = sc.plant.robots[0]
+    assert ref.casters == ("caster",) and ref.caster_friction == 0.0 and ref.free_joints
+    assert sc.to_dict()["plant"]["robots"][0]["free_joints"] is True
+    plant = MujocoPlant([ref], sc.initial_poses(), 0.001, 0.001)
+    _, yaw, _, b = _standing_arm_truth()
+    assert plant.params[0].yaw_inertia < 0.9 * yaw and plant.c_true()[0, 1] > 1.05 * b  # the arm hangs
+    warn = [w for w in feasibility(sc, plant) if "yaw inertia" in w]
+    assert len(warn) == 1 and f"{yaw:.4g}" in warn[0]
+    # held (the default): no such warning, c_true of the standing robot
+    held = MujocoPlant([str(tmp_path / "arm.xml")], sc.initial_poses(), 0.001, 0.001)
+    assert held.c_true()[0, 1] == pytest.approx(b, rel=1e-6)
+    assert not any("yaw inertia" in w for w in feasibility(sc, held))

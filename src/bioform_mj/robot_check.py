@@ -411,7 +411,17 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
             f"({float(m['given']) / float(m['model']) - 1:+.0%}): the controller and c_true use the given "
             "value, the physics the model's"
         )
+    from .robot_params import robot_parameters
+
     for i, p in enumerate(plant.params):
+        p_file = robot_parameters(plant.model, f"f{i + 1}/", scratch)  # the file's configuration (qpos0)
+        change = p.yaw_inertia / p_file.yaw_inertia - 1
+        if abs(change) > YAW_TOL:  # design §13: c_true is the robot that runs (settled)
+            out.append(
+                f"follower {i + 1}: the robot that runs (settled at rest) has yaw inertia {p.yaw_inertia:.4g} kg·m², "
+                f"the file's configuration {p_file.yaw_inertia:.4g} kg·m² ({100 * change:+.1f} %: parts held by weak "
+                f"servos or left free moved); c_true = ({p.a_eff:.4g}, {p.b_eff:.4g}) is the settled robot's"
+            )
         tips = tip_margins(plant.model, scratch, f"f{i + 1}/")["tip_accel_mps2"]
         mu = plant._wheel_friction(i)
         traction = p.traction_torque(mu, float(loads[i].min()))  # μ N r / f per wheel (design §13)
