@@ -318,6 +318,11 @@ def test_self_contacts_name_overlapping_bodies(tmp_path):
     )
     assert sc[0]["depth_m"] == pytest.approx(depth, abs=1.5e-3) and sc[0]["force_n"] > 1.0
     assert any("'left_wheel_link'" in r and "'mudguard'" in r for r in rep["reasons"])
+    # frozen (no servo), the mudguard is welded to the base and MuJoCo's weld-level parent filter drops
+    # the pair: the report is of the robot that runs
+    frozen = _write(tmp_path, "mud_frozen.xml", _robot(extra=MUDGUARD.format(l=L, z=z)))
+    assert check(frozen, identify_=False)["self_contacts"] == []
+    assert len(check(RobotRef(frozen, free_joints=True), identify_=False)["self_contacts"]) == 1
     # without the overlap there is none
     clear = _write(
         tmp_path,
