@@ -185,8 +185,8 @@ def test_mapping_keys_parse_and_are_refused_when_wrong():
 ARM = """
       <body name="arm" pos="0 0 0.1">
         <joint name="arm_joint" type="hinge" axis="0 1 0" damping="0.5"/>
-        <inertial pos="0.15 0 0" mass="2" diaginertia="0.001 0.015 0.015"/>
-        <geom name="arm_geom" type="capsule" fromto="0 0 0 0.3 0 0" size="0.02" contype="0" conaffinity="0"/>
+        <inertial pos="-0.15 0 0" mass="2" diaginertia="0.001 0.015 0.015"/>
+        <geom name="arm_geom" type="capsule" fromto="0 0 0 -0.3 0 0" size="0.02" contype="0" conaffinity="0"/>
       </body>"""
 
 
@@ -198,7 +198,7 @@ def _standing_arm_truth() -> tuple[float, float, float]:
         + M_BASE * X_COM**2
         + 2 * (I_WHEEL_YAW + M_WHEEL * L**2)
         + 0.015
-        + 2.0 * 0.15**2  # the arm's centre 0.15 m ahead of the axle
+        + 2.0 * 0.15**2  # the arm's centre 0.15 m behind the axle (the caster carries it)
     )
     a = _a_formula(mass, I_SPIN)
     b = L / (yaw * R + 2 * I_SPIN * L**2 / R)

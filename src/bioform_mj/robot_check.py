@@ -209,7 +209,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         if abs(change) > YAW_TOL:
             reasons_warn.append(
                 f"the yaw inertia of the robot that runs (after settling) is {p.yaw_inertia:.4g} kg·m², "
-                f"{what} has {other.yaw_inertia:.4g} kg·m² ({100 * change:+.1f} %): c_true = "
+                f"{what} has {other.yaw_inertia:.4g} kg·m² ({100 * change:+.1f} % against the settled one): c_true = "
                 f"({p.a_eff:.4g}, {p.b_eff:.4g}) is the settled one"
                 + (", at the end b_eff = " + f"{p_end.b_eff:.4g}" if other is p_end else "")
             )
