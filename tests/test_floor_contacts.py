@@ -411,3 +411,15 @@ def test_scenario_robot_table_takes_the_keys_and_a_run_says_the_configuration_ch
     held = MujocoPlant([str(tmp_path / "arm.xml")], sc.initial_poses(), 0.001, 0.001)
     assert held.c_true()[0, 1] == pytest.approx(b, rel=1e-6)
     assert not any("yaw inertia" in w for w in feasibility(sc, held))
+
+
+def test_no_import_cycle_between_identify_and_the_plant():
+    """STYLE item 8: the plant imports the ground truth from robot_params, not identify."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, bioform_mj.plants.mujoco_plant, bioform_mj.robot_check; "
+        "assert 'bioform_mj.identify' not in sys.modules, 'the plant imports identify'"
+    )
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True).returncode == 0

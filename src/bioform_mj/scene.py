@@ -13,8 +13,16 @@ A robot is an MJCF file plus a mapping (:class:`bioform_mj.robots.RobotRef`); se
   forward, in N·m): a plain motor of the model on the joint is kept (its gear sign fixed),
   otherwise ``left_motor``/``right_motor`` are added and the model's own wheel drives (joint or
   tendon velocity/position/motor actuators) get zero gain and bias: they exert no force but stay
-  in the model, so sensors that name them still compile. Other actuators are left as they are
-  (a position actuator keeps holding its ctrl = 0 target);
+  in the model, so sensors that name them still compile;
+- the robot that runs (design §13): joints other than the wheels and the root are held where the
+  file puts them — by the model's own position servo, else frozen (deleted: their bodies welded,
+  the actuators on them removed), else (a tendon, equality or sensor names them) locked by a joint
+  equality — unless the mapping says ``free_joints``; a caster's swivel and wheel stay free. Other
+  actuators are kept with ctrl = 0;
+- contacts as the maker meant (design §13): a non-wheel geom published frictionless (friction
+  below :data:`FRICTIONLESS` or condim 1) and the mapping's ``casters`` get
+  :data:`CONTACT_PRIORITY`, so that MuJoCo uses their own friction and condim against the floor
+  rather than the larger of the pair; ``caster_friction`` sets the casters' friction;
 - a wheel collision shape that scrubs when turning (cylinder, capsule, box, mesh: several
   contact points across the tread) is switched off for contacts (kept for looks) and replaced
   by a single-contact ellipsoid proxy of the same radius (design §8 pitfall);
@@ -65,6 +73,11 @@ __all__ = [
     "MARKER_Z",
     "Markers",
     "PATCH_THICKNESS",
+    "FRICTIONLESS",
+    "CONTACT_PRIORITY",
+    "SUPPORT_CLEARANCE",
+    "subtree",
+    "welded_to",
 ]
 
 
