@@ -159,6 +159,7 @@ def test_frictional_caster_is_a_warning_with_its_cost_and_the_mapping_can_fix_it
     c2 = next(c for c in rep2["floor_contacts"] if c["geom"] == "caster")
     assert c2["friction"] < 1e-4 and c2["friction_published"] == pytest.approx(0.8)
     assert c2["load_n"] == pytest.approx(c["load_n"], rel=0.01)
+    assert rep2["parts"]["casters"] == ["caster"] and rep2["parts"]["published_contacts"] == [["caster", 0.8, 3]]
     assert not any("caster 'caster'" in r for r in rep2["reasons"])
     a = _a_formula(M_BASE + 2 * M_WHEEL, I_SPIN)
     assert _measured_accel(ref, 0.5) == pytest.approx(2 * 0.5 * a, rel=0.02)  # measured: +0.19 %
@@ -284,6 +285,15 @@ def test_welded_hubcap_is_in_the_wheel_spin_inertia(tmp_path):
     meas = _measured_accel(f, 0.5)
     assert meas == pytest.approx(2 * 0.5 * a, rel=0.01)  # measured: +0.08 %
     assert abs(meas / (2 * 0.5 * _a_formula(mass, I_SPIN)) - 1) > 0.15  # the wheel alone: 19 % high
+    # fused by the compiler (fusestatic): the hubcap is part of the wheel body, the same I_w
+    fused = _write(
+        tmp_path,
+        "hub_fused.xml",
+        _robot(wheel_extra=HUBCAP).replace('autolimits="true"', 'autolimits="true" fusestatic="true"'),
+    )
+    spec, *_ = prepare_robot(fused)
+    assert mujoco.mj_name2id(spec.compile(), mujoco.mjtObj.mjOBJ_BODY, "left_hubcap") < 0  # fused away
+    assert robot_truth(fused).wheel_inertia == pytest.approx(i_w, rel=1e-9)
     # off the axis: the parallel-axis term m d² about the joint axis
     off = _write(tmp_path, "hub_off.xml", _robot(wheel_extra=HUBCAP.replace('pos="0 0 0" mass', 'pos="0.01 0 0" mass')))
     assert robot_truth(off).wheel_inertia == pytest.approx(i_w + 0.2 * 0.01**2, rel=1e-9)

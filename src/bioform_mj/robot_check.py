@@ -303,9 +303,12 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     verdict = "fail" if reasons_fail else "warn" if reasons_warn else "pass"
     layout = asdict(lay)
     layout["file"] = lay.file
-    for k in ("base", "wheel_joints", "motors", "wheel_geoms", "disabled_actuators"):  # without the scene prefix
+    named = ("base", "wheel_joints", "motors", "wheel_geoms", "disabled_actuators", "frozen_joints", "locked_joints")
+    named += ("held_joints", "free_joints", "rolling_joints", "casters", "priority_geoms")
+    for k in named:  # without the scene prefix
         v = layout[k]
         layout[k] = [x[len("f1/") :] for x in v] if isinstance(v, (list, tuple)) else v[len("f1/") :]
+    layout["published_contacts"] = [[g[len("f1/") :], f, c] for g, f, c in layout["published_contacts"]]
     return {
         "verdict": verdict,
         "reasons": reasons_fail + reasons_warn,
