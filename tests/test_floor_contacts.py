@@ -433,3 +433,32 @@ def test_no_import_cycle_between_identify_and_the_plant():
         "assert 'bioform_mj.identify' not in sys.modules, 'the plant imports identify'"
     )
     assert subprocess.run([sys.executable, "-c", code], capture_output=True).returncode == 0
+
+
+SWIVEL = f"""
+      <body name="caster_swivel" pos="{X_CASTER} 0 -0.01">
+        <joint name="caster_swivel_joint" type="hinge" axis="0 0 1"/>
+        <inertial pos="0 0 0" mass="0.005" diaginertia="1e-7 1e-7 1e-7"/>
+        <body name="caster_wheel" pos="0 0 {-R + 0.03}">
+          <joint name="caster_wheel_joint" type="hinge" axis="0 1 0"/>
+          <inertial pos="0 0 0" mass="0.005" diaginertia="1e-7 2e-7 1e-7"/>
+          <geom name="caster_tire" type="sphere" size="0.02" condim="3" friction="1 0.005 0.0001"/>
+        </body>
+      </body>"""
+
+
+def test_a_swivel_caster_wheel_rolls_free_and_does_not_brake(tmp_path):
+    xml = _robot(extra=SWIVEL).replace(
+        '<geom name="caster" type="sphere"', '<geom name="caster" contype="0" conaffinity="0" type="sphere"'
+    )
+    f = _write(tmp_path, "swivel.xml", xml)
+    lay = prepare_robot(f)[1]
+    assert set(lay.rolling_joints) == {"caster_swivel_joint", "caster_wheel_joint"} and not lay.frozen_joints
+    rep = check(f, identify_=False)
+    c = next(c for c in rep["floor_contacts"] if c["geom"] == "caster_tire")
+    assert c["role"] == "caster" and c["rolls"] and not c["welded_to_base"] and c["friction"] == 1.0
+    assert c["load_n"] == pytest.approx(M_BASE * G * X_COM / X_CASTER, rel=0.03)
+    assert not any("brakes" in r for r in rep["reasons"]) and rep["moving_parts"] == []
+    mass = M_BASE + 2 * M_WHEEL + 0.01
+    # the caster wheel's spin inertia adds 2e-7 / 0.02² = 5e-4 kg: within the tolerance
+    assert _measured_accel(f, 0.5) == pytest.approx(2 * 0.5 * _a_formula(mass, I_SPIN), rel=0.02)  # measured: +0.16 %
