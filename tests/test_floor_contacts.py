@@ -13,6 +13,7 @@ scene (``build_scene``), never with the project's identification code.
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import mujoco
@@ -462,3 +463,22 @@ def test_a_swivel_caster_wheel_rolls_free_and_does_not_brake(tmp_path):
     mass = M_BASE + 2 * M_WHEEL + 0.01
     # the caster wheel's spin inertia adds 2e-7 / 0.02² = 5e-4 kg: within the tolerance
     assert _measured_accel(f, 0.5) == pytest.approx(2 * 0.5 * _a_formula(mass, I_SPIN), rel=0.02)  # measured: +0.16 %
+
+
+def test_a_run_warns_about_a_braking_caster_before_it_starts(tmp_path):
+    from bioform_mj.robot_check import feasibility
+    from bioform_mj.scenario import load
+
+    fr = _write(tmp_path, "fr.xml", _robot(caster='friction="0.8" condim="3"'))
+    sc = load(
+        "paper",
+        plant="mujoco",
+        overrides=["formation.initial_poses=[[0,0,0]]", "formation.offsets=[[3,0]]", "graph.edges=[]"],
+    )
+    warn = [w for w in feasibility(sc, MujocoPlant([fr], sc.initial_poses(), 0.001, 0.001)) if "brakes" in w]
+    n_c = M_BASE * G * X_COM / X_CASTER
+    assert len(warn) == 1 and warn[0].startswith("follower 1: caster 'caster'")
+    brake = float(re.search(r"μ N = ([\d.]+) N", warn[0])[1])
+    assert brake == pytest.approx(1.0 * n_c, rel=0.02)  # μ = 1 (the pair's max) × the statics load
+    fixed = RobotRef(fr, casters=("caster",), caster_friction=0.0)
+    assert not any("brakes" in w for w in feasibility(sc, MujocoPlant([fixed], sc.initial_poses(), 0.001, 0.001)))

@@ -21,7 +21,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from bioform_mj.scene import RobotLayout, subtree, welded_to
+from bioform_mj.scene import FRICTIONLESS, RobotLayout, subtree, welded_to
 
 __all__ = [
     "CASTER_LOAD",
@@ -33,6 +33,7 @@ __all__ = [
     "moving_parts",
     "pose_change",
     "still_bodies",
+    "braking_casters",
 ]
 
 #: a non-wheel geom carrying more than this fraction of the robot's weight is a caster
@@ -227,3 +228,24 @@ def pose_change(
     rel = np.einsum("kji,kjl->kil", ref[1], now[1])  # R_ref^T R_now
     cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
     return dm, np.degrees(np.arccos(cos))
+
+
+def braking_casters(floor: list[dict], drive_force: float) -> list[tuple[dict, float, str]]:
+    """The casters of :func:`floor_contacts` that brake: loaded, with friction (μ ≥ 1e-3 and condim > 1)
+    and unable to roll (no joint between them and the base). ``drive_force``: what the wheels can
+    push, N. Returns ``(contact, μ N in N, message)`` per braking caster."""
+    out = []
+    for c in floor:
+        if c["role"] != "caster" or c["rolls"] or c["friction"] < FRICTIONLESS or c["condim"] == 1:
+            continue
+        brake = c["friction"] * c["load_n"]
+        msg = (
+            f"caster '{c['geom']}' on body '{c['body']}' carries {c['load_n']:.3g} N with friction μ = "
+            f"{c['friction']:g}, condim {c['condim']} as simulated (published μ = {c['friction_published']:g}, "
+            f"condim {c['condim_published']}) and cannot roll: sliding, it brakes the robot with μ N = {brake:.3g} N, "
+            f"{100 * brake / drive_force:.0f} % of what the wheels can push (min of the motor limit 2 f τ_max / r "
+            f"and their traction μ ΣN: {drive_force:.3g} N); if the real caster rolls, map caster_friction = 0"
+            + (": the robot cannot move" if brake >= drive_force else "")
+        )
+        out.append((c, brake, msg))
+    return out

@@ -143,11 +143,19 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     """
     import mujoco
 
-    from .contacts import floor_contacts, moving_parts, pose_change, relative_poses, self_contacts, still_bodies
+    from .contacts import (
+        braking_casters,
+        floor_contacts,
+        moving_parts,
+        pose_change,
+        relative_poses,
+        self_contacts,
+        still_bodies,
+    )
     from .identify import DRAG_STEP, identify
     from .plants.mujoco_plant import MujocoPlant
     from .robot_params import robot_parameters
-    from .scene import FRICTIONLESS, prepare_robot
+    from .scene import prepare_robot
 
     plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
     p, lay = plant.params[0], plant.layouts[0]  # p: the configuration that runs (robot_params.running_data)
@@ -216,20 +224,8 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     weight = p.mass * G
     wheel_force = sum(c["load_n"] for c in floor if c["role"] == "wheel")
     drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
-    for c in floor:
-        if c["role"] != "caster" or c["rolls"] or c["friction"] < FRICTIONLESS or c["condim"] == 1:
-            continue
-        brake = c["friction"] * c["load_n"]
-        msg = (
-            f"caster '{c['geom']}' on body '{c['body']}' carries {c['load_n']:.3g} N with friction μ = "
-            f"{c['friction']:g}, condim {c['condim']} as simulated (published μ = {c['friction_published']:g}, "
-            f"condim {c['condim_published']}) and cannot roll: sliding, it brakes the robot with μ N = {brake:.3g} N, "
-            f"{100 * brake / drive_force:.0f} % of what the wheels can push (min of the motor limit 2 f τ_max / r "
-            f"and their traction μ ΣN: {drive_force:.3g} N); if the real caster rolls, map caster_friction = 0"
-        )
-        (reasons_fail if brake >= drive_force else reasons_warn).append(
-            msg + (": the robot cannot move" if brake >= drive_force else "")
-        )
+    for _, brake, msg in braking_casters(floor, drive_force):
+        (reasons_fail if brake >= drive_force else reasons_warn).append(msg)
     for sc in selfc:
         if sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_FORCE * weight:
             reasons_warn.append(
@@ -400,7 +396,8 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
     scratch = mujoco.MjData(plant.model)
     mujoco.mj_kinematics(plant.model, scratch)
     out: list[str] = []
-    loads = plant.settled_wheel_loads()
+    settled = plant.settled_data()
+    loads = plant.settled_wheel_loads(data=settled)
     given: dict[str, list[int]] = {}  # a mapped size far from the model's geometry (scene.layout_of's notes)
     for i, lay in enumerate(plant.layouts):
         for note in lay.notes:
@@ -414,6 +411,7 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
             f"({float(m['given']) / float(m['model']) - 1:+.0%}): the controller and c_true use the given "
             "value, the physics the model's"
         )
+    from .contacts import braking_casters, floor_contacts
     from .robot_params import robot_parameters
 
     for i, p in enumerate(plant.params):
@@ -445,6 +443,12 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
                 f"margin {tips['lateral']:.3g} m/s²"
             )
         motor = float(min(p.tau_max))
+        # a caster that slides brakes the robot (design §13)
+        floor = floor_contacts(plant.model, settled, plant.layouts[i], f"f{i + 1}/")
+        wheel_force = sum(c["load_n"] for c in floor if c["role"] == "wheel")
+        drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
+        for _, _, msg in braking_casters(floor, drive_force):
+            out.append(f"{who}: {msg}")
         # cruising at the leader's top speed against the wheel damping c and frictionloss f takes
         # c v / r + f per wheel (menagerie Stretch 3: c = 30 N·m·s/rad, 151 N·m at 0.25 m/s)
         v_top = float(np.max(np.abs(vel[:, 0])))

@@ -425,15 +425,20 @@ class MujocoPlant:
                 out[hit] += f[0]
         return out
 
-    def settled_wheel_loads(self, seconds: float = 0.2) -> np.ndarray:
-        """(n, 2) wheel loads, N, after ``seconds`` of zero torque from the initial state, computed on
-        a copy (the run's own state is untouched): the share of the weight the wheels carry."""
+    def settled_data(self, seconds: float = 0.2) -> mujoco.MjData:
+        """A copy of the scene after ``seconds`` of zero torque from the initial state (the run's own
+        state is untouched): its contacts say what each robot stands on (design §13)."""
         m = self.model
         d = mujoco.MjData(m)
         mujoco.mj_forward(m, d)
         for _ in range(max(1, int(round(seconds / m.opt.timestep)))):
             mujoco.mj_step(m, d)
-        return self.wheel_loads(d)
+        return d
+
+    def settled_wheel_loads(self, seconds: float = 0.2, data: mujoco.MjData | None = None) -> np.ndarray:
+        """(n, 2) wheel loads, N, after ``seconds`` of zero torque from the initial state, computed on
+        a copy (:meth:`settled_data`, or ``data`` if given): the share of the weight the wheels carry."""
+        return self.wheel_loads(self.settled_data(seconds) if data is None else data)
 
     def unmodelled(self, v: float, w: float) -> list[dict]:
         """Per follower: wheel damping, armature and frictionloss and their size at speeds
