@@ -83,6 +83,14 @@ def _welded_to_base(model: mujoco.MjModel, base: int, b: int) -> bool:
     return b == base
 
 
+def _contact_bodies(model: mujoco.MjModel, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+    """Bodies of the two geoms of each of the ``ncon`` contacts, (ncon,) each."""
+    n = int(data.ncon)
+    g1 = np.asarray(data.contact.geom1[:n], dtype=int)
+    g2 = np.asarray(data.contact.geom2[:n], dtype=int)
+    return model.geom_bodyid[g1], model.geom_bodyid[g2]
+
+
 def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout, prefix: str = "") -> list[dict]:
     """Every geom of the robot (layout ``lay``, names with ``prefix``) that touches the floor now.
 
@@ -102,17 +110,12 @@ def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout,
     casters = set(lay.casters)
     per: dict[int, dict[str, Any]] = {}
     f6 = np.zeros(6)
-    for k in range(data.ncon):
-        con = data.contact[k]
-        g1, g2 = int(con.geom1), int(con.geom2)
-        b1, b2 = int(model.geom_bodyid[g1]), int(model.geom_bodyid[g2])
-        if b1 == 0 and b2 in bodies:
-            g = g2
-        elif b2 == 0 and b1 in bodies:
-            g = g1
-        else:
-            continue
-        mujoco.mj_contactForce(model, data, k, f6)
+    b1s, b2s = _contact_bodies(model, data)
+    mine = np.isin(b1s, list(bodies)) | np.isin(b2s, list(bodies))
+    for k in np.flatnonzero(mine & ((b1s == 0) | (b2s == 0))):
+        con = data.contact[int(k)]
+        g = int(con.geom2) if b1s[k] == 0 else int(con.geom1)
+        mujoco.mj_contactForce(model, data, int(k), f6)
         row = per.get(g)
         if row is None:
             name = _gname(model, g)
@@ -157,12 +160,12 @@ def self_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout, 
     bodies = set(subtree(model, model.body(lay.base).id).tolist())
     per: dict[tuple[int, int], dict[str, Any]] = {}
     f6 = np.zeros(6)
-    for k in range(data.ncon):
+    b1s, b2s = _contact_bodies(model, data)
+    for k in np.flatnonzero(np.isin(b1s, list(bodies)) & np.isin(b2s, list(bodies))):
+        k = int(k)
         con = data.contact[k]
         g1, g2 = int(con.geom1), int(con.geom2)
-        b1, b2 = int(model.geom_bodyid[g1]), int(model.geom_bodyid[g2])
-        if b1 not in bodies or b2 not in bodies:
-            continue
+        b1, b2 = int(b1s[k]), int(b2s[k])
         if b1 > b2:
             b1, b2, g1, g2 = b2, b1, g2, g1
         mujoco.mj_contactForce(model, data, k, f6)
