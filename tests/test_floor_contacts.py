@@ -396,7 +396,9 @@ def test_heavy_rotor_passes_little_torque_to_the_floor(tmp_path):
         if con.geom1 in wheel or con.geom2 in wheel:
             mujoco.mj_contactForce(model, data, k, f6)
             fx += abs((con.frame.reshape(3, 3).T @ f6[:3])[0])  # world x of the contact force
-    assert fx == pytest.approx(f_drive * 2 * tau / R, rel=0.03)
+    assert fx == pytest.approx(f_drive * 2 * tau / R, rel=0.03)  # measured: +0.03 %
+    # and the robot accelerates as a_eff with the rotor in I_w says (measured: −0.48 %)
+    assert _measured_accel(f, 0.75) == pytest.approx(2 * 0.75 * _a_formula(mass, I_SPIN + arm), rel=0.01)
 
 
 def test_scenario_robot_table_takes_the_keys_and_a_run_says_the_configuration_changed(tmp_path):
