@@ -4,9 +4,11 @@
 the ground truth from the compiled model, identifies ``a, b`` (constant torques from rest,
 :func:`bioform_mj.identify.identify`), and measures what the paper's model leaves out:
 
-- **traction limit** per wheel ``μ N r`` (N·m; ``N`` the wheel's load at rest, from the
+- **traction limit** per wheel ``μ N r / f`` (N·m; ``N`` the wheel's load at rest, from the
   contact forces, ``= m g / 2`` when the wheels carry all the weight; μ of the wheel–floor
-  contact as the scene composes it) against the **motor limit** (N·m);
+  contact as the scene composes it; ``f`` the share of the wheel torque that reaches the floor past
+  the wheel's rotor, :attr:`~bioform_mj.robot_params.RobotParams.floor_fraction`, design §13)
+  against the **motor limit** (N·m);
 - **static tip-over margins**: the forward, backward and lateral accelerations (m/s²) at which
   the chassis tips, from the centre of mass (height ``h``, position ``c`` from the axle midpoint)
   and the support rectangle of every collision geom within :data:`SUPPORT_CLEARANCE` of the
@@ -63,6 +65,10 @@ _GIVEN = re.compile(
 SUPPORT_CLEARANCE = 0.005
 #: identification vs formula: above WARN_ID the verdict is warn, above FAIL_ID fail (relative)
 WARN_ID, FAIL_ID = 0.03, 0.10
+#: the yaw inertia of the robot that runs differs from the file's (or changes while driving) by more: a warning
+YAW_TOL = 0.01
+#: a self contact at rest deeper than this (m) or pushing more than this fraction of the weight is a warning
+SELF_DEPTH, SELF_FORCE = 1e-3, 0.01
 
 
 def _subtree(model: Any, root: int) -> np.ndarray:
@@ -137,24 +143,96 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     """
     import mujoco
 
+    from .contacts import (
+        braking_casters,
+        floor_contacts,
+        moving_parts,
+        pose_change,
+        relative_poses,
+        self_contacts,
+        still_bodies,
+    )
     from .identify import DRAG_STEP, identify
     from .plants.mujoco_plant import MujocoPlant
+    from .robot_params import robot_parameters
     from .scene import prepare_robot
 
     plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
-    p, lay = plant.params[0], plant.layouts[0]
-    scratch = mujoco.MjData(plant.model)
-    mujoco.mj_kinematics(plant.model, scratch)
-    tips = tip_margins(plant.model, scratch, "f1/")
+    p, lay = plant.params[0], plant.layouts[0]  # p: the configuration that runs (robot_params.running_data)
+    model = plant.model
+    scratch = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, scratch)  # the file's configuration (qpos0)
+    tips = tip_margins(model, scratch, "f1/")  # static margins as the file stands (a settled copy may have fallen)
+    p_file = robot_parameters(model, "f1/", scratch)
+    base = model.body(lay.base).id
+    still = still_bodies(model, lay)
+    ref_pose = relative_poses(model, scratch, base, still)
+    worst = (np.zeros(len(still)), np.zeros(len(still)))
+
+    def track() -> None:
+        now = pose_change(ref_pose, relative_poses(model, plant.data, base, still))
+        np.maximum(worst[0], now[0], out=worst[0])
+        np.maximum(worst[1], now[1], out=worst[1])
+
     mu = plant._wheel_friction(0)
     for k in range(200):  # settle at rest: the wheels' share of the weight
         plant.step(np.zeros((1, 2)), k * 0.001)
+        if k % 10 == 9:
+            track()
     loads = plant.wheel_loads()[0]
-    traction = mu * float(loads.min()) * p.wheel_radius  # μ N r per wheel (μ m g r / 2 if the wheels carry all)
+    floor = floor_contacts(model, plant.data, lay, "f1/")
+    selfc = self_contacts(model, plant.data, lay, "f1/")
+    # μ N r / f per wheel (design §13: N the wheel's own load at rest, f the share of torque that
+    # reaches the floor past the rotor; μ m g r / 2 for an even split and a light rotor)
+    traction = p.traction_torque(mu, float(loads.min()))
     motor = float(min(p.tau_max))
     motor_accel = 2 * motor * p.a_eff  # υ̇ at full torque on both wheels, m/s²
     notes = list(lay.notes)
     reasons_fail, reasons_warn = [], []
+
+    # the first ~2 s under gravity and a drive (forward, then a turn): what moves relative to the base
+    t_drive = 0.25 * min(motor, traction)
+    for k in range(1800):
+        tau = t_drive * (np.array([[1.0, 1.0]]) if k < 900 else np.array([[-1.0, 1.0]]))
+        plant.step(tau, (200 + k) * 0.001)
+        if k % 10 == 9:
+            track()
+    end = mujoco.MjData(model)
+    end.qpos[:] = plant.data.qpos
+    mujoco.mj_kinematics(model, end)
+    p_end = robot_parameters(model, "f1/", end)
+    moving = moving_parts(model, still, worst, "f1/")
+    if moving:
+        reasons_warn.append(
+            f"{len(moving)} part(s) move relative to the base in the first 2 s under gravity and a drive "
+            "(moving_parts: "
+            + ", ".join(
+                f"'{m['body']}' {1e3 * m['displacement_m']:.1f} mm / {m['rotation_deg']:.1f}°" for m in moving[:5]
+            )
+            + ("…" if len(moving) > 5 else "")
+            + "); c_true is for the configuration after settling"
+        )
+    for what, other in (("the file's configuration", p_file), ("the end of the 2 s drive", p_end)):
+        change = other.yaw_inertia / p.yaw_inertia - 1
+        if abs(change) > YAW_TOL:
+            reasons_warn.append(
+                f"the yaw inertia of the robot that runs (after settling) is {p.yaw_inertia:.4g} kg·m², "
+                f"{what} has {other.yaw_inertia:.4g} kg·m² ({100 * change:+.1f} % against the settled one): c_true = "
+                f"({p.a_eff:.4g}, {p.b_eff:.4g}) is the settled one"
+                + (", at the end b_eff = " + f"{p_end.b_eff:.4g}" if other is p_end else "")
+            )
+    weight = p.mass * G
+    wheel_force = sum(c["load_n"] for c in floor if c["role"] == "wheel")
+    drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
+    for _, brake, msg in braking_casters(floor, drive_force):
+        (reasons_fail if brake >= drive_force else reasons_warn).append(msg)
+    for sc in selfc:
+        if sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_FORCE * weight:
+            reasons_warn.append(
+                f"the robot's own bodies '{sc['body1']}' and '{sc['body2']}' touch at rest "
+                f"({1e3 * sc['depth_m']:.2g} mm deep, {sc['force_n']:.3g} N; self_contacts): MuJoCo collides all but "
+                "parent-child pairs; exclude the pair (<contact><exclude body1=… body2=…/>) if the robot does not"
+            )
 
     ident = None
     if identify_:
@@ -179,7 +257,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
             reasons_fail.append(f"statically unstable: the centre of mass is outside the support ({way})")
     if motor > traction:
         reasons_warn.append(
-            f"motor limit {motor:.3g} N·m exceeds the traction limit μ N r = {traction:.3g} N·m: "
+            f"motor limit {motor:.3g} N·m exceeds the traction limit μ N r / f = {traction:.3g} N·m: "
             "the wheels can skid at full torque"
         )
     if motor_accel > min(ta["forward"], ta["backward"]) > 0:
@@ -221,9 +299,12 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     verdict = "fail" if reasons_fail else "warn" if reasons_warn else "pass"
     layout = asdict(lay)
     layout["file"] = lay.file
-    for k in ("base", "wheel_joints", "motors", "wheel_geoms", "disabled_actuators"):  # without the scene prefix
+    named = ("base", "wheel_joints", "motors", "wheel_geoms", "disabled_actuators", "frozen_joints", "locked_joints")
+    named += ("held_joints", "free_joints", "rolling_joints", "casters", "priority_geoms")
+    for k in named:  # without the scene prefix
         v = layout[k]
         layout[k] = [x[len("f1/") :] for x in v] if isinstance(v, (list, tuple)) else v[len("f1/") :]
+    layout["published_contacts"] = [[g[len("f1/") :], f, c] for g, f, c in layout["published_contacts"]]
     return {
         "verdict": verdict,
         "reasons": reasons_fail + reasons_warn,
@@ -234,9 +315,23 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         "a_identified": a_id,
         "b_identified": b_id,
         "relative_error": ident["relative_error"] if ident else None,
+        "c_true": {"a": p.a_eff, "b": p.b_eff},
+        "c_true_after_drive": {"a": p_end.a_eff, "b": p_end.b_eff},
         "mass_kg": p.mass,
+        "weight_n": weight,
         "yaw_inertia_kgm2": p.yaw_inertia,
+        "yaw_inertia_file_kgm2": p_file.yaw_inertia,
+        "yaw_inertia_after_drive_kgm2": p_end.yaw_inertia,
         "wheel_inertia_kgm2": p.wheel_inertia,
+        "floor_fraction": {"drive": p.floor_fraction[0], "turn": p.floor_fraction[1]},
+        "floor_contacts": floor,
+        "floor_load_n": float(sum(c["load_n"] for c in floor)),
+        "self_contacts": selfc,
+        "moving_parts": moving,
+        "joints": {
+            k: [x[len("f1/") :] for x in getattr(lay, f"{k}_joints")]
+            for k in ("frozen", "locked", "held", "free", "rolling")
+        },
         "wheel_radius_m": p.wheel_radius,
         "half_track_m": p.half_track,
         "friction_mu": mu,
@@ -285,7 +380,7 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
       centripetal part ``υ_r ω_r`` against the lateral tip margin;
     - the start-up transient: followers start at rest off their slots and the torque law meets
       the jump of the command at the motor limit, so full torque ``2 a_eff τ_max`` (m/s²) is
-      compared with the tip margins, and ``τ_max`` with the traction limit ``μ N r`` (``N`` the
+      compared with the tip margins, and ``τ_max`` with the traction limit ``μ N r / f`` (``N`` the
       least-loaded wheel's share of the weight at rest, measured on a settled copy of the scene:
       casters and gravity-compensated parts take weight off the wheels).
 
@@ -301,7 +396,8 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
     scratch = mujoco.MjData(plant.model)
     mujoco.mj_kinematics(plant.model, scratch)
     out: list[str] = []
-    loads = plant.settled_wheel_loads()
+    settled = plant.settled_data()
+    loads = plant.settled_wheel_loads(data=settled)
     given: dict[str, list[int]] = {}  # a mapped size far from the model's geometry (scene.layout_of's notes)
     for i, lay in enumerate(plant.layouts):
         for note in lay.notes:
@@ -315,10 +411,21 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
             f"({float(m['given']) / float(m['model']) - 1:+.0%}): the controller and c_true use the given "
             "value, the physics the model's"
         )
+    from .contacts import braking_casters, floor_contacts
+    from .robot_params import robot_parameters
+
     for i, p in enumerate(plant.params):
+        p_file = robot_parameters(plant.model, f"f{i + 1}/", scratch)  # the file's configuration (qpos0)
+        change = p.yaw_inertia / p_file.yaw_inertia - 1
+        if abs(change) > YAW_TOL:  # design §13: c_true is the robot that runs (settled)
+            out.append(
+                f"follower {i + 1}: the robot that runs (settled at rest) has yaw inertia {p.yaw_inertia:.4g} kg·m², "
+                f"the file's configuration {p_file.yaw_inertia:.4g} kg·m² ({100 * change:+.1f} %: parts held by weak "
+                f"servos or left free moved); c_true = ({p.a_eff:.4g}, {p.b_eff:.4g}) is the settled robot's"
+            )
         tips = tip_margins(plant.model, scratch, f"f{i + 1}/")["tip_accel_mps2"]
         mu = plant._wheel_friction(i)
-        traction = mu * float(loads[i].min()) * p.wheel_radius  # μ N r per wheel
+        traction = p.traction_torque(mu, float(loads[i].min()))  # μ N r / f per wheel (design §13)
         who = f"follower {i + 1}"
         if total > mu * G:
             out.append(
@@ -336,6 +443,12 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
                 f"margin {tips['lateral']:.3g} m/s²"
             )
         motor = float(min(p.tau_max))
+        # a caster that slides brakes the robot (design §13)
+        floor = floor_contacts(plant.model, settled, plant.layouts[i], f"f{i + 1}/")
+        wheel_force = sum(c["load_n"] for c in floor if c["role"] == "wheel")
+        drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
+        for _, _, msg in braking_casters(floor, drive_force):
+            out.append(f"{who}: {msg}")
         # cruising at the leader's top speed against the wheel damping c and frictionloss f takes
         # c v / r + f per wheel (menagerie Stretch 3: c = 30 N·m·s/rad, 151 N·m at 0.25 m/s)
         v_top = float(np.max(np.abs(vel[:, 0])))
@@ -356,7 +469,7 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
             )
         if motor > traction:
             out.append(
-                f"{who}: torque limit {motor:.3g} N·m exceeds the traction limit μ N r = "
+                f"{who}: torque limit {motor:.3g} N·m exceeds the traction limit μ N r / f = "
                 f"{traction:.3g} N·m (N = {loads[i].min():.3g} N on the least-loaded wheel at rest): "
                 "the wheels can skid at full torque"
             )
@@ -372,6 +485,24 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--wheel-radius", type=float, help="wheel radius in m (default: from the wheels' collision geoms)")
     p.add_argument("--half-track", type=float, help="half the track in m (default: from the wheel joint anchors)")
     p.add_argument("--tau-max", type=float, help="wheel torque limit in N·m (default: the model's own drive limit)")
+    p.add_argument(
+        "--caster",
+        action="append",
+        metavar="NAME",
+        help="a geom or body that is a caster (repeat for several; design §13)",
+    )
+    p.add_argument(
+        "--caster-friction",
+        type=float,
+        metavar="MU",
+        help="sliding friction of the casters against the floor (default: as published; frictionless "
+        "geoms stay frictionless)",
+    )
+    p.add_argument(
+        "--free-joints",
+        action="store_true",
+        help="leave the joints other than the wheels free (default: held at the file's configuration)",
+    )
 
 
 def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
@@ -383,6 +514,9 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
         v = getattr(args, flag, None)
         if v is not None and not (math.isfinite(v) and v > 0):
             raise InputError(f"--{flag.replace('_', '-')} must be a number > 0, got {v}")
+    cf = getattr(args, "caster_friction", None)
+    if cf is not None and not (math.isfinite(cf) and cf >= 0):
+        raise InputError(f"--caster-friction must be a number >= 0, got {cf}")
     return resolve_robot(
         RobotRef(
             model=model,
@@ -392,6 +526,9 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
             wheel_radius=args.wheel_radius or 0.0,
             half_track=args.half_track or 0.0,
             tau_max=args.tau_max or 0.0,
+            casters=tuple(getattr(args, "caster", None) or ()),
+            caster_friction=-1.0 if cf is None else float(cf),
+            free_joints=bool(getattr(args, "free_joints", False)),
         )
     )
 
@@ -413,6 +550,30 @@ def add_parser(sub: Any) -> None:
 
 def _num(x: float | None) -> str:
     return "n/a" if x is None else f"{x:.5g}"
+
+
+def _floor_table(report: dict[str, Any]) -> list[str]:
+    """The floor contacts of a report as a small text table."""
+    rows = [("body", "geom", "role", "load N", "μ sim", "μ pub", "condim sim/pub")]
+    for c in report["floor_contacts"]:
+        rows.append(
+            (
+                c["body"],
+                c["geom"],
+                c["role"] + (" (rolls)" if c["rolls"] else ""),
+                f"{c['load_n']:.4g}",
+                f"{c['friction']:g}",
+                f"{c['friction_published']:g}",
+                f"{c['condim']}/{c['condim_published']}",
+            )
+        )
+    width = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]
+    out = [
+        f"  floor contacts at rest: {len(report['floor_contacts'])}, {report['floor_load_n']:.4g} N of "
+        f"{report['weight_n']:.4g} N weight"
+    ]
+    out += ["    " + "  ".join(v.ljust(w) for v, w in zip(r, width)).rstrip() for r in rows]
+    return out
 
 
 def main(args: argparse.Namespace) -> int:
@@ -438,6 +599,28 @@ def main(args: argparse.Namespace) -> int:
         f"CoM {1e3 * report['com_offset_m']:.1f} mm off the axle, "
         f"{report['com_height_m']:.3g} m high",
     ]
+    lines.append(
+        f"  mass {report['mass_kg']:.4g} kg, yaw inertia {report['yaw_inertia_kgm2']:.4g} kg·m² "
+        f"(the file's configuration: {report['yaw_inertia_file_kgm2']:.4g}), c_true = "
+        f"({report['c_true']['a']:.5g}, {report['c_true']['b']:.5g}); torque reaching the floor "
+        f"{100 * report['floor_fraction']['drive']:.3g} % driving, "
+        f"{100 * report['floor_fraction']['turn']:.3g} % turning"
+    )
+    lines += _floor_table(report)
+    for sc in report["self_contacts"]:
+        lines.append(
+            f"  self contact: '{sc['body1']}' / '{sc['body2']}' "
+            f"{1e3 * sc['depth_m']:.3g} mm deep, {sc['force_n']:.3g} N"
+        )
+    moving = report["moving_parts"]
+    lines.append(
+        "  moving parts (first 2 s): "
+        + (
+            ", ".join(f"'{m['body']}' {1e3 * m['displacement_m']:.1f} mm / {m['rotation_deg']:.1f}°" for m in moving)
+            if moving
+            else "none"
+        )
+    )
     lines += [f"  {r}" for r in report["reasons"]]
     lines += [f"  note: {n}" for n in report["notes"]]
     print("\n".join(lines))

@@ -6,7 +6,8 @@ An entry of ``plant.robots`` is
 - a path to an MJCF file, or
 - a table ``{model = "path.xml", base = "BODY", left_wheel = "JOINT", right_wheel = "JOINT",
   wheel_radius = r, half_track = l, tau_max = τ, motor = "ideal" | "dc", driver = "current" |
-  "voltage"}``: every key but ``model`` optional; an empty
+  "voltage", casters = ["GEOM or BODY", ...], caster_friction = μ, free_joints = false}``: every key
+  but ``model`` optional; an empty
   name (or 0 for a number) means "as in the shipped convention" (body ``base``, joints
   ``left_wheel``/``right_wheel``) resp. "read it from the model".
 
@@ -38,6 +39,11 @@ class RobotRef:
     ``half_track`` (m) override what the model tells; ``tau_max`` (N·m): wheel torque limit of
     the motors the plant attaches (default: the model's own drive limit, see
     :func:`bioform_mj.scene.prepare_robot`). Empty string / 0: the convention / from the model.
+
+    ``casters``: geoms or bodies (every collision geom of a body) that are casters (design §13);
+    ``caster_friction``: their sliding friction against the floor (they then win the contact
+    pair's mixing by priority), negative: as published; ``free_joints``: leave the joints other
+    than the wheels free (default: held, design §13).
     """
 
     model: str
@@ -49,11 +55,23 @@ class RobotRef:
     tau_max: float = 0.0
     motor: str = ""  # "" or "ideal": torque sources (the paper); "dc": the model's <dcmotor> drives
     driver: str = ""  # with motor = "dc": "current" (default) or "voltage" (design §8.2)
+    casters: tuple[str, ...] = ()  # geom or body names of casters (design §13)
+    caster_friction: float = -1.0  # sliding friction of the casters against the floor; < 0: as published
+    free_joints: bool = False  # True: joints other than the wheels left free (default: held, design §13)
 
     @property
     def mapped(self) -> bool:
         """True when any key beyond ``model`` is given."""
-        return any(getattr(self, f.name) for f in fields(self) if f.name != "model")
+        return any(getattr(self, f.name) != f.default for f in fields(self) if f.name != "model")
+
+    def to_table(self) -> dict[str, Any]:
+        """The mapping as a TOML table: ``model`` and every key that differs from its default."""
+        out: dict[str, Any] = {"model": self.model}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name != "model" and v != f.default:
+                out[f.name] = list(v) if isinstance(v, tuple) else v
+        return out
 
     def __str__(self) -> str:
         return self.model
@@ -103,6 +121,16 @@ def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:
                     f"scenario key '{key}.{name}': expected one of "
                     f"{', '.join(repr(a) for a in allowed if a)}, got {value!r}"
                 )
+            kw[name] = value
+        elif name == "casters":
+            if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v for v in value):
+                raise InputError(
+                    f"scenario key '{key}.casters': expected an array of geom or body names, got {value!r}"
+                )
+            kw[name] = tuple(value)
+        elif name == "free_joints":
+            if not isinstance(value, bool):
+                raise InputError(f"scenario key '{key}.free_joints': expected true or false, got {value!r}")
             kw[name] = value
         else:
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:

@@ -335,9 +335,7 @@ class Scenario:
         """Plain nested dict (JSON/TOML-able) of every resolved value (a robot without a mapping
         as its name or path, one with a mapping as a table)."""
         d = _to_plain(dataclasses.asdict(self))
-        d["plant"]["robots"] = [
-            r.model if not r.mapped else _to_plain(dataclasses.asdict(r)) for r in self.plant.robots
-        ]
+        d["plant"]["robots"] = [r.model if not r.mapped else _to_plain(r.to_table()) for r in self.plant.robots]
         return d
 
     # ---- derived objects -------------------------------------------------------------

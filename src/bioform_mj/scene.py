@@ -13,8 +13,16 @@ A robot is an MJCF file plus a mapping (:class:`bioform_mj.robots.RobotRef`); se
   forward, in N·m): a plain motor of the model on the joint is kept (its gear sign fixed),
   otherwise ``left_motor``/``right_motor`` are added and the model's own wheel drives (joint or
   tendon velocity/position/motor actuators) get zero gain and bias: they exert no force but stay
-  in the model, so sensors that name them still compile. Other actuators are left as they are
-  (a position actuator keeps holding its ctrl = 0 target);
+  in the model, so sensors that name them still compile;
+- the robot that runs (design §13): joints other than the wheels and the root are held where the
+  file puts them — by the model's own position servo, else frozen (deleted: their bodies welded,
+  the actuators on them removed), else (a tendon, equality or sensor names them) locked by a joint
+  equality — unless the mapping says ``free_joints``; a caster's swivel and wheel stay free. Other
+  actuators are kept with ctrl = 0;
+- contacts as the maker meant (design §13): a non-wheel geom published frictionless (friction
+  below :data:`FRICTIONLESS` or condim 1) and the mapping's ``casters`` get
+  :data:`CONTACT_PRIORITY`, so that MuJoCo uses their own friction and condim against the floor
+  rather than the larger of the pair; ``caster_friction`` sets the casters' friction;
 - a wheel collision shape that scrubs when turning (cylinder, capsule, box, mesh: several
   contact points across the tread) is switched off for contacts (kept for looks) and replaced
   by a single-contact ellipsoid proxy of the same radius (design §8 pitfall);
@@ -65,11 +73,24 @@ __all__ = [
     "MARKER_Z",
     "Markers",
     "PATCH_THICKNESS",
+    "FRICTIONLESS",
+    "CONTACT_PRIORITY",
+    "SUPPORT_CLEARANCE",
+    "subtree",
+    "welded_to",
 ]
 
 
 #: height of the leader ghost / slot markers above the floor, m
 MARKER_Z = 0.002
+#: a geom whose sliding friction is below this (or whose condim is 1) is frictionless as published
+FRICTIONLESS = 1e-3
+#: priority given to a robot's frictionless geoms and mapped casters (design §13): above the floor's
+#: (0, or 1 with ``floor_friction``) and a friction patch's (1), so that MuJoCo takes their own
+#: friction and condim for the pair instead of the larger of the two
+CONTACT_PRIORITY = 2
+#: a collision geom whose lowest point is within this of the floor (m, or 0.25 r if larger) supports the chassis
+SUPPORT_CLEARANCE = 0.005
 #: thickness of a low-friction floor patch, m: far above a wheel's contact penetration (~1 µm),
 #: below the paper robot's caster clearance (0.5 mm), so only the wheels touch it
 PATCH_THICKNESS = 0.0002
@@ -125,6 +146,7 @@ def _one_line(msg: str) -> str:
 _SINGLE_CONTACT = (int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_ELLIPSOID))
 _LAYOUT_TEXT = "bioform_layout"
 _FREE, _HINGE = int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_HINGE)
+_ACT = mujoco.mjtObj.mjOBJ_ACTUATOR
 
 
 @dataclass(frozen=True)
@@ -147,6 +169,15 @@ class RobotLayout:
     tau_max: float
     disabled_actuators: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
+    # design §13: the robot that runs and its contacts
+    frozen_joints: tuple[str, ...] = ()  # removed from the scene: their bodies welded where the file puts them
+    locked_joints: tuple[str, ...] = ()  # held at qpos0 by a joint equality (referenced elsewhere, not removable)
+    held_joints: tuple[str, ...] = ()  # held by the model's own position actuators
+    free_joints: tuple[str, ...] = ()  # left free (free_joints = true, or a ball joint that cannot be locked)
+    rolling_joints: tuple[str, ...] = ()  # passive joints above a floor contact (caster swivel/wheel): free
+    casters: tuple[str, ...] = ()  # geoms the mapping names as casters
+    priority_geoms: tuple[str, ...] = ()  # geoms given CONTACT_PRIORITY so that their own friction/condim win
+    published_contacts: tuple[tuple[str, float, int], ...] = ()  # (geom, friction, condim) as published, where changed
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -156,6 +187,10 @@ class RobotLayout:
         d = json.loads(text)
         for k in ("wheel_joints", "motors", "wheel_geoms", "axle", "wheel_sign", "disabled_actuators", "notes"):
             d[k] = tuple(d[k])
+        for k in ("frozen_joints", "locked_joints", "held_joints", "free_joints", "rolling_joints", "casters"):
+            d[k] = tuple(d.get(k, ()))
+        d["priority_geoms"] = tuple(d.get("priority_geoms", ()))
+        d["published_contacts"] = tuple((str(g), float(f), int(c)) for g, f, c in d.get("published_contacts", ()))
         return cls(**d)
 
 
@@ -180,6 +215,14 @@ def layout_of(model: mujoco.MjModel, prefix: str = "") -> RobotLayout:
         motors=tuple(prefix + a for a in lay.motors),
         wheel_geoms=tuple(prefix + g for g in lay.wheel_geoms),
         disabled_actuators=tuple(prefix + a for a in lay.disabled_actuators),
+        frozen_joints=tuple(prefix + j for j in lay.frozen_joints),
+        locked_joints=tuple(prefix + j for j in lay.locked_joints),
+        held_joints=tuple(prefix + j for j in lay.held_joints),
+        free_joints=tuple(prefix + j for j in lay.free_joints),
+        rolling_joints=tuple(prefix + j for j in lay.rolling_joints),
+        casters=tuple(prefix + g for g in lay.casters),
+        priority_geoms=tuple(prefix + g for g in lay.priority_geoms),
+        published_contacts=tuple((prefix + g, f, c) for g, f, c in lay.published_contacts),
     )
 
 
@@ -210,6 +253,30 @@ def _geom_support(model: mujoco.MjModel, data: mujoco.MjData, g: int, d: np.ndar
     raise ValueError(f"geom type {mujoco.mjtGeom(t).name} cannot be a wheel")
 
 
+def subtree(model: mujoco.MjModel, root: int) -> np.ndarray:
+    """Ids of body ``root`` and all its descendants."""
+    ids = np.arange(model.nbody)
+    inside = ids == root
+    for b in ids[root + 1 :]:  # children always come after their parents
+        inside[b] = inside[model.body_parentid[b]]
+    return ids[inside]
+
+
+def welded_to(model: mujoco.MjModel, body: int) -> np.ndarray:
+    """Ids of ``body`` and every body welded to it: its descendants reached through bodies without
+    joints (a hubcap on a fixed joint below a wheel; a body the compiler fused is part of ``body``
+    already). They move rigidly with ``body`` (design §13)."""
+    ids = np.arange(model.nbody)
+    inside = ids == body
+    for b in ids[body + 1 :]:
+        inside[b] = inside[model.body_parentid[b]] and model.body_jntnum[b] == 0
+    return ids[inside]
+
+
+def _collides(model: mujoco.MjModel, g: int) -> bool:
+    return bool(model.geom_contype[g] or model.geom_conaffinity[g])
+
+
 def _name(model: mujoco.MjModel, objtype: mujoco.mjtObj, i: int) -> str:
     return mujoco.mj_id2name(model, objtype, i) or f"#{i}"
 
@@ -225,6 +292,14 @@ def _spec_body(spec: mujoco.MjSpec, model: mujoco.MjModel, b: int) -> mujoco.Mjs
 def _spec_geom(spec: mujoco.MjSpec, model: mujoco.MjModel, g: int) -> mujoco.MjsGeom:
     b = int(model.geom_bodyid[g])
     return _spec_body(spec, model, b).geoms[g - int(model.body_geomadr[b])]
+
+
+def _spec_joint(spec: mujoco.MjSpec, model: mujoco.MjModel, j: int) -> mujoco.MjsJoint:
+    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+    if name:
+        return spec.joint(name)
+    b = int(model.jnt_bodyid[j])
+    return _spec_body(spec, model, b).joints[j - int(model.body_jntadr[b])]
 
 
 def _spec_actuator(spec: mujoco.MjSpec, model: mujoco.MjModel, a: int) -> mujoco.MjsActuator:
@@ -473,9 +548,6 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
             + ", ".join(f"'{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)}'" for a in disabled)
             + " is left unused (zero gain and bias: no force)"
         )
-    others = model.nu - len(drives)
-    if others:
-        notes.append(f"{others} other actuator(s) left as they are (ctrl stays 0: position actuators hold 0)")
     for j in joints:
         dof = model.jnt_dofadr[j]
         parts = [
@@ -529,6 +601,7 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
                 "scrubbing it sideways (skid steer), which the paper's differential-drive model lacks; "
                 "its own actuators, if any, are left as they are"
             )
+    cj = _contacts_and_joints(model, data, path, ref, base, joints, drives + dc_all, r, floor_z, up, notes)
     jn = tuple(_name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints)
     gnames = []
     for j, g, pr in zip(jn, geoms, proxies):
@@ -547,6 +620,7 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         tau_max=float(tau_max),
         disabled_actuators=tuple(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in disabled),
         notes=tuple(notes),
+        **cj["layout"],
     )
     plan = dict(
         has_free=has_free,
@@ -560,8 +634,241 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         joints=joints,
         axle_world=mid,
         base_yaw=float(np.arctan2(fwd[1], fwd[0])),
+        **cj["plan"],
     )
     return layout, plan
+
+
+def _geom_label(model: mujoco.MjModel, g: int) -> str:
+    """A geom's name, or ``BODY_geomK`` for an unnamed one (prepare_robot gives it that name)."""
+    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
+    if name:
+        return name
+    b = int(model.geom_bodyid[g])
+    return f"{_name(model, mujoco.mjtObj.mjOBJ_BODY, b)}_geom{g - int(model.body_geomadr[b])}"
+
+
+def _joint_label(model: mujoco.MjModel, j: int) -> str:
+    """A joint's name, or ``BODY_jointK`` for an unnamed one (prepare_robot gives it that name)."""
+    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+    if name:
+        return name
+    b = int(model.jnt_bodyid[j])
+    return f"{_name(model, mujoco.mjtObj.mjOBJ_BODY, b)}_joint{j - int(model.body_jntadr[b])}"
+
+
+def _quoted(names) -> str:
+    return ", ".join(f"'{n}'" for n in names)
+
+
+def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, drives, r, floor_z, up, notes) -> dict:
+    """design §13: the casters and frictionless geoms (priority), and what holds each joint that is
+    not a wheel. Returns ``{"layout": RobotLayout fields, "plan": what prepare_robot changes}``."""
+    bodies = subtree(model, base)
+    body_set = set(bodies.tolist())
+    wheel_bodies = set()
+    for j in joints:
+        wheel_bodies |= set(welded_to(model, int(model.jnt_bodyid[j])).tolist())
+    robot_geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] in body_set and _collides(model, g)]
+    tol = max(SUPPORT_CLEARANCE, 0.25 * r)
+    support = [
+        g
+        for g in robot_geoms
+        if data.geom_xpos[g] @ up - _geom_support(model, data, g, -up) - floor_z <= tol
+        and model.geom_bodyid[g] not in wheel_bodies
+    ]
+
+    # casters named by the mapping: geoms, or every collision geom of a body
+    named: list[int] = []
+    for nm in ref.casters:
+        g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, nm)
+        if g >= 0:
+            if model.geom_bodyid[g] not in body_set:
+                raise ModelError(f"{path}: caster '{nm}' (mapping casters) is not a geom of the robot")
+            named.append(g)
+            continue
+        b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, nm)
+        if b < 0:
+            raise ModelError(f"{path}: no geom or body '{nm}' (mapping casters)")
+        mine = [g for g in robot_geoms if model.geom_bodyid[g] == b]
+        if not mine:
+            raise ModelError(f"{path}: body '{nm}' (mapping casters) has no collision geom")
+        named += mine
+    published: list[tuple[str, float, int]] = []
+    friction: dict[int, list[float]] = {}
+    condim1: list[int] = []
+    if ref.caster_friction >= 0:
+        targets = named or support
+        if not targets:
+            notes.append(
+                f"caster_friction {ref.caster_friction:g} given, but no caster is named and no geom other than the "
+                "wheels reaches the floor: ignored"
+            )
+        for g in targets:
+            fr = np.array(model.geom_friction[g], float)
+            published.append((_geom_label(model, g), float(fr[0]), int(model.geom_condim[g])))
+            fr[0] = ref.caster_friction
+            friction[g] = fr.tolist()
+            if ref.caster_friction < FRICTIONLESS:  # frictionless: condim 1 (a pyramidal cone with μ ≈ 0 is
+                condim1.append(g)  # ill-conditioned: the contact rocks ~10x longer before it settles)
+        if targets:
+            notes.append(
+                f"caster(s) {_quoted(_geom_label(model, g) for g in targets)}: sliding friction "
+                f"{ref.caster_friction:g} (mapping caster_friction; published "
+                + ", ".join(f"{f:g}" for _, f, _ in published)
+                + f"), priority {CONTACT_PRIORITY} so that it decides the floor contact"
+                + (", condim 1" if condim1 else "")
+            )
+    # frictionless as published: priority so that MuJoCo's max rule does not give them the floor's μ
+    raise_prio = [
+        g
+        for g in robot_geoms
+        if model.geom_bodyid[g] not in wheel_bodies
+        and (model.geom_friction[g, 0] < FRICTIONLESS or model.geom_condim[g] == 1 or g in friction)
+        and model.geom_priority[g] < CONTACT_PRIORITY
+    ]
+    fl = [g for g in raise_prio if g not in friction]
+    if fl:
+        notes.append(
+            f"frictionless geom(s) {_quoted(_geom_label(model, g) for g in fl)} (friction < {FRICTIONLESS:g} or "
+            f"condim 1 as published) get priority {CONTACT_PRIORITY}: they stay frictionless against the floor "
+            "(MuJoCo would otherwise take the larger friction of the pair, the floor's)"
+        )
+
+    # joints that are not the wheels or the root (design §13)
+    wheel_set = set(int(j) for j in joints)
+    root = int(model.body_jntadr[base]) if model.body_jntnum[base] else -1
+    sensed_acts = {
+        int(model.sensor_objid[k])
+        for k in range(model.nsensor)
+        if model.sensor_objtype[k] == int(mujoco.mjtObj.mjOBJ_ACTUATOR)
+    }
+    joint_trn = (int(mujoco.mjtTrn.mjTRN_JOINT), int(mujoco.mjtTrn.mjTRN_JOINTINPARENT))
+    frozen, locked, held, free, rolling = [], [], [], [], []
+    frozen_acts: list[int] = []
+    lock_q: dict[int, float] = {}
+    for j in range(model.njnt):
+        b = int(model.jnt_bodyid[j])
+        if j in wheel_set or j == root or b not in body_set:
+            continue
+        below = set(subtree(model, b).tolist())
+        if any(model.geom_bodyid[g] in below for g in support) or b in wheel_bodies:
+            rolling.append(j)  # a caster's swivel or wheel (or a joint on a wheel): passive, free
+            continue
+        acts = [
+            a for a in range(model.nu) if model.actuator_trntype[a] in joint_trn and model.actuator_trnid[a, 0] == j
+        ]
+        servo = [
+            a
+            for a in acts
+            if model.actuator_biastype[a] == int(mujoco.mjtBias.mjBIAS_AFFINE)
+            and model.actuator_biasprm[a, 1] < 0
+            and model.actuator_gainprm[a, 0] > 0
+        ]
+        if ref.free_joints:
+            free.append(j)
+            continue
+        if servo:
+            held.append(j)
+            continue
+        referenced = (
+            any(
+                model.wrap_type[w] == int(mujoco.mjtWrap.mjWRAP_JOINT) and model.wrap_objid[w] == j
+                for w in range(model.nwrap)
+            )
+            or any(
+                model.eq_type[e] == int(mujoco.mjtEq.mjEQ_JOINT) and j in (model.eq_obj1id[e], model.eq_obj2id[e])
+                for e in range(model.neq)
+            )
+            or any(
+                model.sensor_objtype[k] == int(mujoco.mjtObj.mjOBJ_JOINT) and model.sensor_objid[k] == j
+                for k in range(model.nsensor)
+            )
+            or any(a in sensed_acts for a in acts)
+        )
+        if not referenced:
+            frozen.append(j)
+            frozen_acts += acts
+        elif int(model.jnt_type[j]) in (_HINGE, int(mujoco.mjtJoint.mjJNT_SLIDE)):
+            locked.append(j)
+            lock_q[j] = float(model.qpos0[model.jnt_qposadr[j]])
+        else:
+            free.append(j)
+    jl = lambda js: _quoted(_joint_label(model, j) for j in js)  # noqa: E731
+    if frozen:
+        notes.append(
+            f"joint(s) {jl(frozen)} frozen (design §13: removed from the scene, their bodies welded where the file "
+            "puts them; map free_joints = true to leave them free)"
+            + (
+                f"; their actuator(s) {_quoted(_name(model, _ACT, a) for a in frozen_acts)} removed"
+                if frozen_acts
+                else ""
+            )
+        )
+    if locked:
+        notes.append(
+            f"joint(s) {jl(locked)} locked at the file's configuration by a joint equality (a tendon, equality or "
+            "sensor names them, so they cannot be removed)"
+        )
+    if held:
+        qs = [float(model.qpos0[model.jnt_qposadr[j]]) for j in held]
+        notes.append(
+            f"joint(s) {jl(held)} held by the model's own position actuators at ctrl = 0"
+            + (
+                " (their target is 0, the file's configuration is "
+                + ", ".join(f"{q:.3g}" for q in qs)
+                + ": they move there)"
+                if any(abs(q) > 1e-9 for q in qs)
+                else ""
+            )
+        )
+    if free:
+        notes.append(
+            f"joint(s) {jl(free)} left free"
+            + (" (free_joints = true)" if ref.free_joints else " (a ball or free joint that an equality cannot lock)")
+            + ": gravity and the drive move them; robot check reports moving_parts"
+        )
+    if rolling:
+        notes.append(
+            f"joint(s) {jl(rolling)} left free: a caster's swivel or wheel (a geom below them touches the floor)"
+        )
+    frozen_set = set(frozen_acts)
+    others = [a for a in range(model.nu) if a not in drives and a not in frozen_set]
+    if others:
+        notes.append(
+            f"{len(others)} other actuator(s) kept with ctrl = 0 (a position actuator holds its target 0, a motor "
+            "or velocity actuator pushes nothing or damps)"
+        )
+    name_geoms = {
+        g: _geom_label(model, g)
+        for g in set(raise_prio) | set(friction)
+        if not mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
+    }
+    name_joints = {
+        j: _joint_label(model, j) for j in locked if not mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+    }
+    return {
+        "layout": dict(
+            frozen_joints=tuple(_joint_label(model, j) for j in frozen),
+            locked_joints=tuple(_joint_label(model, j) for j in locked),
+            held_joints=tuple(_joint_label(model, j) for j in held),
+            free_joints=tuple(_joint_label(model, j) for j in free),
+            rolling_joints=tuple(_joint_label(model, j) for j in rolling),
+            casters=tuple(dict.fromkeys(_geom_label(model, g) for g in named)),
+            priority_geoms=tuple(_geom_label(model, g) for g in raise_prio),
+            published_contacts=tuple(published),
+        ),
+        "plan": dict(
+            freeze=frozen,
+            freeze_acts=frozen_acts,
+            lock=lock_q,
+            priority=raise_prio,
+            friction=friction,
+            condim1=condim1,
+            name_geoms=name_geoms,
+            name_joints=name_joints,
+        ),
+    }
 
 
 def _wheel_proxy(
@@ -731,6 +1038,8 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
 
     # spec elements by compiled index, resolved before anything is deleted (unnamed ones included)
     acts = {a: _spec_actuator(spec, model, a) for a in range(model.nu)}
+    sjoints = {j: _spec_joint(spec, model, j) for j in set(plan["freeze"]) | set(plan["lock"])}
+    sgeoms = {g: _spec_geom(spec, model, g) for g in set(plan["priority"]) | set(plan["friction"])}
     for g, pr, gname in zip(plan["geoms"], plan["proxies"], layout.wheel_geoms):
         if pr is None and g >= 0 and not mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g):
             _spec_geom(spec, model, g).name = gname
@@ -785,8 +1094,40 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
                 forcelimited=1,
                 forcerange=[-tau, tau],
             )
+    _hold_and_contacts(spec, model, plan, acts, sjoints, sgeoms)
     spec.add_text(name=_LAYOUT_TEXT, data=layout.to_json())
     return spec, layout, np.asarray(plan["axle_world"], float), plan["base_yaw"]
+
+
+def _hold_and_contacts(spec, model, plan, acts, sjoints, sgeoms) -> None:
+    """design §13 in the spec: casters' friction and priority, frozen joints removed (with the
+    actuators on them), locked joints held by a joint equality at their ``qpos0``."""
+    for g, name in plan["name_geoms"].items():
+        sgeoms[g].name = name
+    for g in plan["priority"]:
+        sgeoms[g].priority = CONTACT_PRIORITY
+    for g, fr in plan["friction"].items():
+        sgeoms[g].friction = fr
+        sgeoms[g].priority = CONTACT_PRIORITY
+    for g in plan["condim1"]:
+        sgeoms[g].condim = 1
+    for j, name in plan["name_joints"].items():
+        sjoints[j].name = name
+    for a in plan["freeze_acts"]:
+        spec.delete(acts[a])
+    for j in plan["freeze"]:
+        spec.delete(sjoints[j])
+    dt = float(model.opt.timestep)
+    for j, q0 in plan["lock"].items():
+        data = np.zeros(mujoco.mjNEQDATA)
+        data[0] = q0  # joint1 = polycoef[0] without a joint2: held at q0
+        spec.add_equality(
+            type=mujoco.mjtEq.mjEQ_JOINT,
+            objtype=mujoco.mjtObj.mjOBJ_JOINT,
+            name1=sjoints[j].name,
+            data=data,
+            solref=[2 * dt, 1.0],  # as stiff as the step allows (MuJoCo: timeconst >= 2 dt)
+        )
 
 
 def load_robot(entry: RobotRef | str | Path) -> mujoco.MjSpec:

@@ -25,7 +25,7 @@ import numpy as np
 from bioform_mj.control.equations import slip_ratio
 from bioform_mj.disturbance import harmonic_rows
 from bioform_mj.errors import Diverged
-from bioform_mj.identify import RobotParams, robot_parameters
+from bioform_mj.robot_params import RobotParams, robot_parameters, running_data
 from bioform_mj.scene import (
     Markers,
     RobotLayout,
@@ -103,7 +103,7 @@ class MujocoPlant:
     model, data, spec : the compiled ``MjModel``, its ``MjData`` and the scene ``MjSpec``.
     n_substeps : int, physics steps per control period.
     tau_max : array (n,), torque limit of each follower's motors, N·m.
-    params : list of :class:`~bioform_mj.identify.RobotParams`, current per follower.
+    params : list of :class:`~bioform_mj.robot_params.RobotParams`, current per follower.
     layouts : list of :class:`~bioform_mj.scene.RobotLayout` (names prefixed), per follower.
 
     Index arrays (looked up once; read by the compiled loop kernels, keep their meaning):
@@ -275,8 +275,9 @@ class MujocoPlant:
 
     # ------------------------------------------------------------------ parameters
     def _update_params(self) -> None:
-        scratch = mujoco.MjData(self.model)  # kinematics at qpos0, shared by all robots
-        mujoco.mj_kinematics(self.model, scratch)
+        # kinematics of the configuration the robots run in (qpos0 unless they have joints beyond
+        # the wheels: then settled, design §13), shared by all robots
+        scratch = running_data(self.model, self.n)
         self.params: list[RobotParams] = [robot_parameters(self.model, p, scratch) for p in self._prefixes]
         self._c = np.array([[p.a_eff, p.b_eff] for p in self.params])
         self._m_eff = np.array([p.mass_eff for p in self.params])  # kg
@@ -424,20 +425,25 @@ class MujocoPlant:
                 out[hit] += f[0]
         return out
 
-    def settled_wheel_loads(self, seconds: float = 0.2) -> np.ndarray:
-        """(n, 2) wheel loads, N, after ``seconds`` of zero torque from the initial state, computed on
-        a copy (the run's own state is untouched): the share of the weight the wheels carry."""
+    def settled_data(self, seconds: float = 0.2) -> mujoco.MjData:
+        """A copy of the scene after ``seconds`` of zero torque from the initial state (the run's own
+        state is untouched): its contacts say what each robot stands on (design §13)."""
         m = self.model
         d = mujoco.MjData(m)
         mujoco.mj_forward(m, d)
         for _ in range(max(1, int(round(seconds / m.opt.timestep)))):
             mujoco.mj_step(m, d)
-        return self.wheel_loads(d)
+        return d
+
+    def settled_wheel_loads(self, seconds: float = 0.2, data: mujoco.MjData | None = None) -> np.ndarray:
+        """(n, 2) wheel loads, N, after ``seconds`` of zero torque from the initial state, computed on
+        a copy (:meth:`settled_data`, or ``data`` if given): the share of the weight the wheels carry."""
+        return self.wheel_loads(self.settled_data(seconds) if data is None else data)
 
     def unmodelled(self, v: float, w: float) -> list[dict]:
         """Per follower: wheel damping, armature and frictionloss and their size at speeds
         ``v`` m/s, ``w`` rad/s, with what ``ĉ`` should converge to
-        (:meth:`~bioform_mj.identify.RobotParams.unmodelled`); for ``summary.json``."""
+        (:meth:`~bioform_mj.robot_params.RobotParams.unmodelled`); for ``summary.json``."""
         return [p.unmodelled(v, w) for p in self.params]
 
     def step(self, tau: np.ndarray, t: float) -> None:

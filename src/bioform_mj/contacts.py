@@ -1,0 +1,254 @@
+"""What a robot touches at rest and what of it moves: floor contacts, self contacts, moving parts (design §13).
+
+Read from MuJoCo's own contact list of a compiled scene (``data.contact``, forces from
+``mj_contactForce``), for the robot named with ``prefix``:
+
+- :func:`floor_contacts`: every geom of the robot touching a geom of the world body (the floor, a
+  friction patch), with its role (``wheel``: a driven wheel or a body welded to it; ``caster``: a
+  geom the mapping names, or any other geom that carries load; ``other``: touching, carrying
+  nothing), its load (normal force, N), and friction and condim as published and as MuJoCo mixes
+  them for the pair (the contact's own ``friction``/``dim``);
+- :func:`self_contacts`: pairs of the robot's own bodies in contact (penetration depth, force);
+- :func:`relative_poses` / :func:`moving_parts`: how far each body moves relative to the base.
+
+Imports nothing of the project above :mod:`bioform_mj.scene`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from bioform_mj.scene import FRICTIONLESS, RobotLayout, subtree, welded_to
+
+__all__ = [
+    "CASTER_LOAD",
+    "MOVE_M",
+    "MOVE_DEG",
+    "floor_contacts",
+    "self_contacts",
+    "relative_poses",
+    "moving_parts",
+    "pose_change",
+    "still_bodies",
+    "braking_casters",
+]
+
+#: a non-wheel geom carrying more than this fraction of the robot's weight is a caster
+CASTER_LOAD = 0.005
+#: a body whose position relative to the base changes by more than this (m) or whose orientation
+#: by more than :data:`MOVE_DEG` (deg) is a moving part
+MOVE_M, MOVE_DEG = 5e-3, 1.0
+
+
+def _gname(model: mujoco.MjModel, g: int) -> str:
+    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
+    if name:
+        return name
+    b = int(model.geom_bodyid[g])
+    return f"{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b)}#{g - int(model.body_geomadr[b])}"
+
+
+def _bname(model: mujoco.MjModel, b: int) -> str:
+    return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or f"#{b}"
+
+
+def _strip(name: str, prefix: str) -> str:
+    return name[len(prefix) :] if prefix and name.startswith(prefix) else name
+
+
+def _wheel_bodies(model: mujoco.MjModel, lay: RobotLayout) -> set[int]:
+    out: set[int] = set()
+    for j in lay.wheel_joints:
+        out |= set(welded_to(model, int(model.jnt_bodyid[model.joint(j).id])).tolist())
+    return out
+
+
+def _rolling_bodies(model: mujoco.MjModel, lay: RobotLayout) -> set[int]:
+    out: set[int] = set()
+    for j in lay.rolling_joints:
+        jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+        if jid >= 0:
+            out |= set(subtree(model, int(model.jnt_bodyid[jid])).tolist())
+    return out
+
+
+def _welded_to_base(model: mujoco.MjModel, base: int, b: int) -> bool:
+    while b != base and b > 0:
+        if model.body_jntnum[b]:
+            return False
+        b = int(model.body_parentid[b])
+    return b == base
+
+
+def _contact_bodies(model: mujoco.MjModel, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+    """Bodies of the two geoms of each of the ``ncon`` contacts, (ncon,) each."""
+    n = int(data.ncon)
+    g1 = np.asarray(data.contact.geom1[:n], dtype=int)
+    g2 = np.asarray(data.contact.geom2[:n], dtype=int)
+    return model.geom_bodyid[g1], model.geom_bodyid[g2]
+
+
+def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout, prefix: str = "") -> list[dict]:
+    """Every geom of the robot (layout ``lay``, names with ``prefix``) that touches the floor now.
+
+    One dict per geom: ``body``, ``geom`` (names without ``prefix``), ``role``, ``load_n`` (sum of
+    the normal forces of its contacts, N), ``friction`` (sliding friction MuJoCo uses for the pair),
+    ``condim`` (the pair's), ``friction_published``, ``condim_published`` (the geom's own, as the file
+    says), ``priority``, ``points`` (number of contacts), ``welded_to_base`` (no joint between its
+    body and the base: a caster that cannot roll slides) and ``rolls`` (below a free caster joint).
+    Call it on a robot at rest (settled) for the load at rest.
+    """
+    base = model.body(lay.base).id
+    bodies = set(subtree(model, base).tolist())
+    wheels = _wheel_bodies(model, lay)
+    rolling = _rolling_bodies(model, lay)
+    weight = float(model.body_mass[list(bodies)].sum() * np.linalg.norm(model.opt.gravity))
+    published = {g: (f, c) for g, f, c in lay.published_contacts}
+    casters = set(lay.casters)
+    per: dict[int, dict[str, Any]] = {}
+    f6 = np.zeros(6)
+    b1s, b2s = _contact_bodies(model, data)
+    mine = np.isin(b1s, list(bodies)) | np.isin(b2s, list(bodies))
+    for k in np.flatnonzero(mine & ((b1s == 0) | (b2s == 0))):
+        con = data.contact[int(k)]
+        g = int(con.geom2) if b1s[k] == 0 else int(con.geom1)
+        mujoco.mj_contactForce(model, data, int(k), f6)
+        row = per.get(g)
+        if row is None:
+            name = _gname(model, g)
+            pub = published.get(name, (float(model.geom_friction[g, 0]), int(model.geom_condim[g])))
+            b = int(model.geom_bodyid[g])
+            row = per[g] = {
+                "body": _strip(_bname(model, b), prefix),
+                "geom": _strip(name, prefix),
+                "role": "",
+                "load_n": 0.0,
+                "friction": float(con.friction[0]),
+                "condim": int(con.dim),
+                "friction_published": float(pub[0]),
+                "condim_published": int(pub[1]),
+                "priority": int(model.geom_priority[g]),
+                "points": 0,
+                "welded_to_base": _welded_to_base(model, base, b),
+                "rolls": b in rolling,
+                "_named": name in casters,
+                "_wheel": b in wheels,
+            }
+        row["load_n"] += float(f6[0])
+        row["points"] += 1
+    out = []
+    for row in per.values():
+        named, wheel = row.pop("_named"), row.pop("_wheel")
+        if wheel:
+            row["role"] = "wheel"
+        elif named or row["load_n"] > CASTER_LOAD * weight:
+            row["role"] = "caster"
+        else:
+            row["role"] = "other"
+        out.append(row)
+    order = {"wheel": 0, "caster": 1, "other": 2}
+    return sorted(out, key=lambda r: (order[r["role"]], r["body"], r["geom"]))
+
+
+def self_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout, prefix: str = "") -> list[dict]:
+    """Pairs of the robot's own bodies in contact now: ``body1``, ``body2``, ``geoms`` (pairs of geom
+    names), ``depth_m`` (deepest penetration, m, ≥ 0), ``force_n`` (sum of normal forces, N),
+    ``points``. Names without ``prefix``."""
+    bodies = set(subtree(model, model.body(lay.base).id).tolist())
+    per: dict[tuple[int, int], dict[str, Any]] = {}
+    f6 = np.zeros(6)
+    b1s, b2s = _contact_bodies(model, data)
+    for k in np.flatnonzero(np.isin(b1s, list(bodies)) & np.isin(b2s, list(bodies))):
+        k = int(k)
+        con = data.contact[k]
+        g1, g2 = int(con.geom1), int(con.geom2)
+        b1, b2 = int(b1s[k]), int(b2s[k])
+        if b1 > b2:
+            b1, b2, g1, g2 = b2, b1, g2, g1
+        mujoco.mj_contactForce(model, data, k, f6)
+        row = per.setdefault(
+            (b1, b2),
+            {
+                "body1": _strip(_bname(model, b1), prefix),
+                "body2": _strip(_bname(model, b2), prefix),
+                "geoms": [],
+                "depth_m": 0.0,
+                "force_n": 0.0,
+                "points": 0,
+            },
+        )
+        pair = [_strip(_gname(model, g1), prefix), _strip(_gname(model, g2), prefix)]
+        if pair not in row["geoms"]:
+            row["geoms"].append(pair)
+        row["depth_m"] = max(row["depth_m"], float(-con.dist))
+        row["force_n"] += float(f6[0])
+        row["points"] += 1
+    return list(per.values())
+
+
+def still_bodies(model: mujoco.MjModel, lay: RobotLayout) -> np.ndarray:
+    """Bodies of the robot that should not move relative to its base: all but the base, the
+    wheels (and what is welded to them) and the casters' swivels and wheels."""
+    base = model.body(lay.base).id
+    skip = _wheel_bodies(model, lay) | _rolling_bodies(model, lay) | {base}
+    return np.array([b for b in subtree(model, base) if b not in skip], dtype=int)
+
+
+def relative_poses(model: mujoco.MjModel, data: mujoco.MjData, base: int, bodies: np.ndarray):
+    """``(pos (k, 3) m, rot (k, 3, 3))`` of ``bodies`` in the frame of body ``base``: each body's
+    centre of mass (``data.xipos``: an arm turning about its own origin moves it) and orientation."""
+    rb = data.xmat[base].reshape(3, 3)
+    pos = (data.xipos[bodies] - data.xpos[base]) @ rb
+    rot = np.einsum("ji,kjl->kil", rb, data.xmat[bodies].reshape(-1, 3, 3))
+    return pos, rot
+
+
+def moving_parts(
+    model: mujoco.MjModel,
+    bodies: np.ndarray,
+    worst: tuple[np.ndarray, np.ndarray],
+    prefix: str = "",
+) -> list[dict]:
+    """``bodies`` whose largest displacement ``worst = (metres (k,), degrees (k,))`` (:func:`pose_change`)
+    exceeds :data:`MOVE_M` or :data:`MOVE_DEG`: ``body``, ``displacement_m``, ``rotation_deg``."""
+    out = []
+    for b, dm, dd in zip(bodies, *worst):
+        if dm > MOVE_M or dd > MOVE_DEG:
+            out.append(
+                {"body": _strip(_bname(model, int(b)), prefix), "displacement_m": float(dm), "rotation_deg": float(dd)}
+            )
+    return out
+
+
+def pose_change(
+    ref: tuple[np.ndarray, np.ndarray], now: tuple[np.ndarray, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per body: distance (m) and rotation angle (deg) between two :func:`relative_poses`."""
+    dm = np.linalg.norm(now[0] - ref[0], axis=1)
+    rel = np.einsum("kji,kjl->kil", ref[1], now[1])  # R_ref^T R_now
+    cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
+    return dm, np.degrees(np.arccos(cos))
+
+
+def braking_casters(floor: list[dict], drive_force: float) -> list[tuple[dict, float, str]]:
+    """The casters of :func:`floor_contacts` that brake: loaded, with friction (μ ≥ 1e-3 and condim > 1)
+    and unable to roll (no joint between them and the base). ``drive_force``: what the wheels can
+    push, N. Returns ``(contact, μ N in N, message)`` per braking caster."""
+    out = []
+    for c in floor:
+        if c["role"] != "caster" or c["rolls"] or c["friction"] < FRICTIONLESS or c["condim"] == 1:
+            continue
+        brake = c["friction"] * c["load_n"]
+        msg = (
+            f"caster '{c['geom']}' on body '{c['body']}' carries {c['load_n']:.3g} N with friction μ = "
+            f"{c['friction']:g}, condim {c['condim']} as simulated (published μ = {c['friction_published']:g}, "
+            f"condim {c['condim_published']}) and cannot roll: sliding, it brakes the robot with μ N = {brake:.3g} N, "
+            f"{100 * brake / drive_force:.0f} % of what the wheels can push (min of the motor limit 2 f τ_max / r "
+            f"and their traction μ ΣN: {drive_force:.3g} N); if the real caster rolls, map caster_friction = 0"
+            + (": the robot cannot move" if brake >= drive_force else "")
+        )
+        out.append((c, brake, msg))
+    return out
