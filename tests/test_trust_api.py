@@ -496,3 +496,31 @@ def test_warp_is_silenced():
         assert wp.config.log_level >= wp.LOG_WARNING  # no greeting, no "Module ... load" lines
     finally:
         wp.config.log_level = old
+
+
+def test_cli_run_whose_observer_raises_keeps_the_log_and_names_it(tmp_path, monkeypatch, capsys):
+    """An observer of the CLI (video capture, live viewer) that raises mid-run: the log so far is
+    written and the error line names the observer and the time (exit 1, not an internal error)."""
+    import bioform_mj.sim as sim
+
+    real = sim.simulate
+
+    class Flaky:
+        period = 0.1
+
+        def start(self, run): ...
+        def sample(self, run):
+            if run.t > 0.25:
+                raise OSError("viewer gone")
+
+        def finish(self, run): ...
+
+    monkeypatch.setattr(sim, "simulate", lambda sc, observers=(), **kw: real(sc, [*observers, Flaky()], **kw))
+    out = tmp_path / "r"
+    assert main(["run", "--duration", "1", "--out", str(out), "--quiet"]) == 1
+    line = _one_error(capsys)
+    assert "observer Flaky.sample raised OSError: viewer gone" in line and "t = 0.3 s" in line and str(out) in line
+    s = json.loads((out / "summary.json").read_text())
+    assert s["raised"]["by"] == "observer Flaky.sample" and s["sim_time_s"] == pytest.approx(0.3)
+    with np.load(out / "log.npz") as z:
+        assert len(z["t"]) == 31
