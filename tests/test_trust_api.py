@@ -105,20 +105,22 @@ def _fsize_limit(nbytes: int):
     return pre
 
 
-def test_file_size_limit_mid_run_is_an_error_line_naming_the_file(tmp_path):
-    """`ulimit -f 20` (20 KiB): log.npz of a 5 s run (~60 KiB) cannot be written."""
+@pytest.mark.parametrize("limit,name", [(20 * 1024, "log.npz"), (0, ".bioform.lock")])
+def test_file_size_limit_mid_run_is_an_error_line_naming_the_file(tmp_path, limit, name):
+    """`ulimit -f 20` (20 KiB): log.npz of a 5 s run (~60 KiB) cannot be written; `ulimit -f 0`:
+    not even the folder's lock (its pid) can."""
     r = subprocess.run(
         [sys.executable, "-m", "bioform_mj.cli", "run", "--duration", "5", "--out", "big", "--quiet"],
         cwd=tmp_path,
         env=_env(),
         capture_output=True,
         text=True,
-        preexec_fn=_fsize_limit(20 * 1024),
+        preexec_fn=_fsize_limit(limit),
         timeout=300,
     )
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 1, r.stderr
-    assert len(lines) == 1 and lines[0].startswith("error: cannot write 'big/log.npz'"), r.stderr
+    assert len(lines) == 1 and lines[0].startswith(f"error: cannot write 'big/{name}'"), r.stderr
     assert "File too large" in lines[0] and "nothing kept" in lines[0]
     assert "internal error" not in r.stderr and "Traceback" not in r.stderr
     assert not _tmp_files(tmp_path)
