@@ -526,3 +526,19 @@ def test_cli_run_whose_observer_raises_keeps_the_log_and_names_it(tmp_path, monk
     assert s["raised"]["by"] == "observer Flaky.sample" and s["sim_time_s"] == pytest.approx(0.3)
     with np.load(out / "log.npz") as z:
         assert len(z["t"]) == 31
+
+
+def test_building_a_scene_checks_the_mujoco_distributions(monkeypatch):
+    """The Python API's startup check: compile_scene refuses a mixed installation (once per process)."""
+    from bioform_mj import deps
+    from bioform_mj.errors import InputError
+
+    monkeypatch.setattr(deps, "installed_versions", lambda: {"mujoco": "3.17.0", "mujoco-core": "4.0.1"})
+    deps.check_mujoco_once.cache_clear()
+    try:
+        with pytest.raises(InputError, match="installed MuJoCo is inconsistent"):
+            _composed(["paper"])
+    finally:
+        monkeypatch.undo()
+        deps.check_mujoco_once.cache_clear()
+    assert _composed(["paper"]).nv == 8  # and a consistent one builds (nv = 6 free + 2 wheels)

@@ -13,6 +13,7 @@ of MuJoCo, ~1 ms), and the CLI refuses to start on it (exit 2).
 
 from __future__ import annotations
 
+import functools
 import importlib.metadata as md
 
 #: the distributions that install files into the ``mujoco/`` package (MuJoCo 4 split)
@@ -50,3 +51,14 @@ def mujoco_distribution_problem(versions: dict[str, str] | None = None) -> str |
         f"the installed MuJoCo is inconsistent: {listed} all install the 'mujoco' Python package, "
         f"one over the other; make them one release, e.g. {fix}"
     )
+
+
+@functools.cache
+def check_mujoco_once() -> None:
+    """Raise :class:`~bioform_mj.errors.InputError` when :func:`mujoco_distribution_problem`
+    finds one; once per process (``scene.compile_scene`` calls it: the Python API's startup check)."""
+    problem = mujoco_distribution_problem()
+    if problem:
+        from .errors import InputError
+
+        raise InputError(problem)

@@ -1091,7 +1091,13 @@ def add_sensors(spec: mujoco.MjSpec, layout: RobotLayout) -> None:
 
 
 def compile_scene(spec: mujoco.MjSpec) -> tuple[mujoco.MjModel, mujoco.MjData]:
-    """Compile a scene spec; returns ``(model, data)`` with ``mj_forward`` done."""
+    """Compile a scene spec; returns ``(model, data)`` with ``mj_forward`` done.
+
+    Raises :class:`~bioform_mj.errors.InputError` first if the installed MuJoCo distributions
+    are not one release (checked once per process, design §17)."""
+    from .deps import check_mujoco_once
+
+    check_mujoco_once()
     try:
         model = spec.compile()
     except Exception as exc:
