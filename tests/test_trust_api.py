@@ -542,3 +542,21 @@ def test_building_a_scene_checks_the_mujoco_distributions(monkeypatch):
         monkeypatch.undo()
         deps.check_mujoco_once.cache_clear()
     assert _composed(["paper"]).nv == 8  # and a consistent one builds (nv = 6 free + 2 wheels)
+
+
+def test_a_controller_without_set_tau_max_under_known_actuator_faults_is_refused_before_any_step():
+    sc = load("paper", ["sim.duration=0.5", "faults.actuator=[[1, 0.1, 0.3, 0.5]]", "faults.actuator_known=true"])
+    stepped = []
+
+    class NoLimit(Wrapped):
+        def step(self, *a):
+            stepped.append(1)
+            return super().step(*a)
+
+    ctrl = NoLimit("none")
+    with pytest.raises(ControllerError, match="NoLimit has no set_tau_max"):
+        simulate(sc, controller=ctrl)
+    assert stepped == []
+    ok = load("paper", ["sim.duration=0.5", "faults.actuator=[[1, 0.1, 0.3, 0.5]]", "faults.actuator_known=false"])
+    r = simulate(ok, controller=NoLimit("none"))  # not told: set_tau_max is never called
+    assert r.diverged is None and r.summary["steps"] == 500

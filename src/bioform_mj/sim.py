@@ -304,6 +304,11 @@ def simulate(
 
         p = getattr(controller, "p", None)
         faults = Faults(sc, graph, np.asarray(p.tau_max if p is not None else np.full(n, sc.torque.tau_max)))
+        if faults.has_act and faults.act_known and not callable(getattr(controller, "set_tau_max", None)):
+            raise ControllerError(  # design §17: named before any step, not an AttributeError mid-run
+                f"controller {type(controller).__name__} has no set_tau_max(tau_max) method, which "
+                "faults.actuator_known = true calls when a motor weakens (add it, or set actuator_known = false)"
+            )
     K = (N - 1) // stride + 1
     lg = new_log(K, n)
     kernel = getattr(controller, "kernel", None)
