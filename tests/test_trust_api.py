@@ -68,6 +68,22 @@ def test_closed_pipe_before_the_run_still_writes_its_files(tmp_path):
     assert (tmp_path / "w" / "log.npz").is_file() and not _tmp_files(tmp_path / "w")
 
 
+def test_closed_or_full_standard_streams_keep_the_exit_code(tmp_path):
+    """stdout closed (`>&-`: Python's sys.stdout is None), both closed, stdout on a full device
+    (/dev/full: ENOSPC on the flush, said on stderr as a warning); the runs' codes and files stay."""
+    r = _bash(
+        f"{CLI} run --duration 0.5 --out a >&-; echo $?; "
+        f"{CLI} run --duration 0.5 --set limits.speed=0.5 --out b >&- 2>&-; echo $?; "
+        f"{CLI} run --duration 0.5 --out c >/dev/full 2>c.err; echo $?",
+        tmp_path,
+    )
+    assert r.stdout.split() == ["0", "3", "0"], r.stdout + r.stderr
+    for d in "abc":
+        assert (tmp_path / d / "summary.json").is_file() and (tmp_path / d / "log.npz").is_file()
+    err = (tmp_path / "c.err").read_text().strip().splitlines()
+    assert err == ["warning: stdout could not be written (No space left on device); its output was dropped"]
+
+
 class _Closed:
     """A stream whose reader has gone: every write and flush raises BrokenPipeError."""
 

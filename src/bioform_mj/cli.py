@@ -232,36 +232,47 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 class _PipeSafe:
-    """``sys.stdout``/``sys.stderr`` that survive a closed reader (``bioform run … | head -1``):
-    on ``BrokenPipeError`` the stream's descriptor is pointed at ``/dev/null`` (as Python's
-    documentation of SIGPIPE recommends) and every later write is dropped, so the command goes
-    on writing its files and exits with its own code (design §17). Everything else is the
-    wrapped stream's."""
+    """``sys.stdout``/``sys.stderr`` that survive a closed reader (``bioform run … | head -1``),
+    a full device (``> /dev/full``) or a closed descriptor (``>&-``, where Python sets the stream
+    to None): on the first ``OSError`` of a write the stream's descriptor is pointed at
+    ``/dev/null`` (as Python's documentation of SIGPIPE recommends) and every later write is
+    dropped, so the command goes on writing its files and exits with its own code (design §17).
+    A closed pipe is silence, as Unix tools do; any other error (``error``) is said on stderr at
+    the end, if stderr still works. Everything else is the wrapped stream's."""
 
-    def __init__(self, stream: Any) -> None:
+    def __init__(self, stream: Any, name: str) -> None:
         self._stream = stream
-        self.broken = False
+        self.name = name
+        self.broken = stream is None
+        self.error: OSError | None = None
 
     def write(self, text: str) -> int:
         if not self.broken:
             try:
                 return self._stream.write(text)
-            except BrokenPipeError:
-                self._break()
+            except OSError as exc:
+                self._break(exc)
         return len(text)
 
     def flush(self) -> None:
         if not self.broken:
             try:
                 self._stream.flush()
-            except BrokenPipeError:
-                self._break()
+            except OSError as exc:
+                self._break(exc)
 
-    def _break(self) -> None:
+    def isatty(self) -> bool:
+        return not self.broken and self._stream.isatty()
+
+    def _break(self, exc: OSError) -> None:
         self.broken = True
+        if not isinstance(exc, BrokenPipeError):
+            self.error = exc
         _silence(self._stream)
 
     def __getattr__(self, name: str) -> Any:
+        if self._stream is None:
+            raise AttributeError(name)
         return getattr(self._stream, name)
 
 
@@ -280,11 +291,18 @@ def _silence(stream: Any) -> None:
 
 
 def _guard_streams():
-    """Wrap ``sys.stdout`` and ``sys.stderr`` in :class:`_PipeSafe`; returns the function undoing it."""
+    """Wrap ``sys.stdout`` and ``sys.stderr`` in :class:`_PipeSafe`; returns the function undoing
+    it, which first says on stderr what a failing stdout dropped (never silent)."""
     old = sys.stdout, sys.stderr
-    sys.stdout, sys.stderr = _PipeSafe(sys.stdout), _PipeSafe(sys.stderr)
+    out, err = _PipeSafe(sys.stdout, "stdout"), _PipeSafe(sys.stderr, "stderr")
+    sys.stdout, sys.stderr = out, err
 
     def undo() -> None:
+        if out.error is not None:
+            err.write(
+                f"warning: stdout could not be written ({out.error.strerror or out.error}); its output was dropped\n"
+            )
+            err.flush()
         sys.stdout, sys.stderr = old
 
     return undo
