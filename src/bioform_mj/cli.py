@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from .control.stack import METHODS
-from .errors import BioformError, InputError, Interrupted
+from .errors import BioformError, InputError, Interrupted, WriteFailed
 from .scenario import PLANTS
 
 EXIT_OK, EXIT_OTHER, EXIT_INPUT, EXIT_DIVERGED = 0, 1, 2, 3
@@ -191,12 +191,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     configure_gl_env()  # MUJOCO_GL=egl unless the user chose; before anything imports mujoco
     _show_robot_warnings()
     restore = _catch_signals()
+    unguard = _guard_streams()
     try:
         args = build_parser().parse_args(argv)
+        check_mujoco_distributions()
         return _dispatch(args)
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_INPUT
+    except WriteFailed as exc:  # disk full, read-only file system, ulimit -f: the file and what was kept
+        if not exc.kept:
+            exc.kept = _kept_beside(exc.path)
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_OTHER
     except BioformError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_OTHER
@@ -208,9 +215,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 128 + signum
-    except BrokenPipeError:  # e.g. `bioform ... | head`
-        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - silence the flush at exit
-        return EXIT_OK
+    except BrokenPipeError:  # a closed pipe the stream guard did not see (a child's): never success
+        _silence(sys.stdout)
+        _silence(sys.stderr)
+        return EXIT_OTHER
     except Exception as exc:  # noqa: BLE001 - a bug: one line, full traceback on request
         if os.environ.get("BIOFORM_DEBUG"):
             raise
@@ -219,7 +227,111 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         return EXIT_OTHER
     finally:
+        unguard()
         restore()
+
+
+class _PipeSafe:
+    """``sys.stdout``/``sys.stderr`` that survive a closed reader (``bioform run … | head -1``),
+    a full device (``> /dev/full``) or a closed descriptor (``>&-``, where Python sets the stream
+    to None): on the first ``OSError`` of a write the stream's descriptor is pointed at
+    ``/dev/null`` (as Python's documentation of SIGPIPE recommends) and every later write is
+    dropped, so the command goes on writing its files and exits with its own code (design §17).
+    A closed pipe is silence, as Unix tools do; any other error (``error``) is said on stderr at
+    the end, if stderr still works. Everything else is the wrapped stream's."""
+
+    def __init__(self, stream: Any, name: str) -> None:
+        self._stream = stream
+        self.name = name
+        self.broken = stream is None
+        self.error: OSError | None = None
+
+    def write(self, text: str) -> int:
+        if not self.broken:
+            try:
+                return self._stream.write(text)
+            except OSError as exc:
+                self._break(exc)
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.broken:
+            try:
+                self._stream.flush()
+            except OSError as exc:
+                self._break(exc)
+
+    def isatty(self) -> bool:
+        return not self.broken and self._stream.isatty()
+
+    def _break(self, exc: OSError) -> None:
+        self.broken = True
+        if not isinstance(exc, BrokenPipeError):
+            self.error = exc
+        _silence(self._stream)
+
+    def __getattr__(self, name: str) -> Any:
+        if self._stream is None:
+            raise AttributeError(name)
+        return getattr(self._stream, name)
+
+
+def _silence(stream: Any) -> None:
+    """Point ``stream``'s file descriptor at /dev/null, so that its buffered bytes, the flush at
+    exit and child processes writing there find a sink instead of a closed pipe."""
+    try:
+        fd = stream.fileno()
+    except (AttributeError, OSError, ValueError):  # a test's capture buffer: nothing to redirect
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, fd)
+    finally:
+        os.close(null)
+
+
+def _guard_streams():
+    """Wrap ``sys.stdout`` and ``sys.stderr`` in :class:`_PipeSafe`; returns the function undoing
+    it, which first says on stderr what a failing stdout dropped (never silent)."""
+    old = sys.stdout, sys.stderr
+    out, err = _PipeSafe(sys.stdout, "stdout"), _PipeSafe(sys.stderr, "stderr")
+    sys.stdout, sys.stderr = out, err
+
+    def undo() -> None:
+        if out.error is not None:
+            err.write(
+                f"warning: stdout could not be written ({out.error.strerror or out.error}); its output was dropped\n"
+            )
+            err.flush()
+        sys.stdout, sys.stderr = old
+
+    return undo
+
+
+def _kept_beside(path: str) -> str:
+    """What is in the folder of the file that could not be written (for the error line)."""
+    folder = Path(path).parent
+    try:
+        names = sorted(e.name + ("/" if e.is_dir() else "") for e in os.scandir(folder) if not e.name.startswith("."))
+    except OSError:
+        return "nothing kept"
+    if not names:
+        return f"nothing kept in {folder}"
+    shown = ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+    return f"kept in {folder}: {shown}"
+
+
+def check_mujoco_distributions() -> None:
+    """Exit 2 (an :class:`InputError`) when the installed distributions that provide the
+    ``mujoco`` package disagree on the release (design §17): ``mujoco`` is a metapackage over
+    ``mujoco-core`` from 4.0 on, and both install files into ``mujoco/``; ``mujoco`` 3.x under
+    ``mujoco-core`` 4.x (what ``mujoco-warp`` plus ``mujoco-core>=4.0.1`` resolves to) overwrites
+    one with the other silently. Reads package metadata only (no import of MuJoCo)."""
+    from .deps import mujoco_distribution_problem
+
+    problem = mujoco_distribution_problem()
+    if problem:
+        raise InputError(problem)
 
 
 def _catch_signals():
@@ -411,6 +523,7 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
         live = RerunLive(spawn=args.rerun_spawn, url=live_url, period=max(sc.sim.log_dt, 1 / 30))
         observers.append(live)
     interrupted: KeyboardInterrupt | None = None
+    failed: Exception | None = None
     try:
         with progress_bar(f"{sc.name} {sc.method}", not args.quiet) as cb:
             result = simulate(sc, observers=observers, progress=cb, engine=args.engine)
@@ -420,6 +533,11 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
             exc.kept = "no log kept (the run was stopped before it returned a result)"  # type: ignore[attr-defined]
             raise
         interrupted = exc
+    except Exception as exc:  # an observer (video capture, live viewer) raised mid-run: keep its log
+        result = getattr(exc, "result", None)
+        if result is None:
+            raise
+        failed = exc
     if interrupted is None and getattr(result, "interrupted", None) is not None:  # or a result that says so
         interrupted = result.interrupted
     if interrupted is not None and not result.summary.get("interrupted"):
@@ -432,6 +550,14 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
         write_text(out / "scene.xml", result.plant.model_xml())
     write_json(out / "summary.json", result.summary)
     mjlog.write(out)
+    if failed is not None:
+        r = result.summary.get("raised") or {}
+        print(
+            f"error: {r.get('by', 'the run')} raised {type(failed).__name__}: {failed} at t = "
+            f"{r.get('time_s', 0):g} s; log so far kept in {out} (summary.json, log.npz)",
+            file=sys.stderr,
+        )
+        return EXIT_OTHER
     if interrupted is not None:
         _ignore_signals()
         signum = getattr(interrupted, "signum", signal.SIGINT)
@@ -636,6 +762,11 @@ def _sweep(args: argparse.Namespace) -> int:
             nconmax=args.nconmax,
             njmax=args.njmax,
         )
+    except WriteFailed as exc:  # disk full, read-only, ulimit -f: the finished rows are kept, resumable
+        runs = out / "runs"
+        done = sum(1 for p in runs.glob("*.json")) if runs.is_dir() else 0
+        exc.kept = f"{done} finished row(s) kept in {runs}/; free space, then rerun the same command to resume"
+        raise
     except SweepInterrupted as exc:
         # the same command resumes: finished rows are skipped by their content key
         cmd = ["bioform", "sweep", args.scenario]

@@ -54,3 +54,24 @@ class Interrupted(KeyboardInterrupt):
         self.signum = signum
         self.result = None
         super().__init__(signal.Signals(signum).name)
+
+
+class ControllerError(BioformError, TypeError):
+    """A user's controller or observer breaks its protocol (``control/base.py``, ``sim.Observer``):
+    a missing method (raised when :func:`~bioform_mj.sim.simulate` starts, before any step) or a
+    return of the wrong shape (raised at the step; the run's log so far is attached as ``result``)."""
+
+
+class WriteFailed(BioformError, OSError):
+    """An output file could not be written (disk full, read-only file system, ``ulimit -f``):
+    names the file; the CLI adds what was kept and exits 1 (design §17).
+
+    ``path``: the file that was being written; ``errno``/``strerror``: the operating system's."""
+
+    def __init__(self, path: str, exc: OSError) -> None:
+        self.path = str(path)
+        self.kept = ""  # what the command kept, filled in by whoever knows (the CLI)
+        super().__init__(exc.errno, f"cannot write '{path}': {exc.strerror or exc}")
+
+    def __str__(self) -> str:
+        return str(self.strerror) + (f"; {self.kept}" if self.kept else "")

@@ -19,6 +19,7 @@ job (:func:`bioform_mj.scene.prepare_robot`). This module imports nothing of MuJ
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from importlib import resources
@@ -132,10 +133,16 @@ def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:
             if not isinstance(value, bool):
                 raise InputError(f"scenario key '{key}.free_joints': expected true or false, got {value!r}")
             kw[name] = value
-        else:
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:
-                raise InputError(f"scenario key '{key}.{name}': expected a number >= 0, got {value!r}")
+        else:  # finite (design §17: tau_max = inf was taken as "no limit" while robot check refused it)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 <= value < math.inf):
+                raise InputError(f"scenario key '{key}.{name}': expected a finite number >= 0, got {value!r}")
             kw[name] = float(value)
+    if kw.get("driver") and kw.get("motor") != "dc":  # the driver is the DC motor's: refused, never ignored
+        raise InputError(
+            f"scenario key '{key}.driver': driver = {kw['driver']!r} applies only with motor = \"dc\" "
+            f"(this robot's motor is {kw.get('motor') or 'ideal'!r}: torque sources, no driver); "
+            f'add motor = "dc" or remove driver'
+        )
     return RobotRef(**kw)
 
 

@@ -716,6 +716,16 @@ def validate(sc: Scenario) -> None:
             raise ScenarioError(f"{key}.follower", f"must be a follower id in 1..{n}, got {ev.follower}")
         if not 0 <= ev.time <= s.duration:
             raise ScenarioError(f"{key}.time", f"must lie in [0, sim.duration = {s.duration:g}], got {ev.time:g}")
+        # design §17: an event is applied at the first control step at or after its time; one past the
+        # last step (k = N - 1) would never be applied, silently
+        n_steps = max(1, int(round(s.duration / s.control_dt)))
+        t_last = (n_steps - 1) * s.control_dt
+        if math.ceil((ev.time - 1e-12) / s.control_dt - 1e-9) > n_steps - 1:
+            raise ScenarioError(
+                f"{key}.time",
+                f"{ev.time:g} s is after the last control step (t = {t_last:g} s of sim.duration = "
+                f"{s.duration:g} s), so the event would never be applied; use a time <= {t_last:g} s",
+            )
         _positive(f"{key}.mass", ev.mass, strict=False)
         _positive(f"{key}.inertia", ev.inertia, strict=False)
 

@@ -321,6 +321,11 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
     base = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, base_name)
     if base < 0:
         raise ModelError(f"{path}: no body '{base_name}' (the base; map it with base = \"BODY\")")
+    if base == 0:  # design §17: MuJoCo's world body cannot be a chassis (it failed later, naming no file)
+        raise ModelError(
+            f"{path}: base '{base_name}' is MuJoCo's world body, which is fixed and cannot be a robot's "
+            f'chassis; name the chassis body (map it with base = "BODY")'
+        )
     jnt_adr, jnt_num = model.body_jntadr[base], model.body_jntnum[base]
     has_free = jnt_num >= 1 and model.jnt_type[jnt_adr] == _FREE
     if jnt_num > (1 if has_free else 0):
@@ -1427,7 +1432,13 @@ def add_sensors(spec: mujoco.MjSpec, layout: RobotLayout) -> None:
 
 
 def compile_scene(spec: mujoco.MjSpec) -> tuple[mujoco.MjModel, mujoco.MjData]:
-    """Compile a scene spec; returns ``(model, data)`` with ``mj_forward`` done."""
+    """Compile a scene spec; returns ``(model, data)`` with ``mj_forward`` done.
+
+    Raises :class:`~bioform_mj.errors.InputError` first if the installed MuJoCo distributions
+    are not one release (checked once per process, design §17)."""
+    from .deps import check_mujoco_once
+
+    check_mujoco_once()
     try:
         model = spec.compile()
     except Exception as exc:

@@ -43,7 +43,7 @@ from .engine import (
     new_metrics,
     record_odometry,
 )
-from .errors import Diverged, RobotWarning
+from .errors import ControllerError, Diverged, RobotWarning
 from .plants.base import Plant
 from .plants.ideal import IdealPlant
 from .scenario import Scenario
@@ -248,9 +248,21 @@ def simulate(
     good row and ``diverged`` says why. A ``KeyboardInterrupt`` stops it too
     (``interrupted``). ``progress``, if given, is called as ``progress(k, N)``; if it has a
     ``phase(text)`` method it is told when kernels load or compile.
+
+    A user's ``controller`` and ``observers`` are checked before any step (design §17): a
+    missing protocol method is a :class:`~bioform_mj.errors.ControllerError`. Torques that
+    are not ``(n, 2)`` raise one at the step; non-finite torques stop the run as a divergence
+    whose followers get the outcome ``controller_nonfinite``. An exception raised by the
+    controller or an observer mid-run ends the run: the log up to the last good step is kept
+    in a :class:`RunResult` attached to the exception as ``result`` (with ``summary["raised"]``
+    saying what raised where), a note naming the controller or observer is added to the
+    exception, and it is re-raised.
     """
     if engine not in ENGINES:
         raise ValueError(f"unknown engine '{engine}' (expected one of: {', '.join(ENGINES)})")
+    if controller is not None:
+        check_controller(controller)
+    check_observers(observers)
     t_setup = time.perf_counter()
     graph = sc.build_graph()
     traj = sc.build_leader()
@@ -281,13 +293,22 @@ def simulate(
             warnings.warn(line, RobotWarning, stacklevel=2)  # before the run (the CLI prints warning: lines)
     plant.reset()
     pose0, vel0 = plant.observe()
-    controller.reset(initial_estimates(sc, pose0, L_pose[0]), vel0)
+    try:
+        controller.reset(initial_estimates(sc, pose0, L_pose[0]), vel0)
+    except Exception as exc:
+        exc.add_note(f"bioform: raised by controller {type(controller).__name__}.reset, before the first step")
+        raise
     faults = None  # fault injection (faults.py): built only when configured, else no per-step cost
     if sc.faults.per_step:  # (a friction patch is in the MuJoCo scene: nothing per step)
         from .faults import Faults
 
         p = getattr(controller, "p", None)
         faults = Faults(sc, graph, np.asarray(p.tau_max if p is not None else np.full(n, sc.torque.tau_max)))
+        if faults.has_act and faults.act_known and not callable(getattr(controller, "set_tau_max", None)):
+            raise ControllerError(  # design §17: named before any step, not an AttributeError mid-run
+                f"controller {type(controller).__name__} has no set_tau_max(tau_max) method, which "
+                "faults.actuator_known = true calls when a motor weakens (add it, or set actuator_known = false)"
+            )
     K = (N - 1) // stride + 1
     lg = new_log(K, n)
     kernel = getattr(controller, "kernel", None)
@@ -332,15 +353,44 @@ def simulate(
     def measure() -> tuple[np.ndarray, np.ndarray]:
         return plant.measurement(ctx.pose, ctx.vel) if odometry else (ctx.pose, ctx.vel)
 
+    cname = type(controller).__name__
+    nonfinite: dict[str, Any] = {}  # design §17: a user's controller returned NaN/inf torques
+
     def control(k: int) -> np.ndarray:
         """Control step ``k`` on the current measurements; the torques to apply."""
         mp, mv = measure()
-        if faults is None:
-            tau = controller.step(L_pose[k], L_vel[k], mp, mv)
-        else:  # noisy sensing, faulty network, weakened motors, pushes; tau = what reaches the plant
-            tau = faults.step(k, k * dt, controller, plant, L_pose[k], L_vel[k], mp, mv)
+        try:
+            if faults is None:
+                tau = controller.step(L_pose[k], L_vel[k], mp, mv)
+            else:  # noisy sensing, faulty network, weakened motors, pushes; tau = what reaches the plant
+                tau = faults.step(k, k * dt, controller, plant, L_pose[k], L_vel[k], mp, mv)
+        except Exception as exc:
+            _tag(exc, f"controller {cname}.step", k, k * dt)
+            raise
+        if not own_stack:
+            tau = _checked_torques(tau, n, cname, k, dt)
+            bad = ~np.all(np.isfinite(tau), axis=1)
+            if bad.any():
+                nonfinite.update(k=k, rows=np.flatnonzero(bad), tau=tau.copy())
+                i = int(nonfinite["rows"][0])
+                raise Diverged(
+                    f"follower {i + 1}: controller {cname}.step returned non-finite torques {tau[i].tolist()} "
+                    f"at t = {k * dt:.4f} s (step {k})",
+                    step=k,
+                    time=k * dt,
+                )
         if kernel is None:
-            _shadow(state, controller.signals(), tau, missing)
+            try:
+                sig = controller.signals()
+            except Exception as exc:
+                _tag(exc, f"controller {cname}.signals", k, k * dt)
+                raise
+            try:
+                _shadow(state, sig, tau, missing)
+            except (ValueError, TypeError) as exc:  # a signal of the wrong shape
+                err = ControllerError(f"controller {cname}.signals() at step {k}: {exc}")
+                _tag(err, f"controller {cname}.signals", k, k * dt)
+                raise err from exc
         return np.array(tau, dtype=float)
 
     applied = [np.zeros((n, 2))]
@@ -368,9 +418,11 @@ def simulate(
         )
 
     feed = bool(getattr(plant, "feed_delivered", False))
+    at = [0, 0]  # (steps done, log rows) of the Python chunk so far: kept when a step raises
 
     def python_chunk(k0: int, k1: int, j: int) -> tuple[int, int, int]:
         """The same contract as a compiled chunk, one Python call per step."""
+        at[:] = k0, j
         for k in range(k0, k1):
             plant.step(applied[0], k * dt)  # may raise Diverged (MuJoCo warnings)
             if feed:  # DC motors: the learner gets the torque delivered over the period (design §8.2)
@@ -384,6 +436,7 @@ def simulate(
                 if odometry and j1 > j:
                     record_odometry(lg, j, plant.odo.mpose, plant.odo.mvel)
                 j = j1
+                at[:] = k + 1, j
                 if status != OK:
                     return k + 1 - k0, j, status
         return k1 - k0, j, OK
@@ -392,8 +445,16 @@ def simulate(
         progress.phase("loading compiled kernels (compiling them on the first run)")
     # control step 0 and its row, then a zero-length chunk: kernels are loaded (or compiled) here,
     # outside the timed loop
-    applied[0] = control(0)
-    j, status = record(0, 0)
+    diverged: Diverged | None = None
+    raised: Exception | None = None  # what a user's controller or observer raised (design §17)
+    j, status = 0, OK
+    try:
+        applied[0] = control(0)
+        j, status = record(0, 0)
+    except Diverged as e:  # non-finite torques of a user's controller at step 0
+        diverged = e
+    except Exception as exc:  # noqa: BLE001 - re-raised below, with the log so far attached
+        raised = exc
     if odometry and j > 0:
         record_odometry(lg, 0, plant.odo.mpose, plant.odo.mvel)
     run_chunk = chunk if chunk is not None else python_chunk
@@ -403,19 +464,28 @@ def simulate(
         progress.phase(None)
 
     state_obs = RunState(sc, plant, controller)
-    for o in observers:
-        o.start(state_obs)
+    started: list[Observer] = []
+    if raised is None:
+        try:
+            for o in observers:
+                try:
+                    o.start(state_obs)
+                except Exception as exc:
+                    _tag(exc, f"observer {type(o).__name__}.start", 0, 0.0)
+                    raise
+                started.append(o)
+        except Exception as exc:  # noqa: BLE001 - re-raised below
+            raised = exc
     obs = ObserverClock(observers, state_obs)
     evq = EventQueue(sc.events, dt)
     wall0 = time.perf_counter()
-    diverged: Diverged | None = None
     interrupted: KeyboardInterrupt | None = None
     k = 0
-    if status != OK:
+    if status != OK and diverged is None:
         diverged = Diverged(describe(ctx.diag, 0.0, ctx.bounds), step=0, time=0.0)
     try:
         max_chunk = max(1, int(round(MAX_CHUNK_S / dt)))
-        while k < N and diverged is None:
+        while k < N and diverged is None and raised is None:
             if evq.apply(k, plant):
                 c_true[:] = plant.c_true()
                 if k % stride == 0 and j > 0:
@@ -429,9 +499,16 @@ def simulate(
                 k1 = min(k1, max(k + 1, first_step_at(tn, dt)))
             try:
                 done, j, status = run_chunk(k, k1, j)
-            except Diverged as e:  # a MuJoCo warning: keep the log so far
+            except Diverged as e:  # a MuJoCo warning, a user's non-finite torques: keep the log so far
                 diverged = e
+                if nonfinite:  # ours (a user's controller, stepwise): the rows of this chunk are kept
+                    j = at[1]
                 k = e.step
+                break
+            except Exception as exc:  # noqa: BLE001 - a user's controller raised: re-raised below
+                raised = exc
+                if chunk is None:  # the steps the plant made (the failing control step's index), the rows kept
+                    k, j = int(getattr(exc, "_bioform_step", at[0])), at[1]
                 break
             k += done
             if status == GUARD_FAILED:
@@ -440,17 +517,38 @@ def simulate(
                 progress(k, N)
     except KeyboardInterrupt as exc:
         interrupted = exc
+    except Exception as exc:  # noqa: BLE001 - an observer's sample raised: re-raised below
+        raised = exc
     wall = time.perf_counter() - wall0
     pose, vel = ctx.pose.copy(), ctx.vel.copy()
     k_done = min(k, N)
-    if diverged is None and not interrupted and not (np.all(np.isfinite(pose)) and np.all(np.isfinite(vel))):
+    if (
+        diverged is None
+        and not interrupted
+        and raised is None
+        and not (np.all(np.isfinite(pose)) and np.all(np.isfinite(vel)))
+    ):
         diverged = Diverged(f"non-finite robot state at the end of the run (t = {N * dt:g} s)", step=N, time=N * dt)
-    if progress is not None and diverged is None and not interrupted:
+    if progress is not None and diverged is None and not interrupted and raised is None:
         progress(N, N)
     state_obs.t, state_obs.pose, state_obs.vel = k_done * dt, pose, vel
     state_obs.leader_pose, state_obs.leader_vel = L_pose[k_done], L_vel[k_done]
-    for o in observers:
-        o.finish(state_obs)
+    culprit = getattr(raised, "_bioform_source", None)
+    for o in started:
+        if (
+            culprit is not None
+            and culprit == f"observer {type(o).__name__}.sample"
+            and o is getattr(raised, "_bioform_obj", None)
+        ):
+            continue  # the observer that failed is not asked to finish
+        try:
+            o.finish(state_obs)
+        except Exception as exc:
+            if raised is not None:  # already failing: say it, keep the first error
+                raised.add_note(f"(observer {type(o).__name__}.finish also raised {type(exc).__name__}: {exc})")
+                continue
+            _tag(exc, f"observer {type(o).__name__}.finish", k_done, k_done * dt)
+            raised = exc
     logd = {name: getattr(lg, name)[:j] for name in LogArrays._fields}
     for name in missing:
         logd[name] = np.full_like(logd[name], np.nan)
@@ -486,13 +584,123 @@ def simulate(
     for i, f in enumerate(summary["followers"]):  # pose error of the odometry at the end (design §8.3)
         f["odometry_drift_m"] = None if drift is None else float(drift[i, 0])
         f["odometry_heading_drift_rad"] = None if drift is None else float(drift[i, 1])
+    if nonfinite:  # design §17: the followers whose torques the user's controller made NaN/inf
+        kn = int(nonfinite["k"])
+        for i in nonfinite["rows"]:
+            _add_outcome(
+                summary["followers"][int(i)],
+                "controller_nonfinite",
+                f"{cname}.step returned torques {nonfinite['tau'][int(i)].tolist()} N·m at t = {kn * dt:.4f} s "
+                f"(step {kn})",
+                kn * dt,
+            )
+    if raised is not None:
+        src = getattr(raised, "_bioform_source", "the loop")
+        ks = int(getattr(raised, "_bioform_step", k_done))
+        summary["raised"] = {
+            "by": src,
+            "error": f"{type(raised).__name__}: {raised}",
+            "step": ks,
+            "time_s": ks * dt,
+        }
     unmodelled = getattr(plant, "unmodelled", None)
     if unmodelled is not None and len(logd["vel"]):  # damping and frictionloss at the run's speeds
         v = float(np.abs(logd["vel"][:, :, 0]).max())
         w = float(np.abs(logd["vel"][:, :, 1]).max())
         for f, u in zip(summary["followers"], unmodelled(v, w)):
             f["unmodelled"] = u
-    return RunResult(sc, logd, summary, plant, diverged, interrupted)
+    result = RunResult(sc, logd, summary, plant, diverged, interrupted)
+    if raised is not None:
+        raised.result = result  # type: ignore[attr-defined]
+        raised.add_note(
+            f"bioform: raised by {summary['raised']['by']} at t = {summary['raised']['time_s']:.4f} s "
+            f"(step {summary['raised']['step']}); the run stopped there, its log up to the last good step "
+            f"({len(logd['t'])} rows) is in this exception's .result (a RunResult)"
+        )
+        raise raised
+    return result
+
+
+def _tag(exc: BaseException, source: str, step: int, t: float) -> None:
+    """Remember where ``exc`` came from (the innermost caller wins) for the note and the summary."""
+    if not hasattr(exc, "_bioform_source"):
+        exc._bioform_source = source  # type: ignore[attr-defined]
+        exc._bioform_step = step  # type: ignore[attr-defined]
+        exc._bioform_time = t  # type: ignore[attr-defined]
+
+
+#: what :func:`simulate` needs of a user's controller and observers (design §17)
+CONTROLLER_METHODS = ("reset", "step", "signals")
+OBSERVER_METHODS = ("start", "sample", "finish")
+
+
+def check_controller(controller: Any) -> None:
+    """Raise :class:`~bioform_mj.errors.ControllerError` naming what ``controller`` lacks of the
+    :class:`~bioform_mj.control.base.Controller` protocol (called before any step)."""
+    name = type(controller).__name__
+    lacks = [m for m in CONTROLLER_METHODS if not callable(getattr(controller, m, None))]
+    if lacks:
+        raise ControllerError(
+            f"controller {name} has no {', '.join(m + '()' for m in lacks)} method"
+            f"{'s' if len(lacks) > 1 else ''}; a controller needs reset(est_pose0, vel0), "
+            "step(leader_pose, leader_vel, pose, vel, comm=None) -> (n, 2) torques and signals() -> dict "
+            "(see bioform_mj.control.base.Controller)"
+        )
+
+
+def check_observers(observers: Sequence[Any]) -> None:
+    """Raise :class:`~bioform_mj.errors.ControllerError` naming what an observer lacks of :class:`Observer`."""
+    for o in observers:
+        name = type(o).__name__
+        lacks = [m for m in OBSERVER_METHODS if not callable(getattr(o, m, None))]
+        if lacks:
+            raise ControllerError(
+                f"observer {name} has no {', '.join(m + '()' for m in lacks)} method"
+                f"{'s' if len(lacks) > 1 else ''} (an observer needs period, start, sample, finish: sim.Observer)"
+            )
+        period = getattr(o, "period", None)
+        try:
+            ok = period is not None and float(period) > 0 and math.isfinite(float(period))
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise ControllerError(f"observer {name}: period must be a finite number of seconds > 0, got {period!r}")
+
+
+def _checked_torques(tau: Any, n: int, name: str, k: int, dt: float) -> np.ndarray:
+    """A user's controller's torques as a float (n, 2) array, or a :class:`ControllerError`."""
+    try:
+        arr = np.asarray(tau, dtype=float)
+    except (TypeError, ValueError) as exc:
+        err = ControllerError(
+            f"controller {name}.step returned {type(tau).__name__}, not an (n, 2) = ({n}, 2) array of "
+            f"torques, at t = {k * dt:.4f} s (step {k}): {exc}"
+        )
+        _tag(err, f"controller {name}.step", k, k * dt)
+        raise err from exc
+    if arr.shape != (n, 2):
+        err = ControllerError(
+            f"controller {name}.step returned torques of shape {arr.shape}, expected (n, 2) = ({n}, 2) "
+            f"[tau_L, tau_R] N·m per follower, at t = {k * dt:.4f} s (step {k})"
+        )
+        _tag(err, f"controller {name}.step", k, k * dt)
+        raise err
+    return arr
+
+
+def _add_outcome(f: dict[str, Any], kind: str, detail: str, t: float | None) -> None:
+    """Give follower ``f`` (a summary entry) the outcome ``kind``, the most severe (it caused the
+    run's end), keeping the others in ``outcomes`` (the outcomes contract)."""
+    prev = f.get("outcomes")
+    if prev is None:
+        prev = (
+            []
+            if f.get("outcome", "ok") == "ok"
+            else [{"kind": f["outcome"], "detail": f.get("outcome_detail", ""), "t": None}]
+        )
+    f["outcomes"] = [{"kind": kind, "detail": detail, "t": t}] + [o for o in prev if o.get("kind") != kind]
+    f["outcome"] = kind
+    f["outcome_detail"] = detail
 
 
 def _shadow(state: StackState, sig: Any, tau: np.ndarray, missing: set[str]) -> None:
@@ -693,7 +901,12 @@ class ObserverClock:
         st.t, st.leader_pose, st.leader_vel, st.pose, st.vel = t, leader_pose, leader_vel, pose, vel
         for i, o in enumerate(self.observers):
             if t >= self.next[i] - 1e-12:
-                o.sample(st)
+                try:
+                    o.sample(st)
+                except Exception as exc:
+                    _tag(exc, f"observer {type(o).__name__}.sample", int(round(t / st.scenario.sim.control_dt)), t)
+                    exc._bioform_obj = o  # type: ignore[attr-defined]
+                    raise
                 self.next[i] += o.period
 
 

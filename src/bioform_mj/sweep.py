@@ -161,6 +161,10 @@ def expand(
         key, sep, raw = item.partition("=")
         if not sep or not key.strip() or not raw.strip():
             raise InputError(f"--vary '{item}': expected KEY=V1,V2,... e.g. kinematic.k1=1,2,3")
+        if key.strip() == "method":  # load(method=...) would override it: every run the same, silently
+            raise InputError(
+                f"--vary '{item}': a sweep's methods come from --methods (e.g. --methods backstepping,bioinspired)"
+            )
         values = raw.split(";") if ";" in raw else raw.split(",")
         axes.append([(key.strip(), v.strip()) for v in values])
     specs = []
@@ -177,7 +181,8 @@ def expand(
                 # the seed is the only difference between a configuration's runs (seed0 was validated)
                 sc = dataclasses.replace(base, sim=dataclasses.replace(base.sim, seed=s))
                 run_ov = ov + (f"sim.seed={s}",)
-                specs.append(RunSpec(source, run_ov, method, s, plant, tuple(combo), content_key(sc, run_ov), sc))
+                label = tuple((k, unquote(v)) for k, v in combo)  # design §17: '"backstepping"' labelled backstepping
+                specs.append(RunSpec(source, run_ov, method, s, plant, label, content_key(sc, run_ov), sc))
     if seeds > 1 and no_random and warn is not None:
         if len(no_random) == n_configs:
             which, its = "the scenario has", "its"
@@ -190,6 +195,15 @@ def expand(
             f"or faults.packet_loss), so {its} {seeds} seeds give identical runs"
         )
     return specs
+
+
+def unquote(value: str) -> str:
+    """A ``--vary`` value as its label: one pair of matching outer quotes removed (``'"a"'`` → ``a``),
+    as TOML reads a quoted string; anything else unchanged."""
+    v = value.strip()
+    if len(v) >= 2 and v[0] == v[-1] and v[0] in "\"'":
+        return v[1:-1]
+    return v
 
 
 # ------------------------------------------------------------------------------------------

@@ -69,11 +69,24 @@ def capacity_redo(row: dict[str, Any], backend: str, nconmax: int | None, njmax:
     return None
 
 
+def quiet_warp() -> None:
+    """Silence Warp's informational lines (its greeting, one ``Module … load on device`` line per
+    kernel module: ~50 on stdout per sweep, with or without ``--quiet``); its warnings stay.
+    Warp 1.19 reads ``config.log_level`` (``config.quiet`` is gone); older ones ``config.quiet``
+    (design §17)."""
+    import warp as wp
+
+    wp.config.quiet = True
+    wp.config.log_level = max(int(getattr(wp.config, "log_level", 0)), int(getattr(wp, "LOG_WARNING", 30)))
+
+
 def require_warp() -> None:
-    """InputError (exit 2) unless ``warp`` and ``mujoco_warp`` import."""
+    """InputError (exit 2) unless ``warp`` and ``mujoco_warp`` import (Warp silenced: :func:`quiet_warp`)."""
     try:
-        import mujoco_warp  # noqa: F401
         import warp  # noqa: F401
+
+        quiet_warp()  # before mujoco_warp, whose import may initialise Warp
+        import mujoco_warp  # noqa: F401
     except ImportError as exc:
         raise InputError(
             f"--backend warp needs the optional GPU extra (mujoco-warp, warp-lang): {INSTALL} ({exc})"
@@ -84,7 +97,7 @@ def resolve_device(device: str | None) -> str:
     """The Warp device to use: ``device`` checked, or ``cuda:0`` when there is one, else ``cpu``."""
     import warp as wp
 
-    wp.config.quiet = True
+    quiet_warp()
     if device is None:
         return "cuda:0" if wp.is_cuda_available() else "cpu"
     try:
@@ -290,12 +303,11 @@ def run_warp(
     """Run every group as one batch on ``device``; ``done(row)`` per world as each batch ends.
     ``nconmax``/``njmax``: MuJoCo Warp's capacities per world (None: :class:`~.control.BatchRun`'s).
     ``stop()`` is asked between batches. A batch that raises fails its rows (``failed_row``)."""
-    import warp as wp
 
     from ..scenario import load
     from .control import BatchRun
 
-    wp.config.quiet = True
+    quiet_warp()
     for g in groups:
         if stop():
             return

@@ -77,6 +77,14 @@ def _title(sc_or_summary: Mapping[str, Any]) -> str:
 
 
 # ---------------------------------------------------------------------------- one run
+def _log_scale(ax: Any, data: np.ndarray) -> None:
+    """A log y axis when ``data`` has a positive finite value; else the linear one (a 1-step run's
+    zero errors: matplotlib would warn "Data has no positive values", design §17)."""
+    d = np.asarray(data, dtype=float)
+    if np.any(np.isfinite(d) & (d > 0)):
+        ax.set_yscale("log")
+
+
 def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
     """Write the figures of one run (a :class:`~bioform_mj.sim.RunResult`) into ``out_dir``; return their paths."""
     log, summary = result.log, result.summary
@@ -102,7 +110,7 @@ def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
     for i in range(n):
         ax[3, 0].plot(t, log["formation_error"][:, i], color=follower_rgb(i), lw=1.2)
     ax[3, 0].set_ylabel("formation\nerror (m)")
-    ax[3, 0].set_yscale("log")
+    _log_scale(ax[3, 0], log["formation_error"])
     _finish(fig, ax, title + ": tracking errors")
     paths.append(_save(fig, out / "tracking_errors.png"))
 
@@ -160,7 +168,7 @@ def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
         for i in range(n):
             ax[r, 0].plot(t, err[:, i, r], color=follower_rgb(i), lw=1.0, label=f"follower {i + 1}")
         ax[r, 0].set_ylabel(lab)
-        ax[r, 0].set_yscale("log")
+        _log_scale(ax[r, 0], err[:, :, r])
     _finish(fig, ax, title + ": velocity errors")
     paths.append(_save(fig, out / "velocity_errors.png"))
 

@@ -22,18 +22,26 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 
     On any exception the temporary file is removed and ``path`` is untouched, so a
     reader never sees a half-written file (SIGKILL leaves at most a hidden ``.tmp``).
+    An ``OSError`` on the way (disk full, read-only file system, a file-size limit) becomes a
+    :class:`~bioform_mj.errors.WriteFailed` naming ``path`` (design §17).
     """
+    from ..errors import WriteFailed
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)  # checked up front (check_out_file); made only now
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
+    tmp: str | None = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)  # checked up front (check_out_file); made only now
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
         yield Path(tmp)
         os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the usual permissions
         os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+    except BaseException as exc:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+        if isinstance(exc, OSError) and not isinstance(exc, WriteFailed):
+            raise WriteFailed(str(path), exc) from exc
         raise
 
 

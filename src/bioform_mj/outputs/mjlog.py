@@ -56,9 +56,14 @@ class MujocoLog:
         if not new:
             return None
         path = Path(folder) / FILENAME
-        with open(path, "a") as fh:
-            for t, msg in new:
-                fh.write(f"WARNING {time.strftime('%a %b %d %H:%M:%S %Y', time.localtime(t))}: {msg}\n\n")
+        try:
+            with open(path, "a") as fh:
+                for t, msg in new:
+                    fh.write(f"WARNING {time.strftime('%a %b %d %H:%M:%S %Y', time.localtime(t))}: {msg}\n\n")
+        except OSError as exc:  # disk full, ulimit -f: named like every other output (design §17)
+            from ..errors import WriteFailed
+
+            raise WriteFailed(str(path), exc) from exc
         self.written += len(new)
         return path
 

@@ -154,9 +154,14 @@ class RunDir:
             if same:
                 break
             os.close(fd)
-        os.ftruncate(fd, 0)
-        os.write(fd, str(os.getpid()).encode())
         self._fd = fd
+        try:  # who holds it, for the message of a refused second run
+            os.ftruncate(fd, 0)
+            os.write(fd, str(os.getpid()).encode())
+        except OSError as exc:  # disk full, ulimit -f (design §17): the run could write nothing either
+            from ..errors import WriteFailed
+
+            raise WriteFailed(str(lock), exc) from exc
 
     def _clear(self) -> None:
         """Remove stale temporaries always, and the old run's files with ``overwrite``."""

@@ -530,21 +530,19 @@ def write_still(
 
 
 def read_video(path: str | Path) -> np.ndarray:
-    """Decode an MP4 into ``(frames, height, width, 3)`` uint8.
+    """Decode an MP4 into ``(frames, height, width, 3)`` uint8, with imageio-ffmpeg's reader.
 
-    mediapy's reader first; mediapy 1.2.7 passes ``-vsync``, which the ffmpeg 9 bundled
-    with imageio-ffmpeg 0.8 no longer accepts, so imageio-ffmpeg's own reader is the fallback.
+    Not mediapy's: mediapy 1.2.7 passes ``-vsync``, which ffmpeg 9 (the one imageio-ffmpeg
+    0.8 bundles) removed, so its reader fails there (design §17). imageio-ffmpeg's reader
+    passes no ``-vsync``.
     """
-    import mediapy
+    import imageio_ffmpeg
 
-    set_ffmpeg()
+    gen = imageio_ffmpeg.read_frames(str(path))
     try:
-        return np.asarray(mediapy.read_video(str(path)))
-    except RuntimeError:
-        import imageio_ffmpeg
-
-        gen = imageio_ffmpeg.read_frames(str(path))
         meta = next(gen)
         w, h = meta["size"]
         frames = [np.frombuffer(f, np.uint8).reshape(h, w, 3) for f in gen]
-        return np.stack(frames) if frames else np.zeros((0, h, w, 3), np.uint8)
+    finally:
+        gen.close()
+    return np.stack(frames) if frames else np.zeros((0, h, w, 3), np.uint8)
