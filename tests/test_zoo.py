@@ -37,10 +37,7 @@ URDF = [n for n in NAMES if ROBOTS[n].format == "urdf"]
 REDISTRIBUTABLE = {"Apache-2.0", "BSD", "BSD-3-Clause", "BSD-2-Clause", "MIT", "CC-BY-4.0"}
 
 #: the verdict of robot check in this branch differs from the expected one (the fix is another helper's)
-VERDICT_ELSEWHERE = {
-    "robotis_tb3_burger": "the frictionless caster and the rotor-aware traction limit land with the contacts branch",
-    "robotis_tb3_waffle_pi": "the frictionless casters land with the contacts branch",
-}
+VERDICT_ELSEWHERE: dict[str, str] = {}  # robot -> why its verdict test is still expected to fail
 URDF_REASON = "URDF import lands with the urdf branch"
 
 
@@ -186,8 +183,7 @@ def _mu(x) -> float:
     return float(x)
 
 
-@pytest.mark.parametrize("name", NAMES)
-@pytest.mark.xfail(strict=True, reason="floor_contacts land with the contacts branch (and URDF with the urdf branch)")
+@pytest.mark.parametrize("name", [_urdf_xfail(n) for n in NAMES])
 def test_project_floor_contacts_match_reference(name, package_path):
     """robot check names the bodies on the floor, their loads within 10 % of the weight's share, and keeps the
     frictionless ones frictionless."""
@@ -212,8 +208,7 @@ def test_project_floor_contacts_match_reference(name, package_path):
             assert _mu(c["friction"]) < reference.FRICTIONLESS, c
 
 
-@pytest.mark.parametrize("name", NAMES)
-@pytest.mark.xfail(strict=True, reason="self_contacts land with the urdf branch")
+@pytest.mark.parametrize("name", [_urdf_xfail(n) for n in NAMES])
 def test_project_names_self_contacts_at_rest(name, package_path):
     """robot check's ``self_contacts`` names the pairs of the robot's own bodies that touch at rest (joints as
     published): for the URDFs those MuJoCo would collide and Gazebo does not (Create 3: wheels 55 mm inside the
