@@ -372,12 +372,24 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--wheel-radius", type=float, help="wheel radius in m (default: from the wheels' collision geoms)")
     p.add_argument("--half-track", type=float, help="half the track in m (default: from the wheel joint anchors)")
     p.add_argument("--tau-max", type=float, help="wheel torque limit in N·m (default: the model's own drive limit)")
+    p.add_argument(
+        "--package-path",
+        action="append",
+        default=[],
+        metavar="NAME=DIR",
+        help="URDF: where package://NAME/... points (repeatable; before $BIOFORM_PACKAGE_PATH, $ROS_PACKAGE_PATH)",
+    )
+    p.add_argument(
+        "--self-collide",
+        action="store_true",
+        help="URDF: keep contacts between the robot's own links (default off, as in Gazebo)",
+    )
 
 
 def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
     """A :class:`RobotRef` from a model argument and the :func:`mapping_args` flags."""
     from .errors import InputError
-    from .robots import resolve_robot
+    from .robots import package_path_from_args, resolve_robot
 
     for flag in ("wheel_radius", "half_track", "tau_max"):
         v = getattr(args, flag, None)
@@ -392,6 +404,8 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
             wheel_radius=args.wheel_radius or 0.0,
             half_track=args.half_track or 0.0,
             tau_max=args.tau_max or 0.0,
+            self_collide=bool(getattr(args, "self_collide", False)),
+            package_path=package_path_from_args(getattr(args, "package_path", None)),
         )
     )
 
@@ -406,7 +420,7 @@ def add_parser(sub: Any) -> None:
         "margins, damping/armature/frictionloss; verdict pass/warn/fail "
         f"(exit 0 pass or warn, 2 bad input, {EXIT_FAIL} fail)",
     )
-    chk.add_argument("model", help="shipped robot name or path to an MJCF file")
+    chk.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
     mapping_args(chk)
     chk.add_argument("--json", type=str, metavar="FILE", help="write the report as JSON to FILE")
 

@@ -147,6 +147,8 @@ class RobotLayout:
     tau_max: float
     disabled_actuators: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
+    #: the guesses of a format import (URDF, design §12), also at the head of ``notes``: runs warn them
+    import_notes: tuple[str, ...] = ()
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -156,6 +158,7 @@ class RobotLayout:
         d = json.loads(text)
         for k in ("wheel_joints", "motors", "wheel_geoms", "axle", "wheel_sign", "disabled_actuators", "notes"):
             d[k] = tuple(d[k])
+        d["import_notes"] = tuple(d.get("import_notes", ()))
         return cls(**d)
 
 
@@ -722,12 +725,25 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
     except InputError as exc:
         raise ModelError(str(exc)) from None
     path = Path(ref.model)
-    try:
-        spec = mujoco.MjSpec.from_file(str(path))
-        model = spec.compile()
-    except Exception as exc:  # mujoco raises ValueError; be robust to other types
-        raise ModelError(f"{path}: does not compile: {_one_line(exc)}") from exc
+    from .urdf import import_urdf, is_urdf
+
+    imported: tuple[str, ...] = ()
+    if is_urdf(path):  # design §12: a URDF stays a robot (free root, links kept, meshes found)
+        try:
+            imp = import_urdf(ref)
+        except InputError as exc:
+            raise ModelError(str(exc)) from None
+        spec, model, ref, imported = imp.spec, imp.model, imp.ref, imp.notes
+    else:
+        try:
+            spec = mujoco.MjSpec.from_file(str(path))
+            model = spec.compile()
+        except Exception as exc:  # mujoco raises ValueError; be robust to other types
+            raise ModelError(f"{path}: does not compile: {_one_line(exc)}") from exc
+        absolute_asset_files(spec)
     layout, plan = _analyse(model, path, ref)
+    if imported:
+        layout = replace(layout, notes=imported + layout.notes, import_notes=imported)
 
     # spec elements by compiled index, resolved before anything is deleted (unnamed ones included)
     acts = {a: _spec_actuator(spec, model, a) for a in range(model.nu)}
@@ -787,6 +803,32 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
             )
     spec.add_text(name=_LAYOUT_TEXT, data=layout.to_json())
     return spec, layout, np.asarray(plan["axle_world"], float), plan["base_yaw"]
+
+
+def absolute_asset_files(spec: mujoco.MjSpec) -> None:
+    """Make the spec's mesh, skin, height-field and texture file names absolute (resolved against
+    the model file's folder and its ``meshdir``/``texturedir``), so that a scene composed of robots
+    from many folders names each file once and wholly (design §12: a run's ``scene.xml`` copies
+    them beside it, :func:`bioform_mj.outputs.scenexml.write_scene`). Files in the spec's own
+    asset dictionary are left alone."""
+    top = Path(spec.modelfiledir or ".")
+    own = set(spec.assets) if spec.assets else set()
+
+    def fix(name: str, folder: str) -> str:
+        if not name or name in own or Path(name).is_absolute():
+            return name
+        return str((top / folder / name).resolve())
+
+    for m in spec.meshes:
+        m.file = fix(m.file, spec.meshdir)
+    for sk in spec.skins:
+        sk.file = fix(sk.file, spec.meshdir)
+    for h in spec.hfields:
+        h.file = fix(h.file, spec.meshdir)
+    for t in spec.textures:
+        t.file = fix(t.file, spec.texturedir)
+        if any(t.cubefiles):
+            t.cubefiles = [fix(c, spec.texturedir) for c in t.cubefiles]
 
 
 def load_robot(entry: RobotRef | str | Path) -> mujoco.MjSpec:
