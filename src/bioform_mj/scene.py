@@ -434,7 +434,7 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
             raise ModelError(
                 f"{path}: cannot tell the wheel torque limit: no drive actuator on "
                 f"'{jl_name}'/'{jr_name}' has a forcerange and the joints have no actuatorfrcrange; "
-                "give tau_max (N·m) in the robot's mapping"
+                "give tau_max (N·m) in the robot's mapping (a URDF: <limit effort> on the wheel joints)"
             )
         tau_max = min(limits)
         notes.append(
@@ -883,7 +883,8 @@ def payload_inertial(
     p = np.zeros(3) if at is None else np.asarray(at, float)
     i_origin += payload_mass * (p @ p * np.eye(3) - np.outer(p, p))
     new_mass = mass + payload_mass
-    new_ipos = (mass * ipos + payload_mass * p) / new_mass
+    # a massless base (a URDF base_footprint, design §12) with a massless payload stays massless
+    new_ipos = (mass * ipos + payload_mass * p) / new_mass if new_mass > 0 else ipos.copy()
     i_com = i_origin - new_mass * (new_ipos @ new_ipos * np.eye(3) - np.outer(new_ipos, new_ipos))
     evals, evecs = np.linalg.eigh(i_com)
     if np.allclose(i_com, np.diag(np.diag(i_com)), atol=1e-12):

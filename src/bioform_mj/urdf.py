@@ -745,11 +745,12 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
         notes.append(f"<limit velocity> of {vel} joint(s) ignored (MuJoCo has no joint speed limit)")
 
     # self-collision: off between the robot's own links (URDF/Gazebo), unless asked
-    if not ref.self_collide:
+    if not ref.self_collide:  # the bodies that collide, or may (a wheel gets a contact proxy: scene.py)
+        root_id = body_id[pr.root]
         bodies = [
             b
             for b in range(1, model.nbody)
-            if model.body_jntnum[b]
+            if (model.body_jntnum[b] and b != root_id)
             or any(
                 model.geom_contype[g] or model.geom_conaffinity[g]
                 for g in range(model.body_geomadr[b], model.body_geomadr[b] + model.body_geomnum[b])

@@ -10,6 +10,7 @@ that wrote it. Meshes converted on import (COLLADA) are inline vertex data and n
 
 from __future__ import annotations
 
+import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -32,9 +33,10 @@ _FILE_ATTRS = {
 
 def portable_xml(xml: str) -> tuple[str, dict[str, str]]:
     """``(xml, {absolute source: name in assets/})``: ``xml`` with every asset file renamed to
-    ``assets/NAME`` (one copy per source file; two sources with one name get ``-2``, ``-3`` …) and
-    the compiler's ``meshdir``/``texturedir``/``assetdir`` removed. A relative file name (one no
-    robot resolved) is left as it is."""
+    ``assets/NAME`` (one copy per source file; two sources with one name, in any case, get ``-2``, ``-3`` …) and
+    the compiler's ``meshdir``/``texturedir``/``assetdir`` removed, and each robot's layout text
+    naming its model file by file name only. A relative file name (one no robot resolved) is left
+    as it is."""
     root = ET.fromstring(xml)
     copies: dict[str, str] = {}
     taken: set[str] = set()
@@ -51,12 +53,23 @@ def portable_xml(xml: str) -> tuple[str, dict[str, str]]:
                     p = Path(src)
                     stem, sfx = p.stem, p.suffix.lower()
                     name, k = stem + sfx, 1
-                    while name in taken:
+                    while name.lower() in taken:  # one name per file, on case-blind file systems too
                         k += 1
                         name = f"{stem}-{k}{sfx}"
-                    taken.add(name)
+                    taken.add(name.lower())
                     copies[src] = name
                 el.set(attr, f"{ASSETS_DIR}/{copies[src]}")
+    for text in root.iter("text"):  # the robots' layouts name their files: by file name only
+        if (text.get("name") or "").endswith("bioform_layout"):
+            raw = text.get("data") if text.get("data") is not None else text.text  # MuJoCo writes a CDATA node
+            try:
+                lay = json.loads(raw or "")
+            except ValueError:
+                continue
+            if isinstance(lay, dict) and isinstance(lay.get("file"), str):
+                lay["file"] = Path(lay["file"]).name
+                text.text = None  # MuJoCo reads a text's data from the attribute (or a CDATA node)
+                text.set("data", json.dumps(lay))
     ET.indent(root, space="  ")
     return ET.tostring(root, encoding="unicode") + "\n", copies
 
