@@ -41,9 +41,11 @@ def inertial(m: float, ixx: float, iyy: float, izz: float, xyz: str = "0 0 0") -
     )
 
 
-def wheel(side: str, y: float, extra: str = "", hubcap: bool = False, jtype: str = "continuous") -> str:
+def wheel(
+    side: str, y: float, extra: str = "", hubcap: bool = False, jtype: str = "continuous", effort: bool = True
+) -> str:
     lim = '<limit lower="-3.14" upper="3.14" effort="2" velocity="10"/>' if jtype == "revolute" else ""
-    lim = lim or '<limit effort="2" velocity="10"/>'
+    lim = lim or ('<limit effort="2" velocity="10"/>' if effort else "")
     s = f"""
   <joint name="wheel_{side}_joint" type="{jtype}"><parent link="base_link"/><child link="wheel_{side}"/>
     <origin xyz="0 {y!r} 0" rpy="-{HALF_PI} 0 0"/><axis xyz="0 0 1"/>{lim}</joint>
@@ -66,6 +68,7 @@ def diff_drive(
     tail: str = "",
     wheel_type: str = "continuous",
     chassis_visual: str = "",
+    effort: bool = True,
 ) -> str:
     """A two-wheel differential drive with a caster front and back, symmetric about the axle."""
     caster = ""
@@ -84,8 +87,8 @@ def diff_drive(
     <origin xyz="0 0 {Z_AXLE!r}"/></joint>
   <link name="base_link">{inertial(M_CHASSIS, *I_CHASSIS)}{vis}
     <collision><origin xyz="0 0 0.03"/><geometry>{chassis_collision}</geometry></collision></link>
-  {wheel("left", L_HALF, hubcap=hubcaps, jtype=wheel_type)}
-  {wheel("right", -L_HALF, hubcap=hubcaps, jtype=wheel_type)}
+  {wheel("left", L_HALF, hubcap=hubcaps, jtype=wheel_type, effort=effort)}
+  {wheel("right", -L_HALF, hubcap=hubcaps, jtype=wheel_type, effort=effort)}
   {caster}
   {tail}
 </robot>
@@ -229,6 +232,33 @@ def test_revolute_wheels_lose_their_limits_and_other_limits_are_said(tmp_path):
     assert "wheel joint 'wheel_left_joint' is revolute with limits [-3.14, 3.14] rad: removed" in notes
     assert "joint limits kept: 'pan' [-1, 1] rad" in notes
     assert abs(layout.tau_max - 2.0) < 1e-12  # <limit effort> of the wheels: the motor limit
+
+
+def test_gazebo_diff_drive_plugin_names_the_wheels_and_their_torque(tmp_path):
+    """The maker's own simulation drives these joints at most this hard: read, and said. Here the
+    plugin names the front/rear pair of a four-wheel base, which geometry alone cannot choose."""
+    extra = (
+        wheel("left", L_HALF, effort=False).replace("wheel_left", "rear_left").replace('"0 0.12 0"', '"-0.1 0.12 0"')
+    )
+    extra += (
+        wheel("right", -L_HALF, effort=False)
+        .replace("wheel_right", "rear_right")
+        .replace(f'"0 {-L_HALF!r} 0"', f'"-0.1 {-L_HALF!r} 0"')
+    )
+    plugin = """
+  <gazebo><plugin name="drive" filename="libgazebo_ros_diff_drive.so">
+    <leftJoint>wheel_left_joint</leftJoint><rightJoint>wheel_right_joint</rightJoint><wheelTorque>1.25</wheelTorque>
+  </plugin></gazebo>"""
+    path = write(tmp_path / "dd.urdf", diff_drive(effort=False, tail=extra + plugin))
+    with pytest.raises(InputError, match="cannot tell the driven wheels"):  # without the plugin
+        prepare_robot(str(write(tmp_path / "bare.urdf", diff_drive(effort=False, tail=extra))))
+    _, layout = compiled(str(path))
+    assert layout.wheel_joints == ("wheel_left_joint", "wheel_right_joint")
+    assert layout.tau_max == 1.25
+    notes = " | ".join(layout.import_notes)
+    assert "wheels from the Gazebo diff-drive plugin 'libgazebo_ros_diff_drive.so'" in notes
+    assert "wheel torque limit 1.25 N·m from the Gazebo diff-drive plugin" in notes
+    assert "plugin 'libgazebo_ros_diff_drive.so' (beyond its wheels and wheel torque)" in notes
 
 
 def test_world_root_is_dropped(tmp_path):

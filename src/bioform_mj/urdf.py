@@ -229,6 +229,7 @@ class _Parsed:
     convert: dict[str, tuple[str, str]]  # absolute mesh file → (visual|collision, link)
     hinges: list[str]
     limits: dict[str, tuple[str, float | None, float | None, float | None, float | None]]
+    drive: dict[str, Any] = field(default_factory=dict)  # a Gazebo diff-drive plugin's wheels and torque
     notes: list[str] = field(default_factory=list)
 
 
@@ -434,11 +435,25 @@ def _parse(path: Path, packages: PackagePath) -> _Parsed:
     # <gazebo>: friction read, the rest said
     friction: dict[str, tuple[float, float | None]] = {}
     ignored: list[str] = []
+    drive: dict[str, Any] = {}
     for gz in robot.findall("gazebo"):
         ref = gz.get("reference")
         if ref is None:
             plugs = [p.get("filename") or p.get("name") or "?" for p in gz.iter("plugin")]
-            ignored.append("plugin " + ", ".join(f"'{p}'" for p in plugs) if plugs else "a <gazebo> block")
+            for p in gz.iter("plugin"):  # a diff-drive plugin names the driven wheels and their torque
+                what = f"{p.get('filename', '')} {p.get('name', '')}".lower()
+                if "diff_drive" in what or "diffdrive" in what or "diff-drive" in what:
+                    # ROS 1 gazebo_ros: leftJoint/rightJoint/wheelTorque; ROS 2 and gz-sim: left_joint/...
+                    drive = {
+                        "plugin": p.get("filename") or p.get("name") or "?",
+                        "left": [t.text.strip() for t in p if t.tag in ("leftJoint", "left_joint") and t.text],
+                        "right": [t.text.strip() for t in p if t.tag in ("rightJoint", "right_joint") and t.text],
+                        "torque": _float(p.findtext("wheelTorque") or p.findtext("max_wheel_torque")),
+                    }
+            said = [
+                f"'{p}'" + (" (beyond its wheels and wheel torque)" if drive.get("plugin") == p else "") for p in plugs
+            ]
+            ignored.append("plugin " + ", ".join(said) if plugs else "a <gazebo> block")
             continue
         mu1 = _float(gz.findtext("mu1"))
         mu2 = _float(gz.findtext("mu2"))
@@ -486,6 +501,7 @@ def _parse(path: Path, packages: PackagePath) -> _Parsed:
         convert=convert,
         hinges=hinges,
         limits=limits,
+        drive=drive,
         notes=notes,
     )
 
@@ -712,11 +728,30 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
         base = pr.root
     ref = replace(ref, base=base)
     joint_id = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j): j for j in range(model.njnt)}
+    drive = pr.drive
     if not (ref.left_wheel or ref.right_wheel) and not ("left_wheel" in joint_id and "right_wheel" in joint_id):
-        lw, rw, note = _find_wheels(model, body_id[pr.root], path)
-        notes.append(note)
+        hinge = int(mujoco.mjtJoint.mjJNT_HINGE)
+        named = [drive.get("left", []), drive.get("right", [])]
+        if all(len(n) == 1 and n[0] in joint_id and model.jnt_type[joint_id[n[0]]] == hinge for n in named):
+            lw, rw = named[0][0], named[1][0]  # the maker's own simulation drives these
+            notes.append(
+                f"wheels from the Gazebo diff-drive plugin '{drive['plugin']}': left '{lw}', right '{rw}' "
+                "(map left_wheel/right_wheel to choose others)"
+            )
+        else:
+            lw, rw, note = _find_wheels(model, body_id[pr.root], path)
+            notes.append(note)
         ref = replace(ref, left_wheel=lw, right_wheel=rw)
     wheels = {ref.left_wheel or "left_wheel", ref.right_wheel or "right_wheel"}
+    torque = drive.get("torque")
+    if not ref.tau_max and torque and torque > 0:
+        effort = [pr.limits.get(w, ("", None, None, None, None))[3] for w in wheels]
+        if not all(e and e > 0 for e in effort):  # the URDF's own <limit effort> comes first
+            ref = replace(ref, tau_max=float(torque))
+            notes.append(
+                f"wheel torque limit {torque:g} N·m from the Gazebo diff-drive plugin's wheel torque (the wheel "
+                "joints have no <limit effort>); map tau_max for the real motor's"
+            )
 
     # limits: a wheel turns without end; the others are kept and said
     kept, efforts, vel = [], [], 0
