@@ -508,6 +508,10 @@ def test_bare_urdf_and_xml_names_in_a_toml_file_are_relative_to_it(tmp_path, mon
     # to_dict round trip, and --set adds a package
     again = load(str(d / "sc.toml"), ["plant.package_path.other=" + json.dumps(str(d))])
     assert dict(again.plant.package_path) == {"ddpkg": str((d / "pkgs/ddpkg").resolve()), "other": str(d)}
+    # --package-path of run/table1/sweep: the same key, absolute
+    args = cli.build_parser().parse_args(["sweep", str(d / "sc.toml"), "--out", "o", "--package-path", "p2=proj"])
+    monkeypatch.chdir(tmp_path)
+    assert cli._package_overrides(args) == [f"plant.package_path.p2={json.dumps(str(d))}"]
     with pytest.raises(InputError, match="unknown robot 'dd'"):
         resolve_robot("dd")  # no suffix, no separator: a shipped name, which it is not
 

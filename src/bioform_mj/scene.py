@@ -45,6 +45,7 @@ import numpy as np
 
 from bioform_mj.errors import InputError
 from bioform_mj.robots import RobotRef, models_dir, resolve_robot, robot_names
+from bioform_mj.urdf import import_urdf, is_urdf
 
 log = logging.getLogger(__name__)
 
@@ -725,8 +726,6 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
     except InputError as exc:
         raise ModelError(str(exc)) from None
     path = Path(ref.model)
-    from .urdf import import_urdf, is_urdf
-
     imported: tuple[str, ...] = ()
     if is_urdf(path):  # design §12: a URDF stays a robot (free root, links kept, meshes found)
         try:
