@@ -6,6 +6,7 @@ Every URDF here is written by the test, with inertials whose sums the assertions
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 import os
@@ -473,6 +474,24 @@ def test_xacro_without_the_package_says_how_to_expand(tmp_path, capsys, monkeypa
     assert cli.main(["robot", "check", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"`xacro {path} > dd.urdf`" in err[0], err
+    # a .urdf that still holds macros is xacro too; a commented-out include (as published) is not
+    macro = write(tmp_path / "m.urdf", diff_drive().replace('"0.2"', '"${0.1*2}"', 1))
+    assert cli.main(["robot", "check", str(macro)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "(it holds xacro macros)" in err[0] and "> m.expanded.urdf`" in err[0], err
+    monkeypatch.delitem(sys.modules, "xacro")
+    if importlib.util.find_spec("xacro") is not None:  # with the package: $(find) through our search path
+        missing = write(tmp_path / "f.urdf.xacro", diff_drive(tail='<xacro:include filename="$(find nopkg)/x.xacro"/>'))
+        missing.write_text(
+            missing.read_text().replace('name="dd"', 'name="dd" xmlns:xacro="http://ros.org/wiki/xacro"')
+        )
+        assert cli.main(["robot", "check", str(missing)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "$(find nopkg): package 'nopkg' is on no search path" in err[0], err
+    commented = diff_drive().replace("<robot name", '<!-- <xacro:include filename="x"/> -->\n<robot name')
+    from bioform_mj.urdf import _read_text
+
+    assert _read_text(write(tmp_path / "c.urdf", commented), PackagePath()) == commented
 
 
 def test_package_path_flag_and_key_refuse_a_missing_directory(tmp_path, capsys):
@@ -505,7 +524,11 @@ def test_bare_urdf_and_xml_names_in_a_toml_file_are_relative_to_it(tmp_path, mon
     assert models == [str((d / "dd.urdf").resolve()), str((d / "robot.xml").resolve()), str((d / "dd.urdf").resolve())]
     assert sc.plant.robots[2].self_collide and not sc.plant.robots[0].self_collide
     assert all(r.package_path == PackagePath([("ddpkg", str((d / "pkgs/ddpkg").resolve()))]) for r in sc.plant.robots)
-    # to_dict round trip, and --set adds a package
+    from bioform_mj.scenario import from_dict
+
+    assert from_dict(sc.to_dict()) == sc  # the tables and the scenario's package_path round-trip
+    assert "package_path" not in load("paper").to_dict()["plant"]  # absent when unused: sweep keys unchanged
+    # --set adds a package
     again = load(str(d / "sc.toml"), ["plant.package_path.other=" + json.dumps(str(d))])
     assert dict(again.plant.package_path) == {"ddpkg": str((d / "pkgs/ddpkg").resolve()), "other": str(d)}
     # --package-path of run/table1/sweep: the same key, absolute

@@ -110,13 +110,14 @@ class RobotRef:
 
     def to_entry(self) -> str | dict[str, Any]:
         """The entry as a scenario writes it: the model alone, or a table (``package_path`` as
-        ``{NAME = DIR}``, left out when empty)."""
+        ``{NAME = DIR}``; it and ``self_collide`` left out at their defaults)."""
         if not self.mapped and not self.package_path:
             return self.model
         d = {f.name: getattr(self, f.name) for f in fields(self)}
         d["package_path"] = dict(self.package_path)
-        if not d["package_path"]:
-            del d["package_path"]
+        for k in ("package_path", "self_collide"):  # absent at their defaults: older tables stay as they were
+            if not d[k]:
+                del d[k]
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
 
     def __str__(self) -> str:

@@ -350,6 +350,8 @@ class Scenario:
         d = _to_plain(dataclasses.asdict(self))
         d["plant"]["robots"] = [_to_plain(r.to_entry()) for r in self.plant.robots]
         d["plant"]["package_path"] = dict(self.plant.package_path)
+        if not d["plant"]["package_path"]:  # absent when unused: a sweep's content keys stay as they were
+            del d["plant"]["package_path"]
         return d
 
     # ---- derived objects -------------------------------------------------------------

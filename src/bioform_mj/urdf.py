@@ -39,6 +39,7 @@ scenario is refused before any work.
 from __future__ import annotations
 
 import os
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -68,6 +69,8 @@ URDF_SUFFIXES = (".urdf", ".xacro")
 MESH_NATIVE = (".stl", ".obj", ".msh")
 #: the compiler settings that keep a URDF robot a robot (design §12)
 _COMPILER = {"discardvisual": "false", "fusestatic": "false", "strippath": "false"}
+#: what marks xacro in a file: a xacro element, a ``${…}`` expression, ``$(find …)``/``$(arg …)``
+_XACRO = re.compile(r"<xacro:|\$\{|\$\((find|arg|env|optenv|eval) ")
 _INSTALL_HINT = "pip install 'bioform-mj[urdf]' (trimesh + pycollada)"
 
 
@@ -128,38 +131,49 @@ def _read_text(path: Path, packages: PackagePath) -> str:
     resolved through the same search path)."""
     if not path.is_file():
         raise UrdfError(f"model file '{path}' does not exist")
-    if str(path).lower().endswith(".xacro"):
+    text = None
+    if not str(path).lower().endswith(".xacro"):
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise UrdfError(f"model file '{path}' cannot be read: {_one_line(exc)}") from None
+    # a .urdf that still holds xacro macros (outside comments: published URDFs keep commented includes) is xacro
+    if text is None or _XACRO.search(re.sub(r"<!--.*?-->", "", text, flags=re.S)):
         try:
             import xacro
             import xacro.substitution_args as subst
         except ImportError:
-            stem = path.name[: -len(".xacro")]
+            stem = path.name[: -len(".xacro")] if path.name.lower().endswith(".xacro") else path.stem + ".expanded"
             stem = stem if stem.endswith(".urdf") else stem + ".urdf"
             raise UrdfError(
-                f"{path} is a xacro file: expand it first (`xacro {path} > {stem}`, ROS's xacro tool), "
-                "or pip install 'bioform-mj[urdf]' to let bioform expand it"
+                f"{path} is a xacro file{'' if text is None else ' (it holds xacro macros)'}: expand it first "
+                f"(`xacro {path} > {stem}`, ROS's xacro tool), or pip install 'bioform-mj[urdf]' to let bioform "
+                "expand it"
             ) from None
+
+        missing: list[str] = []
 
         def find(pkg: str) -> str:
             found, _ = find_package(pkg, packages, path)
             if found is None:
-                raise UrdfError(f"{path}: $(find {pkg}): package '{pkg}' is on no search path")
+                missing.append(pkg)
+                raise UrdfError(pkg)
             return str(found)
 
         old = subst._eval_find
         subst._eval_find = find
         try:
             return xacro.process_file(str(path)).toxml()
-        except UrdfError:
-            raise
-        except Exception as exc:  # XacroException, a missing include, bad XML
+        except Exception as exc:  # XacroException (wrapping ours), a missing include, bad XML
+            if missing:
+                raise UrdfError(
+                    f"{path}: $(find {missing[0]}): package '{missing[0]}' is on no search path (searched: "
+                    f"{'; '.join(package_search_path(packages))}; give --package-path {missing[0]}=DIR)"
+                ) from None
             raise UrdfError(f"{path}: xacro cannot expand it: {_one_line(exc)}") from None
         finally:
             subst._eval_find = old
-    try:
-        return path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UrdfError(f"model file '{path}' cannot be read: {_one_line(exc)}") from None
+    return text
 
 
 def _float(text: str | None) -> float | None:
