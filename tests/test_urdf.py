@@ -624,3 +624,17 @@ def test_portable_xml_copies_each_file_once_and_renames_clashes(tmp_path):
     assert (out / "assets" / "M-2.stl").read_bytes() == b.read_bytes()
     model = mujoco.MjModel.from_xml_path(str(out / "scene.xml"))
     assert np.isclose(model.mesh_vert[model.mesh_vertadr[2] :].max(), 0.2, atol=1e-6)
+
+
+def test_a_runs_assets_folder_is_a_runs_own_and_overwrite_clears_it(tmp_path):
+    from bioform_mj.outputs.rundir import RunDir, survey
+
+    run = tmp_path / "run"
+    box_stl(run / "assets" / "m.stl", 0.1, 0.1, 0.1)
+    (run / "scene.xml").write_text("<mujoco/>")
+    assert survey(run) == (["assets/", "scene.xml"], [])
+    with RunDir(run, overwrite=True):
+        assert not (run / "assets").exists()
+    (run / "assets").mkdir()
+    (run / "assets" / "notes.txt").write_text("mine")  # not a suffix a run writes: the user's, kept
+    assert survey(run)[1] == ["assets/notes.txt"]
