@@ -38,6 +38,7 @@ scenario is refused before any work.
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import xml.etree.ElementTree as ET
@@ -119,7 +120,7 @@ class _Parsed:
     links: list[str]
     no_inertial: list[str]
     friction: dict[str, tuple[float, float | None]]
-    convert: dict[str, tuple[str, str]]  # absolute mesh file → (visual|collision, link)
+    convert: dict[str, tuple[str, list[str]]]  # absolute mesh file → (visual|collision, links)
     hinges: list[str]
     limits: dict[str, tuple[str, float | None, float | None, float | None, float | None]]
     drive: dict[str, Any] = field(default_factory=dict)  # a Gazebo diff-drive plugin's wheels and torque
@@ -160,10 +161,15 @@ def _read_text(path: Path, packages: PackagePath) -> str:
                 raise UrdfError(pkg)
             return str(found)
 
+        st = path.stat()
+        key = (str(path.resolve()), st.st_mtime_ns, st.st_size, packages, _env_key())
+        if key in _EXPANDED:  # a scene builds a robot several times; xacro takes ~0.25 s (Kobuki)
+            return _EXPANDED[key]
         old = subst._eval_find
         subst._eval_find = find
         try:
-            return xacro.process_file(str(path)).toxml()
+            _EXPANDED[key] = xacro.process_file(str(path)).toxml()
+            return _EXPANDED[key]
         except Exception as exc:  # XacroException (wrapping ours), a missing include, bad XML
             if missing:
                 raise UrdfError(
@@ -174,6 +180,15 @@ def _read_text(path: Path, packages: PackagePath) -> str:
         finally:
             subst._eval_find = old
     return text
+
+
+#: xacro expansions of this process, by file, its (mtime, size), the search path (an included file
+#: edited while one process runs is not seen: a process builds its robots once, at start)
+_EXPANDED: dict[tuple, str] = {}
+
+
+def _env_key() -> tuple[str, ...]:
+    return tuple(os.environ.get(v, "") for v in ("BIOFORM_PACKAGE_PATH", "ROS_PACKAGE_PATH", "AMENT_PREFIX_PATH"))
 
 
 def _float(text: str | None) -> float | None:
@@ -289,7 +304,7 @@ def _parse(path: Path, packages: PackagePath) -> _Parsed:
         del comp.attrib["meshdir"]
 
     # meshes: absolute files; a visual that cannot be had is dropped, a collision one is an error
-    convert: dict[str, tuple[str, str]] = {}
+    convert: dict[str, tuple[str, list[str]]] = {}
     found_by: set[str] = set()
     dropped: list[str] = []
     trimesh_ok: bool | None = None
@@ -311,7 +326,8 @@ def _parse(path: Path, packages: PackagePath) -> _Parsed:
                     if trimesh_ok is None:
                         trimesh_ok = _have_trimesh()
                     if trimesh_ok:
-                        convert[str(file)] = (role, lname)
+                        was = convert.get(str(file), ("visual", []))
+                        convert[str(file)] = ("collision" if "collision" in (role, was[0]) else role, [*was[1], lname])
                     else:
                         why = (
                             f"MuJoCo cannot read {file.suffix} meshes: {_INSTALL_HINT} to convert it on import, "
@@ -430,8 +446,11 @@ def _collada_unit(file: str) -> float:
     return 1.0
 
 
-def _load_mesh(file: str, role: str, link: str, path: Path) -> tuple[np.ndarray, np.ndarray, str]:
-    """``(vertices (V, 3) m, faces (F, 3), note)`` of a mesh trimesh reads (all its parts, placed)."""
+@functools.lru_cache(maxsize=64)
+def _trimesh_read(file: str, mtime_ns: int, size: int) -> tuple[np.ndarray, np.ndarray, float] | str:
+    """``(vertices (V, 3) m, faces (F, 3), COLLADA unit)`` of a mesh trimesh reads (all its parts,
+    placed), or why not; cached by file and its ``(mtime, size)``: a scene builds a robot several
+    times (a published COLLADA visual takes ~0.2 s)."""
     import trimesh
 
     try:
@@ -439,20 +458,32 @@ def _load_mesh(file: str, role: str, link: str, path: Path) -> tuple[np.ndarray,
         v = np.asarray(mesh.vertices, float)
         f = np.asarray(mesh.faces, int)
     except Exception as exc:  # a broken file, a missing pycollada
-        if role == "collision":
-            raise UrdfError(
-                f"{path}: <collision> mesh '{file}' of link '{link}' cannot be converted ({_one_line(exc)}); "
-                f"convert it to STL and point the URDF at it ({_INSTALL_HINT} reads COLLADA)"
-            ) from None
-        return np.zeros((0, 3)), np.zeros((0, 3), int), f"visual mesh '{file}' of link '{link}' dropped: {exc}"
+        return _one_line(exc) or type(exc).__name__
     if len(v) < 4 or len(f) < 1:
-        if role == "collision":
-            raise UrdfError(f"{path}: <collision> mesh '{file}' of link '{link}' has no triangles")
-        return v, f, f"visual mesh '{file}' of link '{link}' has no triangles: dropped"
+        return "it has no triangles"
     unit = _collada_unit(file) if file.lower().endswith(".dae") else 1.0
     v = v * unit
+    v.flags.writeable = False
+    f.flags.writeable = False
+    return v, f, unit
+
+
+def _load_mesh(file: str, role: str, links: list[str], path: Path) -> tuple[np.ndarray, np.ndarray, str]:
+    """``(vertices, faces, note)`` of a mesh MuJoCo cannot read; a visual one that trimesh cannot
+    read either comes back empty (dropped, said), a collision one is an error."""
+    st = os.stat(file)
+    got = _trimesh_read(file, st.st_mtime_ns, st.st_size)
+    where = f"of link{'s' if len(links) > 1 else ''} {', '.join(repr(n) for n in links)}"
+    if isinstance(got, str):
+        if role == "collision":
+            raise UrdfError(
+                f"{path}: <collision> mesh '{file}' {where} cannot be converted ({got}); "
+                f"convert it to STL and point the URDF at it ({_INSTALL_HINT} reads COLLADA)"
+            )
+        return np.zeros((0, 3)), np.zeros((0, 3), int), f"visual mesh '{file}' {where} dropped: {got}"
+    v, f, unit = got
     note = (
-        f"{role} mesh '{Path(file).name}' of link '{link}' converted with trimesh ({len(v)} vertices, "
+        f"{role} mesh '{Path(file).name}' {where} converted with trimesh ({len(v)} vertices, "
         f"{len(f)} faces{f', COLLADA unit {unit:g} m applied' if unit != 1 else ''})"
     )
     return v, f, note
@@ -557,8 +588,8 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
 
     for m in list(spec.meshes):
         if m.file in pr.convert:
-            role, link = pr.convert[m.file]
-            v, f, note = _load_mesh(m.file, role, link, path)
+            role, links = pr.convert[m.file]
+            v, f, note = _load_mesh(m.file, role, sorted(set(links)), path)
             notes.append(note)
             if len(f) == 0:  # a visual that trimesh could not read: its geoms go
                 for g in list(spec.geoms):
