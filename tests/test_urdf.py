@@ -121,6 +121,21 @@ def box_stl(path: Path, hx: float, hy: float, hz: float) -> Path:
     return path
 
 
+def tiny_png(path: Path) -> Path:
+    """A 2 × 2 RGB PNG (a texture file for MuJoCo)."""
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    rows = b"".join(b"\0" + bytes([200, 40, 40] * 2) for _ in range(2))
+    png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 2, 2, 8, 2, 0, 0, 0))
+    png += chunk(b"IDAT", zlib.compress(rows)) + chunk(b"IEND", b"")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(png)
+    return path
+
+
 def write(path: Path, text: str) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
@@ -552,12 +567,13 @@ def test_check_file_needs_no_mujoco_and_names_the_package(tmp_path, monkeypatch)
 # ------------------------------------------------------------------ a run, and its scene.xml (item 7)
 MJCF_WITH_MESH = """<mujoco model="meshbot">
   <compiler meshdir="meshes" texturedir="textures"/>
-  <asset><mesh name="shell" file="shell.stl"/></asset>
+  <asset><mesh name="shell" file="shell.stl"/><texture name="paint" type="2d" file="paint.png"/>
+    <material name="paint" texture="paint"/></asset>
   <worldbody>
     <body name="base" pos="0 0 0.05">
       <freejoint/>
       <inertial pos="0 0 0" mass="2" diaginertia="0.01 0.012 0.02"/>
-      <geom type="mesh" mesh="shell" pos="0 0 0.03" contype="0" conaffinity="0"/>
+      <geom type="mesh" mesh="shell" pos="0 0 0.03" contype="0" conaffinity="0" material="paint"/>
       <geom type="box" size="0.15 0.1 0.025" pos="0 0 0.03"/>
       <geom type="sphere" size="0.015" pos="0.12 0 -0.035" friction="0.01"/>
       <geom type="sphere" size="0.015" pos="-0.12 0 -0.035" friction="0.01"/>
@@ -585,6 +601,7 @@ def test_run_with_urdf_and_mesh_robots_and_its_scene_loads_alone(tmp_path, monke
     write(proj / "dd.urdf", text)
     write(proj / "mesh_robot.xml", MJCF_WITH_MESH)
     box_stl(proj / "meshes" / "shell.stl", 0.14, 0.09, 0.02)
+    tiny_png(proj / "textures" / "paint.png")
     write(proj / "sc.toml", '[plant]\nkind = "mujoco"\nrobots = ["dd.urdf", "mesh_robot.xml", "dd.urdf"]\n')
     out = tmp_path / "run"
     code = cli.main(
@@ -599,9 +616,15 @@ def test_run_with_urdf_and_mesh_robots_and_its_scene_loads_alone(tmp_path, monke
     xml = (out / "scene.xml").read_text()
     for machine_path in (str(tmp_path), str(Path.home()), str(Path(mujoco.__file__).parent)):
         assert machine_path not in xml
-    assert sorted(p.name for p in (out / "assets").iterdir()) == ["chassis.stl", "shell-2.stl", "shell.stl"]
+    assert sorted(p.name for p in (out / "assets").iterdir()) == [
+        "chassis.stl",
+        "paint.png",
+        "shell-2.stl",
+        "shell.stl",
+    ]
     monkeypatch.chdir(tmp_path / "ws")  # elsewhere
     model = mujoco.MjModel.from_xml_path(str(out / "scene.xml"))
+    assert model.ntex >= 1 and model.tex_height[model.texture("f2/paint").id] == 2  # texturedir resolved
     assert model.nmesh == 2 * 2 + 1  # two URDF robots × (chassis, shell), one MJCF shell
     assert model.nexclude == 2 * 10  # each URDF robot's own pairs, none between robots
     assert [layout_of(model, p).file for p in ("f1/", "f2/")] == ["dd.urdf", "mesh_robot.xml"]  # no folder

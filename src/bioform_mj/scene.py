@@ -1,7 +1,10 @@
 """Compose a MuJoCo scene of ``n`` differential-drive followers with ``mujoco.MjSpec``.
 
 A robot is an MJCF file plus a mapping (:class:`bioform_mj.robots.RobotRef`); see the README,
-"What a robot needs". :func:`prepare_robot` resolves it once, from the compiled model:
+"What a robot needs". A URDF file is imported first (:mod:`bioform_mj.urdf`, design §12: free
+root link, links kept as bodies, meshes found, every guess a note), then treated the same. An
+MJCF robot's asset files are made absolute (:func:`absolute_asset_files`). :func:`prepare_robot`
+resolves it once, from the compiled model:
 
 - the base body (``base`` by convention) carrying a free joint (one is added to a top-level
   base that has none); it is taken as x forward, y left, z up;
