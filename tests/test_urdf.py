@@ -661,3 +661,21 @@ def test_a_runs_assets_folder_is_a_runs_own_and_overwrite_clears_it(tmp_path):
     (run / "assets").mkdir()
     (run / "assets" / "notes.txt").write_text("mine")  # not a suffix a run writes: the user's, kept
     assert survey(run)[1] == ["assets/notes.txt"]
+
+
+def test_an_xml_urdf_and_model_uris_and_file_uris(tmp_path, monkeypatch):
+    """An ``.xml`` whose root is ``<robot>`` is URDF; ``model://NAME`` is searched like a package;
+    ``file://`` is a file."""
+    from bioform_mj.urdf import is_urdf
+
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    pkg, _ = _package(tmp_path)
+    text = diff_drive(
+        chassis_collision='<mesh filename="model://ddpkg/meshes/chassis.stl"/>',
+        chassis_visual=f'<mesh filename="file://{pkg}/meshes/shell.stl"/>',
+    )
+    path = write(tmp_path / "robot.xml", text)
+    assert is_urdf(path) and not is_urdf(resolve_robot("paper").model)
+    model, layout = compiled(RobotRef(str(path), package_path=PackagePath([("ddpkg", str(pkg))])))
+    assert np.allclose(_chassis_half_extent(model), [0.025, 0.1, 0.15], atol=1e-6)
+    assert model.nmesh == 2 and not any("dropped" in n for n in layout.import_notes)
