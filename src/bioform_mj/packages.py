@@ -8,6 +8,7 @@ parent folders (:func:`find_package`). Used for mesh URIs (:func:`resolve_uri`) 
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import xml.etree.ElementTree as ET
@@ -41,18 +42,30 @@ def _in_dir(d: Path, name: str) -> Path | None:
         return d
     if (d / name).is_dir():
         return d / name
-    top = len(d.parts)
+    found = _crawl(str(d), d.stat().st_mtime_ns).get(name)
+    return Path(found) if found else None
+
+
+@functools.lru_cache(maxsize=32)
+def _crawl(d: str, mtime_ns: int) -> dict[str, str]:
+    """``{package name: folder}`` of the packages below ``d`` (by folder name and ``package.xml``
+    name, at most :data:`_CRAWL_DEPTH` levels, none inside a package): one walk per folder and
+    process, however many meshes name it (``mtime_ns``: a folder changed since is walked again)."""
+    del mtime_ns
+    out: dict[str, str] = {}
+    top = len(Path(d).parts)
     for dirpath, dirnames, filenames in os.walk(d):
         here = Path(dirpath)
-        if "package.xml" in filenames and here != d:
-            if here.name == name or _package_name(here) == name:
-                return here
+        if "package.xml" in filenames and str(here) != d:
+            for key in (here.name, _package_name(here)):
+                if key:
+                    out.setdefault(key, str(here))
             dirnames[:] = []  # ROS: no package inside a package
             continue
         if len(here.parts) - top >= _CRAWL_DEPTH:
             dirnames[:] = []
-        dirnames[:] = [n for n in dirnames if not n.startswith(".")]
-    return None
+        dirnames[:] = sorted(n for n in dirnames if not n.startswith("."))
+    return out
 
 
 def package_search_path(packages: PackagePath = _NO_PACKAGES) -> list[str]:
