@@ -45,7 +45,21 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
         metavar="KEY=VALUE",
         help="override a scenario value, e.g. --set kinematic.k1=3 (repeatable)",
     )
+    p.add_argument(
+        "--package-path",
+        action="append",
+        default=[],
+        metavar="NAME=DIR",
+        help="URDF robots: where package://NAME/... points (repeatable; adds to plant.package_path)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar, no result lines")
+
+
+def _package_overrides(args: argparse.Namespace) -> list[str]:
+    """``--package-path NAME=DIR`` as ``--set plant.package_path.NAME="DIR"`` (absolute), design §12."""
+    from .robots import package_path_from_args
+
+    return [f"plant.package_path.{n}={json.dumps(d)}" for n, d in package_path_from_args(args.package_path)]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -103,7 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
     t1.add_argument("--figures", action="store_true", help="write figures/*.png comparing the methods")
 
     ident = sub.add_parser("identify", help="system identification of a robot MJCF: formula vs measured a, b")
-    ident.add_argument("model", help="shipped robot name or path to an MJCF file")
+    ident.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
     ident.add_argument("--out", type=Path, help="write the result as JSON to this file")
     from .robot_check import add_parser as _robot_parser
     from .robot_check import mapping_args
@@ -410,6 +424,7 @@ def _load(args: argparse.Namespace):
         overrides.append(f"sim.duration={args.duration!r}")
     if args.seed is not None:
         overrides.append(f"sim.seed={args.seed}")
+    overrides += _package_overrides(args)
     return load(args.scenario, overrides, method=getattr(args, "method", None), plant=args.plant)
 
 
@@ -506,7 +521,7 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
 def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url) -> int:
     import time
 
-    from .outputs.files import write_json, write_npz, write_text
+    from .outputs.files import write_json, write_npz
     from .outputs.progress import progress_bar
     from .sim import simulate
 
@@ -547,7 +562,9 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
         }
     write_npz(out / "log.npz", result.log)
     if sc.plant.kind == "mujoco":
-        write_text(out / "scene.xml", result.plant.model_xml())
+        from .outputs.scenexml import write_scene
+
+        write_scene(out, result.plant.model_xml())  # design §12: assets/ beside it, loads on its own
     write_json(out / "summary.json", result.summary)
     mjlog.write(out)
     if failed is not None:
@@ -742,6 +759,7 @@ def _sweep(args: argparse.Namespace) -> int:
     overrides = list(args.overrides)
     if args.duration is not None:
         overrides.append(f"sim.duration={args.duration!r}")
+    overrides += _package_overrides(args)
     specs = expand(args.scenario, args.seeds, methods, args.vary, overrides, plant=args.plant, seed0=args.seed or 0)
     if args.backend == "warp":  # unsupported features, device memory: before anything is written
         from .batch.backend import plan

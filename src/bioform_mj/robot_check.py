@@ -503,12 +503,24 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="leave the joints other than the wheels free (default: held at the file's configuration)",
     )
+    p.add_argument(
+        "--package-path",
+        action="append",
+        default=[],
+        metavar="NAME=DIR",
+        help="URDF: where package://NAME/... points (repeatable; before $BIOFORM_PACKAGE_PATH, $ROS_PACKAGE_PATH)",
+    )
+    p.add_argument(
+        "--self-collide",
+        action="store_true",
+        help="URDF: keep contacts between the robot's own links (default off, as in Gazebo)",
+    )
 
 
 def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
     """A :class:`RobotRef` from a model argument and the :func:`mapping_args` flags."""
     from .errors import InputError
-    from .robots import resolve_robot
+    from .robots import package_path_from_args, resolve_robot
 
     for flag in ("wheel_radius", "half_track", "tau_max"):
         v = getattr(args, flag, None)
@@ -529,6 +541,8 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
             casters=tuple(getattr(args, "caster", None) or ()),
             caster_friction=-1.0 if cf is None else float(cf),
             free_joints=bool(getattr(args, "free_joints", False)),
+            self_collide=bool(getattr(args, "self_collide", False)),
+            package_path=package_path_from_args(getattr(args, "package_path", None)),
         )
     )
 
@@ -543,7 +557,7 @@ def add_parser(sub: Any) -> None:
         "margins, damping/armature/frictionloss; verdict pass/warn/fail "
         f"(exit 0 pass or warn, 2 bad input, {EXIT_FAIL} fail)",
     )
-    chk.add_argument("model", help="shipped robot name or path to an MJCF file")
+    chk.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
     mapping_args(chk)
     chk.add_argument("--json", type=str, metavar="FILE", help="write the report as JSON to FILE")
 

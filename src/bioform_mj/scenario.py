@@ -24,7 +24,7 @@ from . import graph as graph_mod
 from . import leader as leader_mod
 from .control.stack import METHODS
 from .errors import GraphError, InputError, ScenarioError
-from .robots import RobotRef, as_ref, rebase_entries
+from .robots import PackagePath, RobotRef, as_package_path, as_ref, rebase_entries, rebase_package_path
 
 PLANTS = ("ideal", "mujoco")
 LEADER_KINDS = ("paper", "line", "circle", "figure8", "harmonic")
@@ -190,7 +190,9 @@ class PlantCfg:
     (:mod:`bioform_mj.robots`), one per follower or one for all; relative paths in a TOML file
     are relative to that file. On the ideal plant a robot other than ``paper`` gives ``c_true``
     (and ``mass``, ``inertia`` = ``M_eff``, ``I_eff``) from its compiled model
-    (:func:`apply_robots_to_ideal`)."""
+    (:func:`apply_robots_to_ideal`). ``package_path``: ``{NAME = "DIR"}``, where the URDF robots'
+    ``package://NAME/…`` URIs point (design §12; relative to the TOML file), merged into every
+    robot's own ``package_path`` (the robot's entries first)."""
 
     kind: str = "ideal"
     c_true: tuple[float, ...] = (0.4, 10.0)
@@ -203,6 +205,17 @@ class PlantCfg:
     sensor_dt: float = 0.0  # s, encoder and gyro period; 0: every physics step
     gyro_noise: float = 0.0  # rad/s, standard deviation per sample
     gyro_bias: float = 0.0  # rad/s, constant
+    package_path: PackagePath = PackagePath()  # design §12: package:// search path of URDF robots
+
+    def __post_init__(self) -> None:
+        if self.package_path:  # every robot searches the scenario's packages after its own
+            robots = tuple(
+                dataclasses.replace(r, package_path=r.package_path.merged(self.package_path))
+                if isinstance(r, RobotRef)
+                else r
+                for r in self.robots
+            )
+            object.__setattr__(self, "robots", robots)
 
 
 SENSINGS = ("truth", "odometry")
@@ -335,7 +348,10 @@ class Scenario:
         """Plain nested dict (JSON/TOML-able) of every resolved value (a robot without a mapping
         as its name or path, one with a mapping as a table)."""
         d = _to_plain(dataclasses.asdict(self))
-        d["plant"]["robots"] = [r.model if not r.mapped else _to_plain(r.to_table()) for r in self.plant.robots]
+        d["plant"]["robots"] = [_to_plain(r.to_entry()) for r in self.plant.robots]
+        d["plant"]["package_path"] = dict(self.plant.package_path)
+        if not d["plant"]["package_path"]:  # absent when unused: a sweep's content keys stay as they were
+            del d["plant"]["package_path"]
         return d
 
     # ---- derived objects -------------------------------------------------------------
@@ -420,6 +436,8 @@ def load(
         data = _read_toml(raw, str(path))
         if isinstance(data.get("plant"), dict) and "robots" in data["plant"]:  # design §10: relative to the file
             data["plant"]["robots"] = rebase_entries(data["plant"]["robots"], path.parent.resolve())
+        if isinstance(data.get("plant"), dict) and "package_path" in data["plant"]:  # design §12: likewise
+            data["plant"]["package_path"] = rebase_package_path(data["plant"]["package_path"], path.parent.resolve())
     else:
         names = preset_names()
         if src not in names:
@@ -471,6 +489,10 @@ def _set_path(data: dict[str, Any], key: str, value: Any) -> None:
             node[part] = value
             return
         cls = hints[part]
+        if cls is PackagePath and i == len(parts) - 2:  # plant.package_path.NAME=DIR adds one package
+            table = node.get(part)
+            node[part] = {**(table if isinstance(table, Mapping) else {}), parts[-1]: value}
+            return
         if not dataclasses.is_dataclass(cls):
             raise ScenarioError(key, f"'{'.'.join(parts[: i + 1])}' is a value, not a table")
         node = node.setdefault(part, {})
@@ -497,6 +519,8 @@ def _build(cls: Any, data: Any, prefix: str) -> Any:
 def _convert(value: Any, tp: Any, key: str) -> Any:
     if tp is RobotRef:  # a name, a path or a mapping table (robots.py)
         return as_ref(value, key)
+    if tp is PackagePath:  # {NAME = "DIR"} (robots.py, design §12)
+        return as_package_path(value, key)
     if dataclasses.is_dataclass(tp):
         return _build(tp, value, key + ".")
     origin = typing.get_origin(tp)
@@ -695,9 +719,15 @@ def validate(sc: Scenario) -> None:
         raise ScenarioError("plant.robots", f"expected 1 or {n} robot models, got {len(pc.robots)}")
     if pc.kind == "mujoco":
         from .robots import resolve_robot
+        from .urdf import check_file, is_urdf
 
+        for name, folder in pc.package_path:
+            if not Path(folder).is_dir():
+                raise ScenarioError(f"plant.package_path.{name}", f"directory '{folder}' does not exist")
         for r in pc.robots:
-            resolve_robot(r)  # raises InputError naming an unknown robot or a missing file
+            ref = resolve_robot(r)  # raises InputError naming an unknown robot or a missing file
+            if is_urdf(ref.model):
+                check_file(ref)  # design §12: root, package://, meshes, wheels: before any work
     _validate_sensing(sc)
 
     d = sc.disturbance

@@ -1,7 +1,10 @@
 """Compose a MuJoCo scene of ``n`` differential-drive followers with ``mujoco.MjSpec``.
 
 A robot is an MJCF file plus a mapping (:class:`bioform_mj.robots.RobotRef`); see the README,
-"What a robot needs". :func:`prepare_robot` resolves it once, from the compiled model:
+"What a robot needs". A URDF file is imported first (:mod:`bioform_mj.urdf`, design §12: free
+root link, links kept as bodies, meshes found, every guess a note), then treated the same. An
+MJCF robot's asset files are made absolute (:func:`absolute_asset_files`). :func:`prepare_robot`
+resolves it once, from the compiled model:
 
 - the base body (``base`` by convention) carrying a free joint (one is added to a top-level
   base that has none); it is taken as x forward, y left, z up;
@@ -53,6 +56,7 @@ import numpy as np
 
 from bioform_mj.errors import InputError
 from bioform_mj.robots import RobotRef, models_dir, resolve_robot, robot_names
+from bioform_mj.urdf import import_urdf, is_urdf
 
 log = logging.getLogger(__name__)
 
@@ -178,6 +182,8 @@ class RobotLayout:
     casters: tuple[str, ...] = ()  # geoms the mapping names as casters
     priority_geoms: tuple[str, ...] = ()  # geoms given CONTACT_PRIORITY so that their own friction/condim win
     published_contacts: tuple[tuple[str, float, int], ...] = ()  # (geom, friction, condim) as published, where changed
+    #: the guesses of a format import (URDF, design §12), also at the head of ``notes``: runs warn them
+    import_notes: tuple[str, ...] = ()
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -191,6 +197,7 @@ class RobotLayout:
             d[k] = tuple(d.get(k, ()))
         d["priority_geoms"] = tuple(d.get("priority_geoms", ()))
         d["published_contacts"] = tuple((str(g), float(f), int(c)) for g, f, c in d.get("published_contacts", ()))
+        d["import_notes"] = tuple(d.get("import_notes", ()))
         return cls(**d)
 
 
@@ -511,7 +518,7 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
             raise ModelError(
                 f"{path}: cannot tell the wheel torque limit: no drive actuator on "
                 f"'{jl_name}'/'{jr_name}' has a forcerange and the joints have no actuatorfrcrange; "
-                "give tau_max (N·m) in the robot's mapping"
+                "give tau_max (N·m) in the robot's mapping (a URDF: <limit effort> on the wheel joints)"
             )
         tau_max = min(limits)
         notes.append(
@@ -1034,12 +1041,23 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
     except InputError as exc:
         raise ModelError(str(exc)) from None
     path = Path(ref.model)
-    try:
-        spec = mujoco.MjSpec.from_file(str(path))
-        model = spec.compile()
-    except Exception as exc:  # mujoco raises ValueError; be robust to other types
-        raise ModelError(f"{path}: does not compile: {_one_line(exc)}") from exc
+    imported: tuple[str, ...] = ()
+    if is_urdf(path):  # design §12: a URDF stays a robot (free root, links kept, meshes found)
+        try:
+            imp = import_urdf(ref)
+        except InputError as exc:
+            raise ModelError(str(exc)) from None
+        spec, model, ref, imported = imp.spec, imp.model, imp.ref, imp.notes
+    else:
+        try:
+            spec = mujoco.MjSpec.from_file(str(path))
+            model = spec.compile()
+        except Exception as exc:  # mujoco raises ValueError; be robust to other types
+            raise ModelError(f"{path}: does not compile: {_one_line(exc)}") from exc
+        absolute_asset_files(spec)
     layout, plan = _analyse(model, path, ref)
+    if imported:
+        layout = replace(layout, notes=imported + layout.notes, import_notes=imported)
 
     # spec elements by compiled index, resolved before anything is deleted (unnamed ones included)
     acts = {a: _spec_actuator(spec, model, a) for a in range(model.nu)}
@@ -1135,6 +1153,32 @@ def _hold_and_contacts(spec, model, plan, acts, sjoints, sgeoms) -> None:
         )
 
 
+def absolute_asset_files(spec: mujoco.MjSpec) -> None:
+    """Make the spec's mesh, skin, height-field and texture file names absolute (resolved against
+    the model file's folder and its ``meshdir``/``texturedir``), so that a scene composed of robots
+    from many folders names each file once and wholly (design §12: a run's ``scene.xml`` copies
+    them beside it, :func:`bioform_mj.outputs.scenexml.write_scene`). Files in the spec's own
+    asset dictionary are left alone."""
+    top = Path(spec.modelfiledir or ".")
+    own = set(spec.assets) if spec.assets else set()
+
+    def fix(name: str, folder: str) -> str:
+        if not name or name in own or Path(name).is_absolute():
+            return name
+        return str((top / folder / name).resolve())
+
+    for m in spec.meshes:
+        m.file = fix(m.file, spec.meshdir)
+    for sk in spec.skins:
+        sk.file = fix(sk.file, spec.meshdir)
+    for h in spec.hfields:
+        h.file = fix(h.file, spec.meshdir)
+    for t in spec.textures:
+        t.file = fix(t.file, spec.texturedir)
+        if any(t.cubefiles):
+            t.cubefiles = [fix(c, spec.texturedir) for c in t.cubefiles]
+
+
 def load_robot(entry: RobotRef | str | Path) -> mujoco.MjSpec:
     """Load one robot MJCF as a fresh, drivable ``MjSpec`` (see :func:`prepare_robot`; raises ``ModelError``)."""
     return prepare_robot(entry)[0]
@@ -1187,7 +1231,8 @@ def payload_inertial(
     p = np.zeros(3) if at is None else np.asarray(at, float)
     i_origin += payload_mass * (p @ p * np.eye(3) - np.outer(p, p))
     new_mass = mass + payload_mass
-    new_ipos = (mass * ipos + payload_mass * p) / new_mass
+    # a massless base (a URDF base_footprint, design §12) with a massless payload stays massless
+    new_ipos = (mass * ipos + payload_mass * p) / new_mass if new_mass > 0 else ipos.copy()
     i_com = i_origin - new_mass * (new_ipos @ new_ipos * np.eye(3) - np.outer(new_ipos, new_ipos))
     evals, evecs = np.linalg.eigh(i_com)
     if np.allclose(i_com, np.diag(np.diag(i_com)), atol=1e-12):

@@ -19,6 +19,7 @@ import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -90,6 +91,19 @@ class RunResult:
     plant: Plant
     diverged: Diverged | None = None
     interrupted: KeyboardInterrupt | None = None  # what stopped the loop (SIGINT/SIGTERM): log and summary so far
+
+
+def import_warnings(plant: Any) -> list[str]:
+    """Each guess a format import made (URDF, design §12), once per robot file: ``"FILE: note"``
+    (empty for MJCF robots and the ideal plant)."""
+    out: list[str] = []
+    seen: set[str] = set()
+    for lay in getattr(plant, "layouts", ()):
+        if lay.file in seen:
+            continue
+        seen.add(lay.file)
+        out += [f"{Path(lay.file).name}: {n}" for n in lay.import_notes]
+    return out
 
 
 def make_plant(sc: Scenario) -> Plant:
@@ -284,6 +298,9 @@ def simulate(
     offsets = np.ascontiguousarray(sc.formation.offsets, dtype=float).reshape(n, 2)
     form = Formation(offsets, sc.formation.frame == "leader")
 
+    imported = import_warnings(plant)  # design §12: the guesses of a URDF import, said before the run
+    for line in imported:
+        warnings.warn(line, RobotWarning, stacklevel=2)
     feasibility: list[str] = []
     if hasattr(plant, "params") and hasattr(plant, "model"):  # MuJoCo robots: what the scenario asks of them
         from .robot_check import feasibility as _feasibility
@@ -579,6 +596,7 @@ def simulate(
         engine="compiled" if chunk else "stepwise",
     )
     summary["feasibility_warnings"] = feasibility
+    summary["import_warnings"] = imported
     summary["sensing"] = "odometry" if odometry else "truth"
     drift = plant.odometry_drift() if odometry else None
     for i, f in enumerate(summary["followers"]):  # pose error of the odometry at the end (design §8.3)

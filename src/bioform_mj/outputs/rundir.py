@@ -20,13 +20,15 @@ from pathlib import Path
 
 from ..errors import InputError
 from .files import check_out_dir
+from .scenexml import ASSET_SUFFIXES, ASSETS_DIR
 
 #: Files a run or a table1 writes into its folder (extend when a command writes a new one).
 RUN_FILES = frozenset(
     {"summary.json", "log.npz", "scene.xml", "video.mp4", "run.rrd", "MUJOCO_LOG.TXT", "table1.json", "table1.md"}
 )
-#: Folders a run writes, and the file suffixes they may hold.
-RUN_DIRS = {"figures": (".png",)}
+#: Folders a run writes, and the file suffixes they may hold (``assets/``: the files ``scene.xml``
+#: names, copied beside it, design §12).
+RUN_DIRS = {"figures": (".png",), ASSETS_DIR: ASSET_SUFFIXES}
 LOCK_NAME = ".bioform.lock"
 #: the temporary names of :func:`~bioform_mj.outputs.files.atomic_path` (``.NAME.XXXXXXXX.tmp``)
 _TMP = re.compile(r"^\.(?P<name>.+)\.[A-Za-z0-9_]+\.tmp$")
