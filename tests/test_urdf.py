@@ -188,19 +188,32 @@ def test_robot_check_on_a_urdf_matches_the_formula_by_hand(tmp_path, capsys):
     assert "note: self-collision off" in text and "note: root link 'base_footprint' gets a free joint" in text
 
 
-def test_link_without_inertial_gets_its_inferred_mass_said(tmp_path):
+def test_link_without_inertial_is_massless_and_said(tmp_path):
+    """The URDF spec: a link without <inertial> has zero mass (MuJoCo's importer would give the lidar its
+    collision box at 1000 kg/m³, 0.5 kg here; a published Husky weighed 176 kg instead of 57 that way)."""
     tail = """
   <joint name="lidar_joint" type="fixed"><parent link="base_link"/><child link="lidar"/>
     <origin xyz="0 0 0.1"/></joint>
   <link name="lidar"><collision><geometry><box size="0.1 0.1 0.05"/></geometry></collision></link>"""
     path = write(tmp_path / "dd.urdf", diff_drive(tail=tail))
     model, layout = compiled(str(path))
-    inferred = 1000 * 0.1 * 0.1 * 0.05  # MuJoCo's inertiafromgeom: 1000 kg/m³ × the collision volume
-    assert abs(model.body_mass[body(model, "lidar")] - inferred) < 1e-9
+    assert model.body_mass[body(model, "lidar")] == 0.0
     note = next(n for n in layout.import_notes if "without <inertial>" in n)
-    assert f"'lidar' {inferred:.4g} kg" in note
-    total = hand_formula()[0] + inferred
-    assert f"{total:.4g} kg" in note
+    assert "massless" in note and "'lidar'" in note
+    assert model.body_subtreemass[1] == pytest.approx(hand_formula()[0], rel=1e-12)
+
+
+def test_inertia_that_is_not_positive_definite_loses_its_products(tmp_path):
+    """A published inertia tensor with eigenvalues <= 0 (PAL's PMB2 antennas): Gazebo takes it, MuJoCo refuses
+    it; the import drops the products of inertia and says so."""
+    tail = """
+  <joint name="ant_joint" type="fixed"><parent link="base_link"/><child link="ant"/><origin xyz="0 0 0.1"/></joint>
+  <link name="ant"><inertial><mass value="0.1"/>
+    <inertia ixx="1e-4" iyy="1e-4" izz="1e-4" ixy="5e-4" ixz="0" iyz="0"/></inertial></link>"""
+    path = write(tmp_path / "dd.urdf", diff_drive(tail=tail))
+    model, layout = compiled(str(path))
+    assert model.body_inertia[body(model, "ant")] == pytest.approx([1e-4, 1e-4, 1e-4])
+    assert any("not positive definite" in n and "'ant'" in n for n in layout.import_notes)
 
 
 def test_gazebo_mu1_becomes_the_caster_friction(tmp_path):
@@ -241,6 +254,8 @@ def test_revolute_wheels_lose_their_limits_and_other_limits_are_said(tmp_path):
     )
     path = write(tmp_path / "dd.urdf", diff_drive(wheel_type="revolute", tail=tail))
     model, layout = compiled(str(path))
+    assert layout.frozen_joints == ("pan",)  # held by default (design §13): welded where the file puts it
+    model, layout = compiled(RobotRef(model=str(path), free_joints=True))  # left free: its limits as published
     for j in layout.wheel_joints:
         assert not model.jnt_limited[model.joint(j).id]
     assert model.jnt_limited[model.joint("pan").id] and tuple(model.jnt_range[model.joint("pan").id]) == (-1, 1)

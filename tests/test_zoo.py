@@ -39,6 +39,13 @@ REDISTRIBUTABLE = {"Apache-2.0", "BSD", "BSD-3-Clause", "BSD-2-Clause", "MIT", "
 #: the verdict of robot check in this branch differs from the expected one (the fix is another helper's)
 VERDICT_ELSEWHERE: dict[str, str] = {}  # robot -> why its verdict test is still expected to fail
 URDF_REASON = "URDF import lands with the urdf branch"
+PENDING: dict[str, str] = {}  # robot -> why its project checks are still expected to fail
+#: self contacts the project does not report yet: the overlap is between the published wheel geoms, which the
+#: composed scene replaces by its wheel-contact proxies (design §8), and the chassis
+SELF_PENDING = {
+    "create3_urdf": "published wheel cylinders 55 mm inside the chassis: the scene's wheel proxies do not overlap it",
+    "pmb2_urdf": "published wheels and caster rollers inside the base mesh: the scene's wheel proxies do not",
+}
 
 
 def _ref(name: str) -> RobotRef:
@@ -47,7 +54,7 @@ def _ref(name: str) -> RobotRef:
 
 
 def _urdf_xfail(name: str):
-    marks = [pytest.mark.xfail(strict=True, reason=URDF_REASON)] if ROBOTS[name].format == "urdf" else []
+    marks = [pytest.mark.xfail(strict=True, reason=PENDING[name])] if name in PENDING else []
     return pytest.param(name, marks=marks)
 
 
@@ -208,7 +215,11 @@ def test_project_floor_contacts_match_reference(name, package_path):
             assert _mu(c["friction"]) < reference.FRICTIONLESS, c
 
 
-@pytest.mark.parametrize("name", [_urdf_xfail(n) for n in NAMES])
+@pytest.mark.parametrize(
+    "name",
+    [pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=SELF_PENDING[n])) if n in SELF_PENDING else n
+     for n in NAMES],
+)  # fmt: skip
 def test_project_names_self_contacts_at_rest(name, package_path):
     """robot check's ``self_contacts`` names the pairs of the robot's own bodies that touch at rest (joints as
     published): for the URDFs those MuJoCo would collide and Gazebo does not (Create 3: wheels 55 mm inside the
@@ -218,7 +229,7 @@ def test_project_names_self_contacts_at_rest(name, package_path):
     got = check(_ref(name), identify_=False)["self_contacts"]
     pairs = set()
     for c in got:
-        bodies = c["bodies"] if isinstance(c, dict) else c
+        bodies = (c["body1"], c["body2"]) if isinstance(c, dict) else c
         pairs.add(tuple(sorted(b.split("/")[-1] for b in bodies)))
     assert pairs == {tuple(c["bodies"]) for c in EXPECT[name]["self_contacts_mujoco_rules"]}
 

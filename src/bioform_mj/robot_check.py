@@ -135,6 +135,36 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
     }
 
 
+def unsimulated_self_contacts(entry: Any, simulated: list[dict]) -> list[dict]:
+    """Pairs of a URDF robot's own bodies that overlap at rest where the import turned self-collision off
+    (the URDF/Gazebo convention, design §12): the contacts MuJoCo would make with it on, from the file's
+    configuration (one ``mj_forward`` of the robot alone), each marked ``"simulated": False``. Empty for an
+    MJCF robot or ``self_collide = true`` (their self contacts are simulated and listed already)."""
+    import dataclasses
+
+    import mujoco
+
+    from .contacts import self_contacts
+    from .plants.mujoco_plant import MujocoPlant
+    from .robots import resolve_robot
+
+    ref = resolve_robot(entry)
+    if ref.self_collide or not str(ref.model).lower().endswith((".urdf", ".xacro")):
+        return []
+    plant = MujocoPlant(
+        [dataclasses.replace(ref, self_collide=True)], np.zeros((1, 3)), 0.001, 0.001, None, slots=False
+    )
+    data = mujoco.MjData(plant.model)
+    mujoco.mj_forward(plant.model, data)
+    have = {(c["body1"], c["body2"]) for c in simulated}
+    out = []
+    for c in self_contacts(plant.model, data, plant.layouts[0], "f1/"):
+        if (c["body1"], c["body2"]) not in have:
+            c["simulated"] = False
+            out.append(c)
+    return out
+
+
 def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     """Everything :mod:`bioform_mj.robot_check` reports about one robot, with the verdict.
 
@@ -182,6 +212,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     loads = plant.wheel_loads()[0]
     floor = floor_contacts(model, plant.data, lay, "f1/")
     selfc = self_contacts(model, plant.data, lay, "f1/")
+    selfc += unsimulated_self_contacts(entry, selfc)
     # μ N r / f per wheel (design §13: N the wheel's own load at rest, f the share of torque that
     # reaches the floor past the rotor; μ m g r / 2 for an even split and a light rotor)
     traction = p.traction_torque(mu, float(loads.min()))

@@ -138,8 +138,14 @@ def _read_text(path: Path, packages: PackagePath) -> str:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise UrdfError(f"model file '{path}' cannot be read: {_one_line(exc)}") from None
-    # a .urdf that still holds xacro macros (outside comments: published URDFs keep commented includes) is xacro
-    if text is None or _XACRO.search(re.sub(r"<!--.*?-->", "", text, flags=re.S)):
+    # a .urdf that still holds xacro macros (outside comments: published URDFs keep commented includes; and
+    # outside <gazebo> tags, whose plugin parameters keep ROS's own $(find …) for Gazebo to resolve) is xacro
+    bare = (
+        None
+        if text is None
+        else re.sub(r"<gazebo\b.*?</gazebo>", "", re.sub(r"<!--.*?-->", "", text, flags=re.S), flags=re.S)
+    )
+    if text is None or _XACRO.search(bare):
         try:
             import xacro
             import xacro.substitution_args as subst
@@ -625,6 +631,35 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
             f"link '{lname}': sliding friction {mu1:g} from <gazebo> mu1 on its {len(geoms)} collision geom(s){extra}"
         )
 
+    # a link without <inertial> is massless (the URDF spec: "zero mass and zero inertia if not specified");
+    # MuJoCo's importer would give it its collision geometry at 1000 kg/m³ (a Husky: 176 kg for ~57).
+    # A link that moves on its own joint needs a mass in MuJoCo: it keeps the geometry's, said below.
+    massless = []
+    for lname in pr.no_inertial:
+        b = spec.body(lname)
+        if b is not None and all(j.type == mujoco.mjtJoint.mjJNT_FREE for j in b.joints):  # the root: welded mass
+            b.mass = 0.0
+            b.inertia = [0.0, 0.0, 0.0]
+            b.explicitinertial = True
+            massless.append(lname)
+    if massless:
+        notes.append(
+            "links without <inertial> are massless, as the URDF spec says: " + ", ".join(f"'{n}'" for n in massless)
+        )
+    bad = []
+    for b in spec.bodies:  # an inertia that is not positive definite: Gazebo takes it, MuJoCo refuses it
+        fi = np.asarray(b.fullinertia, float)
+        if b.name == "world" or not np.all(np.isfinite(fi)) or not np.any(fi[3:]):
+            continue
+        mat = np.array([[fi[0], fi[3], fi[4]], [fi[3], fi[1], fi[5]], [fi[4], fi[5], fi[2]]])
+        if np.linalg.eigvalsh(mat).min() <= 0:
+            bad.append(b.name)
+            b.fullinertia = [float(x) for x in np.abs(fi[:3])] + [0.0, 0.0, 0.0]
+    if bad:
+        notes.append(
+            "inertia tensors that are not positive definite (MuJoCo refuses them): products of inertia dropped "
+            "for " + ", ".join(f"'{n}'" for n in bad)
+        )
     try:
         model = spec.compile()
     except Exception as exc:
@@ -633,7 +668,7 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
     inferred = []
     for lname in pr.no_inertial:
         b = body_id.get(lname)
-        if b is not None and model.body_mass[b] > 0:
+        if b is not None and lname not in massless and model.body_mass[b] > 0:
             inferred.append((lname, float(model.body_mass[b])))
     if inferred:
         total = float(model.body_subtreemass[body_id[pr.root]])
