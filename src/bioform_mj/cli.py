@@ -724,6 +724,15 @@ def _identify(args: argparse.Namespace) -> int:
 
         write_text(args.out, text + "\n")
     print(text)
+    if not result.get("identifiable", True):  # a named cause, never an internal error (design §14)
+        from .robot_check import EXIT_FAIL, cause_of
+
+        c = cause_of(result["findings"])
+        print(
+            f"error: cannot identify a, b: {c['kind'] + ': ' + c['detail'] if c else result['not_identified']}",
+            file=sys.stderr,
+        )
+        return EXIT_FAIL
     return EXIT_OK
 
 

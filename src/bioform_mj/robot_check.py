@@ -129,6 +129,18 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
     }
 
 
+def cause_of(findings: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The likeliest cause among :func:`~bioform_mj.identify.identify`'s findings (its ``CAUSE_ORDER``;
+    ``damping`` only as the last resort), or None."""
+    from .identify import CAUSE_ORDER
+
+    for kind in CAUSE_ORDER:
+        for fd in findings:
+            if fd["kind"] == kind:
+                return fd
+    return None
+
+
 def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     """Everything :mod:`bioform_mj.robot_check` reports about one robot, with the verdict.
 
@@ -137,11 +149,12 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     """
     import mujoco
 
-    from .identify import DRAG_STEP, identify
+    from .identify import DRAG_STEP, check_radius, identify
     from .plants.mujoco_plant import MujocoPlant
     from .scene import prepare_robot
 
     plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
+    check_radius(plant)  # exit 2 before any work: a radius nothing can be measured with
     p, lay = plant.params[0], plant.layouts[0]
     scratch = mujoco.MjData(plant.model)
     mujoco.mj_kinematics(plant.model, scratch)
@@ -156,23 +169,41 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     notes = list(lay.notes)
     reasons_fail, reasons_warn = [], []
 
-    ident = None
-    if identify_:
-        try:
-            ident = identify(entry)
-        except ValueError as exc:  # e.g. a dead band that leaves no usable torque
-            reasons_fail.append(str(exc))
+    ident = identify(entry) if identify_ else None  # InputError (exit 2) for a mapping no test can use
+    findings = ident["findings"] if ident else []
     a_id = ident["identified"]["a"] if ident else None
     b_id = ident["identified"]["b"] if ident else None
-    if ident:
+    if ident and not ident["identifiable"]:
+        c = cause_of(findings)
+        reasons_fail.append(
+            f"cannot identify a, b: {c['kind']}: {c['detail']}"
+            if c
+            else f"cannot identify a, b: {ident['not_identified']}"
+        )
+    elif ident:
         worst = max(abs(ident["relative_error"]["a"]), abs(ident["relative_error"]["b"]))
+        c = cause_of(findings)
+        why = (
+            f"{c['kind']}: {c['detail']}"
+            if c
+            else "no cause found among a braking caster, a dead band, slip, rocking and damping: the wheels "
+            "do not roll as the model of design §8 assumes"
+        )
         if worst > FAIL_ID:
             reasons_fail.append(
-                f"identification differs from the formula by {100 * worst:.1f} % (> {100 * FAIL_ID:g} %): "
-                "the wheels do not roll as the model of design §8 assumes"
+                f"identification differs from the formula by {100 * worst:.1f} % (> {100 * FAIL_ID:g} %); cause {why}"
             )
         elif worst > WARN_ID:
-            reasons_warn.append(f"identification differs from the formula by {100 * worst:.1f} %")
+            reasons_warn.append(f"identification differs from the formula by {100 * worst:.1f} %; cause {why}")
+    for fd in findings:  # every cause found is said, whether the identification held or not (design §14)
+        if fd["kind"] == "structural" and ident["identifiable"]:
+            reasons_fail.append(f"structural: {fd['detail']}")
+        elif fd["kind"] in ("braking_caster", "rocking", "slip", "dead_band") or (
+            fd["kind"] == "damping" and min(t for t in fd["time_constant_s"] if t is not None) < 5.0
+        ):
+            msg = f"{fd['kind'].replace('_', ' ')}: {fd['detail']}"
+            if all(fd["detail"] not in r for r in reasons_fail + reasons_warn):
+                reasons_warn.append(msg)
     ta = tips["tip_accel_mps2"]
     for way, acc in ta.items():
         if acc <= 0:
@@ -269,6 +300,24 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
             if ident
             else None,
         },
+        "identification": None
+        if ident is None
+        else {
+            k: ident.get(k)
+            for k in (
+                "identifiable",
+                "identified",
+                "identified_com",
+                "relative_error",
+                "drag_rate_per_s",
+                "deadband_torque_Nm",
+                "rocking",
+                "slip_ratio",
+                "test",
+            )
+        },
+        "findings": findings,
+        "cause": cause_of(findings) if reasons_fail else None,
         "notes": notes,
     }
 
@@ -417,8 +466,10 @@ def _num(x: float | None) -> str:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``bioform robot check``; prints a short report, returns the exit code."""
-    from .outputs.files import write_json
+    from .outputs.files import check_out_file, write_json
 
+    if args.json:  # before any work (exit 2): a directory, /proc/x, a read-only folder
+        args.json = check_out_file(args.json, "--json")
     report = check(ref_from_args(args.model, args))
     if args.json:
         write_json(args.json, report)
@@ -437,6 +488,7 @@ def main(args: argparse.Namespace) -> int:
         f"(full torque: {report['motor_accel_mps2']:.3g} m/s²); "
         f"CoM {1e3 * report['com_offset_m']:.1f} mm off the axle, "
         f"{report['com_height_m']:.3g} m high",
+        f"  mass {report['mass_kg']:.4g} kg, yaw inertia {report['yaw_inertia_kgm2']:.4g} kg·m²",
     ]
     lines += [f"  {r}" for r in report["reasons"]]
     lines += [f"  note: {n}" for n in report["notes"]]
