@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bioform_mj import cli
@@ -151,3 +152,59 @@ def test_robot_check_json_path_checked_before_any_work(tmp_path, capsys, monkeyp
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "--json" in err[0], err
     ro.chmod(0o700)
+
+
+# ---------------------------------------------------------------- outcomes (design §14)
+def _outcomes(**kw):
+    from bioform_mj.sim import outcome_list
+
+    base = dict(
+        tip_t=None,
+        slip_t=None,
+        spinning=False,
+        final=0.01,
+        fe0=0.5,
+        t_end=20.0,
+        learning=True,
+        c_hat=np.array([0.4, 10.0]),
+        lo=np.array([0.1, 2.0]),
+        hi=np.array([2.0, 50.0]),
+        c_true=np.array([0.4, 10.0]),
+    )
+    return outcome_list(**{**base, **kw})
+
+
+def test_every_outcome_is_listed_most_severe_first():
+    from bioform_mj.sim import LOST_M, OUTCOME_ORDER
+
+    assert _outcomes() == []
+    got = _outcomes(slip_t=3.2, final=2.0)  # a follower 2 m off that also slips: both
+    assert [o["kind"] for o in got] == ["slipping", "lost"]
+    assert got[0]["t"] == 3.2 and got[1]["t"] is None and f"> {LOST_M:g} m" in got[1]["detail"]
+    got = _outcomes(tip_t=1.0, slip_t=0.5, spinning=True, final=3.0, c_hat=np.array([0.1, 10.0]))
+    assert [o["kind"] for o in got] == list(OUTCOME_ORDER)
+
+
+def test_c_hat_bound_is_a_band_not_equality():
+    """Was: 1 of 3 followers at the bound flagged, the others at 1.0001 x the bound passed."""
+    for scale in (1.0, 1.0001, 1.009):
+        got = _outcomes(c_hat=np.array([0.1 * scale, 10.0]), c_true=np.array([0.1, 10.0]))
+        assert [o["kind"] for o in got] == ["c_hat_at_bound"], scale
+    assert _outcomes(c_hat=np.array([0.1 * 1.02, 10.0]), c_true=np.array([0.1, 10.0])) == []
+    got = _outcomes(c_hat=np.array([0.4, 50.0 * 0.995]), c_true=np.array([0.4, 49.0]))
+    assert [o["kind"] for o in got] == ["c_hat_at_bound"] and "learned b at its bound" in got[0]["detail"]
+
+
+def test_c_hat_off_names_the_likely_cause():
+    from bioform_mj.sim import C_HAT_OFF, unmodelled_causes
+
+    assert C_HAT_OFF == 0.25
+    assert _outcomes(c_hat=np.array([0.4 * 0.76, 10.0 * 1.24])) == []  # within 25 %: ok
+    got = _outcomes(c_hat=np.array([0.4 * 0.70, 10.0]), causes=lambda: ["wheel drag"])
+    assert [o["kind"] for o in got] == ["c_hat_off"]
+    assert got[0]["detail"].startswith("learned a -30% from c_true (> 25%); likely cause: wheel drag")
+    got = _outcomes(c_hat=np.array([np.nan, 10.0]))  # a NaN estimate is off, never ok
+    assert got[0]["kind"] == "c_hat_off" and "none the plant knows" in got[0]["detail"]
+    p = robot_truth("paper")
+    assert unmodelled_causes(p) == []
+    assert unmodelled_causes(p, slipping=True, casters=["back_caster"]) == ["wheel slip", "caster 'back_caster' braking"]
