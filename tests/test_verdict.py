@@ -207,4 +207,80 @@ def test_c_hat_off_names_the_likely_cause():
     assert got[0]["kind"] == "c_hat_off" and "none the plant knows" in got[0]["detail"]
     p = robot_truth("paper")
     assert unmodelled_causes(p) == []
-    assert unmodelled_causes(p, slipping=True, casters=["back_caster"]) == ["wheel slip", "caster 'back_caster' braking"]
+    assert unmodelled_causes(p, slipping=True, casters=["back_caster"]) == [
+        "wheel slip",
+        "caster 'back_caster' braking",
+    ]
+
+
+# ---------------------------------------------------------------- bioform run refuses or warns (design §14)
+def test_slot_accelerations_follow_each_slot():
+    """Paper leader x = t, y = 3 + 0.4 sin t: acceleration (0, −0.4 sin t), |a| ≤ 0.4 m/s². World-frame
+    offsets: every slot moves as the leader. Leader-frame offsets: the slots swing with the heading."""
+    from bioform_mj.robot_check import slot_accelerations
+    from bioform_mj.scenario import load
+
+    sc = load("paper", overrides=["sim.duration=10"])
+    t = np.linspace(0.0, 10.0, 2001)
+    tan, cen, tot = slot_accelerations(sc, t)
+    np.testing.assert_allclose(tot, 0.4, rtol=0.01)
+    assert np.all(tan <= tot + 1e-9) and np.all(cen <= tot + 1e-9) and np.all(cen > 0.3)
+    sc = load("paper", overrides=["sim.duration=10", 'formation.frame="leader"'])
+    _, _, tot_leader = slot_accelerations(sc, t)
+    assert np.all(tot_leader > 0.45)  # 5 m beside a heading that swings by ±0.38 rad
+
+
+def _run(tmp_path, robot: str, *extra: str) -> list[str]:
+    out = tmp_path / "run"
+    sets = ["--set", "plant.kind=mujoco", "--set", f'plant.robots=[{{model="{robot}"{",".join(extra)}}}]']
+    code = cli.main(["run", "paper", *sets, "--set", "sim.duration=0.1", "--quiet", "--out", str(out)])
+    return code, out
+
+
+def test_run_refuses_a_skid_steer_base_and_wheels_off_the_floor(tmp_path, capsys):
+    """Was: a skid-steer base that robot check refuses ran under bioform run, lost x3, exit 0."""
+    rear = (
+        '<body name="rear_wheel_link" pos="-0.12 0.2 0"><joint name="rear_wheel" type="hinge" axis="0 1 0"/>'
+        '<inertial pos="0 0 0" mass="0.5" diaginertia="0.0013 0.0025 0.0013"/>'
+        '<geom type="sphere" size="0.1" contype="1" conaffinity="1"/></body>\n    </body>\n  </worldbody>'
+    )
+    skid = _write(tmp_path, "skid", PAPER.replace("    </body>\n  </worldbody>", rear, 1))
+    capsys.readouterr()
+    code, out = _run(tmp_path, skid)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "skid-steer" in err[0] and "followers 1, 2, 3" in err[0], err
+    assert not out.exists()  # nothing written
+    off = _write(
+        tmp_path,
+        "offfloor",
+        PAPER.replace('<geom type="ellipsoid" size="0.1 0.02 0.1"', '<geom type="ellipsoid" size="0.05 0.02 0.05"'),
+    )
+    code, out = _run(tmp_path, off)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "do not stand on the floor" in err[0] and not out.exists()
+
+
+def test_run_warns_about_a_braking_caster_naming_it(tmp_path, capsys):
+    import json
+    import time
+
+    text = PAPER.replace('condim="1" priority="2" friction="0 0 0"', 'condim="3" friction="1 0.005 0.0001"')
+    text = text.replace('pos="-0.13 0 -0.0745"', 'pos="-0.13 0 -0.0755"')
+    text = text.replace('<inertial pos="0 0 0" mass="23.5"', '<inertial pos="-0.03 0 0" mass="23.5"')
+    path = _write(tmp_path, "caster", text)
+    from bioform_mj.robot_check import feasibility
+    from bioform_mj.scenario import load
+    from bioform_mj.sim import make_plant
+
+    sc = load("paper", overrides=["plant.kind=mujoco", f'plant.robots=[{{model="{path}"}}]'])
+    plant = make_plant(sc)
+    t0 = time.perf_counter()
+    warns = feasibility(sc, plant)
+    assert time.perf_counter() - t0 < 0.5  # the run-time check is cheap (measured 0.08 s)
+    (w,) = [w for w in warns if "braking caster" in w]
+    assert w.startswith("followers 1, 2, 3: braking caster: 'back_caster'") and "53.1 N" in w
+    capsys.readouterr()
+    code, out = _run(tmp_path, path)
+    assert code == 0
+    assert any("braking caster: 'back_caster'" in ln for ln in capsys.readouterr().err.splitlines())
+    assert any("back_caster" in x for x in json.loads((out / "summary.json").read_text())["feasibility_warnings"])

@@ -322,11 +322,12 @@ def _finding(kind: str, detail: str, **numbers: Any) -> dict[str, Any]:
     return {"kind": kind, "detail": detail, **numbers}
 
 
-def floor_contacts(plant: Any, i: int = 0) -> list[dict[str, Any]]:
+def floor_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> list[dict[str, Any]]:
     """Robot ``i``'s geoms touching the floor now (after the robot settled): ``body``, ``geom``,
     ``role`` (``wheel`` or ``other``), ``load_n`` (normal force, N), ``friction`` (the contact's
-    sliding μ as simulated), ``condim``. A minimal list for the verdict's braking-caster cause."""
-    m, d = plant.model, plant.data
+    sliding μ as simulated), ``condim``. A minimal list for the verdict's braking-caster cause.
+    ``data``: another state of the plant's model (a settled copy) instead of the plant's own."""
+    m, d = plant.model, (plant.data if data is None else data)
     lay = plant.layouts[i]
     prefix = lay.base[: lay.base.index("/") + 1] if "/" in lay.base else ""
     inside = set(_subtree(m, m.body(lay.base).id).tolist())

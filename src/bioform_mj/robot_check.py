@@ -338,19 +338,47 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
       least-loaded wheel's share of the weight at rest, measured on a settled copy of the scene:
       casters and gravity-compensated parts take weight off the wheels).
 
+    Each follower's own slot path is used (design §14: in a leader-frame formation a slot off the
+    leader's path turns on a wider or tighter circle than the leader). A loaded caster with friction
+    is a warning naming it. Raises :class:`~bioform_mj.errors.InputError` (exit 2, before the run)
+    for what ``robot check`` fails and no run survives (:func:`run_refusals`).
+
     Returns an empty list when nothing is at risk. The estimate is static (no pitch dynamics).
     """
     import mujoco
 
+    from .errors import InputError
+    from .identify import CASTER_LOAD, CASTER_MU, floor_contacts
+
     t = np.linspace(0.0, scenario.sim.duration, max(200, int(scenario.sim.duration * 200)) + 1)
-    _, vel, acc = scenario.build_leader().states(t)
-    tangential = float(np.max(np.abs(acc[:, 0])))
-    centripetal = float(np.max(np.abs(vel[:, 0] * vel[:, 1])))
-    total = float(np.max(np.hypot(acc[:, 0], vel[:, 0] * vel[:, 1])))
+    _, vel, _ = scenario.build_leader().states(t)
+    tangential, centripetal, total = slot_accelerations(scenario, t)
     scratch = mujoco.MjData(plant.model)
     mujoco.mj_kinematics(plant.model, scratch)
     out: list[str] = []
-    loads = plant.settled_wheel_loads()
+    settled = mujoco.MjData(plant.model)  # 0.2 s at rest on a copy: the weight's share, the floor contacts
+    mujoco.mj_forward(plant.model, settled)
+    for _ in range(max(1, int(round(0.2 / plant.model.opt.timestep)))):
+        mujoco.mj_step(plant.model, settled)
+    loads = plant.wheel_loads(settled)
+    refusals = run_refusals(plant, scratch, loads)
+    if refusals:
+        raise InputError("the robots cannot run this scenario (robot check fails them): " + "; ".join(refusals))
+    casters: dict[str, list[int]] = {}
+    for i, p in enumerate(plant.params):
+        weight = p.mass * G
+        for c in floor_contacts(plant, i, settled):
+            if c["role"] != "wheel" and c["load_n"] > CASTER_LOAD * weight and c["friction"] > CASTER_MU:
+                brake = c["friction"] * c["load_n"]
+                note = (
+                    f"'{c['geom']}' (body '{c['body']}') is not a wheel, carries {c['load_n']:.3g} N and slides "
+                    f"with friction {c['friction']:g}: it brakes the robot by up to {brake:.3g} N "
+                    f"({brake * p.wheel_radius / 2:.3g} N·m per wheel of torque lost; make it frictionless, "
+                    "e.g. condim 1 or priority above the floor's)"
+                )
+                casters.setdefault(note, []).append(i + 1)
+    for note, who in casters.items():
+        out.append(f"follower{'s' if len(who) > 1 else ''} {', '.join(map(str, who))}: braking caster: {note}")
     given: dict[str, list[int]] = {}  # a mapped size far from the model's geometry (scene.layout_of's notes)
     for i, lay in enumerate(plant.layouts):
         for note in lay.notes:
@@ -369,20 +397,20 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
         mu = plant._wheel_friction(i)
         traction = mu * float(loads[i].min()) * p.wheel_radius  # μ N r per wheel
         who = f"follower {i + 1}"
-        if total > mu * G:
+        if total[i] > mu * G:
             out.append(
-                f"{who}: the leader accelerates at up to {total:.3g} m/s², beyond the traction limit "
+                f"{who}: its slot accelerates at up to {total[i]:.3g} m/s², beyond the traction limit "
                 f"μ g = {mu * G:.3g} m/s²: the wheels will slip"
             )
-        if tangential > min(tips["forward"], tips["backward"]):
+        if tangential[i] > min(tips["forward"], tips["backward"]):
             out.append(
-                f"{who}: the leader's tangential acceleration {tangential:.3g} m/s² exceeds the tip-over margin "
-                f"(forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²)"
+                f"{who}: its slot's tangential acceleration {tangential[i]:.3g} m/s² exceeds the tip-over margin "
+                f"(forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²): the scenario overturns it"
             )
-        if centripetal > tips["lateral"]:
+        if centripetal[i] > tips["lateral"]:
             out.append(
-                f"{who}: the leader's turns need {centripetal:.3g} m/s² sideways, beyond the lateral tip-over "
-                f"margin {tips['lateral']:.3g} m/s²"
+                f"{who}: its slot's turns need {centripetal[i]:.3g} m/s² sideways, beyond the lateral tip-over "
+                f"margin {tips['lateral']:.3g} m/s²: the scenario overturns it"
             )
         motor = float(min(p.tau_max))
         # cruising at the leader's top speed against the wheel damping c and frictionloss f takes
@@ -410,6 +438,60 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
                 "the wheels can skid at full torque"
             )
     return out
+
+
+def slot_accelerations(scenario: Any, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per follower (n,) the largest tangential, centripetal and total acceleration (m/s²) of its
+    formation slot over the times ``t`` (s): the slot path ``p_r − R(θ_r) Δ_i`` (leader frame) or
+    ``p_r − Δ_i`` differentiated twice; tangential along the slot's velocity, centripetal across it
+    (where the slot moves slower than 1 mm/s, all of it counts as tangential)."""
+    from .sim import slots_of
+
+    pose, _, _ = scenario.build_leader().states(t)
+    slots = np.stack([slots_of(scenario, p) for p in pose])  # (T, n, 2)
+    v = np.gradient(slots, t, axis=0)
+    a = np.gradient(v, t, axis=0)
+    speed = np.linalg.norm(v, axis=-1)
+    moving = speed > 1e-3
+    u = np.where(moving[..., None], v / np.maximum(speed, 1e-12)[..., None], 0.0)
+    tan = np.where(moving, np.abs((a * u).sum(-1)), np.linalg.norm(a, axis=-1))
+    cen = np.where(moving, np.abs(a[..., 0] * u[..., 1] - a[..., 1] * u[..., 0]), 0.0)
+    tot = np.linalg.norm(a, axis=-1)
+    # the ends of np.gradient are one-sided: drop the first and last two samples
+    sl = slice(2, -2) if len(t) > 8 else slice(None)
+    return tan[sl].max(axis=0), cen[sl].max(axis=0), tot[sl].max(axis=0)
+
+
+def run_refusals(plant: Any, scratch: Any, loads: np.ndarray) -> list[str]:
+    """What ``robot check`` fails that no run survives, per robot of a built plant (cheap: the
+    layout, the static tip margins, the settled wheel loads ``loads`` (n, 2) N): a skid-steer base
+    (other fixed wheels on the floor), a robot statically unstable, wheels that carry no weight, a
+    dead band at the motor limit. ``bioform run`` refuses these with exit 2 (design §14)."""
+    from .identify import WHEEL_LOAD_MIN
+
+    found: dict[str, list[int]] = {}
+    for i, (p, lay) in enumerate(zip(plant.params, plant.layouts)):
+        why = []
+        if any("other wheel" in n for n in lay.notes):
+            why.append(
+                "other fixed wheels touch the floor: a 4-wheel / skid-steer base, not a differential drive "
+                "(robot check: map one driven pair and make the others casters)"
+            )
+        try:
+            tips = tip_margins(plant.model, scratch, f"f{i + 1}/")["tip_accel_mps2"]
+            why += [f"statically unstable ({way})" for way, acc in tips.items() if acc <= 0]
+        except ValueError as exc:
+            why.append(str(exc))
+        if float(loads[i].min()) < WHEEL_LOAD_MIN * p.mass * G:
+            why.append(
+                f"the wheels do not stand on the floor ({loads[i, 0]:.3g} N, {loads[i, 1]:.3g} N of "
+                f"{p.mass * G:.3g} N at rest)"
+            )
+        if p.wheel_frictionloss and 2 * p.wheel_frictionloss >= min(p.tau_max):
+            why.append(f"wheel frictionloss {p.wheel_frictionloss:g} N·m: the dead band reaches the motor limit")
+        for w in why:
+            found.setdefault(f"{lay.file}: {w}", []).append(i + 1)
+    return [f"follower{'s' if len(who) > 1 else ''} {', '.join(map(str, who))}: {w}" for w, who in found.items()]
 
 
 # ------------------------------------------------------------------ command line
