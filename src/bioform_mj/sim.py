@@ -165,6 +165,8 @@ def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = 
         k4=_learner_k4(sc, c_hat0),
         k5=np.array(sc.learner.k5),
         kd=np.array(sc.learner.kd),
+        kk=np.array(sc.learner.drag_gain) if sc.learner.drag else np.zeros(2),
+        k_max=float(sc.learner.drag_max) if sc.learner.drag else 0.0,
         c_hat0=c_hat0,
         c_min=lo * c_hat0,
         c_max=hi * c_hat0,
@@ -578,6 +580,8 @@ def _summary(
                 "c_hat": [float(v) for v in c_hat[i]],
                 "c_true": [float(v) for v in c_true[i]],
                 "c_hat_rel_error": [float(v) for v in (c_hat[i] / c_true[i] - 1.0)],
+                # opt-in learner.drag (design §14): the learned drag rates k̂ [1/s] of υ, ω; None when off
+                "drag_hat_per_s": [float(v) for v in state.k_hat[i]] if sc.learner.drag else None,
                 **_robot_used(sc, plant, controller, i),
             }
         )

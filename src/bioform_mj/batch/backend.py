@@ -108,6 +108,8 @@ def unsupported(sc: Any) -> str | None:
             "from the same state on the patch, velocities differ by up to 35x, against ~1e-6 on the floor; "
             "use --backend local)"
         )
+    if getattr(sc.learner, "drag", False):
+        return "learner.drag (the learned-drag extension runs on the local engines only; use --backend local)"
     if getattr(sc.plant, "sensing", "truth") not in ("truth", "odometry"):
         return f"plant.sensing = '{sc.plant.sensing}'"
     return None
