@@ -128,12 +128,25 @@ def test_wheels_off_the_floor_fail_structural_without_an_exception(tmp_path, cap
     assert len(err) == 1 and err[0].startswith("error: cannot identify a, b: structural")
 
 
-@pytest.mark.parametrize("radius", ["1e-9", "1e9"])
+@pytest.mark.parametrize("value", ["1e-9", "1e9"])
+@pytest.mark.parametrize("flag", ["--wheel-radius", "--half-track"])
 @pytest.mark.parametrize("command", ["identify", "robot check"])
-def test_absurd_wheel_radius_exits_2_one_line(capsys, radius, command):
-    assert cli.main([*command.split(), "paper", "--wheel-radius", radius]) == 2
+def test_absurd_wheel_radius_or_half_track_exits_2_one_line(capsys, value, flag, command):
+    """Was: ZeroDivisionError (exit 1) for the radius; b off by 1.8e8 with no cause for the half track."""
+    assert cli.main([*command.split(), "paper", flag, value]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("error: ") and "more than 10x off the wheel geoms' 0.1 m" in err[0]
+    want = "the wheel geoms' 0.1 m" if flag == "--wheel-radius" else "the wheel joint anchors' 0.2 m"
+    assert len(err) == 1 and err[0].startswith("error: ") and f"more than 10x off {want}" in err[0]
+
+
+def test_a_mapped_half_track_off_the_anchors_is_the_named_cause(capsys):
+    from bioform_mj.robots import RobotRef
+
+    rep = check(RobotRef("paper", half_track=0.25))
+    assert rep["verdict"] == "fail" and rep["cause"]["kind"] == "mapping"
+    assert rep["cause"]["mapped_m"] == 0.25 and rep["cause"]["model_m"] == pytest.approx(0.2)
+    # the formula uses l = 0.25: b_eff = l / (I r + 2 I_w l²/r); the physics turns with l = 0.2
+    assert abs(rep["relative_error"]["b"]) > 0.10
 
 
 def test_robot_check_json_path_checked_before_any_work(tmp_path, capsys, monkeypatch):

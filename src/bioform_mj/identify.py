@@ -314,7 +314,9 @@ RADIUS_FACTOR = 10.0
 
 
 #: the kinds of :func:`identify`'s findings, the likeliest cause of a wrong identification first (design §14)
-CAUSE_ORDER = ("structural", "braking_caster", "dead_band", "slip", "rocking", "damping")
+CAUSE_ORDER = ("structural", "mapping", "braking_caster", "dead_band", "slip", "rocking", "damping")
+#: a mapped wheel radius or half track this far (relative) from the model's geometry is a ``mapping`` finding
+MAPPING_TOL = 0.05
 
 
 def _finding(kind: str, detail: str, **numbers: Any) -> dict[str, Any]:
@@ -362,26 +364,34 @@ def floor_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) ->
     return list(out.values())
 
 
+def _given(lay: Any, what: str, says: str) -> float | None:
+    """The model's own value of a mapped size that differs from it (``scene.layout_of``'s note), or None."""
+    for n in lay.notes:
+        if n.startswith(f"{what} ") and f"{says} say" in n:
+            return float(n.rsplit("say ", 1)[1].split()[0])
+    return None
+
+
 def check_radius(plant: Any) -> None:
-    """Refuse (exit 2) a mapped wheel radius that no identification can use (design §14)."""
+    """Refuse (exit 2) a mapped wheel radius or half track that no identification can use: more
+    than :data:`RADIUS_FACTOR` off the model's geometry, or outside [1e-4, 100] m (design §14)."""
     from bioform_mj.errors import InputError
 
     lay = plant.layouts[0]
-    r = lay.wheel_radius
-    geo = None
-    for n in lay.notes:
-        if n.startswith("wheel_radius ") and "collision geoms say" in n:
-            geo = float(n.rsplit("say ", 1)[1].split()[0])
-    if not (math.isfinite(r) and 1e-4 <= r <= 1e2) or (geo and not 1 / RADIUS_FACTOR <= r / geo <= RADIUS_FACTOR):
-        raise InputError(
-            f"{lay.file}: wheel radius {r:g} m"
-            + (
-                f" is more than {RADIUS_FACTOR:g}x off the wheel geoms' {geo:.4g} m"
-                if geo
-                else " is outside [1e-4, 100] m"
+    for what, val, says, hint in (
+        ("wheel_radius", lay.wheel_radius, "collision geoms", "the wheel geoms'"),
+        ("half_track", lay.half_track, "joint anchors", "the wheel joint anchors'"),
+    ):
+        geo = _given(lay, what, says)
+        if not (math.isfinite(val) and 1e-4 <= val <= 1e2) or (
+            geo and not 1 / RADIUS_FACTOR <= val / geo <= RADIUS_FACTOR
+        ):
+            raise InputError(
+                f"{lay.file}: {what.replace('_', ' ')} {val:g} m"
+                + (f" is more than {RADIUS_FACTOR:g}x off {hint} {geo:.4g} m" if geo else " is outside [1e-4, 100] m")
+                + f": no torque level identifies a robot with it (give the {what.replace('_', ' ')} of the "
+                "wheels that touch the floor)"
             )
-            + ": no torque level identifies a robot with it (give the radius of the wheels that touch the floor)"
-        )
 
 
 def _rocking(pitch: np.ndarray, dt: float) -> dict[str, float]:
@@ -490,6 +500,27 @@ def identify(
                 wheel_load_n=loads.tolist(),
             )
         )
+        geo_r = _given(lay, "wheel_radius", "collision geoms")
+        if geo_r:  # a mapped radius the geoms disagree with: the contact proxy has the mapped size
+            findings[-1]["detail"] += (
+                f" (the mapped wheel radius {lay.wheel_radius:g} m is not the wheel geoms' {geo_r:.4g} m)"
+            )
+    for what, says, val in (
+        ("wheel_radius", "collision geoms", lay.wheel_radius),
+        ("half_track", "joint anchors", lay.half_track),
+    ):
+        geo = _given(lay, what, says)
+        if geo and abs(val / geo - 1) > MAPPING_TOL:
+            findings.append(
+                _finding(
+                    "mapping",
+                    f"the mapped {what.replace('_', ' ')} {val:g} m is {val / geo - 1:+.0%} off the model's {says}' "
+                    f"{geo:.4g} m: the formula uses the mapped value, the physics the model's",
+                    what=what,
+                    mapped_m=val,
+                    model_m=geo,
+                )
+            )
     traction = plant._wheel_friction(0) * float(loads.min()) * params.wheel_radius
     f = params.wheel_frictionloss
     motor = min(params.tau_max)

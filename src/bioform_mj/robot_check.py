@@ -186,8 +186,8 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         why = (
             f"{c['kind']}: {c['detail']}"
             if c
-            else "no cause found among a braking caster, a dead band, slip, rocking and damping: the wheels "
-            "do not roll as the model of design §8 assumes"
+            else "no cause found among the mapping, a braking caster, a dead band, slip, rocking and damping: "
+            "the wheels do not roll as the model of design §8 assumes"
         )
         if worst > FAIL_ID:
             reasons_fail.append(
