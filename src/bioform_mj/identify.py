@@ -807,5 +807,19 @@ def identify(
 
 
 def identify_main(model) -> dict:
-    """JSON-able identification report of one robot (name, path or RobotRef; for ``bioform identify``)."""
-    return identify(model)
+    """JSON-able identification report of one robot (name, path or RobotRef; for ``bioform identify``).
+
+    Never an internal error for a robot the tests cannot measure (design §14): an arithmetic
+    failure of the fit becomes ``identifiable: false`` with a ``structural`` finding saying so."""
+    try:
+        return identify(model)
+    except (ArithmeticError, np.linalg.LinAlgError) as exc:
+        why = f"the identification could not be computed ({type(exc).__name__}: {exc}): degenerate robot or mapping"
+        return {
+            "model": str(getattr(model, "model", model)),
+            "identified": {"a": None, "b": None},
+            "relative_error": {"a": None, "b": None},
+            "findings": [_finding("structural", why)],
+            "identifiable": False,
+            "not_identified": why,
+        }
