@@ -29,14 +29,15 @@ def _write(tmp_path: Path, name: str, text: str) -> str:
     return str(p)
 
 
-def _tall(tmp_path: Path) -> str:
-    """20 kg mast 0.6 m above the axle, casters 5 mm above the floor: the start-up pitches the chassis
-    3° back onto its caster and it settles there within ~0.5 s (CoM 0.27 m up)."""
+def _tall(tmp_path: Path, clearance: str = "-0.07") -> str:
+    """20 kg mast 0.6 m above the axle (CoM 0.27 m up), casters 4.5 mm (``-0.07``) or 9.5 mm
+    (``-0.065``) above the floor: the start-up pitches the chassis back onto its rear caster (3.2°,
+    6.9°), it bounces between its casters and settles in ~0.4 s, ~0.7 s."""
     mast = (
         '<body name="mast" pos="0 0 0.6"><inertial pos="0 0 0" mass="20" diaginertia="0.1 0.1 0.05"/>'
         '<geom class="visual" type="box" size="0.03 0.03 0.03"/></body>\n      <site name="imu"'
     )
-    return _write(tmp_path, "tall", PAPER.replace('<site name="imu"', mast, 1).replace("-0.0745", "-0.07"))
+    return _write(tmp_path, "tall", PAPER.replace('<site name="imu"', mast, 1).replace("-0.0745", clearance))
 
 
 def _damped(tmp_path: Path, c: float) -> str:
@@ -49,17 +50,26 @@ def _finding(rep: dict, kind: str) -> dict:
     return found[0]
 
 
-def test_tall_rocking_robot_without_damping_is_not_fail_and_identifies_within_5_percent(tmp_path):
-    """Was: the 0.2 s fit read the start-up rocking as a drag (a −18 %, 'the wheels do not roll')."""
-    path = _tall(tmp_path)
+@pytest.mark.parametrize("clearance,pitch", [("-0.07", 3.0), ("-0.065", 6.0)])
+def test_tall_rocking_robot_without_damping_is_not_fail_and_identifies_within_5_percent(tmp_path, clearance, pitch):
+    """Was: the 0.2 s fit read the start-up rocking as a drag (a −18 % and +233 %, 'the wheels do not
+    roll'). Measured now: a within 0.03 % at the axle midpoint and the centre of mass, fitted after the
+    pitch settled; the rocking is said (amplitude, frequency, settling time), a warning, not a fail."""
+    path = _tall(tmp_path, clearance)
     rep = identify(path)
-    assert rep["rocking"]["transient_deg"] > 2.0  # it really pitches at start-up (measured 3.2°)
-    assert abs(rep["relative_error"]["a"]) < 0.05  # measured −0.9 % (axle midpoint)
-    assert abs(rep["identified_com"]["relative_error"]) < 0.01  # measured +0.01 % (centre of mass)
+    assert rep["rocking"]["transient_deg"] > pitch  # it really pitches at start-up (measured 3.2°, 6.9°)
+    assert abs(rep["relative_error"]["a"]) < 0.05
+    assert abs(rep["identified_com"]["relative_error"]) < 0.01
     assert abs(rep["relative_error"]["b"]) < 0.01
     assert rep["drag_rate_per_s"]["formula"] == [0.0, 0.0]
-    assert not any(f["kind"] == "damping" for f in rep["findings"])
-    assert check(path)["verdict"] != "fail"
+    assert not any(f["kind"] in ("damping", "dead_band") for f in rep["findings"])
+    rock = _finding(rep, "rocking")
+    assert rock["amplitude_deg"] > 1.0 and 0.5 < rock["frequency_hz"] < 3.0 and 0.3 < rock["settled_s"] < 1.3
+    assert rep["test"]["fit_from_s"] > rock["settled_s"]
+    chk = check(path)
+    assert chk["verdict"] == "warn" and any(
+        r.startswith("rocking: the chassis rocks at start-up") for r in chk["reasons"]
+    )
 
 
 def test_wheel_damping_is_named_with_its_time_constant(tmp_path):
