@@ -561,6 +561,13 @@ def identify(
     if any(x["kind"] == "structural" for x in findings):
         return cannot(findings[-1]["detail"])
     if torque is None:  # half the motor limit, at most a quarter of the static traction limit μ N r
+        if not (math.isfinite(motor) and motor > 0):
+            return cannot(f"the motor limit is {motor:g} N·m: no torque to test with")
+        if not traction > 0:
+            return cannot(
+                f"the wheels have no traction: friction μ = {plant._wheel_friction(0):g} on a wheel load of "
+                f"{float(loads.min()):.3g} N"
+            )
         torque = min(0.5 * motor, 0.25 * traction)
         if f > 0 and ID_LEVELS[-1] * torque <= 1.2 * f and torque <= 1.3 * f:
             # every level must clear the dead band (frictionloss f per wheel), else nothing moves and
