@@ -416,17 +416,12 @@ def test_sweep_row_lists_every_outcome(monkeypatch):
     assert row["follower_outcomes"] == "ok;slipping+lost;ok" and row["outcome"] == "lost,slipping"
 
 
-def test_frictionless_wheels_are_a_named_structural_cause_not_an_error(capsys):
+def test_frictionless_wheels_are_a_named_structural_cause_not_an_error(tmp_path, capsys):
     """Was: 'torque must be in (0, 5] N·m, got 0.0' (ValueError: internal error, exit 1)."""
     text = PAPER.replace('friction="1 0.005 0.0001" solref', 'friction="0 0.005 0.0001" priority="3" solref')
-    assert text != PAPER
-    path = Path(os.environ.get("TMPDIR", "/tmp")) / f"nofric_{os.getpid()}.xml"
-    path.write_text(text)
-    try:
-        rep = identify(str(path))
-        assert rep["identifiable"] is False
-        assert _finding(rep, "structural")["detail"].startswith("the wheels have no traction: friction μ = 0")
-        assert cli.main(["identify", str(path)]) == EXIT_FAIL
-        assert capsys.readouterr().err.count("error:") == 1
-    finally:
-        path.unlink()
+    path = _write(tmp_path, "nofric", text)
+    rep = identify(path)
+    assert rep["identifiable"] is False
+    assert _finding(rep, "structural")["detail"].startswith("the wheels have no traction: friction μ = 0")
+    assert cli.main(["identify", path]) == EXIT_FAIL
+    assert capsys.readouterr().err.count("error:") == 1
