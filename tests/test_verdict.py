@@ -425,3 +425,13 @@ def test_frictionless_wheels_are_a_named_structural_cause_not_an_error(tmp_path,
     assert _finding(rep, "structural")["detail"].startswith("the wheels have no traction: friction μ = 0")
     assert cli.main(["identify", path]) == EXIT_FAIL
     assert capsys.readouterr().err.count("error:") == 1
+
+
+def test_drag_gain_follows_the_formation_scale():
+    """k̂' = drag_gain z S: the υ channel's gain is 1/m², so a formation shrunk by s gets / s² (the
+    shrunk closed loop learns the drag as fast as the paper-sized one); the ω channel stays."""
+    from bioform_mj.scenario import load
+
+    base = load("paper", overrides=["learner.drag=true"]).learner.drag_gain
+    scaled = load("paper", overrides=["learner.drag=true", "formation.scale=0.15"]).learner.drag_gain
+    assert scaled[0] == pytest.approx(base[0] / 0.15**2, rel=1e-12) and scaled[1] == base[1]

@@ -1006,7 +1006,8 @@ def apply_scale(sc: Scenario) -> Scenario:
     (eq. 32) works in metres, and in its linear range (``|x̃| ≪ A``, which a small robot's
     errors are) ``k1 V_s ≈ k1 B x̃ / A`` already scales with the error; its bound ``k1 B`` does
     not shrink. The torque law's ``phi`` (one layer on both channels) and the learner's gains
-    are not scaled: use ``learner.gain_scaling = "c_hat0"`` (the scaled presets do). The values
+    are not scaled: use ``learner.gain_scaling = "c_hat0"`` (the scaled presets do); the
+    learned-drag gain's ``υ`` channel (``k̂' = drag_gain z S``: 1/m²) is ``/ s²`` (design §14). The values
     are those written (file and ``--set``); the resolved configuration holds the scaled values
     and ``scale`` for the record (loading a resolved configuration again would scale twice).
     """
@@ -1046,8 +1047,11 @@ def apply_scale(sc: Scenario) -> Scenario:
     torque = dataclasses.replace(sc.torque, c=first(sc.torque.c))
     d = sc.disturbance
     disturbance = dataclasses.replace(d, bias=first(d.bias), amp=first(d.amp))
+    lg = sc.learner.drag_gain
+    learner = dataclasses.replace(sc.learner, drag_gain=(lg[0] / s**2, *lg[1:]) if lg else lg)
     return dataclasses.replace(
         sc,
+        learner=learner,
         leader=leader,
         formation=formation,
         estimator=estimator,
