@@ -435,3 +435,27 @@ def test_drag_gain_follows_the_formation_scale():
     base = load("paper", overrides=["learner.drag=true"]).learner.drag_gain
     scaled = load("paper", overrides=["learner.drag=true", "formation.scale=0.15"]).learner.drag_gain
     assert scaled[0] == pytest.approx(base[0] / 0.15**2, rel=1e-12) and scaled[1] == base[1]
+
+
+def test_self_contact_at_rest_is_the_named_structural_cause(tmp_path):
+    """A fender on its own (limited) hinge 5 mm into the left wheel's tread: not parent and child, so
+    MuJoCo collides them (URDF/Gazebo would not): kilonewtons at rest, the wheel braked. Was: 'the
+    wheels do not roll' with nothing named."""
+    from bioform_mj.robot_check import feasibility
+    from bioform_mj.scenario import load
+    from bioform_mj.sim import make_plant
+
+    fender = (
+        '<body name="fender" pos="0 0.2 0.095"><joint name="fender_hinge" type="hinge" axis="1 0 0" '
+        'range="-0.001 0.001"/><inertial pos="0 0 0" mass="0.2" diaginertia="1e-4 1e-4 1e-4"/>'
+        '<geom name="fender_box" type="box" size="0.05 0.03 0.01" contype="1" conaffinity="1" group="3"/>'
+        '</body>\n      <site name="imu"'
+    )
+    path = _write(tmp_path, "fender", PAPER.replace('<site name="imu"', fender, 1))
+    rep = check(path)
+    assert rep["verdict"] == "fail" and rep["cause"]["kind"] == "structural"
+    (pair,) = rep["cause"]["self_contacts"]
+    assert {pair["body1"], pair["body2"]} == {"left_wheel", "fender"} and pair["force_n"] > 1e3
+    sc = load("paper", overrides=["plant.kind=mujoco", f'plant.robots=[{{model="{path}"}}]'])
+    warns = feasibility(sc, make_plant(sc))
+    assert any(w.startswith("followers 1, 2, 3: self contact: ") and "'left_wheel'/'fender'" in w for w in warns)

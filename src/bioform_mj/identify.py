@@ -35,6 +35,7 @@ __all__ = [
     "identify",
     "identify_main",
     "floor_contacts",
+    "self_contacts",
     "check_radius",
     "CAUSE_ORDER",
 ]
@@ -314,6 +315,9 @@ SLIP_FINDING = 0.05
 #: and more friction than :data:`CASTER_MU`
 CASTER_LOAD = 0.01
 CASTER_MU = 0.01
+#: ... structural: two of the robot's own bodies pressing on each other at rest with more than this share
+#: of its weight
+SELF_CONTACT_LOAD = 0.01
 #: ... structural: a wheel carrying less than this share of the weight at rest
 WHEEL_LOAD_MIN = 0.02
 #: a mapped wheel radius this many times off the wheel geoms' (or outside [1e-4, 1e2] m) is refused (exit 2)
@@ -377,6 +381,42 @@ def _given(lay: Any, what: str, says: str) -> float | None:
         if n.startswith(f"{what} ") and f"{says} say" in n:
             return float(n.rsplit("say ", 1)[1].split()[0])
     return None
+
+
+def self_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> list[dict[str, Any]]:
+    """Pairs of robot ``i``'s own bodies in contact now: ``body1``, ``body2``, ``geom1``, ``geom2``,
+    ``force_n`` (normal force, N). MuJoCo collides every pair but parent and child; URDF/Gazebo
+    collide none of one model's links by default, so a published description may overlap at rest."""
+    m, d = plant.model, (plant.data if data is None else data)
+    lay = plant.layouts[i]
+    prefix = lay.base[: lay.base.index("/") + 1] if "/" in lay.base else ""
+    inside = set(_subtree(m, m.body(lay.base).id).tolist())
+    out: dict[tuple[int, int], dict[str, Any]] = {}
+    f = np.zeros(6)
+
+    def name(kind: Any, k: int) -> str:
+        n = mujoco.mj_id2name(m, kind, k) or f"#{k}"
+        return n[len(prefix) :] if n.startswith(prefix) else n
+
+    for c in range(d.ncon):
+        con = d.contact[c]
+        g1, g2 = int(con.geom1), int(con.geom2)
+        b1, b2 = int(m.geom_bodyid[g1]), int(m.geom_bodyid[g2])
+        if b1 not in inside or b2 not in inside:
+            continue
+        mujoco.mj_contactForce(m, d, c, f)
+        e = out.setdefault(
+            (g1, g2),
+            {
+                "body1": name(mujoco.mjtObj.mjOBJ_BODY, b1),
+                "body2": name(mujoco.mjtObj.mjOBJ_BODY, b2),
+                "geom1": name(mujoco.mjtObj.mjOBJ_GEOM, g1),
+                "geom2": name(mujoco.mjtObj.mjOBJ_GEOM, g2),
+                "force_n": 0.0,
+            },
+        )
+        e["force_n"] += float(f[0])
+    return list(out.values())
 
 
 def check_radius(plant: Any) -> None:
@@ -477,6 +517,17 @@ def identify(
     weight = params.mass * 9.81
     loads = plant.wheel_loads()[0]
     contacts = floor_contacts(plant)
+    selfc = [c for c in self_contacts(plant) if c["force_n"] > SELF_CONTACT_LOAD * weight]
+    if selfc:
+        findings.append(
+            _finding(
+                "structural",
+                "the robot's own bodies press on each other at rest: "
+                + ", ".join(f"'{c['body1']}'/'{c['body2']}' {c['force_n']:.3g} N" for c in selfc)
+                + " (internal forces that brake or lock parts; exclude the pairs, as URDF/Gazebo do by default)",
+                self_contacts=selfc,
+            )
+        )
     for c in contacts:
         if c["role"] != "wheel" and c["load_n"] > CASTER_LOAD * weight and c["friction"] > CASTER_MU:
             brake = c["friction"] * c["load_n"]
@@ -558,7 +609,7 @@ def identify(
             "test": {"timestep_s": dt, "mujoco_warnings": 0},
         }
 
-    if any(x["kind"] == "structural" for x in findings):
+    if any(x["kind"] == "structural" and "self_contacts" not in x for x in findings):
         return cannot(findings[-1]["detail"])
     if torque is None:  # half the motor limit, at most a quarter of the static traction limit μ N r
         if not (math.isfinite(motor) and motor > 0):

@@ -196,7 +196,11 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         elif worst > WARN_ID:
             reasons_warn.append(f"identification differs from the formula by {100 * worst:.1f} %; cause {why}")
     for fd in findings:  # every cause found is said, whether the identification held or not (design §14)
-        if fd["kind"] == "structural" and ident["identifiable"]:
+        if fd["kind"] == "structural" and "self_contacts" in fd:  # a fail only as the cause of a wrong a, b
+            msg = f"structural: {fd['detail']}"
+            if all(fd["detail"] not in r for r in reasons_fail + reasons_warn):
+                reasons_warn.append(msg)
+        elif fd["kind"] == "structural" and ident["identifiable"]:
             reasons_fail.append(f"structural: {fd['detail']}")
         elif fd["kind"] in ("braking_caster", "rocking", "slip", "dead_band") or (
             fd["kind"] == "damping" and min(t for t in fd["time_constant_s"] if t is not None) < 5.0
@@ -348,7 +352,7 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
     import mujoco
 
     from .errors import InputError
-    from .identify import CASTER_LOAD, CASTER_MU, floor_contacts
+    from .identify import CASTER_LOAD, CASTER_MU, SELF_CONTACT_LOAD, floor_contacts, self_contacts
 
     t = np.linspace(0.0, scenario.sim.duration, max(200, int(scenario.sim.duration * 200)) + 1)
     _, vel, _ = scenario.build_leader().states(t)
@@ -377,8 +381,17 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
                     "e.g. condim 1 or priority above the floor's)"
                 )
                 casters.setdefault(note, []).append(i + 1)
+        pressing = [c for c in self_contacts(plant, i, settled) if c["force_n"] > SELF_CONTACT_LOAD * weight]
+        if pressing:
+            note = (
+                "the robot's own bodies press on each other at rest: "
+                + ", ".join(f"'{c['body1']}'/'{c['body2']}' {c['force_n']:.3g} N" for c in pressing)
+                + " (internal forces that brake or lock parts; exclude the pairs)"
+            )
+            casters.setdefault(note, []).append(i + 1)
     for note, who in casters.items():
-        out.append(f"follower{'s' if len(who) > 1 else ''} {', '.join(map(str, who))}: braking caster: {note}")
+        kind = "self contact" if note.startswith("the robot's own") else "braking caster"
+        out.append(f"follower{'s' if len(who) > 1 else ''} {', '.join(map(str, who))}: {kind}: {note}")
     given: dict[str, list[int]] = {}  # a mapped size far from the model's geometry (scene.layout_of's notes)
     for i, lay in enumerate(plant.layouts):
         for note in lay.notes:
