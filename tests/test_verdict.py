@@ -459,3 +459,20 @@ def test_self_contact_at_rest_is_the_named_structural_cause(tmp_path):
     sc = load("paper", overrides=["plant.kind=mujoco", f'plant.robots=[{{model="{path}"}}]'])
     warns = feasibility(sc, make_plant(sc))
     assert any(w.startswith("followers 1, 2, 3: self contact: ") and "'left_wheel'/'fender'" in w for w in warns)
+
+
+def test_batch_engine_refuses_what_run_refuses(tmp_path):
+    pytest.importorskip("warp")
+    pytest.importorskip("mujoco_warp")
+    from bioform_mj.batch.control import run_batch
+    from bioform_mj.errors import InputError
+    from bioform_mj.scenario import load
+
+    off = _write(
+        tmp_path,
+        "offfloor",
+        PAPER.replace('<geom type="ellipsoid" size="0.1 0.02 0.1"', '<geom type="ellipsoid" size="0.05 0.02 0.05"'),
+    )
+    sc = load("paper", overrides=["plant.kind=mujoco", "sim.duration=0.1", f'plant.robots=[{{model="{off}"}}]'])
+    with pytest.raises(InputError, match="do not stand on the floor"):
+        run_batch([sc])

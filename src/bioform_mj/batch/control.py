@@ -1404,6 +1404,7 @@ class BatchRun:
         self.device = wp.get_device(device)
         plant = make_plant(sc0)
         self.plant = plant
+        _refuse_what_robot_check_fails(plant)
         if probe:
             check_physics(sc0, device, plant)  # the scene's physics is C MuJoCo's on this engine
         # DC motors (design §8.2): the learner is fed the torque delivered over each period (_delivered)
@@ -2074,6 +2075,22 @@ def check_physics(sc: Scenario, device: str = "cpu", plant: Any = None) -> None:
             f"gives ~1e-3, the limit is {PROBE_TOL:g}): a contact pair the two engines model differently "
             "(e.g. wheel meshes or boxes); the batch engine would not reproduce the CPU engine"
         )
+
+
+def _refuse_what_robot_check_fails(plant: Any) -> None:
+    """``bioform run``'s refusals (``robot_check.run_refusals``, design §14) for the batch's one scene:
+    a skid-steer base, a statically unstable chassis, wheels off the floor, a dead band at the motor
+    limit are exit 2 before any world runs."""
+    import mujoco
+
+    from ..errors import InputError
+    from ..robot_check import run_refusals
+
+    scratch = mujoco.MjData(plant.model)
+    mujoco.mj_kinematics(plant.model, scratch)
+    why = run_refusals(plant, scratch, plant.settled_wheel_loads())
+    if why:
+        raise InputError("the robots cannot run this scenario (robot check fails them): " + "; ".join(why))
 
 
 def run_batch(scenarios: Sequence[Scenario], device: str = "cpu", **kw) -> list[dict[str, Any]]:
