@@ -111,7 +111,9 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
             pts.append(rot.T @ (data.geom_xpos[g] - mid))
             names.append(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"#{g}")
     if not pts:
-        raise ValueError(f"robot '{prefix.rstrip('/') or lay.base}': no collision geom to stand on")
+        from .errors import InputError
+
+        raise InputError(f"robot '{prefix.rstrip('/') or lay.base}' ({lay.file}): no collision geom to stand on")
     pts = np.array(pts)
     c = rot.T @ (com - mid)
     h = float(com[2] - floor_z)
