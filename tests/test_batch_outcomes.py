@@ -36,6 +36,10 @@ def test_slipping_robot_is_reported_by_both_engines():
         for f in s["followers"]:
             assert f["outcome"] == "slipping", f
             assert f["outcome_detail"].startswith("wheel slip ratio > 0.2 for 0.5 s, by t = ")
+            assert f["outcomes"][0]["kind"] == "slipping" and f["outcomes"][0]["detail"] == f["outcome_detail"]
+    # every outcome, listed alike by both engines (sim.outcome_list; design §14)
+    for fc, fb in zip(cpu["followers"], bat["followers"]):
+        assert [o["kind"] for o in fc["outcomes"]] == [o["kind"] for o in fb["outcomes"]], (fc, fb)
     # the same onset on both engines (measured: identical here; float32 physics may move a threshold
     # crossing by a control step on another CPU, so within 10 steps, not bit for bit)
     onset = lambda s: [float(f["outcome_detail"].rsplit("t = ", 1)[1].split()[0]) for f in s["followers"]]  # noqa: E731

@@ -152,6 +152,27 @@ SPECS = {
         4,
         (),
     ),
+    "learner_drag_step": (
+        [
+            _u(-2, 2),
+            _u(-1, 1),
+            _u(0.1, 10),
+            _u(-1, 1),
+            _u(0, 5),
+            _u(-20, 20),
+            _u(-2, 2),
+            _u(1, 500),
+            _u(0, 50),
+            _u(0, 1),
+            _u(0, 50),
+            _u(0.01, 0.1),
+            _u(10, 20),
+            _u(1, 10),
+            _choice(1e-3, 5e-3),
+        ],
+        5,
+        (),
+    ),
     "harmonic": ([_u(-1, 1), _u(-1, 1), _u(0, 3), _u(-3, 3), _u(0, 20)], 1, ()),
     "unicycle_rk4": (
         [
@@ -289,7 +310,9 @@ def test_warp_float32_matches_numba(nb, name):
         getattr(warp_equations(E, wp.float32), name), len(args), nout, wp.float32, bool_args=BOOL_ARGS.get(name, ())
     )(*args)
     # float32: a few ulps of the largest intermediate; the inputs span |x| <= 50
-    tol = 2e-5 * (1.0 + np.abs(ref)) if name != "learner_step" else 2e-4 * (1.0 + np.abs(ref))
+    tol = (
+        2e-5 * (1.0 + np.abs(ref)) if name not in ("learner_step", "learner_drag_step") else 2e-4 * (1.0 + np.abs(ref))
+    )
     np.testing.assert_array_less(_diff(got, ref, angles), tol)
 
 

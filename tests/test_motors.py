@@ -83,7 +83,11 @@ def test_summary_reports_the_motor_ground_truth(tmp_path):
         u = f["unmodelled"]
         assert u["motor"] == "dc" and u["driver"] == "current"
         assert u["stall_torque_Nm"] == pytest.approx(1.4, rel=0.02)
-        assert f["outcome"] == "ok" and f["final_formation_error_m"] < 0.01
+        assert f["final_formation_error_m"] < 0.01
+        # the formation holds, but the learner ends far from c_true (measured â −82 %, b̂ −68 % in 20 s
+        # from 0.5 c): said as c_hat_off since issue 18 (was: ok), and nothing else
+        assert [o["kind"] for o in f["outcomes"]] in ([], ["c_hat_off"])
+        assert f["outcome"] == ("c_hat_off" if max(map(abs, f["c_hat_rel_error"])) > 0.25 else "ok")
 
 
 def test_plant_measures_the_torque_the_dc_motor_delivers():
@@ -127,7 +131,8 @@ def test_learner_fed_the_delivered_torque_is_unbiased_with_dc_motors():
     assert outcome == ["ok"] * 3
     err, outcome = _c_hat_rel_error([])
     assert np.all(np.abs(err) < 0.32), err
-    assert outcome == ["ok"] * 3
+    # more than 25 % off is said (sim.C_HAT_OFF, issue 18: was ok), within it ok
+    assert outcome == ["c_hat_off" if np.abs(e).max() > 0.25 else "ok" for e in err]
 
 
 def _scenario(tmp_path: Path, robot: str, model_text: str | None = None) -> Path:

@@ -93,7 +93,8 @@ def test_tb3_holds_its_formation_on_odometry_at_100_hz():
     r = simulate(_tb3())
     assert r.summary["engine"] == "compiled" and r.summary["sensing"] == "odometry"
     for f in r.summary["followers"]:
-        assert f["outcome"] == "ok", f
+        # the learner ends far from c_true on this preset (tb3: slow learning), said since issue 18
+        assert [o["kind"] for o in f["outcomes"]] in ([], ["c_hat_off"]), f
         # measured 3.2–3.8 cm (truth sensing: 1.2–1.3 cm); the gyro bias' heading drift dominates
         assert f["final_formation_error_m"] < 0.06
         assert 0.0 < f["odometry_drift_m"] < 0.06

@@ -654,11 +654,19 @@ def _show_robot_warnings() -> None:
 
 
 def _warn_outcomes(summary: dict[str, Any]) -> None:
-    """A ``warning:`` line on stderr for every follower whose outcome is not ``ok`` (never
-    silent: design §9); what the scenario asked beyond the robots was said before the run."""
+    """A ``warning:`` line on stderr for every outcome of every follower (never silent: design §9,
+    §14: a follower 2 m off that also slips gets both); what the scenario asked beyond the robots
+    was said before the run."""
     for f in summary["followers"]:
-        if f.get("outcome", "ok") != "ok":
-            print(f"warning: follower {f['id']}: {f['outcome']} ({f.get('outcome_detail', '')})", file=sys.stderr)
+        outcomes = f.get("outcomes")
+        if outcomes is None:  # a summary from before the outcomes list
+            outcomes = (
+                []
+                if f.get("outcome", "ok") == "ok"
+                else [{"kind": f["outcome"], "detail": f.get("outcome_detail", "")}]
+            )
+        for o in outcomes:
+            print(f"warning: follower {f['id']}: {o['kind']} ({o['detail']})", file=sys.stderr)
 
 
 def _print_summary(summary: dict[str, Any], out: Path) -> None:
@@ -873,6 +881,15 @@ def _identify(args: argparse.Namespace) -> int:
 
         write_text(args.out, text + "\n")
     print(text)
+    if not result.get("identifiable", True):  # a named cause, never an internal error (design §14)
+        from .robot_check import EXIT_FAIL, cause_of
+
+        c = cause_of(result["findings"])
+        print(
+            f"error: cannot identify a, b: {c['kind'] + ': ' + c['detail'] if c else result['not_identified']}",
+            file=sys.stderr,
+        )
+        return EXIT_FAIL
     return EXIT_OK
 
 

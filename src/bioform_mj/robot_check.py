@@ -117,7 +117,9 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
             pts.append(rot.T @ (data.geom_xpos[g] - mid))
             names.append(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"#{g}")
     if not pts:
-        raise ValueError(f"robot '{prefix.rstrip('/') or lay.base}': no collision geom to stand on")
+        from .errors import InputError
+
+        raise InputError(f"robot '{prefix.rstrip('/') or lay.base}' ({lay.file}): no collision geom to stand on")
     pts = np.array(pts)
     c = rot.T @ (com - mid)
     h = float(com[2] - floor_z)
@@ -165,6 +167,18 @@ def unsimulated_self_contacts(entry: Any, simulated: list[dict]) -> list[dict]:
     return out
 
 
+def cause_of(findings: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The likeliest cause among :func:`~bioform_mj.identify.identify`'s findings (its ``CAUSE_ORDER``;
+    ``damping`` only as the last resort), or None."""
+    from .identify import CAUSE_ORDER
+
+    for kind in CAUSE_ORDER:
+        for fd in findings:
+            if fd["kind"] == kind:
+                return fd
+    return None
+
+
 def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     """Everything :mod:`bioform_mj.robot_check` reports about one robot, with the verdict.
 
@@ -182,12 +196,13 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         self_contacts,
         still_bodies,
     )
-    from .identify import DRAG_STEP, identify
+    from .identify import DRAG_STEP, check_radius, identify
     from .plants.mujoco_plant import MujocoPlant
     from .robot_params import robot_parameters
     from .scene import prepare_robot
 
     plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
+    check_radius(plant)  # exit 2 before any work: a radius nothing can be measured with
     p, lay = plant.params[0], plant.layouts[0]  # p: the configuration that runs (robot_params.running_data)
     model = plant.model
     scratch = mujoco.MjData(model)
@@ -265,23 +280,45 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
                 "parent-child pairs; exclude the pair (<contact><exclude body1=… body2=…/>) if the robot does not"
             )
 
-    ident = None
-    if identify_:
-        try:
-            ident = identify(entry)
-        except ValueError as exc:  # e.g. a dead band that leaves no usable torque
-            reasons_fail.append(str(exc))
+    ident = identify(entry) if identify_ else None  # InputError (exit 2) for a mapping no test can use
+    findings = ident["findings"] if ident else []
     a_id = ident["identified"]["a"] if ident else None
     b_id = ident["identified"]["b"] if ident else None
-    if ident:
+    if ident and not ident["identifiable"]:
+        c = cause_of(findings)
+        reasons_fail.append(
+            f"cannot identify a, b: {c['kind']}: {c['detail']}"
+            if c
+            else f"cannot identify a, b: {ident['not_identified']}"
+        )
+    elif ident:
         worst = max(abs(ident["relative_error"]["a"]), abs(ident["relative_error"]["b"]))
+        c = cause_of(findings)
+        why = (
+            f"{c['kind']}: {c['detail']}"
+            if c
+            else "no cause found among the mapping, a braking caster, a dead band, slip, rocking and damping: "
+            "the wheels do not roll as the model of design §8 assumes"
+        )
         if worst > FAIL_ID:
             reasons_fail.append(
-                f"identification differs from the formula by {100 * worst:.1f} % (> {100 * FAIL_ID:g} %): "
-                "the wheels do not roll as the model of design §8 assumes"
+                f"identification differs from the formula by {100 * worst:.1f} % (> {100 * FAIL_ID:g} %); cause {why}"
             )
         elif worst > WARN_ID:
-            reasons_warn.append(f"identification differs from the formula by {100 * worst:.1f} %")
+            reasons_warn.append(f"identification differs from the formula by {100 * worst:.1f} %; cause {why}")
+    for fd in findings:  # every cause found is said, whether the identification held or not (design §14)
+        if fd["kind"] == "structural" and "self_contacts" in fd:  # a fail only as the cause of a wrong a, b
+            msg = f"structural: {fd['detail']}"
+            if all(fd["detail"] not in r for r in reasons_fail + reasons_warn):
+                reasons_warn.append(msg)
+        elif fd["kind"] == "structural" and ident["identifiable"]:
+            reasons_fail.append(f"structural: {fd['detail']}")
+        elif fd["kind"] in ("braking_caster", "rocking", "slip", "dead_band") or (
+            fd["kind"] == "damping" and min(t for t in fd["time_constant_s"] if t is not None) < 5.0
+        ):
+            msg = f"{fd['kind'].replace('_', ' ')}: {fd['detail']}"
+            if all(fd["detail"] not in r for r in reasons_fail + reasons_warn):
+                reasons_warn.append(msg)
     ta = tips["tip_accel_mps2"]
     for way, acc in ta.items():
         if acc <= 0:
@@ -395,6 +432,24 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
             if ident
             else None,
         },
+        "identification": None
+        if ident is None
+        else {
+            k: ident.get(k)
+            for k in (
+                "identifiable",
+                "identified",
+                "identified_com",
+                "relative_error",
+                "drag_rate_per_s",
+                "deadband_torque_Nm",
+                "rocking",
+                "slip_ratio",
+                "test",
+            )
+        },
+        "findings": findings,
+        "cause": cause_of(findings) if reasons_fail else None,
         "notes": notes,
     }
 
@@ -415,20 +470,42 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
       least-loaded wheel's share of the weight at rest, measured on a settled copy of the scene:
       casters and gravity-compensated parts take weight off the wheels).
 
+    Each follower's own slot path is used (design §14: in a leader-frame formation a slot off the
+    leader's path turns on a wider or tighter circle than the leader). A loaded caster with friction
+    is a warning naming it. Raises :class:`~bioform_mj.errors.InputError` (exit 2, before the run)
+    for what ``robot check`` fails and no run survives (:func:`run_refusals`).
+
     Returns an empty list when nothing is at risk. The estimate is static (no pitch dynamics).
     """
     import mujoco
 
+    from .errors import InputError
+    from .identify import SELF_CONTACT_LOAD, self_contacts
+
     t = np.linspace(0.0, scenario.sim.duration, max(200, int(scenario.sim.duration * 200)) + 1)
-    _, vel, acc = scenario.build_leader().states(t)
-    tangential = float(np.max(np.abs(acc[:, 0])))
-    centripetal = float(np.max(np.abs(vel[:, 0] * vel[:, 1])))
-    total = float(np.max(np.hypot(acc[:, 0], vel[:, 0] * vel[:, 1])))
+    _, vel, _ = scenario.build_leader().states(t)
+    tangential, centripetal, total = slot_accelerations(scenario, t)
     scratch = mujoco.MjData(plant.model)
     mujoco.mj_kinematics(plant.model, scratch)
     out: list[str] = []
     settled = plant.settled_data()
     loads = plant.settled_wheel_loads(data=settled)
+    refusals = run_refusals(plant, scratch, loads)
+    if refusals:
+        raise InputError("the robots cannot run this scenario (robot check fails them): " + "; ".join(refusals))
+    pressed: dict[str, list[int]] = {}
+    for i, p in enumerate(plant.params):  # braking casters: below, with contacts.braking_casters
+        weight = p.mass * G
+        pressing = [c for c in self_contacts(plant, i, settled) if c["force_n"] > SELF_CONTACT_LOAD * weight]
+        if pressing:
+            note = (
+                "the robot's own bodies press on each other at rest: "
+                + ", ".join(f"'{c['body1']}'/'{c['body2']}' {c['force_n']:.3g} N" for c in pressing)
+                + " (internal forces that brake or lock parts; exclude the pairs)"
+            )
+            pressed.setdefault(note, []).append(i + 1)
+    for note, who in pressed.items():
+        out.append(f"follower{'s' if len(who) > 1 else ''} {', '.join(map(str, who))}: self contact: {note}")
     given: dict[str, list[int]] = {}  # a mapped size far from the model's geometry (scene.layout_of's notes)
     for i, lay in enumerate(plant.layouts):
         for note in lay.notes:
@@ -458,20 +535,20 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
         mu = plant._wheel_friction(i)
         traction = p.traction_torque(mu, float(loads[i].min()))  # μ N r / f per wheel (design §13)
         who = f"follower {i + 1}"
-        if total > mu * G:
+        if total[i] > mu * G:
             out.append(
-                f"{who}: the leader accelerates at up to {total:.3g} m/s², beyond the traction limit "
+                f"{who}: its slot accelerates at up to {total[i]:.3g} m/s², beyond the traction limit "
                 f"μ g = {mu * G:.3g} m/s²: the wheels will slip"
             )
-        if tangential > min(tips["forward"], tips["backward"]):
+        if tangential[i] > min(tips["forward"], tips["backward"]):
             out.append(
-                f"{who}: the leader's tangential acceleration {tangential:.3g} m/s² exceeds the tip-over margin "
-                f"(forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²)"
+                f"{who}: its slot's tangential acceleration {tangential[i]:.3g} m/s² exceeds the tip-over margin "
+                f"(forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²): the scenario overturns it"
             )
-        if centripetal > tips["lateral"]:
+        if centripetal[i] > tips["lateral"]:
             out.append(
-                f"{who}: the leader's turns need {centripetal:.3g} m/s² sideways, beyond the lateral tip-over "
-                f"margin {tips['lateral']:.3g} m/s²"
+                f"{who}: its slot's turns need {centripetal[i]:.3g} m/s² sideways, beyond the lateral tip-over "
+                f"margin {tips['lateral']:.3g} m/s²: the scenario overturns it"
             )
         motor = float(min(p.tau_max))
         # a caster that slides brakes the robot (design §13)
@@ -505,6 +582,60 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
                 "the wheels can skid at full torque"
             )
     return out
+
+
+def slot_accelerations(scenario: Any, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per follower (n,) the largest tangential, centripetal and total acceleration (m/s²) of its
+    formation slot over the times ``t`` (s): the slot path ``p_r − R(θ_r) Δ_i`` (leader frame) or
+    ``p_r − Δ_i`` differentiated twice; tangential along the slot's velocity, centripetal across it
+    (where the slot moves slower than 1 mm/s, all of it counts as tangential)."""
+    from .sim import slots_of
+
+    pose, _, _ = scenario.build_leader().states(t)
+    slots = np.stack([slots_of(scenario, p) for p in pose])  # (T, n, 2)
+    v = np.gradient(slots, t, axis=0)
+    a = np.gradient(v, t, axis=0)
+    speed = np.linalg.norm(v, axis=-1)
+    moving = speed > 1e-3
+    u = np.where(moving[..., None], v / np.maximum(speed, 1e-12)[..., None], 0.0)
+    tan = np.where(moving, np.abs((a * u).sum(-1)), np.linalg.norm(a, axis=-1))
+    cen = np.where(moving, np.abs(a[..., 0] * u[..., 1] - a[..., 1] * u[..., 0]), 0.0)
+    tot = np.linalg.norm(a, axis=-1)
+    # the ends of np.gradient are one-sided: drop the first and last two samples
+    sl = slice(2, -2) if len(t) > 8 else slice(None)
+    return tan[sl].max(axis=0), cen[sl].max(axis=0), tot[sl].max(axis=0)
+
+
+def run_refusals(plant: Any, scratch: Any, loads: np.ndarray) -> list[str]:
+    """What ``robot check`` fails that no run survives, per robot of a built plant (cheap: the
+    layout, the static tip margins, the settled wheel loads ``loads`` (n, 2) N): a skid-steer base
+    (other fixed wheels on the floor), a robot statically unstable, wheels that carry no weight, a
+    dead band at the motor limit. ``bioform run`` refuses these with exit 2 (design §14)."""
+    from .identify import WHEEL_LOAD_MIN
+
+    found: dict[str, list[int]] = {}
+    for i, (p, lay) in enumerate(zip(plant.params, plant.layouts)):
+        why = []
+        if any("other wheel" in n for n in lay.notes):
+            why.append(
+                "other fixed wheels touch the floor: a 4-wheel / skid-steer base, not a differential drive "
+                "(robot check: map one driven pair and make the others casters)"
+            )
+        try:
+            tips = tip_margins(plant.model, scratch, f"f{i + 1}/")["tip_accel_mps2"]
+            why += [f"statically unstable ({way})" for way, acc in tips.items() if acc <= 0]
+        except ValueError as exc:
+            why.append(str(exc))
+        if float(loads[i].min()) < WHEEL_LOAD_MIN * p.mass * G:
+            why.append(
+                f"the wheels do not stand on the floor ({loads[i, 0]:.3g} N, {loads[i, 1]:.3g} N of "
+                f"{p.mass * G:.3g} N at rest)"
+            )
+        if p.wheel_frictionloss and 2 * p.wheel_frictionloss >= min(p.tau_max):
+            why.append(f"wheel frictionloss {p.wheel_frictionloss:g} N·m: the dead band reaches the motor limit")
+        for w in why:
+            found.setdefault(f"{lay.file}: {w}", []).append(i + 1)
+    return [f"follower{'s' if len(who) > 1 else ''} {', '.join(map(str, who))}: {w}" for w, who in found.items()]
 
 
 # ------------------------------------------------------------------ command line
@@ -623,8 +754,10 @@ def _floor_table(report: dict[str, Any]) -> list[str]:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``bioform robot check``; prints a short report, returns the exit code."""
-    from .outputs.files import write_json
+    from .outputs.files import check_out_file, write_json
 
+    if args.json:  # before any work (exit 2): a directory, /proc/x, a read-only folder
+        args.json = check_out_file(args.json, "--json")
     report = check(ref_from_args(args.model, args))
     if args.json:
         write_json(args.json, report)
@@ -643,6 +776,7 @@ def main(args: argparse.Namespace) -> int:
         f"(full torque: {report['motor_accel_mps2']:.3g} m/s²); "
         f"CoM {1e3 * report['com_offset_m']:.1f} mm off the axle, "
         f"{report['com_height_m']:.3g} m high",
+        f"  mass {report['mass_kg']:.4g} kg, yaw inertia {report['yaw_inertia_kgm2']:.4g} kg·m²",
     ]
     lines.append(
         f"  mass {report['mass_kg']:.4g} kg, yaw inertia {report['yaw_inertia_kgm2']:.4g} kg·m² "

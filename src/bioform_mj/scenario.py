@@ -172,7 +172,9 @@ class LearnerCfg:
     (not in the paper) gives follower ``i`` the gain ``k4 ⊙ (ĉ_i(0) / ĉ_paper(0))²`` with
     ``ĉ_paper(0) = c_hat0_scale ⊙ (0.4, 10)``: a channel learns at a rate ∝ ``k4 τ²`` and the
     torques scale as ``1/c``, so every robot then learns as fast as the paper's robot does
-    with the paper's gains (which it keeps)."""
+    with the paper's gains (which it keeps). ``drag = true`` (not in the paper; design §14) also
+    learns a viscous drag rate ``k̂`` per channel, ``ẑ' = τ ĉ + d̂ − k̂ z − …``, ``k̂' = drag_gain z S``
+    projected onto ``[0, drag_max]`` (1/s), so that wheel damping or back-EMF does not bias ``ĉ``."""
 
     k4: tuple[float, ...] = (6.0, 50.0)
     k5: tuple[float, ...] = (25.0, 50.0)
@@ -180,6 +182,9 @@ class LearnerCfg:
     c_hat0_scale: tuple[float, ...] = (0.5, 0.5)
     c_bounds: tuple[float, ...] = (0.1, 10.0)
     gain_scaling: str = "none"
+    drag: bool = False
+    drag_gain: tuple[float, ...] = (30.0, 50.0)
+    drag_max: float = 50.0
 
 
 @dataclass(frozen=True)
@@ -701,6 +706,10 @@ def validate(sc: Scenario) -> None:
         _positive(f"learner.{key}", getattr(lc, key))
     _length("learner.kd", lc.kd, 2)
     _positive("learner.kd", lc.kd, strict=False)
+    _length("learner.drag_gain", lc.drag_gain, 2)
+    for key, vals in (("learner.drag_gain", lc.drag_gain), ("learner.drag_max", (lc.drag_max,))):
+        if not all(math.isfinite(v) and v > 0 for v in vals):
+            raise ScenarioError(key, f"must be finite numbers > 0, got {list(vals)}")
     if lc.gain_scaling not in GAIN_SCALINGS:
         raise ScenarioError(
             "learner.gain_scaling", f"unknown '{lc.gain_scaling}' (expected one of: {', '.join(GAIN_SCALINGS)})"
@@ -1035,7 +1044,8 @@ def apply_scale(sc: Scenario) -> Scenario:
     (eq. 32) works in metres, and in its linear range (``|x̃| ≪ A``, which a small robot's
     errors are) ``k1 V_s ≈ k1 B x̃ / A`` already scales with the error; its bound ``k1 B`` does
     not shrink. The torque law's ``phi`` (one layer on both channels) and the learner's gains
-    are not scaled: use ``learner.gain_scaling = "c_hat0"`` (the scaled presets do). The values
+    are not scaled: use ``learner.gain_scaling = "c_hat0"`` (the scaled presets do); the
+    learned-drag gain's ``υ`` channel (``k̂' = drag_gain z S``: 1/m²) is ``/ s²`` (design §14). The values
     are those written (file and ``--set``); the resolved configuration holds the scaled values
     and ``scale`` for the record (loading a resolved configuration again would scale twice).
     """
@@ -1075,8 +1085,11 @@ def apply_scale(sc: Scenario) -> Scenario:
     torque = dataclasses.replace(sc.torque, c=first(sc.torque.c))
     d = sc.disturbance
     disturbance = dataclasses.replace(d, bias=first(d.bias), amp=first(d.amp))
+    lg = sc.learner.drag_gain
+    learner = dataclasses.replace(sc.learner, drag_gain=(lg[0] / s**2, *lg[1:]) if lg else lg)
     return dataclasses.replace(
         sc,
+        learner=learner,
         leader=leader,
         formation=formation,
         estimator=estimator,

@@ -179,6 +179,8 @@ def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = 
         k4=_learner_k4(sc, c_hat0),
         k5=np.array(sc.learner.k5),
         kd=np.array(sc.learner.kd),
+        kk=np.array(sc.learner.drag_gain) if sc.learner.drag else np.zeros(2),
+        k_max=float(sc.learner.drag_max) if sc.learner.drag else 0.0,
         c_hat0=c_hat0,
         c_min=lo * c_hat0,
         c_max=hi * c_hat0,
@@ -787,8 +789,9 @@ def _summary(
         followers.append(
             {
                 "id": i + 1,
-                "outcome": outcomes[i][0],
-                "outcome_detail": outcomes[i][1],
+                "outcome": outcomes[i][0]["kind"] if outcomes[i] else "ok",
+                "outcome_detail": outcomes[i][0]["detail"] if outcomes[i] else "",
+                "outcomes": outcomes[i],
                 "total_velocity_error": nan_if("cmd", met.verr[i] * dt),
                 "final_formation_error_m": float(final_form[i]),
                 "rms_formation_error_m": float(np.sqrt(np.mean(fe[:, i] ** 2))) if len(fe) else float("nan"),
@@ -803,6 +806,8 @@ def _summary(
                 "c_hat": [float(v) for v in c_hat[i]],
                 "c_true": [float(v) for v in c_true[i]],
                 "c_hat_rel_error": [float(v) for v in (c_hat[i] / c_true[i] - 1.0)],
+                # opt-in learner.drag (design §14): the learned drag rates k̂ [1/s] of υ, ω; None when off
+                "drag_hat_per_s": [float(v) for v in state.k_hat[i]] if sc.learner.drag else None,
                 **_robot_used(sc, plant, controller, i),
             }
         )
@@ -848,6 +853,136 @@ def _robot_used(sc: Scenario, plant: Any, controller: Any, i: int) -> dict[str, 
     return out
 
 
+#: outcome kinds, the most severe first: a follower's ``outcome`` is the first of its ``outcomes`` (design §14)
+OUTCOME_ORDER = ("tipped", "slipping", "spinning", "lost", "c_hat_at_bound", "c_hat_off")
+#: a learned parameter within this fraction of its projection bound counts as at the bound
+C_HAT_BOUND_BAND = 0.01
+#: a learned ĉ farther than this (relative, either component) from c_true at the end: ``c_hat_off``
+C_HAT_OFF = 0.25
+
+
+def outcome_kinds(follower: dict[str, Any]) -> list[str]:
+    """Every outcome kind of one follower's summary entry, the most severe first (``[]`` when ok); a
+    summary from before the ``outcomes`` list has only ``outcome``."""
+    kinds = [o["kind"] for o in follower.get("outcomes") or []]
+    o = follower.get("outcome")
+    return kinds if o in (None, "ok") or o in kinds else [str(o), *kinds]
+
+
+def unmodelled_causes(params: Any, slipping: bool = False, casters: Sequence[str] = ()) -> list[str]:
+    """The terms a plant knows that the paper's model lacks and that bias ĉ (design §8, §14): wheel
+    drag (damping, back-EMF; time constant), a dead band (frictionloss), slip, braking casters, a
+    centre of mass off the axle (b̂). ``params``: the robot's
+    :class:`~bioform_mj.identify.RobotParams` or None (ideal plant: none)."""
+    out = []
+    if params is not None:
+        um = params.unmodelled(0.0, 0.0)
+        k = um["drag_rate_per_s"]
+        if max(k) > 0:
+            out.append(
+                "wheel drag (damping/back-EMF: time constants "
+                + ", ".join(f"{1 / x:.3g} s" for x in k if x > 0)
+                + "; the opt-in learner.drag would estimate it)"
+            )
+        if params.wheel_frictionloss > 0:
+            out.append(f"a dead band of {2 * params.wheel_frictionloss:.3g} N·m (wheel frictionloss)")
+        if params.com_offset > 0.01:
+            out.append(f"a centre of mass {1e3 * params.com_offset:.0f} mm off the axle (b̂ biased, design §8.1)")
+    if slipping:
+        out.append("wheel slip")
+    out += [f"caster '{c}' braking" for c in casters]
+    return out
+
+
+def outcome_list(
+    *,
+    tip_t: float | None,
+    slip_t: float | None,
+    spinning: bool,
+    final: float,
+    fe0: float,
+    t_end: float,
+    learning: bool,
+    c_hat: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    c_true: np.ndarray,
+    causes: Any = None,
+    slip_ratio: float = 0.2,
+    slip_time: float = 0.5,
+) -> list[dict[str, Any]]:
+    """Every outcome of one follower, the most severe first (:data:`OUTCOME_ORDER`), each
+    ``{"kind", "detail", "t"}`` (``t``: s when it happened, None for an end-of-run outcome); empty
+    when ok. Shared by both engines (``sim.follower_outcomes``, ``batch.control``'s ``_outcome``).
+    ``causes``: a callable giving :func:`unmodelled_causes`' list (called only for ``c_hat_off``)."""
+    from .plants.mujoco_plant import TIP_ANGLE_DEG
+
+    out: list[dict[str, Any]] = []
+    if tip_t is not None:
+        out.append({"kind": "tipped", "detail": f"tilt beyond {TIP_ANGLE_DEG:g} deg at t = {tip_t:.3f} s", "t": tip_t})
+    if slip_t is not None:
+        out.append(
+            {
+                "kind": "slipping",
+                "detail": f"wheel slip ratio > {slip_ratio:g} for {slip_time:g} s, by t = {slip_t:.3f} s",
+                "t": slip_t,
+            }
+        )
+    if spinning:
+        out.append(
+            {"kind": "spinning", "detail": f"|omega| > {SPIN_RAD_S:g} rad/s over the last second", "t": t_end - 1.0}
+        )
+    if final > LOST_M and (t_end >= LOST_AFTER_S - 1e-9 or final > 1.5 * fe0):
+        out.append({"kind": "lost", "detail": f"final formation error {final:.3g} m > {LOST_M:g} m", "t": None})
+    if learning:
+        at = [
+            k
+            for k in range(2)
+            if c_hat[k] <= lo[k] + C_HAT_BOUND_BAND * abs(lo[k]) or c_hat[k] >= hi[k] - C_HAT_BOUND_BAND * abs(hi[k])
+        ]
+        if at:
+            out.append(
+                {
+                    "kind": "c_hat_at_bound",
+                    "detail": "learned "
+                    + ", ".join("ab"[k] for k in at)
+                    + f" at its bound (within {C_HAT_BOUND_BAND:.0%})",
+                    "t": None,
+                }
+            )
+        rel = [float(c_hat[k] / c_true[k] - 1.0) for k in range(2)]
+        off = [k for k in range(2) if not abs(rel[k]) <= C_HAT_OFF]  # NaN counts as off
+        if off:
+            why = list(causes()) if callable(causes) else list(causes or [])
+            out.append(
+                {
+                    "kind": "c_hat_off",
+                    "detail": ", ".join(f"learned {'ab'[k]} {rel[k]:+.0%} from c_true" for k in off)
+                    + f" (> {C_HAT_OFF:.0%}); likely cause: "
+                    + ("; ".join(why) if why else "none the plant knows (too little excitation, or the learner gains)"),
+                    "t": None,
+                }
+            )
+    return out
+
+
+def braking_casters(plant: Any, i: int) -> list[str]:
+    """Follower ``i``'s non-wheel geoms that carry load with friction on the floor now (design §14)."""
+    if not hasattr(plant, "layouts") or not hasattr(plant, "data"):
+        return []
+    try:
+        from .identify import CASTER_LOAD, CASTER_MU, floor_contacts
+
+        weight = plant.params[i].mass * 9.81
+        return [
+            c["geom"]
+            for c in floor_contacts(plant, i)
+            if c["role"] != "wheel" and c["load_n"] > CASTER_LOAD * weight and c["friction"] > CASTER_MU
+        ]
+    except Exception:  # noqa: BLE001 - a cause is a hint; never fail a run's summary for it
+        return []
+
+
 def follower_outcomes(
     sc: Scenario,
     plant: Any,
@@ -856,50 +991,46 @@ def follower_outcomes(
     final_form: np.ndarray,
     c_hat: np.ndarray,
     dt: float,
-) -> list[tuple[str, str]]:
-    """Per follower ``(outcome, detail)``: ``ok`` or the first failure of ``tipped`` (tilt beyond
-    the plant's ``TIP_ANGLE_DEG``, with the time), ``slipping`` (a wheel's slip ratio beyond the
-    plant's ``SLIP_RATIO`` for ``SLIP_TIME`` s), ``spinning`` (|ω| > :data:`SPIN_RAD_S` over
-    the last second), ``lost`` (final formation error > :data:`LOST_M` after
-    :data:`LOST_AFTER_S` s, or grown by half over a shorter run), ``c_hat_at_bound``
-    (a learned parameter at its projection bound at the end)."""
+) -> list[list[dict[str, Any]]]:
+    """Per follower every outcome (:func:`outcome_list`: ``tipped`` (tilt beyond the plant's
+    ``TIP_ANGLE_DEG``, with the time), ``slipping`` (a wheel's slip ratio beyond the plant's
+    ``SLIP_RATIO`` for ``SLIP_TIME`` s), ``spinning`` (|ω| > :data:`SPIN_RAD_S` over the last
+    second), ``lost`` (final formation error > :data:`LOST_M` after :data:`LOST_AFTER_S` s, or
+    grown by half over a shorter run), ``c_hat_at_bound`` (a learned parameter within
+    :data:`C_HAT_BOUND_BAND` of its projection bound at the end), ``c_hat_off`` (ĉ more than
+    :data:`C_HAT_OFF` from c_true, with the likely cause); empty when ok."""
     n = sc.n
-    out: list[tuple[str, str]] = []
+    out: list[list[dict[str, Any]]] = []
     tip = getattr(plant, "tip_step", None)
     slip = getattr(plant, "slip_step", None)
     p = getattr(controller, "p", None)
     t = logd["t"]
     last = t >= (t[-1] - 1.0) if len(t) else np.zeros(0, bool)
+    c_true = plant.c_true()
+    params = getattr(plant, "params", None)
     for i in range(n):
-        if tip is not None and tip[i] >= 0:
-            from .plants.mujoco_plant import TIP_ANGLE_DEG
-
-            out.append(("tipped", f"tilt beyond {TIP_ANGLE_DEG:g} deg at t = {tip[i] * dt:.3f} s"))
-            continue
-        if slip is not None and slip[i] >= 0:
-            out.append(
-                (
-                    "slipping",
-                    f"wheel slip ratio > {plant.SLIP_RATIO:g} for {plant.SLIP_TIME:g} s, by t = {slip[i] * dt:.3f} s",
-                )
+        slipping = slip is not None and slip[i] >= 0
+        learning = p is not None and p.learning
+        out.append(
+            outcome_list(
+                tip_t=float(tip[i] * dt) if tip is not None and tip[i] >= 0 else None,
+                slip_t=float(slip[i] * dt) if slipping else None,
+                spinning=bool(len(t) and np.all(np.abs(logd["vel"][last, i, 1]) > SPIN_RAD_S)),
+                final=float(final_form[i]),
+                fe0=float(logd["formation_error"][0, i]) if len(t) else 0.0,
+                t_end=float(t[-1]) if len(t) else 0.0,
+                learning=learning,
+                c_hat=c_hat[i],
+                lo=np.broadcast_to(p.c_min, (n, 2))[i] if learning else np.zeros(2),
+                hi=np.broadcast_to(p.c_max, (n, 2))[i] if learning else np.zeros(2),
+                c_true=c_true[i],
+                causes=lambda i=i, s=slipping: unmodelled_causes(
+                    params[i] if params is not None else None, s, braking_casters(plant, i)
+                ),
+                slip_ratio=getattr(plant, "SLIP_RATIO", 0.2),
+                slip_time=getattr(plant, "SLIP_TIME", 0.5),
             )
-            continue
-        if len(t) and np.all(np.abs(logd["vel"][last, i, 1]) > SPIN_RAD_S):
-            out.append(("spinning", f"|omega| > {SPIN_RAD_S:g} rad/s over the last second"))
-            continue
-        fe0 = float(logd["formation_error"][0, i]) if len(t) else 0.0
-        t_end = float(t[-1]) if len(t) else 0.0
-        if final_form[i] > LOST_M and (t_end >= LOST_AFTER_S - 1e-9 or final_form[i] > 1.5 * fe0):
-            out.append(("lost", f"final formation error {final_form[i]:.3g} m > {LOST_M:g} m"))
-            continue
-        if p is not None and p.learning:
-            lo = np.broadcast_to(p.c_min, (n, 2))[i]
-            hi = np.broadcast_to(p.c_max, (n, 2))[i]
-            at = [k for k in range(2) if c_hat[i, k] <= lo[k] * (1 + 1e-9) or c_hat[i, k] >= hi[k] * (1 - 1e-9)]
-            if at:
-                out.append(("c_hat_at_bound", "learned " + ", ".join("ab"[k] for k in at) + " at its bound"))
-                continue
-        out.append(("ok", ""))
+        )
     return out
 
 

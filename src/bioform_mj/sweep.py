@@ -234,10 +234,12 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
         row["status"] = "diverged" if div is not None else "ok"
         row["error"] = div["message"] if div is not None else ""
         row["diverged_at_s"] = div["time_s"] if div is not None else None
+        from .sim import outcome_kinds
+
         fo = [f.get("outcome") for f in s["followers"]]
-        if all(o is not None for o in fo):
-            row["follower_outcomes"] = ";".join(str(o) for o in fo)
-        bad = sorted({str(o) for o in fo if o is not None and o != "ok"})
+        if all(o is not None for o in fo):  # every outcome of each follower: "ok;lost+slipping;ok" (design §14)
+            row["follower_outcomes"] = ";".join("+".join(outcome_kinds(f)) or "ok" for f in s["followers"])
+        bad = sorted({k for f in s["followers"] for k in outcome_kinds(f)})
         row["outcome"] = "diverged" if div is not None else (",".join(bad) if bad else "ok")
         row["sim_time_s"] = s["sim_time_s"]
         row["wall_time_s"] = s["wall_time_s"]

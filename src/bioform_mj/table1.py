@@ -61,8 +61,10 @@ def _mark(summary: dict[str, Any], follower: dict[str, Any]) -> str:
     ``outcome`` is not ``ok`` (a summary without ``outcome`` is taken as ok); else ``""``."""
     if _diverged(summary):
         return " [diverged]"
-    outcome = follower.get("outcome")
-    return f" [{outcome}]" if outcome not in (None, "ok") else ""
+    from .sim import outcome_kinds
+
+    kinds = outcome_kinds(follower)
+    return f" [{', '.join(kinds)}]" if kinds else ""
 
 
 def markdown(table: dict[str, Any]) -> str:
@@ -106,7 +108,9 @@ def markdown(table: dict[str, Any]) -> str:
                 + (f": {msg}" if msg else "")
                 + "; its numbers cover the run up to then, not a result."
             )
-        bad = [(f["id"], f["outcome"]) for f in summ["followers"] if f.get("outcome") not in (None, "ok")]
+        from .sim import outcome_kinds
+
+        bad = [(f["id"], " + ".join(outcome_kinds(f))) for f in summ["followers"] if outcome_kinds(f)]
         if bad and not d:
             notes.append(f"- **{m}**: " + ", ".join(f"follower {i} {o}" for i, o in bad) + ".")
     holds = "holds" if table.get("ordering_holds") else "does NOT hold"

@@ -121,6 +121,8 @@ def unsupported(sc: Any) -> str | None:
             "from the same state on the patch, velocities differ by up to 35x, against ~1e-6 on the floor; "
             "use --backend local)"
         )
+    if getattr(sc.learner, "drag", False):
+        return "learner.drag (the learned-drag extension runs on the local engines only; use --backend local)"
     if getattr(sc.plant, "sensing", "truth") not in ("truth", "odometry"):
         return f"plant.sensing = '{sc.plant.sensing}'"
     return None
@@ -263,9 +265,10 @@ def rows_from_summaries(
         row["status"] = "diverged" if div else "ok"
         row["error"] = s["diverged_reason"] if div else ""
         row["diverged_at_s"] = s["sim_time"] if div else None
-        fo = [f.get("outcome") for f in s["followers"]]
-        row["follower_outcomes"] = ";".join(str(o) for o in fo)
-        bad = sorted({str(o) for o in fo if o != "ok"})
+        from ..sim import outcome_kinds
+
+        row["follower_outcomes"] = ";".join("+".join(outcome_kinds(f)) or "ok" for f in s["followers"])
+        bad = sorted({k for f in s["followers"] for k in outcome_kinds(f)})
         row["outcome"] = "diverged" if div else (",".join(bad) if bad else "ok")
         row["sim_time_s"] = s["sim_time"]
         row["wall_time_s"] = batch_wall / W  # the batch's loop time shared out over its worlds

@@ -44,7 +44,7 @@ from ..engine import GUARDS
 from ..faults import Faults, counter
 from ..plants.mujoco_plant import TIP_ANGLE_DEG
 from ..scenario import Scenario
-from ..sim import LOST_AFTER_S, LOST_M, SPIN_RAD_S
+from ..sim import SPIN_RAD_S
 from .backend import default_capacity, unsupported
 from .samesource import warp_equations
 
@@ -1404,6 +1404,7 @@ class BatchRun:
         self.device = wp.get_device(device)
         plant = make_plant(sc0)
         self.plant = plant
+        _refuse_what_robot_check_fails(plant)
         if probe:
             check_physics(sc0, device, plant)  # the scene's physics is C MuJoCo's on this engine
         # DC motors (design §8.2): the learner is fed the torque delivered over each period (_delivered)
@@ -1827,27 +1828,35 @@ class BatchRun:
         return self._timed(steps, start, self.N, chunk, capture)[0]
 
     # -- results
-    def _outcome(self, w, i, diverged, final, fe0, t_end, nrow, spin_ok, tip, slip, learning, c_hat, lo, hi):
+    def _outcome(self, w, i, diverged, final, fe0, t_end, nrow, spin_ok, tip, slip, learning, c_hat, lo, hi, c_true):
         """``sim.follower_outcomes`` from the device's counters (tilt and slip watched per world as
-        ``mujoco_kernels.watch_tilt``/``watch_slip`` do); ``spinning`` is not checked in a world that
-        diverged (its log would end earlier)."""
-        if tip >= 0:
-            return "tipped", f"tilt beyond {TIP_ANGLE_DEG:g} deg at t = {tip * self.dt:.3f} s"
-        if slip >= 0:
-            p = self.plant
-            return (
-                "slipping",
-                f"wheel slip ratio > {p.SLIP_RATIO:g} for {p.SLIP_TIME:g} s, by t = {slip * self.dt:.3f} s",
-            )
-        if not diverged and nrow and spin_ok == 0:
-            return "spinning", f"|omega| > {SPIN_RAD_S:g} rad/s over the last second"
-        if final > LOST_M and (t_end >= LOST_AFTER_S - 1e-9 or final > 1.5 * fe0):
-            return "lost", f"final formation error {final:.3g} m > {LOST_M:g} m"
-        if learning:
-            at = [k for k in range(2) if c_hat[k] <= lo[k] * (1 + 1e-9) or c_hat[k] >= hi[k] * (1 - 1e-9)]
-            if at:
-                return "c_hat_at_bound", "learned " + ", ".join("ab"[k] for k in at) + " at its bound"
-        return "ok", ("batch engine: spinning not checked (diverged)" if diverged else "")
+        ``mujoco_kernels.watch_tilt``/``watch_slip`` do), through the same ``sim.outcome_list``:
+        ``(outcome, detail, outcomes)``; ``spinning`` is not checked in a world that diverged (its
+        log would end earlier). ``c_hat_off``'s causes: the CPU plant's robot parameters (no
+        braking-caster check: the device's contacts are not read back)."""
+        from ..sim import outcome_list, unmodelled_causes
+
+        p = self.plant
+        params = getattr(p, "params", None)
+        lst = outcome_list(
+            tip_t=tip * self.dt if tip >= 0 else None,
+            slip_t=slip * self.dt if slip >= 0 else None,
+            spinning=bool(not diverged and nrow and spin_ok == 0),
+            final=final,
+            fe0=fe0,
+            t_end=t_end,
+            learning=learning,
+            c_hat=c_hat,
+            lo=lo,
+            hi=hi,
+            c_true=c_true,
+            causes=lambda: unmodelled_causes(params[i] if params is not None else None, slip >= 0),
+            slip_ratio=p.SLIP_RATIO,
+            slip_time=p.SLIP_TIME,
+        )
+        if lst:
+            return lst[0]["kind"], lst[0]["detail"], lst
+        return "ok", ("batch engine: spinning not checked (diverged)" if diverged else ""), lst
 
     def _capacity_reason(self, bits: int, t: float) -> str:
         """The ``diverged_reason`` of a world whose physics overflowed MuJoCo Warp's capacities
@@ -1929,7 +1938,7 @@ class BatchRun:
             stride = max(1, int(round(sc.sim.log_dt / self.dt)))
             t_end = (int(nrow[w]) - 1) * stride * self.dt  # the last log row's time (sim.simulate's log)
             for i in range(self.n):
-                outcome, detail = self._outcome(
+                outcome, detail, outcomes = self._outcome(
                     w,
                     i,
                     reason is not None,
@@ -1944,12 +1953,14 @@ class BatchRun:
                     c_hat[w, i],
                     c_min[w, i],
                     c_max[w, i],
+                    c_true[i],
                 )
                 fol.append(
                     {
                         "id": i + 1,
                         "outcome": outcome,
                         "outcome_detail": detail,
+                        "outcomes": outcomes,
                         "rms_formation_error_m": float(np.sqrt(fsq[w, i] / nrow[w])) if nrow[w] else float("nan"),
                         "total_velocity_error": float(verr[w, i] * self.dt),
                         "final_formation_error_m": float(ferr[w, i]),
@@ -2064,6 +2075,22 @@ def check_physics(sc: Scenario, device: str = "cpu", plant: Any = None) -> None:
             f"gives ~1e-3, the limit is {PROBE_TOL:g}): a contact pair the two engines model differently "
             "(e.g. wheel meshes or boxes); the batch engine would not reproduce the CPU engine"
         )
+
+
+def _refuse_what_robot_check_fails(plant: Any) -> None:
+    """``bioform run``'s refusals (``robot_check.run_refusals``, design §14) for the batch's one scene:
+    a skid-steer base, a statically unstable chassis, wheels off the floor, a dead band at the motor
+    limit are exit 2 before any world runs."""
+    import mujoco
+
+    from ..errors import InputError
+    from ..robot_check import run_refusals
+
+    scratch = mujoco.MjData(plant.model)
+    mujoco.mj_kinematics(plant.model, scratch)
+    why = run_refusals(plant, scratch, plant.settled_wheel_loads())
+    if why:
+        raise InputError("the robots cannot run this scenario (robot check fails them): " + "; ".join(why))
 
 
 def run_batch(scenarios: Sequence[Scenario], device: str = "cpu", **kw) -> list[dict[str, Any]]:

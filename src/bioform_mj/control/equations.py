@@ -407,6 +407,47 @@ def learner_step(
     return zn, R + h * zn, clip(P - Q * zn, c_min, c_max), Pd - Qd * zn
 
 
+@equation
+def learner_drag_step(
+    z_hat: float,
+    e_int: float,
+    c_hat: float,
+    d_hat: float,
+    k_hat: float,
+    tau: float,
+    z: float,
+    k4: float,
+    k5: float,
+    kd: float,
+    kk: float,
+    c_min: float,
+    c_max: float,
+    k_max: float,
+    h: float,
+) -> tuple[float, float, float, float, float]:
+    """:func:`learner_step` with a learned viscous drag (opt-in ``learner.drag``, design §14, not in
+    the paper): the model ``ẑ' = τ ĉ + d̂ − k̂ z − k4 e − k5 S`` and ``k̂' = kk z S`` (the regressor
+    of ``k̂`` is ``−z`` as that of ``ĉ`` is ``τ``), so a wheel drag ``−k z`` (joint damping,
+    back-EMF) is estimated beside ``ĉ`` instead of biasing it. Same backward-Euler closed form
+    (``k̂`` is linear in ``ẑ`` for the frozen ``z``: ``k̂_new = k̂ + h kk z S_new``); ``ĉ`` is
+    projected onto ``[c_min, c_max]``, ``k̂`` onto ``[0, k_max]`` (1/s). ``kk = 0`` holds ``k̂``;
+    with ``k̂ = 0`` too it gives :func:`learner_step`'s values. Returns the new ``(ẑ, E, ĉ, d̂, k̂)``.
+    """
+    R = e_int - h * z
+    S0 = k4 * R - z
+    S1 = 1.0 + h * k4
+    hk4t = h * k4 * tau
+    P = c_hat - hk4t * S0
+    Q = hk4t * S1
+    Pd = d_hat - h * kd * S0
+    Qd = h * kd * S1
+    Pk = k_hat + h * kk * z * S0
+    Qk = h * kk * z * S1
+    den = 1.0 + h * k4 + h * k5 * S1 + h * tau * Q + h * Qd + h * z * Qk
+    zn = (z_hat + h * (tau * P + Pd - Pk * z + k4 * z - k5 * S0)) / den
+    return zn, R + h * zn, clip(P - Q * zn, c_min, c_max), Pd - Qd * zn, clip(Pk + Qk * zn, 0.0, k_max)
+
+
 # ------------------------------------------------------------- ideal plant (eq. 34)
 @equation
 def harmonic(bias: float, amp: float, freq: float, phase: float, t: float) -> float:

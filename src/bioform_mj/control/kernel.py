@@ -29,6 +29,7 @@ from .equations import (
     estimator_euler,
     estimator_rates,
     filter_derivative,
+    learner_drag_step,
     learner_step,
     neuron_rate,
     neuron_step,
@@ -97,6 +98,9 @@ class Gains(NamedTuple):
     learning: bool
     steer: bool
     leader_frame: bool
+    kka: float  # learned-drag gains (design §14; 0 = the paper's learner, bit for bit)
+    kkb: float
+    k_max: float  # 1/s: the learned drag's projection bound
     k4: np.ndarray
     c_min: np.ndarray
     c_max: np.ndarray
@@ -141,6 +145,7 @@ class StackState(NamedTuple):
     v_err: np.ndarray
     est_rate: np.ndarray
     first: np.ndarray
+    k_hat: np.ndarray  # (n, 2) learned drag rates [1/s] (opt-in learner.drag, design §14; 0 otherwise)
 
 
 class CommIn(NamedTuple):
@@ -179,6 +184,7 @@ def new_state(n: int) -> StackState:
         z2(),
         np.zeros((n, 5)),
         np.ones(1, dtype=np.int64),
+        z2(),
     )
 
 
@@ -202,6 +208,7 @@ def reset_state(g, s, est_pose0, vel0, c_hat0):
             s.e_int[i, c] = 0.0
             s.c_hat[i, c] = min(max(c_hat0[i, c], g.c_min[i, c]), g.c_max[i, c])
             s.d_hat[i, c] = 0.0
+            s.k_hat[i, c] = 0.0
             s.fy[i, c] = 0.0
             s.fdy[i, c] = 0.0
             s.cmd[i, c] = 0.0
@@ -239,8 +246,29 @@ def learner_update(g, s, vel):
     dt = g.dt
     k5 = (g.k5a, g.k5b)
     kd = (g.kda, g.kdb)
+    kk = (g.kka, g.kkb)
     for i in range(vel.shape[0]):
         for c in range(2):  # a, then b
+            if kk[c] > 0.0:  # opt-in learned drag (design §14); else the paper's step, unchanged
+                zn, en, cn, dn, kn = learner_drag_step(
+                    s.z_hat[i, c],
+                    s.e_int[i, c],
+                    s.c_hat[i, c],
+                    s.d_hat[i, c],
+                    s.k_hat[i, c],
+                    s.tau_body[i, c],
+                    vel[i, c],
+                    g.k4[i, c],
+                    k5[c],
+                    kd[c],
+                    kk[c],
+                    g.c_min[i, c],
+                    g.c_max[i, c],
+                    g.k_max,
+                    dt,
+                )
+                s.z_hat[i, c], s.e_int[i, c], s.c_hat[i, c], s.d_hat[i, c], s.k_hat[i, c] = zn, en, cn, dn, kn
+                continue
             zn, en, cn, dn = learner_step(
                 s.z_hat[i, c],
                 s.e_int[i, c],

@@ -9,7 +9,7 @@ exposes :attr:`ControlStack.kernel`, in the compiled loops of the plants.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,6 +43,7 @@ class StackParams:
     deriv_wn [rad/s]: command-derivative filter;
     derivative: how ``υ̇_cmd, ω̇_cmd`` are obtained, ``filter``, ``difference`` or ``analytic`` (design §6).
     k4 (2,) or (n,2), k5 (2,) [1/s]: learner gains; kd (2,): disturbance-estimate gain (0 = the paper);
+    kk (2,): learned-drag gain (0 = the paper, design §14), k_max [1/s]: its projection bound;
     c_hat0, c_min, c_max (n,2): initial estimate and bounds.
     dt [s]: control period.
     """
@@ -74,6 +75,8 @@ class StackParams:
     dt: float
     leader_frame: bool = False
     derivative: str = "filter"
+    kk: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    k_max: float = 0.0
 
 
 class ControlStack:
@@ -128,6 +131,9 @@ class ControlStack:
             learning=bool(p.learning),
             steer=bool(p.steer_priority),
             leader_frame=bool(p.leader_frame),
+            kka=float(np.broadcast_to(p.kk, (2,))[0]),
+            kkb=float(np.broadcast_to(p.kk, (2,))[1]),
+            k_max=float(p.k_max),
             k4=c(np.broadcast_to(np.asarray(p.k4, dtype=float), (n, 2)), dtype=float),
             c_min=c(np.broadcast_to(p.c_min, (n, 2)), dtype=float),
             c_max=c(np.broadcast_to(p.c_max, (n, 2)), dtype=float),
