@@ -118,7 +118,8 @@ def _finding(kind: str, detail: str, **numbers: Any) -> dict[str, Any]:
 
 def floor_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> list[dict[str, Any]]:
     """Robot ``i``'s geoms touching the floor now (after the robot settled): ``body``, ``geom``,
-    ``role`` (``wheel`` or ``other``), ``load_n`` (normal force, N), ``friction`` (the contact's
+    ``role`` (``wheel``, ``rolling``: on a passive caster joint, or ``other``), ``load_n`` (normal force,
+    N), ``friction`` (the contact's
     sliding μ as simulated), ``condim``. A minimal list for the verdict's braking-caster cause.
     ``data``: another state of the plant's model (a settled copy) instead of the plant's own."""
     m, d = plant.model, (plant.data if data is None else data)
@@ -126,6 +127,11 @@ def floor_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) ->
     prefix = lay.base[: lay.base.index("/") + 1] if "/" in lay.base else ""
     inside = set(subtree(m, m.body(lay.base).id).tolist())
     wheels = {m.geom(g).id for g in lay.wheel_geoms}
+    rolling = set()  # bodies on a passive caster joint (design §13: a caster that swivels and rolls)
+    for j in getattr(lay, "rolling_joints", ()):
+        jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)
+        if jid >= 0:
+            rolling |= set(subtree(m, int(m.jnt_bodyid[jid])).tolist())
     out: dict[int, dict[str, Any]] = {}
     f = np.zeros(6)
     for c in range(d.ncon):
@@ -146,7 +152,7 @@ def floor_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) ->
             {
                 "body": body[len(prefix) :] if body.startswith(prefix) else body,
                 "geom": name[len(prefix) :] if name.startswith(prefix) else name,
-                "role": "wheel" if g in wheels else "other",
+                "role": "wheel" if g in wheels else ("rolling" if int(m.geom_bodyid[g]) in rolling else "other"),
                 "load_n": 0.0,
                 "friction": float(con.friction[0]) if int(con.dim) > 1 else 0.0,
                 "condim": int(con.dim),
@@ -310,7 +316,7 @@ def identify(
             )
         )
     for c in contacts:
-        if c["role"] != "wheel" and c["load_n"] > CASTER_LOAD * weight and c["friction"] > CASTER_MU:
+        if c["role"] == "other" and c["load_n"] > CASTER_LOAD * weight and c["friction"] > CASTER_MU:
             brake = c["friction"] * c["load_n"]
             findings.append(
                 _finding(

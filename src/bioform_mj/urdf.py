@@ -64,6 +64,9 @@ __all__ = [
     "import_urdf",
 ]
 
+#: priority of a collision geom whose friction a ``<gazebo>`` tag gives (= ``scene.CONTACT_PRIORITY``)
+URDF_FRICTION_PRIORITY = 2
+
 #: file suffixes read as URDF (``.urdf.xacro`` ends with ``.xacro``)
 URDF_SUFFIXES = (".urdf", ".xacro")
 #: mesh files MuJoCo reads itself; others are converted with trimesh (design §12)
@@ -624,11 +627,15 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
             fr = np.array(g.friction, float)
             fr[0] = mu1
             g.friction = fr
+            # the maker's friction wins against our floor, as in Gazebo (ODE takes the smaller of a pair's
+            # mu; MuJoCo the larger, unless a geom's priority is higher: scene.CONTACT_PRIORITY, design §13)
+            g.priority = URDF_FRICTION_PRIORITY
         extra = ""
         if mu2 is not None and mu2 != mu1:
             extra = f"; mu2 {mu2:g} not used (MuJoCo's sliding friction is one number)"
         notes.append(
-            f"link '{lname}': sliding friction {mu1:g} from <gazebo> mu1 on its {len(geoms)} collision geom(s){extra}"
+            f"link '{lname}': sliding friction {mu1:g} from <gazebo> mu1 on its {len(geoms)} collision geom(s), "
+            f"winning against the floor's as in Gazebo{extra}"
         )
 
     # a link without <inertial> is massless (the URDF spec: "zero mass and zero inertia if not specified");
