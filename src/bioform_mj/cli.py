@@ -124,7 +124,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="KEY=V1,V2,...",
-        help="vary a scenario key over values (repeatable; ';' separates array values)",
+        help="vary a scenario key over values (repeatable, one --vary per key: a key given twice, or also "
+        "given with --set, is refused; equal values are run once; ';' separates array values)",
     )
     sw.add_argument(
         "--backend",
@@ -620,7 +621,7 @@ def _sweep(args: argparse.Namespace) -> int:
     if args.backend == "warp":  # unsupported features, device memory: before anything is written
         from .batch.backend import plan
 
-        plan(specs, args.device)
+        plan(specs, args.device, nconmax=args.nconmax, njmax=args.njmax)
     out = _prepare_out(args.out, "sweep")
     out.mkdir(parents=True, exist_ok=True)
     progress = _progress(not args.quiet, "sweep")
@@ -635,6 +636,7 @@ def _sweep(args: argparse.Namespace) -> int:
             device=args.device,
             nconmax=args.nconmax,
             njmax=args.njmax,
+            note=None if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True)),
         )
     except SweepInterrupted as exc:
         # the same command resumes: finished rows are skipped by their content key

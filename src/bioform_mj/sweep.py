@@ -43,7 +43,6 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__
 from .errors import BioformError, InputError
 from .outputs.files import write_json, write_text
 from .scenario import Scenario, load
@@ -88,6 +87,8 @@ class RunSpec:
     vary: tuple[tuple[str, str], ...]  # the varied (key, raw value) pairs, for the table
     digest: str = ""
     scenario: Scenario | None = field(default=None, compare=False, hash=False, repr=False)
+    #: :func:`~bioform_mj.provenance.provenance` of the scenario: code and robot files the run depends on
+    provenance: dict | None = field(default=None, compare=False, hash=False, repr=False)
 
     @property
     def key(self) -> str:
@@ -99,18 +100,17 @@ class RunSpec:
 
 
 def content_key(sc: Scenario, overrides: Sequence[str] = ()) -> str:
-    """Hash of what a run computes: the resolved scenario, the overrides, robot model files, package version."""
-    models: dict[str, str] = {}
-    if sc.plant.kind == "mujoco":
-        from .robots import resolve_robot
-
-        for r in sc.plant.robots:
-            with contextlib.suppress(BioformError, OSError):
-                path = resolve_robot(r).model  # a RobotRef (model file + mapping; the mapping is in to_dict)
-                models[path] = hashlib.sha1(Path(path).read_bytes()).hexdigest()
-    doc = {"scenario": sc.to_dict(), "overrides": list(overrides), "models": models, "version": __version__}
-    text = json.dumps(doc, sort_keys=True, separators=(",", ":"), default=repr)
+    """The run's key: a hash of its resolved configuration (``Scenario.to_dict()``, every value the
+    overrides set included, so ``k=1`` and ``k=1.0`` are one run). What the result also depends on,
+    the code and the robot files, is the row's ``provenance``, checked on resume (design §16).
+    ``overrides`` is accepted for compatibility and not hashed: the resolved scenario holds its effect."""
+    text = json.dumps({"scenario": sc.to_dict()}, sort_keys=True, separators=(",", ":"), default=repr)
     return hashlib.sha1(text.encode()).hexdigest()[:16]
+
+
+#: estimated bytes of one expanded run (its RunSpec with the resolved scenario, ~30 kB measured with
+#: tracemalloc for the paper scenario, and its row, ~2 kB), with margin
+SPEC_BYTES = 60e3
 
 
 def randomness(sc: Scenario) -> list[str]:
@@ -157,27 +157,73 @@ def expand(
     if seeds < 1:
         raise InputError(f"--seeds must be >= 1, got {seeds}")
     axes: list[list[tuple[str, str]]] = []
+    given: dict[str, str] = {}
+    set_keys = {o.partition("=")[0].strip() for o in overrides}
+    dropped = 0
     for item in vary:
         key, sep, raw = item.partition("=")
-        if not sep or not key.strip() or not raw.strip():
+        key = key.strip()
+        if not sep or not key or not raw.strip():
             raise InputError(f"--vary '{item}': expected KEY=V1,V2,... e.g. kinematic.k1=1,2,3")
-        values = raw.split(";") if ";" in raw else raw.split(",")
-        axes.append([(key.strip(), v.strip()) for v in values])
+        if key in given:  # the later list would silently replace the earlier one (design §16)
+            raise InputError(
+                f"--vary {key} given twice ('{given[key]}' and '{item}'): give one list of values, "
+                f"e.g. --vary {key}={given[key].partition('=')[2]},{raw}"
+            )
+        if key in set_keys:
+            raise InputError(f"--vary {key} and --set {key} both given: the --set value would be ignored")
+        given[key] = item
+        values = [v.strip() for v in (raw.split(";") if ";" in raw else raw.split(","))]
+        uniq = list(dict.fromkeys(values))  # the same text twice: one value
+        dropped += len(values) - len(uniq)
+        axes.append([(key, v) for v in uniq])
+    n_runs = len(methods) * seeds * int(np.prod([len(a) for a in axes])) if axes else len(methods) * seeds
+    from .budget import fmt_bytes, require
+
+    require(
+        n_runs * SPEC_BYTES,
+        f"a sweep of {n_runs} runs ({fmt_bytes(SPEC_BYTES)} per run for its configuration and row)",
+        "split it (fewer --seeds or --vary values)",
+    )
     specs = []
     no_random: list[str] = []
     n_configs = 0
+    seen_cfg: dict[str, tuple] = {}  # configuration key (at seed0) -> the combo that has it
+    same: list[str] = []
+    prov_cache: dict[str, dict] = {}
     for method in methods:
         for combo in itertools.product(*axes) if axes else [()]:
             ov = tuple(overrides) + tuple(f"{k}={v}" for k, v in combo)
             base = load(source, list(ov) + [f"sim.seed={seed0}"], method=method, plant=plant)
+            cfg = content_key(base)
+            if cfg in seen_cfg:  # e.g. k=1 and k=1.0: the same runs, done and counted once
+                first = seen_cfg[cfg]
+                diff = [f"{k}={v}" for (k, v), (_, v0) in zip(combo, first) if v != v0]
+                was = [f"{k}={v0}" for (k, v), (_, v0) in zip(combo, first) if v != v0]
+                same.append(f"{', '.join(diff)} is {', '.join(was)}")
+                continue
+            seen_cfg[cfg] = combo
             n_configs += 1
             if not randomness(base):
                 no_random.append(", ".join([method] + [f"{k}={v}" for k, v in combo]))
+            pk = json.dumps([base.plant.kind, base.to_dict()["plant"]["robots"]], default=repr)
+            if pk not in prov_cache:
+                from .provenance import provenance
+
+                prov_cache[pk] = provenance(base)
             for s in range(seed0, seed0 + seeds):
                 # the seed is the only difference between a configuration's runs (seed0 was validated)
                 sc = dataclasses.replace(base, sim=dataclasses.replace(base.sim, seed=s))
                 run_ov = ov + (f"sim.seed={s}",)
-                specs.append(RunSpec(source, run_ov, method, s, plant, tuple(combo), content_key(sc, run_ov), sc))
+                specs.append(
+                    RunSpec(source, run_ov, method, s, plant, tuple(combo), content_key(sc), sc, prov_cache[pk])
+                )
+    if (dropped or same) and warn is not None:
+        ex = "; ".join(dict.fromkeys(same))
+        note = f"{dropped} repeated value(s) in --vary" if dropped else ""
+        if same:
+            note += ("; " if note else "") + f"equal values give the same runs ({ex[:300]})"
+        print(f"note: {note}: each distinct run is done and counted once ({len(specs)} runs)", file=sys.stderr)
     if seeds > 1 and no_random and warn is not None:
         if len(no_random) == n_configs:
             which, its = "the scenario has", "its"
@@ -199,6 +245,8 @@ def expand(
 def _base_row(spec: RunSpec) -> dict[str, Any]:
     row: dict[str, Any] = {"key": spec.key, "method": spec.method, "seed": spec.seed}
     row.update({k: v for k, v in spec.vary})
+    if spec.provenance is not None:
+        row["provenance"] = spec.provenance
     return row
 
 
@@ -213,6 +261,10 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
             if spec.scenario is not None
             else load(spec.source, list(spec.overrides), method=spec.method, plant=spec.plant)
         )
+        if "provenance" not in row:
+            from .provenance import provenance
+
+            row["provenance"] = provenance(sc)
         res = simulate(sc)
         s = res.summary
         row["plant"] = s["plant"]
@@ -634,6 +686,7 @@ def sweep(
     device: str | None = None,
     nconmax: int | None = None,
     njmax: int | None = None,
+    note: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Run ``specs`` (skipping those already in ``out/runs``), then write the table and statistics.
 
@@ -641,7 +694,11 @@ def sweep(
     GPU if there is one); every spec is checked first (feature support, device memory); ``nconmax``,
     ``njmax``: MuJoCo Warp's contact / constraint-row capacity per world (None: the defaults).
     Raises :class:`SweepInterrupted` after SIGINT/SIGTERM, with the finished rows kept and
-    the tables written for them.
+    the tables written for them. A finished row is reused when its key (the resolved configuration)
+    and its provenance (code, versions, robot files) match; otherwise it is redone and a
+    ``resume: N row(s) redone (why)`` line said on stderr. One sweep per folder: a second one
+    raises :class:`~bioform_mj.outputs.rundir.FolderBusy` (exit 2). ``note(text)`` is told the
+    run count and an estimated duration before any run starts.
     """
     if backend not in ("local", "ray", "warp"):
         raise InputError(f"unknown backend '{backend}' (expected local, ray or warp)")
@@ -650,35 +707,110 @@ def sweep(
 
         require_warp()
         device = resolve_device(device)
+    from .outputs.rundir import folder_lock
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out, "sweep directory", "running a sweep there"):  # one sweep per folder (exit 2)
+        return _sweep_locked(
+            specs, out, backend, workers, ray_address, progress, warn, device, nconmax, njmax, note
+        )
+
+
+#: estimated cost of a run on one core (design §16): µs per follower and control step, and seconds
+#: of setup per run; measured on the development machine (paper / large16 presets, compiled loop:
+#: ideal 0.4-0.9 µs, MuJoCo 8-11 µs, 5 / 70 ms setup). The ETA printed before a sweep uses them.
+COST_US_PER_ROBOT_STEP = {"ideal": 1.0, "mujoco": 12.0}
+COST_SETUP_S = {"ideal": 0.01, "mujoco": 0.1}
+
+
+def estimate_seconds(specs: Sequence[RunSpec]) -> float:
+    """Estimated single-core seconds of ``specs`` (:data:`COST_US_PER_ROBOT_STEP`, :data:`COST_SETUP_S`)."""
+    total = 0.0
+    for sp in specs:
+        sc = sp.scenario
+        if sc is None:
+            continue
+        kind = sc.plant.kind if sc.plant.kind in COST_SETUP_S else "mujoco"
+        steps = sc.sim.duration / sc.sim.control_dt
+        total += COST_SETUP_S[kind] + steps * sc.n * COST_US_PER_ROBOT_STEP[kind] * 1e-6
+    return total
+
+
+def _stale(row: dict[str, Any], sp: RunSpec, backend: str, nconmax: int | None, njmax: int | None) -> list[str]:
+    """Why a finished row must be redone under this sweep (empty: keep it)."""
+    from .batch.backend import capacity_redo
+
+    why = capacity_redo(row, backend, nconmax, njmax)
+    if why is not None:
+        return [why]
+    was = "warp" if row.get("backend") == "warp" else "local"
+    now = "warp" if backend == "warp" else "local"
+    if was != now:  # float32 MuJoCo Warp and C MuJoCo give different numbers (design §11)
+        return [f"it ran on the {was} engine, this sweep runs the {now} one"]
+    if sp.provenance is None:
+        return []
+    from .provenance import differences
+
+    return differences(row.get("provenance"), sp.provenance)
+
+
+def _sweep_locked(
+    specs: list[RunSpec],
+    out: Path,
+    backend: str,
+    workers: int | None,
+    ray_address: str | None,
+    progress: Callable[[int, int], None] | None,
+    warn: Callable[[str], None] | None,
+    device: str | None,
+    nconmax: int | None,
+    njmax: int | None,
+    note: Callable[[str], None] | None,
+) -> dict[str, Any]:
     runs_dir = out / "runs"
-
-    def redo(row: dict) -> str | None:  # a row stopped on MuJoCo Warp's capacity, resumed with other capacities
-        from .batch.backend import capacity_redo
-
-        return capacity_redo(row, backend, nconmax, njmax)
-
     rows: dict[str, dict[str, Any]] = {}
     todo: list[RunSpec] = []
     keys = list(dict.fromkeys(sp.key for sp in specs))  # identical runs (same content) run once
     seen: set[str] = set()
+    redone: dict[str, int] = {}
     for sp in specs:
         if sp.key in seen:
             continue
         seen.add(sp.key)
-        row = _read_row(runs_dir / f"{sp.key}.json", sp, warn, redo)
+        row = _read_row(runs_dir / f"{sp.key}.json", sp, warn)
+        why = _stale(row, sp, backend, nconmax, njmax) if row is not None else []
+        if why:
+            reason = "; ".join(why[:3]) + (f"; and {len(why) - 3} more" if len(why) > 3 else "")
+            redone[reason] = redone.get(reason, 0) + 1
+            row = None
         if row is None:
             todo.append(sp)
         else:
+            # the row's labels are this sweep's: its content key says the run is the same, whatever
+            # sweep (--set or --vary) produced it (design §16)
+            row.update({k: v for k, v in sp.vary})
             rows[sp.key] = row
+    for reason, k in redone.items():
+        print(f"resume: {k} row(s) redone ({reason})", file=sys.stderr, flush=True)
     groups = None
     if backend == "warp":
         from .batch.backend import plan
 
-        groups = plan(todo, device)  # InputError before any work: unsupported feature, memory
+        # InputError before any work: unsupported feature, memory
+        groups = plan(todo, device, nconmax=nconmax, njmax=njmax)
         workers = 1
     runs_dir.mkdir(parents=True, exist_ok=True)
     workers = workers or os.cpu_count() or 1
     skipped = len(rows)
+    if note is not None:
+        eta = ""
+        if todo and backend != "warp":
+            from .budget import fmt_seconds
+
+            est = estimate_seconds(todo) / max(1, min(workers, len(todo)))
+            eta = f"; estimated {fmt_seconds(est)} (a cost model of the compiled loop, not a measurement)"
+        note(f"sweep: {len(keys)} runs ({skipped} already done, {len(todo)} to run) on {workers} worker(s){eta}")
 
     def done(row: dict) -> None:
         write_json(runs_dir / f"{row['key']}.json", row)
@@ -731,13 +863,17 @@ def sweep(
     return {"rows": got, "stats": stats, "ran": ran, "skipped": skipped, "timing": timing}
 
 
+#: row fields kept in the row files only (nested records, not table cells)
+_NOT_IN_CSV = ("provenance",)
+
+
 def to_csv(rows: list[dict[str, Any]]) -> str:
     """Rows → CSV text with the union of their columns (pandas/polars ``read_csv`` open it)."""
     cols: list[str] = []
     for r in rows:
-        cols += [c for c in r if c not in cols]
+        cols += [c for c in r if c not in cols and c not in _NOT_IN_CSV]
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=cols)
+    w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore")
     w.writeheader()
     for r in rows:
         w.writerow({c: "" if r.get(c) is None else r.get(c) for c in cols})

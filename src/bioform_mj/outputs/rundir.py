@@ -16,6 +16,7 @@ import contextlib
 import os
 import re
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 from ..errors import InputError
@@ -34,6 +35,52 @@ _TMP = re.compile(r"^\.(?P<name>.+)\.[A-Za-z0-9_]+\.tmp$")
 
 class FolderBusy(InputError):
     """Another process holds the folder's lock (exit 2)."""
+
+
+def take_lock(path: Path, what: str = "output directory", doing: str = "writing a run there") -> int:
+    """Lock the existing folder ``path`` (``flock`` on ``path/.bioform.lock``, our pid written in it);
+    returns the locked file descriptor, or raises :class:`FolderBusy` naming the holder's pid."""
+    import fcntl
+
+    lock = Path(path) / LOCK_NAME
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            try:
+                pid = os.read(fd, 32).decode(errors="replace").strip()
+            finally:
+                os.close(fd)
+            who = f"process {pid}" if pid.isdigit() else "another process"
+            raise FolderBusy(f"{what} '{path}' is in use: {who} is {doing}") from None
+        try:  # the holder we waited on may have removed the file: then lock the new one
+            same = os.fstat(fd).st_ino == os.stat(lock).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    os.ftruncate(fd, 0)
+    os.write(fd, str(os.getpid()).encode())
+    return fd
+
+
+def release_lock(path: Path, fd: int) -> None:
+    """Undo :func:`take_lock`: remove the lock file (before unlocking: a waiter sees the inode change)."""
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(Path(path) / LOCK_NAME)
+    os.close(fd)
+
+
+@contextlib.contextmanager
+def folder_lock(path: Path, what: str = "output directory", doing: str = "writing a run there") -> Iterator[None]:
+    """Hold the folder's lock (:func:`take_lock`) while the block runs."""
+    fd = take_lock(path, what, doing)
+    try:
+        yield
+    finally:
+        release_lock(path, fd)
 
 
 def _is_tmp(name: str, allowed: frozenset[str] | tuple[str, ...]) -> bool:
@@ -133,30 +180,7 @@ class RunDir:
         return self
 
     def _lock(self) -> None:
-        import fcntl
-
-        lock = self.path / LOCK_NAME
-        while True:
-            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                try:
-                    pid = os.read(fd, 32).decode(errors="replace").strip()
-                finally:
-                    os.close(fd)
-                who = f"process {pid}" if pid.isdigit() else "another process"
-                raise FolderBusy(f"{self.what} '{self.path}' is in use: {who} is writing a run there") from None
-            try:  # the holder we waited on may have removed the file: then lock the new one
-                same = os.fstat(fd).st_ino == os.stat(lock).st_ino
-            except FileNotFoundError:
-                same = False
-            if same:
-                break
-            os.close(fd)
-        os.ftruncate(fd, 0)
-        os.write(fd, str(os.getpid()).encode())
-        self._fd = fd
+        self._fd = take_lock(self.path, self.what)
 
     def _clear(self) -> None:
         """Remove stale temporaries always, and the old run's files with ``overwrite``."""
@@ -173,9 +197,7 @@ class RunDir:
 
     def __exit__(self, *exc) -> None:
         if self._fd is not None:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(self.path / LOCK_NAME)  # before unlocking: a waiter then sees the inode change
-            os.close(self._fd)
+            release_lock(self.path, self._fd)
             self._fd = None
         for d in self._created:  # nothing written: leave no folder behind
             try:
