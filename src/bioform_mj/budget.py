@@ -65,8 +65,8 @@ def _cgroup_free() -> int | None:
 
 
 def available_memory() -> int:
-    """Bytes this process can still allocate: ``MemAvailable`` of /proc/meminfo, or the cgroup's
-    limit less its usage when lower (psutil or sysconf off Linux)."""
+    """Bytes this process can still allocate: ``MemAvailable`` of /proc/meminfo (psutil or sysconf off
+    Linux), or less: the cgroup's limit less its usage, the address space left under ``ulimit -v``."""
     avail = None
     try:
         with open("/proc/meminfo") as fh:
@@ -84,7 +84,27 @@ def available_memory() -> int:
         except ImportError:
             avail = int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
     cg = _cgroup_free()
-    return min(avail, cg) if cg is not None else avail
+    if cg is not None:
+        avail = min(avail, cg)
+    room = _address_space_left()
+    return min(avail, room) if room is not None else avail
+
+
+def _address_space_left() -> int | None:
+    """Bytes of address space left under ``ulimit -v`` (RLIMIT_AS) for this process (None: unlimited)."""
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft == resource.RLIM_INFINITY or soft < 0:
+            return None
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmSize:"):
+                    return max(0, soft - int(line.split()[1]) * 1024)
+    except (ImportError, OSError, ValueError):
+        return None
+    return None
 
 
 def scene_bytes(n_robots: int) -> float:

@@ -104,8 +104,19 @@ def content_key(sc: Scenario, overrides: Sequence[str] = ()) -> str:
     overrides set included, so ``k=1`` and ``k=1.0`` are one run). What the result also depends on,
     the code and the robot files, is the row's ``provenance``, checked on resume (design §16).
     ``overrides`` is accepted for compatibility and not hashed: the resolved scenario holds its effect."""
-    text = json.dumps({"scenario": sc.to_dict()}, sort_keys=True, separators=(",", ":"), default=repr)
-    return hashlib.sha1(text.encode()).hexdigest()[:16]
+    return seed_key(config_text(sc), sc.sim.seed)
+
+
+def config_text(sc: Scenario) -> str:
+    """Canonical JSON of the resolved scenario without ``sim.seed`` (~0.5 ms: computed once per configuration)."""
+    d = sc.to_dict()
+    d["sim"].pop("seed", None)
+    return json.dumps({"scenario": d}, sort_keys=True, separators=(",", ":"), default=repr)
+
+
+def seed_key(text: str, seed: int) -> str:
+    """The key of the run of configuration ``text`` (:func:`config_text`) with seed ``seed`` (~1 µs)."""
+    return hashlib.sha1(f"{text}\0seed={int(seed)}".encode()).hexdigest()[:16]
 
 
 #: estimated bytes of one expanded run (its RunSpec with the resolved scenario, ~30 kB measured with
@@ -195,7 +206,8 @@ def expand(
         for combo in itertools.product(*axes) if axes else [()]:
             ov = tuple(overrides) + tuple(f"{k}={v}" for k, v in combo)
             base = load(source, list(ov) + [f"sim.seed={seed0}"], method=method, plant=plant)
-            cfg = content_key(base)
+            text = config_text(base)
+            cfg = seed_key(text, seed0)
             if cfg in seen_cfg:  # e.g. k=1 and k=1.0: the same runs, done and counted once
                 first = seen_cfg[cfg]
                 diff = [f"{k}={v}" for (k, v), (_, v0) in zip(combo, first) if v != v0]
@@ -216,7 +228,7 @@ def expand(
                 sc = dataclasses.replace(base, sim=dataclasses.replace(base.sim, seed=s))
                 run_ov = ov + (f"sim.seed={s}",)
                 specs.append(
-                    RunSpec(source, run_ov, method, s, plant, tuple(combo), content_key(sc), sc, prov_cache[pk])
+                    RunSpec(source, run_ov, method, s, plant, tuple(combo), seed_key(text, s), sc, prov_cache[pk])
                 )
     if (dropped or same) and warn is not None:
         ex = "; ".join(dict.fromkeys(same))
@@ -712,9 +724,7 @@ def sweep(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     with folder_lock(out, "sweep directory", "running a sweep there"):  # one sweep per folder (exit 2)
-        return _sweep_locked(
-            specs, out, backend, workers, ray_address, progress, warn, device, nconmax, njmax, note
-        )
+        return _sweep_locked(specs, out, backend, workers, ray_address, progress, warn, device, nconmax, njmax, note)
 
 
 #: estimated cost of a run on one core (design §16): µs per follower and control step, and seconds
