@@ -380,14 +380,20 @@ def _raising(sig: _Signals) -> Iterator[None]:
 # Backends
 
 
+_KERNELS: list[bool] = []
+
+
 def _load_kernels() -> None:
     """Run both compiled loops for a moment, so that numba's cached machine code is loaded
-    in this process (and inherited by forked workers instead of loaded once per worker)."""
+    in this process (and inherited by forked workers instead of loaded once per worker); once per process."""
+    if _KERNELS:
+        return
     from .scenario import load
     from .sim import simulate
 
     for plant in ("ideal", "mujoco"):
         simulate(load("paper", plant=plant, overrides=["sim.duration=0.01"]))
+    _KERNELS.append(True)
 
 
 def _die_with_parent(parent: int) -> None:
@@ -410,7 +416,7 @@ def _read_exact(fd: int, n: int) -> bytes | None:
     return buf
 
 
-def _worker(todo: list[RunSpec], task_r: int, result_w: int, parent: int) -> None:
+def _worker(todo: list[Any], task_r: int, result_w: int, parent: int, fn: Callable[[Any], dict] = run_one) -> None:
     """Body of a forked worker: read run indices (4 bytes each) from ``task_r`` until EOF, write each
     run's row to ``result_w`` as length-prefixed JSON. Never returns."""
     code = 1
@@ -422,7 +428,7 @@ def _worker(todo: list[RunSpec], task_r: int, result_w: int, parent: int) -> Non
             msg = _read_exact(task_r, 4)
             if msg is None:
                 break
-            row = run_one(todo[int.from_bytes(msg, "little")])
+            row = fn(todo[int.from_bytes(msg, "little")])
             data = json.dumps(row, default=lambda o: o.item() if hasattr(o, "item") else str(o)).encode()
             out = len(data).to_bytes(8, "little") + data
             while out:
@@ -435,11 +441,13 @@ def _worker(todo: list[RunSpec], task_r: int, result_w: int, parent: int) -> Non
         os._exit(code)
 
 
-def _run_serial(todo: list[RunSpec], sig: _Signals, done: Callable[[dict], None]) -> None:
+def _run_serial(
+    todo: list[Any], sig: _Signals, done: Callable[[dict], None], fn: Callable[[Any], dict] = run_one
+) -> None:
     for sp in todo:
         try:
             with _raising(sig):
-                row = run_one(sp)
+                row = fn(sp)
         except _Stop:
             return
         done(row)
@@ -456,7 +464,14 @@ class _Proc:
     buf: bytearray = field(default_factory=bytearray)
 
 
-def _run_forked(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable[[dict], None]) -> None:
+def _run_forked(
+    todo: list[Any],
+    workers: int,
+    sig: _Signals,
+    done: Callable[[dict], None],
+    fn: Callable[[Any], dict] = run_one,
+    died: Callable[[Any, str], dict] | None = None,
+) -> None:
     """Runs on ``workers`` processes forked from this one after it loaded the compiled kernels, one run at a
     time each; a worker that dies fails the run it was doing and is replaced."""
     _load_kernels()  # before forking: workers inherit the loaded kernels (start in ms, not ~1 s each)
@@ -473,7 +488,7 @@ def _run_forked(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable
         if pid == 0:  # pragma: no cover - runs in the worker
             for fd in [task_w, result_r] + [fd for p in procs.values() for fd in (p.task_w, p.result_r)]:
                 os.close(fd)
-            _worker(todo, task_r, result_w, parent)
+            _worker(todo, task_r, result_w, parent, fn)
         os.close(task_r)
         os.close(result_w)
         procs[result_r] = _Proc(pid, task_w, result_r)
@@ -518,7 +533,7 @@ def _run_forked(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable
                     close(p)
                     _, status = os.waitpid(p.pid, 0)
                     if p.current is not None and sig.signum is None:
-                        done(_died_row(todo[p.current], _exit_reason(status)))
+                        done((died or _died_row)(todo[p.current], _exit_reason(status)))
                     continue
                 p.buf += chunk
                 while len(p.buf) >= 8 and len(p.buf) >= 8 + int.from_bytes(p.buf[:8], "little"):
@@ -566,11 +581,20 @@ def _wait_gone(left: set[int], deadline: float) -> None:
             time.sleep(0.005)
 
 
-def _run_local(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable[[dict], None]) -> None:
+def _run_local(
+    todo: list[Any],
+    workers: int,
+    sig: _Signals,
+    done: Callable[[dict], None],
+    fn: Callable[[Any], dict] = run_one,
+    died: Callable[[Any, str], dict] | None = None,
+) -> None:
+    """``done(fn(item))`` for every item of ``todo``, in this process or on ``workers`` forked ones
+    (``died(item, reason)``: the row of an item whose worker died); stops when ``sig`` records a signal."""
     if workers <= 1 or not sys.platform.startswith("linux"):  # forking a process that loaded MuJoCo: Linux only
-        _run_serial(todo, sig, done)
+        _run_serial(todo, sig, done, fn)
     else:
-        _run_forked(todo, workers, sig, done)
+        _run_forked(todo, workers, sig, done, fn, died)
 
 
 #: Ray errors meaning the process running the task died (the run did not fail on its own).

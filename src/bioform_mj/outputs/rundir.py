@@ -26,6 +26,12 @@ from .files import check_out_dir
 RUN_FILES = frozenset(
     {"summary.json", "log.npz", "scene.xml", "video.mp4", "run.rrd", "MUJOCO_LOG.TXT", "table1.json", "table1.md"}
 )
+#: Files ``bioform calibrate`` writes into its folder (another kind of run: design §16).
+CALIBRATION_FILES = frozenset(
+    {"calibration.json", "calibration.md", "calibration.partial.json", "evaluations.jsonl", "MUJOCO_LOG.TXT"}
+)
+#: Every file name one of our commands writes as its run's record.
+KNOWN_FILES = RUN_FILES | CALIBRATION_FILES
 #: Folders a run writes, and the file suffixes they may hold.
 RUN_DIRS = {"figures": (".png",)}
 LOCK_NAME = ".bioform.lock"
@@ -91,8 +97,9 @@ def _is_tmp(name: str, allowed: frozenset[str] | tuple[str, ...]) -> bool:
     return inner in allowed if isinstance(allowed, frozenset) else inner.endswith(allowed)
 
 
-def survey(path: Path) -> tuple[list[str], list[str]]:
-    """``(run files, foreign entries)`` in ``path`` (names; folders end with ``/``)."""
+def survey(path: Path, files: frozenset[str] = RUN_FILES) -> tuple[list[str], list[str]]:
+    """``(run files, foreign entries)`` in ``path`` (names; folders end with ``/``); ``files``: the
+    names a run of this kind writes (:data:`RUN_FILES`, :data:`CALIBRATION_FILES`)."""
     ours: list[str] = []
     foreign: list[str] = []
     if not path.is_dir():
@@ -101,9 +108,9 @@ def survey(path: Path) -> tuple[list[str], list[str]]:
         name = entry.name
         if name == LOCK_NAME or name.startswith(".bioform-probe-"):  # ours: the lock, a writability probe
             continue
-        if name in RUN_FILES or _is_tmp(name, RUN_FILES):
+        if name in files or _is_tmp(name, files):
             (ours if entry.is_file(follow_symlinks=False) else foreign).append(name)
-        elif name in RUN_DIRS and entry.is_dir(follow_symlinks=False):
+        elif name in RUN_DIRS and files is RUN_FILES and entry.is_dir(follow_symlinks=False):
             sfx = RUN_DIRS[name]
             inner = [e for e in os.scandir(entry.path)]
             if all(e.is_file(follow_symlinks=False) and (e.name.endswith(sfx) or _is_tmp(e.name, sfx)) for e in inner):
@@ -133,10 +140,21 @@ class RunDir:
     and nothing was written to is removed again.
     """
 
-    def __init__(self, path: str | Path, overwrite: bool = False, what: str = "output directory") -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        overwrite: bool = False,
+        what: str = "output directory",
+        files: frozenset[str] = RUN_FILES,
+        resumable: frozenset[str] = frozenset(),
+    ) -> None:
+        """``files``: what this kind of run writes; ``resumable``: those of its files that an unfinished
+        run leaves and the same command resumes from (a folder holding only them is accepted)."""
         self.path = Path(path)
         self.overwrite = overwrite
         self.what = what
+        self.files = files
+        self.resumable = resumable
         self._fd: int | None = None
         self._created: list[Path] = []
 
@@ -148,8 +166,16 @@ class RunDir:
         return self
 
     def _check_contents(self) -> None:
-        ours, foreign = survey(self.path)
+        ours, foreign = survey(self.path, self.files)
         real = [n for n in ours if not _TMP.match(n)]
+        other = [n for n in foreign if n in KNOWN_FILES or n.rstrip("/") in RUN_DIRS]
+        if other:
+            raise InputError(
+                f"{self.what} '{self.path}' holds another kind of run ({_short(other)}); "
+                f"choose an empty or new folder (nothing there is deleted, even with --overwrite)"
+            )
+        if real and all(n in self.resumable for n in real) and not self.overwrite:
+            return  # an unfinished run of this kind: the same command resumes it
         if foreign:
             raise InputError(
                 f"{self.what} '{self.path}' holds files that are not a run's ({_short(foreign)}); "
@@ -184,7 +210,7 @@ class RunDir:
 
     def _clear(self) -> None:
         """Remove stale temporaries always, and the old run's files with ``overwrite``."""
-        ours, _ = survey(self.path)
+        ours, _ = survey(self.path, self.files)
         for name in ours:
             target = self.path / name.rstrip("/")
             if not (self.overwrite or _TMP.match(name)):
@@ -208,4 +234,4 @@ class RunDir:
     @property
     def written(self) -> bool:
         """True when the folder holds any file of a run."""
-        return bool(survey(self.path)[0])
+        return bool(survey(self.path, self.files)[0])
