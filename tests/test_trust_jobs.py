@@ -443,3 +443,43 @@ def test_calibrate_prints_count_and_eta_without_a_terminal(tmp_path):
     # a complete calibration is another run: refused without --overwrite, replaced with it
     again = _cli(["calibrate", "table1", "--budget", "3", "--out", str(out)], ulimit_kb=None)
     assert again.returncode == 2 and "--overwrite" in _error_lines(again.stderr)[0]
+
+
+@pytest.mark.slow
+def test_ray_head_lost_mid_sweep_writes_the_tables_and_resumes(tmp_path):
+    """A head started with ``ray start --head`` (token auth: RAY_AUTH_MODE=token) killed mid-sweep: an
+    ``error:`` line, exit 1, runs.csv covering the finished rows (measured: 17 s from the kill to the exit)."""
+    pytest.importorskip("ray")
+    import shutil
+    import socket
+
+    ray_cli = shutil.which("ray") or str(Path(sys.executable).parent / "ray")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = {**_env(), "RAY_AUTH_MODE": "token"}
+    head = ["--head", "--port", str(port), "--num-cpus", "2", "--include-dashboard", "false"]
+    subprocess.run([ray_cli, "start", *head, "--disable-usage-stats"], env=env, capture_output=True, timeout=120)
+    out = tmp_path / "s"
+    cmd = [sys.executable, "-m", "bioform_mj.cli", "sweep", "paper", "--plant", "ideal", "--duration", "20"]
+    cmd += ["--seeds", "300", "--set", "formation.init_jitter=0.1", "--backend", "ray"]
+    cmd += ["--ray-address", f"127.0.0.1:{port}", "--out", str(out), "--quiet"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.time() + 120
+        while (
+            time.time() < deadline and len(list((out / "runs").glob("*.json")) if (out / "runs").exists() else []) < 3
+        ):
+            time.sleep(0.2)
+        subprocess.run([ray_cli, "stop", "--force"], env=env, capture_output=True, timeout=60)
+        _, err = proc.communicate(timeout=90)
+    finally:
+        proc.kill()
+        subprocess.run([ray_cli, "stop", "--force"], env=env, capture_output=True, timeout=60)
+    errs = _error_lines(err)
+    assert proc.returncode == 1, err[-2000:]
+    assert len(errs) == 1 and "was lost" in errs[0] and "rerun the same command" in errs[0]
+    finished = list((out / "runs").glob("*.json"))
+    assert 3 <= len(finished) < 300
+    assert len(_rows(out)) == len(finished)
+    assert json.loads((out / "sweep.json").read_text())["complete"] is False

@@ -634,6 +634,12 @@ def _sweep(args: argparse.Namespace) -> int:
         from .batch.backend import plan
 
         plan(specs, args.device, nconmax=args.nconmax, njmax=args.njmax)
+    if args.backend == "ray":  # nothing listening there: exit 2 in seconds, naming the address
+        from .sweep import check_ray_address
+
+        check_ray_address(args.ray_address)
+    elif args.ray_address is not None:
+        raise InputError("--ray-address applies to --backend ray only")
     out = _prepare_out(args.out, "sweep")
     out.mkdir(parents=True, exist_ok=True)
     progress = _progress(not args.quiet, "sweep")
