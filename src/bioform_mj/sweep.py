@@ -1,11 +1,14 @@
 """Monte Carlo sweeps: every combination of methods × varied keys × seeds, on forked workers or Ray.
 
 Each run is identified by a key hashed from the *content* of its resolved scenario
-(``Scenario.to_dict()`` as canonical JSON, the overrides, the robot model files it uses
-and the package version), not from the scenario's file path: an edited scenario runs
-again. Its result row is written atomically to ``DIR/runs/<key>.json`` as soon as it
-finishes, so an interrupted sweep resumes by skipping keys already there; a row file that
-cannot be read is reported (``warning:`` on stderr) and its run redone. At the end the rows
+(``Scenario.to_dict()`` as canonical JSON), not from the scenario's file path or the
+``--set``/``--vary`` strings: an edited scenario runs again, ``k=1`` and ``k=1.0`` are one run.
+Its result row is written atomically to ``DIR/runs/<key>.json`` as soon as it finishes, with
+its provenance (package version, source hash, MuJoCo version, every robot file it loaded:
+:mod:`bioform_mj.provenance`), so an interrupted sweep resumes by skipping keys already there
+whose provenance still matches; a stale row is redone (``resume: N row(s) redone (why)`` on
+stderr), a row file that cannot be read is reported (``warning:`` on stderr) and its run redone.
+One sweep per folder at a time (a lock); design §16. At the end the rows
 are collected into ``DIR/runs.csv`` (one row per run: settings, seed, status, outcome,
 metrics) and aggregated per group, method × every ``--vary`` value, into ``DIR/stats.json``
 and ``DIR/stats.md``.
@@ -416,7 +419,7 @@ def _read_exact(fd: int, n: int) -> bytes | None:
     return buf
 
 
-def _worker(todo: list[Any], task_r: int, result_w: int, parent: int, fn: Callable[[Any], dict] = run_one) -> None:
+def _worker(todo: list[Any], task_r: int, result_w: int, parent: int, fn: Callable[[Any], dict] | None = None) -> None:
     """Body of a forked worker: read run indices (4 bytes each) from ``task_r`` until EOF, write each
     run's row to ``result_w`` as length-prefixed JSON. Never returns."""
     code = 1
@@ -428,7 +431,7 @@ def _worker(todo: list[Any], task_r: int, result_w: int, parent: int, fn: Callab
             msg = _read_exact(task_r, 4)
             if msg is None:
                 break
-            row = fn(todo[int.from_bytes(msg, "little")])
+            row = (fn or run_one)(todo[int.from_bytes(msg, "little")])
             data = json.dumps(row, default=lambda o: o.item() if hasattr(o, "item") else str(o)).encode()
             out = len(data).to_bytes(8, "little") + data
             while out:
@@ -442,12 +445,12 @@ def _worker(todo: list[Any], task_r: int, result_w: int, parent: int, fn: Callab
 
 
 def _run_serial(
-    todo: list[Any], sig: _Signals, done: Callable[[dict], None], fn: Callable[[Any], dict] = run_one
+    todo: list[Any], sig: _Signals, done: Callable[[dict], None], fn: Callable[[Any], dict] | None = None
 ) -> None:
     for sp in todo:
         try:
             with _raising(sig):
-                row = fn(sp)
+                row = (fn or run_one)(sp)
         except _Stop:
             return
         done(row)
@@ -469,7 +472,7 @@ def _run_forked(
     workers: int,
     sig: _Signals,
     done: Callable[[dict], None],
-    fn: Callable[[Any], dict] = run_one,
+    fn: Callable[[Any], dict] | None = None,
     died: Callable[[Any, str], dict] | None = None,
 ) -> None:
     """Runs on ``workers`` processes forked from this one after it loaded the compiled kernels, one run at a
@@ -586,7 +589,7 @@ def _run_local(
     workers: int,
     sig: _Signals,
     done: Callable[[dict], None],
-    fn: Callable[[Any], dict] = run_one,
+    fn: Callable[[Any], dict] | None = None,
     died: Callable[[Any, str], dict] | None = None,
 ) -> None:
     """``done(fn(item))`` for every item of ``todo``, in this process or on ``workers`` forked ones
