@@ -247,7 +247,7 @@ def _big_team(tmp_path: Path, n: int) -> Path:
 def _refused(res: subprocess.CompletedProcess, *needles: str) -> str:
     errs = _error_lines(res.stderr)
     assert res.returncode == 2, res.stderr[-2000:]
-    assert len(errs) == 1 and "needs about" in errs[0] or "needed" in errs[0], res.stderr[-2000:]
+    assert len(errs) == 1 and ("needs about" in errs[0] or "needed" in errs[0]), res.stderr[-2000:]
     assert "Traceback" not in res.stderr and "MemoryError" not in res.stderr
     for n in needles:
         assert n in errs[0], errs[0]
@@ -483,3 +483,66 @@ def test_ray_head_lost_mid_sweep_writes_the_tables_and_resumes(tmp_path):
     assert 3 <= len(finished) < 300
     assert len(_rows(out)) == len(finished)
     assert json.loads((out / "sweep.json").read_text())["complete"] is False
+
+
+def test_a_sweep_refuses_a_folder_holding_another_kind_of_run(tmp_path, capsys):
+    out = tmp_path / "r"
+    out.mkdir()
+    (out / "calibration.json").write_text("{}")
+    assert main(["sweep", "paper", "--plant", "ideal", "--duration", "0.1", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "another kind of run (calibration.json)" in err[0]
+    assert sorted(p.name for p in out.iterdir()) == ["calibration.json"]
+
+
+def test_sigint_while_ray_connects_stops_in_seconds(tmp_path):
+    """A port that accepts connections and never answers: ray.init would wait; Ctrl-C stops the sweep."""
+    pytest.importorskip("ray")
+    import socket
+
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(16)
+    port = srv.getsockname()[1]
+    out = tmp_path / "s"
+    cmd = [sys.executable, "-m", "bioform_mj.cli", "sweep", "paper", "--plant", "ideal", "--duration", "0.1"]
+    cmd += ["--backend", "ray", "--ray-address", f"127.0.0.1:{port}", "--out", str(out), "--quiet"]
+    try:
+        proc = subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(), start_new_session=True
+        )
+        deadline = time.time() + 60
+        while time.time() < deadline and not (out / "runs").exists():  # past the probe: connecting
+            time.sleep(0.05)
+        time.sleep(1.0)
+        assert proc.poll() is None
+        t0 = time.perf_counter()
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+        took = time.perf_counter() - t0
+    finally:
+        srv.close()
+    assert proc.returncode == 130, err[-2000:]
+    assert took < 5, f"{took:.1f} s"
+    assert "interrupted (SIGINT)" in err and "Resume with:" in err
+
+
+def test_calibration_folder_resumes_unfinished_and_overwrites_finished(tmp_path):
+    from bioform_mj.errors import InputError
+    from bioform_mj.outputs.rundir import CALIBRATION_FILES, RunDir
+
+    resumable = frozenset({"evaluations.jsonl", "calibration.partial.json"})
+    out = tmp_path / "c"
+    out.mkdir()
+    (out / "evaluations.jsonl").write_text("{}\n")
+    (out / "calibration.partial.json").write_text("{}")
+    with RunDir(out, files=CALIBRATION_FILES, resumable=resumable).check():  # unfinished: resumed, kept
+        assert (out / "evaluations.jsonl").exists()
+    (out / "calibration.json").write_text("{}")
+    with pytest.raises(InputError, match="--overwrite"):
+        RunDir(out, files=CALIBRATION_FILES, resumable=resumable).check()
+    with RunDir(out, overwrite=True, files=CALIBRATION_FILES, resumable=resumable).check():
+        assert sorted(p.name for p in out.iterdir()) == [".bioform.lock"]  # exactly its files removed
+    (out / "table1.json").write_text("{}")
+    with pytest.raises(InputError, match="another kind of run"):
+        RunDir(out, overwrite=True, files=CALIBRATION_FILES, resumable=resumable).check()

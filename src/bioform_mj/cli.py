@@ -641,6 +641,9 @@ def _sweep(args: argparse.Namespace) -> int:
     elif args.ray_address is not None:
         raise InputError("--ray-address applies to --backend ray only")
     out = _prepare_out(args.out, "sweep")
+    from .sweep import check_sweep_dir
+
+    check_sweep_dir(out)
     out.mkdir(parents=True, exist_ok=True)
     progress = _progress(not args.quiet, "sweep")
     try:

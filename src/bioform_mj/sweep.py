@@ -881,9 +881,24 @@ def sweep(
     if backend == "ray":  # a closed address: exit 2 in seconds, before anything is written
         check_ray_address(ray_address)
     out = Path(out)
+    check_sweep_dir(out)
     out.mkdir(parents=True, exist_ok=True)
     with folder_lock(out, "sweep directory", "running a sweep there"):  # one sweep per folder (exit 2)
         return _sweep_locked(specs, out, backend, workers, ray_address, progress, warn, device, nconmax, njmax, note)
+
+
+def check_sweep_dir(out: Path) -> None:
+    """InputError (exit 2) when ``out`` holds another kind of run (a run's ``summary.json``, a calibration):
+    a sweep folder holds a sweep (design §16)."""
+    from .outputs.rundir import KNOWN_FILES
+
+    if out.is_dir():
+        other = sorted(n for n in os.listdir(out) if n in KNOWN_FILES)
+        if other:
+            raise InputError(
+                f"sweep directory '{out}' holds another kind of run ({', '.join(other[:4])}); choose an empty, "
+                "new or sweep folder"
+            )
 
 
 #: estimated cost of a run on one core (design §16): µs per follower and control step, and seconds
