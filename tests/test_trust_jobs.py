@@ -192,6 +192,7 @@ def test_a_second_sweep_into_a_busy_folder_is_refused(tmp_path, capsys):
     [
         (["--vary", "kinematic.k1=1,2", "--vary", "kinematic.k1=3"], "--vary kinematic.k1 given twice"),
         (["--set", "kinematic.k1=2", "--vary", "kinematic.k1=1,3"], "--vary kinematic.k1 and --set kinematic.k1"),
+        (["--vary", "sim.seed=1,2"], "--vary sim.seed: the seeds are --seed"),
     ],
 )
 def test_repeated_or_clashing_vary_is_refused(tmp_path, capsys, extra, needle):

@@ -184,6 +184,8 @@ def expand(
                 f"--vary {key} given twice ('{given[key]}' and '{item}'): give one list of values, "
                 f"e.g. --vary {key}={given[key].partition('=')[2]},{raw}"
             )
+        if key == "sim.seed":  # each run's seed is set from --seed/--seeds: a varied one would be overwritten
+            raise InputError("--vary sim.seed: the seeds are --seed S (the first) and --seeds K (how many)")
         if key in set_keys:
             raise InputError(f"--vary {key} and --set {key} both given: the --set value would be ignored")
         given[key] = item
