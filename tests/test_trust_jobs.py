@@ -547,3 +547,25 @@ def test_calibration_folder_resumes_unfinished_and_overwrites_finished(tmp_path)
     (out / "table1.json").write_text("{}")
     with pytest.raises(InputError, match="another kind of run"):
         RunDir(out, overwrite=True, files=CALIBRATION_FILES, resumable=resumable).check()
+
+
+def test_evaluations_file_skips_a_cut_line_and_refuses_another_calibration(tmp_path):
+    pytest.importorskip("scipy")
+    from bioform_mj import calibrate as cal
+    from bioform_mj.errors import InputError
+    from bioform_mj.scenario import load
+
+    base = load("paper", plant="ideal")
+    ctx = cal._context(base, "table1", "ideal", 0)
+    c = cal.scenario_conditions(base)
+    ev = {"conditions": c, "objective": 0.123456789012345}
+    path = tmp_path / cal.EVALUATIONS_FILE
+    head = json.dumps({"kind": "bioform calibrate evaluations", "context": ctx})
+    path.write_text(head + "\n" + json.dumps(ev) + "\n" + json.dumps(ev)[:17])  # SIGKILL mid-line
+    got = cal.load_evaluations(path, ctx)
+    assert list(got.values()) == [ev]  # the float comes back bit for bit: a resumed search replays it
+    with pytest.raises(InputError, match="seed"):
+        cal.load_evaluations(path, cal._context(base, "table1", "ideal", 1))
+    other = load("paper", plant="ideal", overrides=["kinematic.k1=3"])
+    with pytest.raises(InputError, match="scenario"):
+        cal.load_evaluations(path, cal._context(other, "table1", "ideal", 0))

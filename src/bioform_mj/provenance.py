@@ -5,8 +5,8 @@ a resume compares the record with the present one (:func:`differences`) and redo
 when anything changed, saying what. Three parts:
 
 * ``code``: a SHA-256 over the package's Python sources (every ``*.py`` under
-  ``bioform_mj/``, names and contents; computed once per process, ~3 ms), beside the
-  package version and the MuJoCo version. numba's cache is keyed by a subset of these
+  ``bioform_mj/``, names and contents; computed once per process, ~2 ms), beside the
+  package version and, for the MuJoCo plant, the MuJoCo version. numba's cache is keyed by a subset of these
   files (``control/equations._cache_dir``: the kernel modules); a result also depends on
   the scenario loader, the metrics and the sweep itself, so the whole package counts.
 * ``files``: for every robot model of a MuJoCo scenario, the SHA-256 of the model file and
@@ -58,10 +58,10 @@ def code_hash() -> str:
 
 def _mujoco_version() -> str:
     if "mujoco" not in _CODE:
-        try:
-            from importlib.metadata import version
+        try:  # the module's own version: importlib.metadata scans site-packages (~80 ms), this is ~1 ms when
+            import mujoco  # the plant has loaded it already (a MuJoCo sweep has)
 
-            _CODE["mujoco"] = version("mujoco")
+            _CODE["mujoco"] = str(mujoco.__version__)
         except Exception:  # noqa: BLE001 - not installed: the ideal plant does not need it
             _CODE["mujoco"] = "absent"
     return _CODE["mujoco"]
@@ -161,14 +161,16 @@ def model_files(path: str | Path) -> dict[str, str]:
 def provenance(sc: Any) -> dict[str, Any]:
     """What a run of scenario ``sc`` depends on beyond ``sc.to_dict()``: versions, code hash, model files."""
     files: dict[str, str] = {}
+    mj = None  # the ideal plant does not use MuJoCo
     if sc.plant.kind == "mujoco":
+        mj = _mujoco_version()
         from .errors import BioformError
         from .robots import resolve_robot
 
         for r in sc.plant.robots:
             with contextlib.suppress(BioformError, OSError):
                 files.update(model_files(resolve_robot(r).model))
-    return {"version": __version__, "code": code_hash(), "mujoco": _mujoco_version(), "files": files}
+    return {"version": __version__, "code": code_hash(), "mujoco": mj, "files": files}
 
 
 def differences(old: Any, new: dict[str, Any]) -> list[str]:
