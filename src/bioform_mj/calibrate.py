@@ -21,7 +21,7 @@ The optimiser is scipy's differential evolution (integer dimensions for the cate
 conditions), seeded with the scenario's own conditions and a scrambled Sobol sample; a budget
 smaller than two populations is spent on that sample alone (quasi-random search). Evaluations
 run on worker processes forked after the kernels are loaded, by the sweep's runner
-(``sweep._run_local``: workers ignore SIGINT and are terminated by this process on a signal).
+(``jobs.run_local``: workers ignore SIGINT and are terminated by this process on a signal).
 Then every condition is moved alone from the best (``sensitivity``). Output:
 ``DIR/calibration.json`` and ``DIR/calibration.md``; while it runs, ``DIR/evaluations.jsonl``
 (one line per evaluation, appended as each finishes: a rerun of the same command reuses them) and,
@@ -434,7 +434,7 @@ def calibrate(
     from scipy.stats import qmc
 
     from .budget import fmt_seconds
-    from .sweep import _run_local, _Signals
+    from .jobs import Signals, run_local
 
     base, budget, workers = check_inputs(target, plant, budget, source, overrides, workers)
     default = scenario_conditions(base)
@@ -463,7 +463,7 @@ def calibrate(
             fh.write(json.dumps(ev, default=float) + "\n")  # one line per evaluation, flushed: a resume reads it
             fh.flush()
 
-    def run_many(conds: list[dict[str, Any]], sig: _Signals, nworkers: int) -> list[dict[str, Any]]:
+    def run_many(conds: list[dict[str, Any]], sig: Signals, nworkers: int) -> list[dict[str, Any]]:
         res: list[dict[str, Any] | None] = [None] * len(conds)
         todo = []
         for i, c in enumerate(conds):
@@ -479,7 +479,7 @@ def calibrate(
             keep(row["ev"])
 
         if todo:
-            _run_local(todo, nworkers, sig, got, fn=_eval_item, died=_died_item)
+            run_local(todo, nworkers, sig, got, fn=_eval_item, died=_died_item)
         if sig.signum is not None:
             history.extend(r for r in res if r is not None)
             raise _Stopped()
@@ -498,7 +498,7 @@ def calibrate(
     sens_res: list = []
     search_evals = 0
     try:
-        with _Signals() as sig:
+        with Signals() as sig:
             try:
                 if plant == "mujoco":  # its own limit is the robots' motors' (torque.tau_max is the ideal plant's)
                     ev_default = run_many([dict(default, tau_max=None)], sig, 1)[0]

@@ -21,12 +21,13 @@ it again) and the sweep goes on. SIGINT/SIGTERM stop the sweep: running workers 
 terminated (SIGTERM, then SIGKILL after a grace period; they also die with the sweep via
 ``PR_SET_PDEATHSIG`` if it is killed), finished rows are kept, the tables are written for
 them and :class:`SweepInterrupted` is raised. One worker (and, off Linux, every sweep) runs in
-this process, where a signal abandons the run in progress.
+this process, where a signal abandons the run in progress. The runner is :mod:`bioform_mj.jobs`
+(shared with ``calibrate``); Ray is :mod:`bioform_mj.ray_backend` (a lost head raises
+:class:`SweepFailed` after the tables are written).
 """
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import dataclasses
 import hashlib
@@ -34,12 +35,10 @@ import io
 import itertools
 import json
 import os
-import select
 import signal
 import sys
 import time
-import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -47,7 +46,12 @@ from typing import Any
 import numpy as np
 
 from .errors import BioformError, InputError
+from .jobs import Signals as _Signals
+from .jobs import Stop as _Stop
+from .jobs import raising as _raising
+from .jobs import run_local as _run_local
 from .outputs.files import write_json, write_text
+from .ray_backend import check_ray_address
 from .scenario import Scenario, load
 
 #: Per-follower metrics of ``summary.json`` that a sweep row carries (mean and max over followers).
@@ -61,8 +65,9 @@ METRICS = (
     "saturation_fraction",
 )
 
-#: Seconds a terminated worker gets to exit before it is killed.
-GRACE_S = 2.0
+
+class SweepFailed(BioformError):
+    """The sweep could not go on (its Ray head was lost); the tables cover the finished rows (exit 1)."""
 
 
 class SweepInterrupted(BioformError):
@@ -316,474 +321,6 @@ def _died_row(spec: RunSpec, reason: str) -> dict[str, Any]:
     return row
 
 
-def _exit_reason(status: int) -> str:
-    if os.WIFSIGNALED(status):
-        sig = os.WTERMSIG(status)
-        try:
-            name = signal.Signals(sig).name
-        except ValueError:
-            name = f"signal {sig}"
-        hint = " (out of memory? the kernel's OOM killer sends SIGKILL)" if sig == signal.SIGKILL else ""
-        return f"killed by {name}{hint}"
-    return f"exited with code {os.waitstatus_to_exitcode(status)} without a result"
-
-
-# ------------------------------------------------------------------------------------------
-# Signals
-
-
-class _Stop(BaseException):
-    """Raised by the signal handler to abandon the in-process run (not an Exception: run_one lets it through)."""
-
-
-class _Signals:
-    """SIGINT/SIGTERM → ``signum`` set (first one wins); while ``raising``, also raise :class:`_Stop`."""
-
-    def __init__(self) -> None:
-        self.signum: int | None = None
-        self.raising = False
-        self._old: dict[int, Any] = {}
-
-    def _handler(self, signum: int, frame: Any) -> None:
-        if self.signum is None:
-            self.signum = signum
-        if self.raising:
-            self.raising = False
-            raise _Stop()
-
-    def __enter__(self) -> _Signals:
-        for s in (signal.SIGINT, signal.SIGTERM):
-            try:
-                self._old[s] = signal.signal(s, self._handler)
-            except ValueError:  # not the main thread: leave signals to the caller
-                break
-        return self
-
-    def reinstall(self) -> None:
-        """Take the signals back from a library that installed its own handlers (ray.init does, for SIGTERM)."""
-        for s in self._old:
-            signal.signal(s, self._handler)
-
-    def __exit__(self, *exc: Any) -> None:
-        for s, h in self._old.items():
-            signal.signal(s, h)
-
-
-@contextlib.contextmanager
-def _raising(sig: _Signals) -> Iterator[None]:
-    """Let a signal abandon what runs inside (checked on entry too)."""
-    if sig.signum is not None:
-        raise _Stop()
-    sig.raising = True
-    try:
-        yield
-    finally:
-        sig.raising = False
-
-
-# ------------------------------------------------------------------------------------------
-# Backends
-
-
-_KERNELS: list[bool] = []
-
-
-def _load_kernels() -> None:
-    """Run both compiled loops for a moment, so that numba's cached machine code is loaded
-    in this process (and inherited by forked workers instead of loaded once per worker); once per process."""
-    if _KERNELS:
-        return
-    from .scenario import load
-    from .sim import simulate
-
-    for plant in ("ideal", "mujoco"):
-        simulate(load("paper", plant=plant, overrides=["sim.duration=0.01"]))
-    _KERNELS.append(True)
-
-
-def _die_with_parent(parent: int) -> None:
-    """In a worker: SIGKILL when the sweep process dies, however it dies (Linux)."""
-    with contextlib.suppress(Exception):
-        import ctypes
-
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    if os.getppid() != parent:  # the sweep died before prctl
-        os._exit(1)
-
-
-def _read_exact(fd: int, n: int) -> bytes | None:
-    buf = b""
-    while len(buf) < n:
-        chunk = os.read(fd, n - len(buf))
-        if not chunk:
-            return None
-        buf += chunk
-    return buf
-
-
-def _worker(todo: list[Any], task_r: int, result_w: int, parent: int, fn: Callable[[Any], dict] | None = None) -> None:
-    """Body of a forked worker: read run indices (4 bytes each) from ``task_r`` until EOF, write each
-    run's row to ``result_w`` as length-prefixed JSON. Never returns."""
-    code = 1
-    try:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group; the sweep decides
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
-        _die_with_parent(parent)
-        while True:
-            msg = _read_exact(task_r, 4)
-            if msg is None:
-                break
-            row = (fn or run_one)(todo[int.from_bytes(msg, "little")])
-            data = json.dumps(row, default=lambda o: o.item() if hasattr(o, "item") else str(o)).encode()
-            out = len(data).to_bytes(8, "little") + data
-            while out:
-                out = out[os.write(result_w, out) :]
-        code = 0
-    except BaseException:  # noqa: BLE001 - report and exit; never run the parent's code
-        with contextlib.suppress(Exception):
-            traceback.print_exc()
-    finally:
-        os._exit(code)
-
-
-def _run_serial(
-    todo: list[Any], sig: _Signals, done: Callable[[dict], None], fn: Callable[[Any], dict] | None = None
-) -> None:
-    for sp in todo:
-        try:
-            with _raising(sig):
-                row = (fn or run_one)(sp)
-        except _Stop:
-            return
-        done(row)
-
-
-@dataclass
-class _Proc:
-    """A forked worker as the sweep sees it."""
-
-    pid: int
-    task_w: int
-    result_r: int
-    current: int | None = None  # index of the run it is doing
-    buf: bytearray = field(default_factory=bytearray)
-
-
-def _run_forked(
-    todo: list[Any],
-    workers: int,
-    sig: _Signals,
-    done: Callable[[dict], None],
-    fn: Callable[[Any], dict] | None = None,
-    died: Callable[[Any, str], dict] | None = None,
-) -> None:
-    """Runs on ``workers`` processes forked from this one after it loaded the compiled kernels, one run at a
-    time each; a worker that dies fails the run it was doing and is replaced."""
-    _load_kernels()  # before forking: workers inherit the loaded kernels (start in ms, not ~1 s each)
-    parent = os.getpid()
-    queue = list(range(len(todo) - 1, -1, -1))  # popped from the end: todo order
-    procs: dict[int, _Proc] = {}  # by result fd
-
-    def start() -> None:
-        task_r, task_w = os.pipe()
-        result_r, result_w = os.pipe()
-        sys.stdout.flush()
-        sys.stderr.flush()
-        pid = os.fork()
-        if pid == 0:  # pragma: no cover - runs in the worker
-            for fd in [task_w, result_r] + [fd for p in procs.values() for fd in (p.task_w, p.result_r)]:
-                os.close(fd)
-            _worker(todo, task_r, result_w, parent, fn)
-        os.close(task_r)
-        os.close(result_w)
-        procs[result_r] = _Proc(pid, task_w, result_r)
-
-    def close_task(p: _Proc) -> None:
-        """EOF on its task pipe: an idle worker exits."""
-        if p.task_w >= 0:
-            with contextlib.suppress(OSError):
-                os.close(p.task_w)
-            p.task_w = -1
-
-    def close(p: _Proc) -> None:
-        del procs[p.result_r]
-        close_task(p)
-        with contextlib.suppress(OSError):
-            os.close(p.result_r)
-
-    def assign(p: _Proc) -> None:
-        """Give an idle worker the next run, or tell it to exit (EOF) when there is none."""
-        if queue and sig.signum is None:
-            i = queue.pop()
-            try:
-                os.write(p.task_w, i.to_bytes(4, "little"))
-                p.current = i
-            except OSError:  # it died idle: the run never started, someone else does it
-                queue.append(i)
-        else:
-            close_task(p)
-
-    try:
-        while sig.signum is None and (queue or any(p.current is not None for p in procs.values())):
-            while queue and len(procs) < workers and sig.signum is None:
-                start()
-            for p in list(procs.values()):
-                if p.current is None and p.task_w >= 0:
-                    assign(p)
-            ready, _, _ = select.select(list(procs), [], [], 0.25)
-            for fd in ready:
-                p = procs[fd]
-                chunk = os.read(fd, 1 << 16)
-                if not chunk:  # EOF: the worker exited or died
-                    close(p)
-                    _, status = os.waitpid(p.pid, 0)
-                    if p.current is not None and sig.signum is None:
-                        done((died or _died_row)(todo[p.current], _exit_reason(status)))
-                    continue
-                p.buf += chunk
-                while len(p.buf) >= 8 and len(p.buf) >= 8 + int.from_bytes(p.buf[:8], "little"):
-                    n = int.from_bytes(p.buf[:8], "little")
-                    row = json.loads(bytes(p.buf[8 : 8 + n]).decode())
-                    del p.buf[: 8 + n]
-                    p.current = None
-                    done(row)
-    finally:
-        for p in list(procs.values()):
-            close_task(p)
-        _reap([p.pid for p in procs.values()], wait_first=sig.signum is None)
-        for p in list(procs.values()):
-            close(p)
-
-
-def _reap(pids: list[int], wait_first: bool = False) -> None:
-    """End worker processes: SIGTERM (after :data:`GRACE_S` for them to exit on their own when
-    ``wait_first``), then SIGKILL those still alive after another :data:`GRACE_S`."""
-    left = set(pids)
-    if wait_first:
-        _wait_gone(left, time.monotonic() + GRACE_S)
-    for pid in left:
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGTERM)
-    _wait_gone(left, time.monotonic() + GRACE_S)
-    for pid in left:
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
-    for pid in left:
-        with contextlib.suppress(ChildProcessError):
-            os.waitpid(pid, 0)
-
-
-def _wait_gone(left: set[int], deadline: float) -> None:
-    """Reap the processes of ``left`` that exit before ``deadline`` (removing them from it)."""
-    while left and time.monotonic() < deadline:
-        for pid in list(left):
-            try:
-                if os.waitpid(pid, os.WNOHANG)[0] != 0:
-                    left.discard(pid)
-            except ChildProcessError:
-                left.discard(pid)
-        if left:
-            time.sleep(0.005)
-
-
-def _run_local(
-    todo: list[Any],
-    workers: int,
-    sig: _Signals,
-    done: Callable[[dict], None],
-    fn: Callable[[Any], dict] | None = None,
-    died: Callable[[Any, str], dict] | None = None,
-) -> None:
-    """``done(fn(item))`` for every item of ``todo``, in this process or on ``workers`` forked ones
-    (``died(item, reason)``: the row of an item whose worker died); stops when ``sig`` records a signal."""
-    if workers <= 1 or not sys.platform.startswith("linux"):  # forking a process that loaded MuJoCo: Linux only
-        _run_serial(todo, sig, done, fn)
-    else:
-        _run_forked(todo, workers, sig, done, fn, died)
-
-
-#: Ray errors meaning the process running the task died (the run did not fail on its own).
-_RAY_DIED = {"WorkerCrashedError", "OutOfMemoryError", "NodeDiedError", "ObjectLostError", "LocalRayletDiedError"}
-
-
-#: seconds a Ray connection may take (``ray.init`` against a cluster), and between probes of its GCS
-#: port during a sweep; the head counts as lost after :data:`RAY_LOST_PROBES` failed probes in a row
-RAY_CONNECT_TIMEOUT_S = 30.0
-RAY_PROBE_EVERY_S = 2.0
-RAY_LOST_PROBES = 3
-
-_RAY_HELP = (
-    "check that the Ray head runs there (`ray status --address ADDR`; `ray start --head` prints the address, "
-    "GCS port 6379 by default) and that no firewall blocks the port; a cluster started with `ray start --head` "
-    "(Ray >= 2.52) uses token authentication: set RAY_AUTH_MODE=token (and RAY_AUTH_TOKEN, or the token in "
-    "~/.ray/auth_token) in the sweep's environment too"
-)
-
-
-class SweepFailed(BioformError):
-    """The sweep could not go on (its Ray head was lost); the tables cover the finished rows (exit 1)."""
-
-
-def _host_port(address: str) -> tuple[str, int] | None:
-    """``(host, port)`` of a Ray address ``HOST:PORT`` or ``ray://HOST:PORT`` (None: ``auto``/``local``)."""
-    a = address.split("://", 1)[1] if "://" in address else address
-    host, sep, port = a.rpartition(":")
-    if not sep or not port.isdigit():
-        return None
-    return host.strip("[]") or "127.0.0.1", int(port)
-
-
-def _probe(host: str, port: int, timeout: float = 2.0) -> str | None:
-    """None when something accepts TCP connections at ``host:port``, else why not."""
-    import socket
-
-    try:
-        with socket.create_connection((host, port), timeout=timeout):
-            return None
-    except OSError as exc:
-        return (
-            exc.strerror or type(exc).__name__ if not isinstance(exc, TimeoutError) else f"no answer in {timeout:g} s"
-        )
-
-
-def check_ray_address(address: str | None) -> None:
-    """InputError (exit 2) within seconds when nothing listens at ``--ray-address``, naming it and what to check."""
-    if address is None:
-        return
-    hp = _host_port(address)
-    if address not in ("auto", "local") and hp is None:
-        raise InputError(
-            f"--ray-address '{address}': expected HOST:PORT (e.g. 127.0.0.1:6379), ray://HOST:PORT or auto"
-        )
-    if hp is None:
-        return
-    why = _probe(*hp)
-    if why is not None:
-        raise InputError(f"--ray-address {address}: cannot connect ({why}); {_RAY_HELP.replace('ADDR', address)}")
-
-
-def _in_thread(fn: Callable[[], Any], seconds: float, sig: _Signals) -> tuple[str, Any]:
-    """Run ``fn`` in a daemon thread: ``("ok", value)``, ``("error", exc)``, ``("timeout", None)`` after
-    ``seconds``, or ``("signal", None)`` as soon as ``sig`` records SIGINT/SIGTERM."""
-    import threading
-
-    box: dict[str, Any] = {}
-
-    def body() -> None:
-        try:
-            box["ok"] = fn()
-        except BaseException as exc:  # noqa: BLE001 - handed to the caller
-            box["error"] = exc
-
-    t = threading.Thread(target=body, daemon=True)
-    t.start()
-    deadline = time.monotonic() + seconds
-    while t.is_alive():
-        if sig.signum is not None:
-            return "signal", None
-        if time.monotonic() > deadline:
-            return "timeout", None
-        t.join(0.05)
-    return ("error", box["error"]) if "error" in box else ("ok", box.get("ok"))
-
-
-def _run_ray(
-    todo: list[RunSpec], workers: int, address: str | None, sig: _Signals, done: Callable[[dict], None]
-) -> str | None:
-    """The runs as Ray tasks; returns None, or why the sweep could not go on (its head was lost).
-
-    ``ray.init`` runs in a thread with a deadline (:data:`RAY_CONNECT_TIMEOUT_S`), so that a signal or a
-    cluster that does not answer stops it in seconds; during the sweep the cluster's GCS port is probed
-    every :data:`RAY_PROBE_EVERY_S` (design §16)."""
-    import logging
-
-    try:
-        import ray
-    except ImportError:
-        raise InputError("--backend ray needs Ray: pip install 'bioform-mj[ray]'") from None
-    started = False
-    if not ray.is_initialized():
-        kwargs: dict[str, Any] = {"address": address, "include_dashboard": False, "log_to_driver": False}
-        if address is None:
-            kwargs["num_cpus"] = workers
-        wlog = logging.getLogger("ray._private.worker")
-        level = wlog.level
-        wlog.setLevel(logging.ERROR)  # "SIGTERM handler is not set ...": ours stays, as wanted
-        try:
-            if address is None:  # a local cluster starts from the main thread (its GCS does not come up otherwise)
-                try:
-                    with _raising(sig):
-                        how, val = "ok", ray.init(**kwargs)
-                except _Stop:
-                    how, val = "signal", None
-                    if ray.is_initialized():
-                        ray.shutdown()
-                except Exception as exc:  # noqa: BLE001 - reported below
-                    how, val = "error", exc
-            else:
-                how, val = _in_thread(lambda: ray.init(**kwargs), RAY_CONNECT_TIMEOUT_S, sig)
-        finally:
-            wlog.setLevel(level)
-        where = address or "a local Ray"
-        if how == "signal":
-            return None
-        if how == "timeout":
-            raise InputError(
-                f"--ray-address {where}: no connection in {RAY_CONNECT_TIMEOUT_S:g} s; "
-                f"{_RAY_HELP.replace('ADDR', str(address))}"
-            )
-        if how == "error":
-            msg = str(val).splitlines()[0] if str(val) else type(val).__name__
-            raise InputError(
-                f"--ray-address {where}: ray.init failed ({type(val).__name__}: {msg[:300]}); "
-                f"{_RAY_HELP.replace('ADDR', str(address))}"
-            )
-        started = True
-    sig.reinstall()
-    gcs = None
-    with contextlib.suppress(Exception):
-        gcs = _host_port(ray.get_runtime_context().gcs_address)
-    pending: dict[Any, RunSpec] = {}
-    lost: str | None = None
-    try:
-        # no retries: a run whose worker dies is recorded as failed, like the local backend does
-        remote = ray.remote(num_cpus=1, max_retries=0)(run_one)
-        pending = {remote.remote(sp): sp for sp in todo}
-        next_probe, failed = time.monotonic() + RAY_PROBE_EVERY_S, 0
-        while pending and sig.signum is None:
-            if gcs is not None and time.monotonic() > next_probe:
-                why = _probe(*gcs, timeout=1.0)
-                failed = failed + 1 if why is not None else 0
-                next_probe = time.monotonic() + RAY_PROBE_EVERY_S
-                if failed >= RAY_LOST_PROBES:
-                    lost = f"the Ray head at {gcs[0]}:{gcs[1]} was lost ({why}, {failed} probes in a row)"
-                    break
-            try:
-                ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.25)
-            except Exception as exc:  # noqa: BLE001 - the cluster went away under us
-                lost = f"Ray failed mid-sweep ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})"
-                break
-            for r in ready:
-                sp = pending.pop(r)
-                try:
-                    row = ray.get(r)
-                except Exception as exc:  # noqa: BLE001 - WorkerCrashedError, OutOfMemoryError, ...
-                    msg = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
-                    if type(exc).__name__ in _RAY_DIED:
-                        row = _died_row(sp, msg)
-                    else:
-                        row = {**_base_row(sp), "status": "failed", "outcome": "failed", "error": msg}
-                done(row)
-    finally:
-        if pending and (sig.signum is not None or lost is None):
-            for r in pending:
-                with contextlib.suppress(Exception):
-                    ray.cancel(r, force=True)
-        if started:  # a lost head can make shutdown wait: bounded
-            _in_thread(ray.shutdown, 5.0, _Signals())
-    return lost
-
-
 # ------------------------------------------------------------------------------------------
 # The sweep
 
@@ -1010,11 +547,16 @@ def _sweep_locked(
     failure: str | None = None
     with _Signals() as sig:
         if backend == "local":
-            _run_local(todo, workers, sig, done)
+            _run_local(todo, workers, sig, done, fn=run_one, died=_died_row)
         elif backend == "warp":
             _run_warp(todo, groups, device, sig, done, {"nconmax": nconmax, "njmax": njmax})
         else:
-            failure = _run_ray(todo, workers, ray_address, sig, done)
+            from .ray_backend import run_ray
+
+            def failed(sp: RunSpec, msg: str) -> dict[str, Any]:
+                return {**_base_row(sp), "status": "failed", "outcome": "failed", "error": msg}
+
+            failure = run_ray(todo, workers, ray_address, sig, done, run_one, _died_row, failed)
         wall = time.perf_counter() - t0
         ran = len(rows) - skipped
         interrupted = sig.signum
