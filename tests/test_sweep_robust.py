@@ -263,10 +263,20 @@ def test_resume_keys_on_content_not_path(tmp_path):
     assert a.key == expand("paper", 1, ["bioinspired"], [], ["sim.duration=0.3"], warn=None)[0].key
 
 
-def test_key_includes_package_version(monkeypatch):
-    a = expand("paper", 1, ["bioinspired"], [], warn=None)[0].key
-    monkeypatch.setattr(sweep_mod, "__version__", "999.0")
-    assert expand("paper", 1, ["bioinspired"], [], warn=None)[0].key != a
+def test_package_version_change_redoes_rows(tmp_path, monkeypatch, capsys):
+    """The version is part of a row's provenance: a resume under another version redoes the row, saying why."""
+    from bioform_mj import provenance
+
+    out = tmp_path / "sw"
+    args = ("paper", 1, ["bioinspired"], [], ["sim.duration=0.2"])
+    assert sweep(expand(*args, plant="ideal", warn=None), out, workers=1)["ran"] == 1
+    assert sweep(expand(*args, plant="ideal", warn=None), out, workers=1)["ran"] == 0
+    monkeypatch.setattr(provenance, "__version__", "999.0")
+    capsys.readouterr()
+    again = sweep(expand(*args, plant="ideal", warn=None), out, workers=1)
+    assert again["ran"] == 1 and again["skipped"] == 0
+    assert "resume: 1 row(s) redone (package version changed: 0.1.0 -> 999.0)" in capsys.readouterr().err
+    assert again["rows"][0]["provenance"]["version"] == "999.0"
 
 
 @pytest.mark.parametrize("damage", ["truncate", "garbage", "wrong_key"])

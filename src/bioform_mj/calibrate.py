@@ -20,25 +20,32 @@ above 0.5 m: the paper's Figs. 5–6 show every method holding it) and 10 for a 
 The optimiser is scipy's differential evolution (integer dimensions for the categorical
 conditions), seeded with the scenario's own conditions and a scrambled Sobol sample; a budget
 smaller than two populations is spent on that sample alone (quasi-random search). Evaluations
-run on a fork-based process pool, forked after the kernels are loaded (as ``sweep.py`` does).
+run on worker processes forked after the kernels are loaded, by the sweep's runner
+(``jobs.run_local``: workers ignore SIGINT and are terminated by this process on a signal).
 Then every condition is moved alone from the best (``sensitivity``). Output:
-``DIR/calibration.json`` and ``DIR/calibration.md``.
+``DIR/calibration.json`` and ``DIR/calibration.md``; while it runs, ``DIR/evaluations.jsonl``
+(one line per evaluation, appended as each finishes: a rerun of the same command reuses them) and,
+after SIGINT/SIGTERM, ``DIR/calibration.partial.json`` (the best so far). Design §16.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import hashlib
+import json
 import math
-import multiprocessing
 import os
+import signal
 import time
 import warnings
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .errors import InputError
+from .errors import BioformError, InputError
 from .outputs.files import write_json, write_text
 from .table1 import PAPER_TABLE1
 
@@ -271,20 +278,48 @@ def _sensitivity_points(best: dict[str, Any], default: dict[str, Any]) -> list[t
     return pts
 
 
-def calibrate(
-    target: str = "table1",
-    plant: str = "ideal",
-    budget: int | None = None,
-    source: str = "paper",
-    overrides: Sequence[str] = (),
-    workers: int | None = None,
-    seed: int = 0,
-    progress: Callable[[int, int], None] | None = None,
-) -> dict[str, Any]:
-    """Run the search and the sensitivity analysis; returns the report (see module doc)."""
-    from scipy.optimize import differential_evolution
-    from scipy.stats import qmc
+#: most evaluations one calibration may ask (design §16): beyond, the estimate is refused (exit 2)
+MAX_BUDGET = 100_000
+#: estimated memory one kept evaluation takes (its record in the history, ~3 kB, with margin)
+EVALUATION_BYTES = 10e3
+EVALUATIONS_FILE = "evaluations.jsonl"
+PARTIAL_FILE = "calibration.partial.json"
+_HEADER_KIND = "bioform calibrate evaluations"
 
+
+class CalibrationInterrupted(BioformError):
+    """SIGINT/SIGTERM stopped the calibration; the evaluations done are kept in ``evaluations.jsonl``."""
+
+    def __init__(self, signum: int, done: int, kept: str) -> None:
+        self.signum, self.done, self.kept = signum, done, kept
+        super().__init__(f"interrupted ({signal.Signals(signum).name}) after {done} evaluations; {kept}")
+
+
+class _Stopped(Exception):
+    """Raised through scipy's optimiser when a signal stopped the evaluations."""
+
+
+def evaluation_seconds(sc: Any) -> float:
+    """Estimated single-core seconds of one evaluation (Table I: four runs of ``sc``), from the sweep's cost model."""
+    from .sweep import COST_SETUP_S, COST_US_PER_ROBOT_STEP
+
+    kind = sc.plant.kind if sc.plant.kind in COST_SETUP_S else "mujoco"
+    steps = sc.sim.duration / sc.sim.control_dt
+    return 4 * (COST_SETUP_S[kind] + steps * sc.n * COST_US_PER_ROBOT_STEP[kind] * 1e-6)
+
+
+def check_inputs(
+    target: str,
+    plant: str,
+    budget: int | None,
+    source: str,
+    overrides: Sequence[str],
+    workers: int | None,
+) -> tuple[Any, int, int]:
+    """Validate a calibration's input before any work (InputError, exit 2): returns
+    ``(scenario, budget, workers)``. A budget above :data:`MAX_BUDGET`, or whose history does not fit
+    in memory, is refused with its estimated duration."""
+    from .budget import fmt_bytes, fmt_seconds, require
     from .scenario import PLANTS, load
 
     if target not in TARGETS:
@@ -300,79 +335,235 @@ def calibrate(
     base = load(source, list(overrides), plant=plant)  # validates the scenario (exit 2 before any work)
     if base.n != 3:
         raise InputError(f"Table I has three followers; scenario '{source}' has {base.n}")
+    each = evaluation_seconds(base)
+    if budget > MAX_BUDGET:
+        raise InputError(
+            f"--budget {budget}: {budget:.3g} evaluations of ~{each:.2g} s each (estimated) on {workers} worker(s) "
+            f"would take about {fmt_seconds(budget * each / workers)}; at most {MAX_BUDGET} evaluations"
+        )
+    require(budget * EVALUATION_BYTES, f"--budget {budget} ({fmt_bytes(EVALUATION_BYTES)} per evaluation kept)")
+    return base, budget, workers
+
+
+def _context(base: Any, target: str, plant: str, seed: int) -> dict[str, Any]:
+    """What the evaluations of a calibration depend on besides their conditions (a resume checks it)."""
+    from .provenance import provenance
+    from .sweep import config_text
+
+    return {
+        "target": target,
+        "plant": plant,
+        "seed": seed,
+        "scenario": hashlib.sha1(config_text(base).encode()).hexdigest()[:16],
+        "provenance": provenance(base),
+    }
+
+
+def _ckey(c: dict[str, Any]) -> str:
+    return json.dumps(c, sort_keys=True, separators=(",", ":"))
+
+
+def load_evaluations(path: Path, context: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The evaluations kept in ``path`` by an earlier run with the same ``context``, by conditions;
+    InputError when they belong to another calibration (other scenario, code, robot files, seed).
+    A last line cut short (the process was killed mid-write) is ignored."""
+    try:
+        lines = path.read_text().splitlines()
+    except FileNotFoundError:
+        return {}
+    if not lines:
+        return {}
+    try:
+        head = json.loads(lines[0])
+    except ValueError:
+        head = {}
+    if head.get("kind") != _HEADER_KIND:
+        raise InputError(f"'{path}' is not a calibration's evaluations file; use --overwrite or another --out")
+    old = head.get("context", {})
+    why = [k for k in ("target", "plant", "seed", "scenario") if old.get(k) != context[k]]
+    from .provenance import differences
+
+    why += differences(old.get("provenance"), context["provenance"])
+    if why:
+        raise InputError(
+            f"'{path}' holds the evaluations of another calibration ({'; '.join(why[:3])}): they cannot be "
+            "resumed; use --overwrite to start again, or another --out"
+        )
+    cache: dict[str, dict[str, Any]] = {}
+    for ln in lines[1:]:
+        try:
+            ev = json.loads(ln)
+        except ValueError:
+            continue  # cut short
+        if isinstance(ev, dict) and "conditions" in ev and "objective" in ev:
+            cache[_ckey(ev["conditions"])] = ev
+    return cache
+
+
+def _eval_item(item: tuple[int, dict[str, Any]]) -> dict[str, Any]:
+    return {"i": item[0], "ev": _eval_in_worker(item[1])}
+
+
+def _died_item(item: tuple[int, dict[str, Any]], reason: str) -> dict[str, Any]:
+    c = item[1]
+    return {"i": item[0], "ev": {"conditions": c, "objective": DIVERGED_PENALTY * 2, "error": f"worker died: {reason}"}}
+
+
+def calibrate(
+    target: str = "table1",
+    plant: str = "ideal",
+    budget: int | None = None,
+    source: str = "paper",
+    overrides: Sequence[str] = (),
+    workers: int | None = None,
+    seed: int = 0,
+    progress: Callable[[int, int], None] | None = None,
+    out: str | Path | None = None,
+    note: Callable[[str], None] | None = None,
+) -> dict[str, Any]:
+    """Run the search and the sensitivity analysis; returns the report (see module doc).
+
+    With ``out``, every evaluation is appended to ``out/evaluations.jsonl`` as it finishes, and
+    evaluations already there (same scenario, code, robot files and seed) are reused: the search is
+    deterministic for a seed, so a rerun replays them and goes on where the last one stopped.
+    SIGINT/SIGTERM stop the evaluations in seconds (workers terminated), write the best so far to
+    ``out/calibration.partial.json`` and raise :class:`CalibrationInterrupted`. ``note(text)`` is
+    told the evaluation count and an estimated duration once the first evaluation is timed.
+    """
+    from scipy.optimize import differential_evolution
+    from scipy.stats import qmc
+
+    from .budget import fmt_seconds
+    from .jobs import Signals, run_local
+
+    base, budget, workers = check_inputs(target, plant, budget, source, overrides, workers)
     default = scenario_conditions(base)
     bounds = _bounds(np.array(default["initial_poses"]))
     n = base.n
     t_start = time.perf_counter()
-
     _CTX.update(source=source, plant=plant, overrides=list(overrides))
-    if plant == "mujoco":  # the scenario's own limit there is the robots' motors' (torque.tau_max is the ideal plant's)
-        ev_default = evaluate(dict(default, tau_max=None), source, plant, overrides)
-        default["tau_max"] = float(ev_default.get("robot_tau_max") or default["tau_max"])
-        ev_default["conditions"] = default
-    else:
-        ev_default = evaluate(default, source, plant, overrides)  # loads the kernels before the fork
-    history: list[dict[str, Any]] = [ev_default]
-    done = [1]
+
+    ev_path = Path(out) / EVALUATIONS_FILE if out is not None else None
+    cache: dict[str, dict[str, Any]] = {}
+    fh = None
+    if ev_path is not None:
+        context = _context(base, target, plant, seed)
+        cache = load_evaluations(ev_path, context)
+        if not cache:
+            with open(ev_path, "w") as f0:
+                f0.write(json.dumps({"kind": _HEADER_KIND, "context": context}) + "\n")
+        fh = open(ev_path, "a")  # noqa: SIM115 - closed in the finally below
+    reused = [0]
+    history: list[dict[str, Any]] = []
+    done = [0]
     total = budget
 
-    ctx = multiprocessing.get_context("fork") if workers > 1 and hasattr(os, "fork") else None
-    pool = ctx.Pool(workers) if ctx is not None else None
+    def keep(ev: dict[str, Any]) -> None:
+        if fh is not None and not str(ev.get("error", "")).startswith("worker died"):
+            fh.write(json.dumps(ev, default=float) + "\n")  # one line per evaluation, flushed: a resume reads it
+            fh.flush()
 
-    def run_many(conds: list[dict[str, Any]]) -> list[dict[str, Any]]:
-        res = pool.map(_eval_in_worker, conds, chunksize=1) if pool is not None else [_eval_in_worker(c) for c in conds]
-        history.extend(res)
+    def run_many(conds: list[dict[str, Any]], sig: Signals, nworkers: int) -> list[dict[str, Any]]:
+        res: list[dict[str, Any] | None] = [None] * len(conds)
+        todo = []
+        for i, c in enumerate(conds):
+            hit = cache.get(_ckey(c))
+            if hit is not None:
+                res[i] = hit
+                reused[0] += 1
+            else:
+                todo.append((i, c))
+
+        def got(row: dict[str, Any]) -> None:
+            res[row["i"]] = row["ev"]
+            keep(row["ev"])
+
+        if todo:
+            run_local(todo, nworkers, sig, got, fn=_eval_item, died=_died_item)
+        if sig.signum is not None:
+            history.extend(r for r in res if r is not None)
+            raise _Stopped()
+        history.extend(res)  # type: ignore[arg-type]
         done[0] += len(res)
         if progress is not None:
             progress(min(done[0], total), total)
-        return res
-
-    def de_map(_func: Callable, xs: Any) -> list[float]:
-        return [r["objective"] for r in run_many([to_conditions(x, n) for x in xs])]
+        return res  # type: ignore[return-value]
 
     d = len(bounds)
     pop = max(5, 2 * d)
     x0 = to_vector(default)
     lo, hi = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
     method = "quasi-random search (scrambled Sobol)"
+    sens_pts: list = []
+    sens_res: list = []
+    search_evals = 0
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # Sobol balance warnings for sample sizes not a power of 2
-            sob = qmc.Sobol(d, scramble=True, seed=seed)
-            if budget < 2 * pop:
-                pts = qmc.scale(sob.random(max(budget - 1, 0)), lo, hi) if budget > 1 else np.zeros((0, d))
-                run_many([to_conditions(x, n) for x in pts])
-            else:
-                method = "differential evolution (scipy.optimize, rand1bin, integer categorical dimensions)"
-                init = np.vstack([x0, qmc.scale(sob.random(pop - 1), lo, hi)])
-                ints = _integrality(3 * n)
-                init[:, ints] = np.round(init[:, ints])
-                maxiter = max(budget // pop - 1, 0)
-                differential_evolution(
-                    lambda x: 0.0,
-                    bounds,
-                    init=init,
-                    maxiter=maxiter,
-                    popsize=pop,
-                    integrality=ints,
-                    workers=de_map,
-                    updating="deferred",
-                    polish=False,
-                    tol=0.0,
-                    atol=0.0,
-                    seed=seed,
-                    mutation=(0.5, 1.0),
-                    recombination=0.7,
-                )
-        search_evals = len(history)
-        good = [h for h in history if "per" in h]
-        best = min(good or history, key=lambda h: h["objective"])
-        sens_pts = _sensitivity_points(best["conditions"], default)
-        sens_res = run_many([c for _, _, c in sens_pts])
+        with Signals() as sig:
+            try:
+                if plant == "mujoco":  # its own limit is the robots' motors' (torque.tau_max is the ideal plant's)
+                    ev_default = run_many([dict(default, tau_max=None)], sig, 1)[0]
+                    default["tau_max"] = float(ev_default.get("robot_tau_max") or default["tau_max"])
+                    ev_default = dict(ev_default, conditions=default)
+                    history[-1] = ev_default
+                else:
+                    ev_default = run_many([default], sig, 1)[0]  # in this process: loads the kernels before the fork
+                if note is not None:
+                    each = float(ev_default.get("wall_s") or evaluation_seconds(base))
+                    n_sens = len(_sensitivity_points(default, scenario_conditions(base))) + 8
+                    left = max(0, budget - 1 - len(cache)) + n_sens
+                    was = f"; {len(cache)} kept in {ev_path} are reused" if cache else ""
+                    note(
+                        f"calibrate: {budget} evaluations in the search + ~{n_sens} for the sensitivity on {workers} "
+                        f"worker(s), {each:.2g} s each (the first one, measured): estimated "
+                        f"{fmt_seconds(left * each / workers)}{was}"
+                    )
+
+                def de_map(_func: Callable, xs: Any) -> list[float]:
+                    return [r["objective"] for r in run_many([to_conditions(x, n) for x in xs], sig, workers)]
+
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")  # Sobol balance warnings for sample sizes not a power of 2
+                    sob = qmc.Sobol(d, scramble=True, seed=seed)
+                    if budget < 2 * pop:
+                        pts = qmc.scale(sob.random(max(budget - 1, 0)), lo, hi) if budget > 1 else np.zeros((0, d))
+                        run_many([to_conditions(x, n) for x in pts], sig, workers)
+                    else:
+                        method = "differential evolution (scipy.optimize, rand1bin, integer categorical dimensions)"
+                        init = np.vstack([x0, qmc.scale(sob.random(pop - 1), lo, hi)])
+                        ints = _integrality(3 * n)
+                        init[:, ints] = np.round(init[:, ints])
+                        maxiter = max(budget // pop - 1, 0)
+                        differential_evolution(
+                            lambda x: 0.0,
+                            bounds,
+                            init=init,
+                            maxiter=maxiter,
+                            popsize=pop,
+                            integrality=ints,
+                            workers=de_map,
+                            updating="deferred",
+                            polish=False,
+                            tol=0.0,
+                            atol=0.0,
+                            seed=seed,
+                            mutation=(0.5, 1.0),
+                            recombination=0.7,
+                        )
+                search_evals = len(history)
+                good = [h for h in history if "per" in h]
+                best = min(good or history, key=lambda h: h["objective"])
+                sens_pts = _sensitivity_points(best["conditions"], default)
+                sens_res = run_many([c for _, _, c in sens_pts], sig, workers)
+            except _Stopped:
+                signum = sig.signum or signal.SIGINT
+                kept = _write_partial(history, out, signum)
+                raise CalibrationInterrupted(signum, len(history), kept) from None
     finally:
-        if pool is not None:
-            pool.close()
-            pool.join()
+        if fh is not None:
+            fh.close()
+    if out is not None:
+        with contextlib.suppress(FileNotFoundError):
+            (Path(out) / PARTIAL_FILE).unlink()
 
     sensitivity: dict[str, Any] = {}
     for (name, value, _), r in zip(sens_pts, sens_res):
@@ -400,7 +591,12 @@ def calibrate(
         "overrides": list(overrides),
         "seed": seed,
         "budget": budget,
-        "evaluations": {"search": search_evals, "sensitivity": len(sens_res), "total": len(history)},
+        "evaluations": {
+            "search": search_evals,
+            "sensitivity": len(sens_res),
+            "total": len(history),
+            "reused": reused[0],
+        },
         "optimiser": method,
         "workers": workers,
         "wall_s": round(time.perf_counter() - t_start, 2),
@@ -452,6 +648,32 @@ def calibrate(
         ],
     }
     return report
+
+
+def _write_partial(history: list[dict[str, Any]], out: str | Path | None, signum: int) -> str:
+    """The best evaluation so far as ``out/calibration.partial.json``; returns what was kept, in words."""
+    if out is None:
+        return f"{len(history)} evaluations done, nothing written (no output folder)"
+    good = [h for h in history if "per" in h] or history
+    ev_file = Path(out) / EVALUATIONS_FILE
+    if not good:
+        return f"nothing evaluated yet; rerun the same command to start ({ev_file})"
+    best = min(good, key=lambda h: h["objective"])
+    write_json(
+        Path(out) / PARTIAL_FILE,
+        {
+            "interrupted": signal.Signals(signum).name,
+            "evaluations_done": len(history),
+            "objective": best["objective"],
+            "rms_log_residual": best.get("rms_log_residual"),
+            "best": best["conditions"],
+            "resume": "rerun the same command: the evaluations kept in evaluations.jsonl are reused",
+        },
+    )
+    return (
+        f"{len(history)} evaluations kept in {ev_file}, the best so far (objective {best['objective']:.4g}) in "
+        f"{Path(out) / PARTIAL_FILE}; rerun the same command to resume"
+    )
 
 
 def markdown(r: dict[str, Any]) -> str:

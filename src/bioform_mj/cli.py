@@ -138,7 +138,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="KEY=V1,V2,...",
-        help="vary a scenario key over values (repeatable; ';' separates array values)",
+        help="vary a scenario key over values (repeatable, one --vary per key: a key given twice, or also "
+        "given with --set, is refused; equal values are run once; ';' separates array values)",
     )
     sw.add_argument(
         "--backend",
@@ -167,11 +168,23 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("target", help="what to fit: table1")
     cal.add_argument("--scenario", default="paper", help="preset name or TOML file to start from (default: paper)")
     cal.add_argument("--plant", choices=PLANTS, default="ideal")
-    cal.add_argument("--budget", type=int, help="evaluations in the search (default: 600 ideal, 90 mujoco)")
+    cal.add_argument(
+        "--budget",
+        type=int,
+        help="evaluations in the search (default: 600 ideal, 90 mujoco; at most 100000); the count and an "
+        "estimated duration are printed before the search",
+    )
     cal.add_argument("--workers", type=int, help="processes (default: up to 2)")
     cal.add_argument("--seed", type=int, default=0)
     cal.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
-    cal.add_argument("--out", type=Path, required=True, help="writes calibration.json and calibration.md here")
+    cal.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="writes calibration.json, calibration.md and evaluations.jsonl here; one calibration per folder, "
+        "rerunning the same command resumes an unfinished one",
+    )
+    cal.add_argument("--overwrite", action="store_true", help="replace the calibration already in --out")
     cal.add_argument("--quiet", action="store_true")
 
     sub.add_parser("presets", help="list the shipped scenario presets, each with its description")
@@ -772,8 +785,17 @@ def _sweep(args: argparse.Namespace) -> int:
     if args.backend == "warp":  # unsupported features, device memory: before anything is written
         from .batch.backend import plan
 
-        plan(specs, args.device)
+        plan(specs, args.device, nconmax=args.nconmax, njmax=args.njmax)
+    if args.backend == "ray":  # nothing listening there: exit 2 in seconds, naming the address
+        from .sweep import check_ray_address
+
+        check_ray_address(args.ray_address)
+    elif args.ray_address is not None:
+        raise InputError("--ray-address applies to --backend ray only")
     out = _prepare_out(args.out, "sweep")
+    from .sweep import check_sweep_dir
+
+    check_sweep_dir(out)
     out.mkdir(parents=True, exist_ok=True)
     progress = _progress(not args.quiet, "sweep")
     try:
@@ -787,6 +809,7 @@ def _sweep(args: argparse.Namespace) -> int:
             device=args.device,
             nconmax=args.nconmax,
             njmax=args.njmax,
+            note=None if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True)),
         )
     except WriteFailed as exc:  # disk full, read-only, ulimit -f: the finished rows are kept, resumable
         runs = out / "runs"
@@ -843,26 +866,40 @@ def _sweep(args: argparse.Namespace) -> int:
 
 def _calibrate(args: argparse.Namespace) -> int:
     from . import calibrate as cal
+    from .outputs.rundir import CALIBRATION_FILES, RunDir
 
-    if args.target not in cal.TARGETS:
-        raise InputError(f"unknown calibration target '{args.target}' (expected one of: {', '.join(cal.TARGETS)})")
-    if args.budget is not None and args.budget < 1:
-        raise InputError(f"--budget must be >= 1 evaluation, got {args.budget}")
-    out = _prepare_out(args.out, "calibration")
-    rep = cal.calibrate(
-        args.target,
-        plant=args.plant,
-        budget=args.budget,
-        source=args.scenario,
-        overrides=args.overrides,
-        workers=args.workers,
-        seed=args.seed,
-        progress=_progress(not args.quiet, "calibrate"),
-    )
-    cal.write(rep, out)
+    # every input, the budget's estimate and the folder checked before any work (exit 2)
+    cal.check_inputs(args.target, args.plant, args.budget, args.scenario, args.overrides, args.workers)
+    rundir = RunDir(
+        _out_path(args.out, "calibration"),
+        overwrite=args.overwrite,
+        what="calibration folder",
+        files=CALIBRATION_FILES,
+        resumable=frozenset({cal.EVALUATIONS_FILE, cal.PARTIAL_FILE, "MUJOCO_LOG.TXT"}),
+    ).check()
+    with rundir:  # one calibration per folder (flock); --overwrite clears an earlier one's files
+        out = rundir.path
+        try:
+            rep = cal.calibrate(
+                args.target,
+                plant=args.plant,
+                budget=args.budget,
+                source=args.scenario,
+                overrides=args.overrides,
+                workers=args.workers,
+                seed=args.seed,
+                progress=_progress(not args.quiet, "calibrate"),
+                out=out,
+                note=None if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True)),
+            )
+        except cal.CalibrationInterrupted as exc:
+            _ignore_signals()
+            print(f"error: {exc}", file=sys.stderr, flush=True)
+            return 128 + exc.signum
+        cal.write(rep, out)
     if not args.quiet:
         print(cal.markdown(rep))
-        print(f"outputs in {out}/ (calibration.json, calibration.md)")
+        print(f"outputs in {out}/ (calibration.json, calibration.md, {cal.EVALUATIONS_FILE})")
     return EXIT_OK
 
 

@@ -899,6 +899,15 @@ def _validate_size(sc: Scenario) -> None:
             "sim.duration",
             f"{what}, log every {s.log_dt:g} s for {sc.n} followers: {mem}; at most {_fmt_bytes(MAX_RUN_BYTES)}{hint}",
         )
+    if sc.plant.kind == "mujoco":  # the compiled scene grows with n² (its contact arena): known before it is built
+        from .budget import require, scene_bytes
+
+        require(
+            scene_bytes(sc.n) + est["bytes"],
+            f"a MuJoCo scene of {sc.n} followers ({_fmt_bytes(scene_bytes(sc.n))} for the compiled model and its "
+            f"data, {_fmt_bytes(est['bytes'])} of log)",
+            "use fewer followers, or the ideal plant",
+        )
 
 
 def _follower_id(key: str, value: float, n: int, lo: int = 1, what: str = "a follower id") -> int:

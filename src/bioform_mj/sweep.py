@@ -1,11 +1,14 @@
 """Monte Carlo sweeps: every combination of methods × varied keys × seeds, on forked workers or Ray.
 
 Each run is identified by a key hashed from the *content* of its resolved scenario
-(``Scenario.to_dict()`` as canonical JSON, the overrides, the robot model files it uses
-and the package version), not from the scenario's file path: an edited scenario runs
-again. Its result row is written atomically to ``DIR/runs/<key>.json`` as soon as it
-finishes, so an interrupted sweep resumes by skipping keys already there; a row file that
-cannot be read is reported (``warning:`` on stderr) and its run redone. At the end the rows
+(``Scenario.to_dict()`` as canonical JSON), not from the scenario's file path or the
+``--set``/``--vary`` strings: an edited scenario runs again, ``k=1`` and ``k=1.0`` are one run.
+Its result row is written atomically to ``DIR/runs/<key>.json`` as soon as it finishes, with
+its provenance (package version, source hash, MuJoCo version, every robot file it loaded:
+:mod:`bioform_mj.provenance`), so an interrupted sweep resumes by skipping keys already there
+whose provenance still matches; a stale row is redone (``resume: N row(s) redone (why)`` on
+stderr), a row file that cannot be read is reported (``warning:`` on stderr) and its run redone.
+One sweep per folder at a time (a lock); design §16. At the end the rows
 are collected into ``DIR/runs.csv`` (one row per run: settings, seed, status, outcome,
 metrics) and aggregated per group, method × every ``--vary`` value, into ``DIR/stats.json``
 and ``DIR/stats.md``.
@@ -18,12 +21,13 @@ it again) and the sweep goes on. SIGINT/SIGTERM stop the sweep: running workers 
 terminated (SIGTERM, then SIGKILL after a grace period; they also die with the sweep via
 ``PR_SET_PDEATHSIG`` if it is killed), finished rows are kept, the tables are written for
 them and :class:`SweepInterrupted` is raised. One worker (and, off Linux, every sweep) runs in
-this process, where a signal abandons the run in progress.
+this process, where a signal abandons the run in progress. The runner is :mod:`bioform_mj.jobs`
+(shared with ``calibrate``); Ray is :mod:`bioform_mj.ray_backend` (a lost head raises
+:class:`SweepFailed` after the tables are written).
 """
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import dataclasses
 import hashlib
@@ -31,21 +35,23 @@ import io
 import itertools
 import json
 import os
-import select
 import signal
 import sys
 import time
-import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from . import __version__
 from .errors import BioformError, InputError
+from .jobs import Signals as _Signals
+from .jobs import Stop as _Stop
+from .jobs import raising as _raising
+from .jobs import run_local as _run_local
 from .outputs.files import write_json, write_text
+from .ray_backend import check_ray_address
 from .scenario import Scenario, load
 
 #: Per-follower metrics of ``summary.json`` that a sweep row carries (mean and max over followers).
@@ -59,8 +65,9 @@ METRICS = (
     "saturation_fraction",
 )
 
-#: Seconds a terminated worker gets to exit before it is killed.
-GRACE_S = 2.0
+
+class SweepFailed(BioformError):
+    """The sweep could not go on (its Ray head was lost); the tables cover the finished rows (exit 1)."""
 
 
 class SweepInterrupted(BioformError):
@@ -88,6 +95,8 @@ class RunSpec:
     vary: tuple[tuple[str, str], ...]  # the varied (key, raw value) pairs, for the table
     digest: str = ""
     scenario: Scenario | None = field(default=None, compare=False, hash=False, repr=False)
+    #: :func:`~bioform_mj.provenance.provenance` of the scenario: code and robot files the run depends on
+    provenance: dict | None = field(default=None, compare=False, hash=False, repr=False)
 
     @property
     def key(self) -> str:
@@ -99,18 +108,28 @@ class RunSpec:
 
 
 def content_key(sc: Scenario, overrides: Sequence[str] = ()) -> str:
-    """Hash of what a run computes: the resolved scenario, the overrides, robot model files, package version."""
-    models: dict[str, str] = {}
-    if sc.plant.kind == "mujoco":
-        from .robots import resolve_robot
+    """The run's key: a hash of its resolved configuration (``Scenario.to_dict()``, every value the
+    overrides set included, so ``k=1`` and ``k=1.0`` are one run). What the result also depends on,
+    the code and the robot files, is the row's ``provenance``, checked on resume (design §16).
+    ``overrides`` is accepted for compatibility and not hashed: the resolved scenario holds its effect."""
+    return seed_key(config_text(sc), sc.sim.seed)
 
-        for r in sc.plant.robots:
-            with contextlib.suppress(BioformError, OSError):
-                path = resolve_robot(r).model  # a RobotRef (model file + mapping; the mapping is in to_dict)
-                models[path] = hashlib.sha1(Path(path).read_bytes()).hexdigest()
-    doc = {"scenario": sc.to_dict(), "overrides": list(overrides), "models": models, "version": __version__}
-    text = json.dumps(doc, sort_keys=True, separators=(",", ":"), default=repr)
-    return hashlib.sha1(text.encode()).hexdigest()[:16]
+
+def config_text(sc: Scenario) -> str:
+    """Canonical JSON of the resolved scenario without ``sim.seed`` (~0.5 ms: computed once per configuration)."""
+    d = sc.to_dict()
+    d["sim"].pop("seed", None)
+    return json.dumps({"scenario": d}, sort_keys=True, separators=(",", ":"), default=repr)
+
+
+def seed_key(text: str, seed: int) -> str:
+    """The key of the run of configuration ``text`` (:func:`config_text`) with seed ``seed`` (~1 µs)."""
+    return hashlib.sha1(f"{text}\0seed={int(seed)}".encode()).hexdigest()[:16]
+
+
+#: estimated bytes of one expanded run (its RunSpec with the resolved scenario, ~30 kB measured with
+#: tracemalloc for the paper scenario, and its row, ~2 kB), with margin
+SPEC_BYTES = 60e3
 
 
 def randomness(sc: Scenario) -> list[str]:
@@ -157,32 +176,81 @@ def expand(
     if seeds < 1:
         raise InputError(f"--seeds must be >= 1, got {seeds}")
     axes: list[list[tuple[str, str]]] = []
+    given: dict[str, str] = {}
+    set_keys = {o.partition("=")[0].strip() for o in overrides}
+    dropped = 0
     for item in vary:
         key, sep, raw = item.partition("=")
-        if not sep or not key.strip() or not raw.strip():
+        key = key.strip()
+        if not sep or not key or not raw.strip():
             raise InputError(f"--vary '{item}': expected KEY=V1,V2,... e.g. kinematic.k1=1,2,3")
-        if key.strip() == "method":  # load(method=...) would override it: every run the same, silently
+        if key == "method":  # load(method=...) would override it: every run the same, silently
             raise InputError(
                 f"--vary '{item}': a sweep's methods come from --methods (e.g. --methods backstepping,bioinspired)"
             )
-        values = raw.split(";") if ";" in raw else raw.split(",")
-        axes.append([(key.strip(), v.strip()) for v in values])
+        if key in given:  # the later list would silently replace the earlier one (design §16)
+            raise InputError(
+                f"--vary {key} given twice ('{given[key]}' and '{item}'): give one list of values, "
+                f"e.g. --vary {key}={given[key].partition('=')[2]},{raw}"
+            )
+        if key == "sim.seed":  # each run's seed is set from --seed/--seeds: a varied one would be overwritten
+            raise InputError("--vary sim.seed: the seeds are --seed S (the first) and --seeds K (how many)")
+        if key in set_keys:
+            raise InputError(f"--vary {key} and --set {key} both given: the --set value would be ignored")
+        given[key] = item
+        values = [v.strip() for v in (raw.split(";") if ";" in raw else raw.split(","))]
+        uniq = list(dict.fromkeys(values))  # the same text twice: one value
+        dropped += len(values) - len(uniq)
+        axes.append([(key, v) for v in uniq])
+    n_runs = len(methods) * seeds * int(np.prod([len(a) for a in axes])) if axes else len(methods) * seeds
+    from .budget import fmt_bytes, require
+
+    require(
+        n_runs * SPEC_BYTES,
+        f"a sweep of {n_runs} runs ({fmt_bytes(SPEC_BYTES)} per run for its configuration and row)",
+        "split it (fewer --seeds or --vary values)",
+    )
     specs = []
     no_random: list[str] = []
     n_configs = 0
+    seen_cfg: dict[str, tuple] = {}  # configuration key (at seed0) -> the combo that has it
+    same: list[str] = []
+    prov_cache: dict[str, dict] = {}
     for method in methods:
         for combo in itertools.product(*axes) if axes else [()]:
             ov = tuple(overrides) + tuple(f"{k}={v}" for k, v in combo)
             base = load(source, list(ov) + [f"sim.seed={seed0}"], method=method, plant=plant)
+            text = config_text(base)
+            cfg = seed_key(text, seed0)
+            if cfg in seen_cfg:  # e.g. k=1 and k=1.0: the same runs, done and counted once
+                first = seen_cfg[cfg]
+                diff = [f"{k}={v}" for (k, v), (_, v0) in zip(combo, first) if v != v0]
+                was = [f"{k}={v0}" for (k, v), (_, v0) in zip(combo, first) if v != v0]
+                same.append(f"{', '.join(diff)} is {', '.join(was)}")
+                continue
+            seen_cfg[cfg] = combo
             n_configs += 1
             if not randomness(base):
                 no_random.append(", ".join([method] + [f"{k}={v}" for k, v in combo]))
+            pk = json.dumps([base.plant.kind, base.to_dict()["plant"]["robots"]], default=repr)
+            if pk not in prov_cache:
+                from .provenance import provenance
+
+                prov_cache[pk] = provenance(base)
             for s in range(seed0, seed0 + seeds):
                 # the seed is the only difference between a configuration's runs (seed0 was validated)
                 sc = dataclasses.replace(base, sim=dataclasses.replace(base.sim, seed=s))
                 run_ov = ov + (f"sim.seed={s}",)
                 label = tuple((k, unquote(v)) for k, v in combo)  # design §17: '"backstepping"' labelled backstepping
-                specs.append(RunSpec(source, run_ov, method, s, plant, label, content_key(sc, run_ov), sc))
+                specs.append(
+                    RunSpec(source, run_ov, method, s, plant, label, seed_key(text, s), sc, prov_cache[pk])
+                )
+    if (dropped or same) and warn is not None:
+        ex = "; ".join(dict.fromkeys(same))
+        note = f"{dropped} repeated value(s) in --vary" if dropped else ""
+        if same:
+            note += ("; " if note else "") + f"equal values give the same runs ({ex[:300]})"
+        print(f"note: {note}: each distinct run is done and counted once ({len(specs)} runs)", file=sys.stderr)
     if seeds > 1 and no_random and warn is not None:
         if len(no_random) == n_configs:
             which, its = "the scenario has", "its"
@@ -213,6 +281,8 @@ def unquote(value: str) -> str:
 def _base_row(spec: RunSpec) -> dict[str, Any]:
     row: dict[str, Any] = {"key": spec.key, "method": spec.method, "seed": spec.seed}
     row.update({k: v for k, v in spec.vary})
+    if spec.provenance is not None:
+        row["provenance"] = spec.provenance
     return row
 
 
@@ -227,6 +297,10 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
             if spec.scenario is not None
             else load(spec.source, list(spec.overrides), method=spec.method, plant=spec.plant)
         )
+        if "provenance" not in row:
+            from .provenance import provenance
+
+            row["provenance"] = provenance(sc)
         res = simulate(sc)
         s = res.summary
         row["plant"] = s["plant"]
@@ -261,320 +335,6 @@ def _died_row(spec: RunSpec, reason: str) -> dict[str, Any]:
     row = _base_row(spec)
     row.update(status="failed", outcome="failed", error=f"worker died: {reason}", worker_died=True)
     return row
-
-
-def _exit_reason(status: int) -> str:
-    if os.WIFSIGNALED(status):
-        sig = os.WTERMSIG(status)
-        try:
-            name = signal.Signals(sig).name
-        except ValueError:
-            name = f"signal {sig}"
-        hint = " (out of memory? the kernel's OOM killer sends SIGKILL)" if sig == signal.SIGKILL else ""
-        return f"killed by {name}{hint}"
-    return f"exited with code {os.waitstatus_to_exitcode(status)} without a result"
-
-
-# ------------------------------------------------------------------------------------------
-# Signals
-
-
-class _Stop(BaseException):
-    """Raised by the signal handler to abandon the in-process run (not an Exception: run_one lets it through)."""
-
-
-class _Signals:
-    """SIGINT/SIGTERM → ``signum`` set (first one wins); while ``raising``, also raise :class:`_Stop`."""
-
-    def __init__(self) -> None:
-        self.signum: int | None = None
-        self.raising = False
-        self._old: dict[int, Any] = {}
-
-    def _handler(self, signum: int, frame: Any) -> None:
-        if self.signum is None:
-            self.signum = signum
-        if self.raising:
-            self.raising = False
-            raise _Stop()
-
-    def __enter__(self) -> _Signals:
-        for s in (signal.SIGINT, signal.SIGTERM):
-            try:
-                self._old[s] = signal.signal(s, self._handler)
-            except ValueError:  # not the main thread: leave signals to the caller
-                break
-        return self
-
-    def reinstall(self) -> None:
-        """Take the signals back from a library that installed its own handlers (ray.init does, for SIGTERM)."""
-        for s in self._old:
-            signal.signal(s, self._handler)
-
-    def __exit__(self, *exc: Any) -> None:
-        for s, h in self._old.items():
-            signal.signal(s, h)
-
-
-@contextlib.contextmanager
-def _raising(sig: _Signals) -> Iterator[None]:
-    """Let a signal abandon what runs inside (checked on entry too)."""
-    if sig.signum is not None:
-        raise _Stop()
-    sig.raising = True
-    try:
-        yield
-    finally:
-        sig.raising = False
-
-
-# ------------------------------------------------------------------------------------------
-# Backends
-
-
-def _load_kernels() -> None:
-    """Run both compiled loops for a moment, so that numba's cached machine code is loaded
-    in this process (and inherited by forked workers instead of loaded once per worker)."""
-    from .scenario import load
-    from .sim import simulate
-
-    for plant in ("ideal", "mujoco"):
-        simulate(load("paper", plant=plant, overrides=["sim.duration=0.01"]))
-
-
-def _die_with_parent(parent: int) -> None:
-    """In a worker: SIGKILL when the sweep process dies, however it dies (Linux)."""
-    with contextlib.suppress(Exception):
-        import ctypes
-
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    if os.getppid() != parent:  # the sweep died before prctl
-        os._exit(1)
-
-
-def _read_exact(fd: int, n: int) -> bytes | None:
-    buf = b""
-    while len(buf) < n:
-        chunk = os.read(fd, n - len(buf))
-        if not chunk:
-            return None
-        buf += chunk
-    return buf
-
-
-def _worker(todo: list[RunSpec], task_r: int, result_w: int, parent: int) -> None:
-    """Body of a forked worker: read run indices (4 bytes each) from ``task_r`` until EOF, write each
-    run's row to ``result_w`` as length-prefixed JSON. Never returns."""
-    code = 1
-    try:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group; the sweep decides
-        signal.signal(signal.SIGTERM, signal.SIG_DFL)
-        _die_with_parent(parent)
-        while True:
-            msg = _read_exact(task_r, 4)
-            if msg is None:
-                break
-            row = run_one(todo[int.from_bytes(msg, "little")])
-            data = json.dumps(row, default=lambda o: o.item() if hasattr(o, "item") else str(o)).encode()
-            out = len(data).to_bytes(8, "little") + data
-            while out:
-                out = out[os.write(result_w, out) :]
-        code = 0
-    except BaseException:  # noqa: BLE001 - report and exit; never run the parent's code
-        with contextlib.suppress(Exception):
-            traceback.print_exc()
-    finally:
-        os._exit(code)
-
-
-def _run_serial(todo: list[RunSpec], sig: _Signals, done: Callable[[dict], None]) -> None:
-    for sp in todo:
-        try:
-            with _raising(sig):
-                row = run_one(sp)
-        except _Stop:
-            return
-        done(row)
-
-
-@dataclass
-class _Proc:
-    """A forked worker as the sweep sees it."""
-
-    pid: int
-    task_w: int
-    result_r: int
-    current: int | None = None  # index of the run it is doing
-    buf: bytearray = field(default_factory=bytearray)
-
-
-def _run_forked(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable[[dict], None]) -> None:
-    """Runs on ``workers`` processes forked from this one after it loaded the compiled kernels, one run at a
-    time each; a worker that dies fails the run it was doing and is replaced."""
-    _load_kernels()  # before forking: workers inherit the loaded kernels (start in ms, not ~1 s each)
-    parent = os.getpid()
-    queue = list(range(len(todo) - 1, -1, -1))  # popped from the end: todo order
-    procs: dict[int, _Proc] = {}  # by result fd
-
-    def start() -> None:
-        task_r, task_w = os.pipe()
-        result_r, result_w = os.pipe()
-        sys.stdout.flush()
-        sys.stderr.flush()
-        pid = os.fork()
-        if pid == 0:  # pragma: no cover - runs in the worker
-            for fd in [task_w, result_r] + [fd for p in procs.values() for fd in (p.task_w, p.result_r)]:
-                os.close(fd)
-            _worker(todo, task_r, result_w, parent)
-        os.close(task_r)
-        os.close(result_w)
-        procs[result_r] = _Proc(pid, task_w, result_r)
-
-    def close_task(p: _Proc) -> None:
-        """EOF on its task pipe: an idle worker exits."""
-        if p.task_w >= 0:
-            with contextlib.suppress(OSError):
-                os.close(p.task_w)
-            p.task_w = -1
-
-    def close(p: _Proc) -> None:
-        del procs[p.result_r]
-        close_task(p)
-        with contextlib.suppress(OSError):
-            os.close(p.result_r)
-
-    def assign(p: _Proc) -> None:
-        """Give an idle worker the next run, or tell it to exit (EOF) when there is none."""
-        if queue and sig.signum is None:
-            i = queue.pop()
-            try:
-                os.write(p.task_w, i.to_bytes(4, "little"))
-                p.current = i
-            except OSError:  # it died idle: the run never started, someone else does it
-                queue.append(i)
-        else:
-            close_task(p)
-
-    try:
-        while sig.signum is None and (queue or any(p.current is not None for p in procs.values())):
-            while queue and len(procs) < workers and sig.signum is None:
-                start()
-            for p in list(procs.values()):
-                if p.current is None and p.task_w >= 0:
-                    assign(p)
-            ready, _, _ = select.select(list(procs), [], [], 0.25)
-            for fd in ready:
-                p = procs[fd]
-                chunk = os.read(fd, 1 << 16)
-                if not chunk:  # EOF: the worker exited or died
-                    close(p)
-                    _, status = os.waitpid(p.pid, 0)
-                    if p.current is not None and sig.signum is None:
-                        done(_died_row(todo[p.current], _exit_reason(status)))
-                    continue
-                p.buf += chunk
-                while len(p.buf) >= 8 and len(p.buf) >= 8 + int.from_bytes(p.buf[:8], "little"):
-                    n = int.from_bytes(p.buf[:8], "little")
-                    row = json.loads(bytes(p.buf[8 : 8 + n]).decode())
-                    del p.buf[: 8 + n]
-                    p.current = None
-                    done(row)
-    finally:
-        for p in list(procs.values()):
-            close_task(p)
-        _reap([p.pid for p in procs.values()], wait_first=sig.signum is None)
-        for p in list(procs.values()):
-            close(p)
-
-
-def _reap(pids: list[int], wait_first: bool = False) -> None:
-    """End worker processes: SIGTERM (after :data:`GRACE_S` for them to exit on their own when
-    ``wait_first``), then SIGKILL those still alive after another :data:`GRACE_S`."""
-    left = set(pids)
-    if wait_first:
-        _wait_gone(left, time.monotonic() + GRACE_S)
-    for pid in left:
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGTERM)
-    _wait_gone(left, time.monotonic() + GRACE_S)
-    for pid in left:
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
-    for pid in left:
-        with contextlib.suppress(ChildProcessError):
-            os.waitpid(pid, 0)
-
-
-def _wait_gone(left: set[int], deadline: float) -> None:
-    """Reap the processes of ``left`` that exit before ``deadline`` (removing them from it)."""
-    while left and time.monotonic() < deadline:
-        for pid in list(left):
-            try:
-                if os.waitpid(pid, os.WNOHANG)[0] != 0:
-                    left.discard(pid)
-            except ChildProcessError:
-                left.discard(pid)
-        if left:
-            time.sleep(0.005)
-
-
-def _run_local(todo: list[RunSpec], workers: int, sig: _Signals, done: Callable[[dict], None]) -> None:
-    if workers <= 1 or not sys.platform.startswith("linux"):  # forking a process that loaded MuJoCo: Linux only
-        _run_serial(todo, sig, done)
-    else:
-        _run_forked(todo, workers, sig, done)
-
-
-#: Ray errors meaning the process running the task died (the run did not fail on its own).
-_RAY_DIED = {"WorkerCrashedError", "OutOfMemoryError", "NodeDiedError", "ObjectLostError", "LocalRayletDiedError"}
-
-
-def _run_ray(
-    todo: list[RunSpec], workers: int, address: str | None, sig: _Signals, done: Callable[[dict], None]
-) -> None:
-    try:
-        import ray
-    except ImportError:
-        raise InputError("--backend ray needs Ray: pip install 'bioform-mj[ray]'") from None
-    started = False
-    try:
-        with _raising(sig):
-            if not ray.is_initialized():
-                kwargs: dict[str, Any] = {"address": address, "include_dashboard": False, "log_to_driver": False}
-                if address is None:
-                    kwargs["num_cpus"] = workers
-                ray.init(**kwargs)
-                started = True
-        sig.reinstall()
-    except _Stop:
-        if started:
-            ray.shutdown()
-        return
-    pending: dict[Any, RunSpec] = {}
-    try:
-        # no retries: a run whose worker dies is recorded as failed, like the local backend does
-        remote = ray.remote(num_cpus=1, max_retries=0)(run_one)
-        pending = {remote.remote(sp): sp for sp in todo}
-        while pending and sig.signum is None:
-            ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.25)
-            for r in ready:
-                sp = pending.pop(r)
-                try:
-                    row = ray.get(r)
-                except Exception as exc:  # noqa: BLE001 - WorkerCrashedError, OutOfMemoryError, ...
-                    msg = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
-                    if type(exc).__name__ in _RAY_DIED:
-                        row = _died_row(sp, msg)
-                    else:
-                        row = {**_base_row(sp), "status": "failed", "outcome": "failed", "error": msg}
-                done(row)
-    finally:
-        if pending and sig.signum is not None:
-            for r in pending:
-                with contextlib.suppress(Exception):
-                    ray.cancel(r, force=True)
-        if started:
-            ray.shutdown()
 
 
 # ------------------------------------------------------------------------------------------
@@ -650,6 +410,7 @@ def sweep(
     device: str | None = None,
     nconmax: int | None = None,
     njmax: int | None = None,
+    note: Callable[[str], None] | None = None,
 ) -> dict[str, Any]:
     """Run ``specs`` (skipping those already in ``out/runs``), then write the table and statistics.
 
@@ -657,7 +418,11 @@ def sweep(
     GPU if there is one); every spec is checked first (feature support, device memory); ``nconmax``,
     ``njmax``: MuJoCo Warp's contact / constraint-row capacity per world (None: the defaults).
     Raises :class:`SweepInterrupted` after SIGINT/SIGTERM, with the finished rows kept and
-    the tables written for them.
+    the tables written for them. A finished row is reused when its key (the resolved configuration)
+    and its provenance (code, versions, robot files) match; otherwise it is redone and a
+    ``resume: N row(s) redone (why)`` line said on stderr. One sweep per folder: a second one
+    raises :class:`~bioform_mj.outputs.rundir.FolderBusy` (exit 2). ``note(text)`` is told the
+    run count and an estimated duration before any run starts.
     """
     if backend not in ("local", "ray", "warp"):
         raise InputError(f"unknown backend '{backend}' (expected local, ray or warp)")
@@ -666,35 +431,125 @@ def sweep(
 
         require_warp()
         device = resolve_device(device)
+    from .outputs.rundir import folder_lock
+
+    if backend == "ray":  # a closed address: exit 2 in seconds, before anything is written
+        check_ray_address(ray_address)
+    out = Path(out)
+    check_sweep_dir(out)
+    out.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out, "sweep directory", "running a sweep there"):  # one sweep per folder (exit 2)
+        return _sweep_locked(specs, out, backend, workers, ray_address, progress, warn, device, nconmax, njmax, note)
+
+
+def check_sweep_dir(out: Path) -> None:
+    """InputError (exit 2) when ``out`` holds another kind of run (a run's ``summary.json``, a calibration):
+    a sweep folder holds a sweep (design §16)."""
+    from .outputs.rundir import KNOWN_FILES
+
+    if out.is_dir():
+        other = sorted(n for n in os.listdir(out) if n in KNOWN_FILES)
+        if other:
+            raise InputError(
+                f"sweep directory '{out}' holds another kind of run ({', '.join(other[:4])}); choose an empty, "
+                "new or sweep folder"
+            )
+
+
+#: estimated cost of a run on one core (design §16): µs per follower and control step, and seconds
+#: of setup per run; measured on the development machine (paper / large16 presets, compiled loop:
+#: ideal 0.4-0.9 µs, MuJoCo 8-11 µs, 5 / 70 ms setup). The ETA printed before a sweep uses them.
+COST_US_PER_ROBOT_STEP = {"ideal": 1.0, "mujoco": 12.0}
+COST_SETUP_S = {"ideal": 0.01, "mujoco": 0.1}
+
+
+def estimate_seconds(specs: Sequence[RunSpec]) -> float:
+    """Estimated single-core seconds of ``specs`` (:data:`COST_US_PER_ROBOT_STEP`, :data:`COST_SETUP_S`)."""
+    total = 0.0
+    for sp in specs:
+        sc = sp.scenario
+        if sc is None:
+            continue
+        kind = sc.plant.kind if sc.plant.kind in COST_SETUP_S else "mujoco"
+        steps = sc.sim.duration / sc.sim.control_dt
+        total += COST_SETUP_S[kind] + steps * sc.n * COST_US_PER_ROBOT_STEP[kind] * 1e-6
+    return total
+
+
+def _stale(row: dict[str, Any], sp: RunSpec, backend: str, nconmax: int | None, njmax: int | None) -> list[str]:
+    """Why a finished row must be redone under this sweep (empty: keep it)."""
+    from .batch.backend import capacity_redo
+
+    why = capacity_redo(row, backend, nconmax, njmax)
+    if why is not None:
+        return [why]
+    was = "warp" if row.get("backend") == "warp" else "local"
+    now = "warp" if backend == "warp" else "local"
+    if was != now:  # float32 MuJoCo Warp and C MuJoCo give different numbers (design §11)
+        return [f"it ran on the {was} engine, this sweep runs the {now} one"]
+    if sp.provenance is None:
+        return []
+    from .provenance import differences
+
+    return differences(row.get("provenance"), sp.provenance)
+
+
+def _sweep_locked(
+    specs: list[RunSpec],
+    out: Path,
+    backend: str,
+    workers: int | None,
+    ray_address: str | None,
+    progress: Callable[[int, int], None] | None,
+    warn: Callable[[str], None] | None,
+    device: str | None,
+    nconmax: int | None,
+    njmax: int | None,
+    note: Callable[[str], None] | None,
+) -> dict[str, Any]:
     runs_dir = out / "runs"
-
-    def redo(row: dict) -> str | None:  # a row stopped on MuJoCo Warp's capacity, resumed with other capacities
-        from .batch.backend import capacity_redo
-
-        return capacity_redo(row, backend, nconmax, njmax)
-
     rows: dict[str, dict[str, Any]] = {}
     todo: list[RunSpec] = []
     keys = list(dict.fromkeys(sp.key for sp in specs))  # identical runs (same content) run once
     seen: set[str] = set()
+    redone: dict[str, int] = {}
     for sp in specs:
         if sp.key in seen:
             continue
         seen.add(sp.key)
-        row = _read_row(runs_dir / f"{sp.key}.json", sp, warn, redo)
+        row = _read_row(runs_dir / f"{sp.key}.json", sp, warn)
+        why = _stale(row, sp, backend, nconmax, njmax) if row is not None else []
+        if why:
+            reason = "; ".join(why[:3]) + (f"; and {len(why) - 3} more" if len(why) > 3 else "")
+            redone[reason] = redone.get(reason, 0) + 1
+            row = None
         if row is None:
             todo.append(sp)
         else:
+            # the row's labels are this sweep's: its content key says the run is the same, whatever
+            # sweep (--set or --vary) produced it (design §16)
+            row.update({k: v for k, v in sp.vary})
             rows[sp.key] = row
+    for reason, k in redone.items():
+        print(f"resume: {k} row(s) redone ({reason})", file=sys.stderr, flush=True)
     groups = None
     if backend == "warp":
         from .batch.backend import plan
 
-        groups = plan(todo, device)  # InputError before any work: unsupported feature, memory
+        # InputError before any work: unsupported feature, memory
+        groups = plan(todo, device, nconmax=nconmax, njmax=njmax)
         workers = 1
     runs_dir.mkdir(parents=True, exist_ok=True)
     workers = workers or os.cpu_count() or 1
     skipped = len(rows)
+    if note is not None:
+        eta = ""
+        if todo and backend != "warp":
+            from .budget import fmt_seconds
+
+            est = estimate_seconds(todo) / max(1, min(workers, len(todo)))
+            eta = f"; estimated {fmt_seconds(est)} (a cost model of the compiled loop, not a measurement)"
+        note(f"sweep: {len(keys)} runs ({skipped} already done, {len(todo)} to run) on {workers} worker(s){eta}")
 
     def done(row: dict) -> None:
         write_json(runs_dir / f"{row['key']}.json", row)
@@ -705,13 +560,19 @@ def sweep(
     if progress is not None:
         progress(len(rows), len(keys))
     t0 = time.perf_counter()
+    failure: str | None = None
     with _Signals() as sig:
         if backend == "local":
-            _run_local(todo, workers, sig, done)
+            _run_local(todo, workers, sig, done, fn=run_one, died=_died_row)
         elif backend == "warp":
             _run_warp(todo, groups, device, sig, done, {"nconmax": nconmax, "njmax": njmax})
         else:
-            _run_ray(todo, workers, ray_address, sig, done)
+            from .ray_backend import run_ray
+
+            def failed(sp: RunSpec, msg: str) -> dict[str, Any]:
+                return {**_base_row(sp), "status": "failed", "outcome": "failed", "error": msg}
+
+            failure = run_ray(todo, workers, ray_address, sig, done, run_one, _died_row, failed)
         wall = time.perf_counter() - t0
         ran = len(rows) - skipped
         interrupted = sig.signum
@@ -744,16 +605,25 @@ def sweep(
         write_text(out / "stats.md", stats_markdown(stats) + note)
     if interrupted is not None:
         raise SweepInterrupted(interrupted, len(got), len(keys))
+    if failure is not None:
+        raise SweepFailed(
+            f"{failure} after {len(got)} of {len(keys)} runs: runs.csv and the statistics cover the finished "
+            f"rows (kept in {out}/runs/); rerun the same command to resume"
+        )
     return {"rows": got, "stats": stats, "ran": ran, "skipped": skipped, "timing": timing}
+
+
+#: row fields kept in the row files only (nested records, not table cells)
+_NOT_IN_CSV = ("provenance",)
 
 
 def to_csv(rows: list[dict[str, Any]]) -> str:
     """Rows → CSV text with the union of their columns (pandas/polars ``read_csv`` open it)."""
     cols: list[str] = []
     for r in rows:
-        cols += [c for c in r if c not in cols]
+        cols += [c for c in r if c not in cols and c not in _NOT_IN_CSV]
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=cols)
+    w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore")
     w.writeheader()
     for r in rows:
         w.writerow({c: "" if r.get(c) is None else r.get(c) for c in cols})

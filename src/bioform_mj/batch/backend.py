@@ -16,7 +16,6 @@ pushes, network faults and sensor noise) varies per world.
 from __future__ import annotations
 
 import json
-import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -41,6 +40,11 @@ RING_BYTES_PER_ROW = 40
 EVENT_BYTES_PER_ROBOT_ROW = 400.0
 #: share of the free memory a batch may plan to use
 MEMORY_SHARE = 0.9
+#: device bytes per contact and per constraint row of a world's capacity beyond the defaults
+#: (``--nconmax``/``--njmax``): MuJoCo Warp's ``put_data`` arrays measured at 168 B per contact and
+#: 163-188 B per row (nv 24-512), with margin for the solver's per-row work arrays (design §16)
+CONTACT_BYTES = 250.0
+ROW_BYTES = 300.0
 
 
 def default_capacity(n_robots: int) -> tuple[int, int]:
@@ -148,9 +152,12 @@ def group_key(sc: Any) -> str:
     )
 
 
-def world_bytes(n_robots: int) -> float:
-    """Estimated peak device bytes of one world of ``n_robots`` followers (see the constants)."""
-    return WORLD_BYTES_BASE + (WORLD_BYTES_PER_ROBOT + CONTROL_BYTES_PER_ROBOT) * n_robots
+def world_bytes(n_robots: int, nconmax: int | None = None, njmax: int | None = None) -> float:
+    """Estimated peak device bytes of one world of ``n_robots`` followers (see the constants), with
+    ``nconmax`` contacts and ``njmax`` constraint rows per world (None: :func:`default_capacity`)."""
+    dc, dj = default_capacity(n_robots)
+    extra = CONTACT_BYTES * max(0, (nconmax or dc) - dc) + ROW_BYTES * max(0, (njmax or dj) - dj)
+    return WORLD_BYTES_BASE + (WORLD_BYTES_PER_ROBOT + CONTROL_BYTES_PER_ROBOT) * n_robots + extra
 
 
 def free_memory(device: str) -> int:
@@ -160,19 +167,9 @@ def free_memory(device: str) -> int:
     dev = wp.get_device(device)
     if dev.is_cuda:
         return int(dev.free_memory)
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    try:
-        import psutil
+    from ..budget import available_memory
 
-        return int(psutil.virtual_memory().available)
-    except ImportError:
-        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    return available_memory()  # MemAvailable, or the cgroup's limit when lower
 
 
 @dataclass
@@ -184,24 +181,40 @@ class Group:
     n: int
     ring_rows: int = 1  # the batch's largest faults.delay in control steps + 1
     events: int = 0  # the most payload events of one of its worlds
+    nconmax: int | None = None  # contacts / constraint rows per world (None: the defaults)
+    njmax: int | None = None
 
     @property
     def world_bytes(self) -> float:
         """Estimated peak device bytes of one of its worlds (with the delay's ring and, with events,
         the per-world model rows: ``control.event_tables`` (E + 1 rows) and the batched fields)."""
         ev = (self.events + 2) * EVENT_BYTES_PER_ROBOT_ROW * self.n if self.events else 0.0
-        return world_bytes(self.n) + self.ring_rows * (RING_BYTES_PER_ROW + RING_BYTES_PER_ROBOT_ROW * self.n) + ev
+        ring = self.ring_rows * (RING_BYTES_PER_ROW + RING_BYTES_PER_ROBOT_ROW * self.n)
+        return world_bytes(self.n, self.nconmax, self.njmax) + ring + ev
 
     @property
     def bytes(self) -> float:
         return len(self.specs) * self.world_bytes
 
 
-def plan(specs: Sequence[Any], device: str) -> list[Group]:
+def plan(specs: Sequence[Any], device: str, nconmax: int | None = None, njmax: int | None = None) -> list[Group]:
     """Check ``specs`` (with resolved scenarios) for the batch engine and group them; InputError
-    naming the first unsupported feature, or the memory estimate of a batch that does not fit."""
+    naming the first unsupported feature, or the memory estimate of a batch that does not fit
+    (with ``nconmax`` contacts and ``njmax`` constraint rows per world; None: the defaults)."""
     from ..scenario import load
 
+    if specs:  # the capacity alone, before any scene is built: --nconmax 1e9 must not reach put_data
+        free = free_memory(device)
+        sc0 = specs[0].scenario
+        n0 = sc0.n if sc0 is not None else 1
+        one = world_bytes(n0, nconmax, njmax)
+        if one > MEMORY_SHARE * free:
+            raise InputError(
+                f"--backend warp: one world of {n0} robots with nconmax {nconmax or default_capacity(n0)[0]}, "
+                f"njmax {njmax or default_capacity(n0)[1]} needs about {one / 1e9:.3g} GB on {device} "
+                f"({CONTACT_BYTES:g} B per contact, {ROW_BYTES:g} B per constraint row, estimated), "
+                f"{free / 1e9:.2f} GB free; lower --nconmax/--njmax"
+            )
     groups: dict[str, Group] = {}
     for sp in specs:
         sc = (
@@ -223,7 +236,7 @@ def plan(specs: Sequence[Any], device: str) -> list[Group]:
                 check_physics(sc, device)
             except ValueError as exc:
                 raise InputError(f"--backend warp: {exc}; use --backend local") from None
-        g = groups.setdefault(k, Group(k, [], sc.n))
+        g = groups.setdefault(k, Group(k, [], sc.n, nconmax=nconmax, njmax=njmax))
         g.specs.append(sp)
         if sc.faults.delay > 0:
             g.ring_rows = max(g.ring_rows, int(round(sc.faults.delay / sc.sim.control_dt)) + 1)

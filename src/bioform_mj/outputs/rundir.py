@@ -16,6 +16,7 @@ import contextlib
 import os
 import re
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 from ..errors import InputError
@@ -26,6 +27,12 @@ from .scenexml import ASSET_SUFFIXES, ASSETS_DIR
 RUN_FILES = frozenset(
     {"summary.json", "log.npz", "scene.xml", "video.mp4", "run.rrd", "MUJOCO_LOG.TXT", "table1.json", "table1.md"}
 )
+#: Files ``bioform calibrate`` writes into its folder (another kind of run: design §16).
+CALIBRATION_FILES = frozenset(
+    {"calibration.json", "calibration.md", "calibration.partial.json", "evaluations.jsonl", "MUJOCO_LOG.TXT"}
+)
+#: Every file name one of our commands writes as its run's record.
+KNOWN_FILES = RUN_FILES | CALIBRATION_FILES
 #: Folders a run writes, and the file suffixes they may hold (``assets/``: the files ``scene.xml``
 #: names, copied beside it, design §12).
 RUN_DIRS = {"figures": (".png",), ASSETS_DIR: ASSET_SUFFIXES}
@@ -38,6 +45,58 @@ class FolderBusy(InputError):
     """Another process holds the folder's lock (exit 2)."""
 
 
+def take_lock(path: Path, what: str = "output directory", doing: str = "writing a run there") -> int:
+    """Lock the existing folder ``path`` (``flock`` on ``path/.bioform.lock``, our pid written in it);
+    returns the locked file descriptor, or raises :class:`FolderBusy` naming the holder's pid."""
+    import fcntl
+
+    lock = Path(path) / LOCK_NAME
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            try:
+                pid = os.read(fd, 32).decode(errors="replace").strip()
+            finally:
+                os.close(fd)
+            who = f"process {pid}" if pid.isdigit() else "another process"
+            raise FolderBusy(f"{what} '{path}' is in use: {who} is {doing}") from None
+        try:  # the holder we waited on may have removed the file: then lock the new one
+            same = os.fstat(fd).st_ino == os.stat(lock).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:  # who holds it, for the message of a refused second run
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+    except OSError as exc:  # disk full, ulimit -f (design §17): the run could write nothing either
+        from ..errors import WriteFailed
+
+        os.close(fd)
+        raise WriteFailed(str(lock), exc) from exc
+    return fd
+
+
+def release_lock(path: Path, fd: int) -> None:
+    """Undo :func:`take_lock`: remove the lock file (before unlocking: a waiter sees the inode change)."""
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(Path(path) / LOCK_NAME)
+    os.close(fd)
+
+
+@contextlib.contextmanager
+def folder_lock(path: Path, what: str = "output directory", doing: str = "writing a run there") -> Iterator[None]:
+    """Hold the folder's lock (:func:`take_lock`) while the block runs."""
+    fd = take_lock(path, what, doing)
+    try:
+        yield
+    finally:
+        release_lock(path, fd)
+
+
 def _is_tmp(name: str, allowed: frozenset[str] | tuple[str, ...]) -> bool:
     m = _TMP.match(name)
     if not m:
@@ -46,8 +105,9 @@ def _is_tmp(name: str, allowed: frozenset[str] | tuple[str, ...]) -> bool:
     return inner in allowed if isinstance(allowed, frozenset) else inner.endswith(allowed)
 
 
-def survey(path: Path) -> tuple[list[str], list[str]]:
-    """``(run files, foreign entries)`` in ``path`` (names; folders end with ``/``)."""
+def survey(path: Path, files: frozenset[str] = RUN_FILES) -> tuple[list[str], list[str]]:
+    """``(run files, foreign entries)`` in ``path`` (names; folders end with ``/``); ``files``: the
+    names a run of this kind writes (:data:`RUN_FILES`, :data:`CALIBRATION_FILES`)."""
     ours: list[str] = []
     foreign: list[str] = []
     if not path.is_dir():
@@ -56,9 +116,9 @@ def survey(path: Path) -> tuple[list[str], list[str]]:
         name = entry.name
         if name == LOCK_NAME or name.startswith(".bioform-probe-"):  # ours: the lock, a writability probe
             continue
-        if name in RUN_FILES or _is_tmp(name, RUN_FILES):
+        if name in files or _is_tmp(name, files):
             (ours if entry.is_file(follow_symlinks=False) else foreign).append(name)
-        elif name in RUN_DIRS and entry.is_dir(follow_symlinks=False):
+        elif name in RUN_DIRS and files is RUN_FILES and entry.is_dir(follow_symlinks=False):
             sfx = RUN_DIRS[name]
             inner = [e for e in os.scandir(entry.path)]
             if all(e.is_file(follow_symlinks=False) and (e.name.endswith(sfx) or _is_tmp(e.name, sfx)) for e in inner):
@@ -88,10 +148,21 @@ class RunDir:
     and nothing was written to is removed again.
     """
 
-    def __init__(self, path: str | Path, overwrite: bool = False, what: str = "output directory") -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        overwrite: bool = False,
+        what: str = "output directory",
+        files: frozenset[str] = RUN_FILES,
+        resumable: frozenset[str] = frozenset(),
+    ) -> None:
+        """``files``: what this kind of run writes; ``resumable``: those of its files that an unfinished
+        run leaves and the same command resumes from (a folder holding only them is accepted)."""
         self.path = Path(path)
         self.overwrite = overwrite
         self.what = what
+        self.files = files
+        self.resumable = resumable
         self._fd: int | None = None
         self._created: list[Path] = []
 
@@ -103,8 +174,16 @@ class RunDir:
         return self
 
     def _check_contents(self) -> None:
-        ours, foreign = survey(self.path)
+        ours, foreign = survey(self.path, self.files)
         real = [n for n in ours if not _TMP.match(n)]
+        other = [n for n in foreign if n in KNOWN_FILES or n.rstrip("/") in RUN_DIRS]
+        if other:
+            raise InputError(
+                f"{self.what} '{self.path}' holds another kind of run ({_short(other)}); "
+                f"choose an empty or new folder (nothing there is deleted, even with --overwrite)"
+            )
+        if real and all(n in self.resumable for n in real) and not self.overwrite:
+            return  # an unfinished run of this kind: the same command resumes it
         if foreign:
             raise InputError(
                 f"{self.what} '{self.path}' holds files that are not a run's ({_short(foreign)}); "
@@ -135,39 +214,11 @@ class RunDir:
         return self
 
     def _lock(self) -> None:
-        import fcntl
-
-        lock = self.path / LOCK_NAME
-        while True:
-            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                try:
-                    pid = os.read(fd, 32).decode(errors="replace").strip()
-                finally:
-                    os.close(fd)
-                who = f"process {pid}" if pid.isdigit() else "another process"
-                raise FolderBusy(f"{self.what} '{self.path}' is in use: {who} is writing a run there") from None
-            try:  # the holder we waited on may have removed the file: then lock the new one
-                same = os.fstat(fd).st_ino == os.stat(lock).st_ino
-            except FileNotFoundError:
-                same = False
-            if same:
-                break
-            os.close(fd)
-        self._fd = fd
-        try:  # who holds it, for the message of a refused second run
-            os.ftruncate(fd, 0)
-            os.write(fd, str(os.getpid()).encode())
-        except OSError as exc:  # disk full, ulimit -f (design §17): the run could write nothing either
-            from ..errors import WriteFailed
-
-            raise WriteFailed(str(lock), exc) from exc
+        self._fd = take_lock(self.path, self.what)
 
     def _clear(self) -> None:
         """Remove stale temporaries always, and the old run's files with ``overwrite``."""
-        ours, _ = survey(self.path)
+        ours, _ = survey(self.path, self.files)
         for name in ours:
             target = self.path / name.rstrip("/")
             if not (self.overwrite or _TMP.match(name)):
@@ -180,9 +231,7 @@ class RunDir:
 
     def __exit__(self, *exc) -> None:
         if self._fd is not None:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(self.path / LOCK_NAME)  # before unlocking: a waiter then sees the inode change
-            os.close(self._fd)
+            release_lock(self.path, self._fd)
             self._fd = None
         for d in self._created:  # nothing written: leave no folder behind
             try:
@@ -193,4 +242,4 @@ class RunDir:
     @property
     def written(self) -> bool:
         """True when the folder holds any file of a run."""
-        return bool(survey(self.path)[0])
+        return bool(survey(self.path, self.files)[0])
