@@ -56,7 +56,7 @@ except ImportError as exc:  # pragma: no cover - exercised only without the extr
 #: named observation layout: (field, width, unit, meaning); a field of width ``K·w`` repeats per neighbour slot
 OBS_FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("vel", "2", "m/s, rad/s", "own measured body-frame velocities [υ, ω]"),
-    ("slot_error", "3", "m, m, rad", "tracking error [x̃, ỹ, θ̃] to the own slot, body frame, from the own leader estimate"),
+    ("slot_error", "3", "m, m, rad", "tracking error [x̃, ỹ, θ̃] to the own slot (body frame, own leader estimate)"),
     ("leader_estimate_vel", "2", "m/s, rad/s", "the own estimate of the leader's velocities [υ_ir, ω_ir]"),
     (
         "neighbours",
@@ -158,12 +158,12 @@ class FormationParallelEnv(ParallelEnv):
         self._done = True
 
     # ------------------------------------------------------------------ spaces
-    @functools.lru_cache(maxsize=None)  # noqa: B019 - one space object per agent, as PettingZoo asks
+    @functools.cache  # noqa: B019 - one space object per agent, as PettingZoo asks
     def observation_space(self, agent: str) -> spaces.Box:
         self._check_agent(agent)
         return self._obs_spaces[agent]
 
-    @functools.lru_cache(maxsize=None)  # noqa: B019
+    @functools.cache  # noqa: B019
     def action_space(self, agent: str) -> spaces.Box:
         self._check_agent(agent)
         return self._act_spaces[agent]
@@ -212,7 +212,8 @@ class FormationParallelEnv(ParallelEnv):
         if seed is not None:
             if int(seed) < 0:
                 raise ValueError(f"seed must be >= 0, got {seed}")
-            sc = dataclasses.replace(self.base_scenario, sim=dataclasses.replace(self.base_scenario.sim, seed=int(seed)))
+            base = self.base_scenario
+            sc = dataclasses.replace(base, sim=dataclasses.replace(base.sim, seed=int(seed)))
         self._sc = sc
         plant = self._plant_for(sc)
         plant.reset()
@@ -453,12 +454,12 @@ def _relative(p: np.ndarray, v: np.ndarray, own_p: np.ndarray, own_v: np.ndarray
 def _unsupported(sc: Scenario) -> str:
     """What of ``sc`` the environment does not run (empty: everything)."""
     if sc.faults.per_step:
-        return "per-step faults (faults.link_fail, packet_loss, delay, noise, actuator, push) are not wired to the environment"
+        return "per-step faults (faults.link_fail, packet_loss, delay, noise, actuator, push) are not wired to it"
     return ""
 
 
 def parallel_env(scenario: str | Path | Scenario = "paper", **options: Any) -> FormationParallelEnv:
-    """The formation of ``scenario`` as a PettingZoo ``ParallelEnv`` (``options``: see :class:`FormationParallelEnv`)."""
+    """The formation of ``scenario`` as a PettingZoo ``ParallelEnv`` (``options``: :class:`FormationParallelEnv`)."""
     try:
         return FormationParallelEnv(scenario, **options)
     except InputError as exc:  # a bad scenario: the project's one-line message, as a ValueError
