@@ -184,7 +184,9 @@ def main() -> None:
     ]
     results = {}
     for name, eps in rows.items():
-        tv, ff, rf = (stat(eps, k) for k in ("total_velocity_error", "final_formation_error_m", "rms_formation_error_m"))
+        tv, ff, rf = (
+            stat(eps, k) for k in ("total_velocity_error", "final_formation_error_m", "rms_formation_error_m")
+        )
         bad = sorted({f["outcome"] for e in eps for f in e["followers"]} - {"ok"})
         lines.append(
             f"| {name} | {', '.join(f'{x:.3f}' for x in tv)} | {', '.join(f'{x:.3f}' for x in ff)} | "

@@ -145,9 +145,30 @@ def test_bad_input_is_named():
 
 
 def test_reward_terms():
-    """The reward is −w_f·e − w_e·effort: with only the formation term it equals −(true formation error)."""
+    """The reward is −dt·(w_f·e + w_e·effort): with only the formation term it equals −dt·(true formation error)."""
     env = parallel_env("paper", reward={"effort": 0.0}, overrides=SHORT)
     env.reset(seed=1)
     _, rew, *_ = env.step({a: np.array([0.2, 0.1]) for a in env.agents})
     fe = env._formation_error(env.k)
-    assert [rew[a] for a in env.possible_agents] == pytest.approx(-fe, rel=1e-12)
+    assert [rew[a] for a in env.possible_agents] == pytest.approx(-env.dt * fe, rel=1e-12)
+
+
+def test_divergence_terminates_with_the_remaining_time_penalty():
+    """A state beyond ``limits`` ends the episode for every agent (terminated, named in infos), and the
+    reward of that step carries −w_terminal·(T − t), so that ending early never pays."""
+    env = parallel_env(
+        "paper",
+        v_max=1.0,
+        reward={"effort": 0.0},
+        overrides=["sim.duration=1", "sim.control_dt=0.01", "limits.speed=0.05"],
+    )
+    env.reset(seed=0)
+    while env.agents:
+        obs, rew, term, trunc, info = env.step({a: np.array([0.5, 0.0]) for a in env.agents})
+    assert all(term.values()) and not any(trunc.values())
+    assert "limits.speed" in info["follower_1"]["diverged"]
+    t = info["follower_1"]["t"]
+    assert t < 1.0
+    fe = env._formation_error(env.k)
+    expect = -env.dt * fe - env.weights["terminal"] * (1.0 - t)
+    assert [rew[a] for a in env.possible_agents] == pytest.approx(expect, rel=1e-6)

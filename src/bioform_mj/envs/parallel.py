@@ -20,10 +20,13 @@ suffix decides whether ``ĉ`` learns); ``action = "torque"``: wheel torques ``[�
 within ``±τ_max``. An action outside its space, NaN, a missing or unknown agent is a
 ``ValueError`` naming it: nothing is clipped silently.
 
-Reward per agent and step (weights in ``reward=``, defaults :data:`REWARD_WEIGHTS`):
-``−w_formation·e_i − w_effort·((τ_L/τ_max)² + (τ_R/τ_max)²)/2 − w_tipped·[i tipped this step]``
-with ``e_i`` the true formation error (m) of follower ``i`` (a training signal may use the
-truth; observations may not). Termination of every agent: a divergence (the run's guards,
+Reward per agent and step (weights in ``reward=``, defaults :data:`REWARD_WEIGHTS`), an integral
+over the period so that an episode's return does not depend on the control rate:
+``−dt·(w_formation·e_i + w_effort·((τ_L/τ_max)² + (τ_R/τ_max)²)/2) − w_tipped·[i tipped this step]
+− w_terminal·(T − t)·[the episode terminated this step]``, with ``e_i`` the true formation error
+(m) of follower ``i`` (a training signal may use the truth; observations may not) and ``T − t`` the
+time an early end leaves (s): without it, ending the episode by tipping a robot over would pay.
+Termination of every agent: a divergence (the run's guards,
 ``engine.check``, or a MuJoCo warning) or a robot tipped over; truncation at ``sim.duration``.
 """
 
@@ -67,8 +70,8 @@ OBS_FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("leader", "6", "-, m, m, rad, m/s, rad/s", "[access, Δx, Δy, Δθ, Δυ, Δω] of the leader minus the own estimate"),
 )
 
-#: reward weights (per step): formation error (1/m), torque effort, a tip-over
-REWARD_WEIGHTS: dict[str, float] = {"formation": 1.0, "effort": 0.01, "tipped": 100.0}
+#: reward weights: formation error (1/(m·s)), torque effort (1/s), a tip-over (per event), an early end (1/s)
+REWARD_WEIGHTS: dict[str, float] = {"formation": 1.0, "effort": 0.01, "tipped": 10.0, "terminal": 10.0}
 
 ACTIONS = ("velocity", "torque")
 
@@ -281,8 +284,10 @@ class FormationParallelEnv(ParallelEnv):
         self._tipped |= newly
         eff = ((tau / self._tau_max[:, None]) ** 2).mean(axis=1)
         w = self.weights
-        r = -w["formation"] * np.where(np.isfinite(fe), fe, 0.0) - w["effort"] * eff - w["tipped"] * newly
         end = diverged is not None or bool(self._tipped.any())
+        r = -self.dt * (w["formation"] * np.where(np.isfinite(fe), fe, 0.0) + w["effort"] * eff) - w["tipped"] * newly
+        if end:
+            r = r - w["terminal"] * max(0.0, (self.N - k) * self.dt)
         trunc = k >= self.N and not end
         obs = self._observations() if diverged is None else {a: np.zeros(self.obs_size) for a in self.agents}
         info = {"t": k * self.dt}
