@@ -112,9 +112,6 @@ class FormationParallelEnv(ParallelEnv):
         if action not in ACTIONS:
             raise ValueError(f"unknown action mode {action!r} (expected one of: {', '.join(ACTIONS)})")
         sc = _scenario_of(scenario, overrides)
-        unsupported = _unsupported(sc)
-        if unsupported:
-            raise ValueError(f"the environment cannot run this scenario yet: {unsupported}")
         weights = dict(REWARD_WEIGHTS)
         for k, v in (reward or {}).items():
             if k not in weights:
@@ -134,6 +131,7 @@ class FormationParallelEnv(ParallelEnv):
         self.graph = graph
         src, dst = np.asarray(graph.src), np.asarray(graph.dst)
         self._nbrs = [dst[src == i].tolist() for i in range(sc.n)]
+        self._nbr_edges = [np.flatnonzero(src == i).tolist() for i in range(sc.n)]
         self.K = max(1, max(len(x) for x in self._nbrs))
         self.obs_size = 2 + 3 + 2 + 6 * self.K + 6
         self._plant = None
@@ -226,14 +224,18 @@ class FormationParallelEnv(ParallelEnv):
         self.k = 0
         pose, vel = plant.observe()
         self._pose, self._vel = pose, vel
-        mp, mv = self._measure()
         st = self._stack
-        st.reset(initial_estimates(sc, pose, self.L_pose[0]), mv)
         g, s = st.kernel
         self._g, self._s = g, s
-        self._comm = st._no_comm
         self._tau_max = np.broadcast_to(np.asarray(st.p.tau_max, dtype=float), (self.n,))
-        sense_errors(g, s, self.L_pose[0], self.L_vel[0], self._pin(mp), self._vin(mv), self._comm, False)
+        self._faults = None
+        if sc.faults.per_step:  # faults.py: the same Faults object, in the same order, as bioform run
+            from ..faults import Faults
+
+            self._faults = Faults(sc, self.graph, np.array(self._tau_max))
+            st.set_tau_max(np.array(self._tau_max))
+        st.reset(initial_estimates(sc, pose, self.L_pose[0]), vel)  # the truth, as sim.simulate does
+        self._sense_phase(0, learn=False)
         self._stats_reset()
         self.agents = list(self.possible_agents)
         self._done = False
@@ -241,15 +243,40 @@ class FormationParallelEnv(ParallelEnv):
         obs = self._observations()
         return obs, {a: {"t": 0.0} for a in self.agents}
 
-    def _pin(self, p: np.ndarray) -> np.ndarray:
-        return np.ascontiguousarray(p, dtype=float)
-
-    _vin = _pin
-
-    def _measure(self) -> tuple[np.ndarray, np.ndarray]:
+    def _raw_measurement(self) -> tuple[np.ndarray, np.ndarray]:
+        """The sensors' pose and velocity now (odometry where ``plant.sensing`` says), before fault noise."""
         if self._odometry:
             return self._plant.measurement(self._pose, self._vel)
         return self._pose, self._vel
+
+    def _measure(self) -> tuple[np.ndarray, np.ndarray]:
+        """What the followers measure at this control step (with the faults' noise): cached per step."""
+        return self._mp, self._mv
+
+    def _sense_phase(self, k: int, learn: bool) -> None:
+        """Control step ``k``'s inputs, in ``Faults.step``'s order: actuator limits and pushes at ``t_k``,
+        the measurement (noise), the network (link weights, held or delayed neighbour estimates, the
+        leader as received); then the learner, the consensus and the tracking errors (``sense_errors``)."""
+        t = k * self.dt
+        mp, mv = self._raw_measurement()
+        lp, lv = self.L_pose[k], self.L_vel[k]
+        f, st = self._faults, self._stack
+        comm = None
+        if f is not None:
+            if f.has_act:
+                f.actuate(t, st)
+            while f._push_i < len(f._pushes) and f._pushes[f._push_i][1] <= t + 1e-12:
+                i, t0, dur, fx, fy, tz = f._pushes[f._push_i]
+                self._plant.push(int(i) - 1, (fx, fy), tz, t0 + dur)
+                f._push_i += 1
+            if f.has_noise:
+                mp, mv = f.sense(k, t, mp, mv)
+            if f.has_comm:
+                comm, lp, lv = f.comm(k, t, st.state.est_pose, st.state.est_vel, lp, lv)
+        self._mp, self._mv = np.array(mp, dtype=float), np.array(mv, dtype=float)
+        self._comm, self._lp_rx, self._lv_rx = comm, np.array(lp, dtype=float), np.array(lv, dtype=float)
+        self._comm_in = st.comm_in(comm)
+        sense_errors(self._g, self._s, self._lp_rx, self._lv_rx, self._mp, self._mv, self._comm_in, learn)
 
     def step(self, actions: Mapping[str, Any]):
         """One control period for every live agent. Returns ``(obs, rewards, terminations, truncations, infos)``."""
@@ -259,11 +286,13 @@ class FormationParallelEnv(ParallelEnv):
         g, s, k = self._g, self._s, self.k
         mp, mv = self._measure()
         if self.action_mode == "velocity":
-            track_velocity(g, s, self._vin(mv), u)
+            track_velocity(g, s, mv, u)
         else:
             direct_torque(g, s, u)
         self._stats_control(mv)
         tau = np.array(s.tau, dtype=float)
+        if self._faults is not None and self._faults._lim is not None:  # weakened motors deliver no more
+            tau = np.clip(tau, -self._faults._lim, self._faults._lim)
         estimator_advance(g, s)
         diverged = None
         try:
@@ -273,8 +302,7 @@ class FormationParallelEnv(ParallelEnv):
         except Diverged as e:
             diverged = str(e)
         self.k = k = k + 1
-        mp, mv = self._measure()
-        sense_errors(g, s, self.L_pose[k], self.L_vel[k], self._pin(mp), self._vin(mv), self._comm, True)
+        self._sense_phase(k, learn=True)
         if diverged is None and not check(s, self._pose, self._vel, self._lim, self._diag):
             diverged = describe(self._diag, k * self.dt, self._lim)
         fe = self._formation_error(k)
@@ -344,10 +372,15 @@ class FormationParallelEnv(ParallelEnv):
 
     # ------------------------------------------------------------------ observations
     def _observations(self) -> dict[str, np.ndarray]:
-        s = self._s
+        s, comm = self._s, self._comm
         mp, mv = self._measure()
-        lp, lv = self.L_pose[self.k], self.L_vel[self.k]
+        lp, lv = self._lp_rx, self._lv_rx  # the leader as this step's network delivers it
         lacc = np.asarray(self.graph.leader_access, dtype=float)
+        if comm is not None:
+            lacc = lacc * np.asarray(comm.leader_w, dtype=float)
+        rp = s.est_pose[self.graph.dst] if comm is None or comm.recv_pose is None else comm.recv_pose
+        rv = s.est_vel[self.graph.dst] if comm is None or comm.recv_vel is None else comm.recv_vel
+        ew = np.ones(len(self.graph.src)) if comm is None else np.asarray(comm.edge_w, dtype=float)
         out = {}
         for a in self.agents:
             i = self._index[a]
@@ -357,8 +390,9 @@ class FormationParallelEnv(ParallelEnv):
             o[5:7] = s.est_vel[i]
             own = s.est_pose[i]
             c, sn = math.cos(mp[i, 2]), math.sin(mp[i, 2])
-            for q, j in enumerate(self._nbrs[i]):
-                o[7 + 6 * q : 13 + 6 * q] = _relative(s.est_pose[j], s.est_vel[j], own, s.est_vel[i], c, sn)
+            for q, e in enumerate(self._nbr_edges[i]):
+                if ew[e] > 0:  # a link that is down delivers nothing
+                    o[7 + 6 * q : 13 + 6 * q] = _relative(rp[e], rv[e], own, s.est_vel[i], c, sn)
             if lacc[i] > 0:
                 o[7 + 6 * self.K :] = _relative(lp, lv, own, s.est_vel[i], c, sn)
             out[a] = o
@@ -388,9 +422,14 @@ class FormationParallelEnv(ParallelEnv):
             self._rows_vel.append(self._vel.copy())
 
     def leader_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """The virtual leader's pose (3,) and velocities (2,) now: for baselines that read the leader
-        where the graph gives access (:class:`ControllerPolicy`); not part of any observation."""
-        return self.L_pose[self.k], self.L_vel[self.k]
+        """The virtual leader's pose (3,) and velocities (2,) now, as this step's network delivers them
+        (faults: delayed or held): for baselines that read the leader where the graph gives access
+        (:class:`ControllerPolicy`); an observation holds it only for followers with access."""
+        return self._lp_rx, self._lv_rx
+
+    def network(self):
+        """This step's :class:`~bioform_mj.control.base.Comm` (None: the paper's perfect network)."""
+        return self._comm
 
     def measured_state(self) -> tuple[np.ndarray, np.ndarray]:
         """Every follower's measured pose (n, 3) and velocity (n, 2) now (what a ``Controller`` reads)."""
@@ -454,13 +493,6 @@ def _relative(p: np.ndarray, v: np.ndarray, own_p: np.ndarray, own_v: np.ndarray
     dx, dy = p[0] - own_p[0], p[1] - own_p[1]
     dth = (p[2] - own_p[2] + math.pi) % (2 * math.pi) - math.pi
     return np.array([1.0, c * dx + s * dy, -s * dx + c * dy, dth, v[0] - own_v[0], v[1] - own_v[1]])
-
-
-def _unsupported(sc: Scenario) -> str:
-    """What of ``sc`` the environment does not run (empty: everything)."""
-    if sc.faults.per_step:
-        return "per-step faults (faults.link_fail, packet_loss, delay, noise, actuator, push) are not wired to it"
-    return ""
 
 
 def parallel_env(scenario: str | Path | Scenario = "paper", **options: Any) -> FormationParallelEnv:

@@ -37,10 +37,7 @@ class ControllerPolicy:
         if self.controller is None or isinstance(self.controller, ControlStack):
             p = env._plant
             self.controller = ControlStack(env.graph, stack_params(env._sc, p.c_true(), getattr(p, "tau_max", None)))
-        mp, mv = env.measured_state()
-        lp, _ = env.leader_state()
-        pose0, _ = env._pose, env._vel
-        self.controller.reset(initial_estimates(env._sc, pose0, lp), mv)
+        self.controller.reset(initial_estimates(env._sc, env._pose, env.L_pose[0]), env._vel)  # as sim.simulate
         self.verr[:] = 0.0
 
     def __call__(self, obs: Any = None) -> dict[str, np.ndarray]:
@@ -48,7 +45,15 @@ class ControllerPolicy:
         env = self.env
         lp, lv = env.leader_state()
         mp, mv = env.measured_state()
-        tau = np.asarray(self.controller.step(lp, lv, mp, mv), dtype=float)
+        f = env._faults
+        if f is not None and f.has_act and f.act_known and hasattr(self.controller, "set_tau_max"):
+            self.controller.set_tau_max(np.array(env._g.lim))  # the limits the faults told the stack
+        comm = env.network()
+        if comm is None:
+            tau = self.controller.step(lp, lv, mp, mv)
+        else:
+            tau = self.controller.step(lp, lv, mp, mv, comm)
+        tau = np.asarray(tau, dtype=float)
         cmd = self.controller.signals().get("cmd") if hasattr(self.controller, "signals") else None
         if cmd is not None:  # Table I's metric, as engine.accumulate sums it (true velocities)
             v = env._vel
