@@ -27,6 +27,8 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=20.0)
     ap.add_argument("--control-dt", type=float, default=0.01)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--worlds", type=int, default=0, help="also the batched environment with this many worlds")
+    ap.add_argument("--device", default="cpu", help="Warp device of the batched environment")
     a = ap.parse_args()
     ov = [f"sim.duration={a.duration}", f"sim.control_dt={a.control_dt}", f"plant.kind={a.plant}"]
     env = parallel_env(a.scenario, action="velocity", overrides=ov)
@@ -48,6 +50,35 @@ def main() -> None:
     print(f"scenario {a.scenario}, plant {a.plant}, n = {sc.n}, control_dt {a.control_dt:g} s, {a.duration:g} s")
     print(f"environment: {e:,.0f} steps/s ({e * sc.n:,.0f} agent-steps/s); bioform run (compiled): {r:,.0f} steps/s")
     print(f"ratio environment / compiled loop: {e / r:.2f}")
+    if a.worlds:
+        batch(a, ov, sc)
+
+
+def batch(a, ov, sc) -> None:
+    """The batched environment against the batch engine's own closed loop (``BatchRun.run``), same worlds."""
+    import warp as wp
+
+    from bioform_mj.envs import batch_env
+
+    be = batch_env(a.scenario, worlds=a.worlds, device=a.device, overrides=ov)
+    act = np.tile(np.array([0.2, 0.1]), (a.worlds, sc.n, 1))
+    be.reset()
+    be.step(act)  # kernels loaded
+    env_rates, run_rates = [], []
+    for _ in range(a.repeat):
+        be.reset()
+        wp.synchronize_device(be.run.device)
+        t0 = time.perf_counter()
+        for _k in range(be.N):
+            be.step(act)
+        wp.synchronize_device(be.run.device)
+        env_rates.append(be.N / (time.perf_counter() - t0))
+        wall = be.run.run()
+        run_rates.append(be.N / wall)
+    e, r = statistics.median(env_rates), statistics.median(run_rates)
+    agents = a.worlds * sc.n
+    print(f"batched environment, {a.worlds} worlds on {a.device}: {e:,.1f} steps/s ({e * agents:,.0f} agent-steps/s)")
+    print(f"batch engine closed loop (BatchRun.run): {r:,.1f} steps/s; ratio {e / r:.2f}")
 
 
 if __name__ == "__main__":
