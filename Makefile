@@ -21,7 +21,7 @@ $(STAMP): pyproject.toml | $(PY)
 
 # the test extras on top, and the gpu extra: the batch engine's tests run on Warp's CPU device (no GPU needed)
 $(TEST_STAMP): $(STAMP) pyproject.toml
-	$(PY) -m pip install --quiet -e '.[test,gpu]'
+	$(PY) -m pip install --quiet -e '.[test,gpu,rl,urdf]'
 	touch $(TEST_STAMP)
 
 install: $(STAMP)
@@ -37,6 +37,7 @@ NPY_AVX512 = $(PY) -c "from numpy._core._multiarray_umath import __cpu_features_
 
 test: $(TEST_STAMP)
 	$(PY) -c "import warp, mujoco_warp" || { echo "error: the gpu extra is missing from $(VENV): rm $(TEST_STAMP) and run make test again" >&2; exit 2; }
+	$(PY) -c "import pettingzoo, gymnasium" || { echo "error: the rl extra is missing from $(VENV): rm $(TEST_STAMP) and run make test again" >&2; exit 2; }
 	$(VENV)/bin/ruff check src tests scripts examples
 	$(VENV)/bin/ruff format --check src tests scripts examples
 	$(PY) -m pytest -q

@@ -1,0 +1,85 @@
+"""A :class:`~bioform_mj.control.base.Controller` as a policy of the formation environment (design §20).
+
+The paper's four methods (and any user controller) are centralised objects that compute every
+follower's torques at once from what each follower may read (the leader only through
+``a_ir``); :class:`ControllerPolicy` gives them the environment's measurements and the
+leader's state, and returns their torques as the agents' actions (``action = "torque"``). An
+episode of it is the run ``bioform run`` makes of the same scenario: same plant, same order
+(control at ``t_k`` from the state at ``t_k``, held over the period), so the summaries agree
+(``tests/test_envs.py`` states the tolerance).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .parallel import FormationParallelEnv
+
+
+class ControllerPolicy:
+    """Runs ``controller`` (default: the paper's stack for the scenario's method) in ``env``."""
+
+    def __init__(self, env: FormationParallelEnv, controller: Any = None) -> None:
+        if env.action_mode != "torque":
+            raise ValueError("ControllerPolicy drives wheel torques: build the environment with action='torque'")
+        self.env = env
+        self.controller = controller
+        self.verr = np.zeros(env.n)
+
+    def reset(self) -> None:
+        """After ``env.reset``: the controller's initial estimates, as ``bioform run`` sets them."""
+        from ..control.stack import ControlStack
+        from ..sim import initial_estimates, stack_params
+
+        env = self.env
+        if self.controller is None or isinstance(self.controller, ControlStack):
+            p = env._plant
+            self.controller = ControlStack(env.graph, stack_params(env._sc, p.c_true(), getattr(p, "tau_max", None)))
+        self.controller.reset(initial_estimates(env._sc, env._pose, env.L_pose[0]), env._vel)  # as sim.simulate
+        self.verr[:] = 0.0
+
+    def __call__(self, obs: Any = None) -> dict[str, np.ndarray]:
+        """The actions of every live agent for this control step."""
+        env = self.env
+        lp, lv = env.leader_state()
+        mp, mv = env.measured_state()
+        f = env._faults
+        if f is not None and f.has_act and f.act_known and hasattr(self.controller, "set_tau_max"):
+            self.controller.set_tau_max(np.array(env._g.lim))  # the limits the faults told the stack
+        comm = env.network()
+        if comm is None:
+            tau = self.controller.step(lp, lv, mp, mv)
+        else:
+            tau = self.controller.step(lp, lv, mp, mv, comm)
+        tau = np.asarray(tau, dtype=float)
+        cmd = self.controller.signals().get("cmd") if hasattr(self.controller, "signals") else None
+        if cmd is not None:  # Table I's metric, as engine.accumulate sums it (true velocities)
+            v = env._vel
+            self.verr += np.abs(cmd[:, 0] - v[:, 0]) + np.abs(cmd[:, 1] - v[:, 1])
+        else:
+            self.verr[:] = np.nan
+        return {a: tau[env._index[a]].copy() for a in env.agents}
+
+
+def run_episode(env: FormationParallelEnv, policy: Any, seed: int | None = None) -> dict[str, Any]:
+    """One episode of ``policy`` (a :class:`ControllerPolicy`, or any ``obs dict -> action dict``
+    callable) in ``env``; returns :meth:`FormationParallelEnv.episode_summary` with the episode's
+    return per agent (``return``)."""
+    obs, _ = env.reset(seed=seed)
+    if hasattr(policy, "reset"):
+        policy.reset()
+    ret = dict.fromkeys(env.possible_agents, 0.0)
+    while env.agents:
+        obs, rew, _term, _trunc, _info = env.step(policy(obs))
+        for a, r in rew.items():
+            ret[a] += r
+    ctrl = getattr(policy, "controller", None)
+    summary = env.episode_summary(ctrl)
+    if isinstance(policy, ControllerPolicy):
+        for f, v in zip(summary["followers"], policy.verr):
+            f["total_velocity_error"] = float(v * env.dt)
+    for f, a in zip(summary["followers"], env.possible_agents):
+        f["return"] = ret[a]
+    return summary
