@@ -68,7 +68,7 @@ def test_controller_episode_matches_bioform_run(plant):
         for key in ("total_velocity_error", "final_formation_error_m", "rms_formation_error_m"):
             assert g[key] == pytest.approx(f[key], rel=1e-9, abs=1e-12), key
         assert g["c_hat"] == pytest.approx(f["c_hat"], rel=1e-9)
-        assert g["outcome"] == f["outcome"]
+        assert g["outcome"] == f["outcome"] and [o["kind"] for o in g["outcomes"]] == [o["kind"] for o in f["outcomes"]]
     # and the episode is not trivial: every follower closes on its slot from its initial error
     fe0 = env._rows_fe[0]
     for i, g in enumerate(ep["followers"]):

@@ -242,9 +242,7 @@ def expand(
                 sc = dataclasses.replace(base, sim=dataclasses.replace(base.sim, seed=s))
                 run_ov = ov + (f"sim.seed={s}",)
                 label = tuple((k, unquote(v)) for k, v in combo)  # design §17: '"backstepping"' labelled backstepping
-                specs.append(
-                    RunSpec(source, run_ov, method, s, plant, label, seed_key(text, s), sc, prov_cache[pk])
-                )
+                specs.append(RunSpec(source, run_ov, method, s, plant, label, seed_key(text, s), sc, prov_cache[pk]))
     if (dropped or same) and warn is not None:
         ex = "; ".join(dict.fromkeys(same))
         note = f"{dropped} repeated value(s) in --vary" if dropped else ""

@@ -439,7 +439,7 @@ class FormationParallelEnv(ParallelEnv):
     def episode_summary(self, controller: Any = None) -> dict[str, Any]:
         """Per follower the run metrics of ``bioform run``'s ``summary.json`` for this episode so far:
         ``total_velocity_error`` (Table I's metric), ``final_formation_error_m``, ``rms_formation_error_m``,
-        ``c_hat``, ``outcome``/``outcomes`` (from ``sim.follower_outcomes``)."""
+        ``c_hat``, ``outcome`` and every outcome in ``outcomes`` (``sim.follower_outcomes``)."""
         from ..sim import follower_outcomes
 
         sc, n = self._sc, self.n
@@ -466,7 +466,8 @@ class FormationParallelEnv(ParallelEnv):
                     "final_formation_error_m": float(final[i]),
                     "rms_formation_error_m": float(np.sqrt(np.mean(fe_rows[:, i] ** 2))) if len(fe_rows) else math.nan,
                     "c_hat": [float(v) for v in c_hat[i]],
-                    "outcome": o[0] if isinstance(o, tuple) else o.get("outcome", "ok"),
+                    "outcome": o[0]["kind"] if o else "ok",  # the most severe (sim.outcome_list's order)
+                    "outcomes": o,
                 }
             )
         return {
