@@ -99,7 +99,8 @@ def test_constraint_capacity_overflow_and_the_sweep_flag(tmp_path):
 
 def test_a_resume_with_more_capacity_redoes_the_capacity_stops(tmp_path, capsys):
     """Rows that stopped on capacity are finished rows, but a resume with other capacities redoes
-    them (a warning per row); the same capacities keep them; healthy rows are always kept."""
+    them (one ``resume:`` line with the count and why); the same capacities keep them; healthy rows are
+    always kept."""
     out = tmp_path / "sw"
     args = ["sweep", "paper", "--plant", "mujoco", "--duration", "0.02", "--seeds", "2", "--quiet"]
     args += ["--backend", "warp", "--device", "cpu", "--out", str(out)]
@@ -109,7 +110,8 @@ def test_a_resume_with_more_capacity_redoes_the_capacity_stops(tmp_path, capsys)
     assert "redone" not in capsys.readouterr().err
     assert main(args) == 0  # the default capacity (112 rows for 3 robots): redone, now healthy
     err = capsys.readouterr().err
-    assert err.count("its run is redone") == 2 and "njmax 4; now nconmax 40, njmax 112" in err
+    assert "resume: 2 row(s) redone (it stopped on MuJoCo Warp's capacity" in err
+    assert "njmax 4; now nconmax 40, njmax 112" in err
     with open(out / "runs.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["status"] for r in rows] == ["ok", "ok"] and all(r["capacity_exceeded"] == "False" for r in rows)
