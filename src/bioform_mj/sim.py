@@ -91,6 +91,28 @@ class RunResult:
     diverged: Diverged | None = None
     interrupted: KeyboardInterrupt | None = None  # what stopped the loop (SIGINT/SIGTERM): log and summary so far
 
+    def table(self) -> Any:
+        """The log as a tidy ``pyarrow.Table``: one row per log sample and follower (``K × n`` rows,
+        sample-major), columns ``t_s``, ``follower`` (1-based) and one per channel component with its
+        unit in the name (``pose_x_m``, ``tau_left_Nm``, ``formation_error_m``; :mod:`bioform_mj.logtable`),
+        each field's unit in its metadata, scenario name, plant and method in the schema's."""
+        from .logtable import to_arrow
+
+        sc = self.scenario
+        return to_arrow(self.log, {"scenario": sc.name, "plant": sc.plant.kind, "method": sc.method})
+
+    to_arrow = table
+
+    def to_pandas(self) -> Any:
+        """:meth:`table` as a pandas DataFrame (needs pandas)."""
+        return self.table().to_pandas()
+
+    def to_polars(self) -> Any:
+        """:meth:`table` as a polars DataFrame (needs polars)."""
+        import polars as pl
+
+        return pl.from_arrow(self.table())
+
 
 def make_plant(sc: Scenario) -> Plant:
     """The plant named by ``sc.plant.kind``, at the scenario's initial poses."""
