@@ -69,7 +69,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--engine",
         choices=("auto", "compiled", "stepwise"),
         default="auto",
-        help="fused: the numba-compiled loop (default when numba imports); numpy: the reference stack",
+        help="compiled: whole chunks of control periods in machine code (needs a plant and controller with "
+        "compiled kernels and no per-step faults); stepwise: one Python call per control step, same equations; "
+        "auto (default): compiled where possible",
     )
     run.add_argument(
         "--video",
