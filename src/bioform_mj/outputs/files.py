@@ -50,6 +50,14 @@ def write_text(path: str | Path, text: str) -> None:
         tmp.write_text(text)
 
 
+def write_parquet(path: str | Path, table: Any) -> None:
+    """Atomically write a ``pyarrow.Table`` as Parquet."""
+    import pyarrow.parquet as pq
+
+    with atomic_path(path) as tmp:
+        pq.write_table(table, str(tmp))
+
+
 def write_npz(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
     """Atomically write a compressed ``.npz``."""
     with atomic_path(path) as tmp:
