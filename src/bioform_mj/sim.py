@@ -542,10 +542,23 @@ def _shadow(state: StackState, sig: Any, tau: np.ndarray, missing: set[str]) -> 
     state.tau[:] = tau
 
 
-#: follower outcomes (design §8): thresholds
-LOST_M = 1.0  # m: final formation error beyond this → lost ...
+#: follower outcomes (design §9): thresholds
+LOST_FRACTION = 0.1  # final formation error beyond this fraction of the formation's extent → lost ...
 LOST_AFTER_S = 10.0  # s: ... once the run has had this long to converge (or if the error grew over the run)
 SPIN_RAD_S = 6.0  # rad/s: |ω| beyond this over the last second → spinning
+#: the ``lost`` threshold of the paper's formation (extent 10 m), kept for reference
+LOST_M = 1.0
+
+
+def lost_threshold_m(sc: Scenario) -> float:
+    """The ``lost`` outcome's threshold, m: :data:`LOST_FRACTION` × the formation's extent, the
+    largest distance between two points of the leader and the followers' slots (``p_r − Δ_i``), from
+    the resolved offsets (design §9). 1 m for the paper's formation (offsets (3, 0), (4, ±5): 10 m), so
+    it scales with the experiment: 0.15 m for the ``tb3`` preset (``formation.scale = 0.15``), 0.25 m for
+    ``stretch``. The one place both engines take it from."""
+    pts = np.vstack([np.zeros((1, 2)), np.asarray(sc.formation.offsets, dtype=float)])
+    extent = float(np.max(np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1)))
+    return LOST_FRACTION * extent
 
 
 def _summary(
@@ -656,7 +669,7 @@ def follower_outcomes(
     """Per follower ``(outcome, detail)``: ``ok`` or the first failure of ``tipped`` (tilt beyond
     the plant's ``TIP_ANGLE_DEG``, with the time), ``slipping`` (a wheel's slip ratio beyond the
     plant's ``SLIP_RATIO`` for ``SLIP_TIME`` s), ``spinning`` (|ω| > :data:`SPIN_RAD_S` over
-    the last second), ``lost`` (final formation error > :data:`LOST_M` after
+    the last second), ``lost`` (final formation error > :func:`lost_threshold_m` after
     :data:`LOST_AFTER_S` s, or grown by half over a shorter run), ``c_hat_at_bound``
     (a learned parameter at its projection bound at the end)."""
     n = sc.n
@@ -666,6 +679,7 @@ def follower_outcomes(
     p = getattr(controller, "p", None)
     t = logd["t"]
     last = t >= (t[-1] - 1.0) if len(t) else np.zeros(0, bool)
+    lost_m = lost_threshold_m(sc)
     for i in range(n):
         if tip is not None and tip[i] >= 0:
             from .plants.mujoco_plant import TIP_ANGLE_DEG
@@ -685,8 +699,8 @@ def follower_outcomes(
             continue
         fe0 = float(logd["formation_error"][0, i]) if len(t) else 0.0
         t_end = float(t[-1]) if len(t) else 0.0
-        if final_form[i] > LOST_M and (t_end >= LOST_AFTER_S - 1e-9 or final_form[i] > 1.5 * fe0):
-            out.append(("lost", f"final formation error {final_form[i]:.3g} m > {LOST_M:g} m"))
+        if final_form[i] > lost_m and (t_end >= LOST_AFTER_S - 1e-9 or final_form[i] > 1.5 * fe0):
+            out.append(("lost", f"final formation error {final_form[i]:.3g} m > {lost_m:.3g} m"))
             continue
         if p is not None and p.learning:
             lo = np.broadcast_to(p.c_min, (n, 2))[i]

@@ -44,7 +44,7 @@ from ..engine import GUARDS
 from ..faults import Faults, counter
 from ..plants.mujoco_plant import TIP_ANGLE_DEG
 from ..scenario import Scenario
-from ..sim import LOST_AFTER_S, LOST_M, SPIN_RAD_S
+from ..sim import LOST_AFTER_S, SPIN_RAD_S, lost_threshold_m
 from .backend import default_capacity, unsupported
 from .samesource import warp_equations
 
@@ -1841,8 +1841,9 @@ class BatchRun:
             )
         if not diverged and nrow and spin_ok == 0:
             return "spinning", f"|omega| > {SPIN_RAD_S:g} rad/s over the last second"
-        if final > LOST_M and (t_end >= LOST_AFTER_S - 1e-9 or final > 1.5 * fe0):
-            return "lost", f"final formation error {final:.3g} m > {LOST_M:g} m"
+        lost_m = lost_threshold_m(self.scenarios[w])
+        if final > lost_m and (t_end >= LOST_AFTER_S - 1e-9 or final > 1.5 * fe0):
+            return "lost", f"final formation error {final:.3g} m > {lost_m:.3g} m"
         if learning:
             at = [k for k in range(2) if c_hat[k] <= lo[k] * (1 + 1e-9) or c_hat[k] >= hi[k] * (1 - 1e-9)]
             if at:
