@@ -50,7 +50,7 @@ def test_scenario_reference_has_one_row_per_key_with_type_default_and_choices():
     frame = next(r for r in rows if r.startswith("| `formation.frame`"))
     assert '"world", "leader"' in frame and '`"world"`' in frame  # allowed values and default
     jitter = next(r for r in rows if r.startswith("| `formation.init_jitter`"))
-    assert "| number | m and rad | `0.0` |" in jitter
+    assert "| number | m | `0.0` |" in jitter
 
 
 def test_cli_reference_lists_every_subcommand_and_option():
@@ -134,3 +134,5 @@ def test_docs_build_strictly(tmp_path):
     assert out.returncode == 0, out.stderr[-3000:]
     scen = (tmp_path / "site" / "reference" / "scenario" / "index.html").read_text()
     assert "formation.init_jitter" in scen and "faults.friction_patch" in scen
+    tut = (tmp_path / "site" / "tutorials" / "own-controller" / "index.html").read_text()
+    assert "SlotTracker" in tut and "--8&lt;--" not in tut and "8 &lt; --" not in tut  # the script itself, included

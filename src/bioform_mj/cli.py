@@ -433,6 +433,7 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
     if sc.plant.kind == "mujoco":
         write_text(out / "scene.xml", result.plant.model_xml())
     write_json(out / "summary.json", result.summary)
+    write_text(out / "resolved.toml", _record_toml(result.summary))
     mjlog.write(out)
     if interrupted is not None:
         _ignore_signals()
@@ -491,6 +492,23 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
             print(note)
         _print_summary(result.summary, out)
     return EXIT_INPUT if problems else EXIT_OK
+
+
+def _record_toml(summary: dict[str, Any]) -> str:
+    """``resolved.toml``: the run's configuration as a scenario file that repeats it (``record.py``)."""
+    from .record import to_toml
+
+    scale = summary.get("formation_scale", 1.0)
+    note = (
+        "The resolved configuration of this run (written by bioform run); `bioform run` on this file repeats it\n"
+        "bit for bit on the same machine and engine."
+        + (
+            f"\nLengths are already x formation.scale = {scale:g} of the scenario as written: scale = 1 here."
+            if scale != 1
+            else ""
+        )
+    )
+    return to_toml(summary["config"], note)
 
 
 def _show_robot_warnings() -> None:

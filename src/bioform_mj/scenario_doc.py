@@ -85,9 +85,10 @@ KEYS: dict[str, tuple[str, str]] = {
         "`[[Δx, Δy], …]` per follower: the slot is the leader's position **minus** the offset. × scale.",
     ),
     "formation.initial_poses": ("m, m, rad", "`[[x, y, θ], …]` per follower. x, y × scale."),
-    "formation.init_jitter": (
-        "m and rad",
-        "Seeded uniform perturbation `±j` of the initial poses: x, y by `j × scale` m, θ by `j` rad (unscaled).",
+    "formation.init_jitter": ("m", "Seeded uniform perturbation `±j` of the initial x and y. × scale."),
+    "formation.init_jitter_heading": (
+        "rad",
+        "The same on the initial headings, not scaled (an angle); -1: the number of `init_jitter` as written.",
     ),
     "formation.scale": (
         "",

@@ -46,6 +46,7 @@ from .engine import (
 from .errors import Diverged, RobotWarning
 from .plants.base import Plant
 from .plants.ideal import IdealPlant
+from .record import resolved_config
 from .scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -635,7 +636,8 @@ def _summary(
         "log_channels": {name: CHANNELS[name][1] for name in CHANNELS},
         "log_interval_means": list(MEAN_CHANNELS),
         "versions": _versions(),
-        "config": sc.to_dict(),
+        "formation_scale": sc.formation.scale,  # applied: config holds the scaled values with scale = 1
+        "config": resolved_config(sc),  # the run's own record: load() takes it back unchanged
         "followers": followers,
     }
 

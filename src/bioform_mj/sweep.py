@@ -119,7 +119,7 @@ def randomness(sc: Scenario) -> list[str]:
     The seed draws the initial-pose jitter and, inside the fault window, sensor noise and packet loss.
     """
     out = []
-    if sc.formation.init_jitter > 0:
+    if sc.formation.init_jitter > 0 or sc.formation.init_jitter_heading > 0:
         out.append("formation.init_jitter")
     f = sc.faults
     w0, w1 = f.window if f.window else (-np.inf, np.inf)

@@ -23,7 +23,17 @@ from .files import check_out_dir
 
 #: Files a run or a table1 writes into its folder (extend when a command writes a new one).
 RUN_FILES = frozenset(
-    {"summary.json", "log.npz", "scene.xml", "video.mp4", "run.rrd", "MUJOCO_LOG.TXT", "table1.json", "table1.md"}
+    {
+        "summary.json",
+        "resolved.toml",
+        "log.npz",
+        "scene.xml",
+        "video.mp4",
+        "run.rrd",
+        "MUJOCO_LOG.TXT",
+        "table1.json",
+        "table1.md",
+    }
 )
 #: Folders a run writes, and the file suffixes they may hold.
 RUN_DIRS = {"figures": (".png",)}
