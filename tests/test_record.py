@@ -95,3 +95,14 @@ def test_a_file_that_is_no_record_is_refused(tmp_path, capsys):
     assert main(["run", str(p), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and "summary.json" in err[0]
+
+
+@pytest.mark.parametrize("preset", ["paper", "tb3", "stretch", "hetero", "payload", "fault_push", "large16"])
+def test_every_kind_of_preset_round_trips_through_its_record(tmp_path, preset):
+    """Faults, events, heterogeneous robots, scaled presets: the record loads back to the same scenario."""
+    import dataclasses
+
+    sc = load(preset)
+    (tmp_path / "r.toml").write_text(to_toml(resolved_config(sc)))
+    back = load(str(tmp_path / "r.toml"))
+    assert back == dataclasses.replace(sc, formation=dataclasses.replace(sc.formation, scale=1.0))
