@@ -25,7 +25,7 @@ import numpy as np
 from bioform_mj.control.equations import slip_ratio
 from bioform_mj.disturbance import harmonic_rows
 from bioform_mj.errors import Diverged
-from bioform_mj.identify import RobotParams, robot_parameters
+from bioform_mj.robot_params import RobotParams, robot_parameters
 from bioform_mj.scene import (
     Markers,
     RobotLayout,

@@ -1,0 +1,248 @@
+"""The ground truth of a robot model: :class:`RobotParams` (``a_eff``, ``b_eff``, masses, inertias, the
+drags and dead bands the paper's model lacks) read from a compiled MuJoCo model by
+:func:`robot_parameters` (design §5/§8; the formulas are in :mod:`bioform_mj.identify`'s docstring).
+
+Below both :mod:`bioform_mj.identify` (which checks these values by identification, driving a
+:class:`~bioform_mj.plants.mujoco_plant.MujocoPlant`) and the plant (which reports them), so that neither
+imports the other for them.
+"""
+
+from __future__ import annotations
+
+import logging
+import warnings
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from bioform_mj.scene import DC_INPUT_VOLTAGE, build_scene, compile_scene, dc_constants, dc_ctrl_scale, layout_of
+
+log = logging.getLogger(__name__)
+
+#: a centre of mass farther than this from the axle midpoint (m) makes the formula approximate
+COM_TOLERANCE_M = 1e-3
+
+
+@dataclass(frozen=True)
+class RobotParams:
+    """Physical parameters of one robot as compiled (SI units)."""
+
+    mass: float  # m, kg: total mass of the robot subtree
+    yaw_inertia: float  # I, kg·m²: about the vertical through the axle midpoint
+    wheel_inertia: float  # I_w, kg·m²: one wheel's spin inertia (+ armature)
+    wheel_radius: float  # r, m
+    half_track: float  # l, m
+    com_offset: float  # m: horizontal distance of the centre of mass from the axle midpoint
+    tau_max: tuple[float, float]  # N·m: torque limit of left/right motor
+    a_eff: float  # 1/(kg·m)
+    b_eff: float  # 1/(kg·m²)
+    com_xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m: CoM from the axle midpoint, base frame
+    wheel_damping: float = 0.0  # N·m·s/rad per wheel joint (mean of the two)
+    wheel_armature: float = 0.0  # kg·m² per wheel joint (included in wheel_inertia)
+    wheel_frictionloss: float = 0.0  # N·m per wheel joint
+    motor: str = "ideal"  # "ideal" (torque source) or "dc" (MuJoCo <dcmotor>, design §8.2)
+    driver: str = ""  # DC motor driver: "current" or "voltage"
+    motor_stall_torque: float = 0.0  # N·m at the wheel: g K V_max / R (DC motor)
+    motor_no_load_speed: float = 0.0  # rad/s at the wheel: V_max / (g K) (DC motor)
+    motor_damping: float = 0.0  # N·m·s/rad per wheel: back-EMF drag (g K)²/R (voltage driver; 0 otherwise)
+
+    @property
+    def c(self) -> tuple[float, float]:
+        """``(a_eff, b_eff)``."""
+        return (self.a_eff, self.b_eff)
+
+    @property
+    def mass_eff(self) -> float:
+        """``M_eff = 1/(a_eff r) = m + 2 I_w/r²``, kg (a force F gives υ̇ = F/M_eff)."""
+        return 1.0 / (self.a_eff * self.wheel_radius)
+
+    @property
+    def inertia_eff(self) -> float:
+        """``I_eff = l/(b_eff r) = I + 2 I_w l²/r²``, kg·m² (a yaw torque T gives ω̇ = T/I_eff)."""
+        return self.half_track / (self.b_eff * self.wheel_radius)
+
+    @property
+    def traction_limit(self) -> float:
+        """``μ m g r / 2`` per wheel for μ = 1, N·m (scale by the floor's μ)."""
+        return self.mass * 9.81 * self.wheel_radius / 2
+
+    def unmodelled(self, v: float, w: float) -> dict:
+        """Wheel damping and frictionloss as the paper's model sees them (design §8, issue 10).
+
+        A joint damping ``c`` (N·m·s/rad) on each wheel is a torque ``−c φ̇`` with wheel rates
+        ``φ̇_{R,L} = (υ ± l ω)/r``, so ``υ̇ = a τ_a − k_υ υ`` and ``ω̇ = b τ_b − k_ω ω`` with
+        ``k_υ = 2 a c / r`` and ``k_ω = 2 b c l / r`` (1/s); at speeds ``v`` m/s, ``w`` rad/s that
+        is a drag of ``k_υ v`` m/s² and ``k_ω w`` rad/s². A frictionloss ``f`` (N·m) per wheel is
+        a dead band: up to ``2 f`` of ``τ_a`` resp. ``τ_b`` moves nothing, ``2 a f`` m/s² resp.
+        ``2 b f`` rad/s². Neither is in ``υ̇ = a τ_a + d``: the learner meets them as a
+        disturbance, and where the torque is nearly constant (cruising at ``v``, torque
+        ``τ_a ≈ k_υ v / a``) it cannot tell them from ``a τ_a`` (the constant-disturbance bias of
+        design §8): ``â`` then tends to ``a − k_υ v/τ_a``, which is ``0`` for pure cruising, i.e.
+        it stays where the projection and the excitation put it. Armature is in ``a_eff, b_eff``.
+        """
+        a, b, r, l = self.a_eff, self.b_eff, self.wheel_radius, self.half_track
+        c, f = self.wheel_damping + self.motor_damping, self.wheel_frictionloss
+        k_v, k_w = 2 * a * c / r, 2 * b * c * l / r
+        motor = {"motor": self.motor}
+        if self.motor == "dc":
+            ce = self.motor_damping
+            motor.update(
+                {
+                    "driver": self.driver,
+                    "stall_torque_Nm": self.motor_stall_torque,
+                    "no_load_speed_rad_s": self.motor_no_load_speed,
+                    "back_emf_damping_Nms_per_rad": ce,
+                    "back_emf_drag_rate_per_s": [2 * a * ce / r, 2 * b * ce * l / r],
+                    "ground_truth": (
+                        "voltage driver: a_eff, b_eff from rest (the stall torque line); moving, back-EMF is a "
+                        "viscous drag (gK)^2/R per wheel: v' = a tau_a - k_v v, w' = b tau_b - k_w w, "
+                        "k_v = 2 a c/r, k_w = 2 b c l/r (c = damping + back-EMF)"
+                        if self.driver == "voltage"
+                        else "current driver: the commanded torque is delivered below the torque-speed line "
+                        "|tau| <= stall (1 - |wheel rate|/no-load speed): a_eff, b_eff and no drag; "
+                        "beyond it the torque is clipped (a saturation, not a drag)"
+                    ),
+                }
+            )
+        return {
+            **motor,
+            "damping_Nms_per_rad": c,
+            "armature_kgm2": self.wheel_armature,
+            "frictionloss_Nm": f,
+            "armature_in_c_true": "I_w includes armature: a = 1/(m r + 2 I_w/r), b = l/(I r + 2 I_w l²/r)",
+            "drag_rate_per_s": [k_v, k_w],
+            "drag_time_constant_s": [1 / k_v if k_v else None, 1 / k_w if k_w else None],
+            "at_speed": [v, w],
+            "drag_accel_at_speed": [k_v * v, k_w * w],
+            "deadband_torque_Nm": [2 * f, 2 * f],
+            "deadband_accel": [2 * a * f, 2 * b * f],
+            "c_hat_converges_to": (
+                "c_true = (a_eff, b_eff) under exciting motion, the drag and dead band acting as a "
+                "disturbance d; with a nearly constant torque they bias c_hat like a constant d: "
+                "a_hat ~ a - (k_v v + 2 a f)/tau_a, b_hat ~ b - (k_w w + 2 b f)/tau_b"
+                if (c or f)
+                else "c_true = (a_eff, b_eff): no wheel damping or frictionloss"
+            ),
+        }
+
+
+def _subtree(model: mujoco.MjModel, root: int) -> np.ndarray:
+    """Ids of ``root`` and all its descendants."""
+    ids = np.arange(model.nbody)
+    inside = ids == root
+    for b in ids[root + 1 :]:  # children always come after their parents
+        inside[b] = inside[model.body_parentid[b]]
+    return ids[inside]
+
+
+def robot_parameters(model: mujoco.MjModel, prefix: str = "", data: mujoco.MjData | None = None) -> RobotParams:
+    """Read one robot's parameters from a compiled model (robot names start with ``prefix``).
+
+    The parts come from the robot's layout (:func:`bioform_mj.scene.layout_of`: mapping, wheel
+    radius, half track, axle midpoint). Evaluated at ``qpos0``; yaw inertia uses every body's
+    inertia rotated to the world frame plus the parallel-axis term about the vertical through
+    the axle midpoint (midpoint of the two wheel joint anchors). ``I_w`` is a wheel's spin
+    inertia about its joint axis plus the joint's armature. ``data``: a scratch ``MjData`` on
+    which ``mj_kinematics`` ran at ``qpos0`` (saves the work when reading many robots).
+    """
+    lay = layout_of(model, prefix)
+    base = model.body(lay.base).id
+    jl, jr = (model.joint(n).id for n in lay.wheel_joints)
+    al, ar = (model.actuator(n).id for n in lay.motors)
+
+    if data is None:
+        data = mujoco.MjData(model)
+        mujoco.mj_kinematics(model, data)
+    rot_b = data.xmat[base].reshape(3, 3)
+    up = rot_b[:, 2]  # robot's vertical axis
+    mid = 0.5 * (data.xanchor[jl] + data.xanchor[jr])
+
+    bodies = _subtree(model, base)
+    masses = model.body_mass[bodies]
+    mass = float(masses.sum())
+    yaw = 0.0
+    for b in bodies:
+        rot = data.ximat[b].reshape(3, 3)
+        n_local = rot.T @ up
+        rel = data.xipos[b] - mid
+        yaw += n_local @ (model.body_inertia[b] * n_local)
+        yaw += model.body_mass[b] * (rel @ rel - (rel @ up) ** 2)
+    com = (masses[:, None] * data.xipos[bodies]).sum(axis=0) / mass - mid
+    com_offset = float(np.linalg.norm(com - (com @ up) * up))
+
+    spins, damp, arm, fl = [], [], [], []
+    for j in (jl, jr):
+        wb = model.jnt_bodyid[j]
+        dof = model.jnt_dofadr[j]
+        axis_local = data.ximat[wb].reshape(3, 3).T @ data.xaxis[j]
+        spins.append(axis_local @ (model.body_inertia[wb] * axis_local) + model.dof_armature[dof])
+        damp.append(float(model.dof_damping[dof]))
+        arm.append(float(model.dof_armature[dof]))
+        fl.append(float(model.dof_frictionloss[dof]))
+    i_w, r, l = float(np.mean(spins)), lay.wheel_radius, lay.half_track
+    if abs(spins[0] - spins[1]) > 1e-9 * max(spins):
+        warnings.warn(f"{prefix or 'robot'}: left and right wheels differ; using their mean", stacklevel=2)
+    if com_offset > COM_TOLERANCE_M:
+        log.info(
+            "%s: centre of mass %.1f mm off the axle midpoint; a_eff, b_eff hold from rest "
+            "(an unmodelled υ·ω coupling acts while moving)",
+            prefix or "robot",
+            1e3 * com_offset,
+        )
+    a_eff = 1.0 / (mass * r + 2.0 * i_w / r)  # design §8
+    b_eff = l / (yaw * r + 2.0 * i_w * l**2 / r)  # design §8
+
+    dc = int(model.actuator_dyntype[al]) == int(mujoco.mjtDyn.mjDYN_DCMOTOR)
+
+    def limit(a: int) -> float:
+        if dc:  # ctrl is the driver's input: the wheel torque is ctrl / scale (design §8.2)
+            lim = float(model.actuator_ctrlrange[a, 1] / dc_ctrl_scale(model, a))
+            if model.actuator_forcelimited[a]:
+                lim = min(lim, float(model.actuator_forcerange[a, 1] * abs(model.actuator_gear[a, 0])))
+            R, K, g, vmax = dc_constants(model, a)
+            return min(lim, g * K * vmax / R)
+        lim = float(model.actuator_ctrlrange[a, 1] * abs(model.actuator_gear[a, 0]))
+        if model.actuator_forcelimited[a]:
+            lim = min(lim, float(model.actuator_forcerange[a, 1]))
+        return lim
+
+    motor: dict = {}
+    if dc:
+        R, K, g, vmax = dc_constants(model, al)
+        voltage = int(model.actuator_ctrlspec[al]) == DC_INPUT_VOLTAGE
+        motor = dict(
+            motor="dc",
+            driver="voltage" if voltage else "current",
+            motor_stall_torque=g * K * vmax / R,
+            motor_no_load_speed=vmax / (g * K),
+            motor_damping=(g * K) ** 2 / R if voltage else 0.0,
+        )
+    return RobotParams(
+        mass,
+        float(yaw),
+        i_w,
+        r,
+        l,
+        com_offset,
+        (limit(al), limit(ar)),
+        float(a_eff),
+        float(b_eff),
+        tuple(float(x) for x in rot_b.T @ com),
+        float(np.mean(damp)),
+        float(np.mean(arm)),
+        float(np.mean(fl)),
+        **motor,
+    )
+
+
+def robot_truth(entry) -> RobotParams:
+    """:class:`RobotParams` of one robot entry (name, path, table or RobotRef), as the plant builds it."""
+    model = compile_scene(build_scene([entry], np.zeros((1, 3)), slots=False))[0]
+    return robot_parameters(model, "f1/")
+
+
+def ground_truth(model: mujoco.MjModel, prefix: str = "") -> tuple[float, float]:
+    """``(a_eff, b_eff)`` of the robot named with ``prefix`` in a compiled model (design §8)."""
+    p = robot_parameters(model, prefix)
+    return p.a_eff, p.b_eff
