@@ -93,6 +93,22 @@ def test_tutorial_runs_and_prints_what_the_docs_show():
     assert '--8<-- "docs/tutorials/own_controller.py"' in page and '--8<-- "docs/tutorials/own_controller.out"' in page
 
 
+def test_the_rerun_entities_documented_are_the_ones_logged():
+    import inspect
+
+    from bioform_mj.outputs import rerun_log
+
+    page = (DOCS / "guide" / "outputs.md").read_text()
+    for leaf, _fn, _names in rerun_log._SERIES:
+        assert f"`{leaf}`" in page, leaf
+    src = inspect.getsource(rerun_log)
+    for entity in ("/world/leader", "/world/paths/leader", "/summary"):
+        assert f'"{entity}"' in src and f"`{entity}`" in page
+    for leaf in ("robot", "estimate", "slot", "path"):
+        assert f'f"{{base}}/{leaf}"' in src and f"`/world/follower/<i>/{leaf}`" in page
+    assert 'base = f"/world/follower/{i + 1}"' in src
+
+
 def test_every_page_is_in_the_nav_and_every_nav_entry_exists():
     nav = re.findall(r":\s*([\w/.-]+\.md)\s*$", (ROOT / "mkdocs.yml").read_text(), flags=re.M)
     generated = {"reference/scenario.md", "reference/cli.md", "reference/log.md"}
@@ -118,6 +134,11 @@ def test_readme_is_a_front_door():
     for target in re.findall(r"\]\((docs/[^)#]+)", text):
         assert (ROOT / target).exists() or target.startswith("docs/reference/"), target
     assert "/world/follower/" not in text or "/world/follower/<i>/robot" in text
+    found = text.split("## What we found", 1)[1].split("\n## ", 1)[0]
+    assert 0 < len([ln for ln in found.splitlines() if ln.strip()]) <= 15  # headline findings, then a link
+    for extra in ("`test` extra", "`gpu` extra", "`docs` extra"):  # what make test installs, said
+        assert extra in text
+    assert text.count("~/.cache/bioform_mj/numba-") == 1  # the compile cache, stated once
 
 
 @pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="the docs extra is not installed")
