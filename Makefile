@@ -44,7 +44,7 @@ test: $(TEST_STAMP)
 	$(VENV)/bin/ruff format --check src tests scripts examples docs/tutorials
 	$(PY) -m pytest -q
 	NPY_DISABLE_CPU_FEATURES="$$($(NPY_AVX512))" $(PY) -m pytest -q -m equivalence -p no:cacheprovider
-	$(MKDOCS) build --strict --quiet
+	$(MKDOCS) build --strict
 
 # MkDocs' notice about its own future is not a warning about these docs
 MKDOCS := NO_MKDOCS_2_WARNING=1 DISABLE_MKDOCS_2_WARNING=true $(VENV)/bin/mkdocs

@@ -150,10 +150,36 @@ def test_docs_build_strictly(tmp_path):
         DISABLE_MKDOCS_2_WARNING="true",
         PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
     )
-    cmd = [sys.executable, "-m", "mkdocs", "build", "--strict", "--quiet", "-d", str(tmp_path / "site")]
+    # not --quiet: it hides the warnings from strict mode too, and a broken link would pass
+    cmd = [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")]
     out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env=env, timeout=300)
     assert out.returncode == 0, out.stderr[-3000:]
+    assert "WARNING" not in out.stderr, out.stderr[-3000:]
     scen = (tmp_path / "site" / "reference" / "scenario" / "index.html").read_text()
     assert "formation.init_jitter" in scen and "faults.friction_patch" in scen
     tut = (tmp_path / "site" / "tutorials" / "own-controller" / "index.html").read_text()
     assert "SlotTracker" in tut and "--8&lt;--" not in tut and "8 &lt; --" not in tut  # the script itself, included
+
+
+@pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="the docs extra is not installed")
+def test_a_broken_link_fails_the_strict_build(tmp_path):
+    """The build make test runs would fail on a broken link (a copy of the docs with one added)."""
+    import shutil
+
+    work = tmp_path / "w"
+    shutil.copytree(DOCS, work / "docs")
+    shutil.copy(ROOT / "mkdocs.yml", work / "mkdocs.yml")
+    (work / "scripts").mkdir()
+    shutil.copy(ROOT / "scripts" / "gen_docs.py", work / "scripts" / "gen_docs.py")
+    (work / "src").symlink_to(ROOT / "src")
+    with open(work / "docs" / "guide" / "faults.md", "a") as fh:
+        fh.write("\n[a page that is not there](no-such-page.md)\n")
+    env = dict(
+        os.environ,
+        NO_MKDOCS_2_WARNING="1",
+        DISABLE_MKDOCS_2_WARNING="true",
+        PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
+    )
+    cmd = [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")]
+    out = subprocess.run(cmd, cwd=work, capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode != 0 and "no-such-page.md" in out.stderr
