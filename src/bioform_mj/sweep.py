@@ -45,7 +45,7 @@ import numpy as np
 
 from . import __version__
 from .errors import BioformError, InputError
-from .outputs.files import write_json, write_parquet, write_text
+from .outputs.files import rows_to_arrow, write_json, write_parquet, write_text
 from .scenario import Scenario, load
 
 #: Per-follower metrics of ``summary.json`` that a sweep row carries (mean and max over followers).
@@ -718,7 +718,7 @@ def sweep(
         }
         write_json(out / "sweep.json", timing)
         write_text(out / "runs.csv", to_csv(got))
-        write_parquet(out / "runs.parquet", to_arrow(got))
+        write_parquet(out / "runs.parquet", rows_to_arrow(got))
         stats = aggregate(got, group_by)
         write_json(out / "stats.json", stats)
         note = (
@@ -743,33 +743,6 @@ def to_csv(rows: list[dict[str, Any]]) -> str:
     for r in rows:
         w.writerow({c: "" if r.get(c) is None else r.get(c) for c in cols})
     return buf.getvalue()
-
-
-def to_arrow(rows: list[dict[str, Any]]) -> Any:
-    """Rows → a ``pyarrow.Table`` with the union of their columns, as :func:`to_csv` (``runs.parquet``).
-
-    A column whose values are all booleans is boolean, all integers int64, all numbers float64 (missing
-    values null); any other column is text (lists and tables as JSON), so a column never changes type
-    with the rows it happens to hold."""
-    import pyarrow as pa
-
-    cols: list[str] = []
-    for r in rows:
-        cols += [c for c in r if c not in cols]
-    arrays = []
-    for c in cols:
-        vals = [r.get(c) for r in rows]
-        present = [v for v in vals if v is not None]
-        if present and all(isinstance(v, bool) for v in present):
-            arrays.append(pa.array(vals, type=pa.bool_()))
-        elif present and all(isinstance(v, int) and not isinstance(v, bool) for v in present):
-            arrays.append(pa.array(vals, type=pa.int64()))
-        elif present and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in present):
-            arrays.append(pa.array([None if v is None else float(v) for v in vals], type=pa.float64()))
-        else:
-            text = [None if v is None else (v if isinstance(v, str) else json.dumps(v, default=str)) for v in vals]
-            arrays.append(pa.array(text, type=pa.string()))
-    return pa.Table.from_arrays(arrays, names=cols)
 
 
 def aggregate(rows: list[dict[str, Any]], group_by: Sequence[str] = ("method",)) -> dict[str, Any]:
