@@ -1,14 +1,16 @@
 # Two commands do all the set-up on a fresh machine (Python 3.11 with venv):
 #   make demo   - create .venv if needed, install what the demo needs, run the paper scenario, say where the outputs are
-#   make test   - same set-up plus the test extras (pytest, hypothesis, ray) and the gpu extra (mujoco-warp,
-#                 warp-lang: the batch engine's tests run on Warp's CPU device), run the test suite
+#   make test   - same set-up plus the test extras (pytest, hypothesis, ray), the gpu extra (mujoco-warp,
+#                 warp-lang: the batch engine's tests run on Warp's CPU device) and the docs extra (MkDocs),
+#                 run the test suite and build the documentation with warnings as errors
+#   make docs   - build the documentation site into site/ (needs the docs extra)
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: demo test test-fast lint bench install clean
+.PHONY: demo test test-fast lint bench install clean docs
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -19,9 +21,10 @@ $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet -e .
 	touch $(STAMP)
 
-# the test extras on top, and the gpu extra: the batch engine's tests run on Warp's CPU device (no GPU needed)
+# the test extras on top, the gpu extra (the batch engine's tests run on Warp's CPU device, no GPU needed)
+# and the docs extra (make test builds the documentation strictly)
 $(TEST_STAMP): $(STAMP) pyproject.toml
-	$(PY) -m pip install --quiet -e '.[test,gpu,rl,urdf]'
+	$(PY) -m pip install --quiet -e '.[test,gpu,rl,urdf,docs]'
 	touch $(TEST_STAMP)
 
 install: $(STAMP)
@@ -38,14 +41,25 @@ NPY_AVX512 = $(PY) -c "from numpy._core._multiarray_umath import __cpu_features_
 test: $(TEST_STAMP)
 	$(PY) -c "import warp, mujoco_warp" || { echo "error: the gpu extra is missing from $(VENV): rm $(TEST_STAMP) and run make test again" >&2; exit 2; }
 	$(PY) -c "import pettingzoo, gymnasium" || { echo "error: the rl extra is missing from $(VENV): rm $(TEST_STAMP) and run make test again" >&2; exit 2; }
-	$(VENV)/bin/ruff check src tests scripts examples
-	$(VENV)/bin/ruff format --check src tests scripts examples
+	$(VENV)/bin/ruff check src tests scripts examples docs/tutorials
+	$(VENV)/bin/ruff format --check src tests scripts examples docs/tutorials
 	$(PY) -m pytest -q
 	NPY_DISABLE_CPU_FEATURES="$$($(NPY_AVX512))" $(PY) -m pytest -q -m equivalence -p no:cacheprovider
+	$(MKDOCS) build --strict
+
+# MkDocs' notice about its own future is not a warning about these docs
+MKDOCS := NO_MKDOCS_2_WARNING=1 DISABLE_MKDOCS_2_WARNING=true $(VENV)/bin/mkdocs
+
+# the site into site/ (offline: no plugin fetches anything); strict: a broken link or stale reference fails
+docs: $(STAMP)
+	@$(PY) -c "import mkdocs, material, mkdocstrings, mkdocs_gen_files" 2>/dev/null || \
+		{ echo "error: the docs extra is missing from $(VENV): install it with $(PY) -m pip install -e '.[docs]'" >&2; exit 2; }
+	$(MKDOCS) build --strict
+	@echo "documentation: site/index.html"
 
 lint: $(TEST_STAMP)
-	$(VENV)/bin/ruff check --fix src tests scripts examples
-	$(VENV)/bin/ruff format src tests scripts examples
+	$(VENV)/bin/ruff check --fix src tests scripts examples docs/tutorials
+	$(VENV)/bin/ruff format src tests scripts examples docs/tutorials
 
 test-fast: $(TEST_STAMP)
 	$(PY) -m pytest -q -m "not slow"
@@ -55,4 +69,4 @@ bench: $(STAMP)
 	$(VENV)/bin/bioform bench --json runs/bench.json
 
 clean:
-	rm -rf $(VENV) runs .pytest_cache
+	rm -rf $(VENV) runs .pytest_cache site

@@ -9,25 +9,34 @@ torques, using the nominal parameters ``ĉ(0)`` (no learning, no sliding mode):
     τ_a = (kv (υ_cmd − υ)) / â0         τ_b = (kw (ω_cmd − ω)) / b̂0
 
 It implements the ``Controller`` protocol (control/base.py) and reuses the package's own
-estimator kernel and equations; nothing of the loop is copied. Run:
+estimator kernel and equations; nothing of the loop is copied. It honours the scenario options a
+controller of this kind meets: offsets in the leader's frame (``formation.frame = "leader"``: it
+tracks the slot's own pose and velocity, ``slot_reference``, design §4), the saturation mode
+(``torque.saturation``), actuator faults the controller is told of (``set_tau_max``) and the
+network's faults (the estimator's ``comm``). The paper's controller gains (``kinematic``,
+``torque``, ``learner``) are not this controller's: they apply to the four methods it is compared
+with. Run:
 
-    .venv/bin/python examples/kanayama.py [--plant ideal|mujoco] [--duration S] [--out DIR]
+    .venv/bin/python examples/kanayama.py [SCENARIO] [--plant ideal|mujoco] [--duration S] [--out DIR]
 
-It prints, and writes to ``DIR/table.md``, the Table I metric and the final formation
-error of this controller beside the paper's four methods, in ``bioform table1``'s format.
+(``SCENARIO``: a preset or TOML file, default ``paper``). It prints, and writes to
+``DIR/table.md``, the Table I metric and the final formation error of this controller beside the
+paper's four methods, in ``bioform table1``'s format. Bad input: one ``error:`` line, exit 2.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from bioform_mj.control.base import Comm
-from bioform_mj.control.equations import saturate, tracking_error
+from bioform_mj.control.equations import saturate, slot_reference, tracking_error
 from bioform_mj.control.kernel import estimator_update, reset_state
 from bioform_mj.control.stack import METHODS, ControlStack
+from bioform_mj.errors import InputError
 from bioform_mj.scenario import Scenario, load
 from bioform_mj.sim import make_plant, simulate, stack_params
 
@@ -51,6 +60,7 @@ class Kanayama:
         self._est = ControlStack(sc.build_graph(), stack_params(sc, c_true, tau_max))
         self.gains, self.state = self._est.kernel
         self.c0 = np.asarray(sc.learner.c_hat0_scale) * c_true  # nominal [â, b̂], as the paper's stack starts
+        self.steer = sc.torque.saturation == "steer-priority"  # the scenario's saturation mode (design §5)
         self.k = (kx, ky, kth, kv, kw)
         self.cmd = np.zeros((self.n, 2))
         self.tau = np.zeros((self.n, 2))
@@ -70,15 +80,19 @@ class Kanayama:
         kx, ky, kth, kv, kw = self.k
         s, g = self.state, self.gains
         for i in range(self.n):
-            ex, ey, eth = tracking_error(*s.est_pose[i], *pose[i], *g.offsets[i])
-            v_ir, w_ir = s.est_vel[i]
-            self.cmd[i] = (v_ir * np.cos(eth) + kx * ex, w_ir + v_ir * (ky * ey + kth * np.sin(eth)))
+            if g.leader_frame:  # offsets in the leader's frame: the slot's own pose and velocity (design §4)
+                xs, ys, ths, v_ref, w_ref = slot_reference(*s.est_pose[i], *s.est_vel[i], *g.offsets[i])
+                ex, ey, eth = tracking_error(xs, ys, ths, *pose[i], 0.0, 0.0)
+            else:  # world-frame offsets (the paper): the slot moves with the leader's velocity
+                ex, ey, eth = tracking_error(*s.est_pose[i], *pose[i], *g.offsets[i])
+                v_ref, w_ref = s.est_vel[i]
+            self.cmd[i] = (v_ref * np.cos(eth) + kx * ex, w_ref + v_ref * (ky * ey + kth * np.sin(eth)))
             ta = kv * (self.cmd[i, 0] - vel[i, 0]) / self.c0[i, 0]
             tb = kw * (self.cmd[i, 1] - vel[i, 1]) / self.c0[i, 1]
             self.tau_raw[i] = (0.5 * (ta - tb), 0.5 * (ta + tb))  # τ_b = τ_R − τ_L (design §5)
             lim = g.lim[i]
             self.saturated[i] = np.abs(self.tau_raw[i]).max() > lim
-            self.tau[i] = saturate(self.tau_raw[i, 0], self.tau_raw[i, 1], lim, True)
+            self.tau[i] = saturate(self.tau_raw[i, 0], self.tau_raw[i, 1], lim, self.steer)
         estimator_update(g, s, np.asarray(leader_pose, float), np.asarray(leader_vel, float), self._est.comm_in(comm))
         return self.tau
 
@@ -96,11 +110,13 @@ class Kanayama:
         self.gains.lim[:] = tau_max
 
 
-def compare(plant: str = "ideal", duration: float | None = None) -> dict[str, dict]:
-    """Summaries of the four methods and of :class:`Kanayama` on the paper scenario."""
-    ov = [] if duration is None else [f"sim.duration={duration}"]
-    out = {m: simulate(load("paper", ov, method=m, plant=plant)).summary for m in METHODS}
-    sc = load("paper", ov, plant=plant)
+def compare(
+    plant: str | None = "ideal", duration: float | None = None, scenario: str = "paper", overrides=()
+) -> dict[str, dict]:
+    """Summaries of the four methods and of :class:`Kanayama` on ``scenario`` (a preset or TOML file)."""
+    ov = list(overrides) + ([] if duration is None else [f"sim.duration={duration}"])
+    sc = load(scenario, ov, plant=plant)  # validated first: bad input before any run
+    out = {m: simulate(load(scenario, ov, method=m, plant=plant)).summary for m in METHODS}
     pl = make_plant(sc)
     ctrl = Kanayama(sc, pl.c_true(), getattr(pl, "tau_max", np.full(sc.n, sc.torque.tau_max)))
     out["kanayama (examples/)"] = simulate(sc, plant=pl, controller=ctrl).summary
@@ -130,11 +146,17 @@ def table(summaries: dict[str, dict]) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--plant", choices=("ideal", "mujoco"), default="ideal")
+    ap.add_argument("scenario", nargs="?", default="paper", help="preset name or TOML file (default: paper)")
+    ap.add_argument("--plant", choices=("ideal", "mujoco"), help="plant (default: the scenario's)")
     ap.add_argument("--duration", type=float)
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--out", type=Path, default=Path("runs/kanayama"))
     args = ap.parse_args()
-    md = table(compare(args.plant, args.duration))
+    try:
+        md = table(compare(args.plant, args.duration, args.scenario, args.overrides))
+    except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        sys.exit(2)
     print(md)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "table.md").write_text(md)

@@ -56,7 +56,7 @@ def test_second_run_into_a_folder_is_refused_then_overwrite_replaces_it(tmp_path
 
     assert main(["run", "--duration", "0.2", "--quiet", "--out", str(out), "--overwrite"]) == 0
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["log.npz", "summary.json"]  # the old video, figures and MuJoCo log are gone
+    assert names == ["log.npz", "resolved.toml", "summary.json"]  # the old video, figures and MuJoCo log are gone
     assert json.loads((out / "summary.json").read_text())["sim_time_s"] == pytest.approx(0.2)
 
 
@@ -90,7 +90,7 @@ def test_stale_temporary_files_of_a_killed_run_are_cleared(tmp_path):
     (out / ".log.npz.abc123.tmp").write_bytes(b"half")
     (out / ".bioform.lock").write_text("12345")  # a killed run's lock file: no lock is held on it
     assert main(["run", "--duration", "0.1", "--quiet", "--out", str(out)]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["log.npz", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["log.npz", "resolved.toml", "summary.json"]
 
 
 def test_concurrent_writer_is_refused(tmp_path, capsys):

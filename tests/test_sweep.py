@@ -108,3 +108,23 @@ def test_sweep_bad_vary_exit_2(tmp_path, capsys):
     assert "--vary" in capsys.readouterr().err
     assert main(["sweep", "paper", "--vary", "kinematic.k1=1,-2", "--out", str(tmp_path / "y")]) == 2
     assert not (tmp_path / "y").exists()
+
+
+def test_runs_parquet_holds_the_same_rows_as_runs_csv(local_sweep):
+    """runs.parquet beside runs.csv: same rows and columns, typed (numbers as float64/int64, not text)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    tbl = pq.read_table(local_sweep / "runs.parquet")
+    rows = _rows(local_sweep)
+    assert tbl.num_rows == len(rows) == 8
+    with open(local_sweep / "runs.csv") as fh:
+        assert tbl.column_names == next(csv.reader(fh))
+    assert tbl.schema.field("seed").type == pa.int64()
+    assert tbl.schema.field("total_velocity_error_mean").type == pa.float64()
+    by_key = {r["key"]: r for r in tbl.to_pylist()}
+    for r in rows:
+        p = by_key[r["key"]]
+        assert p["method"] == r["method"] and str(p["seed"]) == r["seed"]
+        assert p["total_velocity_error_mean"] == float(r["total_velocity_error_mean"])  # repr round-trips
+        assert str(p["kinematic.k1"]) == r["kinematic.k1"]  # the varied value as written

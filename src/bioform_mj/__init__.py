@@ -1,6 +1,45 @@
 """bioform_mj: distributed leader-follower formation control (Xu et al., IEEE T-IV 2024)
-on an ideal unicycle plant and on MuJoCo differential-drive robots."""
+on an ideal unicycle plant and on MuJoCo differential-drive robots.
+
+The Python API at the top level: :func:`load` a scenario, :func:`simulate` it, read the
+:class:`RunResult` (``.summary``, ``.log``, ``.table()``); :class:`Controller` is the protocol a
+controller of your own implements. The names are imported on first use, so ``import bioform_mj``
+stays cheap (no numba, no MuJoCo).
+"""
 
 from __future__ import annotations
 
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
 __version__ = "0.1.0"
+
+#: public name -> (module, attribute), imported on first access
+_LAZY = {
+    "load": ("bioform_mj.scenario", "load"),
+    "Scenario": ("bioform_mj.scenario", "Scenario"),
+    "simulate": ("bioform_mj.sim", "simulate"),
+    "RunResult": ("bioform_mj.sim", "RunResult"),
+    "Controller": ("bioform_mj.control.base", "Controller"),
+}
+
+__all__ = ["Controller", "RunResult", "Scenario", "__version__", "load", "simulate"]
+
+if TYPE_CHECKING:  # for type checkers and editors; at run time __getattr__ imports lazily
+    from .control.base import Controller
+    from .scenario import Scenario, load
+    from .sim import RunResult, simulate
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module, attr = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module 'bioform_mj' has no attribute {name!r}") from None
+    value = getattr(import_module(module), attr)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from .looptime import loop_time as _loop
+from .looptime import stop_if_interrupted
 from .outputs.files import write_json
 
 #: team size → (preset, default simulated seconds)
@@ -37,16 +39,6 @@ CASES: dict[int, tuple[str, float]] = {
     64: ("large64", 4.0),
     256: ("large256", 2.0),
 }
-
-
-def stop_if_interrupted(result: Any) -> Any:
-    """``result``, or its interrupt raised again: :func:`simulate` returns the run so far when
-    SIGINT/SIGTERM arrives (``RunResult.interrupted``); a caller with more runs to do must stop."""
-    exc = getattr(result, "interrupted", None)
-    if exc is not None:
-        exc.result = result
-        raise exc
-    return result
 
 
 def _bare(sc: Any, reps: int) -> dict[str, float]:
@@ -91,18 +83,6 @@ def _bare(sc: Any, reps: int) -> dict[str, float]:
         "constant_torque_bare_s": c_time,
         "constant_torque_solver_iters_per_step": c_iters / physics_steps,
     }
-
-
-def _loop(sc: Any, reps: int, engine: str = "auto") -> tuple[float, dict]:
-    """Loop seconds of :func:`simulate` (best of ``reps``) and the last summary."""
-    from .sim import simulate
-
-    best, summary = float("inf"), {}
-    for _ in range(reps):
-        r = stop_if_interrupted(simulate(sc, engine=engine))
-        summary = r.summary
-        best = min(best, float(r.summary["wall_time_s"]))
-    return best, summary
 
 
 def bench_case(n: int, duration: float | None = None, reps: int = 2, numpy_too: bool = False) -> dict[str, Any]:

@@ -83,7 +83,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--engine",
         choices=("auto", "compiled", "stepwise"),
         default="auto",
-        help="fused: the numba-compiled loop (default when numba imports); numpy: the reference stack",
+        help="compiled: whole chunks of control periods in machine code (needs a plant and controller with "
+        "compiled kernels and no per-step faults); stepwise: one Python call per control step, same equations; "
+        "auto (default): compiled where possible",
     )
     run.add_argument(
         "--video",
@@ -534,7 +536,7 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
 def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url) -> int:
     import time
 
-    from .outputs.files import write_json, write_npz
+    from .outputs.files import write_json, write_npz, write_text
     from .outputs.progress import progress_bar
     from .sim import simulate
 
@@ -579,6 +581,7 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
 
         write_scene(out, result.plant.model_xml())  # design §12: assets/ beside it, loads on its own
     write_json(out / "summary.json", result.summary)
+    write_text(out / "resolved.toml", _record_toml(result.summary))
     mjlog.write(out)
     if failed is not None:
         r = result.summary.get("raised") or {}
@@ -645,6 +648,23 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
             print(note)
         _print_summary(result.summary, out)
     return EXIT_INPUT if problems else EXIT_OK
+
+
+def _record_toml(summary: dict[str, Any]) -> str:
+    """``resolved.toml``: the run's configuration as a scenario file that repeats it (``record.py``)."""
+    from .record import to_toml
+
+    scale = summary.get("formation_scale", 1.0)
+    note = (
+        "The resolved configuration of this run (written by bioform run); `bioform run` on this file repeats it\n"
+        "bit for bit on the same machine and engine."
+        + (
+            f"\nLengths are already x formation.scale = {scale:g} of the scenario as written: scale = 1 here."
+            if scale != 1
+            else ""
+        )
+    )
+    return to_toml(summary["config"], note)
 
 
 def _show_robot_warnings() -> None:
@@ -860,7 +880,7 @@ def _sweep(args: argparse.Namespace) -> int:
         died = f", {tm['workers_died']} worker(s) died (rerun to retry)" if tm["workers_died"] else ""
         print(f"{tm['runs']} runs ({res['ran']} run now, {res['skipped']} already done{rate}{died})")
         print((out / "stats.md").read_text())
-        print(f"outputs in {out}/ (runs.csv, stats.json, stats.md, sweep.json)")
+        print(f"outputs in {out}/ (runs.csv, runs.parquet, stats.json, stats.md, sweep.json)")
     return EXIT_OK
 
 

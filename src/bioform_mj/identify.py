@@ -1,5 +1,8 @@
 """Ground-truth dynamics parameters of a MuJoCo robot, and their check by identification.
 
+(:class:`RobotParams` and :func:`robot_parameters` live in :mod:`bioform_mj.robot_params`, below the plant;
+they are re-exported here.)
+
 design §5/§8: ``υ̇ = a τ_a + d1``, ``ω̇ = b τ_b + d2`` with ``τ_a = τ_L + τ_R`` and
 ``τ_b = τ_R − τ_L`` (design §5 sign fix of the paper's eq. 34: CCW-positive ω). With rolling
 without slip and the centre of mass on the axle midpoint, Lagrange's equations give

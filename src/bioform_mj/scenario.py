@@ -104,7 +104,9 @@ class GraphCfg:
 class FormationCfg:
     """Offsets ``(Δx, Δy)`` (m, world frame) and initial poses ``(x, y, θ)`` (m, m, rad), one row per follower.
 
-    ``init_jitter`` (m for x/y, rad for θ) adds a seeded uniform perturbation to the initial poses.
+    ``init_jitter`` adds a seeded uniform perturbation ``±init_jitter`` to the initial positions (m; × ``scale``)
+    and ``±init_jitter_heading`` to the headings (rad; not scaled: an angle; -1, the default, takes the number
+    of ``init_jitter`` as written).
     ``frame``: ``"world"`` (the paper: offsets in world axes, the formation keeps its orientation
     while the leader turns) or ``"leader"`` (offsets in the leader's frame, x forward, y left: the
     formation turns with its leader).
@@ -115,6 +117,7 @@ class FormationCfg:
     offsets: tuple[tuple[float, ...], ...] = ((3.0, 0.0), (4.0, 5.0), (4.0, -5.0))
     initial_poses: tuple[tuple[float, ...], ...] = ((0.0, 0.0, 0.0), (-1.0, -4.0, 0.0), (-1.0, 4.0, 0.0))
     init_jitter: float = 0.0
+    init_jitter_heading: float = -1.0  # rad; -1: the number of init_jitter (as written, unscaled)
     scale: float = 1.0  # the whole experiment at a robot's scale (apply_scale); 1 = as written
     frame: str = "world"  # offsets in "world" axes (the paper) or in the "leader"'s frame (turns with it)
 
@@ -382,12 +385,20 @@ class Scenario:
         return leader_mod.Harmonic(c.x0, c.y0, c.vx, c.vy, tuple(map(tuple, c.x_terms)), tuple(map(tuple, c.y_terms)))
 
     def initial_poses(self) -> np.ndarray:
-        """(n, 3) initial poses, with the seeded jitter applied."""
-        p = np.array(self.formation.initial_poses, dtype=float)
-        j = self.formation.init_jitter
-        if j > 0:
+        """(n, 3) initial poses, with the seeded jitter applied: ``U(−j, j)`` on x and y (m, ``j =
+        init_jitter``), ``U(−j_θ, j_θ)`` on θ (rad, ``j_θ = init_jitter_heading``, -1: ``j``), one
+        (n, 3) draw seeded by ``sim.seed``."""
+        f = self.formation
+        p = np.array(f.initial_poses, dtype=float)
+        j = f.init_jitter
+        jh = j if f.init_jitter_heading < 0 else f.init_jitter_heading
+        if j > 0 or jh > 0:
             rng = np.random.default_rng(self.sim.seed)
-            p += rng.uniform(-j, j, size=p.shape)
+            if jh == j:  # one bound for all three: the draw as it always was
+                p += rng.uniform(-j, j, size=p.shape)
+            else:
+                bound = np.array([j, j, jh])
+                p += rng.uniform(-bound, bound, size=p.shape)
         return p
 
 
@@ -418,7 +429,8 @@ def load(
     method: str | None = None,
     plant: str | None = None,
 ) -> Scenario:
-    """Load a preset name or TOML path, apply ``--set`` overrides, method and plant; validate.
+    """Load a preset name, a TOML path or a run's ``summary.json`` (its ``config``: the run again, bit for
+    bit), apply ``--set`` overrides, method and plant; validate.
 
     Raises :class:`InputError` (or a subclass) with one line naming the problem.
     """
@@ -438,7 +450,7 @@ def load(
             raw = path.read_bytes()
         except OSError as exc:  # PermissionError, a FIFO that errors, an I/O error
             raise InputError(f"scenario file '{path}' cannot be read: {exc.strerror or exc}") from None
-        data = _read_toml(raw, str(path))
+        data = _read_record(raw, str(path)) if path.suffix.lower() == ".json" else _read_toml(raw, str(path))
         if isinstance(data.get("plant"), dict) and "robots" in data["plant"]:  # design §10: relative to the file
             data["plant"]["robots"] = rebase_entries(data["plant"]["robots"], path.parent.resolve())
         if isinstance(data.get("plant"), dict) and "package_path" in data["plant"]:  # design §12: likewise
@@ -459,6 +471,19 @@ def load(
     sc = apply_scale(from_dict(data))
     validate(sc)
     return apply_robots_to_ideal(sc)
+
+
+def _read_record(raw: bytes, where: str) -> dict[str, Any]:
+    """A run's ``summary.json``: its ``config`` (:func:`bioform_mj.record.resolved_config`)."""
+    import json
+
+    try:
+        data = json.loads(raw.decode("utf-8"))
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InputError(f"{where} is not valid JSON: {exc}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("config"), dict):
+        raise InputError(f"{where} is not a run's summary.json (no 'config' table); give a scenario TOML file")
+    return data["config"]
 
 
 def _read_toml(raw: bytes, where: str) -> dict[str, Any]:
@@ -652,6 +677,11 @@ def validate(sc: Scenario) -> None:
         if len(p) != 3:
             raise ScenarioError(f"formation.initial_poses[{i}]", f"expected [x, y, theta], got {list(p)}")
     _positive("formation.init_jitter", f.init_jitter, strict=False)
+    if not (f.init_jitter_heading == -1.0 or f.init_jitter_heading >= 0):
+        raise ScenarioError(
+            "formation.init_jitter_heading",
+            f"must be >= 0 (or -1: the number of init_jitter), got {f.init_jitter_heading:g}",
+        )
     if f.frame not in ("world", "leader"):
         raise ScenarioError("formation.frame", f"must be 'world' or 'leader', got {f.frame!r}")
     offs = np.array(f.offsets)
@@ -1045,7 +1075,9 @@ def apply_scale(sc: Scenario) -> Scenario:
 
     So every speed and acceleration is × s and every angle, rate and time constant stays: the
     leader (``x0, y0, speed, amplitude, radius, vx, vy`` and the amplitudes of ``x_terms`` /
-    ``y_terms``), the offsets and initial positions (and ``init_jitter``), and the gains that
+    ``y_terms``), the offsets and initial positions (and ``init_jitter``, the positions' jitter; the
+    headings' jitter ``init_jitter_heading`` is an angle and stays, resolved from -1 to the
+    ``init_jitter`` as written), and the gains that
     carry a length so that the closed loop is the paper's, shrunk: the estimator's ``υ``-channel
     sign gain ``ka[0]`` and boundary layer ``phi[0]`` (m/s², m/s), the torque law's ``c[0]``
     (m/s²), the disturbance's ``υ`` channel (m/s²) × s; ``k2 / s²`` and ``k3 / s`` (eq. 31:
@@ -1055,8 +1087,10 @@ def apply_scale(sc: Scenario) -> Scenario:
     not shrink. The torque law's ``phi`` (one layer on both channels) and the learner's gains
     are not scaled: use ``learner.gain_scaling = "c_hat0"`` (the scaled presets do); the
     learned-drag gain's ``υ`` channel (``k̂' = drag_gain z S``: 1/m²) is ``/ s²`` (design §14). The values
-    are those written (file and ``--set``); the resolved configuration holds the scaled values
-    and ``scale`` for the record (loading a resolved configuration again would scale twice).
+    are those written (file and ``--set``); the returned scenario holds the scaled values and
+    ``scale``; a run's record (:func:`bioform_mj.record.resolved_config`) holds the scaled values
+    with ``scale = 1``, so loading it again does not scale twice (the ``lost`` threshold and the
+    video's sizes are taken from the scaled lengths, not from ``scale``).
     """
     s = sc.formation.scale
     if s == 1.0:
@@ -1084,7 +1118,11 @@ def apply_scale(sc: Scenario) -> Scenario:
     )
     f = sc.formation
     formation = dataclasses.replace(
-        f, offsets=rows(f.offsets, 2), initial_poses=rows(f.initial_poses, 2), init_jitter=f.init_jitter * s
+        f,
+        offsets=rows(f.offsets, 2),
+        initial_poses=rows(f.initial_poses, 2),
+        init_jitter=f.init_jitter * s,  # positions: a length
+        init_jitter_heading=f.init_jitter if f.init_jitter_heading < 0 else f.init_jitter_heading,  # an angle
     )
     e = sc.estimator
     first = lambda v: (v[0] * s, *v[1:]) if v else v  # noqa: E731 - the υ channel of a (υ, ω) pair

@@ -1403,20 +1403,30 @@ def build_scene(
         castshadow=False,
     )
 
-    # cameras ride on a mocap body that whoever renders keeps on the formation centroid (Markers)
+    # cameras ride on a mocap body that whoever renders keeps on the formation centroid (Markers); the
+    # cameras' distances and the markers' sizes are the paper robot's × u, the robots' size relative to it
+    u = robot_unit([p[1].half_track for p in prepared])
     centre = poses[:, :2].mean(axis=0)
     centroid = world.add_body(name="centroid", mocap=True, pos=[centre[0], centre[1], 0.0])
-    chase = np.array([-6.0, -6.0, 6.0])
+    chase = np.array([-6.0, -6.0, 6.0]) * u
     centroid.add_camera(name="track", pos=chase, quat=_look_quat(chase), fovy=45)
-    centroid.add_camera(name="top", pos=[0, 0, 14.0], quat=_look_quat(np.array([0, 0, 1.0])), fovy=45)
+    centroid.add_camera(name="top", pos=[0, 0, 14.0 * u], quat=_look_quat(np.array([0, 0, 1.0])), fovy=45)
 
     leader = world.add_body(name="leader", mocap=True, pos=[centre[0], centre[1], MARKER_Z])
     ghost = dict(contype=0, conaffinity=0, group=1, material="ghost", mass=0, density=0)
     leader.add_geom(
-        name="leader_ghost", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.15, 0.12, 0.05], pos=[0, 0, 0.05], **ghost
+        name="leader_ghost",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=[0.15 * u, 0.12 * u, 0.05 * u],
+        pos=[0, 0, 0.05 * u],
+        **ghost,
     )
     leader.add_geom(
-        name="leader_heading", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.12, 0.025, 0.01], pos=[0.2, 0, 0.05], **ghost
+        name="leader_heading",
+        type=mujoco.mjtGeom.mjGEOM_BOX,
+        size=[0.12 * u, 0.025 * u, 0.01 * u],
+        pos=[0.2 * u, 0, 0.05 * u],
+        **ghost,
     )
     if slots:
         for i in range(n):
@@ -1424,7 +1434,7 @@ def build_scene(
             slot.add_geom(
                 name=f"slot_{i + 1}_marker",
                 type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                size=[0.12, 0.002, 0],
+                size=[0.12 * u, 0.002, 0],
                 contype=0,
                 conaffinity=0,
                 group=1,
@@ -1474,6 +1484,19 @@ def add_sensors(spec: mujoco.MjSpec, layout: RobotLayout) -> None:
     spec.add_sensor(
         name=SENSORS[3], type=mujoco.mjtSensor.mjSENS_ACCELEROMETER, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=IMU_SITE
     )
+
+
+#: half track of the paper's robot, m: the unit of the visual markers' and the cameras' sizes
+PAPER_HALF_TRACK = 0.2
+
+
+def robot_unit(half_tracks: Sequence[float]) -> float:
+    """The robots' size relative to the paper's (median half track / :data:`PAPER_HALF_TRACK`): the
+    scene's markers and cameras (:func:`build_scene`) and the video's halos, slot discs, camera margin
+    and trail tolerance (``outputs/video.py``) are the paper-scale sizes × this, so a TurtleBot team
+    (l = 0.08 m: 0.4) is drawn as the paper's robots are (design §9). 1 for the paper robot."""
+    u = float(np.median(np.asarray(half_tracks, dtype=float))) / PAPER_HALF_TRACK
+    return round(u, 9) if np.isfinite(u) and u > 0 else 1.0
 
 
 def compile_scene(spec: mujoco.MjSpec) -> tuple[mujoco.MjModel, mujoco.MjData]:

@@ -47,6 +47,7 @@ from .engine import (
 from .errors import ControllerError, Diverged, RobotWarning
 from .plants.base import Plant
 from .plants.ideal import IdealPlant
+from .record import resolved_config
 from .scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -91,6 +92,28 @@ class RunResult:
     plant: Plant
     diverged: Diverged | None = None
     interrupted: KeyboardInterrupt | None = None  # what stopped the loop (SIGINT/SIGTERM): log and summary so far
+
+    def table(self) -> Any:
+        """The log as a tidy ``pyarrow.Table``: one row per log sample and follower (``K × n`` rows,
+        sample-major), columns ``t_s``, ``follower`` (1-based) and one per channel component with its
+        unit in the name (``pose_x_m``, ``tau_left_Nm``, ``formation_error_m``; :mod:`bioform_mj.logtable`),
+        each field's unit in its metadata, scenario name, plant and method in the schema's."""
+        from .logtable import to_arrow
+
+        sc = self.scenario
+        return to_arrow(self.log, {"scenario": sc.name, "plant": sc.plant.kind, "method": sc.method})
+
+    to_arrow = table
+
+    def to_pandas(self) -> Any:
+        """:meth:`table` as a pandas DataFrame (needs pandas)."""
+        return self.table().to_pandas()
+
+    def to_polars(self) -> Any:
+        """:meth:`table` as a polars DataFrame (needs polars)."""
+        import polars as pl
+
+        return pl.from_arrow(self.table())
 
 
 def import_warnings(plant: Any) -> list[str]:
@@ -748,10 +771,23 @@ def _shadow(state: StackState, sig: Any, tau: np.ndarray, missing: set[str]) -> 
     state.tau[:] = tau
 
 
-#: follower outcomes (design §8): thresholds
-LOST_M = 1.0  # m: final formation error beyond this → lost ...
+#: follower outcomes (design §9): thresholds
+LOST_FRACTION = 0.1  # final formation error beyond this fraction of the formation's extent → lost ...
 LOST_AFTER_S = 10.0  # s: ... once the run has had this long to converge (or if the error grew over the run)
 SPIN_RAD_S = 6.0  # rad/s: |ω| beyond this over the last second → spinning
+#: the ``lost`` threshold of the paper's formation (extent 10 m), kept for reference
+LOST_M = 1.0
+
+
+def lost_threshold_m(sc: Scenario) -> float:
+    """The ``lost`` outcome's threshold, m: :data:`LOST_FRACTION` × the formation's extent, the
+    largest distance between two points of the leader and the followers' slots (``p_r − Δ_i``), from
+    the resolved offsets (design §9). 1 m for the paper's formation (offsets (3, 0), (4, ±5): 10 m), so
+    it scales with the experiment: 0.15 m for the ``tb3`` preset (``formation.scale = 0.15``), 0.25 m for
+    ``stretch``. The one place both engines take it from."""
+    pts = np.vstack([np.zeros((1, 2)), np.asarray(sc.formation.offsets, dtype=float)])
+    extent = float(np.max(np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1)))
+    return LOST_FRACTION * extent
 
 
 def _summary(
@@ -831,7 +867,8 @@ def _summary(
         "log_channels": {name: CHANNELS[name][1] for name in CHANNELS},
         "log_interval_means": list(MEAN_CHANNELS),
         "versions": _versions(),
-        "config": sc.to_dict(),
+        "formation_scale": sc.formation.scale,  # applied: config holds the scaled values with scale = 1
+        "config": resolved_config(sc),  # the run's own record: load() takes it back unchanged
         "followers": followers,
     }
 
@@ -910,11 +947,13 @@ def outcome_list(
     causes: Any = None,
     slip_ratio: float = 0.2,
     slip_time: float = 0.5,
+    lost_m: float = LOST_M,
 ) -> list[dict[str, Any]]:
     """Every outcome of one follower, the most severe first (:data:`OUTCOME_ORDER`), each
     ``{"kind", "detail", "t"}`` (``t``: s when it happened, None for an end-of-run outcome); empty
     when ok. Shared by both engines (``sim.follower_outcomes``, ``batch.control``'s ``_outcome``).
-    ``causes``: a callable giving :func:`unmodelled_causes`' list (called only for ``c_hat_off``)."""
+    ``causes``: a callable giving :func:`unmodelled_causes`' list (called only for ``c_hat_off``);
+    ``lost_m``: the scenario's :func:`lost_threshold_m` (m)."""
     from .plants.mujoco_plant import TIP_ANGLE_DEG
 
     out: list[dict[str, Any]] = []
@@ -932,8 +971,8 @@ def outcome_list(
         out.append(
             {"kind": "spinning", "detail": f"|omega| > {SPIN_RAD_S:g} rad/s over the last second", "t": t_end - 1.0}
         )
-    if final > LOST_M and (t_end >= LOST_AFTER_S - 1e-9 or final > 1.5 * fe0):
-        out.append({"kind": "lost", "detail": f"final formation error {final:.3g} m > {LOST_M:g} m", "t": None})
+    if final > lost_m and (t_end >= LOST_AFTER_S - 1e-9 or final > 1.5 * fe0):
+        out.append({"kind": "lost", "detail": f"final formation error {final:.3g} m > {lost_m:.3g} m", "t": None})
     if learning:
         at = [
             k
@@ -995,7 +1034,7 @@ def follower_outcomes(
     """Per follower every outcome (:func:`outcome_list`: ``tipped`` (tilt beyond the plant's
     ``TIP_ANGLE_DEG``, with the time), ``slipping`` (a wheel's slip ratio beyond the plant's
     ``SLIP_RATIO`` for ``SLIP_TIME`` s), ``spinning`` (|ω| > :data:`SPIN_RAD_S` over the last
-    second), ``lost`` (final formation error > :data:`LOST_M` after :data:`LOST_AFTER_S` s, or
+    second), ``lost`` (final formation error > :func:`lost_threshold_m` after :data:`LOST_AFTER_S` s, or
     grown by half over a shorter run), ``c_hat_at_bound`` (a learned parameter within
     :data:`C_HAT_BOUND_BAND` of its projection bound at the end), ``c_hat_off`` (ĉ more than
     :data:`C_HAT_OFF` from c_true, with the likely cause); empty when ok."""
@@ -1008,6 +1047,7 @@ def follower_outcomes(
     last = t >= (t[-1] - 1.0) if len(t) else np.zeros(0, bool)
     c_true = plant.c_true()
     params = getattr(plant, "params", None)
+    lost_m = lost_threshold_m(sc)
     for i in range(n):
         slipping = slip is not None and slip[i] >= 0
         learning = p is not None and p.learning
@@ -1029,6 +1069,7 @@ def follower_outcomes(
                 ),
                 slip_ratio=getattr(plant, "SLIP_RATIO", 0.2),
                 slip_time=getattr(plant, "SLIP_TIME", 0.5),
+                lost_m=lost_m,
             )
         )
     return out

@@ -10,8 +10,8 @@ whose provenance still matches; a stale row is redone (``resume: N row(s) redone
 stderr), a row file that cannot be read is reported (``warning:`` on stderr) and its run redone.
 One sweep per folder at a time (a lock); design §16. At the end the rows
 are collected into ``DIR/runs.csv`` (one row per run: settings, seed, status, outcome,
-metrics) and aggregated per group, method × every ``--vary`` value, into ``DIR/stats.json``
-and ``DIR/stats.md``.
+metrics; the same rows as Parquet in ``DIR/runs.parquet``) and aggregated per group, method ×
+every ``--vary`` value, into ``DIR/stats.json`` and ``DIR/stats.md``.
 
 Processes (``backend="local"``): with more than one worker, every run is a process forked
 from this one after it has loaded the compiled kernels, so a worker starts in milliseconds
@@ -50,7 +50,7 @@ from .jobs import Signals as _Signals
 from .jobs import Stop as _Stop
 from .jobs import raising as _raising
 from .jobs import run_local as _run_local
-from .outputs.files import write_json, write_text
+from .outputs.files import rows_to_arrow, write_json, write_parquet, write_text
 from .ray_backend import check_ray_address
 from .scenario import Scenario, load
 
@@ -138,7 +138,7 @@ def randomness(sc: Scenario) -> list[str]:
     The seed draws the initial-pose jitter and, inside the fault window, sensor noise and packet loss.
     """
     out = []
-    if sc.formation.init_jitter > 0:
+    if sc.formation.init_jitter > 0 or sc.formation.init_jitter_heading > 0:
         out.append("formation.init_jitter")
     f = sc.faults
     w0, w1 = f.window if f.window else (-np.inf, np.inf)
@@ -593,6 +593,7 @@ def _sweep_locked(
         }
         write_json(out / "sweep.json", timing)
         write_text(out / "runs.csv", to_csv(got))
+        write_parquet(out / "runs.parquet", rows_to_arrow(got))
         stats = aggregate(got, group_by)
         write_json(out / "stats.json", stats)
         note = (

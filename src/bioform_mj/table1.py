@@ -23,6 +23,42 @@ PAPER_TABLE1: dict[str, tuple[float, float, float]] = {
 }
 
 
+def paper_differences(sc: Scenario) -> list[str]:
+    """The keys in which ``sc`` is not the paper's experiment (empty: Table I's numbers are comparable).
+
+    The experiment is the paper's leader, graph, three followers at the paper's offsets (world frame,
+    scale 1), 20 s, the disturbance, the kinematic, torque-law (``c``) and learner gains (``k4, k5``, no
+    ``kd``), no faults or events, and the paper's robot (``c_true = (0.4, 10)`` on the ideal plant, the
+    ``paper`` robot on MuJoCo). What the paper leaves unstated may differ: initial poses, time steps,
+    ``ĉ(0)``, torque limit and saturation, command derivative, boundary layers, estimator gains (eq. 13
+    or eq. 15), the plant kind."""
+    ref = Scenario()
+    out = []
+    for section, keys in (
+        ("leader", None),
+        ("graph", None),
+        ("disturbance", None),
+        ("kinematic", None),
+        ("formation", ("offsets", "frame", "scale")),
+        ("torque", ("c",)),
+        ("learner", ("k4", "k5", "kd", "gain_scaling")),
+        ("sim", ("duration",)),
+    ):
+        a, b = getattr(sc, section), getattr(ref, section)
+        for f in dataclasses.fields(a):
+            if (keys is None or f.name in keys) and getattr(a, f.name) != getattr(b, f.name):
+                out.append(f"{section}.{f.name}")
+    if sc.faults.configured:
+        out.append("faults")
+    if sc.events:
+        out.append("events")
+    if sc.plant.kind == "ideal" and tuple(sc.plant.c_true) != tuple(ref.plant.c_true):
+        out.append("plant.c_true")
+    if sc.plant.kind == "mujoco" and any(r.model != "paper" or r.mapped for r in sc.plant.robots):
+        out.append("plant.robots")
+    return out
+
+
 def run_table1(
     sc: Scenario,
     on_result: Callable[[str, RunResult], None] | None = None,
@@ -32,7 +68,14 @@ def run_table1(
 
     ``progress(method)``, if given, returns the ``progress(k, N)`` callback for that run.
     """
-    out: dict[str, Any] = {"plant": sc.plant.kind, "scenario": sc.name, "methods": {}}
+    differs = paper_differences(sc)
+    out: dict[str, Any] = {
+        "plant": sc.plant.kind,
+        "scenario": sc.name,
+        "paper_comparable": not differs,  # the paper's numbers are shown beside ours only then
+        "differs_from_paper": differs,
+        "methods": {},
+    }
     for m in METHODS:
         res = simulate(dataclasses.replace(sc, method=m), progress=None if progress is None else progress(m))
         if getattr(res, "interrupted", None) is not None:  # SIGINT/SIGTERM: no further methods
@@ -76,10 +119,18 @@ def markdown(table: dict[str, Any]) -> str:
     the ordering claim is then qualified.
     """
     methods = list(table["methods"])
+    comparable = table.get("paper_comparable", True)
+    differs = table.get("differs_from_paper", [])
+    paper_note = (
+        "paper's value in brackets."
+        if comparable
+        else "the paper's values are not shown: they are not comparable, this scenario is not the paper's "
+        f"experiment (it differs in {', '.join(differs)})."
+    )
     lines = [
         f"# Table I: total velocity error ({table['plant']} plant, scenario '{table['scenario']}')",
         "",
-        "Metric: ∫(|υ_cmd − υ| + |ω_cmd − ω|) dt per follower; paper's value in brackets.",
+        f"Metric: ∫(|υ_cmd − υ| + |ω_cmd − ω|) dt per follower; {paper_note}",
         "",
         "| follower | " + " | ".join(methods) + " |",
         "|---|" + "---|" * len(methods),
@@ -91,7 +142,7 @@ def markdown(table: dict[str, Any]) -> str:
             summ = table["methods"][m]
             f = summ["followers"][i]
             ours = f["total_velocity_error"]
-            paper = PAPER_TABLE1.get(m)
+            paper = PAPER_TABLE1.get(m) if comparable else None
             ref = f" ({paper[i]})" if paper and i < len(paper) and n == 3 else ""
             cells.append(f"{ours:.2f}{ref}{_mark(summ, f)}")
         lines.append(f"| {i + 1} | " + " | ".join(cells) + " |")

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import InputError
+from .support import default_capacity, unsupported
 
 INSTALL = "pip install 'bioform-mj[gpu]'"
 
@@ -45,12 +46,6 @@ MEMORY_SHARE = 0.9
 #: 163-188 B per row (nv 24-512), with margin for the solver's per-row work arrays (design §16)
 CONTACT_BYTES = 250.0
 ROW_BYTES = 300.0
-
-
-def default_capacity(n_robots: int) -> tuple[int, int]:
-    """MuJoCo Warp's default ``(nconmax, njmax)`` per world for ``n_robots`` robots (contacts,
-    constraint rows): what :class:`~.control.BatchRun` uses when not told."""
-    return 8 * n_robots + 16, 32 * n_robots + 16
 
 
 def capacity_redo(row: dict[str, Any], backend: str, nconmax: int | None, njmax: int | None) -> str | None:
@@ -109,27 +104,6 @@ def resolve_device(device: str | None) -> str:
     except (RuntimeError, ValueError) as exc:
         names = ", ".join(str(d) for d in wp.get_devices())
         raise InputError(f"--device '{device}': not a Warp device here ({exc}; available: {names})") from None
-
-
-def unsupported(sc: Any) -> str | None:
-    """What of scenario ``sc`` the batch engine does not run yet (None: all of it)."""
-    if sc.plant.kind != "mujoco":
-        return (
-            f"plant.kind = '{sc.plant.kind}' (the batch engine runs the MuJoCo plant only; "
-            "use --plant mujoco or --backend local)"
-        )
-    f = sc.faults
-    if f.friction_patch:
-        return (
-            "faults.friction_patch (MuJoCo Warp's wheel-on-box contacts differ from C MuJoCo's: one physics step "
-            "from the same state on the patch, velocities differ by up to 35x, against ~1e-6 on the floor; "
-            "use --backend local)"
-        )
-    if getattr(sc.learner, "drag", False):
-        return "learner.drag (the learned-drag extension runs on the local engines only; use --backend local)"
-    if getattr(sc.plant, "sensing", "truth") not in ("truth", "odometry"):
-        return f"plant.sensing = '{sc.plant.sensing}'"
-    return None
 
 
 def group_key(sc: Any) -> str:

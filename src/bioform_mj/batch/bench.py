@@ -125,7 +125,7 @@ def check_worlds(W: int, base: Any, device: str) -> None:
 
 def cpu_engine(scenario: str = "paper", duration: float = 1.0) -> dict[str, Any]:
     """The CPU engine (compiled loop, C MuJoCo, one core) on the same scenario: robot-steps/s."""
-    from ..bench import _loop
+    from ..looptime import loop_time as _loop
     from ..scenario import load
 
     sc = load(scenario, overrides=["plant.kind=mujoco", f"sim.duration={duration}", "formation.init_jitter=0.05"])

@@ -58,6 +58,41 @@ def write_text(path: str | Path, text: str) -> None:
         tmp.write_text(text)
 
 
+def rows_to_arrow(rows: list[dict[str, Any]]) -> Any:
+    """Rows → a ``pyarrow.Table`` with the union of their columns, as ``sweep.to_csv`` (``runs.parquet``).
+
+    A column whose values are all booleans is boolean, all integers int64, all numbers float64 (missing
+    values null); any other column is text (lists and tables as JSON), so a column never changes type
+    with the rows it happens to hold."""
+    import pyarrow as pa
+
+    cols: list[str] = []
+    for r in rows:
+        cols += [c for c in r if c not in cols]
+    arrays = []
+    for c in cols:
+        vals = [r.get(c) for r in rows]
+        present = [v for v in vals if v is not None]
+        if present and all(isinstance(v, bool) for v in present):
+            arrays.append(pa.array(vals, type=pa.bool_()))
+        elif present and all(isinstance(v, int) and not isinstance(v, bool) for v in present):
+            arrays.append(pa.array(vals, type=pa.int64()))
+        elif present and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in present):
+            arrays.append(pa.array([None if v is None else float(v) for v in vals], type=pa.float64()))
+        else:
+            text = [None if v is None else (v if isinstance(v, str) else json.dumps(v, default=str)) for v in vals]
+            arrays.append(pa.array(text, type=pa.string()))
+    return pa.Table.from_arrays(arrays, names=cols)
+
+
+def write_parquet(path: str | Path, table: Any) -> None:
+    """Atomically write a ``pyarrow.Table`` as Parquet."""
+    import pyarrow.parquet as pq
+
+    with atomic_path(path) as tmp:
+        pq.write_table(table, str(tmp))
+
+
 def write_npz(path: str | Path, arrays: dict[str, np.ndarray]) -> None:
     """Atomically write a compressed ``.npz``."""
     with atomic_path(path) as tmp:

@@ -25,7 +25,17 @@ from .scenexml import ASSET_SUFFIXES, ASSETS_DIR
 
 #: Files a run or a table1 writes into its folder (extend when a command writes a new one).
 RUN_FILES = frozenset(
-    {"summary.json", "log.npz", "scene.xml", "video.mp4", "run.rrd", "MUJOCO_LOG.TXT", "table1.json", "table1.md"}
+    {
+        "summary.json",
+        "resolved.toml",
+        "log.npz",
+        "scene.xml",
+        "video.mp4",
+        "run.rrd",
+        "MUJOCO_LOG.TXT",
+        "table1.json",
+        "table1.md",
+    }
 )
 #: Files ``bioform calibrate`` writes into its folder (another kind of run: design §16).
 CALIBRATION_FILES = frozenset(

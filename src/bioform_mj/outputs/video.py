@@ -41,7 +41,7 @@ CAMERAS = ("auto", "track", "top")
 
 _AZIMUTH = 15.0  # deg, auto camera: behind the formation (the leader drives along +x), a little to its right
 _ELEVATION = -55.0  # deg, looking down
-_MARGIN = 1.0  # m kept in view around every robot, the leader and every slot
+_MARGIN = 1.0  # m kept in view around every robot, the leader and every slot (× robot_unit)
 
 
 @dataclass(frozen=True)
@@ -144,6 +144,7 @@ class _Replay:
         self.markers = Markers(m, n)
         prefixes = [follower_prefix(i) for i in range(n)]
         lays = [layout_of(m, p) for p in prefixes]  # the robot's own names, mapped (design §8)
+        self.half_track = np.array([lay.half_track for lay in lays], dtype=float)  # m, per follower
         base = [m.body(lay.base).id for lay in lays]
         self.base_q = np.array([m.jnt_qposadr[m.body_jntadr[b]] for b in base])  # free joint qpos address
         self.base_z = np.array([m.qpos0[a + 2] for a in self.base_q])
@@ -198,13 +199,18 @@ def _camera_basis(az_deg: float, el_deg: float) -> tuple[np.ndarray, np.ndarray,
 
 
 def auto_camera_path(
-    capture: FrameCapture, fovy_deg: float, aspect: float, azimuth: float = _AZIMUTH, elevation: float = _ELEVATION
+    capture: FrameCapture,
+    fovy_deg: float,
+    aspect: float,
+    azimuth: float = _AZIMUTH,
+    elevation: float = _ELEVATION,
+    unit: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per frame ``lookat`` (K, 3) and ``distance`` (K,) m of a free camera that shows everyone.
 
     Each frame's requirement is the smallest distance at which every follower, the leader
-    and every slot, each with a ``_MARGIN`` m disc around it, lies inside the frustum, the
-    camera looking at the middle of their extent on the ground. A centred moving average
+    and every slot, each with a ``_MARGIN × unit`` m disc around it (``unit``: :func:`bioform_mj.scene.robot_unit`),
+    lies inside the frustum, the camera looking at the middle of their extent on the ground. A centred moving average
     (±1 s) of the look-at point and a moving maximum then average of the distance make
     the path smooth while still containing everyone.
     """
@@ -230,12 +236,12 @@ def auto_camera_path(
     centers = _moving_average(centers, win)
     need = np.zeros(K)
     for k in range(K):
-        rel = np.vstack([pts[k], pts[k] + [0.0, 0.0, 0.3]]) - centers[k]
+        rel = np.vstack([pts[k], pts[k] + [0.0, 0.0, 0.3 * unit]]) - centers[k]
         depth = rel @ fwd
         need[k] = max(
-            np.max((np.abs(rel @ right) + _MARGIN) / tan_h - depth),
-            np.max((np.abs(rel @ up) + _MARGIN) / tan_v - depth),
-            2.0,
+            np.max((np.abs(rel @ right) + _MARGIN * unit) / tan_h - depth),
+            np.max((np.abs(rel @ up) + _MARGIN * unit) / tan_v - depth),
+            2.0 * unit,
         )
     need = _moving_max(need, win)
     dist = np.maximum(_moving_average(need[:, None], win)[:, 0], need)
@@ -302,8 +308,13 @@ class _Trails:
         return self.xy[track, idx]
 
 
-def _add_geoms(renderer: Any, capture: FrameCapture, trails: _Trails, k: int, line_px: float) -> None:
+def _add_geoms(
+    renderer: Any, capture: FrameCapture, trails: _Trails, k: int, line_px: float, unit: float = 1.0
+) -> None:
     """Trails, formation shape and robot halos, appended to the renderer's scene after ``update_scene``.
+
+    Disc radii are the paper-scale sizes (halo 0.3 m, slot 0.18 m, leader 0.3 m) × ``unit``
+    (:func:`bioform_mj.scene.robot_unit`): a halo is 1.5 half tracks, a slot disc 0.9, whatever the robot's size.
 
     Trails are ``mjGEOM_LINE`` connectors (``line_px`` pixels wide): a capsule per segment
     costs ~25× more triangles, which a software rasteriser feels (0.3 s per frame).
@@ -352,9 +363,9 @@ def _add_geoms(renderer: Any, capture: FrameCapture, trails: _Trails, k: int, li
         slot = capture.slots[k][i]
         segments(np.array([[lp[0], lp[1], z], [slot[0], slot[1], z]]), white, max(1.0, 0.5 * line_px))
         rgb = follower_rgb(i)
-        disc(capture.pose[k][i, :2], 0.3, 0.003, np.array([*rgb, 0.3], np.float32))  # halo under the robot
-        disc(slot, 0.18, 0.003, np.array([*rgb, 0.45], np.float32))  # its slot, in its colour
-    disc(lp[:2], 0.3, 0.003, np.array([*LEADER_RGB, 0.3], np.float32))
+        disc(capture.pose[k][i, :2], 0.3 * unit, 0.003, np.array([*rgb, 0.3], np.float32))  # halo under the robot
+        disc(slot, 0.18 * unit, 0.003, np.array([*rgb, 0.45], np.float32))  # its slot, in its colour
+    disc(lp[:2], 0.3 * unit, 0.003, np.array([*LEADER_RGB, 0.3], np.float32))
 
 
 # ---------------------------------------------------------------------------- caption
@@ -434,11 +445,14 @@ class FrameRenderer:
         self.caption = _Caption(options.height)
         self.colors = [follower_rgb(i) for i in range(self.sc.n)]
         self.line_px = max(2.0, options.height / 200)  # trail width, pixels
-        self.trails = _Trails(capture)
+        from ..scene import robot_unit
+
+        self.unit = robot_unit(self.replay.half_track)  # markers and margins at the robots' size (design §9)
+        self.trails = _Trails(capture, tol=0.015 * self.unit)
         self.centers: np.ndarray | None = None
         if options.camera == "auto":
             fovy = float(self.replay.model.vis.global_.fovy)
-            self.centers, self.dists = auto_camera_path(capture, fovy, options.width / options.height)
+            self.centers, self.dists = auto_camera_path(capture, fovy, options.width / options.height, unit=self.unit)
             self.camera: Any = mujoco.MjvCamera()
             self.camera.type = mujoco.mjtCamera.mjCAMERA_FREE
             self.camera.azimuth, self.camera.elevation = _AZIMUTH, _ELEVATION
@@ -458,7 +472,7 @@ class FrameRenderer:
         if self.fast:  # invisible from these cameras, or not worth a CPU rasteriser's time
             r.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
             r.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = 0
-        _add_geoms(r, cap, self.trails, k, line_px=self.line_px)
+        _add_geoms(r, cap, self.trails, k, line_px=self.line_px, unit=self.unit)
         img = r.render()
         fe = np.linalg.norm(cap.pose[k][:, :2] - cap.slots[k], axis=1)
         lines = [

@@ -1,0 +1,35 @@
+"""What the batch engine supports and the capacities it allocates: shared by :mod:`.backend` (sweep and
+bench glue, refusals before any work) and :mod:`.runner` (the batch itself), below both, so neither
+imports the other to get them. Pure Python: no Warp needed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def default_capacity(n_robots: int) -> tuple[int, int]:
+    """MuJoCo Warp's default ``(nconmax, njmax)`` per world for ``n_robots`` robots (contacts,
+    constraint rows): what :class:`~.runner.BatchRun` uses when not told."""
+    return 8 * n_robots + 16, 32 * n_robots + 16
+
+
+def unsupported(sc: Any) -> str | None:
+    """What of scenario ``sc`` the batch engine does not run yet (None: all of it)."""
+    if sc.plant.kind != "mujoco":
+        return (
+            f"plant.kind = '{sc.plant.kind}' (the batch engine runs the MuJoCo plant only; "
+            "use --plant mujoco or --backend local)"
+        )
+    f = sc.faults
+    if f.friction_patch:
+        return (
+            "faults.friction_patch (MuJoCo Warp's wheel-on-box contacts differ from C MuJoCo's: one physics step "
+            "from the same state on the patch, velocities differ by up to 35x, against ~1e-6 on the floor; "
+            "use --backend local)"
+        )
+    if getattr(sc.learner, "drag", False):
+        return "learner.drag (the learned-drag extension runs on the local engines only; use --backend local)"
+    if getattr(sc.plant, "sensing", "truth") not in ("truth", "odometry"):
+        return f"plant.sensing = '{sc.plant.sensing}'"
+    return None

@@ -1,0 +1,185 @@
+"""The documentation cannot rot: generated references cover the code, the tutorial runs, the README is short."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bioform_mj import scenario_doc
+from bioform_mj.errors import InputError
+from bioform_mj.scenario import load
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCS = ROOT / "docs"
+
+
+def _gen_docs():
+    spec = importlib.util.spec_from_file_location("gen_docs", ROOT / "scripts" / "gen_docs.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_every_scenario_key_has_a_description_and_no_entry_is_stale():
+    keys = scenario_doc.scenario_keys()
+    assert len(keys) >= 90  # 95 keys today
+    missing = [k for k in keys if not scenario_doc.KEYS.get(k, ("", ""))[1].strip()]
+    assert not missing, f"scenario keys without a description in scenario_doc.KEYS: {missing}"
+    stale = sorted(set(scenario_doc.KEYS) - set(keys))
+    assert not stale, f"scenario_doc.KEYS names keys the scenario does not have: {stale}"
+    assert set(scenario_doc.CHOICES) <= set(keys)
+
+
+@pytest.mark.parametrize("key", [k for k in scenario_doc.CHOICES if "[]" not in k])
+def test_documented_choices_are_the_validated_ones(key):
+    """Every allowed value the reference lists is accepted by validation's list, and another string is refused."""
+    with pytest.raises(InputError, match=re.escape(key)):
+        load("paper", {key: "no-such-value"})
+
+
+def test_scenario_reference_has_one_row_per_key_with_type_default_and_choices():
+    md = _gen_docs().scenario_reference()
+    rows = [ln for ln in md.splitlines() if ln.startswith("| `")]
+    assert len(rows) == len(scenario_doc.scenario_keys())
+    frame = next(r for r in rows if r.startswith("| `formation.frame`"))
+    assert '"world", "leader"' in frame and '`"world"`' in frame  # allowed values and default
+    jitter = next(r for r in rows if r.startswith("| `formation.init_jitter`"))
+    assert "| number | m | `0.0` |" in jitter
+
+
+def test_cli_reference_lists_every_subcommand_and_option():
+    gen = _gen_docs()
+    md = gen.cli_reference()
+    from bioform_mj.cli import build_parser
+
+    subs = gen._subcommands(build_parser(), "bioform")
+    assert {c for c, _h, _p in subs} >= {"bioform run", "bioform sweep", "bioform robot check", "bioform bench"}
+    for cmd, _help, parser in subs:
+        assert f"## `{cmd}`" in md
+        for action in parser._actions:
+            for opt in action.option_strings:
+                if opt not in ("-h", "--help"):
+                    assert f"`{opt}`" in md, (cmd, opt)
+
+
+def test_log_reference_names_every_channel_and_column():
+    from bioform_mj.engine import CHANNELS
+    from bioform_mj.logtable import column_units
+
+    md = _gen_docs().log_reference()
+    for ch in CHANNELS:
+        assert f"| `{ch}` |" in md
+    for col in column_units():
+        if col != "follower":
+            assert f"`{col}`" in md
+
+
+def test_tutorial_runs_and_prints_what_the_docs_show():
+    """docs/tutorials/own_controller.py, included into its page, prints the committed output."""
+    script = DOCS / "tutorials" / "own_controller.py"
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout == (DOCS / "tutorials" / "own_controller.out").read_text()
+    errs = [float(x) for x in re.findall(r"\d+\.\d+", out.stdout.splitlines()[0])]
+    assert len(errs) == 3 and max(errs) < 0.05  # the user's controller holds the formation: 0.019-0.022 m
+    page = (DOCS / "tutorials" / "own-controller.md").read_text()
+    assert '--8<-- "docs/tutorials/own_controller.py"' in page and '--8<-- "docs/tutorials/own_controller.out"' in page
+
+
+def test_the_rerun_entities_documented_are_the_ones_logged():
+    import inspect
+
+    from bioform_mj.outputs import rerun_log
+
+    page = (DOCS / "guide" / "outputs.md").read_text()
+    for leaf, _fn, _names in rerun_log._SERIES:
+        assert f"`{leaf}`" in page, leaf
+    src = inspect.getsource(rerun_log)
+    for entity in ("/world/leader", "/world/paths/leader", "/summary"):
+        assert f'"{entity}"' in src and f"`{entity}`" in page
+    for leaf in ("robot", "estimate", "slot", "path"):
+        assert f'f"{{base}}/{leaf}"' in src and f"`/world/follower/<i>/{leaf}`" in page
+    assert 'base = f"/world/follower/{i + 1}"' in src
+
+
+def test_every_page_is_in_the_nav_and_every_nav_entry_exists():
+    nav = re.findall(r":\s*([\w/.-]+\.md)\s*$", (ROOT / "mkdocs.yml").read_text(), flags=re.M)
+    generated = {"reference/scenario.md", "reference/cli.md", "reference/log.md"}
+    pages = {p.relative_to(DOCS).as_posix() for p in DOCS.rglob("*.md")}
+    assert set(nav) - generated <= pages, set(nav) - generated - pages
+    assert generated <= set(nav)
+    assert pages <= set(nav), f"pages not in mkdocs.yml's nav: {sorted(pages - set(nav))}"
+
+
+def test_findings_are_a_report_not_a_diary():
+    diary = re.compile(r"\bround \d|\bissue \d|this round|previous measurement|\bRound \d", re.I)
+    for page in sorted((DOCS / "findings").glob("*.md")):
+        hits = [ln for ln in page.read_text().splitlines() if diary.search(ln)]
+        assert not hits, (page.name, hits[:3])
+    for page in sorted((DOCS / "findings").glob("*.md")):
+        if page.name != "index.md":
+            assert "**Reproduce:**" in page.read_text() or "Reproduce" in page.read_text(), page.name
+
+
+def test_readme_is_a_front_door():
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 250
+    for target in re.findall(r"\]\((docs/[^)#]+)", text):
+        assert (ROOT / target).exists() or target.startswith("docs/reference/"), target
+    assert "/world/follower/" not in text or "/world/follower/<i>/robot" in text
+    found = text.split("## What we found", 1)[1].split("\n## ", 1)[0]
+    assert 0 < len([ln for ln in found.splitlines() if ln.strip()]) <= 15  # headline findings, then a link
+    for extra in ("`test` extra", "`gpu` extra", "`docs` extra"):  # what make test installs, said
+        assert extra in text
+    assert text.count("~/.cache/bioform_mj/numba-") == 1  # the compile cache, stated once
+
+
+@pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="the docs extra is not installed")
+def test_docs_build_strictly(tmp_path):
+    """mkdocs build --strict: a broken link, a missing page or a stale API reference fails."""
+    env = dict(
+        os.environ,
+        NO_MKDOCS_2_WARNING="1",
+        DISABLE_MKDOCS_2_WARNING="true",
+        PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
+    )
+    # not --quiet: it hides the warnings from strict mode too, and a broken link would pass
+    cmd = [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")]
+    out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "WARNING" not in out.stderr, out.stderr[-3000:]
+    scen = (tmp_path / "site" / "reference" / "scenario" / "index.html").read_text()
+    assert "formation.init_jitter" in scen and "faults.friction_patch" in scen
+    tut = (tmp_path / "site" / "tutorials" / "own-controller" / "index.html").read_text()
+    assert "SlotTracker" in tut and "--8&lt;--" not in tut and "8 &lt; --" not in tut  # the script itself, included
+
+
+@pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="the docs extra is not installed")
+def test_a_broken_link_fails_the_strict_build(tmp_path):
+    """The build make test runs would fail on a broken link (a copy of the docs with one added)."""
+    import shutil
+
+    work = tmp_path / "w"
+    shutil.copytree(DOCS, work / "docs")
+    shutil.copy(ROOT / "mkdocs.yml", work / "mkdocs.yml")
+    (work / "scripts").mkdir()
+    shutil.copy(ROOT / "scripts" / "gen_docs.py", work / "scripts" / "gen_docs.py")
+    (work / "src").symlink_to(ROOT / "src")
+    with open(work / "docs" / "guide" / "faults.md", "a") as fh:
+        fh.write("\n[a page that is not there](no-such-page.md)\n")
+    env = dict(
+        os.environ,
+        NO_MKDOCS_2_WARNING="1",
+        DISABLE_MKDOCS_2_WARNING="true",
+        PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
+    )
+    cmd = [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")]
+    out = subprocess.run(cmd, cwd=work, capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode != 0 and "no-such-page.md" in out.stderr
