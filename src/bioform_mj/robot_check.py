@@ -137,36 +137,6 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
     }
 
 
-def unsimulated_self_contacts(entry: Any, simulated: list[dict]) -> list[dict]:
-    """Pairs of a URDF robot's own bodies that overlap at rest where the import turned self-collision off
-    (the URDF/Gazebo convention, design §12): the contacts MuJoCo would make with it on, from the file's
-    configuration (one ``mj_forward`` of the robot alone), each marked ``"simulated": False``. Empty for an
-    MJCF robot or ``self_collide = true`` (their self contacts are simulated and listed already)."""
-    import dataclasses
-
-    import mujoco
-
-    from .contacts import self_contacts
-    from .plants.mujoco_plant import MujocoPlant
-    from .robots import resolve_robot
-
-    ref = resolve_robot(entry)
-    if ref.self_collide or not str(ref.model).lower().endswith((".urdf", ".xacro")):
-        return []
-    plant = MujocoPlant(
-        [dataclasses.replace(ref, self_collide=True)], np.zeros((1, 3)), 0.001, 0.001, None, slots=False
-    )
-    data = mujoco.MjData(plant.model)
-    mujoco.mj_forward(plant.model, data)
-    have = {(c["body1"], c["body2"]) for c in simulated}
-    out = []
-    for c in self_contacts(plant.model, data, plant.layouts[0], "f1/"):
-        if (c["body1"], c["body2"]) not in have:
-            c["simulated"] = False
-            out.append(c)
-    return out
-
-
 def cause_of(findings: list[dict[str, Any]]) -> dict[str, Any] | None:
     """The likeliest cause among :func:`~bioform_mj.identify.identify`'s findings (its ``CAUSE_ORDER``;
     ``damping`` only as the last resort), or None."""
@@ -195,6 +165,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         relative_poses,
         self_contacts,
         still_bodies,
+        unsimulated_self_contacts,
     )
     from .identify import DRAG_STEP, check_radius, identify
     from .plants.mujoco_plant import MujocoPlant
@@ -227,7 +198,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     loads = plant.wheel_loads()[0]
     floor = floor_contacts(model, plant.data, lay, "f1/")
     selfc = self_contacts(model, plant.data, lay, "f1/")
-    selfc += unsimulated_self_contacts(entry, selfc)
+    selfc += unsimulated_self_contacts(entry, selfc)  # a URDF's excluded pairs that overlap (design §12)
     # μ N r / f per wheel (design §13: N the wheel's own load at rest, f the share of torque that
     # reaches the floor past the rotor; μ m g r / 2 for an even split and a light rotor)
     traction = p.traction_torque(mu, float(loads.min()))
@@ -589,7 +560,7 @@ def slot_accelerations(scenario: Any, t: np.ndarray) -> tuple[np.ndarray, np.nda
     formation slot over the times ``t`` (s): the slot path ``p_r − R(θ_r) Δ_i`` (leader frame) or
     ``p_r − Δ_i`` differentiated twice; tangential along the slot's velocity, centripetal across it
     (where the slot moves slower than 1 mm/s, all of it counts as tangential)."""
-    from .sim import slots_of
+    from .outcomes import slots_of
 
     pose, _, _ = scenario.build_leader().states(t)
     slots = np.stack([slots_of(scenario, p) for p in pose])  # (T, n, 2)

@@ -128,6 +128,12 @@ KEYS: dict[str, tuple[str, str]] = {
     "learner.c_hat0_scale": ("", "`ĉ(0) = c_hat0_scale ⊙ c_true` per follower."),
     "learner.c_bounds": ("", "Projection bounds of `ĉ` as factors of `ĉ(0)`: lower ≤ 1 ≤ upper."),
     "learner.gain_scaling": ("", "`c_hat0`: `k4 ⊙ (ĉ_i(0)/ĉ_paper(0))²` per robot, so any robot learns as fast."),
+    "learner.drag": (
+        "",
+        "Also learn a viscous drag rate per channel (not in the paper; design §14): for wheel damping or back-EMF.",
+    ),
+    "learner.drag_gain": ("", "Adaptation gains of the learned drag `[υ, ω]` (the `υ` one ÷ scale²)."),
+    "learner.drag_max": ("1/s", "Upper projection bound of the learned drag rate."),
     # plant
     "plant.kind": ("", "`ideal`: the paper's unicycle model (RK4); `mujoco`: MJCF robots simulated by MuJoCo."),
     "plant.c_true": ("1/(kg·m), 1/(kg·m²)", "Ideal plant's `(a, b) = (1/(m r), l/(I r))`; MuJoCo: from the models."),
@@ -142,6 +148,31 @@ KEYS: dict[str, tuple[str, str]] = {
     "plant.robots[].tau_max": ("N·m", "Wheel torque limit of the attached motors (0: the model's own)."),
     "plant.robots[].motor": ("", '`ideal` torque sources (the paper; `""` = ideal) or the model\'s `dc` motors.'),
     "plant.robots[].driver": ("", 'With `motor = "dc"`: `current` (default) or `voltage` driver (design §8.2).'),
+    "plant.robots[].casters": (
+        "",
+        "Geoms or bodies that are casters (design §13); their friction can be set by `caster_friction`.",
+    ),
+    "plant.robots[].caster_friction": (
+        "",
+        "Sliding friction of the casters against the floor (they win it by priority); < 0: as published.",
+    ),
+    "plant.robots[].free_joints": (
+        "",
+        "Leave the joints other than the wheels free (default: held at the file's configuration, design §13).",
+    ),
+    "plant.robots[].self_collide": (
+        "",
+        "URDF: keep contacts between the robot's own links (default off, as in Gazebo; design §12).",
+    ),
+    "plant.robots[].package_path": (
+        "",
+        "URDF: `{NAME = \"DIR\"}` where this robot's `package://NAME/…` point (before the scenario's).",
+    ),
+    "plant.package_path": (
+        "",
+        'URDF: `{NAME = "DIR"}` where `package://NAME/…` point, before `$BIOFORM_PACKAGE_PATH`, '
+        "`$ROS_PACKAGE_PATH` (design §12).",
+    ),
     "plant.sensing": ("", "What the controllers are given (MuJoCo): the `truth`, or `odometry` (design §8.3)."),
     "plant.encoder_cpr": ("counts/rev", "Wheel encoder resolution; -1: each robot file's `encoder_cpr`."),
     "plant.sensor_dt": (

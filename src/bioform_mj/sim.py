@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import logging
 import math
-import platform
 import time
 import warnings
 from collections.abc import Sequence
@@ -24,14 +23,11 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from . import __version__
 from .control.kernel import StackState, new_state
 from .control.stack import ControlStack, StackParams, parse_method
 from .disturbance import Harmonic as HarmonicDisturbance
 from .engine import (
-    CHANNELS,
     GUARD_FAILED,
-    MEAN_CHANNELS,
     OK,
     Bounds,
     Formation,
@@ -45,10 +41,35 @@ from .engine import (
     record_odometry,
 )
 from .errors import ControllerError, Diverged, RobotWarning
+from .outcomes import (  # noqa: F401 - re-exported: sim is where callers have found them
+    C_HAT_BOUND_BAND,
+    C_HAT_OFF,
+    LOST_AFTER_S,
+    LOST_FRACTION,
+    LOST_M,
+    OUTCOME_ORDER,
+    SPIN_RAD_S,
+    braking_casters,
+    follower_outcomes,
+    lost_threshold_m,
+    outcome_kinds,
+    outcome_list,
+    slots_of,
+    unmodelled_causes,
+)
 from .plants.base import Plant
 from .plants.ideal import IdealPlant
-from .record import resolved_config
+from .runsummary import _signal_name, _summary, _versions  # noqa: F401 - sim's own names
 from .scenario import Scenario
+from .userhooks import (  # noqa: F401 - simulate's checks, importable from sim as before
+    CONTROLLER_METHODS,
+    OBSERVER_METHODS,
+    _add_outcome,
+    _checked_torques,
+    _tag,
+    check_controller,
+    check_observers,
+)
 
 log = logging.getLogger(__name__)
 
@@ -223,16 +244,6 @@ def _learner_k4(sc: Scenario, c_hat0: np.ndarray) -> np.ndarray:
         ref = np.asarray(sc.learner.c_hat0_scale, dtype=float) * np.asarray(PAPER_C)
         return k4 * (np.asarray(c_hat0, dtype=float) / ref) ** 2
     return k4
-
-
-def slots_of(sc: Scenario, leader_pose: np.ndarray) -> np.ndarray:
-    """Formation slots (n, 2) m of the true leader at ``leader_pose`` (3,): ``p_r − Δ_i``, with the
-    offsets rotated by the leader's heading for ``formation.frame = "leader"`` (design §4)."""
-    off = np.asarray(sc.formation.offsets, dtype=float).reshape(sc.n, 2)
-    if sc.formation.frame == "leader":
-        c, s = np.cos(leader_pose[2]), np.sin(leader_pose[2])
-        off = np.column_stack([c * off[:, 0] - s * off[:, 1], s * off[:, 0] + c * off[:, 1]])
-    return np.asarray(leader_pose[:2], dtype=float)[None, :] - off
 
 
 def initial_estimates(sc: Scenario, pose0: np.ndarray, leader_pose0: np.ndarray) -> np.ndarray:
@@ -664,88 +675,6 @@ def simulate(
     return result
 
 
-def _tag(exc: BaseException, source: str, step: int, t: float) -> None:
-    """Remember where ``exc`` came from (the innermost caller wins) for the note and the summary."""
-    if not hasattr(exc, "_bioform_source"):
-        exc._bioform_source = source  # type: ignore[attr-defined]
-        exc._bioform_step = step  # type: ignore[attr-defined]
-        exc._bioform_time = t  # type: ignore[attr-defined]
-
-
-#: what :func:`simulate` needs of a user's controller and observers (design §17)
-CONTROLLER_METHODS = ("reset", "step", "signals")
-OBSERVER_METHODS = ("start", "sample", "finish")
-
-
-def check_controller(controller: Any) -> None:
-    """Raise :class:`~bioform_mj.errors.ControllerError` naming what ``controller`` lacks of the
-    :class:`~bioform_mj.control.base.Controller` protocol (called before any step)."""
-    name = type(controller).__name__
-    lacks = [m for m in CONTROLLER_METHODS if not callable(getattr(controller, m, None))]
-    if lacks:
-        raise ControllerError(
-            f"controller {name} has no {', '.join(m + '()' for m in lacks)} method"
-            f"{'s' if len(lacks) > 1 else ''}; a controller needs reset(est_pose0, vel0), "
-            "step(leader_pose, leader_vel, pose, vel, comm=None) -> (n, 2) torques and signals() -> dict "
-            "(see bioform_mj.control.base.Controller)"
-        )
-
-
-def check_observers(observers: Sequence[Any]) -> None:
-    """Raise :class:`~bioform_mj.errors.ControllerError` naming what an observer lacks of :class:`Observer`."""
-    for o in observers:
-        name = type(o).__name__
-        lacks = [m for m in OBSERVER_METHODS if not callable(getattr(o, m, None))]
-        if lacks:
-            raise ControllerError(
-                f"observer {name} has no {', '.join(m + '()' for m in lacks)} method"
-                f"{'s' if len(lacks) > 1 else ''} (an observer needs period, start, sample, finish: sim.Observer)"
-            )
-        period = getattr(o, "period", None)
-        try:
-            ok = period is not None and float(period) > 0 and math.isfinite(float(period))
-        except (TypeError, ValueError):
-            ok = False
-        if not ok:
-            raise ControllerError(f"observer {name}: period must be a finite number of seconds > 0, got {period!r}")
-
-
-def _checked_torques(tau: Any, n: int, name: str, k: int, dt: float) -> np.ndarray:
-    """A user's controller's torques as a float (n, 2) array, or a :class:`ControllerError`."""
-    try:
-        arr = np.asarray(tau, dtype=float)
-    except (TypeError, ValueError) as exc:
-        err = ControllerError(
-            f"controller {name}.step returned {type(tau).__name__}, not an (n, 2) = ({n}, 2) array of "
-            f"torques, at t = {k * dt:.4f} s (step {k}): {exc}"
-        )
-        _tag(err, f"controller {name}.step", k, k * dt)
-        raise err from exc
-    if arr.shape != (n, 2):
-        err = ControllerError(
-            f"controller {name}.step returned torques of shape {arr.shape}, expected (n, 2) = ({n}, 2) "
-            f"[tau_L, tau_R] N·m per follower, at t = {k * dt:.4f} s (step {k})"
-        )
-        _tag(err, f"controller {name}.step", k, k * dt)
-        raise err
-    return arr
-
-
-def _add_outcome(f: dict[str, Any], kind: str, detail: str, t: float | None) -> None:
-    """Give follower ``f`` (a summary entry) the outcome ``kind``, the most severe (it caused the
-    run's end), keeping the others in ``outcomes`` (the outcomes contract)."""
-    prev = f.get("outcomes")
-    if prev is None:
-        prev = (
-            []
-            if f.get("outcome", "ok") == "ok"
-            else [{"kind": f["outcome"], "detail": f.get("outcome_detail", ""), "t": None}]
-        )
-    f["outcomes"] = [{"kind": kind, "detail": detail, "t": t}] + [o for o in prev if o.get("kind") != kind]
-    f["outcome"] = kind
-    f["outcome_detail"] = detail
-
-
 def _shadow(state: StackState, sig: Any, tau: np.ndarray, missing: set[str]) -> None:
     """Copy a user controller's signals into the shadow state the metrics, guards and log read."""
     fields = {
@@ -769,310 +698,6 @@ def _shadow(state: StackState, sig: Any, tau: np.ndarray, missing: set[str]) -> 
             continue
         getattr(state, attr)[:] = v
     state.tau[:] = tau
-
-
-#: follower outcomes (design §9): thresholds
-LOST_FRACTION = 0.1  # final formation error beyond this fraction of the formation's extent → lost ...
-LOST_AFTER_S = 10.0  # s: ... once the run has had this long to converge (or if the error grew over the run)
-SPIN_RAD_S = 6.0  # rad/s: |ω| beyond this over the last second → spinning
-#: the ``lost`` threshold of the paper's formation (extent 10 m), kept for reference
-LOST_M = 1.0
-
-
-def lost_threshold_m(sc: Scenario) -> float:
-    """The ``lost`` outcome's threshold, m: :data:`LOST_FRACTION` × the formation's extent, the
-    largest distance between two points of the leader and the followers' slots (``p_r − Δ_i``), from
-    the resolved offsets (design §9). 1 m for the paper's formation (offsets (3, 0), (4, ±5): 10 m), so
-    it scales with the experiment: 0.15 m for the ``tb3`` preset (``formation.scale = 0.15``), 0.25 m for
-    ``stretch``. The one place both engines take it from."""
-    pts = np.vstack([np.zeros((1, 2)), np.asarray(sc.formation.offsets, dtype=float)])
-    extent = float(np.max(np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1)))
-    return LOST_FRACTION * extent
-
-
-def _summary(
-    sc,
-    plant,
-    controller,
-    state,
-    met,
-    logd,
-    lp_end,
-    pose,
-    vel,
-    offsets,
-    k_done,
-    dt,
-    wall,
-    setup_s,
-    diverged,
-    interrupted,
-    missing,
-    engine,
-) -> dict[str, Any]:
-    n = sc.n
-    final_form = np.linalg.norm(pose[:, :2] - slots_of(sc, lp_end), axis=1)
-    est = state.est_pose if "est_pose" not in missing else np.full((n, 3), np.nan)
-    final_est = np.linalg.norm(est[:, :2] - lp_end[None, :2], axis=1)
-    fe = logd["formation_error"]
-    half = fe[len(fe) // 2 :] if len(fe) else fe
-    c_true = plant.c_true()
-    c_hat = state.c_hat if "c_hat" not in missing else np.full((n, 2), np.nan)
-    nan_if = lambda name, v: float("nan") if name in missing else float(v)  # noqa: E731
-    outcomes = follower_outcomes(sc, plant, controller, logd, final_form, c_hat, dt)
-    followers = []
-    for i in range(n):
-        followers.append(
-            {
-                "id": i + 1,
-                "outcome": outcomes[i][0]["kind"] if outcomes[i] else "ok",
-                "outcome_detail": outcomes[i][0]["detail"] if outcomes[i] else "",
-                "outcomes": outcomes[i],
-                "total_velocity_error": nan_if("cmd", met.verr[i] * dt),
-                "final_formation_error_m": float(final_form[i]),
-                "rms_formation_error_m": float(np.sqrt(np.mean(fe[:, i] ** 2))) if len(fe) else float("nan"),
-                "rms_formation_error_last_half_m": float(np.sqrt(np.mean(half[:, i] ** 2)))
-                if len(half)
-                else float("nan"),
-                "final_estimation_error_m": float(final_est[i]),
-                "max_abs_v_cmd": nan_if("cmd", met.vmax[i]),
-                "peak_abs_torque": float(met.tau[i]),
-                "peak_abs_torque_commanded": float(met.tau_raw[i]),
-                "saturation_fraction": nan_if("saturated", met.sat[i] / max(1, k_done)),
-                "c_hat": [float(v) for v in c_hat[i]],
-                "c_true": [float(v) for v in c_true[i]],
-                "c_hat_rel_error": [float(v) for v in (c_hat[i] / c_true[i] - 1.0)],
-                # opt-in learner.drag (design §14): the learned drag rates k̂ [1/s] of υ, ω; None when off
-                "drag_hat_per_s": [float(v) for v in state.k_hat[i]] if sc.learner.drag else None,
-                **_robot_used(sc, plant, controller, i),
-            }
-        )
-    return {
-        "scenario": sc.name,
-        "plant": sc.plant.kind,
-        "method": sc.method if getattr(controller, "p", None) is not None else type(controller).__name__,
-        "controller": type(controller).__name__,
-        "engine": engine,
-        "seed": sc.sim.seed,
-        "sim_time_s": k_done * dt,
-        "wall_time_s": wall,
-        "setup_time_s": setup_s,
-        "steps": k_done,
-        "diverged": None
-        if diverged is None
-        else {"message": str(diverged), "time_s": diverged.time, "step": diverged.step},
-        "interrupted": None
-        if interrupted is None
-        else {"signal": _signal_name(getattr(interrupted, "signum", 2)), "time_s": k_done * dt},
-        "log_channels": {name: CHANNELS[name][1] for name in CHANNELS},
-        "log_interval_means": list(MEAN_CHANNELS),
-        "versions": _versions(),
-        "formation_scale": sc.formation.scale,  # applied: config holds the scaled values with scale = 1
-        "config": resolved_config(sc),  # the run's own record: load() takes it back unchanged
-        "followers": followers,
-    }
-
-
-def _robot_used(sc: Scenario, plant: Any, controller: Any, i: int) -> dict[str, Any]:
-    """What follower ``i``'s robot really was: torque limit, mass, yaw inertia (design §9)."""
-    p = getattr(controller, "p", None)
-    out: dict[str, Any] = {"tau_max_nm": float(np.broadcast_to(p.tau_max, (sc.n,))[i]) if p is not None else None}
-    params = getattr(plant, "params", None)
-    if params is not None:
-        rp = params[i]
-        out["mass_kg"] = float(rp.mass)
-        out["yaw_inertia_kgm2"] = float(rp.yaw_inertia)
-    else:
-        mass = getattr(plant, "mass", None)
-        inertia = getattr(plant, "inertia", None)
-        out["mass_kg"] = None if mass is None else float(mass[i])
-        out["yaw_inertia_kgm2"] = None if inertia is None else float(inertia[i])
-    return out
-
-
-#: outcome kinds, the most severe first: a follower's ``outcome`` is the first of its ``outcomes`` (design §14)
-OUTCOME_ORDER = ("tipped", "slipping", "spinning", "lost", "c_hat_at_bound", "c_hat_off")
-#: a learned parameter within this fraction of its projection bound counts as at the bound
-C_HAT_BOUND_BAND = 0.01
-#: a learned ĉ farther than this (relative, either component) from c_true at the end: ``c_hat_off``
-C_HAT_OFF = 0.25
-
-
-def outcome_kinds(follower: dict[str, Any]) -> list[str]:
-    """Every outcome kind of one follower's summary entry, the most severe first (``[]`` when ok); a
-    summary from before the ``outcomes`` list has only ``outcome``."""
-    kinds = [o["kind"] for o in follower.get("outcomes") or []]
-    o = follower.get("outcome")
-    return kinds if o in (None, "ok") or o in kinds else [str(o), *kinds]
-
-
-def unmodelled_causes(params: Any, slipping: bool = False, casters: Sequence[str] = ()) -> list[str]:
-    """The terms a plant knows that the paper's model lacks and that bias ĉ (design §8, §14): wheel
-    drag (damping, back-EMF; time constant), a dead band (frictionloss), slip, braking casters, a
-    centre of mass off the axle (b̂). ``params``: the robot's
-    :class:`~bioform_mj.identify.RobotParams` or None (ideal plant: none)."""
-    out = []
-    if params is not None:
-        um = params.unmodelled(0.0, 0.0)
-        k = um["drag_rate_per_s"]
-        if max(k) > 0:
-            out.append(
-                "wheel drag (damping/back-EMF: time constants "
-                + ", ".join(f"{1 / x:.3g} s" for x in k if x > 0)
-                + "; the opt-in learner.drag would estimate it)"
-            )
-        if params.wheel_frictionloss > 0:
-            out.append(f"a dead band of {2 * params.wheel_frictionloss:.3g} N·m (wheel frictionloss)")
-        if params.com_offset > 0.01:
-            out.append(f"a centre of mass {1e3 * params.com_offset:.0f} mm off the axle (b̂ biased, design §8.1)")
-    if slipping:
-        out.append("wheel slip")
-    out += [f"caster '{c}' braking" for c in casters]
-    return out
-
-
-def outcome_list(
-    *,
-    tip_t: float | None,
-    slip_t: float | None,
-    spinning: bool,
-    final: float,
-    fe0: float,
-    t_end: float,
-    learning: bool,
-    c_hat: np.ndarray,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    c_true: np.ndarray,
-    causes: Any = None,
-    slip_ratio: float = 0.2,
-    slip_time: float = 0.5,
-    lost_m: float = LOST_M,
-) -> list[dict[str, Any]]:
-    """Every outcome of one follower, the most severe first (:data:`OUTCOME_ORDER`), each
-    ``{"kind", "detail", "t"}`` (``t``: s when it happened, None for an end-of-run outcome); empty
-    when ok. Shared by both engines (``sim.follower_outcomes``, ``batch.control``'s ``_outcome``).
-    ``causes``: a callable giving :func:`unmodelled_causes`' list (called only for ``c_hat_off``);
-    ``lost_m``: the scenario's :func:`lost_threshold_m` (m)."""
-    from .plants.mujoco_plant import TIP_ANGLE_DEG
-
-    out: list[dict[str, Any]] = []
-    if tip_t is not None:
-        out.append({"kind": "tipped", "detail": f"tilt beyond {TIP_ANGLE_DEG:g} deg at t = {tip_t:.3f} s", "t": tip_t})
-    if slip_t is not None:
-        out.append(
-            {
-                "kind": "slipping",
-                "detail": f"wheel slip ratio > {slip_ratio:g} for {slip_time:g} s, by t = {slip_t:.3f} s",
-                "t": slip_t,
-            }
-        )
-    if spinning:
-        out.append(
-            {"kind": "spinning", "detail": f"|omega| > {SPIN_RAD_S:g} rad/s over the last second", "t": t_end - 1.0}
-        )
-    if final > lost_m and (t_end >= LOST_AFTER_S - 1e-9 or final > 1.5 * fe0):
-        out.append({"kind": "lost", "detail": f"final formation error {final:.3g} m > {lost_m:.3g} m", "t": None})
-    if learning:
-        at = [
-            k
-            for k in range(2)
-            if c_hat[k] <= lo[k] + C_HAT_BOUND_BAND * abs(lo[k]) or c_hat[k] >= hi[k] - C_HAT_BOUND_BAND * abs(hi[k])
-        ]
-        if at:
-            out.append(
-                {
-                    "kind": "c_hat_at_bound",
-                    "detail": "learned "
-                    + ", ".join("ab"[k] for k in at)
-                    + f" at its bound (within {C_HAT_BOUND_BAND:.0%})",
-                    "t": None,
-                }
-            )
-        rel = [float(c_hat[k] / c_true[k] - 1.0) for k in range(2)]
-        off = [k for k in range(2) if not abs(rel[k]) <= C_HAT_OFF]  # NaN counts as off
-        if off:
-            why = list(causes()) if callable(causes) else list(causes or [])
-            out.append(
-                {
-                    "kind": "c_hat_off",
-                    "detail": ", ".join(f"learned {'ab'[k]} {rel[k]:+.0%} from c_true" for k in off)
-                    + f" (> {C_HAT_OFF:.0%}); likely cause: "
-                    + ("; ".join(why) if why else "none the plant knows (too little excitation, or the learner gains)"),
-                    "t": None,
-                }
-            )
-    return out
-
-
-def braking_casters(plant: Any, i: int) -> list[str]:
-    """Follower ``i``'s non-wheel geoms that carry load with friction on the floor now (design §14)."""
-    if not hasattr(plant, "layouts") or not hasattr(plant, "data"):
-        return []
-    try:
-        from .identify import CASTER_LOAD, CASTER_MU, floor_contacts
-
-        weight = plant.params[i].mass * 9.81
-        return [
-            c["geom"]
-            for c in floor_contacts(plant, i)
-            if c["role"] != "wheel" and c["load_n"] > CASTER_LOAD * weight and c["friction"] > CASTER_MU
-        ]
-    except Exception:  # noqa: BLE001 - a cause is a hint; never fail a run's summary for it
-        return []
-
-
-def follower_outcomes(
-    sc: Scenario,
-    plant: Any,
-    controller: Any,
-    logd: dict[str, np.ndarray],
-    final_form: np.ndarray,
-    c_hat: np.ndarray,
-    dt: float,
-) -> list[list[dict[str, Any]]]:
-    """Per follower every outcome (:func:`outcome_list`: ``tipped`` (tilt beyond the plant's
-    ``TIP_ANGLE_DEG``, with the time), ``slipping`` (a wheel's slip ratio beyond the plant's
-    ``SLIP_RATIO`` for ``SLIP_TIME`` s), ``spinning`` (|ω| > :data:`SPIN_RAD_S` over the last
-    second), ``lost`` (final formation error > :func:`lost_threshold_m` after :data:`LOST_AFTER_S` s, or
-    grown by half over a shorter run), ``c_hat_at_bound`` (a learned parameter within
-    :data:`C_HAT_BOUND_BAND` of its projection bound at the end), ``c_hat_off`` (ĉ more than
-    :data:`C_HAT_OFF` from c_true, with the likely cause); empty when ok."""
-    n = sc.n
-    out: list[list[dict[str, Any]]] = []
-    tip = getattr(plant, "tip_step", None)
-    slip = getattr(plant, "slip_step", None)
-    p = getattr(controller, "p", None)
-    t = logd["t"]
-    last = t >= (t[-1] - 1.0) if len(t) else np.zeros(0, bool)
-    c_true = plant.c_true()
-    params = getattr(plant, "params", None)
-    lost_m = lost_threshold_m(sc)
-    for i in range(n):
-        slipping = slip is not None and slip[i] >= 0
-        learning = p is not None and p.learning
-        out.append(
-            outcome_list(
-                tip_t=float(tip[i] * dt) if tip is not None and tip[i] >= 0 else None,
-                slip_t=float(slip[i] * dt) if slipping else None,
-                spinning=bool(len(t) and np.all(np.abs(logd["vel"][last, i, 1]) > SPIN_RAD_S)),
-                final=float(final_form[i]),
-                fe0=float(logd["formation_error"][0, i]) if len(t) else 0.0,
-                t_end=float(t[-1]) if len(t) else 0.0,
-                learning=learning,
-                c_hat=c_hat[i],
-                lo=np.broadcast_to(p.c_min, (n, 2))[i] if learning else np.zeros(2),
-                hi=np.broadcast_to(p.c_max, (n, 2))[i] if learning else np.zeros(2),
-                c_true=c_true[i],
-                causes=lambda i=i, s=slipping: unmodelled_causes(
-                    params[i] if params is not None else None, s, braking_casters(plant, i)
-                ),
-                slip_ratio=getattr(plant, "SLIP_RATIO", 0.2),
-                slip_time=getattr(plant, "SLIP_TIME", 0.5),
-                lost_m=lost_m,
-            )
-        )
-    return out
 
 
 class ObserverClock:
@@ -1126,23 +751,3 @@ class EventQueue:
 def first_step_at(t: float, dt: float) -> int:
     """The first control step ``k`` with ``k·dt ≥ t`` (to 1e-12 s)."""
     return max(0, int(math.ceil((t - 1e-12) / dt - 1e-9)))
-
-
-def _signal_name(signum: int) -> str:
-    import signal
-
-    try:
-        return signal.Signals(signum).name
-    except ValueError:
-        return str(signum)
-
-
-def _versions() -> dict[str, str]:
-    out = {"bioform_mj": __version__, "numpy": np.__version__, "python": platform.python_version()}
-    try:
-        import mujoco
-
-        out["mujoco"] = mujoco.__version__
-    except ImportError:  # pragma: no cover - mujoco is a dependency
-        out["mujoco"] = "not installed"
-    return out
