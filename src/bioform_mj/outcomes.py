@@ -197,7 +197,7 @@ def follower_outcomes(
     p = getattr(controller, "p", None)
     t = logd["t"]
     last = t >= (t[-1] - 1.0) if len(t) else np.zeros(0, bool)
-    c_true = plant.c_true()
+    c_true = plant.c_true() if plant is not None else np.full((n, 2), np.nan)
     params = getattr(plant, "params", None)
     lost_m = lost_threshold_m(sc)
     for i in range(n):

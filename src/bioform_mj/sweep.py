@@ -593,7 +593,9 @@ def _sweep_locked(
         }
         write_json(out / "sweep.json", timing)
         write_text(out / "runs.csv", to_csv(got))
-        write_parquet(out / "runs.parquet", rows_to_arrow(got))
+        write_parquet(
+            out / "runs.parquet", rows_to_arrow([{k: v for k, v in r.items() if k not in _NOT_IN_CSV} for r in got])
+        )
         stats = aggregate(got, group_by)
         write_json(out / "stats.json", stats)
         note = (

@@ -23,7 +23,7 @@ import mujoco_warp as mjw
 import numpy as np
 import warp as wp
 
-from .control import (
+from .device import (
     A_,
     B_,
     BIO,
@@ -59,7 +59,6 @@ from .control import (
     TPHI,
     USED,
     BatchGains,
-    BatchRun,
     BatchState,
     F,
     _check,
@@ -79,6 +78,7 @@ from .control import (
     tracking_error,
     wrap,
 )
+from .runner import BatchRun  # noqa: E402
 
 _ = (clip, KA0, KA1, KB0, KB1, KX, KY, KTH, EPHI0, EPHI1)  # kernel globals (Warp resolves them by name)
 
