@@ -514,8 +514,15 @@ def _warn_outcomes(summary: dict[str, Any]) -> None:
     """A ``warning:`` line on stderr for every follower whose outcome is not ``ok`` (never
     silent: design §9); what the scenario asked beyond the robots was said before the run."""
     for f in summary["followers"]:
-        if f.get("outcome", "ok") != "ok":
-            print(f"warning: follower {f['id']}: {f['outcome']} ({f.get('outcome_detail', '')})", file=sys.stderr)
+        every = f.get("outcomes")
+        if every is None:
+            every = (
+                []
+                if f.get("outcome", "ok") == "ok"
+                else [{"kind": f["outcome"], "detail": f.get("outcome_detail", "")}]
+            )
+        for o in every:  # every outcome, not only the most severe (design §19)
+            print(f"warning: follower {f['id']}: {o['kind']} ({o.get('detail', '')})", file=sys.stderr)
 
 
 def _print_summary(summary: dict[str, Any], out: Path) -> None:

@@ -24,7 +24,13 @@ from . import graph as graph_mod
 from . import leader as leader_mod
 from .control.stack import METHODS
 from .errors import GraphError, InputError, ScenarioError
+from .obstacles import Obstacle, ObstacleCfg, ObstacleFieldCfg
+from .obstacles import resolve as _resolve_obstacles
+from .obstacles import scaled as _scaled_obstacles
+from .obstacles import validate as _validate_obstacles
 from .robots import RobotRef, as_ref, rebase_entries
+from .safety import SafetyCfg
+from .safety import validate as _validate_safety
 
 PLANTS = ("ideal", "mujoco")
 LEADER_KINDS = ("paper", "line", "circle", "figure8", "harmonic")
@@ -325,6 +331,9 @@ class Scenario:
     limits: LimitsCfg = field(default_factory=LimitsCfg)
     events: tuple[EventCfg, ...] = ()
     faults: FaultsCfg = field(default_factory=FaultsCfg)
+    obstacles: tuple[ObstacleCfg, ...] = ()  # design §19
+    obstacle_field: ObstacleFieldCfg = field(default_factory=ObstacleFieldCfg)
+    safety: SafetyCfg = field(default_factory=SafetyCfg)
 
     @property
     def n(self) -> int:
@@ -361,6 +370,15 @@ class Scenario:
         if c.kind == "figure8":
             return leader_mod.figure_eight(c.x0, c.y0, c.radius, c.frequency)
         return leader_mod.Harmonic(c.x0, c.y0, c.vx, c.vy, tuple(map(tuple, c.x_terms)), tuple(map(tuple, c.y_terms)))
+
+    def obstacle_list(self) -> list[Obstacle]:
+        """The fixed obstacles and the seeded random field's (:func:`bioform_mj.obstacles.resolve`;
+        the field keeps ``keep_out`` m from the leader's positions every 0.05 s of the run)."""
+        path = None
+        if self.obstacle_field.count and self.obstacle_field.keep_out > 0:
+            t = np.arange(0.0, self.sim.duration + 1e-9, 0.05)
+            path = np.asarray(self.build_leader().states(t)[0])[:, :2]
+        return _resolve_obstacles(self.obstacles, self.obstacle_field, self.sim.seed, path)
 
     def initial_poses(self) -> np.ndarray:
         """(n, 3) initial poses, with the seeded jitter applied."""
@@ -722,6 +740,14 @@ def validate(sc: Scenario) -> None:
         _positive(f"{key}.inertia", ev.inertia, strict=False)
 
     _validate_faults(sc)
+    _validate_safety(sc.safety)
+    _validate_obstacles(sc.obstacles, sc.obstacle_field)
+    if sc.obstacles or sc.obstacle_field.count:
+        if pc.kind != "mujoco":
+            raise ScenarioError(
+                "obstacles", "the ideal plant has no bodies to touch obstacles: use plant.kind = 'mujoco'"
+            )
+        sc.obstacle_list()  # a field too dense to place fails here, before any work
 
 
 def _validate_sensing(sc: Scenario) -> None:
@@ -1037,8 +1063,13 @@ def apply_scale(sc: Scenario) -> Scenario:
     torque = dataclasses.replace(sc.torque, c=first(sc.torque.c))
     d = sc.disturbance
     disturbance = dataclasses.replace(d, bias=first(d.bias), amp=first(d.amp))
+    obstacles, obstacle_field = _scaled_obstacles(sc.obstacles, sc.obstacle_field, s)
+    safety = dataclasses.replace(sc.safety, distance=sc.safety.distance * s)
     return dataclasses.replace(
         sc,
+        obstacles=obstacles,
+        obstacle_field=obstacle_field,
+        safety=safety,
         leader=leader,
         formation=formation,
         estimator=estimator,

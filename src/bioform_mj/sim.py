@@ -125,15 +125,28 @@ def make_plant(sc: Scenario) -> Plant:
             gyro_bias=pc.gyro_bias,
             seed=sc.sim.seed,
         )
-    return MujocoPlant(
+    plant = MujocoPlant(
         refs,
         poses,
         sc.sim.control_dt,
         sc.sim.physics_dt,
         dist,
-        friction_patch=sc.faults.friction_patch or None,
+        friction_patch=sc.faults.friction_patch or None,  # faults: low-friction floor patch
+        obstacles=sc.obstacle_list(),
+        safety_distance=sc.safety.distance,
         **sensing,
-    )  # faults: low-friction floor patch
+    )
+    bad = plant.start_overlaps()  # design §19: an impossible start is refused before any work
+    if bad:
+        from .errors import InputError
+
+        jit = (
+            f" (formation.init_jitter = {sc.formation.init_jitter:g} m, seed {sc.sim.seed})"
+            if sc.formation.init_jitter
+            else ""
+        )
+        raise InputError("impossible initial poses" + jit + ": " + "; ".join(bad))
+    return plant
 
 
 def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = None) -> StackParams:
@@ -458,6 +471,10 @@ def simulate(
         logd["odom_pose"] = logd["pose"].copy()
         logd["odom_vel"] = logd["vel"].copy()
     logd["offsets"] = offsets
+    if getattr(plant, "obstacles", None):  # design §19: drawn by the figures and rerun from the log
+        from .obstacles import to_rows
+
+        logd["obstacles"] = to_rows(plant.obstacles)
     logd["edges"] = graph.edges + 1
     logd["leader_access"] = graph.leader_access
     summary = _summary(
@@ -520,6 +537,9 @@ def _shadow(state: StackState, sig: Any, tau: np.ndarray, missing: set[str]) -> 
     state.tau[:] = tau
 
 
+#: outcome kinds, most severe first (``outcome`` is the first of a follower's ``outcomes``)
+SEVERITY = ("tipped", "collided", "slipping", "spinning", "lost", "too_close", "c_hat_at_bound")
+
 #: follower outcomes (design §8): thresholds
 LOST_M = 1.0  # m: final formation error beyond this → lost ...
 LOST_AFTER_S = 10.0  # s: ... once the run has had this long to converge (or if the error grew over the run)
@@ -556,13 +576,21 @@ def _summary(
     c_hat = state.c_hat if "c_hat" not in missing else np.full((n, 2), np.nan)
     nan_if = lambda name, v: float("nan") if name in missing else float(v)  # noqa: E731
     outcomes = follower_outcomes(sc, plant, controller, logd, final_form, c_hat, dt)
+    contact = _contact_outcomes(plant, n, dt)  # design §19: contacts and distances (MuJoCo)
     followers = []
     for i in range(n):
+        every = contact[i][1]
+        if outcomes[i][0] != "ok":
+            every = every + [{"kind": outcomes[i][0], "detail": outcomes[i][1], "t": None}]
+        every = sorted(every, key=lambda o: SEVERITY.index(o["kind"]) if o["kind"] in SEVERITY else len(SEVERITY))
+        first = every[0] if every else {"kind": "ok", "detail": ""}
         followers.append(
             {
                 "id": i + 1,
-                "outcome": outcomes[i][0],
-                "outcome_detail": outcomes[i][1],
+                "outcome": first["kind"],
+                "outcome_detail": first["detail"],
+                "outcomes": every,
+                **contact[i][0],
                 "total_velocity_error": nan_if("cmd", met.verr[i] * dt),
                 "final_formation_error_m": float(final_form[i]),
                 "rms_formation_error_m": float(np.sqrt(np.mean(fe[:, i] ** 2))) if len(fe) else float("nan"),
@@ -603,6 +631,18 @@ def _summary(
         "config": sc.to_dict(),
         "followers": followers,
     }
+
+
+def _contact_outcomes(plant: Any, n: int, dt: float) -> list[tuple[dict[str, Any], list[dict]]]:
+    """Per follower the contact/proximity fields and outcomes (``collided``, ``too_close``) of a
+    plant that watches them (:func:`bioform_mj.safety.follower_fields`); none for the others."""
+    if not hasattr(plant, "contact_watch"):
+        return [({}, []) for _ in range(n)]
+    watch = plant.contact_watch()
+    from .safety import follower_fields
+
+    names = [o.name for o in getattr(plant, "obstacles", [])]
+    return [follower_fields(watch, i, dt, names) for i in range(n)]
 
 
 def _robot_used(sc: Scenario, plant: Any, controller: Any, i: int) -> dict[str, Any]:

@@ -61,6 +61,10 @@ def _mark(summary: dict[str, Any], follower: dict[str, Any]) -> str:
     ``outcome`` is not ``ok`` (a summary without ``outcome`` is taken as ok); else ``""``."""
     if _diverged(summary):
         return " [diverged]"
+    every = follower.get("outcomes")  # every outcome (design §19: a collision shows beside a tip-over)
+    if every:
+        kinds = list(dict.fromkeys(o["kind"] for o in every))
+        return f" [{', '.join(kinds)}]"
     outcome = follower.get("outcome")
     return f" [{outcome}]" if outcome not in (None, "ok") else ""
 
