@@ -509,6 +509,9 @@ def simulate(
         w = float(np.abs(logd["vel"][:, :, 1]).max())
         for f, u in zip(summary["followers"], unmodelled(v, w)):
             f["unmodelled"] = u
+    from .hardware import verdict  # design §19: would this run on the robots as specified?
+
+    summary["hardware"] = verdict(sc, plant, summary, logd)
     return RunResult(sc, logd, summary, plant, diverged, interrupted)
 
 
