@@ -250,3 +250,43 @@ def test_no_contact_fields_on_the_ideal_plant():
     f = res.summary["followers"][0]
     assert "min_separation_m" not in f and f["outcomes"] == []
     json.dumps(res.summary)
+
+
+def test_obstacles_drawn_in_figure_and_rerun(tmp_path):
+    """The log keeps the obstacles; the trajectory figure fills one footprint per obstacle and the
+    rerun recording holds them as static boxes and cylinders."""
+    from bioform_mj.obstacles import from_rows
+    from bioform_mj.outputs.figures import _trajectories
+    from bioform_mj.outputs.rerun_log import read_entities, write_rrd
+
+    sc = _crossing(
+        **{
+            "sim.duration": 0.1,
+            "obstacles": [
+                {"shape": "box", "position": [2.0, 0.0], "size": [0.1, 0.5, 0.2], "yaw": 0.5},
+                {"shape": "cylinder", "position": [3.0, 1.0], "size": [0.2, 0.3]},
+            ],
+        }
+    )
+    res = simulate(sc)
+    rows = res.log["obstacles"]
+    assert rows.shape == (2, 7)
+    obs = from_rows(rows)
+    assert [o.shape for o in obs] == ["box", "cylinder"] and obs[0].yaw == pytest.approx(0.5)
+    assert obs[1].size == pytest.approx((0.2, 0.3))
+    fig = _trajectories(res.log, "t")
+    assert len(fig.axes[0].patches) == 2
+    ents = read_entities(write_rrd(res, tmp_path / "run.rrd"))
+    assert "/world/obstacles/boxes" in ents and "/world/obstacles/cylinders" in ents
+
+
+def test_obstacles_preset_followers_hit_the_fixed_obstacles():
+    """The preset's fixed obstacles stand on the slot paths: follower 1 touches obstacle_1 when its
+    slot reaches x = 5 (measured t = 7.59 s), follower 2 obstacle_2 at x = 6 (9.63 s); 3 fixed + 8
+    field obstacles in the scene."""
+    sc = load("obstacles", {"sim.duration": 10.0})
+    assert len(sc.obstacle_list()) == 11
+    fs = simulate(sc).summary["followers"]
+    hit = {f["id"]: next((o for o in f["outcomes"] if o["kind"] == "collided"), None) for f in fs}
+    assert "obstacle_1" in hit[1]["detail"] and 7.0 < hit[1]["t"] < 8.5
+    assert "obstacle_2" in hit[2]["detail"] and 9.0 < hit[2]["t"] < 10.0
