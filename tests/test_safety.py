@@ -290,3 +290,19 @@ def test_obstacles_preset_followers_hit_the_fixed_obstacles():
     hit = {f["id"]: next((o for o in f["outcomes"] if o["kind"] == "collided"), None) for f in fs}
     assert "obstacle_1" in hit[1]["detail"] and 7.0 < hit[1]["t"] < 8.5
     assert "obstacle_2" in hit[2]["detail"] and 9.0 < hit[2]["t"] < 10.0
+
+
+def test_table1_marks_every_outcome_kind():
+    from bioform_mj.table1 import _mark
+
+    f = {
+        "outcome": "tipped",
+        "outcomes": [
+            {"kind": "tipped", "detail": "", "t": 1.0},
+            {"kind": "collided", "detail": "touched follower 2", "t": 0.9},
+            {"kind": "collided", "detail": "touched obstacle_1", "t": 2.0},
+        ],
+    }
+    assert _mark({}, f) == " [tipped, collided]"
+    assert _mark({}, {"outcome": "ok", "outcomes": []}) == ""
+    assert _mark({"diverged": {"message": "x"}}, f) == " [diverged]"

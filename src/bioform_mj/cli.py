@@ -482,7 +482,7 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
         print(f"error: {p}", file=sys.stderr)
     _warn_outcomes(result.summary)
     hw = result.summary.get("hardware")
-    if hw is not None:  # design §19: one line, a warning when it would not run on the robots
+    if hw is not None and not problems:  # design §19: one line, a warning when it would not run on the robots
         from .hardware import line
 
         if hw["verdict"] == "fail":
