@@ -15,17 +15,23 @@ import numpy as np
 
 from .errors import ScenarioError
 
-FILTERS = ("none",)
+FILTERS = ("none", "cbf")
 
 
 @dataclass(frozen=True)
 class SafetyCfg:
     """``distance`` m: a follower closer than this to another robot or an obstacle (chassis to
     chassis, MuJoCo's geometry) is ``too_close`` (time summed; 0: not watched). ``filter``: the
-    safety filter between the kinematic command and the torque law (``none``: the paper's)."""
+    safety filter between the kinematic command and the torque law (``none``: the paper's;
+    ``cbf``: a control barrier function on a point ``lookahead`` m ahead of the axle with gain
+    ``gain`` 1/s, keeping robots and obstacles ``distance`` m apart, :mod:`bioform_mj.control.cbf`;
+    neighbours within ``range`` m enter its QP)."""
 
     distance: float = 0.0
     filter: str = "none"
+    lookahead: float = 0.1
+    gain: float = 5.0
+    range: float = 2.0
 
 
 def validate(cfg: SafetyCfg) -> None:
@@ -35,6 +41,9 @@ def validate(cfg: SafetyCfg) -> None:
         raise ScenarioError("safety.distance", f"must be <= 100 m, got {cfg.distance:g}")
     if cfg.filter not in FILTERS:
         raise ScenarioError("safety.filter", f"unknown filter '{cfg.filter}' (expected one of: {', '.join(FILTERS)})")
+    for key in ("lookahead", "gain", "range"):
+        if not getattr(cfg, key) > 0:
+            raise ScenarioError(f"safety.{key}", f"must be > 0, got {getattr(cfg, key):g}")
 
 
 def _name(k: int, kind: int, obstacle_names: list[str]) -> str:

@@ -741,6 +741,12 @@ def validate(sc: Scenario) -> None:
 
     _validate_faults(sc)
     _validate_safety(sc.safety)
+    if sc.safety.filter == "cbf" and sc.torque.derivative == "analytic":
+        raise ScenarioError(
+            "safety.filter",
+            "the analytic command derivative differentiates eq. 31, not the filtered command: "
+            "use torque.derivative = 'filter' or 'difference' with the cbf filter",
+        )
     _validate_obstacles(sc.obstacles, sc.obstacle_field)
     if sc.obstacles or sc.obstacle_field.count:
         if pc.kind != "mujoco":
@@ -1064,7 +1070,8 @@ def apply_scale(sc: Scenario) -> Scenario:
     d = sc.disturbance
     disturbance = dataclasses.replace(d, bias=first(d.bias), amp=first(d.amp))
     obstacles, obstacle_field = _scaled_obstacles(sc.obstacles, sc.obstacle_field, s)
-    safety = dataclasses.replace(sc.safety, distance=sc.safety.distance * s)
+    sf = sc.safety
+    safety = dataclasses.replace(sf, distance=sf.distance * s, lookahead=sf.lookahead * s, range=sf.range * s)
     return dataclasses.replace(
         sc,
         obstacles=obstacles,

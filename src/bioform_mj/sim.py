@@ -149,8 +149,9 @@ def make_plant(sc: Scenario) -> Plant:
     return plant
 
 
-def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = None) -> StackParams:
-    """Resolve the scenario's numbers into the control stack's per-follower arrays."""
+def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = None, plant: Any = None) -> StackParams:
+    """Resolve the scenario's numbers into the control stack's per-follower arrays (``plant``, if
+    given, tells the safety filter each robot's footprint radius and the obstacles, design §19)."""
     law, learning = parse_method(sc.method)
     n = sc.n
     c_hat0 = np.asarray(sc.learner.c_hat0_scale) * c_true
@@ -183,6 +184,24 @@ def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = 
         c_max=hi * c_hat0,
         dt=sc.sim.control_dt,
         leader_frame=sc.formation.frame == "leader",
+        **_cbf_params(sc, plant),
+    )
+
+
+def _cbf_params(sc: Scenario, plant: Any) -> dict[str, Any]:
+    """The safety filter's part of :class:`StackParams` (design §19; empty when it is off)."""
+    sf = sc.safety
+    if sf.filter != "cbf":
+        return {}
+    from .obstacles import to_rows
+
+    radius = getattr(plant, "footprint_radius", None)
+    obstacles = getattr(plant, "obstacles", None) or []
+    return dict(
+        cbf=True,
+        cbf_par=(sf.lookahead, sf.gain, sf.distance, sf.range),
+        cbf_radius=None if radius is None else np.asarray(radius, dtype=float),
+        cbf_obstacles=to_rows(obstacles) if obstacles else None,
     )
 
 
@@ -271,7 +290,7 @@ def simulate(
         plant = make_plant(sc)
     own_stack = controller is None
     if own_stack:
-        controller = ControlStack(graph, stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None)))
+        controller = ControlStack(graph, stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None), plant))
     n = sc.n
     if getattr(controller, "n", n) != n or getattr(plant, "n", n) != n:
         raise ValueError(f"the scenario has {n} followers, the plant {plant.n} and the controller {controller.n}")
