@@ -452,6 +452,16 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
 
 
 @njit
+def physics_steps(mp, dp, n_sub, k0, ncon, con, meta, owner, ci, cf, f6, hdt):
+    """``n_sub`` ``mj_step`` calls, each followed by the contact watch (:func:`watch_contacts`; the
+    physics steps before these: ``k0``): the step-by-step plant's period when it has no sensors and
+    no DC-motor feed, as the compiled chunk runs it (one numba call, not one per physics step)."""
+    for sub in range(n_sub):
+        _mj_step(mp, dp)
+        watch_contacts(mp, dp, ncon, con, meta, owner, ci, cf, f6, hdt, (k0 + sub + 1) * hdt)
+
+
+@njit
 def replay(mp, dp, n_sub, ctrl, xfrc, base, rec_ctrl, rec_xfrc, solver_niter):
     """Bare physics for the benchmark: ``n_sub`` ``mj_step`` per recorded row of ``ctrl`` and
     chassis ``xfrc_applied`` inputs. Returns the total of the solver's iterations."""

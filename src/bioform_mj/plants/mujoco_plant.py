@@ -50,6 +50,7 @@ from .mujoco_kernels import (
     observe,
     odometry_read,
     odometry_reset,
+    physics_steps,
     run_chunk,
     sense,
     watch_slip,
@@ -294,6 +295,9 @@ class MujocoPlant:
         for k, g in enumerate(og):
             owner[g] = -2 - k
         self._obstacle_geoms = og
+        import numba
+
+        self._compiled_steps = HAVE_MJ_STEP and not numba.config.DISABLE_JIT
         self.contacts = ContactReader(
             m, d, owner, self.contact_geoms, og, self.footprint_radius, safety, self.control_dt
         )
@@ -540,13 +544,16 @@ class MujocoPlant:
         self._dacc[:] = 0.0  # this period's delivered torque only (feed_delivered_torque)
         cl = self.contacts.contacts
         k0 = self._step_count * self.n_substeps
-        for s_ in range(self.n_substeps):  # after every physics step, as in the compiled loop
-            mujoco.mj_step(m, d)
-            if self.sensors.on:
-                sense(d.sensordata, self.sensors, self.odo)
-            if self.feed_delivered:
-                delivered_add(d.actuator_force, self._ctrl, self._to_wheel, self._dacc)
-            watch_contacts(m._address, d._address, *cl, (k0 + s_ + 1) * cl.hdt)
+        if self.sensors.on or self.feed_delivered or not self._compiled_steps:
+            for s_ in range(self.n_substeps):  # after every physics step, as in the compiled loop
+                mujoco.mj_step(m, d)
+                if self.sensors.on:
+                    sense(d.sensordata, self.sensors, self.odo)
+                if self.feed_delivered:
+                    delivered_add(d.actuator_force, self._ctrl, self._to_wheel, self._dacc)
+                watch_contacts(m._address, d._address, *cl, (k0 + s_ + 1) * cl.hdt)
+        else:  # the same calls in one compiled loop
+            physics_steps(m._address, d._address, self.n_substeps, k0, *cl)
         self._step_count += 1
         for i, w_ in enumerate(self._warnings):
             if w_.number:
