@@ -107,3 +107,10 @@ def test_filter_leaves_far_apart_robots_alone():
     a = simulate(load("paper", {"sim.duration": 2.0}))
     b = simulate(load("paper", {"sim.duration": 2.0, "safety.filter": "cbf"}))
     assert np.array_equal(a.log["cmd"], b.log["cmd"]) and np.array_equal(a.log["pose"], b.log["pose"])
+
+
+def test_crossing_preset_collides_without_the_filter():
+    """The shipped ``crossing`` preset is the crossing above: both followers collide by 3 s."""
+    fs = simulate(load("crossing", {"sim.duration": 3.0})).summary["followers"]
+    assert [f["outcome"] for f in fs] == ["collided", "collided"]
+    assert all("follower" in f["outcomes"][0]["detail"] for f in fs)
