@@ -1024,7 +1024,9 @@ def apply_scale(sc: Scenario) -> Scenario:
     ``y_terms``), the offsets and initial positions (and ``init_jitter``), and the gains that
     carry a length so that the closed loop is the paper's, shrunk: the estimator's ``υ``-channel
     sign gain ``ka[0]`` and boundary layer ``phi[0]`` (m/s², m/s), the torque law's ``c[0]``
-    (m/s²), the disturbance's ``υ`` channel (m/s²) × s; ``k2 / s²`` and ``k3 / s`` (eq. 31:
+    (m/s²), the disturbance's ``υ`` channel (m/s²) × s; the obstacles (positions, sizes, the
+    field's numbers) and ``safety.distance``, ``lookahead``, ``range`` × s (design §19);
+    ``k2 / s²`` and ``k3 / s`` (eq. 31:
     ``ω_cmd = ω_ir + k2 υ_ir ỹ + k3 υ_ir sin θ̃`` is then unchanged). ``k1`` stays: the neuron
     (eq. 32) works in metres, and in its linear range (``|x̃| ≪ A``, which a small robot's
     errors are) ``k1 V_s ≈ k1 B x̃ / A`` already scales with the error; its bound ``k1 B`` does
