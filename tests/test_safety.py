@@ -306,3 +306,22 @@ def test_table1_marks_every_outcome_kind():
     assert _mark({}, f) == " [tipped, collided]"
     assert _mark({}, {"outcome": "ok", "outcomes": []}) == ""
     assert _mark({"diverged": {"message": "x"}}, f) == " [diverged]"
+
+
+def test_contact_list_found_with_robots_in_the_air_at_start():
+    """A mapped wheel radius 40 % above the geometry places the robots 4 cm above the floor: no
+    contact at the initial state, yet the watch finds MuJoCo's contact list (one forward pass with
+    the robots sunk into the floor) and the state is put back."""
+    sc = load("paper", {"plant.kind": "mujoco", "plant.robots": [{"model": "paper", "wheel_radius": 0.14}]})
+    plant = make_plant(sc)
+    assert plant.contacts.off == "" and plant.contacts.meta[3] > 1000
+    d = mujoco_data_at_start(plant)
+    assert d.ncon == 0 and np.allclose(plant.data.qpos, d.qpos)
+
+
+def mujoco_data_at_start(plant):
+    import mujoco
+
+    d = mujoco.MjData(plant.model)
+    mujoco.mj_forward(plant.model, d)
+    return d

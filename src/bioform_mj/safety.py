@@ -72,6 +72,7 @@ def follower_fields(watch: Any, i: int, dt: float, obstacle_names: list[str]) ->
         _name(int(w.min_clear_with[i]), 1, obstacle_names) if np.isfinite(clr) else None
     )
     outcomes: list[dict] = []
+    out["contacts_watched"] = not w.off  # False: MuJoCo's contact list could not be read (said before the run)
     for kind, label in ((0, "robot"), (1, "obstacle")):
         ev = int(w.events[i, kind])
         out[f"{label}_contacts"] = ev

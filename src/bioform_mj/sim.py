@@ -136,6 +136,9 @@ def make_plant(sc: Scenario) -> Plant:
         safety_distance=sc.safety.distance,
         **sensing,
     )
+    if plant.contacts.off:  # design §19: never silent
+        why = plant.contacts.off
+        warnings.warn(f"contacts between robots and with obstacles are not watched: {why}", RobotWarning, stacklevel=2)
     bad = plant.start_overlaps()  # design §19: an impossible start is refused before any work
     if bad:
         from .errors import InputError

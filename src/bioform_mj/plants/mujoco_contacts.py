@@ -342,6 +342,7 @@ class Watched(NamedTuple):
     safety: float  # m
     exact_range: float  # m
     every: int  # control steps between two looks at the distances
+    off: str  # why MuJoCo's contact list is not read ("": it is)
 
 
 class ContactReader:
@@ -357,14 +358,34 @@ class ContactReader:
         radii: np.ndarray,
         safety: float,
         control_dt: float,
+        zadr: np.ndarray | None = None,
     ) -> None:
         import mujoco
 
         m, d = model, data
         self.model, self.data = m, d
         mujoco.mj_forward(m, d)
-        if d.ncon == 0:  # the contact views exist only with a contact
-            raise RuntimeError("the contact watch needs a contact at the initial state (wheels on the floor)")
+        self.off = ""  # why the contact list is not read (empty: it is)
+        if d.ncon == 0 and zadr is not None and len(zadr):
+            # the bindings' contact views carry the address only with a contact: sink the robots into
+            # the floor for one forward pass (the arena does not move), then put them back
+            q = d.qpos.copy()
+            d.qpos[zadr] -= 1.0
+            mujoco.mj_forward(m, d)
+            self._layout(m, d)
+            d.qpos[:] = q
+            mujoco.mj_forward(m, d)
+        elif d.ncon:
+            self._layout(m, d)
+        else:
+            self.off = "no contact to learn MuJoCo's contact layout from"
+        self._build(m, d, owner, geoms, obstacle_geoms, radii, safety, control_dt)
+
+    def _layout(self, m, d) -> None:
+        """Where the contact list and ``ncon`` lie, from the bindings' views (a contact must exist)."""
+        if d.ncon == 0:
+            self.off = "no contact to learn MuJoCo's contact layout from (no collision geom touches the floor)"
+            return
         c = d.contact
         base = c.dist.__array_interface__["data"][0]
         stride = c.dist.strides[0]
@@ -385,6 +406,16 @@ class ContactReader:
             or not np.array_equal([self.con[k * w + o2] for k in range(d.ncon)], c.geom2)
         ):
             raise RuntimeError("cannot read MuJoCo's contact list in place (layout differs from MuJoCo 3/4's)")
+        self.meta = np.array([w, o1, o2, cap], dtype=np.int64)
+
+    def _build(self, m, d, owner, geoms, obstacle_geoms, radii, safety, control_dt) -> None:
+        if self.off:  # nothing read: an empty view (cap 0); ncon still from after the timers
+            td = d.timer.duration
+            ncon_addr = td.__array_interface__["data"][0] + len(td) * td.strides[0]
+            self.ncon = np.ctypeslib.as_array((ctypes.c_int32 * 1).from_address(ncon_addr))
+            self.con = np.zeros(1, dtype=np.int32)
+            self.meta = np.array([1, 0, 0, 0], dtype=np.int64)
+            self.base = None
         n = len(geoms)
         mo = len(obstacle_geoms)
         gstart = np.zeros(n + 1, dtype=np.int64)
@@ -395,7 +426,7 @@ class ContactReader:
         self.contacts = ContactList(
             self.ncon,
             self.con,
-            np.array([w, o1, o2, cap], dtype=np.int64),
+            self.meta,
             np.ascontiguousarray(owner, dtype=np.int64),
             np.zeros((n, 2, 6), dtype=np.int64),
             np.zeros((n, 2, 6)),
@@ -457,6 +488,7 @@ class ContactReader:
             float(self.proximity.ranges[2]),
             float(self.proximity.ranges[0]),
             self.every,
+            self.off,
         )
 
     def check(self) -> None:
@@ -464,7 +496,7 @@ class ContactReader:
         d = self.data
         if int(self.ncon[0]) != d.ncon:
             raise RuntimeError("the contact watch lost MjData.ncon")
-        if d.ncon and d.contact.dist.__array_interface__["data"][0] != self.base:
+        if self.base is not None and d.ncon and d.contact.dist.__array_interface__["data"][0] != self.base:
             raise RuntimeError("MuJoCo moved its contact list; the contact watch cannot follow it")
 
 

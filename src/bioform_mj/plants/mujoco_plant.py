@@ -299,7 +299,7 @@ class MujocoPlant:
 
         self._compiled_steps = HAVE_MJ_STEP and not numba.config.DISABLE_JIT
         self.contacts = ContactReader(
-            m, d, owner, self.contact_geoms, og, self.footprint_radius, safety, self.control_dt
+            m, d, owner, self.contact_geoms, og, self.footprint_radius, safety, self.control_dt, self._q7[:, 2]
         )
 
     def _axle_world(self, d) -> np.ndarray:
