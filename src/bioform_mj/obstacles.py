@@ -41,7 +41,8 @@ class ObstacleFieldCfg:
     """A seeded random field (``sim.seed``): ``count`` obstacles of ``shape`` (``box``: square
     footprint, half-side; ``cylinder``: radius) with the size drawn uniformly in ``size = [min, max]``
     m and height ``height`` m, centres uniform in ``region = [x0, y0, x1, y1]`` m, yaw uniform (boxes).
-    ``keep_out`` m > 0: no obstacle closer than this to the leader's path (sampled over the run);
+    ``keep_out`` m > 0: no obstacle closer than this to the leader's path (sampled over the run)
+    nor to a follower's initial position;
     ``gap`` m: least distance between two obstacles. ``count = 0``: no field."""
 
     count: int = 0

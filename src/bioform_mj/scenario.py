@@ -373,11 +373,13 @@ class Scenario:
 
     def obstacle_list(self) -> list[Obstacle]:
         """The fixed obstacles and the seeded random field's (:func:`bioform_mj.obstacles.resolve`;
-        the field keeps ``keep_out`` m from the leader's positions every 0.05 s of the run)."""
+        the field keeps ``keep_out`` m from the leader's positions every 0.05 s of the run and from
+        the followers' initial positions, jitter included)."""
         path = None
         if self.obstacle_field.count and self.obstacle_field.keep_out > 0:
             t = np.arange(0.0, self.sim.duration + 1e-9, 0.05)
             path = np.asarray(self.build_leader().states(t)[0])[:, :2]
+            path = np.vstack([path, self.initial_poses()[:, :2]])
         return _resolve_obstacles(self.obstacles, self.obstacle_field, self.sim.seed, path)
 
     def initial_poses(self) -> np.ndarray:
