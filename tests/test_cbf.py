@@ -114,3 +114,14 @@ def test_crossing_preset_collides_without_the_filter():
     fs = simulate(load("crossing", {"sim.duration": 3.0})).summary["followers"]
     assert [f["outcome"] for f in fs] == ["collided", "collided"]
     assert all("follower" in f["outcomes"][0]["detail"] for f in fs)
+
+
+def test_right_hand_rule_breaks_the_crossing_deadlock():
+    """The crossing preset (8 s) with the filter: the pure minimal QP (pass_right = 0) keeps the two
+    apart but stuck side by side (measured final formation errors 0.96, 0.88 m); the right-hand rule
+    (the default pass_right = 1) lets them pass (0.30, 0.27 m), both without a contact."""
+    stuck = simulate(load("crossing", {"safety.filter": "cbf", "safety.pass_right": 0.0})).summary["followers"]
+    passed = simulate(load("crossing", {"safety.filter": "cbf"})).summary["followers"]
+    assert all(f["robot_contacts"] == 0 for f in stuck + passed)
+    assert min(f["final_formation_error_m"] for f in stuck) > 0.8
+    assert max(f["final_formation_error_m"] for f in passed) < 0.4

@@ -25,13 +25,15 @@ class SafetyCfg:
     safety filter between the kinematic command and the torque law (``none``: the paper's;
     ``cbf``: a control barrier function on a point ``lookahead`` m ahead of the axle with gain
     ``gain`` 1/s, keeping robots and obstacles ``distance`` m apart, :mod:`bioform_mj.control.cbf`;
-    neighbours within ``range`` m enter its QP)."""
+    neighbours within ``range`` m enter its QP; ``pass_right``: the right-hand rule that breaks the
+    deadlock of two robots meeting, 0: off)."""
 
     distance: float = 0.0
     filter: str = "none"
     lookahead: float = 0.1
     gain: float = 5.0
     range: float = 2.0
+    pass_right: float = 1.0
 
 
 def validate(cfg: SafetyCfg) -> None:
@@ -44,6 +46,8 @@ def validate(cfg: SafetyCfg) -> None:
     for key in ("lookahead", "gain", "range"):
         if not getattr(cfg, key) > 0:
             raise ScenarioError(f"safety.{key}", f"must be > 0, got {getattr(cfg, key):g}")
+    if not 0 <= cfg.pass_right <= 10:
+        raise ScenarioError("safety.pass_right", f"must lie in [0, 10], got {cfg.pass_right:g}")
 
 
 def _name(k: int, kind: int, obstacle_names: list[str]) -> str:

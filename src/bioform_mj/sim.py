@@ -202,7 +202,7 @@ def _cbf_params(sc: Scenario, plant: Any) -> dict[str, Any]:
     obstacles = getattr(plant, "obstacles", None) or []
     return dict(
         cbf=True,
-        cbf_par=(sf.lookahead, sf.gain, sf.distance, sf.range),
+        cbf_par=(sf.lookahead, sf.gain, sf.distance, sf.range, sf.pass_right),
         cbf_radius=None if radius is None else np.asarray(radius, dtype=float),
         cbf_obstacles=to_rows(obstacles) if obstacles else None,
     )

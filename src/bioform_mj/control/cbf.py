@@ -13,14 +13,18 @@ with ``û = J (υ_cmd, ω_cmd)``, ``h_ij = |p_i − p_j|² − (r_i + r_j + d + 
 footprint radii, ``d``: ``safety.distance``; ``2 l`` because the points, not the axles, are kept
 apart), ``q_k`` the obstacle's nearest point (a cylinder's centre with its radius added to the
 distance), each robot taking half of a pair's constraint (the decentralised split: the other does
-the other half). Only neighbours within ``range`` m enter. The QP is solved by Hildreth's dual
-coordinate ascent (exact after one sweep with one active constraint; to ``1e-9`` otherwise, at most
-:data:`HILDRETH_SWEEPS` sweeps), compiled, so both engines run it.
+the other half). Only neighbours within ``range`` m enter. Two robots meeting head-on or side by
+side stop each other symmetrically (the filter's known deadlock); the right-hand rule breaks it:
+where the nominal command violates a pair's constraint, ``û`` is first turned towards the right
+of the other robot by ``pass_right`` × its speed (``û += ε |û| R(−90°) (p_i − p_j)/|p_i − p_j|``;
+0: the pure minimal QP). Obstacles get no such turn (the QP already slides along them). The QP
+is solved by Hildreth's dual coordinate ascent (exact after one sweep with one active constraint;
+to ``1e-9`` otherwise, at most :data:`HILDRETH_SWEEPS` sweeps), compiled, so both engines run it.
 """
 
 from __future__ import annotations
 
-from math import cos, sin, sqrt
+from math import cos, hypot, sin, sqrt
 
 from .equations import njit
 
@@ -33,9 +37,13 @@ def cbf_filter(i, v, w, pose, rad, obst, par, A, b, lam):
 
     ``pose`` (n, 3) every robot's ``[x, y, θ]``; ``rad`` (n,) footprint radii m; ``obst`` (m, 7)
     rows ``[shape (0 box, 1 cylinder), x, y, s0, s1, s2, yaw]`` (:func:`bioform_mj.obstacles.to_rows`);
-    ``par`` (4,) ``[l m, γ 1/s, d m, range m]``; scratch ``A`` (K, 2), ``b``, ``lam`` (K,), K ≥ n + m.
+    ``par`` (4,) or (5,) ``[l m, γ 1/s, d m, range m, pass_right]``; scratch ``A`` (K, 2), ``b``,
+    ``lam`` (K,), K ≥ n + m.
     """
     la, gam, dist, reach = par[0], par[1], par[2], par[3]
+    eps = par[4] if par.shape[0] > 4 else 0.0
+    n0 = 0.0
+    n1 = 0.0
     c = cos(pose[i, 2])
     s = sin(pose[i, 2])
     px = pose[i, 0] + la * c
@@ -56,6 +64,10 @@ def cbf_filter(i, v, w, pose, rad, obst, par, A, b, lam):
         A[k, 0] = -2.0 * dx
         A[k, 1] = -2.0 * dy
         b[k] = 0.5 * gam * (d2 - D * D)
+        if eps > 0.0 and A[k, 0] * u0 + A[k, 1] * u1 > b[k]:  # the right-hand rule (module docstring)
+            sp = hypot(u0, u1) * eps / max(sqrt(d2), 1e-12)
+            n0 += sp * dy
+            n1 -= sp * dx
         k += 1
     for o in range(obst.shape[0]):
         if obst[o, 0] == 1.0:  # cylinder: its centre, its radius added
@@ -85,7 +97,7 @@ def cbf_filter(i, v, w, pose, rad, obst, par, A, b, lam):
     if k == 0:
         return v, w
     # Hildreth: u = û − Aᵀλ, λ ≥ 0, one coordinate at a time
-    x0, x1 = u0, u1
+    x0, x1 = u0 + n0, u1 + n1
     for q in range(k):
         lam[q] = 0.0
     for _ in range(HILDRETH_SWEEPS):

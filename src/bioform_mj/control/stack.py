@@ -76,7 +76,7 @@ class StackParams:
     derivative: str = "filter"
     # the safety filter (design §19, control/cbf.py): off by default (the paper has none)
     cbf: bool = False
-    cbf_par: tuple[float, ...] = (0.1, 5.0, 0.0, 2.0)  # look-ahead l m, gain γ 1/s, distance d m, range m
+    cbf_par: tuple[float, ...] = (0.1, 5.0, 0.0, 2.0, 1.0)  # look-ahead l m, γ 1/s, d m, range m, pass_right
     cbf_radius: np.ndarray | None = None  # (n,) m, each robot's footprint radius (None: 0, points)
     cbf_obstacles: np.ndarray | None = None  # (m, 7) rows of obstacles.to_rows (None: none)
 
