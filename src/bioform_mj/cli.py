@@ -509,6 +509,14 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
     for p in problems:
         print(f"error: {p}", file=sys.stderr)
     _warn_outcomes(result.summary)
+    hw = result.summary.get("hardware")
+    if hw is not None and not problems:  # design §19: one line, a warning when it would not run on the robots
+        from .hardware import line
+
+        if hw["verdict"] == "fail":
+            print(f"warning: {line(hw)}", file=sys.stderr)
+        elif not args.quiet:
+            print(line(hw))
     if result.diverged is not None:
         print(f"error: simulation diverged: {result.diverged}; log kept in {out}", file=sys.stderr)
         return EXIT_DIVERGED

@@ -43,11 +43,27 @@ def lost_threshold_m(sc: Scenario) -> float:
 
 
 #: outcome kinds, the most severe first: a follower's ``outcome`` is the first of its ``outcomes`` (design §14)
-OUTCOME_ORDER = ("tipped", "slipping", "spinning", "lost", "c_hat_at_bound", "c_hat_off")
+OUTCOME_ORDER = (
+    "controller_nonfinite",
+    "tipped",
+    "collided",
+    "slipping",
+    "spinning",
+    "lost",
+    "too_close",
+    "c_hat_at_bound",
+    "c_hat_off",
+)
 #: a learned parameter within this fraction of its projection bound counts as at the bound
 C_HAT_BOUND_BAND = 0.01
 #: a learned ĉ farther than this (relative, either component) from c_true at the end: ``c_hat_off``
 C_HAT_OFF = 0.25
+
+
+def severity(outcome: dict[str, Any]) -> int:
+    """Sort key of an outcome ``{"kind", …}``: its place in :data:`OUTCOME_ORDER` (unknown kinds last)."""
+    k = outcome.get("kind")
+    return OUTCOME_ORDER.index(k) if k in OUTCOME_ORDER else len(OUTCOME_ORDER)
 
 
 def outcome_kinds(follower: dict[str, Any]) -> list[str]:

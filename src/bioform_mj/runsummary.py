@@ -11,7 +11,7 @@ import numpy as np
 
 from . import __version__
 from .engine import CHANNELS, MEAN_CHANNELS
-from .outcomes import follower_outcomes, slots_of
+from .outcomes import follower_outcomes, severity, slots_of
 from .record import resolved_config
 from .scenario import Scenario
 
@@ -46,14 +46,17 @@ def _summary(
     c_hat = state.c_hat if "c_hat" not in missing else np.full((n, 2), np.nan)
     nan_if = lambda name, v: float("nan") if name in missing else float(v)  # noqa: E731
     outcomes = follower_outcomes(sc, plant, controller, logd, final_form, c_hat, dt)
+    contact = _contact_outcomes(plant, n, dt)  # design §19: contacts and distances (MuJoCo)
     followers = []
     for i in range(n):
+        every = sorted(outcomes[i] + contact[i][1], key=severity)  # every outcome, the most severe first
         followers.append(
             {
                 "id": i + 1,
-                "outcome": outcomes[i][0]["kind"] if outcomes[i] else "ok",
-                "outcome_detail": outcomes[i][0]["detail"] if outcomes[i] else "",
-                "outcomes": outcomes[i],
+                "outcome": every[0]["kind"] if every else "ok",
+                "outcome_detail": every[0]["detail"] if every else "",
+                "outcomes": every,
+                **contact[i][0],
                 "total_velocity_error": nan_if("cmd", met.verr[i] * dt),
                 "final_formation_error_m": float(final_form[i]),
                 "rms_formation_error_m": float(np.sqrt(np.mean(fe[:, i] ** 2))) if len(fe) else float("nan"),
@@ -134,3 +137,15 @@ def _versions() -> dict[str, str]:
     except ImportError:  # pragma: no cover - mujoco is a dependency
         out["mujoco"] = "not installed"
     return out
+
+
+def _contact_outcomes(plant: Any, n: int, dt: float) -> list[tuple[dict[str, Any], list[dict]]]:
+    """Per follower the contact/proximity fields and outcomes (``collided``, ``too_close``) of a
+    plant that watches them (:func:`bioform_mj.safety.follower_fields`); none for the others."""
+    if not hasattr(plant, "contact_watch"):
+        return [({}, []) for _ in range(n)]
+    watch = plant.contact_watch()
+    from .safety import follower_fields
+
+    names = [o.name for o in getattr(plant, "obstacles", [])]
+    return [follower_fields(watch, i, dt, names) for i in range(n)]

@@ -24,7 +24,13 @@ from . import graph as graph_mod
 from . import leader as leader_mod
 from .control.stack import METHODS
 from .errors import GraphError, InputError, ScenarioError
+from .obstacles import Obstacle, ObstacleCfg, ObstacleFieldCfg
+from .obstacles import resolve as _resolve_obstacles
+from .obstacles import scaled as _scaled_obstacles
+from .obstacles import validate as _validate_obstacles
 from .robots import PackagePath, RobotRef, as_package_path, as_ref, rebase_entries, rebase_package_path
+from .safety import SafetyCfg
+from .safety import validate as _validate_safety
 
 PLANTS = ("ideal", "mujoco")
 LEADER_KINDS = ("paper", "line", "circle", "figure8", "harmonic")
@@ -346,6 +352,9 @@ class Scenario:
     limits: LimitsCfg = field(default_factory=LimitsCfg)
     events: tuple[EventCfg, ...] = ()
     faults: FaultsCfg = field(default_factory=FaultsCfg)
+    obstacles: tuple[ObstacleCfg, ...] = ()  # design §19
+    obstacle_field: ObstacleFieldCfg = field(default_factory=ObstacleFieldCfg)
+    safety: SafetyCfg = field(default_factory=SafetyCfg)
 
     @property
     def n(self) -> int:
@@ -383,6 +392,17 @@ class Scenario:
         if c.kind == "figure8":
             return leader_mod.figure_eight(c.x0, c.y0, c.radius, c.frequency)
         return leader_mod.Harmonic(c.x0, c.y0, c.vx, c.vy, tuple(map(tuple, c.x_terms)), tuple(map(tuple, c.y_terms)))
+
+    def obstacle_list(self) -> list[Obstacle]:
+        """The fixed obstacles and the seeded random field's (:func:`bioform_mj.obstacles.resolve`;
+        the field keeps ``keep_out`` m from the leader's positions every 0.05 s of the run and from
+        the followers' initial positions, jitter included)."""
+        path = None
+        if self.obstacle_field.count and self.obstacle_field.keep_out > 0:
+            t = np.arange(0.0, self.sim.duration + 1e-9, 0.05)
+            path = np.asarray(self.build_leader().states(t)[0])[:, :2]
+            path = np.vstack([path, self.initial_poses()[:, :2]])
+        return _resolve_obstacles(self.obstacles, self.obstacle_field, self.sim.seed, path)
 
     def initial_poses(self) -> np.ndarray:
         """(n, 3) initial poses, with the seeded jitter applied: ``U(−j, j)`` on x and y (m, ``j =
@@ -799,6 +819,20 @@ def validate(sc: Scenario) -> None:
         _positive(f"{key}.inertia", ev.inertia, strict=False)
 
     _validate_faults(sc)
+    _validate_safety(sc.safety)
+    if sc.safety.filter == "cbf" and sc.torque.derivative == "analytic":
+        raise ScenarioError(
+            "safety.filter",
+            "the analytic command derivative differentiates eq. 31, not the filtered command: "
+            "use torque.derivative = 'filter' or 'difference' with the cbf filter",
+        )
+    _validate_obstacles(sc.obstacles, sc.obstacle_field)
+    if sc.obstacles or sc.obstacle_field.count:
+        if pc.kind != "mujoco":
+            raise ScenarioError(
+                "obstacles", "the ideal plant has no bodies to touch obstacles: use plant.kind = 'mujoco'"
+            )
+        sc.obstacle_list()  # a field too dense to place fails here, before any work
 
 
 def _validate_sensing(sc: Scenario) -> None:
@@ -1080,7 +1114,9 @@ def apply_scale(sc: Scenario) -> Scenario:
     ``init_jitter`` as written), and the gains that
     carry a length so that the closed loop is the paper's, shrunk: the estimator's ``υ``-channel
     sign gain ``ka[0]`` and boundary layer ``phi[0]`` (m/s², m/s), the torque law's ``c[0]``
-    (m/s²), the disturbance's ``υ`` channel (m/s²) × s; ``k2 / s²`` and ``k3 / s`` (eq. 31:
+    (m/s²), the disturbance's ``υ`` channel (m/s²) × s; the obstacles (positions, sizes, the
+    field's numbers) and ``safety.distance``, ``lookahead``, ``range`` × s (design §19);
+    ``k2 / s²`` and ``k3 / s`` (eq. 31:
     ``ω_cmd = ω_ir + k2 υ_ir ỹ + k3 υ_ir sin θ̃`` is then unchanged). ``k1`` stays: the neuron
     (eq. 32) works in metres, and in its linear range (``|x̃| ≪ A``, which a small robot's
     errors are) ``k1 V_s ≈ k1 B x̃ / A`` already scales with the error; its bound ``k1 B`` does
@@ -1134,9 +1170,15 @@ def apply_scale(sc: Scenario) -> Scenario:
     disturbance = dataclasses.replace(d, bias=first(d.bias), amp=first(d.amp))
     lg = sc.learner.drag_gain
     learner = dataclasses.replace(sc.learner, drag_gain=(lg[0] / s**2, *lg[1:]) if lg else lg)
+    obstacles, obstacle_field = _scaled_obstacles(sc.obstacles, sc.obstacle_field, s)
+    sf = sc.safety
+    safety = dataclasses.replace(sf, distance=sf.distance * s, lookahead=sf.lookahead * s, range=sf.range * s)
     return dataclasses.replace(
         sc,
         learner=learner,
+        obstacles=obstacles,
+        obstacle_field=obstacle_field,
+        safety=safety,
         leader=leader,
         formation=formation,
         estimator=estimator,

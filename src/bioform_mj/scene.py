@@ -1295,6 +1295,7 @@ def build_scene(
     timestep: float | None = None,
     friction_patch: Sequence[float] | None = None,
     sensors: bool = False,
+    obstacles: Sequence = (),
 ) -> mujoco.MjSpec:
     """Compose the scene of ``n`` followers; returns an uncompiled ``MjSpec``.
 
@@ -1322,6 +1323,9 @@ def build_scene(
     sensors : bool
         Add each robot's odometry sensors (:func:`add_sensors`: wheel encoders, gyro,
         accelerometer; design §8.3). Off, the scene has no sensors of ours (no cost per step).
+    obstacles : sequence of :class:`~bioform_mj.obstacles.Obstacle`
+        Fixed obstacles standing on the floor: static box or cylinder geoms of the world body,
+        named as the obstacles (``obstacle_k``), colliding with the robots (design §19).
 
     The scene's ``<option>`` (integrator, solver, …) is the first robot file's.
     """
@@ -1383,6 +1387,17 @@ def build_scene(
             priority=1,
             condim=3,
             rgba=[0.55, 0.8, 1.0, 0.45],
+        )
+    for ob in obstacles:  # design §19: static geoms of the world body
+        half_h = ob.size[2] if ob.shape == "box" else ob.size[1]
+        world.add_geom(
+            name=ob.name,
+            type=mujoco.mjtGeom.mjGEOM_BOX if ob.shape == "box" else mujoco.mjtGeom.mjGEOM_CYLINDER,
+            pos=[ob.x, ob.y, half_h],
+            quat=yaw_quat(ob.yaw),
+            size=list(ob.size) + [0.0] * (3 - len(ob.size)),
+            condim=3,
+            rgba=[0.45, 0.42, 0.38, 1.0],  # outputs.figures.OBSTACLE_RGB
         )
     world.add_light(
         name="sun",

@@ -183,19 +183,36 @@ def make_plant(sc: Scenario) -> Plant:
             gyro_bias=pc.gyro_bias,
             seed=sc.sim.seed,
         )
-    return MujocoPlant(
+    plant = MujocoPlant(
         refs,
         poses,
         sc.sim.control_dt,
         sc.sim.physics_dt,
         dist,
-        friction_patch=sc.faults.friction_patch or None,
+        friction_patch=sc.faults.friction_patch or None,  # faults: low-friction floor patch
+        obstacles=sc.obstacle_list(),
+        safety_distance=sc.safety.distance,
         **sensing,
-    )  # faults: low-friction floor patch
+    )
+    if plant.contacts.off:  # design §19: never silent
+        why = plant.contacts.off
+        warnings.warn(f"contacts between robots and with obstacles are not watched: {why}", RobotWarning, stacklevel=2)
+    bad = plant.start_overlaps()  # design §19: an impossible start is refused before any work
+    if bad:
+        from .errors import InputError
+
+        jit = (
+            f" (formation.init_jitter = {sc.formation.init_jitter:g} m, seed {sc.sim.seed})"
+            if sc.formation.init_jitter
+            else ""
+        )
+        raise InputError("impossible initial poses" + jit + ": " + "; ".join(bad))
+    return plant
 
 
-def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = None) -> StackParams:
-    """Resolve the scenario's numbers into the control stack's per-follower arrays."""
+def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = None, plant: Any = None) -> StackParams:
+    """Resolve the scenario's numbers into the control stack's per-follower arrays (``plant``, if
+    given, tells the safety filter each robot's footprint radius and the obstacles, design §19)."""
     law, learning = parse_method(sc.method)
     n = sc.n
     c_hat0 = np.asarray(sc.learner.c_hat0_scale) * c_true
@@ -230,6 +247,24 @@ def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = 
         c_max=hi * c_hat0,
         dt=sc.sim.control_dt,
         leader_frame=sc.formation.frame == "leader",
+        **_cbf_params(sc, plant),
+    )
+
+
+def _cbf_params(sc: Scenario, plant: Any) -> dict[str, Any]:
+    """The safety filter's part of :class:`StackParams` (design §19; empty when it is off)."""
+    sf = sc.safety
+    if sf.filter != "cbf":
+        return {}
+    from .obstacles import to_rows
+
+    radius = getattr(plant, "footprint_radius", None)
+    obstacles = getattr(plant, "obstacles", None) or []
+    return dict(
+        cbf=True,
+        cbf_par=(sf.lookahead, sf.gain, sf.distance, sf.range, sf.pass_right),
+        cbf_radius=None if radius is None else np.asarray(radius, dtype=float),
+        cbf_obstacles=to_rows(obstacles) if obstacles else None,
     )
 
 
@@ -320,7 +355,7 @@ def simulate(
         plant = make_plant(sc)
     own_stack = controller is None
     if own_stack:
-        controller = ControlStack(graph, stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None)))
+        controller = ControlStack(graph, stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None), plant))
     n = sc.n
     if getattr(controller, "n", n) != n or getattr(plant, "n", n) != n:
         raise ValueError(f"the scenario has {n} followers, the plant {plant.n} and the controller {controller.n}")
@@ -609,6 +644,10 @@ def simulate(
         logd["odom_pose"] = logd["pose"].copy()
         logd["odom_vel"] = logd["vel"].copy()
     logd["offsets"] = offsets
+    if getattr(plant, "obstacles", None):  # design §19: drawn by the figures and rerun from the log
+        from .obstacles import to_rows
+
+        logd["obstacles"] = to_rows(plant.obstacles)
     logd["edges"] = graph.edges + 1
     logd["leader_access"] = graph.leader_access
     summary = _summary(
@@ -663,6 +702,9 @@ def simulate(
         w = float(np.abs(logd["vel"][:, :, 1]).max())
         for f, u in zip(summary["followers"], unmodelled(v, w)):
             f["unmodelled"] = u
+    from .hardware import verdict  # design §19: would this run on the robots as specified?
+
+    summary["hardware"] = verdict(sc, plant, summary, logd)
     result = RunResult(sc, logd, summary, plant, diverged, interrupted)
     if raised is not None:
         raised.result = result  # type: ignore[attr-defined]

@@ -321,11 +321,24 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
             row[f"{m}_max"] = float(np.max(vals))
         ch = np.array([f["c_hat_rel_error"] for f in s["followers"]], dtype=float)
         row["c_hat_abs_rel_error_max"] = float(np.max(np.abs(ch)))
+        _contact_columns(row, s["followers"])
     except Exception as exc:  # noqa: BLE001 - a failed run must not sink the sweep
         row["status"] = "failed"
         row["outcome"] = "failed"
         row["error"] = f"{type(exc).__name__}: {exc}"
     return row
+
+
+def _contact_columns(row: dict[str, Any], followers: list[dict[str, Any]]) -> None:
+    """Design §19 (MuJoCo runs): ``min_separation_m`` (the least over followers; empty when no robot
+    came within range), ``collisions`` (contact events with robots and obstacles, summed over
+    followers: a robot–robot touch counts for both) and ``collided`` (followers that touched)."""
+    if not followers or "robot_contacts" not in followers[0]:
+        return
+    seps = [f["min_separation_m"] for f in followers if f.get("min_separation_m") is not None]
+    row["min_separation_m"] = float(min(seps)) if seps else None
+    row["collisions"] = int(sum(f["robot_contacts"] + f["obstacle_contacts"] for f in followers))
+    row["collided"] = int(sum(1 for f in followers if f["robot_contacts"] + f["obstacle_contacts"] > 0))
 
 
 def _died_row(spec: RunSpec, reason: str) -> dict[str, Any]:

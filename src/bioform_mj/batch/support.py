@@ -32,4 +32,10 @@ def unsupported(sc: Any) -> str | None:
         return "learner.drag (the learned-drag extension runs on the local engines only; use --backend local)"
     if getattr(sc.plant, "sensing", "truth") not in ("truth", "odometry"):
         return f"plant.sensing = '{sc.plant.sensing}'"
+    if getattr(sc, "obstacles", ()) or getattr(getattr(sc, "obstacle_field", None), "count", 0):
+        return "obstacles (design §19: the batch engine has no obstacles nor a contact watch yet; use --backend local)"
+    if getattr(getattr(sc, "safety", None), "filter", "none") != "none":
+        return "safety.filter (the batch engine has no safety filter yet; use --backend local)"
+    if getattr(getattr(sc, "safety", None), "distance", 0.0) > 0:
+        return "safety.distance (the batch engine has no proximity watch yet; use --backend local)"
     return None

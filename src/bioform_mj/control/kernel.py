@@ -22,6 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .cbf import cbf_filter
 from .equations import (
     backward_difference,
     command_rate,
@@ -109,6 +110,15 @@ class Gains(NamedTuple):
     src: np.ndarray
     dst: np.ndarray
     lacc: np.ndarray
+    # the safety filter (design §19, control/cbf.py): on, [l, γ, d, range], radii (n,),
+    # obstacle rows (m, 7), QP scratch (n + m, 2), (n + m,), (n + m,)
+    cbf: bool
+    cbf_par: np.ndarray
+    cbf_rad: np.ndarray
+    cbf_obst: np.ndarray
+    cbf_A: np.ndarray
+    cbf_b: np.ndarray
+    cbf_lam: np.ndarray
 
 
 class StackState(NamedTuple):
@@ -318,6 +328,8 @@ def command_and_torques(g, s, pose, vel):
         s.err[i, 0], s.err[i, 1], s.err[i, 2] = e0, e1, e2
         u = s.vs[i] if g.bio else e0
         vc, wc = velocity_command(e1, e2, u, v_ref, w_ref, g.k1, g.k2, g.k3)
+        if g.cbf:  # the safety filter between eq. 31 and the torque law (design §19)
+            vc, wc = cbf_filter(i, vc, wc, pose, g.cbf_rad, g.cbf_obst, g.cbf_par, g.cbf_A, g.cbf_b, g.cbf_lam)
         s.cmd[i, 0], s.cmd[i, 1] = vc, wc
         if g.deriv == DERIV_ANALYTIC:  # chain rule through the controller's own dynamics (design §6)
             r = s.est_rate  # this step's estimator rates (estimator_consensus)

@@ -77,6 +77,11 @@ class StackParams:
     derivative: str = "filter"
     kk: np.ndarray = field(default_factory=lambda: np.zeros(2))
     k_max: float = 0.0
+    # the safety filter (design §19, control/cbf.py): off by default (the paper has none)
+    cbf: bool = False
+    cbf_par: tuple[float, ...] = (0.1, 5.0, 0.0, 2.0, 1.0)  # look-ahead l m, γ 1/s, d m, range m, pass_right
+    cbf_radius: np.ndarray | None = None  # (n,) m, each robot's footprint radius (None: 0, points)
+    cbf_obstacles: np.ndarray | None = None  # (m, 7) rows of obstacles.to_rows (None: none)
 
 
 class ControlStack:
@@ -142,6 +147,13 @@ class ControlStack:
             src=c(graph.src, dtype=np.int64),
             dst=c(graph.dst, dtype=np.int64),
             lacc=c(graph.leader_access, dtype=float),
+            cbf=bool(p.cbf),
+            cbf_par=np.array(p.cbf_par, dtype=float),
+            cbf_rad=np.zeros(n) if p.cbf_radius is None else c(p.cbf_radius, dtype=float).reshape(n),
+            cbf_obst=np.zeros((0, 7)) if p.cbf_obstacles is None else c(p.cbf_obstacles, dtype=float).reshape(-1, 7),
+            cbf_A=np.zeros((n + (0 if p.cbf_obstacles is None else len(p.cbf_obstacles)), 2)),
+            cbf_b=np.zeros(n + (0 if p.cbf_obstacles is None else len(p.cbf_obstacles))),
+            cbf_lam=np.zeros(n + (0 if p.cbf_obstacles is None else len(p.cbf_obstacles))),
         )
         self.state: StackState = new_state(n)
         self._no_comm = perfect_comm(n, int(graph.src.shape[0]))

@@ -25,6 +25,8 @@ from .files import atomic_path
 
 #: Leader colour (the ghost's orange), RGB in 0..1.
 LEADER_RGB: tuple[float, float, float] = (1.0, 0.5, 0.05)
+#: obstacles (design §19), as the MuJoCo scene colours them
+OBSTACLE_RGB: tuple[float, float, float] = (0.45, 0.42, 0.38)
 _FOLLOWER_RGB = [
     (0.12, 0.47, 0.71),
     (0.17, 0.63, 0.17),
@@ -208,6 +210,12 @@ def _trajectories(log: Mapping[str, np.ndarray], title: str, ax: Any = None) -> 
     n = pose.shape[1]
     offsets = np.asarray(log["offsets"], dtype=float) if "offsets" in log else np.zeros((n, 2))
     ax.plot(lp[:, 0], lp[:, 1], color=LEADER_RGB, lw=2.0, ls="--", label="leader")
+    if "obstacles" in log and len(log["obstacles"]):  # design §19: their footprints
+        from ..obstacles import from_rows
+
+        for k, ob in enumerate(from_rows(log["obstacles"])):
+            xy = ob.outline()
+            ax.fill(xy[:, 0], xy[:, 1], color=OBSTACLE_RGB, alpha=0.7, lw=0, label="obstacles" if k == 0 else None)
     for i in range(n):
         ax.plot(pose[:, i, 0], pose[:, i, 1], color=follower_rgb(i), lw=1.5, label=f"follower {i + 1}")
         ax.plot(pose[0, i, 0], pose[0, i, 1], "o", color=follower_rgb(i), ms=5)

@@ -173,8 +173,48 @@ def blueprint(n: int) -> Any:
     )
 
 
-def _log_static(rec: Any, n: int, summary: Mapping[str, Any] | None, label: str) -> None:
-    """Everything that does not change: view coordinates, boxes, series names and colours, summary."""
+def _log_obstacles(rec: Any, obstacles: Any) -> None:
+    """The obstacles (design §19) as static boxes and cylinders under ``/world/obstacles``."""
+    import rerun as rr
+
+    from ..obstacles import from_rows
+    from .figures import OBSTACLE_RGB
+
+    obs = from_rows(obstacles) if obstacles is not None and len(obstacles) else []
+    boxes = [o for o in obs if o.shape == "box"]
+    cyls = [o for o in obs if o.shape == "cylinder"]
+    col = _u8(OBSTACLE_RGB)
+    if boxes:
+        rec.log(
+            "/world/obstacles/boxes",
+            rr.Boxes3D(
+                half_sizes=[list(o.size) for o in boxes],
+                centers=[[o.x, o.y, o.size[2]] for o in boxes],
+                quaternions=[rr.Quaternion(xyzw=[0.0, 0.0, np.sin(o.yaw / 2), np.cos(o.yaw / 2)]) for o in boxes],
+                colors=[col] * len(boxes),
+                labels=[o.name for o in boxes],
+                fill_mode=rr.components.FillMode.Solid,
+            ),
+            static=True,
+        )
+    if cyls:
+        rec.log(
+            "/world/obstacles/cylinders",
+            rr.Cylinders3D(
+                lengths=[2 * o.size[1] for o in cyls],
+                radii=[o.size[0] for o in cyls],
+                centers=[[o.x, o.y, o.size[1]] for o in cyls],
+                colors=[col] * len(cyls),
+                labels=[o.name for o in cyls],
+                fill_mode=rr.components.FillMode.Solid,
+            ),
+            static=True,
+        )
+
+
+def _log_static(rec: Any, n: int, summary: Mapping[str, Any] | None, label: str, obstacles: Any = None) -> None:
+    """Everything that does not change: view coordinates, boxes, series names and colours, summary,
+    obstacles (``(m, 7)`` rows of :func:`bioform_mj.obstacles.to_rows`)."""
     import rerun as rr
 
     rec.send_recording_name(label)
@@ -191,6 +231,7 @@ def _log_static(rec: Any, n: int, summary: Mapping[str, Any] | None, label: str)
         static=True,
     )
     rec.log("/world/paths/leader", rr.LineStrips3D([], colors=[_u8(LEADER_RGB)], radii=[0.02]), static=True)
+    _log_obstacles(rec, obstacles)
     for i in range(n):
         c = follower_rgb(i)
         base = f"/world/follower/{i + 1}"
@@ -343,7 +384,7 @@ def write_rrd(result: Any, path: str | Path) -> Path:
         rec = rr.RecordingStream(APP_ID, send_properties=True)
         rec.save(tmp, default_blueprint=blueprint(n))
         try:
-            _log_static(rec, n, result.summary, _label(result.summary))
+            _log_static(rec, n, result.summary, _label(result.summary), result.log.get("obstacles"))
             send_log(rec, result.log)
             rec.flush()
         finally:
@@ -382,7 +423,10 @@ class RerunLive:
             else:
                 self.rec.connect_grpc(self.url, default_blueprint=blueprint(n))
             sc = run.scenario
-            _log_static(self.rec, n, None, f"{sc.name} {sc.plant.kind} {sc.method} (live)")
+            from ..obstacles import to_rows
+
+            obstacles = to_rows(getattr(run.plant, "obstacles", None) or [])
+            _log_static(self.rec, n, None, f"{sc.name} {sc.plant.kind} {sc.method} (live)", obstacles)
         except Exception as exc:  # noqa: BLE001 - a viewer that cannot be reached must not stop the run
             self._fail(exc)
         self._paths = [[] for _ in range(n)]

@@ -28,6 +28,7 @@ from ..control.equations import (
 )
 from ..control.kernel import control_step
 from ..engine import OK, PLANT_FAILED, after_control, record_odometry
+from .mujoco_contacts import watch_contacts, watch_proximity
 
 if HAVE_NUMBA:
     import numba
@@ -336,7 +337,7 @@ class Watch(NamedTuple):
 
 
 @njit
-def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, sd, sen, odo):
+def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, sd, sen, odo, cl, px):
     """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by the
     control step of ``k+1`` (``lp``: :class:`~bioform_mj.engine.Loop`; the control step of ``k0``
     must be done). ``io``: :class:`MjIO`; ``w``: :class:`Watch`; ``c_true`` (n, 2).
@@ -348,7 +349,9 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
     before the next control step (:func:`delivered_feed`), so the learner sees it. With ``sen.on``
     the sensors are sampled after each physics step (:func:`sense`) and the controller is given the
     odometry (:func:`odometry_read`) instead of the truth; metrics, guards, the formation error and
-    the outcome watches stay on the truth. If ``rec_ctrl`` has rows, the inputs of step ``k`` are
+    the outcome watches stay on the truth. ``cl``, ``px``: the contact and proximity watches
+    (:mod:`.mujoco_contacts`, design §19): MuJoCo's contact list after every physics step, distances
+    every ``px.ranges[3]`` control steps. If ``rec_ctrl`` has rows, the inputs of step ``k`` are
     copied to ``rec_ctrl[k]``, ``rec_xfrc[k]`` (for a bare-physics replay). Returns ``(steps done,
     next log row, status)``.
     """
@@ -391,6 +394,9 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
         slip_run,
         slip_step,
     ) = w
+    ncon, con, meta, owner, ci, cf, f6, hdt = cl
+    gstart, glist, ogeom, obst, rad, ranges, rf, ri, box, order = px
+    px_every = int(ranges[3])
     j = j0
     n = pose.shape[0]
     for k in range(k0, k1):
@@ -399,7 +405,7 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
             rec_ctrl[k, :] = ctrl
             for i in range(n):
                 rec_xfrc[k, i, :] = xfrc[base[i], :]
-        for _ in range(n_sub):
+        for sub in range(n_sub):
             _mj_step(mp, dp)
             if _warned(warn):
                 return k - k0, j, PLANT_FAILED
@@ -407,9 +413,12 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
                 sense(sd, sen, odo)
             if feed_on:
                 delivered_add(act_force, ctrl_id, to_wheel, dacc)
+            watch_contacts(mp, dp, ncon, con, meta, owner, ci, cf, f6, hdt, (k * n_sub + sub + 1) * hdt)
         if feed_on:
             delivered_feed(dacc, n_sub, feed, s.tau_body)
         observe(qpos, qvel, q7, v6, axle, pose, vel, up)
+        if (k + 1) % px_every == 0:
+            watch_proximity(mp, dp, gstart, glist, ogeom, obst, rad, ranges, rf, ri, box, order, pose, (k + 1) * dt)
         watch_tilt(up, tilt_cos, tip_step, k + 1)
         watch_slip(
             qvel,
@@ -440,6 +449,16 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
             if status != OK:
                 return k + 1 - k0, j, status
     return k1 - k0, j, OK
+
+
+@njit
+def physics_steps(mp, dp, n_sub, k0, ncon, con, meta, owner, ci, cf, f6, hdt):
+    """``n_sub`` ``mj_step`` calls, each followed by the contact watch (:func:`watch_contacts`; the
+    physics steps before these: ``k0``): the step-by-step plant's period when it has no sensors and
+    no DC-motor feed, as the compiled chunk runs it (one numba call, not one per physics step)."""
+    for sub in range(n_sub):
+        _mj_step(mp, dp)
+        watch_contacts(mp, dp, ncon, con, meta, owner, ci, cf, f6, hdt, (k0 + sub + 1) * hdt)
 
 
 @njit

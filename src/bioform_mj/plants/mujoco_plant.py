@@ -37,6 +37,7 @@ from bioform_mj.scene import (
     payload_inertial,
 )
 
+from .mujoco_contacts import ContactReader, robot_geoms, watch_contacts, watch_proximity
 from .mujoco_kernels import (
     HAVE_MJ_STEP,
     MjIO,
@@ -49,6 +50,7 @@ from .mujoco_kernels import (
     observe,
     odometry_read,
     odometry_reset,
+    physics_steps,
     run_chunk,
     sense,
     watch_slip,
@@ -148,6 +150,8 @@ class MujocoPlant:
         gyro_noise: float = 0.0,
         gyro_bias: float = 0.0,
         seed: int = 0,
+        obstacles: Sequence = (),
+        safety_distance: float = 0.0,
     ) -> None:
         if not (physics_dt > 0 and control_dt > 0):
             raise ValueError(f"control_dt and physics_dt must be > 0, got {control_dt}, {physics_dt}")
@@ -183,7 +187,9 @@ class MujocoPlant:
             timestep=physics_dt,
             friction_patch=friction_patch,
             sensors=sensing == "odometry",
+            obstacles=obstacles,
         )
+        self.obstacles = list(obstacles)  # bioform_mj.obstacles.Obstacle rows (design §19)
         self.model, self.data = compile_scene(self.spec)
         m = self.model
         n = self.n
@@ -271,7 +277,72 @@ class MujocoPlant:
                     limit,
                 )
         self._step_count = 0
+        self._contacts_setup(float(safety_distance))
         self.reset()
+
+    # ------------------------------------------------------------------ contacts (design §19)
+    def _contacts_setup(self, safety: float) -> None:
+        """The contact and proximity watch (:mod:`.mujoco_contacts`): which geom belongs to which
+        follower or obstacle, each robot's collision geoms and bounding radius about its axle midpoint."""
+        m, d = self.model, self.data
+        mujoco.mj_forward(m, d)
+        owner = np.full(m.ngeom, -1, dtype=np.int64)
+        axle_w = self._axle_world(d)
+        self.contact_geoms, self.footprint_radius = robot_geoms(m, d, self._base, axle_w)
+        for i, gs in enumerate(self.contact_geoms):
+            owner[gs] = i
+        og = [m.geom(o.name).id for o in self.obstacles]
+        for k, g in enumerate(og):
+            owner[g] = -2 - k
+        self._obstacle_geoms = og
+        import numba
+
+        self._compiled_steps = HAVE_MJ_STEP and not numba.config.DISABLE_JIT
+        self.contacts = ContactReader(
+            m, d, owner, self.contact_geoms, og, self.footprint_radius, safety, self.control_dt, self._q7[:, 2]
+        )
+
+    def _axle_world(self, d) -> np.ndarray:
+        """(n, 2) world position of each robot's axle midpoint now, m."""
+        pose = np.empty((self.n, 3))
+        vel = np.empty((self.n, 2))
+        observe(d.qpos, d.qvel, self._q7[:, 0], self._v6[:, 0], self._axle, pose, vel, np.ones(self.n))
+        return pose[:, :2]
+
+    def start_overlaps(self, tol: float = 1e-4) -> list[str]:
+        """What overlaps at the initial state, one text per pair (empty: none): two followers whose
+        collision geoms interpenetrate deeper than ``tol`` m, or a follower inside an obstacle
+        (``mj_geomDistance`` on the composed scene; the floor is not counted)."""
+        m = self.model
+        d = mujoco.MjData(m)
+        mujoco.mj_forward(m, d)
+        xy = self._axle_world(d)
+        r = self.footprint_radius
+        out = []
+        for i in range(self.n):
+            for j in range(i + 1, self.n):
+                if np.hypot(*(xy[i] - xy[j])) > r[i] + r[j]:
+                    continue
+                dist = min(
+                    mujoco.mj_geomDistance(m, d, a, b, 1.0, None)
+                    for a in self.contact_geoms[i]
+                    for b in self.contact_geoms[j]
+                )
+                if dist < -tol:
+                    out.append(f"followers {i + 1} and {j + 1} overlap by {-dist * 100:.3g} cm")
+            for k, g in enumerate(self._obstacle_geoms):
+                ob = self.obstacles[k]
+                if np.hypot(xy[i, 0] - ob.x, xy[i, 1] - ob.y) > r[i] + ob.radius:
+                    continue
+                dist = min(mujoco.mj_geomDistance(m, d, a, g, 1.0, None) for a in self.contact_geoms[i])
+                if dist < -tol:
+                    out.append(f"follower {i + 1} stands inside {ob.name} (by {-dist * 100:.3g} cm)")
+        return out
+
+    def contact_watch(self):
+        """What the contact and proximity watches recorded since :meth:`reset` (design §19):
+        :class:`~.mujoco_contacts.Watched`, per follower."""
+        return self.contacts.watched()
 
     # ------------------------------------------------------------------ parameters
     def _update_params(self) -> None:
@@ -326,6 +397,8 @@ class MujocoPlant:
         self.slip_step[:] = -1
         self._dacc[:] = 0.0
         self._push_until: np.ndarray | None = None  # pushes (faults): see push()
+        if hasattr(self, "contacts"):
+            self.contacts.reset()
 
     def observe(self) -> tuple[np.ndarray, np.ndarray]:
         """Pose (n, 3) ``[x, y, θ ∈ (−π, π]]`` and body-frame velocity (n, 2) ``[υ, ω]`` of each
@@ -475,19 +548,25 @@ class MujocoPlant:
         if self._push_until is not None:  # faults: an external push on some chassis (push())
             self._apply_push(t)
         self._dacc[:] = 0.0  # this period's delivered torque only (feed_delivered_torque)
-        if self.sensors.on or self.feed_delivered:  # after every physics step, as in the compiled loop
-            for _ in range(self.n_substeps):
+        cl = self.contacts.contacts
+        k0 = self._step_count * self.n_substeps
+        if self.sensors.on or self.feed_delivered or not self._compiled_steps:
+            for s_ in range(self.n_substeps):  # after every physics step, as in the compiled loop
                 mujoco.mj_step(m, d)
                 if self.sensors.on:
                     sense(d.sensordata, self.sensors, self.odo)
                 if self.feed_delivered:
                     delivered_add(d.actuator_force, self._ctrl, self._to_wheel, self._dacc)
-        else:
-            mujoco.mj_step(m, d, self.n_substeps)
+                watch_contacts(m._address, d._address, *cl, (k0 + s_ + 1) * cl.hdt)
+        else:  # the same calls in one compiled loop
+            physics_steps(m._address, d._address, self.n_substeps, k0, *cl)
         self._step_count += 1
         for i, w_ in enumerate(self._warnings):
             if w_.number:
                 self._raise_warning(i, w_)
+        if self._step_count % self.contacts.every == 0:  # as run_chunk: every PROXIMITY_DT
+            pose3 = np.column_stack([self._axle_world(d), np.zeros(self.n)])
+            watch_proximity(m._address, d._address, *self.contacts.proximity, pose3, self._step_count * self.control_dt)
 
     def _raise_warning(self, kind: int, stat) -> None:
         name = _WARNING_NAMES.get(kind, str(kind))
@@ -652,7 +731,10 @@ class MujocoPlant:
                 d.sensordata,
                 self.sensors,
                 self.odo,
+                self.contacts.contacts,
+                self.contacts.proximity,
             )
+            self.contacts.check()
             self._step_count = k0 + done
             if status == 2:  # engine.PLANT_FAILED: a MuJoCo warning in step k0 + done
                 self._step_count += 1
