@@ -16,7 +16,9 @@ import typing
 from typing import Any
 
 from .control.stack import METHODS
+from .obstacles import SHAPES
 from .robots import RobotRef
+from .safety import FILTERS
 from .scenario import (
     DERIVATIVES,
     ESTIMATOR_INITS,
@@ -38,6 +40,9 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "formation.frame": ("world", "leader"),
     "estimator.init": ESTIMATOR_INITS,
     "torque.saturation": SATURATIONS,
+    "obstacles[].shape": SHAPES,
+    "obstacle_field.shape": SHAPES,
+    "safety.filter": FILTERS,
     "torque.derivative": DERIVATIVES,
     "learner.gain_scaling": GAIN_SCALINGS,
     "plant.kind": PLANTS,
@@ -210,6 +215,35 @@ KEYS: dict[str, tuple[str, str]] = {
     "faults.actuator_known": ("", "The controller is told of an actuator fault (its own limit changes too)."),
     "faults.push": ("—, s, s, N, N, N·m", "`[[i, t, duration, fx, fy, tz], …]`: external wrench on i's chassis."),
     "faults.friction_patch": ("m, m, m, m, —", "`[x0, y0, x1, y1, mu]`: a floor rectangle with friction mu (MuJoCo)."),
+    "obstacles[].shape": (
+        "",
+        "`box` or `cylinder` (design §19): fixed, standing on the floor; a wall is a long thin box.",
+    ),
+    "obstacles[].position": ("m", "`[x, y]` of its centre (× scale)."),
+    "obstacles[].size": ("m", "box: half-extents `[sx, sy, sz]`; cylinder: `[radius, half_height]` (× scale)."),
+    "obstacles[].yaw": ("rad", "Heading of a box."),
+    "obstacle_field.count": ("", "How many random obstacles (seeded by `sim.seed`); 0: no field."),
+    "obstacle_field.shape": ("", "`box` (square footprint) or `cylinder`."),
+    "obstacle_field.size": ("m", "`[min, max]` of the half-side or radius, drawn uniformly (× scale)."),
+    "obstacle_field.height": ("m", "Height of every field obstacle (× scale)."),
+    "obstacle_field.region": ("m", "`[x0, y0, x1, y1]` where the centres are drawn (× scale)."),
+    "obstacle_field.keep_out": (
+        "m",
+        "> 0: no obstacle this close to the leader's path or a follower's start (× scale).",
+    ),
+    "obstacle_field.gap": ("m", "Least distance between two field obstacles (× scale)."),
+    "safety.distance": (
+        "m",
+        "A follower closer than this to a robot or obstacle is `too_close`; the filter's margin (× scale).",
+    ),
+    "safety.filter": (
+        "",
+        "`none` (the paper's) or `cbf`: a control barrier function between eq. 31 and the torque law.",
+    ),
+    "safety.lookahead": ("m", "The CBF's point ahead of the axle (Robotarium's construction; × scale)."),
+    "safety.gain": ("1/s", "The CBF's class-K gain γ."),
+    "safety.range": ("m", "Neighbours and obstacles within this distance enter the CBF's QP (× scale)."),
+    "safety.pass_right": ("", "Weight of the right-hand rule that breaks the deadlock of two robots meeting; 0: off."),
 }
 
 

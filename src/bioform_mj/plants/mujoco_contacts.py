@@ -27,7 +27,9 @@ when numba's JIT is off.
 from __future__ import annotations
 
 import ctypes
+import importlib.util
 import math
+import os
 from typing import NamedTuple
 
 import numpy as np
@@ -48,9 +50,21 @@ COARSE_RANGE_M = 0.25
 
 
 # ---------------------------------------------------------------- the two C functions, both ways
-def _ctypes_lib():
-    from .mujoco_kernels import _libmujoco_path
+def _libmujoco_path() -> str | None:
+    """Path of the libmujoco shipped with the ``mujoco`` Python package (without importing it)."""
+    spec = importlib.util.find_spec("mujoco")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    d = list(spec.submodule_search_locations)[0]
+    names = sorted(
+        f
+        for f in os.listdir(d)
+        if f.startswith("libmujoco.so") or (f.startswith("libmujoco.") and f.endswith(".dylib"))
+    )
+    return os.path.join(d, names[-1]) if names else None
 
+
+def _ctypes_lib():
     path = _libmujoco_path()
     lib = ctypes.CDLL(path)
     lib.mj_geomDistance.restype = ctypes.c_double

@@ -10,8 +10,6 @@ same functions, so the step-by-step and the compiled loop compute the same bits.
 from __future__ import annotations
 
 import ctypes
-import importlib.util
-import os
 from typing import NamedTuple
 
 import numpy as np
@@ -28,24 +26,10 @@ from ..control.equations import (
 )
 from ..control.kernel import control_step
 from ..engine import OK, PLANT_FAILED, after_control, record_odometry
-from .mujoco_contacts import watch_contacts, watch_proximity
+from .mujoco_contacts import _libmujoco_path, watch_contacts, watch_proximity
 
 if HAVE_NUMBA:
     import numba
-
-
-def _libmujoco_path() -> str | None:
-    """Path of the libmujoco shipped with the ``mujoco`` Python package (without importing it)."""
-    spec = importlib.util.find_spec("mujoco")
-    if spec is None or not spec.submodule_search_locations:
-        return None
-    d = list(spec.submodule_search_locations)[0]
-    names = sorted(
-        f
-        for f in os.listdir(d)
-        if f.startswith("libmujoco.so") or (f.startswith("libmujoco.") and f.endswith(".dylib"))
-    )
-    return os.path.join(d, names[-1]) if names else None
 
 
 # ``mj_step(const mjModel*, mjData*)`` called by symbol name; pointers passed as integers (the
