@@ -204,3 +204,30 @@ def test_divergence_terminates_with_the_remaining_time_penalty():
     fe = env._formation_error(env.k)
     expect = -env.dt * fe - env.weights["terminal"] * (1.0 - t)
     assert [rew[a] for a in env.possible_agents] == pytest.approx(expect, rel=1e-6)
+
+
+def test_a_collision_costs_reward_and_is_named():
+    """The crossing preset (two followers swap sides, design §19): driven straight at each other with a
+    velocity command, they touch; the step's reward of each carries -w_collision per contact event and
+    infos name them; the episode's summary lists the ``collided`` outcome."""
+    env = parallel_env("crossing", action="velocity", reward={"formation": 0.0, "effort": 0.0, "terminal": 0.0},
+                       overrides=["sim.duration=6", "sim.control_dt=0.01", "safety.filter=none"])  # fmt: skip
+    env.reset(seed=0)
+    hit_rewards, named = [], set()
+    while env.agents:
+        pose, _ = env.measured_state()
+        act = {}
+        for a, i in env._index.items():
+            j = 1 - i if env.n == 2 else (i + 1) % env.n
+            dx, dy = pose[j, 0] - pose[i, 0], pose[j, 1] - pose[i, 1]
+            err = np.arctan2(dy, dx) - pose[i, 2]
+            act[a] = np.array([0.5, float(np.clip(3.0 * np.arctan2(np.sin(err), np.cos(err)), -6, 6))])
+        _, rew, _, _, info = env.step(act)
+        for a, r in rew.items():
+            if r != 0.0:
+                hit_rewards.append(r)
+                named |= set(info[a].get("collided", []))
+    assert hit_rewards and all(r <= -env.weights["collision"] + 1e-12 for r in hit_rewards)
+    assert named
+    kinds = {o["kind"] for f in env.episode_summary()["followers"] for o in f["outcomes"]}
+    assert "collided" in kinds

@@ -70,8 +70,15 @@ OBS_FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("leader", "6", "-, m, m, rad, m/s, rad/s", "[access, Δx, Δy, Δθ, Δυ, Δω] of the leader minus the own estimate"),
 )
 
-#: reward weights: formation error (1/(m·s)), torque effort (1/s), a tip-over (per event), an early end (1/s)
-REWARD_WEIGHTS: dict[str, float] = {"formation": 1.0, "effort": 0.01, "tipped": 10.0, "terminal": 10.0}
+#: reward weights: formation error (1/(m·s)), torque effort (1/s), a tip-over (per event), an early end (1/s),
+#: a contact with another robot or an obstacle (per contact event of the plant's watch, design §19)
+REWARD_WEIGHTS: dict[str, float] = {
+    "formation": 1.0,
+    "effort": 0.01,
+    "tipped": 10.0,
+    "terminal": 10.0,
+    "collision": 1.0,
+}
 
 ACTIONS = ("velocity", "torque")
 
@@ -240,6 +247,7 @@ class FormationParallelEnv(ParallelEnv):
         self.agents = list(self.possible_agents)
         self._done = False
         self._tipped = np.zeros(self.n, dtype=bool)
+        self._events_seen = np.zeros(self.n)
         obs = self._observations()
         return obs, {a: {"t": 0.0} for a in self.agents}
 
@@ -313,7 +321,9 @@ class FormationParallelEnv(ParallelEnv):
         eff = ((tau / self._tau_max[:, None]) ** 2).mean(axis=1)
         w = self.weights
         end = diverged is not None or bool(self._tipped.any())
+        hits = self._new_contacts()
         r = -self.dt * (w["formation"] * np.where(np.isfinite(fe), fe, 0.0) + w["effort"] * eff) - w["tipped"] * newly
+        r = r - w["collision"] * hits
         if end:
             r = r - w["terminal"] * max(0.0, (self.N - k) * self.dt)
         trunc = k >= self.N and not end
@@ -323,6 +333,8 @@ class FormationParallelEnv(ParallelEnv):
             info["diverged"] = diverged
         if self._tipped.any():
             info["tipped"] = [self.possible_agents[i] for i in np.flatnonzero(self._tipped)]
+        if hits.any():
+            info["collided"] = [self.possible_agents[i] for i in np.flatnonzero(hits)]
         agents = self.agents
         rewards = {a: float(r[self._index[a]]) for a in agents}
         terms = dict.fromkeys(agents, end)
@@ -333,6 +345,16 @@ class FormationParallelEnv(ParallelEnv):
             self._diverged = diverged
             self.agents = []
         return obs, rewards, terms, truncs, infos
+
+    def _new_contacts(self) -> np.ndarray:
+        """Contact events (robots and obstacles) of each follower in the period just ended (n,), from the
+        plant's contact watch (MuJoCo, design §19; zeros for a plant without one)."""
+        watch = getattr(self._plant, "contact_watch", None)
+        if watch is None:
+            return np.zeros(self.n)
+        ev = np.asarray(watch().events, dtype=float).sum(axis=1)  # since the plant's reset
+        new, self._events_seen = ev - self._events_seen, ev
+        return new
 
     def _actions(self, actions: Mapping[str, Any]) -> np.ndarray:
         if not isinstance(actions, Mapping):
@@ -454,8 +476,14 @@ class FormationParallelEnv(ParallelEnv):
         sig = controller.signals() if controller is not None and hasattr(controller, "signals") else {}
         if sig.get("c_hat") is not None:  # the controller's own learner, not the environment's
             c_hat = np.array(sig["c_hat"], dtype=float)
-        oc = follower_outcomes(sc, self._plant, controller if controller is not None else self._stack, logd, final,
-                               c_hat, self.dt)  # fmt: skip
+        from ..outcomes import severity
+        from ..runsummary import _contact_outcomes
+
+        ctrl = controller if controller is not None else self._stack
+        oc = follower_outcomes(sc, self._plant, ctrl, logd, final, c_hat, self.dt)
+        contact = _contact_outcomes(self._plant, n, self.dt)
+        oc = [sorted(o + contact[i][1], key=severity) for i, o in enumerate(oc)]
+
         followers = []
         for i in range(n):
             o = oc[i]
