@@ -119,6 +119,9 @@ def main() -> None:
     ap.add_argument("--jitter", type=float, default=0.3, help="formation.init_jitter (m, rad): seeds matter")
     ap.add_argument("--copies", type=int, default=2, help="environment copies in the vectorised env")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--collision-weight", type=float, default=1.0, help="the reward's w_collision (0: as first measured)"
+    )
     ap.add_argument("--eval-seeds", type=int, default=5)
     ap.add_argument("--out", type=Path, default=Path("runs/ppo"))
     a = ap.parse_args()
@@ -135,7 +138,8 @@ def main() -> None:
         "plant.kind=mujoco",
         f"formation.init_jitter={a.jitter}",
     ]
-    mk = lambda: parallel_env(a.scenario, action="velocity", overrides=ov)  # noqa: E731
+    rw = {"collision": a.collision_weight}
+    mk = lambda: parallel_env(a.scenario, action="velocity", reward=rw, overrides=ov)  # noqa: E731
     venv = make_vec_env(mk, a.copies, a.seed)
     norm = VecNormalize(venv, norm_obs=True, norm_reward=True, gamma=0.99)
     model = PPO("MlpPolicy", norm, seed=a.seed, n_steps=500, batch_size=500, n_epochs=5, learning_rate=3e-4,
