@@ -326,10 +326,12 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
             f"{ident['test']['timestep_s'] if ident else step:.2g} s)"
         )
     if any("other wheel" in n for n in lay.notes):
-        reasons_fail.append(
+        skid = (
             "other fixed wheels touch the floor (see notes): a 4-wheel / skid-steer base, not the paper's "
             "differential drive; map one driven pair and make the others casters, or use another robot"
         )
+        reasons_fail.append(skid)
+        findings.insert(0, {"kind": "structural", "detail": skid})  # the cause, before what it makes identify see
     if any("stiffness" in n for n in lay.notes):
         reasons_warn.append("wheel joint stiffness: a spring torque that grows with the distance driven (see notes)")
     tcs = [t for t in um["drag_time_constant_s"] if t is not None]
