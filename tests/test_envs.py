@@ -231,3 +231,18 @@ def test_a_collision_costs_reward_and_is_named():
     assert named
     kinds = {o["kind"] for f in env.episode_summary()["followers"] for o in f["outcomes"]}
     assert "collided" in kinds
+
+
+def test_float32_observations_for_learning_libraries():
+    """``dtype="float32"``: observations and their space in float32 (BenchMARL's and SB3's networks),
+    the same numbers as float64 rounded once; the API test still passes."""
+    mk = lambda dtype: parallel_env("paper", dtype=dtype, overrides=SHORT)  # noqa: E731
+    e64, e32 = mk("float64"), mk("float32")
+    o64, _ = e64.reset(seed=2)
+    o32, _ = e32.reset(seed=2)
+    for a in e64.possible_agents:
+        assert o32[a].dtype == np.float32 and e32.observation_space(a).dtype == np.float32
+        assert np.array_equal(o32[a], o64[a].astype(np.float32))
+    parallel_api_test(mk("float32"), num_cycles=10)
+    with pytest.raises(ValueError, match="unknown observation dtype"):
+        mk("float16")

@@ -102,6 +102,8 @@ class FormationParallelEnv(ParallelEnv):
     v_max, w_max : bounds of the velocity action (m/s, rad/s); default ``limits.speed`` bounded to 2 m/s,
         and 2π rad/s.
     overrides : ``--set``-style overrides (``["sim.control_dt=0.01"]`` or a mapping), with a name/path.
+    dtype : ``"float64"`` (default: the controller's own numbers) or ``"float32"`` observations (what most
+        learning libraries' networks take; BenchMARL, SB3).
     """
 
     metadata = {"name": "bioform_formation_v0", "render_modes": [], "is_parallelizable": True}
@@ -115,9 +117,13 @@ class FormationParallelEnv(ParallelEnv):
         v_max: float | None = None,
         w_max: float | None = None,
         overrides: Any = None,
+        dtype: str = "float64",
     ) -> None:
         if action not in ACTIONS:
             raise ValueError(f"unknown action mode {action!r} (expected one of: {', '.join(ACTIONS)})")
+        if dtype not in ("float64", "float32"):
+            raise ValueError(f"unknown observation dtype {dtype!r} (expected float64 or float32)")
+        self._dtype = np.dtype(dtype)
         sc = _scenario_of(scenario, overrides)
         weights = dict(REWARD_WEIGHTS)
         for k, v in (reward or {}).items():
@@ -151,8 +157,8 @@ class FormationParallelEnv(ParallelEnv):
         wm = float(2 * math.pi) if w_max is None else float(w_max)
         if not (vm > 0 and wm > 0 and math.isfinite(vm) and math.isfinite(wm)):
             raise ValueError(f"v_max and w_max must be positive and finite, got {vm!r}, {wm!r}")
-        hi_obs = np.full(self.obs_size, np.inf)
-        self._obs_spaces = {a: spaces.Box(-hi_obs, hi_obs, dtype=np.float64) for a in self.possible_agents}
+        hi_obs = np.full(self.obs_size, np.inf, dtype=self._dtype)
+        self._obs_spaces = {a: spaces.Box(-hi_obs, hi_obs, dtype=self._dtype) for a in self.possible_agents}
         if action == "velocity":
             hi = np.array([vm, wm])
             self._act_spaces = {a: spaces.Box(-hi, hi, dtype=np.float64) for a in self.possible_agents}
@@ -327,7 +333,9 @@ class FormationParallelEnv(ParallelEnv):
         if end:
             r = r - w["terminal"] * max(0.0, (self.N - k) * self.dt)
         trunc = k >= self.N and not end
-        obs = self._observations() if diverged is None else {a: np.zeros(self.obs_size) for a in self.agents}
+        obs = (
+            self._observations() if diverged is None else {a: np.zeros(self.obs_size, self._dtype) for a in self.agents}
+        )
         info = {"t": k * self.dt}
         if diverged is not None:
             info["diverged"] = diverged
@@ -417,7 +425,7 @@ class FormationParallelEnv(ParallelEnv):
                     o[7 + 6 * q : 13 + 6 * q] = _relative(rp[e], rv[e], own, s.est_vel[i], c, sn)
             if lacc[i] > 0:
                 o[7 + 6 * self.K :] = _relative(lp, lv, own, s.est_vel[i], c, sn)
-            out[a] = o
+            out[a] = o.astype(self._dtype, copy=False)
         return out
 
     def _formation_error(self, k: int) -> np.ndarray:
