@@ -100,7 +100,8 @@ def test_min_separation_side_by_side_is_the_geometry():
     for f in res.summary["followers"]:
         assert f["min_separation_exact"] is True
         assert 0.155 <= f["min_separation_m"] <= 0.16 + 1e-6
-        assert f["outcomes"] == [] and f["outcome"] == "ok" and f["robot_contacts"] == 0
+        kinds = [o["kind"] for o in f["outcomes"]]  # the learner's c_hat_off (design §14) is not a contact's
+        assert not {"collided", "too_close"} & set(kinds) and f["robot_contacts"] == 0
         assert f["too_close_s"] is None  # safety.distance = 0: not watched
 
 

@@ -109,7 +109,9 @@ def test_broken_stdout_and_stderr_in_process(tmp_path, monkeypatch, diverge, cod
     argv = ["run", "--duration", "1", "--out", str(tmp_path / "r")] + (["--set", "limits.speed=0.5"] if diverge else [])
     assert main(argv) == code
     assert (tmp_path / "r" / "summary.json").is_file() and (tmp_path / "r" / "log.npz").is_file()
-    assert out.tries + err.tries == 1  # one failed write, then silence (not one per line)
+    assert (
+        out.tries <= 1 and err.tries <= 1 and out.tries + err.tries >= 1
+    )  # per stream: one failed write, then silence
     assert sys.stdout is out and sys.stderr is err  # main restored the streams
 
 

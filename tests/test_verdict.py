@@ -205,7 +205,11 @@ def test_every_outcome_is_listed_most_severe_first():
     assert [o["kind"] for o in got] == ["slipping", "lost"]
     assert got[0]["t"] == 3.2 and got[1]["t"] is None and f"> {LOST_M:g} m" in got[1]["detail"]
     got = _outcomes(tip_t=1.0, slip_t=0.5, spinning=True, final=3.0, c_hat=np.array([0.1, 10.0]))
-    assert [o["kind"] for o in got] == list(OUTCOME_ORDER)
+    # outcome_list gives the kinds it knows in OUTCOME_ORDER's order (collided/too_close come from the
+    # contact watch, controller_nonfinite from simulate's torque check: design §19, §17)
+    assert [o["kind"] for o in got] == [
+        k for k in OUTCOME_ORDER if k not in ("controller_nonfinite", "collided", "too_close")
+    ]
 
 
 def test_c_hat_bound_is_a_band_not_equality():

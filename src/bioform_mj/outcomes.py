@@ -69,7 +69,7 @@ def severity(outcome: dict[str, Any]) -> int:
 def outcome_kinds(follower: dict[str, Any]) -> list[str]:
     """Every outcome kind of one follower's summary entry, the most severe first (``[]`` when ok); a
     summary from before the ``outcomes`` list has only ``outcome``."""
-    kinds = [o["kind"] for o in follower.get("outcomes") or []]
+    kinds = list(dict.fromkeys(o["kind"] for o in follower.get("outcomes") or []))  # a kind once (two collisions)
     o = follower.get("outcome")
     return kinds if o in (None, "ok") or o in kinds else [str(o), *kinds]
 
