@@ -479,7 +479,7 @@ def test_ray_head_lost_mid_sweep_writes_the_tables_and_resumes(tmp_path):
         subprocess.run([ray_cli, "stop", "--force"], env=env, capture_output=True, timeout=60)
     errs = _error_lines(err)
     assert proc.returncode == 1, err[-2000:]
-    assert len(errs) == 1 and "was lost" in errs[0] and "rerun the same command" in errs[0]
+    assert len(errs) == 1 and "was lost" in errs[0] and "rerun the same command" in errs[0], err[-3000:]
     finished = list((out / "runs").glob("*.json"))
     assert 3 <= len(finished) < 300
     assert len(_rows(out)) == len(finished)

@@ -9,6 +9,9 @@ cluster's GCS port during the sweep and returns why when the head is lost.
 from __future__ import annotations
 
 import contextlib
+import gc
+import signal
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -97,6 +100,35 @@ def _in_thread(fn: Callable[[], Any], seconds: float, sig: Signals) -> tuple[str
     return ("error", box["error"]) if "error" in box else ("ok", box.get("ok"))
 
 
+class _HeadWatch(threading.Thread):
+    """Probes the Ray head's GCS port every :data:`RAY_PROBE_EVERY_S` in its own thread, so that a Ray
+    call blocked on a lost head cannot hide the loss (Ray's core ends the process 60 s after it loses
+    the GCS, and Python cannot catch that): after :data:`RAY_LOST_PROBES` failures in a row ``lost``
+    says why; if the sweep's loop has not stopped :data:`RAY_PROBE_EVERY_S` later, the main thread is
+    interrupted (:class:`~bioform_mj.jobs.Stop` raised in it), so the tables of the finished rows get
+    written and the ``error:`` line said (design §16)."""
+
+    def __init__(self, gcs: tuple[str, int], sig: Signals) -> None:
+        super().__init__(daemon=True, name="bioform-ray-head-watch")
+        self.gcs, self.sig = gcs, sig
+        self.lost: str | None = None
+        self.done = threading.Event()
+
+    def run(self) -> None:
+        import _thread
+
+        failed = 0
+        while not self.done.wait(RAY_PROBE_EVERY_S):
+            why = _probe(*self.gcs, timeout=1.0)
+            failed = failed + 1 if why is not None else 0
+            if failed >= RAY_LOST_PROBES:
+                self.lost = f"the Ray head at {self.gcs[0]}:{self.gcs[1]} was lost ({why}, {failed} probes in a row)"
+                if not self.done.wait(RAY_PROBE_EVERY_S):  # the loop did not notice: a Ray call is blocked
+                    self.sig.raising = True
+                    _thread.interrupt_main(signal.SIGINT)
+                return
+
+
 def run_ray(
     todo: list[Any],
     workers: int,
@@ -160,23 +192,30 @@ def run_ray(
     gcs = None
     with contextlib.suppress(Exception):
         gcs = _host_port(ray.get_runtime_context().gcs_address)
+    if gcs is None and address:  # the address the user gave is the GCS's too
+        gcs = _host_port(address)
     pending: dict[Any, Any] = {}
+    ready: list[Any] = []
+    r = remote = None
     lost: str | None = None
+    watch = _HeadWatch(gcs, sig) if gcs is not None else None
     try:
         # no retries: a run whose worker dies is recorded as failed, like the local backend does
         remote = ray.remote(num_cpus=1, max_retries=0)(fn)
         pending = {remote.remote(sp): sp for sp in todo}
-        next_probe, failed = time.monotonic() + RAY_PROBE_EVERY_S, 0
+        if watch is not None:
+            watch.start()
         while pending and sig.signum is None:
-            if gcs is not None and time.monotonic() > next_probe:
-                why = _probe(*gcs, timeout=1.0)
-                failed = failed + 1 if why is not None else 0
-                next_probe = time.monotonic() + RAY_PROBE_EVERY_S
-                if failed >= RAY_LOST_PROBES:
-                    lost = f"the Ray head at {gcs[0]}:{gcs[1]} was lost ({why}, {failed} probes in a row)"
-                    break
+            if watch is not None and watch.lost:
+                lost = watch.lost
+                break
             try:
                 ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.25)
+            except Stop:  # the watch interrupted a Ray call that did not return (design §16)
+                if watch is None or not watch.lost:
+                    raise
+                lost, sig.signum = watch.lost, None  # not the user's Ctrl-C: the head's loss
+                break
             except Exception as exc:  # noqa: BLE001 - the cluster went away under us
                 lost = f"Ray failed mid-sweep ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})"
                 break
@@ -192,10 +231,18 @@ def run_ray(
                         row = failed_row(sp, msg)
                 done(row)
     finally:
+        if watch is not None:
+            watch.done.set()
         if pending and (sig.signum is not None or lost is None):
             for r in pending:
                 with contextlib.suppress(Exception):
                     ray.cancel(r, force=True)
+        # no ObjectRef may outlive the shutdown: its destructor would call into the core worker, which then
+        # ends the process ("The core worker has already been shutdown"), before the tables and the error
+        # line are written (seen once in four runs of the head-loss test)
+        pending.clear()
+        ready = r = remote = None  # noqa: F841
+        gc.collect()
         if started:  # a lost head can make shutdown wait: bounded
             _in_thread(ray.shutdown, 5.0, Signals())
     return lost
