@@ -253,6 +253,14 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
 
     ident = identify(entry) if identify_ else None  # InputError (exit 2) for a mapping no test can use
     findings = ident["findings"] if ident else []
+    if any("other wheel" in n for n in lay.notes):  # the cause, before what it makes the identification see
+        skid = (
+            "other fixed wheels touch the floor (see notes): a 4-wheel / skid-steer base, not the paper's "
+            "differential drive; map one driven pair and make the others casters, or use another robot"
+        )
+        findings.insert(0, {"kind": "structural", "detail": skid})
+        if not (ident and ident["identifiable"]):  # else said below, as the identification's cause
+            reasons_fail.append(skid)
     a_id = ident["identified"]["a"] if ident else None
     b_id = ident["identified"]["b"] if ident else None
     if ident and not ident["identifiable"]:
@@ -282,8 +290,9 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
             msg = f"structural: {fd['detail']}"
             if all(fd["detail"] not in r for r in reasons_fail + reasons_warn):
                 reasons_warn.append(msg)
-        elif fd["kind"] == "structural" and ident["identifiable"]:
-            reasons_fail.append(f"structural: {fd['detail']}")
+        elif fd["kind"] == "structural" and ident and ident["identifiable"]:
+            if all(fd["detail"] not in r for r in reasons_fail):  # once, also when it is the identification's cause
+                reasons_fail.append(f"structural: {fd['detail']}")
         elif fd["kind"] in ("braking_caster", "rocking", "slip", "dead_band") or (
             fd["kind"] == "damping" and min(t for t in fd["time_constant_s"] if t is not None) < 5.0
         ):
@@ -325,13 +334,6 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
             f"off by tens of %); run with sim.physics_dt <= {DRAG_STEP / k_drag:.2g} s (identification used "
             f"{ident['test']['timestep_s'] if ident else step:.2g} s)"
         )
-    if any("other wheel" in n for n in lay.notes):
-        skid = (
-            "other fixed wheels touch the floor (see notes): a 4-wheel / skid-steer base, not the paper's "
-            "differential drive; map one driven pair and make the others casters, or use another robot"
-        )
-        reasons_fail.append(skid)
-        findings.insert(0, {"kind": "structural", "detail": skid})  # the cause, before what it makes identify see
     if any("stiffness" in n for n in lay.notes):
         reasons_warn.append("wheel joint stiffness: a spring torque that grows with the distance driven (see notes)")
     tcs = [t for t in um["drag_time_constant_s"] if t is not None]
