@@ -196,6 +196,7 @@ def run_ray(
         gcs = _host_port(address)
     pending: dict[Any, Any] = {}
     ready: list[Any] = []
+    rest: list[Any] = []
     r = remote = None
     lost: str | None = None
     watch = _HeadWatch(gcs, sig) if gcs is not None else None
@@ -210,7 +211,7 @@ def run_ray(
                 lost = watch.lost
                 break
             try:
-                ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.25)
+                ready, rest = ray.wait(list(pending), num_returns=1, timeout=0.25)
             except Stop:  # the watch interrupted a Ray call that did not return (design §16)
                 if watch is None or not watch.lost:
                     raise
@@ -241,7 +242,7 @@ def run_ray(
         # ends the process ("The core worker has already been shutdown"), before the tables and the error
         # line are written (seen once in four runs of the head-loss test)
         pending.clear()
-        ready = r = remote = None  # noqa: F841
+        ready = rest = r = remote = None  # noqa: F841 - ray.wait's lists hold ObjectRefs too
         gc.collect()
         if started:  # a lost head can make shutdown wait: bounded
             _in_thread(ray.shutdown, 5.0, Signals())
