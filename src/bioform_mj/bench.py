@@ -194,7 +194,7 @@ def run(args: argparse.Namespace) -> int:
         )
     import mujoco
 
-    from . import __version__
+    from ._version import __version__
 
     out = {
         "machine": {

@@ -28,7 +28,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
-from . import __version__
+from ._version import __version__
 
 #: attributes that name a file MuJoCo loads (MJCF and URDF)
 _FILE_ATTRS = ("file", "filename", "fileright", "fileleft", "fileup", "filedown", "filefront", "fileback")

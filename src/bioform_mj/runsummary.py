@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__
+from ._version import __version__
 from .engine import CHANNELS, MEAN_CHANNELS
 from .outcomes import follower_outcomes, severity, slots_of
 from .record import resolved_config

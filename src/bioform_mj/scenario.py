@@ -20,10 +20,20 @@ from typing import Any
 
 import numpy as np
 
-from . import graph as graph_mod
-from . import leader as leader_mod
 from .control.stack import METHODS
 from .errors import GraphError, InputError, ScenarioError
+from .graph import Graph
+from .graph import chain as _chain
+from .graph import complete as _complete
+from .graph import from_edges as _from_edges
+from .graph import ring as _ring
+from .graph import star as _star
+from .leader import Harmonic as _HarmonicLeader
+from .leader import Trajectory
+from .leader import circle as _circle
+from .leader import figure_eight as _figure_eight
+from .leader import line as _line
+from .leader import paper as _paper_leader
 from .obstacles import Obstacle, ObstacleCfg, ObstacleFieldCfg
 from .obstacles import resolve as _resolve_obstacles
 from .obstacles import scaled as _scaled_obstacles
@@ -372,26 +382,26 @@ class Scenario:
         return d
 
     # ---- derived objects -------------------------------------------------------------
-    def build_graph(self) -> graph_mod.Graph:
+    def build_graph(self) -> Graph:
         g, n = self.graph, self.n
         if g.kind == "explicit":
-            return graph_mod.from_edges(n, g.edges, g.leader_access)
+            return _from_edges(n, g.edges, g.leader_access)
         if g.kind == "star":
-            return graph_mod.star(n, g.center, g.leader_access)
-        builder = {"chain": graph_mod.chain, "ring": graph_mod.ring, "complete": graph_mod.complete}[g.kind]
+            return _star(n, g.center, g.leader_access)
+        builder = {"chain": _chain, "ring": _ring, "complete": _complete}[g.kind]
         return builder(n, g.leader_access)
 
-    def build_leader(self) -> leader_mod.Trajectory:
+    def build_leader(self) -> Trajectory:
         c = self.leader
         if c.kind == "paper":
-            return leader_mod.paper(c.x0, c.y0, c.speed, c.amplitude, c.frequency)
+            return _paper_leader(c.x0, c.y0, c.speed, c.amplitude, c.frequency)
         if c.kind == "line":
-            return leader_mod.line(c.x0, c.y0, c.speed, c.heading)
+            return _line(c.x0, c.y0, c.speed, c.heading)
         if c.kind == "circle":
-            return leader_mod.circle(c.x0, c.y0, c.radius, c.speed)
+            return _circle(c.x0, c.y0, c.radius, c.speed)
         if c.kind == "figure8":
-            return leader_mod.figure_eight(c.x0, c.y0, c.radius, c.frequency)
-        return leader_mod.Harmonic(c.x0, c.y0, c.vx, c.vy, tuple(map(tuple, c.x_terms)), tuple(map(tuple, c.y_terms)))
+            return _figure_eight(c.x0, c.y0, c.radius, c.frequency)
+        return _HarmonicLeader(c.x0, c.y0, c.vx, c.vy, tuple(map(tuple, c.x_terms)), tuple(map(tuple, c.y_terms)))
 
     def obstacle_list(self) -> list[Obstacle]:
         """The fixed obstacles and the seeded random field's (:func:`bioform_mj.obstacles.resolve`;

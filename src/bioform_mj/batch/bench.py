@@ -183,7 +183,7 @@ def run(
     import mujoco
     import warp as wp
 
-    from .. import __version__
+    from .._version import __version__
     from .backend import require_warp, resolve_device
 
     require_warp()
