@@ -233,6 +233,53 @@ def pose_change(
     return dm, np.degrees(np.arccos(cos))
 
 
+def floor_points(model: Any, data: Any, g: int, z_top: float) -> list[np.ndarray]:
+    """World points of geom ``g`` that stand on the floor: below ``z_top`` (m). A box's corners and a mesh's
+    vertices there (a chassis or skid plate resting on its rear edge supports it there, not at its centre);
+    for a round geom (sphere, ellipsoid, capsule, cylinder: wheels, casters) its centre, straight above the
+    point it touches the floor with."""
+    t = int(model.geom_type[g])
+    pos, rot = data.geom_xpos[g], data.geom_xmat[g].reshape(3, 3)
+    if t == int(mujoco.mjtGeom.mjGEOM_BOX):
+        loc = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * model.geom_size[g]
+    elif t == int(mujoco.mjtGeom.mjGEOM_MESH):
+        mid = model.geom_dataid[g]
+        va, vn = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
+        loc = model.mesh_vert[va : va + vn].astype(float)
+    else:
+        return [pos.copy()]
+    world = pos + loc @ rot.T
+    low = world[world[:, 2] <= z_top]
+    return list(low if len(low) else world[np.argmin(world[:, 2])][None, :])
+
+
+#: after the settle a robot at rest moves its base slower than these (m/s, rad/s), and the floor carries its
+#: weight (less what gravcomp holds) within this fraction
+REST_SPEED, REST_RATE, REST_LOAD = 0.01, 0.05, 0.1
+
+
+def not_at_rest(model: Any, data: Any, base: int, floor: list[dict], settle_s: float) -> str:
+    """Why the robot is not at rest after ``settle_s`` s at zero torque ('' when it is): the base still moving,
+    or the floor contacts (:func:`floor_contacts`) not carrying its weight (a robot bouncing off its own
+    bodies, tipping, falling). Then the floor contacts and wheel loads are a snapshot, and it is said."""
+    v6 = np.zeros(6)
+    mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, base, v6, 0)
+    rate, speed = float(np.linalg.norm(v6[:3])), float(np.linalg.norm(v6[3:]))
+    bodies = subtree(model, base)
+    g = float(np.linalg.norm(model.opt.gravity))
+    weight = float(np.sum(model.body_mass[bodies])) * g
+    held = float(np.sum(model.body_mass[bodies] * (1.0 - model.body_gravcomp[bodies]))) * g
+    load = float(sum(c["load_n"] for c in floor))
+    if speed < REST_SPEED and rate < REST_RATE and abs(load - held) <= REST_LOAD * held:
+        return ""
+    comp = f" (gravcomp holds {weight - held:.3g} N of its weight)" if held < 0.999 * weight else ""
+    return (
+        f"not at rest after the {settle_s:g} s settle: the base moves at {speed:.3g} m/s and {rate:.3g} rad/s, the "
+        f"floor carries {load:.4g} N of the {held:.4g} N it holds at rest{comp}: the floor contacts, wheel loads "
+        "and traction limit are a snapshot of a moving robot"
+    )
+
+
 def braking_casters(floor: list[dict], drive_force: float) -> list[tuple[dict, float, str]]:
     """The casters of :func:`floor_contacts` that brake: loaded, with friction (μ ≥ 1e-3 and condim > 1)
     and unable to roll (no joint between them and the base). ``drive_force``: what the wheels can
@@ -280,4 +327,28 @@ def unsimulated_self_contacts(entry: Any, simulated: list[dict]) -> list[dict]:
         if (c["body1"], c["body2"]) not in have:
             c["simulated"] = False
             out.append(c)
+    return out
+
+
+def floor_table(report: dict[str, Any]) -> list[str]:
+    """The floor contacts of a report as a small text table."""
+    rows = [("body", "geom", "role", "load N", "μ sim", "μ pub", "condim sim/pub")]
+    for c in report["floor_contacts"]:
+        rows.append(
+            (
+                c["body"],
+                c["geom"],
+                c["role"] + (" (rolls)" if c["rolls"] else ""),
+                f"{c['load_n']:.4g}",
+                f"{c['friction']:g}",
+                f"{c['friction_published']:g}",
+                f"{c['condim']}/{c['condim_published']}",
+            )
+        )
+    width = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]
+    out = [
+        f"  floor contacts at rest: {len(report['floor_contacts'])}, {report['floor_load_n']:.4g} N of "
+        f"{report['weight_n']:.4g} N weight"
+    ]
+    out += ["    " + "  ".join(v.ljust(w) for v, w in zip(r, width)).rstrip() for r in rows]
     return out

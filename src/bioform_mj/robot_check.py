@@ -88,6 +88,7 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
     """
     import mujoco
 
+    from .contacts import floor_points
     from .scene import _geom_support, layout_of
 
     lay = layout_of(model, prefix)
@@ -114,7 +115,7 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
         floor_z = min(lows.values())
     for g, low in lows.items():
         if low - floor_z <= tol:
-            pts.append(rot.T @ (data.geom_xpos[g] - mid))
+            pts.extend(rot.T @ (q - mid) for q in floor_points(model, data, g, floor_z + tol))
             names.append(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or f"#{g}")
     if not pts:
         from .errors import InputError
@@ -161,6 +162,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         braking_casters,
         floor_contacts,
         moving_parts,
+        not_at_rest,
         pose_change,
         relative_poses,
         self_contacts,
@@ -197,6 +199,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
             track()
     loads = plant.wheel_loads()[0]
     floor = floor_contacts(model, plant.data, lay, "f1/")
+    moving_at_rest = not_at_rest(model, plant.data, base, floor, 0.2)  # said below, with its likely cause
     selfc = self_contacts(model, plant.data, lay, "f1/")
     selfc += unsimulated_self_contacts(entry, selfc)  # a URDF's excluded pairs that overlap (design §12)
     # μ N r / f per wheel (design §13: N the wheel's own load at rest, f the share of torque that
@@ -243,8 +246,17 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
     for _, brake, msg in braking_casters(floor, drive_force):
         (reasons_fail if brake >= drive_force else reasons_warn).append(msg)
+    if moving_at_rest:
+        pushed = [f"'{c['body1']}'/'{c['body2']}'" for c in selfc if c.get("simulated") is not False]
+        reasons_warn.append(moving_at_rest + (f"; its own bodies push it: {', '.join(pushed)}" if pushed else ""))
     for sc in selfc:
-        if sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_FORCE * weight:
+        if sc.get("simulated") is False:  # a URDF pair excluded from contacts: said, it changes nothing (design §12)
+            notes.append(
+                f"the robot's own links '{sc['body1']}' and '{sc['body2']}' overlap at rest "
+                f"({1e3 * sc['depth_m']:.2g} mm deep) but do not collide: self-collision is off (the URDF/Gazebo "
+                f"convention); with self_collide = true MuJoCo would push them apart with {sc['force_n']:.3g} N"
+            )
+        elif sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_FORCE * weight:
             reasons_warn.append(
                 f"the robot's own bodies '{sc['body1']}' and '{sc['body2']}' touch at rest "
                 f"({1e3 * sc['depth_m']:.2g} mm deep, {sc['force_n']:.3g} N; self_contacts): MuJoCo collides all but "
@@ -703,32 +715,9 @@ def _num(x: float | None) -> str:
     return "n/a" if x is None else f"{x:.5g}"
 
 
-def _floor_table(report: dict[str, Any]) -> list[str]:
-    """The floor contacts of a report as a small text table."""
-    rows = [("body", "geom", "role", "load N", "μ sim", "μ pub", "condim sim/pub")]
-    for c in report["floor_contacts"]:
-        rows.append(
-            (
-                c["body"],
-                c["geom"],
-                c["role"] + (" (rolls)" if c["rolls"] else ""),
-                f"{c['load_n']:.4g}",
-                f"{c['friction']:g}",
-                f"{c['friction_published']:g}",
-                f"{c['condim']}/{c['condim_published']}",
-            )
-        )
-    width = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]
-    out = [
-        f"  floor contacts at rest: {len(report['floor_contacts'])}, {report['floor_load_n']:.4g} N of "
-        f"{report['weight_n']:.4g} N weight"
-    ]
-    out += ["    " + "  ".join(v.ljust(w) for v, w in zip(r, width)).rstrip() for r in rows]
-    return out
-
-
 def main(args: argparse.Namespace) -> int:
     """Run ``bioform robot check``; prints a short report, returns the exit code."""
+    from .contacts import floor_table
     from .outputs.files import check_out_file, write_json
 
     if args.json:  # before any work (exit 2): a directory, /proc/x, a read-only folder
@@ -760,11 +749,16 @@ def main(args: argparse.Namespace) -> int:
         f"{100 * report['floor_fraction']['drive']:.3g} % driving, "
         f"{100 * report['floor_fraction']['turn']:.3g} % turning"
     )
-    lines += _floor_table(report)
+    lines += floor_table(report)
     for sc in report["self_contacts"]:
         lines.append(
             f"  self contact: '{sc['body1']}' / '{sc['body2']}' "
-            f"{1e3 * sc['depth_m']:.3g} mm deep, {sc['force_n']:.3g} N"
+            f"{1e3 * sc['depth_m']:.3g} mm deep, "
+            + (
+                f"not simulated (self-collision off; {sc['force_n']:.3g} N if on)"
+                if sc.get("simulated") is False
+                else f"{sc['force_n']:.3g} N"
+            )
         )
     moving = report["moving_parts"]
     lines.append(

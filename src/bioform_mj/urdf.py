@@ -207,6 +207,17 @@ def _float(text: str | None) -> float | None:
         return None
 
 
+def _gz_value(parent: ET.Element, path: str) -> str | None:
+    """``<gazebo>`` element ``path``'s ``value`` attribute, else its text (``<mu1 value="0.5"/>`` is
+    ``<mu1>0.5</mu1>`` to Gazebo's URDF parser)."""
+    el = parent.find(path)
+    return None if el is None else el.get("value", el.text)
+
+
+def _gz_names(plugin: ET.Element, tags: tuple[str, ...]) -> list[str]:
+    return [v.strip() for t in plugin if t.tag in tags and (v := t.get("value", t.text)) and v.strip()]
+
+
 def _have_trimesh() -> bool:
     try:
         import trimesh  # noqa: F401
@@ -375,20 +386,20 @@ def _parse(path: Path, packages: PackagePath) -> _Parsed:
                     # ROS 1 gazebo_ros: leftJoint/rightJoint/wheelTorque; ROS 2 and gz-sim: left_joint/...
                     drive = {
                         "plugin": p.get("filename") or p.get("name") or "?",
-                        "left": [t.text.strip() for t in p if t.tag in ("leftJoint", "left_joint") and t.text],
-                        "right": [t.text.strip() for t in p if t.tag in ("rightJoint", "right_joint") and t.text],
-                        "torque": _float(p.findtext("wheelTorque") or p.findtext("max_wheel_torque")),
+                        "left": _gz_names(p, ("leftJoint", "left_joint")),
+                        "right": _gz_names(p, ("rightJoint", "right_joint")),
+                        "torque": _float(_gz_value(p, "wheelTorque") or _gz_value(p, "max_wheel_torque")),
                     }
             said = [
                 f"'{p}'" + (" (beyond its wheels and wheel torque)" if drive.get("plugin") == p else "") for p in plugs
             ]
             ignored.append("plugin " + ", ".join(said) if plugs else "a <gazebo> block")
             continue
-        mu1 = _float(gz.findtext("mu1"))
-        mu2 = _float(gz.findtext("mu2"))
+        mu1 = _float(_gz_value(gz, "mu1"))
+        mu2 = _float(_gz_value(gz, "mu2"))
         if mu1 is None:  # SDF style: <collision><surface><friction><ode><mu>
-            mu1 = _float(gz.findtext(".//surface/friction/ode/mu"))
-            mu2 = _float(gz.findtext(".//surface/friction/ode/mu2")) if mu1 is not None else mu2
+            mu1 = _float(_gz_value(gz, ".//surface/friction/ode/mu"))
+            mu2 = _float(_gz_value(gz, ".//surface/friction/ode/mu2")) if mu1 is not None else mu2
         if mu1 is not None and ref in links:
             friction[ref] = (mu1, mu2)
         rest = sorted({c.tag for c in gz if c.tag not in ("mu1", "mu2") or ref not in links})

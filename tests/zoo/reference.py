@@ -12,7 +12,8 @@ This script does NOT import bioform_mj: only mujoco and numpy. For each robot of
    geom ``priority`` (MuJoCo uses the higher-priority geom's friction/condim for a pair);
 3. removes the model's actuators (torques enter as ``qfrc_applied``: a torque source, the
    paper's model), welds every joint that is not a wheel or a listed passive caster joint (the
-   joint is deleted from the spec, so its child moves with its parent at ``qpos0``), and lets
+   joint is deleted from the spec, so its child moves with its parent at ``qpos0``; keyframes and the
+   tendons, equalities and sensors go with them), and lets
    each wheel touch the floor through one sphere of its radius (a flat tread scrubs when turning);
 4. lets it settle (free caster swivels set to trail the coming test's motion), records the floor
    contacts (geom, body, normal load, friction as published and as simulated), then drives it
@@ -511,7 +512,18 @@ def load(
         spec.delete(a)
     if acts:
         notes.append(f"{len(acts)} actuator(s) of the model removed (torque source instead)")
+    keys = list(spec.keys)  # a keyframe's ctrl/qpos no longer fit the model: the reference starts at qpos0
+    for k in keys:
+        spec.delete(k)
+    if keys:
+        notes.append(f"{len(keys)} keyframe(s) dropped (the tests start at qpos0)")
     keep = {robot.left, robot.right, *robot.other_wheels, *robot.free_joints}
+    if lock:  # tendons, equalities and sensors may name the joints welded below; at qpos0 they do nothing we test
+        tied = [*spec.tendons, *spec.equalities, *spec.sensors]
+        for el in tied:
+            spec.delete(el)
+        if tied:
+            notes.append(f"{len(tied)} tendon(s)/equality(ies)/sensor(s) removed with the welded joints")
     locked = []
     for j in list(spec.joints):
         if j.type == mujoco.mjtJoint.mjJNT_FREE or j.name in keep or not lock:

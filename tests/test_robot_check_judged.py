@@ -1,0 +1,185 @@
+"""Regressions found by judging ``robot check`` on published robots outside the zoo (issue 18, "the checks
+will be judged on published robots you have not seen"): a MiR100 URDF (DFKI-NI/mir_robot), a Fetch Freight
+URDF (ZebraDevs/fetch_ros), a Hello Robot Stretch MJCF (hello-robot/stretch_mujoco).
+
+Every robot here is written by the test, small, with the one feature that went wrong on the published one;
+the numbers the assertions use are computed by hand from the file.
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from bioform_mj.robot_check import G, check, tip_margins
+from bioform_mj.robots import RobotRef
+from bioform_mj.scene import prepare_robot
+from test_urdf import box_stl  # a binary STL box, as the URDF tests write it
+
+HALF_PI = repr(math.pi / 2)
+
+
+def _urdf(tail: str = "", chassis: str = '<box size="0.3 0.2 0.05"/>') -> str:
+    """A URDF diff drive: 2 kg chassis, wheels r = 0.05 m at y = ±0.12 m, a sphere caster front and back."""
+    casters = ""
+    for name, x in (("caster_front", 0.12), ("caster_back", -0.12)):
+        casters += f"""
+  <joint name="{name}_joint" type="fixed"><parent link="base_link"/><child link="{name}"/>
+    <origin xyz="{x!r} 0 -0.035"/></joint>
+  <link name="{name}"><inertial><mass value="0.05"/><inertia ixx="4e-6" iyy="4e-6" izz="4e-6" ixy="0" ixz="0"
+    iyz="0"/></inertial><collision><geometry><sphere radius="0.015"/></geometry></collision></link>"""
+    wheels = ""
+    for side, y in (("left", 0.12), ("right", -0.12)):
+        wheels += f"""
+  <joint name="wheel_{side}_joint" type="continuous"><parent link="base_link"/><child link="wheel_{side}"/>
+    <origin xyz="0 {y!r} 0" rpy="-{HALF_PI} 0 0"/><axis xyz="0 0 1"/><limit effort="2" velocity="10"/></joint>
+  <link name="wheel_{side}"><inertial><mass value="0.2"/><inertia ixx="1.3e-4" iyy="1.3e-4" izz="2.5e-4"
+    ixy="0" ixz="0" iyz="0"/></inertial>
+    <collision><geometry><cylinder radius="0.05" length="0.02"/></geometry></collision></link>"""
+    return f"""<?xml version="1.0"?>
+<robot name="dd">
+  <link name="base_footprint"/>
+  <joint name="base_joint" type="fixed"><parent link="base_footprint"/><child link="base_link"/>
+    <origin xyz="0 0 0.05"/></joint>
+  <link name="base_link"><inertial><mass value="2.0"/><inertia ixx="0.01" iyy="0.012" izz="0.02" ixy="0"
+    ixz="0" iyz="0"/></inertial>
+    <collision><origin xyz="0 0 0.03"/><geometry>{chassis}</geometry></collision></link>
+  {wheels}
+  {casters}
+  {tail}
+</robot>
+"""
+
+
+def _geoms_of(model: mujoco.MjModel, body: str) -> list[int]:
+    b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body)
+    assert b >= 0, body
+    return [g for g in range(model.ngeom) if model.geom_bodyid[g] == b and model.geom_contype[g]]
+
+
+def test_gazebo_friction_in_the_value_attribute_form_is_read(tmp_path):
+    """MiR's URDF writes ``<mu1 value="200"/>`` (Gazebo's URDF parser takes the ``value`` attribute before the
+    text); it was dropped without a word, and the wheels and casters kept MuJoCo's default μ = 1."""
+    tail = """
+  <gazebo reference="caster_front"><mu1 value="0.0"/><mu2 value="0.0"/><kp value="1e7"/></gazebo>
+  <gazebo reference="caster_back"><mu1 value="0.3"/><mu2 value="0.4"/></gazebo>"""
+    path = tmp_path / "dd.urdf"
+    path.write_text(_urdf(tail))
+    spec, layout, _, _ = prepare_robot(RobotRef(str(path)))
+    model = spec.compile()
+    for link, mu in (("caster_front", 0.0), ("caster_back", 0.3)):
+        geoms = _geoms_of(model, link)
+        assert geoms and all(model.geom_friction[g, 0] == pytest.approx(mu) for g in geoms), link
+    notes = " | ".join(layout.import_notes)
+    assert "link 'caster_back': sliding friction 0.3 from <gazebo> mu1" in notes and "mu2 0.4 not used" in notes
+    assert "reference 'caster_front': kp" in notes  # the rest of the block is still said to be ignored
+
+
+def test_urdf_overlaps_that_do_not_collide_are_named_but_not_a_warning(tmp_path):
+    """MiR's caster wheels sit 35–66 mm inside its chassis mesh: with URDF self-collision off (Gazebo's
+    convention) that overlap exerts nothing, yet robot check warned that the bodies 'touch at rest' with
+    kilonewtons and told the user to exclude a pair that is already excluded."""
+    swivel = """
+  <joint name="swivel_joint" type="continuous"><parent link="base_link"/><child link="swivel"/>
+    <origin xyz="0.2 0 -0.02"/><axis xyz="0 0 1"/></joint>
+  <link name="swivel"><inertial><mass value="0.01"/><inertia ixx="1e-6" iyy="1e-6" izz="1e-6" ixy="0" ixz="0"
+    iyz="0"/></inertial></link>
+  <joint name="roller_joint" type="continuous"><parent link="swivel"/><child link="roller"/>
+    <origin xyz="-0.02 0 -0.015"/><axis xyz="0 1 0"/></joint>
+  <link name="roller"><inertial><mass value="0.01"/><inertia ixx="1e-6" iyy="1e-6" izz="1e-6" ixy="0" ixz="0"
+    iyz="0"/></inertial><collision><geometry><sphere radius="0.015"/></geometry></collision></link>"""
+    path = tmp_path / "dd.urdf"
+    # the chassis' bottom 10 mm above the floor, the swivel caster's roller (0 to 30 mm) 20 mm inside it
+    path.write_text(_urdf(swivel, chassis='<box size="0.4 0.2 0.14"/>'))
+    rep = check(RobotRef(str(path)), identify_=False)
+    pairs = {(c["body1"], c["body2"]): c for c in rep["self_contacts"]}
+    assert set(pairs) == {("base_link", "roller")}
+    assert all(c["simulated"] is False and c["depth_m"] == pytest.approx(0.02, abs=2e-3) for c in pairs.values())
+    assert not any("touch at rest" in r for r in rep["reasons"])
+    said = [n for n in rep["notes"] if "overlap at rest" in n]
+    assert len(said) == 1 and "'base_link' and 'roller'" in said[0] and "self-collision is off" in said[0]
+
+
+CHASSIS_HX, CHASSIS_HY, PAYLOAD_X = 0.2, 0.15, -0.05
+
+
+def _flat_chassis_mjcf(chassis: str) -> str:
+    """Wheels (spheres r = 0.05 m) at x = 0, y = ±0.17 m; a 2 kg chassis whose bottom is 5 mm above the floor
+    and reaches x = ±0.2 m; a 1 kg payload (no collision) 5 cm behind the axle: the centre of mass is behind
+    the axle, the chassis' rear edge is what it rests on (a Fetch Freight's base mesh, a skid plate)."""
+    return f"""<mujoco><worldbody><body name="base" pos="0 0 0">
+  {chassis}
+  <geom type="sphere" size="0.01" pos="{PAYLOAD_X} 0 0.05" mass="1" contype="0" conaffinity="0"/>
+  <body name="lw" pos="0 0.17 0.05"><joint name="left_wheel" type="hinge" axis="0 1 0"/>
+    <geom type="sphere" size="0.05" mass="0.2"/></body>
+  <body name="rw" pos="0 -0.17 0.05"><joint name="right_wheel" type="hinge" axis="0 1 0"/>
+    <geom type="sphere" size="0.05" mass="0.2"/></body>
+</body></worldbody>
+<actuator><motor joint="left_wheel" ctrlrange="-1 1" gear="1"/><motor joint="right_wheel" ctrlrange="-1 1"/>
+</actuator></mujoco>"""
+
+
+@pytest.mark.parametrize("kind", ["box", "mesh"])
+def test_a_chassis_near_the_floor_supports_at_its_edges_not_its_centre(tmp_path, kind):
+    """The support of the tip-over margins took each near-floor geom's centre: a chassis (box or mesh)
+    centred on the axle counted as a point at the axle, and a Freight whose centre of mass is 3 mm behind
+    the axle came out 'statically unstable (forward)' while it rests on its chassis' rear edge."""
+    z = 0.025  # chassis centre; half height 0.02: its bottom 5 mm above the floor (the wheels' bottom)
+    if kind == "box":
+        chassis = f'<geom type="box" size="{CHASSIS_HX} {CHASSIS_HY} 0.02" pos="0 0 {z}" mass="2"/>'
+        assets = ""
+    else:
+        box_stl(tmp_path / "chassis.stl", CHASSIS_HX, CHASSIS_HY, 0.02)
+        chassis = f'<geom type="mesh" mesh="chassis" pos="0 0 {z}" mass="2"/>'
+        assets = '<asset><mesh name="chassis" file="chassis.stl"/></asset>'
+    path = tmp_path / "flat.xml"
+    path.write_text(_flat_chassis_mjcf(chassis).replace("<worldbody>", assets + "<worldbody>", 1))
+    spec, _, _, _ = prepare_robot(RobotRef(str(path), tau_max=1.0))
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    prefix = model.body(1).name.split("/")[0] + "/" if "/" in model.body(1).name else ""
+    tips = tip_margins(model, data, prefix)
+    m = 2.0 + 1.0 + 0.4
+    cx = PAYLOAD_X * 1.0 / m  # the chassis and the wheels are centred on the axle
+    h = (2.0 * z + 1.0 * 0.05 + 0.4 * 0.05) / m  # above the floor (the wheels' bottom, z = 0)
+    assert tips["support_m"]["x_rear"] == pytest.approx(-CHASSIS_HX, abs=1e-6)
+    assert tips["support_m"]["x_front"] == pytest.approx(CHASSIS_HX, abs=1e-6)
+    assert tips["tip_accel_mps2"]["forward"] == pytest.approx(G * (cx + CHASSIS_HX) / h, rel=1e-5)
+    assert tips["tip_accel_mps2"]["backward"] == pytest.approx(G * (CHASSIS_HX - cx) / h, rel=1e-5)
+    assert tips["tip_accel_mps2"]["lateral"] == pytest.approx(G * 0.17 / h, rel=1e-5)  # the wheels, wider
+
+
+def test_a_robot_still_moving_after_the_settle_is_said(tmp_path):
+    """Hello Robot's Stretch MJCF at qpos0 has its wrist inside the base: the self contact bounces it, and the
+    'floor contacts at rest' were a snapshot (one wheel 342 N, the other and the caster 0 N, of 284 N) that
+    nothing flagged. ``not_at_rest`` says so; a robot that stands still gets ''. Gravcomp bodies (the
+    Stretch's lift and arm) weigh nothing on the floor."""
+    from bioform_mj.contacts import floor_contacts, not_at_rest
+    from bioform_mj.plants.mujoco_plant import MujocoPlant
+
+    path = tmp_path / "flat.xml"
+    chassis = f'<geom type="box" size="{CHASSIS_HX} {CHASSIS_HY} 0.02" pos="0 0 0.025" mass="2"/>'
+    path.write_text(_flat_chassis_mjcf(chassis))
+    plant = MujocoPlant([RobotRef(str(path), tau_max=1.0)], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
+    model, data, lay = plant.model, plant.data, plant.layouts[0]
+    for k in range(200):
+        plant.step(np.zeros((1, 2)), k * 0.001)
+    base = model.body(lay.base).id
+    floor = floor_contacts(model, data, lay, "f1/")
+    assert not_at_rest(model, data, base, floor, 0.2) == ""
+    assert sum(c["load_n"] for c in floor) == pytest.approx(3.4 * G, rel=0.02)
+    free = next(j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE)
+    data.qvel[model.jnt_dofadr[free]] = 0.1  # the base sliding forward at 0.1 m/s
+    mujoco.mj_forward(model, data)
+    said = not_at_rest(model, data, base, floor, 0.2)
+    assert "not at rest after the 0.2 s settle" in said and "0.1 m/s" in said
+    data.qvel[model.jnt_dofadr[free]] = 0.0
+    mujoco.mj_forward(model, data)
+    assert model.body_mass[base] == pytest.approx(3.0)  # chassis 2 kg and payload 1 kg are the base's geoms
+    model.body_gravcomp[base] = 1.0  # the 3 kg base held by gravcomp: the floor should carry the wheels' 0.4 kg
+    said = not_at_rest(model, data, base, floor, 0.2)
+    assert f"of the {0.4 * G:.4g} N it holds at rest" in said and "gravcomp holds" in said
