@@ -183,3 +183,62 @@ def test_a_robot_still_moving_after_the_settle_is_said(tmp_path):
     model.body_gravcomp[base] = 1.0  # the 3 kg base held by gravcomp: the floor should carry the wheels' 0.4 kg
     said = not_at_rest(model, data, base, floor, 0.2)
     assert f"of the {0.4 * G:.4g} N it holds at rest" in said and "gravcomp holds" in said
+
+
+@pytest.mark.parametrize("legacy", ["<legacyMode>true</legacyMode>", ""])
+def test_gazebo_plugin_wheels_on_the_wrong_side_are_swapped_by_the_geometry(tmp_path, legacy):
+    """A Pioneer 3-DX URDF (mario-serna/pioneer_p3dx_model) names ``leftJoint`` the right wheel: the ROS 1
+    diff-drive plugin's legacyMode (its default when the tag is missing) drives leftJoint as the right
+    wheel. The import took the names as sides and every check ended 'left_wheel … is not to the left'."""
+
+    def plugin(left: str, right: str) -> str:
+        return f"""
+  <gazebo><plugin name="differential_drive_controller" filename="libgazebo_ros_diff_drive.so">
+    <leftJoint>{left}</leftJoint><rightJoint>{right}</rightJoint>{legacy}<wheelTorque>5</wheelTorque>
+  </plugin></gazebo>"""
+
+    path = tmp_path / "dd.urdf"
+    path.write_text(_urdf(plugin("wheel_right_joint", "wheel_left_joint")))
+    rep = check(RobotRef(str(path)), identify_=False)
+    assert rep["parts"]["wheel_joints"] == ["wheel_left_joint", "wheel_right_joint"]
+    said = [n for n in rep["notes"] if "wheels from the Gazebo diff-drive plugin" in n]
+    assert len(said) == 1 and "its leftJoint 'wheel_right_joint' is the right wheel" in said[0]
+    path.write_text(_urdf(plugin("wheel_left_joint", "wheel_right_joint")))  # named as they are: kept
+    rep = check(RobotRef(str(path)), identify_=False)
+    assert rep["parts"]["wheel_joints"] == ["wheel_left_joint", "wheel_right_joint"]
+    assert not any("is the right wheel" in n for n in rep["notes"])
+
+
+class _Kicked:
+    """A one-robot plant whose base is pushed sideways at 5 cm/s until ``until`` s (None: always)."""
+
+    def __init__(self, plant, until: float | None):
+        self.plant, self.until = plant, until
+        self.model, self.data = plant.model, plant.data
+        free = next(j for j in range(self.model.njnt) if self.model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE)
+        self.dof = int(self.model.jnt_dofadr[free]) + 1  # world y
+
+    def step(self, tau, t):
+        if self.until is None or t < self.until:
+            self.data.qvel[self.dof] = 0.05
+        self.plant.step(tau, t)
+
+
+def test_a_robot_moving_at_0_2_s_is_settled_longer_then_said(tmp_path):
+    """robot check's settle: 0.2 s, then 0.1 s more at a time while the robot moves (a Pioneer 3-DX on its
+    caster: 73 N of 55 N at 0.2 s, at rest at 0.3 s), up to 1 s; a robot still moving then is said."""
+    from bioform_mj.contacts import settle
+    from bioform_mj.plants.mujoco_plant import MujocoPlant
+
+    path = tmp_path / "flat.xml"
+    path.write_text(_flat_chassis_mjcf(f'<geom type="box" size="{CHASSIS_HX} {CHASSIS_HY} 0.02" pos="0 0 0.025"/>'))
+    ticks = []
+    for until, steps, moving in ((None, 1000, True), (0.25, 300, False), (0.1, 200, False)):
+        plant = MujocoPlant([RobotRef(str(path), tau_max=1.0)], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
+        got, floor, why = settle(_Kicked(plant, until), plant.layouts[0], lambda: ticks.append(1))
+        assert got == steps and bool(why) == moving, (until, got, why)
+        if moving:
+            assert "not at rest after the 1 s settle" in why and "the base moves at 0.05" in why
+        else:
+            assert sum(c["load_n"] for c in floor) == pytest.approx(float(plant.params[0].mass) * G, rel=0.05)
+    assert len(ticks) == (1000 + 300 + 200) // 10

@@ -280,6 +280,23 @@ def not_at_rest(model: Any, data: Any, base: int, floor: list[dict], settle_s: f
     )
 
 
+def settle(plant: Any, lay: RobotLayout, track: Any, prefix: str = "f1/", cap: int = 1000) -> tuple[int, list, str]:
+    """Step a one-robot ``plant`` (time step 1 ms) at zero torque for 0.2 s, then 0.1 s at a time while
+    :func:`not_at_rest` says it still moves, up to ``cap`` steps; ``track()`` every 10 steps. Returns the
+    steps taken, the :func:`floor_contacts` then, and :func:`not_at_rest`'s text ('' at rest)."""
+    base = plant.model.body(lay.base).id
+    k, why, floor = 0, "", []
+    while k < 200 or (why and k < cap):
+        for _ in range(200 if k < 200 else 100):
+            plant.step(np.zeros((1, 2)), k * 0.001)
+            k += 1
+            if k % 10 == 0:
+                track()
+        floor = floor_contacts(plant.model, plant.data, lay, prefix)
+        why = not_at_rest(plant.model, plant.data, base, floor, k * 0.001)
+    return k, floor, why
+
+
 def braking_casters(floor: list[dict], drive_force: float) -> list[tuple[dict, float, str]]:
     """The casters of :func:`floor_contacts` that brake: loaded, with friction (μ ≥ 1e-3 and condim > 1)
     and unable to roll (no joint between them and the base). ``drive_force``: what the wheels can

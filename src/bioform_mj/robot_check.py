@@ -160,12 +160,11 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
 
     from .contacts import (
         braking_casters,
-        floor_contacts,
         moving_parts,
-        not_at_rest,
         pose_change,
         relative_poses,
         self_contacts,
+        settle,
         still_bodies,
         unsimulated_self_contacts,
     )
@@ -193,13 +192,8 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         np.maximum(worst[1], now[1], out=worst[1])
 
     mu = plant._wheel_friction(0)
-    for k in range(200):  # settle at rest: the wheels' share of the weight
-        plant.step(np.zeros((1, 2)), k * 0.001)
-        if k % 10 == 9:
-            track()
+    settled, floor, moving_at_rest = settle(plant, lay, track)  # 0.2 s, up to 1 s while it moves
     loads = plant.wheel_loads()[0]
-    floor = floor_contacts(model, plant.data, lay, "f1/")
-    moving_at_rest = not_at_rest(model, plant.data, base, floor, 0.2)  # said below, with its likely cause
     selfc = self_contacts(model, plant.data, lay, "f1/")
     selfc += unsimulated_self_contacts(entry, selfc)  # a URDF's excluded pairs that overlap (design §12)
     # μ N r / f per wheel (design §13: N the wheel's own load at rest, f the share of torque that
@@ -214,7 +208,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     t_drive = 0.25 * min(motor, traction)
     for k in range(1800):
         tau = t_drive * (np.array([[1.0, 1.0]]) if k < 900 else np.array([[-1.0, 1.0]]))
-        plant.step(tau, (200 + k) * 0.001)
+        plant.step(tau, (settled + k) * 0.001)
         if k % 10 == 9:
             track()
     end = mujoco.MjData(model)
@@ -246,6 +240,8 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
     for _, brake, msg in braking_casters(floor, drive_force):
         (reasons_fail if brake >= drive_force else reasons_warn).append(msg)
+    if settled > 200 and not moving_at_rest:
+        notes.append(f"at rest after {settled * 0.001:g} s (still moving at 0.2 s): floor contacts and loads from then")
     if moving_at_rest:
         pushed = [f"'{c['body1']}'/'{c['body2']}'" for c in selfc if c.get("simulated") is not False]
         reasons_warn.append(moving_at_rest + (f"; its own bodies push it: {', '.join(pushed)}" if pushed else ""))

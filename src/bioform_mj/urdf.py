@@ -51,6 +51,7 @@ import numpy as np
 from .errors import InputError
 from .packages import find_package, package_search_path, resolve_uri
 from .robots import PackagePath, RobotRef
+from .urdf_wheels import find_wheels, left_of, welded_to
 
 __all__ = [
     "UrdfError",
@@ -510,85 +511,6 @@ def _load_mesh(file: str, role: str, links: list[str], path: Path) -> tuple[np.n
 
 
 # ------------------------------------------------------------------ import
-def _body_chain_fixed(model: Any, b: int, top: int) -> bool:
-    """True when body ``b`` hangs below ``top`` through bodies without joints (``b`` excluded)."""
-    p = int(model.body_parentid[b])
-    while p != top:
-        if p == 0 or model.body_jntnum[p]:
-            return False
-        p = int(model.body_parentid[p])
-    return True
-
-
-def _welded_to(model: Any, b: int, top: int) -> bool:
-    """True when body ``b`` is ``top`` or welded to it (no joint on the way up)."""
-    while b != top:
-        if b == 0 or model.body_jntnum[b]:
-            return False
-        b = int(model.body_parentid[b])
-    return True
-
-
-def _collision_zmin(model: Any, data: Any, g: int) -> float:
-    """Lowest world z of geom ``g``'s bounding box, m."""
-    rot = data.geom_xmat[g].reshape(3, 3)
-    c, h = model.geom_aabb[g, :3], model.geom_aabb[g, 3:]
-    return float((data.geom_xpos[g] + rot @ c)[2] - np.abs(rot[2]) @ h)
-
-
-def _find_wheels(model: Any, base: int, path: Path) -> tuple[str, str, str]:
-    """``(left, right, note)``: the two joints that can be the driven wheels (see the module docstring)."""
-    import mujoco
-
-    data = mujoco.MjData(model)
-    mujoco.mj_kinematics(model, data)
-    rot = data.xmat[base].reshape(3, 3)
-    left = rot[:, 1]
-    hinge = int(mujoco.mjtJoint.mjJNT_HINGE)
-
-    def collides(g: int) -> bool:
-        return bool(model.geom_contype[g] or model.geom_conaffinity[g])
-
-    robot = [g for g in range(model.ngeom) if collides(g) and model.body_rootid[model.geom_bodyid[g]] != 0]
-    if not robot:
-        raise UrdfError(f"{path}: the robot has no collision geometry: nothing can touch the floor")
-    floor = min(_collision_zmin(model, data, g) for g in robot)
-    sides: dict[int, list[tuple[str, float]]] = {1: [], -1: []}
-    for j in range(model.njnt):
-        if model.jnt_type[j] != hinge or abs(float(data.xaxis[j] @ left)) < 0.99:
-            continue
-        b = int(model.jnt_bodyid[j])
-        if model.body_jntnum[b] != 1 or not _body_chain_fixed(model, b, base):
-            continue
-        mine = [g for g in robot if _welded_to(model, int(model.geom_bodyid[g]), b)]
-        if not mine:
-            continue
-        low = min(_collision_zmin(model, data, g) for g in mine)
-        radius = float(data.xanchor[j][2]) - low
-        if radius <= 0 or low - floor > max(0.005, 0.25 * radius):
-            continue
-        side = 1 if float((data.xanchor[j] - data.xpos[base]) @ left) > 0 else -1
-        sides[side].append((mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or f"#{j}", radius))
-    if len(sides[1]) == 1 and len(sides[-1]) == 1:
-        lw, rw = sides[1][0][0], sides[-1][0][0]
-        return (
-            lw,
-            rw,
-            f"wheels found: left '{lw}', right '{rw}' (the joints along the base's y axis whose links touch the "
-            "floor; map left_wheel/right_wheel to choose others)",
-        )
-    cand = [n for n, _ in sides[1]] + [n for n, _ in sides[-1]]
-    if not cand:
-        raise UrdfError(
-            f"{path}: no continuous or revolute joint can be a driven wheel (an axis along the base's y axis, "
-            "right below the base, on a link that touches the floor); map left_wheel and right_wheel"
-        )
-    raise UrdfError(
-        f"{path}: cannot tell the driven wheels (left: {', '.join(repr(n) for n, _ in sides[1]) or 'none'}; "
-        f"right: {', '.join(repr(n) for n, _ in sides[-1]) or 'none'}); map left_wheel and right_wheel"
-    )
-
-
 def import_urdf(ref: RobotRef) -> UrdfImport:
     """Import the URDF ``ref.model`` as a drivable robot spec (see the module docstring).
 
@@ -704,7 +626,7 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
         b = body_id.get(base)
         if b is None:
             raise UrdfError(f"{path}: no link '{base}' (the base; the URDF's root link is '{pr.root}')")
-        if not _welded_to(model, b, body_id[pr.root]):
+        if not welded_to(model, b, body_id[pr.root]):
             raise UrdfError(
                 f"{path}: base '{base}' moves against the root link '{pr.root}' (a joint lies between them): "
                 f"the base of a URDF robot is its root link; leave base unset or map '{pr.root}'"
@@ -722,12 +644,15 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
         named = [drive.get("left", []), drive.get("right", [])]
         if all(len(n) == 1 and n[0] in joint_id and model.jnt_type[joint_id[n[0]]] == hinge for n in named):
             lw, rw = named[0][0], named[1][0]  # the maker's own simulation drives these
+            swap = left_of(model, body_id[pr.root], rw, lw)  # ROS 1 legacyMode (its default) drives them swapped
+            lw, rw = (rw, lw) if swap else (lw, rw)
             notes.append(
                 f"wheels from the Gazebo diff-drive plugin '{drive['plugin']}': left '{lw}', right '{rw}' "
-                "(map left_wheel/right_wheel to choose others)"
+                + (f"(its leftJoint '{rw}' is the right wheel, as legacyMode drives it) " if swap else "")
+                + "(map left_wheel/right_wheel to choose others)"
             )
         else:
-            lw, rw, note = _find_wheels(model, body_id[pr.root], path)
+            lw, rw, note = find_wheels(model, body_id[pr.root], path)
             notes.append(note)
         ref = replace(ref, left_wheel=lw, right_wheel=rw)
     wheels = {ref.left_wheel or "left_wheel", ref.right_wheel or "right_wheel"}
