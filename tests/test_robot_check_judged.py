@@ -242,3 +242,26 @@ def test_a_robot_moving_at_0_2_s_is_settled_longer_then_said(tmp_path):
         else:
             assert sum(c["load_n"] for c in floor) == pytest.approx(float(plant.params[0].mass) * G, rel=0.05)
     assert len(ticks) == (1000 + 300 + 200) // 10
+
+
+def test_placeholder_inertias_are_said_with_their_share(tmp_path):
+    """The Pioneer 3-DX URDF gives a 10 g top plate and a 0.1 g sonar ``ixx = iyy = izz = 1`` kg·m² (radii of
+    gyration 10 m and 100 m on a robot 0.5 m across): 2 of its 3.16 kg·m² yaw inertia, so b_eff is a third of
+    the robot's, without a word. The same diff drive without them says nothing."""
+    path = tmp_path / "dd.urdf"
+    path.write_text(_urdf())
+    assert not any("implausible inertias" in r for r in check(RobotRef(str(path)), identify_=False)["reasons"])
+    sonar = """
+  <joint name="sonar_joint" type="fixed"><parent link="base_link"/><child link="sonar"/>
+    <origin xyz="0.15 0 0.06"/></joint>
+  <link name="sonar"><inertial><mass value="0.0001"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0"
+    iyz="0"/></inertial></link>"""
+    path.write_text(_urdf(sonar))
+    rep = check(RobotRef(str(path)), identify_=False)
+    said = [r for r in rep["reasons"] if "implausible inertias" in r]
+    assert len(said) == 1 and "'sonar' 0.0001 kg, 1 kg·m² (100 m)" in said[0], said
+    # yaw inertia: 1 of the sonar + the rest (chassis 0.02, wheels 2 (1.3e-4 + 0.2 · 0.12²), casters 2 (4e-6 +
+    # 0.05 · 0.12²), about the centre of mass on the axle midpoint by symmetry; the sonar's 0.1 g moves it 4 µm)
+    rest = 0.02 + 2 * (1.3e-4 + 0.2 * 0.12**2) + 2 * (4e-6 + 0.05 * 0.12**2)
+    assert f"({100 * 1 / (1 + rest):.0f} % of the yaw inertia, 0 % of the wheels' spin inertia I_w)" in said[0]
+    assert rep["yaw_inertia_kgm2"] == pytest.approx(1 + rest, rel=1e-3)

@@ -170,7 +170,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     )
     from .identify import DRAG_STEP, check_radius, identify
     from .plants.mujoco_plant import MujocoPlant
-    from .robot_params import robot_parameters
+    from .robot_params import implausible_inertias, robot_parameters
     from .scene import prepare_robot
 
     plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
@@ -242,6 +242,8 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         (reasons_fail if brake >= drive_force else reasons_warn).append(msg)
     if settled > 200 and not moving_at_rest:
         notes.append(f"at rest after {settled * 0.001:g} s (still moving at 0.2 s): floor contacts and loads from then")
+    if odd := implausible_inertias(model, "f1/", scratch):  # at the file's configuration
+        reasons_warn.append(odd)
     if moving_at_rest:
         pushed = [f"'{c['body1']}'/'{c['body2']}'" for c in selfc if c.get("simulated") is not False]
         reasons_warn.append(moving_at_rest + (f"; its own bodies push it: {', '.join(pushed)}" if pushed else ""))

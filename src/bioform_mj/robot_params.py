@@ -317,3 +317,55 @@ def ground_truth(model: mujoco.MjModel, prefix: str = "") -> tuple[float, float]
     """``(a_eff, b_eff)`` of the robot named with ``prefix`` in a compiled model (design §8)."""
     p = robot_parameters(model, prefix)
     return p.a_eff, p.b_eff
+
+
+def implausible_inertias(model: mujoco.MjModel, prefix: str, data: mujoco.MjData) -> str:
+    """'' unless bodies of robot ``prefix`` have an inertia no body of their mass could have inside the
+    robot: a radius of gyration ``sqrt(I_max / m)`` beyond the robot's own size (the farthest point of its
+    collision geoms from its centre of mass, at ``data``'s configuration). Such an inertia is a placeholder
+    (``ixx = iyy = izz = 1`` on a 10 g plate, as a published Pioneer 3-DX URDF has) that ``a_eff, b_eff``
+    take as it is; the line names them with their share of the yaw inertia and of the wheels' ``I_w``."""
+    lay = layout_of(model, prefix)
+    bodies = subtree(model, model.body(lay.base).id)
+    mass = model.body_mass[bodies]
+    com = (mass[:, None] * data.xipos[bodies]).sum(axis=0) / max(float(mass.sum()), 1e-12)
+    mine = set(bodies.tolist())
+    size = max(
+        (
+            float(np.linalg.norm(data.geom_xpos[g] - com)) + float(model.geom_rbound[g])
+            for g in range(model.ngeom)
+            if model.geom_bodyid[g] in mine
+        ),
+        default=0.0,
+    )
+    spin = {}  # body -> wheel joint it spins with
+    for jn in lay.wheel_joints:
+        j = model.joint(jn).id
+        spin.update({int(b): j for b in welded_to(model, int(model.jnt_bodyid[j]))})
+
+    def about(b: int, axis: np.ndarray) -> float:
+        n = data.ximat[b].reshape(3, 3).T @ axis
+        return float(n @ (model.body_inertia[b] * n))
+
+    yaw = sum(
+        about(b, np.array([0.0, 0, 1])) + model.body_mass[b] * np.sum((data.xipos[b] - com)[:2] ** 2) for b in bodies
+    )
+    i_w = sum(about(b, data.xaxis[j]) for b, j in spin.items())
+    bad = [
+        b for b in bodies if model.body_mass[b] > 0 and np.sqrt(model.body_inertia[b].max() / model.body_mass[b]) > size
+    ]
+    if not bad or size <= 0:
+        return ""
+    names = [
+        f"'{(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or f'#{b}').removeprefix(prefix)}' "
+        f"{model.body_mass[b]:.3g} kg, {model.body_inertia[b].max():.3g} kg·m² "
+        f"({np.sqrt(model.body_inertia[b].max() / model.body_mass[b]):.3g} m)"
+        for b in bad
+    ]
+    share_yaw = sum(about(b, np.array([0.0, 0, 1])) for b in bad if b not in spin) / max(yaw, 1e-12)
+    share_w = sum(about(b, data.xaxis[spin[b]]) for b in bad if b in spin) / max(i_w, 1e-12)
+    return (
+        f"implausible inertias (placeholders?): {', '.join(names)}: radii of gyration beyond the robot's "
+        f"{size:.3g} m from its centre of mass; a_eff, b_eff take them as published ({100 * share_yaw:.0f} % of the "
+        f"yaw inertia, {100 * share_w:.0f} % of the wheels' spin inertia I_w); give those links their real inertia"
+    )
