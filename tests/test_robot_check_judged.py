@@ -265,3 +265,20 @@ def test_placeholder_inertias_are_said_with_their_share(tmp_path):
     rest = 0.02 + 2 * (1.3e-4 + 0.2 * 0.12**2) + 2 * (4e-6 + 0.05 * 0.12**2)
     assert f"({100 * 1 / (1 + rest):.0f} % of the yaw inertia, 0 % of the wheels' spin inertia I_w)" in said[0]
     assert rep["yaw_inertia_kgm2"] == pytest.approx(1 + rest, rel=1e-3)
+
+
+def test_a_caster_mapped_on_a_driven_wheel_is_refused(tmp_path, capsys):
+    """``--caster l_wheel_link`` on the Freight was taken: the wheel's published mesh (off for contacts, the
+    scene rolls the wheel on its proxy) was made frictionless with a note, and the check ran as if nothing was
+    wrong. A caster on a driven wheel's body is bad input: one error line, exit 2, nothing written."""
+    from bioform_mj import cli
+
+    path = tmp_path / "dd.urdf"
+    path.write_text(_urdf())
+    out = tmp_path / "check.json"
+    assert cli.main(["robot", "check", str(path), "--caster", "wheel_left", "--json", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: ") and "driven wheel body 'wheel_left'" in err[0], err
+    assert str(path) in err[0] and not out.exists()
+    assert cli.main(["robot", "check", str(path), "--caster", "caster_back", "--json", str(out)]) in (0, 4)
+    assert out.exists()

@@ -706,6 +706,9 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
         if not mine:
             raise ModelError(f"{path}: body '{nm}' (mapping casters) has no collision geom")
         named += mine
+    if on_wheel := [int(model.geom_bodyid[g]) for g in named if model.geom_bodyid[g] in wheel_bodies]:
+        wb = _name(model, mujoco.mjtObj.mjOBJ_BODY, on_wheel[0])
+        raise ModelError(f"{path}: a caster (mapping casters) is on the driven wheel body '{wb}', not a caster")
     published: list[tuple[str, float, int]] = []
     friction: dict[int, list[float]] = {}
     condim1: list[int] = []
