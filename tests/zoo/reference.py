@@ -995,7 +995,9 @@ def reference(robot: Robot) -> dict:
     for jn in robot.free_joints:
         passive.update(m_.body(b).name for b in _subtree(m_, m_.jnt_bodyid[m_.joint(jn).id]))
     other = [c for c in ident["floor_contacts"] if c["geom"] not in wheel_geoms and c["body"] not in passive]
-    braking = [c for c in other if c["friction_simulated"] >= FRICTIONLESS and c["load_n"] > 1e-3]
+    braking = [  # condim 1: frictionless whatever its friction
+        c for c in other if c["friction_simulated"] >= FRICTIONLESS and c["condim_simulated"] > 1 and c["load_n"] > 1e-3
+    ]
     if braking:
         notes.append(
             "non-driven geoms with friction carry load at rest (they brake): "
