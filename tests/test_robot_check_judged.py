@@ -282,3 +282,32 @@ def test_a_caster_mapped_on_a_driven_wheel_is_refused(tmp_path, capsys):
     assert str(path) in err[0] and not out.exists()
     assert cli.main(["robot", "check", str(path), "--caster", "caster_back", "--json", str(out)]) in (0, 4)
     assert out.exists()
+
+
+def test_a_gazebo_mu_above_the_floors_is_the_floors(tmp_path):
+    """MiR's URDF gives its driven wheels Gazebo ``mu1 200`` (ODE takes the smaller mu of a pair: the floor's).
+    Applied with priority, 200 won every pair, beat the friction patches of a fault scenario, and in MuJoCo's
+    pyramidal cone left the wheels of a base on four level supports with almost no normal load (MiR: 0 N of
+    850 N; the check said 'the wheels do not stand on the floor'). Now the wheels keep the floor's μ 1 and
+    no priority; a mu below the floor's (a caster's 0.3) still wins by priority."""
+    from bioform_mj.scene import CONTACT_PRIORITY
+
+    tail = """
+  <gazebo reference="wheel_left"><mu1>200</mu1><mu2>200</mu2></gazebo>
+  <gazebo reference="wheel_right"><mu1 value="200"/><mu2 value="200"/></gazebo>
+  <gazebo reference="caster_back"><mu1>0.3</mu1></gazebo>"""
+    path = tmp_path / "dd.urdf"
+    path.write_text(_urdf(tail))  # the casters' bottoms are level with the wheels': four supports
+    spec, layout, _, _ = prepare_robot(RobotRef(str(path)))
+    model = spec.compile()
+    for link, mu, prio in (("wheel_left", 1.0, 0), ("wheel_right", 1.0, 0), ("caster_back", 0.3, CONTACT_PRIORITY)):
+        geoms = _geoms_of(model, link)
+        assert geoms and all(model.geom_friction[g, 0] == pytest.approx(mu) for g in geoms), link
+        assert all(model.geom_priority[g] == prio for g in geoms), link
+    notes = " | ".join(layout.import_notes)
+    assert "link 'wheel_left': sliding friction 200 from <gazebo> mu1" in notes and "at or above the floor's 1" in notes
+    rep = check(RobotRef(str(path)), identify_=False)
+    weight = rep["mass_kg"] * G
+    wheels = [c["load_n"] for c in rep["floor_contacts"] if c["role"] == "wheel"]
+    assert len(wheels) == 2 and min(wheels) > 0.1 * weight, rep["floor_contacts"]  # 4.3 N each of 24.5 N (μ 200: ~0)
+    assert sum(c["load_n"] for c in rep["floor_contacts"]) == pytest.approx(weight, rel=0.02)

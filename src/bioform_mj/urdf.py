@@ -67,6 +67,9 @@ __all__ = [
 
 #: priority of a collision geom whose friction a ``<gazebo>`` tag gives (= ``scene.CONTACT_PRIORITY``)
 URDF_FRICTION_PRIORITY = 2
+#: sliding friction of the scene's floor (MuJoCo's default): a ``<gazebo>`` mu1 at or above it is the floor's
+#: (Gazebo's ODE takes the smaller mu of a pair), so the floor and its friction patches decide those contacts
+FLOOR_MU = 1.0
 
 #: file suffixes read as URDF (``.urdf.xacro`` ends with ``.xacro``)
 URDF_SUFFIXES = (".urdf", ".xacro")
@@ -556,19 +559,29 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
 
     for lname, (mu1, mu2) in pr.friction.items():
         geoms = [g for g in spec.body(lname).geoms if g.contype or g.conaffinity]
+        low = mu1 < FLOOR_MU
         for g in geoms:
             fr = np.array(g.friction, float)
-            fr[0] = mu1
+            fr[0] = min(mu1, FLOOR_MU)
             g.friction = fr
-            # the maker's friction wins against our floor, as in Gazebo (ODE takes the smaller of a pair's
-            # mu; MuJoCo the larger, unless a geom's priority is higher: scene.CONTACT_PRIORITY, design §13)
-            g.priority = URDF_FRICTION_PRIORITY
+            # ODE takes the smaller mu of a pair, MuJoCo the larger unless a geom's priority is higher: a mu below
+            # the floor's wins by priority (scene.CONTACT_PRIORITY, design §13); one above is the floor's (a
+            # priority would also beat friction patches, and a mu of 200 starves the contact's normal load in
+            # MuJoCo's pyramidal cone: a MiR100's driven wheels carried 0 N of 850 N)
+            if low:
+                g.priority = URDF_FRICTION_PRIORITY
         extra = ""
         if mu2 is not None and mu2 != mu1:
             extra = f"; mu2 {mu2:g} not used (MuJoCo's sliding friction is one number)"
+        how = (
+            "winning against the floor's as in Gazebo (ODE takes the smaller of a pair)"
+            if low
+            else f"at or above the floor's {FLOOR_MU:g}: the floor's and its friction patches' decide, as the "
+            "smaller of a pair does in Gazebo"
+        )
         notes.append(
             f"link '{lname}': sliding friction {mu1:g} from <gazebo> mu1 on its {len(geoms)} collision geom(s), "
-            f"winning against the floor's as in Gazebo{extra}"
+            f"{how}{extra}"
         )
 
     # a link without <inertial> is massless (the URDF spec: "zero mass and zero inertia if not specified");

@@ -6,7 +6,8 @@ This script does NOT import bioform_mj: only mujoco and numpy. For each robot of
    compiler with ``fusestatic="false" discardvisual="true" strippath="false"
    inertiafromgeom="false"`` inserted, ``package://NAME/`` rewritten to the zoo's package folder,
    a free joint added to the root link, links without ``<inertial>`` massless as the URDF
-   specification says, self-collision off as in Gazebo, ``<gazebo><mu1>`` friction applied);
+   specification says, self-collision off as in Gazebo, ``<gazebo><mu1>`` friction applied, the
+   smaller of it and the floor's as in Gazebo);
 2. puts it on our own plane floor (friction 1, condim 3); a geom its maker made frictionless
    (friction < 1e-3 or condim 1, or a Gazebo ``mu1`` < 1e-3) keeps that against the floor through
    geom ``priority`` (MuJoCo uses the higher-priority geom's friction/condim for a pair);
@@ -498,8 +499,10 @@ def load(
                 mu1, mu2 = gz[link]
                 mu = min(mu1, mu2)
                 published[g.name] = {"friction": [mu1, mu2], "condim": None, "source": "gazebo mu1/mu2"}
-                g.friction = [mu, g.friction[1], g.friction[2]]
-                g.priority = 1
+                # ODE (Gazebo) takes the smaller mu of a pair: one below our floor's wins by priority, one above is
+                # the floor's (a MiR100's mu1 200 would also starve its wheels' normal load in the pyramidal cone)
+                g.friction = [min(mu, FLOOR_FRICTION[0]), g.friction[1], g.friction[2]]
+                g.priority = 1 if mu < FLOOR_FRICTION[0] else 0
                 if mu < FRICTIONLESS:
                     g.condim = 1
                 if mu1 != mu2:
