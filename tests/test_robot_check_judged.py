@@ -311,3 +311,27 @@ def test_a_gazebo_mu_above_the_floors_is_the_floors(tmp_path):
     wheels = [c["load_n"] for c in rep["floor_contacts"] if c["role"] == "wheel"]
     assert len(wheels) == 2 and min(wheels) > 0.1 * weight, rep["floor_contacts"]  # 4.3 N each of 24.5 N (μ 200: ~0)
     assert sum(c["load_n"] for c in rep["floor_contacts"]) == pytest.approx(weight, rel=0.02)
+
+
+def test_a_dropped_visual_mesh_leaves_no_machine_path_in_the_runs_scene(tmp_path, monkeypatch):
+    """The Pioneer 3-DX and Freight copies have no visual meshes: the import drops them with a note, which a
+    run's scene.xml keeps (the robot's layout text); it said 'no file /abs/path/…' (issue 18 item 7: no
+    absolute path of the machine but the asset paths). The note gives the path from the URDF's folder."""
+    from bioform_mj import cli
+
+    deco = """
+  <joint name="deco_joint" type="fixed"><parent link="base_link"/><child link="deco"/></joint>
+  <link name="deco"><visual><geometry><mesh filename="meshes/gone.stl"/></geometry></visual></link>"""
+    (tmp_path / "robot").mkdir()
+    path = tmp_path / "robot" / "dd.urdf"
+    path.write_text(_urdf(deco))
+    _, layout, _, _ = prepare_robot(RobotRef(str(path)))
+    said = [n for n in layout.import_notes if "visual mesh(es) dropped" in n]
+    assert len(said) == 1 and "'meshes/gone.stl' of link 'deco' (no file meshes/gone.stl)" in said[0], said
+    assert str(tmp_path) not in " ".join(layout.import_notes)
+    (tmp_path / "sc.toml").write_text(
+        'name = "dd"\n[sim]\nduration = 0.05\n[plant]\nkind = "mujoco"\nrobots = ["robot/dd.urdf"]\n'
+    )
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["run", "sc.toml", "--quiet", "--out", str(tmp_path / "run")]) == 0
+    assert str(tmp_path) not in (tmp_path / "run" / "scene.xml").read_text()

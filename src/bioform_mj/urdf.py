@@ -361,13 +361,15 @@ def _parse(path: Path, packages: PackagePath) -> _Parsed:
                 if why:
                     if role == "collision":
                         raise UrdfError(f"{path}: <collision> mesh '{uri}' of link '{lname}': {why}")
-                    link.remove(el)
+                    link.remove(el)  # said with paths from the URDF's folder: a run's scene.xml keeps the notes
+                    why = why.replace(str(file), os.path.relpath(file, path.parent)) if file is not None else why
                     dropped.append(f"'{uri}' of link '{lname}' ({why})")
                     continue
                 mesh.set("filename", str(file))
     if dropped:
         notes.append(
-            f"{len(dropped)} visual mesh(es) dropped (looks only; contacts and inertia unchanged): "
+            f"{len(dropped)} visual mesh(es) dropped (looks only; contacts and inertia unchanged; paths from the "
+            "URDF file's folder): "
             + "; ".join(dropped[:4])
             + (f" and {len(dropped) - 4} more" if len(dropped) > 4 else "")
         )
@@ -504,7 +506,8 @@ def _load_mesh(file: str, role: str, links: list[str], path: Path) -> tuple[np.n
                 f"{path}: <collision> mesh '{file}' {where} cannot be converted ({got}); "
                 f"convert it to STL and point the URDF at it ({_INSTALL_HINT} reads COLLADA)"
             )
-        return np.zeros((0, 3)), np.zeros((0, 3), int), f"visual mesh '{file}' {where} dropped: {got}"
+        rel = os.path.relpath(file, path.parent)  # a run's scene.xml keeps the notes: no machine path
+        return np.zeros((0, 3)), np.zeros((0, 3), int), f"visual mesh '{rel}' {where} dropped: {got}"
     v, f, unit = got
     note = (
         f"{role} mesh '{Path(file).name}' {where} converted with trimesh ({len(v)} vertices, "
