@@ -252,32 +252,3 @@ def braking_casters(floor: list[dict], drive_force: float) -> list[tuple[dict, f
         )
         out.append((c, brake, msg))
     return out
-
-
-def unsimulated_self_contacts(entry: Any, simulated: list[dict]) -> list[dict]:
-    """Pairs of a URDF robot's own bodies that overlap at rest where the import turned self-collision off
-    (the URDF/Gazebo convention, design §12): the contacts MuJoCo would make with it on, from the file's
-    configuration (one ``mj_forward`` of the robot alone), each marked ``"simulated": False``. Empty for an
-    MJCF robot or ``self_collide = true`` (their self contacts are simulated and listed already)."""
-    import dataclasses
-
-    import mujoco
-
-    from .plants.mujoco_plant import MujocoPlant  # above the plant: a one-robot scene of its own
-    from .robots import resolve_robot
-
-    ref = resolve_robot(entry)
-    if ref.self_collide or not str(ref.model).lower().endswith((".urdf", ".xacro")):
-        return []
-    plant = MujocoPlant(
-        [dataclasses.replace(ref, self_collide=True)], np.zeros((1, 3)), 0.001, 0.001, None, slots=False
-    )
-    data = mujoco.MjData(plant.model)
-    mujoco.mj_forward(plant.model, data)
-    have = {(c["body1"], c["body2"]) for c in simulated}
-    out = []
-    for c in self_contacts(plant.model, data, plant.layouts[0], "f1/"):
-        if (c["body1"], c["body2"]) not in have:
-            c["simulated"] = False
-            out.append(c)
-    return out

@@ -165,9 +165,9 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         relative_poses,
         self_contacts,
         still_bodies,
-        unsimulated_self_contacts,
     )
     from .identify import DRAG_STEP, check_radius, identify
+    from .overlaps import self_contacts_at_rest
     from .plants.mujoco_plant import MujocoPlant
     from .robot_params import robot_parameters
     from .scene import prepare_robot
@@ -197,14 +197,16 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
             track()
     loads = plant.wheel_loads()[0]
     floor = floor_contacts(model, plant.data, lay, "f1/")
-    selfc = self_contacts(model, plant.data, lay, "f1/")
-    selfc += unsimulated_self_contacts(entry, selfc)  # a URDF's excluded pairs that overlap (design §12)
+    # the scene's contacts at rest, and every pair whose published geoms overlap at qpos0 (design §13.1)
+    selfc, self_notes = self_contacts_at_rest(
+        entry, lay.base[len("f1/") :], model, "f1/", self_contacts(model, plant.data, lay, "f1/")
+    )
     # μ N r / f per wheel (design §13: N the wheel's own load at rest, f the share of torque that
     # reaches the floor past the rotor; μ m g r / 2 for an even split and a light rotor)
     traction = p.traction_torque(mu, float(loads.min()))
     motor = float(min(p.tau_max))
     motor_accel = 2 * motor * p.a_eff  # υ̇ at full torque on both wheels, m/s²
-    notes = list(lay.notes)
+    notes = list(lay.notes) + self_notes
     reasons_fail, reasons_warn = [], []
 
     # the first ~2 s under gravity and a drive (forward, then a turn): what moves relative to the base
@@ -243,8 +245,8 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
     for _, brake, msg in braking_casters(floor, drive_force):
         (reasons_fail if brake >= drive_force else reasons_warn).append(msg)
-    for sc in selfc:
-        if sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_FORCE * weight:
+    for sc in selfc:  # a pair the scene does not collide is a note (self_notes), not a warning
+        if sc["simulated"] and (sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_FORCE * weight):
             reasons_warn.append(
                 f"the robot's own bodies '{sc['body1']}' and '{sc['body2']}' touch at rest "
                 f"({1e3 * sc['depth_m']:.2g} mm deep, {sc['force_n']:.3g} N; self_contacts): MuJoCo collides all but "
@@ -765,6 +767,7 @@ def main(args: argparse.Namespace) -> int:
         lines.append(
             f"  self contact: '{sc['body1']}' / '{sc['body2']}' "
             f"{1e3 * sc['depth_m']:.3g} mm deep, {sc['force_n']:.3g} N"
+            + ("" if sc["simulated"] else " (not collided in the scene)")
         )
     moving = report["moving_parts"]
     lines.append(
