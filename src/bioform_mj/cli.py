@@ -30,7 +30,7 @@ from .cliproc import (  # noqa: F401 - re-exported for callers of cli
 from .clireport import _print_summary, _record_toml, _show_robot_warnings, _warn_outcomes  # noqa: F401
 from .control.stack import METHODS
 from .errors import BioformError, InputError, WriteFailed
-from .scenario import PLANTS
+from .scenario_config import PLANTS
 
 EXIT_OK, EXIT_OTHER, EXIT_INPUT, EXIT_DIVERGED = 0, 1, 2, 3
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -273,7 +273,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "presets":
-        from .scenario import preset_descriptions
+        from .scenario_load import preset_descriptions
 
         desc = preset_descriptions()
         width = max(map(len, desc))
@@ -301,7 +301,7 @@ def _dispatch(args: argparse.Namespace) -> int:
 
 
 def _load(args: argparse.Namespace):
-    from .scenario import load
+    from .scenario_load import load
 
     overrides = list(args.overrides)
     if args.duration is not None:
