@@ -13,7 +13,7 @@ from ._version import __version__
 from .engine import CHANNELS, MEAN_CHANNELS
 from .outcomes import follower_outcomes, severity, slots_of
 from .record import resolved_config
-from .scenario import Scenario
+from .scenario_config import Scenario
 
 
 def _summary(

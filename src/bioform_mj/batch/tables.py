@@ -9,7 +9,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..scenario import Scenario
+from ..scenario_config import Scenario
 from .plant_kernels import EVENT_FIELDS
 from .support import unsupported
 

@@ -44,8 +44,8 @@ import numpy as np
 from ..control.kernel import estimator_advance
 from ..engine import Bounds, check, describe
 from ..errors import Diverged, InputError
-from ..scenario import Scenario
-from ..scenario import load as load_scenario
+from ..scenario_config import Scenario
+from ..scenario_load import load as load_scenario
 from .kernels import direct_torque, sense_errors, track_velocity
 
 try:  # the optional extra [rl]
