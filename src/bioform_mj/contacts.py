@@ -11,7 +11,7 @@ Read from MuJoCo's own contact list of a compiled scene (``data.contact``, force
 - :func:`self_contacts`: pairs of the robot's own bodies in contact (penetration depth, force);
 - :func:`relative_poses` / :func:`moving_parts`: how far each body moves relative to the base.
 
-Imports nothing of the project above :mod:`bioform_mj.scene`.
+Imports nothing of the project above :mod:`bioform_mj.robot_layout`.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from bioform_mj.scene import FRICTIONLESS, RobotLayout, subtree, welded_to
+from bioform_mj.robot_layout import FRICTIONLESS, RobotLayout, subtree, welded_to
 
 __all__ = [
     "CASTER_LOAD",
