@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -82,13 +83,88 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
     """Resolve ``ref``'s mapping on the compiled robot ``model``; returns ``(layout, plan)``.
 
     ``plan`` says what :func:`~bioform_mj.robot_prepare.prepare_robot` must change in the spec.
-    Raises ModelError naming the element and the file.
+    Raises ModelError naming the element and the file. The steps, in order (each adds its notes):
+    the base, the wheel joints, the axle, the wheels' contact geoms and radius, the wheel drives
+    and the torque limit, the motors, notes on the wheel joints and on other wheels, the casters
+    and the other joints (:func:`_contacts_and_joints`).
     """
-    base_name = ref.base or ROBOT.base
-    jl_name = ref.left_wheel or ROBOT.wheel_joints[0]
-    jr_name = ref.right_wheel or ROBOT.wheel_joints[1]
+    names = _Mapped(
+        ref.base or ROBOT.base, ref.left_wheel or ROBOT.wheel_joints[0], ref.right_wheel or ROBOT.wheel_joints[1]
+    )
     notes: list[str] = []
+    base, has_free = _find_base(model, path, names.base, notes)
+    joints = _wheel_joints(model, path, names, base)
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    ax = _axle(model, data, path, ref, names, base, joints, notes)
+    r, geoms, proxies = _wheel_contacts(model, data, path, ref, joints, ax.anchors, ax.up, notes)
+    drives, dc_all, keep = _wheel_drives(model, joints)
+    tau_max = _torque_limit(model, path, ref, names, joints, drives, keep, notes)
+    motors, keep, disabled, dc_keep, tau_max = _motors(
+        model, path, ref, joints, drives, dc_all, keep, tau_max, add_motors, notes
+    )
+    _note_wheel_joints(model, joints, r, notes)
+    # other wheels: hinges below the base, axis along its y, touching the floor (a 4-wheel or skid-steer
+    # base, e.g. the menagerie Jackal); a swivelling caster's wheel sits below a second joint and is fine
+    floor_z = float(np.mean(ax.anchors[:, 2])) - r
+    _note_other_wheels(model, data, base, joints, ax.left, ax.up, r, floor_z, notes)
+    cj = _contacts_and_joints(model, data, path, ref, base, joints, drives + dc_all, r, floor_z, ax.up, notes)
+    jn = tuple(_name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints)
+    layout = RobotLayout(
+        file=str(path),
+        base=names.base,
+        wheel_joints=jn,
+        motors=motors,
+        wheel_geoms=_wheel_geom_names(model, jn, geoms, proxies),
+        wheel_radius=r,
+        half_track=ax.half_track,
+        axle=tuple(float(x) for x in ax.axle),
+        wheel_sign=tuple(ax.signs),
+        tau_max=float(tau_max),
+        disabled_actuators=tuple(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in disabled),
+        notes=tuple(notes),
+        **cj["layout"],
+    )
+    plan = dict(
+        has_free=has_free,
+        keep=keep,
+        disabled=disabled,
+        dc=bool(dc_keep),
+        dc_removed=[] if dc_keep else dc_all,
+        proxies=proxies,
+        geoms=geoms,
+        radius=r,
+        joints=joints,
+        axle_world=ax.mid,
+        base_yaw=float(np.arctan2(ax.fwd[1], ax.fwd[0])),
+        **cj["plan"],
+    )
+    return layout, plan
 
+
+class _Mapped(NamedTuple):
+    """The mapping's names of the base body and the wheel joints (the convention's where not given)."""
+
+    base: str
+    left: str
+    right: str
+
+
+class _Axle(NamedTuple):
+    """The wheels' axle in the model file's world frame at ``qpos0`` (m), and the base's axes."""
+
+    fwd: np.ndarray  # base x axis, world frame
+    left: np.ndarray  # base y axis
+    up: np.ndarray  # base z axis
+    anchors: np.ndarray  # (2, 3) the wheel joints' anchors, [left, right]
+    signs: list[int]  # +1/−1 per wheel: sign · joint velocity = forward wheel rate
+    mid: np.ndarray  # axle midpoint, world frame
+    axle: np.ndarray  # axle midpoint in the base body's frame
+    half_track: float
+
+
+def _find_base(model: mujoco.MjModel, path: Path, base_name: str, notes: list[str]) -> tuple[int, bool]:
+    """The base body's id and whether it has a free joint (one is added otherwise: noted)."""
     base = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, base_name)
     if base < 0:
         raise ModelError(f"{path}: no body '{base_name}' (the base; map it with base = \"BODY\")")
@@ -107,9 +183,13 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         raise ModelError(f"{path}: body '{base_name}' has no free joint and is not a child of the world body")
     if not has_free:
         notes.append(f"body '{base_name}' had no free joint: one was added")
+    return base, has_free
 
+
+def _wheel_joints(model: mujoco.MjModel, path: Path, names: _Mapped, base: int) -> list[int]:
+    """The ids of the left and right wheel joints: two different hinges on bodies below the base."""
     joints = []
-    for side, jname in (("left_wheel", jl_name), ("right_wheel", jr_name)):
+    for side, jname in (("left_wheel", names.left), ("right_wheel", names.right)):
         j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, jname)
         if j < 0:
             raise ModelError(f"{path}: no joint '{jname}' ({side}; map it with {side} = \"JOINT\")")
@@ -121,18 +201,21 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         while b not in (0, base):
             b = model.body_parentid[b]
         if b != base:
-            raise ModelError(f"{path}: joint '{jname}' ({side}) is not on a body below '{base_name}'")
+            raise ModelError(f"{path}: joint '{jname}' ({side}) is not on a body below '{names.base}'")
         joints.append(j)
     if joints[0] == joints[1]:
-        raise ModelError(f"{path}: left_wheel and right_wheel are the same joint '{jl_name}'")
+        raise ModelError(f"{path}: left_wheel and right_wheel are the same joint '{names.left}'")
+    return joints
 
-    data = mujoco.MjData(model)
-    mujoco.mj_kinematics(model, data)
+
+def _axle(model, data, path: Path, ref: RobotRef, names: _Mapped, base: int, joints, notes) -> _Axle:
+    """The level base's axes, the wheel axes along its y (their forward signs), the axle midpoint and
+    the half track (the mapping's, if given)."""
     rot = data.xmat[base].reshape(3, 3)
     fwd, left, up = rot[:, 0], rot[:, 1], rot[:, 2]
     if up[2] < 0.999:
         raise ModelError(
-            f"{path}: body '{base_name}' is not level in the model file (its z axis is "
+            f"{path}: body '{names.base}' is not level in the model file (its z axis is "
             f"{np.round(up, 3).tolist()}); the base frame must be x forward, z up"
         )
     anchors = np.array([data.xanchor[j] for j in joints])
@@ -154,7 +237,7 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
             )
     if (anchors[0] - anchors[1]) @ left <= 0:
         raise ModelError(
-            f"{path}: left_wheel '{jl_name}' is not to the left of right_wheel '{jr_name}' "
+            f"{path}: left_wheel '{names.left}' is not to the left of right_wheel '{names.right}' "
             "(swapped mapping, or the base's x axis is not forward)"
         )
     mid = anchors.mean(axis=0)
@@ -162,15 +245,23 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
     if np.linalg.norm(axle) > 1e-6:
         notes.append(
             f"base origin is off the axle midpoint (axle midpoint at {np.round(axle, 4).tolist()} m in "
-            f"'{base_name}'): pose and υ refer to the axle midpoint"
+            f"'{names.base}'): pose and υ refer to the axle midpoint"
         )
     half_track = float(0.5 * np.linalg.norm(anchors[0] - anchors[1]))
     if ref.half_track > 0:
         if abs(ref.half_track / half_track - 1) > 0.01:
             notes.append(f"half_track {ref.half_track:g} m given; the joint anchors say {half_track:.4g} m")
         half_track = float(ref.half_track)
+    return _Axle(fwd, left, up, anchors, signs, mid, axle, half_track)
 
-    # wheel contact geoms: collision geoms on each wheel's body; radius = extent below the anchor
+
+def _wheel_contacts(model, data, path: Path, ref: RobotRef, joints, anchors, up, notes):
+    """Each wheel's contact geom and the wheel radius, m: ``(r, geoms, proxies)``.
+
+    The collision geoms on each wheel's body; the radius is their extent below the joint anchor
+    (the mapping's ``wheel_radius`` if given). ``geoms[i]``: the lowest one (−1: none);
+    ``proxies[i]``: ``None`` (the geom is single-contact and alone), ``(joint, candidates)`` (they
+    are replaced by a single-contact proxy) or ``(joint, None)`` (no geom: a proxy is added)."""
     radii, geoms, proxies = [], [], []
     for j, anchor in zip(joints, anchors):
         wb = model.jnt_bodyid[j]
@@ -222,44 +313,60 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         raise ModelError(
             f"{path}: wheel radius from the collision geoms is {r:g} m (are the wheel geoms centred on their joints?)"
         )
+    return r, geoms, proxies
 
+
+def _drives_wheel(model: mujoco.MjModel, a: int, wheel_set: set) -> bool:
+    """Actuator ``a`` acts on a wheel joint (directly, or through a tendon)."""
+    trn, tid = int(model.actuator_trntype[a]), int(model.actuator_trnid[a, 0])
+    if trn in (int(mujoco.mjtTrn.mjTRN_JOINT), int(mujoco.mjtTrn.mjTRN_JOINTINPARENT)):
+        return tid in wheel_set
+    if trn == int(mujoco.mjtTrn.mjTRN_TENDON):
+        adr, num = model.tendon_adr[tid], model.tendon_num[tid]
+        return any(
+            model.wrap_type[w] == int(mujoco.mjtWrap.mjWRAP_JOINT) and model.wrap_objid[w] in wheel_set
+            for w in range(adr, adr + num)
+        )
+    return False
+
+
+def _plain_motor(model: mujoco.MjModel, a: int, j: int) -> bool:
+    """Actuator ``a`` is a plain torque motor on joint ``j`` (gain 1, no bias or dynamics, gear ±1, ctrl limited)."""
+    return (
+        int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
+        and model.actuator_trnid[a, 0] == j
+        and model.actuator_dyntype[a] == int(mujoco.mjtDyn.mjDYN_NONE)
+        and model.actuator_gaintype[a] == int(mujoco.mjtGain.mjGAIN_FIXED)
+        and model.actuator_gainprm[a, 0] == 1
+        and model.actuator_biastype[a] == int(mujoco.mjtBias.mjBIAS_NONE)
+        and abs(abs(model.actuator_gear[a, 0]) - 1) < 1e-12
+        and bool(model.actuator_ctrllimited[a])
+    )
+
+
+def _wheel_drives(model: mujoco.MjModel, joints) -> tuple[list[int], list[int], list[int]]:
+    """The actuators on the wheels: ``(drives, dc_all, keep)``: the drives other than ``<dcmotor>``, the
+    ``<dcmotor>`` ones (design §8.2: used with the mapping's motor = "dc", removed otherwise), and the
+    plain motor kept per wheel (``[-1, -1]`` unless there are exactly two drives, one plain motor each)."""
     # actuators on the wheels: keep a plain motor, neutralise every other drive
     wheel_set = set(joints)
-
-    def drives_wheel(a: int) -> bool:
-        trn, tid = int(model.actuator_trntype[a]), int(model.actuator_trnid[a, 0])
-        if trn in (int(mujoco.mjtTrn.mjTRN_JOINT), int(mujoco.mjtTrn.mjTRN_JOINTINPARENT)):
-            return tid in wheel_set
-        if trn == int(mujoco.mjtTrn.mjTRN_TENDON):
-            adr, num = model.tendon_adr[tid], model.tendon_num[tid]
-            return any(
-                model.wrap_type[w] == int(mujoco.mjtWrap.mjWRAP_JOINT) and model.wrap_objid[w] in wheel_set
-                for w in range(adr, adr + num)
-            )
-        return False
-
-    def plain_motor(a: int, j: int) -> bool:
-        return (
-            int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
-            and model.actuator_trnid[a, 0] == j
-            and model.actuator_dyntype[a] == int(mujoco.mjtDyn.mjDYN_NONE)
-            and model.actuator_gaintype[a] == int(mujoco.mjtGain.mjGAIN_FIXED)
-            and model.actuator_gainprm[a, 0] == 1
-            and model.actuator_biastype[a] == int(mujoco.mjtBias.mjBIAS_NONE)
-            and abs(abs(model.actuator_gear[a, 0]) - 1) < 1e-12
-            and bool(model.actuator_ctrllimited[a])
-        )
-
-    drives = [a for a in range(model.nu) if drives_wheel(a)]
+    drives = [a for a in range(model.nu) if _drives_wheel(model, a, wheel_set)]
     # <dcmotor> drives (design §8.2): used with the mapping's motor = "dc", removed otherwise
     dc_all = [a for a in drives if int(model.actuator_dyntype[a]) == int(mujoco.mjtDyn.mjDYN_DCMOTOR)]
     drives = [a for a in drives if a not in dc_all]
     keep = []
     for j in joints:
-        mine = [a for a in drives if plain_motor(a, j)]
+        mine = [a for a in drives if _plain_motor(model, a, j)]
         keep.append(mine[0] if mine else -1)
     if min(keep) < 0 or len(drives) != 2:
         keep = [-1, -1]
+    return drives, dc_all, keep
+
+
+def _torque_limit(model, path: Path, ref: RobotRef, names: _Mapped, joints, drives, keep, notes) -> float:
+    """The wheel torque limit, N·m: the mapping's ``tau_max``, else the kept motors' ctrl/force range,
+    else the model's own drives' force range × gear or the joints' ``actuatorfrcrange``; a joint's
+    ``actuatorfrcrange`` caps it."""
     limits = []
     if ref.tau_max > 0:
         tau_max = float(ref.tau_max)
@@ -281,7 +388,7 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
         if not limits:
             raise ModelError(
                 f"{path}: cannot tell the wheel torque limit: no drive actuator on "
-                f"'{jl_name}'/'{jr_name}' has a forcerange and the joints have no actuatorfrcrange; "
+                f"'{names.left}'/'{names.right}' has a forcerange and the joints have no actuatorfrcrange; "
                 "give tau_max (N·m) in the robot's mapping (a URDF: <limit effort> on the wheel joints)"
             )
         tau_max = min(limits)
@@ -300,7 +407,14 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
                 tau_max = lim
     if not tau_max > 0:
         raise ModelError(f"{path}: wheel torque limit is {tau_max:g} N·m; give tau_max in the robot's mapping")
+    return tau_max
 
+
+def _motors(model, path: Path, ref: RobotRef, joints, drives, dc_all, keep, tau_max, add_motors, notes):
+    """The motors the plant writes: ``(motors, keep, disabled, dc_keep, tau_max)``: their names (the
+    kept plain motors, the ``<dcmotor>`` ones with motor = "dc" (:func:`_dc_plan`, which also sets
+    ``tau_max``), else torque motors to add), the actuators kept per wheel, the model's wheel drives
+    left unused and the kept ``<dcmotor>`` ones."""
     disabled = [a for a in drives if a not in keep]
     dc_keep: list[int] = []
     if ref.motor == "dc":
@@ -324,6 +438,12 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
             + ", ".join(f"'{_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)}'" for a in disabled)
             + " is left unused (zero gain and bias: no force)"
         )
+    return motors, keep, disabled, dc_keep, tau_max
+
+
+def _note_wheel_joints(model: mujoco.MjModel, joints, r: float, notes: list[str]) -> None:
+    """Notes on what the wheel joints carry that the paper's model lacks: damping, armature,
+    frictionloss, stiffness."""
     for j in joints:
         dof = model.jnt_dofadr[j]
         parts = [
@@ -349,9 +469,11 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
                 "a spring on a wheel that turns without end: a torque k φ growing with the distance driven "
                 f"(k s / r = {model.jnt_stiffness[j] / r:.3g} N·m per metre), which the paper's model lacks"
             )
-    # other wheels: hinges below the base, axis along its y, touching the floor (a 4-wheel or skid-steer
-    # base, e.g. the menagerie Jackal); a swivelling caster's wheel sits below a second joint and is fine
-    floor_z = float(np.mean(anchors[:, 2])) - r
+
+
+def _note_other_wheels(model, data, base: int, joints, left, up, r: float, floor_z: float, notes) -> None:
+    """A note per other fixed wheel touching the floor: a hinge along the axle direction, the only
+    joint of its body, below the base through bodies without joints (skid steer)."""
     for j in range(model.njnt):
         if j in joints or model.jnt_type[j] != _HINGE or abs(float(data.xaxis[j] @ left)) < 0.99:
             continue
@@ -377,42 +499,16 @@ def _analyse(model: mujoco.MjModel, path: Path, ref: RobotRef, *, add_motors: bo
                 "scrubbing it sideways (skid steer), which the paper's differential-drive model lacks; "
                 "its own actuators, if any, are left as they are"
             )
-    cj = _contacts_and_joints(model, data, path, ref, base, joints, drives + dc_all, r, floor_z, up, notes)
-    jn = tuple(_name(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints)
+
+
+def _wheel_geom_names(model: mujoco.MjModel, jn, geoms, proxies) -> tuple[str, ...]:
+    """The geom that touches the floor, per wheel: its name, or ``JOINT_contact`` for a proxy or an
+    unnamed wheel geom (prepare_robot gives it that name)."""
     gnames = []
     for j, g, pr in zip(jn, geoms, proxies):
         named = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) if pr is None else None
         gnames.append(named or f"{j}_contact")  # an unnamed wheel geom gets a name (prepare_robot)
-    layout = RobotLayout(
-        file=str(path),
-        base=base_name,
-        wheel_joints=jn,
-        motors=motors,
-        wheel_geoms=tuple(gnames),
-        wheel_radius=r,
-        half_track=half_track,
-        axle=tuple(float(x) for x in axle),
-        wheel_sign=tuple(signs),
-        tau_max=float(tau_max),
-        disabled_actuators=tuple(_name(model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in disabled),
-        notes=tuple(notes),
-        **cj["layout"],
-    )
-    plan = dict(
-        has_free=has_free,
-        keep=keep,
-        disabled=disabled,
-        dc=bool(dc_keep),
-        dc_removed=[] if dc_keep else dc_all,
-        proxies=proxies,
-        geoms=geoms,
-        radius=r,
-        joints=joints,
-        axle_world=mid,
-        base_yaw=float(np.arctan2(fwd[1], fwd[0])),
-        **cj["plan"],
-    )
-    return layout, plan
+    return tuple(gnames)
 
 
 def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, drives, r, floor_z, up, notes) -> dict:
