@@ -21,7 +21,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from bioform_mj.robot_layout import FRICTIONLESS, RobotLayout, subtree, welded_to
+from bioform_mj.robot_layout import FRICTIONLESS, RobotLayout, _label, _name, subtree, welded_to
 
 __all__ = [
     "CASTER_LOAD",
@@ -44,15 +44,11 @@ MOVE_M, MOVE_DEG = 5e-3, 1.0
 
 
 def _gname(model: mujoco.MjModel, g: int) -> str:
-    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
-    if name:
-        return name
-    b = int(model.geom_bodyid[g])
-    return f"{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b)}#{g - int(model.body_geomadr[b])}"
+    return _label(model, mujoco.mjtObj.mjOBJ_GEOM, g, "#")
 
 
 def _bname(model: mujoco.MjModel, b: int) -> str:
-    return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or f"#{b}"
+    return _name(model, mujoco.mjtObj.mjOBJ_BODY, b)
 
 
 def _strip(name: str, prefix: str) -> str:

@@ -225,22 +225,27 @@ def _spec_actuator(spec: mujoco.MjSpec, model: mujoco.MjModel, a: int) -> mujoco
     return spec.actuator(name) if name else spec.actuators[a]
 
 
-def _geom_label(model: mujoco.MjModel, g: int) -> str:
-    """A geom's name, or ``BODY_geomK`` for an unnamed one (prepare_robot gives it that name)."""
-    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
+def _label(model: mujoco.MjModel, objtype: mujoco.mjtObj, i: int, sep: str) -> str:
+    """Element ``i``'s name (a geom or a joint), or ``BODY{sep}K`` for an unnamed one: the ``K``-th
+    of its kind on its body ``BODY`` (named as :func:`_name` does)."""
+    name = mujoco.mj_id2name(model, objtype, i)
     if name:
         return name
-    b = int(model.geom_bodyid[g])
-    return f"{_name(model, mujoco.mjtObj.mjOBJ_BODY, b)}_geom{g - int(model.body_geomadr[b])}"
+    if objtype == mujoco.mjtObj.mjOBJ_GEOM:
+        b, first = int(model.geom_bodyid[i]), int(model.body_geomadr[model.geom_bodyid[i]])
+    else:
+        b, first = int(model.jnt_bodyid[i]), int(model.body_jntadr[model.jnt_bodyid[i]])
+    return f"{_name(model, mujoco.mjtObj.mjOBJ_BODY, b)}{sep}{i - first}"
+
+
+def _geom_label(model: mujoco.MjModel, g: int) -> str:
+    """A geom's name, or ``BODY_geomK`` for an unnamed one (prepare_robot gives it that name)."""
+    return _label(model, mujoco.mjtObj.mjOBJ_GEOM, g, "_geom")
 
 
 def _joint_label(model: mujoco.MjModel, j: int) -> str:
     """A joint's name, or ``BODY_jointK`` for an unnamed one (prepare_robot gives it that name)."""
-    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j)
-    if name:
-        return name
-    b = int(model.jnt_bodyid[j])
-    return f"{_name(model, mujoco.mjtObj.mjOBJ_BODY, b)}_joint{j - int(model.body_jntadr[b])}"
+    return _label(model, mujoco.mjtObj.mjOBJ_JOINT, j, "_joint")
 
 
 def _quoted(names) -> str:
