@@ -66,15 +66,9 @@ class Stepper:
         odometry: bool,
         missing: set[str],
     ) -> None:
-        self.ctx, self.plant, self.controller, self.faults = ctx, plant, controller, faults
-        self.own_stack, self.kernel, self.c_true, self.odometry, self.missing = (
-            own_stack,
-            kernel,
-            c_true,
-            odometry,
-            missing,
-        )
-        self.n = n
+        self.ctx, self.n, self.plant, self.controller, self.faults = ctx, n, plant, controller, faults
+        self.own_stack, self.kernel, self.c_true = own_stack, kernel, c_true
+        self.odometry, self.missing = odometry, missing
         self.cname = type(controller).__name__
         self.nonfinite: dict[str, Any] = {}  # design §17: a user's controller returned NaN/inf torques
         self.applied = np.zeros((self.n, 2))  # the torques the plant applies over the next period
@@ -82,6 +76,7 @@ class Stepper:
         self.at = [0, 0]  # (steps done, log rows) of the Python chunk so far: kept when a step raises
 
     def measure(self) -> tuple[np.ndarray, np.ndarray]:
+        """What the controllers get: the true pose and velocity, or the odometry's (design §8.3)."""
         ctx = self.ctx
         return self.plant.measurement(ctx.pose, ctx.vel) if self.odometry else (ctx.pose, ctx.vel)
 

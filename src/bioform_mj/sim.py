@@ -7,7 +7,8 @@ kernel (``controller.kernel``), the chunk runs in machine code; otherwise (injec
 faults, a user's controller, ``engine="stepwise"``, ``NUMBA_DISABLE_JIT=1``) it runs step
 by step in Python. Both call the same compiled equations and the same metric, log and
 guard functions (``engine.py``), so the two engines agree bit for bit on one machine
-(docs/design.md §9).
+(docs/design.md §9). :func:`simulate` resolves, builds, runs the loop (``runloop.py``) and
+summarises (``runsummary.py``).
 """
 
 from __future__ import annotations
