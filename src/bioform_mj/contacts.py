@@ -11,7 +11,7 @@ Read from MuJoCo's own contact list of a compiled scene (``data.contact``, force
 - :func:`self_contacts`: pairs of the robot's own bodies in contact (penetration depth, force);
 - :func:`relative_poses` / :func:`moving_parts`: how far each body moves relative to the base.
 
-Imports nothing of the project above :mod:`bioform_mj.scene`.
+Imports nothing of the project above :mod:`bioform_mj.robot_layout`.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from bioform_mj.scene import FRICTIONLESS, RobotLayout, subtree, welded_to
+from bioform_mj.robot_layout import FRICTIONLESS, RobotLayout, _label, _name, subtree, welded_to
 
 __all__ = [
     "CASTER_LOAD",
@@ -44,15 +44,11 @@ MOVE_M, MOVE_DEG = 5e-3, 1.0
 
 
 def _gname(model: mujoco.MjModel, g: int) -> str:
-    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
-    if name:
-        return name
-    b = int(model.geom_bodyid[g])
-    return f"{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b)}#{g - int(model.body_geomadr[b])}"
+    return _label(model, mujoco.mjtObj.mjOBJ_GEOM, g, "#")
 
 
 def _bname(model: mujoco.MjModel, b: int) -> str:
-    return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or f"#{b}"
+    return _name(model, mujoco.mjtObj.mjOBJ_BODY, b)
 
 
 def _strip(name: str, prefix: str) -> str:

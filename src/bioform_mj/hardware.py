@@ -103,7 +103,7 @@ def verdict(sc: Any, plant: Any, summary: dict[str, Any], logd: dict[str, np.nda
     else:
         import mujoco
 
-        from .scene import dc_constants
+        from .robot_layout import dc_constants
 
         m = plant.model
         limits = []

@@ -25,6 +25,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from bioform_mj.robot_layout import subtree
 from bioform_mj.robot_params import (  # re-exported: the ground truth lives beside the scene (STYLE item 8)
     COM_TOLERANCE_M,
     RobotParams,
@@ -32,7 +33,6 @@ from bioform_mj.robot_params import (  # re-exported: the ground truth lives bes
     robot_parameters,
     robot_truth,
 )
-from bioform_mj.scene import subtree
 
 log = logging.getLogger(__name__)
 
@@ -277,7 +277,7 @@ def identify(
     """
     from bioform_mj.errors import InputError
     from bioform_mj.plants.mujoco_plant import MujocoPlant  # a floor up; imported when used
-    from bioform_mj.scene import prepare_robot
+    from bioform_mj.robot_prepare import prepare_robot
 
     if not (math.isfinite(duration) and duration > 0) or not (math.isfinite(settle) and settle >= 0):
         raise InputError(f"identify: duration must be > 0 and settle >= 0 s, got {duration}, {settle}")

@@ -88,7 +88,8 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
     """
     import mujoco
 
-    from .scene import _geom_support, layout_of
+    from .robot_analysis import layout_of
+    from .robot_layout import _geom_support
 
     lay = layout_of(model, prefix)
     base = model.body(lay.base).id
@@ -170,7 +171,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     from .overlaps import self_contacts_at_rest
     from .plants.mujoco_plant import MujocoPlant
     from .robot_params import robot_parameters
-    from .scene import prepare_robot
+    from .robot_prepare import prepare_robot
 
     plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
     check_radius(plant)  # exit 2 before any work: a radius nothing can be measured with

@@ -394,7 +394,7 @@ class FormationParallelEnv(ParallelEnv):
         return u
 
     def _events(self, k: int) -> None:
-        from ..sim import EventQueue
+        from ..runloop import EventQueue
 
         if k == 0:
             self._evq = EventQueue(self._sc.events, self.dt)
