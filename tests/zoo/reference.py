@@ -878,6 +878,21 @@ def _settle(L: Loaded, swivels, turn: bool, mid: np.ndarray) -> tuple:
     return _state(L)
 
 
+def _levels(L: Loaded, st, torques: list[float], turn: bool, signs, damped: bool) -> tuple:
+    """The drive (``τ_L = τ_R = T``) or turn (``τ_R = −τ_L = T``) tests at each ``T`` of ``torques`` from the
+    settled state ``st``: ``(slope, intercept, accelerations, drag rates, pitch range rad)`` with the slope and
+    intercept of the accelerations (CoM forward / yaw) against ``τ_a = 2 T`` resp. ``τ_b = 2 T``."""
+    acc, drag, pitch = [], [], 0.0
+    for T in torques:
+        r = _run(L, st, -T if turn else T, T, signs)
+        alpha, beta = _rate(r["t"], r["w" if turn else "v"], r["w0" if turn else "v0"], damped)
+        acc.append(alpha)
+        drag.append(-beta)
+        pitch = max(pitch, float(np.ptp(r["pitch"])))
+    slope, intercept = np.polyfit(2 * np.array(torques), acc, 1)
+    return slope, intercept, acc, drag, pitch
+
+
 def identify(L: Loaded, f: dict) -> dict:
     """Settle, record the floor contacts, run the drive and turn tests at three levels; fit ``a_id, b_id``.
 
@@ -903,26 +918,12 @@ def identify(L: Loaded, f: dict) -> dict:
     turn_max = min(max(ACCELS) / l, TURN_RATE_MAX / RUN_S)  # rad/s²
     drive_t = [fl + acc / (2 * a_f) for acc in ACCELS]
     turn_t = [fl + turn_max * k / len(ACCELS) / (2 * b_f) for k in range(1, len(ACCELS) + 1)]
-    acc_v, acc_w, drag_v, drag_w, pitch_amp = [], [], [], [], 0.0
     # a drag that settles within the test is fitted as ẏ = α + β y; one that settles within a few steps
     # (k dt > 0.2) leaves nothing to fit at these torques: the speed is the damping's, the cause is named
     k_est = 2 * a_f * damp / f_rest["r_m"]
     damped = damp > 0 and k_est * m.opt.timestep < 0.2
-    for T in drive_t:
-        r = _run(L, st, T, T, signs)
-        alpha, beta = _rate(r["t"], r["v"], r["v0"], damped)
-        acc_v.append(alpha)
-        drag_v.append(-beta)
-        pitch_amp = max(pitch_amp, float(np.ptp(r["pitch"])))
-    for T in turn_t:
-        r = _run(L, st_turn, -T, T, signs)
-        alpha, beta = _rate(r["t"], r["w"], r["w0"], damped)
-        acc_w.append(alpha)
-        drag_w.append(-beta)
-    tau_a = 2 * np.array(drive_t)
-    tau_b = 2 * np.array(turn_t)
-    a_id, c_v = np.polyfit(tau_a, acc_v, 1)
-    b_id, c_w = np.polyfit(tau_b, acc_w, 1)
+    a_id, c_v, acc_v, drag_v, pitch_amp = _levels(L, st, drive_t, False, signs, damped)
+    b_id, c_w, acc_w, drag_w, _ = _levels(L, st_turn, turn_t, True, signs, damped)
     _restore(L, st)  # leave the robot at rest where it settled (statics() reads it)
     return {
         "floor_contacts": contacts,

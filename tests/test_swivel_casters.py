@@ -1,0 +1,145 @@
+"""Issue 18 item 3: the verdict is right on robots with swivel (castor) wheels (design §14.1).
+
+A synthetic base written here: two driven wheels on the axle, the centre of mass on the axle midpoint,
+and two swivel casters on the centreline (0.2 m ahead and behind), each a passive vertical hinge with
+damping carrying a sphere on a roller hinge 30 mm behind the swivel axis. The file turns both swivels
+by 90° or 180° at ``qpos0``: their wheels must swing round before the robot moves as the formula says.
+``identify`` turns each swivel to trail the coming test's motion first (driving: behind its axis;
+turning in place: tangent to its circle about the axle midpoint), and then identifies the rigid-body
+formula; without that pre-alignment the same tests read a 17 % high (90°) or b 47 % low (180°, the
+pattern of the menagerie TIAGo). A sphere on a swivel alone (no roller) cannot roll: it is named as a
+braking caster.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+import bioform_mj.identify as identify_module
+from bioform_mj.contacts import align_swivels, swivel_casters
+from bioform_mj.identify import identify
+from bioform_mj.plants.mujoco_plant import MujocoPlant
+from bioform_mj.robot_check import check
+
+R, L, R_CASTER, X_CASTER = 0.05, 0.15, 0.02, 0.2
+
+
+def _robot(turn_deg: float = 90.0, trail: float = 0.03, roller: bool = True) -> mujoco.MjSpec:
+    """The base, built with MjSpec: swivels turned by ``turn_deg`` about the vertical at ``qpos0``, casters
+    ``trail`` m behind their axes, each sphere on a roller hinge (``roller``) or straight on the swivel."""
+    spec = mujoco.MjSpec()
+    spec.modelname = "swivel_caster_base"
+    spec.compiler.degree = False
+    spec.option.timestep = 0.001
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    hinge, sphere = mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtGeom.mjGEOM_SPHERE
+
+    def body(parent, name: str, pos, mass: float, inertia, ipos=(0.0, 0.0, 0.0), quat=(1.0, 0.0, 0.0, 0.0)):
+        b = parent.add_body(name=name, pos=list(pos), quat=list(quat))
+        b.mass, b.inertia, b.ipos, b.explicitinertial = mass, list(inertia), list(ipos), True
+        return b
+
+    base = body(spec.worldbody, "base", (0, 0, R), 8.0, (0.06, 0.1, 0.12), ipos=(0, 0, 0.04))
+    base.add_freejoint(name="root")
+    base.add_geom(name="chassis", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[0, 0, 0.09], size=[0.26, 0.12, 0.03],
+                  contype=0, conaffinity=0)  # fmt: skip
+    for side, y in (("left", L), ("right", -L)):
+        wheel = body(base, f"{side}_wheel_link", (0, y, 0), 0.5, (4e-4, 6.25e-4, 4e-4))
+        wheel.add_joint(name=f"{side}_wheel", type=hinge, axis=[0, 1, 0])
+        wheel.add_geom(name=f"{side}_tire", type=sphere, size=[R, 0, 0], condim=3)
+        spec.add_exclude(bodyname1="base", bodyname2=f"{side}_wheel_link")
+        motor = spec.add_actuator(name=f"{side}_motor", target=f"{side}_wheel", trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        motor.set_to_motor()
+        motor.ctrlrange, motor.ctrllimited = [-2.0, 2.0], True
+    half = math.radians(turn_deg) / 2
+    for name, x in (("front", X_CASTER), ("back", -X_CASTER)):
+        sw = body(base, f"{name}_swivel", (x, 0, 0), 0.05, (2e-5,) * 3, ipos=(-0.015, 0, -0.015),
+                  quat=(math.cos(half), 0, 0, math.sin(half)))  # fmt: skip
+        sw.add_joint(name=f"{name}_swivel_joint", type=hinge, axis=[0, 0, 1], damping=0.02)
+        wheel = body(sw, f"{name}_wheel", (-trail, 0, -(R - R_CASTER)), 0.05, (8e-6,) * 3)
+        if roller:
+            wheel.add_joint(name=f"{name}_roller", type=hinge, axis=[0, 1, 0])
+        wheel.add_geom(name=f"{name}_tire", type=sphere, size=[R_CASTER, 0, 0], condim=3, friction=[1, 0.005, 1e-4])
+    return spec
+
+
+def _write(tmp_path: Path, spec: mujoco.MjSpec) -> str:
+    p = tmp_path / "swivel_base.xml"
+    p.write_text(spec.to_xml())
+    return str(p)
+
+
+def _heading(model: mujoco.MjModel, data: mujoco.MjData, name: str, trail: bool) -> float:
+    """Base-frame heading (rad) of a caster: its trail (wheel centre from the swivel axis) or, without a
+    trail, its rolling direction (up × roller axis)."""
+    rot = data.xmat[model.body("f1/base").id].reshape(3, 3)
+    if trail:
+        jid = model.joint(f"f1/{name}_swivel_joint").id
+        d = rot.T @ (data.geom_xpos[model.geom(f"f1/{name}_tire").id] - data.xanchor[jid])
+        return math.atan2(d[1], d[0])
+    ax = rot.T @ data.xaxis[model.joint(f"f1/{name}_roller").id]
+    return math.atan2(ax[0], -ax[1])
+
+
+@pytest.mark.parametrize("trail", [0.03, 0.0])
+def test_swivels_are_found_and_turned_to_trail_the_coming_motion(tmp_path, trail):
+    """Found from the layout's rolling joints (vertical hinges only, not the rollers); trail and heading
+    at qpos0 as the file puts them (90° turned: the wheels sideways); aligned for a drive the trail points
+    back (−x) and for a CCW turn against each axis's velocity ω ẑ × p; trailless, the rolling direction
+    lies along the motion."""
+    plant = MujocoPlant([_write(tmp_path, _robot(90.0, trail))], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
+    model, lay = plant.model, plant.layouts[0]
+    sw = swivel_casters(model, lay)
+    assert [s.joint for s in sw] == ["f1/front_swivel_joint", "f1/back_swivel_joint"]
+    for s, x in zip(sw, (X_CASTER, -X_CASTER)):
+        assert s.anchor == pytest.approx((x, 0.0), abs=1e-9) and s.sense == 1.0
+        assert s.trail_m == pytest.approx(trail, abs=1e-9)
+        # trail (-0.03, 0) turned +90°: towards −y; the rolling direction up × roller axis, (−1, 0) turned: −y
+        assert s.angle0 == pytest.approx(-math.pi / 2, abs=1e-9)
+    data = mujoco.MjData(model)
+    for v, w, want in (
+        (1.0, 0.0, {"front": math.pi, "back": math.pi}),  # driving forward: behind (trail) / along x
+        (0.0, 1.0, {"front": -math.pi / 2, "back": math.pi / 2}),  # CCW in place: front axis moves +y, back −y
+    ):
+        mujoco.mj_resetData(model, data)
+        align_swivels(data, sw, lay.axle, v, w)
+        mujoco.mj_kinematics(model, data)
+        for name in ("front", "back"):
+            got = _heading(model, data, name, trail > 0)
+            period = 2 * math.pi if trail else math.pi  # a trailless caster rolls either way
+            assert math.remainder(got - want[name], period) == pytest.approx(0.0, abs=1e-9), (name, v, w)
+
+
+@pytest.mark.parametrize("turn_deg,off", [(90.0, "a"), (180.0, "b")])
+def test_misaligned_swivel_casters_identify_as_the_rigid_body_formula(tmp_path, monkeypatch, turn_deg, off):
+    """Casters 90° / 180° off at qpos0: identify within 2 % of the formula (measured a −0.08 %, b −1.3 %:
+    the caster rollers' spin inertia, which the formula leaves out) and robot check passes; the same
+    tests without the pre-alignment are >10 % off (measured a +17.6 % at 90°; b −46.9 % at 180°)."""
+    path = _write(tmp_path, _robot(turn_deg))
+    rep = identify(path)
+    assert abs(rep["relative_error"]["a"]) < 0.02 and abs(rep["relative_error"]["b"]) < 0.02, rep["relative_error"]
+    assert rep["test"]["caster_swivels"] == ["front_swivel_joint", "back_swivel_joint"]
+    assert not [f for f in rep["findings"] if f["kind"] != "rocking"], rep["findings"]
+    assert check(path)["verdict"] == "pass"
+    monkeypatch.setattr(identify_module, "align_swivels", lambda *a, **k: [])
+    unaligned = identify(path)
+    assert abs(unaligned["relative_error"][off]) > 0.10, unaligned["relative_error"]
+
+
+def test_a_sphere_on_a_swivel_alone_slides_and_is_named_a_braking_caster(tmp_path):
+    """No roller: the swivel turns the sphere about the vertical, but it cannot roll; it slides with μ 1
+    (each carries 2.8 N): identify names both as braking casters and robot check fails with that cause."""
+    path = _write(tmp_path, _robot(90.0, roller=False))
+    rep = identify(path)
+    braking = {f["geom"] for f in rep["findings"] if f["kind"] == "braking_caster"}
+    assert braking == {"front_tire", "back_tire"}
+    assert {c["role"] for c in rep["floor_contacts"] if c["geom"] in braking} == {"other"}
+    chk = check(path)
+    assert chk["verdict"] == "fail" and chk["cause"]["kind"] == "braking_caster"
+    rows = [c for c in chk["floor_contacts"] if c["geom"] in braking]
+    assert rows and all(not c["rolls"] and c["role"] == "caster" for c in rows)
