@@ -4,10 +4,11 @@ A synthetic base written here: two driven wheels on the axle, the centre of mass
 and two swivel casters on the centreline (0.2 m ahead and behind), each a passive vertical hinge with
 damping carrying a sphere on a roller hinge 30 mm behind the swivel axis. The file turns both swivels
 by 90° or 180° at ``qpos0``: their wheels must swing round before the robot moves as the formula says.
-``identify`` turns each swivel to trail the coming test's motion first (driving: behind its axis;
-turning in place: tangent to its circle about the axle midpoint), and then identifies the rigid-body
-formula; without that pre-alignment the same tests read a 17 % high (90°) or b 47 % low (180°, the
-pattern of the menagerie TIAGo). A sphere on a swivel alone (no roller) cannot roll: it is named as a
+``identify`` turns each swivel to its steady state under the coming test's motion first (driving:
+behind its axis; turning in place: 8.6° beyond the tangent to its circle about the axle midpoint, so that
+the wheel rolls along its heading), and then identifies the rigid-body formula; without that
+pre-alignment the same tests read a 17 % high (90°) or b 47 % low (180°, the pattern of the menagerie
+TIAGo). A sphere on a swivel alone (no roller) cannot roll: it is named as a
 braking caster.
 """
 
@@ -74,24 +75,30 @@ def _write(tmp_path: Path, spec: mujoco.MjSpec) -> str:
     return str(p)
 
 
-def _heading(model: mujoco.MjModel, data: mujoco.MjData, name: str, trail: bool) -> float:
-    """Base-frame heading (rad) of a caster: its trail (wheel centre from the swivel axis) or, without a
-    trail, its rolling direction (up × roller axis)."""
-    rot = data.xmat[model.body("f1/base").id].reshape(3, 3)
-    if trail:
-        jid = model.joint(f"f1/{name}_swivel_joint").id
-        d = rot.T @ (data.geom_xpos[model.geom(f"f1/{name}_tire").id] - data.xanchor[jid])
-        return math.atan2(d[1], d[0])
+def _caster_state(model: mujoco.MjModel, data: mujoco.MjData, name: str) -> tuple[np.ndarray, ...]:
+    """Base frame, m: the swivel axis's position ``p``, the trail ``t`` (wheel centre − axis, horizontal) and
+    the caster wheel's rolling direction (up × roller axis)."""
+    base = model.body("f1/base").id
+    rot, origin = data.xmat[base].reshape(3, 3), data.xpos[base]
+    anchor = data.xanchor[model.joint(f"f1/{name}_swivel_joint").id]
+    p = (rot.T @ (anchor - origin))[:2]
+    t = (rot.T @ (data.geom_xpos[model.geom(f"f1/{name}_tire").id] - anchor))[:2]
     ax = rot.T @ data.xaxis[model.joint(f"f1/{name}_roller").id]
-    return math.atan2(ax[0], -ax[1])
+    return p, t, np.array([-ax[1], ax[0]])
+
+
+def _velocity(x: np.ndarray, axle: np.ndarray, v: float, w: float) -> np.ndarray:
+    """Base-frame velocity at ``x`` of the motion (υ, ω) about the axle midpoint ``axle``."""
+    return np.array([v - w * (x[1] - axle[1]), w * (x[0] - axle[0])])
 
 
 @pytest.mark.parametrize("trail", [0.03, 0.0])
-def test_swivels_are_found_and_turned_to_trail_the_coming_motion(tmp_path, trail):
+def test_swivels_are_found_and_turned_to_their_steady_state_for_the_coming_motion(tmp_path, trail):
     """Found from the layout's rolling joints (vertical hinges only, not the rollers); trail and heading
-    at qpos0 as the file puts them (90° turned: the wheels sideways); aligned for a drive the trail points
-    back (−x) and for a CCW turn against each axis's velocity ω ẑ × p; trailless, the rolling direction
-    lies along the motion."""
+    at qpos0 as the file puts them (90° turned: the wheels sideways). Aligned for a drive and for a CCW turn
+    in place, each caster is in its steady state: its wheel's velocity ``u(p + t)`` (``u`` the motion's
+    velocity field about the axle midpoint) points along −t (it rolls along its heading, trailing the
+    axis); turning, that is asin(d/ρ) = 8.6° beyond the tangent. Trailless, it rolls along ``u(p)``."""
     plant = MujocoPlant([_write(tmp_path, _robot(90.0, trail))], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
     model, lay = plant.model, plant.layouts[0]
     sw = swivel_casters(model, lay)
@@ -102,22 +109,29 @@ def test_swivels_are_found_and_turned_to_trail_the_coming_motion(tmp_path, trail
         # trail (-0.03, 0) turned +90°: towards −y; the rolling direction up × roller axis, (−1, 0) turned: −y
         assert s.angle0 == pytest.approx(-math.pi / 2, abs=1e-9)
     data = mujoco.MjData(model)
-    for v, w, want in (
-        (1.0, 0.0, {"front": math.pi, "back": math.pi}),  # driving forward: behind (trail) / along x
-        (0.0, 1.0, {"front": -math.pi / 2, "back": math.pi / 2}),  # CCW in place: front axis moves +y, back −y
-    ):
+    axle = np.array(lay.axle[:2])
+    for v, w in ((1.0, 0.0), (0.0, 1.0)):
         mujoco.mj_resetData(model, data)
-        align_swivels(data, sw, lay.axle, v, w)
+        turned = align_swivels(data, sw, lay.axle, v, w)
         mujoco.mj_kinematics(model, data)
-        for name in ("front", "back"):
-            got = _heading(model, data, name, trail > 0)
-            period = 2 * math.pi if trail else math.pi  # a trailless caster rolls either way
-            assert math.remainder(got - want[name], period) == pytest.approx(0.0, abs=1e-9), (name, v, w)
+        for name, q in zip(("front", "back"), turned):
+            p, t, roll = _caster_state(model, data, name)
+
+            if trail:
+                uw = _velocity(p + t, axle, v, w)
+                assert np.linalg.norm(t) == pytest.approx(trail, rel=1e-9)
+                assert uw[0] * t[1] - uw[1] * t[0] == pytest.approx(0.0, abs=1e-12) and uw @ t < 0, (name, v, w)
+                if w:  # from −y (qpos0) to asin(d/ρ) = 8.6° beyond the tangent: front −8.6°, back 180° − 8.6°
+                    lead = math.asin(trail / X_CASTER)
+                    assert q == pytest.approx(math.pi - lead if name == "back" else -lead, abs=1e-9)
+            else:
+                ua = _velocity(p, axle, v, w)
+                assert ua[0] * roll[1] - ua[1] * roll[0] == pytest.approx(0.0, abs=1e-12), (name, v, w)
 
 
 @pytest.mark.parametrize("turn_deg,off", [(90.0, "a"), (180.0, "b")])
 def test_misaligned_swivel_casters_identify_as_the_rigid_body_formula(tmp_path, monkeypatch, turn_deg, off):
-    """Casters 90° / 180° off at qpos0: identify within 2 % of the formula (measured a −0.08 %, b −1.3 %:
+    """Casters 90° / 180° off at qpos0: identify within 2 % of the formula (measured a −0.08 %, b −0.49 %:
     the caster rollers' spin inertia, which the formula leaves out) and robot check passes; the same
     tests without the pre-alignment are >10 % off (measured a +17.6 % at 90°; b −46.9 % at 180°)."""
     path = _write(tmp_path, _robot(turn_deg))

@@ -403,22 +403,29 @@ def swivel_casters(model: mujoco.MjModel, lay: RobotLayout) -> list[Swivel]:
 def align_swivels(
     data: mujoco.MjData, swivels: list[Swivel], axle: tuple[float, float, float], v: float, w: float
 ) -> list[float]:
-    """Turn each swivel so that its caster trails the motion ``(υ, ω)`` (m/s, rad/s; only their
-    directions count) of the axle midpoint ``axle`` (base frame, m): the wheel behind its axis, opposite
-    the axis's velocity ``υ x̂ + ω ẑ × (p − axle)`` (driving: straight behind; turning in place: tangent
-    to the circle about the axle midpoint), or, trailless, rolling along it (design §14.1). Sets
-    ``data.qpos`` and zeroes the swivels' ``qvel``; call ``mj_forward`` after. A caster on the axis of a
-    turn in place stays as it is. Returns the angle each swivel turned, rad."""
+    """Turn each swivel to its caster's steady state under the motion ``(υ, ω)`` (m/s, rad/s) of the axle
+    midpoint ``axle`` (base frame, m): the wheel rolls along its own heading without slipping sideways,
+    trailing its axis (design §14.1). With ``u(p) = υ x̂ + ω ẑ × (p − axle)`` the velocity field and the
+    trail ``t`` (length ``d``), the wheel's velocity ``u(p + t) = u(p) + ω ẑ × t`` must point along
+    ``−t``: the trail's heading is ``ψ − π − asin(ω d / |u(p)|)``, ``ψ`` the heading of ``u(p)``. Driving
+    that is straight behind the axis; turning in place nearly tangent to the axis's circle about the axle
+    midpoint, ``asin(d/ρ)`` further round (8.6° for a 30 mm trail 0.2 m out). A trailless caster's rolling
+    direction is laid along ``u(p)`` (the nearer way round). Only the ratio of ``υ`` and ``ω`` counts.
+    Sets ``data.qpos`` and zeroes the swivels' ``qvel``; call ``mj_forward`` after. A caster on the axis
+    of a turn in place stays as it is. Returns the angle each swivel turned, rad."""
     turned = []
     for s in swivels:
-        vx, vy = v - w * (s.anchor[1] - axle[1]), w * (s.anchor[0] - axle[0])
-        if math.hypot(vx, vy) < 1e-9 * max(1.0, abs(v), abs(w)):
+        ux, uy = v - w * (s.anchor[1] - axle[1]), w * (s.anchor[0] - axle[0])
+        speed = math.hypot(ux, uy)
+        if speed < 1e-9 * max(1.0, abs(v), abs(w)):
             turned.append(0.0)
             continue
+        psi = math.atan2(uy, ux)
         if s.trail_m > 0:
-            delta = math.remainder(math.atan2(-vy, -vx) - s.angle0, 2 * math.pi)
+            lead = math.asin(max(-1.0, min(1.0, w * s.trail_m / speed)))
+            delta = math.remainder(psi - math.pi - lead - s.angle0, 2 * math.pi)
         else:  # rolling either way along the motion: the nearer
-            delta = math.remainder(math.atan2(vy, vx) - s.angle0, math.pi)
+            delta = math.remainder(psi - s.angle0, math.pi)
         q = s.q0 + s.sense * delta
         if s.limits is not None:
             q = min(max(q, s.limits[0]), s.limits[1])
