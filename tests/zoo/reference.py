@@ -96,18 +96,34 @@ _MENAGERIE_TB3 = (
 )
 _TB3 = "https://github.com/ROBOTIS-GIT/turtlebot3/blob/"
 
+
+def _robotis(fmt: str) -> dict:
+    """What the two ROBOTIS MJCFs (``fmt`` "mjcf": menagerie names) and the two URDFs ("urdf") share."""
+    urdf = fmt == "urdf"
+    return dict(
+        format=fmt,
+        maker="ROBOTIS",
+        collection="ROBOTIS-GIT/turtlebot3 (turtlebot3_description)"
+        if urdf
+        else "ROBOTIS-GIT/robotis_mujoco_menagerie",
+        license="Apache-2.0",
+        base="base_footprint" if urdf else "base",
+        left="wheel_left_joint" if urdf else "wheel_left",
+        right="wheel_right_joint" if urdf else "wheel_right",
+    )
+
+
+#: PAL's four casters (TIAGo, PMB2): a swivel (1) and a roller (2) joint each, left free
+_PAL_CASTERS = tuple(
+    f"caster_{corner}_{k}_joint" for corner in ("front_right", "front_left", "back_right", "back_left") for k in (1, 2)
+)
+
 ROBOTS: tuple[Robot, ...] = (
     Robot(
         name="robotis_tb3_burger",
         file="robotis_tb3_burger/turtlebot3_burger.xml",
-        format="mjcf",
-        maker="ROBOTIS",
-        collection="ROBOTIS-GIT/robotis_mujoco_menagerie",
+        **_robotis("mjcf"),
         source=_MENAGERIE_TB3 + "robotis_tb3/turtlebot3_burger.xml",
-        license="Apache-2.0",
-        base="base",
-        left="wheel_left",
-        right="wheel_right",
         tau_max=1.4,
         tau_max_source="Dynamixel XL430-W250 stall torque, 11.1 V (ROBOTIS e-Manual); the MJCF has velocity servos",
         expected_verdict="warn",
@@ -121,14 +137,8 @@ ROBOTS: tuple[Robot, ...] = (
     Robot(
         name="robotis_tb3_waffle_pi",
         file="robotis_tb3_waffle_pi/turtlebot3_waffle_pi.xml",
-        format="mjcf",
-        maker="ROBOTIS",
-        collection="ROBOTIS-GIT/robotis_mujoco_menagerie",
+        **_robotis("mjcf"),
         source=_MENAGERIE_TB3 + "robotis_tb3/turtlebot3_waffle_pi.xml",
-        license="Apache-2.0",
-        base="base",
-        left="wheel_left",
-        right="wheel_right",
         tau_max=3.0,
         tau_max_source="Dynamixel XM430-W210 stall torque, 12 V (ROBOTIS e-Manual); the MJCF has velocity servos only",
         expected_verdict="warn",
@@ -150,9 +160,7 @@ ROBOTS: tuple[Robot, ...] = (
         base="base_link",
         left="wheel_left_joint",
         right="wheel_right_joint",
-        free_joints=tuple(
-            f"caster_{c}_{k}_joint" for c in ("front_right", "front_left", "back_right", "back_left") for k in (1, 2)
-        ),
+        free_joints=_PAL_CASTERS,
         tau_max=100.0,
         tau_max_source="the wheel joints' actuatorfrcrange (-100, 100) in the published MJCF",
         expected_verdict="warn",
@@ -165,14 +173,8 @@ ROBOTS: tuple[Robot, ...] = (
     Robot(
         name="tb3_burger_urdf",
         file="tb3_burger_urdf/turtlebot3_burger.urdf",
-        format="urdf",
-        maker="ROBOTIS",
-        collection="ROBOTIS-GIT/turtlebot3 (turtlebot3_description)",
+        **_robotis("urdf"),
         source=_TB3 + "754a9ddd937667839d7c38e88ca08ee0d93c08a8/turtlebot3_description/urdf/turtlebot3_burger.urdf",
-        license="Apache-2.0",
-        base="base_footprint",
-        left="wheel_left_joint",
-        right="wheel_right_joint",
         tau_max=1.4,
         tau_max_source="Dynamixel XL430-W250 stall torque (ROBOTIS e-Manual); the URDF has no effort limit",
         expected_verdict="fail",
@@ -184,14 +186,8 @@ ROBOTS: tuple[Robot, ...] = (
     Robot(
         name="tb3_waffle_pi_urdf",
         file="tb3_waffle_pi_urdf/turtlebot3_waffle_pi.urdf",
-        format="urdf",
-        maker="ROBOTIS",
-        collection="ROBOTIS-GIT/turtlebot3 (turtlebot3_description)",
+        **_robotis("urdf"),
         source=_TB3 + "fd74967cd79cd40cc23d2ae907adda93ea92cece/turtlebot3_description/urdf/turtlebot3_waffle_pi.urdf",
-        license="Apache-2.0",
-        base="base_footprint",
-        left="wheel_left_joint",
-        right="wheel_right_joint",
         tau_max=3.0,
         tau_max_source="Dynamixel XM430-W210 stall torque (ROBOTIS e-Manual); the URDF has no effort limit",
         expected_verdict="fail",
@@ -283,11 +279,7 @@ ROBOTS: tuple[Robot, ...] = (
         base="base_footprint",
         left="wheel_left_joint",
         right="wheel_right_joint",
-        free_joints=tuple(
-            f"caster_{corner}_{k}_joint"
-            for corner in ("front_right", "front_left", "back_right", "back_left")
-            for k in (1, 2)
-        ),
+        free_joints=_PAL_CASTERS,
         packages={"pmb2_description": "pmb2_urdf/pmb2_description"},
         tau_max=6.0,
         tau_max_source="the wheel joints' <limit effort='6.0'> (PAL's wheel_torque)",
