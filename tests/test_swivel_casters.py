@@ -30,9 +30,10 @@ from bioform_mj.robot_check import check
 R, L, R_CASTER, X_CASTER = 0.05, 0.15, 0.02, 0.2
 
 
-def _robot(turn_deg: float = 90.0, trail: float = 0.03, roller: bool = True) -> mujoco.MjSpec:
+def _robot(turn_deg: float = 90.0, trail: float = 0.03, roller: bool = True, com_y: float = 0.0) -> mujoco.MjSpec:
     """The base, built with MjSpec: swivels turned by ``turn_deg`` about the vertical at ``qpos0``, casters
-    ``trail`` m behind their axes, each sphere on a roller hinge (``roller``) or straight on the swivel."""
+    ``trail`` m behind their axes, each sphere on a roller hinge (``roller``) or straight on the swivel; the
+    chassis's centre of mass ``com_y`` m beside the axle midpoint."""
     spec = mujoco.MjSpec()
     spec.modelname = "swivel_caster_base"
     spec.compiler.degree = False
@@ -45,7 +46,7 @@ def _robot(turn_deg: float = 90.0, trail: float = 0.03, roller: bool = True) -> 
         b.mass, b.inertia, b.ipos, b.explicitinertial = mass, list(inertia), list(ipos), True
         return b
 
-    base = body(spec.worldbody, "base", (0, 0, R), 8.0, (0.06, 0.1, 0.12), ipos=(0, 0, 0.04))
+    base = body(spec.worldbody, "base", (0, 0, R), 8.0, (0.06, 0.1, 0.12), ipos=(0, com_y, 0.04))
     base.add_freejoint(name="root")
     base.add_geom(name="chassis", type=mujoco.mjtGeom.mjGEOM_BOX, pos=[0, 0, 0.09], size=[0.26, 0.12, 0.03],
                   contype=0, conaffinity=0)  # fmt: skip
@@ -157,3 +158,22 @@ def test_a_sphere_on_a_swivel_alone_slides_and_is_named_a_braking_caster(tmp_pat
     assert chk["verdict"] == "fail" and chk["cause"]["kind"] == "braking_caster"
     rows = [c for c in chk["floor_contacts"] if c["geom"] in braking]
     assert rows and all(not c["rolls"] and c["role"] == "caster" for c in rows)
+
+
+def test_a_robot_that_turns_while_driving_straight_is_tested_at_a_lower_torque(tmp_path, monkeypatch):
+    """The chassis's centre of mass 20 mm beside the axle (17 mm for the robot): equal wheel torques turn it
+    (the υ·ω coupling of design §8.1). At the first torque the drive test turns 0.78 rad; rerun at a torque
+    that turns about DRIVE_HEADING_MAX it identifies a +1.2 %, b +0.9 % (the coupling's own share) and robot
+    check warns (centre of mass off the axle) with a note; without the rerun the robot spins round (3 rad)
+    and a reads −65 %."""
+    path = _write(tmp_path, _robot(90.0, com_y=0.02))
+    rep = identify(path)
+    rerun = rep["test"]["drive_rerun"]
+    assert rerun and rerun["first_heading_change_rad"] > identify_module.DRIVE_HEADING_MAX
+    assert rep["test"]["torque_Nm"] < 0.5 * rerun["first_torque_Nm"]
+    assert abs(rep["relative_error"]["a"]) < 0.02 and abs(rep["relative_error"]["b"]) < 0.02, rep["relative_error"]
+    chk = check(path)
+    assert chk["verdict"] == "warn" and any(n.startswith("drive tests at ") for n in chk["notes"])
+    assert any("turned before each identification test" in n and "damping of up to 0.02" in n for n in chk["notes"])
+    monkeypatch.setattr(identify_module, "DRIVE_HEADING_MAX", float("inf"))
+    assert identify(path)["relative_error"]["a"] < -0.3

@@ -334,6 +334,16 @@ class Swivel:
     angle0: float  # at q0: the heading of the trail (the wheel centre from the axis), or of the rolling direction
     trail_m: float  # horizontal distance of the wheel centre behind the axis (0: no trail)
     limits: tuple[float, float] | None  # the joint range, rad, where it is limited
+    damping: float = 0.0  # N·m·s/rad: the swivel's joint damping (resists turning the caster round)
+    frictionloss: float = 0.0  # N·m: the swivel's dry friction (the same)
+
+    def resistance(self) -> dict[str, Any]:
+        """``{"joint" (without the scene's prefix), "damping_Nms_per_rad", "frictionloss_Nm"}``."""
+        return {
+            "joint": self.joint.split("/", 1)[-1],
+            "damping_Nms_per_rad": self.damping,
+            "frictionloss_Nm": self.frictionloss,
+        }
 
 
 def swivel_casters(model: mujoco.MjModel, lay: RobotLayout) -> list[Swivel]:
@@ -395,6 +405,8 @@ def swivel_casters(model: mujoco.MjModel, lay: RobotLayout) -> list[Swivel]:
                 angle0=angle,
                 trail_m=dist,
                 limits=(float(model.jnt_range[j, 0]), float(model.jnt_range[j, 1])) if model.jnt_limited[j] else None,
+                damping=float(model.dof_damping[model.jnt_dofadr[j]]),
+                frictionloss=float(model.dof_frictionloss[model.jnt_dofadr[j]]),
             )
         )
     return out

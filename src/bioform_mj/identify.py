@@ -45,6 +45,7 @@ __all__ = [
     "ground_truth",
     "identify",
     "identify_main",
+    "identify_notes",
     "floor_contacts",
     "self_contacts",
     "check_radius",
@@ -734,6 +735,8 @@ def identify(
                 else None
             ),
             "caster_swivels": [s_.joint.split("/", 1)[-1] for s_ in swivels],
+            # what resists turning them round (a start from other angles, a change of direction)
+            "caster_swivel_resistance": [x.resistance() for x in swivels if x.damping or x.frictionloss],
             "turn_torque_Nm": turn_levels[0],
             "turn_torque_levels_Nm": turn_levels,
             "duration_s": n_run * dt,
@@ -750,6 +753,28 @@ def identify(
             "mujoco_warnings": sum(x["warnings"] for x in drive + turn),
         },
     }
+
+
+def identify_notes(ident: dict | None) -> list[str]:
+    """For ``robot check``'s notes: the caster swivels :func:`identify` turned before each test and what
+    resists turning them, a drive test rerun at a lower torque (design §14.1)."""
+    test, notes = (ident or {}).get("test", {}), []
+    if test.get("caster_swivels"):
+        res = test.get("caster_swivel_resistance") or [{"damping_Nms_per_rad": 0.0, "frictionloss_Nm": 0.0}]
+        notes.append(
+            f"caster swivel(s) {', '.join(repr(j) for j in test['caster_swivels'])} turned before each "
+            "identification test to trail its motion (the casters' steady state); a start from other caster "
+            f"angles turns them round first, against a swivel damping of up to "
+            f"{max(r['damping_Nms_per_rad'] for r in res):g} N·m·s/rad and frictionloss of up to "
+            f"{max(r['frictionloss_Nm'] for r in res):g} N·m"
+        )
+    if dr := test.get("drive_rerun"):
+        notes.append(
+            f"drive tests at {test['torque_Nm']:.3g} N·m: at {dr['first_torque_Nm']:.3g} N·m the robot turned "
+            f"{dr['first_heading_change_rad']:.2g} rad within the test (design §14.1: a centre of mass beside "
+            "the axle couples υ into ω)"
+        )
+    return notes
 
 
 def identify_main(model) -> dict:

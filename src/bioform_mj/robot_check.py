@@ -167,7 +167,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         still_bodies,
         unsimulated_self_contacts,
     )
-    from .identify import DRAG_STEP, check_radius, identify
+    from .identify import DRAG_STEP, check_radius, identify, identify_notes
     from .plants.mujoco_plant import MujocoPlant
     from .robot_params import robot_parameters
     from .scene import prepare_robot
@@ -253,20 +253,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
 
     ident = identify(entry) if identify_ else None  # InputError (exit 2) for a mapping no test can use
     findings = ident["findings"] if ident else []
-    test = (ident or {}).get("test", {})
-    if test.get("caster_swivels"):  # design §14.1: what the identification set up, said
-        notes.append(
-            f"caster swivel(s) {', '.join(repr(j) for j in test['caster_swivels'])} turned before each "
-            "identification test to trail its motion (the casters' steady state); a start from other caster "
-            "angles turns them round first"
-        )
-    if test.get("drive_rerun"):
-        dr = test["drive_rerun"]
-        notes.append(
-            f"drive tests at {test['torque_Nm']:.3g} N·m: at {dr['first_torque_Nm']:.3g} N·m the robot turned "
-            f"{dr['first_heading_change_rad']:.2g} rad within the test (design §14.1: a centre of mass beside "
-            "the axle couples υ into ω)"
-        )
+    notes += identify_notes(ident)  # design §14.1: what the identification set up, said
     if any("other wheel" in n for n in lay.notes):  # the cause, before what it makes the identification see
         skid = (
             "other fixed wheels touch the floor (see notes): a 4-wheel / skid-steer base, not the paper's "
