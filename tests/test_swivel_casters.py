@@ -30,10 +30,13 @@ from bioform_mj.robot_check import check
 R, L, R_CASTER, X_CASTER = 0.05, 0.15, 0.02, 0.2
 
 
-def _robot(turn_deg: float = 90.0, trail: float = 0.03, roller: bool = True, com_y: float = 0.0) -> mujoco.MjSpec:
+def _robot(
+    turn_deg: float = 90.0, trail: float = 0.03, roller: bool = True, com_y: float = 0.0, fork: bool = False
+) -> mujoco.MjSpec:
     """The base, built with MjSpec: swivels turned by ``turn_deg`` about the vertical at ``qpos0``, casters
     ``trail`` m behind their axes, each sphere on a roller hinge (``roller``) or straight on the swivel; the
-    chassis's centre of mass ``com_y`` m beside the axle midpoint."""
+    chassis's centre of mass ``com_y`` m beside the axle midpoint; ``fork``: a colliding fork geom on each
+    swivel, on its axis and lower than the wheel's centre (as a caster mesh's frame may be), off the floor."""
     spec = mujoco.MjSpec()
     spec.modelname = "swivel_caster_base"
     spec.compiler.degree = False
@@ -63,6 +66,8 @@ def _robot(turn_deg: float = 90.0, trail: float = 0.03, roller: bool = True, com
         sw = body(base, f"{name}_swivel", (x, 0, 0), 0.05, (2e-5,) * 3, ipos=(-0.015, 0, -0.015),
                   quat=(math.cos(half), 0, 0, math.sin(half)))  # fmt: skip
         sw.add_joint(name=f"{name}_swivel_joint", type=hinge, axis=[0, 0, 1], damping=0.02)
+        if fork:
+            sw.add_geom(name=f"{name}_fork", type=sphere, size=[0.004, 0, 0], pos=[0, 0, -(R - R_CASTER) - 0.006])
         wheel = body(sw, f"{name}_wheel", (-trail, 0, -(R - R_CASTER)), 0.05, (8e-6,) * 3)
         if roller:
             wheel.add_joint(name=f"{name}_roller", type=hinge, axis=[0, 1, 0])
@@ -93,14 +98,17 @@ def _velocity(x: np.ndarray, axle: np.ndarray, v: float, w: float) -> np.ndarray
     return np.array([v - w * (x[1] - axle[1]), w * (x[0] - axle[0])])
 
 
-@pytest.mark.parametrize("trail", [0.03, 0.0])
-def test_swivels_are_found_and_turned_to_their_steady_state_for_the_coming_motion(tmp_path, trail):
+@pytest.mark.parametrize("trail,fork", [(0.03, False), (0.0, False), (0.03, True)])
+def test_swivels_are_found_and_turned_to_their_steady_state_for_the_coming_motion(tmp_path, trail, fork):
     """Found from the layout's rolling joints (vertical hinges only, not the rollers); trail and heading
     at qpos0 as the file puts them (90° turned: the wheels sideways). Aligned for a drive and for a CCW turn
     in place, each caster is in its steady state: its wheel's velocity ``u(p + t)`` (``u`` the motion's
     velocity field about the axle midpoint) points along −t (it rolls along its heading, trailing the
-    axis); turning, that is asin(d/ρ) = 8.6° beyond the tangent. Trailless, it rolls along ``u(p)``."""
-    plant = MujocoPlant([_write(tmp_path, _robot(90.0, trail))], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
+    axis); turning, that is asin(d/ρ) = 8.6° beyond the tangent. Trailless, it rolls along ``u(p)``. A fork
+    geom lower than the wheel's centre is not taken for the wheel (the wheel is the roller's)."""
+    plant = MujocoPlant(
+        [_write(tmp_path, _robot(90.0, trail, fork=fork))], np.zeros((1, 3)), 0.001, 0.001, None, slots=False
+    )
     model, lay = plant.model, plant.layouts[0]
     sw = swivel_casters(model, lay)
     assert [s.joint for s in sw] == ["f1/front_swivel_joint", "f1/back_swivel_joint"]

@@ -367,10 +367,21 @@ def swivel_casters(model: mujoco.MjModel, lay: RobotLayout) -> list[Swivel]:
         if abs(ax[2]) < math.cos(math.radians(SWIVEL_TILT_DEG)):
             continue
         below = set(subtree(model, int(model.jnt_bodyid[j])).tolist())
+        # the caster's wheel: on the roller (a horizontal hinge below the swivel) where there is one, so
+        # that a fork's own collision geom (a MiR caster's mesh) is not taken for it; the lowest centre
+        rollers = [
+            k
+            for k in range(model.njnt)
+            if k != j
+            and int(model.jnt_type[k]) == hinge
+            and int(model.jnt_bodyid[k]) in below
+            and abs((rot.T @ data.xaxis[k])[2]) < 0.5
+        ]
+        carried = set(subtree(model, int(model.jnt_bodyid[rollers[0]])).tolist()) if rollers else below
         geoms = [
             g
             for g in range(model.ngeom)
-            if model.geom_bodyid[g] in below and (model.geom_contype[g] or model.geom_conaffinity[g])
+            if model.geom_bodyid[g] in carried and (model.geom_contype[g] or model.geom_conaffinity[g])
         ]
         if not geoms:
             continue
@@ -379,20 +390,11 @@ def swivel_casters(model: mujoco.MjModel, lay: RobotLayout) -> list[Swivel]:
         dist = math.hypot(trail[0], trail[1])
         if dist >= TRAIL_MIN_M:
             angle = math.atan2(trail[1], trail[0])
-        else:  # no trail: the wheel's rolling direction, up × its hinge axis
-            rollers = [
-                k
-                for k in range(model.njnt)
-                if k != j
-                and int(model.jnt_type[k]) == hinge
-                and int(model.jnt_bodyid[k]) in below
-                and int(model.geom_bodyid[g]) in subtree(model, int(model.jnt_bodyid[k]))
-                and abs((rot.T @ data.xaxis[k])[2]) < 0.5
-            ]
-            if not rollers:
-                continue
+        elif rollers:  # no trail: the wheel's rolling direction, up × its hinge axis
             ra = rot.T @ data.xaxis[rollers[0]]
-            angle, dist = math.atan2(ra[0], -ra[1]), 0.0  # (0, 0, 1) × ra
+            angle, dist = math.atan2(ra[0], -ra[1]), 0.0
+        else:
+            continue
         anchor = rot.T @ (data.xanchor[j] - data.xpos[base])
         out.append(
             Swivel(
