@@ -26,6 +26,7 @@ from bioform_mj.contacts import align_swivels, swivel_casters
 from bioform_mj.identify import identify
 from bioform_mj.plants.mujoco_plant import MujocoPlant
 from bioform_mj.robot_check import check
+from bioform_mj.robots import RobotRef
 
 R, L, R_CASTER, X_CASTER = 0.05, 0.15, 0.02, 0.2
 
@@ -185,3 +186,52 @@ def test_a_robot_that_turns_while_driving_straight_is_tested_at_a_lower_torque(t
     assert any("turned before each identification test" in n and "damping of up to 0.02" in n for n in chk["notes"])
     monkeypatch.setattr(identify_module, "DRIVE_HEADING_MAX", float("inf"))
     assert identify(path)["relative_error"]["a"] < -0.3
+
+
+PIONEER_LIKE_URDF = """<?xml version="1.0"?>
+<robot name="pioneer_like">
+  <link name="base_link">
+    <inertial><mass value="9.0"/><origin xyz="-0.02 0 0.1"/>
+      <inertia ixx="0.1" ixy="0" ixz="0" iyy="0.15" iyz="0" izz="0.2"/></inertial>
+    <collision><origin xyz="-0.045 0 0.145"/><geometry><box size="0.35 0.25 0.14"/></geometry></collision>
+  </link>
+  SIDES
+  <link name="swivel">
+    <inertial><mass value="0.1"/><inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial>
+  </link>
+  <joint name="swivel_joint" type="continuous"><parent link="base_link"/><child link="swivel"/>
+    <origin xyz="-0.185 0 0.055" rpy="0 0 1.5708"/><axis xyz="0 0 1"/><dynamics damping="0.05"/></joint>
+  <link name="center_wheel">
+    <inertial><mass value="0.2"/><inertia ixx="1e-4" ixy="0" ixz="0" iyy="1.5e-4" iyz="0" izz="1e-4"/></inertial>
+    <collision><origin rpy="-1.5708 0 0"/><geometry><cylinder length="0.01" radius="0.0375"/></geometry></collision>
+  </link>
+  <joint name="center_wheel_joint" type="continuous"><parent link="swivel"/><child link="center_wheel"/>
+    <origin xyz="-0.026 0 -0.0175"/><axis xyz="0 1 0"/></joint>
+</robot>
+"""
+_SIDE = """<link name="S_wheel">
+    <inertial><mass value="0.5"/><inertia ixx="0.001" ixy="0" ixz="0" iyy="0.002" iyz="0" izz="0.001"/></inertial>
+    <collision><origin rpy="-1.5708 0 0"/><geometry><cylinder length="0.04" radius="0.09"/></geometry></collision>
+  </link>
+  <joint name="S_wheel_joint" type="continuous"><parent link="base_link"/><child link="S_wheel"/>
+    <origin xyz="0 Y 0.09"/><axis xyz="0 1 0"/></joint>"""
+
+
+def test_a_urdf_base_with_a_rear_swivel_caster_turned_sideways(tmp_path, monkeypatch):
+    """A Pioneer-3-DX-like URDF: one rear caster, a continuous swivel (damping 0.05) whose joint origin turns
+    it 90° (the wheel sideways) and a continuous wheel joint 26 mm behind it. Through the URDF import the
+    swivel is found and aligned: a −0.8 %, b −2.1 % (measured; the caster wheel's spin inertia is outside the
+    formula), not a fail; without the alignment the drive test reads a −66 %."""
+    sides = "\n  ".join(_SIDE.replace("S", s).replace("Y", y) for s, y in (("left", "0.158"), ("right", "-0.158")))
+    path = tmp_path / "pioneer_like.urdf"
+    path.write_text(PIONEER_LIKE_URDF.replace("SIDES", sides))
+    ref = RobotRef(
+        model=str(path), base="base_link", left_wheel="left_wheel_joint", right_wheel="right_wheel_joint", tau_max=2.0
+    )
+    rep = identify(ref)
+    assert rep["test"]["caster_swivels"] == ["swivel_joint"]
+    assert abs(rep["relative_error"]["a"]) < 0.03 and abs(rep["relative_error"]["b"]) < 0.03, rep["relative_error"]
+    assert [c["role"] for c in rep["floor_contacts"] if c["body"] == "center_wheel"] == ["rolling"]
+    assert check(ref)["verdict"] != "fail"
+    monkeypatch.setattr(identify_module, "align_swivels", lambda *a, **k: [])
+    assert identify(ref)["relative_error"]["a"] < -0.3
