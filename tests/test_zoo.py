@@ -37,10 +37,7 @@ URDF = [n for n in NAMES if ROBOTS[n].format == "urdf"]
 REDISTRIBUTABLE = {"Apache-2.0", "BSD", "BSD-3-Clause", "BSD-2-Clause", "MIT", "CC-BY-4.0"}
 
 #: the verdict of robot check in this branch differs from the expected one (the fix is another helper's)
-VERDICT_ELSEWHERE: dict[str, str] = {  # robot -> why its verdict test is still expected to fail
-    "menagerie_tiago": "swivel casters turn before the robot does: identify's 0.2 s turn test reads b 47 % low and "
-    "names a dead band (the reference, casters aligned with the coming motion, finds -0.4 %)",
-}
+VERDICT_ELSEWHERE: dict[str, str] = {}  # robot -> why its verdict test is still expected to fail
 URDF_REASON = "URDF import lands with the urdf branch"
 PENDING: dict[str, str] = {}  # robot -> why its project checks are still expected to fail
 #: self contacts the project does not report yet (robot -> why): none since the published geoms are read

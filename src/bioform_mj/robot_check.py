@@ -167,7 +167,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         self_contacts,
         still_bodies,
     )
-    from .identify import DRAG_STEP, check_radius, identify
+    from .identify import DRAG_STEP, check_radius, identify, identify_notes
     from .overlaps import self_contacts_at_rest
     from .plants.mujoco_plant import MujocoPlant
     from .robot_params import robot_parameters
@@ -256,6 +256,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
 
     ident = identify(entry) if identify_ else None  # InputError (exit 2) for a mapping no test can use
     findings = ident["findings"] if ident else []
+    notes += identify_notes(ident)  # design §14.1: what the identification set up, said
     if any("other wheel" in n for n in lay.notes):  # the cause, before what it makes the identification see
         skid = (
             "other fixed wheels touch the floor (see notes): a 4-wheel / skid-steer base, not the paper's "
