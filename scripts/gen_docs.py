@@ -2,7 +2,7 @@
 
 Run by the ``gen-files`` plugin of ``mkdocs build`` (``mkdocs.yml``), so the pages never go stale:
 
-- ``reference/scenario.md`` from the scenario dataclasses (``scenario.py``) and their descriptions
+- ``reference/scenario.md`` from the scenario dataclasses (``scenario_config.py``) and their descriptions
   (``scenario_doc.KEYS``, ``scenario_doc.CHOICES``);
 - ``reference/cli.md`` from the ``bioform`` argparse parser (``cli.build_parser``).
 
@@ -36,8 +36,9 @@ def scenario_reference() -> str:
         "# Scenario reference",
         "",
         "Every key a scenario file (TOML) or `--set KEY=VALUE` accepts, generated from the scenario dataclasses "
-        "(`bioform_mj/scenario.py`) and their descriptions (`bioform_mj/scenario_doc.py`). Unknown keys are refused. "
-        "The defaults are the paper scenario (`scenarios/paper.toml` restates them). Follower ids are 1-based. "
+        "(`bioform_mj/scenario_config.py`) and their descriptions (`bioform_mj/scenario_doc.py`). "
+        "Unknown keys are refused. The defaults are the paper scenario (`scenarios/paper.toml` restates them). "
+        "Follower ids are 1-based. "
         '"× scale": multiplied by `formation.scale` when the scenario is loaded '
         "(see [Scenarios](../guide/scenarios.md)).",
         "",

@@ -25,7 +25,7 @@ def test_import_is_cheap_and_the_names_are_lazy():
     assert out.returncode == 0, out.stderr
     heavy, names = out.stdout.splitlines()
     assert heavy == "[]"  # import bioform_mj loads neither numba nor MuJoCo nor the simulator
-    assert names == "bioform_mj.sim bioform_mj.scenario RunResult Controller"
+    assert names == "bioform_mj.sim bioform_mj.scenario_load RunResult Controller"  # scenario.py re-exports it
     with pytest.raises(AttributeError, match="no_such_name"):
         bf.no_such_name  # noqa: B018
 

@@ -328,12 +328,21 @@ def test_self_contacts_name_overlapping_bodies(tmp_path):
         [["mudguard_geom", "left_wheel_collision"]],
     )
     assert sc[0]["depth_m"] == pytest.approx(depth, abs=1.5e-3) and sc[0]["force_n"] > 1.0
+    assert sc[0]["simulated"] is True
     assert any("'left_wheel_link'" in r and "'mudguard'" in r for r in rep["reasons"])
     # frozen (no servo), the mudguard is welded to the base and MuJoCo's weld-level parent filter drops
-    # the pair: the report is of the robot that runs
+    # the pair in the scene: still named (the published geoms overlap at rest, design §13.1), but as not
+    # simulated, with no force, and a note instead of a warning
     frozen = _write(tmp_path, "mud_frozen.xml", _robot(extra=MUDGUARD.format(l=L, z=z)))
-    assert check(frozen, identify_=False)["self_contacts"] == []
-    assert len(check(RobotRef(frozen, free_joints=True), identify_=False)["self_contacts"]) == 1
+    rep = check(frozen, identify_=False)
+    (pair,) = rep["self_contacts"]
+    assert {pair["body1"], pair["body2"]} == {"left_wheel_link", "mudguard"}
+    assert pair["simulated"] is False and pair["force_n"] == 0.0 and pair["points"] == 0
+    assert pair["depth_m"] == pytest.approx(depth, abs=1e-6)  # the published geoms at the file's configuration
+    assert not any("'mudguard'" in r for r in rep["reasons"])
+    assert any("'mudguard'" in n and "frozen" in n for n in rep["notes"])
+    (free,) = check(RobotRef(frozen, free_joints=True), identify_=False)["self_contacts"]
+    assert free["simulated"] is True and free["force_n"] > 1.0
     # without the overlap there is none
     clear = _write(
         tmp_path,

@@ -37,18 +37,12 @@ URDF = [n for n in NAMES if ROBOTS[n].format == "urdf"]
 REDISTRIBUTABLE = {"Apache-2.0", "BSD", "BSD-3-Clause", "BSD-2-Clause", "MIT", "CC-BY-4.0"}
 
 #: the verdict of robot check in this branch differs from the expected one (the fix is another helper's)
-VERDICT_ELSEWHERE: dict[str, str] = {  # robot -> why its verdict test is still expected to fail
-    "menagerie_tiago": "swivel casters turn before the robot does: identify's 0.2 s turn test reads b 47 % low and "
-    "names a dead band (the reference, casters aligned with the coming motion, finds -0.4 %)",
-}
+VERDICT_ELSEWHERE: dict[str, str] = {}  # robot -> why its verdict test is still expected to fail
 URDF_REASON = "URDF import lands with the urdf branch"
 PENDING: dict[str, str] = {}  # robot -> why its project checks are still expected to fail
-#: self contacts the project does not report yet: the overlap is between the published wheel geoms, which the
-#: composed scene replaces by its wheel-contact proxies (design §8), and the chassis
-SELF_PENDING = {
-    "create3_urdf": "published wheel cylinders 55 mm inside the chassis: the scene's wheel proxies do not overlap it",
-    "pmb2_urdf": "published wheels and caster rollers inside the base mesh: the scene's wheel proxies do not",
-}
+#: self contacts the project does not report yet (robot -> why): none since the published geoms are read
+#: (design §13.1; Create 3 and PMB2 were here: their wheel overlaps were hidden by the scene's wheel proxies)
+SELF_PENDING: dict[str, str] = {}
 
 
 def _ref(name: str) -> RobotRef:
@@ -223,16 +217,23 @@ def test_project_floor_contacts_match_reference(name, package_path):
 )  # fmt: skip
 def test_project_names_self_contacts_at_rest(name, package_path):
     """robot check's ``self_contacts`` names the pairs of the robot's own bodies that touch at rest (joints as
-    published): for the URDFs those MuJoCo would collide and Gazebo does not (Create 3: wheels 55 mm inside the
-    chassis cylinder; PMB2: wheels and caster rollers inside the base mesh), for the MJCFs none."""
+    published), with the reference's depth within 1 mm: for the URDFs those MuJoCo would collide and Gazebo does
+    not (Create 3: wheels 55 mm inside the chassis cylinder; PMB2: wheels and caster rollers inside the base mesh),
+    none of them simulated; for the MJCFs none."""
     from bioform_mj.robot_check import check
 
     got = check(_ref(name), identify_=False)["self_contacts"]
-    pairs = set()
+    depth = {}
     for c in got:
         bodies = (c["body1"], c["body2"]) if isinstance(c, dict) else c
-        pairs.add(tuple(sorted(b.split("/")[-1] for b in bodies)))
-    assert pairs == {tuple(c["bodies"]) for c in EXPECT[name]["self_contacts_mujoco_rules"]}
+        depth[tuple(sorted(b.split("/")[-1] for b in bodies))] = c["depth_m"]
+    want = {tuple(c["bodies"]): c["depth_m"] for c in EXPECT[name]["self_contacts_mujoco_rules"]}
+    assert set(depth) == set(want)
+    for pair, d in want.items():  # the penetration depth, from the published geoms at qpos0
+        assert depth[pair] == pytest.approx(d, abs=1e-3), pair
+    urdf = ROBOTS[name].format == "urdf"
+    for c in got:  # URDF: self-collision off by convention (design §12), so none of them is simulated
+        assert not (urdf and c["simulated"]), c
 
 
 def test_reference_formula_counts_bodies_welded_to_wheels(tmp_path):

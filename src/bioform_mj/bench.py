@@ -87,7 +87,7 @@ def _bare(sc: Any, reps: int) -> dict[str, float]:
 
 def bench_case(n: int, duration: float | None = None, reps: int = 2, numpy_too: bool = False) -> dict[str, Any]:
     """Measure one team size; returns one row of the table."""
-    from .scenario import load
+    from .scenario_load import load
 
     preset, dur = CASES[n]
     dur = duration if duration is not None else dur

@@ -133,7 +133,7 @@ def scenario_conditions(sc) -> dict[str, Any]:
 def build_scenario(source: str, plant: str, c: dict[str, Any], overrides: Sequence[str] = ()):
     """The scenario ``source`` under the conditions ``c`` on ``plant``."""
     from .robots import RobotRef
-    from .scenario import load
+    from .scenario_load import load
 
     ka, kb = EST_GAINS[c["estimator_gains"]]
     s = c["c_hat0_scale"]
@@ -320,7 +320,8 @@ def check_inputs(
     ``(scenario, budget, workers)``. A budget above :data:`MAX_BUDGET`, or whose history does not fit
     in memory, is refused with its estimated duration."""
     from .budget import fmt_bytes, fmt_seconds, require
-    from .scenario import PLANTS, load
+    from .scenario_config import PLANTS
+    from .scenario_load import load
 
     if target not in TARGETS:
         raise InputError(f"unknown calibration target '{target}' (expected one of: {', '.join(TARGETS)})")

@@ -30,7 +30,7 @@ from .cliproc import (  # noqa: F401 - re-exported for callers of cli
 from .clireport import _print_summary, _record_toml, _show_robot_warnings, _warn_outcomes  # noqa: F401
 from .control.stack import METHODS
 from .errors import BioformError, InputError, WriteFailed
-from .scenario import PLANTS
+from .scenario_config import PLANTS
 
 EXIT_OK, EXIT_OTHER, EXIT_INPUT, EXIT_DIVERGED = 0, 1, 2, 3
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -41,6 +41,12 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> None:  # type: ignore[override]
         raise InputError(f"{self.prog}: {message}")
+
+
+def _backend_args(p: argparse.ArgumentParser, choices: tuple[str, ...], help: str) -> None:
+    """``--backend`` (one of ``choices``, the first the default) and ``--device``, its Warp device."""
+    p.add_argument("--backend", choices=choices, default=choices[0], help=help)
+    p.add_argument("--device", help="with --backend warp: Warp device, cpu or cuda[:N] (default: cuda if present)")
 
 
 def _scenario_args(p: argparse.ArgumentParser) -> None:
@@ -154,14 +160,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="vary a scenario key over values (repeatable, one --vary per key: a key given twice, or also "
         "given with --set, is refused; equal values are run once; ';' separates array values)",
     )
-    sw.add_argument(
-        "--backend",
-        choices=("local", "ray", "warp"),
-        default="local",
-        help="local processes, Ray, or warp: every run a world of a MuJoCo Warp batch "
-        "(needs pip install 'bioform-mj[gpu]')",
+    _backend_args(
+        sw,
+        ("local", "ray", "warp"),
+        "local processes, Ray, or warp: every run a world of a MuJoCo Warp batch (needs pip install 'bioform-mj[gpu]')",
     )
-    sw.add_argument("--device", help="with --backend warp: Warp device, cpu or cuda[:N] (default: cuda if present)")
     sw.add_argument(
         "--nconmax",
         type=int,
@@ -208,14 +211,12 @@ def build_parser() -> argparse.ArgumentParser:
     bn.add_argument("--reps", type=int, default=2, help="repetitions; the best time counts (default 2)")
     bn.add_argument("--numpy", action="store_true", help="also time the numpy reference stack")
     bn.add_argument("--json", type=Path, default=Path("runs/bench.json"), help="output JSON (default runs/bench.json)")
-    bn.add_argument(
-        "--backend",
-        choices=("cpu", "warp"),
-        default="cpu",
-        help="cpu: the compiled loop vs mj_step (default); warp: MuJoCo Warp batches, closed loop vs "
+    _backend_args(
+        bn,
+        ("cpu", "warp"),
+        "cpu: the compiled loop vs mj_step (default); warp: MuJoCo Warp batches, closed loop vs "
         "physics alone, and the CPU engine on this machine",
     )
-    bn.add_argument("--device", help="with --backend warp: Warp device, cpu or cuda[:N] (default: cuda if present)")
     bn.add_argument(
         "--worlds",
         default="1024,4096,32768",
@@ -273,7 +274,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "presets":
-        from .scenario import preset_descriptions
+        from .scenario_load import preset_descriptions
 
         desc = preset_descriptions()
         width = max(map(len, desc))
@@ -301,7 +302,7 @@ def _dispatch(args: argparse.Namespace) -> int:
 
 
 def _load(args: argparse.Namespace):
-    from .scenario import load
+    from .scenario_load import load
 
     overrides = list(args.overrides)
     if args.duration is not None:

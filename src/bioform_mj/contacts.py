@@ -9,19 +9,23 @@ Read from MuJoCo's own contact list of a compiled scene (``data.contact``, force
   nothing), its load (normal force, N), and friction and condim as published and as MuJoCo mixes
   them for the pair (the contact's own ``friction``/``dim``);
 - :func:`self_contacts`: pairs of the robot's own bodies in contact (penetration depth, force);
-- :func:`relative_poses` / :func:`moving_parts`: how far each body moves relative to the base.
+- :func:`relative_poses` / :func:`moving_parts`: how far each body moves relative to the base;
+- :func:`swivel_casters` / :func:`align_swivels`: the casters that swivel about a vertical axis, and
+  their swivels turned to trail a coming motion (design §14.1).
 
-Imports nothing of the project above :mod:`bioform_mj.scene`.
+Imports nothing of the project above :mod:`bioform_mj.robot_layout`.
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from typing import Any
 
 import mujoco
 import numpy as np
 
-from bioform_mj.scene import FRICTIONLESS, RobotLayout, subtree, welded_to
+from bioform_mj.robot_layout import FRICTIONLESS, RobotLayout, _label, _name, subtree, welded_to
 
 __all__ = [
     "CASTER_LOAD",
@@ -34,6 +38,10 @@ __all__ = [
     "pose_change",
     "still_bodies",
     "braking_casters",
+    "Swivel",
+    "swivel_casters",
+    "rolling_bodies",
+    "align_swivels",
 ]
 
 #: a non-wheel geom carrying more than this fraction of the robot's weight is a caster
@@ -41,18 +49,20 @@ CASTER_LOAD = 0.005
 #: a body whose position relative to the base changes by more than this (m) or whose orientation
 #: by more than :data:`MOVE_DEG` (deg) is a moving part
 MOVE_M, MOVE_DEG = 5e-3, 1.0
+#: a passive hinge above a floor contact whose axis is within this angle of the base's vertical is a
+#: caster swivel (deg; design §14.1)
+SWIVEL_TILT_DEG = 20.0
+#: a caster wheel whose centre sits less than this behind its swivel axis has no trail (m): its rolling
+#: direction is aligned with the motion instead of its trail behind it
+TRAIL_MIN_M = 1e-3
 
 
 def _gname(model: mujoco.MjModel, g: int) -> str:
-    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
-    if name:
-        return name
-    b = int(model.geom_bodyid[g])
-    return f"{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b)}#{g - int(model.body_geomadr[b])}"
+    return _label(model, mujoco.mjtObj.mjOBJ_GEOM, g, "#")
 
 
 def _bname(model: mujoco.MjModel, b: int) -> str:
-    return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or f"#{b}"
+    return _name(model, mujoco.mjtObj.mjOBJ_BODY, b)
 
 
 def _strip(name: str, prefix: str) -> str:
@@ -71,6 +81,28 @@ def _rolling_bodies(model: mujoco.MjModel, lay: RobotLayout) -> set[int]:
     for j in lay.rolling_joints:
         jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j)
         if jid >= 0:
+            out |= set(subtree(model, int(model.jnt_bodyid[jid])).tolist())
+    return out
+
+
+def rolling_bodies(model: mujoco.MjModel, lay: RobotLayout) -> set[int]:
+    """Bodies that can roll on the floor: below one of the layout's ``rolling_joints`` that is a ball
+    joint or a hinge that is not a swivel (its axis more than :data:`SWIVEL_TILT_DEG` from the base's
+    vertical at ``qpos0``). A geom on a swivel alone turns about the vertical but slides on the floor
+    (design §14.1): it brakes like a fixed caster."""
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    up = data.xmat[model.body(lay.base).id].reshape(3, 3)[:, 2]
+    ball, hinge = int(mujoco.mjtJoint.mjJNT_BALL), int(mujoco.mjtJoint.mjJNT_HINGE)
+    out: set[int] = set()
+    for j in lay.rolling_joints:
+        jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j)
+        if jid < 0:
+            continue
+        kind = int(model.jnt_type[jid])
+        if kind == ball or (
+            kind == hinge and abs(float(data.xaxis[jid] @ up)) < math.cos(math.radians(SWIVEL_TILT_DEG))
+        ):
             out |= set(subtree(model, int(model.jnt_bodyid[jid])).tolist())
     return out
 
@@ -98,13 +130,14 @@ def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout,
     the normal forces of its contacts, N), ``friction`` (sliding friction MuJoCo uses for the pair),
     ``condim`` (the pair's), ``friction_published``, ``condim_published`` (the geom's own, as the file
     says), ``priority``, ``points`` (number of contacts), ``welded_to_base`` (no joint between its
-    body and the base: a caster that cannot roll slides) and ``rolls`` (below a free caster joint).
+    body and the base: a caster that cannot roll slides) and ``rolls`` (below a free caster joint that
+    rolls: :func:`rolling_bodies`; a swivel alone does not).
     Call it on a robot at rest (settled) for the load at rest.
     """
     base = model.body(lay.base).id
     bodies = set(subtree(model, base).tolist())
     wheels = _wheel_bodies(model, lay)
-    rolling = _rolling_bodies(model, lay)
+    rolling = rolling_bodies(model, lay)
     weight = float(model.body_mass[list(bodies)].sum() * np.linalg.norm(model.opt.gravity))
     published = {g: (f, c) for g, f, c in lay.published_contacts}
     casters = set(lay.casters)
@@ -318,33 +351,133 @@ def braking_casters(floor: list[dict], drive_force: float) -> list[tuple[dict, f
     return out
 
 
-def unsimulated_self_contacts(entry: Any, simulated: list[dict]) -> list[dict]:
-    """Pairs of a URDF robot's own bodies that overlap at rest where the import turned self-collision off
-    (the URDF/Gazebo convention, design §12): the contacts MuJoCo would make with it on, from the file's
-    configuration (one ``mj_forward`` of the robot alone), each marked ``"simulated": False``. Empty for an
-    MJCF robot or ``self_collide = true`` (their self contacts are simulated and listed already)."""
-    import dataclasses
+@dataclass(frozen=True)
+class Swivel:
+    """One caster swivel (:func:`swivel_casters`): a passive hinge about the base's vertical carrying
+    a wheel (or sphere) that touches the floor. Angles in rad, lengths in m, in the base body's frame."""
 
-    import mujoco
+    joint: str  # joint name (with the scene's prefix)
+    qpos: int  # qpos address
+    dof: int  # qvel address
+    q0: float  # the joint's qpos0, rad
+    sense: float  # +1 / −1: the swivel axis along / against the base's up (a positive angle turns the caster CCW / CW)
+    anchor: tuple[float, float]  # the swivel axis's horizontal position in the base frame, m
+    angle0: float  # at q0: the heading of the trail (the wheel centre from the axis), or of the rolling direction
+    trail_m: float  # horizontal distance of the wheel centre behind the axis (0: no trail)
+    limits: tuple[float, float] | None  # the joint range, rad, where it is limited
+    damping: float = 0.0  # N·m·s/rad: the swivel's joint damping (resists turning the caster round)
+    frictionloss: float = 0.0  # N·m: the swivel's dry friction (the same)
 
-    from .plants.mujoco_plant import MujocoPlant  # above the plant: a one-robot scene of its own
-    from .robots import resolve_robot
+    def resistance(self) -> dict[str, Any]:
+        """``{"joint" (without the scene's prefix), "damping_Nms_per_rad", "frictionloss_Nm"}``."""
+        return {
+            "joint": self.joint.split("/", 1)[-1],
+            "damping_Nms_per_rad": self.damping,
+            "frictionloss_Nm": self.frictionloss,
+        }
 
-    ref = resolve_robot(entry)
-    if ref.self_collide or not str(ref.model).lower().endswith((".urdf", ".xacro")):
-        return []
-    plant = MujocoPlant(
-        [dataclasses.replace(ref, self_collide=True)], np.zeros((1, 3)), 0.001, 0.001, None, slots=False
-    )
-    data = mujoco.MjData(plant.model)
-    mujoco.mj_forward(plant.model, data)
-    have = {(c["body1"], c["body2"]) for c in simulated}
-    out = []
-    for c in self_contacts(plant.model, data, plant.layouts[0], "f1/"):
-        if (c["body1"], c["body2"]) not in have:
-            c["simulated"] = False
-            out.append(c)
+
+def swivel_casters(model: mujoco.MjModel, lay: RobotLayout) -> list[Swivel]:
+    """The robot's caster swivels (design §14.1): each of the layout's ``rolling_joints`` (passive joints
+    above a floor contact, design §13) that is a hinge within :data:`SWIVEL_TILT_DEG` of the base's
+    vertical at ``qpos0``, with the lowest collision geom below it (the caster's wheel). Its direction is
+    the trail (the wheel centre's horizontal offset from the axis) where that exceeds :data:`TRAIL_MIN_M`,
+    else the rolling direction of the horizontal hinge that carries the wheel; a trailless swivel with no
+    such hinge (a ball on a swivel) has no direction and is left out."""
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    base = model.body(lay.base).id
+    rot = data.xmat[base].reshape(3, 3)
+    hinge = int(mujoco.mjtJoint.mjJNT_HINGE)
+    out: list[Swivel] = []
+    for name in lay.rolling_joints:
+        j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+        if j < 0 or int(model.jnt_type[j]) != hinge:
+            continue
+        ax = rot.T @ data.xaxis[j]
+        if abs(ax[2]) < math.cos(math.radians(SWIVEL_TILT_DEG)):
+            continue
+        below = set(subtree(model, int(model.jnt_bodyid[j])).tolist())
+        # the caster's wheel: on the roller (a horizontal hinge below the swivel) where there is one, so
+        # that a fork's own collision geom (a MiR caster's mesh) is not taken for it; the lowest centre
+        rollers = [
+            k
+            for k in range(model.njnt)
+            if k != j
+            and int(model.jnt_type[k]) == hinge
+            and int(model.jnt_bodyid[k]) in below
+            and abs((rot.T @ data.xaxis[k])[2]) < 0.5
+        ]
+        carried = set(subtree(model, int(model.jnt_bodyid[rollers[0]])).tolist()) if rollers else below
+        geoms = [
+            g
+            for g in range(model.ngeom)
+            if model.geom_bodyid[g] in carried and (model.geom_contype[g] or model.geom_conaffinity[g])
+        ]
+        if not geoms:
+            continue
+        g = min(geoms, key=lambda g: float(data.geom_xpos[g] @ rot[:, 2]))
+        trail = rot.T @ (data.geom_xpos[g] - data.xanchor[j])
+        dist = math.hypot(trail[0], trail[1])
+        if dist >= TRAIL_MIN_M:
+            angle = math.atan2(trail[1], trail[0])
+        elif rollers:  # no trail: the wheel's rolling direction, up × its hinge axis
+            ra = rot.T @ data.xaxis[rollers[0]]
+            angle, dist = math.atan2(ra[0], -ra[1]), 0.0
+        else:
+            continue
+        anchor = rot.T @ (data.xanchor[j] - data.xpos[base])
+        out.append(
+            Swivel(
+                joint=name,
+                qpos=int(model.jnt_qposadr[j]),
+                dof=int(model.jnt_dofadr[j]),
+                q0=float(model.qpos0[model.jnt_qposadr[j]]),
+                sense=1.0 if ax[2] > 0 else -1.0,
+                anchor=(float(anchor[0]), float(anchor[1])),
+                angle0=angle,
+                trail_m=dist,
+                limits=(float(model.jnt_range[j, 0]), float(model.jnt_range[j, 1])) if model.jnt_limited[j] else None,
+                damping=float(model.dof_damping[model.jnt_dofadr[j]]),
+                frictionloss=float(model.dof_frictionloss[model.jnt_dofadr[j]]),
+            )
+        )
     return out
+
+
+def align_swivels(
+    data: mujoco.MjData, swivels: list[Swivel], axle: tuple[float, float, float], v: float, w: float
+) -> list[float]:
+    """Turn each swivel to its caster's steady state under the motion ``(υ, ω)`` (m/s, rad/s) of the axle
+    midpoint ``axle`` (base frame, m): the wheel rolls along its own heading without slipping sideways,
+    trailing its axis (design §14.1). With ``u(p) = υ x̂ + ω ẑ × (p − axle)`` the velocity field and the
+    trail ``t`` (length ``d``), the wheel's velocity ``u(p + t) = u(p) + ω ẑ × t`` must point along
+    ``−t``: the trail's heading is ``ψ − π − asin(ω d / |u(p)|)``, ``ψ`` the heading of ``u(p)``. Driving
+    that is straight behind the axis; turning in place nearly tangent to the axis's circle about the axle
+    midpoint, ``asin(d/ρ)`` further round (8.6° for a 30 mm trail 0.2 m out). A trailless caster's rolling
+    direction is laid along ``u(p)`` (the nearer way round). Only the ratio of ``υ`` and ``ω`` counts.
+    Sets ``data.qpos`` and zeroes the swivels' ``qvel``; call ``mj_forward`` after. A caster on the axis
+    of a turn in place stays as it is. Returns the angle each swivel turned, rad."""
+    turned = []
+    for s in swivels:
+        ux, uy = v - w * (s.anchor[1] - axle[1]), w * (s.anchor[0] - axle[0])
+        speed = math.hypot(ux, uy)
+        if speed < 1e-9 * max(1.0, abs(v), abs(w)):
+            turned.append(0.0)
+            continue
+        psi = math.atan2(uy, ux)
+        if s.trail_m > 0:
+            lead = math.asin(max(-1.0, min(1.0, w * s.trail_m / speed)))
+            delta = math.remainder(psi - math.pi - lead - s.angle0, 2 * math.pi)
+        else:  # rolling either way along the motion: the nearer
+            delta = math.remainder(psi - s.angle0, math.pi)
+        q = s.q0 + s.sense * delta
+        if s.limits is not None:
+            q = min(max(q, s.limits[0]), s.limits[1])
+        data.qpos[s.qpos] = q
+        data.qvel[s.dof] = 0.0
+        turned.append(q - s.q0)
+    return turned
 
 
 def floor_table(report: dict[str, Any]) -> list[str]:

@@ -44,7 +44,7 @@ from .control.base import Comm
 from .control.equations import njit, noisy_reading, packet_received, wrap
 from .control.stack import ControlStack
 from .graph import Graph
-from .scenario import Scenario
+from .scenario_config import Scenario
 
 #: Streams of the counter hash (the module doc): source -> stream number (0 is the gyro's).
 STREAM = {"packet_loss": 1, "noise_pose": 2, "noise_vel": 3}

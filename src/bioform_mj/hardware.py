@@ -71,7 +71,8 @@ def _preset_rates() -> list[tuple[float, str, str]]:
     from pathlib import Path
 
     from .robots import as_ref, resolve_robot
-    from .scenario import SimCfg, preset_names
+    from .scenario_config import SimCfg
+    from .scenario_load import preset_names
 
     out = []
     for name in preset_names():
@@ -102,7 +103,7 @@ def verdict(sc: Any, plant: Any, summary: dict[str, Any], logd: dict[str, np.nda
     else:
         import mujoco
 
-        from .scene import dc_constants
+        from .robot_layout import dc_constants
 
         m = plant.model
         limits = []

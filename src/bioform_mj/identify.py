@@ -25,6 +25,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from bioform_mj.contacts import align_swivels, rolling_bodies, swivel_casters
+from bioform_mj.robot_layout import subtree
 from bioform_mj.robot_params import (  # re-exported: the ground truth lives beside the scene (STYLE item 8)
     COM_TOLERANCE_M,
     RobotParams,
@@ -32,7 +34,6 @@ from bioform_mj.robot_params import (  # re-exported: the ground truth lives bes
     robot_parameters,
     robot_truth,
 )
-from bioform_mj.scene import subtree
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +45,7 @@ __all__ = [
     "ground_truth",
     "identify",
     "identify_main",
+    "identify_notes",
     "floor_contacts",
     "self_contacts",
     "check_radius",
@@ -81,8 +83,15 @@ ID_WINDOW = 0.7
 ID_MAX_S = 2.0
 #: ... unless the chassis pitched by more than this in that longer test (deg): then the 1 s test stands
 PROBE_UPSET_DEG = 20.0
+#: a drive test whose top level turns the heading by more than this (rad) is rerun at a lower torque, at most
+#: DRIVE_SCALE_MIN times the first (design §14.1: a centre of mass beside the axle couples υ into ω)
+DRIVE_HEADING_MAX = 0.1
+DRIVE_SCALE_MIN = 0.1
 #: the turn tests last this long from rest, s, fitted from the start
 TURN_DURATION = 0.2
+#: ... from this time on where the wheels have a frictionloss (design §14.1: MuJoCo's soft frictionloss
+#: lets a wheel creep for its first ~0.1 s from rest; PAL PMB2: ω̇ 3.4 rad/s² where the dead band allows 1.5)
+TURN_SKIP = 0.1
 #: torque levels of each test, as fractions between the lowest usable torque and the top one
 ID_LEVELS = (1.0, 0.5, 0.0)
 #: a finding of :func:`identify` (design §14): drag when it changes the speed by this fraction over a test
@@ -121,20 +130,16 @@ def _finding(kind: str, detail: str, **numbers: Any) -> dict[str, Any]:
 
 def floor_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> list[dict[str, Any]]:
     """Robot ``i``'s geoms touching the floor now (after the robot settled): ``body``, ``geom``,
-    ``role`` (``wheel``, ``rolling``: on a passive caster joint, or ``other``), ``load_n`` (normal force,
-    N), ``friction`` (the contact's
-    sliding μ as simulated), ``condim``. A minimal list for the verdict's braking-caster cause.
+    ``role`` (``wheel``; ``rolling``: below a passive caster joint that rolls, not a swivel alone; or
+    ``other``), ``load_n`` (normal force, N), ``friction`` (the contact's sliding μ as simulated),
+    ``condim``. A minimal list for the verdict's braking-caster cause.
     ``data``: another state of the plant's model (a settled copy) instead of the plant's own."""
     m, d = plant.model, (plant.data if data is None else data)
     lay = plant.layouts[i]
     prefix = lay.base[: lay.base.index("/") + 1] if "/" in lay.base else ""
     inside = set(subtree(m, m.body(lay.base).id).tolist())
     wheels = {m.geom(g).id for g in lay.wheel_geoms}
-    rolling = set()  # bodies on a passive caster joint (design §13: a caster that swivels and rolls)
-    for j in getattr(lay, "rolling_joints", ()):
-        jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)
-        if jid >= 0:
-            rolling |= set(subtree(m, int(m.jnt_bodyid[jid])).tolist())
+    rolling = rolling_bodies(m, lay)  # below a passive caster joint that rolls (design §13, §14.1)
     out: dict[int, dict[str, Any]] = {}
     f = np.zeros(6)
     for c in range(d.ncon):
@@ -277,7 +282,7 @@ def identify(
     """
     from bioform_mj.errors import InputError
     from bioform_mj.plants.mujoco_plant import MujocoPlant  # a floor up; imported when used
-    from bioform_mj.scene import prepare_robot
+    from bioform_mj.robot_prepare import prepare_robot
 
     if not (math.isfinite(duration) and duration > 0) or not (math.isfinite(settle) and settle >= 0):
         raise InputError(f"identify: duration must be > 0 and settle >= 0 s, got {duration}, {settle}")
@@ -431,9 +436,13 @@ def identify(
             torque = hi
     if not (math.isfinite(torque) and 0 < torque <= motor):
         raise InputError(f"identify: torque must be in (0, {motor:g}] N·m, got {torque}")
+
     # the lowest level: a third of the top one, or halfway between the dead band and it
-    lo = torque / 3 if torque / 3 > 1.2 * f else f + 0.5 * (torque - f)
-    levels = [lo + x * (torque - lo) for x in ID_LEVELS]
+    def levels_of(top: float) -> list[float]:
+        lo = top / 3 if top / 3 > 1.2 * f else f + 0.5 * (top - f)
+        return [lo + x * (top - lo) for x in ID_LEVELS]
+
+    levels = levels_of(torque)
     if params.motor == "dc":  # design §8.2: stay below the torque–speed line; see the drag's transient
         k_v = params.unmodelled(0.0, 0.0)["drag_rate_per_s"][0]
         w0 = 0.3 * params.motor_no_load_speed * params.wheel_radius  # 30 % of the no-load wheel speed, m/s
@@ -458,9 +467,13 @@ def identify(
         k0 = 0
     base_id = model.body(lay.base).id
     wdof, wsign, r = plant._wheel_dof[0], plant._wheel_sign[0], params.wheel_radius
+    swivels = swivel_casters(model, lay)
 
     def run(tau_l: float, tau_r: float, n_run: int) -> dict:
         mujoco.mj_resetData(model, data)  # not plant.reset(): that would remove the payload
+        # design §14.1: each caster swivel starts trailing the coming motion (driving: behind its axis;
+        # turning: tangent to its circle about the axle midpoint), as it runs once it has turned round
+        align_swivels(data, swivels, lay.axle, tau_l + tau_r, tau_r - tau_l)
         mujoco.mj_forward(model, data)
         zero = np.zeros((1, 2))
         for k in range(n_settle):
@@ -471,6 +484,7 @@ def identify(
         vcom = np.empty(n_run + 1)
         pitch = np.empty(n_run + 1)
         rim = np.empty(n_run + 1)  # m/s: the wheels' mean rim speed
+        heading = np.empty(n_run + 1)  # rad
 
         def sample(k: int) -> None:
             pose, vel = plant.observe()
@@ -479,7 +493,7 @@ def identify(
             mujoco.mj_comPos(model, data)
             mujoco.mj_comVel(model, data)
             mujoco.mj_subtreeVel(model, data)
-            th = pose[0, 2]
+            th = heading[k] = pose[0, 2]
             lv = data.subtree_linvel[base_id]
             vcom[k] = np.cos(th) * lv[0] + np.sin(th) * lv[1]
             xm = data.xmat[base_id].reshape(3, 3)
@@ -498,6 +512,7 @@ def identify(
             vcom=vcom,
             pitch=pitch,
             rim=rim,
+            heading=np.unwrap(heading),
             lateral_m=float(-np.sin(th0) * d[0] + np.cos(th0) * d[1]),
             warnings=sum(int(w.number) for w in data.warning),
             heading_change_rad=float(np.angle(np.exp(1j * (pose[0, 2] - th0)))),
@@ -557,30 +572,48 @@ def identify(
     turn_levels = [x * t_turn / torque for x in levels]
     if f > 0 and min(turn_levels) < 1.1 * f:
         turn_levels = levels  # the dead band needs the turn tests at the drive torques
-    settle_s = None
-    if not rate_form and n_run * dt >= ID_DURATION - 1e-9 and duration >= ID_DURATION - 1e-9:
+    k0_first, n_first = k0, n_run
+
+    def drive_tests(levels_: list[float]) -> tuple[list[dict], int, int, float | None]:
+        """The drive tests at ``levels_``: (runs, first fitted step, steps, when the pitch settled or None)."""
+        k0_, n_run_ = k0_first, n_first
+        if rate_form or n_run_ * dt < ID_DURATION - 1e-9 or duration < ID_DURATION - 1e-9:
+            return [run(T, T, n_run_) for T in levels_], k0_, n_run_, None
         # a chassis that keeps pitching past ID_SKIP (a tall one bouncing between its casters): the drive
         # tests run ID_MAX_S; where every level's pitch settles (within SETTLED_DEG of its final lean)
         # later than ID_SKIP, the ID_WINDOW after the last of them is fitted, else the first
         # duration s as for any robot (the same numbers: the runs are deterministic) (design §14)
         n_long = round(ID_MAX_S / dt)
-        drive = [run(T, T, n_long) for T in levels]
+        drive_ = [run(T, T, n_long) for T in levels_]
         settles, upset = [], False
-        for r_ in drive:
+        for r_ in drive_:
             p_ = r_["pitch"]
             away = np.nonzero(np.abs(p_ - p_[-1]) > SETTLED_DEG * np.pi / 180)[0]
             settles.append(float(away[-1] + 1) * dt if len(away) else 0.0)
             upset |= bool(np.degrees(np.abs(p_ - p_[0]).max()) > PROBE_UPSET_DEG)  # it tips, or the physics fails
-        settle_s = max(settles)
-        if settle_s > ID_SKIP and not upset:
-            k0 = round(min(settle_s + 0.05, ID_MAX_S - ID_WINDOW) / dt)
-            n_run = n_long
-        else:
-            for r_ in drive:
-                for key in ("z", "vcom", "pitch", "rim"):
-                    r_[key] = r_[key][: n_run + 1]
-    else:
-        drive = [run(T, T, n_run) for T in levels]
+            # ... or it does not drive straight (the pitch follows the turn): design §14.1
+            upset |= bool(np.abs(r_["heading"][: n_run_ + 1] - r_["heading"][0]).max() > DRIVE_HEADING_MAX)
+        settle_ = max(settles)
+        if settle_ > ID_SKIP and not upset:
+            return drive_, round(min(settle_ + 0.05, ID_MAX_S - ID_WINDOW) / dt), n_long, settle_
+        for r_ in drive_:
+            for key in ("z", "vcom", "pitch", "rim", "heading"):
+                r_[key] = r_[key][: n_run_ + 1]
+        return drive_, k0_, n_run_, settle_
+
+    drive, k0, n_run, settle_s = drive_tests(levels)
+    # design §14.1: a drive test is one while the robot drives straight; a centre of mass beside the axle
+    # couples υ into ω (§8.1: PAL TIAGo, 48 mm: 1.4 rad in 1 s at a quarter of the traction limit, a 10 %
+    # low); where the top level turns by more than DRIVE_HEADING_MAX, the tests rerun at a torque scaled
+    # down to turn by about that much (the turn grows with the torque), at most DRIVE_SCALE_MIN down and
+    # every level clear of the dead band
+    turned = float(np.abs(drive[0]["heading"][: n_first + 1] - drive[0]["heading"][0]).max())
+    first_torque = torque
+    if turned > DRIVE_HEADING_MAX:
+        lower = max(torque * max(DRIVE_HEADING_MAX / turned, DRIVE_SCALE_MIN), 3 * f)
+        if lower < 0.9 * torque:
+            torque, levels = lower, levels_of(lower)
+            drive, k0, n_run, settle_s = drive_tests(levels)
     turn = [run(-T, T, n_turn) for T in turn_levels]
     tau_a = [2 * T for T in levels]  # τ_a = τ_L + τ_R
     tau_b = [2 * T for T in turn_levels]  # τ_b = τ_R − τ_L (design §5 sign fix)
@@ -589,11 +622,12 @@ def identify(
     # not know shows in the free fit of the centre of mass (drag_rate_per_s.free_fit)
     k_form = params.unmodelled(0.0, 0.0)["drag_rate_per_s"]
     a_id, ca, be = fit(drive, tau_a, "z", 0, k_form[0] > 0, k0)
-    b_id, cb, ge = fit(turn, tau_b, "z", 1, k_form[1] > 0, 0)
+    k0_turn = 0 if rate_form or f == 0 else min(round(TURN_SKIP / dt), n_turn - 4)
+    b_id, cb, ge = fit(turn, tau_b, "z", 1, k_form[1] > 0, k0_turn)
     a_com, _, be_com = fit(drive, tau_a, "vcom", None, k_form[0] > 0, k0)
     _, _, be_free = fit(drive, tau_a, "vcom", None, True, k0)
-    _, _, ge_free = fit(turn, tau_b, "z", 1, True, 0)
-    windows = [(n_run - k0) * dt, n_turn * dt]
+    _, _, ge_free = fit(turn, tau_b, "z", 1, True, k0_turn)
+    windows = [(n_run - k0) * dt, (n_turn - k0_turn) * dt]
     truth = params.unmodelled(0.0, 0.0)
     ok = all(math.isfinite(x) for x in (a_id, b_id)) and a_id > 0 and b_id > 0
     rock = _rocking(drive[0]["pitch"][k0:], dt)
@@ -693,10 +727,21 @@ def identify(
         "test": {
             "torque_Nm": torque,
             "torque_levels_Nm": levels,
+            # design §14.1: the first drive tests' top torque and how far its heading turned (rad), where
+            # they turned by more than DRIVE_HEADING_MAX and reran at ``torque_Nm``
+            "drive_rerun": (
+                {"first_torque_Nm": first_torque, "first_heading_change_rad": turned}
+                if torque != first_torque
+                else None
+            ),
+            "caster_swivels": [s_.joint.split("/", 1)[-1] for s_ in swivels],
+            # what resists turning them round (a start from other angles, a change of direction)
+            "caster_swivel_resistance": [x.resistance() for x in swivels if x.damping or x.frictionloss],
             "turn_torque_Nm": turn_levels[0],
             "turn_torque_levels_Nm": turn_levels,
             "duration_s": n_run * dt,
             "turn_duration_s": n_turn * dt,
+            "turn_fit_from_s": k0_turn * dt,
             "fit_from_s": k0 * dt,
             "pitch_settled_s": settle_s,
             "fit": "rates" if rate_form else "summed speed",
@@ -708,6 +753,28 @@ def identify(
             "mujoco_warnings": sum(x["warnings"] for x in drive + turn),
         },
     }
+
+
+def identify_notes(ident: dict | None) -> list[str]:
+    """For ``robot check``'s notes: the caster swivels :func:`identify` turned before each test and what
+    resists turning them, a drive test rerun at a lower torque (design §14.1)."""
+    test, notes = (ident or {}).get("test", {}), []
+    if test.get("caster_swivels"):
+        res = test.get("caster_swivel_resistance") or [{"damping_Nms_per_rad": 0.0, "frictionloss_Nm": 0.0}]
+        notes.append(
+            f"caster swivel(s) {', '.join(repr(j) for j in test['caster_swivels'])} turned before each "
+            "identification test to trail its motion (the casters' steady state); a start from other caster "
+            f"angles turns them round first, against a swivel damping of up to "
+            f"{max(r['damping_Nms_per_rad'] for r in res):g} N·m·s/rad and frictionloss of up to "
+            f"{max(r['frictionloss_Nm'] for r in res):g} N·m"
+        )
+    if dr := test.get("drive_rerun"):
+        notes.append(
+            f"drive tests at {test['torque_Nm']:.3g} N·m: at {dr['first_torque_Nm']:.3g} N·m the robot turned "
+            f"{dr['first_heading_change_rad']:.2g} rad within the test (design §14.1: a centre of mass beside "
+            "the axle couples υ into ω)"
+        )
+    return notes
 
 
 def identify_main(model) -> dict:

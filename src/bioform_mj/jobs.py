@@ -97,7 +97,7 @@ def load_kernels() -> None:
     in this process (and inherited by forked workers instead of loaded once per worker); once per process."""
     if _KERNELS:
         return
-    from .scenario import load
+    from .scenario_load import load
     from .sim import simulate
 
     for plant in ("ideal", "mujoco"):

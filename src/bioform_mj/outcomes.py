@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .scenario import Scenario
+from .scenario_config import Scenario
 
 
 def slots_of(sc: Scenario, leader_pose: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from .robots import _is_shipped
-from .scenario import Scenario
+from .scenario_config import Scenario
 
 
 def resolved_config(sc: Scenario) -> dict[str, Any]:

@@ -89,7 +89,8 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
     import mujoco
 
     from .contacts import floor_points
-    from .scene import _geom_support, layout_of
+    from .robot_analysis import layout_of
+    from .robot_layout import _geom_support
 
     lay = layout_of(model, prefix)
     base = model.body(lay.base).id
@@ -166,12 +167,12 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         self_contacts,
         settle,
         still_bodies,
-        unsimulated_self_contacts,
     )
-    from .identify import DRAG_STEP, check_radius, identify
+    from .identify import DRAG_STEP, check_radius, identify, identify_notes
+    from .overlaps import self_contacts_at_rest
     from .plants.mujoco_plant import MujocoPlant
     from .robot_params import implausible_inertias, robot_parameters
-    from .scene import prepare_robot
+    from .robot_prepare import prepare_robot
 
     plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
     check_radius(plant)  # exit 2 before any work: a radius nothing can be measured with
@@ -194,14 +195,16 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     mu = plant._wheel_friction(0)
     settled, floor, moving_at_rest = settle(plant, lay, track)  # 0.2 s, up to 1 s while it moves
     loads = plant.wheel_loads()[0]
-    selfc = self_contacts(model, plant.data, lay, "f1/")
-    selfc += unsimulated_self_contacts(entry, selfc)  # a URDF's excluded pairs that overlap (design §12)
+    # the scene's contacts at rest, and every pair whose published geoms overlap at qpos0 (design §13.1)
+    selfc, self_notes = self_contacts_at_rest(
+        entry, lay.base[len("f1/") :], model, "f1/", self_contacts(model, plant.data, lay, "f1/")
+    )
     # μ N r / f per wheel (design §13: N the wheel's own load at rest, f the share of torque that
     # reaches the floor past the rotor; μ m g r / 2 for an even split and a light rotor)
     traction = p.traction_torque(mu, float(loads.min()))
     motor = float(min(p.tau_max))
     motor_accel = 2 * motor * p.a_eff  # υ̇ at full torque on both wheels, m/s²
-    notes = list(lay.notes)
+    notes = list(lay.notes) + self_notes
     reasons_fail, reasons_warn = [], []
 
     # the first ~2 s under gravity and a drive (forward, then a turn): what moves relative to the base
@@ -245,16 +248,10 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     if odd := implausible_inertias(model, "f1/", scratch):  # at the file's configuration
         reasons_warn.append(odd)
     if moving_at_rest:
-        pushed = [f"'{c['body1']}'/'{c['body2']}'" for c in selfc if c.get("simulated") is not False]
+        pushed = [f"'{c['body1']}'/'{c['body2']}'" for c in selfc if c["simulated"]]
         reasons_warn.append(moving_at_rest + (f"; its own bodies push it: {', '.join(pushed)}" if pushed else ""))
-    for sc in selfc:
-        if sc.get("simulated") is False:  # a URDF pair excluded from contacts: said, it changes nothing (design §12)
-            notes.append(
-                f"the robot's own links '{sc['body1']}' and '{sc['body2']}' overlap at rest "
-                f"({1e3 * sc['depth_m']:.2g} mm deep) but do not collide: self-collision is off (the URDF/Gazebo "
-                f"convention); with self_collide = true MuJoCo would push them apart with {sc['force_n']:.3g} N"
-            )
-        elif sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_FORCE * weight:
+    for sc in selfc:  # a pair the scene does not collide is a note (self_notes), not a warning
+        if sc["simulated"] and (sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_FORCE * weight):
             reasons_warn.append(
                 f"the robot's own bodies '{sc['body1']}' and '{sc['body2']}' touch at rest "
                 f"({1e3 * sc['depth_m']:.2g} mm deep, {sc['force_n']:.3g} N; self_contacts): MuJoCo collides all but "
@@ -263,6 +260,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
 
     ident = identify(entry) if identify_ else None  # InputError (exit 2) for a mapping no test can use
     findings = ident["findings"] if ident else []
+    notes += identify_notes(ident)  # design §14.1: what the identification set up, said
     if any("other wheel" in n for n in lay.notes):  # the cause, before what it makes the identification see
         skid = (
             "other fixed wheels touch the floor (see notes): a 4-wheel / skid-steer base, not the paper's "
@@ -751,12 +749,8 @@ def main(args: argparse.Namespace) -> int:
     for sc in report["self_contacts"]:
         lines.append(
             f"  self contact: '{sc['body1']}' / '{sc['body2']}' "
-            f"{1e3 * sc['depth_m']:.3g} mm deep, "
-            + (
-                f"not simulated (self-collision off; {sc['force_n']:.3g} N if on)"
-                if sc.get("simulated") is False
-                else f"{sc['force_n']:.3g} N"
-            )
+            f"{1e3 * sc['depth_m']:.3g} mm deep, {sc['force_n']:.3g} N"
+            + ("" if sc["simulated"] else " (not collided in the scene)")
         )
     moving = report["moving_parts"]
     lines.append(

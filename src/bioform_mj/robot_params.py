@@ -21,16 +21,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from bioform_mj.scene import (
-    DC_INPUT_VOLTAGE,
-    build_scene,
-    compile_scene,
-    dc_constants,
-    dc_ctrl_scale,
-    layout_of,
-    subtree,
-    welded_to,
-)
+from bioform_mj.robot_analysis import layout_of
+from bioform_mj.robot_layout import DC_INPUT_VOLTAGE, dc_constants, dc_ctrl_scale, subtree, welded_to
+from bioform_mj.scene import build_scene, compile_scene
 
 log = logging.getLogger(__name__)
 

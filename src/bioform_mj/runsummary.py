@@ -5,7 +5,7 @@ was used; versions, timing, divergence or interrupt, the resolved configuration.
 from __future__ import annotations
 
 import platform
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -13,29 +13,32 @@ from ._version import __version__
 from .engine import CHANNELS, MEAN_CHANNELS
 from .outcomes import follower_outcomes, severity, slots_of
 from .record import resolved_config
-from .scenario import Scenario
+from .scenario_config import Scenario
 
 
-def _summary(
-    sc,
-    plant,
-    controller,
-    state,
-    met,
-    logd,
-    lp_end,
-    pose,
-    vel,
-    offsets,
-    k_done,
-    dt,
-    wall,
-    setup_s,
-    diverged,
-    interrupted,
-    missing,
-    engine,
-) -> dict[str, Any]:
+class RunEnd(NamedTuple):
+    """How a run ended, as :func:`_summary` reads it (built by :func:`bioform_mj.sim.simulate`)."""
+
+    state: Any  # the controller's StackState (a user's controller: the shadow of its signals)
+    met: Any  # engine.Metrics, per follower
+    logd: dict[str, np.ndarray]  # the run's log
+    lp_end: np.ndarray  # (3,) the leader's pose at the last step done
+    pose: np.ndarray  # (n, 3) the followers' final true poses
+    k_done: int  # control steps done
+    dt: float  # control period, s
+    wall: float  # s, the loop
+    setup_s: float  # s, before the loop
+    diverged: Any  # Diverged or None
+    interrupted: Any  # KeyboardInterrupt or None
+    missing: set[str]  # the signals a user's controller did not give
+    engine: str  # "compiled" or "stepwise"
+
+
+def _summary(sc: Scenario, plant: Any, controller: Any, run: RunEnd) -> dict[str, Any]:
+    """summary.json of a run (design §9): per follower the metrics, outcomes and the robot used; the run's
+    scenario, engine, timing, how it ended, the log's channels, versions and resolved configuration."""
+    state, met, logd, lp_end, pose = run.state, run.met, run.logd, run.lp_end, run.pose
+    k_done, dt, missing = run.k_done, run.dt, run.missing
     n = sc.n
     final_form = np.linalg.norm(pose[:, :2] - slots_of(sc, lp_end), axis=1)
     est = state.est_pose if "est_pose" not in missing else np.full((n, 3), np.nan)
@@ -81,18 +84,18 @@ def _summary(
         "plant": sc.plant.kind,
         "method": sc.method if getattr(controller, "p", None) is not None else type(controller).__name__,
         "controller": type(controller).__name__,
-        "engine": engine,
+        "engine": run.engine,
         "seed": sc.sim.seed,
         "sim_time_s": k_done * dt,
-        "wall_time_s": wall,
-        "setup_time_s": setup_s,
+        "wall_time_s": run.wall,
+        "setup_time_s": run.setup_s,
         "steps": k_done,
         "diverged": None
-        if diverged is None
-        else {"message": str(diverged), "time_s": diverged.time, "step": diverged.step},
+        if run.diverged is None
+        else {"message": str(run.diverged), "time_s": run.diverged.time, "step": run.diverged.step},
         "interrupted": None
-        if interrupted is None
-        else {"signal": _signal_name(getattr(interrupted, "signum", 2)), "time_s": k_done * dt},
+        if run.interrupted is None
+        else {"signal": _signal_name(getattr(run.interrupted, "signum", 2)), "time_s": k_done * dt},
         "log_channels": {name: CHANNELS[name][1] for name in CHANNELS},
         "log_interval_means": list(MEAN_CHANNELS),
         "versions": _versions(),

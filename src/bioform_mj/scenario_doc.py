@@ -19,7 +19,7 @@ from .control.stack import METHODS
 from .obstacles import SHAPES
 from .robots import RobotRef
 from .safety import FILTERS
-from .scenario import (
+from .scenario_config import (
     DERIVATIVES,
     ESTIMATOR_INITS,
     EVENT_KINDS,

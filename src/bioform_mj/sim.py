@@ -7,39 +7,26 @@ kernel (``controller.kernel``), the chunk runs in machine code; otherwise (injec
 faults, a user's controller, ``engine="stepwise"``, ``NUMBA_DISABLE_JIT=1``) it runs step
 by step in Python. Both call the same compiled equations and the same metric, log and
 guard functions (``engine.py``), so the two engines agree bit for bit on one machine
-(docs/design.md §9).
+(docs/design.md §9). :func:`simulate` resolves, builds, runs the loop (``runloop.py``) and
+summarises (``runsummary.py``).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import time
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-from .control.kernel import StackState, new_state
+from .control.kernel import new_state
 from .control.stack import ControlStack, StackParams, parse_method
 from .disturbance import Harmonic as HarmonicDisturbance
-from .engine import (
-    GUARD_FAILED,
-    OK,
-    Bounds,
-    Formation,
-    LogArrays,
-    Loop,
-    after_control,
-    describe,
-    new_acc,
-    new_log,
-    new_metrics,
-    record_odometry,
-)
+from .engine import Bounds, Formation, LogArrays, Loop, new_acc, new_log, new_metrics
 from .errors import ControllerError, Diverged, RobotWarning
 from .outcomes import (  # noqa: F401 - re-exported: sim is where callers have found them
     C_HAT_BOUND_BAND,
@@ -59,7 +46,19 @@ from .outcomes import (  # noqa: F401 - re-exported: sim is where callers have f
 )
 from .plants.base import Plant
 from .plants.ideal import IdealPlant
-from .runsummary import _signal_name, _summary, _versions  # noqa: F401 - sim's own names
+from .runloop import (  # noqa: F401 - MAX_CHUNK_S, ObserverClock, EventQueue, first_step_at: importable from sim as before
+    MAX_CHUNK_S,
+    EventQueue,
+    LoopEnd,
+    ObserverClock,
+    Stepper,
+    finish_observers,
+    first_step_at,
+    run_loop,
+    start_observers,
+    warm_up,
+)
+from .runsummary import RunEnd, _signal_name, _summary, _versions  # noqa: F401 - sim's own names
 from .scenario import Scenario
 from .userhooks import (  # noqa: F401 - simulate's checks, importable from sim as before
     CONTROLLER_METHODS,
@@ -299,10 +298,6 @@ def initial_estimates(sc: Scenario, pose0: np.ndarray, leader_pose0: np.ndarray)
 
 ENGINES = ("auto", "compiled", "stepwise")
 
-#: longest stretch of simulated time between two visits to Python (s): bounds the delay of
-#: progress reports and of interrupts
-MAX_CHUNK_S = 0.1
-
 
 #: what a plant's compiled chunk shares with this driver (kept under its old name)
 LoopContext = Loop
@@ -343,22 +338,81 @@ def simulate(
     saying what raised where), a note naming the controller or observer is added to the
     exception, and it is re-raised.
     """
+    # resolve: the arguments, the graph, the leader's path and the formation
+    _check_arguments(engine, controller, observers)
+    t_setup = time.perf_counter()
+    graph = sc.build_graph()
+    traj = sc.build_leader()
+    # build the plant and the controller, say what the run will meet, and reset them
+    if plant is None:
+        plant = make_plant(sc)
+    controller, own_stack = _build_controller(sc, graph, plant, controller)
+    tl = _timeline(sc, traj)
+    warned = _warn_before_run(sc, plant)
+    pose0, vel0 = _reset(sc, plant, controller, tl.L_pose[0])
+    faults = _build_faults(sc, graph, controller)
+    # the loop: its shared arrays, a compiled chunk where possible, warm-up, observers, chunks to the end
+    ctx, kernel = _loop_context(sc, controller, tl, pose0, vel0)
+    chunk = _compiled_chunk(engine, plant, ctx, kernel, faults, record_inputs)
+    c_true = np.ascontiguousarray(plant.c_true(), dtype=float)
+    # design §8.3: with sensing = "odometry" the controllers get each robot's dead reckoning
+    # (plant.measurement), everything else (metrics, guards, formation error, outcomes) the truth
+    odometry = getattr(plant, "sensing", "truth") == "odometry"
+    missing: set[str] = set()  # the signals a user's controller does not give
+    step = Stepper(ctx, sc.n, plant, controller, faults, own_stack, kernel, c_true, odometry, missing)
+    run_chunk = chunk if chunk is not None else step.python_chunk
+    warm = warm_up(step, run_chunk, progress, t_setup)
+    state_obs = RunState(sc, plant, controller)
+    started, raised = start_observers(observers, state_obs, warm.raised)
+    end = run_loop(sc, step, run_chunk, chunk is not None, observers, state_obs, warm, raised, progress)
+    raised = finish_observers(started, state_obs, step, end)
+    # summarise: the log, summary.json, the result (attached to what a user's code raised)
+    logd = _log_dict(plant, graph, ctx.log, end.j, missing, odometry, tl.offsets)
+    engine_used = "compiled" if chunk else "stepwise"
+    summary = _summarise(sc, plant, controller, step, end, logd, warm.setup_s, engine_used, warned)
+    _add_run_notes(summary, sc, plant, step, end, logd, raised)
+    result = RunResult(sc, logd, summary, plant, end.diverged, end.interrupted)
+    if raised is not None:
+        raise _with_result(raised, result)
+    return result
+
+
+def _check_arguments(engine: str, controller: Any, observers: Sequence[Observer]) -> None:
+    """The engine's name; a user's controller and observers (design §17)."""
     if engine not in ENGINES:
         raise ValueError(f"unknown engine '{engine}' (expected one of: {', '.join(ENGINES)})")
     if controller is not None:
         check_controller(controller)
     check_observers(observers)
-    t_setup = time.perf_counter()
-    graph = sc.build_graph()
-    traj = sc.build_leader()
-    if plant is None:
-        plant = make_plant(sc)
+
+
+def _build_controller(sc: Scenario, graph: Any, plant: Plant, controller: Any) -> tuple[Any, bool]:
+    """``(controller, own_stack)``: the user's, or the paper's stack for ``sc.method`` (own_stack True);
+    both the plant and the controller must have the scenario's ``n`` followers."""
     own_stack = controller is None
     if own_stack:
         controller = ControlStack(graph, stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None), plant))
     n = sc.n
     if getattr(controller, "n", n) != n or getattr(plant, "n", n) != n:
         raise ValueError(f"the scenario has {n} followers, the plant {plant.n} and the controller {controller.n}")
+    return controller, own_stack
+
+
+class _Timeline(NamedTuple):
+    """The run's steps and the leader's path: ``N`` control steps of ``dt`` s, a log row every
+    ``stride``; the leader at every step ``L_pose`` (N+1, 3), ``L_vel`` (N+1, 2); the formation."""
+
+    dt: float
+    N: int
+    stride: int
+    L_pose: np.ndarray
+    L_vel: np.ndarray
+    offsets: np.ndarray  # (n, 2) m
+    form: Formation
+
+
+def _timeline(sc: Scenario, traj: Any) -> _Timeline:
+    n = sc.n
     dt = sc.sim.control_dt
     N = max(1, int(round(sc.sim.duration / dt)))
     stride = max(1, int(round(sc.sim.log_dt / dt)))
@@ -368,39 +422,62 @@ def simulate(
     L_vel = np.ascontiguousarray(L_vel, dtype=float)
     offsets = np.ascontiguousarray(sc.formation.offsets, dtype=float).reshape(n, 2)
     form = Formation(offsets, sc.formation.frame == "leader")
+    return _Timeline(dt, N, stride, L_pose, L_vel, offsets, form)
 
+
+def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str]]:
+    """``(imported, feasibility)``: the guesses of a URDF import (design §12) and what the scenario
+    asks of the MuJoCo robots (``robot_check.feasibility``), warned before the run (the CLI prints
+    ``warning:`` lines) and kept for summary.json."""
     imported = import_warnings(plant)  # design §12: the guesses of a URDF import, said before the run
     for line in imported:
-        warnings.warn(line, RobotWarning, stacklevel=2)
+        warnings.warn(line, RobotWarning, stacklevel=3)
     feasibility: list[str] = []
     if hasattr(plant, "params") and hasattr(plant, "model"):  # MuJoCo robots: what the scenario asks of them
         from .robot_check import feasibility as _feasibility
 
         feasibility = _feasibility(sc, plant)  # in summary.json too
         for line in feasibility:
-            warnings.warn(line, RobotWarning, stacklevel=2)  # before the run (the CLI prints warning: lines)
+            warnings.warn(line, RobotWarning, stacklevel=3)  # before the run (the CLI prints warning: lines)
+    return imported, feasibility
+
+
+def _reset(sc: Scenario, plant: Plant, controller: Any, leader_pose0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Reset the plant, then the controller on its first measurement; returns ``(pose0, vel0)``."""
     plant.reset()
     pose0, vel0 = plant.observe()
     try:
-        controller.reset(initial_estimates(sc, pose0, L_pose[0]), vel0)
+        controller.reset(initial_estimates(sc, pose0, leader_pose0), vel0)
     except Exception as exc:
         exc.add_note(f"bioform: raised by controller {type(controller).__name__}.reset, before the first step")
         raise
-    faults = None  # fault injection (faults.py): built only when configured, else no per-step cost
+    return pose0, vel0
+
+
+def _build_faults(sc: Scenario, graph: Any, controller: Any) -> Any:
+    """Fault injection (faults.py): built only when configured, else None (no per-step cost)."""
+    faults = None
     if sc.faults.per_step:  # (a friction patch is in the MuJoCo scene: nothing per step)
         from .faults import Faults
 
         p = getattr(controller, "p", None)
-        faults = Faults(sc, graph, np.asarray(p.tau_max if p is not None else np.full(n, sc.torque.tau_max)))
+        faults = Faults(sc, graph, np.asarray(p.tau_max if p is not None else np.full(sc.n, sc.torque.tau_max)))
         if faults.has_act and faults.act_known and not callable(getattr(controller, "set_tau_max", None)):
             raise ControllerError(  # design §17: named before any step, not an AttributeError mid-run
                 f"controller {type(controller).__name__} has no set_tau_max(tau_max) method, which "
                 "faults.actuator_known = true calls when a motor weakens (add it, or set actuator_known = false)"
             )
-    K = (N - 1) // stride + 1
+    return faults
+
+
+def _loop_context(sc: Scenario, controller: Any, tl: _Timeline, pose0: np.ndarray, vel0: np.ndarray):
+    """``(ctx, kernel)``: the arrays the loop shares with a compiled chunk (:class:`~bioform_mj.engine.Loop`)
+    and the controller's compiled kernel (None: a user's controller, whose signals are copied into
+    a shadow state each step)."""
+    n = sc.n
+    K = (tl.N - 1) // tl.stride + 1
     lg = new_log(K, n)
     kernel = getattr(controller, "kernel", None)
-    missing: set[str] = set()
     if kernel is not None:
         gains, state = kernel
     else:  # a user's controller: its signals are copied into a shadow state each step
@@ -410,21 +487,26 @@ def simulate(
         gains,
         state,
         getattr(controller, "_no_comm", None),
-        N,
-        dt,
-        L_pose,
-        L_vel,
+        tl.N,
+        tl.dt,
+        tl.L_pose,
+        tl.L_vel,
         np.ascontiguousarray(pose0, dtype=float),
         np.ascontiguousarray(vel0, dtype=float),
         new_metrics(n),
         new_acc(n),
         lg,
-        stride,
-        form,
+        tl.stride,
+        tl.form,
         Bounds(float(lim.position), float(lim.speed), float(lim.torque)),
         np.zeros(3),
     )
+    return ctx, kernel
 
+
+def _compiled_chunk(engine: str, plant: Plant, ctx: Loop, kernel: Any, faults: Any, record_inputs: Any) -> Any:
+    """The plant's compiled chunk, where the engine, the controller's kernel and no per-step faults
+    allow it (None: the Python chunk); ``engine = "compiled"`` without one is refused."""
     chunk = None
     if engine != "stepwise" and kernel is not None and faults is None and hasattr(plant, "compiled_chunk"):
         chunk = plant.compiled_chunk(ctx, record_inputs) if record_inputs is not None else plant.compiled_chunk(ctx)
@@ -433,210 +515,12 @@ def simulate(
             "engine 'compiled' needs a plant and a controller with compiled kernels, and no "
             "per-step faults (use engine 'auto' or 'stepwise')"
         )
-    c_true = np.ascontiguousarray(plant.c_true(), dtype=float)
-    # design §8.3: with sensing = "odometry" the controllers get each robot's dead reckoning
-    # (plant.measurement), everything else (metrics, guards, formation error, outcomes) the truth
-    odometry = getattr(plant, "sensing", "truth") == "odometry"
+    return chunk
 
-    def measure() -> tuple[np.ndarray, np.ndarray]:
-        return plant.measurement(ctx.pose, ctx.vel) if odometry else (ctx.pose, ctx.vel)
 
-    cname = type(controller).__name__
-    nonfinite: dict[str, Any] = {}  # design §17: a user's controller returned NaN/inf torques
-
-    def control(k: int) -> np.ndarray:
-        """Control step ``k`` on the current measurements; the torques to apply."""
-        mp, mv = measure()
-        try:
-            if faults is None:
-                tau = controller.step(L_pose[k], L_vel[k], mp, mv)
-            else:  # noisy sensing, faulty network, weakened motors, pushes; tau = what reaches the plant
-                tau = faults.step(k, k * dt, controller, plant, L_pose[k], L_vel[k], mp, mv)
-        except Exception as exc:
-            _tag(exc, f"controller {cname}.step", k, k * dt)
-            raise
-        if not own_stack:
-            tau = _checked_torques(tau, n, cname, k, dt)
-            bad = ~np.all(np.isfinite(tau), axis=1)
-            if bad.any():
-                nonfinite.update(k=k, rows=np.flatnonzero(bad), tau=tau.copy())
-                i = int(nonfinite["rows"][0])
-                raise Diverged(
-                    f"follower {i + 1}: controller {cname}.step returned non-finite torques {tau[i].tolist()} "
-                    f"at t = {k * dt:.4f} s (step {k})",
-                    step=k,
-                    time=k * dt,
-                )
-        if kernel is None:
-            try:
-                sig = controller.signals()
-            except Exception as exc:
-                _tag(exc, f"controller {cname}.signals", k, k * dt)
-                raise
-            try:
-                _shadow(state, sig, tau, missing)
-            except (ValueError, TypeError) as exc:  # a signal of the wrong shape
-                err = ControllerError(f"controller {cname}.signals() at step {k}: {exc}")
-                _tag(err, f"controller {cname}.signals", k, k * dt)
-                raise err from exc
-        return np.array(tau, dtype=float)
-
-    applied = [np.zeros((n, 2))]
-
-    def record(k: int, j: int) -> tuple[int, int]:
-        """After the control step of ``k``: metrics, guards and the log row (``engine.after_control``)."""
-        return after_control(
-            k,
-            N,
-            stride,
-            state,
-            ctx.pose,
-            ctx.vel,
-            ctx.met,
-            ctx.acc,
-            lg,
-            j,
-            L_pose,
-            L_vel,
-            dt,
-            c_true,
-            form,
-            ctx.bounds,
-            ctx.diag,
-        )
-
-    feed = bool(getattr(plant, "feed_delivered", False))
-    at = [0, 0]  # (steps done, log rows) of the Python chunk so far: kept when a step raises
-
-    def python_chunk(k0: int, k1: int, j: int) -> tuple[int, int, int]:
-        """The same contract as a compiled chunk, one Python call per step."""
-        at[:] = k0, j
-        for k in range(k0, k1):
-            plant.step(applied[0], k * dt)  # may raise Diverged (MuJoCo warnings)
-            if feed:  # DC motors: the learner gets the torque delivered over the period (design §8.2)
-                plant.feed_delivered_torque(state.tau_body)
-            p, v = plant.observe()
-            ctx.pose[:] = p
-            ctx.vel[:] = v
-            if k + 1 < N:
-                applied[0] = control(k + 1)
-                j1, status = record(k + 1, j)
-                if odometry and j1 > j:
-                    record_odometry(lg, j, plant.odo.mpose, plant.odo.mvel)
-                j = j1
-                at[:] = k + 1, j
-                if status != OK:
-                    return k + 1 - k0, j, status
-        return k1 - k0, j, OK
-
-    if progress is not None and hasattr(progress, "phase"):
-        progress.phase("loading compiled kernels (compiling them on the first run)")
-    # control step 0 and its row, then a zero-length chunk: kernels are loaded (or compiled) here,
-    # outside the timed loop
-    diverged: Diverged | None = None
-    raised: Exception | None = None  # what a user's controller or observer raised (design §17)
-    j, status = 0, OK
-    try:
-        applied[0] = control(0)
-        j, status = record(0, 0)
-    except Diverged as e:  # non-finite torques of a user's controller at step 0
-        diverged = e
-    except Exception as exc:  # noqa: BLE001 - re-raised below, with the log so far attached
-        raised = exc
-    if odometry and j > 0:
-        record_odometry(lg, 0, plant.odo.mpose, plant.odo.mvel)
-    run_chunk = chunk if chunk is not None else python_chunk
-    run_chunk(0, 0, j)
-    setup_s = time.perf_counter() - t_setup
-    if progress is not None and hasattr(progress, "phase"):
-        progress.phase(None)
-
-    state_obs = RunState(sc, plant, controller)
-    started: list[Observer] = []
-    if raised is None:
-        try:
-            for o in observers:
-                try:
-                    o.start(state_obs)
-                except Exception as exc:
-                    _tag(exc, f"observer {type(o).__name__}.start", 0, 0.0)
-                    raise
-                started.append(o)
-        except Exception as exc:  # noqa: BLE001 - re-raised below
-            raised = exc
-    obs = ObserverClock(observers, state_obs)
-    evq = EventQueue(sc.events, dt)
-    wall0 = time.perf_counter()
-    interrupted: KeyboardInterrupt | None = None
-    k = 0
-    if status != OK and diverged is None:
-        diverged = Diverged(describe(ctx.diag, 0.0, ctx.bounds), step=0, time=0.0)
-    try:
-        max_chunk = max(1, int(round(MAX_CHUNK_S / dt)))
-        while k < N and diverged is None and raised is None:
-            if evq.apply(k, plant):
-                c_true[:] = plant.c_true()
-                if k % stride == 0 and j > 0:
-                    lg.c_true[j - 1] = c_true  # this step's row shows the new plant
-            obs.sample(k * dt, L_pose[k], L_vel[k], ctx.pose, ctx.vel)
-            k1 = min(N, k + max_chunk)
-            nxt = evq.next_step()
-            if nxt is not None:
-                k1 = min(k1, max(k + 1, nxt))
-            for tn in obs.next:
-                k1 = min(k1, max(k + 1, first_step_at(tn, dt)))
-            try:
-                done, j, status = run_chunk(k, k1, j)
-            except Diverged as e:  # a MuJoCo warning, a user's non-finite torques: keep the log so far
-                diverged = e
-                if nonfinite:  # ours (a user's controller, stepwise): the rows of this chunk are kept
-                    j = at[1]
-                k = e.step
-                break
-            except Exception as exc:  # noqa: BLE001 - a user's controller raised: re-raised below
-                raised = exc
-                if chunk is None:  # the steps the plant made (the failing control step's index), the rows kept
-                    k, j = int(getattr(exc, "_bioform_step", at[0])), at[1]
-                break
-            k += done
-            if status == GUARD_FAILED:
-                diverged = Diverged(describe(ctx.diag, k * dt, ctx.bounds), step=k, time=k * dt)
-            if progress is not None:
-                progress(k, N)
-    except KeyboardInterrupt as exc:
-        interrupted = exc
-    except Exception as exc:  # noqa: BLE001 - an observer's sample raised: re-raised below
-        raised = exc
-    wall = time.perf_counter() - wall0
-    pose, vel = ctx.pose.copy(), ctx.vel.copy()
-    k_done = min(k, N)
-    if (
-        diverged is None
-        and not interrupted
-        and raised is None
-        and not (np.all(np.isfinite(pose)) and np.all(np.isfinite(vel)))
-    ):
-        diverged = Diverged(f"non-finite robot state at the end of the run (t = {N * dt:g} s)", step=N, time=N * dt)
-    if progress is not None and diverged is None and not interrupted and raised is None:
-        progress(N, N)
-    state_obs.t, state_obs.pose, state_obs.vel = k_done * dt, pose, vel
-    state_obs.leader_pose, state_obs.leader_vel = L_pose[k_done], L_vel[k_done]
-    culprit = getattr(raised, "_bioform_source", None)
-    for o in started:
-        if (
-            culprit is not None
-            and culprit == f"observer {type(o).__name__}.sample"
-            and o is getattr(raised, "_bioform_obj", None)
-        ):
-            continue  # the observer that failed is not asked to finish
-        try:
-            o.finish(state_obs)
-        except Exception as exc:
-            if raised is not None:  # already failing: say it, keep the first error
-                raised.add_note(f"(observer {type(o).__name__}.finish also raised {type(exc).__name__}: {exc})")
-                continue
-            _tag(exc, f"observer {type(o).__name__}.finish", k_done, k_done * dt)
-            raised = exc
+def _log_dict(plant: Plant, graph: Any, lg: LogArrays, j: int, missing: set[str], odometry: bool, offsets):
+    """The run's log: the ``j`` rows written (a user's missing signals NaN), the odometry (the truth
+    when the controllers used it), the offsets, obstacles and graph."""
     logd = {name: getattr(lg, name)[:j] for name in LogArrays._fields}
     for name in missing:
         logd[name] = np.full_like(logd[name], np.nan)
@@ -650,30 +534,41 @@ def simulate(
         logd["obstacles"] = to_rows(plant.obstacles)
     logd["edges"] = graph.edges + 1
     logd["leader_access"] = graph.leader_access
-    summary = _summary(
-        sc,
-        plant,
-        controller,
-        state,
-        ctx.met,
-        logd,
-        L_pose[k_done],
-        pose,
-        vel,
-        offsets,
-        k_done,
-        dt,
-        wall,
-        setup_s,
-        diverged,
-        interrupted,
-        missing,
-        engine="compiled" if chunk else "stepwise",
+    return logd
+
+
+def _summarise(sc, plant, controller, step: Stepper, end: LoopEnd, logd, setup_s: float, engine: str, warned):
+    """summary.json's body (:func:`bioform_mj.runsummary._summary`) for the run that ended as ``end``,
+    with the warnings said before the run (``warned``: ``(imported, feasibility)``)."""
+    ctx = step.ctx
+    run = RunEnd(
+        state=ctx.state,
+        met=ctx.met,
+        logd=logd,
+        lp_end=ctx.L_pose[end.k_done],
+        pose=end.pose,
+        k_done=end.k_done,
+        dt=ctx.dt,
+        wall=end.wall,
+        setup_s=setup_s,
+        diverged=end.diverged,
+        interrupted=end.interrupted,
+        missing=step.missing,
+        engine=engine,
     )
-    summary["feasibility_warnings"] = feasibility
-    summary["import_warnings"] = imported
-    summary["sensing"] = "odometry" if odometry else "truth"
-    drift = plant.odometry_drift() if odometry else None
+    summary = _summary(sc, plant, controller, run)
+    summary["feasibility_warnings"] = warned[1]
+    summary["import_warnings"] = warned[0]
+    return summary
+
+
+def _add_run_notes(summary: dict[str, Any], sc, plant, step: Stepper, end: LoopEnd, logd, raised) -> None:
+    """What summary.json says beyond :func:`_summary`: the sensing and the odometry drift (design
+    §8.3), a user's non-finite torques and what raised (design §17), the unmodelled drags and the
+    hardware verdict (design §19)."""
+    dt, k_done, cname, nonfinite = step.ctx.dt, end.k_done, step.cname, step.nonfinite
+    summary["sensing"] = "odometry" if step.odometry else "truth"
+    drift = plant.odometry_drift() if step.odometry else None
     for i, f in enumerate(summary["followers"]):  # pose error of the odometry at the end (design §8.3)
         f["odometry_drift_m"] = None if drift is None else float(drift[i, 0])
         f["odometry_heading_drift_rad"] = None if drift is None else float(drift[i, 1])
@@ -705,91 +600,15 @@ def simulate(
     from .hardware import verdict  # design §19: would this run on the robots as specified?
 
     summary["hardware"] = verdict(sc, plant, summary, logd)
-    result = RunResult(sc, logd, summary, plant, diverged, interrupted)
-    if raised is not None:
-        raised.result = result  # type: ignore[attr-defined]
-        raised.add_note(
-            f"bioform: raised by {summary['raised']['by']} at t = {summary['raised']['time_s']:.4f} s "
-            f"(step {summary['raised']['step']}); the run stopped there, its log up to the last good step "
-            f"({len(logd['t'])} rows) is in this exception's .result (a RunResult)"
-        )
-        raise raised
-    return result
 
 
-def _shadow(state: StackState, sig: Any, tau: np.ndarray, missing: set[str]) -> None:
-    """Copy a user controller's signals into the shadow state the metrics, guards and log read."""
-    fields = {
-        "est_pose": "est_pose",
-        "est_vel": "est_vel",
-        "cmd": "cmd",
-        "dcmd": "dcmd",
-        "tau_raw": "tau_raw",
-        "c_hat": "c_hat",
-        "z_hat": "z_hat",
-        "vs": "vs",
-        "tracking_error": "err",
-        "saturated": "saturated",
-    }
-    for name, attr in fields.items():
-        v = sig.get(name)
-        if v is None:
-            missing.add(name)
-            if name == "tau_raw":
-                state.tau_raw[:] = tau
-            continue
-        getattr(state, attr)[:] = v
-    state.tau[:] = tau
-
-
-class ObserverClock:
-    """Calls each observer's ``sample`` once its period of simulated time has passed."""
-
-    def __init__(self, observers: Sequence[Observer], state: RunState) -> None:
-        self.observers = list(observers)
-        self.state = state
-        self.next = [0.0] * len(self.observers)  # s, next due time of each
-
-    def sample(self, t: float, leader_pose, leader_vel, pose, vel) -> None:
-        """At control time ``t`` (s), before the plant step: sample the observers that are due."""
-        if not self.observers:
-            return
-        st = self.state
-        st.t, st.leader_pose, st.leader_vel, st.pose, st.vel = t, leader_pose, leader_vel, pose, vel
-        for i, o in enumerate(self.observers):
-            if t >= self.next[i] - 1e-12:
-                try:
-                    o.sample(st)
-                except Exception as exc:
-                    _tag(exc, f"observer {type(o).__name__}.sample", int(round(t / st.scenario.sim.control_dt)), t)
-                    exc._bioform_obj = o  # type: ignore[attr-defined]
-                    raise
-                self.next[i] += o.period
-
-
-class EventQueue:
-    """The scenario's timed events, applied to the plant at the first control step at or after their time."""
-
-    def __init__(self, events: Sequence[Any], dt: float) -> None:
-        self.events = sorted(events, key=lambda e: e.time)
-        self.steps = [first_step_at(e.time, dt) for e in self.events]
-        self.i = 0
-
-    def next_step(self) -> int | None:
-        """Control step of the next pending event (None: no more)."""
-        return self.steps[self.i] if self.i < len(self.steps) else None
-
-    def apply(self, k: int, plant: Plant) -> bool:
-        """Apply every event due at step ``k``; True if any was."""
-        applied = False
-        while self.i < len(self.events) and self.steps[self.i] <= k:
-            ev = self.events[self.i]
-            plant.add_payload(ev.follower - 1, ev.mass, ev.inertia)
-            self.i += 1
-            applied = True
-        return applied
-
-
-def first_step_at(t: float, dt: float) -> int:
-    """The first control step ``k`` with ``k·dt ≥ t`` (to 1e-12 s)."""
-    return max(0, int(math.ceil((t - 1e-12) / dt - 1e-9)))
+def _with_result(raised: Exception, result: RunResult) -> Exception:
+    """``raised`` with the run so far attached as ``.result`` and a note saying where it stopped."""
+    summary, logd = result.summary, result.log
+    raised.result = result  # type: ignore[attr-defined]
+    raised.add_note(
+        f"bioform: raised by {summary['raised']['by']} at t = {summary['raised']['time_s']:.4f} s "
+        f"(step {summary['raised']['step']}); the run stopped there, its log up to the last good step "
+        f"({len(logd['t'])} rows) is in this exception's .result (a RunResult)"
+    )
+    return raised

@@ -52,7 +52,8 @@ from .jobs import raising as _raising
 from .jobs import run_local as _run_local
 from .outputs.files import rows_to_arrow, write_json, write_parquet, write_text
 from .ray_backend import check_ray_address
-from .scenario import Scenario, load
+from .scenario_config import Scenario
+from .scenario_load import load
 
 #: Per-follower metrics of ``summary.json`` that a sweep row carries (mean and max over followers).
 METRICS = (

@@ -11,7 +11,7 @@ from collections.abc import Callable
 from typing import Any
 
 from .control.stack import METHODS
-from .scenario import Scenario
+from .scenario_config import Scenario
 from .sim import RunResult, simulate
 
 #: The paper's Table I, "total velocity error", per follower 1..3.

@@ -26,15 +26,23 @@ CONTROLLER_METHODS = ("reset", "step", "signals")
 OBSERVER_METHODS = ("start", "sample", "finish")
 
 
+def _lacking(obj: Any, methods: tuple[str, ...], what: str) -> str:
+    """``"<what> <class> has no a(), b() methods"`` for the ``methods`` ``obj`` lacks (not callable), "" if none."""
+    lacks = [m for m in methods if not callable(getattr(obj, m, None))]
+    if not lacks:
+        return ""
+    return (
+        f"{what} {type(obj).__name__} has no {', '.join(m + '()' for m in lacks)} method{'s' if len(lacks) > 1 else ''}"
+    )
+
+
 def check_controller(controller: Any) -> None:
     """Raise :class:`~bioform_mj.errors.ControllerError` naming what ``controller`` lacks of the
     :class:`~bioform_mj.control.base.Controller` protocol (called before any step)."""
-    name = type(controller).__name__
-    lacks = [m for m in CONTROLLER_METHODS if not callable(getattr(controller, m, None))]
+    lacks = _lacking(controller, CONTROLLER_METHODS, "controller")
     if lacks:
         raise ControllerError(
-            f"controller {name} has no {', '.join(m + '()' for m in lacks)} method"
-            f"{'s' if len(lacks) > 1 else ''}; a controller needs reset(est_pose0, vel0), "
+            f"{lacks}; a controller needs reset(est_pose0, vel0), "
             "step(leader_pose, leader_vel, pose, vel, comm=None) -> (n, 2) torques and signals() -> dict "
             "(see bioform_mj.control.base.Controller)"
         )
@@ -44,12 +52,9 @@ def check_observers(observers: Sequence[Any]) -> None:
     """Raise :class:`~bioform_mj.errors.ControllerError` naming what an observer lacks of :class:`Observer`."""
     for o in observers:
         name = type(o).__name__
-        lacks = [m for m in OBSERVER_METHODS if not callable(getattr(o, m, None))]
+        lacks = _lacking(o, OBSERVER_METHODS, "observer")
         if lacks:
-            raise ControllerError(
-                f"observer {name} has no {', '.join(m + '()' for m in lacks)} method"
-                f"{'s' if len(lacks) > 1 else ''} (an observer needs period, start, sample, finish: sim.Observer)"
-            )
+            raise ControllerError(f"{lacks} (an observer needs period, start, sample, finish: sim.Observer)")
         period = getattr(o, "period", None)
         try:
             ok = period is not None and float(period) > 0 and math.isfinite(float(period))

@@ -98,18 +98,34 @@ _MENAGERIE_TB3 = (
 )
 _TB3 = "https://github.com/ROBOTIS-GIT/turtlebot3/blob/"
 
+
+def _robotis(fmt: str) -> dict:
+    """What the two ROBOTIS MJCFs (``fmt`` "mjcf": menagerie names) and the two URDFs ("urdf") share."""
+    urdf = fmt == "urdf"
+    return dict(
+        format=fmt,
+        maker="ROBOTIS",
+        collection="ROBOTIS-GIT/turtlebot3 (turtlebot3_description)"
+        if urdf
+        else "ROBOTIS-GIT/robotis_mujoco_menagerie",
+        license="Apache-2.0",
+        base="base_footprint" if urdf else "base",
+        left="wheel_left_joint" if urdf else "wheel_left",
+        right="wheel_right_joint" if urdf else "wheel_right",
+    )
+
+
+#: PAL's four casters (TIAGo, PMB2): a swivel (1) and a roller (2) joint each, left free
+_PAL_CASTERS = tuple(
+    f"caster_{corner}_{k}_joint" for corner in ("front_right", "front_left", "back_right", "back_left") for k in (1, 2)
+)
+
 ROBOTS: tuple[Robot, ...] = (
     Robot(
         name="robotis_tb3_burger",
         file="robotis_tb3_burger/turtlebot3_burger.xml",
-        format="mjcf",
-        maker="ROBOTIS",
-        collection="ROBOTIS-GIT/robotis_mujoco_menagerie",
+        **_robotis("mjcf"),
         source=_MENAGERIE_TB3 + "robotis_tb3/turtlebot3_burger.xml",
-        license="Apache-2.0",
-        base="base",
-        left="wheel_left",
-        right="wheel_right",
         tau_max=1.4,
         tau_max_source="Dynamixel XL430-W250 stall torque, 11.1 V (ROBOTIS e-Manual); the MJCF has velocity servos",
         expected_verdict="warn",
@@ -123,14 +139,8 @@ ROBOTS: tuple[Robot, ...] = (
     Robot(
         name="robotis_tb3_waffle_pi",
         file="robotis_tb3_waffle_pi/turtlebot3_waffle_pi.xml",
-        format="mjcf",
-        maker="ROBOTIS",
-        collection="ROBOTIS-GIT/robotis_mujoco_menagerie",
+        **_robotis("mjcf"),
         source=_MENAGERIE_TB3 + "robotis_tb3/turtlebot3_waffle_pi.xml",
-        license="Apache-2.0",
-        base="base",
-        left="wheel_left",
-        right="wheel_right",
         tau_max=3.0,
         tau_max_source="Dynamixel XM430-W210 stall torque, 12 V (ROBOTIS e-Manual); the MJCF has velocity servos only",
         expected_verdict="warn",
@@ -152,9 +162,7 @@ ROBOTS: tuple[Robot, ...] = (
         base="base_link",
         left="wheel_left_joint",
         right="wheel_right_joint",
-        free_joints=tuple(
-            f"caster_{c}_{k}_joint" for c in ("front_right", "front_left", "back_right", "back_left") for k in (1, 2)
-        ),
+        free_joints=_PAL_CASTERS,
         tau_max=100.0,
         tau_max_source="the wheel joints' actuatorfrcrange (-100, 100) in the published MJCF",
         expected_verdict="warn",
@@ -167,14 +175,8 @@ ROBOTS: tuple[Robot, ...] = (
     Robot(
         name="tb3_burger_urdf",
         file="tb3_burger_urdf/turtlebot3_burger.urdf",
-        format="urdf",
-        maker="ROBOTIS",
-        collection="ROBOTIS-GIT/turtlebot3 (turtlebot3_description)",
+        **_robotis("urdf"),
         source=_TB3 + "754a9ddd937667839d7c38e88ca08ee0d93c08a8/turtlebot3_description/urdf/turtlebot3_burger.urdf",
-        license="Apache-2.0",
-        base="base_footprint",
-        left="wheel_left_joint",
-        right="wheel_right_joint",
         tau_max=1.4,
         tau_max_source="Dynamixel XL430-W250 stall torque (ROBOTIS e-Manual); the URDF has no effort limit",
         expected_verdict="fail",
@@ -186,14 +188,8 @@ ROBOTS: tuple[Robot, ...] = (
     Robot(
         name="tb3_waffle_pi_urdf",
         file="tb3_waffle_pi_urdf/turtlebot3_waffle_pi.urdf",
-        format="urdf",
-        maker="ROBOTIS",
-        collection="ROBOTIS-GIT/turtlebot3 (turtlebot3_description)",
+        **_robotis("urdf"),
         source=_TB3 + "fd74967cd79cd40cc23d2ae907adda93ea92cece/turtlebot3_description/urdf/turtlebot3_waffle_pi.urdf",
-        license="Apache-2.0",
-        base="base_footprint",
-        left="wheel_left_joint",
-        right="wheel_right_joint",
         tau_max=3.0,
         tau_max_source="Dynamixel XM430-W210 stall torque (ROBOTIS e-Manual); the URDF has no effort limit",
         expected_verdict="fail",
@@ -285,11 +281,7 @@ ROBOTS: tuple[Robot, ...] = (
         base="base_footprint",
         left="wheel_left_joint",
         right="wheel_right_joint",
-        free_joints=tuple(
-            f"caster_{corner}_{k}_joint"
-            for corner in ("front_right", "front_left", "back_right", "back_left")
-            for k in (1, 2)
-        ),
+        free_joints=_PAL_CASTERS,
         packages={"pmb2_description": "pmb2_urdf/pmb2_description"},
         tau_max=6.0,
         tau_max_source="the wheel joints' <limit effort='6.0'> (PAL's wheel_torque)",
@@ -893,6 +885,21 @@ def _settle(L: Loaded, swivels, turn: bool, mid: np.ndarray) -> tuple:
     return _state(L)
 
 
+def _levels(L: Loaded, st, torques: list[float], turn: bool, signs, damped: bool) -> tuple:
+    """The drive (``τ_L = τ_R = T``) or turn (``τ_R = −τ_L = T``) tests at each ``T`` of ``torques`` from the
+    settled state ``st``: ``(slope, intercept, accelerations, drag rates, pitch range rad)`` with the slope and
+    intercept of the accelerations (CoM forward / yaw) against ``τ_a = 2 T`` resp. ``τ_b = 2 T``."""
+    acc, drag, pitch = [], [], 0.0
+    for T in torques:
+        r = _run(L, st, -T if turn else T, T, signs)
+        alpha, beta = _rate(r["t"], r["w" if turn else "v"], r["w0" if turn else "v0"], damped)
+        acc.append(alpha)
+        drag.append(-beta)
+        pitch = max(pitch, float(np.ptp(r["pitch"])))
+    slope, intercept = np.polyfit(2 * np.array(torques), acc, 1)
+    return slope, intercept, acc, drag, pitch
+
+
 def identify(L: Loaded, f: dict) -> dict:
     """Settle, record the floor contacts, run the drive and turn tests at three levels; fit ``a_id, b_id``.
 
@@ -918,26 +925,12 @@ def identify(L: Loaded, f: dict) -> dict:
     turn_max = min(max(ACCELS) / l, TURN_RATE_MAX / RUN_S)  # rad/s²
     drive_t = [fl + acc / (2 * a_f) for acc in ACCELS]
     turn_t = [fl + turn_max * k / len(ACCELS) / (2 * b_f) for k in range(1, len(ACCELS) + 1)]
-    acc_v, acc_w, drag_v, drag_w, pitch_amp = [], [], [], [], 0.0
     # a drag that settles within the test is fitted as ẏ = α + β y; one that settles within a few steps
     # (k dt > 0.2) leaves nothing to fit at these torques: the speed is the damping's, the cause is named
     k_est = 2 * a_f * damp / f_rest["r_m"]
     damped = damp > 0 and k_est * m.opt.timestep < 0.2
-    for T in drive_t:
-        r = _run(L, st, T, T, signs)
-        alpha, beta = _rate(r["t"], r["v"], r["v0"], damped)
-        acc_v.append(alpha)
-        drag_v.append(-beta)
-        pitch_amp = max(pitch_amp, float(np.ptp(r["pitch"])))
-    for T in turn_t:
-        r = _run(L, st_turn, -T, T, signs)
-        alpha, beta = _rate(r["t"], r["w"], r["w0"], damped)
-        acc_w.append(alpha)
-        drag_w.append(-beta)
-    tau_a = 2 * np.array(drive_t)
-    tau_b = 2 * np.array(turn_t)
-    a_id, c_v = np.polyfit(tau_a, acc_v, 1)
-    b_id, c_w = np.polyfit(tau_b, acc_w, 1)
+    a_id, c_v, acc_v, drag_v, pitch_amp = _levels(L, st, drive_t, False, signs, damped)
+    b_id, c_w, acc_w, drag_w, _ = _levels(L, st_turn, turn_t, True, signs, damped)
     _restore(L, st)  # leave the robot at rest where it settled (statics() reads it)
     return {
         "floor_contacts": contacts,

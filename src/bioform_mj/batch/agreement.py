@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from ..scenario import Scenario
+from ..scenario_config import Scenario
 
 __all__ = ["TOLERANCES", "METRICS", "differences", "float32_spread", "judge", "DEFAULT_EPS", "SPREAD_FACTOR"]
 

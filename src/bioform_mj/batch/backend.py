@@ -175,7 +175,7 @@ def plan(specs: Sequence[Any], device: str, nconmax: int | None = None, njmax: i
     """Check ``specs`` (with resolved scenarios) for the batch engine and group them; InputError
     naming the first unsupported feature, or the memory estimate of a batch that does not fit
     (with ``nconmax`` contacts and ``njmax`` constraint rows per world; None: the defaults)."""
-    from ..scenario import load
+    from ..scenario_load import load
 
     if specs:  # the capacity alone, before any scene is built: --nconmax 1e9 must not reach put_data
         free = free_memory(device)
@@ -294,7 +294,7 @@ def run_warp(
     ``nconmax``/``njmax``: MuJoCo Warp's capacities per world (None: :class:`~.control.BatchRun`'s).
     ``stop()`` is asked between batches. A batch that raises fails its rows (``failed_row``)."""
 
-    from ..scenario import load
+    from ..scenario_load import load
     from .control import BatchRun
 
     quiet_warp()

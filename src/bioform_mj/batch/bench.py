@@ -45,7 +45,7 @@ def bench_worlds(
     import numpy as np
     import warp as wp
 
-    from ..scenario import load
+    from ..scenario_load import load
     from .backend import free_memory
     from .control import BatchRun
 
@@ -126,7 +126,7 @@ def check_worlds(W: int, base: Any, device: str) -> None:
 def cpu_engine(scenario: str = "paper", duration: float = 1.0) -> dict[str, Any]:
     """The CPU engine (compiled loop, C MuJoCo, one core) on the same scenario: robot-steps/s."""
     from ..looptime import loop_time as _loop
-    from ..scenario import load
+    from ..scenario_load import load
 
     sc = load(scenario, overrides=["plant.kind=mujoco", f"sim.duration={duration}", "formation.init_jitter=0.05"])
     _loop(load(scenario, overrides=["plant.kind=mujoco", "sim.duration=0.05"]), 1)  # compile / load the kernels
@@ -189,7 +189,7 @@ def run(
     require_warp()
     device = resolve_device(device)
     dev = wp.get_device(device)
-    from ..scenario import load
+    from ..scenario_load import load
 
     base = load(scenario, overrides=["plant.kind=mujoco", f"sim.duration={duration}"])
     for W in worlds:  # every count checked before the first batch runs

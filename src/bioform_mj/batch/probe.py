@@ -11,7 +11,7 @@ import mujoco_warp as mjw
 import numpy as np
 import warp as wp
 
-from ..scenario import Scenario
+from ..scenario_config import Scenario
 from .support import default_capacity
 
 #: :func:`physics_probe`'s limit on the one-step velocity difference (relative to |qvel|). Measured

@@ -21,7 +21,7 @@ from ..disturbance import Harmonic
 from ..engine import GUARDS
 from ..faults import Faults
 from ..plants.mujoco_plant import TIP_ANGLE_DEG
-from ..scenario import Scenario
+from ..scenario_config import Scenario
 from ..sim import lost_threshold_m
 from .device import (
     CAPACITY_EXCEEDED,

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..scenario import Scenario
+from ..scenario_config import Scenario
 from .plant_kernels import EVENT_FIELDS
 from .support import unsupported
 
@@ -59,7 +59,8 @@ def event_tables(sc0: Scenario, scs: Sequence[Scenario], N: int, dt: float) -> d
     −1; per field of :data:`EVENT_FIELDS` an array (W, E + 1, *the field's C shape*): row 0 the
     initial model, row ``e + 1`` the model after events ``0..e`` (padding rows repeat the last);
     ``m_eff`` (W, E + 1, n) kg, ``i_eff`` (W, E + 1, n) kg·m², ``c_true`` (W, E + 1, n, 2)."""
-    from ..sim import first_step_at, make_plant
+    from ..runloop import first_step_at
+    from ..sim import make_plant
 
     if not any(sc.events for sc in scs):
         return None

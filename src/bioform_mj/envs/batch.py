@@ -6,7 +6,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from ..scenario import Scenario
+from ..scenario_config import Scenario
 
 
 def batch_env(
@@ -23,7 +23,7 @@ def batch_env(
     :func:`~bioform_mj.envs.parallel_env`, per world and agent. World ``w`` runs ``sim.seed = seeds[w]``
     (default ``0 … worlds − 1``: the seeded jitter of the initial poses). ``options``: ``action``,
     ``reward``, ``v_max``, ``w_max``, ``nconmax``, ``njmax``."""
-    from ..scenario import load
+    from ..scenario_load import load
 
     if isinstance(scenario, Scenario):
         if overrides:

@@ -44,8 +44,8 @@ import numpy as np
 from ..control.kernel import estimator_advance
 from ..engine import Bounds, check, describe
 from ..errors import Diverged, InputError
-from ..scenario import Scenario
-from ..scenario import load as load_scenario
+from ..scenario_config import Scenario
+from ..scenario_load import load as load_scenario
 from .kernels import direct_torque, sense_errors, track_velocity
 
 try:  # the optional extra [rl]
@@ -394,7 +394,7 @@ class FormationParallelEnv(ParallelEnv):
         return u
 
     def _events(self, k: int) -> None:
-        from ..sim import EventQueue
+        from ..runloop import EventQueue
 
         if k == 0:
             self._evq = EventQueue(self._sc.events, self.dt)

@@ -134,32 +134,15 @@ def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
 
     # Fig. 5: velocity commands and measured velocities
     fig, ax = _figure(2)
-    for r, lab in enumerate(("υ (m/s)", "ω (rad/s)")):
-        for i in range(n):
-            ax[r, 0].plot(t, log["cmd"][:, i, r], color=follower_rgb(i), lw=1.4, label=f"follower {i + 1} command")
-            ax[r, 0].plot(
-                t,
-                log["vel"][:, i, r],
-                color=follower_rgb(i),
-                lw=0.9,
-                ls="--",
-                alpha=0.8,
-                label=f"follower {i + 1} measured",
-            )
+    _solid_dashed(ax, t, ("υ (m/s)", "ω (rad/s)"), log["cmd"], "command", log["vel"], "measured", lw=0.9, alpha=0.8)
+    for r in range(2):
         ax[r, 0].plot(t, lv[:, r], color="k", lw=0.8, ls=":", label="leader")
-        ax[r, 0].set_ylabel(lab)
     _finish(fig, ax, title + ": velocity commands (solid) and velocities (dashed)")
     paths.append(_save(fig, out / "velocities.png"))
 
     # Fig. 6: learning of c = (a, b)
     fig, ax = _figure(2)
-    for r, lab in enumerate(("â (1/(kg·m))", "b̂ (1/(kg·m²))")):
-        for i in range(n):
-            ax[r, 0].plot(t, log["c_hat"][:, i, r], color=follower_rgb(i), lw=1.4, label=f"follower {i + 1} estimate")
-            ax[r, 0].plot(
-                t, log["c_true"][:, i, r], color=follower_rgb(i), lw=1.0, ls="--", label=f"follower {i + 1} true"
-            )
-        ax[r, 0].set_ylabel(lab)
+    _solid_dashed(ax, t, ("â (1/(kg·m))", "b̂ (1/(kg·m²))"), log["c_hat"], "estimate", log["c_true"], "true", lw=1.0)
     _finish(fig, ax, title + ": learning of a, b (dashed: true)")
     paths.append(_save(fig, out / "learning.png"))
 
@@ -196,6 +179,32 @@ def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
     _finish(fig, ax, title + f": torques ({what}), V_s")
     paths.append(_save(fig, out / "torques.png"))
     return paths
+
+
+def _solid_dashed(
+    ax: Any,
+    t: np.ndarray,
+    labels: tuple[str, str],
+    solid: np.ndarray,
+    solid_name: str,
+    dashed: np.ndarray,
+    dashed_name: str,
+    **dashed_style: Any,
+) -> None:
+    """Panel ``r`` (y label ``labels[r]``): channel ``r`` of ``solid`` (K, n, 2) as each follower's solid line
+    and of ``dashed`` (K, n, 2) as its dashed line (``dashed_style``: further line keywords, e.g. ``lw``)."""
+    for r, lab in enumerate(labels):
+        for i in range(solid.shape[1]):
+            ax[r, 0].plot(t, solid[:, i, r], color=follower_rgb(i), lw=1.4, label=f"follower {i + 1} {solid_name}")
+            ax[r, 0].plot(
+                t,
+                dashed[:, i, r],
+                color=follower_rgb(i),
+                ls="--",
+                label=f"follower {i + 1} {dashed_name}",
+                **dashed_style,
+            )
+        ax[r, 0].set_ylabel(lab)
 
 
 def _trajectories(log: Mapping[str, np.ndarray], title: str, ax: Any = None) -> Any:

@@ -122,7 +122,8 @@ class _Replay:
     def __init__(self, result: Any, capture: FrameCapture) -> None:
         import mujoco
 
-        from ..scene import Markers, build_scene, compile_scene, follower_prefix, layout_of
+        from ..robot_analysis import layout_of
+        from ..scene import Markers, build_scene, compile_scene, follower_prefix
 
         self.mujoco = mujoco
         sc = result.scenario

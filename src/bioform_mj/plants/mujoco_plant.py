@@ -25,17 +25,10 @@ import numpy as np
 from bioform_mj.control.equations import slip_ratio
 from bioform_mj.disturbance import harmonic_rows
 from bioform_mj.errors import Diverged
+from bioform_mj.robot_analysis import layout_of
+from bioform_mj.robot_layout import RobotLayout, dc_ctrl_scale
 from bioform_mj.robot_params import RobotParams, robot_parameters, running_data
-from bioform_mj.scene import (
-    Markers,
-    RobotLayout,
-    build_scene,
-    compile_scene,
-    dc_ctrl_scale,
-    follower_prefix,
-    layout_of,
-    payload_inertial,
-)
+from bioform_mj.scene import Markers, build_scene, compile_scene, follower_prefix, payload_inertial
 
 from .mujoco_contacts import ContactReader, robot_geoms, watch_contacts, watch_proximity
 from .mujoco_kernels import (
