@@ -302,30 +302,7 @@ def command_and_torques(g, s, pose, vel):
     (eqs. 38–39) and saturation for every follower, from the current estimates."""
     first = s.first[0] == 1
     for i in range(pose.shape[0]):
-        if g.leader_frame:  # the slot's own pose and velocity (design §4)
-            xs, ys, ths, v_ref, w_ref = slot_reference(
-                s.est_pose[i, 0],
-                s.est_pose[i, 1],
-                s.est_pose[i, 2],
-                s.est_vel[i, 0],
-                s.est_vel[i, 1],
-                g.offsets[i, 0],
-                g.offsets[i, 1],
-            )
-            e0, e1, e2 = tracking_error(xs, ys, ths, pose[i, 0], pose[i, 1], pose[i, 2], 0.0, 0.0)
-        else:  # the paper: world-frame offsets, the slot moves with the leader's velocity
-            v_ref, w_ref = s.est_vel[i, 0], s.est_vel[i, 1]
-            e0, e1, e2 = tracking_error(
-                s.est_pose[i, 0],
-                s.est_pose[i, 1],
-                s.est_pose[i, 2],
-                pose[i, 0],
-                pose[i, 1],
-                pose[i, 2],
-                g.offsets[i, 0],
-                g.offsets[i, 1],
-            )
-        s.err[i, 0], s.err[i, 1], s.err[i, 2] = e0, e1, e2
+        e0, e1, e2, v_ref, w_ref = slot_error(g, s, i, pose)
         u = s.vs[i] if g.bio else e0
         vc, wc = velocity_command(e1, e2, u, v_ref, w_ref, g.k1, g.k2, g.k3)
         if g.cbf:  # the safety filter between eq. 31 and the torque law (design §19)
@@ -345,29 +322,84 @@ def command_and_torques(g, s, pose, vel):
             )
         else:
             for c in range(2):  # filter or backward difference (design §6)
-                if first:
-                    s.fy[i, c] = s.cmd[i, c]
-                    s.fdy[i, c] = 0.0
-                if g.deriv == DERIV_DIFFERENCE:
-                    s.dcmd[i, c] = backward_difference(s.cmd[i, c], s.fy[i, c], g.dt)
-                    s.fy[i, c] = s.cmd[i, c]
-                else:
-                    y, dy, d = filter_derivative(
-                        s.fy[i, c], s.fdy[i, c], s.cmd[i, c], g.f00, g.f01, g.f10, g.f11, g.g0, g.g1, g.dt
-                    )
-                    s.fy[i, c], s.fdy[i, c] = y, dy
-                    s.dcmd[i, c] = d
-        r0, r1 = sliding_mode(
-            vc, wc, s.dcmd[i, 0], s.dcmd[i, 1], vel[i, 0], vel[i, 1], s.c_hat[i, 0], s.c_hat[i, 1], g.ca, g.cb, g.tphi
-        )
-        s.tau_raw[i, 0], s.tau_raw[i, 1] = r0, r1
-        L = g.lim[i]
-        s.saturated[i] = abs(r0) > L or abs(r1) > L
-        t0, t1 = saturate(r0, r1, L, g.steer)
-        s.tau[i, 0], s.tau[i, 1] = t0, t1
-        s.tau_body[i, 0] = t0 + t1  # τ_a = τ_L + τ_R
-        s.tau_body[i, 1] = t1 - t0  # τ_b = τ_R − τ_L (design §5)
+                command_derivative(g, s, i, c, first)
+        torque_law(g, s, i, vc, wc, vel)
     s.first[0] = 0
+
+
+@njit
+def slot_error(g, s, i, pose):
+    """Follower ``i``'s tracking error (eqs. 27–28) from its own leader estimate and its measured
+    ``pose`` (n, 3), into ``s.err[i]``; with ``leader_frame`` against the slot's own pose (design §4).
+    Returns ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``: the error and the reference velocities the slot moves with
+    (the leader estimate's for world-frame offsets, the paper; the slot's own for leader-frame ones)."""
+    if g.leader_frame:  # the slot's own pose and velocity (design §4)
+        xs, ys, ths, v_ref, w_ref = slot_reference(
+            s.est_pose[i, 0],
+            s.est_pose[i, 1],
+            s.est_pose[i, 2],
+            s.est_vel[i, 0],
+            s.est_vel[i, 1],
+            g.offsets[i, 0],
+            g.offsets[i, 1],
+        )
+        e0, e1, e2 = tracking_error(xs, ys, ths, pose[i, 0], pose[i, 1], pose[i, 2], 0.0, 0.0)
+    else:  # the paper: world-frame offsets, the slot moves with the leader's velocity
+        v_ref, w_ref = s.est_vel[i, 0], s.est_vel[i, 1]
+        e0, e1, e2 = tracking_error(
+            s.est_pose[i, 0],
+            s.est_pose[i, 1],
+            s.est_pose[i, 2],
+            pose[i, 0],
+            pose[i, 1],
+            pose[i, 2],
+            g.offsets[i, 0],
+            g.offsets[i, 1],
+        )
+    s.err[i, 0], s.err[i, 1], s.err[i, 2] = e0, e1, e2
+    return e0, e1, e2, v_ref, w_ref
+
+
+@njit
+def command_derivative(g, s, i, c, first):
+    """The derivative of the command ``s.cmd[i, c]`` into ``s.dcmd[i, c]`` by the filter or the backward
+    difference (``g.deriv``, design §6), advancing its state ``s.fy, s.fdy``; ``first``: the first step
+    (the state starts at the command, so the first derivative is 0)."""
+    if first:
+        s.fy[i, c] = s.cmd[i, c]
+        s.fdy[i, c] = 0.0
+    if g.deriv == DERIV_DIFFERENCE:
+        s.dcmd[i, c] = backward_difference(s.cmd[i, c], s.fy[i, c], g.dt)
+        s.fy[i, c] = s.cmd[i, c]
+    else:
+        y, dy, d = filter_derivative(s.fy[i, c], s.fdy[i, c], s.cmd[i, c], g.f00, g.f01, g.f10, g.f11, g.g0, g.g1, g.dt)
+        s.fy[i, c], s.fdy[i, c] = y, dy
+        s.dcmd[i, c] = d
+
+
+@njit
+def torque_law(g, s, i, vc, wc, vel):
+    """Follower ``i``'s sliding-mode wheel torques (eqs. 38–39) tracking the command ``(vc, wc)``
+    [m/s, rad/s] with its derivative ``s.dcmd[i]``, the measured ``vel`` (n, 2) and ``ĉ``; then
+    :func:`apply_torque`."""
+    r0, r1 = sliding_mode(
+        vc, wc, s.dcmd[i, 0], s.dcmd[i, 1], vel[i, 0], vel[i, 1], s.c_hat[i, 0], s.c_hat[i, 1], g.ca, g.cb, g.tphi
+    )
+    apply_torque(g, s, i, r0, r1)
+
+
+@njit
+def apply_torque(g, s, i, r0, r1):
+    """Follower ``i``'s commanded wheel torques ``(r0, r1)`` = ``[τ_L, τ_R]`` N·m into ``s.tau_raw[i]``,
+    saturated at ``g.lim[i]`` (``g.steer``: steer priority) into ``s.tau[i]``, ``s.saturated[i]``, and the
+    body torques ``s.tau_body[i]`` the learner reads."""
+    s.tau_raw[i, 0], s.tau_raw[i, 1] = r0, r1
+    L = g.lim[i]
+    s.saturated[i] = abs(r0) > L or abs(r1) > L
+    t0, t1 = saturate(r0, r1, L, g.steer)
+    s.tau[i, 0], s.tau[i, 1] = t0, t1
+    s.tau_body[i, 0] = t0 + t1  # τ_a = τ_L + τ_R
+    s.tau_body[i, 1] = t1 - t0  # τ_b = τ_R − τ_L (design §5)
 
 
 @njit
