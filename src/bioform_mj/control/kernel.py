@@ -259,40 +259,18 @@ def learner_update(g, s, vel):
     kk = (g.kka, g.kkb)
     for i in range(vel.shape[0]):
         for c in range(2):  # a, then b
+            z_hat, e_int, c_hat, d_hat = s.z_hat[i, c], s.e_int[i, c], s.c_hat[i, c], s.d_hat[i, c]
+            tau, z = s.tau_body[i, c], vel[i, c]
             if kk[c] > 0.0:  # opt-in learned drag (design §14); else the paper's step, unchanged
                 zn, en, cn, dn, kn = learner_drag_step(
-                    s.z_hat[i, c],
-                    s.e_int[i, c],
-                    s.c_hat[i, c],
-                    s.d_hat[i, c],
-                    s.k_hat[i, c],
-                    s.tau_body[i, c],
-                    vel[i, c],
-                    g.k4[i, c],
-                    k5[c],
-                    kd[c],
-                    kk[c],
-                    g.c_min[i, c],
-                    g.c_max[i, c],
-                    g.k_max,
-                    dt,
+                    z_hat, e_int, c_hat, d_hat, s.k_hat[i, c], tau, z, g.k4[i, c], k5[c], kd[c], kk[c], g.c_min[i, c],
+                    g.c_max[i, c], g.k_max, dt,
+                )  # fmt: skip
+                s.k_hat[i, c] = kn
+            else:
+                zn, en, cn, dn = learner_step(
+                    z_hat, e_int, c_hat, d_hat, tau, z, g.k4[i, c], k5[c], kd[c], g.c_min[i, c], g.c_max[i, c], dt
                 )
-                s.z_hat[i, c], s.e_int[i, c], s.c_hat[i, c], s.d_hat[i, c], s.k_hat[i, c] = zn, en, cn, dn, kn
-                continue
-            zn, en, cn, dn = learner_step(
-                s.z_hat[i, c],
-                s.e_int[i, c],
-                s.c_hat[i, c],
-                s.d_hat[i, c],
-                s.tau_body[i, c],
-                vel[i, c],
-                g.k4[i, c],
-                k5[c],
-                kd[c],
-                g.c_min[i, c],
-                g.c_max[i, c],
-                dt,
-            )
             s.z_hat[i, c], s.e_int[i, c], s.c_hat[i, c], s.d_hat[i, c] = zn, en, cn, dn
 
 
