@@ -372,6 +372,27 @@ def saturate(tl: float, tr: float, lim: float, steer: bool) -> tuple[float, floa
 
 # ----------------------------------------------------------------- learner (eq. 37)
 @equation
+def learner_terms(
+    e_int: float, c_hat: float, d_hat: float, tau: float, z: float, k4: float, kd: float, h: float
+) -> tuple[float, float, float, float, float, float, float]:
+    """The terms of the backward-Euler closed form of eq. 37 that :func:`learner_step` and
+    :func:`learner_drag_step` share, for the frozen torque ``tau`` and the velocity ``z`` measured at the
+    step's end (``h`` the step, s): with the new estimate ``ẑ'`` still unknown, ``E' = R + h ẑ'``,
+    ``S' = S0 + S1 ẑ'``, ``ĉ' = P − Q ẑ'`` (before its projection) and ``d̂' = Pd − Qd ẑ'``.
+    Returns ``(R, S0, S1, P, Q, Pd, Qd)``.
+    """
+    R = e_int - h * z
+    S0 = k4 * R - z
+    S1 = 1.0 + h * k4
+    hk4t = h * k4 * tau
+    P = c_hat - hk4t * S0
+    Q = hk4t * S1
+    Pd = d_hat - h * kd * S0
+    Qd = h * kd * S1
+    return R, S0, S1, P, Q, Pd, Qd
+
+
+@equation
 def learner_step(
     z_hat: float,
     e_int: float,
@@ -394,14 +415,7 @@ def learner_step(
     measured at its end, so solved in closed form (A-stable, design §5); ``ĉ`` is then
     projected onto ``[c_min, c_max]``. Returns the new ``(ẑ, E, ĉ, d̂)``.
     """
-    R = e_int - h * z
-    S0 = k4 * R - z
-    S1 = 1.0 + h * k4
-    hk4t = h * k4 * tau
-    P = c_hat - hk4t * S0
-    Q = hk4t * S1
-    Pd = d_hat - h * kd * S0
-    Qd = h * kd * S1
+    R, S0, S1, P, Q, Pd, Qd = learner_terms(e_int, c_hat, d_hat, tau, z, k4, kd, h)
     den = 1.0 + h * k4 + h * k5 * S1 + h * tau * Q + h * Qd
     zn = (z_hat + h * (tau * P + Pd + k4 * z - k5 * S0)) / den
     return zn, R + h * zn, clip(P - Q * zn, c_min, c_max), Pd - Qd * zn
@@ -433,14 +447,7 @@ def learner_drag_step(
     projected onto ``[c_min, c_max]``, ``k̂`` onto ``[0, k_max]`` (1/s). ``kk = 0`` holds ``k̂``;
     with ``k̂ = 0`` too it gives :func:`learner_step`'s values. Returns the new ``(ẑ, E, ĉ, d̂, k̂)``.
     """
-    R = e_int - h * z
-    S0 = k4 * R - z
-    S1 = 1.0 + h * k4
-    hk4t = h * k4 * tau
-    P = c_hat - hk4t * S0
-    Q = hk4t * S1
-    Pd = d_hat - h * kd * S0
-    Qd = h * kd * S1
+    R, S0, S1, P, Q, Pd, Qd = learner_terms(e_int, c_hat, d_hat, tau, z, k4, kd, h)
     Pk = k_hat + h * kk * z * S0
     Qk = h * kk * z * S1
     den = 1.0 + h * k4 + h * k5 * S1 + h * tau * Q + h * Qd + h * z * Qk
