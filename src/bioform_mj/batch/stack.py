@@ -246,34 +246,19 @@ def slot_error(g: BatchGains, s: BatchState, w: int, i: int, lframe: bool):
     estimate and its measurement ``s.mpose``, into ``s.err[w, i]``; with ``lframe`` (offsets in the
     leader's frame) against the slot's own pose (design §4). Returns ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``, the
     reference velocities being the leader estimate's (world frame, the paper) or the slot's own."""
-    zero = F(0.0)
+    px = s.est_pose[w, i, 0]
+    py = s.est_pose[w, i, 1]
+    pth = s.est_pose[w, i, 2]
     v_ref = s.est_vel[w, i, 0]
     w_ref = s.est_vel[w, i, 1]
-    e0 = zero
-    e1 = zero
-    e2 = zero
-    if lframe:  # the slot's own pose and velocity (design §4)
-        xs, ys, ths, v_ref, w_ref = slot_reference(
-            s.est_pose[w, i, 0],
-            s.est_pose[w, i, 1],
-            s.est_pose[w, i, 2],
-            s.est_vel[w, i, 0],
-            s.est_vel[w, i, 1],
-            g.offsets[w, i, 0],
-            g.offsets[w, i, 1],
-        )
-        e0, e1, e2 = tracking_error(xs, ys, ths, s.mpose[w, i, 0], s.mpose[w, i, 1], s.mpose[w, i, 2], zero, zero)
-    else:  # the paper: world-frame offsets, the slot moves with the leader's velocity
-        e0, e1, e2 = tracking_error(
-            s.est_pose[w, i, 0],
-            s.est_pose[w, i, 1],
-            s.est_pose[w, i, 2],
-            s.mpose[w, i, 0],
-            s.mpose[w, i, 1],
-            s.mpose[w, i, 2],
-            g.offsets[w, i, 0],
-            g.offsets[w, i, 1],
-        )
+    ox = g.offsets[w, i, 0]
+    oy = g.offsets[w, i, 1]
+    if lframe:  # the slot's own pose and velocity, no offset left (design §4)
+        px, py, pth, v_ref, w_ref = slot_reference(px, py, pth, v_ref, w_ref, ox, oy)
+        ox = F(0.0)
+        oy = F(0.0)
+    # else the paper: world-frame offsets, the slot moves with the leader's velocity
+    e0, e1, e2 = tracking_error(px, py, pth, s.mpose[w, i, 0], s.mpose[w, i, 1], s.mpose[w, i, 2], ox, oy)
     s.err[w, i, 0] = e0
     s.err[w, i, 1] = e1
     s.err[w, i, 2] = e2

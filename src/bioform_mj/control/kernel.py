@@ -311,29 +311,13 @@ def slot_error(g, s, i, pose):
     ``pose`` (n, 3), into ``s.err[i]``; with ``leader_frame`` against the slot's own pose (design §4).
     Returns ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``: the error and the reference velocities the slot moves with
     (the leader estimate's for world-frame offsets, the paper; the slot's own for leader-frame ones)."""
-    if g.leader_frame:  # the slot's own pose and velocity (design §4)
-        xs, ys, ths, v_ref, w_ref = slot_reference(
-            s.est_pose[i, 0],
-            s.est_pose[i, 1],
-            s.est_pose[i, 2],
-            s.est_vel[i, 0],
-            s.est_vel[i, 1],
-            g.offsets[i, 0],
-            g.offsets[i, 1],
-        )
-        e0, e1, e2 = tracking_error(xs, ys, ths, pose[i, 0], pose[i, 1], pose[i, 2], 0.0, 0.0)
-    else:  # the paper: world-frame offsets, the slot moves with the leader's velocity
-        v_ref, w_ref = s.est_vel[i, 0], s.est_vel[i, 1]
-        e0, e1, e2 = tracking_error(
-            s.est_pose[i, 0],
-            s.est_pose[i, 1],
-            s.est_pose[i, 2],
-            pose[i, 0],
-            pose[i, 1],
-            pose[i, 2],
-            g.offsets[i, 0],
-            g.offsets[i, 1],
-        )
+    px, py, pth, v_ref, w_ref = s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2], s.est_vel[i, 0], s.est_vel[i, 1]
+    ox, oy = g.offsets[i, 0], g.offsets[i, 1]
+    if g.leader_frame:  # the slot's own pose and velocity, no offset left (design §4)
+        px, py, pth, v_ref, w_ref = slot_reference(px, py, pth, v_ref, w_ref, ox, oy)
+        ox, oy = 0.0, 0.0
+    # else the paper: world-frame offsets, the slot moves with the leader's velocity
+    e0, e1, e2 = tracking_error(px, py, pth, pose[i, 0], pose[i, 1], pose[i, 2], ox, oy)
     s.err[i, 0], s.err[i, 1], s.err[i, 2] = e0, e1, e2
     return e0, e1, e2, v_ref, w_ref
 
