@@ -280,7 +280,7 @@ def command_and_torques(g, s, pose, vel):
     (eqs. 38–39) and saturation for every follower, from the current estimates."""
     first = s.first[0] == 1
     for i in range(pose.shape[0]):
-        e0, e1, e2, v_ref, w_ref = slot_error(g, s, i, pose)
+        e0, e1, e2, v_ref, w_ref = follower_error(g, s, i, pose)
         u = s.vs[i] if g.bio else e0
         vc, wc = velocity_command(e1, e2, u, v_ref, w_ref, g.k1, g.k2, g.k3)
         if g.cbf:  # the safety filter between eq. 31 and the torque law (design §19)
@@ -300,50 +300,40 @@ def command_and_torques(g, s, pose, vel):
             )
         else:
             for c in range(2):  # filter or backward difference (design §6)
-                command_derivative(g, s, i, c, first)
-        torque_law(g, s, i, vc, wc, vel)
+                follower_derivative(g, s, i, c, first)
+        follower_torques(g, s, i, vc, wc, vel)
     s.first[0] = 0
 
 
+# Per-follower pieces shared with the learning environment (envs/kernels.py). Each is a call with the
+# follower's numbers only, written as a one-line wrapper around a scalar function: a numba call that
+# passes Gains and StackState (every array of both) costs more than the piece itself, per follower.
 @njit
-def slot_error(g, s, i, pose):
-    """Follower ``i``'s tracking error (eqs. 27–28) from its own leader estimate and its measured
-    ``pose`` (n, 3), into ``s.err[i]``; with ``leader_frame`` against the slot's own pose (design §4).
-    Returns ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``: the error and the reference velocities the slot moves with
-    (the leader estimate's for world-frame offsets, the paper; the slot's own for leader-frame ones)."""
-    px, py, pth, v_ref, w_ref = s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2], s.est_vel[i, 0], s.est_vel[i, 1]
-    ox, oy = g.offsets[i, 0], g.offsets[i, 1]
-    if g.leader_frame:  # the slot's own pose and velocity, no offset left (design §4)
-        px, py, pth, v_ref, w_ref = slot_reference(px, py, pth, v_ref, w_ref, ox, oy)
-        ox, oy = 0.0, 0.0
-    # else the paper: world-frame offsets, the slot moves with the leader's velocity
-    e0, e1, e2 = tracking_error(px, py, pth, pose[i, 0], pose[i, 1], pose[i, 2], ox, oy)
+def follower_error(g, s, i, pose):
+    """Follower ``i``'s :func:`slot_error` from its leader estimate and measured ``pose`` (n, 3), into
+    ``s.err[i]``; returns ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``."""
+    e0, e1, e2, v_ref, w_ref = slot_error(
+        s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2], s.est_vel[i, 0], s.est_vel[i, 1], g.offsets[i, 0],
+        g.offsets[i, 1], pose[i, 0], pose[i, 1], pose[i, 2], g.leader_frame,
+    )  # fmt: skip
     s.err[i, 0], s.err[i, 1], s.err[i, 2] = e0, e1, e2
     return e0, e1, e2, v_ref, w_ref
 
 
 @njit
-def command_derivative(g, s, i, c, first):
-    """The derivative of the command ``s.cmd[i, c]`` into ``s.dcmd[i, c]`` by the filter or the backward
-    difference (``g.deriv``, design §6), advancing its state ``s.fy, s.fdy``; ``first``: the first step
-    (the state starts at the command, so the first derivative is 0)."""
-    if first:
-        s.fy[i, c] = s.cmd[i, c]
-        s.fdy[i, c] = 0.0
-    if g.deriv == DERIV_DIFFERENCE:
-        s.dcmd[i, c] = backward_difference(s.cmd[i, c], s.fy[i, c], g.dt)
-        s.fy[i, c] = s.cmd[i, c]
-    else:
-        y, dy, d = filter_derivative(s.fy[i, c], s.fdy[i, c], s.cmd[i, c], g.f00, g.f01, g.f10, g.f11, g.g0, g.g1, g.dt)
-        s.fy[i, c], s.fdy[i, c] = y, dy
-        s.dcmd[i, c] = d
+def follower_derivative(g, s, i, c, first):
+    """:func:`command_derivative` of the command ``s.cmd[i, c]`` into ``s.dcmd[i, c]``, its state ``s.fy``,
+    ``s.fdy`` advanced; ``first``: the first step."""
+    s.fy[i, c], s.fdy[i, c], s.dcmd[i, c] = command_derivative(
+        s.fy[i, c], s.fdy[i, c], s.cmd[i, c], first, g.deriv == DERIV_DIFFERENCE, g.f00, g.f01, g.f10, g.f11, g.g0,
+        g.g1, g.dt,
+    )  # fmt: skip
 
 
 @njit
-def torque_law(g, s, i, vc, wc, vel):
-    """Follower ``i``'s sliding-mode wheel torques (eqs. 38–39) tracking the command ``(vc, wc)``
-    [m/s, rad/s] with its derivative ``s.dcmd[i]``, the measured ``vel`` (n, 2) and ``ĉ``; then
-    :func:`apply_torque`."""
+def follower_torques(g, s, i, vc, wc, vel):
+    """Follower ``i``'s sliding-mode torques (eqs. 38–39) tracking ``(vc, wc)`` [m/s, rad/s] with
+    ``s.dcmd[i]``, the measured ``vel`` (n, 2) and ``ĉ``; then :func:`apply_torque`."""
     r0, r1 = sliding_mode(
         vc, wc, s.dcmd[i, 0], s.dcmd[i, 1], vel[i, 0], vel[i, 1], s.c_hat[i, 0], s.c_hat[i, 1], g.ca, g.cb, g.tphi
     )
@@ -362,6 +352,33 @@ def apply_torque(g, s, i, r0, r1):
     s.tau[i, 0], s.tau[i, 1] = t0, t1
     s.tau_body[i, 0] = t0 + t1  # τ_a = τ_L + τ_R
     s.tau_body[i, 1] = t1 - t0  # τ_b = τ_R − τ_L (design §5)
+
+
+@njit
+def slot_error(px, py, pth, v_ir, w_ir, ox, oy, x, y, th, leader_frame):
+    """The tracking error (eqs. 27–28) of a follower at ``(x, y, θ)`` from its leader estimate
+    ``(px, py, pth)``, ``(v_ir, w_ir)`` and its offset ``(ox, oy)`` [m]; with ``leader_frame`` the offset is
+    in the leader's frame and the error is taken against the slot's own pose (design §4). Returns
+    ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``: the error and the velocities the slot moves with (the estimate's for
+    world-frame offsets, the paper; the slot's own for leader-frame ones)."""
+    if leader_frame:  # the slot's own pose and velocity, no offset left (design §4)
+        px, py, pth, v_ir, w_ir = slot_reference(px, py, pth, v_ir, w_ir, ox, oy)
+        ox, oy = 0.0, 0.0
+    e0, e1, e2 = tracking_error(px, py, pth, x, y, th, ox, oy)
+    return e0, e1, e2, v_ir, w_ir
+
+
+@njit
+def command_derivative(y, dy, u, first, difference, f00, f01, f10, f11, g0, g1, h):
+    """The derivative of the command ``u`` by the filter (state: output ``y``, rate ``dy``) or, with
+    ``difference``, the backward difference from the last command ``y`` (design §6), ``h`` the step [s];
+    ``first``: the first step (the state starts at the command, so the derivative is 0). Returns the new
+    ``(y, dy)`` and the derivative."""
+    if first:
+        y, dy = u, 0.0
+    if difference:
+        return u, dy, backward_difference(u, y, h)
+    return filter_derivative(y, dy, u, f00, f01, f10, f11, g0, g1, h)
 
 
 @njit

@@ -13,11 +13,11 @@ from __future__ import annotations
 from ..control.equations import njit
 from ..control.kernel import (
     apply_torque,
-    command_derivative,
     estimator_consensus,
+    follower_derivative,
+    follower_error,
+    follower_torques,
     learner_update,
-    slot_error,
-    torque_law,
 )
 
 
@@ -31,7 +31,7 @@ def sense_errors(g, s, lp, lv, pose, vel, comm, learn):
         learner_update(g, s, vel)
     estimator_consensus(g, s, lp, lv, comm)
     for i in range(pose.shape[0]):
-        slot_error(g, s, i, pose)
+        follower_error(g, s, i, pose)
 
 
 @njit
@@ -45,8 +45,8 @@ def track_velocity(g, s, vel, cmd):
     for i in range(vel.shape[0]):
         for c in range(2):
             s.cmd[i, c] = cmd[i, c]
-            command_derivative(g, s, i, c, first)
-        torque_law(g, s, i, cmd[i, 0], cmd[i, 1], vel)
+            follower_derivative(g, s, i, c, first)
+        follower_torques(g, s, i, cmd[i, 0], cmd[i, 1], vel)
     s.first[0] = 0
 
 
