@@ -137,7 +137,7 @@ def _env_sense(
     K = nbr.shape[1]
     for i in range(n):
         # tracking error (eqs. 27-28; the slot's own pose for leader-frame offsets, design §4)
-        e0, e1, e2, vr, wr = stack.slot_error(g, s, w, i, lframe)
+        e0, e1, e2, vr, wr = stack.follower_error(g, s, w, i, lframe)
         # formation error against the true leader (engine.record)
         ox, oy = formation_offset(g.offsets[w, i, 0], g.offsets[w, i, 1], lp2, lframe)
         dx = s.pose[w, i, 0] - (lp0 - ox)
@@ -230,7 +230,7 @@ def _env_act(
         if mode == 0:
             for c in range(2):
                 s.cmd[w, i, c] = action[w, i, c]
-                stack.command_derivative(g, s, w, i, c, first, dt)
+                stack.follower_derivative(g, s, w, i, c, first, dt)
             r0, r1 = stack.torque_law(g, s, w, i, action[w, i, 0], action[w, i, 1])
         stack.apply_torque(s, w, i, r0, r1, g.lim[w, i], steer)
     s.first[w] = 0

@@ -44,18 +44,16 @@ from .device import (
     BatchState,
     CommFaults,
     F,
-    backward_difference,
+    command_derivative,
     estimator_euler,
     estimator_rates,
-    filter_derivative,
     harmonic,
     learner_step,
     neuron_step,
     planar_state,
     saturate,
     sliding_mode,
-    slot_reference,
-    tracking_error,
+    slot_error,
     wrap,
 )
 
@@ -241,24 +239,23 @@ def consensus(
 
 
 @wp.func
-def slot_error(g: BatchGains, s: BatchState, w: int, i: int, lframe: bool):
-    """``kernel.slot_error`` of follower ``i``: its tracking error (eqs. 27–28) from its own leader
-    estimate and its measurement ``s.mpose``, into ``s.err[w, i]``; with ``lframe`` (offsets in the
-    leader's frame) against the slot's own pose (design §4). Returns ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``, the
-    reference velocities being the leader estimate's (world frame, the paper) or the slot's own."""
-    px = s.est_pose[w, i, 0]
-    py = s.est_pose[w, i, 1]
-    pth = s.est_pose[w, i, 2]
-    v_ref = s.est_vel[w, i, 0]
-    w_ref = s.est_vel[w, i, 1]
-    ox = g.offsets[w, i, 0]
-    oy = g.offsets[w, i, 1]
-    if lframe:  # the slot's own pose and velocity, no offset left (design §4)
-        px, py, pth, v_ref, w_ref = slot_reference(px, py, pth, v_ref, w_ref, ox, oy)
-        ox = F(0.0)
-        oy = F(0.0)
-    # else the paper: world-frame offsets, the slot moves with the leader's velocity
-    e0, e1, e2 = tracking_error(px, py, pth, s.mpose[w, i, 0], s.mpose[w, i, 1], s.mpose[w, i, 2], ox, oy)
+def follower_error(g: BatchGains, s: BatchState, w: int, i: int, lframe: bool):
+    """``kernel.follower_error`` of follower ``i``: its ``slot_error`` (eqs. 27–28; with ``lframe``, offsets
+    in the leader's frame, against the slot's own pose, design §4) from its own leader estimate and its
+    measurement ``s.mpose``, into ``s.err[w, i]``. Returns ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``."""
+    e0, e1, e2, v_ref, w_ref = slot_error(
+        s.est_pose[w, i, 0],
+        s.est_pose[w, i, 1],
+        s.est_pose[w, i, 2],
+        s.est_vel[w, i, 0],
+        s.est_vel[w, i, 1],
+        g.offsets[w, i, 0],
+        g.offsets[w, i, 1],
+        s.mpose[w, i, 0],
+        s.mpose[w, i, 1],
+        s.mpose[w, i, 2],
+        lframe,
+    )
     s.err[w, i, 0] = e0
     s.err[w, i, 1] = e1
     s.err[w, i, 2] = e2
@@ -266,37 +263,32 @@ def slot_error(g: BatchGains, s: BatchState, w: int, i: int, lframe: bool):
 
 
 @wp.func
-def command_derivative(g: BatchGains, s: BatchState, w: int, i: int, c: int, first: bool, dt: F):
-    """``kernel.command_derivative``: the derivative of the command ``s.cmd[w, i, c]`` into ``s.dcmd``
-    by the world's filter or backward difference (its ``deriv`` code, design §6), advancing the state
-    ``s.fy``, ``s.fdy``; ``first``: the world's first step (the state starts at the command)."""
-    if first:
-        s.fy[w, i, c] = s.cmd[w, i, c]
-        s.fdy[w, i, c] = F(0.0)
-    if g.sc[w, DERIV] == DERIV_D:
-        s.dcmd[w, i, c] = backward_difference(s.cmd[w, i, c], s.fy[w, i, c], dt)
-        s.fy[w, i, c] = s.cmd[w, i, c]
-    else:
-        y, dy, dd = filter_derivative(
-            s.fy[w, i, c],
-            s.fdy[w, i, c],
-            s.cmd[w, i, c],
-            g.sc[w, F00],
-            g.sc[w, F01],
-            g.sc[w, F10],
-            g.sc[w, F11],
-            g.sc[w, G0],
-            g.sc[w, G1],
-            dt,
-        )
-        s.fy[w, i, c] = y
-        s.fdy[w, i, c] = dy
-        s.dcmd[w, i, c] = dd
+def follower_derivative(g: BatchGains, s: BatchState, w: int, i: int, c: int, first: bool, dt: F):
+    """``kernel.follower_derivative``: the ``command_derivative`` of the command ``s.cmd[w, i, c]`` into
+    ``s.dcmd`` by the world's filter or backward difference (its ``deriv`` code, design §6), its state
+    ``s.fy``, ``s.fdy`` advanced; ``first``: the world's first step (the state starts at the command)."""
+    y, dy, dd = command_derivative(
+        s.fy[w, i, c],
+        s.fdy[w, i, c],
+        s.cmd[w, i, c],
+        first,
+        g.sc[w, DERIV] == DERIV_D,
+        g.sc[w, F00],
+        g.sc[w, F01],
+        g.sc[w, F10],
+        g.sc[w, F11],
+        g.sc[w, G0],
+        g.sc[w, G1],
+        dt,
+    )
+    s.fy[w, i, c] = y
+    s.fdy[w, i, c] = dy
+    s.dcmd[w, i, c] = dd
 
 
 @wp.func
 def torque_law(g: BatchGains, s: BatchState, w: int, i: int, vc: F, wc: F):
-    """The sliding-mode wheel torques ``[τ_L, τ_R]`` (eqs. 38–39, ``kernel.torque_law``) of follower ``i``
+    """The sliding-mode wheel torques ``[τ_L, τ_R]`` (eqs. 38–39, as in ``kernel.follower_torques``) of follower ``i``
     tracking the command ``(vc, wc)`` with its derivative ``s.dcmd``, the measured ``s.mvel`` and ``ĉ``."""
     r0, r1 = sliding_mode(
         vc,

@@ -250,7 +250,7 @@ def _control(
         bio = g.sc[w, BIO] != zero
         deriv = g.sc[w, DERIV]
         for i in range(n):
-            e0, e1, e2, v_ref, w_ref = stack.slot_error(g, s, w, i, lframe)
+            e0, e1, e2, v_ref, w_ref = stack.follower_error(g, s, w, i, lframe)
             u = e0
             if bio:
                 u = s.vs[w, i]
@@ -286,7 +286,7 @@ def _control(
                 s.dcmd[w, i, 1] = dwc
             else:
                 for c in range(2):  # filter or backward difference (design §6)
-                    stack.command_derivative(g, s, w, i, c, first, dt)
+                    stack.follower_derivative(g, s, w, i, c, first, dt)
             r0, r1 = stack.torque_law(g, s, w, i, vc, wc)
             L = g.lim[w, i]
             if pf.act_known[w] != 0:  # faults.actuator_known: the stack's own limit (ControlStack.set_tau_max)

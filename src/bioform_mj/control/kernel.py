@@ -24,12 +24,11 @@ import numpy as np
 
 from .cbf import cbf_filter
 from .equations import (
-    backward_difference,
+    command_derivative,
     command_rate,
     error_rate,
     estimator_euler,
     estimator_rates,
-    filter_derivative,
     learner_drag_step,
     learner_step,
     neuron_rate,
@@ -37,8 +36,7 @@ from .equations import (
     njit,
     saturate,
     sliding_mode,
-    slot_reference,
-    tracking_error,
+    slot_error,
     velocity_command,
     wrap,
 )
@@ -305,8 +303,8 @@ def command_and_torques(g, s, pose, vel):
     s.first[0] = 0
 
 
-# Per-follower pieces shared with the learning environment (envs/kernels.py). Each is a call with the
-# follower's numbers only, written as a one-line wrapper around a scalar function: a numba call that
+# Per-follower pieces shared with the learning environment (envs/kernels.py): one-line wrappers around
+# equations (on scalars; the batch engine's Warp kernels call the same equations): a numba call that
 # passes Gains and StackState (every array of both) costs more than the piece itself, per follower.
 @njit
 def follower_error(g, s, i, pose):
@@ -352,33 +350,6 @@ def apply_torque(g, s, i, r0, r1):
     s.tau[i, 0], s.tau[i, 1] = t0, t1
     s.tau_body[i, 0] = t0 + t1  # τ_a = τ_L + τ_R
     s.tau_body[i, 1] = t1 - t0  # τ_b = τ_R − τ_L (design §5)
-
-
-@njit
-def slot_error(px, py, pth, v_ir, w_ir, ox, oy, x, y, th, leader_frame):
-    """The tracking error (eqs. 27–28) of a follower at ``(x, y, θ)`` from its leader estimate
-    ``(px, py, pth)``, ``(v_ir, w_ir)`` and its offset ``(ox, oy)`` [m]; with ``leader_frame`` the offset is
-    in the leader's frame and the error is taken against the slot's own pose (design §4). Returns
-    ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``: the error and the velocities the slot moves with (the estimate's for
-    world-frame offsets, the paper; the slot's own for leader-frame ones)."""
-    if leader_frame:  # the slot's own pose and velocity, no offset left (design §4)
-        px, py, pth, v_ir, w_ir = slot_reference(px, py, pth, v_ir, w_ir, ox, oy)
-        ox, oy = 0.0, 0.0
-    e0, e1, e2 = tracking_error(px, py, pth, x, y, th, ox, oy)
-    return e0, e1, e2, v_ir, w_ir
-
-
-@njit
-def command_derivative(y, dy, u, first, difference, f00, f01, f10, f11, g0, g1, h):
-    """The derivative of the command ``u`` by the filter (state: output ``y``, rate ``dy``) or, with
-    ``difference``, the backward difference from the last command ``y`` (design §6), ``h`` the step [s];
-    ``first``: the first step (the state starts at the command, so the derivative is 0). Returns the new
-    ``(y, dy)`` and the derivative."""
-    if first:
-        y, dy = u, 0.0
-    if difference:
-        return u, dy, backward_difference(u, y, h)
-    return filter_derivative(y, dy, u, f00, f01, f10, f11, g0, g1, h)
 
 
 @njit
