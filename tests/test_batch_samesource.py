@@ -134,6 +134,11 @@ SPECS = {
         (),
     ),
     "saturate": ([_u(-50, 50), _u(-50, 50), _u(1, 20), _choice(0.0, 1.0)], 2, ()),
+    "learner_terms": (
+        [_u(-1, 1), _u(0.1, 10), _u(-1, 1), _u(-20, 20), _u(-2, 2), _u(1, 500), _u(0, 1), _choice(1e-3, 5e-3)],
+        7,
+        (),
+    ),
     "learner_step": (
         [
             _u(-2, 2),
@@ -210,6 +215,18 @@ SPECS = {
         5,
         (2,),
     ),
+    "slot_error": (
+        [_u(-5, 5), _u(-5, 5), _u(-3, 3), _u(-2, 2), _u(-2, 2), _u(-1, 1), _u(-1, 1)]
+        + [_u(-5, 5), _u(-5, 5), _u(-4, 4), _choice(0.0, 1.0)],
+        5,
+        (2,),
+    ),
+    "command_derivative": (
+        [_u(-2, 2), _u(-20, 20), _u(-2, 2), _choice(0.0, 1.0), _choice(0.0, 1.0)]
+        + [_u(0.5, 1), _u(0, 1e-3), _u(-3, 0), _u(0.5, 1), _u(0, 0.1), _u(0, 3), _choice(1e-3, 1e-2)],
+        3,
+        (),
+    ),
     "formation_offset": ([_u(-1, 1), _u(-1, 1), _u(-4, 4), _choice(0.0, 1.0)], 2, ()),
     "slip_ratio": ([_u(-20, 20), _u(0.02, 0.1), _u(-1, 1), _u(-3, 3), _u(-0.2, 0.2), _choice(0.05)], 1, ()),
     "hash_round": ([_int(0, 2**30), _choice(40692.0, 39373.0, 48271.0, 16807.0), _int(0, 2**30)], 1, ()),
@@ -231,7 +248,7 @@ SPECS = {
     ),
 }
 #: arguments that are ``bool`` in the source (passed as ``x != 0``)
-BOOL_ARGS = {"saturate": (3,), "formation_offset": (3,)}
+BOOL_ARGS = {"saturate": (3,), "formation_offset": (3,), "slot_error": (10,), "command_derivative": (3, 4)}
 #: exact integer arithmetic beyond float32's 24-bit mantissa (the counter hash), or a floor that
 #: float32 rounding moves by a whole encoder count: meaningful in float64 only (the precision the
 #: batch engine's controller state uses)

@@ -25,6 +25,8 @@ wrap = EQ.wrap
 estimator_euler = EQ.estimator_euler
 tracking_error = EQ.tracking_error
 slot_reference = EQ.slot_reference
+slot_error = EQ.slot_error
+command_derivative = EQ.command_derivative
 formation_offset = EQ.formation_offset
 velocity_command = EQ.velocity_command
 neuron_step = EQ.neuron_step
@@ -359,26 +361,21 @@ def _comm(
     D = int(f.sc[w, FDELAY])
     R = D + 1
     now = k % R
-    for i in range(n):
-        for c in range(3):
-            f.ring_p[w, now, i, c] = s.est_pose[w, i, c]
-        for c in range(2):
-            f.ring_v[w, now, i, c] = s.est_vel[w, i, c]
-    for c in range(3):
-        f.ring_lp[w, now, c] = L_pose[k, c]
-    for c in range(2):
-        f.ring_lv[w, now, c] = L_vel[k, c]
-    if k == 0:  # before the first step there is no history: the initial values
-        for r in range(R):
-            for i in range(n):
-                for c in range(3):
-                    f.ring_p[w, r, i, c] = s.est_pose[w, i, c]
-                for c in range(2):
-                    f.ring_v[w, r, i, c] = s.est_vel[w, i, c]
+    r0 = now  # this step's row of the ring; before the first step there is no history: every row
+    r1 = now + 1
+    if k == 0:
+        r1 = R
+    for r in range(r0, r1):
+        for i in range(n):
             for c in range(3):
-                f.ring_lp[w, r, c] = L_pose[k, c]
+                f.ring_p[w, r, i, c] = s.est_pose[w, i, c]
             for c in range(2):
-                f.ring_lv[w, r, c] = L_vel[k, c]
+                f.ring_v[w, r, i, c] = s.est_vel[w, i, c]
+        for c in range(3):
+            f.ring_lp[w, r, c] = L_pose[k, c]
+        for c in range(2):
+            f.ring_lv[w, r, c] = L_vel[k, c]
+    if k == 0:  # the initial values held and valid
         for e in range(m):
             j = g.dst[e]
             for c in range(3):

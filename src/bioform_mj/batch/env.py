@@ -8,9 +8,11 @@ advances the estimator and applies torques and the disturbance; then ``n_substep
 tracking errors, the guards, and writes observations, rewards and done flags. Each world has
 its own step counter; ``reset(worlds)`` puts the chosen worlds back at their initial state.
 
-Every equation is the Warp translation (``batch/samesource.py``) of ``control/equations.py``, as
-in ``batch/control.py``, whose structures (``BatchGains``, ``BatchState``) and set-up
-(``BatchRun``: model, data, per-world gains, initial poses) this module reuses.
+Every equation is the Warp translation (``batch/samesource.py``) of ``control/equations.py``, and
+the stack's steps (observe, reset, learner, consensus, tracking error, command derivative, torque law,
+estimator advance) are the device functions of ``batch/stack.py`` that the closed loop
+(``batch/step.py``) calls too; the structures (``BatchGains``, ``BatchState``) and set-up
+(``BatchRun``: model, data, per-world gains, initial poses) are the batch engine's.
 """
 
 from __future__ import annotations
@@ -23,64 +25,24 @@ import mujoco_warp as mjw
 import numpy as np
 import warp as wp
 
+from . import stack
 from .device import (
-    A_,
-    B_,
     BIO,
-    CA,
-    CB,
-    D_,
-    DD0,
-    DE0,
-    DERIV,
-    DERIV_D,
     DT,
-    EPHI0,
-    EPHI1,
-    F00,
-    F01,
-    F10,
-    F11,
-    G0,
-    G1,
-    K5A,
-    KA0,
-    KA1,
-    KB0,
-    KB1,
-    KDA,
-    KTH,
-    KX,
-    KY,
     LEARN,
     LFRAME,
     STEER,
     TILT,
-    TPHI,
     USED,
     BatchGains,
     BatchState,
+    CommFaults,
     F,
     _check,
-    backward_difference,
-    clip,
-    estimator_euler,
-    estimator_rates,
-    filter_derivative,
     formation_offset,
-    harmonic,
-    learner_step,
-    neuron_step,
-    planar_state,
-    saturate,
-    sliding_mode,
-    slot_reference,
-    tracking_error,
     wrap,
 )
 from .runner import BatchRun  # noqa: E402
-
-_ = (clip, KA0, KA1, KB0, KB1, KX, KY, KTH, EPHI0, EPHI1)  # kernel globals (Warp resolves them by name)
 
 
 @wp.func
@@ -134,6 +96,7 @@ def _env_sense(
     done: wp.array2d(dtype=int),  # (W, 2): [terminated, truncated]
     tipped: wp.array2d(dtype=int),  # (W, n) 1 once tipped (2 in the period it happened)
     active: wp.array(dtype=int),  # (W,) 1: this world is sensed now (0: a partial reset leaves it as it is)
+    f: CommFaults,  # the run's network faults: none here (the consensus runs on the perfect network)
 ):
     """World ``w`` at its control step ``k``: observe (``mujoco_kernels.observe``), reset the stack at
     ``k = 0`` (``kernel.reset_state``), the learner over the last period, the consensus on the perfect
@@ -148,123 +111,33 @@ def _env_sense(
     zero = F(0.0)
     fresh = wp.int32(0)  # typed: mutated in a dynamic loop
     for i in range(n):
-        qa = qadr[i]
-        qb = dadr[i]
-        x, y, th, v, om, up = planar_state(
-            F(qpos[w, qa]), F(qpos[w, qa + 1]), F(qpos[w, qa + 3]), F(qpos[w, qa + 4]), F(qpos[w, qa + 5]),
-            F(qpos[w, qa + 6]), F(qvel[w, qb]), F(qvel[w, qb + 1]), F(qvel[w, qb + 2]), F(qvel[w, qb + 3]),
-            F(qvel[w, qb + 4]), F(qvel[w, qb + 5]), axle[i, 0], axle[i, 1], axle[i, 2],
-        )  # fmt: skip
-        s.pose[w, i, 0] = x
-        s.pose[w, i, 1] = y
-        s.pose[w, i, 2] = th
-        s.vel[w, i, 0] = v
-        s.vel[w, i, 1] = om
-        s.mpose[w, i, 0] = x
-        s.mpose[w, i, 1] = y
-        s.mpose[w, i, 2] = th
-        s.mvel[w, i, 0] = v
-        s.mvel[w, i, 1] = om
+        up = stack.observe(s, w, i, qpos, qvel, qadr, dadr, axle)
+        for c in range(3):
+            s.mpose[w, i, c] = s.pose[w, i, c]
+        for c in range(2):
+            s.mvel[w, i, c] = s.vel[w, i, c]
         if k == 0:
             tipped[w, i] = 0
         elif up < g.sc[w, TILT] and tipped[w, i] == 0:
             tipped[w, i] = 2  # tipped in this period (the reward's tip term), then 1
             fresh = fresh + 1
     if k == 0:  # kernel.reset_state
-        for i in range(n):
-            s.est_pose[w, i, 0] = g.est0[w, i, 0]
-            s.est_pose[w, i, 1] = g.est0[w, i, 1]
-            s.est_pose[w, i, 2] = wrap(g.est0[w, i, 2])
-            for c in range(2):
-                s.est_vel[w, i, c] = zero
-                s.z_hat[w, i, c] = s.vel[w, i, c]
-                s.e_int[w, i, c] = zero
-                s.c_hat[w, i, c] = wp.min(wp.max(g.c_hat0[w, i, c], g.c_min[w, i, c]), g.c_max[w, i, c])
-                s.d_hat[w, i, c] = zero
-                s.fy[w, i, c] = zero
-                s.fdy[w, i, c] = zero
-                s.cmd[w, i, c] = zero
-                s.dcmd[w, i, c] = zero
-                s.tau[w, i, c] = zero
-                s.tau_raw[w, i, c] = zero
-                s.tau_body[w, i, c] = zero
-            for c in range(3):
-                s.err[w, i, c] = zero
-            s.vs[w, i] = zero
-            s.saturated[w, i] = 0
-        s.first[w] = 1
-        s.status[w] = 0
+        stack.reset(g, s, w, n)
     elif g.sc[w, LEARN] != zero and s.first[w] == 0:  # kernel.learner_update
-        for i in range(n):
-            for c in range(2):
-                zn, en, cn, dn = learner_step(
-                    s.z_hat[w, i, c], s.e_int[w, i, c], s.c_hat[w, i, c], s.d_hat[w, i, c], s.tau_body[w, i, c],
-                    s.mvel[w, i, c], g.k4[w, i, c], g.sc[w, K5A + c], g.sc[w, KDA + c], g.c_min[w, i, c],
-                    g.c_max[w, i, c], dt,
-                )  # fmt: skip
-                s.z_hat[w, i, c] = zn
-                s.e_int[w, i, c] = en
-                s.c_hat[w, i, c] = cn
-                s.d_hat[w, i, c] = dn
+        stack.learn(g, s, w, n, dt)
     kl = wp.min(k, N)
     lp0 = L_pose[kl, 0]
     lp1 = L_pose[kl, 1]
     lp2 = L_pose[kl, 2]
     lv0 = L_vel[kl, 0]
     lv1 = L_vel[kl, 1]
-    # kernel.estimator_consensus on the perfect network
-    for i in range(n):
-        for c in range(3):
-            s.p_err[w, i, c] = zero
-        for c in range(2):
-            s.v_err[w, i, c] = zero
-    for e in range(g.src.shape[0]):
-        i = g.src[e]
-        j = g.dst[e]
-        for c in range(3):
-            d = s.est_pose[w, i, c] - s.est_pose[w, j, c]
-            if c == 2:
-                d = wrap(d)
-            s.p_err[w, i, c] = s.p_err[w, i, c] + d
-        for c in range(2):
-            s.v_err[w, i, c] = s.v_err[w, i, c] + (s.est_vel[w, i, c] - s.est_vel[w, j, c])
+    # kernel.estimator_consensus on the perfect network (no network faults here: batch_env_unsupported)
+    stack.consensus(g, s, f, w, n, False, False, lp0, lp1, lp2, lv0, lv1)
     lframe = g.sc[w, LFRAME] != zero
     K = nbr.shape[1]
     for i in range(n):
-        ai = g.lacc[w, i]
-        s.p_err[w, i, 0] = ai * (s.est_pose[w, i, 0] - lp0) + s.p_err[w, i, 0]
-        s.p_err[w, i, 1] = ai * (s.est_pose[w, i, 1] - lp1) + s.p_err[w, i, 1]
-        s.p_err[w, i, 2] = ai * wrap(s.est_pose[w, i, 2] - lp2) + s.p_err[w, i, 2]
-        s.v_err[w, i, 0] = ai * (s.est_vel[w, i, 0] - lv0) + s.v_err[w, i, 0]
-        s.v_err[w, i, 1] = ai * (s.est_vel[w, i, 1] - lv1) + s.v_err[w, i, 1]
-        q0, q1, q2, q3, q4 = estimator_rates(
-            s.est_pose[w, i, 2], s.est_vel[w, i, 0], s.est_vel[w, i, 1], s.p_err[w, i, 0], s.p_err[w, i, 1],
-            s.p_err[w, i, 2], s.v_err[w, i, 0], s.v_err[w, i, 1], g.sc[w, KX], g.sc[w, KY], g.sc[w, KTH],
-            g.sc[w, KA0], g.sc[w, KA1], g.sc[w, KB0], g.sc[w, KB1], g.sc[w, EPHI0], g.sc[w, EPHI1],
-        )  # fmt: skip
-        s.est_rate[w, i, 0] = q0
-        s.est_rate[w, i, 1] = q1
-        s.est_rate[w, i, 2] = q2
-        s.est_rate[w, i, 3] = q3
-        s.est_rate[w, i, 4] = q4
         # tracking error (eqs. 27-28; the slot's own pose for leader-frame offsets, design §4)
-        e0 = zero
-        e1 = zero
-        e2 = zero
-        if lframe:
-            xs, ys, ths, vr, wr = slot_reference(
-                s.est_pose[w, i, 0], s.est_pose[w, i, 1], s.est_pose[w, i, 2], s.est_vel[w, i, 0],
-                s.est_vel[w, i, 1], g.offsets[w, i, 0], g.offsets[w, i, 1],
-            )  # fmt: skip
-            e0, e1, e2 = tracking_error(xs, ys, ths, s.mpose[w, i, 0], s.mpose[w, i, 1], s.mpose[w, i, 2], zero, zero)
-        else:
-            e0, e1, e2 = tracking_error(
-                s.est_pose[w, i, 0], s.est_pose[w, i, 1], s.est_pose[w, i, 2], s.mpose[w, i, 0],
-                s.mpose[w, i, 1], s.mpose[w, i, 2], g.offsets[w, i, 0], g.offsets[w, i, 1],
-            )  # fmt: skip
-        s.err[w, i, 0] = e0
-        s.err[w, i, 1] = e1
-        s.err[w, i, 2] = e2
+        e0, e1, e2, vr, wr = stack.follower_error(g, s, w, i, lframe)
         # formation error against the true leader (engine.record)
         ox, oy = formation_offset(g.offsets[w, i, 0], g.offsets[w, i, 1], lp2, lframe)
         dx = s.pose[w, i, 0] - (lp0 - ox)
@@ -356,59 +229,17 @@ def _env_act(
         r1 = action[w, i, 1]
         if mode == 0:
             for c in range(2):
-                u = action[w, i, c]
-                s.cmd[w, i, c] = u
-                if first:
-                    s.fy[w, i, c] = u
-                    s.fdy[w, i, c] = zero
-                if g.sc[w, DERIV] == DERIV_D:
-                    s.dcmd[w, i, c] = backward_difference(u, s.fy[w, i, c], dt)
-                    s.fy[w, i, c] = u
-                else:  # the filter (also for "analytic": it differentiates the kinematic law, replaced here)
-                    y, dy, dd = filter_derivative(
-                        s.fy[w, i, c], s.fdy[w, i, c], u, g.sc[w, F00], g.sc[w, F01], g.sc[w, F10], g.sc[w, F11],
-                        g.sc[w, G0], g.sc[w, G1], dt,
-                    )  # fmt: skip
-                    s.fy[w, i, c] = y
-                    s.fdy[w, i, c] = dy
-                    s.dcmd[w, i, c] = dd
-            r0, r1 = sliding_mode(
-                action[w, i, 0], action[w, i, 1], s.dcmd[w, i, 0], s.dcmd[w, i, 1], s.mvel[w, i, 0],
-                s.mvel[w, i, 1], s.c_hat[w, i, 0], s.c_hat[w, i, 1], g.sc[w, CA], g.sc[w, CB], g.sc[w, TPHI],
-            )  # fmt: skip
-        s.tau_raw[w, i, 0] = r0
-        s.tau_raw[w, i, 1] = r1
-        L = g.lim[w, i]
-        sat = wp.int32(0)
-        if wp.abs(r0) > L or wp.abs(r1) > L:
-            sat = 1
-        s.saturated[w, i] = sat
-        t0, t1 = saturate(r0, r1, L, steer)
-        s.tau[w, i, 0] = t0
-        s.tau[w, i, 1] = t1
-        s.tau_body[w, i, 0] = t0 + t1
-        s.tau_body[w, i, 1] = t1 - t0
+                s.cmd[w, i, c] = action[w, i, c]
+                stack.follower_derivative(g, s, w, i, c, first, dt)
+            r0, r1 = stack.torque_law(g, s, w, i, action[w, i, 0], action[w, i, 1])
+        stack.apply_torque(s, w, i, r0, r1, g.lim[w, i], steer)
     s.first[w] = 0
     bio = g.sc[w, BIO] != zero
-    for i in range(n):  # kernel.estimator_advance
-        px, py, pth, v, om = estimator_euler(
-            s.est_pose[w, i, 0], s.est_pose[w, i, 1], s.est_pose[w, i, 2], s.est_vel[w, i, 0], s.est_vel[w, i, 1],
-            s.est_rate[w, i, 0], s.est_rate[w, i, 1], s.est_rate[w, i, 2], s.est_rate[w, i, 3], s.est_rate[w, i, 4],
-            dt,
-        )  # fmt: skip
-        s.est_pose[w, i, 0] = px
-        s.est_pose[w, i, 1] = py
-        s.est_pose[w, i, 2] = pth
-        s.est_vel[w, i, 0] = v
-        s.est_vel[w, i, 1] = om
-        if bio:
-            s.vs[w, i] = neuron_step(s.vs[w, i], s.err[w, i, 0], g.sc[w, A_], g.sc[w, B_], g.sc[w, D_], dt)
+    stack.advance(g, s, w, n, dt, bio)  # kernel.estimator_advance
     d0 = zero
     d1 = zero
     if g.sc[w, USED] != zero:
-        t = F(k) * dt
-        d0 = harmonic(g.sc[w, DD0], g.sc[w, DD0 + 1], g.sc[w, DD0 + 2], g.sc[w, DD0 + 3], t)
-        d1 = harmonic(g.sc[w, DE0], g.sc[w, DE0 + 1], g.sc[w, DE0 + 2], g.sc[w, DE0 + 3], t)
+        d0, d1 = stack.disturbance(g, w, F(k) * dt)
     for i in range(n):
         ctrl[w, act[i, 0]] = wp.float32(cscale[i, 0] * s.tau[w, i, 0])
         ctrl[w, act[i, 1]] = wp.float32(cscale[i, 1] * s.tau[w, i, 1])
@@ -545,7 +376,7 @@ class BatchEnv:
             inputs=[
                 r.g, r.s, self.N, r.L_pose, r.L_vel, d.qpos, d.qvel, r.qadr, r.dadr, r.axle, self._nbr,
                 F(w["formation"]), F(w["effort"]), F(w["tipped"]), F(w["terminal"]),
-                self.obs, self.reward, self._done, self._tipped, active,
+                self.obs, self.reward, self._done, self._tipped, active, r.f,
             ],
         )  # fmt: skip
 

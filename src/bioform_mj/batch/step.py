@@ -7,33 +7,25 @@ and the eq. 34 disturbance as chassis ``xfrc_applied``; ``ctrl = scale · τ``, 
 per N·m, design §8.2; actuator limits and pushes from :class:`~.device.PlantFaults`), looping over the
 followers and graph edges in the same order as the CPU kernels, with each world's network faults and
 sensor noise (:class:`~.device.CommFaults`, :func:`~.device._comm`). Every equation is the Warp
-translation of ``control/equations.py``: only loops, indexing and bookkeeping are written here.
+translation of ``control/equations.py``; the stack's steps (observe, reset, learner, consensus,
+tracking error, command derivative, torque law, estimator advance) are the device functions of
+:mod:`.stack`, shared with the batched environment: only the loop's own bookkeeping is written here.
 """
 
 from __future__ import annotations
 
 import warp as wp
 
+from . import stack
 from .device import (
     A_,
     B_,
     BIO,
-    CA,
     CAPACITY,
-    CB,
     D_,
-    DD0,
-    DE0,
     DERIV,
     DERIV_A,
-    DERIV_D,
     DT,
-    EPHI0,
-    EPHI1,
-    F00,
-    F01,
-    F10,
-    F11,
     FCOMM,
     FNOISE,
     FNP0,
@@ -42,20 +34,9 @@ from .device import (
     FSEED,
     FW0,
     FW1,
-    G0,
-    G1,
     K1,
     K2,
     K3,
-    K5A,
-    KA0,
-    KA1,
-    KB0,
-    KB1,
-    KDA,
-    KTH,
-    KX,
-    KY,
     LEARN,
     LFRAME,
     NPOSE0,
@@ -69,7 +50,6 @@ from .device import (
     STEER,
     STRIDE,
     TILT,
-    TPHI,
     TSPIN,
     USED,
     BatchGains,
@@ -81,26 +61,14 @@ from .device import (
     _check,
     _comm,
     _push_row,
-    backward_difference,
     clip,
     command_rate,
     encoder_angle,
     error_rate,
-    estimator_euler,
-    estimator_rates,
-    filter_derivative,
     formation_offset,
-    harmonic,
-    learner_step,
     neuron_rate,
-    neuron_step,
     noisy_reading,
-    planar_state,
-    saturate,
-    sliding_mode,
     slip_ratio,
-    slot_reference,
-    tracking_error,
     velocity_command,
     wrap,
 )
@@ -168,30 +136,7 @@ def _control(
         s.k_done[w] = k - 1
     # ---- observe (mujoco_kernels.observe)
     for i in range(n):
-        qa = qadr[i]
-        qb = dadr[i]
-        x, y, th, v, om, up = planar_state(
-            F(qpos[w, qa]),
-            F(qpos[w, qa + 1]),
-            F(qpos[w, qa + 3]),
-            F(qpos[w, qa + 4]),
-            F(qpos[w, qa + 5]),
-            F(qpos[w, qa + 6]),
-            F(qvel[w, qb]),
-            F(qvel[w, qb + 1]),
-            F(qvel[w, qb + 2]),
-            F(qvel[w, qb + 3]),
-            F(qvel[w, qb + 4]),
-            F(qvel[w, qb + 5]),
-            axle[i, 0],
-            axle[i, 1],
-            axle[i, 2],
-        )
-        s.pose[w, i, 0] = x
-        s.pose[w, i, 1] = y
-        s.pose[w, i, 2] = th
-        s.vel[w, i, 0] = v
-        s.vel[w, i, 1] = om
+        up = stack.observe(s, w, i, qpos, qvel, qadr, dadr, axle)
         # mujoco_kernels.watch_tilt and watch_slip after each plant step (k ≥ 1) until the loop stops
         if k >= 1 and s.status[w] == 0:
             if s.tip_step[w, i] < 0 and up < g.sc[w, TILT]:
@@ -201,8 +146,8 @@ def _control(
                 sl = slip_ratio(
                     F(qvel[w, wdof[i, c]]) * wsign[i, c],
                     wrad[i],
-                    v,
-                    om,
+                    s.vel[w, i, 0],
+                    s.vel[w, i, 1],
                     F(2 * c - 1) * htrack[i],
                     g.sc[w, SLIPFLOOR],
                 )
@@ -220,29 +165,10 @@ def _control(
         dx = s.pose[w, i, 0] - (L_pose[kl, 0] - ox)
         dy = s.pose[w, i, 1] - (L_pose[kl, 1] - oy)
         s.ferr[w, i] = wp.sqrt(dx * dx + dy * dy)
-    # ---- reset (kernel.reset_state)
+    # ---- reset (kernel.reset_state), and the loop's own metrics and watches
     if k == 0:
+        stack.reset(g, s, w, n)
         for i in range(n):
-            s.est_pose[w, i, 0] = g.est0[w, i, 0]
-            s.est_pose[w, i, 1] = g.est0[w, i, 1]
-            s.est_pose[w, i, 2] = wrap(g.est0[w, i, 2])
-            for c in range(2):
-                s.est_vel[w, i, c] = zero
-                s.z_hat[w, i, c] = s.vel[w, i, c]
-                s.e_int[w, i, c] = zero
-                s.c_hat[w, i, c] = wp.min(wp.max(g.c_hat0[w, i, c], g.c_min[w, i, c]), g.c_max[w, i, c])
-                s.d_hat[w, i, c] = zero
-                s.fy[w, i, c] = zero
-                s.fdy[w, i, c] = zero
-                s.cmd[w, i, c] = zero
-                s.dcmd[w, i, c] = zero
-                s.tau[w, i, c] = zero
-                s.tau_raw[w, i, c] = zero
-                s.tau_body[w, i, c] = zero
-            for c in range(3):
-                s.err[w, i, c] = zero
-            s.vs[w, i] = zero
-            s.saturated[w, i] = 0
             s.verr[w, i] = zero
             s.nsat[w, i] = zero
             s.vmax[w, i] = zero
@@ -255,8 +181,6 @@ def _control(
             s.slip_run[w, i] = 0
             s.slip_step[w, i] = -1
         s.nrow[w] = 0
-        s.first[w] = 1
-        s.status[w] = 0
         s.k_done[w] = 0
         if g.sc[w, ODO] != zero:  # mujoco_kernels.odometry_reset: the true pose, the sensordata of mjw.forward
             s.odo_count[w] = 0
@@ -299,26 +223,7 @@ def _control(
                     )
         # ---- learner_update
         if g.sc[w, LEARN] != zero and s.first[w] == 0:
-            for i in range(n):
-                for c in range(2):  # a (k5a, kda), then b (k5b, kdb): adjacent columns of SCALARS
-                    zn, en, cn, dn = learner_step(
-                        s.z_hat[w, i, c],
-                        s.e_int[w, i, c],
-                        s.c_hat[w, i, c],
-                        s.d_hat[w, i, c],
-                        s.tau_body[w, i, c],
-                        s.mvel[w, i, c],
-                        g.k4[w, i, c],
-                        g.sc[w, K5A + c],
-                        g.sc[w, KDA + c],
-                        g.c_min[w, i, c],
-                        g.c_max[w, i, c],
-                        dt,
-                    )
-                    s.z_hat[w, i, c] = zn
-                    s.e_int[w, i, c] = en
-                    s.c_hat[w, i, c] = cn
-                    s.d_hat[w, i, c] = dn
+            stack.learn(g, s, w, n, dt)
         # ---- the network (faults.Faults.comm): link weights, and with loss or delay the values received
         comm = f.sc[w, FCOMM] != zero
         recv = comm and f.sc[w, FRECV] != zero
@@ -338,104 +243,14 @@ def _control(
             lv1 = f.hlv[w, 1]
         # ---- estimator_consensus: p_err, v_err of this step, leader term included (weights 1 and the
         # neighbours' current estimates on a perfect network; else Comm's weights and received values)
-        for i in range(n):
-            for c in range(3):
-                s.p_err[w, i, c] = zero
-            for c in range(2):
-                s.v_err[w, i, c] = zero
-        for e in range(g.src.shape[0]):
-            i = g.src[e]
-            j = g.dst[e]
-            we = F(1.0)
-            if comm:
-                we = f.ew[w, e]
-            for c in range(3):
-                xj = s.est_pose[w, j, c]
-                if recv:
-                    xj = f.hp[w, e, c]
-                d = s.est_pose[w, i, c] - xj
-                if c == 2:
-                    d = wrap(d)
-                s.p_err[w, i, c] = s.p_err[w, i, c] + d * we
-            for c in range(2):
-                xj = s.est_vel[w, j, c]
-                if recv:
-                    xj = f.hv[w, e, c]
-                s.v_err[w, i, c] = s.v_err[w, i, c] + (s.est_vel[w, i, c] - xj) * we
-        for i in range(n):
-            ai = g.lacc[w, i]
-            if comm:
-                ai = ai * f.lw[w, i]
-            s.p_err[w, i, 0] = ai * (s.est_pose[w, i, 0] - lp0) + s.p_err[w, i, 0]
-            s.p_err[w, i, 1] = ai * (s.est_pose[w, i, 1] - lp1) + s.p_err[w, i, 1]
-            s.p_err[w, i, 2] = ai * wrap(s.est_pose[w, i, 2] - lp2) + s.p_err[w, i, 2]
-            s.v_err[w, i, 0] = ai * (s.est_vel[w, i, 0] - lv0) + s.v_err[w, i, 0]
-            s.v_err[w, i, 1] = ai * (s.est_vel[w, i, 1] - lv1) + s.v_err[w, i, 1]
-            # the estimator's rates from them, once (kernel.estimator_consensus): the analytic
-            # derivative and the Euler step below both read them
-            q0, q1, q2, q3, q4 = estimator_rates(
-                s.est_pose[w, i, 2],
-                s.est_vel[w, i, 0],
-                s.est_vel[w, i, 1],
-                s.p_err[w, i, 0],
-                s.p_err[w, i, 1],
-                s.p_err[w, i, 2],
-                s.v_err[w, i, 0],
-                s.v_err[w, i, 1],
-                g.sc[w, KX],
-                g.sc[w, KY],
-                g.sc[w, KTH],
-                g.sc[w, KA0],
-                g.sc[w, KA1],
-                g.sc[w, KB0],
-                g.sc[w, KB1],
-                g.sc[w, EPHI0],
-                g.sc[w, EPHI1],
-            )
-            s.est_rate[w, i, 0] = q0
-            s.est_rate[w, i, 1] = q1
-            s.est_rate[w, i, 2] = q2
-            s.est_rate[w, i, 3] = q3
-            s.est_rate[w, i, 4] = q4
+        stack.consensus(g, s, f, w, n, comm, recv, lp0, lp1, lp2, lv0, lv1)
         # ---- command_and_torques
         first = s.first[w] == 1
         steer = g.sc[w, STEER] != zero
         bio = g.sc[w, BIO] != zero
         deriv = g.sc[w, DERIV]
         for i in range(n):
-            # the paper: world-frame offsets, the slot moves with the leader's velocity
-            v_ref = s.est_vel[w, i, 0]
-            w_ref = s.est_vel[w, i, 1]
-            e0 = zero
-            e1 = zero
-            e2 = zero
-            if lframe:  # the slot's own pose and velocity (design §4)
-                xs, ys, ths, v_ref, w_ref = slot_reference(
-                    s.est_pose[w, i, 0],
-                    s.est_pose[w, i, 1],
-                    s.est_pose[w, i, 2],
-                    s.est_vel[w, i, 0],
-                    s.est_vel[w, i, 1],
-                    g.offsets[w, i, 0],
-                    g.offsets[w, i, 1],
-                )
-                e0, e1, e2 = tracking_error(
-                    xs, ys, ths, s.mpose[w, i, 0], s.mpose[w, i, 1], s.mpose[w, i, 2], zero, zero
-                )
-            else:
-                e0, e1, e2 = tracking_error(
-                    s.est_pose[w, i, 0],
-                    s.est_pose[w, i, 1],
-                    s.est_pose[w, i, 2],
-                    s.mpose[w, i, 0],
-                    s.mpose[w, i, 1],
-                    s.mpose[w, i, 2],
-                    g.offsets[w, i, 0],
-                    g.offsets[w, i, 1],
-                )
-            s.err[w, i, 0] = e0
-            s.err[w, i, 1] = e1
-            s.err[w, i, 2] = e2
+            e0, e1, e2, v_ref, w_ref = stack.follower_error(g, s, w, i, lframe)
             u = e0
             if bio:
                 u = s.vs[w, i]
@@ -471,78 +286,15 @@ def _control(
                 s.dcmd[w, i, 1] = dwc
             else:
                 for c in range(2):  # filter or backward difference (design §6)
-                    if first:
-                        s.fy[w, i, c] = s.cmd[w, i, c]
-                        s.fdy[w, i, c] = zero
-                    if deriv == DERIV_D:
-                        s.dcmd[w, i, c] = backward_difference(s.cmd[w, i, c], s.fy[w, i, c], dt)
-                        s.fy[w, i, c] = s.cmd[w, i, c]
-                    else:
-                        y, dy, dd = filter_derivative(
-                            s.fy[w, i, c],
-                            s.fdy[w, i, c],
-                            s.cmd[w, i, c],
-                            g.sc[w, F00],
-                            g.sc[w, F01],
-                            g.sc[w, F10],
-                            g.sc[w, F11],
-                            g.sc[w, G0],
-                            g.sc[w, G1],
-                            dt,
-                        )
-                        s.fy[w, i, c] = y
-                        s.fdy[w, i, c] = dy
-                        s.dcmd[w, i, c] = dd
-            r0, r1 = sliding_mode(
-                vc,
-                wc,
-                s.dcmd[w, i, 0],
-                s.dcmd[w, i, 1],
-                s.mvel[w, i, 0],
-                s.mvel[w, i, 1],
-                s.c_hat[w, i, 0],
-                s.c_hat[w, i, 1],
-                g.sc[w, CA],
-                g.sc[w, CB],
-                g.sc[w, TPHI],
-            )
-            s.tau_raw[w, i, 0] = r0
-            s.tau_raw[w, i, 1] = r1
+                    stack.follower_derivative(g, s, w, i, c, first, dt)
+            r0, r1 = stack.torque_law(g, s, w, i, vc, wc)
             L = g.lim[w, i]
             if pf.act_known[w] != 0:  # faults.actuator_known: the stack's own limit (ControlStack.set_tau_max)
                 L = L * _act_scale(pf, w, i, k)
-            sat = 0
-            if wp.abs(r0) > L or wp.abs(r1) > L:
-                sat = 1
-            s.saturated[w, i] = sat
-            t0, t1 = saturate(r0, r1, L, steer)
-            s.tau[w, i, 0] = t0
-            s.tau[w, i, 1] = t1
-            s.tau_body[w, i, 0] = t0 + t1
-            s.tau_body[w, i, 1] = t1 - t0
+            stack.apply_torque(s, w, i, r0, r1, L, steer)
         s.first[w] = 0
         # ---- estimator_advance: one Euler step with this step's rates; the neuron (eq. 32)
-        for i in range(n):
-            px, py, pth, v, om = estimator_euler(
-                s.est_pose[w, i, 0],
-                s.est_pose[w, i, 1],
-                s.est_pose[w, i, 2],
-                s.est_vel[w, i, 0],
-                s.est_vel[w, i, 1],
-                s.est_rate[w, i, 0],
-                s.est_rate[w, i, 1],
-                s.est_rate[w, i, 2],
-                s.est_rate[w, i, 3],
-                s.est_rate[w, i, 4],
-                dt,
-            )
-            s.est_pose[w, i, 0] = px
-            s.est_pose[w, i, 1] = py
-            s.est_pose[w, i, 2] = pth
-            s.est_vel[w, i, 0] = v
-            s.est_vel[w, i, 1] = om
-            if bio:
-                s.vs[w, i] = neuron_step(s.vs[w, i], s.err[w, i, 0], g.sc[w, A_], g.sc[w, B_], g.sc[w, D_], dt)
+        stack.advance(g, s, w, n, dt, bio)
         # ---- engine.accumulate (metrics) and engine.check (guards)
         for i in range(n):
             s.verr[w, i] = (
@@ -571,9 +323,7 @@ def _control(
     d0 = zero
     d1 = zero
     if running and g.sc[w, USED] != zero:
-        t = F(k) * dt
-        d0 = harmonic(g.sc[w, DD0], g.sc[w, DD0 + 1], g.sc[w, DD0 + 2], g.sc[w, DD0 + 3], t)
-        d1 = harmonic(g.sc[w, DE0], g.sc[w, DE0 + 1], g.sc[w, DE0 + 2], g.sc[w, DE0 + 3], t)
+        d0, d1 = stack.disturbance(g, w, F(k) * dt)
     # faults.actuator (Faults.step): while any follower's limit is reduced, every wheel's torque
     # reaching the plant is clipped to its follower's limit × scale (s.tau stays as commanded: the
     # log, the metrics and, unless a DC motor feeds back what it delivered, the learner see that)

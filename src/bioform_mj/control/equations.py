@@ -211,6 +211,42 @@ def tracking_error(
 
 
 @equation
+def slot_error(
+    xr: float,
+    yr: float,
+    thr: float,
+    vr: float,
+    wr: float,
+    dx: float,
+    dy: float,
+    x: float,
+    y: float,
+    th: float,
+    leader_frame: bool,
+) -> tuple[float, float, float, float, float]:
+    """A follower's tracking error (eqs. 27–28) and the velocities its slot moves with.
+
+    ``(xr, yr, thr)``, ``(vr, wr)``: its estimate of the leader's pose and velocities; ``(dx, dy)`` its
+    offset (m); ``(x, y, th)`` its pose. World-frame offsets (the paper): :func:`tracking_error` with the
+    offset, the slot moving with ``(vr, wr)``; ``leader_frame``: against the slot's own pose and
+    velocity (:func:`slot_reference`, design §4), no offset left. Returns ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``.
+    """
+    px = xr
+    py = yr
+    pth = thr
+    v_ref = vr
+    w_ref = wr
+    ox = dx
+    oy = dy
+    if leader_frame:
+        px, py, pth, v_ref, w_ref = slot_reference(xr, yr, thr, vr, wr, dx, dy)
+        ox = 0.0
+        oy = 0.0
+    e0, e1, e2 = tracking_error(px, py, pth, x, y, th, ox, oy)
+    return e0, e1, e2, v_ref, w_ref
+
+
+@equation
 def velocity_command(
     ey: float, eth: float, u: float, v_ir: float, w_ir: float, k1: float, k2: float, k3: float
 ) -> tuple[float, float]:
@@ -276,6 +312,38 @@ def filter_derivative(
 def backward_difference(u: float, u_prev: float, dt: float) -> float:
     """``torque.derivative = "difference"``: ``(u[k] − u[k−1])/dt``."""
     return (u - u_prev) / dt
+
+
+@equation
+def command_derivative(
+    y: float,
+    dy: float,
+    u: float,
+    first: bool,
+    difference: bool,
+    f00: float,
+    f01: float,
+    f10: float,
+    f11: float,
+    g0: float,
+    g1: float,
+    dt: float,
+) -> tuple[float, float, float]:
+    """The command derivative of ``torque.derivative`` = ``"filter"`` or, with ``difference``,
+    ``"difference"`` (design §6) for the command ``u``: the state ``(y, dy)`` is the filter's output and
+    rate (:func:`filter_derivative`) or, for the difference, the last command (:func:`backward_difference`;
+    ``dy`` kept); ``first``: the first step, the state starts at ``(u, 0)`` (a zero derivative). Returns
+    the new ``(y, dy)`` and the derivative.
+    """
+    y0 = y
+    dy0 = dy
+    if first:
+        y0 = u
+        dy0 = 0.0
+    if difference:
+        return u, dy0, backward_difference(u, y0, dt)
+    yn, dyn, d = filter_derivative(y0, dy0, u, f00, f01, f10, f11, g0, g1, dt)
+    return yn, dyn, d
 
 
 @equation
@@ -372,6 +440,27 @@ def saturate(tl: float, tr: float, lim: float, steer: bool) -> tuple[float, floa
 
 # ----------------------------------------------------------------- learner (eq. 37)
 @equation
+def learner_terms(
+    e_int: float, c_hat: float, d_hat: float, tau: float, z: float, k4: float, kd: float, h: float
+) -> tuple[float, float, float, float, float, float, float]:
+    """The terms of the backward-Euler closed form of eq. 37 that :func:`learner_step` and
+    :func:`learner_drag_step` share, for the frozen torque ``tau`` and the velocity ``z`` measured at the
+    step's end (``h`` the step, s): with the new estimate ``ẑ'`` still unknown, ``E' = R + h ẑ'``,
+    ``S' = S0 + S1 ẑ'``, ``ĉ' = P − Q ẑ'`` (before its projection) and ``d̂' = Pd − Qd ẑ'``.
+    Returns ``(R, S0, S1, P, Q, Pd, Qd)``.
+    """
+    R = e_int - h * z
+    S0 = k4 * R - z
+    S1 = 1.0 + h * k4
+    hk4t = h * k4 * tau
+    P = c_hat - hk4t * S0
+    Q = hk4t * S1
+    Pd = d_hat - h * kd * S0
+    Qd = h * kd * S1
+    return R, S0, S1, P, Q, Pd, Qd
+
+
+@equation
 def learner_step(
     z_hat: float,
     e_int: float,
@@ -394,14 +483,7 @@ def learner_step(
     measured at its end, so solved in closed form (A-stable, design §5); ``ĉ`` is then
     projected onto ``[c_min, c_max]``. Returns the new ``(ẑ, E, ĉ, d̂)``.
     """
-    R = e_int - h * z
-    S0 = k4 * R - z
-    S1 = 1.0 + h * k4
-    hk4t = h * k4 * tau
-    P = c_hat - hk4t * S0
-    Q = hk4t * S1
-    Pd = d_hat - h * kd * S0
-    Qd = h * kd * S1
+    R, S0, S1, P, Q, Pd, Qd = learner_terms(e_int, c_hat, d_hat, tau, z, k4, kd, h)
     den = 1.0 + h * k4 + h * k5 * S1 + h * tau * Q + h * Qd
     zn = (z_hat + h * (tau * P + Pd + k4 * z - k5 * S0)) / den
     return zn, R + h * zn, clip(P - Q * zn, c_min, c_max), Pd - Qd * zn
@@ -433,14 +515,7 @@ def learner_drag_step(
     projected onto ``[c_min, c_max]``, ``k̂`` onto ``[0, k_max]`` (1/s). ``kk = 0`` holds ``k̂``;
     with ``k̂ = 0`` too it gives :func:`learner_step`'s values. Returns the new ``(ẑ, E, ĉ, d̂, k̂)``.
     """
-    R = e_int - h * z
-    S0 = k4 * R - z
-    S1 = 1.0 + h * k4
-    hk4t = h * k4 * tau
-    P = c_hat - hk4t * S0
-    Q = hk4t * S1
-    Pd = d_hat - h * kd * S0
-    Qd = h * kd * S1
+    R, S0, S1, P, Q, Pd, Qd = learner_terms(e_int, c_hat, d_hat, tau, z, k4, kd, h)
     Pk = k_hat + h * kk * z * S0
     Qk = h * kk * z * S1
     den = 1.0 + h * k4 + h * k5 * S1 + h * tau * Q + h * Qd + h * z * Qk

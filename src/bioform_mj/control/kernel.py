@@ -24,12 +24,11 @@ import numpy as np
 
 from .cbf import cbf_filter
 from .equations import (
-    backward_difference,
+    command_derivative,
     command_rate,
     error_rate,
     estimator_euler,
     estimator_rates,
-    filter_derivative,
     learner_drag_step,
     learner_step,
     neuron_rate,
@@ -37,8 +36,7 @@ from .equations import (
     njit,
     saturate,
     sliding_mode,
-    slot_reference,
-    tracking_error,
+    slot_error,
     velocity_command,
     wrap,
 )
@@ -259,40 +257,18 @@ def learner_update(g, s, vel):
     kk = (g.kka, g.kkb)
     for i in range(vel.shape[0]):
         for c in range(2):  # a, then b
+            z_hat, e_int, c_hat, d_hat = s.z_hat[i, c], s.e_int[i, c], s.c_hat[i, c], s.d_hat[i, c]
+            tau, z = s.tau_body[i, c], vel[i, c]
             if kk[c] > 0.0:  # opt-in learned drag (design §14); else the paper's step, unchanged
                 zn, en, cn, dn, kn = learner_drag_step(
-                    s.z_hat[i, c],
-                    s.e_int[i, c],
-                    s.c_hat[i, c],
-                    s.d_hat[i, c],
-                    s.k_hat[i, c],
-                    s.tau_body[i, c],
-                    vel[i, c],
-                    g.k4[i, c],
-                    k5[c],
-                    kd[c],
-                    kk[c],
-                    g.c_min[i, c],
-                    g.c_max[i, c],
-                    g.k_max,
-                    dt,
+                    z_hat, e_int, c_hat, d_hat, s.k_hat[i, c], tau, z, g.k4[i, c], k5[c], kd[c], kk[c], g.c_min[i, c],
+                    g.c_max[i, c], g.k_max, dt,
+                )  # fmt: skip
+                s.k_hat[i, c] = kn
+            else:
+                zn, en, cn, dn = learner_step(
+                    z_hat, e_int, c_hat, d_hat, tau, z, g.k4[i, c], k5[c], kd[c], g.c_min[i, c], g.c_max[i, c], dt
                 )
-                s.z_hat[i, c], s.e_int[i, c], s.c_hat[i, c], s.d_hat[i, c], s.k_hat[i, c] = zn, en, cn, dn, kn
-                continue
-            zn, en, cn, dn = learner_step(
-                s.z_hat[i, c],
-                s.e_int[i, c],
-                s.c_hat[i, c],
-                s.d_hat[i, c],
-                s.tau_body[i, c],
-                vel[i, c],
-                g.k4[i, c],
-                k5[c],
-                kd[c],
-                g.c_min[i, c],
-                g.c_max[i, c],
-                dt,
-            )
             s.z_hat[i, c], s.e_int[i, c], s.c_hat[i, c], s.d_hat[i, c] = zn, en, cn, dn
 
 
@@ -302,30 +278,7 @@ def command_and_torques(g, s, pose, vel):
     (eqs. 38–39) and saturation for every follower, from the current estimates."""
     first = s.first[0] == 1
     for i in range(pose.shape[0]):
-        if g.leader_frame:  # the slot's own pose and velocity (design §4)
-            xs, ys, ths, v_ref, w_ref = slot_reference(
-                s.est_pose[i, 0],
-                s.est_pose[i, 1],
-                s.est_pose[i, 2],
-                s.est_vel[i, 0],
-                s.est_vel[i, 1],
-                g.offsets[i, 0],
-                g.offsets[i, 1],
-            )
-            e0, e1, e2 = tracking_error(xs, ys, ths, pose[i, 0], pose[i, 1], pose[i, 2], 0.0, 0.0)
-        else:  # the paper: world-frame offsets, the slot moves with the leader's velocity
-            v_ref, w_ref = s.est_vel[i, 0], s.est_vel[i, 1]
-            e0, e1, e2 = tracking_error(
-                s.est_pose[i, 0],
-                s.est_pose[i, 1],
-                s.est_pose[i, 2],
-                pose[i, 0],
-                pose[i, 1],
-                pose[i, 2],
-                g.offsets[i, 0],
-                g.offsets[i, 1],
-            )
-        s.err[i, 0], s.err[i, 1], s.err[i, 2] = e0, e1, e2
+        e0, e1, e2, v_ref, w_ref = follower_error(g, s, i, pose)
         u = s.vs[i] if g.bio else e0
         vc, wc = velocity_command(e1, e2, u, v_ref, w_ref, g.k1, g.k2, g.k3)
         if g.cbf:  # the safety filter between eq. 31 and the torque law (design §19)
@@ -345,29 +298,58 @@ def command_and_torques(g, s, pose, vel):
             )
         else:
             for c in range(2):  # filter or backward difference (design §6)
-                if first:
-                    s.fy[i, c] = s.cmd[i, c]
-                    s.fdy[i, c] = 0.0
-                if g.deriv == DERIV_DIFFERENCE:
-                    s.dcmd[i, c] = backward_difference(s.cmd[i, c], s.fy[i, c], g.dt)
-                    s.fy[i, c] = s.cmd[i, c]
-                else:
-                    y, dy, d = filter_derivative(
-                        s.fy[i, c], s.fdy[i, c], s.cmd[i, c], g.f00, g.f01, g.f10, g.f11, g.g0, g.g1, g.dt
-                    )
-                    s.fy[i, c], s.fdy[i, c] = y, dy
-                    s.dcmd[i, c] = d
-        r0, r1 = sliding_mode(
-            vc, wc, s.dcmd[i, 0], s.dcmd[i, 1], vel[i, 0], vel[i, 1], s.c_hat[i, 0], s.c_hat[i, 1], g.ca, g.cb, g.tphi
-        )
-        s.tau_raw[i, 0], s.tau_raw[i, 1] = r0, r1
-        L = g.lim[i]
-        s.saturated[i] = abs(r0) > L or abs(r1) > L
-        t0, t1 = saturate(r0, r1, L, g.steer)
-        s.tau[i, 0], s.tau[i, 1] = t0, t1
-        s.tau_body[i, 0] = t0 + t1  # τ_a = τ_L + τ_R
-        s.tau_body[i, 1] = t1 - t0  # τ_b = τ_R − τ_L (design §5)
+                follower_derivative(g, s, i, c, first)
+        follower_torques(g, s, i, vc, wc, vel)
     s.first[0] = 0
+
+
+# Per-follower pieces shared with the learning environment (envs/kernels.py): one-line wrappers around
+# equations (on scalars; the batch engine's Warp kernels call the same equations): a numba call that
+# passes Gains and StackState (every array of both) costs more than the piece itself, per follower.
+@njit
+def follower_error(g, s, i, pose):
+    """Follower ``i``'s :func:`slot_error` from its leader estimate and measured ``pose`` (n, 3), into
+    ``s.err[i]``; returns ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``."""
+    e0, e1, e2, v_ref, w_ref = slot_error(
+        s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2], s.est_vel[i, 0], s.est_vel[i, 1], g.offsets[i, 0],
+        g.offsets[i, 1], pose[i, 0], pose[i, 1], pose[i, 2], g.leader_frame,
+    )  # fmt: skip
+    s.err[i, 0], s.err[i, 1], s.err[i, 2] = e0, e1, e2
+    return e0, e1, e2, v_ref, w_ref
+
+
+@njit
+def follower_derivative(g, s, i, c, first):
+    """:func:`command_derivative` of the command ``s.cmd[i, c]`` into ``s.dcmd[i, c]``, its state ``s.fy``,
+    ``s.fdy`` advanced; ``first``: the first step."""
+    s.fy[i, c], s.fdy[i, c], s.dcmd[i, c] = command_derivative(
+        s.fy[i, c], s.fdy[i, c], s.cmd[i, c], first, g.deriv == DERIV_DIFFERENCE, g.f00, g.f01, g.f10, g.f11, g.g0,
+        g.g1, g.dt,
+    )  # fmt: skip
+
+
+@njit
+def follower_torques(g, s, i, vc, wc, vel):
+    """Follower ``i``'s sliding-mode torques (eqs. 38–39) tracking ``(vc, wc)`` [m/s, rad/s] with
+    ``s.dcmd[i]``, the measured ``vel`` (n, 2) and ``ĉ``; then :func:`apply_torque`."""
+    r0, r1 = sliding_mode(
+        vc, wc, s.dcmd[i, 0], s.dcmd[i, 1], vel[i, 0], vel[i, 1], s.c_hat[i, 0], s.c_hat[i, 1], g.ca, g.cb, g.tphi
+    )
+    apply_torque(g, s, i, r0, r1)
+
+
+@njit
+def apply_torque(g, s, i, r0, r1):
+    """Follower ``i``'s commanded wheel torques ``(r0, r1)`` = ``[τ_L, τ_R]`` N·m into ``s.tau_raw[i]``,
+    saturated at ``g.lim[i]`` (``g.steer``: steer priority) into ``s.tau[i]``, ``s.saturated[i]``, and the
+    body torques ``s.tau_body[i]`` the learner reads."""
+    s.tau_raw[i, 0], s.tau_raw[i, 1] = r0, r1
+    L = g.lim[i]
+    s.saturated[i] = abs(r0) > L or abs(r1) > L
+    t0, t1 = saturate(r0, r1, L, g.steer)
+    s.tau[i, 0], s.tau[i, 1] = t0, t1
+    s.tau_body[i, 0] = t0 + t1  # τ_a = τ_L + τ_R
+    s.tau_body[i, 1] = t1 - t0  # τ_b = τ_R − τ_L (design §5)
 
 
 @njit

@@ -10,16 +10,15 @@ kinematic controller, supplies the velocity command.
 
 from __future__ import annotations
 
-from ..control.equations import (
-    backward_difference,
-    filter_derivative,
-    njit,
-    saturate,
-    sliding_mode,
-    slot_reference,
-    tracking_error,
+from ..control.equations import njit
+from ..control.kernel import (
+    apply_torque,
+    estimator_consensus,
+    follower_derivative,
+    follower_error,
+    follower_torques,
+    learner_update,
 )
-from ..control.kernel import DERIV_DIFFERENCE, estimator_consensus, learner_update
 
 
 @njit
@@ -32,29 +31,7 @@ def sense_errors(g, s, lp, lv, pose, vel, comm, learn):
         learner_update(g, s, vel)
     estimator_consensus(g, s, lp, lv, comm)
     for i in range(pose.shape[0]):
-        if g.leader_frame:
-            xs, ys, ths, _v, _w = slot_reference(
-                s.est_pose[i, 0],
-                s.est_pose[i, 1],
-                s.est_pose[i, 2],
-                s.est_vel[i, 0],
-                s.est_vel[i, 1],
-                g.offsets[i, 0],
-                g.offsets[i, 1],
-            )
-            e0, e1, e2 = tracking_error(xs, ys, ths, pose[i, 0], pose[i, 1], pose[i, 2], 0.0, 0.0)
-        else:
-            e0, e1, e2 = tracking_error(
-                s.est_pose[i, 0],
-                s.est_pose[i, 1],
-                s.est_pose[i, 2],
-                pose[i, 0],
-                pose[i, 1],
-                pose[i, 2],
-                g.offsets[i, 0],
-                g.offsets[i, 1],
-            )
-        s.err[i, 0], s.err[i, 1], s.err[i, 2] = e0, e1, e2
+        follower_error(g, s, i, pose)
 
 
 @njit
@@ -68,23 +45,8 @@ def track_velocity(g, s, vel, cmd):
     for i in range(vel.shape[0]):
         for c in range(2):
             s.cmd[i, c] = cmd[i, c]
-            if first:
-                s.fy[i, c] = cmd[i, c]
-                s.fdy[i, c] = 0.0
-            if g.deriv == DERIV_DIFFERENCE:
-                s.dcmd[i, c] = backward_difference(cmd[i, c], s.fy[i, c], g.dt)
-                s.fy[i, c] = cmd[i, c]
-            else:
-                y, dy, d = filter_derivative(
-                    s.fy[i, c], s.fdy[i, c], cmd[i, c], g.f00, g.f01, g.f10, g.f11, g.g0, g.g1, g.dt
-                )
-                s.fy[i, c], s.fdy[i, c] = y, dy
-                s.dcmd[i, c] = d
-        r0, r1 = sliding_mode(
-            cmd[i, 0], cmd[i, 1], s.dcmd[i, 0], s.dcmd[i, 1], vel[i, 0], vel[i, 1], s.c_hat[i, 0], s.c_hat[i, 1],
-            g.ca, g.cb, g.tphi,
-        )  # fmt: skip
-        _apply_torque(g, s, i, r0, r1)
+            follower_derivative(g, s, i, c, first)
+        follower_torques(g, s, i, cmd[i, 0], cmd[i, 1], vel)
     s.first[0] = 0
 
 
@@ -93,16 +55,5 @@ def direct_torque(g, s, tau):
     """``action = "torque"``: the agents' wheel torques ``tau`` (n, 2) N·m, already within the
     action space ``±τ_max``; the same bookkeeping as the torque law (``s.tau_body`` feeds the learner)."""
     for i in range(tau.shape[0]):
-        _apply_torque(g, s, i, tau[i, 0], tau[i, 1])
+        apply_torque(g, s, i, tau[i, 0], tau[i, 1])
     s.first[0] = 0
-
-
-@njit
-def _apply_torque(g, s, i, r0, r1):
-    s.tau_raw[i, 0], s.tau_raw[i, 1] = r0, r1
-    L = g.lim[i]
-    s.saturated[i] = abs(r0) > L or abs(r1) > L
-    t0, t1 = saturate(r0, r1, L, g.steer)
-    s.tau[i, 0], s.tau[i, 1] = t0, t1
-    s.tau_body[i, 0] = t0 + t1  # τ_a = τ_L + τ_R (design §5)
-    s.tau_body[i, 1] = t1 - t0  # τ_b = τ_R − τ_L
