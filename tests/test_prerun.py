@@ -173,3 +173,40 @@ def test_a_check_that_breaks_is_a_warning_not_a_failed_run(tmp_path, fresh_cache
     assert res["robots"][0]["verdict"] == "error" and "RuntimeError: boom" in res["robots"][0]["error"]
     assert len(res["warnings"]) == 1 and "robot check cannot check" in res["warnings"][0]
     assert not (fresh_cache / "robot-check").exists()  # an error is not cached
+
+
+def test_simulate_and_a_sweep_row_say_it(tmp_path, fresh_cache):
+    """The Python API warns it (a RobotWarning before the run) and a sweep's row has the column."""
+    from bioform_mj.errors import RobotWarning
+    from bioform_mj.sim import simulate
+    from bioform_mj.sweep import expand, run_one
+
+    path = _braking(tmp_path)
+    sets = ["plant.kind=mujoco", f'plant.robots=[{{model="{path}"}}]', "sim.duration=0.05"]
+    with pytest.warns(RobotWarning, match=r"followers 1, 2, 3: robot check fails .*back_caster"):
+        res = simulate(load("paper", overrides=sets))
+    r = res.summary["robot_check"]["robots"][0]
+    assert r["verdict"] == "fail" and r["from"] == "computed"
+    n0 = prerun.COMPUTED[0]
+    with pytest.warns(RobotWarning):
+        row = run_one(expand("paper", 1, ["bioinspired"], [], sets, plant="mujoco")[0])
+    assert row["status"] == "ok" and row["robot_check"] == "fail: " + "; ".join(r["fail_reasons"])
+    assert prerun.COMPUTED[0] == n0  # the sweep's run took it from memory
+    row = run_one(expand("paper", 1, ["bioinspired"], [], sets[2:], plant="mujoco")[0])
+    assert row["robot_check"] == "pass"  # the paper robot
+
+
+def test_an_identification_off_the_formula_is_warned_with_its_size_and_cause(fresh_cache):
+    """The paper robot mapped with wheel_radius 0.14 m (its wheels are 0.1 m): the formula takes the
+    mapped radius, the physics the wheels': robot check fails it, cause ``mapping``."""
+    from bioform_mj.robots import RobotRef, resolve_robot
+    from bioform_mj.sim import make_plant
+
+    sc = load("paper", overrides=["plant.kind=mujoco", 'plant.robots=[{model="paper", wheel_radius=0.14}]'])
+    res = prerun.before_run(sc, make_plant(sc))
+    rep = check(resolve_robot(RobotRef("paper", wheel_radius=0.14)))
+    (r,) = res["robots"]
+    worst = max(abs(rep["relative_error"]["a"]), abs(rep["relative_error"]["b"]))
+    assert worst > 0.10 and r["relative_error"] == pytest.approx(rep["relative_error"], rel=1e-9)
+    (line,) = [w for w in res["warnings"] if "identification differs" in w]
+    assert f"by {100 * worst:.1f} % (> 10 %); cause mapping" in line and "followers 1, 2, 3" in line
