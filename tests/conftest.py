@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import os
+import tempfile
 
 import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# the pre-run robot check's cache (design §14.2): per test session, not the user's ~/.cache/bioform_mj
+os.environ.setdefault("BIOFORM_CACHE_DIR", tempfile.mkdtemp(prefix="bioform-test-cache-"))
 
 
 @pytest.fixture(scope="session")

@@ -70,6 +70,12 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
         help="URDF robots: where package://NAME/... points (repeatable; adds to plant.package_path)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar, no result lines")
+    p.add_argument(
+        "--no-robot-check",
+        action="store_true",
+        help="MuJoCo robots: skip the robot check before the run (identification, once per robot, cached; "
+        "its failures are warnings; design §14.2); sets BIOFORM_NO_ROBOT_CHECK=1",
+    )
 
 
 def _package_overrides(args: argparse.Namespace) -> list[str]:
@@ -273,6 +279,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
+    if getattr(args, "no_robot_check", False):  # design §14.2; inherited by a sweep's worker processes
+        from .prerun import SKIP_ENV
+
+        os.environ[SKIP_ENV] = "1"
     if args.command == "presets":
         from .scenario_load import preset_descriptions
 

@@ -38,6 +38,7 @@ __all__ = [
     "pose_change",
     "still_bodies",
     "braking_casters",
+    "brakes",
     "Swivel",
     "swivel_casters",
     "rolling_bodies",
@@ -330,13 +331,20 @@ def settle(plant: Any, lay: RobotLayout, track: Any, prefix: str = "f1/", cap: i
     return k, floor, why
 
 
+def brakes(c: dict) -> bool:
+    """Whether a contact of :func:`floor_contacts` brakes the robot: a caster (a non-wheel geom with more
+    than :data:`CASTER_LOAD` of the weight, or one the mapping names) that cannot roll, with friction
+    (μ ≥ ``FRICTIONLESS`` and condim > 1). The one test ``robot check`` and a run's outcomes use (design §14.2)."""
+    return c["role"] == "caster" and not c["rolls"] and c["friction"] >= FRICTIONLESS and c["condim"] != 1
+
+
 def braking_casters(floor: list[dict], drive_force: float) -> list[tuple[dict, float, str]]:
     """The casters of :func:`floor_contacts` that brake: loaded, with friction (μ ≥ 1e-3 and condim > 1)
     and unable to roll (no joint between them and the base). ``drive_force``: what the wheels can
     push, N. Returns ``(contact, μ N in N, message)`` per braking caster."""
     out = []
     for c in floor:
-        if c["role"] != "caster" or c["rolls"] or c["friction"] < FRICTIONLESS or c["condim"] == 1:
+        if not brakes(c):
             continue
         brake = c["friction"] * c["load_n"]
         msg = (

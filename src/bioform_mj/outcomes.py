@@ -174,18 +174,16 @@ def outcome_list(
 
 
 def braking_casters(plant: Any, i: int) -> list[str]:
-    """Follower ``i``'s non-wheel geoms that carry load with friction on the floor now (design §14)."""
+    """Follower ``i``'s casters that brake on the floor now, labelled as ``robot check`` labels them
+    (``contacts.floor_contacts``: a geom's name, or ``BODY#K``), by ``robot check``'s test
+    (``contacts.brakes``: loaded, cannot roll, with friction; design §14.2)."""
     if not hasattr(plant, "layouts") or not hasattr(plant, "data"):
         return []
     try:
-        from .identify import CASTER_LOAD, CASTER_MU, floor_contacts
+        from .contacts import brakes, floor_contacts
 
-        weight = plant.params[i].mass * 9.81
-        return [
-            c["geom"]
-            for c in floor_contacts(plant, i)
-            if c["role"] != "wheel" and c["load_n"] > CASTER_LOAD * weight and c["friction"] > CASTER_MU
-        ]
+        floor = floor_contacts(plant.model, plant.data, plant.layouts[i], f"f{i + 1}/")
+        return [c["geom"] for c in floor if brakes(c)]
     except Exception:  # noqa: BLE001 - a cause is a hint; never fail a run's summary for it
         return []
 

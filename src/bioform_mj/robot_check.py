@@ -359,6 +359,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     return {
         "verdict": verdict,
         "reasons": reasons_fail + reasons_warn,
+        "fail_reasons": reasons_fail,  # what makes the verdict fail (a run warns these: design §14.2)
         "model": lay.file,
         "parts": layout,
         "a_eff": p.a_eff,

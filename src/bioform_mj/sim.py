@@ -425,10 +425,11 @@ def _timeline(sc: Scenario, traj: Any) -> _Timeline:
     return _Timeline(dt, N, stride, L_pose, L_vel, offsets, form)
 
 
-def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str]]:
-    """``(imported, feasibility)``: the guesses of a URDF import (design §12) and what the scenario
-    asks of the MuJoCo robots (``robot_check.feasibility``), warned before the run (the CLI prints
-    ``warning:`` lines) and kept for summary.json."""
+def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], dict[str, Any] | None]:
+    """``(imported, feasibility, robot_check)``: the guesses of a URDF import (design §12), what the
+    scenario asks of the MuJoCo robots (``robot_check.feasibility``) and what ``robot check`` fails
+    them for (``prerun.before_run``, design §14.2; None for other plants), warned before the run (the
+    CLI prints ``warning:`` lines) and kept for summary.json."""
     imported = import_warnings(plant)  # design §12: the guesses of a URDF import, said before the run
     for line in imported:
         warnings.warn(line, RobotWarning, stacklevel=3)
@@ -439,7 +440,14 @@ def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str]]:
         feasibility = _feasibility(sc, plant)  # in summary.json too
         for line in feasibility:
             warnings.warn(line, RobotWarning, stacklevel=3)  # before the run (the CLI prints warning: lines)
-    return imported, feasibility
+    checked = None
+    if sc.plant.kind == "mujoco" and hasattr(plant, "params") and hasattr(plant, "model"):
+        from .prerun import before_run  # design §14.2: once per robot, cached
+
+        checked = before_run(sc, plant)
+        for line in checked["warnings"]:
+            warnings.warn(line, RobotWarning, stacklevel=3)
+    return imported, feasibility, checked
 
 
 def _reset(sc: Scenario, plant: Plant, controller: Any, leader_pose0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -539,7 +547,7 @@ def _log_dict(plant: Plant, graph: Any, lg: LogArrays, j: int, missing: set[str]
 
 def _summarise(sc, plant, controller, step: Stepper, end: LoopEnd, logd, setup_s: float, engine: str, warned):
     """summary.json's body (:func:`bioform_mj.runsummary._summary`) for the run that ended as ``end``,
-    with the warnings said before the run (``warned``: ``(imported, feasibility)``)."""
+    with the warnings said before the run (``warned``: ``(imported, feasibility, robot_check)``)."""
     ctx = step.ctx
     run = RunEnd(
         state=ctx.state,
@@ -559,6 +567,8 @@ def _summarise(sc, plant, controller, step: Stepper, end: LoopEnd, logd, setup_s
     summary = _summary(sc, plant, controller, run)
     summary["feasibility_warnings"] = warned[1]
     summary["import_warnings"] = warned[0]
+    if warned[2] is not None:  # design §14.2: what robot check fails the robots for
+        summary["robot_check"] = warned[2]
     return summary
 
 

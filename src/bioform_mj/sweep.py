@@ -314,6 +314,16 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
             row["follower_outcomes"] = ";".join("+".join(outcome_kinds(f)) or "ok" for f in s["followers"])
         bad = sorted({k for f in s["followers"] for k in outcome_kinds(f)})
         row["outcome"] = "diverged" if div is not None else (",".join(bad) if bad else "ok")
+        rc = s.get("robot_check")  # design §14.2: what robot check fails the robots for (once per robot)
+        if rc is not None:
+            row["robot_check"] = (
+                "skipped"
+                if rc["skipped"]
+                else " | ".join(
+                    r["verdict"] + (": " + "; ".join(r["fail_reasons"]) if r["fail_reasons"] else "")
+                    for r in rc["robots"]
+                )
+            )
         row["sim_time_s"] = s["sim_time_s"]
         row["wall_time_s"] = s["wall_time_s"]
         for m in METRICS:

@@ -74,6 +74,7 @@ class BatchRun:
         plant = make_plant(sc0)
         self.plant = plant
         _refuse_what_robot_check_fails(plant)
+        self.robot_check = _warn_what_robot_check_fails(sc0, plant)
         if probe:
             check_physics(sc0, device, plant)  # the scene's physics is C MuJoCo's on this engine
         # DC motors (design §8.2): the learner is fed the torque delivered over each period (_delivered)
@@ -662,6 +663,7 @@ class BatchRun:
                     "sim_time": kd * self.dt,
                     "wall_time_s": wall,
                     "followers": fol,
+                    "robot_check": self.robot_check,  # design §14.2: one scene, one check
                 }
             )
         return out
@@ -681,6 +683,22 @@ def _refuse_what_robot_check_fails(plant: Any) -> None:
     why = run_refusals(plant, scratch, plant.settled_wheel_loads())
     if why:
         raise InputError("the robots cannot run this scenario (robot check fails them): " + "; ".join(why))
+
+
+def _warn_what_robot_check_fails(sc: Scenario, plant: Any) -> dict[str, Any] | None:
+    """What ``robot check`` fails the batch's robots for (``prerun.before_run``, design §14.2), warned
+    (a ``RobotWarning`` each) before any world runs; None for a plant that is not MuJoCo's."""
+    import warnings
+
+    from ..errors import RobotWarning
+    from ..prerun import before_run
+
+    if sc.plant.kind != "mujoco":
+        return None
+    checked = before_run(sc, plant)
+    for line in checked["warnings"]:
+        warnings.warn(line, RobotWarning, stacklevel=3)
+    return checked
 
 
 def run_batch(scenarios: Sequence[Scenario], device: str = "cpu", **kw) -> list[dict[str, Any]]:
