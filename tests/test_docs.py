@@ -141,6 +141,17 @@ def test_readme_is_a_front_door():
     assert text.count("~/.cache/bioform_mj/numba-") == 1  # the compile cache, stated once
 
 
+def test_readme_python_quick_start_runs_as_written(capsys):
+    """The README's Python quick start, executed as it stands (no pandas needed), prints what its comments say."""
+    text = (ROOT / "README.md").read_text()
+    block = text.split("## Quick start: Python", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    exec(compile(block, "README.md (Python quick start)", "exec"), {})
+    first, second = capsys.readouterr().out.splitlines()[:2]
+    errs = [float(x) for x in re.findall(r"\d+\.\d+(?:e-?\d+)?", first)]
+    assert len(errs) == 3 and max(errs) < 0.05  # 10 s on the ideal plant: 0.021-0.029 m
+    assert second.startswith("3000 ['t_s', 'follower', 'leader_pose_x_m'")  # 1000 rows × 3 followers
+
+
 @pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="the docs extra is not installed")
 def test_docs_build_strictly(tmp_path):
     """mkdocs build --strict: a broken link, a missing page or a stale API reference fails."""
