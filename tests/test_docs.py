@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -199,3 +200,18 @@ def test_a_broken_link_fails_the_strict_build(tmp_path):
     cmd = [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")]
     out = subprocess.run(cmd, cwd=work, capture_output=True, text=True, env=env, timeout=300)
     assert out.returncode != 0 and "no-such-page.md" in out.stderr
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="no make")
+def test_make_docs_without_the_docs_extra_says_how_to_install_it(tmp_path):
+    """`make docs` in a venv that lacks MkDocs: one error line naming the install command, exit 2, no build."""
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
+    (venv / ".installed").touch()  # the package's own install step (make's stamp) taken as done
+    out = subprocess.run(
+        ["make", "-s", "-C", str(ROOT), "docs", f"VENV={venv}"], capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 2, out.stderr
+    first = out.stderr.splitlines()[0]
+    assert first.startswith("error: the docs extra is missing") and "pip install -e '.[docs]'" in first
+    assert "Traceback" not in out.stderr
