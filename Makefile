@@ -52,7 +52,7 @@ MKDOCS := NO_MKDOCS_2_WARNING=1 DISABLE_MKDOCS_2_WARNING=true $(VENV)/bin/mkdocs
 
 # the site into site/ (offline: no plugin fetches anything); strict: a broken link or stale reference fails
 docs: $(STAMP)
-	@$(PY) -c "import mkdocs, material, mkdocstrings, mkdocs_gen_files" 2>/dev/null || \
+	@$(PY) -c "import mkdocs, material, mkdocstrings, mkdocstrings_handlers.python, mkdocs_gen_files" 2>/dev/null || \
 		{ echo "error: the docs extra is missing from $(VENV): install it with $(PY) -m pip install -e '.[docs]'" >&2; exit 2; }
 	$(MKDOCS) build --strict
 	@echo "documentation: site/index.html"

@@ -87,12 +87,23 @@ def test_pandas_and_polars_frames_when_installed(short_run):
         df = short_run.to_pandas()
         assert len(df) == 150 and df.groupby("follower")["formation_error_m"].count().tolist() == [50, 50, 50]
     else:
-        with pytest.raises(ImportError):
+        with pytest.raises(ImportError, match=r"needs pandas, which is not installed: pip install pandas"):
             short_run.to_pandas()
     try:
         import polars  # noqa: F401
     except ImportError:
-        with pytest.raises(ImportError):
+        with pytest.raises(ImportError, match=r"needs polars, which is not installed: pip install polars"):
             short_run.to_polars()
     else:
         assert short_run.to_polars().height == 150
+
+
+def test_a_missing_frame_library_says_how_to_install_it(short_run, monkeypatch):
+    """Without pandas, to_pandas() names the fix, not pyarrow's internal import (also where pandas is installed)."""
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "pandas" else real(name, *a))
+    with pytest.raises(ModuleNotFoundError, match=r"to_pandas\(\) needs pandas.*pip install pandas") as exc:
+        short_run.to_pandas()
+    assert exc.value.name == "pandas"

@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -141,6 +142,17 @@ def test_readme_is_a_front_door():
     assert text.count("~/.cache/bioform_mj/numba-") == 1  # the compile cache, stated once
 
 
+def test_readme_python_quick_start_runs_as_written(capsys):
+    """The README's Python quick start, executed as it stands (no pandas needed), prints what its comments say."""
+    text = (ROOT / "README.md").read_text()
+    block = text.split("## Quick start: Python", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    exec(compile(block, "README.md (Python quick start)", "exec"), {})
+    first, second = capsys.readouterr().out.splitlines()[:2]
+    errs = [float(x) for x in re.findall(r"\d+\.\d+(?:e-?\d+)?", first)]
+    assert len(errs) == 3 and max(errs) < 0.05  # 10 s on the ideal plant: 0.021-0.029 m
+    assert second.startswith("3000 ['t_s', 'follower', 'leader_pose_x_m'")  # 1000 rows × 3 followers
+
+
 @pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="the docs extra is not installed")
 def test_docs_build_strictly(tmp_path):
     """mkdocs build --strict: a broken link, a missing page or a stale API reference fails."""
@@ -157,6 +169,10 @@ def test_docs_build_strictly(tmp_path):
     assert "WARNING" not in out.stderr, out.stderr[-3000:]
     scen = (tmp_path / "site" / "reference" / "scenario" / "index.html").read_text()
     assert "formation.init_jitter" in scen and "faults.friction_patch" in scen
+    api = (tmp_path / "site" / "reference" / "api" / "index.html").read_text()
+    for name in ("bioform_mj.robot_check.check", "bioform_mj.robot_prepare.prepare_robot", "RobotLayout"):
+        assert name in api, name  # the robot modules' public names (after the split of scene.py)
+    assert not re.search(r":(func|class|mod|meth|data):", api)  # Sphinx roles rendered as code, not as typed
     tut = (tmp_path / "site" / "tutorials" / "own-controller" / "index.html").read_text()
     assert "SlotTracker" in tut and "--8&lt;--" not in tut and "8 &lt; --" not in tut  # the script itself, included
 
@@ -170,7 +186,8 @@ def test_a_broken_link_fails_the_strict_build(tmp_path):
     shutil.copytree(DOCS, work / "docs")
     shutil.copy(ROOT / "mkdocs.yml", work / "mkdocs.yml")
     (work / "scripts").mkdir()
-    shutil.copy(ROOT / "scripts" / "gen_docs.py", work / "scripts" / "gen_docs.py")
+    for script in ("gen_docs.py", "griffe_sphinx_roles.py"):  # what mkdocs.yml runs
+        shutil.copy(ROOT / "scripts" / script, work / "scripts" / script)
     (work / "src").symlink_to(ROOT / "src")
     with open(work / "docs" / "guide" / "faults.md", "a") as fh:
         fh.write("\n[a page that is not there](no-such-page.md)\n")
@@ -183,3 +200,75 @@ def test_a_broken_link_fails_the_strict_build(tmp_path):
     cmd = [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")]
     out = subprocess.run(cmd, cwd=work, capture_output=True, text=True, env=env, timeout=300)
     assert out.returncode != 0 and "no-such-page.md" in out.stderr
+
+
+@pytest.mark.skipif(shutil.which("make") is None, reason="no make")
+def test_make_docs_without_the_docs_extra_says_how_to_install_it(tmp_path):
+    """`make docs` in a venv that lacks MkDocs: one error line naming the install command, exit 2, no build."""
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
+    (venv / ".installed").touch()  # the package's own install step (make's stamp) taken as done
+    out = subprocess.run(
+        ["make", "-s", "-C", str(ROOT), "docs", f"VENV={venv}"], capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 2, out.stderr
+    first = out.stderr.splitlines()[0]
+    assert first.startswith("error: the docs extra is missing") and "pip install -e '.[docs]'" in first
+    assert "Traceback" not in out.stderr
+
+
+def _package_modules() -> dict[str, str]:
+    """``{"robot_prepare": "bioform_mj.robot_prepare", "batch.support": ..., ...}``: every module by its short name."""
+    pkg = ROOT / "src" / "bioform_mj"
+    out = {}
+    for p in pkg.rglob("*.py"):
+        parts = p.relative_to(pkg).with_suffix("").parts
+        parts = parts[:-1] if parts[-1] == "__init__" else parts
+        if parts:
+            out[".".join(parts)] = "bioform_mj." + ".".join(parts)
+    return out
+
+
+def test_code_the_docs_name_exists_and_the_design_names_its_home():
+    """Every `module.name` in README and docs/ resolves; the design documents name the module that defines it
+    (after a split, `scene.prepare_robot` still resolved through a re-export while the code was elsewhere)."""
+    import importlib
+    import inspect
+
+    mods = _package_modules()
+    keys = set(scenario_doc.scenario_keys())
+    alt = "|".join(re.escape(m) for m in sorted(mods, key=len, reverse=True))
+    ref = re.compile(r"`(?:bioform_mj\.)?(" + alt + r")\.([A-Za-z_]\w*)(?:\.(\w+))?(?:\(\))?`")
+    suffixes = {"py", "xml", "md", "json", "toml", "csv", "npz", "rrd", "mp4", "parquet", "txt"}
+    bad = []
+    for page in [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]:
+        design = page.name in ("design.md", "warp_engine.md")
+        for ln, line in enumerate(page.read_text().splitlines(), 1):
+            for m in ref.finditer(line):
+                mod, attr, sub = m.groups()
+                if attr in suffixes or any(k == f"{mod}.{attr}" or k.startswith(f"{mod}.{attr}[") for k in keys):
+                    continue  # a file name, or a scenario key (sim.seed, faults.delay, plant.robots[] …)
+                try:
+                    module = importlib.import_module(mods[mod])
+                except ImportError:  # an extra that is not installed here (warp, pettingzoo)
+                    continue
+                obj = getattr(module, attr, None)
+                if obj is None and f"{mod}.{attr}" not in mods or (sub and not hasattr(obj, sub)):
+                    bad.append(f"{page.relative_to(ROOT)}:{ln}: {m.group(0)} does not exist")
+                elif design and (inspect.isfunction(obj) or inspect.isclass(obj)) and obj.__module__ != mods[mod]:
+                    bad.append(f"{page.relative_to(ROOT)}:{ln}: {m.group(0)} is defined in {obj.__module__}")
+    for page in [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]:
+        for path in re.findall(
+            r"`((?:src/bioform_mj|scripts|tests|examples|docs)/[\w/.*-]+\.(?:py|toml|xml|md))", page.read_text()
+        ):
+            generated = path.startswith("docs/reference/") and path.rsplit("/", 1)[-1] in (
+                "scenario.md",
+                "cli.md",
+                "log.md",
+            )
+            if not generated and not list(ROOT.glob(path)):
+                bad.append(f"{page.relative_to(ROOT)}: `{path}` does not exist")
+        for path in re.findall(r"`((?:control|batch|plants|outputs|envs)/\w+\.py)", page.read_text()):
+            if not (ROOT / "src" / "bioform_mj" / path).exists():  # a subpackage's module, named from the package
+                bad.append(f"{page.relative_to(ROOT)}: `{path}` does not exist")
+    assert not bad, "\n".join(bad)

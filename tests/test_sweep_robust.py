@@ -390,6 +390,13 @@ def test_randomness_sources():
     assert randomness(load("paper", ["faults.noise_vel=[0,0.01]"])) == ["faults.noise_vel"]
     # noise in a window after the run ends never draws
     assert randomness(load("paper", ["faults.noise_vel=[0,0.01]", "sim.duration=5", "faults.window=[6,8]"])) == []
+    # the obstacle field and the gyro's noise are drawn from the seed too: seeds differ (the warning said otherwise)
+    assert randomness(load("obstacles")) == ["obstacle_field"]
+    a, b = (load("obstacles", [f"sim.seed={s}"]).obstacle_list() for s in (0, 1))
+    assert min(abs(p.x - q.x) + abs(p.y - q.y) for p, q in zip(a[-8:], b[-8:])) > 1e-3  # the field moved
+    gyro = ["plant.sensing='odometry'", "plant.gyro_noise=0.01"]
+    assert randomness(load("tb3", gyro)) == ["plant.gyro_noise"]
+    assert randomness(load("tb3", gyro[:1])) == []  # odometry without noise is deterministic
 
 
 def test_diverged_run_marked_in_tables(tmp_path):

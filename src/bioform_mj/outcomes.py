@@ -1,5 +1,5 @@
 """What each follower's run came to (design §9, §14): the formation slots, the thresholds and
-:func:`outcome_list`, the one list of outcomes both engines give a follower (``sim.follower_outcomes``
+:func:`outcome_list`, the one list of outcomes both engines give a follower (:func:`follower_outcomes`
 for the CPU loops, ``batch.runner``'s ``_outcome`` for the device). Below :mod:`bioform_mj.sim` and
 :mod:`bioform_mj.robot_check`, which both import it."""
 
@@ -119,7 +119,7 @@ def outcome_list(
 ) -> list[dict[str, Any]]:
     """Every outcome of one follower, the most severe first (:data:`OUTCOME_ORDER`), each
     ``{"kind", "detail", "t"}`` (``t``: s when it happened, None for an end-of-run outcome); empty
-    when ok. Shared by both engines (``sim.follower_outcomes``, ``batch.control``'s ``_outcome``).
+    when ok. Shared by both engines (:func:`follower_outcomes`, ``batch/runner.py``'s ``BatchRun._outcome``).
     ``causes``: a callable giving :func:`unmodelled_causes`' list (called only for ``c_hat_off``);
     ``lost_m``: the scenario's :func:`lost_threshold_m` (m)."""
     from .plants.mujoco_plant import TIP_ANGLE_DEG

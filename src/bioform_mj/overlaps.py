@@ -1,6 +1,6 @@
 """Pairs of a robot's own bodies whose published collision geoms overlap or touch at rest (design §13.1).
 
-The scene replaces a wheel's collision shape by a single-contact proxy (scene.py ``_wheel_proxy``)
+The scene replaces a wheel's collision shape by a single-contact proxy (``robot_prepare._wheel_proxy``)
 and holds, freezes or locks the other joints (design §13), so its contact list hides overlaps that
 the robot's maker published: a wheel cylinder inside the chassis. Here the robot's model is read
 as its file gives it — the MJCF compiled as it stands, a URDF imported with MuJoCo's collision

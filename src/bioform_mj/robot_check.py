@@ -737,7 +737,6 @@ def main(args: argparse.Namespace) -> int:
         f"(full torque: {report['motor_accel_mps2']:.3g} m/s²); "
         f"CoM {1e3 * report['com_offset_m']:.1f} mm off the axle, "
         f"{report['com_height_m']:.3g} m high",
-        f"  mass {report['mass_kg']:.4g} kg, yaw inertia {report['yaw_inertia_kgm2']:.4g} kg·m²",
     ]
     lines.append(
         f"  mass {report['mass_kg']:.4g} kg, yaw inertia {report['yaw_inertia_kgm2']:.4g} kg·m² "

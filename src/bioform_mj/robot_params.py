@@ -172,7 +172,7 @@ _subtree = subtree
 def robot_parameters(model: mujoco.MjModel, prefix: str = "", data: mujoco.MjData | None = None) -> RobotParams:
     """Read one robot's parameters from a compiled model (robot names start with ``prefix``).
 
-    The parts come from the robot's layout (:func:`bioform_mj.scene.layout_of`: mapping, wheel
+    The parts come from the robot's layout (:func:`bioform_mj.robot_analysis.layout_of`: mapping, wheel
     radius, half track, axle midpoint). Evaluated at ``qpos0``; yaw inertia uses every body's
     inertia rotated to the world frame plus the parallel-axis term about the vertical through
     the axle midpoint (midpoint of the two wheel joint anchors). ``I_w`` is a wheel's spin

@@ -16,7 +16,7 @@ A name with a ``.xml``/``.urdf``/``.xacro`` suffix or a path separator is a path
 inside a TOML file (models and package directories) resolve against the directory of that file
 (:func:`rebase_entries`, called when the file is read); on the command line against the
 working directory. What the project then reads from the model is :mod:`bioform_mj.scene`'s
-job (:func:`bioform_mj.scene.prepare_robot`). This module imports nothing of MuJoCo.
+job (:func:`bioform_mj.robot_prepare.prepare_robot`). This module imports nothing of MuJoCo.
 """
 
 from __future__ import annotations
@@ -87,7 +87,7 @@ class RobotRef:
     ``right_wheel``: the two hinge joints of the driven wheels; ``wheel_radius`` (m) and
     ``half_track`` (m) override what the model tells; ``tau_max`` (N·m): wheel torque limit of
     the motors the plant attaches (default: the model's own drive limit, see
-    :func:`bioform_mj.scene.prepare_robot`). Empty string / 0: the convention / from the model.
+    :func:`bioform_mj.robot_prepare.prepare_robot`). Empty string / 0: the convention / from the model.
 
     ``casters``: geoms or bodies (every collision geom of a body) that are casters (design §13);
     ``caster_friction``: their sliding friction against the floor (they then win the contact

@@ -6,7 +6,7 @@ the keys that take one of a few strings. :func:`reference_rows` walks the datacl
 with their types and defaults; ``scripts/gen_docs.py`` renders it into ``reference/scenario.md`` at
 build time, and ``tests/test_docs.py`` fails when a key has no entry (or an entry no key). A key marked
 "× scale" is multiplied by ``formation.scale`` when the scenario is loaded
-(:func:`~bioform_mj.scenario.apply_scale`).
+(:func:`~bioform_mj.scenario_load.apply_scale`).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from .scenario_config import (
     Scenario,
 )
 
-#: allowed values of the string keys that take one of a few (validated in scenario.validate)
+#: allowed values of the string keys that take one of a few (validated in scenario_check.validate)
 CHOICES: dict[str, tuple[str, ...]] = {
     "method": tuple(METHODS),
     "leader.kind": LEADER_KINDS,

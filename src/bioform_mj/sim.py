@@ -126,14 +126,29 @@ class RunResult:
     to_arrow = table
 
     def to_pandas(self) -> Any:
-        """:meth:`table` as a pandas DataFrame (needs pandas)."""
+        """:meth:`table` as a pandas DataFrame (needs pandas, which the package does not install)."""
+        _need("pandas")
         return self.table().to_pandas()
 
     def to_polars(self) -> Any:
-        """:meth:`table` as a polars DataFrame (needs polars)."""
+        """:meth:`table` as a polars DataFrame (needs polars, which the package does not install)."""
+        _need("polars")
         import polars as pl
 
         return pl.from_arrow(self.table())
+
+
+def _need(module: str) -> None:
+    """Raise ``ModuleNotFoundError`` saying how to install ``module`` when it is not installed
+    (pyarrow's own error would name only the missing import, from inside pyarrow)."""
+    import importlib.util
+
+    if importlib.util.find_spec(module) is None:
+        raise ModuleNotFoundError(
+            f"RunResult.to_{module}() needs {module}, which is not installed: pip install {module} "
+            f"(RunResult.table() gives the same table as pyarrow, which is installed)",
+            name=module,
+        )
 
 
 def import_warnings(plant: Any) -> list[str]:

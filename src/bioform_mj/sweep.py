@@ -136,11 +136,16 @@ SPEC_BYTES = 60e3
 def randomness(sc: Scenario) -> list[str]:
     """The scenario keys through which ``sim.seed`` changes a run (empty: every seed gives the same run).
 
-    The seed draws the initial-pose jitter and, inside the fault window, sensor noise and packet loss.
+    The seed draws the initial-pose jitter, the random obstacle field (design §19), the gyro's noise under
+    odometry sensing (design §8.3) and, inside the fault window, sensor noise and packet loss.
     """
     out = []
     if sc.formation.init_jitter > 0 or sc.formation.init_jitter_heading > 0:
         out.append("formation.init_jitter")
+    if sc.obstacle_field.count > 0:
+        out.append("obstacle_field")
+    if sc.plant.kind == "mujoco" and sc.plant.sensing == "odometry" and sc.plant.gyro_noise > 0:
+        out.append("plant.gyro_noise")
     f = sc.faults
     w0, w1 = f.window if f.window else (-np.inf, np.inf)
     if w0 < min(w1, sc.sim.duration):  # the noise/loss window overlaps the run
@@ -258,8 +263,8 @@ def expand(
             which = f"{len(no_random)} of {n_configs} configurations ({'; '.join(no_random[:3])}{more}) have"
             its = "their"
         warn(
-            f"--seeds {seeds}: {which} no randomness (no formation.init_jitter, faults.noise_pose/noise_vel "
-            f"or faults.packet_loss), so {its} {seeds} seeds give identical runs"
+            f"--seeds {seeds}: {which} no randomness (no formation.init_jitter, obstacle_field, plant.gyro_noise, "
+            f"faults.noise_pose/noise_vel or faults.packet_loss), so {its} {seeds} seeds give identical runs"
         )
     return specs
 
