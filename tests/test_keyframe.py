@@ -1,4 +1,4 @@
-"""A robot starts and is held in its file's keyframe (design §13.1, issue 18 item 4).
+"""A robot starts and is held in its file's keyframe (design §13.2, issue 18 item 4).
 
 A synthetic MJCF robot: a differential-drive base with an arm on position servos (a shoulder, and a
 wrist with two hinges on one body), a frozen head (a hinge without actuator) and a ``home`` keyframe.
@@ -21,7 +21,7 @@ from bioform_mj.robot_params import robot_parameters, running_data
 from bioform_mj.robots import RobotRef
 from bioform_mj.scene import build_scene, compile_scene
 
-HOME_Q = {"shoulder": 0.9, "wrist_a": 0.5, "wrist_b": -0.7, "head": 1.2}
+HOME_Q = {"shoulder": 0.9, "wrist_a": 0.5, "wrist_b": -0.7, "head": 1.2, "flap_a": 0.2, "flap_b": 0.5}
 STOW_CTRL = {"shoulder": -0.4, "wrist_a": 0.3, "wrist_b": 0.6}
 
 ROBOT = """
@@ -61,6 +61,14 @@ ROBOT = """
         <inertial pos="0.12 0 0" mass="0.6" diaginertia="0.0003 0.003 0.003"/>
         <geom type="box" pos="0.12 0 0" size="0.12 0.02 0.02" contype="0" conaffinity="0"/>
       </body>
+      <body name="flap_a" pos="0 0.05 0.1">
+        <joint name="flap_a" type="hinge" axis="1 0 0"/>
+        <inertial pos="0 0.05 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>
+      </body>
+      <body name="flap_b" pos="0 -0.05 0.1">
+        <joint name="flap_b" type="hinge" axis="1 0 0"/>
+        <inertial pos="0 -0.05 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/>
+      </body>
     </body>
   </worldbody>
   <actuator>
@@ -70,6 +78,9 @@ ROBOT = """
     <position name="wrist_a_servo" joint="wrist_a" kp="2000" kv="5" ctrlrange="-3 3"/>
     <position name="wrist_b_servo" joint="wrist_b" kp="2000" kv="5" ctrlrange="-3 3"/>
   </actuator>
+  <equality>
+    <joint joint1="flap_b" joint2="flap_a" polycoef="0.1 2 0 0 0"/>
+  </equality>
   <keyframe>
     KEYS
   </keyframe>
@@ -78,8 +89,10 @@ ROBOT = """
 
 
 def _qpos_key() -> str:
-    # qpos order: root (7), left_wheel, right_wheel, shoulder, wrist_a, wrist_b, head
-    q = [0, 0, 0.1, 1, 0, 0, 0, 0, 0, HOME_Q["shoulder"], HOME_Q["wrist_a"], HOME_Q["wrist_b"], HOME_Q["head"]]
+    # qpos order: root (7), left_wheel, right_wheel, shoulder, wrist_a, wrist_b, head, flap_a, flap_b
+    q = [0, 0, 0.1, 1, 0, 0, 0, 0, 0] + [
+        HOME_Q[n] for n in ("shoulder", "wrist_a", "wrist_b", "head", "flap_a", "flap_b")
+    ]
     ctrl = [0, 0, HOME_Q["shoulder"], HOME_Q["wrist_a"], HOME_Q["wrist_b"]]
     return (
         f'<key name="home" qpos="{" ".join(map(str, q))}" ctrl="{" ".join(map(str, ctrl))}"/>\n'
@@ -179,6 +192,29 @@ def test_two_joints_on_one_body_move_as_in_the_file(robot_file):
     assert np.abs(Rs - Rr).max() < 1e-9 and np.abs(ps - pr).max() < 1e-9
 
 
+def test_a_coupling_equality_keeps_the_files_relation(robot_file):
+    """flap_b = 0.1 + 2 flap_a (relative to the file's qpos0 = 0): the keyframe (0.2, 0.5) satisfies it;
+    baked, qpos0 is the keyframe and the equality is rewritten about it, so the flaps stay there (an
+    unshifted one would pull flap_b to 0.6). Both are locked (an equality names them) at the keyframe."""
+    model = _scene(str(robot_file))
+    lay = layout_of(model, "f1/")
+    assert {"f1/flap_a", "f1/flap_b"} <= set(lay.locked_joints)
+    data = running_data(model, 1, seconds=1.0)
+    assert _joint_q(model, data, "f1/flap_a") == pytest.approx(0.2, abs=1e-4)
+    assert _joint_q(model, data, "f1/flap_b") == pytest.approx(0.5, abs=1e-4)
+
+
+def test_robot_table_keyframe_key_is_checked():
+    from bioform_mj.errors import InputError
+    from bioform_mj.robots import as_ref
+
+    assert as_ref({"model": "x.xml", "keyframe": "home"}).keyframe == "home"
+    assert as_ref({"model": "x.xml"}).keyframe is None
+    assert as_ref({"model": "x.xml", "keyframe": "none"}).to_table() == {"model": "x.xml", "keyframe": "none"}
+    with pytest.raises(InputError, match="keyframe"):
+        as_ref({"model": "x.xml", "keyframe": 3})
+
+
 def test_ctrl_only_keyframe_settles_to_the_servo_targets(robot_file):
     model = _scene(RobotRef(model=str(robot_file), keyframe="stow"))
     lay = layout_of(model, "f1/")
@@ -186,6 +222,7 @@ def test_ctrl_only_keyframe_settles_to_the_servo_targets(robot_file):
     q = dict(lay.keyframe_qpos)
     for n, target in STOW_CTRL.items():
         assert q[n] == pytest.approx(target, abs=1e-3)  # the configuration the servos settle at, reported
+    assert abs(q.get("flap_a", 0.0)) < 1e-3  # no servo on it: the scene locks it, the settle holds it at qpos0
     assert any("ctrl only" in n for n in lay.notes)
     data = running_data(model, 1, seconds=1.0)
     for n, target in STOW_CTRL.items():

@@ -167,7 +167,7 @@ def self_contacts_at_rest(
     pub = published_model(entry)
     data = mujoco.MjData(pub)
     lay = layout_of(scene, prefix)
-    for jn, q in lay.keyframe_qpos:  # the configuration that runs: the keyframe's (design §13.1)
+    for jn, q in lay.keyframe_qpos:  # the configuration that runs: the keyframe's (design §13.2)
         data.qpos[pub.jnt_qposadr[pub.joint(jn).id]] = q
     config = f"keyframe '{lay.keyframe}'" if lay.keyframe else "file's"
     mujoco.mj_kinematics(pub, data)

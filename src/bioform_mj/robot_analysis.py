@@ -665,7 +665,7 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
         )
     if held:
         qs = [float(model.qpos0[model.jnt_qposadr[j]]) for j in held]
-        hold = [_servo_hold(model, j, joint_trn) for j in held]  # 0 unless a keyframe moved it (design §13.1)
+        hold = [_servo_hold(model, j, joint_trn) for j in held]  # 0 unless a keyframe moved it (design §13.2)
         notes.append(
             f"joint(s) {jl(held)} held by the model's own position actuators at ctrl = 0"
             + (
@@ -727,7 +727,7 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
 
 def _servo_hold(model: mujoco.MjModel, j: int, joint_trn) -> float:
     """Where joint ``j``'s first position servo holds it at ``ctrl = 0``: ``−b0 / (b1 · gear)`` (0 for a
-    servo as published, ``b0 = 0``; a keyframe's target where one moved it into the bias, design §13.1)."""
+    servo as published, ``b0 = 0``; a keyframe's target where one moved it into the bias, design §13.2)."""
     for a in range(model.nu):
         if (
             model.actuator_trntype[a] in joint_trn

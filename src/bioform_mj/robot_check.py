@@ -652,7 +652,7 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
         "--keyframe",
         metavar="NAME",
         help="MJCF: start and hold the robot in this keyframe (default: 'home' where the file has one; "
-        "'none': qpos0; design §13.1)",
+        "'none': qpos0; design §13.2)",
     )
     p.add_argument(
         "--package-path",

@@ -1,4 +1,4 @@
-"""Start a robot in one of its file's keyframes (design §13.1): the robot that runs is the maker's pose.
+"""Start a robot in one of its file's keyframes (design §13.2): the robot that runs is the maker's pose.
 
 A published MJCF often carries keyframes (MuJoCo Menagerie's robots: ``home``); the pose at ``qpos0``
 may be one no one runs (Hello Robot Stretch: the wrist folded into the base). The mapping's
@@ -88,14 +88,23 @@ def _joint_motion(model: mujoco.MjModel, j: int, d: float) -> tuple[np.ndarray, 
 
 
 def _settle(
-    spec: mujoco.MjSpec, model: mujoco.MjModel, key: int, root: int, moved: list[int]
+    spec: mujoco.MjSpec, model: mujoco.MjModel, key: int, root: int, moved: list[int], driven: set[int]
 ) -> tuple[np.ndarray, float, float]:
     """The configuration the robot alone settles at under keyframe ``key``'s ``ctrl``, its root welded
-    where the file puts it (a copy of ``spec`` without the root's free joint): ``(qpos, seconds,
-    residual speed)``, ``qpos`` in ``model``'s layout (the root's entries as in ``qpos0``)."""
+    where the file puts it (a copy of ``spec`` without the root's free joint), the joints of ``moved``
+    not in ``driven`` held at ``qpos0`` by a joint equality (the scene holds them there): ``(qpos,
+    seconds, residual speed)``, ``qpos`` in ``model``'s layout (the root's entries as in ``qpos0``)."""
     pinned = spec.copy()
     for k in list(pinned.keys):
         pinned.delete(k)
+    dt = float(model.opt.timestep)
+    for j in moved:  # what the scene holds without a servo (frozen, locked) stays at qpos0 meanwhile
+        if j not in driven:
+            sj = _spec_joint(pinned, model, j)
+            sj.name = sj.name or f"bioform_keyframe_hold_{j}"
+            pinned.add_equality(
+                type=mujoco.mjtEq.mjEQ_JOINT, objtype=mujoco.mjtObj.mjOBJ_JOINT, name1=sj.name, solref=[2 * dt, 1.0]
+            )
     if root >= 0:
         pinned.delete(_spec_joint(pinned, model, root))
     m = pinned.compile()
@@ -109,7 +118,7 @@ def _settle(
             data.qpos[a2 : a2 + n] = model.key_qpos[key, a : a + n]
     data.ctrl[:] = model.key_ctrl[key]
     dofs = np.array([int(m.jnt_dofadr[shift(j)]) for j in moved], int)
-    steps, speed, dt = 0, np.inf, float(m.opt.timestep)
+    steps, speed = 0, np.inf
     while steps * dt < SETTLE_MAX_S:
         mujoco.mj_step(m, data)
         steps += 1
@@ -138,6 +147,36 @@ def _servos(model: mujoco.MjModel, wheels: set[int]) -> list[int]:
         and model.actuator_biasprm[a, 1] < 0
         and not (model.actuator_trntype[a] in joint_trn and int(model.actuator_trnid[a, 0]) in wheels)
     ]
+
+
+def _driven(model: mujoco.MjModel, servos: list[int]) -> set[int]:
+    """Joints the position servos ``servos`` move: on a joint, every joint of a fixed tendon, and
+    (repeatedly) every joint a joint equality couples to one of them."""
+    out: set[int] = set()
+    for a in servos:
+        trn, obj = int(model.actuator_trntype[a]), int(model.actuator_trnid[a, 0])
+        if trn == int(mujoco.mjtTrn.mjTRN_TENDON):
+            adr, num = int(model.tendon_adr[obj]), int(model.tendon_num[obj])
+            out |= {
+                int(model.wrap_objid[w])
+                for w in range(adr, adr + num)
+                if model.wrap_type[w] == int(mujoco.mjtWrap.mjWRAP_JOINT)
+            }
+        elif trn in (int(mujoco.mjtTrn.mjTRN_JOINT), int(mujoco.mjtTrn.mjTRN_JOINTINPARENT)):
+            out.add(obj)
+    pairs = [
+        (int(model.eq_obj1id[e]), int(model.eq_obj2id[e]))
+        for e in range(model.neq)
+        if model.eq_type[e] == int(mujoco.mjtEq.mjEQ_JOINT) and model.eq_obj2id[e] >= 0
+    ]
+    grown = True
+    while grown:
+        grown = False
+        for j1, j2 in pairs:
+            if (j1 in out) != (j2 in out):
+                out |= {j1, j2}
+                grown = True
+    return out
 
 
 def _shift_poly(coef: np.ndarray, dx: float, dy: float) -> np.ndarray:
@@ -182,7 +221,10 @@ def apply_keyframe(spec: mujoco.MjSpec, model: mujoco.MjModel, path: Path, ref: 
         qpos = np.array(model.key_qpos[key], float)
         how = "its qpos"
     else:
-        qpos, t, speed = _settle(spec, model, key, root, moved)
+        driven = moved if ref.free_joints else _driven(model, _servos(model, wheels))
+        qpos, t, speed = _settle(spec, model, key, root, moved, set(driven))
+        for j in set(moved) - set(driven):  # held by the scene, not by a servo: exactly where the file puts it
+            qpos[model.jnt_qposadr[j]] = model.qpos0[model.jnt_qposadr[j]]
         how = f"ctrl only: the servos' targets, settled with the base pinned in {t:.2g} s" + (
             f" (still moving {speed:.2g}/s at {SETTLE_MAX_S:g} s)" if speed >= REST_SPEED else ""
         )
@@ -218,7 +260,7 @@ def apply_keyframe(spec: mujoco.MjSpec, model: mujoco.MjModel, path: Path, ref: 
         if has_ctrl and a not in target and abs(model.key_ctrl[key, a]) > 0 and not _on(model, a, wheels)
     ]
 
-    # bake: body frames and joint refs, by body (joints in their order; design §13.1)
+    # bake: body frames and joint refs, by body (joints in their order; design §13.2)
     sjoints = {j: _spec_joint(spec, model, j) for j in disp}
     sacts = {a: _spec_actuator(spec, model, a) for a in target}
     for b in sorted({int(model.jnt_bodyid[j]) for j in disp}):

@@ -131,7 +131,7 @@ class RobotLayout:
     published_contacts: tuple[tuple[str, float, int], ...] = ()  # (geom, friction, condim) as published, where changed
     #: the guesses of a format import (URDF, design §12), also at the head of ``notes``: runs warn them
     import_notes: tuple[str, ...] = ()
-    #: design §13.1: the keyframe the robot starts and is held in ("" none) and its joints' values there
+    #: design §13.2: the keyframe the robot starts and is held in ("" none) and its joints' values there
     keyframe: str = ""
     keyframe_qpos: tuple[tuple[str, float], ...] = ()
 

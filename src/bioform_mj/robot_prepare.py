@@ -30,7 +30,7 @@ resolves it once, from the compiled model:
   contact points across the tread) is switched off for contacts (kept for looks) and replaced
   by a single-contact ellipsoid proxy of the same radius (design §8 pitfall);
 - a keyframe (the mapping's ``keyframe``, default ``home`` where the file has one) is baked in first
-  (:mod:`bioform_mj.robot_keyframe`, design §13.1): its configuration becomes ``qpos0``, the position
+  (:mod:`bioform_mj.robot_keyframe`, design §13.2): its configuration becomes ``qpos0``, the position
   servos hold it; then keyframes are dropped (the scene sets its own initial poses).
 
 What was found is stored in the robot's spec as the custom text ``bioform_layout`` (JSON of
@@ -178,7 +178,7 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
         except Exception as exc:  # mujoco raises ValueError; be robust to other types
             raise ModelError(f"{path}: does not compile: {_one_line(exc)}") from exc
         absolute_asset_files(spec)
-        spec, model, key, key_q, key_notes = apply_keyframe(spec, model, path, ref)  # design §13.1
+        spec, model, key, key_q, key_notes = apply_keyframe(spec, model, path, ref)  # design §13.2
     layout, plan = _analyse(model, path, ref)
     if imported:
         layout = replace(layout, notes=imported + layout.notes, import_notes=imported)

@@ -168,7 +168,7 @@ KEYS: dict[str, tuple[str, str]] = {
     "plant.robots[].keyframe": (
         "",
         'MJCF: the keyframe the robot starts and is held in (default `home` where the file has one; `""` or '
-        '`"none"`: `qpos0`; design §13.1).',
+        '`"none"`: `qpos0`; design §13.2).',
     ),
     "plant.robots[].self_collide": (
         "",
