@@ -10,6 +10,7 @@ vertical through the wheel anchors' midpoint.
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -209,7 +210,7 @@ def test_robot_table_keyframe_key_is_checked():
     from bioform_mj.robots import as_ref
 
     assert as_ref({"model": "x.xml", "keyframe": "home"}).keyframe == "home"
-    assert as_ref({"model": "x.xml"}).keyframe is None
+    assert as_ref({"model": "x.xml"}).keyframe == ""
     assert as_ref({"model": "x.xml", "keyframe": "none"}).to_table() == {"model": "x.xml", "keyframe": "none"}
     with pytest.raises(InputError, match="keyframe"):
         as_ref({"model": "x.xml", "keyframe": 3})
@@ -239,7 +240,7 @@ def test_qpos_only_keyframe_servos_hold_it(robot_file):
         assert _joint_q(model, data, "f1/" + n) == pytest.approx(HOME_Q[n], abs=1e-3)
 
 
-@pytest.mark.parametrize("off", ["", "none"])
+@pytest.mark.parametrize("off", ["none", "None"])
 def test_keyframe_none_starts_at_qpos0_and_says_so(robot_file, off):
     model = _scene(RobotRef(model=str(robot_file), keyframe=off))
     lay = layout_of(model, "f1/")
@@ -254,3 +255,13 @@ def test_unknown_keyframe_exits_2_naming_the_files_keyframes(robot_file, capsys)
     assert rc == 2
     errors = [line for line in err if line.startswith("error:")]
     assert len(errors) == 1 and "'parked'" in errors[0] and "'home', 'bare', 'stow'" in errors[0], err
+
+
+def test_a_urdf_with_a_keyframe_is_refused_naming_it():
+    from bioform_mj.robot_layout import ModelError
+    from bioform_mj.robot_prepare import prepare_robot
+
+    urdf = Path(__file__).resolve().parent / "zoo" / "diffbot_urdf" / "diffbot.urdf"
+    with pytest.raises(ModelError, match="keyframe 'home': a URDF has no keyframes"):
+        prepare_robot(RobotRef(model=str(urdf), keyframe="home"))
+    assert prepare_robot(RobotRef(model=str(urdf), keyframe="none"))[1].keyframe == ""

@@ -694,7 +694,7 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
             free_joints=bool(getattr(args, "free_joints", False)),
             self_collide=bool(getattr(args, "self_collide", False)),
             package_path=package_path_from_args(getattr(args, "package_path", None)),
-            keyframe=getattr(args, "keyframe", None),
+            keyframe=getattr(args, "keyframe", None) or "",
         )
     )
 

@@ -2,7 +2,7 @@
 
 A published MJCF often carries keyframes (MuJoCo Menagerie's robots: ``home``); the pose at ``qpos0``
 may be one no one runs (Hello Robot Stretch: the wrist folded into the base). The mapping's
-``keyframe = "NAME"`` (default: ``home`` where the file has one; ``""`` or ``"none"``: ``qpos0``)
+``keyframe = "NAME"`` (default ``""``: ``home`` where the file has one; ``"none"``: ``qpos0``)
 selects one; :func:`apply_keyframe` makes its configuration the robot's rest configuration in the
 spec, before anything is read from it:
 
@@ -46,7 +46,6 @@ REST_SPEED = 1e-4
 
 _HINGE, _SLIDE = int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)
 _J = mujoco.mjtObj.mjOBJ_JOINT
-_NO_KEY = ("", "none")
 
 
 class KeyframeResult(tuple):
@@ -58,9 +57,9 @@ def keyframe_name(model: mujoco.MjModel, path: Path, ref: RobotRef) -> str:
     """The keyframe ``ref`` selects in ``model`` (``""``: none). Raises :class:`ModelError` naming the
     keyframes the file has for an unknown name."""
     names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_KEY, k) or "" for k in range(model.nkey)]
-    if ref.keyframe is None:
+    if not ref.keyframe:
         return "home" if "home" in names else ""
-    if ref.keyframe.lower() in _NO_KEY:
+    if ref.keyframe.lower() == "none":
         return ""
     if ref.keyframe not in names:
         have = f"the file has {_quoted(n for n in names if n)}" if any(names) else "the file has no named keyframe"
@@ -197,7 +196,9 @@ def apply_keyframe(spec: mujoco.MjSpec, model: mujoco.MjModel, path: Path, ref: 
     name = keyframe_name(model, path, ref)
     if not name:
         opted = (
-            ref.keyframe is not None and model.nkey and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home") >= 0
+            ref.keyframe.lower() == "none"
+            and model.nkey
+            and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "home") >= 0
         )
         notes = ("keyframe 'home' not used (mapping keyframe = none): the robot starts at qpos0",) if opted else ()
         return KeyframeResult((spec, model, "", (), notes))
@@ -348,7 +349,7 @@ def apply_keyframe(spec: mujoco.MjSpec, model: mujoco.MjModel, path: Path, ref: 
     config = tuple((_jname(model, j), float(qpos[model.jnt_qposadr[j]])) for j in disp)
     why = (
         'the file has one named home: used by default; mapping keyframe = "none" for qpos0'
-        if ref.keyframe is None
+        if not ref.keyframe
         else "mapping keyframe"
     )
     holds = [f"{_act(model, a)} -> {c:.4g}" for a, c in target.items() if abs(c) > 0]

@@ -96,8 +96,8 @@ class RobotRef:
     ``self_collide``: a URDF robot's links collide with each other (default off, the URDF/Gazebo
     convention; an MJCF robot collides as its file says either way). ``package_path``: where its
     ``package://`` URIs point (:class:`PackagePath`; not part of the mapping proper).
-    ``keyframe``: the MJCF keyframe the robot starts and is held in (design §13.2; ``None``: ``home``
-    where the file has one, else ``qpos0``; ``""`` or ``"none"``: ``qpos0``).
+    ``keyframe``: the MJCF keyframe the robot starts and is held in (design §13.2; ``""``: ``home``
+    where the file has one, else ``qpos0``; ``"none"``: ``qpos0``).
     """
 
     model: str
@@ -114,7 +114,7 @@ class RobotRef:
     free_joints: bool = False  # True: joints other than the wheels left free (default: held, design §13)
     self_collide: bool = False  # URDF only (design §12): keep contacts between the robot's own links
     package_path: PackagePath = PackagePath()  # URDF only: package:// search path, before the environment
-    keyframe: str | None = None  # MJCF keyframe to start in (design §13.2); None: 'home' if the file has it; "": none
+    keyframe: str = ""  # MJCF keyframe to start in (design §13.2); "": 'home' if the file has one; "none": qpos0
 
     @property
     def mapped(self) -> bool:

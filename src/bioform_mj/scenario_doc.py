@@ -167,8 +167,8 @@ KEYS: dict[str, tuple[str, str]] = {
     ),
     "plant.robots[].keyframe": (
         "",
-        'MJCF: the keyframe the robot starts and is held in (default `home` where the file has one; `""` or '
-        '`"none"`: `qpos0`; design §13.2).',
+        'MJCF: the keyframe the robot starts and is held in (`""`: `home` where the file has one, else '
+        '`qpos0`; `"none"`: `qpos0`; design §13.2).',
     ),
     "plant.robots[].self_collide": (
         "",
