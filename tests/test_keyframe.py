@@ -265,3 +265,21 @@ def test_a_urdf_with_a_keyframe_is_refused_naming_it():
     with pytest.raises(ModelError, match="keyframe 'home': a URDF has no keyframes"):
         prepare_robot(RobotRef(model=str(urdf), keyframe="home"))
     assert prepare_robot(RobotRef(model=str(urdf), keyframe="none"))[1].keyframe == ""
+
+
+def test_scenario_robot_table_takes_the_keyframe_and_a_run_refuses_an_unknown_one(robot_file, tmp_path, capsys):
+    from bioform_mj.scenario import load
+
+    (tmp_path / "s.toml").write_text(
+        f'[plant]\nkind = "mujoco"\nrobots = [{{model = "{robot_file.name}", keyframe = "stow"}}]\n'
+    )
+    sc = load(str(tmp_path / "s.toml"))
+    assert sc.plant.robots[0].keyframe == "stow"
+    assert sc.to_dict()["plant"]["robots"][0]["keyframe"] == "stow"  # written back as given
+    (tmp_path / "bad.toml").write_text(
+        f'[plant]\nkind = "mujoco"\nrobots = [{{model = "{robot_file.name}", keyframe = "parked"}}]\n'
+    )
+    rc = cli.main(["run", str(tmp_path / "bad.toml"), "--out", str(tmp_path / "out")])
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
+    assert rc == 2 and len(err) == 1 and "no keyframe 'parked'" in err[0], err
+    assert not (tmp_path / "out").exists()
