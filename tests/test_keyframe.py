@@ -283,3 +283,24 @@ def test_scenario_robot_table_takes_the_keyframe_and_a_run_refuses_an_unknown_on
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
     assert rc == 2 and len(err) == 1 and "no keyframe 'parked'" in err[0], err
     assert not (tmp_path / "out").exists()
+
+
+def test_tendon_coupling_and_spring_keep_the_files_meaning():
+    """Tendon equalities are relative to length0 (at qpos0), which the keyframe moves: baked, the keyframe
+    (0.3, 0.1), which satisfies t1 = 0.1 + 2 t2, stays (an unshifted relation would pull s1 to 0.4); the
+    tendon spring (default rest length, at springref) pushes as in the file at the keyframe (−10 · 0.4 N)."""
+    path = Path(__file__).resolve().parent / "data" / "keyframe_tendons.xml"
+    model = _scene(str(path))
+    data = running_data(model, 1, seconds=1.0)
+    assert _joint_q(model, data, "f1/s1") == pytest.approx(0.3, abs=1e-4)
+    assert _joint_q(model, data, "f1/s2") == pytest.approx(0.1, abs=1e-4)
+    d0 = mujoco.MjData(model)
+    mujoco.mj_forward(model, d0)
+    ref = mujoco.MjModel.from_xml_path(str(path))
+    rd = mujoco.MjData(ref)
+    mujoco.mj_resetDataKeyframe(ref, rd, 0)
+    mujoco.mj_forward(ref, rd)
+    for n in ("s1", "s2"):
+        got = d0.qfrc_passive[model.jnt_dofadr[model.joint("f1/" + n).id]]
+        assert got == pytest.approx(rd.qfrc_passive[ref.jnt_dofadr[ref.joint(n).id]], abs=1e-9)
+        assert got == pytest.approx(-4.0, abs=1e-9)

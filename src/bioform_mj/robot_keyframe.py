@@ -16,8 +16,7 @@ spec, before anything is read from it:
   servo targets, ``springref``, fixed tendon lengths) mean what they meant. Several joints on one
   body: a joint's anchor and axis are carried through the joints after it (exact). Equalities
   written relative to ``qpos0`` (joint and tendon couplings) get their polynomial shifted, so each
-  relation is the one the file states; a tendon spring whose rest length is "at ``qpos0``" keeps the
-  file's rest length;
+  relation is the one the file states (springs rest at ``springref``, which baking leaves alone);
 - the robot's own position servos (fixed gain, affine bias ``b1 < 0``) hold the keyframe: their
   target (the keyframe's ``ctrl``; without one, the ``ctrl`` at which the servo pushes nothing there)
   is moved into the bias (``b0 += g·target``, ``ctrlrange −= target``), so the scene's ``ctrl = 0``
@@ -327,7 +326,8 @@ def apply_keyframe(spec: mujoco.MjSpec, model: mujoco.MjModel, path: Path, ref: 
         bp[0] = float(model.actuator_biasprm[a, 0]) + float(model.actuator_gainprm[a, 0]) * c
         sa.biasprm = bp
         target[a] = c
-    # tendons: a rest length or coupling taken at qpos0 stays the file's
+    # tendon couplings are relative to length0 (at qpos0): each kept as the file states it. A tendon
+    # spring's default rest length is taken at qpos_spring (springref), which baking leaves alone
     L0_old = np.array(model.tendon_length0, float)
     try:
         new = spec.compile()
@@ -335,13 +335,6 @@ def apply_keyframe(spec: mujoco.MjSpec, model: mujoco.MjModel, path: Path, ref: 
         raise ModelError(f"{path}: keyframe '{name}' does not compile once applied: {exc}") from exc
     dL = np.array(new.tendon_length0, float) - L0_old
     changed = False
-    for t in range(model.ntendon):
-        if abs(dL[t]) > 1e-12:
-            st = spec.tendons[t]
-            sl = np.array(st.springlength, float)
-            if sl[0] == -1:  # "the length at qpos0": the file's qpos0
-                st.springlength = np.array(model.tendon_lengthspring[t], float)
-                changed = True
     for e in range(model.neq):
         if int(model.eq_type[e]) == int(mujoco.mjtEq.mjEQ_TENDON):
             t1, t2 = int(model.eq_obj1id[e]), int(model.eq_obj2id[e])
