@@ -162,8 +162,14 @@ def self_contacts_at_rest(
 
     ref = resolve_robot(entry)
     urdf = is_urdf(Path(ref.model)) and not ref.self_collide
+    from .robot_analysis import layout_of
+
     pub = published_model(entry)
     data = mujoco.MjData(pub)
+    lay = layout_of(scene, prefix)
+    for jn, q in lay.keyframe_qpos:  # the configuration that runs: the keyframe's (design §13.2)
+        data.qpos[pub.jnt_qposadr[pub.joint(jn).id]] = q
+    config = f"keyframe '{lay.keyframe}'" if lay.keyframe else "file's"
     mujoco.mj_kinematics(pub, data)
     root = int(pub.body_rootid[pub.body(base).id])
     rows = {frozenset((c["body1"], c["body2"])): dict(c, simulated=True) for c in in_scene}
@@ -189,7 +195,7 @@ def self_contacts_at_rest(
             "points": 0,
             "simulated": sim,
         }
-        where = f"'{n1}' and '{n2}': published collision geoms overlap {1e3 * hit['depth_m']:.3g} mm at the file's "
+        where = f"'{n1}' and '{n2}': published collision geoms overlap {1e3 * hit['depth_m']:.3g} mm at the {config} "
         if sim:
             notes.append(
                 where + "configuration; the scene collides the pair but its geoms do not touch at rest (a wheel's "

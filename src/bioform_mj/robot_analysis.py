@@ -665,13 +665,14 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
         )
     if held:
         qs = [float(model.qpos0[model.jnt_qposadr[j]]) for j in held]
+        hold = [_servo_hold(model, j, joint_trn) for j in held]  # 0 unless a keyframe moved it (design §13.2)
         notes.append(
             f"joint(s) {jl(held)} held by the model's own position actuators at ctrl = 0"
             + (
-                " (their target is 0, the file's configuration is "
+                f" (their target is {', '.join(f'{h:.3g}' for h in hold)}, the file's configuration is "
                 + ", ".join(f"{q:.3g}" for q in qs)
                 + ": they move there)"
-                if any(abs(q) > 1e-9 for q in qs)
+                if any(abs(q - h) > 1e-9 for q, h in zip(qs, hold))
                 else ""
             )
         )
@@ -722,6 +723,19 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
             name_joints=name_joints,
         ),
     }
+
+
+def _servo_hold(model: mujoco.MjModel, j: int, joint_trn) -> float:
+    """Where joint ``j``'s first position servo holds it at ``ctrl = 0``: ``−b0 / (b1 · gear)`` (0 for a
+    servo as published, ``b0 = 0``; a keyframe's target where one moved it into the bias, design §13.2)."""
+    for a in range(model.nu):
+        if (
+            model.actuator_trntype[a] in joint_trn
+            and model.actuator_trnid[a, 0] == j
+            and model.actuator_biasprm[a, 1] < 0
+        ):
+            return float(-model.actuator_biasprm[a, 0] / (model.actuator_biasprm[a, 1] * model.actuator_gear[a, 0]))
+    return 0.0
 
 
 def _dc_plan(model, path, ref, joints, dc_all, dc_keep, notes) -> float:

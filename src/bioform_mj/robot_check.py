@@ -650,6 +650,12 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
         help="leave the joints other than the wheels free (default: held at the file's configuration)",
     )
     p.add_argument(
+        "--keyframe",
+        metavar="NAME",
+        help="MJCF: start and hold the robot in this keyframe (default: 'home' where the file has one; "
+        "'none': qpos0; design §13.2)",
+    )
+    p.add_argument(
         "--package-path",
         action="append",
         default=[],
@@ -689,6 +695,7 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
             free_joints=bool(getattr(args, "free_joints", False)),
             self_collide=bool(getattr(args, "self_collide", False)),
             package_path=package_path_from_args(getattr(args, "package_path", None)),
+            keyframe=getattr(args, "keyframe", None) or "",
         )
     )
 

@@ -131,6 +131,9 @@ class RobotLayout:
     published_contacts: tuple[tuple[str, float, int], ...] = ()  # (geom, friction, condim) as published, where changed
     #: the guesses of a format import (URDF, design §12), also at the head of ``notes``: runs warn them
     import_notes: tuple[str, ...] = ()
+    #: design §13.2: the keyframe the robot starts and is held in ("" none) and its joints' values there
+    keyframe: str = ""
+    keyframe_qpos: tuple[tuple[str, float], ...] = ()
 
     def to_json(self) -> str:
         return json.dumps(asdict(self))
@@ -145,6 +148,7 @@ class RobotLayout:
         d["priority_geoms"] = tuple(d.get("priority_geoms", ()))
         d["published_contacts"] = tuple((str(g), float(f), int(c)) for g, f, c in d.get("published_contacts", ()))
         d["import_notes"] = tuple(d.get("import_notes", ()))
+        d["keyframe_qpos"] = tuple((str(j), float(q)) for j, q in d.get("keyframe_qpos", ()))
         return cls(**d)
 
 

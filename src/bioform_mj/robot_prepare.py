@@ -29,7 +29,9 @@ resolves it once, from the compiled model:
 - a wheel collision shape that scrubs when turning (cylinder, capsule, box, mesh: several
   contact points across the tread) is switched off for contacts (kept for looks) and replaced
   by a single-contact ellipsoid proxy of the same radius (design §8 pitfall);
-- keyframes are dropped (the scene sets its own initial poses).
+- a keyframe (the mapping's ``keyframe``, default ``home`` where the file has one) is baked in first
+  (:mod:`bioform_mj.robot_keyframe`, design §13.2): its configuration becomes ``qpos0``, the position
+  servos hold it; then keyframes are dropped (the scene sets its own initial poses).
 
 What was found is stored in the robot's spec as the custom text ``bioform_layout`` (JSON of
 :class:`RobotLayout`), so a compiled scene carries it (``f1/bioform_layout``, …) and
@@ -46,6 +48,7 @@ import numpy as np
 
 from bioform_mj.errors import InputError
 from bioform_mj.robot_analysis import _analyse
+from bioform_mj.robot_keyframe import apply_keyframe
 from bioform_mj.robot_layout import (
     _LAYOUT_TEXT,
     CONTACT_PRIORITY,
@@ -157,7 +160,12 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
         raise ModelError(str(exc)) from None
     path = Path(ref.model)
     imported: tuple[str, ...] = ()
-    if is_urdf(path):  # design §12: a URDF stays a robot (free root, links kept, meshes found)
+    key, key_q, key_notes = "", (), ()
+    if is_urdf(path):
+        if ref.keyframe and ref.keyframe.lower() != "none":
+            raise ModelError(
+                f"{path}: keyframe '{ref.keyframe}': a URDF has no keyframes (remove the mapping's keyframe)"
+            )  # design §12: a URDF stays a robot (free root, links kept, meshes found)
         try:
             imp = import_urdf(ref)
         except InputError as exc:
@@ -170,9 +178,12 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
         except Exception as exc:  # mujoco raises ValueError; be robust to other types
             raise ModelError(f"{path}: does not compile: {_one_line(exc)}") from exc
         absolute_asset_files(spec)
+        spec, model, key, key_q, key_notes = apply_keyframe(spec, model, path, ref)  # design §13.2
     layout, plan = _analyse(model, path, ref)
     if imported:
         layout = replace(layout, notes=imported + layout.notes, import_notes=imported)
+    elif key_notes or key:
+        layout = replace(layout, notes=key_notes + layout.notes, keyframe=key, keyframe_qpos=key_q)
 
     # spec elements by compiled index, resolved before anything is deleted (unnamed ones included)
     acts = {a: _spec_actuator(spec, model, a) for a in range(model.nu)}
@@ -256,9 +267,8 @@ def _hold_and_contacts(spec, model, plan, acts, sjoints, sgeoms) -> None:
     for j in plan["freeze"]:
         spec.delete(sjoints[j])
     dt = float(model.opt.timestep)
-    for j, q0 in plan["lock"].items():
-        data = np.zeros(mujoco.mjNEQDATA)
-        data[0] = q0  # joint1 = polycoef[0] without a joint2: held at q0
+    for j in plan["lock"]:
+        data = np.zeros(mujoco.mjNEQDATA)  # joint1 − qpos0 = polycoef[0] = 0 without a joint2: held at qpos0
         spec.add_equality(
             type=mujoco.mjtEq.mjEQ_JOINT,
             objtype=mujoco.mjtObj.mjOBJ_JOINT,

@@ -7,7 +7,7 @@ An entry of ``plant.robots`` is
 - a table ``{model = "path.xml", base = "BODY", left_wheel = "JOINT", right_wheel = "JOINT",
   wheel_radius = r, half_track = l, tau_max = τ, motor = "ideal" | "dc", driver = "current" |
   "voltage", casters = ["GEOM or BODY", ...], caster_friction = μ, free_joints = false,
-  self_collide = false, package_path = {NAME = "DIR"}}``: every key but ``model``
+  self_collide = false, package_path = {NAME = "DIR"}, keyframe = "home"}``: every key but ``model``
   optional; an empty name (or 0 for a number) means "as in the shipped convention" (body
   ``base``, joints ``left_wheel``/``right_wheel``; a URDF: its root link, and the two wheels it
   finds) resp. "read it from the model".
@@ -96,6 +96,8 @@ class RobotRef:
     ``self_collide``: a URDF robot's links collide with each other (default off, the URDF/Gazebo
     convention; an MJCF robot collides as its file says either way). ``package_path``: where its
     ``package://`` URIs point (:class:`PackagePath`; not part of the mapping proper).
+    ``keyframe``: the MJCF keyframe the robot starts and is held in (design §13.2; ``""``: ``home``
+    where the file has one, else ``qpos0``; ``"none"``: ``qpos0``).
     """
 
     model: str
@@ -112,6 +114,7 @@ class RobotRef:
     free_joints: bool = False  # True: joints other than the wheels left free (default: held, design §13)
     self_collide: bool = False  # URDF only (design §12): keep contacts between the robot's own links
     package_path: PackagePath = PackagePath()  # URDF only: package:// search path, before the environment
+    keyframe: str = ""  # MJCF keyframe to start in (design §13.2); "": 'home' if the file has one; "none": qpos0
 
     @property
     def mapped(self) -> bool:
@@ -182,7 +185,7 @@ def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:
             kw[name] = value
         elif name == "package_path":
             kw[name] = as_package_path(value, f"{key}.{name}")
-        elif name in ("model", "base", "left_wheel", "right_wheel", "motor", "driver"):
+        elif name in ("model", "base", "left_wheel", "right_wheel", "motor", "driver", "keyframe"):
             if not isinstance(value, str):
                 raise InputError(f"scenario key '{key}.{name}': expected a string, got {value!r}")
             allowed = {"motor": ("", "ideal", "dc"), "driver": ("", "current", "voltage")}.get(name)

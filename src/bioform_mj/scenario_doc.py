@@ -165,6 +165,11 @@ KEYS: dict[str, tuple[str, str]] = {
         "",
         "Leave the joints other than the wheels free (default: held at the file's configuration, design §13).",
     ),
+    "plant.robots[].keyframe": (
+        "",
+        'MJCF: the keyframe the robot starts and is held in (`""`: `home` where the file has one, else '
+        '`qpos0`; `"none"`: `qpos0`; design §13.2).',
+    ),
     "plant.robots[].self_collide": (
         "",
         "URDF: keep contacts between the robot's own links (default off, as in Gazebo; design §12).",
