@@ -43,7 +43,8 @@ FRICTIONLESS = 1e-3
 
 #: priority given to a robot's frictionless geoms and mapped casters (design §13): above the floor's
 #: (0, or 1 with ``floor_friction``) and a friction patch's (1), so that MuJoCo takes their own
-#: friction and condim for the pair instead of the larger of the two
+#: friction and condim for the pair instead of the larger of the two (against a surface more slippery than
+#: the geom, the smaller of the two: explicit pairs, design §13.3)
 CONTACT_PRIORITY = 2
 
 

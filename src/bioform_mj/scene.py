@@ -41,6 +41,7 @@ from bioform_mj.robot_layout import (
     welded_to,
 )
 from bioform_mj.robot_prepare import absolute_asset_files, load_robot, prepare_robot
+from bioform_mj.surfaces import add_min_friction_pairs
 
 log = logging.getLogger(__name__)
 
@@ -224,7 +225,8 @@ def build_scene(
     slots : bool
         Add mocap markers ``slot_1 … slot_n`` (visual only) for the formation slots.
     floor_friction : float, optional
-        Sliding friction of every floor contact. Without it MuJoCo's rule applies
+        Sliding friction of every floor contact (priority 1; a robot geom of priority 2 gets the
+        smaller of its own and this, design §13.3). Without it MuJoCo's rule applies
         (the larger of floor and wheel friction, i.e. the robot file decides).
     payloads : sequence of (mass kg, yaw inertia kg·m²), length n, optional
         Extra payload on each follower's base at its axle midpoint.
@@ -233,7 +235,8 @@ def build_scene(
     friction_patch : (x0, y0, x1, y1, mu), optional
         A low-friction floor rectangle (m; sliding friction ``mu``): a box geom
         ``friction_patch`` :data:`PATCH_THICKNESS` thick on the floor whose friction decides
-        the wheel contacts (priority 1; casters keep theirs with priority 2).
+        the wheel contacts (priority 1); a robot geom of priority 2 (casters, Gazebo μ) gets the
+        smaller of its own and the patch's friction (an explicit contact pair, design §13.3).
     sensors : bool
         Add each robot's odometry sensors (:func:`add_sensors`: wheel encoders, gyro,
         accelerometer; design §8.3). Off, the scene has no sensors of ours (no cost per step).
@@ -387,6 +390,9 @@ def build_scene(
             pos=[pose[0] - mx, pose[1] - my, layout.wheel_radius - axle_world[2]], quat=yaw_quat(yaw)
         )
         spec.attach(robot, prefix=follower_prefix(i), frame=frame)
+    # design §13.3: on the scene's own slippery surfaces a robot's priority geom gets the smaller friction
+    surfaces = (["floor"] if floor_friction is not None else []) + (["friction_patch"] if friction_patch else [])
+    add_min_friction_pairs(spec, surfaces)
     return spec
 
 

@@ -569,7 +569,7 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
             g.friction = fr
             # ODE takes the smaller mu of a pair, MuJoCo the larger unless a geom's priority is higher: a mu below
             # the floor's wins by priority (scene.CONTACT_PRIORITY, design §13); one above is the floor's (a
-            # priority would also beat friction patches, and a mu of 200 starves the contact's normal load in
+            # priority would beat the floor's own μ 1, and a mu of 200 starves the contact's normal load in
             # MuJoCo's pyramidal cone: a MiR100's driven wheels carried 0 N of 850 N)
             if low:
                 g.priority = URDF_FRICTION_PRIORITY

@@ -348,10 +348,14 @@ class MujocoPlant:
         self._i_eff = np.array([p.inertia_eff for p in self.params])  # kg·m²
 
     def _wheel_friction(self, i: int) -> float:
-        """Sliding friction μ of follower ``i``'s wheel–floor contact (MuJoCo's priority/max rule)."""
+        """Sliding friction μ of follower ``i``'s wheel–floor contact (its explicit pair's, design §13.3,
+        else MuJoCo's priority/max rule)."""
         m = self.model
         floor = m.geom("floor").id
         wheel = m.geom(self.layouts[i].wheel_geoms[0]).id
+        pair = np.flatnonzero((m.pair_geom1 == floor) & (m.pair_geom2 == wheel))
+        if pair.size:
+            return float(m.pair_friction[pair[0], 0])
         if m.geom_priority[floor] != m.geom_priority[wheel]:
             winner = floor if m.geom_priority[floor] > m.geom_priority[wheel] else wheel
             return float(m.geom_friction[winner, 0])
