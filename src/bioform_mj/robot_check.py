@@ -172,7 +172,6 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     from .overlaps import self_contacts_at_rest
     from .plants.mujoco_plant import MujocoPlant
     from .robot_params import implausible_inertias, robot_parameters
-    from .robot_prepare import prepare_robot
 
     plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
     check_radius(plant)  # exit 2 before any work: a radius nothing can be measured with
@@ -334,7 +333,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         )
     k_drag = max(um["drag_rate_per_s"])
     step = float(plant.model.opt.timestep)
-    model_step = float(prepare_robot(entry)[0].option.timestep)
+    model_step = plant.file_timesteps[0]  # the robot file's own step, read when the plant prepared it
     if k_drag * model_step > 0.1:
         reasons_warn.append(
             f"wheel drag rate {k_drag:.3g} 1/s against the model's own step {model_step:g} s (k dt = "

@@ -211,6 +211,7 @@ def build_scene(
     friction_patch: Sequence[float] | None = None,
     sensors: bool = False,
     obstacles: Sequence = (),
+    prepared: Sequence[tuple] | None = None,
 ) -> mujoco.MjSpec:
     """Compose the scene of ``n`` followers; returns an uncompiled ``MjSpec``.
 
@@ -243,6 +244,9 @@ def build_scene(
     obstacles : sequence of :class:`~bioform_mj.obstacles.Obstacle`
         Fixed obstacles standing on the floor: static box or cylinder geoms of the world body,
         named as the obstacles (``obstacle_k``), colliding with the robots (design §19).
+    prepared : sequence of :func:`prepare_robot` results, length n, optional
+        The robots already prepared from ``robot_files`` (each used once: attaching consumes it);
+        default: prepared here.
 
     The scene's ``<option>`` (integrator, solver, …) is the first robot file's.
     """
@@ -257,7 +261,9 @@ def build_scene(
     if timestep is not None and not timestep > 0:
         raise ValueError(f"timestep must be > 0, got {timestep}")
 
-    prepared = [prepare_robot(f) for f in robot_files]
+    if prepared is not None and len(prepared) != n:
+        raise ValueError(f"prepared must have {n} entries, got {len(prepared)}")
+    prepared = list(prepared) if prepared is not None else [prepare_robot(f) for f in robot_files]
     robots = [p[0] for p in prepared]
 
     spec = mujoco.MjSpec()

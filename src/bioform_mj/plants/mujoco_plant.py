@@ -28,7 +28,7 @@ from bioform_mj.errors import Diverged
 from bioform_mj.robot_analysis import layout_of
 from bioform_mj.robot_layout import RobotLayout, dc_ctrl_scale
 from bioform_mj.robot_params import RobotParams, robot_parameters, running_data
-from bioform_mj.scene import Markers, build_scene, compile_scene, follower_prefix, payload_inertial
+from bioform_mj.scene import Markers, build_scene, compile_scene, follower_prefix, payload_inertial, prepare_robot
 
 from .mujoco_contacts import ContactReader, robot_geoms, watch_contacts, watch_proximity
 from .mujoco_kernels import (
@@ -172,6 +172,9 @@ class MujocoPlant:
                 f"that divides control_dt {control_dt} s"
             )
 
+        prepared = [prepare_robot(f) for f in robot_files]
+        #: each robot file's own ``<option timestep>``, s (the scene runs at ``physics_dt``)
+        self.file_timesteps: tuple[float, ...] = tuple(float(p[0].option.timestep) for p in prepared)
         self.spec = build_scene(
             robot_files,
             self.initial_poses,
@@ -181,6 +184,7 @@ class MujocoPlant:
             friction_patch=friction_patch,
             sensors=sensing == "odometry",
             obstacles=obstacles,
+            prepared=prepared,
         )
         self.obstacles = list(obstacles)  # bioform_mj.obstacles.Obstacle rows (design §19)
         self.model, self.data = compile_scene(self.spec)
