@@ -108,3 +108,28 @@ def test_published_urdf_caster_with_gazebo_mu_gets_the_patch_friction(monkeypatc
     assert caster_on[0].friction[0] == pytest.approx(0.05) and caster_off[0].friction[0] == pytest.approx(0.1)
     assert on["f1/left_wheel_joint_contact"].friction[0] == pytest.approx(0.05)
     assert off["f2/left_wheel_joint_contact"].friction[0] == pytest.approx(1.0)
+
+
+def test_obstacle_against_a_priority_wheel_is_the_smaller_friction_already(robot):
+    """An obstacle (mu 1, priority 0) touching the left wheel's side: MuJoCo's priority rule gives the wheel's
+    0.5 = min(0.5, 1), no pair needed; the shipped tb3 wheel (mu 1, priority 0) gets max(1, 1) = 1."""
+    from bioform_mj.obstacles import Obstacle
+
+    wall = Obstacle(
+        name="obstacle_1", shape="box", x=0.0, y=0.08 + 0.009 + 0.05 - 5e-4, size=(0.02, 0.05, 0.05), yaw=0.0
+    )
+    for ref, mu in ((robot, 0.5), (resolve_robot("tb3"), 1.0)):
+        m = build_scene([ref], POSES[:1], obstacles=[wall]).compile()
+        d = mujoco.MjData(m)
+        mujoco.mj_forward(m, d)
+        touch = [c for c in d.contact[: d.ncon] if m.geom("obstacle_1").id in c.geom]
+        assert (
+            m.npair == 0
+            and touch
+            and {m.geom(g).name for c in touch for g in c.geom}
+            == {
+                "obstacle_1",
+                "f1/left_wheel_collision",
+            }
+        )
+        assert all(c.friction[0] == pytest.approx(mu) for c in touch)
