@@ -31,7 +31,7 @@ def robot(tmp_path_factory):
 
 
 def _contacts(robot, **kw) -> tuple[mujoco.MjModel, dict]:
-    """Compile the two-robot scene, settle 20 steps; {(robot geom, surface): first contact}."""
+    """Compile the two-robot scene, settle 20 steps; {(robot geom, surface): every contact of the two}."""
     m = build_scene([robot, robot], POSES, **kw).compile()
     d = mujoco.MjData(m)
     for _ in range(20):
@@ -40,12 +40,17 @@ def _contacts(robot, **kw) -> tuple[mujoco.MjModel, dict]:
     for c in d.contact[: d.ncon]:
         a, b = m.geom(c.geom[0]).name, m.geom(c.geom[1]).name
         surf, geom = (a, b) if a in ("floor", "friction_patch") else (b, a)
-        out.setdefault((geom, surf), c)
+        out.setdefault((geom, surf), []).append(c)
     return m, out
 
 
 def test_icy_patch_beats_a_priority_wheel_and_the_caster_stays_frictionless(robot):
-    m, c = _contacts(robot, friction_patch=(*PATCH, 0.05))
+    m, every = _contacts(robot, friction_patch=(*PATCH, 0.05))
+    # the explicit pair replaces MuJoCo's own contact of the two geoms: one contact per wheel, none with its 0.5
+    for side in ("left", "right"):
+        (k,) = every[(f"f1/{side}_wheel_collision", "friction_patch")]
+        assert k.friction[0] == pytest.approx(0.05)
+    c = {key: ks[0] for key, ks in every.items()}
     assert m.npair == 4  # 2 robots x 2 wheels; the caster (mu 0) needs none
     for side in ("left", "right"):
         on, off = c[(f"f1/{side}_wheel_collision", "friction_patch")], c[(f"f2/{side}_wheel_collision", "floor")]
@@ -59,13 +64,15 @@ def test_icy_patch_beats_a_priority_wheel_and_the_caster_stays_frictionless(robo
 
 
 def test_patch_rougher_than_the_wheel_leaves_its_friction_by_priority(robot):
-    m, c = _contacts(robot, friction_patch=(*PATCH, 0.8))
+    m, every = _contacts(robot, friction_patch=(*PATCH, 0.8))
+    c = {key: ks[0] for key, ks in every.items()}
     assert m.npair == 0  # min(0.5, 0.8) = 0.5 is what the priority gives already
     assert c[("f1/left_wheel_collision", "friction_patch")].friction[0] == pytest.approx(0.5)
 
 
 def test_floor_friction_below_the_wheels_is_the_floors(robot):
-    m, c = _contacts(robot, floor_friction=0.3)
+    m, every = _contacts(robot, floor_friction=0.3)
+    c = {key: ks[0] for key, ks in every.items()}
     assert m.npair == 4
     assert c[("f2/right_wheel_collision", "floor")].friction[0] == pytest.approx(0.3)
     assert c[("f2/back_caster", "floor")].dim == 1
@@ -98,7 +105,8 @@ def test_published_urdf_caster_with_gazebo_mu_gets_the_patch_friction(monkeypatc
         right_wheel="right_wheel_joint",
         tau_max=0.05,
     )
-    m, c = _contacts(ref, friction_patch=(*PATCH, 0.05))
+    m, every = _contacts(ref, friction_patch=(*PATCH, 0.05))
+    c = {key: ks[0] for key, ks in every.items()}
     assert m.npair == 4  # 2 robots x (caster, bumper); the wheels (mu 1, priority 0) get the patch's by priority
     on = {g: k for (g, s), k in c.items() if s == "friction_patch"}
     off = {g: k for (g, s), k in c.items() if s == "floor"}
