@@ -1,0 +1,368 @@
+"""Cause attribution of :func:`bioform_mj.identify.identify` (design §14): what touches the floor and
+with what load, the robot's own bodies pressing on each other, the findings at rest (structural,
+braking geoms, mapping) and those the fit reads (damping, dead band, rocking, slip).
+
+Split from :mod:`bioform_mj.identify`, which re-exports the public names.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from bioform_mj.contacts import rolling_bodies
+from bioform_mj.robot_layout import subtree
+
+#: a finding of :func:`identify` (design §14): drag when it changes the speed by this fraction over a test
+DRAG_FINDING = 0.02
+#: ... a dead band above this fraction of the top test torque
+DEADBAND_FINDING = 0.02
+#: ... rocking: the chassis pitch oscillating by more than this (deg, half peak-to-peak) after the transient
+ROCK_DEG = 0.5
+#: ... or the centre of mass's ``a`` this far (relative) from the axle midpoint's while the chassis pitched
+ROCK_GAP = 0.03
+#: ... slip: the wheels' rim speed this far (relative) from the axle's speed at the end of a drive test
+SLIP_FINDING = 0.05
+#: ... a braking geom: a non-wheel geom on the floor at rest with more load than this share of the weight
+#: and more friction than :data:`CASTER_MU`
+CASTER_LOAD = 0.01
+CASTER_MU = 0.01
+#: ... structural: two of the robot's own bodies pressing on each other at rest with more than this share
+#: of its weight
+SELF_CONTACT_LOAD = 0.01
+#: ... structural: a wheel carrying less than this share of the weight at rest
+WHEEL_LOAD_MIN = 0.02
+#: a mapped wheel radius this many times off the wheel geoms' (or outside [1e-4, 1e2] m) is refused (exit 2)
+RADIUS_FACTOR = 10.0
+
+
+#: the kinds of :func:`identify`'s findings, the likeliest cause of a wrong identification first (design §14)
+CAUSE_ORDER = ("structural", "mapping", "braking_caster", "dead_band", "slip", "rocking", "damping")
+#: a mapped wheel radius or half track this far (relative) from the model's geometry is a ``mapping`` finding
+MAPPING_TOL = 0.05
+
+
+def _finding(kind: str, detail: str, **numbers: Any) -> dict[str, Any]:
+    """One cause :func:`identify` names: ``{"kind", "detail", ...numbers}`` (design §14)."""
+    return {"kind": kind, "detail": detail, **numbers}
+
+
+def floor_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> list[dict[str, Any]]:
+    """Robot ``i``'s geoms touching the floor now (after the robot settled): ``body``, ``geom``,
+    ``role`` (``wheel``; ``rolling``: below a passive caster joint that rolls, not a swivel alone; or
+    ``other``), ``load_n`` (normal force, N), ``friction`` (the contact's sliding μ as simulated),
+    ``condim``. A minimal list for the verdict's braking-caster cause.
+    ``data``: another state of the plant's model (a settled copy) instead of the plant's own."""
+    m, d = plant.model, (plant.data if data is None else data)
+    lay = plant.layouts[i]
+    prefix = lay.base[: lay.base.index("/") + 1] if "/" in lay.base else ""
+    inside = set(subtree(m, m.body(lay.base).id).tolist())
+    wheels = {m.geom(g).id for g in lay.wheel_geoms}
+    rolling = rolling_bodies(m, lay)  # below a passive caster joint that rolls (design §13, §14.1)
+    out: dict[int, dict[str, Any]] = {}
+    f = np.zeros(6)
+    for c in range(d.ncon):
+        con = d.contact[c]
+        g1, g2 = int(con.geom1), int(con.geom2)
+        b1, b2 = int(m.geom_bodyid[g1]), int(m.geom_bodyid[g2])
+        if b1 == 0 and b2 in inside:
+            g = g2
+        elif b2 == 0 and b1 in inside:
+            g = g1
+        else:
+            continue
+        mujoco.mj_contactForce(m, d, c, f)
+        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"#{g}"
+        body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.geom_bodyid[g])) or ""
+        e = out.setdefault(
+            g,
+            {
+                "body": body[len(prefix) :] if body.startswith(prefix) else body,
+                "geom": name[len(prefix) :] if name.startswith(prefix) else name,
+                "role": "wheel" if g in wheels else ("rolling" if int(m.geom_bodyid[g]) in rolling else "other"),
+                "load_n": 0.0,
+                "friction": float(con.friction[0]) if int(con.dim) > 1 else 0.0,
+                "condim": int(con.dim),
+            },
+        )
+        e["load_n"] += float(f[0])
+    return list(out.values())
+
+
+def _given(lay: Any, what: str, says: str) -> float | None:
+    """The model's own value of a mapped size that differs from it (``scene.layout_of``'s note), or None."""
+    for n in lay.notes:
+        if n.startswith(f"{what} ") and f"{says} say" in n:
+            return float(n.rsplit("say ", 1)[1].split()[0])
+    return None
+
+
+def self_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> list[dict[str, Any]]:
+    """Pairs of robot ``i``'s own bodies in contact now: ``body1``, ``body2``, ``geom1``, ``geom2``,
+    ``force_n`` (normal force, N). MuJoCo collides every pair but parent and child; URDF/Gazebo
+    collide none of one model's links by default, so a published description may overlap at rest."""
+    m, d = plant.model, (plant.data if data is None else data)
+    lay = plant.layouts[i]
+    prefix = lay.base[: lay.base.index("/") + 1] if "/" in lay.base else ""
+    inside = set(subtree(m, m.body(lay.base).id).tolist())
+    out: dict[tuple[int, int], dict[str, Any]] = {}
+    f = np.zeros(6)
+
+    def name(kind: Any, k: int) -> str:
+        n = mujoco.mj_id2name(m, kind, k) or f"#{k}"
+        return n[len(prefix) :] if n.startswith(prefix) else n
+
+    for c in range(d.ncon):
+        con = d.contact[c]
+        g1, g2 = int(con.geom1), int(con.geom2)
+        b1, b2 = int(m.geom_bodyid[g1]), int(m.geom_bodyid[g2])
+        if b1 not in inside or b2 not in inside:
+            continue
+        mujoco.mj_contactForce(m, d, c, f)
+        e = out.setdefault(
+            (g1, g2),
+            {
+                "body1": name(mujoco.mjtObj.mjOBJ_BODY, b1),
+                "body2": name(mujoco.mjtObj.mjOBJ_BODY, b2),
+                "geom1": name(mujoco.mjtObj.mjOBJ_GEOM, g1),
+                "geom2": name(mujoco.mjtObj.mjOBJ_GEOM, g2),
+                "force_n": 0.0,
+            },
+        )
+        e["force_n"] += float(f[0])
+    return list(out.values())
+
+
+def check_radius(plant: Any) -> None:
+    """Refuse (exit 2) a mapped wheel radius or half track that no identification can use: more
+    than :data:`RADIUS_FACTOR` off the model's geometry, or outside [1e-4, 100] m (design §14)."""
+    from bioform_mj.errors import InputError
+
+    lay = plant.layouts[0]
+    for what, val, says, hint in (
+        ("wheel_radius", lay.wheel_radius, "collision geoms", "the wheel geoms'"),
+        ("half_track", lay.half_track, "joint anchors", "the wheel joint anchors'"),
+    ):
+        geo = _given(lay, what, says)
+        if not (math.isfinite(val) and 1e-4 <= val <= 1e2) or (
+            geo and not 1 / RADIUS_FACTOR <= val / geo <= RADIUS_FACTOR
+        ):
+            raise InputError(
+                f"{lay.file}: {what.replace('_', ' ')} {val:g} m"
+                + (f" is more than {RADIUS_FACTOR:g}x off {hint} {geo:.4g} m" if geo else " is outside [1e-4, 100] m")
+                + f": no torque level identifies a robot with it (give the {what.replace('_', ' ')} of the "
+                "wheels that touch the floor)"
+            )
+
+
+def _rocking(pitch: np.ndarray, dt: float) -> dict[str, float]:
+    """Half peak-to-peak (deg) and frequency (Hz, from zero crossings) of a pitch series (rad)
+    after removing its linear trend."""
+    if len(pitch) < 4:
+        return {"amplitude_deg": 0.0, "frequency_hz": 0.0}
+    t = np.arange(len(pitch)) * dt
+    res = pitch - np.polyval(np.polyfit(t, pitch, 1), t)
+    amp = float(np.degrees(0.5 * (res.max() - res.min())))
+    s = np.sign(res[np.abs(res) > 0.1 * np.abs(res).max()]) if amp > 0 else np.zeros(0)
+    crossings = int(np.count_nonzero(np.diff(s))) if len(s) > 1 else 0
+    return {"amplitude_deg": amp, "frequency_hz": crossings / (2 * t[-1]) if t[-1] > 0 else 0.0}
+
+
+def rest_findings(
+    plant: Any, params: Any, lay: Any, weight: float, loads: np.ndarray, contacts: list[dict[str, Any]]
+) -> list[dict[str, Any]]:
+    """The findings at rest (design §14): self contacts, braking geoms, wheels off the floor, a mapped
+    size off the model's. ``weight`` N, ``loads`` (2,) the wheel loads N, ``contacts`` :func:`floor_contacts`."""
+    findings: list[dict[str, Any]] = []
+    selfc = [c for c in self_contacts(plant) if c["force_n"] > SELF_CONTACT_LOAD * weight]
+    if selfc:
+        findings.append(
+            _finding(
+                "structural",
+                "the robot's own bodies press on each other at rest: "
+                + ", ".join(f"'{c['body1']}'/'{c['body2']}' {c['force_n']:.3g} N" for c in selfc)
+                + " (internal forces that brake or lock parts; exclude the pairs, as URDF/Gazebo do by default)",
+                self_contacts=selfc,
+            )
+        )
+    for c in contacts:
+        if c["role"] == "other" and c["load_n"] > CASTER_LOAD * weight and c["friction"] > CASTER_MU:
+            brake = c["friction"] * c["load_n"]
+            findings.append(
+                _finding(
+                    "braking_caster",
+                    f"'{c['geom']}' (body '{c['body']}') is not a wheel, carries {c['load_n']:.3g} N "
+                    f"({c['load_n'] / weight:.0%} of the weight) and slides with friction {c['friction']:g}: "
+                    f"up to {brake:.3g} N of braking, {brake * params.wheel_radius:.3g} N·m of wheel torque lost",
+                    geom=c["geom"],
+                    body=c["body"],
+                    load_n=c["load_n"],
+                    friction=c["friction"],
+                    braking_force_n=brake,
+                )
+            )
+    if float(loads.min()) < WHEEL_LOAD_MIN * weight:
+        findings.append(
+            _finding(
+                "structural",
+                f"the wheels do not stand on the floor: they carry {loads[0]:.3g} N (left) and {loads[1]:.3g} N "
+                f"(right) of the robot's {weight:.3g} N at rest"
+                + (
+                    "; it stands on " + ", ".join(f"'{c['geom']}'" for c in contacts if c["role"] != "wheel")
+                    if any(c["role"] != "wheel" for c in contacts)
+                    else ""
+                ),
+                wheel_load_n=loads.tolist(),
+            )
+        )
+        geo_r = _given(lay, "wheel_radius", "collision geoms")
+        if geo_r:  # a mapped radius the geoms disagree with: the contact proxy has the mapped size
+            findings[-1]["detail"] += (
+                f" (the mapped wheel radius {lay.wheel_radius:g} m is not the wheel geoms' {geo_r:.4g} m)"
+            )
+    for what, says, val in (
+        ("wheel_radius", "collision geoms", lay.wheel_radius),
+        ("half_track", "joint anchors", lay.half_track),
+    ):
+        geo = _given(lay, what, says)
+        if geo and abs(val / geo - 1) > MAPPING_TOL:
+            findings.append(
+                _finding(
+                    "mapping",
+                    f"the mapped {what.replace('_', ' ')} {val:g} m is {val / geo - 1:+.0%} off the model's {says}' "
+                    f"{geo:.4g} m: the formula uses the mapped value, the physics the model's",
+                    what=what,
+                    mapped_m=val,
+                    model_m=geo,
+                )
+            )
+    return findings
+
+
+def fit_findings(
+    findings: list[dict[str, Any]],
+    *,
+    params: Any,
+    drive: list[dict],
+    k0: int,
+    dt: float,
+    ok: bool,
+    k_form: list[float],
+    fits: dict[str, float],
+    windows: list[float],
+    truth: dict[str, Any],
+    torque: float,
+    f: float,
+    settle_s: float | None,
+    id_skip: float,
+) -> dict[str, Any]:
+    """Append the findings the fit reads (damping, dead band, rocking, slip; design §14) to ``findings``;
+    return the numbers they rest on (``rock``, ``transient_deg``, ``slip``, ``drag``, ``db``, ``com_gap``).
+    ``id_skip``: identify's ID_SKIP (s). ``fits``: ``a_id, b_id, a_com`` and the fits' intercepts ``ca, cb``
+    and drags ``be, ge, be_free, ge_free``."""
+    a_id, b_id, a_com = fits["a_id"], fits["b_id"], fits["a_com"]
+    ca, cb, be, ge, be_free, ge_free = (fits[k] for k in ("ca", "cb", "be", "ge", "be_free", "ge_free"))
+    rock = _rocking(drive[0]["pitch"][k0:], dt)
+    transient_deg = float(np.degrees(np.abs(drive[0]["pitch"] - drive[0]["pitch"][0]).max()))
+    v_end = float(drive[0]["z"][-1, 0])
+    rim_end = float(drive[0]["rim"][-1])
+    slip = (rim_end - v_end) / max(abs(rim_end), abs(v_end), 1e-6)
+    # the drag: fitted where the model has one, else the free fit's (a drag the formula does not know)
+    drag = [-be if k_form[0] > 0 else -be_free, -ge if k_form[1] > 0 else -ge_free]
+    rocks = rock["amplitude_deg"] > ROCK_DEG
+    db = [-ca / a_id if ok else None, -cb / b_id if ok else None]
+    tcs = [1 / k if k > 0 else None for k in drag]
+    drag_seen = [k * windows[j] > DRAG_FINDING and (k_form[j] > 0 or not rocks) for j, k in enumerate(drag)]
+    if ok and any(drag_seen):
+        findings.append(
+            _finding(
+                "damping",
+                "a viscous drag: time constant "
+                + ", ".join(f"{t:.3g} s ({w})" for t, w in zip(tcs, ("drive", "turn")) if t is not None)
+                + " (formula from the wheel joints' damping and back-EMF: "
+                + ", ".join(f"{t:.3g} s" if t else "none" for t in truth["drag_time_constant_s"])
+                + ")",
+                drag_rate_per_s=drag,
+                time_constant_s=tcs,
+            )
+        )
+    braking = any(x["kind"] == "braking_caster" for x in findings)
+    db_seen = ok and max(db[0], db[1]) > DEADBAND_FINDING * 2 * torque
+    # a rocking chassis moves the fit's intercept too: an intercept neither the frictionloss nor a
+    # braking geom explains is then said as part of the rocking, not as a dead band
+    db_rocking = db_seen and rocks and f == 0 and not braking
+    if db_seen and not db_rocking:
+        findings.append(
+            _finding(
+                "dead_band",
+                f"a dead band of {db[0]:.3g} N·m on τ_a, {db[1]:.3g} N·m on τ_b (torque that moves nothing; "
+                f"formula from the wheel frictionloss: {2 * f:.3g} N·m"
+                + (", the rest from the braking geoms" if braking else "")
+                + ")",
+                deadband_torque_Nm=db,
+            )
+        )
+    com_gap = a_com / a_id - 1 if ok else 0.0
+    if rocks or (abs(com_gap) > ROCK_GAP and transient_deg > ROCK_DEG):
+        findings.append(
+            _finding(
+                "rocking",
+                f"the chassis rocks by ±{rock['amplitude_deg']:.2g}° at {rock['frequency_hz']:.3g} Hz after the "
+                f"start-up ({transient_deg:.2g}° at most from rest); the centre of mass identifies a "
+                f"{a_com / params.a_eff - 1:+.1%} from the formula, the axle midpoint {a_id / params.a_eff - 1:+.1%}"
+                + (f"; the fit reads it as a dead band of {db[0]:.3g} N·m" if db_rocking else ""),
+                transient_deg=transient_deg,
+                a_com=a_com,
+                **rock,
+            )
+        )
+    elif ok and k0 * dt > id_skip and transient_deg > ROCK_DEG:  # rocked at start-up, settled, fitted after
+        start = _rocking(drive[0]["pitch"][: max(k0, 4)], dt)
+        findings.append(
+            _finding(
+                "rocking",
+                f"the chassis rocks at start-up (±{start['amplitude_deg']:.2g}° at {start['frequency_hz']:.3g} Hz, "
+                f"{transient_deg:.2g}° at most from rest) and settles after {settle_s:.2g} s: a, b fitted after it "
+                f"(the axle midpoint {a_id / params.a_eff - 1:+.1%}, the centre of mass "
+                f"{a_com / params.a_eff - 1:+.1%} from the formula); the start of each manoeuvre shakes it",
+                transient_deg=transient_deg,
+                settled_s=settle_s,
+                a_com=a_com,
+                **start,
+            )
+        )
+    if abs(slip) > SLIP_FINDING:
+        findings.append(
+            _finding(
+                "slip",
+                f"the wheels' rim speed {rim_end:.3g} m/s against the axle's {v_end:.3g} m/s at the end of "
+                f"the drive test ({slip:+.0%}): they do not roll on the floor",
+                slip_ratio=slip,
+            )
+        )
+    return dict(rock=rock, transient_deg=transient_deg, slip=slip, drag=drag, db=db, com_gap=com_gap)
+
+
+def identify_notes(ident: dict | None) -> list[str]:
+    """For ``robot check``'s notes: the caster swivels :func:`identify` turned before each test and what
+    resists turning them, a drive test rerun at a lower torque (design §14.1)."""
+    test, notes = (ident or {}).get("test", {}), []
+    if test.get("caster_swivels"):
+        res = test.get("caster_swivel_resistance") or [{"damping_Nms_per_rad": 0.0, "frictionloss_Nm": 0.0}]
+        notes.append(
+            f"caster swivel(s) {', '.join(repr(j) for j in test['caster_swivels'])} turned before each "
+            "identification test to trail its motion (the casters' steady state); a start from other caster "
+            f"angles turns them round first, against a swivel damping of up to "
+            f"{max(r['damping_Nms_per_rad'] for r in res):g} N·m·s/rad and frictionloss of up to "
+            f"{max(r['frictionloss_Nm'] for r in res):g} N·m"
+        )
+    if dr := test.get("drive_rerun"):
+        notes.append(
+            f"drive tests at {test['torque_Nm']:.3g} N·m: at {dr['first_torque_Nm']:.3g} N·m the robot turned "
+            f"{dr['first_heading_change_rad']:.2g} rad within the test (design §14.1: a centre of mass beside "
+            "the axle couples υ into ω)"
+        )
+    return notes
