@@ -27,6 +27,7 @@ import numpy as np
 
 from bioform_mj.contacts import align_swivels, swivel_casters
 from bioform_mj.identify_causes import (  # re-exported: cause attribution lives by concern (design §14)
+    CASTER_CF_DEV,
     CASTER_LOAD,
     CASTER_MU,
     CAUSE_ORDER,
@@ -40,10 +41,14 @@ from bioform_mj.identify_causes import (  # re-exported: cause attribution lives
     SLIP_FINDING,
     WHEEL_LOAD_MIN,
     _finding,
+    caster_counterfactual,
+    caster_finding,
+    caster_parts,
     check_radius,
     fit_findings,
     floor_contacts,
     identify_notes,
+    moving_brakes,
     rest_findings,
     self_contacts,
 )
@@ -84,6 +89,8 @@ __all__ = [
     "WHEEL_LOAD_MIN",
 ]
 
+#: the tests look for non-wheel geoms dragging on the floor every this many steps (design §14.2)
+DRAG_SAMPLE = 10
 #: the turn test of :func:`identify` ends below this yaw rate, rad/s
 OMEGA_ID = 2.0
 #: :func:`identify` steps at most ``DRAG_STEP / k`` s for a wheel drag rate ``k`` (1/s), so that
@@ -308,9 +315,17 @@ def identify(
             rim[k] = float(np.mean(data.qvel[wdof] * wsign) * r)
 
         sample(0)
+        dragging: dict[str, dict] = {}  # design §14.2: non-wheel geoms on the floor while it runs: mean, peak load
+        n_samples = n_run // DRAG_SAMPLE
         for k in range(n_run):
             plant.step(tau, k * dt)
             sample(k + 1)
+            if k % DRAG_SAMPLE == DRAG_SAMPLE - 1:
+                for c in floor_contacts(plant):
+                    if c["role"] == "other":
+                        e = dragging.setdefault(c["geom"], {**c, "load_n": 0.0, "peak_n": 0.0})
+                        e["load_n"] += c["load_n"] / n_samples
+                        e["peak_n"] = max(e["peak_n"], c["load_n"])
         pose, vel = plant.observe()
         d = pose[0, :2] - pose0[0, :2]
         th0 = pose0[0, 2]
@@ -320,6 +335,7 @@ def identify(
             pitch=pitch,
             rim=rim,
             heading=np.unwrap(heading),
+            dragging=list(dragging.values()),
             lateral_m=float(-np.sin(th0) * d[0] + np.cos(th0) * d[1]),
             warnings=sum(int(w.number) for w in data.warning),
             heading_change_rad=float(np.angle(np.exp(1j * (pose[0, 2] - th0)))),
@@ -383,21 +399,51 @@ def identify(
             torque, levels = lower, levels_of(lower)
             drive, k0, n_run, settle_s = drive_tests(levels)
     turn = [run(-T, T, n_turn) for T in turn_levels]
+    # design §14.2: a geom that is no wheel and no caster and drags on the floor while the robot drives (a chassis
+    # edge the drive torque pitches onto) brakes it, whether or not it carried load at rest
+    findings += moving_brakes(findings, drive[0]["dragging"], weight, params.wheel_radius, lay.base, 2 * levels[0])
     tau_a = [2 * T for T in levels]  # τ_a = τ_L + τ_R
     tau_b = [2 * T for T in turn_levels]  # τ_b = τ_R − τ_L (design §5 sign fix)
     # the drag term only where the model has a drag (wheel damping, back-EMF): free, it reads the
     # slow pitch settling of a tall chassis as a drag (design §14); without, a drag the formula does
     # not know shows in the free fit of the centre of mass (drag_rate_per_s.free_fit)
     k_form = params.unmodelled(0.0, 0.0)["drag_rate_per_s"]
-    a_id, ca, be = fit(drive, tau_a, "z", 0, k_form[0] > 0, k0)
+    a_id, ca, be, res_a = fit(drive, tau_a, "z", 0, k_form[0] > 0, k0, residual=True)
     k0_turn = 0 if rate_form or f == 0 else min(round(TURN_SKIP / dt), n_turn - 4)
-    b_id, cb, ge = fit(turn, tau_b, "z", 1, k_form[1] > 0, k0_turn)
+    b_id, cb, ge, res_b = fit(turn, tau_b, "z", 1, k_form[1] > 0, k0_turn, residual=True)
     a_com, _, be_com = fit(drive, tau_a, "vcom", None, k_form[0] > 0, k0)
     _, _, be_free = fit(drive, tau_a, "vcom", None, True, k0)
     _, _, ge_free = fit(turn, tau_b, "z", 1, True, k0_turn)
     windows = [(n_run - k0) * dt, (n_turn - k0_turn) * dt]
     truth = params.unmodelled(0.0, 0.0)
     ok = all(math.isfinite(x) for x in (a_id, b_id)) and a_id > 0 and b_id > 0
+    # design §14.2: a robot with casters whose a or b is off reruns its tests without what the casters resist
+    # with (their joints' damping and frictionloss, their own inertia, their scrub): the share they remove is theirs
+    casters, caster_cf = caster_parts(model, lay), None
+    gaps = (a_id / params.a_eff - 1, b_id / params.b_eff - 1) if ok else (0.0, 0.0)
+    if casters["joints"] and max(abs(g) for g in gaps) > CASTER_CF_DEV:
+
+        def measure() -> tuple[float | None, float | None]:
+            a_ = b_ = None
+            if abs(gaps[0]) > CASTER_CF_DEV:
+                drive_, k0_, _, _ = drive_tests(levels)
+                a_ = fit(drive_, tau_a, "z", 0, k_form[0] > 0, k0_)[0]
+            if abs(gaps[1]) > CASTER_CF_DEV:
+                b_ = fit([run(-T, T, n_turn) for T in turn_levels], tau_b, "z", 1, k_form[1] > 0, k0_turn)[0]
+            return a_, b_
+
+        steps = caster_counterfactual(model, casters, measure)
+        caster_cf = caster_finding(
+            model,
+            casters,
+            (params.a_eff, params.b_eff),
+            (a_id, b_id),
+            steps,
+            lay.base[: lay.base.index("/") + 1] if "/" in lay.base else "",
+            (k_form[0] > 0, k_form[1] > 0),
+        )
+        if caster_cf is not None:
+            caster_cf["steps"] = {k: list(v) for k, v in steps.items()}
     fitted = fit_findings(
         findings,
         params=params,
@@ -406,7 +452,19 @@ def identify(
         dt=dt,
         ok=ok,
         k_form=k_form,
-        fits=dict(a_id=a_id, b_id=b_id, a_com=a_com, ca=ca, cb=cb, be=be, ge=ge, be_free=be_free, ge_free=ge_free),
+        fits=dict(
+            a_id=a_id,
+            b_id=b_id,
+            a_com=a_com,
+            ca=ca,
+            cb=cb,
+            be=be,
+            ge=ge,
+            be_free=be_free,
+            ge_free=ge_free,
+            res_a=res_a,
+            res_b=res_b,
+        ),
         windows=windows,
         truth=truth,
         torque=torque,
@@ -416,6 +474,13 @@ def identify(
     )
     rock, transient_deg, slip = fitted["rock"], fitted["transient_deg"], fitted["slip"]
     drag, db, com_gap = fitted["drag"], fitted["db"], fitted["com_gap"]
+    if caster_cf is not None:
+        findings.append(caster_cf)
+        # a drag the wheel joints do not have, in a test the casters account for, is theirs: not said as damping
+        theirs = [k_form[j] == 0 and w in caster_cf for j, w in enumerate(("a", "b"))]
+        for fd in [x for x in findings if x["kind"] == "damping"]:
+            if all(theirs[j] or t is None for j, t in enumerate(fd["time_constant_s"])):
+                findings.remove(fd)
     if not ok:
         return cannot(
             f"the tests give a = {a_id:.3g}, b = {b_id:.3g}: the robot does not move forward under forward torque"
@@ -428,6 +493,13 @@ def identify(
         "identified_axle_vs_com": com_gap,
         "drag_rate_per_s": {"formula": truth["drag_rate_per_s"], "identified": drag},
         "deadband_torque_Nm": {"formula": truth["deadband_torque_Nm"], "identified": db},
+        # design §14.2: the fits' intercepts as torques (a negative one: the linear model does not hold)
+        "fit_intercept_Nm": fitted["intercept"],
+        "fit_residual": {"a": res_a, "b": res_b},
+        # design §14.2: whether the fit of each test holds (residual, intercept); where not, why (its a or b
+        # is then a reading of the test, not the robot's)
+        "fit_holds": {"a": fitted["holds"][0], "b": fitted["holds"][1]},
+        "fit_problem": fitted["why_not"] or None,
         "rocking": {**rock, "transient_deg": transient_deg, "settled_s": settle_s},
         "slip_ratio": slip,
         "findings": findings,

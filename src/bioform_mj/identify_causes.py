@@ -30,6 +30,9 @@ SLIP_FINDING = 0.05
 #: and more friction than :data:`CASTER_MU`
 CASTER_LOAD = 0.01
 CASTER_MU = 0.01
+#: a fit whose RMS residual exceeds this share of its torque term's RMS does not hold (design §14.2: measured
+#: ≤ 0.6 % on a and ≤ 4.8 % on b over the zoo but for a skid-steer's b, 16 %; 8–31 % where a chassis edge drags)
+FIT_RESIDUAL_MAX = 0.06
 #: ... structural: two of the robot's own bodies pressing on each other at rest with more than this share
 #: of its weight
 SELF_CONTACT_LOAD = 0.01
@@ -40,7 +43,16 @@ RADIUS_FACTOR = 10.0
 
 
 #: the kinds of :func:`identify`'s findings, the likeliest cause of a wrong identification first (design §14)
-CAUSE_ORDER = ("structural", "mapping", "braking_caster", "dead_band", "slip", "rocking", "damping")
+CAUSE_ORDER = (
+    "structural",
+    "mapping",
+    "braking_caster",
+    "caster_resistance",
+    "dead_band",
+    "slip",
+    "rocking",
+    "damping",
+)
 #: a mapped wheel radius or half track this far (relative) from the model's geometry is a ``mapping`` finding
 MAPPING_TOL = 0.05
 
@@ -171,6 +183,51 @@ def _rocking(pitch: np.ndarray, dt: float) -> dict[str, float]:
     return {"amplitude_deg": amp, "frequency_hz": crossings / (2 * t[-1]) if t[-1] > 0 else 0.0}
 
 
+def _contact_kind(c: dict[str, Any], base: str) -> str:
+    """``chassis`` for a floor contact of the base body itself, else ``caster`` (a link of its own)."""
+    return "chassis" if c["body"] == base.split("/", 1)[-1] else "caster"
+
+
+def _brake_what(c: dict[str, Any], base: str) -> str:
+    """How a braking floor contact is named: the chassis itself dragging, or a non-wheel link (design §14.2)."""
+    if _contact_kind(c, base) == "chassis":
+        return f"the chassis '{c['body']}' drags on the floor (geom '{c['geom']}', no wheel, no caster):"
+    return f"'{c['geom']}' (body '{c['body']}') is not a wheel,"
+
+
+def moving_brakes(
+    findings: list[dict[str, Any]], dragging: list[dict[str, Any]], weight: float, r: float, base: str, tau_a: float
+) -> list[dict[str, Any]]:
+    """``braking_caster`` findings for geoms that are no wheel and do not roll and drag on the floor while the
+    robot drives (``dragging``: :func:`floor_contacts` entries with their mean ``load_n`` and their ``peak_n``
+    over the top drive test, ``tau_a`` N·m), with a mean load over :data:`CASTER_LOAD` of ``weight`` N, not
+    already named at rest."""
+    named = {x.get("geom") for x in findings if x["kind"] == "braking_caster"}
+    out = []
+    for c in dragging:
+        if c["geom"] in named or c["load_n"] <= CASTER_LOAD * weight or c["friction"] <= CASTER_MU:
+            continue
+        brake = c["friction"] * c["load_n"]
+        out.append(
+            _finding(
+                "braking_caster",
+                _brake_what(c, base) + f" carries {c['load_n']:.3g} N on average ({c['load_n'] / weight:.0%} of the "
+                f"weight; {c['peak_n']:.3g} N at most) while it drives at τ_a = {tau_a:.3g} N·m (less at rest: the "
+                f"drive torque pitches the chassis onto it) and slides with friction {c['friction']:g}: "
+                f"{brake:.3g} N of braking on average, {brake * r:.3g} N·m of wheel torque lost",
+                geom=c["geom"],
+                body=c["body"],
+                load_n=c["load_n"],
+                friction=c["friction"],
+                braking_force_n=brake,
+                peak_load_n=c["peak_n"],
+                contact=_contact_kind(c, base),
+                while_driving=True,
+            )
+        )
+    return out
+
+
 def rest_findings(
     plant: Any, params: Any, lay: Any, weight: float, loads: np.ndarray, contacts: list[dict[str, Any]]
 ) -> list[dict[str, Any]]:
@@ -194,7 +251,7 @@ def rest_findings(
             findings.append(
                 _finding(
                     "braking_caster",
-                    f"'{c['geom']}' (body '{c['body']}') is not a wheel, carries {c['load_n']:.3g} N "
+                    _brake_what(c, lay.base) + f" carries {c['load_n']:.3g} N "
                     f"({c['load_n'] / weight:.0%} of the weight) and slides with friction {c['friction']:g}: "
                     f"up to {brake:.3g} N of braking, {brake * params.wheel_radius:.3g} N·m of wheel torque lost",
                     geom=c["geom"],
@@ -202,6 +259,7 @@ def rest_findings(
                     load_n=c["load_n"],
                     friction=c["friction"],
                     braking_force_n=brake,
+                    contact=_contact_kind(c, lay.base),
                 )
             )
     if float(loads.min()) < WHEEL_LOAD_MIN * weight:
@@ -273,7 +331,27 @@ def fit_findings(
     # the drag: fitted where the model has one, else the free fit's (a drag the formula does not know)
     drag = [-be if k_form[0] > 0 else -be_free, -ge if k_form[1] > 0 else -ge_free]
     rocks = rock["amplitude_deg"] > ROCK_DEG
-    db = [-ca / a_id if ok else None, -cb / b_id if ok else None]
+    # design §14.2: a dead band is never negative; a fit whose intercept is an acceleration at zero torque
+    # (a chassis edge whose drag grows with the torque, a rocking chassis) does not hold: said, not reported
+    intercept = [-ca / a_id if ok else None, -cb / b_id if ok else None]
+    db = [max(x, 0.0) if x is not None else None for x in intercept]
+    residual = [fits.get("res_a", 0.0), fits.get("res_b", 0.0)]
+    tol = DEADBAND_FINDING * 2 * torque
+    holds = [ok and intercept[j] >= -tol and residual[j] <= FIT_RESIDUAL_MAX for j in range(2)]
+    why_not = "".join(
+        f"; the fit of υ̇ = {w} τ_{w} + … does not hold ("
+        + ", ".join(
+            ([f"its residual is {residual[j]:.0%} of the torque term"] if residual[j] > FIT_RESIDUAL_MAX else [])
+            + (
+                [f"its intercept, {intercept[j]:.3g} N·m, is a push at zero torque (no dead band is negative)"]
+                if intercept[j] < -tol
+                else []
+            )
+        )
+        + f"): the identified {w} is not the robot's"
+        for j, w in enumerate(("a", "b"))
+        if ok and not holds[j]
+    )
     tcs = [1 / k if k > 0 else None for k in drag]
     drag_seen = [k * windows[j] > DRAG_FINDING and (k_form[j] > 0 or not rocks) for j, k in enumerate(drag)]
     if ok and any(drag_seen):
@@ -290,6 +368,8 @@ def fit_findings(
             )
         )
     braking = any(x["kind"] == "braking_caster" for x in findings)
+    if why_not and braking:
+        next(x for x in findings if x["kind"] == "braking_caster")["detail"] += why_not
     db_seen = ok and max(db[0], db[1]) > DEADBAND_FINDING * 2 * torque
     # a rocking chassis moves the fit's intercept too: an intercept neither the frictionloss nor a
     # braking geom explains is then said as part of the rocking, not as a dead band
@@ -298,7 +378,12 @@ def fit_findings(
         findings.append(
             _finding(
                 "dead_band",
-                f"a dead band of {db[0]:.3g} N·m on τ_a, {db[1]:.3g} N·m on τ_b (torque that moves nothing; "
+                "a dead band of "
+                + ", ".join(
+                    f"{db[j]:.3g} N·m on τ_{w}" if holds[j] else f"(none read on τ_{w}: its fit does not hold)"
+                    for j, w in enumerate(("a", "b"))
+                )
+                + " (torque that moves nothing; "
                 f"formula from the wheel frictionloss: {2 * f:.3g} N·m"
                 + (", the rest from the braking geoms" if braking else "")
                 + ")",
@@ -311,9 +396,15 @@ def fit_findings(
             _finding(
                 "rocking",
                 f"the chassis rocks by ±{rock['amplitude_deg']:.2g}° at {rock['frequency_hz']:.3g} Hz after the "
-                f"start-up ({transient_deg:.2g}° at most from rest); the centre of mass identifies a "
-                f"{a_com / params.a_eff - 1:+.1%} from the formula, the axle midpoint {a_id / params.a_eff - 1:+.1%}"
-                + (f"; the fit reads it as a dead band of {db[0]:.3g} N·m" if db_rocking else ""),
+                f"start-up ({transient_deg:.2g}° at most from rest)"
+                + (
+                    f"; the centre of mass identifies a {a_com / params.a_eff - 1:+.1%} from the formula, the axle "
+                    f"midpoint {a_id / params.a_eff - 1:+.1%}"
+                    if holds[0]
+                    else ""
+                )
+                + (f"; the fit reads it as a dead band of {max(db):.3g} N·m" if db_rocking else "")
+                + (why_not if not braking else ""),
                 transient_deg=transient_deg,
                 a_com=a_com,
                 **rock,
@@ -343,7 +434,17 @@ def fit_findings(
                 slip_ratio=slip,
             )
         )
-    return dict(rock=rock, transient_deg=transient_deg, slip=slip, drag=drag, db=db, com_gap=com_gap)
+    return dict(
+        rock=rock,
+        transient_deg=transient_deg,
+        slip=slip,
+        drag=drag,
+        db=db,
+        com_gap=com_gap,
+        intercept=intercept,
+        holds=holds,
+        why_not=why_not[2:],
+    )
 
 
 def identify_notes(ident: dict | None) -> list[str]:
@@ -366,3 +467,122 @@ def identify_notes(ident: dict | None) -> list[str]:
             "the axle couples υ into ω)"
         )
     return notes
+
+
+#: :func:`identify` reruns its tests without what its casters resist with (design §14.2) where a or b is this far
+#: (relative) from the formula and the robot has caster joints ...
+CASTER_CF_DEV = 0.05
+#: ... and names the casters (``caster_resistance``) where they account for more than this share of the gap
+CASTER_CF_SHARE = 0.5
+#: the steps of that counterfactual, each on top of the ones before
+CASTER_STEPS = ("joints", "inertia", "scrub")
+
+
+def caster_parts(model: mujoco.MjModel, lay: Any) -> dict[str, Any]:
+    """The robot's caster joints (the layout's ``rolling_joints``: passive joints above a floor contact),
+    their dofs, the bodies below them and those bodies' collision geoms (design §14.2)."""
+    joints = [j for j in (mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in lay.rolling_joints) if j >= 0]
+    ndof = {int(mujoco.mjtJoint.mjJNT_BALL): 3, int(mujoco.mjtJoint.mjJNT_FREE): 6}
+    dofs = [int(model.jnt_dofadr[j]) + k for j in joints for k in range(ndof.get(int(model.jnt_type[j]), 1))]
+    bodies: set[int] = set()
+    for j in joints:
+        bodies |= set(subtree(model, int(model.jnt_bodyid[j])).tolist())
+    geoms = [
+        g
+        for g in range(model.ngeom)
+        if int(model.geom_bodyid[g]) in bodies and (model.geom_contype[g] or model.geom_conaffinity[g])
+    ]
+    return {"joints": joints, "dofs": dofs, "bodies": sorted(bodies), "geoms": geoms}
+
+
+def caster_counterfactual(model: mujoco.MjModel, parts: dict[str, Any], measure: Any) -> dict[str, Any]:
+    """``measure()`` (→ ``(a, b)``, either None where not measured) rerun on ``model`` changed in
+    :data:`CASTER_STEPS`, each on top of the last (design §14.2): ``joints``, the caster joints' damping and
+    frictionloss zeroed; ``inertia``, their armature and the caster bodies' rotational inertia cut to 1e-3
+    (their mass stays: the formula counts it); ``scrub``, the caster geoms frictionless (condim 1, a
+    priority over the floor's). The model is restored after. Returns ``{step: (a, b)}``."""
+    dofs, bodies, geoms = parts["dofs"], parts["bodies"], parts["geoms"]
+    saved = [
+        (model.dof_damping, dofs),
+        (model.dof_frictionloss, dofs),
+        (model.dof_armature, dofs),
+        (model.body_inertia, bodies),
+        (model.geom_condim, geoms),
+        (model.geom_priority, geoms),
+    ]
+    keep = [arr[idx].copy() for arr, idx in saved]
+    out: dict[str, Any] = {}
+    try:
+        model.dof_damping[dofs] = 0.0
+        model.dof_frictionloss[dofs] = 0.0
+        out["joints"] = measure()
+        model.dof_armature[dofs] *= 1e-3
+        model.body_inertia[bodies] *= 1e-3
+        out["inertia"] = measure()
+        model.geom_condim[geoms] = 1
+        model.geom_priority[geoms] = int(model.geom_priority.max()) + 1
+        out["scrub"] = measure()
+    finally:
+        for (arr, idx), v in zip(saved, keep):
+            arr[idx] = v
+    return out
+
+
+def caster_finding(
+    model: mujoco.MjModel,
+    parts: dict[str, Any],
+    formula: tuple[float, float],
+    identified: tuple[float, float],
+    steps: dict[str, Any],
+    prefix: str,
+    wheel_drag: tuple[bool, bool] = (False, False),
+) -> dict[str, Any] | None:
+    """The ``caster_resistance`` finding (design §14.2), or None: for each of a (drive) and b (turn) measured
+    in ``steps`` (:func:`caster_counterfactual`), the gap to the formula and the share of it that each step
+    removed — the caster joints' damping and frictionloss, the casters' own inertia (the wheels' spin, the
+    forks' swivel), the caster wheels' scrub on the floor — where the casters account for more than
+    :data:`CASTER_CF_SHARE` of a gap over :data:`CASTER_CF_DEV`. ``wheel_drag``: whether the wheel joints have a
+    drag in the drive and the turn test (then it is not said that they have none)."""
+
+    def name(kind: Any, k: int) -> str:
+        n = mujoco.mj_id2name(model, kind, k) or f"#{k}"
+        return n[len(prefix) :] if n.startswith(prefix) else n
+
+    parts_by: dict[str, Any] = {}
+    texts = []
+    for j, what in enumerate(("a", "b")):
+        gaps = [identified[j] / formula[j] - 1] + [
+            steps[s][j] / formula[j] - 1 if steps[s][j] is not None else None for s in CASTER_STEPS
+        ]
+        if any(g is None for g in gaps) or abs(gaps[0]) <= CASTER_CF_DEV:
+            continue
+        share = (gaps[0] - gaps[-1]) / gaps[0]
+        if share <= CASTER_CF_SHARE:
+            continue
+        each = {s: gaps[k] - gaps[k + 1] for k, s in enumerate(CASTER_STEPS)}
+        parts_by[what] = {"gap": gaps[0], "casters_share": share, "by_step": each, "without_casters": gaps[-1]}
+        texts.append(
+            f"{what} {gaps[0]:+.1%} from the formula ({'drive' if j == 0 else 'turn'}), {gaps[-1]:+.1%} with ideal "
+            f"casters: {each['joints']:+.1%} from the caster joints' damping and frictionloss, "
+            f"{each['inertia']:+.1%} from the casters' own inertia (wheel spin, swivel), {each['scrub']:+.1%} from "
+            "the caster wheels' scrub on the floor"
+        )
+    if not texts:
+        return None
+    joints = [name(mujoco.mjtObj.mjOBJ_JOINT, j) for j in parts["joints"]]
+    damp = [float(model.dof_damping[d]) for d in parts["dofs"]]
+    fl = [float(model.dof_frictionloss[d]) for d in parts["dofs"]]
+    return _finding(
+        "caster_resistance",
+        f"the casters resist the motion (their passive joints {', '.join(repr(j) for j in joints)}; damping up to "
+        f"{max(damp):g} N·m·s/rad, frictionloss up to {max(fl):g} N·m"
+        + (
+            "; the wheel joints have no drag"
+            if not any(wheel_drag[j] for j, w in enumerate(("a", "b")) if w in parts_by)
+            else ""
+        )
+        + "): "
+        + "; ".join(texts),
+        caster_joints=joints,
+        **parts_by,
+    )

@@ -20,7 +20,8 @@ def fit_levels(
     implicit_damping: bool,
     explicit: bool,
     rate_form: bool,
-) -> tuple[float, float, float]:
+    residual: bool = False,
+) -> tuple[float, ...]:
     """(slope a, intercept c₀, drag β) of ``υ̇ = a τ + c₀ + β υ`` over all levels from ``t₀``, fitted
     on the speed integrated twice (a position-like sum), each level with its own ``υ(t₀)``: a
     rocking chassis adds a bounded wobble to that sum, where it adds its full swing to υ̇. Discrete
@@ -34,7 +35,9 @@ def fit_levels(
 
     ``runs``: the tests (dicts of series, ``key`` the series, ``col`` its column or None), ``taus`` their
     torques (N·m), ``drag`` whether β is fitted, ``k0`` the first fitted step; ``dt`` the step (s), the
-    integrator's scheme (``implicit_damping``, ``explicit``) and ``rate_form`` as above."""
+    integrator's scheme (``implicit_damping``, ``explicit``) and ``rate_form`` as above. ``residual``: a fourth
+    value, the fit's RMS residual over the RMS of its torque term ``a τ`` (design §14.2: how much of what
+    the torque explains is left unexplained; a fit that holds leaves a few per cent at most)."""
     n = len(runs)
     rows, rhs = [], []
     for i_, (run_, tau) in enumerate(zip(runs, taus)):
@@ -58,5 +61,10 @@ def fit_levels(
     scale = np.abs(A).max(axis=0)
     scale[scale == 0] = 1.0
     sol, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
-    a_, c0, beta = (sol / scale)[:3]
-    return float(a_), float(c0), float(beta)
+    x = sol / scale
+    a_, c0, beta = x[:3]
+    if not residual:
+        return float(a_), float(c0), float(beta)
+    torque_part = float(np.sqrt(np.mean((A[:, 0] * a_) ** 2)))
+    left = float(np.sqrt(np.mean((A @ x - b) ** 2)))
+    return float(a_), float(c0), float(beta), left / torque_part if torque_part > 0 else float("inf")

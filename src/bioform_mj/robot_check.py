@@ -287,7 +287,9 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
             else "no cause found among the mapping, a braking caster, a dead band, slip, rocking and damping: "
             "the wheels do not roll as the model of design §8 assumes"
         )
-        if worst > FAIL_ID:
+        if ident.get("fit_problem"):  # design §14.2: a fit that does not hold reports no a, b as measured
+            reasons_fail.append(f"identification: {ident['fit_problem']}; cause {why}")
+        elif worst > FAIL_ID:
             reasons_fail.append(
                 f"identification differs from the formula by {100 * worst:.1f} % (> {100 * FAIL_ID:g} %); cause {why}"
             )
@@ -301,7 +303,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         elif fd["kind"] == "structural" and ident and ident["identifiable"]:
             if all(fd["detail"] not in r for r in reasons_fail):  # once, also when it is the identification's cause
                 reasons_fail.append(f"structural: {fd['detail']}")
-        elif fd["kind"] in ("braking_caster", "rocking", "slip", "dead_band") or (
+        elif fd["kind"] in ("braking_caster", "caster_resistance", "rocking", "slip", "dead_band") or (
             fd["kind"] == "damping" and min(t for t in fd["time_constant_s"] if t is not None) < 5.0
         ):
             msg = f"{fd['kind'].replace('_', ' ')}: {fd['detail']}"
