@@ -554,7 +554,7 @@ def caster_finding(
         gaps = [identified[j] / formula[j] - 1] + [
             steps[s][j] / formula[j] - 1 if steps[s][j] is not None else None for s in CASTER_STEPS
         ]
-        if any(g is None for g in gaps) or abs(gaps[0]) <= CASTER_CF_DEV:
+        if any(g is None or not math.isfinite(g) for g in gaps) or abs(gaps[0]) <= CASTER_CF_DEV:
             continue
         share = (gaps[0] - gaps[-1]) / gaps[0]
         if share <= CASTER_CF_SHARE:
