@@ -110,7 +110,8 @@ def test_a_chassis_edge_dragging_on_the_floor_is_a_braking_contact_and_no_negati
     geom needs, 16 N on average while driving; z 0.152: 30 N at rest). identify names the chassis
     as a braking contact (at rest or while driving), reports no negative dead band (the fits' intercepts: -15.6 and
     -5.3 N·m) and says the drive fit does not hold (residual 86 %, 9 % of the torque term; the turn's 1 %); robot
-    check fails with the braking contact as the cause and gives no "differs by" percentage for a."""
+    check fails with the braking contact as the cause and gives no "differs by" percentage for a. The chassis
+    also bounces on that edge (peaks of 1.4 kN and 0.3 kN): the rocking finding names what it strikes."""
     p = tmp_path / "dragging.urdf"
     p.write_text(FREIGHT_LIKE.format(z=z))
     rep = identify(str(p))
@@ -127,6 +128,9 @@ def test_a_chassis_edge_dragging_on_the_floor_is_a_braking_contact_and_no_negati
     assert rep["fit_holds"] == {"a": False, "b": True}
     assert rep["fit_residual"]["a"] > FIT_RESIDUAL_MAX > 2 * rep["fit_residual"]["b"]
     assert "the identified a is not the robot's" in rep["fit_problem"]
+    rock = next(f for f in rep["findings"] if f["kind"] == "rocking")  # it bounces on that edge: said where
+    assert [c["body"] for c in rock["strikes"]] == ["base_link"] and rock["strikes"][0]["peak_n"] > 100.0
+    assert "from the formula" not in rock["detail"]  # the fit of a does not hold: no percentage for it
     chk = check(str(p))
     assert chk["verdict"] == "fail" and chk["cause"]["kind"] == "braking_caster"
     assert not any("differs from the formula" in r for r in chk["reasons"]), chk["reasons"]

@@ -474,6 +474,13 @@ def identify(
     )
     rock, transient_deg, slip = fitted["rock"], fitted["transient_deg"], fitted["slip"]
     drag, db, com_gap = fitted["drag"], fitted["db"], fitted["com_gap"]
+    struck = [c for c in drive[0]["dragging"] if c["peak_n"] > CASTER_LOAD * weight]
+    for fd in [x for x in findings if x["kind"] == "rocking"][:1] if struck else []:  # design §14.2: on what
+        fd["detail"] += "; it strikes the floor with " + ", ".join(
+            f"'{c['geom']}' (body '{c['body']}', up to {c['peak_n']:.3g} N, {c['load_n']:.3g} N on average)"
+            for c in struck
+        )
+        fd["strikes"] = [{k: c[k] for k in ("geom", "body", "load_n", "peak_n")} for c in struck]
     if caster_cf is not None:
         findings.append(caster_cf)
         # a drag the wheel joints do not have, in a test the casters account for, is theirs: not said as damping

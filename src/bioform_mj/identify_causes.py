@@ -368,8 +368,6 @@ def fit_findings(
             )
         )
     braking = any(x["kind"] == "braking_caster" for x in findings)
-    if why_not and braking:
-        next(x for x in findings if x["kind"] == "braking_caster")["detail"] += why_not
     db_seen = ok and max(db[0], db[1]) > DEADBAND_FINDING * 2 * torque
     # a rocking chassis moves the fit's intercept too: an intercept neither the frictionloss nor a
     # braking geom explains is then said as part of the rocking, not as a dead band
@@ -403,8 +401,7 @@ def fit_findings(
                     if holds[0]
                     else ""
                 )
-                + (f"; the fit reads it as a dead band of {max(db):.3g} N·m" if db_rocking else "")
-                + (why_not if not braking else ""),
+                + (f"; the fit reads it as a dead band of {max(db):.3g} N·m" if db_rocking else ""),
                 transient_deg=transient_deg,
                 a_com=a_com,
                 **rock,
