@@ -133,5 +133,22 @@ def test_a_chassis_edge_dragging_on_the_floor_is_a_braking_contact_and_no_negati
     assert "from the formula" not in rock["detail"]  # the fit of a does not hold: no percentage for it
     chk = check(str(p))
     assert chk["verdict"] == "fail" and chk["cause"]["kind"] == "braking_caster"
+    assert chk["a_identified"] is None and chk["b_identified"] == rep["identified"]["b"]  # a: no measurement
     assert not any("differs from the formula" in r for r in chk["reasons"]), chk["reasons"]
     assert any(r.startswith("identification: the fit of υ̇ = a τ_a") for r in chk["reasons"]), chk["reasons"]
+
+
+def test_bioform_identify_warns_where_a_fit_does_not_hold(tmp_path, capsys):
+    """``bioform identify`` on the dragging base: the JSON has ``fit_problem`` and stderr one ``warning:`` line
+    saying the drive fit does not hold (exit 0: it identified, and says what its a is not)."""
+    import json
+
+    from bioform_mj.cli import main
+
+    p = tmp_path / "dragging.urdf"
+    p.write_text(FREIGHT_LIKE.format(z=0.150))
+    assert main(["identify", str(p)]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["fit_holds"] == {"a": False, "b": True}
+    warns = [ln for ln in err.splitlines() if ln.startswith("warning: the fit of υ̇ = a τ_a")]
+    assert len(warns) == 1, err

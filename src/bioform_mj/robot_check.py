@@ -269,8 +269,10 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         findings.insert(0, {"kind": "structural", "detail": skid})
         if not (ident and ident["identifiable"]):  # else said below, as the identification's cause
             reasons_fail.append(skid)
-    a_id = ident["identified"]["a"] if ident else None
-    b_id = ident["identified"]["b"] if ident else None
+    # design §14.2: an identified value whose fit does not hold is not reported as the robot's
+    holds = (ident or {}).get("fit_holds") or {}
+    a_id = ident["identified"]["a"] if ident and holds.get("a", True) else None
+    b_id = ident["identified"]["b"] if ident and holds.get("b", True) else None
     if ident and not ident["identifiable"]:
         c = cause_of(findings)
         reasons_fail.append(
