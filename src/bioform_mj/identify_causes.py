@@ -300,6 +300,15 @@ def rest_findings(
     return findings
 
 
+def fit_holds(a: float, c0: float, residual: float, torque: float) -> bool:
+    """Whether a fit of ``υ̇ = a τ + c₀ + β υ`` holds (design §14.2): ``a`` finite and > 0, the intercept as a
+    torque ``−c₀/a`` no push at zero torque (≥ −:data:`DEADBAND_FINDING` of ``2 torque``, the top τ_a, N·m),
+    the relative ``residual`` (:func:`~bioform_mj.identify_fit.fit_levels`) at most :data:`FIT_RESIDUAL_MAX`."""
+    if not (math.isfinite(a) and a > 0):
+        return False
+    return -c0 / a >= -DEADBAND_FINDING * 2 * torque and residual <= FIT_RESIDUAL_MAX
+
+
 def fit_findings(
     findings: list[dict[str, Any]],
     *,
@@ -337,7 +346,7 @@ def fit_findings(
     db = [max(x, 0.0) if x is not None else None for x in intercept]
     residual = [fits.get("res_a", 0.0), fits.get("res_b", 0.0)]
     tol = DEADBAND_FINDING * 2 * torque
-    holds = [ok and intercept[j] >= -tol and residual[j] <= FIT_RESIDUAL_MAX for j in range(2)]
+    holds = [ok and fit_holds(a, c, residual[j], torque) for j, (a, c) in enumerate(((a_id, ca), (b_id, cb)))]
     why_not = "".join(
         f"; the fit of υ̇ = {w} τ_{w} + … does not hold ("
         + ", ".join(
@@ -456,6 +465,14 @@ def identify_notes(ident: dict | None) -> list[str]:
             f"angles turns them round first, against a swivel damping of up to "
             f"{max(r['damping_Nms_per_rad'] for r in res):g} N·m·s/rad and frictionloss of up to "
             f"{max(r['frictionloss_Nm'] for r in res):g} N·m"
+        )
+    if fr := test.get("fit_rerun"):
+        notes.append(
+            f"drive tests rerun at {fr['torque_Nm']:.3g} N·m: at {fr['first_torque_Nm']:.3g} N·m their fit did not "
+            f"hold (residual {fr['first_fit_residual']:.0%} of the torque term"
+            + (f", intercept {fr['first_intercept_Nm']:.3g} N·m" if fr["first_intercept_Nm"] is not None else "")
+            + "; design §14.2)"
+            + ("" if fr["kept"] else "; nor at the lower torque: the first tests stand")
         )
     if dr := test.get("drive_rerun"):
         notes.append(
