@@ -130,7 +130,8 @@ def test_a_chassis_edge_dragging_on_the_floor_is_a_braking_contact_and_no_negati
     9 % of its torque term, intercepts -15.6 / -5.3 N·m: a push at zero torque, which was printed as a dead
     band; a -69 % / -86 %), so the drive tests rerun at a third of the torque, where the fit holds (residual
     0.5 % / 0.2 %) and a is within 5 % of the independent reference's (measured a -7.8 % / -6.9 % from the
-    formula, the reference -4.8 % / -5.1 %). No dead band is negative; robot check names the chassis."""
+    formula, the reference -4.8 % / -5.1 %). No dead band is negative; robot check fails (the robot does not
+    follow the model at the test torque) with that a and the chassis as the cause."""
     p = tmp_path / "dragging.urdf"
     p.write_text(FREIGHT_LIKE.format(z=z))
     rep = identify(str(p))
@@ -148,8 +149,10 @@ def test_a_chassis_edge_dragging_on_the_floor_is_a_braking_contact_and_no_negati
     for f in rep["findings"]:
         assert all(x >= 0 for x in f.get("deadband_torque_Nm", []) or []), f
         assert "dead band of -" not in f["detail"], f
-    chk = check(str(p))
-    assert any("the chassis 'base_link' drags on the floor" in r for r in chk["reasons"]), chk["reasons"]
+    chk = check(str(p))  # fail: at the test torque the robot does not follow the model; the cause, the chassis
+    assert chk["verdict"] == "fail" and chk["cause"]["kind"] == "braking_caster" and chk["cause"]["body"] == "base_link"
+    assert chk["reasons"][0].startswith("identification: at 8.85 N·m (τ_a) the drive fit does not hold"), chk["reasons"]
+    assert f"a is {rep['relative_error']['a']:+.1%}" in chk["reasons"][0]
     assert any("fit did not hold" in n for n in chk["notes"]), chk["notes"]
 
 

@@ -289,8 +289,16 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
             else "no cause found among the mapping, a braking caster, a dead band, slip, rocking and damping: "
             "the wheels do not roll as the model of design §8 assumes"
         )
+        fr = ident["test"].get("fit_rerun") or {}
         if ident.get("fit_problem"):  # design §14.2: a fit that does not hold reports no a, b as measured
             reasons_fail.append(f"identification: {ident['fit_problem']}; cause {why}")
+        elif fr.get("kept"):  # design §14.2: measured lower, but at the test torque the robot is not the model
+            reasons_fail.append(
+                f"identification: at {2 * fr['first_torque_Nm']:.3g} N·m (τ_a) the drive fit does not hold (residual "
+                f"{fr['first_fit_residual']:.0%} of its torque term): the robot does not follow υ̇ = a τ_a there; at "
+                f"{2 * fr['torque_Nm']:.3g} N·m a is {ident['relative_error']['a']:+.1%}, b "
+                f"{ident['relative_error']['b']:+.1%} from the formula; cause {why}"
+            )
         elif worst > FAIL_ID:
             reasons_fail.append(
                 f"identification differs from the formula by {100 * worst:.1f} % (> {100 * FAIL_ID:g} %); cause {why}"
