@@ -468,8 +468,8 @@ def identify_notes(ident: dict | None) -> list[str]:
         )
     if fr := test.get("fit_rerun"):
         notes.append(
-            f"drive tests rerun at {fr['torque_Nm']:.3g} N·m: at {fr['first_torque_Nm']:.3g} N·m their fit did not "
-            f"hold (residual {fr['first_fit_residual']:.0%} of the torque term"
+            f"drive tests rerun at {fr['torque_Nm']:.3g} N·m per wheel: at {fr['first_torque_Nm']:.3g} N·m their fit "
+            f"did not hold (residual {fr['first_fit_residual']:.0%} of the torque term"
             + (f", intercept {fr['first_intercept_Nm']:.3g} N·m" if fr["first_intercept_Nm"] is not None else "")
             + "; design §14.2)"
             + ("" if fr["kept"] else "; nor at the lower torque: the first tests stand")
