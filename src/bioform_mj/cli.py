@@ -760,6 +760,8 @@ def _identify(args: argparse.Namespace) -> int:
 
         write_text(args.out, text + "\n")
     print(text)
+    if result.get("fit_problem"):  # design §14.3: its identified value is a reading of the test, said
+        print(f"warning: {result['fit_problem']}", file=sys.stderr)
     if not result.get("identifiable", True):  # a named cause, never an internal error (design §14)
         from .robot_check import EXIT_FAIL, cause_of
 

@@ -20,13 +20,40 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import asdict
-from typing import Any
+from functools import partial
 
 import mujoco
 import numpy as np
 
-from bioform_mj.contacts import align_swivels, rolling_bodies, swivel_casters
-from bioform_mj.robot_layout import subtree
+from bioform_mj.contacts import align_swivels, swivel_casters
+from bioform_mj.identify_causes import (  # re-exported: cause attribution lives by concern (design §14)
+    CASTER_CF_DEV,
+    CASTER_LOAD,
+    CASTER_MU,
+    CAUSE_ORDER,
+    DEADBAND_FINDING,
+    DRAG_FINDING,
+    MAPPING_TOL,
+    RADIUS_FACTOR,
+    ROCK_DEG,
+    ROCK_GAP,
+    SELF_CONTACT_LOAD,
+    SLIP_FINDING,
+    WHEEL_LOAD_MIN,
+    _finding,
+    caster_counterfactual,
+    caster_finding,
+    caster_parts,
+    check_radius,
+    fit_findings,
+    fit_holds,
+    floor_contacts,
+    identify_notes,
+    moving_brakes,
+    rest_findings,
+    self_contacts,
+)
+from bioform_mj.identify_fit import fit_levels
 from bioform_mj.robot_params import (  # re-exported: the ground truth lives beside the scene (STYLE item 8)
     COM_TOLERANCE_M,
     RobotParams,
@@ -50,24 +77,28 @@ __all__ = [
     "self_contacts",
     "check_radius",
     "CAUSE_ORDER",
+    "CASTER_LOAD",
+    "CASTER_MU",
+    "DEADBAND_FINDING",
+    "DRAG_FINDING",
+    "MAPPING_TOL",
+    "RADIUS_FACTOR",
+    "ROCK_DEG",
+    "ROCK_GAP",
+    "SELF_CONTACT_LOAD",
+    "SLIP_FINDING",
+    "WHEEL_LOAD_MIN",
 ]
 
+#: a drive fit that does not hold is rerun at this share of its torque (design §14.2)
+FIT_RERUN_SCALE = 1 / 3
+#: the tests look for non-wheel geoms dragging on the floor every this many steps (design §14.2)
+DRAG_SAMPLE = 10
 #: the turn test of :func:`identify` ends below this yaw rate, rad/s
 OMEGA_ID = 2.0
 #: :func:`identify` steps at most ``DRAG_STEP / k`` s for a wheel drag rate ``k`` (1/s), so that
 #: MuJoCo integrates the damping finely; robot check warns when the model's own step is coarser
 DRAG_STEP = 0.02
-
-
-def _yaw_and_rates(qpos: np.ndarray, qvel: np.ndarray) -> tuple[float, float, float, float]:
-    """Heading θ, forward speed υ, lateral speed, yaw rate ω from a free joint's qpos/qvel."""
-    w, x, y, z = qpos[3:7]
-    theta = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    c, s = np.cos(theta), np.sin(theta)
-    v, v_lat = qvel[0] * c + qvel[1] * s, -qvel[0] * s + qvel[1] * c
-    # world-z component of the body-frame angular velocity (third row of R)
-    omega = (2 * (x * z - w * y)) * qvel[3] + (2 * (y * z + w * x)) * qvel[4] + (1 - 2 * (x * x + y * y)) * qvel[5]
-    return float(theta), float(v), float(v_lat), float(omega)
 
 
 #: the identification's drive and turn tests last this long from rest, s (design §14)
@@ -94,159 +125,6 @@ TURN_DURATION = 0.2
 TURN_SKIP = 0.1
 #: torque levels of each test, as fractions between the lowest usable torque and the top one
 ID_LEVELS = (1.0, 0.5, 0.0)
-#: a finding of :func:`identify` (design §14): drag when it changes the speed by this fraction over a test
-DRAG_FINDING = 0.02
-#: ... a dead band above this fraction of the top test torque
-DEADBAND_FINDING = 0.02
-#: ... rocking: the chassis pitch oscillating by more than this (deg, half peak-to-peak) after the transient
-ROCK_DEG = 0.5
-#: ... or the centre of mass's ``a`` this far (relative) from the axle midpoint's while the chassis pitched
-ROCK_GAP = 0.03
-#: ... slip: the wheels' rim speed this far (relative) from the axle's speed at the end of a drive test
-SLIP_FINDING = 0.05
-#: ... a braking geom: a non-wheel geom on the floor at rest with more load than this share of the weight
-#: and more friction than :data:`CASTER_MU`
-CASTER_LOAD = 0.01
-CASTER_MU = 0.01
-#: ... structural: two of the robot's own bodies pressing on each other at rest with more than this share
-#: of its weight
-SELF_CONTACT_LOAD = 0.01
-#: ... structural: a wheel carrying less than this share of the weight at rest
-WHEEL_LOAD_MIN = 0.02
-#: a mapped wheel radius this many times off the wheel geoms' (or outside [1e-4, 1e2] m) is refused (exit 2)
-RADIUS_FACTOR = 10.0
-
-
-#: the kinds of :func:`identify`'s findings, the likeliest cause of a wrong identification first (design §14)
-CAUSE_ORDER = ("structural", "mapping", "braking_caster", "dead_band", "slip", "rocking", "damping")
-#: a mapped wheel radius or half track this far (relative) from the model's geometry is a ``mapping`` finding
-MAPPING_TOL = 0.05
-
-
-def _finding(kind: str, detail: str, **numbers: Any) -> dict[str, Any]:
-    """One cause :func:`identify` names: ``{"kind", "detail", ...numbers}`` (design §14)."""
-    return {"kind": kind, "detail": detail, **numbers}
-
-
-def floor_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> list[dict[str, Any]]:
-    """Robot ``i``'s geoms touching the floor now (after the robot settled): ``body``, ``geom``,
-    ``role`` (``wheel``; ``rolling``: below a passive caster joint that rolls, not a swivel alone; or
-    ``other``), ``load_n`` (normal force, N), ``friction`` (the contact's sliding μ as simulated),
-    ``condim``. A minimal list for the verdict's braking-caster cause.
-    ``data``: another state of the plant's model (a settled copy) instead of the plant's own."""
-    m, d = plant.model, (plant.data if data is None else data)
-    lay = plant.layouts[i]
-    prefix = lay.base[: lay.base.index("/") + 1] if "/" in lay.base else ""
-    inside = set(subtree(m, m.body(lay.base).id).tolist())
-    wheels = {m.geom(g).id for g in lay.wheel_geoms}
-    rolling = rolling_bodies(m, lay)  # below a passive caster joint that rolls (design §13, §14.1)
-    out: dict[int, dict[str, Any]] = {}
-    f = np.zeros(6)
-    for c in range(d.ncon):
-        con = d.contact[c]
-        g1, g2 = int(con.geom1), int(con.geom2)
-        b1, b2 = int(m.geom_bodyid[g1]), int(m.geom_bodyid[g2])
-        if b1 == 0 and b2 in inside:
-            g = g2
-        elif b2 == 0 and b1 in inside:
-            g = g1
-        else:
-            continue
-        mujoco.mj_contactForce(m, d, c, f)
-        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"#{g}"
-        body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.geom_bodyid[g])) or ""
-        e = out.setdefault(
-            g,
-            {
-                "body": body[len(prefix) :] if body.startswith(prefix) else body,
-                "geom": name[len(prefix) :] if name.startswith(prefix) else name,
-                "role": "wheel" if g in wheels else ("rolling" if int(m.geom_bodyid[g]) in rolling else "other"),
-                "load_n": 0.0,
-                "friction": float(con.friction[0]) if int(con.dim) > 1 else 0.0,
-                "condim": int(con.dim),
-            },
-        )
-        e["load_n"] += float(f[0])
-    return list(out.values())
-
-
-def _given(lay: Any, what: str, says: str) -> float | None:
-    """The model's own value of a mapped size that differs from it (``scene.layout_of``'s note), or None."""
-    for n in lay.notes:
-        if n.startswith(f"{what} ") and f"{says} say" in n:
-            return float(n.rsplit("say ", 1)[1].split()[0])
-    return None
-
-
-def self_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> list[dict[str, Any]]:
-    """Pairs of robot ``i``'s own bodies in contact now: ``body1``, ``body2``, ``geom1``, ``geom2``,
-    ``force_n`` (normal force, N). MuJoCo collides every pair but parent and child; URDF/Gazebo
-    collide none of one model's links by default, so a published description may overlap at rest."""
-    m, d = plant.model, (plant.data if data is None else data)
-    lay = plant.layouts[i]
-    prefix = lay.base[: lay.base.index("/") + 1] if "/" in lay.base else ""
-    inside = set(subtree(m, m.body(lay.base).id).tolist())
-    out: dict[tuple[int, int], dict[str, Any]] = {}
-    f = np.zeros(6)
-
-    def name(kind: Any, k: int) -> str:
-        n = mujoco.mj_id2name(m, kind, k) or f"#{k}"
-        return n[len(prefix) :] if n.startswith(prefix) else n
-
-    for c in range(d.ncon):
-        con = d.contact[c]
-        g1, g2 = int(con.geom1), int(con.geom2)
-        b1, b2 = int(m.geom_bodyid[g1]), int(m.geom_bodyid[g2])
-        if b1 not in inside or b2 not in inside:
-            continue
-        mujoco.mj_contactForce(m, d, c, f)
-        e = out.setdefault(
-            (g1, g2),
-            {
-                "body1": name(mujoco.mjtObj.mjOBJ_BODY, b1),
-                "body2": name(mujoco.mjtObj.mjOBJ_BODY, b2),
-                "geom1": name(mujoco.mjtObj.mjOBJ_GEOM, g1),
-                "geom2": name(mujoco.mjtObj.mjOBJ_GEOM, g2),
-                "force_n": 0.0,
-            },
-        )
-        e["force_n"] += float(f[0])
-    return list(out.values())
-
-
-def check_radius(plant: Any) -> None:
-    """Refuse (exit 2) a mapped wheel radius or half track that no identification can use: more
-    than :data:`RADIUS_FACTOR` off the model's geometry, or outside [1e-4, 100] m (design §14)."""
-    from bioform_mj.errors import InputError
-
-    lay = plant.layouts[0]
-    for what, val, says, hint in (
-        ("wheel_radius", lay.wheel_radius, "collision geoms", "the wheel geoms'"),
-        ("half_track", lay.half_track, "joint anchors", "the wheel joint anchors'"),
-    ):
-        geo = _given(lay, what, says)
-        if not (math.isfinite(val) and 1e-4 <= val <= 1e2) or (
-            geo and not 1 / RADIUS_FACTOR <= val / geo <= RADIUS_FACTOR
-        ):
-            raise InputError(
-                f"{lay.file}: {what.replace('_', ' ')} {val:g} m"
-                + (f" is more than {RADIUS_FACTOR:g}x off {hint} {geo:.4g} m" if geo else " is outside [1e-4, 100] m")
-                + f": no torque level identifies a robot with it (give the {what.replace('_', ' ')} of the "
-                "wheels that touch the floor)"
-            )
-
-
-def _rocking(pitch: np.ndarray, dt: float) -> dict[str, float]:
-    """Half peak-to-peak (deg) and frequency (Hz, from zero crossings) of a pitch series (rad)
-    after removing its linear trend."""
-    if len(pitch) < 4:
-        return {"amplitude_deg": 0.0, "frequency_hz": 0.0}
-    t = np.arange(len(pitch)) * dt
-    res = pitch - np.polyval(np.polyfit(t, pitch, 1), t)
-    amp = float(np.degrees(0.5 * (res.max() - res.min())))
-    s = np.sign(res[np.abs(res) > 0.1 * np.abs(res).max()]) if amp > 0 else np.zeros(0)
-    crossings = int(np.count_nonzero(np.diff(s))) if len(s) > 1 else 0
-    return {"amplitude_deg": amp, "frequency_hz": crossings / (2 * t[-1]) if t[-1] > 0 else 0.0}
 
 
 def identify(
@@ -305,75 +183,13 @@ def identify(
     params, lay = plant.params[0], plant.layouts[0]
     model, data = plant.model, plant.data
     dt = float(model.opt.timestep)
-    findings: list[dict[str, Any]] = []
     # at rest: what touches the floor, with what load (design §14: structural and braking-geom causes)
     for k in range(max(1, round(settle / dt))):
         plant.step(np.zeros((1, 2)), k * dt)
     weight = params.mass * 9.81
     loads = plant.wheel_loads()[0]
     contacts = floor_contacts(plant)
-    selfc = [c for c in self_contacts(plant) if c["force_n"] > SELF_CONTACT_LOAD * weight]
-    if selfc:
-        findings.append(
-            _finding(
-                "structural",
-                "the robot's own bodies press on each other at rest: "
-                + ", ".join(f"'{c['body1']}'/'{c['body2']}' {c['force_n']:.3g} N" for c in selfc)
-                + " (internal forces that brake or lock parts; exclude the pairs, as URDF/Gazebo do by default)",
-                self_contacts=selfc,
-            )
-        )
-    for c in contacts:
-        if c["role"] == "other" and c["load_n"] > CASTER_LOAD * weight and c["friction"] > CASTER_MU:
-            brake = c["friction"] * c["load_n"]
-            findings.append(
-                _finding(
-                    "braking_caster",
-                    f"'{c['geom']}' (body '{c['body']}') is not a wheel, carries {c['load_n']:.3g} N "
-                    f"({c['load_n'] / weight:.0%} of the weight) and slides with friction {c['friction']:g}: "
-                    f"up to {brake:.3g} N of braking, {brake * params.wheel_radius:.3g} N·m of wheel torque lost",
-                    geom=c["geom"],
-                    body=c["body"],
-                    load_n=c["load_n"],
-                    friction=c["friction"],
-                    braking_force_n=brake,
-                )
-            )
-    if float(loads.min()) < WHEEL_LOAD_MIN * weight:
-        findings.append(
-            _finding(
-                "structural",
-                f"the wheels do not stand on the floor: they carry {loads[0]:.3g} N (left) and {loads[1]:.3g} N "
-                f"(right) of the robot's {weight:.3g} N at rest"
-                + (
-                    "; it stands on " + ", ".join(f"'{c['geom']}'" for c in contacts if c["role"] != "wheel")
-                    if any(c["role"] != "wheel" for c in contacts)
-                    else ""
-                ),
-                wheel_load_n=loads.tolist(),
-            )
-        )
-        geo_r = _given(lay, "wheel_radius", "collision geoms")
-        if geo_r:  # a mapped radius the geoms disagree with: the contact proxy has the mapped size
-            findings[-1]["detail"] += (
-                f" (the mapped wheel radius {lay.wheel_radius:g} m is not the wheel geoms' {geo_r:.4g} m)"
-            )
-    for what, says, val in (
-        ("wheel_radius", "collision geoms", lay.wheel_radius),
-        ("half_track", "joint anchors", lay.half_track),
-    ):
-        geo = _given(lay, what, says)
-        if geo and abs(val / geo - 1) > MAPPING_TOL:
-            findings.append(
-                _finding(
-                    "mapping",
-                    f"the mapped {what.replace('_', ' ')} {val:g} m is {val / geo - 1:+.0%} off the model's {says}' "
-                    f"{geo:.4g} m: the formula uses the mapped value, the physics the model's",
-                    what=what,
-                    mapped_m=val,
-                    model_m=geo,
-                )
-            )
+    findings = rest_findings(plant, params, lay, weight, loads, contacts)
     # μ N r / f: the least-loaded wheel's own load, and only the share f of the torque that passes the
     # wheel's rotor pushes on the floor (design §13; a rotor of 10 m r² passes 5 %)
     traction = params.traction_torque(plant._wheel_friction(0), float(loads.min()))
@@ -468,6 +284,7 @@ def identify(
     base_id = model.body(lay.base).id
     wdof, wsign, r = plant._wheel_dof[0], plant._wheel_sign[0], params.wheel_radius
     swivels = swivel_casters(model, lay)
+    fit = partial(fit_levels, dt=dt, implicit_damping=implicit_damping, explicit=explicit, rate_form=rate_form)
 
     def run(tau_l: float, tau_r: float, n_run: int) -> dict:
         mujoco.mj_resetData(model, data)  # not plant.reset(): that would remove the payload
@@ -501,9 +318,17 @@ def identify(
             rim[k] = float(np.mean(data.qvel[wdof] * wsign) * r)
 
         sample(0)
+        dragging: dict[str, dict] = {}  # design §14.2: non-wheel geoms on the floor while it runs: mean, peak load
+        n_samples = n_run // DRAG_SAMPLE
         for k in range(n_run):
             plant.step(tau, k * dt)
             sample(k + 1)
+            if k % DRAG_SAMPLE == DRAG_SAMPLE - 1:
+                for c in floor_contacts(plant):
+                    if c["role"] == "other":
+                        e = dragging.setdefault(c["geom"], {**c, "load_n": 0.0, "peak_n": 0.0})
+                        e["load_n"] += c["load_n"] / n_samples
+                        e["peak_n"] = max(e["peak_n"], c["load_n"])
         pose, vel = plant.observe()
         d = pose[0, :2] - pose0[0, :2]
         th0 = pose0[0, 2]
@@ -513,49 +338,11 @@ def identify(
             pitch=pitch,
             rim=rim,
             heading=np.unwrap(heading),
+            dragging=list(dragging.values()),
             lateral_m=float(-np.sin(th0) * d[0] + np.cos(th0) * d[1]),
             warnings=sum(int(w.number) for w in data.warning),
             heading_change_rad=float(np.angle(np.exp(1j * (pose[0, 2] - th0)))),
         )
-
-    def fit(
-        runs: list[dict], taus: list[float], key: str, col: int | None, drag: bool, k0: int
-    ) -> tuple[float, float, float]:
-        """(slope a, intercept c₀, drag β) of ``υ̇ = a τ + c₀ + β υ`` over all levels from ``t₀``, fitted
-        on the speed integrated twice (a position-like sum), each level with its own ``υ(t₀)``: a
-        rocking chassis adds a bounded wobble to that sum, where it adds its full swing to υ̇. Discrete
-        and exact for the integrator: with ``υ*`` the speed the drag acts on (implicit damping: the
-        new one, explicit Euler: the old one, RK4: the midpoint; damping 30 on the menagerie Stretch 3
-        has k dt ≈ 0.5 at its own step), ``υ_k − υ_0 = α k dt + β S_k``, ``S_k = dt Σ_{j<k} υ*_j``, so
-        ``dt Σ_{k<K} υ_k = K dt υ_0 + α dt² K(K−1)/2 + β dt Σ_{k<K} S_k``. Where the model's drag settles
-        υ within the test (``k · duration > STRONG_DRAG``: menagerie Stretch 3, k = 232 1/s) the steady
-        state carries no information on ``a`` and the fit is on the rates ``(υ_{k+1} − υ_k)/dt = α + β υ*_k``
-        instead, every step weighted alike."""
-        n = len(runs)
-        rows, rhs = [], []
-        for i_, (run_, tau) in enumerate(zip(runs, taus)):
-            y = run_[key] if col is None else run_[key][:, col]
-            y = y[k0:]
-            mids = y[1:] if implicit_damping else y[:-1] if explicit else 0.5 * (y[1:] + y[:-1])
-            S = np.concatenate([[0.0], np.cumsum(mids) * dt])  # S_k, k = 0..K
-            P = np.concatenate([[0.0], np.cumsum(y[:-1]) * dt])  # dt Σ_{k<K} υ_k
-            SS = np.concatenate([[0.0], np.cumsum(S[:-1]) * dt])
-            if rate_form:  # a drag that settles υ within a few steps: the transient is the information
-                rows.append(np.column_stack([np.full(len(mids), tau), np.ones(len(mids)), mids * drag, 0 * mids]))
-                rhs.append(np.diff(y) / dt)
-                continue
-            K = np.arange(len(y))
-            quad = dt * dt * K * (K - 1) / 2
-            v0 = np.zeros((len(y), n))
-            v0[:, i_] = K * dt
-            rows.append(np.column_stack([tau * quad, quad, SS if drag else 0 * SS, v0]))
-            rhs.append(P)
-        A, b = np.vstack(rows), np.concatenate(rhs)
-        scale = np.abs(A).max(axis=0)
-        scale[scale == 0] = 1.0
-        sol, *_ = np.linalg.lstsq(A / scale, b, rcond=None)
-        a_, c0, beta = (sol / scale)[:3]
-        return float(a_), float(c0), float(beta)
 
     # turn torque: ω at the end at most OMEGA_ID rad/s, so the υ·ω coupling of a centre of mass
     # off the axle (∝ ω²) stays small
@@ -615,99 +402,114 @@ def identify(
             torque, levels = lower, levels_of(lower)
             drive, k0, n_run, settle_s = drive_tests(levels)
     turn = [run(-T, T, n_turn) for T in turn_levels]
+    # design §14.2: a geom that is no wheel and no caster and drags on the floor while the robot drives (a chassis
+    # edge the drive torque pitches onto) brakes it, whether or not it carried load at rest
+    findings += moving_brakes(findings, drive[0]["dragging"], weight, params.wheel_radius, lay.base, 2 * levels[0])
     tau_a = [2 * T for T in levels]  # τ_a = τ_L + τ_R
     tau_b = [2 * T for T in turn_levels]  # τ_b = τ_R − τ_L (design §5 sign fix)
     # the drag term only where the model has a drag (wheel damping, back-EMF): free, it reads the
     # slow pitch settling of a tall chassis as a drag (design §14); without, a drag the formula does
     # not know shows in the free fit of the centre of mass (drag_rate_per_s.free_fit)
     k_form = params.unmodelled(0.0, 0.0)["drag_rate_per_s"]
-    a_id, ca, be = fit(drive, tau_a, "z", 0, k_form[0] > 0, k0)
+    a_id, ca, be, res_a = fit(drive, tau_a, "z", 0, k_form[0] > 0, k0, residual=True)
+    heading_torque, fit_rerun = torque, None
+    # design §14.2: a drive fit that does not hold (a chassis edge the torque pitches onto, a chassis bouncing on
+    # it) reruns once at FIT_RERUN_SCALE of the torque, every level clear of the dead band; kept where it holds
+    if not fit_holds(a_id, ca, res_a, torque) and (lower := max(torque * FIT_RERUN_SCALE, 3 * f)) < 0.9 * torque:
+        levels2 = levels_of(lower)
+        drive2, k02, n_run2, settle2 = drive_tests(levels2)
+        tau_a2 = [2 * T for T in levels2]
+        a2, ca2, be2, res2 = fit(drive2, tau_a2, "z", 0, k_form[0] > 0, k02, residual=True)
+        fit_rerun = {
+            "torque_Nm": lower,
+            "first_torque_Nm": torque,
+            "first_a": a_id,
+            "first_fit_residual": res_a,
+            "first_intercept_Nm": -ca / a_id if a_id else None,
+            "kept": fit_holds(a2, ca2, res2, lower),
+        }
+        if fit_rerun["kept"]:
+            torque, levels, drive, k0, n_run, settle_s, tau_a = lower, levels2, drive2, k02, n_run2, settle2, tau_a2
+            a_id, ca, be, res_a = a2, ca2, be2, res2
     k0_turn = 0 if rate_form or f == 0 else min(round(TURN_SKIP / dt), n_turn - 4)
-    b_id, cb, ge = fit(turn, tau_b, "z", 1, k_form[1] > 0, k0_turn)
+    b_id, cb, ge, res_b = fit(turn, tau_b, "z", 1, k_form[1] > 0, k0_turn, residual=True)
     a_com, _, be_com = fit(drive, tau_a, "vcom", None, k_form[0] > 0, k0)
     _, _, be_free = fit(drive, tau_a, "vcom", None, True, k0)
     _, _, ge_free = fit(turn, tau_b, "z", 1, True, k0_turn)
     windows = [(n_run - k0) * dt, (n_turn - k0_turn) * dt]
     truth = params.unmodelled(0.0, 0.0)
     ok = all(math.isfinite(x) for x in (a_id, b_id)) and a_id > 0 and b_id > 0
-    rock = _rocking(drive[0]["pitch"][k0:], dt)
-    transient_deg = float(np.degrees(np.abs(drive[0]["pitch"] - drive[0]["pitch"][0]).max()))
-    v_end = float(drive[0]["z"][-1, 0])
-    rim_end = float(drive[0]["rim"][-1])
-    slip = (rim_end - v_end) / max(abs(rim_end), abs(v_end), 1e-6)
-    # the drag: fitted where the model has one, else the free fit's (a drag the formula does not know)
-    drag = [-be if k_form[0] > 0 else -be_free, -ge if k_form[1] > 0 else -ge_free]
-    rocks = rock["amplitude_deg"] > ROCK_DEG
-    db = [-ca / a_id if ok else None, -cb / b_id if ok else None]
-    tcs = [1 / k if k > 0 else None for k in drag]
-    drag_seen = [k * windows[j] > DRAG_FINDING and (k_form[j] > 0 or not rocks) for j, k in enumerate(drag)]
-    if ok and any(drag_seen):
-        findings.append(
-            _finding(
-                "damping",
-                "a viscous drag: time constant "
-                + ", ".join(f"{t:.3g} s ({w})" for t, w in zip(tcs, ("drive", "turn")) if t is not None)
-                + " (formula from the wheel joints' damping and back-EMF: "
-                + ", ".join(f"{t:.3g} s" if t else "none" for t in truth["drag_time_constant_s"])
-                + ")",
-                drag_rate_per_s=drag,
-                time_constant_s=tcs,
-            )
+    # design §14.2: a robot with casters whose a or b is off reruns its tests without what the casters resist
+    # with (their joints' damping and frictionloss, their own inertia, their scrub): the share they remove is theirs
+    casters, caster_cf = caster_parts(model, lay), None
+    gaps = (a_id / params.a_eff - 1, b_id / params.b_eff - 1) if ok else (0.0, 0.0)
+    if casters["joints"] and max(abs(g) for g in gaps) > CASTER_CF_DEV:
+
+        def measure() -> tuple[float | None, float | None]:
+            a_ = b_ = None
+            if abs(gaps[0]) > CASTER_CF_DEV:
+                drive_, k0_, _, _ = drive_tests(levels)
+                a_ = fit(drive_, tau_a, "z", 0, k_form[0] > 0, k0_)[0]
+            if abs(gaps[1]) > CASTER_CF_DEV:
+                b_ = fit([run(-T, T, n_turn) for T in turn_levels], tau_b, "z", 1, k_form[1] > 0, k0_turn)[0]
+            return a_, b_
+
+        steps = caster_counterfactual(model, casters, measure)
+        caster_cf = caster_finding(
+            model,
+            casters,
+            (params.a_eff, params.b_eff),
+            (a_id, b_id),
+            steps,
+            lay.base[: lay.base.index("/") + 1] if "/" in lay.base else "",
+            (k_form[0] > 0, k_form[1] > 0),
         )
-    braking = any(x["kind"] == "braking_caster" for x in findings)
-    db_seen = ok and max(db[0], db[1]) > DEADBAND_FINDING * 2 * torque
-    # a rocking chassis moves the fit's intercept too: an intercept neither the frictionloss nor a
-    # braking geom explains is then said as part of the rocking, not as a dead band
-    db_rocking = db_seen and rocks and f == 0 and not braking
-    if db_seen and not db_rocking:
-        findings.append(
-            _finding(
-                "dead_band",
-                f"a dead band of {db[0]:.3g} N·m on τ_a, {db[1]:.3g} N·m on τ_b (torque that moves nothing; "
-                f"formula from the wheel frictionloss: {2 * f:.3g} N·m"
-                + (", the rest from the braking geoms" if braking else "")
-                + ")",
-                deadband_torque_Nm=db,
-            )
+        if caster_cf is not None:
+            caster_cf["steps"] = {k: list(v) for k, v in steps.items()}
+    fitted = fit_findings(
+        findings,
+        params=params,
+        drive=drive,
+        k0=k0,
+        dt=dt,
+        ok=ok,
+        k_form=k_form,
+        fits=dict(
+            a_id=a_id,
+            b_id=b_id,
+            a_com=a_com,
+            ca=ca,
+            cb=cb,
+            be=be,
+            ge=ge,
+            be_free=be_free,
+            ge_free=ge_free,
+            res_a=res_a,
+            res_b=res_b,
+        ),
+        windows=windows,
+        truth=truth,
+        torque=torque,
+        f=f,
+        settle_s=settle_s,
+        id_skip=ID_SKIP,
+    )
+    rock, transient_deg, slip = fitted["rock"], fitted["transient_deg"], fitted["slip"]
+    drag, db, com_gap = fitted["drag"], fitted["db"], fitted["com_gap"]
+    struck = [c for c in drive[0]["dragging"] if c["peak_n"] > CASTER_LOAD * weight]
+    for fd in [x for x in findings if x["kind"] == "rocking"][:1] if struck else []:  # design §14.2: on what
+        fd["detail"] += "; it strikes the floor with " + ", ".join(
+            f"'{c['geom']}' (body '{c['body']}', up to {c['peak_n']:.3g} N, {c['load_n']:.3g} N on average)"
+            for c in struck
         )
-    com_gap = a_com / a_id - 1 if ok else 0.0
-    if rocks or (abs(com_gap) > ROCK_GAP and transient_deg > ROCK_DEG):
-        findings.append(
-            _finding(
-                "rocking",
-                f"the chassis rocks by ±{rock['amplitude_deg']:.2g}° at {rock['frequency_hz']:.3g} Hz after the "
-                f"start-up ({transient_deg:.2g}° at most from rest); the centre of mass identifies a "
-                f"{a_com / params.a_eff - 1:+.1%} from the formula, the axle midpoint {a_id / params.a_eff - 1:+.1%}"
-                + (f"; the fit reads it as a dead band of {db[0]:.3g} N·m" if db_rocking else ""),
-                transient_deg=transient_deg,
-                a_com=a_com,
-                **rock,
-            )
-        )
-    elif ok and k0 * dt > ID_SKIP and transient_deg > ROCK_DEG:  # rocked at start-up, settled, fitted after
-        start = _rocking(drive[0]["pitch"][: max(k0, 4)], dt)
-        findings.append(
-            _finding(
-                "rocking",
-                f"the chassis rocks at start-up (±{start['amplitude_deg']:.2g}° at {start['frequency_hz']:.3g} Hz, "
-                f"{transient_deg:.2g}° at most from rest) and settles after {settle_s:.2g} s: a, b fitted after it "
-                f"(the axle midpoint {a_id / params.a_eff - 1:+.1%}, the centre of mass "
-                f"{a_com / params.a_eff - 1:+.1%} from the formula); the start of each manoeuvre shakes it",
-                transient_deg=transient_deg,
-                settled_s=settle_s,
-                a_com=a_com,
-                **start,
-            )
-        )
-    if abs(slip) > SLIP_FINDING:
-        findings.append(
-            _finding(
-                "slip",
-                f"the wheels' rim speed {rim_end:.3g} m/s against the axle's {v_end:.3g} m/s at the end of "
-                f"the drive test ({slip:+.0%}): they do not roll on the floor",
-                slip_ratio=slip,
-            )
-        )
+        fd["strikes"] = [{k: c[k] for k in ("geom", "body", "load_n", "peak_n")} for c in struck]
+    if caster_cf is not None:
+        findings.append(caster_cf)
+        # a drag the wheel joints do not have, in a test the casters account for, is theirs: not said as damping
+        theirs = [k_form[j] == 0 and w in caster_cf for j, w in enumerate(("a", "b"))]
+        for fd in [x for x in findings if x["kind"] == "damping"]:
+            if all(theirs[j] or t is None for j, t in enumerate(fd["time_constant_s"])):
+                findings.remove(fd)
     if not ok:
         return cannot(
             f"the tests give a = {a_id:.3g}, b = {b_id:.3g}: the robot does not move forward under forward torque"
@@ -720,6 +522,13 @@ def identify(
         "identified_axle_vs_com": com_gap,
         "drag_rate_per_s": {"formula": truth["drag_rate_per_s"], "identified": drag},
         "deadband_torque_Nm": {"formula": truth["deadband_torque_Nm"], "identified": db},
+        # design §14.2: the fits' intercepts as torques (a negative one: the linear model does not hold)
+        "fit_intercept_Nm": fitted["intercept"],
+        "fit_residual": {"a": res_a, "b": res_b},
+        # design §14.2: whether the fit of each test holds (residual, intercept); where not, why (its a or b
+        # is then a reading of the test, not the robot's)
+        "fit_holds": {"a": fitted["holds"][0], "b": fitted["holds"][1]},
+        "fit_problem": fitted["why_not"] or None,
         "rocking": {**rock, "transient_deg": transient_deg, "settled_s": settle_s},
         "slip_ratio": slip,
         "findings": findings,
@@ -731,9 +540,11 @@ def identify(
             # they turned by more than DRIVE_HEADING_MAX and reran at ``torque_Nm``
             "drive_rerun": (
                 {"first_torque_Nm": first_torque, "first_heading_change_rad": turned}
-                if torque != first_torque
+                if heading_torque != first_torque
                 else None
             ),
+            # design §14.2: the drive tests rerun at a lower torque where their first fit did not hold
+            "fit_rerun": fit_rerun,
             "caster_swivels": [s_.joint.split("/", 1)[-1] for s_ in swivels],
             # what resists turning them round (a start from other angles, a change of direction)
             "caster_swivel_resistance": [x.resistance() for x in swivels if x.damping or x.frictionloss],
@@ -753,28 +564,6 @@ def identify(
             "mujoco_warnings": sum(x["warnings"] for x in drive + turn),
         },
     }
-
-
-def identify_notes(ident: dict | None) -> list[str]:
-    """For ``robot check``'s notes: the caster swivels :func:`identify` turned before each test and what
-    resists turning them, a drive test rerun at a lower torque (design §14.1)."""
-    test, notes = (ident or {}).get("test", {}), []
-    if test.get("caster_swivels"):
-        res = test.get("caster_swivel_resistance") or [{"damping_Nms_per_rad": 0.0, "frictionloss_Nm": 0.0}]
-        notes.append(
-            f"caster swivel(s) {', '.join(repr(j) for j in test['caster_swivels'])} turned before each "
-            "identification test to trail its motion (the casters' steady state); a start from other caster "
-            f"angles turns them round first, against a swivel damping of up to "
-            f"{max(r['damping_Nms_per_rad'] for r in res):g} N·m·s/rad and frictionloss of up to "
-            f"{max(r['frictionloss_Nm'] for r in res):g} N·m"
-        )
-    if dr := test.get("drive_rerun"):
-        notes.append(
-            f"drive tests at {test['torque_Nm']:.3g} N·m: at {dr['first_torque_Nm']:.3g} N·m the robot turned "
-            f"{dr['first_heading_change_rad']:.2g} rad within the test (design §14.1: a centre of mass beside "
-            "the axle couples υ into ω)"
-        )
-    return notes
 
 
 def identify_main(model) -> dict:

@@ -268,8 +268,10 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         findings.insert(0, {"kind": "structural", "detail": skid})
         if not (ident and ident["identifiable"]):  # else said below, as the identification's cause
             reasons_fail.append(skid)
-    a_id = ident["identified"]["a"] if ident else None
-    b_id = ident["identified"]["b"] if ident else None
+    # design §14.3: an identified value whose fit does not hold is not reported as the robot's
+    holds = (ident or {}).get("fit_holds") or {}
+    a_id = ident["identified"]["a"] if ident and holds.get("a", True) else None
+    b_id = ident["identified"]["b"] if ident and holds.get("b", True) else None
     if ident and not ident["identifiable"]:
         c = cause_of(findings)
         reasons_fail.append(
@@ -286,7 +288,17 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
             else "no cause found among the mapping, a braking caster, a dead band, slip, rocking and damping: "
             "the wheels do not roll as the model of design §8 assumes"
         )
-        if worst > FAIL_ID:
+        fr = ident["test"].get("fit_rerun") or {}
+        if ident.get("fit_problem"):  # design §14.3: a fit that does not hold reports no a, b as measured
+            reasons_fail.append(f"identification: {ident['fit_problem']}; cause {why}")
+        elif fr.get("kept"):  # design §14.2: measured lower, but at the test torque the robot is not the model
+            reasons_fail.append(
+                f"identification: at {2 * fr['first_torque_Nm']:.3g} N·m (τ_a) the drive fit does not hold (residual "
+                f"{fr['first_fit_residual']:.0%} of its torque term): the robot does not follow υ̇ = a τ_a there; at "
+                f"{2 * fr['torque_Nm']:.3g} N·m a is {ident['relative_error']['a']:+.1%}, b "
+                f"{ident['relative_error']['b']:+.1%} from the formula; cause {why}"
+            )
+        elif worst > FAIL_ID:
             reasons_fail.append(
                 f"identification differs from the formula by {100 * worst:.1f} % (> {100 * FAIL_ID:g} %); cause {why}"
             )
@@ -300,7 +312,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         elif fd["kind"] == "structural" and ident and ident["identifiable"]:
             if all(fd["detail"] not in r for r in reasons_fail):  # once, also when it is the identification's cause
                 reasons_fail.append(f"structural: {fd['detail']}")
-        elif fd["kind"] in ("braking_caster", "rocking", "slip", "dead_band") or (
+        elif fd["kind"] in ("braking_caster", "caster_resistance", "rocking", "slip", "dead_band") or (
             fd["kind"] == "damping" and min(t for t in fd["time_constant_s"] if t is not None) < 5.0
         ):
             msg = f"{fd['kind'].replace('_', ' ')}: {fd['detail']}"
