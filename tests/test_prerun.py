@@ -75,7 +75,8 @@ def test_run_warns_before_the_run_what_robot_check_fails_and_checks_once(tmp_pat
     s = summary["robot_check"]
     assert s["skipped"] is False and len(s["robots"]) == 1
     r = s["robots"][0]
-    assert r["followers"] == [1, 2, 3] and r["verdict"] == "fail" and r["from"] == "computed"
+    assert r["followers"] == [1, 2, 3] and r["verdict"] == "fail"
+    assert not set(prerun.VOLATILE) & (set(r) | set(s))  # the summary is the same bit for bit for the same seed
     assert r["fail_reasons"] == rep["fail_reasons"] and r["cause"]["kind"] == "braking_caster"
     # the same deterministic check: here a, b cannot be identified at all (the caster stops the robot)
     assert r["relative_error"] == rep["relative_error"] and r["identified"] == {"a": rep["a_identified"], "b": None}
@@ -86,16 +87,16 @@ def test_run_warns_before_the_run_what_robot_check_fails_and_checks_once(tmp_pat
     assert len(list((fresh_cache / "robot-check").glob("*.json"))) == 1
     # a second run in the process: remembered; a new process (memo cleared): from disk; never recomputed
     _run(tmp_path, path, "--overwrite")
-    assert json.loads((out / "summary.json").read_text())["robot_check"]["robots"][0]["from"] == "memory"
+    assert json.loads((out / "summary.json").read_text())["robot_check"] == s  # remembered: not computed again
+    assert prerun.COMPUTED[0] == n0 + 1
     prerun._MEMO.clear()
     other = tmp_path / "elsewhere"  # the same content at another path: the same robot
     other.mkdir()
     moved = _braking(other)
     _run(tmp_path, moved, "--overwrite")
     s2 = json.loads((out / "summary.json").read_text())["robot_check"]
-    assert s2["robots"][0]["from"] == "disk" and s2["robots"][0]["fail_reasons"] == rep["fail_reasons"]
-    assert prerun.COMPUTED[0] == n0 + 1
-    assert s2["seconds"] < r["seconds"]  # reading the cache is cheaper than the check (measured 8 ms vs 0.4 s)
+    assert s2["robots"][0]["fail_reasons"] == rep["fail_reasons"]
+    assert prerun.COMPUTED[0] == n0 + 1  # the memo cleared and nothing computed: read from disk
 
 
 def test_a_mapping_that_fixes_the_caster_is_another_robot_and_does_not_warn(tmp_path, fresh_cache):
@@ -186,7 +187,7 @@ def test_simulate_and_a_sweep_row_say_it(tmp_path, fresh_cache):
     with pytest.warns(RobotWarning, match=r"followers 1, 2, 3: robot check fails .*back_caster"):
         res = simulate(load("paper", overrides=sets))
     r = res.summary["robot_check"]["robots"][0]
-    assert r["verdict"] == "fail" and r["from"] == "computed"
+    assert r["verdict"] == "fail"
     n0 = prerun.COMPUTED[0]
     with pytest.warns(RobotWarning):
         row = run_one(expand("paper", 1, ["bioinspired"], [], sets, plant="mujoco")[0])

@@ -139,6 +139,19 @@ def _cached_check(ref: Any, key: str) -> dict[str, Any]:
     return out
 
 
+#: what :func:`before_run` measures of itself (its time, where each check came from): said on a run's log, not kept
+#: in its summary, which is the same bit for bit for the same seed (design §14.2)
+VOLATILE = ("seconds", "from", "cache_error")
+
+
+def for_summary(rc: dict[str, Any]) -> dict[str, Any]:
+    """:func:`before_run`'s result without the :data:`VOLATILE` keys: what summary.json keeps."""
+    return {
+        **{k: v for k, v in rc.items() if k not in VOLATILE},
+        "robots": [{k: v for k, v in r.items() if k not in VOLATILE} for r in rc.get("robots", [])],
+    }
+
+
 def before_run(sc: Any, plant: Any) -> dict[str, Any]:
     """summary.json's ``robot_check`` for a MuJoCo run: ``{"skipped", "seconds", "robots", "warnings"}``.
 

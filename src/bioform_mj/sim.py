@@ -583,7 +583,9 @@ def _summarise(sc, plant, controller, step: Stepper, end: LoopEnd, logd, setup_s
     summary["feasibility_warnings"] = warned[1]
     summary["import_warnings"] = warned[0]
     if warned[2] is not None:  # design §14.2: what robot check fails the robots for
-        summary["robot_check"] = warned[2]
+        from .prerun import for_summary
+
+        summary["robot_check"] = for_summary(warned[2])
     return summary
 
 

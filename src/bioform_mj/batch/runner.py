@@ -21,6 +21,7 @@ from ..disturbance import Harmonic
 from ..engine import GUARDS
 from ..faults import Faults
 from ..plants.mujoco_plant import TIP_ANGLE_DEG
+from ..prerun import for_summary as _prerun_summary
 from ..scenario_config import Scenario
 from ..sim import lost_threshold_m
 from .device import (
@@ -663,7 +664,7 @@ class BatchRun:
                     "sim_time": kd * self.dt,
                     "wall_time_s": wall,
                     "followers": fol,
-                    "robot_check": self.robot_check,  # design §14.2: one scene, one check
+                    "robot_check": _prerun_summary(self.robot_check),  # design §14.2: one scene, one check
                 }
             )
         return out
