@@ -32,6 +32,20 @@ class RobotWarning(UserWarning):
     the CLI prints each as one ``warning:`` line on stderr."""
 
 
+class OutcomeWarning(UserWarning):
+    """How a run ended badly, issued by :func:`~bioform_mj.sim.simulate` once it has the summary
+    (never silent, design §18.1): one per follower with an outcome other than ``ok`` (``tipped``,
+    ``lost``, ...; every kind with its detail), and one when the run diverged. ``follower``: the
+    follower's id (1-based; None for the divergence), ``outcomes``: its ``{"kind", "detail", "t"}``
+    list as in the summary. Filter it to silence a loop that reads the outcomes itself:
+    ``warnings.simplefilter("ignore", bioform_mj.OutcomeWarning)`` (sweeps and calibration do)."""
+
+    def __init__(self, message: str, follower: int | None = None, outcomes: list | None = None) -> None:
+        super().__init__(message)
+        self.follower = follower
+        self.outcomes = list(outcomes or [])
+
+
 class Diverged(BioformError, RuntimeError):
     """The closed loop produced NaN/inf or a state beyond the configured limits (exit 3)."""
 

@@ -1,0 +1,159 @@
+"""``simulate`` on a scenario changed in Python (checked as ``load`` checks a file, its scale applied)
+and its :class:`~bioform_mj.OutcomeWarning` per follower that did not end ``ok`` (design §18.1)."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+
+import bioform_mj as bf
+from bioform_mj.errors import InputError, OutcomeWarning, ScenarioError
+
+SHORT = ["sim.duration=0.2"]
+#: backstepping beyond a speed limit of 0.05 m/s: diverges at the first step, every follower lost (ideal plant)
+DIVERGES = ["sim.duration=0.5", "limits.speed=0.05"]
+
+
+def _outcome_warnings(fn):
+    """``(result, [OutcomeWarning, ...])`` of ``fn()``, every warning kept (no once-per-place filter)."""
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        res = fn()
+    return res, [w.message for w in got if issubclass(w.category, OutcomeWarning)]
+
+
+def _replaced(sc, table: str, **changes):
+    return dataclasses.replace(sc, **{table: dataclasses.replace(getattr(sc, table), **changes)})
+
+
+# ---- the scenario is checked as load checks a file --------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "table,changes,key,value",
+    [
+        ("kinematic", {"k1": float("nan")}, "kinematic.k1", "nan"),  # from_dict's finite-number check
+        ("torque", {"c": (float("inf"), 3.0)}, "torque.c", "[inf, 3.0]"),
+        ("kinematic", {"k2": "two"}, "kinematic.k2", "'two'"),  # a string for a number
+        ("estimator", {"kp": (15.0, -1.0, 15.0)}, "estimator.kp", "[15.0, -1.0, 15.0]"),  # validate's
+        ("sim", {"duration": 0.0}, "sim.duration", "0.0"),
+        ("formation", {"scale": -1.0}, "formation.scale", "-1.0"),  # apply_scale's range
+    ],
+)
+def test_a_replaced_bad_value_is_refused_with_loads_error(table, changes, key, value):
+    sc = bf.load("paper", SHORT, plant="ideal")
+    with pytest.raises(InputError) as by_load:
+        bf.load("paper", [*SHORT, f"{key}={value}"], plant="ideal")
+    with pytest.raises(InputError) as by_simulate:
+        bf.simulate(_replaced(sc, table, **changes))
+    assert type(by_simulate.value) is type(by_load.value) and issubclass(type(by_load.value), ScenarioError)
+    assert str(by_simulate.value) == str(by_load.value)
+    assert key in str(by_simulate.value)
+
+
+def test_a_valid_scenario_runs_as_given_bit_for_bit():
+    sc = bf.load("paper", SHORT, plant="ideal")
+    a, b = bf.simulate(sc), bf.simulate(sc)
+    assert a.scenario is sc  # nothing rebuilt: the same object ran
+    assert np.array_equal(a.log["pose"], b.log["pose"]) and len(a.log["t"]) == 20
+
+
+def test_a_replaced_scale_is_applied_as_load_applies_it():
+    written = bf.load("paper", SHORT, plant="ideal")
+    res = bf.simulate(_replaced(written, "formation", scale=0.5))
+    loaded = bf.load("paper", [*SHORT, "formation.scale=0.5"], plant="ideal")
+    assert res.scenario == loaded and res.scenario.formation.offsets == ((1.5, 0.0), (2.0, 2.5), (2.0, -2.5))
+    assert res.scenario.kinematic.k2 == loaded.kinematic.k2 == written.kinematic.k2 / 0.25
+    assert res.summary["formation_scale"] == 0.5
+    assert np.array_equal(res.log["pose"], bf.simulate(loaded).log["pose"])  # the same run, bit for bit
+    # a scaled scenario rescaled: lengths end at 0.25 of those written, once (not 0.5 x 0.25)
+    again = bf.simulate(_replaced(loaded, "formation", scale=0.25)).scenario
+    assert np.allclose(again.formation.offsets, np.array(written.formation.offsets) * 0.25, rtol=1e-15, atol=0)
+    # another value of a scaled scenario changed: it is taken as given, not scaled again
+    moved = _replaced(loaded, "formation", offsets=((1.0, 0.0), (2.0, 2.5), (2.0, -2.5)))
+    assert bf.simulate(moved).scenario is moved
+
+
+def test_scale_applied_is_not_a_scenario_key():
+    sc = bf.load("paper", ["formation.scale=0.5"], plant="ideal")
+    assert sc.formation.scale_applied == 0.5 and "scale_applied" not in sc.to_dict()["formation"]
+    with pytest.raises(ScenarioError, match="formation.scale_applied': unknown key"):
+        bf.load("paper", ["formation.scale_applied=0.5"])
+
+
+# ---- an OutcomeWarning per follower that did not end ok ---------------------------------------------
+
+
+def test_outcome_warning_is_exported_and_filterable():
+    assert bf.OutcomeWarning is OutcomeWarning and issubclass(OutcomeWarning, UserWarning)
+    assert "OutcomeWarning" in bf.__all__
+
+
+def test_a_clean_paper_run_warns_nothing():
+    res, got = _outcome_warnings(lambda: bf.simulate(bf.load("paper", plant="ideal")))  # 20 s, the paper's run
+    assert res.diverged is None and all(f["outcomes"] == [] for f in res.summary["followers"])
+    assert got == []
+
+
+def test_a_diverged_run_warns_each_lost_follower_and_the_divergence():
+    sc = bf.load("paper", DIVERGES, method="backstepping", plant="ideal")
+    res, got = _outcome_warnings(lambda: bf.simulate(sc))
+    fs = res.summary["followers"]
+    assert res.diverged is not None and all([o["kind"] for o in f["outcomes"]] == ["lost"] for f in fs)
+    assert [w.follower for w in got] == [1, 2, 3, None]  # one per follower, then the run's
+    for w, f in zip(got, fs):
+        assert str(w) == f"paper / backstepping: follower {f['id']}: lost ({f['outcomes'][0]['detail']})"
+        assert w.outcomes == f["outcomes"]
+    assert str(got[3]).startswith("paper / backstepping: the simulation diverged at t = 0 s: ")
+    with warnings.catch_warnings(record=True) as quiet:  # what a user's filter does
+        warnings.simplefilter("always")
+        warnings.simplefilter("ignore", bf.OutcomeWarning)
+        bf.simulate(sc)
+    assert [w for w in quiet if issubclass(w.category, OutcomeWarning)] == []
+
+
+@pytest.mark.slow
+def test_a_tipped_follower_gets_exactly_one_warning_naming_it():
+    """tb3 in the unscaled paper scenario tips every follower within 0.5 s (tests/test_robots.py)."""
+    sc = bf.load("paper", plant="mujoco", overrides=['plant.robots=["tb3"]', "sim.duration=0.5"])
+    res, got = _outcome_warnings(lambda: bf.simulate(sc))
+    for f in res.summary["followers"]:
+        assert f["outcome"] == "tipped"
+        mine = [w for w in got if w.follower == f["id"]]
+        assert len(mine) == 1 and f"follower {f['id']}: tipped (" in str(mine[0])
+        assert all(f"{o['kind']} ({o['detail']})" in str(mine[0]) for o in f["outcomes"])  # every kind, its detail
+    assert len(got) == 3
+
+
+# ---- who reads the outcomes itself does not warn ----------------------------------------------------
+
+
+def test_the_cli_prints_each_outcome_line_once(tmp_path, capsys):
+    from bioform_mj.cli import main
+
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        code = main(
+            ["run", "paper", "--plant", "ideal", "--method", "backstepping", "--quiet"]
+            + [a for s in DIVERGES for a in ("--set", s)]
+            + ["--out", str(tmp_path)]
+        )
+    err = capsys.readouterr().err.splitlines()
+    assert code == 3
+    for i in (1, 2, 3):
+        assert sum(f"follower {i}: lost (" in ln for ln in err) == 1, err  # not also as an OutcomeWarning
+        assert f"warning: follower {i}: lost (final formation error" in "\n".join(err)
+    assert sum("diverged" in ln for ln in err) == 1 and not any("OutcomeWarning" in ln for ln in err), err
+    assert [w for w in got if issubclass(w.category, OutcomeWarning)] == []
+
+
+def test_a_sweep_row_tabulates_outcomes_without_warning():
+    from bioform_mj.sweep import expand, run_one
+
+    spec = expand("paper", 1, ["backstepping"], [], DIVERGES, plant="ideal")[0]
+    row, got = _outcome_warnings(lambda: run_one(spec))
+    assert row["outcome"] == "diverged" and row["follower_outcomes"] == "lost;lost;lost"
+    assert got == []
