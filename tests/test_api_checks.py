@@ -115,7 +115,6 @@ def test_a_diverged_run_warns_each_lost_follower_and_the_divergence():
     assert [w for w in quiet if issubclass(w.category, OutcomeWarning)] == []
 
 
-@pytest.mark.slow
 def test_a_tipped_follower_gets_exactly_one_warning_naming_it():
     """tb3 in the unscaled paper scenario tips every follower within 0.5 s (tests/test_robots.py)."""
     sc = bf.load("paper", plant="mujoco", overrides=['plant.robots=["tb3"]', "sim.duration=0.5"])
@@ -157,3 +156,28 @@ def test_a_sweep_row_tabulates_outcomes_without_warning():
     row, got = _outcome_warnings(lambda: run_one(spec))
     assert row["outcome"] == "diverged" and row["follower_outcomes"] == "lost;lost;lost"
     assert got == []
+
+
+def test_quiet_outcomes_ignores_only_outcome_warnings():
+    from bioform_mj.errors import quiet_outcomes
+
+    sc = bf.load("paper", DIVERGES, method="backstepping", plant="ideal")
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        with quiet_outcomes():
+            res = bf.simulate(sc)
+            warnings.warn("another", RuntimeWarning, stacklevel=1)
+        bf.simulate(sc)  # outside again: said
+    kinds = [w.category.__name__ for w in got]
+    assert res.diverged is not None and kinds == ["RuntimeWarning"] + ["OutcomeWarning"] * 4, kinds
+
+
+def test_the_kernels_warm_up_says_nothing_of_its_outcomes(monkeypatch):
+    """A 0.01 s run per plant leaves every follower c_hat_off: a sweep's warm-up must not say so."""
+    from bioform_mj import jobs
+
+    monkeypatch.setattr(jobs, "_KERNELS", [])
+    _, got = _outcome_warnings(jobs.load_kernels)
+    assert jobs._KERNELS == [True] and got == []
+    _, said = _outcome_warnings(lambda: bf.simulate(bf.load("paper", ["sim.duration=0.01"], plant="ideal")))
+    assert [w.follower for w in said] == [1, 2, 3] and all("c_hat_off (" in str(w) for w in said)

@@ -6,6 +6,10 @@ exit 2 with a single ``error:`` line, a diverging simulation exits 3.
 
 from __future__ import annotations
 
+import contextlib
+import warnings
+from collections.abc import Iterator
+
 
 class BioformError(Exception):
     """Base class of every error the CLI reports without a traceback."""
@@ -44,6 +48,16 @@ class OutcomeWarning(UserWarning):
         super().__init__(message)
         self.follower = follower
         self.outcomes = list(outcomes or [])
+
+
+@contextlib.contextmanager
+def quiet_outcomes() -> Iterator[None]:
+    """Within: no :class:`OutcomeWarning` (the other warnings as before). For whoever reports the
+    outcomes itself or has no use for them: ``bioform run``, a sweep's row, calibration, timing loops,
+    the kernels' warm-up (design §18.1)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutcomeWarning)
+        yield
 
 
 class Diverged(BioformError, RuntimeError):

@@ -38,7 +38,6 @@ import os
 import signal
 import sys
 import time
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,7 +45,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import BioformError, InputError, OutcomeWarning
+from .errors import BioformError, InputError, quiet_outcomes
 from .jobs import Signals as _Signals
 from .jobs import Stop as _Stop
 from .jobs import raising as _raising
@@ -306,8 +305,7 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
             from .provenance import provenance
 
             row["provenance"] = provenance(sc)
-        with warnings.catch_warnings():  # the row tabulates the outcomes: no warning per run (design §18.1)
-            warnings.simplefilter("ignore", OutcomeWarning)
+        with quiet_outcomes():  # the row tabulates the outcomes: no warning per run (design §18.1)
             res = simulate(sc)
         s = res.summary
         row["plant"] = s["plant"]
