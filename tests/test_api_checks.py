@@ -181,3 +181,18 @@ def test_the_kernels_warm_up_says_nothing_of_its_outcomes(monkeypatch):
     assert jobs._KERNELS == [True] and got == []
     _, said = _outcome_warnings(lambda: bf.simulate(bf.load("paper", ["sim.duration=0.01"], plant="ideal")))
     assert [w.follower for w in said] == [1, 2, 3] and all("c_hat_off (" in str(w) for w in said)
+
+
+def test_table1_prints_each_followers_outcome_warning_once_and_the_divergence_as_its_error(tmp_path, capsys):
+    from bioform_mj.cli import main
+
+    sets = [a for s in DIVERGES for a in ("--set", s)]
+    assert main(["table1", "paper", "--plant", "ideal", *sets, "--quiet", "--out", str(tmp_path / "t")]) == 3
+    err = capsys.readouterr().err.splitlines()
+    table = __import__("json").loads((tmp_path / "t" / "table1.json").read_text())
+    expected = [(m, f["id"]) for m, s in table["methods"].items() for f in s["followers"] if f["outcomes"]]
+    assert len(expected) >= 6  # backstepping's three followers lost, at least
+    for m, i in expected:
+        assert sum(ln.startswith(f"warning: paper / {m}: follower {i}: ") for ln in err) == 1, err
+    assert sum(ln.startswith("warning:") for ln in err) == len(expected)  # the divergence: not a warning ...
+    assert sum(ln.startswith("error: simulation diverged for") for ln in err) == 1  # ... its error line

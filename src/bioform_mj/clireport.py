@@ -48,6 +48,7 @@ def _show_robot_warnings() -> None:
 
     warnings.showwarning = showwarning
     warnings.simplefilter("always", RobotWarning)
+    warnings.simplefilter("always", OutcomeWarning)  # each run's, even if another run's read the same
 
 
 def _warn_outcomes(summary: dict[str, Any]) -> None:
