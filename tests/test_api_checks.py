@@ -196,3 +196,44 @@ def test_table1_prints_each_followers_outcome_warning_once_and_the_divergence_as
         assert sum(ln.startswith(f"warning: paper / {m}: follower {i}: ") for ln in err) == 1, err
     assert sum(ln.startswith("warning:") for ln in err) == len(expected)  # the divergence: not a warning ...
     assert sum(ln.startswith("error: simulation diverged for") for ln in err) == 1  # ... its error line
+
+
+class _Spoiled:
+    """The paper's stack; after 50 steps NaN torques for follower 2 (``nan``) or a raise (``raise``)."""
+
+    def __init__(self, sc, mode: str) -> None:
+        from bioform_mj.control.stack import ControlStack
+        from bioform_mj.sim import stack_params
+
+        self.inner = ControlStack(sc.build_graph(), stack_params(sc, np.array(sc.plant.c_true)))
+        self.n, self.k, self.mode = sc.n, 0, mode
+
+    def reset(self, est_pose0, vel0):
+        self.inner.reset(est_pose0, vel0)
+
+    def step(self, *a):
+        tau = self.inner.step(*a)
+        self.k += 1
+        if self.k > 50 and self.mode == "raise":
+            raise ValueError("boom")
+        if self.k > 50:
+            tau = tau.copy()
+            tau[1, 0] = np.nan
+        return tau
+
+    def signals(self):
+        return self.inner.signals()
+
+
+def test_a_users_nonfinite_torques_are_warned_and_a_raise_is_not():
+    sc = bf.load("paper", SHORT, plant="ideal")
+    res, got = _outcome_warnings(lambda: bf.simulate(sc, controller=_Spoiled(sc, "nan")))
+    assert [w.follower for w in got] == [2, None]  # follower 2's controller_nonfinite, then the divergence
+    assert str(got[0]).startswith("paper / _Spoiled: follower 2: controller_nonfinite (_Spoiled.step returned")
+    assert res.summary["followers"][1]["outcomes"] == got[0].outcomes
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        with pytest.raises(ValueError, match="boom") as info:
+            bf.simulate(sc, controller=_Spoiled(sc, "raise"))
+    assert info.value.result.summary["raised"]["step"] == 50  # the exception is the news: no OutcomeWarning
+    assert [w for w in seen if issubclass(w.category, OutcomeWarning)] == []

@@ -359,7 +359,8 @@ def simulate(
     refused), and a ``formation.scale`` changed after loading is applied (``result.scenario`` is then
     the scaled scenario; design §18.1). Every follower whose run did not end ``ok`` (tipped, lost, ...)
     gets one :class:`~bioform_mj.errors.OutcomeWarning` naming it and every outcome with its detail,
-    and a divergence one more (filter the class to silence them: the outcomes stay in the summary).
+    and a divergence one more (filter the class to silence them: the outcomes stay in the summary);
+    none when a user's controller or observer raised (the exception is the news).
     """
     # resolve: the scenario (checked as load checks a file), the arguments, the graph, the leader's path
     sc = checked(sc)
@@ -396,10 +397,10 @@ def simulate(
     summary = _summarise(sc, plant, controller, step, end, logd, warm.setup_s, engine_used, warned)
     _add_run_notes(summary, sc, plant, step, end, logd, raised)
     result = RunResult(sc, logd, summary, plant, end.diverged, end.interrupted)
+    if raised is not None:  # the exception says the run failed (its summary holds the outcomes so far)
+        raise _with_result(raised, result)
     for w in outcome_warnings(summary):  # never silent (design §18.1): the CLI prints its own lines instead
         warnings.warn(w, stacklevel=2)
-    if raised is not None:
-        raise _with_result(raised, result)
     return result
 
 
