@@ -158,6 +158,19 @@ def test_a_sweep_row_tabulates_outcomes_without_warning():
     assert got == []
 
 
+def test_a_sweeps_runs_are_not_checked_again():
+    """``expand`` validated each configuration by ``load`` and each seed itself: its per-seed copies
+    are marked, so ``simulate`` spends nothing on them (the check costs 2-5 ms; an ideal run's set-up ~10 ms)."""
+    from bioform_mj.scenario_load import checked
+    from bioform_mj.sweep import expand
+
+    specs = expand("paper", 3, ["bioinspired"], [], ["formation.init_jitter=0.1"], plant="ideal")
+    assert [sp.scenario.sim.seed for sp in specs] == [0, 1, 2]
+    assert all(checked(sp.scenario) is sp.scenario for sp in specs)
+    replaced = dataclasses.replace(specs[0].scenario, method="backstepping")  # a change of one's own: checked
+    assert getattr(replaced, "_bioform_checked", False) is False and checked(replaced) is replaced
+
+
 def test_quiet_outcomes_ignores_only_outcome_warnings():
     from bioform_mj.errors import quiet_outcomes
 

@@ -88,12 +88,14 @@ def load(
         data.setdefault("plant", {})["kind"] = plant
     sc = apply_scale(from_dict(data))
     validate(sc)
-    return _mark_checked(apply_robots_to_ideal(sc))
+    return mark_checked(apply_robots_to_ideal(sc))
 
 
-def _mark_checked(sc: Scenario) -> Scenario:
+def mark_checked(sc: Scenario) -> Scenario:
     """``sc``, marked as checked (:func:`checked` then returns it at once): an attribute of this
-    frozen object, not a field, so ``dataclasses.replace`` makes an unmarked one (design §18.1)."""
+    frozen object, not a field, so ``dataclasses.replace`` makes an unmarked one (design §18.1). For
+    :func:`load`, and a caller that changed a loaded scenario only where it checked the value itself
+    (a sweep's seeds)."""
     object.__setattr__(sc, "_bioform_checked", True)
     return sc
 
@@ -114,7 +116,7 @@ def checked(sc: Scenario) -> Scenario:
     )
     scaled = apply_scale(again)  # a scale changed after loading: applied now (its range checked)
     validate(scaled)
-    return sc if scaled is again else _mark_checked(scaled)  # (sc unmarked: it may hold numpy arrays)
+    return sc if scaled is again else mark_checked(scaled)  # (sc unmarked: it may hold numpy arrays)
 
 
 def _plain_values(obj: Any) -> Any:
