@@ -250,3 +250,15 @@ def test_a_users_nonfinite_torques_are_warned_and_a_raise_is_not():
             bf.simulate(sc, controller=_Spoiled(sc, "raise"))
     assert info.value.result.summary["raised"]["step"] == 50  # the exception is the news: no OutcomeWarning
     assert [w for w in seen if issubclass(w.category, OutcomeWarning)] == []
+
+
+def test_the_environment_checks_a_scenario_object_as_simulate_does():
+    pytest.importorskip("pettingzoo")
+    from bioform_mj.envs import parallel_env
+
+    sc = bf.load("paper", SHORT, plant="ideal")
+    # the environment's contract: an InputError as a ValueError with the same one-line message
+    with pytest.raises(ValueError, match="scenario key 'kinematic.k1': expected a finite number, got nan"):
+        parallel_env(_replaced(sc, "kinematic", k1=float("nan")))
+    env = parallel_env(_replaced(sc, "formation", scale=0.5))  # applied, as simulate applies it
+    assert env._sc.formation.offsets == ((1.5, 0.0), (2.0, 2.5), (2.0, -2.5))
