@@ -42,7 +42,8 @@ class OutcomeWarning(UserWarning):
     ``lost``, ...; every kind with its detail), and one when the run diverged. ``follower``: the
     follower's id (1-based; None for the divergence), ``outcomes``: its ``{"kind", "detail", "t"}``
     list as in the summary. Filter it to silence a loop that reads the outcomes itself:
-    ``warnings.simplefilter("ignore", bioform_mj.OutcomeWarning)`` (sweeps and calibration do)."""
+    ``warnings.simplefilter("ignore", bioform_mj.OutcomeWarning)``, or run within :func:`quiet_outcomes`
+    (sweeps and calibration do)."""
 
     def __init__(self, message: str, follower: int | None = None, outcomes: list | None = None) -> None:
         super().__init__(message)
