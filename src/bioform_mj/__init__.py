@@ -3,7 +3,8 @@ on an ideal unicycle plant and on MuJoCo differential-drive robots.
 
 The Python API at the top level: :func:`load` a scenario, :func:`simulate` it, read the
 :class:`RunResult` (``.summary``, ``.log``, ``.table()``); :class:`Controller` is the protocol a
-controller of your own implements. The names are imported on first use, so ``import bioform_mj``
+controller of your own implements; :class:`OutcomeWarning` is what ``simulate`` warns of a follower
+that tipped, was lost, ... or a run that diverged. The names are imported on first use, so ``import bioform_mj``
 stays cheap (no numba, no MuJoCo).
 """
 
@@ -21,12 +22,14 @@ _LAZY = {
     "simulate": ("bioform_mj.sim", "simulate"),
     "RunResult": ("bioform_mj.sim", "RunResult"),
     "Controller": ("bioform_mj.control.base", "Controller"),
+    "OutcomeWarning": ("bioform_mj.errors", "OutcomeWarning"),
 }
 
-__all__ = ["Controller", "RunResult", "Scenario", "__version__", "load", "simulate"]
+__all__ = ["Controller", "OutcomeWarning", "RunResult", "Scenario", "__version__", "load", "simulate"]
 
 if TYPE_CHECKING:  # for type checkers and editors; at run time __getattr__ imports lazily
     from .control.base import Controller
+    from .errors import OutcomeWarning
     from .scenario import Scenario, load
     from .sim import RunResult, simulate
 

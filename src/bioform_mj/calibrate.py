@@ -180,11 +180,13 @@ def evaluate(
     c: dict[str, Any], source: str = "paper", plant: str = "ideal", overrides: Sequence[str] = ()
 ) -> dict[str, Any]:
     """One evaluation: Table I (four methods) under the conditions ``c``."""
+    from .errors import quiet_outcomes
     from .table1 import run_table1
 
     t0 = time.perf_counter()
     try:
-        tab = run_table1(build_scenario(source, plant, c, overrides))
+        with quiet_outcomes():  # the objective scores lost and diverged runs (design §18.1)
+            tab = run_table1(build_scenario(source, plant, c, overrides))
     except Exception as exc:  # noqa: BLE001 - a failed evaluation is a bad point, not the end of the search
         return {
             "conditions": c,

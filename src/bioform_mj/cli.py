@@ -416,6 +416,7 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
 def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url) -> int:
     import time
 
+    from .errors import quiet_outcomes
     from .outputs.files import write_json, write_npz, write_text
     from .outputs.progress import progress_bar
     from .sim import simulate
@@ -435,7 +436,10 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
     interrupted: KeyboardInterrupt | None = None
     failed: Exception | None = None
     try:
-        with progress_bar(f"{sc.name} {sc.method}", not args.quiet) as cb:
+        with (
+            progress_bar(f"{sc.name} {sc.method}", not args.quiet) as cb,
+            quiet_outcomes(),  # said once, by _warn_outcomes after the files
+        ):
             result = simulate(sc, observers=observers, progress=cb, engine=args.engine)
     except KeyboardInterrupt as exc:  # SIGINT/SIGTERM mid-run: keep what the loop returns with it
         result = getattr(exc, "result", None)

@@ -27,21 +27,28 @@ def _record_toml(summary: dict[str, Any]) -> str:
 
 def _show_robot_warnings() -> None:
     """Print every :class:`~bioform_mj.errors.RobotWarning` (issued before a run) as one
-    ``warning:`` line on stderr, each time it is issued."""
+    ``warning:`` line on stderr, each time it is issued; likewise each follower's
+    :class:`~bioform_mj.errors.OutcomeWarning` of a command that does not print outcomes itself
+    (``bioform run`` ignores them and prints :func:`_warn_outcomes`' lines; a divergence's is dropped
+    here: every command says it as its ``error:`` line, exit 3)."""
     import warnings
 
-    from .errors import RobotWarning
+    from .errors import OutcomeWarning, RobotWarning
 
     show = warnings.showwarning
 
     def showwarning(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
         if issubclass(category, RobotWarning):
             print(f"warning: {message}", file=sys.stderr)
+        elif issubclass(category, OutcomeWarning):
+            if getattr(message, "follower", None) is not None:
+                print(f"warning: {message}", file=sys.stderr)
         else:
             show(message, category, filename, lineno, file, line)
 
     warnings.showwarning = showwarning
     warnings.simplefilter("always", RobotWarning)
+    warnings.simplefilter("always", OutcomeWarning)  # each run's, even if another run's read the same
 
 
 def _warn_outcomes(summary: dict[str, Any]) -> None:

@@ -6,6 +6,10 @@ exit 2 with a single ``error:`` line, a diverging simulation exits 3.
 
 from __future__ import annotations
 
+import contextlib
+import warnings
+from collections.abc import Iterator
+
 
 class BioformError(Exception):
     """Base class of every error the CLI reports without a traceback."""
@@ -30,6 +34,31 @@ class GraphError(InputError):
 class RobotWarning(UserWarning):
     """What a scenario asks beyond a robot's margins (traction, tip-over), said before the run;
     the CLI prints each as one ``warning:`` line on stderr."""
+
+
+class OutcomeWarning(UserWarning):
+    """How a run ended badly, issued by :func:`~bioform_mj.sim.simulate` once it has the summary
+    (never silent, design §18.1): one per follower with an outcome other than ``ok`` (``tipped``,
+    ``lost``, ...; every kind with its detail), and one when the run diverged. ``follower``: the
+    follower's id (1-based; None for the divergence), ``outcomes``: its ``{"kind", "detail", "t"}``
+    list as in the summary. Filter it to silence a loop that reads the outcomes itself:
+    ``warnings.simplefilter("ignore", bioform_mj.OutcomeWarning)``, or run within :func:`quiet_outcomes`
+    (sweeps and calibration do)."""
+
+    def __init__(self, message: str, follower: int | None = None, outcomes: list | None = None) -> None:
+        super().__init__(message)
+        self.follower = follower
+        self.outcomes = list(outcomes or [])
+
+
+@contextlib.contextmanager
+def quiet_outcomes() -> Iterator[None]:
+    """Within: no :class:`OutcomeWarning` (the other warnings as before). For whoever reports the
+    outcomes itself or has no use for them: ``bioform run``, a sweep's row, calibration, timing loops,
+    the kernels' warm-up (design §18.1)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutcomeWarning)
+        yield
 
 
 class Diverged(BioformError, RuntimeError):

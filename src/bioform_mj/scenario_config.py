@@ -10,6 +10,7 @@ Reading files and ``--set`` overrides is :mod:`bioform_mj.scenario_load`'s, the 
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -127,6 +128,10 @@ class FormationCfg:
     init_jitter_heading: float = -1.0  # rad; -1: the number of init_jitter (as written, unscaled)
     scale: float = 1.0  # the whole experiment at a robot's scale (apply_scale); 1 = as written
     frame: str = "world"  # offsets in "world" axes (the paper) or in the "leader"'s frame (turns with it)
+    #: not a scenario key: the ``scale`` the lengths already carry, set by :func:`apply_scale` (1: as
+    #: written), so :func:`~bioform_mj.sim.simulate` can tell a ``scale`` changed by ``dataclasses.replace``
+    #: from one applied (design §18.1); not in ``to_dict``, files, ``--set`` nor equality
+    scale_applied: float = field(default=1.0, compare=False, repr=False, metadata={"internal": True})
 
 
 @dataclass(frozen=True)
@@ -344,6 +349,7 @@ class Scenario:
         """Plain nested dict (JSON/TOML-able) of every resolved value (a robot without a mapping
         as its name or path, one with a mapping as a table)."""
         d = _to_plain(dataclasses.asdict(self))
+        del d["formation"]["scale_applied"]  # internal (design §18.1): not a key of a file or a record
         d["plant"]["robots"] = [_to_plain(r.to_entry()) for r in self.plant.robots]
         d["plant"]["package_path"] = dict(self.plant.package_path)
         if not d["plant"]["package_path"]:  # absent when unused: a sweep's content keys stay as they were
@@ -399,6 +405,17 @@ class Scenario:
                 bound = np.array([j, j, jh])
                 p += rng.uniform(-bound, bound, size=p.shape)
         return p
+
+
+@functools.cache
+def keys_of(cls: Any) -> dict[str, Any]:
+    """The scenario keys of a config dataclass ``cls``: ``{name: type}`` of its fields, without the
+    internal ones (``metadata["internal"]``: :attr:`FormationCfg.scale_applied`). Cached: resolving
+    the annotations was 40 % of checking a scenario (do not modify the dict returned)."""
+    import typing
+
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints[f.name] for f in dataclasses.fields(cls) if not f.metadata.get("internal")}
 
 
 def _to_plain(obj: Any) -> Any:

@@ -268,6 +268,8 @@ def _fields(cls: Any, prefix: str) -> list[tuple[str, Any, Any]]:
     hints = typing.get_type_hints(cls)
     inst = cls() if cls is not RobotRef else None
     for f in dataclasses.fields(cls):
+        if f.metadata.get("internal"):  # not a scenario key (FormationCfg.scale_applied)
+            continue
         tp = hints[f.name]
         default = getattr(inst, f.name) if inst is not None else f.default
         if dataclasses.is_dataclass(tp) and tp is not RobotRef:

@@ -22,7 +22,7 @@ from .errors import InputError, ScenarioError
 from .obstacles import scaled as _scaled_obstacles
 from .robots import PackagePath, RobotRef, as_package_path, as_ref, rebase_entries, rebase_package_path
 from .scenario_check import validate
-from .scenario_config import MAX_INT, PAPER_C, Scenario
+from .scenario_config import MAX_INT, PAPER_C, Scenario, keys_of
 
 
 def preset_names() -> list[str]:
@@ -88,7 +88,47 @@ def load(
         data.setdefault("plant", {})["kind"] = plant
     sc = apply_scale(from_dict(data))
     validate(sc)
-    return apply_robots_to_ideal(sc)
+    return mark_checked(apply_robots_to_ideal(sc))
+
+
+def mark_checked(sc: Scenario) -> Scenario:
+    """``sc``, marked as checked (:func:`checked` then returns it at once): an attribute of this
+    frozen object, not a field, so ``dataclasses.replace`` makes an unmarked one (design §18.1). For
+    :func:`load`, and a caller that changed a loaded scenario only where it checked the value itself
+    (a sweep's seeds)."""
+    object.__setattr__(sc, "_bioform_checked", True)
+    return sc
+
+
+def checked(sc: Scenario) -> Scenario:
+    """``sc`` refused as :func:`load` refuses a file (the same :class:`InputError` subclasses and
+    messages: types, finite numbers, then :func:`validate`), and scaled if its ``formation.scale``
+    is not yet applied (:func:`apply_scale`); ``sc`` itself when it needs no scaling. For a scenario
+    built or changed in Python (``dataclasses.replace``), which :func:`load` has not seen:
+    :func:`bioform_mj.sim.simulate` calls it before any work (design §18.1; 2-5 ms, nothing for a
+    scenario :func:`load` returned or this function scaled)."""
+    if getattr(sc, "_bioform_checked", False):
+        return sc
+    plain = _plain_values(sc.to_dict())
+    again = _build(Scenario, plain, "")  # what from_dict refuses in a file (NaN, a string for a number, ...)
+    again = dataclasses.replace(
+        again, formation=dataclasses.replace(again.formation, scale_applied=sc.formation.scale_applied)
+    )
+    scaled = apply_scale(again)  # a scale changed after loading: applied now (its range checked)
+    validate(scaled)
+    return sc if scaled is again else mark_checked(scaled)  # (sc unmarked: it may hold numpy arrays)
+
+
+def _plain_values(obj: Any) -> Any:
+    """``obj`` with numpy arrays and scalars as Python lists and numbers (a scenario changed in
+    Python may hold them; a file cannot)."""
+    if isinstance(obj, dict):
+        return {k: _plain_values(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [_plain_values(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
 
 
 def _read_record(raw: bytes, where: str) -> dict[str, Any]:
@@ -130,7 +170,7 @@ def _set_path(data: dict[str, Any], key: str, value: Any) -> None:
     cls: Any = Scenario
     node = data
     for i, part in enumerate(parts):
-        hints = typing.get_type_hints(cls)
+        hints = keys_of(cls)  # an internal field (FormationCfg.scale_applied) is no key
         if part not in hints:
             raise ScenarioError(key, f"unknown key (expected one of: {', '.join(hints)})")
         if i == len(parts) - 1:
@@ -156,7 +196,7 @@ def from_dict(data: Mapping[str, Any]) -> Scenario:
 def _build(cls: Any, data: Any, prefix: str) -> Any:
     if not isinstance(data, Mapping):
         raise ScenarioError(prefix.rstrip("."), f"expected a table, got {type(data).__name__}")
-    hints = typing.get_type_hints(cls)
+    hints = keys_of(cls)  # an internal field (FormationCfg.scale_applied) is no key
     unknown = [k for k in data if k not in hints]
     if unknown:
         raise ScenarioError(prefix + unknown[0], f"unknown key (expected one of: {', '.join(hints)})")
@@ -279,14 +319,20 @@ def apply_scale(sc: Scenario) -> Scenario:
     ``scale``; a run's record (:func:`bioform_mj.record.resolved_config`) holds the scaled values
     with ``scale = 1``, so loading it again does not scale twice (the ``lost`` threshold and the
     video's sizes are taken from the scaled lengths, not from ``scale``).
+
+    The returned scenario's ``formation.scale_applied`` says the lengths carry ``scale`` (design
+    §18.1); a scenario whose ``scale`` was then changed (``dataclasses.replace``) is scaled by
+    ``scale / scale_applied``, so its lengths end at ``scale`` × those written (a loaded scenario has
+    ``scale_applied = 1``: scaled by ``scale``, as before).
     """
-    s = sc.formation.scale
-    if s == 1.0:
+    want = sc.formation.scale
+    if want == sc.formation.scale_applied:
         return sc
-    if not (math.isfinite(s) and s > 0):
-        raise ScenarioError("formation.scale", f"must be a number > 0, got {s:g}")
-    if not 1e-3 <= s <= 1e3:  # beyond, k2 / s² and the lengths leave floating point's comfortable range
-        raise ScenarioError("formation.scale", f"must lie in [0.001, 1000], got {s:g}")
+    if not (math.isfinite(want) and want > 0):
+        raise ScenarioError("formation.scale", f"must be a number > 0, got {want:g}")
+    if not 1e-3 <= want <= 1e3:  # beyond, k2 / s² and the lengths leave floating point's comfortable range
+        raise ScenarioError("formation.scale", f"must lie in [0.001, 1000], got {want:g}")
+    s = want / sc.formation.scale_applied  # exactly `want` for a scenario as written
 
     def rows(values: tuple, cols: int) -> tuple:
         return tuple(tuple(v * s if j < cols else v for j, v in enumerate(r)) for r in values)
@@ -311,6 +357,7 @@ def apply_scale(sc: Scenario) -> Scenario:
         initial_poses=rows(f.initial_poses, 2),
         init_jitter=f.init_jitter * s,  # positions: a length
         init_jitter_heading=f.init_jitter if f.init_jitter_heading < 0 else f.init_jitter_heading,  # an angle
+        scale_applied=want,
     )
     e = sc.estimator
     first = lambda v: (v[0] * s, *v[1:]) if v else v  # noqa: E731 - the υ channel of a (υ, ω) pair

@@ -27,7 +27,7 @@ from .control.kernel import new_state
 from .control.stack import ControlStack, StackParams, parse_method
 from .disturbance import Harmonic as HarmonicDisturbance
 from .engine import Bounds, Formation, LogArrays, Loop, new_acc, new_log, new_metrics
-from .errors import ControllerError, Diverged, RobotWarning
+from .errors import ControllerError, Diverged, OutcomeWarning, RobotWarning
 from .outcomes import (  # noqa: F401 - re-exported: sim is where callers have found them
     C_HAT_BOUND_BAND,
     C_HAT_OFF,
@@ -60,6 +60,7 @@ from .runloop import (  # noqa: F401 - MAX_CHUNK_S, ObserverClock, EventQueue, f
 )
 from .runsummary import RunEnd, _signal_name, _summary, _versions  # noqa: F401 - sim's own names
 from .scenario import Scenario
+from .scenario_load import checked
 from .userhooks import (  # noqa: F401 - simulate's checks, importable from sim as before
     CONTROLLER_METHODS,
     OBSERVER_METHODS,
@@ -352,8 +353,17 @@ def simulate(
     in a :class:`RunResult` attached to the exception as ``result`` (with ``summary["raised"]``
     saying what raised where), a note naming the controller or observer is added to the
     exception, and it is re-raised.
+
+    ``sc`` is checked as :func:`~bioform_mj.scenario.load` checks a file, before any work (the same
+    :class:`~bioform_mj.errors.InputError` and message: a NaN gain set by ``dataclasses.replace`` is
+    refused), and a ``formation.scale`` changed after loading is applied (``result.scenario`` is then
+    the scaled scenario; design §18.1). Every follower whose run did not end ``ok`` (tipped, lost, ...)
+    gets one :class:`~bioform_mj.errors.OutcomeWarning` naming it and every outcome with its detail,
+    and a divergence one more (filter the class to silence them: the outcomes stay in the summary);
+    none when a user's controller or observer raised (the exception is the news).
     """
-    # resolve: the arguments, the graph, the leader's path and the formation
+    # resolve: the scenario (checked as load checks a file), the arguments, the graph, the leader's path
+    sc = checked(sc)
     _check_arguments(engine, controller, observers)
     t_setup = time.perf_counter()
     graph = sc.build_graph()
@@ -387,9 +397,28 @@ def simulate(
     summary = _summarise(sc, plant, controller, step, end, logd, warm.setup_s, engine_used, warned)
     _add_run_notes(summary, sc, plant, step, end, logd, raised)
     result = RunResult(sc, logd, summary, plant, end.diverged, end.interrupted)
-    if raised is not None:
+    if raised is not None:  # the exception says the run failed (its summary holds the outcomes so far)
         raise _with_result(raised, result)
+    for w in outcome_warnings(summary):  # never silent (design §18.1): the CLI prints its own lines instead
+        warnings.warn(w, stacklevel=2)
     return result
+
+
+def outcome_warnings(summary: dict[str, Any]) -> list[OutcomeWarning]:
+    """What :func:`simulate` warns of a run's ``summary``: per follower with outcomes one
+    :class:`OutcomeWarning` ``"SCENARIO / METHOD: follower I: KIND (DETAIL); KIND (DETAIL)"``, the
+    CLI's ``warning:`` lines joined (``clireport._warn_outcomes``), and one for a divergence."""
+    head = f"{summary.get('scenario', '')} / {summary.get('method', '')}: "
+    out = []
+    for f in summary["followers"]:
+        got = f.get("outcomes") or []
+        if got:
+            said = "; ".join(f"{o['kind']} ({o['detail']})" for o in got)
+            out.append(OutcomeWarning(f"{head}follower {f['id']}: {said}", int(f["id"]), got))
+    div = summary.get("diverged")
+    if div is not None:
+        out.append(OutcomeWarning(f"{head}the simulation diverged at t = {div['time_s']:g} s: {div['message']}"))
+    return out
 
 
 def _check_arguments(engine: str, controller: Any, observers: Sequence[Observer]) -> None:

@@ -101,16 +101,19 @@ def float32_spread(
     between ``ref`` and each of ``realisations`` perturbed runs (noise streams seeded by
     ``(seed, realisation)``: the same call gives the same numbers, bit for bit). A perturbed run
     that diverges where ``ref`` did not gives ``inf`` (the world is at a divergence edge)."""
+    from ..errors import quiet_outcomes
     from ..sim import make_plant, simulate
 
     if sc.plant.kind != "mujoco":
         raise ValueError("float32_spread perturbs MuJoCo's state: plant.kind must be 'mujoco'")
     if ref is None:
-        ref = simulate(sc).summary
+        with quiet_outcomes():  # a measurement of the engines' spread: the outcomes are compared, not said
+            ref = simulate(sc).summary
     worst = [dict.fromkeys(METRICS, 0.0) for _ in ref["followers"]]
     for r in range(realisations):
         rng = np.random.default_rng([seed, r])
-        run = simulate(sc, plant=_perturbed(make_plant(sc), eps, rng), engine="stepwise").summary
+        with quiet_outcomes():
+            run = simulate(sc, plant=_perturbed(make_plant(sc), eps, rng), engine="stepwise").summary
         if bool(run["diverged"]) != bool(ref["diverged"]):
             diffs = [dict.fromkeys(METRICS, float("inf")) for _ in worst]
         else:

@@ -23,12 +23,12 @@ def batch_env(
     :func:`~bioform_mj.envs.parallel_env`, per world and agent. World ``w`` runs ``sim.seed = seeds[w]``
     (default ``0 … worlds − 1``: the seeded jitter of the initial poses). ``options``: ``action``,
     ``reward``, ``v_max``, ``w_max``, ``nconmax``, ``njmax``."""
-    from ..scenario_load import load
+    from ..scenario_load import checked, load
 
     if isinstance(scenario, Scenario):
         if overrides:
             raise ValueError("overrides= needs a preset name or TOML path, not a Scenario object")
-        sc = scenario
+        sc = checked(scenario)  # as simulate (design §18.1)
     else:
         sc = load(scenario, overrides)
     W = int(worlds)

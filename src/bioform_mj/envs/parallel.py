@@ -87,7 +87,9 @@ def _scenario_of(scenario: str | Path | Scenario, overrides: Any = None) -> Scen
     if isinstance(scenario, Scenario):
         if overrides:
             raise ValueError("overrides= needs a preset name or TOML path, not a Scenario object")
-        return scenario
+        from ..scenario_load import checked
+
+        return checked(scenario)  # as simulate: a Scenario changed in Python is checked as load checks a file
     return load_scenario(scenario, overrides)
 
 
