@@ -38,13 +38,18 @@ demo: $(STAMP)
 NPY_AVX512 = $(PY) -c "from numpy._core._multiarray_umath import __cpu_features__ as f; \
 	print(' '.join(k for k in ('AVX512F','AVX512CD','AVX512_SKX','AVX512_CLX','AVX512_CNL','AVX512_ICL','AVX512_SPR','X86_V4') if f.get(k)))"
 
+# the suite in TEST_WORKERS processes (pytest-xdist; 2 = this project's 2-core reference machine; 0: one
+# process); Ray's tests stay on one worker (tests/conftest.py)
+TEST_WORKERS ?= 2
+XDIST = $(if $(filter 0,$(TEST_WORKERS)),,-n $(TEST_WORKERS) --dist loadgroup)
+
 test: $(TEST_STAMP)
 	$(PY) -c "import warp, mujoco_warp" || { echo "error: the gpu extra is missing from $(VENV): rm $(TEST_STAMP) and run make test again" >&2; exit 2; }
 	$(PY) -c "import pettingzoo, gymnasium" || { echo "error: the rl extra is missing from $(VENV): rm $(TEST_STAMP) and run make test again" >&2; exit 2; }
 	$(VENV)/bin/ruff check src tests scripts examples docs/tutorials
 	$(VENV)/bin/ruff format --check src tests scripts examples docs/tutorials
-	$(PY) -m pytest -q
-	NPY_DISABLE_CPU_FEATURES="$$($(NPY_AVX512))" $(PY) -m pytest -q -m equivalence -p no:cacheprovider
+	$(PY) -m pytest -q $(XDIST)
+	NPY_DISABLE_CPU_FEATURES="$$($(NPY_AVX512))" $(PY) -m pytest -q -m equivalence -p no:cacheprovider $(XDIST)
 	$(MKDOCS) build --strict
 
 # MkDocs' notice about its own future is not a warning about these docs
@@ -62,7 +67,7 @@ lint: $(TEST_STAMP)
 	$(VENV)/bin/ruff format src tests scripts examples docs/tutorials
 
 test-fast: $(TEST_STAMP)
-	$(PY) -m pytest -q -m "not slow"
+	$(PY) -m pytest -q -m "not slow" $(XDIST)
 
 bench: $(STAMP)
 	$(PY) scripts/bench_control_step.py

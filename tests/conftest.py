@@ -12,6 +12,15 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("BIOFORM_CACHE_DIR", tempfile.mkdtemp(prefix="bioform-test-cache-"))
 
 
+def pytest_collection_modifyitems(config, items):
+    """Under pytest-xdist (``make test`` runs two workers, ``--dist loadgroup``), the tests that start a Ray
+    cluster run one after another on one worker: two local clusters on one machine share Ray's fixed ports
+    (the dashboard agent's, the client server's). Without xdist the mark does nothing."""
+    for item in items:
+        if "ray" in item.nodeid.lower().replace("array", ""):
+            item.add_marker(pytest.mark.xdist_group("ray"))
+
+
 @pytest.fixture(scope="session")
 def table1_ideal(tmp_path_factory):
     """``bioform table1 paper --plant ideal`` through the CLI; returns (out_dir, table dict, logs)."""
