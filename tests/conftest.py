@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import tempfile
 
 import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 # the pre-run robot check's cache (design §14.2): per test session, not the user's ~/.cache/bioform_mj
-os.environ.setdefault("BIOFORM_CACHE_DIR", tempfile.mkdtemp(prefix="bioform-test-cache-"))
+if "BIOFORM_CACHE_DIR" not in os.environ:
+    _CACHE = tempfile.mkdtemp(prefix="bioform-test-cache-")
+    os.environ["BIOFORM_CACHE_DIR"] = _CACHE
+    atexit.register(shutil.rmtree, _CACHE, ignore_errors=True)  # one per session (and per xdist worker): not left
 
 
 def pytest_collection_modifyitems(config, items):
