@@ -9,6 +9,7 @@ from bioform_mj.control.cbf import cbf_filter
 from bioform_mj.errors import ScenarioError
 from bioform_mj.scenario import load
 from bioform_mj.sim import simulate
+from crossing import CROSSING
 
 
 def _scratch(k):
@@ -59,18 +60,7 @@ def test_two_robots_head_on_both_constraints_hold():
         assert v < 1.0  # slowed down
 
 
-CROSS = {
-    "sim.duration": 3.0,
-    "leader.kind": "line",
-    "leader.y0": 0.0,
-    "leader.speed": 0.2,
-    "plant.kind": "mujoco",
-    "graph.edges": [[1, 2]],
-    "graph.leader_access": [1, 2],
-    "formation.offsets": [[1.0, 0.5], [1.0, -0.5]],
-    "formation.initial_poses": [[-1.0, 0.5, 0.0], [-1.0, -0.5, 0.0]],
-    "safety.distance": 0.05,
-}
+CROSS = {**CROSSING, "sim.duration": 3.0, "safety.distance": 0.05}
 
 
 def test_crossing_without_contact_with_the_filter_and_engines_agree():

@@ -9,6 +9,7 @@ from bioform_mj.hardware import line, preset_control_rate
 from bioform_mj.robots import resolve_robot
 from bioform_mj.scenario import load
 from bioform_mj.sim import simulate
+from crossing import CROSSING
 
 
 def _run(name, **over):
@@ -63,21 +64,7 @@ def test_dc_motor_no_load_speed_is_the_limit():
 def test_collision_fails_separation():
     """Two followers swapping sides touch (test_safety's crossing): separation check fails with
     the min separation (≤ 0) against the safety distance and the contact count said."""
-    sc = load(
-        "paper",
-        {
-            "sim.duration": 2.5,
-            "leader.kind": "line",
-            "leader.y0": 0.0,
-            "leader.speed": 0.2,
-            "plant.kind": "mujoco",
-            "graph.edges": [[1, 2]],
-            "graph.leader_access": [1, 2],
-            "formation.offsets": [[1.0, 0.5], [1.0, -0.5]],
-            "formation.initial_poses": [[-1.0, 0.5, 0.0], [-1.0, -0.5, 0.0]],
-            "safety.distance": 0.1,
-        },
-    )
+    sc = load("paper", {**CROSSING, "sim.duration": 2.5, "safety.distance": 0.1})
     res = simulate(sc)
     c = res.summary["hardware"]["checks"]["separation"]
     f = res.summary["followers"]

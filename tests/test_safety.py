@@ -16,20 +16,13 @@ from bioform_mj.cli import main
 from bioform_mj.errors import InputError, ScenarioError
 from bioform_mj.scenario import load
 from bioform_mj.sim import make_plant, simulate
+from crossing import CROSSING
 
 CROSS = {
     "name": "crossing",
+    **CROSSING,
     "sim.duration": 3.0,
-    "leader.kind": "line",
     "leader.x0": 0.0,
-    "leader.y0": 0.0,
-    "leader.speed": 0.2,
-    "plant.kind": "mujoco",
-    "graph.edges": [[1, 2]],
-    "graph.leader_access": [1, 2],
-    "formation.offsets": [[1.0, 0.5], [1.0, -0.5]],
-    # each starts in the other's slot: they must swap sides, and the paper's law has no avoidance
-    "formation.initial_poses": [[-1.0, 0.5, 0.0], [-1.0, -0.5, 0.0]],
     "safety.distance": 0.1,
 }
 
