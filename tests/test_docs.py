@@ -153,9 +153,8 @@ def test_readme_python_quick_start_runs_as_written(capsys):
     assert second.startswith("3000 ['t_s', 'follower', 'leader_pose_x_m'")  # 1000 rows × 3 followers
 
 
-@pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="the docs extra is not installed")
-def test_docs_build_strictly(tmp_path):
-    """mkdocs build --strict: a broken link, a missing page or a stale API reference fails."""
+def _mkdocs_strict(cwd: Path, site: Path) -> subprocess.CompletedProcess:
+    """``mkdocs build --strict -d site`` in ``cwd`` with this checkout's src first on the path."""
     env = dict(
         os.environ,
         NO_MKDOCS_2_WARNING="1",
@@ -163,8 +162,14 @@ def test_docs_build_strictly(tmp_path):
         PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
     )
     # not --quiet: it hides the warnings from strict mode too, and a broken link would pass
-    cmd = [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")]
-    out = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env=env, timeout=300)
+    cmd = [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(site)]
+    return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, env=env, timeout=300)
+
+
+@pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="the docs extra is not installed")
+def test_docs_build_strictly(tmp_path):
+    """mkdocs build --strict: a broken link, a missing page or a stale API reference fails."""
+    out = _mkdocs_strict(ROOT, tmp_path / "site")
     assert out.returncode == 0, out.stderr[-3000:]
     assert "WARNING" not in out.stderr, out.stderr[-3000:]
     scen = (tmp_path / "site" / "reference" / "scenario" / "index.html").read_text()
@@ -191,14 +196,7 @@ def test_a_broken_link_fails_the_strict_build(tmp_path):
     (work / "src").symlink_to(ROOT / "src")
     with open(work / "docs" / "guide" / "faults.md", "a") as fh:
         fh.write("\n[a page that is not there](no-such-page.md)\n")
-    env = dict(
-        os.environ,
-        NO_MKDOCS_2_WARNING="1",
-        DISABLE_MKDOCS_2_WARNING="true",
-        PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
-    )
-    cmd = [sys.executable, "-m", "mkdocs", "build", "--strict", "-d", str(tmp_path / "site")]
-    out = subprocess.run(cmd, cwd=work, capture_output=True, text=True, env=env, timeout=300)
+    out = _mkdocs_strict(work, tmp_path / "site")
     assert out.returncode != 0 and "no-such-page.md" in out.stderr
 
 
