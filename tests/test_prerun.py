@@ -27,11 +27,15 @@ PAPER = (models_dir() / "paper_robot.xml").read_text()
 def _braking(tmp_path: Path, name: str = "caster", unnamed: bool = False) -> str:
     """The paper robot with its rear caster at the floor's friction, 3 cm of centre of mass behind the
     axle: the caster carries 23.5 g · 0.03 / 0.13 = 53.2 N and brakes (test_verdict's robot)."""
-    text = PAPER.replace('condim="1" priority="2" friction="0 0 0"', 'condim="3" friction="1 0.005 0.0001"')
-    text = text.replace('pos="-0.13 0 -0.0745"', 'pos="-0.13 0 -0.0755"')
-    text = text.replace('<inertial pos="0 0 0" mass="23.5"', '<inertial pos="-0.03 0 0" mass="23.5"')
-    if unnamed:
-        text = text.replace('name="back_caster" ', "")
+    edits = [
+        ('condim="1" priority="2" friction="0 0 0"', 'condim="3" friction="1 0.005 0.0001"'),
+        ('pos="-0.13 0 -0.0745"', 'pos="-0.13 0 -0.0755"'),
+        ('<inertial pos="0 0 0" mass="23.5"', '<inertial pos="-0.03 0 0" mass="23.5"'),
+    ] + ([('name="back_caster" ', "")] if unnamed else [])
+    text = PAPER
+    for old, new in edits:
+        assert old in text, old  # each edit finds its place: a changed paper robot would make another robot
+        text = text.replace(old, new)
     assert text.count("friction=") and text != PAPER and (not unnamed or "back_caster" not in text)
     p = tmp_path / f"{name}.xml"
     p.write_text(text)
