@@ -126,7 +126,12 @@ def test_findings_are_a_report_not_a_diary():
         assert not hits, (page.name, hits[:3])
     for page in sorted((DOCS / "findings").glob("*.md")):
         if page.name != "index.md":
-            assert "**Reproduce:**" in page.read_text() or "Reproduce" in page.read_text(), page.name
+            text = page.read_text()
+            # each finding says how to reproduce it: a command in backticks right after the bold label
+            assert re.search(r"\*\*Reproduce:\*\*\s+`[^`]+`", text), page.name
+            # and the scripts and test files those commands run are in the repository
+            for named in re.findall(r"\b((?:scripts|tests)/[\w/.-]+\.py)\b", text):
+                assert (ROOT / named).exists(), (page.name, named)
 
 
 def test_readme_is_a_front_door():
