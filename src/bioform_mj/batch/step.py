@@ -65,7 +65,6 @@ from .device import (
     command_rate,
     encoder_angle,
     error_rate,
-    formation_offset,
     neuron_rate,
     noisy_reading,
     slip_ratio,
@@ -161,10 +160,7 @@ def _control(
     kl = wp.min(k, N)
     lframe = g.sc[w, LFRAME] != zero
     for i in range(n):  # formation error against the true leader at this observation (engine.record)
-        ox, oy = formation_offset(g.offsets[w, i, 0], g.offsets[w, i, 1], L_pose[kl, 2], lframe)
-        dx = s.pose[w, i, 0] - (L_pose[kl, 0] - ox)
-        dy = s.pose[w, i, 1] - (L_pose[kl, 1] - oy)
-        s.ferr[w, i] = wp.sqrt(dx * dx + dy * dy)
+        stack.formation_error(g, s, w, i, L_pose[kl, 0], L_pose[kl, 1], L_pose[kl, 2], lframe)
     # ---- reset (kernel.reset_state), and the loop's own metrics and watches
     if k == 0:
         stack.reset(g, s, w, n)
