@@ -469,9 +469,7 @@ class BatchRun:
             self.reset()
             rec()
             for _ in range(N - 1):
-                self._period()
-                self._launch_events()
-                self._launch_control()
+                self._steps(1)
                 rec()
             wp.synchronize_device(self.device)
 
