@@ -581,10 +581,11 @@ class BatchRun:
             s.tip_step.numpy(),
         )
         slip = s.slip_step.numpy()
-        odo = self.g.sc.numpy()[:, ODO] != 0
+        scal = self.g.sc.numpy()  # (W, SCALARS): one copy off the device
+        odo = scal[:, ODO] != 0
         drift = self._odometry_drift()
         c_min, c_max = self.g.c_min.numpy(), self.g.c_max.numpy()
-        learning = self.g.sc.numpy()[:, LEARN] != 0
+        learning = scal[:, LEARN] != 0
         lp_end = self.L_pose_host[self.N]
         out = []
         for w, sc in enumerate(self.scenarios):
