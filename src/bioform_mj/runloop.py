@@ -165,21 +165,24 @@ class Stepper:
         return k1 - k0, j, OK
 
 
+#: a user controller's ``signals()`` names and the :class:`StackState` field each is copied into
+_SIGNALS = (
+    ("est_pose", "est_pose"),
+    ("est_vel", "est_vel"),
+    ("cmd", "cmd"),
+    ("dcmd", "dcmd"),
+    ("tau_raw", "tau_raw"),
+    ("c_hat", "c_hat"),
+    ("z_hat", "z_hat"),
+    ("vs", "vs"),
+    ("tracking_error", "err"),
+    ("saturated", "saturated"),
+)
+
+
 def _shadow(state: StackState, sig: Any, tau: np.ndarray, missing: set[str]) -> None:
     """Copy a user controller's signals into the shadow state the metrics, guards and log read."""
-    fields = {
-        "est_pose": "est_pose",
-        "est_vel": "est_vel",
-        "cmd": "cmd",
-        "dcmd": "dcmd",
-        "tau_raw": "tau_raw",
-        "c_hat": "c_hat",
-        "z_hat": "z_hat",
-        "vs": "vs",
-        "tracking_error": "err",
-        "saturated": "saturated",
-    }
-    for name, attr in fields.items():
+    for name, attr in _SIGNALS:
         v = sig.get(name)
         if v is None:
             missing.add(name)

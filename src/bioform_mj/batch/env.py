@@ -39,7 +39,6 @@ from .device import (
     CommFaults,
     F,
     _check,
-    formation_offset,
     wrap,
 )
 from .runner import BatchRun  # noqa: E402
@@ -138,11 +137,7 @@ def _env_sense(
     for i in range(n):
         # tracking error (eqs. 27-28; the slot's own pose for leader-frame offsets, design §4)
         e0, e1, e2, vr, wr = stack.follower_error(g, s, w, i, lframe)
-        # formation error against the true leader (engine.record)
-        ox, oy = formation_offset(g.offsets[w, i, 0], g.offsets[w, i, 1], lp2, lframe)
-        dx = s.pose[w, i, 0] - (lp0 - ox)
-        dy = s.pose[w, i, 1] - (lp1 - oy)
-        s.ferr[w, i] = wp.sqrt(dx * dx + dy * dy)
+        stack.formation_error(g, s, w, i, lp0, lp1, lp2, lframe)  # against the true leader (engine.record)
     bad = wp.int32(0)
     if k > 0:
         bad = _check(g, s, w, n)

@@ -469,9 +469,7 @@ class BatchRun:
             self.reset()
             rec()
             for _ in range(N - 1):
-                self._period()
-                self._launch_events()
-                self._launch_control()
+                self._steps(1)
                 rec()
             wp.synchronize_device(self.device)
 
@@ -583,10 +581,11 @@ class BatchRun:
             s.tip_step.numpy(),
         )
         slip = s.slip_step.numpy()
-        odo = self.g.sc.numpy()[:, ODO] != 0
+        scal = self.g.sc.numpy()  # (W, SCALARS): one copy off the device
+        odo = scal[:, ODO] != 0
         drift = self._odometry_drift()
         c_min, c_max = self.g.c_min.numpy(), self.g.c_max.numpy()
-        learning = self.g.sc.numpy()[:, LEARN] != 0
+        learning = scal[:, LEARN] != 0
         lp_end = self.L_pose_host[self.N]
         out = []
         for w, sc in enumerate(self.scenarios):

@@ -47,6 +47,7 @@ from .device import (
     command_derivative,
     estimator_euler,
     estimator_rates,
+    formation_offset,
     harmonic,
     learner_step,
     neuron_step,
@@ -349,6 +350,17 @@ def advance(g: BatchGains, s: BatchState, w: int, n: int, dt: F, bio: bool):
         s.est_vel[w, i, 1] = om
         if bio:
             s.vs[w, i] = neuron_step(s.vs[w, i], s.err[w, i, 0], g.sc[w, A_], g.sc[w, B_], g.sc[w, D_], dt)
+
+
+@wp.func
+def formation_error(g: BatchGains, s: BatchState, w: int, i: int, lx: F, ly: F, lth: F, lframe: bool):
+    """``engine.record``'s formation error of follower ``i`` into ``s.ferr[w, i]`` (m): the distance of its
+    true pose ``s.pose`` from its slot about the true leader at ``(lx, ly)`` m, heading ``lth`` rad (with
+    ``lframe``, the offsets in the leader's frame: ``formation_offset``, design §4)."""
+    ox, oy = formation_offset(g.offsets[w, i, 0], g.offsets[w, i, 1], lth, lframe)
+    dx = s.pose[w, i, 0] - (lx - ox)
+    dy = s.pose[w, i, 1] - (ly - oy)
+    s.ferr[w, i] = wp.sqrt(dx * dx + dy * dy)
 
 
 @wp.func

@@ -65,7 +65,6 @@ from .device import (
     command_rate,
     encoder_angle,
     error_rate,
-    formation_offset,
     neuron_rate,
     noisy_reading,
     slip_ratio,
@@ -125,14 +124,16 @@ def _control(
     k = s.k[w]
     n = s.pose.shape[1]
     dt = g.sc[w, DT]
+    tk = F(k) * dt  # s: the time of control step k
     zero = F(0.0)
+    odo = g.sc[w, ODO] != zero  # the controller measures by odometry (design §8.3)
     # ---- MuJoCo Warp dropped contacts or constraint rows in the last period: stop this world
     # (the CPU loop stops on MuJoCo's warnings: engine.PLANT_FAILED), never silently
     if k >= 1 and s.status[w] == 0 and (overflow[w] & CAPACITY) != 0:
         s.status[w] = ST_CAP
         s.diag[w, 0] = F(overflow[w] & CAPACITY)
         s.diag[w, 1] = F(-1.0)
-        s.diag[w, 2] = F(k) * dt  # the end of the period that overflowed
+        s.diag[w, 2] = tk  # the end of the period that overflowed
         s.k_done[w] = k - 1
     # ---- observe (mujoco_kernels.observe)
     for i in range(n):
@@ -161,10 +162,7 @@ def _control(
     kl = wp.min(k, N)
     lframe = g.sc[w, LFRAME] != zero
     for i in range(n):  # formation error against the true leader at this observation (engine.record)
-        ox, oy = formation_offset(g.offsets[w, i, 0], g.offsets[w, i, 1], L_pose[kl, 2], lframe)
-        dx = s.pose[w, i, 0] - (L_pose[kl, 0] - ox)
-        dy = s.pose[w, i, 1] - (L_pose[kl, 1] - oy)
-        s.ferr[w, i] = wp.sqrt(dx * dx + dy * dy)
+        stack.formation_error(g, s, w, i, L_pose[kl, 0], L_pose[kl, 1], L_pose[kl, 2], lframe)
     # ---- reset (kernel.reset_state), and the loop's own metrics and watches
     if k == 0:
         stack.reset(g, s, w, n)
@@ -182,7 +180,7 @@ def _control(
             s.slip_step[w, i] = -1
         s.nrow[w] = 0
         s.k_done[w] = 0
-        if g.sc[w, ODO] != zero:  # mujoco_kernels.odometry_reset: the true pose, the sensordata of mjw.forward
+        if odo:  # mujoco_kernels.odometry_reset: the true pose, the sensordata of mjw.forward
             s.odo_count[w] = 0
             for i in range(n):
                 for c in range(3):
@@ -195,7 +193,7 @@ def _control(
     if running:
         # ---- the measurement (sim.simulate's measure(): plant.measurement, mujoco_kernels.odometry_read)
         for i in range(n):
-            if g.sc[w, ODO] != zero:
+            if odo:
                 for c in range(3):
                     s.mpose[w, i, c] = s.odo_pose[w, i, c]
                 s.mvel[w, i, 0] = s.odo_dist[w, i] / dt
@@ -208,7 +206,6 @@ def _control(
                 for c in range(2):
                     s.mvel[w, i, c] = s.vel[w, i, c]
         # ---- faults.Faults.sense: Gaussian noise on what the controller measures, inside the window
-        tk = F(k) * dt
         if f.sc[w, FNOISE] != zero and tk >= f.sc[w, FW0] and tk < f.sc[w, FW1]:
             seed = f.sc[w, FSEED]
             for i in range(n):
@@ -316,14 +313,14 @@ def _control(
                 s.fsq[w, i] = s.fsq[w, i] + s.ferr[w, i] * s.ferr[w, i]
                 if k == 0:
                     s.fe0[w, i] = s.ferr[w, i]
-                if F(k) * dt >= g.sc[w, TSPIN] and wp.abs(s.vel[w, i, 1]) <= SPIN:
+                if tk >= g.sc[w, TSPIN] and wp.abs(s.vel[w, i, 1]) <= SPIN:
                     s.spin_ok[w, i] = s.spin_ok[w, i] + F(1.0)
             s.nrow[w] = s.nrow[w] + 1
     # ---- apply_inputs: this step's torques and d(k dt), held over the period (zero once stopped)
     d0 = zero
     d1 = zero
     if running and g.sc[w, USED] != zero:
-        d0, d1 = stack.disturbance(g, w, F(k) * dt)
+        d0, d1 = stack.disturbance(g, w, tk)
     # faults.actuator (Faults.step): while any follower's limit is reduced, every wheel's torque
     # reaching the plant is clipped to its follower's limit × scale (s.tau stays as commanded: the
     # log, the metrics and, unless a DC motor feeds back what it delivered, the learner see that)
