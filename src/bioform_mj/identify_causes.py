@@ -13,8 +13,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from bioform_mj.contacts import rolling_bodies
-from bioform_mj.robot_layout import subtree
+from bioform_mj.contacts import _strip, rolling_bodies
+from bioform_mj.robot_layout import _name, subtree
 
 #: a finding of :func:`identify` (design §14): drag when it changes the speed by this fraction over a test
 DRAG_FINDING = 0.02
@@ -87,13 +87,12 @@ def floor_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) ->
         else:
             continue
         mujoco.mj_contactForce(m, d, c, f)
-        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"#{g}"
         body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.geom_bodyid[g])) or ""
         e = out.setdefault(
             g,
             {
-                "body": body[len(prefix) :] if body.startswith(prefix) else body,
-                "geom": name[len(prefix) :] if name.startswith(prefix) else name,
+                "body": _strip(body, prefix),
+                "geom": _strip(_name(m, mujoco.mjtObj.mjOBJ_GEOM, g), prefix),
                 "role": "wheel" if g in wheels else ("rolling" if int(m.geom_bodyid[g]) in rolling else "other"),
                 "load_n": 0.0,
                 "friction": float(con.friction[0]) if int(con.dim) > 1 else 0.0,
@@ -124,8 +123,7 @@ def self_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> 
     f = np.zeros(6)
 
     def name(kind: Any, k: int) -> str:
-        n = mujoco.mj_id2name(m, kind, k) or f"#{k}"
-        return n[len(prefix) :] if n.startswith(prefix) else n
+        return _strip(_name(m, kind, k), prefix)
 
     for c in range(d.ncon):
         con = d.contact[c]
@@ -572,8 +570,7 @@ def caster_finding(
     drag in the drive and the turn test (then it is not said that they have none)."""
 
     def name(kind: Any, k: int) -> str:
-        n = mujoco.mj_id2name(model, kind, k) or f"#{k}"
-        return n[len(prefix) :] if n.startswith(prefix) else n
+        return _strip(_name(model, kind, k), prefix)
 
     parts_by: dict[str, Any] = {}
     texts = []
