@@ -474,22 +474,20 @@ def _note_wheel_joints(model: mujoco.MjModel, joints, r: float, notes: list[str]
 def _note_other_wheels(model, data, base: int, joints, left, up, r: float, floor_z: float, notes) -> None:
     """A note per other fixed wheel touching the floor: a hinge along the axle direction, the only
     joint of its body, below the base through bodies without joints (skid steer)."""
+    welded = set(welded_to(model, base).tolist())
     for j in range(model.njnt):
         if j in joints or model.jnt_type[j] != _HINGE or abs(float(data.xaxis[j] @ left)) < 0.99:
             continue
         b = int(model.jnt_bodyid[j])
         if model.body_jntnum[b] != 1:
             continue
-        p_ = int(model.body_parentid[b])
-        while p_ not in (0, base) and model.body_jntnum[p_] == 0:
-            p_ = int(model.body_parentid[p_])
-        if p_ != base:
+        if int(model.body_parentid[b]) not in welded:
             continue
         touches = [
             g
             for g in range(model.ngeom)
             if model.geom_bodyid[g] == b
-            and (model.geom_contype[g] or model.geom_conaffinity[g])
+            and _collides(model, g)
             and data.geom_xpos[g][2] - _geom_support(model, data, g, -up) - floor_z <= max(0.005, 0.25 * r)
         ]
         if touches:
