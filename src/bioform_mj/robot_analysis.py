@@ -189,6 +189,7 @@ def _find_base(model: mujoco.MjModel, path: Path, base_name: str, notes: list[st
 def _wheel_joints(model: mujoco.MjModel, path: Path, names: _Mapped, base: int) -> list[int]:
     """The ids of the left and right wheel joints: two different hinges on bodies below the base."""
     joints = []
+    below = set(subtree(model, base).tolist())
     for side, jname in (("left_wheel", names.left), ("right_wheel", names.right)):
         j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, jname)
         if j < 0:
@@ -197,10 +198,7 @@ def _wheel_joints(model: mujoco.MjModel, path: Path, names: _Mapped, base: int) 
             raise ModelError(
                 f"{path}: joint '{jname}' ({side}) is not a hinge (type {mujoco.mjtJoint(model.jnt_type[j]).name})"
             )
-        b = model.jnt_bodyid[j]
-        while b not in (0, base):
-            b = model.body_parentid[b]
-        if b != base:
+        if int(model.jnt_bodyid[j]) not in below:
             raise ModelError(f"{path}: joint '{jname}' ({side}) is not on a body below '{names.base}'")
         joints.append(j)
     if joints[0] == joints[1]:
