@@ -108,14 +108,6 @@ def rolling_bodies(model: mujoco.MjModel, lay: RobotLayout) -> set[int]:
     return out
 
 
-def _welded_to_base(model: mujoco.MjModel, base: int, b: int) -> bool:
-    while b != base and b > 0:
-        if model.body_jntnum[b]:
-            return False
-        b = int(model.body_parentid[b])
-    return b == base
-
-
 def _contact_bodies(model: mujoco.MjModel, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
     """Bodies of the two geoms of each of the ``ncon`` contacts, (ncon,) each."""
     n = int(data.ncon)
@@ -139,6 +131,7 @@ def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout,
     bodies = set(subtree(model, base).tolist())
     wheels = _wheel_bodies(model, lay)
     rolling = rolling_bodies(model, lay)
+    welded = set(welded_to(model, base).tolist())
     weight = float(model.body_mass[list(bodies)].sum() * np.linalg.norm(model.opt.gravity))
     published = {g: (f, c) for g, f, c in lay.published_contacts}
     casters = set(lay.casters)
@@ -166,7 +159,7 @@ def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout,
                 "condim_published": int(pub[1]),
                 "priority": int(model.geom_priority[g]),
                 "points": 0,
-                "welded_to_base": _welded_to_base(model, base, b),
+                "welded_to_base": b in welded,
                 "rolls": b in rolling,
                 "_named": name in casters,
                 "_wheel": b in wheels,

@@ -13,8 +13,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from bioform_mj.contacts import rolling_bodies
-from bioform_mj.robot_layout import subtree
+from bioform_mj.contacts import _strip, rolling_bodies
+from bioform_mj.robot_layout import _name, subtree
 
 #: a finding of :func:`identify` (design §14): drag when it changes the speed by this fraction over a test
 DRAG_FINDING = 0.02
@@ -87,13 +87,12 @@ def floor_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) ->
         else:
             continue
         mujoco.mj_contactForce(m, d, c, f)
-        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"#{g}"
         body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.geom_bodyid[g])) or ""
         e = out.setdefault(
             g,
             {
-                "body": body[len(prefix) :] if body.startswith(prefix) else body,
-                "geom": name[len(prefix) :] if name.startswith(prefix) else name,
+                "body": _strip(body, prefix),
+                "geom": _strip(_name(m, mujoco.mjtObj.mjOBJ_GEOM, g), prefix),
                 "role": "wheel" if g in wheels else ("rolling" if int(m.geom_bodyid[g]) in rolling else "other"),
                 "load_n": 0.0,
                 "friction": float(con.friction[0]) if int(con.dim) > 1 else 0.0,
@@ -124,8 +123,7 @@ def self_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> 
     f = np.zeros(6)
 
     def name(kind: Any, k: int) -> str:
-        n = mujoco.mj_id2name(m, kind, k) or f"#{k}"
-        return n[len(prefix) :] if n.startswith(prefix) else n
+        return _strip(_name(m, kind, k), prefix)
 
     for c in range(d.ncon):
         con = d.contact[c]
@@ -195,6 +193,30 @@ def _brake_what(c: dict[str, Any], base: str) -> str:
     return f"'{c['geom']}' (body '{c['body']}') is not a wheel,"
 
 
+def _brakes(c: dict[str, Any], weight: float) -> bool:
+    """True when floor contact ``c`` (a :func:`floor_contacts` entry, or a driving mean of one) carries over
+    :data:`CASTER_LOAD` of ``weight`` N and slides with more friction than :data:`CASTER_MU`."""
+    return c["load_n"] > CASTER_LOAD * weight and c["friction"] > CASTER_MU
+
+
+def _braking_finding(c: dict[str, Any], base: str, detail: str, while_driving: bool = False) -> dict[str, Any]:
+    """The ``braking_caster`` finding of floor contact ``c`` (at rest, or ``while_driving`` with its
+    ``peak_n``): named by :func:`_brake_what`, ``detail`` the rest of its sentence; braking force N."""
+    numbers: dict[str, Any] = {
+        "geom": c["geom"],
+        "body": c["body"],
+        "load_n": c["load_n"],
+        "friction": c["friction"],
+        "braking_force_n": c["friction"] * c["load_n"],
+    }
+    if while_driving:
+        numbers["peak_load_n"] = c["peak_n"]
+    numbers["contact"] = _contact_kind(c, base)
+    if while_driving:
+        numbers["while_driving"] = True
+    return _finding("braking_caster", _brake_what(c, base) + detail, **numbers)
+
+
 def moving_brakes(
     findings: list[dict[str, Any]], dragging: list[dict[str, Any]], weight: float, r: float, base: str, tau_a: float
 ) -> list[dict[str, Any]]:
@@ -205,23 +227,17 @@ def moving_brakes(
     named = {x.get("geom") for x in findings if x["kind"] == "braking_caster"}
     out = []
     for c in dragging:
-        if c["geom"] in named or c["load_n"] <= CASTER_LOAD * weight or c["friction"] <= CASTER_MU:
+        if c["geom"] in named or not _brakes(c, weight):
             continue
         brake = c["friction"] * c["load_n"]
         out.append(
-            _finding(
-                "braking_caster",
-                _brake_what(c, base) + f" carries {c['load_n']:.3g} N on average ({c['load_n'] / weight:.0%} of the "
+            _braking_finding(
+                c,
+                base,
+                f" carries {c['load_n']:.3g} N on average ({c['load_n'] / weight:.0%} of the "
                 f"weight; {c['peak_n']:.3g} N at most) while it drives at τ_a = {tau_a:.3g} N·m (less at rest: the "
                 f"drive torque pitches the chassis onto it) and slides with friction {c['friction']:g}: "
                 f"{brake:.3g} N of braking on average, {brake * r:.3g} N·m of wheel torque lost",
-                geom=c["geom"],
-                body=c["body"],
-                load_n=c["load_n"],
-                friction=c["friction"],
-                braking_force_n=brake,
-                peak_load_n=c["peak_n"],
-                contact=_contact_kind(c, base),
                 while_driving=True,
             )
         )
@@ -246,20 +262,15 @@ def rest_findings(
             )
         )
     for c in contacts:
-        if c["role"] == "other" and c["load_n"] > CASTER_LOAD * weight and c["friction"] > CASTER_MU:
+        if c["role"] == "other" and _brakes(c, weight):
             brake = c["friction"] * c["load_n"]
             findings.append(
-                _finding(
-                    "braking_caster",
-                    _brake_what(c, lay.base) + f" carries {c['load_n']:.3g} N "
+                _braking_finding(
+                    c,
+                    lay.base,
+                    f" carries {c['load_n']:.3g} N "
                     f"({c['load_n'] / weight:.0%} of the weight) and slides with friction {c['friction']:g}: "
                     f"up to {brake:.3g} N of braking, {brake * params.wheel_radius:.3g} N·m of wheel torque lost",
-                    geom=c["geom"],
-                    body=c["body"],
-                    load_n=c["load_n"],
-                    friction=c["friction"],
-                    braking_force_n=brake,
-                    contact=_contact_kind(c, lay.base),
                 )
             )
     if float(loads.min()) < WHEEL_LOAD_MIN * weight:
@@ -559,8 +570,7 @@ def caster_finding(
     drag in the drive and the turn test (then it is not said that they have none)."""
 
     def name(kind: Any, k: int) -> str:
-        n = mujoco.mj_id2name(model, kind, k) or f"#{k}"
-        return n[len(prefix) :] if n.startswith(prefix) else n
+        return _strip(_name(model, kind, k), prefix)
 
     parts_by: dict[str, Any] = {}
     texts = []

@@ -189,6 +189,7 @@ def _find_base(model: mujoco.MjModel, path: Path, base_name: str, notes: list[st
 def _wheel_joints(model: mujoco.MjModel, path: Path, names: _Mapped, base: int) -> list[int]:
     """The ids of the left and right wheel joints: two different hinges on bodies below the base."""
     joints = []
+    below = set(subtree(model, base).tolist())
     for side, jname in (("left_wheel", names.left), ("right_wheel", names.right)):
         j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, jname)
         if j < 0:
@@ -197,10 +198,7 @@ def _wheel_joints(model: mujoco.MjModel, path: Path, names: _Mapped, base: int) 
             raise ModelError(
                 f"{path}: joint '{jname}' ({side}) is not a hinge (type {mujoco.mjtJoint(model.jnt_type[j]).name})"
             )
-        b = model.jnt_bodyid[j]
-        while b not in (0, base):
-            b = model.body_parentid[b]
-        if b != base:
+        if int(model.jnt_bodyid[j]) not in below:
             raise ModelError(f"{path}: joint '{jname}' ({side}) is not on a body below '{names.base}'")
         joints.append(j)
     if joints[0] == joints[1]:
@@ -474,22 +472,20 @@ def _note_wheel_joints(model: mujoco.MjModel, joints, r: float, notes: list[str]
 def _note_other_wheels(model, data, base: int, joints, left, up, r: float, floor_z: float, notes) -> None:
     """A note per other fixed wheel touching the floor: a hinge along the axle direction, the only
     joint of its body, below the base through bodies without joints (skid steer)."""
+    welded = set(welded_to(model, base).tolist())
     for j in range(model.njnt):
         if j in joints or model.jnt_type[j] != _HINGE or abs(float(data.xaxis[j] @ left)) < 0.99:
             continue
         b = int(model.jnt_bodyid[j])
         if model.body_jntnum[b] != 1:
             continue
-        p_ = int(model.body_parentid[b])
-        while p_ not in (0, base) and model.body_jntnum[p_] == 0:
-            p_ = int(model.body_parentid[p_])
-        if p_ != base:
+        if int(model.body_parentid[b]) not in welded:
             continue
         touches = [
             g
             for g in range(model.ngeom)
             if model.geom_bodyid[g] == b
-            and (model.geom_contype[g] or model.geom_conaffinity[g])
+            and _collides(model, g)
             and data.geom_xpos[g][2] - _geom_support(model, data, g, -up) - floor_z <= max(0.005, 0.25 * r)
         ]
         if touches:

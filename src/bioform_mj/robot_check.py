@@ -71,14 +71,6 @@ YAW_TOL = 0.01
 SELF_DEPTH, SELF_FORCE = 1e-3, 0.01
 
 
-def _subtree(model: Any, root: int) -> np.ndarray:
-    ids = np.arange(model.nbody)
-    inside = ids == root
-    for b in ids[root + 1 :]:
-        inside[b] = inside[model.body_parentid[b]]
-    return ids[inside]
-
-
 def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
     """Static tip-over margins of the robot ``prefix`` standing at ``qpos0`` on a floor at z = 0.
 
@@ -90,14 +82,14 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
 
     from .contacts import floor_points
     from .robot_analysis import layout_of
-    from .robot_layout import _geom_support
+    from .robot_layout import _geom_support, subtree
 
     lay = layout_of(model, prefix)
     base = model.body(lay.base).id
     rot = data.xmat[base].reshape(3, 3)
     jl, jr = (model.joint(j).id for j in lay.wheel_joints)
     mid = 0.5 * (data.xanchor[jl] + data.xanchor[jr])
-    bodies = _subtree(model, base)
+    bodies = subtree(model, base)
     masses = model.body_mass[bodies]
     com = (masses[:, None] * data.xipos[bodies]).sum(axis=0) / masses.sum()
     floor_z = mid[2] - lay.wheel_radius

@@ -13,18 +13,10 @@ import numpy as np
 from .errors import InputError
 
 
-def body_chain_fixed(model: Any, b: int, top: int) -> bool:
-    """True when body ``b`` hangs below ``top`` through bodies without joints (``b`` excluded)."""
-    p = int(model.body_parentid[b])
-    while p != top:
-        if p == 0 or model.body_jntnum[p]:
-            return False
-        p = int(model.body_parentid[p])
-    return True
-
-
 def welded_to(model: Any, b: int, top: int) -> bool:
-    """True when body ``b`` is ``top`` or welded to it (no joint on the way up)."""
+    """True when body ``b`` is ``top`` or welded to it (no joint on the way up): the climbing form of
+    :func:`bioform_mj.robot_layout.welded_to`, kept here so that :mod:`bioform_mj.urdf` imports no
+    MuJoCo at import time."""
     while b != top:
         if b == 0 or model.body_jntnum[b]:
             return False
@@ -61,7 +53,7 @@ def find_wheels(model: Any, base: int, path: Path) -> tuple[str, str, str]:
         if model.jnt_type[j] != hinge or abs(float(data.xaxis[j] @ left)) < 0.99:
             continue
         b = int(model.jnt_bodyid[j])
-        if model.body_jntnum[b] != 1 or not body_chain_fixed(model, b, base):
+        if model.body_jntnum[b] != 1 or not welded_to(model, int(model.body_parentid[b]), base):
             continue
         mine = [g for g in robot if welded_to(model, int(model.geom_bodyid[g]), b)]
         if not mine:
