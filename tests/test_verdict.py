@@ -487,3 +487,17 @@ def test_batch_engine_refuses_what_run_refuses(tmp_path):
     sc = load("paper", overrides=["plant.kind=mujoco", "sim.duration=0.1", f'plant.robots=[{{model="{off}"}}]'])
     with pytest.raises(InputError, match="do not stand on the floor"):
         run_batch([sc])
+
+
+def test_a_warn_verdict_says_its_reasons_on_stderr(capsys):
+    """Never silent: tb3's ``warn`` exits 0 and says its reasons as one ``warning:`` line on stderr, not only in
+    the report on stdout (a pass says nothing there)."""
+    assert cli.main(["robot", "check", "tb3"]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("warn: ")
+    lines = err.strip().splitlines()
+    warn = [ln for ln in lines if ln.startswith("warning: robot check warns: ")]
+    assert len(warn) == 1 and len(warn[0]) > len("warning: robot check warns: ") + 10
+    assert cli.main(["robot", "check", "paper"]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("pass: ") and "robot check warns" not in err

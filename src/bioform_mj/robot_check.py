@@ -711,7 +711,8 @@ def add_parser(sub: Any) -> None:
         "check",
         help="parts, a_eff/b_eff (formula and identified), traction and tip-over "
         "margins, damping/armature/frictionloss; verdict pass/warn/fail "
-        f"(exit 0 pass or warn, 2 bad input, {EXIT_FAIL} fail)",
+        "(exit 0 pass or warn: a warn says its reasons in one warning: line on stderr; "
+        f"2 bad input, {EXIT_FAIL} fail)",
     )
     chk.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
     mapping_args(chk)
@@ -777,4 +778,6 @@ def main(args: argparse.Namespace) -> int:
     if report["verdict"] == "fail":
         print(f"error: robot check failed: {'; '.join(report['reasons'])}", file=sys.stderr)
         return EXIT_FAIL
+    if report["verdict"] == "warn":  # never silent: a warn's reasons on stderr too, not only in the report
+        print(f"warning: robot check warns: {'; '.join(report['reasons'])}", file=sys.stderr)
     return 0
