@@ -271,7 +271,10 @@ def test_code_the_docs_name_exists_and_the_design_names_its_home():
             )
             if not generated and not list(ROOT.glob(path)):
                 bad.append(f"{page.relative_to(ROOT)}: `{path}` does not exist")
-        for path in re.findall(r"`((?:control|batch|plants|outputs|envs)/\w+\.py)", page.read_text()):
+        for path in re.findall(
+            r"`((?:core|formation|control|robots|scenario|plants|outputs|assess|run|batch|envs|jobs|cli)/[\w/]+\.py)",
+            page.read_text(),
+        ):
             if not (ROOT / "src" / "bioform_mj" / path).exists():  # a subpackage's module, named from the package
                 bad.append(f"{page.relative_to(ROOT)}: `{path}` does not exist")
     assert not bad, "\n".join(bad)

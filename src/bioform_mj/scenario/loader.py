@@ -50,6 +50,26 @@ def load(
     """Load a preset name, a TOML path or a run's ``summary.json`` (its ``config``: the run again, bit for
     bit), apply ``--set`` overrides, method and plant; validate.
 
+    Parameters
+    ----------
+    source
+        A preset name (``bioform presets``), a path to a scenario TOML file, or a run's ``summary.json``
+        or ``resolved.toml``; ``None``: the paper scenario (the dataclass defaults).
+    overrides
+        ``--set`` overrides: a list of ``"KEY=VALUE"`` strings (``"kinematic.k1=3"``, values in TOML syntax) or
+        a mapping of dotted keys to values; applied in order, after the file. Units are each key's
+        (docs/reference/scenario.md).
+    method
+        The controller, as ``--method``: one of the paper's four (``bioinspired-learning``, ...); ``None``
+        keeps the file's.
+    plant
+        ``"ideal"`` or ``"mujoco"``, as ``--plant``; ``None`` keeps the file's.
+
+    Returns
+    -------
+    Scenario
+        The frozen, validated scenario.
+
     Raises :class:`InputError` (or a subclass) with one line naming the problem.
     """
     data: dict[str, Any]
