@@ -117,6 +117,17 @@ def build_parser() -> argparse.ArgumentParser:
         "the ideal plant is shown in a composed scene)",
     )
     run.add_argument("--rrd", action="store_true", help="write run.rrd (rerun recording)")
+    run.add_argument(
+        "--rosbag",
+        action="store_true",
+        help="write rosbag/ (a ROS 2 bag: metadata.yaml + MCAP, standard messages; needs the ros extra) and the "
+        "3-D state in log.npz",
+    )
+    run.add_argument(
+        "--ros-distro",
+        choices=("humble", "iron", "jazzy", "kilted"),
+        help="with --rosbag: the ROS 2 distribution whose message definitions the bag carries (default jazzy)",
+    )
     run.add_argument("--figures", action="store_true", help="write figures/*.png")
     run.add_argument("--rerun-spawn", action="store_true", help="stream the run live to a rerun viewer spawned for it")
     run.add_argument(
@@ -393,6 +404,12 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
         given = [f"--{k}" for k in ("width", "height", "fps", "camera") if getattr(args, k) is not None]
         if given:
             raise InputError(f"{', '.join(given)} only apply to --video")
+    if args.rosbag:  # before any work: the extra is installed (else one error: line saying how)
+        from .outputs.rosbag import check_available
+
+        check_available()
+    elif args.ros_distro is not None:
+        raise InputError("--ros-distro only applies to --rosbag")
     live_url = None
     if args.rerun_spawn and args.rerun_connect:
         raise InputError("--rerun-spawn and --rerun-connect exclude each other")
@@ -440,7 +457,7 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
             progress_bar(f"{sc.name} {sc.method}", not args.quiet) as cb,
             quiet_outcomes(),  # said once, by _warn_outcomes after the files
         ):
-            result = simulate(sc, observers=observers, progress=cb, engine=args.engine)
+            result = simulate(sc, observers=observers, progress=cb, engine=args.engine, full_state=args.rosbag)
     except KeyboardInterrupt as exc:  # SIGINT/SIGTERM mid-run: keep what the loop returns with it
         result = getattr(exc, "result", None)
         if result is None:
@@ -494,6 +511,14 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
             t0 = time.perf_counter()
             write_rrd(result, out / "run.rrd")
             notes.append(f"run.rrd written in {time.perf_counter() - t0:.1f} s")
+        if args.rosbag:
+            from .outputs.rosbag import DEFAULT_DISTRO, write_bag
+
+            bag = write_bag(result, out / "rosbag", distro=args.ros_distro or DEFAULT_DISTRO)
+            notes.append(
+                f"rosbag/: {bag.messages} messages on {len(bag.topics)} topics ({bag.distro}) written in "
+                f"{bag.write_s:.2f} s"
+            )
         if args.figures:
             from .outputs.figures import run_figures
 
