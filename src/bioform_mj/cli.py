@@ -117,17 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
         "the ideal plant is shown in a composed scene)",
     )
     run.add_argument("--rrd", action="store_true", help="write run.rrd (rerun recording)")
-    run.add_argument(
-        "--rosbag",
-        action="store_true",
-        help="write rosbag/ (a ROS 2 bag: metadata.yaml + MCAP, standard messages; needs the ros extra) and the "
-        "3-D state in log.npz",
-    )
-    run.add_argument(
-        "--ros-distro",
-        choices=("humble", "iron", "jazzy", "kilted"),
-        help="with --rosbag: the ROS 2 distribution whose message definitions the bag carries (default jazzy)",
-    )
+    run.add_argument("--rosbag", action="store_true", help="write rosbag/: the run as a ROS 2 bag (ros extra)")
+    run.add_argument("--ros-distro", choices=("humble", "iron", "jazzy", "kilted"), help="the bag's (default jazzy)")
     run.add_argument("--figures", action="store_true", help="write figures/*.png")
     run.add_argument("--rerun-spawn", action="store_true", help="stream the run live to a rerun viewer spawned for it")
     run.add_argument(
@@ -404,12 +395,10 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
         given = [f"--{k}" for k in ("width", "height", "fps", "camera") if getattr(args, k) is not None]
         if given:
             raise InputError(f"{', '.join(given)} only apply to --video")
-    if args.rosbag:  # before any work: the extra is installed (else one error: line saying how)
-        from .outputs.rosbag import check_available
+    if args.rosbag or args.ros_distro:  # before any work: the ros extra is installed (else: how to install it)
+        from .outputs.rosbag import check_args
 
-        check_available()
-    elif args.ros_distro is not None:
-        raise InputError("--ros-distro only applies to --rosbag")
+        check_args(args.rosbag, args.ros_distro)
     live_url = None
     if args.rerun_spawn and args.rerun_connect:
         raise InputError("--rerun-spawn and --rerun-connect exclude each other")
@@ -512,13 +501,9 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
             write_rrd(result, out / "run.rrd")
             notes.append(f"run.rrd written in {time.perf_counter() - t0:.1f} s")
         if args.rosbag:
-            from .outputs.rosbag import DEFAULT_DISTRO, write_bag
+            from .outputs.rosbag import write_run_bag
 
-            bag = write_bag(result, out / "rosbag", distro=args.ros_distro or DEFAULT_DISTRO)
-            notes.append(
-                f"rosbag/: {bag.messages} messages on {len(bag.topics)} topics ({bag.distro}) written in "
-                f"{bag.write_s:.2f} s"
-            )
+            notes.append(write_run_bag(result, out, args.ros_distro))
         if args.figures:
             from .outputs.figures import run_figures
 

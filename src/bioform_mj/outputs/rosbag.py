@@ -65,6 +65,20 @@ def check_available() -> None:
         raise InputError(f"--rosbag needs the ros extra (the rosbags package), which is not installed: {INSTALL_HINT}")
 
 
+def check_args(rosbag: bool, distro: str | None) -> None:
+    """``bioform run``'s ``--rosbag`` and ``--ros-distro``, before any work: the extra is installed
+    (else :func:`check_available`'s error), ``--ros-distro`` only with ``--rosbag``."""
+    if not rosbag:
+        raise InputError("--ros-distro only applies to --rosbag")
+    check_available()
+
+
+def write_run_bag(result: Any, out: Path, distro: str | None) -> str:
+    """``bioform run --rosbag``: write ``out/rosbag`` (:func:`write_bag`); the line the run prints about it."""
+    bag = write_bag(result, Path(out) / "rosbag", distro=distro or DEFAULT_DISTRO)
+    return f"rosbag/: {bag.messages} messages on {len(bag.topics)} topics ({bag.distro}) written in {bag.write_s:.2f} s"
+
+
 @dataclass
 class BagInfo:
     """What :func:`write_bag` wrote: the folder, message and topic counts, the distribution, wall time (s)."""
