@@ -27,6 +27,7 @@ reader reads the result back (``tests/test_rosbag.py`` compares it with ``log.np
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import shutil
@@ -43,7 +44,7 @@ import numpy as np
 from ..errors import InputError
 from .fullstate import quat_of_rpy
 
-__all__ = ["DISTROS", "DEFAULT_DISTRO", "BagInfo", "check_available", "write_bag", "topics_of"]
+__all__ = ["DISTROS", "DEFAULT_DISTRO", "BagInfo", "check_available", "warm_up", "write_bag", "topics_of"]
 
 #: ROS 2 distributions whose message definitions and type hashes a bag can carry (``rosbags`` stores)
 DISTROS = ("humble", "iron", "jazzy", "kilted")
@@ -71,6 +72,40 @@ def check_args(rosbag: bool, distro: str | None) -> None:
     if not rosbag:
         raise InputError("--ros-distro only applies to --rosbag")
     check_available()
+    warm_up(distro or DEFAULT_DISTRO)
+
+
+def warm_up(distro: str = DEFAULT_DISTRO) -> float:
+    """Import ``rosbags``, build ``distro``'s type store and every serialiser a bag uses, once per
+    process (about 0.3 s, the first time), on a one-row stand-in log; returns the seconds it took.
+    ``bioform run --rosbag`` does it before the run, with its other start-up work: a broken install
+    fails there, and the bag's own write time is then what the run's numbers cost."""
+    t0 = time.perf_counter()
+    msgs = _messages(distro)
+    z = np.zeros
+    log = {
+        "t": z(1),
+        "t_state": np.array([0.0, 0.001]),
+        "pose_3d": z((2, 1, 6)),
+        "twist_3d": z((2, 1, 6)),
+        "wheel_angle": z((2, 1, 2)),
+        "wheel_speed": z((2, 1, 2)),
+        "imu_gyro": z((2, 1, 3)),
+        "imu_accel": z((2, 1, 3)),
+        "leader_state": z((2, 5)),
+        "wheel_sign": np.ones((1, 2)),
+        "wheel_joints": np.array([["l", "r"]]),
+        "cmd": z((1, 1, 2)),
+        "tau": z((1, 1, 2)),
+        "est_pose": z((1, 1, 3)),
+        "est_vel": z((1, 1, 2)),
+        "odom_pose": z((1, 1, 3)),
+        "odom_vel": z((1, 1, 2)),
+    }
+    for tp in topics_of(log, "odometry", msgs):
+        msgs.store.hash_rihs01(tp.msgtype)
+    _static_tf(log, msgs, 0)
+    return time.perf_counter() - t0
 
 
 def write_run_bag(result: Any, out: Path, distro: str | None) -> str:
@@ -102,15 +137,25 @@ class _Topic:
     extra: list[tuple[int, bytes]] = field(default_factory=list)  # (row, CDR bytes): messages of another layout
     qos: list[Any] = field(default_factory=list)
 
-    def payloads(self) -> np.ndarray:
-        """(m, L) uint8: the template with every row's numbers written in."""
-        m = len(self.rows)
-        buf = np.empty((m, self.template.size), np.uint8)
-        buf[:] = self.template
+    def fill(self, out: np.ndarray, cid: int, stamps: np.ndarray, rows: slice = slice(None)) -> None:
+        """Write this topic's MCAP message records (:data:`_MSG_HEAD` bytes of record header, then the
+        template with the numbers of its messages ``rows``) into ``out`` (m, :data:`_MSG_HEAD` + L) uint8,
+        a view into the samples' byte matrix; ``stamps`` (m,) ns: log and publish time of each."""
+        m, L = out.shape[0], self.template.size
+        out[:, :_MSG_HEAD] = np.frombuffer(struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + L, cid, 0, 0, 0), np.uint8)
+        t8 = np.ascontiguousarray(stamps, dtype="<u8").view(np.uint8).reshape(m, 8)
+        out[:, 15:23] = t8  # log time
+        out[:, 23:31] = t8  # publish time
+        body = out[:, _MSG_HEAD:]
+        body[:] = self.template
         for off, dt, vals in self.fields:
             w = np.dtype(dt).itemsize
-            buf[:, off : off + w] = np.ascontiguousarray(vals, dtype=dt).view(np.uint8).reshape(m, w)
-        return buf
+            body[:, off : off + w] = np.ascontiguousarray(vals[rows], dtype=dt).view(np.uint8).reshape(m, w)
+
+    @property
+    def width(self) -> int:
+        """Bytes of one message record of this topic."""
+        return _MSG_HEAD + self.template.size
 
 
 class _Markers:
@@ -213,6 +258,15 @@ class _Messages:
 
     def clock(self, stamp: Any) -> Any:
         return self._t("rosgraph_msgs/msg/Clock")(clock=stamp)
+
+
+@functools.cache
+def _messages(distro: str) -> _Messages:
+    """The message builders of ``distro``'s ``rosbags`` type store, made once per process (``rosbags``
+    generates each type's serialiser on first use: about 0.1 s for a bag's types)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return _Messages(get_typestore(Stores[f"ROS2_{distro.upper()}"]))
 
 
 def _static_qos() -> list[Any]:
@@ -475,9 +529,8 @@ def write_bag(
 def _write(path: Path, log: Mapping[str, Any], summary: Mapping[str, Any], sensing: str, distro: str, start_ns: int):
     """Write the bag folder ``path`` (must not exist); returns ``{topic: messages}``."""
     from rosbags.rosbag2 import StoragePlugin
-    from rosbags.typesys import Stores, get_typestore
 
-    msgs = _Messages(get_typestore(Stores[f"ROS2_{distro.upper()}"]))
+    msgs = _messages(distro)
     topics = topics_of(log, sensing, msgs, start_ns)
     static = _static_tf(log, msgs, start_ns)
     with _BulkWriter(path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP) as w:
@@ -513,20 +566,6 @@ def _write(path: Path, log: Mapping[str, Any], summary: Mapping[str, Any], sensi
 _MSG_HEAD = 1 + 8 + 2 + 4 + 8 + 8  # opcode, record length, channel id, sequence, log time, publish time
 
 
-def _records(cid: int, stamps: np.ndarray, payloads: np.ndarray) -> np.ndarray:
-    """(m, _MSG_HEAD + L) uint8: MCAP message records of ``payloads`` (m, L) on channel ``cid``."""
-    m, L = payloads.shape
-    head = np.zeros(
-        m, dtype=[("op", "u1"), ("len", "<u8"), ("cid", "<u2"), ("seq", "<u4"), ("lt", "<u8"), ("pt", "<u8")]
-    )
-    head["op"] = 0x05
-    head["len"] = 2 + 4 + 8 + 8 + L
-    head["cid"] = cid
-    head["lt"] = stamps
-    head["pt"] = stamps
-    return np.concatenate([head.view(np.uint8).reshape(m, _MSG_HEAD), payloads], axis=1)
-
-
 def _record(cid: int, stamp: int, data: bytes) -> bytes:
     return struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + len(data), cid, 0, stamp, stamp) + data
 
@@ -541,27 +580,31 @@ def _writer_classes():
     class BulkMcap(McapWriter):
         """``rosbags``' MCAP storage (rosbags 0.11.9) plus :meth:`write_chunk`: one chunk of ready records."""
 
-        def write_chunk(self, records: bytes, index: dict[int, tuple[np.ndarray, np.ndarray]]) -> None:
-            """Write the records ``records`` (message records, in time order) as one chunk; ``index``:
-            channel id → (log times, offsets of its records in ``records``). The schema and channel
-            records ``rosbags`` keeps pending go first."""
+        def write_chunk(self, pieces: list[Any], index: dict[int, tuple[np.ndarray, np.ndarray]]) -> None:
+            """Write the message records ``pieces`` (bytes or contiguous uint8 arrays, in time order) as
+            one chunk; ``index``: channel id → (log times, offsets of its records in the pieces). The
+            schema and channel records ``rosbags`` keeps pending go first."""
             from collections import defaultdict
 
             pending = self.chunk.bio.getvalue()
             self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
-            data = pending + records
             if not index:
                 return
+            pieces = [pending, *pieces]
+            size = sum(len(p) if isinstance(p, bytes) else p.nbytes for p in pieces)
             t_start = min(int(t.min()) for t, _ in index.values())
             t_end = max(int(t.max()) for t, _ in index.values())
-            comp = self.compressor(data)
+            if self.compression:
+                pieces = [self.compressor(b"".join(bytes(p) for p in pieces))]
+            comp_size = sum(len(p) if isinstance(p, bytes) else p.nbytes for p in pieces)
             cname = self.compression.encode()
-            head = struct.pack("<QQQI", t_start, t_end, len(data), 0) + struct.pack("<I", len(cname)) + cname
-            body = head + struct.pack("<Q", len(comp))
+            head = struct.pack("<QQQI", t_start, t_end, size, 0) + struct.pack("<I", len(cname)) + cname
+            body = head + struct.pack("<Q", comp_size)
             chunk_start = self.bio.tell()
-            self.bio.write(struct.pack("<BQ", 0x06, len(body) + len(comp)))
+            self.bio.write(struct.pack("<BQ", 0x06, len(body) + comp_size))
             self.bio.write(body)
-            self.bio.write(comp)
+            for p in pieces:
+                self.bio.write(p if isinstance(p, bytes) else memoryview(p))
             chunk_end = self.bio.tell()
             offsets = []
             for cid in sorted(index):
@@ -579,7 +622,7 @@ def _writer_classes():
                 rec.write(struct.pack("<HQ", cid, o))
             rec.write(struct.pack("<Q", self.bio.tell() - chunk_end))
             rec.write(struct.pack("<I", len(cname)) + cname)
-            rec.write(struct.pack("<QQ", len(comp), len(data)))
+            rec.write(struct.pack("<QQ", comp_size, size))
             self.chunks.append(rec)
             self.message_start_time = min(self.message_start_time, t_start)
             self.message_end_time = max(self.message_end_time, t_end)
@@ -596,17 +639,21 @@ def _writer_classes():
             (the end of the run) holds the state topics' messages only."""
             S = len(stamps)
             K = S - 1
-            recs = [(_records(conns[tp.name].id, stamps[tp.rows], tp.payloads()), conns[tp.name].id) for tp in topics]
+            cids = [conns[tp.name].id for tp in topics]
             cols, c = [], 0
-            for r, _ in recs:
+            for tp in topics:
                 cols.append(c)
-                c += r.shape[1]
+                c += tp.width
             B = c
-            M = np.hstack([r[:K] for r, _ in recs]) if K > 0 else np.zeros((0, B), np.uint8)
+            M = np.empty((K, B), np.uint8)  # the log rows' samples, every topic's record side by side
             tail, tail_idx = [], []  # the last sample: (cid, record bytes)
-            for tp, (r, cid) in zip(topics, recs):
-                if r.shape[0] == S:
-                    tail.append(r[K].tobytes())
+            for tp, cid, col in zip(topics, cids, cols):
+                full = len(tp.rows) == S
+                tp.fill(M[:, col : col + tp.width], cid, stamps[:K], slice(0, K))
+                if full:  # the state topics: one more message, at the end of the run
+                    last = np.empty((1, tp.width), np.uint8)
+                    tp.fill(last, cid, stamps[K:], slice(K, S))
+                    tail.append(last.tobytes())
                     tail_idx.append(cid)
                 for row, data in tp.extra:
                     assert row == K, "only the last sample has messages of another layout"
@@ -624,9 +671,9 @@ def _writer_classes():
                 if j0 == 0:
                     index[c_static.id] = (stamps[:1], np.zeros(1, np.int64))
                 js = np.arange(j0, j1)
-                for (_, cid), col in zip(recs, cols):
+                for cid, col in zip(cids, cols):
                     index[cid] = (stamps[js], at + (js - j0) * B + col)
-                parts.append(M[j0:j1].tobytes())
+                parts.append(M[j0:j1].reshape(-1))
                 at += (j1 - j0) * B
                 if j1 == K:  # the last chunk: the end of the run's messages too
                     for cid, rec in zip(tail_idx, tail):
@@ -634,7 +681,7 @@ def _writer_classes():
                         index[cid] = (np.append(t_old, stamps[K]), np.append(o_old, at))
                         parts.append(rec)
                         at += len(rec)
-                storage.write_chunk(b"".join(parts), {k: v for k, v in index.items() if len(v[0])})
+                storage.write_chunk(parts, {k: v for k, v in index.items() if len(v[0])})
                 for cid, (t, _) in index.items():
                     self.counts[cid] += len(t)
                 if j1 == K:
