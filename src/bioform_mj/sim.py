@@ -397,7 +397,7 @@ def simulate(
     if full_state:  # the 3-D state at the log's rows (outputs/fullstate.py): a ROS 2 bag's needs
         from .outputs.fullstate import StateSampler
 
-        sampler = StateSampler(sc.sim.log_dt, sc.sim.control_dt)
+        sampler = StateSampler(sc.sim.log_dt, sc.sim.control_dt, in_kernel=chunk is not None)
         observers = [*observers, sampler]
     started, raised = start_observers(observers, state_obs, warm.raised)
     end = run_loop(sc, step, run_chunk, chunk is not None, observers, state_obs, warm, raised, progress)
@@ -405,7 +405,7 @@ def simulate(
     # summarise: the log, summary.json, the result (attached to what a user's code raised)
     logd = _log_dict(plant, graph, ctx.log, end.j, missing, odometry, tl.offsets)
     if sampler is not None:
-        logd.update(sampler.log_arrays(logd["t"]))
+        logd.update(sampler.log_arrays(logd))
     engine_used = "compiled" if chunk else "stepwise"
     summary = _summarise(sc, plant, controller, step, end, logd, warm.setup_s, engine_used, warned)
     _add_run_notes(summary, sc, plant, step, end, logd, raised)

@@ -77,12 +77,23 @@ class StateSampler:
     """Observer (``sim.Observer``) that samples the full 3-D state at every log row and at the end.
 
     ``log_dt``, ``control_dt``: the scenario's (s); it samples at control steps ``k`` with
-    ``k % stride == 0`` (the log's rows) and once in ``finish`` (the end of the run)."""
+    ``k % stride == 0`` (the log's rows) and once in ``finish`` (the end of the run). Where it need
+    not visit Python at every row, it does not (the loop then keeps its long chunks):
 
-    def __init__(self, log_dt: float, control_dt: float) -> None:
+    - a planar plant (ideal, a user's): the rows are the log's own ``pose`` and ``vel``; only the
+      start and the end are sampled;
+    - MuJoCo with the compiled chunk (``in_kernel``): the chunk copies each row's ``qpos``, ``qvel``
+      and ``sensordata`` into ``plant.row_state`` (``plants/mujoco_kernels.py: copy_row``);
+    - MuJoCo step by step: sampled here at every row."""
+
+    def __init__(self, log_dt: float, control_dt: float, in_kernel: bool = False) -> None:
         self.dt = float(control_dt)
         self.stride = max(1, int(round(float(log_dt) / self.dt)))
         self.period = self.stride * self.dt  # s of simulated time between samples
+        self.in_kernel = bool(in_kernel)
+        self.planar = False
+        self._buf: np.ndarray | None = None  # MuJoCo in_kernel: (K, nq + nv [+ nsensordata]) raw rows
+        self._plant: Any = None
         self.rows: dict[int, tuple[np.ndarray, ...]] = {}  # control step → sample
         self.end: tuple[int, tuple[np.ndarray, ...]] | None = None
         self._read: Any = None
@@ -97,12 +108,20 @@ class StateSampler:
         """Find what the plant offers (MuJoCo's free and wheel joints, its IMU) once."""
         plant = run.plant
         n = int(np.asarray(run.pose).shape[0]) if np.asarray(run.pose).size else int(getattr(plant, "n", 0))
+        N = max(1, int(round(float(run.scenario.sim.duration) / self.dt)))  # as sim._timeline
         if hasattr(plant, "model") and hasattr(plant, "data") and hasattr(plant, "_q7"):
             self._read = self._mujoco_reader(plant)
-        elif hasattr(plant, "x") and np.shape(plant.x)[1:] == (5,):  # the ideal plant's [x, y, θ, υ, ω]
-            self._read = lambda run: (plant.x[:, :3].copy(), plant.x[:, 3:5].copy())
-        else:  # a user's plant: what the loop measured
+            if self.in_kernel and hasattr(plant, "row_state"):
+                d = plant.data
+                width = d.qpos.size + d.qvel.size + (d.sensordata.size if self.imu else 0)
+                self._buf = np.full(((N - 1) // self.stride + 1, width), np.nan)
+                plant.row_state = self._buf
+                self._plant = plant
+                self.period = (N + 1) * self.dt  # row 0 here, then none until the end
+        else:  # the ideal plant, a user's: planar, what the loop measured (= the log's rows)
             self._read = lambda run: (np.array(run.pose, dtype=float), np.array(run.vel, dtype=float))
+            self.planar = True
+            self.period = (N + 1) * self.dt
         if not self.wheels:
             self.wheel_sign = np.ones((n, 2))
             self.wheel_joints = np.array([["left_wheel", "right_wheel"]] * n)
@@ -116,6 +135,9 @@ class StateSampler:
     def finish(self, run: Any) -> None:
         """At the end of the run (``run.t`` = the steps done × ``control_dt``): the last sample."""
         self.end = (int(round(run.t / self.dt)), self._sample(run))
+        if self._plant is not None:  # the plant's chunk copies no more rows
+            self._plant.row_state = np.zeros((0, 0))
+            self._plant = None
 
     # -- reading the plant ------------------------------------------------------------------
     def _sample(self, run: Any) -> tuple[np.ndarray, ...]:
@@ -143,6 +165,7 @@ class StateSampler:
             accel = np.array([m.sensor_adr[m.sensor(p + SENSORS[3]).id] for p in prefixes])[:, None] + np.arange(3)
         wq = np.array([[m.jnt_qposadr[m.joint(j).id] for j in lay.wheel_joints] for lay in lays])
         self._mj = (np.asarray(plant._q7), np.asarray(plant._v6), wq, np.asarray(plant._wheel_dof), gyro, accel)
+        self._nq, self._nv = d.qpos.size, d.qvel.size
         if self.imu:
             return lambda run: (d.qpos.copy(), d.qvel.copy(), d.sensordata.copy())
         return lambda run: (d.qpos.copy(), d.qvel.copy(), None)
@@ -184,21 +207,37 @@ class StateSampler:
         return pose3, twist, wa, ws, g, a
 
     # -- the log's new entries -----------------------------------------------------------------
-    def log_arrays(self, t: np.ndarray) -> dict[str, np.ndarray]:
-        """The entries of :data:`STATE_CHANNELS` and :data:`STATE_STATICS` for a log whose rows are at
-        times ``t`` (s, (K,)): row ``j`` is the sample of control step ``round(t_j / dt)`` (NaN if there
-        was none), row ``K`` the end of the run. ``imu_*`` only where the plant has an IMU."""
-        ks = [int(round(float(tj) / self.dt)) for tj in np.asarray(t)]
+    def log_arrays(self, log: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The entries of :data:`STATE_CHANNELS` and :data:`STATE_STATICS` for the run's ``log`` (its
+        rows at times ``log["t"]`` s, (K,)): row ``j`` is the state at ``t_j`` (NaN where none was
+        sampled), row ``K`` the end of the run. ``imu_*`` only where the plant has an IMU."""
+        t = np.asarray(log["t"])
+        K = t.shape[0]
+        ks = [int(round(float(tj) / self.dt)) for tj in t]
         end_k, end = self.end if self.end is not None else (ks[-1] if ks else 0, None)
-        rows = [self.rows.get(k) for k in ks] + [end]
+        rows: list[tuple[np.ndarray, ...] | None] = []  # (raw state..., leader pose, leader velocity)
+        lp, lv = np.asarray(log["leader_pose"], float), np.asarray(log["leader_vel"], float)
+        pose, vel = np.asarray(log["pose"], float), np.asarray(log["vel"], float)
+        buf, nq, nv = self._buf, getattr(self, "_nq", 0), getattr(self, "_nv", 0)
+        for j, k in enumerate(ks):
+            if self.planar:
+                rows.append((pose[j], vel[j], lp[j], lv[j]))
+            elif k in self.rows:
+                rows.append(self.rows[k])
+            elif buf is not None and j < buf.shape[0] and np.isfinite(buf[j, 0]):
+                b = buf[j]
+                rows.append((b[:nq], b[nq : nq + nv], b[nq + nv :] if self.imu else None, lp[j], lv[j]))
+            else:
+                rows.append(None)
+        rows.append(end)
         like = next((r for r in rows if r is not None), None)
         out: dict[str, np.ndarray] = {"t_state": np.array([*(k * self.dt for k in ks), end_k * self.dt])}
         names = ("pose_3d", "twist_3d", "wheel_angle", "wheel_speed", "imu_gyro", "imu_accel")
         if like is None:  # nothing sampled (a run that failed before its first row)
             n = self.wheel_sign.shape[0]
             for name, w in zip(names, (6, 6, 2, 2, 3, 3)):
-                out[name] = np.full((len(rows), n, w), np.nan)
-            out["leader_state"] = np.full((len(rows), 5), np.nan)
+                out[name] = np.full((K + 1, n, w), np.nan)
+            out["leader_state"] = np.full((K + 1, 5), np.nan)
         else:
             blank = tuple(None if a is None else np.full_like(a, np.nan) for a in like)
             got = [blank if r is None else r for r in rows]
