@@ -2,7 +2,7 @@
 
 ``bioform run … --rosbag`` writes ``rosbag/`` beside ``log.npz``; from Python,
 ``write_bag(simulate(sc, full_state=True), "run/rosbag")``. The topics, frames and the meaning of
-every field are in ``docs/guide/rosbag.md`` (and :data:`TOPICS`); in short, per follower ``fI``
+every field are in ``docs/guide/rosbag.md``; in short, per follower ``fI``
 (``I`` = 1 … n) and for the virtual leader:
 
 - ``/clock`` (``rosgraph_msgs/Clock``), ``/tf`` and ``/tf_static`` (``tf2_msgs/TFMessage``: a common
@@ -18,10 +18,10 @@ at every log row and, for the state topics, at the run's end ``T``. The message 
 hashes are those of the chosen ROS 2 distribution (:data:`DISTROS`, default :data:`DEFAULT_DISTRO`)
 from ``rosbags`` (the ``ros`` extra), which writes the folder; no ROS install is needed.
 
-Speed (design §9: an output must not cost more than a fraction of the run): each topic's message has
+Speed (design §9, a run as a ROS 2 bag: a fraction of the run's stepping time): each topic's message has
 one fixed layout, so one message is serialised by ``rosbags`` with marker values, the markers'
 byte offsets are found, and every row's numbers are written into a copy of it with numpy; the
-MCAP chunks and their message indexes are built the same way (:class:`_BulkMcap`). ``rosbags``'
+MCAP chunks and their message indexes are built the same way (:func:`_writer_classes`). ``rosbags``'
 reader reads the result back (``tests/test_rosbag.py`` compares it with ``log.npz``).
 """
 
@@ -504,6 +504,7 @@ def write_bag(
     check_available()
     t0 = time.perf_counter()
     log = result.log
+    _need(log, "t_state")  # before anything is written
     summary = getattr(result, "summary", {}) or {}
     sensing = str(summary.get("sensing", "truth"))
     path = Path(path)
