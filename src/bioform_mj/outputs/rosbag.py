@@ -77,11 +77,11 @@ def check_args(rosbag: bool, distro: str | None) -> None:
 
 def warm_up(distro: str = DEFAULT_DISTRO) -> float:
     """Import ``rosbags``, build ``distro``'s type store and every serialiser a bag uses, once per
-    process (about 0.3 s, the first time), on a one-row stand-in log; returns the seconds it took.
+    process (about 0.3 s, the first time), by writing a one-row stand-in log's bag into a temporary
+    folder; returns the seconds it took.
     ``bioform run --rosbag`` does it before the run, with its other start-up work: a broken install
     fails there, and the bag's own write time is then what the run's numbers cost."""
     t0 = time.perf_counter()
-    msgs = _messages(distro)
     z = np.zeros
     log = {
         "t": z(1),
@@ -102,9 +102,8 @@ def warm_up(distro: str = DEFAULT_DISTRO) -> float:
         "odom_pose": z((1, 1, 3)),
         "odom_vel": z((1, 1, 2)),
     }
-    for tp in topics_of(log, "odometry", msgs):
-        msgs.store.hash_rihs01(tp.msgtype)
-    _static_tf(log, msgs, 0)
+    with tempfile.TemporaryDirectory(prefix="bioform-rosbag-") as tmp:  # every path once: YAML, MCAP, files
+        _write(Path(tmp) / "bag", log, {}, "odometry", distro, 0)
     return time.perf_counter() - t0
 
 
@@ -571,6 +570,7 @@ def _record(cid: int, stamp: int, data: bytes) -> bytes:
     return struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + len(data), cid, 0, stamp, stamp) + data
 
 
+@functools.cache
 def _writer_classes():
     """``(_BulkWriter, _BulkMcap)``: rosbags' writer with a storage that takes whole chunks at once."""
     from io import BytesIO
