@@ -4,8 +4,7 @@
 observer at the log's period; ``log.npz`` then gains the channels of :data:`STATE_CHANNELS`, sampled at
 each log row's time ``t_j`` and once more at the run's end ``T`` (``t_state`` has ``K + 1`` entries,
 ``t_state[:K] == t``), and the static :data:`STATE_STATICS`. The existing channels are not touched, and
-a run without ``full_state`` writes exactly the log it wrote before (the sampler is the only cost:
-one visit to Python per log row instead of one per ``MAX_CHUNK_S``).
+a run without ``full_state`` writes exactly the log it wrote before (design §9).
 
 Where the values come from (design §8, §8.3):
 
