@@ -199,6 +199,14 @@ def test_ideal_bag_humble(tmp_path):
     assert [m.pose.pose.position.z for m in gt] == [0.0] * (K + 1)
     with pytest.raises(FileExistsError):
         write_bag(r, tmp_path / "bag")
+    # an absolute start: every stamp and log time shifted by it
+    t0 = 1_764_633_600_000_000_000  # 2025-12-02 00:00 UTC, ns
+    write_bag(r, tmp_path / "bag", start_ns=t0, overwrite=True)
+    shifted, _, _ = _read(tmp_path / "bag")
+    clock = shifted["/clock"]
+    assert clock[0][0] == t0 and clock[-1][0] == t0 + 500_000_000
+    assert [m.clock.sec * 10**9 + m.clock.nanosec for _, m in clock] == [t for t, _ in clock]
+    assert _stamp(shifted["/f1/ground_truth/odom"][7][1]) == t0 + 70_000_000
     with pytest.raises(ValueError, match="full_state=True"):
         write_bag(simulate(sc), tmp_path / "bag2")
     assert not (tmp_path / "bag2").exists() and not list(tmp_path.glob(".*tmp"))
