@@ -227,6 +227,22 @@ def test_rosbag_without_the_extra_says_how_to_install(tmp_path, capsys, monkeypa
 
 
 @needs_rosbags
+def test_rosbag_with_a_broken_install_fails_before_the_run(tmp_path, capsys, monkeypatch):
+    """rosbags importable but failing: exit 2 before the run, one error: line, nothing written."""
+    from bioform_mj.outputs import rosbag
+
+    def broken(distro):
+        raise ImportError("no module named rosbags.typesys.stores.ros2_jazzy")
+
+    monkeypatch.setattr(rosbag, "_messages", broken)
+    out = tmp_path / "run"
+    assert main(["run", "paper", "--duration", "0.1", "--out", str(out), "--rosbag"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --rosbag: the rosbags package does not work (ImportError")
+    assert not out.exists()
+
+
+@needs_rosbags
 def test_overwrite_replaces_the_bag_folder(tmp_path, capsys):
     """rosbag/ is a run's folder: refused without --overwrite, replaced with it; a stale temporary
     bag folder is cleared; a foreign file inside rosbag/ makes the folder not ours."""

@@ -72,7 +72,12 @@ def check_args(rosbag: bool, distro: str | None) -> None:
     if not rosbag:
         raise InputError("--ros-distro only applies to --rosbag")
     check_available()
-    warm_up(distro or DEFAULT_DISTRO)
+    try:
+        warm_up(distro or DEFAULT_DISTRO)
+    except Exception as exc:  # noqa: BLE001 - a broken install: one error: line, before the run
+        raise InputError(
+            f"--rosbag: the rosbags package does not work ({type(exc).__name__}: {exc}); reinstall it: {INSTALL_HINT}"
+        ) from exc
 
 
 def warm_up(distro: str = DEFAULT_DISTRO) -> float:
