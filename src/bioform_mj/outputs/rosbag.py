@@ -641,8 +641,9 @@ def _writer_classes():
         def write_samples(self, c_static: Any, static: bytes, topics: list[_Topic], conns: dict, stamps) -> None:
             """``/tf_static`` at the first stamp, then every sample's messages in topic order, in chunks of
             whole samples of about :data:`CHUNK_BYTES`. Every topic has a message at each of the first
-            ``K`` samples (the log rows, all of one layout: a ``(K, B)`` byte matrix); the last sample
-            (the end of the run) holds the state topics' messages only."""
+            ``K`` samples (the log rows, all of one layout: a chunk is a ``(samples, B)`` byte matrix,
+            filled when it is written: memory stays at one chunk); the last sample (the end of the run)
+            holds the state topics' messages only."""
             S = len(stamps)
             K = S - 1
             cids = [conns[tp.name].id for tp in topics]
@@ -651,11 +652,9 @@ def _writer_classes():
                 cols.append(c)
                 c += tp.width
             B = c
-            M = np.empty((K, B), np.uint8)  # the log rows' samples, every topic's record side by side
             tail, tail_idx = [], []  # the last sample: (cid, record bytes)
-            for tp, cid, col in zip(topics, cids, cols):
+            for tp, cid in zip(topics, cids):
                 full = len(tp.rows) == S
-                tp.fill(M[:, col : col + tp.width], cid, stamps[:K], slice(0, K))
                 if full:  # the state topics: one more message, at the end of the run
                     last = np.empty((1, tp.width), np.uint8)
                     tp.fill(last, cid, stamps[K:], slice(K, S))
@@ -679,7 +678,10 @@ def _writer_classes():
                 js = np.arange(j0, j1)
                 for cid, col in zip(cids, cols):
                     index[cid] = (stamps[js], at + (js - j0) * B + col)
-                parts.append(M[j0:j1].reshape(-1))
+                M = np.empty((j1 - j0, B), np.uint8)  # this chunk's samples, every topic's record side by side
+                for tp, cid, col in zip(topics, cids, cols):
+                    tp.fill(M[:, col : col + tp.width], cid, stamps[j0:j1], slice(j0, j1))
+                parts.append(M.reshape(-1))
                 at += (j1 - j0) * B
                 if j1 == K:  # the last chunk: the end of the run's messages too
                     for cid, rec in zip(tail_idx, tail):
