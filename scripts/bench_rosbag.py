@@ -21,8 +21,8 @@ def main() -> None:
     ap.add_argument("--plants", default="ideal,mujoco")
     ap.add_argument("--repeat", type=int, default=3, help="runs per variant; the minimum is reported")
     args = ap.parse_args()
-    from bioform_mj.scenario import load
-    from bioform_mj.sim import simulate
+    from bioform_mj.run.simulate import simulate
+    from bioform_mj.scenario.loader import load
 
     out = {}
     with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():

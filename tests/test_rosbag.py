@@ -11,10 +11,10 @@ import warnings
 import numpy as np
 import pytest
 
-from bioform_mj.cli import main
+from bioform_mj.cli.main import main
 from bioform_mj.outputs.fullstate import quat_of_rpy, rpy_of_quat
-from bioform_mj.scenario import load
-from bioform_mj.sim import simulate
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load
 
 needs_rosbags = pytest.mark.skipif(importlib.util.find_spec("rosbags") is None, reason="the ros extra is not installed")
 
@@ -273,7 +273,7 @@ def test_overwrite_replaces_the_bag_folder(tmp_path, capsys):
 
 
 def test_mujoco_3d_state_same_from_the_compiled_chunk_and_step_by_step():
-    """MuJoCo: the compiled chunk copies each row's raw state (plants/mujoco_kernels.py: copy_row),
+    """MuJoCo: the compiled chunk copies each row's raw state (plants/mujoco/kernels.py: copy_row),
     the step-by-step loop samples it as an observer; the 3-D channels agree bit for bit, and the
     other channels are those of a run without full_state."""
     sc = load("paper", plant="mujoco", overrides={"sim.duration": 0.3, "plant.sensing": "odometry"})

@@ -395,7 +395,7 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
         if given:
             raise InputError(f"{', '.join(given)} only apply to --video")
     if args.rosbag or args.ros_distro:  # before any work: the ros extra is installed (else: how to install it)
-        from .outputs.rosbag import check_args
+        from bioform_mj.outputs.rosbag import check_args
 
         check_args(args.rosbag, args.ros_distro)
     live_url = None
@@ -500,7 +500,7 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
             write_rrd(result, out / "run.rrd")
             notes.append(f"run.rrd written in {time.perf_counter() - t0:.1f} s")
         if args.rosbag:
-            from .outputs.rosbag import write_run_bag
+            from bioform_mj.outputs.rosbag import write_run_bag
 
             notes.append(write_run_bag(result, out, args.ros_distro))
         if args.figures:

@@ -73,7 +73,7 @@ def quat_of_rpy(rpy: np.ndarray) -> np.ndarray:
 
 
 class StateSampler:
-    """Observer (``sim.Observer``) that samples the full 3-D state at every log row and at the end.
+    """Observer (``run.simulate.Observer``) that samples the full 3-D state at every log row and at the end.
 
     ``log_dt``, ``control_dt``: the scenario's (s); it samples at control steps ``k`` with
     ``k % stride == 0`` (the log's rows) and once in ``finish`` (the end of the run). Where it need
@@ -82,7 +82,7 @@ class StateSampler:
     - a planar plant (ideal, a user's): the rows are the log's own ``pose`` and ``vel``; only the
       start and the end are sampled;
     - MuJoCo with the compiled chunk (``in_kernel``): the chunk copies each row's ``qpos``, ``qvel``
-      and ``sensordata`` into ``plant.row_state`` (``plants/mujoco_kernels.py: copy_row``);
+      and ``sensordata`` into ``plant.row_state`` (``plants/mujoco/kernels.py: copy_row``);
     - MuJoCo step by step: sampled here at every row."""
 
     def __init__(self, log_dt: float, control_dt: float, in_kernel: bool = False) -> None:
@@ -107,7 +107,7 @@ class StateSampler:
         """Find what the plant offers (MuJoCo's free and wheel joints, its IMU) once."""
         plant = run.plant
         n = int(np.asarray(run.pose).shape[0]) if np.asarray(run.pose).size else int(getattr(plant, "n", 0))
-        N = max(1, int(round(float(run.scenario.sim.duration) / self.dt)))  # as sim._timeline
+        N = max(1, int(round(float(run.scenario.sim.duration) / self.dt)))  # as run.simulate._timeline
         if hasattr(plant, "model") and hasattr(plant, "data") and hasattr(plant, "_q7"):
             self._read = self._mujoco_reader(plant)
             if self.in_kernel and hasattr(plant, "row_state"):
@@ -144,7 +144,7 @@ class StateSampler:
         return (*self._read(run), np.array(run.leader_pose, dtype=float), np.array(run.leader_vel, dtype=float))
 
     def _mujoco_reader(self, plant: Any):
-        """A :class:`~bioform_mj.plants.mujoco_plant.MujocoPlant`'s ``qpos``, ``qvel`` (and ``sensordata``
+        """A :class:`~bioform_mj.plants.mujoco.plant.MujocoPlant`'s ``qpos``, ``qvel`` (and ``sensordata``
         with an IMU) as copies; :meth:`_convert` makes the 3-D state of them."""
         m, d = plant.model, plant.data
         lays = plant.layouts
@@ -158,7 +158,7 @@ class StateSampler:
         self.imu = bool(getattr(sensors, "on", False))
         gyro = accel = None
         if self.imu:
-            from ..scene import SENSORS
+            from bioform_mj.robots.scene import SENSORS
 
             gyro = np.array([m.sensor_adr[m.sensor(p + SENSORS[2]).id] for p in prefixes])[:, None] + np.arange(3)
             accel = np.array([m.sensor_adr[m.sensor(p + SENSORS[3]).id] for p in prefixes])[:, None] + np.arange(3)

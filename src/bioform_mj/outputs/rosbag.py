@@ -41,8 +41,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
-from .fullstate import quat_of_rpy
+from bioform_mj.core.errors import InputError
+from bioform_mj.outputs.fullstate import quat_of_rpy
 
 __all__ = ["DISTROS", "DEFAULT_DISTRO", "BagInfo", "check_available", "warm_up", "write_bag", "topics_of"]
 
@@ -493,7 +493,7 @@ def write_bag(
     start_ns: int = 0,
     overwrite: bool = False,
 ) -> BagInfo:
-    """Write the run ``result`` (a :class:`~bioform_mj.sim.RunResult` of ``simulate(sc, full_state=True)``)
+    """Write the run ``result`` (a :class:`~bioform_mj.run.simulate.RunResult` of ``simulate(sc, full_state=True)``)
     as the rosbag2 folder ``path`` (``metadata.yaml`` and ``<name>.mcap``), complete or not at all.
 
     ``distro``: the ROS 2 distribution whose message definitions and type hashes the bag carries
@@ -523,7 +523,7 @@ def write_bag(
             shutil.rmtree(path)
         os.replace(inner, path)
     except OSError as exc:
-        from ..errors import WriteFailed
+        from bioform_mj.core.errors import WriteFailed
 
         raise WriteFailed(str(path), exc) from exc
     finally:

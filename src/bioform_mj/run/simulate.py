@@ -332,6 +332,10 @@ def simulate(
         A :class:`~bioform_mj.plants.base.Plant`; ``None``: built from ``sc.plant``.
     controller
         A :class:`~bioform_mj.control.base.Controller`; ``None``: the paper's stack for ``sc.method``.
+    full_state
+        The log also gets the 3-D state at every row and at the end of the run (m, rad, m/s, rad/s:
+        z, roll, pitch, wheel angles and rates, the IMU; :data:`bioform_mj.outputs.fullstate.STATE_CHANNELS`),
+        what a ROS 2 bag needs (:func:`bioform_mj.outputs.rosbag.write_bag`); the other channels are the same.
 
     Returns
     -------
@@ -360,10 +364,6 @@ def simulate(
     gets one :class:`~bioform_mj.core.errors.OutcomeWarning` naming it and every outcome with its detail,
     and a divergence one more (filter the class to silence them: the outcomes stay in the summary);
     none when a user's controller or observer raised (the exception is the news).
-
-    ``full_state``: the log also gets the 3-D state at every row and at the end of the run (wheel
-    angles and speeds, z, roll, pitch, the IMU; :data:`bioform_mj.outputs.fullstate.STATE_CHANNELS`),
-    what a ROS 2 bag needs (:func:`bioform_mj.outputs.rosbag.write_bag`); the other channels are the same.
     """
     # resolve: the scenario (checked as load checks a file), the arguments, the graph, the leader's path
     sc = checked(sc)
@@ -393,7 +393,7 @@ def simulate(
     state_obs = RunState(sc, plant, controller)
     sampler = None
     if full_state:  # the 3-D state at the log's rows (outputs/fullstate.py): a ROS 2 bag's needs
-        from .outputs.fullstate import StateSampler
+        from bioform_mj.outputs.fullstate import StateSampler
 
         sampler = StateSampler(sc.sim.log_dt, sc.sim.control_dt, in_kernel=chunk is not None)
         observers = [*observers, sampler]
