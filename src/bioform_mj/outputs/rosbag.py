@@ -74,6 +74,8 @@ def check_args(rosbag: bool, distro: str | None) -> None:
     check_available()
     try:
         warm_up(distro or DEFAULT_DISTRO)
+    except OSError as exc:  # the temporary folder, not the package
+        raise InputError(f"--rosbag: could not write a trial bag in the temporary folder: {exc}") from exc
     except Exception as exc:  # noqa: BLE001 - a broken install: one error: line, before the run
         raise InputError(
             f"--rosbag: the rosbags package does not work ({type(exc).__name__}: {exc}); reinstall it: {INSTALL_HINT}"
