@@ -480,8 +480,8 @@ def _timeline(sc: Scenario, traj: Any) -> _Timeline:
     return _Timeline(dt, N, stride, L_pose, L_vel, offsets, form)
 
 
-def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], dict[str, Any] | None]:
-    """``(imported, feasibility, robot_check)``: the guesses of a URDF import (design §12), what the
+def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], dict | None, dict | None]:
+    """``(imported, feasibility, robot_check, demand)``: the guesses of a URDF import (design §12), what the
     scenario asks of the MuJoCo robots (``robot_check.feasibility``) and what ``robot check`` fails
     them for (``prerun.before_run``, design §14.2; None for other plants), warned before the run (the
     CLI prints ``warning:`` lines) and kept for summary.json."""
@@ -502,7 +502,14 @@ def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], 
         checked = before_run(sc, plant)
         for line in checked["warnings"]:
             warnings.warn(line, RobotWarning, stacklevel=3)
-    return imported, feasibility, checked
+    demand = None
+    if checked is not None and not checked.get("skipped"):  # design §21: the scenario's demand vs the limits
+        from bioform_mj.run.demand import before_run as _demand
+
+        demand = _demand(sc, plant)
+        for line in demand["warnings"]:
+            warnings.warn(line, RobotWarning, stacklevel=3)
+    return imported, feasibility, checked, demand
 
 
 def _reset(sc: Scenario, plant: Plant, controller: Any, leader_pose0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -626,6 +633,10 @@ def _summarise(sc, plant, controller, step: Stepper, end: LoopEnd, logd, setup_s
         from bioform_mj.assess.prerun import for_summary
 
         summary["robot_check"] = for_summary(warned[2])
+    if warned[3] is not None:  # design §21: the scenario's demand against the robots' limits
+        from bioform_mj.run.demand import for_summary as _demand_summary
+
+        summary["demand"] = _demand_summary(warned[3])
     return summary
 
 
