@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import typing
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -41,16 +42,28 @@ _SENSOR = "a property of the robot's sensor"
 _EQ32 = "eq. 32 adds |x̃| (m) to A (1/s): A, B, D scaled as rates, similar where |x̃| ≪ A (design §21)"
 _EQ37 = "eq. 37: k4 is S's integral gain (1/s) and the adaptation gain; × σ² keeps k4 τ²/k5 × 1/σ (design §21)"
 
-PLANTS = ("ideal", "mujoco")
-LEADER_KINDS = ("paper", "line", "circle", "figure8", "harmonic")
-GRAPH_KINDS = ("explicit", "chain", "ring", "star", "complete")
-ESTIMATOR_INITS = ("zero", "self", "leader")
-EVENT_KINDS = ("payload",)
-SATURATIONS = ("steer-priority", "wheel")
-SENSINGS = ("truth", "odometry")
+#: the kinds of the string keys, as ``Literal`` types (the annotation of each key) and their allowed values
+#: (``typing.get_args`` of the same type: one source)
+PlantKind = Literal["ideal", "mujoco"]
+LeaderKind = Literal["paper", "line", "circle", "figure8", "harmonic"]
+GraphKind = Literal["explicit", "chain", "ring", "star", "complete"]
+EstimatorInit = Literal["zero", "self", "leader"]
+EventKind = Literal["payload"]
+Saturation = Literal["steer-priority", "wheel"]
+Sensing = Literal["truth", "odometry"]
 #: how the torque law gets ``υ̇_cmd, ω̇_cmd`` (design §6)
-DERIVATIVES = ("filter", "difference", "analytic")
-GAIN_SCALINGS = ("none", "c_hat0")
+Derivative = Literal["filter", "difference", "analytic"]
+GainScaling = Literal["none", "c_hat0"]
+OffsetFrame = Literal["world", "leader"]
+PLANTS: tuple[str, ...] = typing.get_args(PlantKind)
+LEADER_KINDS: tuple[str, ...] = typing.get_args(LeaderKind)
+GRAPH_KINDS: tuple[str, ...] = typing.get_args(GraphKind)
+ESTIMATOR_INITS: tuple[str, ...] = typing.get_args(EstimatorInit)
+EVENT_KINDS: tuple[str, ...] = typing.get_args(EventKind)
+SATURATIONS: tuple[str, ...] = typing.get_args(Saturation)
+SENSINGS: tuple[str, ...] = typing.get_args(Sensing)
+DERIVATIVES: tuple[str, ...] = typing.get_args(Derivative)
+GAIN_SCALINGS: tuple[str, ...] = typing.get_args(GainScaling)
 #: the robot the paper's learner gains were tuned for: ``c = (a, b)`` of Sec. IV
 PAPER_C = (0.4, 10.0)
 
@@ -92,7 +105,7 @@ class LeaderCfg:
     harmonic: ``x = x0 + vx t + Σ A cos(w t + φ)`` with ``x_terms = [[A, w, φ], …]``, same for y.
     """
 
-    kind: str = unit("paper", "-")
+    kind: LeaderKind = unit("paper", "-")
     x0: float = unit(0.0, "m")
     y0: float = unit(3.0, "m")
     speed: float = unit(1.0, "m/s")
@@ -110,7 +123,7 @@ class LeaderCfg:
 class GraphCfg:
     """Communication graph (design §1). The paper's Fig. 1 is missing; default: leader → 1, edges 1–2, 1–3."""
 
-    kind: str = unit("explicit", "-")
+    kind: GraphKind = unit("explicit", "-")
     edges: tuple[tuple[int, ...], ...] = unit(((1, 2), (1, 3)), "1")
     leader_access: tuple[int, ...] = unit((1,), "1")
     center: int = unit(1, "1")
@@ -138,7 +151,8 @@ class FormationCfg:
     init_jitter_heading: float = unit(-1.0, "rad")  # rad; -1: the number of init_jitter (as written, unscaled)
     #: the whole experiment at a robot's scale (apply_scale); 1 = as written, "auto": s from the half track
     scale: float | str = unit(1.0, "1", kept="the length factor itself")
-    frame: str = unit("world", "-")  # offsets in "world" axes (the paper) or in the "leader"'s frame (turns with it)
+    #: offsets in "world" axes (the paper) or in the "leader"'s frame (turns with it)
+    frame: OffsetFrame = unit("world", "-")
     #: time factor σ (design §21): every time × σ and every key by its unit; 1 = as written, "auto": from
     #: the robot's limits and the scenario's demand (:mod:`bioform_mj.run.auto_scale`)
     time_scale: float | str = unit(1.0, "1", kept="the time factor itself")
@@ -165,7 +179,7 @@ class EstimatorCfg:
     ka: tuple[float, ...] = unit((25.0, 25.0), ("m/s^2", "rad/s^2"))
     kb: tuple[float, ...] = unit((1.0, 1.0), "1/s")
     phi: tuple[float, ...] = unit((0.0, 0.0), ("m/s", "rad/s"))
-    init: str = unit("zero", "-")
+    init: EstimatorInit = unit("zero", "-")
 
 
 @dataclass(frozen=True)
@@ -193,8 +207,8 @@ class TorqueCfg:
     phi: float = unit(0.0, "rad/s", mixed="one boundary layer for υ̃ (m/s) and ω̃ (rad/s): scaled as rad/s")
     tau_max: float = unit(20.0, "N·m")
     deriv_wn: float = unit(50.0, "rad/s")
-    saturation: str = unit("steer-priority", "-")
-    derivative: str = unit("filter", "-")
+    saturation: Saturation = unit("steer-priority", "-")
+    derivative: Derivative = unit("filter", "-")
 
 
 @dataclass(frozen=True)
@@ -214,7 +228,7 @@ class LearnerCfg:
     kd: tuple[float, ...] = unit((0.0, 0.0), "1/s^2")
     c_hat0_scale: tuple[float, ...] = unit((0.5, 0.5), "1")
     c_bounds: tuple[float, ...] = unit((0.1, 10.0), "1")
-    gain_scaling: str = unit("none", "-")
+    gain_scaling: GainScaling = unit("none", "-")
     drag: bool = unit(False, "-")
     drag_gain: tuple[float, ...] = unit((30.0, 50.0), ("1/m^2", "1/rad^2"))
     drag_max: float = unit(50.0, "1/s")
@@ -232,13 +246,13 @@ class PlantCfg:
     ``package://NAME/…`` URIs point (design §12; relative to the TOML file), merged into every
     robot's own ``package_path`` (the robot's entries first)."""
 
-    kind: str = unit("ideal", "-")
+    kind: PlantKind = unit("ideal", "-")
     c_true: tuple[float, ...] = unit((0.4, 10.0), ("1/kg·m", "1/kg·m^2"))
     mass: float = unit(25.0, "kg")
     inertia: float = unit(0.2, "kg·m^2")
     robots: tuple[RobotRef, ...] = unit((RobotRef("paper"),), "-", kept="the robot itself")
     # design §8.3, MuJoCo only: what the controllers are given ("truth" or "odometry")
-    sensing: str = unit("truth", "-")
+    sensing: Sensing = unit("truth", "-")
     encoder_cpr: int = unit(-1, "1")  # counts per wheel revolution; -1: each robot file's <numeric name="encoder_cpr">
     sensor_dt: float = unit(0.0, "s", kept=_STEP)  # s, encoder and gyro period; 0: every physics step
     gyro_noise: float = unit(0.0, "rad/s", kept=_SENSOR)  # rad/s, standard deviation per sample
@@ -271,7 +285,7 @@ class EventCfg:
     """A timed event. ``payload``: follower (1-based) gains ``mass`` kg and yaw ``inertia`` kg·m²."""
 
     time: float = unit(0.0, "s")
-    kind: str = unit("payload", "-")
+    kind: EventKind = unit("payload", "-")
     follower: int = unit(1, "1")
     mass: float = unit(0.0, "kg")
     inertia: float = unit(0.0, "kg·m^2")

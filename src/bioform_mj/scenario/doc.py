@@ -274,6 +274,8 @@ def _type_name(tp: Any) -> str:
         return f"array of {inner}" if args[-1] is Ellipsis else f"[{', '.join(_type_name(a) for a in args)}]"
     if tp is RobotRef:
         return "robot"
+    if typing.get_origin(tp) is typing.Literal:  # a kind: its values are the choices column
+        return "string"
     if isinstance(tp, types.UnionType):  # formation.scale, time_scale (design §21)
         return 'number or "auto"'
     return {float: "number", int: "integer", str: "string", bool: "boolean"}.get(tp, getattr(tp, "__name__", str(tp)))

@@ -248,6 +248,8 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
         if dataclasses.is_dataclass(inner) and inner is not RobotRef:
             return tuple(_build(inner, v, f"{key}[{i}].") for i, v in enumerate(value))
         return tuple(_convert(v, inner, f"{key}[{i}]") for i, v in enumerate(value))
+    if origin is typing.Literal:  # a kind (scenario/config.py): a string here, its value checked by validate()
+        tp = str
     if typing.get_origin(tp) is types.UnionType:  # formation.scale, time_scale: a number or "auto" (design §21)
         if value == "auto":
             return value
