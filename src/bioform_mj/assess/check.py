@@ -11,7 +11,7 @@ the ground truth from the compiled model, identifies ``a, b`` (constant torques 
   against the **motor limit** (N·m);
 - **static tip-over margins**: the forward, backward and lateral accelerations (m/s²) at which
   the chassis tips, from the centre of mass (height ``h``, position ``c`` from the axle midpoint)
-  and the support rectangle of every collision geom within :data:`SUPPORT_CLEARANCE` of the
+  and the support rectangle of every collision geom within :data:`~bioform_mj.robots.layout.SUPPORT_CLEARANCE` of the
   floor (wheels, casters): accelerating forward tips it backwards about the rearmost support
   ``x_rear`` once ``a > g (c_x − x_rear)/h``; braking tips it forwards once
   ``a > g (x_front − c_x)/h``; turning tips it sideways once ``υω > g min(y_left − c_y, c_y − y_right)/h``;
@@ -48,7 +48,6 @@ __all__ = [
     "main",
     "EXIT_FAIL",
     "G",
-    "SUPPORT_CLEARANCE",
 ]
 
 #: exit code of ``bioform robot check`` for a ``fail`` verdict (0: pass or warn, 2: bad input)
@@ -61,8 +60,6 @@ GIVEN_TOL = 0.05
 _GIVEN = re.compile(
     r"(?P<what>wheel_radius|half_track) (?P<given>[-+.\deE]+) m given; the [a-z ]+ say (?P<model>[-+.\deE]+) m$"
 )
-#: a collision geom whose lowest point is within this of the floor (m, or 0.25 r if larger) supports the chassis
-SUPPORT_CLEARANCE = 0.005
 #: identification vs formula: above WARN_ID the verdict is warn, above FAIL_ID fail (relative)
 WARN_ID, FAIL_ID = 0.03, 0.10
 #: the yaw inertia of the robot that runs differs from the file's (or changes while driving) by more: a warning
@@ -82,7 +79,7 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
 
     from bioform_mj.robots.analysis import layout_of
     from bioform_mj.robots.contacts import floor_points
-    from bioform_mj.robots.layout import geom_support, subtree
+    from bioform_mj.robots.layout import SUPPORT_CLEARANCE, geom_support, subtree
 
     lay = layout_of(model, prefix)
     base = model.body(lay.base).id
