@@ -16,6 +16,11 @@ ONE_HOME: dict[str, str] = {
     "wrap": "core/equations.py",
     "welded_to": "robots/layout.py",
     "SUPPORT_CLEARANCE": "robots/layout.py",
+    "floor_contacts": "robots/contacts.py",
+    "self_contacts": "robots/contacts.py",
+    "CASTER_LOAD": "robots/contacts.py",
+    "is_caster": "robots/contacts.py",
+    "brakes": "robots/contacts.py",
 }
 
 
@@ -156,3 +161,33 @@ def test_batch_device_constant_is_the_table():
     from bioform_mj.core.thresholds import SPIN_RAD_S
 
     assert float(device.SPIN) == SPIN_RAD_S
+
+
+# ----------------------------------------------------------------------------- floor contacts and braking
+def test_no_second_braking_threshold():
+    """Identification's own ``CASTER_MU`` (μ > 0.01) and ``CASTER_LOAD`` (1 %) are gone: it uses robot check's."""
+    defs = _definitions()
+    assert "CASTER_MU" not in defs
+    assert defs["CASTER_LOAD"] == ["robots/contacts.py"]
+
+
+@pytest.mark.parametrize("share", [0.004, 0.006, 0.02])
+@pytest.mark.parametrize("mu", [5e-4, 2e-3, 0.5])
+@pytest.mark.parametrize("condim", [1, 3])
+@pytest.mark.parametrize("rolls", [False, True])
+def test_identification_and_robot_check_share_the_braking_rule(share, mu, condim, rolls):
+    """A floor contact brakes for identification (at rest and as a drive test's mean,
+    ``causes.dragging_brakes``) exactly when it does for robot check and a run's outcomes
+    (``contacts.brakes`` on a row classified by ``contacts.is_caster``)."""
+    from bioform_mj.assess.causes import dragging_brakes
+    from bioform_mj.robots.contacts import CASTER_LOAD, brakes, is_caster
+
+    weight = 100.0
+    row = {"load_n": share * weight, "friction": mu, "condim": condim, "rolls": rolls, "geom": "g", "body": "b"}
+    at_rest = {**row, "role": "caster" if is_caster(row["load_n"], weight) else "other"}
+    want = share > CASTER_LOAD and mu >= 1e-3 and condim != 1 and not rolls
+    assert brakes(at_rest) == want
+    assert dragging_brakes({**row, "role": "other"}, weight) == want
+    assert dragging_brakes({**row, "role": "caster"}, weight) == want  # the role is the mean's, not a sample's
+    assert dragging_brakes({**row, "role": "other"}, weight, named=True) == (mu >= 1e-3 and condim != 1 and not rolls)
+    assert not dragging_brakes({**row, "role": "wheel"}, weight)

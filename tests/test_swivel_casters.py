@@ -162,7 +162,8 @@ def test_a_sphere_on_a_swivel_alone_slides_and_is_named_a_braking_caster(tmp_pat
     rep = identify(path)
     braking = {f["geom"] for f in rep["findings"] if f["kind"] == "braking_caster"}
     assert braking == {"front_tire", "back_tire"}
-    assert {c["role"] for c in rep["floor_contacts"] if c["geom"] in braking} == {"other"}
+    # one classification (design §0): identify's floor contacts are robot check's, casters that cannot roll
+    assert {(c["role"], c["rolls"]) for c in rep["floor_contacts"] if c["geom"] in braking} == {("caster", False)}
     chk = check(path)
     assert chk["verdict"] == "fail" and chk["cause"]["kind"] == "braking_caster"
     rows = [c for c in chk["floor_contacts"] if c["geom"] in braking]

@@ -464,8 +464,9 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
     """
     import mujoco
 
-    from bioform_mj.assess.causes import SELF_CONTACT_LOAD, self_contacts
+    from bioform_mj.assess.causes import SELF_CONTACT_LOAD
     from bioform_mj.core.errors import InputError
+    from bioform_mj.robots.contacts import self_contacts
 
     t = np.linspace(0.0, scenario.sim.duration, max(200, int(scenario.sim.duration * 200)) + 1)
     _, vel, _ = scenario.build_leader().states(t)
@@ -481,7 +482,8 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
     pressed: dict[str, list[int]] = {}
     for i, p in enumerate(plant.params):  # braking casters: below, with contacts.braking_casters
         weight = p.mass * G
-        pressing = [c for c in self_contacts(plant, i, settled) if c["force_n"] > SELF_CONTACT_LOAD * weight]
+        mine = self_contacts(plant.model, settled, plant.layouts[i], f"f{i + 1}/")
+        pressing = [c for c in mine if c["force_n"] > SELF_CONTACT_LOAD * weight]
         if pressing:
             note = (
                 "the robot's own bodies press on each other at rest: "
