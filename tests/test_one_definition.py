@@ -21,6 +21,7 @@ ONE_HOME: dict[str, str] = {
     "CASTER_LOAD": "robots/contacts.py",
     "is_caster": "robots/contacts.py",
     "brakes": "robots/contacts.py",
+    "SELF_CONTACT_LOAD": "assess/causes.py",
 }
 
 
@@ -167,7 +168,7 @@ def test_batch_device_constant_is_the_table():
 def test_no_second_braking_threshold():
     """Identification's own ``CASTER_MU`` (μ > 0.01) and ``CASTER_LOAD`` (1 %) are gone: it uses robot check's."""
     defs = _definitions()
-    assert "CASTER_MU" not in defs
+    assert "CASTER_MU" not in defs and "SELF_FORCE" not in defs  # robot check's 1 % self-contact force: causes'
     assert defs["CASTER_LOAD"] == ["robots/contacts.py"]
 
 

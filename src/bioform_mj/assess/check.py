@@ -64,8 +64,9 @@ _GIVEN = re.compile(
 WARN_ID, FAIL_ID = 0.03, 0.10
 #: the yaw inertia of the robot that runs differs from the file's (or changes while driving) by more: a warning
 YAW_TOL = 0.01
-#: a self contact at rest deeper than this (m) or pushing more than this fraction of the weight is a warning
-SELF_DEPTH, SELF_FORCE = 1e-3, 0.01
+#: a self contact at rest deeper than this (m), or pushing more than ``causes.SELF_CONTACT_LOAD`` of the weight
+#: (identification's structural threshold, the one definition: design §0), is a warning
+SELF_DEPTH = 1e-3
 
 
 def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
@@ -148,7 +149,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     """
     import mujoco
 
-    from bioform_mj.assess.causes import check_radius, identify_notes
+    from bioform_mj.assess.causes import SELF_CONTACT_LOAD, check_radius, identify_notes
     from bioform_mj.assess.identify import DRAG_STEP, identify
     from bioform_mj.plants.mujoco.plant import MujocoPlant
     from bioform_mj.robots.contacts import (
@@ -240,7 +241,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         pushed = [f"'{c['body1']}'/'{c['body2']}'" for c in selfc if c["simulated"]]
         reasons_warn.append(moving_at_rest + (f"; its own bodies push it: {', '.join(pushed)}" if pushed else ""))
     for sc in selfc:  # a pair the scene does not collide is a note (self_notes), not a warning
-        if sc["simulated"] and (sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_FORCE * weight):
+        if sc["simulated"] and (sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_CONTACT_LOAD * weight):
             reasons_warn.append(
                 f"the robot's own bodies '{sc['body1']}' and '{sc['body2']}' touch at rest "
                 f"({1e3 * sc['depth_m']:.2g} mm deep, {sc['force_n']:.3g} N; self_contacts): MuJoCo collides all but "
