@@ -51,7 +51,7 @@ import numpy as np
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.packages import find_package, package_search_path, resolve_uri
 from bioform_mj.robots.refs import PackagePath, RobotRef
-from bioform_mj.robots.urdf_wheels import find_wheels, left_of, welded_to
+from bioform_mj.robots.urdf_wheels import find_wheels, left_of
 
 __all__ = [
     "UrdfError",
@@ -642,7 +642,9 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
         b = body_id.get(base)
         if b is None:
             raise UrdfError(f"{path}: no link '{base}' (the base; the URDF's root link is '{pr.root}')")
-        if not welded_to(model, b, body_id[pr.root]):
+        from bioform_mj.robots.layout import welded_to  # MuJoCo only when a URDF is read
+
+        if b not in welded_to(model, body_id[pr.root]).tolist():
             raise UrdfError(
                 f"{path}: base '{base}' moves against the root link '{pr.root}' (a joint lies between them): "
                 f"the base of a URDF robot is its root link; leave base unset or map '{pr.root}'"
