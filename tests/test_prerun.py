@@ -87,7 +87,12 @@ def test_run_warns_before_the_run_what_robot_check_fails_and_checks_once(tmp_pat
     assert r["relative_error"] == rep["relative_error"] and r["identified"] == {"a": rep["a_identified"], "b": None}
     assert any(w.startswith("cannot identify a, b: braking_caster") for w in r["fail_reasons"])
     assert r["formula"]["a"] == pytest.approx(rep["a_eff"], rel=1e-12)
-    assert len(s["warnings"]) == len(mine) and all(w in err[i] for w, i in zip(s["warnings"], mine))
+    # summary.json names the robot's file relative to the run's folder (no absolute path; outputs/summary_paths.py)
+    rel = os.path.relpath(path, out.resolve())
+    assert all(f"'{rel}'" in w and str(tmp_path) not in w for w in s["warnings"])
+    assert len(s["warnings"]) == len(mine) and all(
+        w.replace(f"'{rel}'", f"'{path}'") in err[i] for w, i in zip(s["warnings"], mine)
+    )
     assert prerun.COMPUTED[0] == n0 + 1
     assert len(list((fresh_cache / "robot-check").glob("*.json"))) == 1
     # a second run in the process: remembered; a new process (memo cleared): from disk; never recomputed

@@ -236,9 +236,10 @@ def rest_findings(
             )
         )
         geo_r = _given(lay, "wheel_radius", "collision geoms")
-        if geo_r:  # a mapped radius the geoms disagree with: the contact proxy has the mapped size
+        if geo_r:  # a mapped radius the geoms disagree with: the simulated tyre (a contact proxy too) is the geoms'
             findings[-1]["detail"] += (
-                f" (the mapped wheel radius {lay.wheel_radius:g} m is not the wheel geoms' {geo_r:.4g} m)"
+                f" (the mapped wheel radius {lay.wheel_radius:g} m is not the wheel geoms' {geo_r:.4g} m, the radius "
+                "simulated)"
             )
     for what, says, val in (
         ("wheel_radius", "collision geoms", lay.wheel_radius),

@@ -141,15 +141,17 @@ def cause_of(findings: list[dict[str, Any]]) -> dict[str, Any] | None:
     return None
 
 
-def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
+def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) -> dict[str, Any]:
     """Everything :mod:`bioform_mj.assess.check` reports about one robot, with the verdict.
 
-    ``entry``: shipped name, MJCF path or :class:`~bioform_mj.robots.refs.RobotRef`. Raises
+    ``entry``: shipped name, MJCF path or :class:`~bioform_mj.robots.refs.RobotRef`. ``run_step``: the run's
+    ``sim.physics_dt`` (s) where a run asks; the identification is repeated at it and at the model's own step
+    where they differ from the step it measured at (``identification_steps``; design §14.2). Raises
     :class:`~bioform_mj.core.errors.InputError` (exit 2) for a model that cannot be used at all.
     """
     import mujoco
 
-    from bioform_mj.assess.causes import SELF_CONTACT_LOAD, check_radius, identify_notes
+    from bioform_mj.assess.causes import SELF_CONTACT_LOAD, WHEEL_LOAD_MIN, check_radius, identify_notes
     from bioform_mj.assess.identify import DRAG_STEP, identify
     from bioform_mj.plants.mujoco.plant import MujocoPlant
     from bioform_mj.robots.contacts import (
@@ -161,6 +163,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         settle,
         still_bodies,
     )
+    from bioform_mj.robots.level_support import level_support
     from bioform_mj.robots.overlaps import self_contacts_at_rest
     from bioform_mj.robots.params import implausible_inertias, robot_parameters
 
@@ -185,6 +188,9 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     mu = plant._wheel_friction(0)
     settled, floor, moving_at_rest = settle(plant, lay, track)  # 0.2 s, up to 1 s while it moves
     loads = plant.wheel_loads()[0]
+    level = level_support(model, plant.data, lay, p.mass * G, WHEEL_LOAD_MIN)  # design §14: a level stance
+    if level is not None:
+        loads = np.array(level["statics_n"])
     # the scene's contacts at rest, and every pair whose published geoms overlap at qpos0 (design §13.1)
     selfc, self_notes = self_contacts_at_rest(
         entry, lay.base[len("f1/") :], model, "f1/", self_contacts(model, plant.data, lay, "f1/")
@@ -229,8 +235,10 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
                 + (", at the end b_eff = " + f"{p_end.b_eff:.4g}" if other is p_end else "")
             )
     weight = p.mass * G
-    wheel_force = sum(c["load_n"] for c in floor if c["role"] == "wheel")
+    wheel_force = float(loads.sum()) if level else sum(c["load_n"] for c in floor if c["role"] == "wheel")
     drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
+    if level is not None:
+        reasons_warn.append(f"level stance: {level['detail']}")
     for _, brake, msg in braking_casters(floor, drive_force):
         (reasons_fail if brake >= drive_force else reasons_warn).append(msg)
     if settled > 200 and not moving_at_rest:
@@ -249,6 +257,20 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
             )
 
     ident = identify(entry) if identify_ else None  # InputError (exit 2) for a mapping no test can use
+    steps = None
+    if ident is not None:  # design §14.2: the robot as simulated, at the model's own step and the run's
+        from bioform_mj.assess.identify_steps import identify_at_steps, step_reasons
+
+        steps = identify_at_steps(entry, ident, plant.file_timesteps[0], run_step)
+        s_fail, s_warn = step_reasons(
+            steps,
+            max(p.unmodelled(0.0, 0.0)["drag_rate_per_s"]),
+            WARN_ID,
+            FAIL_ID,
+            "run" if run_step is not None else "model",
+        )
+        reasons_fail += s_fail
+        reasons_warn += s_warn
     findings = ident["findings"] if ident else []
     notes += identify_notes(ident)  # design §14.1: what the identification set up, said
     if any("other wheel" in n for n in lay.notes):  # the cause, before what it makes the identification see
@@ -348,7 +370,18 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         reasons_warn.append("wheel joint stiffness: a spring torque that grows with the distance driven (see notes)")
     tcs = [t for t in um["drag_time_constant_s"] if t is not None]
     if tcs and min(tcs) < 5.0:
-        reasons_warn.append(f"wheel damping: drag time constant {min(tcs):.2g} s (< 5 s), a large unmodelled term")
+        from bioform_mj.scenario.config import LearnerCfg
+
+        k_top = LearnerCfg().drag_max  # the opt-in learner.drag's default bound, 1/s (design §14)
+        reasons_warn.append(
+            f"wheel damping: drag time constant {min(tcs):.2g} s (< 5 s), a large unmodelled term"
+            + (
+                f"; its drag rate {k_drag:.3g} 1/s is beyond the opt-in learner.drag's range [0, {k_top:g}] 1/s "
+                "(learner.drag_max)"
+                if k_drag > k_top
+                else "; the opt-in learner.drag can learn it"
+            )
+        )
     verdict = "fail" if reasons_fail else "warn" if reasons_warn else "pass"
     from bioform_mj.robots.limits import limits_of  # design §21: the limits in one place
 
@@ -396,6 +429,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         "traction_limit_nm": traction,
         "motor_limit_nm": motor,
         "wheel_load_n": loads.tolist(),
+        "level_support": level,  # design §14: wheels level with other supports (loads above: the statics')
         "weight_on_wheels": float(loads.sum() / (p.mass * G)),
         "motor_accel_mps2": motor_accel,
         "tip_accel_mps2": ta,
@@ -439,6 +473,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
                 "test",
             )
         },
+        "identification_steps": steps,  # design §14.2: at the model's own step and the run's
         "findings": findings,
         "cause": cause_of(findings) if reasons_fail else None,
         "notes": notes,
@@ -483,8 +518,16 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
     settled = plant.settled_data()
     loads = plant.settled_wheel_loads(data=settled)
     refusals = run_refusals(plant, scratch, loads)
+    level = _levels(plant, settled)  # design §14.4: a level stance's wheel loads are its statics', not MuJoCo's
+    for i in level:
+        loads[i] = level[i]
     if refusals:
-        raise InputError("the robots cannot run this scenario (robot check fails them): " + "; ".join(refusals))
+        from bioform_mj.assess.skip import skipped
+
+        if not skipped():
+            raise InputError("the robots cannot run this scenario (robot check fails them): " + "; ".join(refusals))
+        # design §14.2: a run told to skip the robot check is never refused by it; what it would refuse is said
+        out += [f"robot check skipped (the run goes ahead); it would refuse {r}" for r in refusals]
     pressed: dict[str, list[int]] = {}
     for i, p in enumerate(plant.params):  # braking casters: below, with contacts.braking_casters
         weight = p.mass * G
@@ -546,20 +589,21 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
         motor = float(min(p.tau_max))
         # a caster that slides brakes the robot (design §13)
         floor = floor_contacts(plant.model, settled, plant.layouts[i], f"f{i + 1}/")
-        wheel_force = sum(c["load_n"] for c in floor if c["role"] == "wheel")
+        wheel_force = float(loads[i].sum()) if i in level else sum(c["load_n"] for c in floor if c["role"] == "wheel")
         drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
         for _, _, msg in braking_casters(floor, drive_force):
             out.append(f"{who}: {msg}")
         # cruising at the leader's top speed against the wheel damping c and frictionloss f takes
-        # c v / r + f per wheel (menagerie Stretch 3: c = 30 N·m·s/rad, 151 N·m at 0.25 m/s)
+        # c v / r + f per wheel (menagerie Stretch 3: c = 30 N·m·s/rad, 151 N·m at 0.25 m/s); the wheel's own
+        # damper absorbs that torque between motor and tyre, so it is the motor's to give, never the tyre's
+        # traction (design §14: at a steady cruise the tyre pushes nothing)
         v_top = float(np.max(np.abs(vel[:, 0])))
         cruise = p.wheel_damping * v_top / p.wheel_radius + p.wheel_frictionloss
-        if p.wheel_damping and cruise > min(motor, traction):
+        if p.wheel_damping and cruise > motor:
             out.append(
-                f"{who}: cruising at the leader's {v_top:.3g} m/s against the wheel damping {p.wheel_damping:g} "
-                f"N·m·s/rad and frictionloss {p.wheel_frictionloss:g} N·m takes {cruise:.3g} N·m per wheel, beyond "
-                f"the {'motor' if motor < traction else 'traction'} limit "
-                f"{min(motor, traction):.3g} N·m: the robot cannot keep up"
+                f"{who}: cruising at the leader's {v_top:.3g} m/s, the wheel's own damper ({p.wheel_damping:g} "
+                f"N·m·s/rad) and frictionloss ({p.wheel_frictionloss:g} N·m) absorb {cruise:.3g} N·m per wheel, "
+                f"beyond the motor limit {motor:.3g} N·m: the robot cannot keep up"
             )
         full = 2 * p.a_eff * motor
         if full > min(tips["forward"], tips["backward"]):
@@ -619,7 +663,7 @@ def run_refusals(plant: Any, scratch: Any, loads: np.ndarray) -> list[str]:
             why += [f"statically unstable ({way})" for way, acc in tips.items() if acc <= 0]
         except ValueError as exc:
             why.append(str(exc))
-        if float(loads[i].min()) < WHEEL_LOAD_MIN * p.mass * G:
+        if float(loads[i].min()) < WHEEL_LOAD_MIN * p.mass * G and not _level(plant, i):
             why.append(
                 f"the wheels do not stand on the floor ({loads[i, 0]:.3g} N, {loads[i, 1]:.3g} N of "
                 f"{p.mass * G:.3g} N at rest)"
@@ -629,6 +673,32 @@ def run_refusals(plant: Any, scratch: Any, loads: np.ndarray) -> list[str]:
         for w in why:
             found.setdefault(f"{lay.file}: {w}", []).append(i + 1)
     return [f"follower{'s' if len(who) > 1 else ''} {', '.join(map(str, who))}: {w}" for w, who in found.items()]
+
+
+def _levels(plant: Any, settled: Any) -> dict[int, np.ndarray]:
+    """Per robot of a built plant whose wheels stand level with other supports on the settled state ``settled``
+    (:func:`~bioform_mj.robots.level_support.level_support`): its wheel loads by the stance's statics, (2,) N."""
+    from bioform_mj.assess.causes import WHEEL_LOAD_MIN
+    from bioform_mj.robots.level_support import level_support
+
+    out = {}
+    for i, (p, lay) in enumerate(zip(plant.params, plant.layouts)):
+        lv = level_support(plant.model, settled, lay, p.mass * G, WHEEL_LOAD_MIN)
+        if lv is not None:
+            out[i] = np.array(lv["statics_n"])
+    return out
+
+
+def _level(plant: Any, i: int) -> bool:
+    """Whether robot ``i``'s wheels stand level with other supports on a settled copy of the scene
+    (:func:`~bioform_mj.robots.level_support.level_support`): unloaded there by MuJoCo's choice, not off the floor."""
+    from bioform_mj.assess.causes import WHEEL_LOAD_MIN
+    from bioform_mj.robots.level_support import level_support
+
+    return (
+        level_support(plant.model, plant.settled_data(), plant.layouts[i], plant.params[i].mass * G, WHEEL_LOAD_MIN)
+        is not None
+    )
 
 
 # ------------------------------------------------------------------ command line
@@ -678,6 +748,11 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
         help="URDF: where package://NAME/... points (repeatable; before $BIOFORM_PACKAGE_PATH, $ROS_PACKAGE_PATH)",
     )
     p.add_argument(
+        "--balance-inertia",
+        action="store_true",
+        help="set MuJoCo's compiler option balanceinertia (an inertia breaking A + B >= C is balanced)",
+    )
+    p.add_argument(
         "--self-collide",
         action="store_true",
         help="URDF: keep contacts between the robot's own links (default off, as in Gazebo)",
@@ -709,6 +784,7 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
             caster_friction=-1.0 if cf is None else float(cf),
             free_joints=bool(getattr(args, "free_joints", False)),
             self_collide=bool(getattr(args, "self_collide", False)),
+            balance_inertia=bool(getattr(args, "balance_inertia", False)),
             package_path=package_path_from_args(getattr(args, "package_path", None)),
             keyframe=getattr(args, "keyframe", None) or "",
             top_speed=getattr(args, "top_speed", None) or 0.0,

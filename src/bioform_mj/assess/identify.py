@@ -52,6 +52,7 @@ from bioform_mj.assess.causes import (
 )
 from bioform_mj.assess.fit import fit_levels
 from bioform_mj.robots.contacts import CASTER_LOAD, align_swivels, strip_prefix, swivel_casters
+from bioform_mj.robots.level_support import level_support
 from bioform_mj.robots.params import COM_TOLERANCE_M, RobotParams, ground_truth, robot_parameters, robot_truth
 
 log = logging.getLogger(__name__)
@@ -89,6 +90,9 @@ OMEGA_ID = 2.0
 DRAG_STEP = 0.02
 
 
+#: a level stance (:mod:`bioform_mj.robots.level_support`) whose drive test is further than this from the formula is
+#: one whose wheels do not carry it (``structural``; robot check's fail threshold, design §14)
+LEVEL_OFF = 0.10
 #: the identification's drive and turn tests last this long from rest, s (design §14)
 ID_DURATION = 1.0
 #: ... and are fitted only after this start-up transient, s (a tall chassis rocks on its casters there)
@@ -177,6 +181,11 @@ def identify(
     weight = params.mass * 9.81
     loads = plant.wheel_loads()[0]
     contacts = on_floor(plant)
+    # design §14: wheels level with other supports carry what the stance's statics gives, not MuJoCo's arbitrary
+    # resolution of it; the drive test below decides whether the robot drives as the formula says
+    level = level_support(model, data, lay, weight, WHEEL_LOAD_MIN)
+    if level is not None:
+        loads = np.array(level["statics_n"])
     findings = rest_findings(plant, params, lay, weight, loads, contacts)
     # μ N r / f: the least-loaded wheel's own load, and only the share f of the torque that passes the
     # wheel's rotor pushes on the floor (design §13; a rotor of 10 m r² passes 5 %)
@@ -190,6 +199,10 @@ def identify(
         "layout": asdict(lay),
         "floor_contacts": contacts,
         "wheel_load_n": loads.tolist(),
+        "level_support": level,
+        # design §14: a 4-wheel / skid-steer base is not the paper's differential drive; its a, b are a reading of
+        # the tests (robot check fails it); the notes that name the other wheels, or None
+        "skid_steer": [n for n in lay.notes if "other wheel '" in n] or None,
     }
 
     def cannot(why: str) -> dict:
@@ -501,6 +514,18 @@ def identify(
         for fd in [x for x in findings if x["kind"] == "damping"]:
             if all(theirs[j] or t is None for j, t in enumerate(fd["time_constant_s"])):
                 findings.remove(fd)
+    if level is not None and (not ok or max(abs(a_id / params.a_eff - 1), abs(b_id / params.b_eff - 1)) > LEVEL_OFF):
+        # design §14: a level stance whose drive test does not follow the formula: the wheels do not carry it
+        findings.insert(
+            0,
+            _finding(
+                "structural",
+                f"the wheels do not stand on the floor as driven: at rest {level['detail'].split(': ', 1)[0]}, and "
+                f"under torque it gives a = {a_id:.3g}, b = {b_id:.3g} against the formula's {params.a_eff:.3g}, "
+                f"{params.b_eff:.3g}",
+                wheel_load_n=level["measured_n"],
+            ),
+        )
     if not ok:
         return cannot(
             f"the tests give a = {a_id:.3g}, b = {b_id:.3g}: the robot does not move forward under forward torque"

@@ -73,20 +73,29 @@ def outcome_kinds(follower: dict[str, Any]) -> list[str]:
     return kinds if o in (None, "ok") or o in kinds else [str(o), *kinds]
 
 
-def unmodelled_causes(params: Any, slipping: bool = False, casters: Sequence[str] = ()) -> list[str]:
+def unmodelled_causes(
+    params: Any, slipping: bool = False, casters: Sequence[str] = (), drag_max: float = 50.0
+) -> list[str]:
     """The terms a plant knows that the paper's model lacks and that bias ĉ (design §8, §14): wheel
     drag (damping, back-EMF; time constant), a dead band (frictionloss), slip, braking casters, a
     centre of mass off the axle (b̂). ``params``: the robot's
-    :class:`~bioform_mj.robots.params.RobotParams` or None (ideal plant: none)."""
+    :class:`~bioform_mj.robots.params.RobotParams` or None (ideal plant: none). ``drag_max``: the opt-in
+    ``learner.drag``'s upper bound, 1/s: a drag rate beyond it is said to be beyond its range."""
     out = []
     if params is not None:
         um = params.unmodelled(0.0, 0.0)
         k = um["drag_rate_per_s"]
         if max(k) > 0:
+            beyond = max(k) > drag_max
             out.append(
                 "wheel drag (damping/back-EMF: time constants "
                 + ", ".join(f"{1 / x:.3g} s" for x in k if x > 0)
-                + "; the opt-in learner.drag would estimate it)"
+                + (
+                    f"; drag rates {', '.join(f'{x:.3g}' for x in k)} 1/s, beyond the range of the opt-in learner.drag "
+                    f"[0, learner.drag_max = {drag_max:g}] 1/s: it cannot estimate this one)"
+                    if beyond
+                    else "; the opt-in learner.drag would estimate it)"
+                )
             )
         if params.wheel_frictionloss > 0:
             out.append(f"a dead band of {2 * params.wheel_frictionloss:.3g} N·m (wheel frictionloss)")
@@ -157,7 +166,14 @@ def outcome_list(
         rel = [float(c_hat[k] / c_true[k] - 1.0) for k in range(2)]
         off = [k for k in range(2) if not abs(rel[k]) <= C_HAT_OFF]  # NaN counts as off
         if off:
-            why = list(causes()) if callable(causes) else list(causes or [])
+            # a tipped robot learned on an overturned chassis: the tip is the cause, not what it then lies on
+            why = (
+                [f"the robot tipped at t = {tip_t:.3f} s"]
+                if tip_t is not None
+                else list(causes())
+                if callable(causes)
+                else list(causes or [])
+            )
             out.append(
                 {
                     "kind": "c_hat_off",
@@ -228,7 +244,7 @@ def follower_outcomes(
                 hi=np.broadcast_to(p.c_max, (n, 2))[i] if learning else np.zeros(2),
                 c_true=c_true[i],
                 causes=lambda i=i, s=slipping: unmodelled_causes(
-                    params[i] if params is not None else None, s, braking_casters(plant, i)
+                    params[i] if params is not None else None, s, braking_casters(plant, i), sc.learner.drag_max
                 ),
                 slip_ratio=SLIP_RATIO,
                 slip_time=SLIP_TIME,

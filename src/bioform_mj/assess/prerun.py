@@ -24,25 +24,20 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+from bioform_mj.assess.skip import SKIP_ENV, skipped
+
 log = logging.getLogger(__name__)
 
 __all__ = ["before_run", "cache_dir", "robot_key", "skipped", "SKIP_ENV", "CACHE_ENV", "COMPUTED"]
 
-#: set (to anything but "" or "0") to skip the pre-run robot check (``--no-robot-check`` sets it)
-SKIP_ENV = "BIOFORM_NO_ROBOT_CHECK"
 #: the cache's parent folder (else ``$NUMBA_CACHE_DIR``, else ``~/.cache/bioform_mj``, as the kernels')
 CACHE_ENV = "BIOFORM_CACHE_DIR"
 #: the shape of a cache entry; an entry of another shape is recomputed
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2
 #: entries of this process, by :func:`robot_key`
 _MEMO: dict[str, dict[str, Any]] = {}
 #: robot checks this process computed (neither remembered nor read from the cache): a counter for tests
 COMPUTED = [0]
-
-
-def skipped() -> bool:
-    """True when :data:`SKIP_ENV` asks to skip the pre-run robot check."""
-    return os.environ.get(SKIP_ENV, "").strip() not in ("", "0")
 
 
 def cache_dir() -> Path:
@@ -81,8 +76,9 @@ def robot_key(ref: Any) -> str:
     return h.hexdigest()[:32]
 
 
-def _check(ref: Any) -> dict[str, Any]:
-    """``robot check``'s verdict of one robot, reduced to what a run says (a cache entry)."""
+def _check(ref: Any, run_step: float | None = None) -> dict[str, Any]:
+    """``robot check``'s verdict of one robot, reduced to what a run says (a cache entry); ``run_step``: the
+    run's physics step, s (the identification is repeated there: design §14.2)."""
     from bioform_mj.assess.check import check
     from bioform_mj.core.errors import InputError
 
@@ -90,7 +86,7 @@ def _check(ref: Any) -> dict[str, Any]:
     try:
         with warnings.catch_warnings():  # what the robot's import says, the run has said already
             warnings.simplefilter("ignore")
-            res = check(ref)
+            res = check(ref, run_step=run_step)
     except InputError as exc:  # robot check's exit 2 (a mapping no test can use), where the run starts
         return {"verdict": "error", "error": str(exc), "fail_reasons": [], "seconds": time.perf_counter() - t0}
     except Exception as exc:  # noqa: BLE001 - a check that breaks is said, and does not stop the run
@@ -105,12 +101,17 @@ def _check(ref: Any) -> dict[str, Any]:
         "formula": {"a": res["a_eff"], "b": res["b_eff"]},
         "identified": {"a": res["a_identified"], "b": res["b_identified"]},
         "relative_error": res["relative_error"],
+        # the identified dead band [on τ_a, on τ_b] N·m (learner_sizing, design §14), or None
+        "deadband_torque_Nm": ((res.get("wheel_joints") or {}).get("identified") or {}).get("deadband_torque_Nm"),
         "seconds": time.perf_counter() - t0,
     }
 
 
-def _cached_check(ref: Any, key: str) -> dict[str, Any]:
-    """The entry of robot ``key``: remembered, read from :func:`cache_dir`, or computed (and written)."""
+def cached_check(ref: Any, key: str, run_step: float | None = None) -> dict[str, Any]:
+    """The entry of robot ``key``: remembered, read from :func:`cache_dir`, or computed (and written);
+    ``run_step`` (s) is part of the key (the identification is repeated at it)."""
+    if run_step is not None:
+        key = hashlib.sha256(f"{key}/{run_step!r}".encode()).hexdigest()[:32]
     if key in _MEMO:
         return {**_MEMO[key], "from": "memory"}
     path = cache_dir() / f"{key}.json"
@@ -122,7 +123,7 @@ def _cached_check(ref: Any, key: str) -> dict[str, Any]:
     except (OSError, ValueError):
         pass  # absent or unreadable: computed below
     COMPUTED[0] += 1
-    entry = _check(ref)
+    entry = _check(ref, run_step)
     _MEMO[key] = entry
     out = {**entry, "from": "computed"}
     if entry.get("format") == CACHE_FORMAT:
@@ -172,7 +173,8 @@ def before_run(sc: Any, plant: Any) -> dict[str, Any]:
         groups.setdefault(robot_key(ref), (ref, []))[1].extend(who)
     robots, lines = [], []
     for key, (ref, who) in groups.items():
-        entry = {"model": ref.model, "followers": who, **_cached_check(ref, key)}
+        step = float(plant.model.opt.timestep) if hasattr(plant, "model") else None  # the run's physics step
+        entry = {"model": ref.model, "followers": who, **cached_check(ref, key, step)}
         entry.pop("format", None)
         robots.append(entry)
         whom = f"follower{'s' if len(who) > 1 else ''} {', '.join(map(str, who))}"

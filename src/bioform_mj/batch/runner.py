@@ -681,7 +681,16 @@ def _refuse_what_robot_check_fails(plant: Any) -> None:
     scratch = mujoco.MjData(plant.model)
     mujoco.mj_kinematics(plant.model, scratch)
     why = run_refusals(plant, scratch, plant.settled_wheel_loads())
-    if why:
+    from bioform_mj.assess.skip import skipped
+
+    if why and skipped():  # design §14.2: a run told to skip the robot check is not refused by it
+        import warnings
+
+        from bioform_mj.core.errors import RobotWarning
+
+        for w in why:
+            warnings.warn(f"robot check skipped (the run goes ahead); it would refuse {w}", RobotWarning, stacklevel=3)
+    elif why:
         raise InputError("the robots cannot run this scenario (robot check fails them): " + "; ".join(why))
 
 

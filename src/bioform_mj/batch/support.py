@@ -30,6 +30,11 @@ def unsupported(sc: Any) -> str | None:
         )
     if getattr(sc.learner, "drag", False):
         return "learner.drag (the learned-drag extension runs on the local engines only; use --backend local)"
+    if getattr(sc.torque, "resistance_margin", 0.0) > 0 or getattr(sc.learner, "kd_deadband", ()):
+        return (
+            "torque.resistance_margin / learner.kd_deadband (sized to robot check's identification: the local engines "
+            "only, design §14.4; use --backend local)"
+        )
     if getattr(sc.plant, "sensing", "truth") not in ("truth", "odometry"):
         return f"plant.sensing = '{sc.plant.sensing}'"
     if getattr(sc, "obstacles", ()) or getattr(getattr(sc, "obstacle_field", None), "count", 0):

@@ -240,6 +240,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     _show_robot_warnings()
     restore = _catch_signals()
     unguard = _guard_streams()
+    from bioform_mj.assess.skip import SKIP_ENV
+
+    skip_before = os.environ.get(SKIP_ENV)  # --no-robot-check sets it for this command only (design §14.2)
     try:
         args = build_parser().parse_args(argv)
         check_mujoco_distributions()
@@ -277,11 +280,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         unguard()
         restore()
+        if skip_before is None:
+            os.environ.pop(SKIP_ENV, None)
+        else:
+            os.environ[SKIP_ENV] = skip_before
 
 
 def _dispatch(args: argparse.Namespace) -> int:
     if getattr(args, "no_robot_check", False):  # design §14.2; inherited by a sweep's worker processes
-        from bioform_mj.assess.prerun import SKIP_ENV
+        from bioform_mj.assess.skip import SKIP_ENV
 
         os.environ[SKIP_ENV] = "1"
     if args.command == "presets":
@@ -469,8 +476,13 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
         from bioform_mj.outputs.scenexml import write_scene
 
         write_scene(out, result.plant.model_xml())  # design §12: assets/ beside it, loads on its own
-    write_json(out / "summary.json", result.summary)
-    write_text(out / "resolved.toml", _record_toml(result.summary))
+    from bioform_mj.outputs.summary_paths import (
+        relative_paths,  # design §10: no absolute path of the machine in the run's files
+    )
+
+    record = relative_paths(result.summary, out)
+    write_json(out / "summary.json", record)
+    write_text(out / "resolved.toml", _record_toml(record))
     mjlog.write(out)
     if failed is not None:
         r = result.summary.get("raised") or {}
@@ -773,6 +785,12 @@ def _identify(args: argparse.Namespace) -> int:
 
         write_text(args.out, text + "\n")
     print(text)
+    if result.get("skid_steer"):  # design §14: named, as robot check names it (and fails it)
+        print(
+            "warning: a 4-wheel / skid-steer base, not the paper's differential drive (robot check fails it): "
+            + "; ".join(result["skid_steer"]),
+            file=sys.stderr,
+        )
     if result.get("fit_problem"):  # design §14.3: its identified value is a reading of the test, said
         print(f"warning: {result['fit_problem']}", file=sys.stderr)
     if not result.get("identifiable", True):  # a named cause, never an internal error (design §14)

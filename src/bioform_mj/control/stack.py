@@ -91,6 +91,8 @@ class StackParams:
     cbf_par: tuple[float, ...] = (0.1, 5.0, 0.0, 2.0, 1.0)  # look-ahead l m, γ 1/s, d m, range m, pass_right
     cbf_radius: np.ndarray | None = None  # (n,) m, each robot's footprint radius (None: 0, points)
     cbf_obstacles: np.ndarray | None = None  # (m, 7) rows of obstacles.to_rows (None: none)
+    # opt-in sizing of c_gain and kd to the identified resistance (learner_sizing.sizing; None: off)
+    sizing: dict | None = None
 
 
 class ControlStack:

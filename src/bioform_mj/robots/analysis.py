@@ -258,8 +258,9 @@ def _wheel_contacts(model, data, path: Path, ref: RobotRef, joints, anchors, up,
 
     The collision geoms on each wheel's body; the radius is their extent below the joint anchor
     (the mapping's ``wheel_radius`` if given). ``geoms[i]``: the lowest one (−1: none);
-    ``proxies[i]``: ``None`` (the geom is single-contact and alone), ``(joint, candidates)`` (they
-    are replaced by a single-contact proxy) or ``(joint, None)`` (no geom: a proxy is added)."""
+    ``proxies[i]``: ``None`` (the geom is single-contact and alone), ``(joint, candidates, radius)`` (they
+    are replaced by a single-contact proxy of their own radius, m) or ``(joint, None)`` (no geom: a proxy of
+    the mapped radius is added)."""
     radii, geoms, proxies = [], [], []
     for j, anchor in zip(joints, anchors):
         wb = model.jnt_bodyid[j]
@@ -290,7 +291,9 @@ def _wheel_contacts(model, data, path: Path, ref: RobotRef, joints, anchors, up,
         geoms.append(g)
         gtype = int(model.geom_type[g])
         if gtype not in _SINGLE_CONTACT or len(cand) > 1:
-            proxies.append((j, cand))
+            # the proxy has the tyre's own radius, as a single-contact wheel keeps its geom: a mapped wheel_radius
+            # changes the formula, never the physics (design §14, ``mapping``)
+            proxies.append((j, cand, ext[k]))
             kind = mujoco.mjtGeom(gtype).name[len("mjGEOM_") :].lower()
             notes.append(
                 f"wheel '{jname}': collision {kind} '{element_name(model, mujoco.mjtObj.mjOBJ_GEOM, g)}'"

@@ -358,7 +358,8 @@ def braking_casters(floor: list[dict], drive_force: float) -> list[tuple[dict, f
             f"caster '{c['geom']}' on body '{c['body']}' carries {c['load_n']:.3g} N with friction μ = "
             f"{c['friction']:g}, condim {c['condim']} as simulated (published μ = {c['friction_published']:g}, "
             f"condim {c['condim_published']}) and cannot roll: sliding, it brakes the robot with μ N = {brake:.3g} N, "
-            f"{100 * brake / drive_force:.0f} % of what the wheels can push (min of the motor limit 2 f τ_max / r "
+            f"{100 * brake / drive_force if drive_force > 0 else float('inf'):.0f} % of what the wheels can push "
+            "(min of the motor limit 2 f τ_max / r "
             f"and their traction μ ΣN: {drive_force:.3g} N); if the real caster rolls, map caster_friction = 0"
             + (": the robot cannot move" if brake >= drive_force else "")
         )

@@ -174,9 +174,13 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
     else:
         try:
             spec = mujoco.MjSpec.from_file(str(path))
+            if ref.balance_inertia:  # the mapping's balance_inertia (design §12)
+                spec.compiler.balanceinertia = True
             model = spec.compile()
         except Exception as exc:  # mujoco raises ValueError; be robust to other types
-            raise ModelError(f"{path}: does not compile: {_one_line(exc)}") from exc
+            from bioform_mj.robots.compile_hints import compile_hint
+
+            raise ModelError(f"{path}: does not compile: {_one_line(exc)}{compile_hint(exc)}") from exc
         absolute_asset_files(spec)
         spec, model, key, key_q, key_notes = apply_keyframe(spec, model, path, ref)  # design §13.2
     layout, plan = _analyse(model, path, ref)
@@ -199,7 +203,8 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
         spec.delete(key)
     for j, pr, gname in zip(plan["joints"], plan["proxies"], layout.wheel_geoms):
         if pr is not None:
-            _wheel_proxy(spec, model, j, pr[1] if isinstance(pr, tuple) else None, layout.wheel_radius, gname)
+            r_proxy = pr[2] if isinstance(pr, tuple) and len(pr) > 2 else layout.wheel_radius  # the tyre's own
+            _wheel_proxy(spec, model, j, pr[1] if isinstance(pr, tuple) else None, r_proxy, gname)
     for a in plan["disabled"]:
         act = acts[a]
         act.gainprm = np.zeros(len(act.gainprm))

@@ -7,7 +7,8 @@ An entry of ``plant.robots`` is
 - a table ``{model = "path.xml", base = "BODY", left_wheel = "JOINT", right_wheel = "JOINT",
   wheel_radius = r, half_track = l, tau_max = τ, motor = "ideal" | "dc", driver = "current" |
   "voltage", casters = ["GEOM or BODY", ...], caster_friction = μ, free_joints = false,
-  self_collide = false, package_path = {NAME = "DIR"}, keyframe = "home"}``: every key but ``model``
+  self_collide = false, package_path = {NAME = "DIR"}, keyframe = "home", balance_inertia = false}``: every
+  key but ``model``
   optional; an empty name (or 0 for a number) means "as in the shipped convention" (body
   ``base``, joints ``left_wheel``/``right_wheel``; a URDF: its root link, and the two wheels it
   finds) resp. "read it from the model".
@@ -116,6 +117,7 @@ class RobotRef:
     package_path: PackagePath = PackagePath()  # URDF only: package:// search path, before the environment
     keyframe: str = ""  # MJCF keyframe to start in (design §13.2); "": 'home' if the file has one; "none": qpos0
     top_speed: float = 0.0  # m/s at the tyre, the maker's datasheet figure (design §21); 0: not given
+    balance_inertia: bool = False  # MuJoCo's compiler option balanceinertia (an inertia breaking A + B >= C)
 
     @property
     def mapped(self) -> bool:
@@ -180,7 +182,7 @@ def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:
         raise InputError(f"scenario key '{key}': a robot table needs 'model' (an MJCF or URDF path or shipped name)")
     kw: dict[str, Any] = {}
     for name, value in entry.items():
-        if name == "self_collide":
+        if name in ("self_collide", "balance_inertia"):
             if not isinstance(value, bool):
                 raise InputError(f"scenario key '{key}.{name}': expected true or false, got {value!r}")
             kw[name] = value

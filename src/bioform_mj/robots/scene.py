@@ -392,9 +392,10 @@ def build_scene(
         yaw = pose[2] - base_yaw
         c, s_ = np.cos(yaw), np.sin(yaw)
         mx, my = c * axle_world[0] - s_ * axle_world[1], s_ * axle_world[0] + c * axle_world[1]
-        frame = world.add_frame(
-            pos=[pose[0] - mx, pose[1] - my, layout.wheel_radius - axle_world[2]], quat=yaw_quat(yaw)
-        )
+        # the tyre's own radius where a mapped wheel_radius differs from it (the physics is the tyre's: design §14.4;
+        # at the mapped one a smaller radius starts the robot inside the floor and it jumps)
+        r_floor = _tyre_radius(layout)
+        frame = world.add_frame(pos=[pose[0] - mx, pose[1] - my, r_floor - axle_world[2]], quat=yaw_quat(yaw))
         spec.attach(robot, prefix=follower_prefix(i), frame=frame)
     # design §13.3: on the scene's own slippery surfaces a robot's priority geom gets the smaller friction
     surfaces = (["floor"] if floor_friction is not None else []) + (["friction_patch"] if friction_patch else [])
@@ -493,3 +494,12 @@ class Markers:
             data.mocap_pos[self.slots, :2] = slots
         if centroid is not None and self.centroid >= 0:
             data.mocap_pos[self.centroid, :2] = centroid
+
+
+def _tyre_radius(layout: RobotLayout) -> float:
+    """The wheels' own radius, m: the collision geoms' where a mapped ``wheel_radius`` differs from them (the
+    layout's note ``wheel_radius R m given; the collision geoms say G m``), else ``layout.wheel_radius``."""
+    for n in layout.notes:
+        if n.startswith("wheel_radius ") and "collision geoms say " in n:
+            return float(n.rsplit("say ", 1)[1].split()[0])
+    return float(layout.wheel_radius)

@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.core.errors import InputError
+from bioform_mj.robots.compile_hints import compile_hint
 from bioform_mj.robots.packages import find_package, package_search_path, resolve_uri
 from bioform_mj.robots.refs import PackagePath, RobotRef
 from bioform_mj.robots.urdf_wheels import find_wheels, left_of
@@ -616,10 +617,12 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
             "inertia tensors that are not positive definite (MuJoCo refuses them): products of inertia dropped "
             "for " + ", ".join(f"'{n}'" for n in bad)
         )
+    if ref.balance_inertia:  # the mapping's balance_inertia (design §12)
+        spec.compiler.balanceinertia = True
     try:
         model = spec.compile()
     except Exception as exc:
-        raise UrdfError(f"{path}: does not compile: {_one_line(exc)}") from None
+        raise UrdfError(f"{path}: does not compile: {_one_line(exc)}{compile_hint(exc)}") from None
     body_id = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b): b for b in range(1, model.nbody)}
     inferred = []
     for lname in pr.no_inertial:
@@ -740,5 +743,5 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
     try:
         model = spec.compile()
     except Exception as exc:
-        raise UrdfError(f"{path}: does not compile: {_one_line(exc)}") from None
+        raise UrdfError(f"{path}: does not compile: {_one_line(exc)}{compile_hint(exc)}") from None
     return UrdfImport(spec=spec, model=model, ref=ref, root=pr.root, notes=tuple(notes))

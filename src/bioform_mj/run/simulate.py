@@ -211,6 +211,13 @@ def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = 
     n = sc.n
     c_hat0 = np.asarray(sc.learner.c_hat0_scale) * c_true
     lo, hi = sc.learner.c_bounds
+    from bioform_mj.assess.learner_sizing import (
+        sizing as _sizing,  # opt-in (design §14): c and kd sized to the resistance
+    )
+
+    sized = _sizing(sc, plant, np.asarray(c_true, dtype=float))
+    band = sc.learner.projection_band  # opt-in (design §14): a band around the prior c_true, not c_bounds × ĉ(0)
+    c_lo, c_hi = (band[0] * c_true, band[1] * c_true) if band else (lo * c_hat0, hi * c_hat0)
     return StackParams(
         offsets=np.array(sc.formation.offsets, dtype=float),
         kp=np.array(sc.estimator.kp),
@@ -225,7 +232,7 @@ def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = 
         D=sc.kinematic.D,
         law=law,
         learning=learning,
-        c_gain=np.array(sc.torque.c),
+        c_gain=np.array(sized["c_gain"] if sized else sc.torque.c),
         torque_phi=sc.torque.phi,
         tau_max=np.full(n, sc.torque.tau_max) if tau_max is None else np.asarray(tau_max, dtype=float),
         steer_priority=sc.torque.saturation == "steer-priority",
@@ -233,15 +240,16 @@ def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = 
         derivative=sc.torque.derivative,
         k4=_learner_k4(sc, c_hat0),
         k5=np.array(sc.learner.k5),
-        kd=np.array(sc.learner.kd),
+        kd=np.array(sized["kd"] if sized else sc.learner.kd),
         kk=np.array(sc.learner.drag_gain) if sc.learner.drag else np.zeros(2),
         k_max=float(sc.learner.drag_max) if sc.learner.drag else 0.0,
         c_hat0=c_hat0,
-        c_min=lo * c_hat0,
-        c_max=hi * c_hat0,
+        c_min=c_lo,
+        c_max=c_hi,
         dt=sc.sim.control_dt,
         leader_frame=sc.formation.frame == "leader",
         **_cbf_params(sc, plant),
+        sizing=sized,
     )
 
 

@@ -103,6 +103,8 @@ def _summary(sc: Scenario, plant: Any, controller: Any, run: RunEnd) -> dict[str
         "time_scale": sc.formation.time_scale,  # design §21: applied likewise (config: time_scale = 1)
         "scale_note": sc.formation.scale_note,  # why ("auto": from what, which limit set σ)
         "config": resolved_config(sc),  # the run's own record: load() takes it back unchanged
+        # opt-in (design §14, learner_sizing): the c and kd sized to the identified resistance; None: off
+        "learner_sizing": getattr(getattr(controller, "p", None), "sizing", None),
         "followers": followers,
     }
 

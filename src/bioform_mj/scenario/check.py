@@ -175,6 +175,7 @@ def validate(sc: Scenario) -> None:
     _positive("torque.phi", t.phi, strict=False)
     _positive("torque.tau_max", t.tau_max)
     _positive("torque.deriv_wn", t.deriv_wn)
+    _positive("torque.resistance_margin", (t.resistance_margin,), strict=False)  # opt-in (learner_sizing)
     if t.derivative not in DERIVATIVES:
         raise ScenarioError(
             "torque.derivative", f"unknown '{t.derivative}' (expected one of: {', '.join(DERIVATIVES)})"
@@ -197,6 +198,15 @@ def validate(sc: Scenario) -> None:
     if lc.gain_scaling not in GAIN_SCALINGS:
         raise ScenarioError(
             "learner.gain_scaling", f"unknown '{lc.gain_scaling}' (expected one of: {', '.join(GAIN_SCALINGS)})"
+        )
+    if lc.kd_deadband:  # opt-in (learner_sizing): [] or two gains >= 0
+        _length("learner.kd_deadband", lc.kd_deadband, 2)
+        _positive("learner.kd_deadband", lc.kd_deadband, strict=False)
+    band = lc.projection_band  # opt-in (design §14): factors of the prior c_true
+    if band and not (len(band) == 2 and all(math.isfinite(v) for v in band) and 0 < band[0] <= 1.0 <= band[1]):
+        raise ScenarioError(
+            "learner.projection_band",
+            f"must be [] or [lower, upper] with 0 < lower <= 1 <= upper (factors of c_true), got {list(band)}",
         )
     if not lc.c_bounds[0] <= 1.0 <= lc.c_bounds[1]:
         raise ScenarioError(

@@ -209,6 +209,8 @@ class TorqueCfg:
     deriv_wn: float = unit(50.0, "rad/s")
     saturation: Saturation = unit("steer-priority", "-")
     derivative: Derivative = unit("filter", "-")
+    #: opt-in (issue 27 item 5; design §14): c at least this many times the identified resistance; 0 = off
+    resistance_margin: float = unit(0.0, "1", kept="a ratio of two torques")
 
 
 @dataclass(frozen=True)
@@ -232,6 +234,11 @@ class LearnerCfg:
     drag: bool = unit(False, "-")
     drag_gain: tuple[float, ...] = unit((30.0, 50.0), ("1/m^2", "1/rad^2"))
     drag_max: float = unit(50.0, "1/s")
+    #: opt-in (issue 27 item 5; design §14): project ĉ onto [lo, hi] × the prior c_true (the robot's formula
+    #: values, what robot check gives) instead of c_bounds × ĉ(0); empty: the paper's c_bounds
+    projection_band: tuple[float, ...] = unit((), "1")
+    #: opt-in (issue 27 item 5): the kd used where robot check identifies a dead band; empty: off
+    kd_deadband: tuple[float, ...] = unit((), "1/s^2")
 
 
 @dataclass(frozen=True)

@@ -135,6 +135,11 @@ KEYS: dict[str, tuple[str, str]] = {
     "torque.tau_max": ("N·m", "Wheel torque limit on the ideal plant (MuJoCo robots bring their actuator limits)."),
     "torque.deriv_wn": ("rad/s", "Natural frequency of the command-derivative filter (`derivative = filter`)."),
     "torque.saturation": ("", "`steer-priority`: keep `τ_R − τ_L`, clip the common mode; `wheel`: clip each wheel."),
+    "torque.resistance_margin": (
+        "",
+        "Opt-in (design §14): `c_a, c_b` at least this many times the dead band `robot check` identifies, as "
+        "`a τ_db`, `b τ_db` (m/s², rad/s²); 0 (default) = the paper's `c`.",
+    ),
     "torque.derivative": ("", "How `υ̇_cmd, ω̇_cmd` are obtained (design §6): filter, backward difference or analytic."),
     # learner
     "learner.k4": ("", "Eq. 37 learning gains `(k4_a, k4_b)`; × σ², the adaptation rate's scaling (design §21)."),
@@ -142,6 +147,15 @@ KEYS: dict[str, tuple[str, str]] = {
     "learner.kd": ("", "Disturbance estimate `d̂' = −kd S` (our extension; 0 = the paper)."),
     "learner.c_hat0_scale": ("", "`ĉ(0) = c_hat0_scale ⊙ c_true` per follower."),
     "learner.c_bounds": ("", "Projection bounds of `ĉ` as factors of `ĉ(0)`: lower ≤ 1 ≤ upper."),
+    "learner.kd_deadband": (
+        "",
+        "Opt-in (design §14): the `kd` used where `robot check` identifies a dead band (`[]`: off, `kd` stands).",
+    ),
+    "learner.projection_band": (
+        "",
+        "Opt-in (design §14): project `ĉ` onto `[lower, upper] × c_true` (the robot's formula values) instead of "
+        "`c_bounds × ĉ(0)`; `[]` (default) = the paper's bounds.",
+    ),
     "learner.gain_scaling": ("", "`c_hat0`: `k4 ⊙ (ĉ_i(0)/ĉ_paper(0))²` per robot, so any robot learns as fast."),
     "learner.drag": (
         "",
@@ -188,6 +202,11 @@ KEYS: dict[str, tuple[str, str]] = {
     "plant.robots[].self_collide": (
         "",
         "URDF: keep contacts between the robot's own links (default off, as in Gazebo; design §12).",
+    ),
+    "plant.robots[].balance_inertia": (
+        "",
+        "Set MuJoCo's compiler option `balanceinertia` (an inertia that breaks the triangle inequality "
+        "A + B >= C, which Gazebo takes and MuJoCo refuses, is balanced; default off).",
     ),
     "plant.robots[].package_path": (
         "",
