@@ -62,7 +62,8 @@ class BatchRun:
         njmax: int | None = None,
         probe: bool = True,
     ) -> None:
-        from bioform_mj.run.simulate import initial_estimates, make_plant, stack_params
+        from bioform_mj.control.params import stack_params
+        from bioform_mj.run.simulate import initial_estimates, make_plant
 
         scs = list(scenarios)
         if not scs:

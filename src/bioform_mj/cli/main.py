@@ -27,6 +27,7 @@ from bioform_mj.cli.proc import (
     check_mujoco_distributions,
 )
 from bioform_mj.cli.report import _print_summary, _record_toml, _show_robot_warnings, _warn_outcomes
+from bioform_mj.control.registry import ENTRY_POINT_GROUP, parse_methods
 from bioform_mj.control.stack import METHODS
 from bioform_mj.core.errors import BioformError, InputError, WriteFailed
 from bioform_mj.scenario.config import PLANTS
@@ -92,7 +93,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser("run", help="run one scenario and write summary.json and log.npz")
     _scenario_args(run)
-    run.add_argument("--method", choices=METHODS, help="control method (default: the scenario's)")
+    run.add_argument(
+        "--method",
+        metavar="NAME",
+        help=f"control method: {', '.join(METHODS)}, or a registered controller's name (entry points "
+        f"{ENTRY_POINT_GROUP}) (default: the scenario's)",
+    )
     run.add_argument(
         "--out", type=Path, help="output directory (default: runs/<scenario>-<plant>-<method>); one run per folder"
     )
@@ -136,6 +142,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     t1 = sub.add_parser("table1", help="run the four methods and write table1.json / table1.md")
     _scenario_args(t1)
+    t1.add_argument(
+        "--methods",
+        default="all",
+        help="comma-separated methods (the paper's or registered controllers'), or 'all': the paper's four (default)",
+    )
     t1.add_argument("--out", type=Path, help="output directory (default: runs/table1-<plant>)")
     t1.add_argument("--overwrite", action="store_true", help="replace the table already in --out (its files only)")
     t1.add_argument("--figures", action="store_true", help="write figures/*.png comparing the methods")
@@ -155,7 +166,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument(
         "--methods",
         default="bioinspired-learning",
-        help="comma-separated methods, or 'all' (default: bioinspired-learning)",
+        help="comma-separated methods (the paper's or registered controllers'), or 'all': the paper's four "
+        "(default: bioinspired-learning)",
     )
     sw.add_argument(
         "--vary",
@@ -557,6 +569,7 @@ def _table1_in(args: argparse.Namespace, sc, out: Path) -> int:
     from bioform_mj.outputs.progress import progress_bar
 
     results = {}
+    methods = parse_methods(args.methods, "--methods")
 
     with progress_bar(f"table1 {sc.name} {sc.plant.kind}", not args.quiet) as cb:
 
@@ -566,8 +579,8 @@ def _table1_in(args: argparse.Namespace, sc, out: Path) -> int:
                 line = f"  {m}: done in {res.summary['wall_time_s']:.1f} s"
                 cb.write(line) if cb is not None else print(line, file=sys.stderr)
 
-        def per_method(m: str):  # one bar over the four runs: method i fills [i/4, (i+1)/4]
-            i, total = list(METHODS).index(m), len(METHODS)
+        def per_method(m: str):  # one bar over the runs: method i of k fills [i/k, (i+1)/k]
+            i, total = methods.index(m), len(methods)
 
             def part(k: int, n: int) -> None:
                 cb(i * n + k, total * n)
@@ -576,7 +589,7 @@ def _table1_in(args: argparse.Namespace, sc, out: Path) -> int:
             return part
 
         try:
-            table = run_table1(sc, on_result=keep, progress=None if cb is None else per_method)
+            table = run_table1(sc, on_result=keep, progress=None if cb is None else per_method, methods=methods)
         except KeyboardInterrupt as exc:
             done = ", ".join(results) or "none"
             exc.kept = f"no table written (methods finished: {done})"  # type: ignore[attr-defined]
@@ -605,10 +618,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
     from bioform_mj.jobs.sweep import SweepInterrupted, expand, sweep
 
-    methods = list(METHODS) if args.methods == "all" else [m.strip() for m in args.methods.split(",") if m.strip()]
-    for m in methods:
-        if m not in METHODS:
-            raise InputError(f"--methods: unknown method '{m}' (expected one of: {', '.join(METHODS)}, or all)")
+    methods = parse_methods(args.methods, "--methods")
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
     for flag, val in (("--device", args.device), ("--nconmax", args.nconmax), ("--njmax", args.njmax)):

@@ -200,8 +200,8 @@ class FormationParallelEnv(ParallelEnv):
         self.L_vel = np.ascontiguousarray(lv, dtype=float)
 
     def _build_stack(self, sc: Scenario, plant_c_true: np.ndarray | None) -> None:
+        from bioform_mj.control.params import stack_params
         from bioform_mj.control.stack import ControlStack
-        from bioform_mj.run.simulate import stack_params
 
         c = np.array(sc.plant.c_true, dtype=float)[None, :].repeat(sc.n, 0) if plant_c_true is None else plant_c_true
         tau_max = getattr(self._plant, "tau_max", None) if self._plant is not None else None

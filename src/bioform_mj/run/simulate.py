@@ -27,7 +27,7 @@ from bioform_mj.assess.outcomes import (
     slots_of,
 )
 from bioform_mj.control.kernel import new_state
-from bioform_mj.control.stack import ControlStack, StackParams, parse_method
+from bioform_mj.control.registry import build_controller, is_builtin
 from bioform_mj.core.engine import Bounds, Formation, LogArrays, Loop, new_acc, new_log, new_metrics
 from bioform_mj.core.errors import ControllerError, Diverged, OutcomeWarning, RobotWarning
 from bioform_mj.formation.disturbance import Harmonic as HarmonicDisturbance
@@ -204,77 +204,6 @@ def make_plant(sc: Scenario) -> Plant:
     return plant
 
 
-def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = None, plant: Any = None) -> StackParams:
-    """Resolve the scenario's numbers into the control stack's per-follower arrays (``plant``, if
-    given, tells the safety filter each robot's footprint radius and the obstacles, design §19)."""
-    law, learning = parse_method(sc.method)
-    n = sc.n
-    c_hat0 = np.asarray(sc.learner.c_hat0_scale) * c_true
-    lo, hi = sc.learner.c_bounds
-    return StackParams(
-        offsets=np.array(sc.formation.offsets, dtype=float),
-        kp=np.array(sc.estimator.kp),
-        ka=np.array(sc.estimator.ka),
-        kb=np.array(sc.estimator.kb),
-        est_phi=np.array(sc.estimator.phi),
-        k1=sc.kinematic.k1,
-        k2=sc.kinematic.k2,
-        k3=sc.kinematic.k3,
-        A=sc.kinematic.A,
-        B=sc.kinematic.B,
-        D=sc.kinematic.D,
-        law=law,
-        learning=learning,
-        c_gain=np.array(sc.torque.c),
-        torque_phi=sc.torque.phi,
-        tau_max=np.full(n, sc.torque.tau_max) if tau_max is None else np.asarray(tau_max, dtype=float),
-        steer_priority=sc.torque.saturation == "steer-priority",
-        deriv_wn=sc.torque.deriv_wn,
-        derivative=sc.torque.derivative,
-        k4=_learner_k4(sc, c_hat0),
-        k5=np.array(sc.learner.k5),
-        kd=np.array(sc.learner.kd),
-        kk=np.array(sc.learner.drag_gain) if sc.learner.drag else np.zeros(2),
-        k_max=float(sc.learner.drag_max) if sc.learner.drag else 0.0,
-        c_hat0=c_hat0,
-        c_min=lo * c_hat0,
-        c_max=hi * c_hat0,
-        dt=sc.sim.control_dt,
-        leader_frame=sc.formation.frame == "leader",
-        **_cbf_params(sc, plant),
-    )
-
-
-def _cbf_params(sc: Scenario, plant: Any) -> dict[str, Any]:
-    """The safety filter's part of :class:`StackParams` (design §19; empty when it is off)."""
-    sf = sc.safety
-    if sf.filter != "cbf":
-        return {}
-    from bioform_mj.formation.obstacles import to_rows
-
-    radius = getattr(plant, "footprint_radius", None)
-    obstacles = getattr(plant, "obstacles", None) or []
-    return dict(
-        cbf=True,
-        cbf_par=(sf.lookahead, sf.gain, sf.distance, sf.range, sf.pass_right),
-        cbf_radius=None if radius is None else np.asarray(radius, dtype=float),
-        cbf_obstacles=to_rows(obstacles) if obstacles else None,
-    )
-
-
-def _learner_k4(sc: Scenario, c_hat0: np.ndarray) -> np.ndarray:
-    """``k4`` (2,) as configured, or (n, 2) per robot for ``gain_scaling = "c_hat0"``:
-    ``k4 ⊙ (ĉ_i(0) / ĉ_paper(0))²`` with ``ĉ_paper(0) = c_hat0_scale ⊙ PAPER_C``, the initial
-    estimate the paper's robot gets, so that robot keeps the paper's gains exactly."""
-    from bioform_mj.scenario.config import PAPER_C
-
-    k4 = np.array(sc.learner.k4, dtype=float)
-    if sc.learner.gain_scaling == "c_hat0":
-        ref = np.asarray(sc.learner.c_hat0_scale, dtype=float) * np.asarray(PAPER_C)
-        return k4 * (np.asarray(c_hat0, dtype=float) / ref) ** 2
-    return k4
-
-
 def initial_estimates(sc: Scenario, pose0: np.ndarray, leader_pose0: np.ndarray) -> np.ndarray:
     """``P_ir(0)`` (n, 3) per ``estimator.init``: ``zero``, ``self`` (own pose + offset) or ``leader``."""
     n = sc.n
@@ -311,11 +240,11 @@ def simulate(
     """Run the closed loop of ``sc`` and return its log and summary.
 
     ``plant``: a :class:`~bioform_mj.plants.base.Plant` (default: built from ``sc.plant``);
-    ``controller``: a :class:`~bioform_mj.control.base.Controller` (default: the paper's
-    stack for ``sc.method``). ``engine``: ``auto`` (compiled where plant and controller
-    allow it), ``compiled`` (refuse if they do not) or ``stepwise`` (one Python call per
-    control step; the same compiled equations, the same bits). ``record_inputs`` (compiled
-    MuJoCo loop only): arrays ``(N, nu)``, ``(N, n, 6)`` that receive each step's ``ctrl``
+    ``controller``: a :class:`~bioform_mj.control.base.Controller` (default: the one registered as
+    ``sc.method``, the paper's stack for its four methods, :mod:`bioform_mj.control.registry`).
+    ``engine``: ``auto`` (compiled where plant and controller allow it), ``compiled`` (refuse if they do
+    not) or ``stepwise`` (one Python call per control step; the same compiled equations, the same bits).
+    ``record_inputs`` (compiled MuJoCo loop only): arrays ``(N, nu)``, ``(N, n, 6)`` that receive each step's ``ctrl``
     and chassis ``xfrc_applied``, for a bare replay.
 
     A divergence (NaN/inf or a state beyond ``sc.limits``, checked after every control
@@ -350,7 +279,8 @@ def simulate(
     # build the plant and the controller, say what the run will meet, and reset them
     if plant is None:
         plant = make_plant(sc)
-    controller, own_stack = _build_controller(sc, graph, plant, controller)
+    named = controller is None  # built from the registry: the summary's method is sc.method
+    controller, own_stack = _build_controller(sc, plant, controller)
     tl = _timeline(sc, traj)
     warned = _warn_before_run(sc, plant)
     pose0, vel0 = _reset(sc, plant, controller, tl.L_pose[0])
@@ -374,6 +304,8 @@ def simulate(
     logd = _log_dict(plant, graph, ctx.log, end.j, missing, odometry, tl.offsets)
     engine_used = "compiled" if chunk else "stepwise"
     summary = _summarise(sc, plant, controller, step, end, logd, warm.setup_s, engine_used, warned)
+    if named:  # a registered controller is named by its method (a given one by its class)
+        summary["method"] = sc.method
     _add_run_notes(summary, sc, plant, step, end, logd, raised)
     result = RunResult(sc, logd, summary, plant, end.diverged, end.interrupted)
     if raised is not None:  # the exception says the run failed (its summary holds the outcomes so far)
@@ -409,12 +341,15 @@ def _check_arguments(engine: str, controller: Any, observers: Sequence[Observer]
     check_observers(observers)
 
 
-def _build_controller(sc: Scenario, graph: Any, plant: Plant, controller: Any) -> tuple[Any, bool]:
-    """``(controller, own_stack)``: the user's, or the paper's stack for ``sc.method`` (own_stack True);
-    both the plant and the controller must have the scenario's ``n`` followers."""
-    own_stack = controller is None
-    if own_stack:
-        controller = ControlStack(graph, stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None), plant))
+def _build_controller(sc: Scenario, plant: Plant, controller: Any) -> tuple[Any, bool]:
+    """``(controller, own_stack)``: the user's, or the one registered as ``sc.method`` (the paper's stack for
+    its four methods: ``own_stack`` True; design §21); both the plant and the controller must have the
+    scenario's ``n`` followers. A registered user's controller is checked as a given one is."""
+    own_stack = controller is None and is_builtin(sc.method)
+    if controller is None:
+        controller = build_controller(sc.method, sc, plant)
+        if not own_stack:
+            check_controller(controller)
     n = sc.n
     if getattr(controller, "n", n) != n or getattr(plant, "n", n) != n:
         raise ValueError(f"the scenario has {n} followers, the plant {plant.n} and the controller {controller.n}")

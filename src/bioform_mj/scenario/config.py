@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from bioform_mj.control.params import PAPER_C
 from bioform_mj.formation.graph import Graph
 from bioform_mj.formation.graph import chain as _chain
 from bioform_mj.formation.graph import complete as _complete
@@ -43,8 +44,6 @@ SENSINGS = ("truth", "odometry")
 #: how the torque law gets ``υ̇_cmd, ω̇_cmd`` (design §6)
 DERIVATIVES = ("filter", "difference", "analytic")
 GAIN_SCALINGS = ("none", "c_hat0")
-#: the robot the paper's learner gains were tuned for: ``c = (a, b)`` of Sec. IV
-PAPER_C = (0.4, 10.0)
 
 # Bounds on the time axis: beyond them a run would not finish or would not fit in memory
 # (issue 11). Refused up front with the estimate, before any work.
@@ -215,7 +214,7 @@ class PlantCfg:
     robot's own ``package_path`` (the robot's entries first)."""
 
     kind: str = "ideal"
-    c_true: tuple[float, ...] = (0.4, 10.0)
+    c_true: tuple[float, ...] = PAPER_C
     mass: float = 25.0
     inertia: float = 0.2
     robots: tuple[RobotRef, ...] = (RobotRef("paper"),)
