@@ -31,7 +31,7 @@ from bioform_mj.control.registry import build_controller, is_builtin
 from bioform_mj.core.engine import Bounds, Formation, LogArrays, Loop, new_acc, new_log, new_metrics
 from bioform_mj.core.errors import ControllerError, Diverged, OutcomeWarning, RobotWarning
 from bioform_mj.formation.disturbance import Harmonic as HarmonicDisturbance
-from bioform_mj.plants.base import Plant
+from bioform_mj.plants.base import CompiledChunk, Obstacles, Plant, RobotModels, Sensing, Unmodelled
 from bioform_mj.plants.ideal import IdealPlant
 from bioform_mj.run.hooks import (
     _add_outcome,
@@ -136,7 +136,7 @@ def import_warnings(plant: Any) -> list[str]:
     (empty for MJCF robots and the ideal plant)."""
     out: list[str] = []
     seen: set[str] = set()
-    for lay in getattr(plant, "layouts", ()):
+    for lay in plant.layouts if isinstance(plant, RobotModels) else ():
         if lay.file in seen:
             continue
         seen.add(lay.file)
@@ -291,7 +291,7 @@ def simulate(
     c_true = np.ascontiguousarray(plant.c_true(), dtype=float)
     # design §8.3: with sensing = "odometry" the controllers get each robot's dead reckoning
     # (plant.measurement), everything else (metrics, guards, formation error, outcomes) the truth
-    odometry = getattr(plant, "sensing", "truth") == "odometry"
+    odometry = isinstance(plant, Sensing) and plant.sensing == "odometry"
     missing: set[str] = set()  # the signals a user's controller does not give
     step = Stepper(ctx, sc.n, plant, controller, faults, own_stack, kernel, c_true, odometry, missing)
     run_chunk = chunk if chunk is not None else step.python_chunk
@@ -392,14 +392,14 @@ def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], 
     for line in imported:
         warnings.warn(line, RobotWarning, stacklevel=3)
     feasibility: list[str] = []
-    if hasattr(plant, "params") and hasattr(plant, "model"):  # MuJoCo robots: what the scenario asks of them
+    if isinstance(plant, RobotModels):  # robots from model files: what the scenario asks of them
         from bioform_mj.assess.check import feasibility as _feasibility
 
         feasibility = _feasibility(sc, plant)  # in summary.json too
         for line in feasibility:
             warnings.warn(line, RobotWarning, stacklevel=3)  # before the run (the CLI prints warning: lines)
     checked = None
-    if sc.plant.kind == "mujoco" and hasattr(plant, "params") and hasattr(plant, "model"):
+    if sc.plant.kind == "mujoco" and isinstance(plant, RobotModels):  # the scenario's robots are the plant's
         from bioform_mj.assess.prerun import before_run  # design §14.2: once per robot, cached
 
         checked = before_run(sc, plant)
@@ -474,7 +474,7 @@ def _compiled_chunk(engine: str, plant: Plant, ctx: Loop, kernel: Any, faults: A
     """The plant's compiled chunk, where the engine, the controller's kernel and no per-step faults
     allow it (None: the Python chunk); ``engine = "compiled"`` without one is refused."""
     chunk = None
-    if engine != "stepwise" and kernel is not None and faults is None and hasattr(plant, "compiled_chunk"):
+    if engine != "stepwise" and kernel is not None and faults is None and isinstance(plant, CompiledChunk):
         chunk = plant.compiled_chunk(ctx, record_inputs) if record_inputs is not None else plant.compiled_chunk(ctx)
     if engine == "compiled" and chunk is None:
         raise ValueError(
@@ -494,7 +494,7 @@ def _log_dict(plant: Plant, graph: Any, lg: LogArrays, j: int, missing: set[str]
         logd["odom_pose"] = logd["pose"].copy()
         logd["odom_vel"] = logd["vel"].copy()
     logd["offsets"] = offsets
-    if getattr(plant, "obstacles", None):  # design §19: drawn by the figures and rerun from the log
+    if isinstance(plant, Obstacles) and plant.obstacles:  # design §19: drawn by the figures and rerun from the log
         from bioform_mj.formation.obstacles import to_rows
 
         logd["obstacles"] = to_rows(plant.obstacles)
@@ -561,11 +561,10 @@ def _add_run_notes(summary: dict[str, Any], sc, plant, step: Stepper, end: LoopE
             "step": ks,
             "time_s": ks * dt,
         }
-    unmodelled = getattr(plant, "unmodelled", None)
-    if unmodelled is not None and len(logd["vel"]):  # damping and frictionloss at the run's speeds
+    if isinstance(plant, Unmodelled) and len(logd["vel"]):  # damping and frictionloss at the run's speeds
         v = float(np.abs(logd["vel"][:, :, 0]).max())
         w = float(np.abs(logd["vel"][:, :, 1]).max())
-        for f, u in zip(summary["followers"], unmodelled(v, w)):
+        for f, u in zip(summary["followers"], plant.unmodelled(v, w)):
             f["unmodelled"] = u
     from bioform_mj.assess.hardware import verdict  # design §19: would this run on the robots as specified?
 
