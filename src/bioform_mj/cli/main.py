@@ -14,6 +14,7 @@ import os
 import signal
 import sys
 from collections.abc import Sequence
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,7 @@ from bioform_mj.cli.report import _print_summary, _record_toml, _show_robot_warn
 from bioform_mj.control.registry import ENTRY_POINT_GROUP, parse_methods
 from bioform_mj.control.stack import METHODS
 from bioform_mj.core.errors import BioformError, InputError, WriteFailed
+from bioform_mj.outputs.registry import OUTPUTS
 from bioform_mj.scenario.config import PLANTS
 
 EXIT_OK, EXIT_OTHER, EXIT_INPUT, EXIT_DIVERGED = 0, 1, 2, 3
@@ -115,14 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
         "compiled kernels and no per-step faults); stepwise: one Python call per control step, same equations; "
         "auto (default): compiled where possible",
     )
-    run.add_argument(
-        "--video",
-        action="store_true",
-        help="write video.mp4 (off-screen MuJoCo rendering, MUJOCO_GL=egl by default; "
-        "the ideal plant is shown in a composed scene)",
-    )
-    run.add_argument("--rrd", action="store_true", help="write run.rrd (rerun recording)")
-    run.add_argument("--figures", action="store_true", help="write figures/*.png")
+    for o in OUTPUTS.values():  # the registered outputs (design §21): --video, --rrd, --figures, ...
+        run.add_argument(o.flag, action="store_true", help=o.help)
     run.add_argument("--rerun-spawn", action="store_true", help="stream the run live to a rerun viewer spawned for it")
     run.add_argument(
         "--rerun-connect",
@@ -418,14 +414,13 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
     rundir = _claim(args.out, f"{sc.name}-{sc.plant.kind}-{sc.method}", args.overwrite)
     with rundir:  # created and locked from here on (exit 2 if another run holds it); lock released at the end
         try:
-            return _run_in(args, sc, mjlog, rundir.path, video_opts, live_url)
+            return _run_in(args, sc, mjlog, rundir.path, {"video": video_opts}, live_url)
         finally:
             if rundir.written:  # MuJoCo's warnings join a run's files (a folder left empty is removed)
                 mjlog.write(rundir.path)
 
 
-def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url) -> int:
-    import time
+def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, options: dict[str, Any], live_url) -> int:
 
     from bioform_mj.core.errors import quiet_outcomes
     from bioform_mj.outputs.files import write_json, write_npz, write_text
@@ -433,12 +428,10 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
     from bioform_mj.run.simulate import simulate
 
     observers: list[Any] = []  # none unless asked: the loop then has no per-step observer cost
-    capture = live = None
-    if video_opts is not None:
-        from bioform_mj.outputs.video import FrameCapture
-
-        capture = FrameCapture(video_opts.fps)  # snapshots only; frames are rendered after the loop
-        observers.append(capture)
+    live = None
+    chosen = [o for o in OUTPUTS.values() if getattr(args, o.dest, False)]  # the registered outputs asked for
+    watchers = {o.name: o.watch(options.get(o.name)) for o in chosen}  # the video's snapshots (rendered after)
+    observers += [w for w in watchers.values() if w is not None]
     if args.rerun_spawn or live_url:
         from bioform_mj.outputs.rerun_log import RerunLive
 
@@ -499,29 +492,13 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
     problems: list[str] = []  # what was asked for and could not be made: error lines, exit 2
     notes: list[str] = []
     try:
-        if args.rrd:
-            from bioform_mj.outputs.rerun_log import write_rrd
-
-            t0 = time.perf_counter()
-            write_rrd(result, out / "run.rrd")
-            notes.append(f"run.rrd written in {time.perf_counter() - t0:.1f} s")
-        if args.figures:
-            from bioform_mj.outputs.figures import run_figures
-
-            t0 = time.perf_counter()
-            figs = run_figures(result, out / "figures")
-            notes.append(f"figures/: {len(figs)} PNGs in {time.perf_counter() - t0:.1f} s")
-        if capture is not None:
-            from bioform_mj.outputs.video import render_video
-
+        for o in chosen:  # design §21: each registered output's writer, in the registry's order
+            bar = o.files[0] if o.files else o.name
+            show = progress_bar(bar, not args.quiet, unit=o.progress_unit) if o.progress_unit else nullcontext()
             try:
-                with progress_bar("video.mp4", not args.quiet, unit="frame") as cb:
-                    info = render_video(capture, result, out / "video.mp4", video_opts, progress=cb)
-                notes.append(
-                    f"video.mp4: {info.frames} frames {info.width}x{info.height} at {info.fps:g} fps "
-                    f"rendered in {info.render_s:.1f} s ({info.gl_renderer or 'OpenGL'})"
-                )
-            except InputError as exc:  # no OpenGL context (GLUnavailable), or nothing to show
+                with show as cb:
+                    notes.append(o.write(result, out, watchers[o.name], options.get(o.name), progress=cb))
+            except InputError as exc:  # what it cannot make (the video: no OpenGL context, nothing to show)
                 problems.append(str(exc))
     except KeyboardInterrupt as exc:  # while writing the extras: the run itself is complete
         exc.kept = (
