@@ -39,6 +39,7 @@ from bioform_mj.batch.tables import _check_compatible, _yaw_quat, event_tables, 
 from bioform_mj.control.stack import ControlStack
 from bioform_mj.core.engine import GUARDS
 from bioform_mj.formation.disturbance import Harmonic
+from bioform_mj.plants.base import DeliveredTorques
 from bioform_mj.plants.mujoco.plant import TIP_ANGLE_DEG
 from bioform_mj.run.faults import Faults
 from bioform_mj.scenario.config import Scenario
@@ -80,7 +81,7 @@ class BatchRun:
         if probe:
             check_physics(sc0, device, plant)  # the scene's physics is C MuJoCo's on this engine
         # DC motors (design §8.2): the learner is fed the torque delivered over each period (_delivered)
-        self.feed_on = bool(getattr(plant, "feed_delivered", False))
+        self.feed_on = isinstance(plant, DeliveredTorques) and bool(plant.feed_delivered)
         # plant.sensing = "odometry" (design §8.3; the plant, so the scene's sensors, is one per batch)
         sen = plant.sensors
         self.sense_on = bool(sen.on)

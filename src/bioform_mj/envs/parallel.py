@@ -45,6 +45,7 @@ from bioform_mj.control.kernel import estimator_advance
 from bioform_mj.core.engine import Bounds, check, describe
 from bioform_mj.core.errors import Diverged, InputError
 from bioform_mj.envs.kernels import direct_torque, sense_errors, track_velocity
+from bioform_mj.plants.base import Sensing
 from bioform_mj.scenario.config import Scenario
 from bioform_mj.scenario.loader import load as load_scenario
 
@@ -233,7 +234,7 @@ class FormationParallelEnv(ParallelEnv):
         self._sc = sc
         plant = self._plant_for(sc)
         plant.reset()
-        self._odometry = getattr(plant, "sensing", "truth") == "odometry"
+        self._odometry = isinstance(plant, Sensing) and plant.sensing == "odometry"
         self._lim = Bounds(float(sc.limits.position), float(sc.limits.speed), float(sc.limits.torque))
         self._diag = np.zeros(3)
         self.k = 0
