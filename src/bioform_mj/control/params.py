@@ -13,10 +13,7 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.control.stack import ControlStack, StackParams, parse_method
-
-#: the robot the paper's learner gains were tuned for: ``c = (a, b)`` of Sec. IV (also the scenario's
-#: default ``plant.c_true``)
-PAPER_C = (0.4, 10.0)
+from bioform_mj.control.tuning import PAPER_C
 
 
 def paper_stack(sc: Any, plant: Any) -> ControlStack:

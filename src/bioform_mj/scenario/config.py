@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from bioform_mj.control.params import PAPER_C
+from bioform_mj.control.tuning import PAPER_C
 from bioform_mj.formation.graph import Graph
 from bioform_mj.formation.graph import chain as _chain
 from bioform_mj.formation.graph import complete as _complete

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from bioform_mj.control.params import PAPER_C
+from bioform_mj.control.tuning import PAPER_C
 from bioform_mj.core.errors import InputError, ScenarioError
 from bioform_mj.formation.obstacles import scaled as _scaled_obstacles
 from bioform_mj.robots.refs import PackagePath, RobotRef, as_package_path, as_ref, rebase_entries, rebase_package_path
