@@ -32,6 +32,7 @@ from bioform_mj.control.registry import ENTRY_POINT_GROUP, parse_methods
 from bioform_mj.control.stack import METHODS
 from bioform_mj.core.errors import BioformError, InputError, WriteFailed
 from bioform_mj.outputs.registry import OUTPUTS
+from bioform_mj.plants.base import RobotModels
 from bioform_mj.scenario.config import PLANTS
 
 EXIT_OK, EXIT_OTHER, EXIT_INPUT, EXIT_DIVERGED = 0, 1, 2, 3
@@ -464,7 +465,7 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, options: dict[str, A
             "time_s": result.summary.get("sim_time_s"),
         }
     write_npz(out / "log.npz", result.log)
-    if sc.plant.kind == "mujoco":
+    if isinstance(result.plant, RobotModels):  # design §21: a scene of robot models (the MuJoCo plant)
         from bioform_mj.outputs.scenexml import write_scene
 
         write_scene(out, result.plant.model_xml())  # design §12: assets/ beside it, loads on its own

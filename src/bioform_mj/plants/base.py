@@ -79,6 +79,9 @@ class RobotModels(Protocol):
     model: Any
     data: Any
 
+    def model_xml(self) -> str:
+        """The composed scene as MJCF (as built), for a run folder's ``scene.xml`` (design §12)."""
+
 
 @runtime_checkable
 class LumpedBodies(Protocol):
