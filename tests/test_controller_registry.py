@@ -150,3 +150,8 @@ def test_an_installed_packages_entry_point_is_found_by_the_cli(tmp_path, monkeyp
     assert main(["run", "paper", "--plant", "ideal", "--set", "sim.duration=0.3", "--method", "slot-pd-ep"] + [
         "--out", str(out), "--quiet"]) == 0  # fmt: skip
     assert json.loads((out / "summary.json").read_text())["method"] == "slot-pd-ep"
+    sw = tmp_path / "sweep"  # bioform sweep --methods NAME: a forked worker finds it as the parent did
+    assert main(["sweep", "paper", "--plant", "ideal", "--set", "sim.duration=0.3", "--methods"] + [
+        "slot-pd-ep,bioinspired", "--workers", "2", "--out", str(sw), "--quiet"]) == 0  # fmt: skip
+    rows = [json.loads(p.read_text()) for p in (sw / "runs").glob("*.json")]
+    assert sorted(r["method"] for r in rows) == ["bioinspired", "slot-pd-ep"]
