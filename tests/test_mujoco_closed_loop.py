@@ -20,10 +20,11 @@ import numpy as np
 import pytest
 
 from bioform_mj.cli.main import main
+from bioform_mj.control.params import stack_params
 from bioform_mj.jobs.table1 import ordering_holds, run_table1
 from bioform_mj.robots.params import ground_truth
 from bioform_mj.robots.refs import models_dir
-from bioform_mj.run.simulate import simulate, stack_params
+from bioform_mj.run.simulate import simulate
 from bioform_mj.scenario.config import EventCfg
 from bioform_mj.scenario.loader import load
 

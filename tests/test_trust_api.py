@@ -213,8 +213,8 @@ class Wrapped:
     """The paper's stack, spoiled after ``k_bad`` steps: NaN for follower 2, a raise, a wrong shape."""
 
     def __init__(self, mode: str, k_bad: int = 50) -> None:
+        from bioform_mj.control.params import stack_params
         from bioform_mj.control.stack import ControlStack
-        from bioform_mj.run.simulate import stack_params
 
         self.inner = ControlStack(SC.build_graph(), stack_params(SC, np.array(SC.plant.c_true)))
         self.n, self.k, self.k_bad, self.mode = SC.n, 0, k_bad, mode

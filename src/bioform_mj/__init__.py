@@ -3,7 +3,8 @@ on an ideal unicycle plant and on MuJoCo differential-drive robots.
 
 The Python API at the top level: :func:`load` a scenario, :func:`simulate` it, read the
 :class:`RunResult` (``.summary``, ``.log``, ``.table()``); :class:`Controller` is the protocol a
-controller of your own implements; :class:`OutcomeWarning` is what ``simulate`` warns of a follower
+controller of your own implements, and :func:`register_controller` names one so that ``method = "NAME"``
+runs it; :class:`OutcomeWarning` is what ``simulate`` warns of a follower
 that tipped, was lost, ... or a run that diverged. The names are imported on first use, so ``import bioform_mj``
 stays cheap (no numba, no MuJoCo).
 """
@@ -22,13 +23,24 @@ _LAZY = {
     "simulate": ("bioform_mj.run.simulate", "simulate"),
     "RunResult": ("bioform_mj.run.simulate", "RunResult"),
     "Controller": ("bioform_mj.control.base", "Controller"),
+    "register_controller": ("bioform_mj.control.registry", "register_controller"),
     "OutcomeWarning": ("bioform_mj.core.errors", "OutcomeWarning"),
 }
 
-__all__ = ["Controller", "OutcomeWarning", "RunResult", "Scenario", "__version__", "load", "simulate"]
+__all__ = [
+    "Controller",
+    "OutcomeWarning",
+    "RunResult",
+    "Scenario",
+    "__version__",
+    "load",
+    "register_controller",
+    "simulate",
+]
 
 if TYPE_CHECKING:  # for type checkers and editors; at run time __getattr__ imports lazily
     from bioform_mj.control.base import Controller
+    from bioform_mj.control.registry import register_controller
     from bioform_mj.core.errors import OutcomeWarning
     from bioform_mj.run.simulate import RunResult, simulate
     from bioform_mj.scenario.config import Scenario

@@ -32,6 +32,8 @@ from typing import Any
 
 import numpy as np
 
+from bioform_mj.plants.base import RobotModels, TipSlipWatch
+
 #: largest fraction of control steps at the torque limit that still counts as feasible: beyond it
 #: the run depends more on the saturation model than on the controller (the shipped presets, 20 s:
 #: paper 0.09, stretch 0.15, tb3 0.01)
@@ -99,7 +101,7 @@ def verdict(sc: Any, plant: Any, summary: dict[str, Any], logd: dict[str, np.nda
     for a finished run (``summary``: its ``summary.json`` dict, ``logd``: its log)."""
     fs = summary["followers"]
     checks: dict[str, dict[str, Any]] = {}
-    params = getattr(plant, "params", None)
+    params = plant.params if isinstance(plant, RobotModels) else None
     vel = np.asarray(logd.get("vel", np.zeros((0, len(fs), 2))))
     t = np.asarray(logd.get("t", np.zeros(0)))
 
@@ -220,7 +222,7 @@ def verdict(sc: Any, plant: Any, summary: dict[str, Any], logd: dict[str, np.nda
             checks["control_rate"] = _check(rate, lim_r, rate <= lim_r * (1 + 1e-9), f"the '{name}' preset's rate")
 
     # slip
-    if getattr(plant, "slip_step", None) is None:
+    if not isinstance(plant, TipSlipWatch) or plant.slip_step is None:
         checks["slip"] = _skip("the ideal plant has no wheels")
     else:
         slips = [f["id"] for f in fs if any(o["kind"] == "slipping" for o in f.get("outcomes", []))]

@@ -21,6 +21,7 @@ from bioform_mj.core.thresholds import (
     SPIN_RAD_S,
     TIP_ANGLE_DEG,
 )
+from bioform_mj.plants.base import RobotModels, TipSlipWatch
 from bioform_mj.scenario.config import Scenario
 
 
@@ -190,7 +191,7 @@ def braking_casters(plant: Any, i: int) -> list[str]:
     """Follower ``i``'s casters that brake on the floor now, labelled as ``robot check`` labels them
     (``contacts.floor_contacts``: a geom's name, or ``BODY#K``), by ``robot check``'s test
     (``contacts.brakes``: loaded, cannot roll, with friction; design §14.2)."""
-    if not hasattr(plant, "layouts") or not hasattr(plant, "data"):
+    if not isinstance(plant, RobotModels):
         return []
     try:
         from bioform_mj.robots.contacts import brakes, floor_contacts
@@ -219,13 +220,14 @@ def follower_outcomes(
     ``C_HAT_OFF`` from c_true, with the likely cause); empty when ok."""
     n = sc.n
     out: list[list[dict[str, Any]]] = []
-    tip = getattr(plant, "tip_step", None)
-    slip = getattr(plant, "slip_step", None)
+    watch = isinstance(plant, TipSlipWatch)
+    tip = plant.tip_step if watch else None
+    slip = plant.slip_step if watch else None
     p = getattr(controller, "p", None)
     t = logd["t"]
     last = t >= (t[-1] - 1.0) if len(t) else np.zeros(0, bool)
     c_true = plant.c_true() if plant is not None else np.full((n, 2), np.nan)
-    params = getattr(plant, "params", None)
+    params = plant.params if isinstance(plant, RobotModels) else None
     lost_m = lost_threshold_m(sc)
     for i in range(n):
         slipping = slip is not None and slip[i] >= 0

@@ -40,6 +40,7 @@ from bioform_mj.control.stack import ControlStack
 from bioform_mj.core.engine import GUARDS
 from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_TIME, SLIP_V_FLOOR, TIP_ANGLE_DEG
 from bioform_mj.formation.disturbance import Harmonic
+from bioform_mj.plants.base import DeliveredTorques
 from bioform_mj.run.faults import Faults
 from bioform_mj.scenario.config import Scenario
 
@@ -62,7 +63,8 @@ class BatchRun:
         njmax: int | None = None,
         probe: bool = True,
     ) -> None:
-        from bioform_mj.run.simulate import initial_estimates, make_plant, stack_params
+        from bioform_mj.control.params import stack_params
+        from bioform_mj.run.simulate import initial_estimates, make_plant
 
         scs = list(scenarios)
         if not scs:
@@ -79,7 +81,7 @@ class BatchRun:
         if probe:
             check_physics(sc0, device, plant)  # the scene's physics is C MuJoCo's on this engine
         # DC motors (design §8.2): the learner is fed the torque delivered over each period (_delivered)
-        self.feed_on = bool(getattr(plant, "feed_delivered", False))
+        self.feed_on = isinstance(plant, DeliveredTorques) and bool(plant.feed_delivered)
         # plant.sensing = "odometry" (design §8.3; the plant, so the scene's sensors, is one per batch)
         sen = plant.sensors
         self.sense_on = bool(sen.on)

@@ -16,6 +16,10 @@ def default_capacity(n_robots: int) -> tuple[int, int]:
 
 def unsupported(sc: Any) -> str | None:
     """What of scenario ``sc`` the batch engine does not run yet (None: all of it)."""
+    from bioform_mj.control.stack import METHODS  # loaded with the scenario already (this module stays light)
+
+    if sc.method not in METHODS:  # design §22: a registered controller runs in Python, one robot team at a time
+        return f"method = '{sc.method}' (a registered controller; the batch engine runs the paper's four methods only)"
     if sc.plant.kind != "mujoco":
         return (
             f"plant.kind = '{sc.plant.kind}' (the batch engine runs the MuJoCo plant only; "

@@ -14,6 +14,7 @@ import os
 import signal
 import sys
 from collections.abc import Sequence
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -27,8 +28,11 @@ from bioform_mj.cli.proc import (
     check_mujoco_distributions,
 )
 from bioform_mj.cli.report import _print_summary, _record_toml, _show_robot_warnings, _warn_outcomes
+from bioform_mj.control.registry import ENTRY_POINT_GROUP, parse_methods
 from bioform_mj.control.stack import METHODS
 from bioform_mj.core.errors import BioformError, InputError, WriteFailed
+from bioform_mj.outputs.registry import OUTPUTS
+from bioform_mj.plants.base import RobotModels
 from bioform_mj.scenario.config import PLANTS
 
 EXIT_OK, EXIT_OTHER, EXIT_INPUT, EXIT_DIVERGED = 0, 1, 2, 3
@@ -92,7 +96,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser("run", help="run one scenario and write summary.json and log.npz")
     _scenario_args(run)
-    run.add_argument("--method", choices=METHODS, help="control method (default: the scenario's)")
+    run.add_argument(
+        "--method",
+        metavar="NAME",
+        help=f"control method: {', '.join(METHODS)}, or a registered controller's name (entry points "
+        f"{ENTRY_POINT_GROUP}) (default: the scenario's)",
+    )
     run.add_argument(
         "--out", type=Path, help="output directory (default: runs/<scenario>-<plant>-<method>); one run per folder"
     )
@@ -109,16 +118,9 @@ def build_parser() -> argparse.ArgumentParser:
         "compiled kernels and no per-step faults); stepwise: one Python call per control step, same equations; "
         "auto (default): compiled where possible",
     )
-    run.add_argument(
-        "--video",
-        action="store_true",
-        help="write video.mp4 (off-screen MuJoCo rendering, MUJOCO_GL=egl by default; "
-        "the ideal plant is shown in a composed scene)",
-    )
-    run.add_argument("--rrd", action="store_true", help="write run.rrd (rerun recording)")
-    run.add_argument("--rosbag", action="store_true", help="write rosbag/: the run as a ROS 2 bag (ros extra)")
+    for o in OUTPUTS.values():  # the registered outputs (design §22): --video, --rrd, --figures, ...
+        run.add_argument(o.flag, action="store_true", help=o.help)
     run.add_argument("--ros-distro", choices=("humble", "iron", "jazzy", "kilted"), help="the bag's (default jazzy)")
-    run.add_argument("--figures", action="store_true", help="write figures/*.png")
     run.add_argument("--rerun-spawn", action="store_true", help="stream the run live to a rerun viewer spawned for it")
     run.add_argument(
         "--rerun-connect",
@@ -138,6 +140,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     t1 = sub.add_parser("table1", help="run the four methods and write table1.json / table1.md")
     _scenario_args(t1)
+    t1.add_argument(
+        "--methods",
+        default="all",
+        help="comma-separated methods (the paper's or registered controllers'), or 'all': the paper's four (default)",
+    )
     t1.add_argument("--out", type=Path, help="output directory (default: runs/table1-<plant>)")
     t1.add_argument("--overwrite", action="store_true", help="replace the table already in --out (its files only)")
     t1.add_argument("--figures", action="store_true", help="write figures/*.png comparing the methods")
@@ -157,7 +164,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument(
         "--methods",
         default="bioinspired-learning",
-        help="comma-separated methods, or 'all' (default: bioinspired-learning)",
+        help="comma-separated methods (the paper's or registered controllers'), or 'all': the paper's four "
+        "(default: bioinspired-learning)",
     )
     sw.add_argument(
         "--vary",
@@ -419,14 +427,13 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
     rundir = _claim(args.out, f"{sc.name}-{sc.plant.kind}-{sc.method}", args.overwrite)
     with rundir:  # created and locked from here on (exit 2 if another run holds it); lock released at the end
         try:
-            return _run_in(args, sc, mjlog, rundir.path, video_opts, live_url)
+            return _run_in(args, sc, mjlog, rundir.path, {"video": video_opts, "rosbag": args.ros_distro}, live_url)
         finally:
             if rundir.written:  # MuJoCo's warnings join a run's files (a folder left empty is removed)
                 mjlog.write(rundir.path)
 
 
-def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url) -> int:
-    import time
+def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, options: dict[str, Any], live_url) -> int:
 
     from bioform_mj.core.errors import quiet_outcomes
     from bioform_mj.outputs.files import write_json, write_npz, write_text
@@ -434,12 +441,10 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
     from bioform_mj.run.simulate import simulate
 
     observers: list[Any] = []  # none unless asked: the loop then has no per-step observer cost
-    capture = live = None
-    if video_opts is not None:
-        from bioform_mj.outputs.video import FrameCapture
-
-        capture = FrameCapture(video_opts.fps)  # snapshots only; frames are rendered after the loop
-        observers.append(capture)
+    live = None
+    chosen = [o for o in OUTPUTS.values() if getattr(args, o.dest, False)]  # the registered outputs asked for
+    watchers = {o.name: o.watch(options.get(o.name)) for o in chosen}  # the video's snapshots (rendered after)
+    observers += [w for w in watchers.values() if w is not None]
     if args.rerun_spawn or live_url:
         from bioform_mj.outputs.rerun_log import RerunLive
 
@@ -472,7 +477,7 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
             "time_s": result.summary.get("sim_time_s"),
         }
     write_npz(out / "log.npz", result.log)
-    if sc.plant.kind == "mujoco":
+    if isinstance(result.plant, RobotModels):  # design §22: a scene of robot models (the MuJoCo plant)
         from bioform_mj.outputs.scenexml import write_scene
 
         write_scene(out, result.plant.model_xml())  # design §12: assets/ beside it, loads on its own
@@ -505,33 +510,13 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
     problems: list[str] = []  # what was asked for and could not be made: error lines, exit 2
     notes: list[str] = []
     try:
-        if args.rrd:
-            from bioform_mj.outputs.rerun_log import write_rrd
-
-            t0 = time.perf_counter()
-            write_rrd(result, out / "run.rrd")
-            notes.append(f"run.rrd written in {time.perf_counter() - t0:.1f} s")
-        if args.rosbag:
-            from bioform_mj.outputs.rosbag import write_run_bag
-
-            notes.append(write_run_bag(result, out, args.ros_distro))
-        if args.figures:
-            from bioform_mj.outputs.figures import run_figures
-
-            t0 = time.perf_counter()
-            figs = run_figures(result, out / "figures")
-            notes.append(f"figures/: {len(figs)} PNGs in {time.perf_counter() - t0:.1f} s")
-        if capture is not None:
-            from bioform_mj.outputs.video import render_video
-
+        for o in chosen:  # design §22: each registered output's writer, in the registry's order
+            bar = o.files[0] if o.files else o.name
+            show = progress_bar(bar, not args.quiet, unit=o.progress_unit) if o.progress_unit else nullcontext()
             try:
-                with progress_bar("video.mp4", not args.quiet, unit="frame") as cb:
-                    info = render_video(capture, result, out / "video.mp4", video_opts, progress=cb)
-                notes.append(
-                    f"video.mp4: {info.frames} frames {info.width}x{info.height} at {info.fps:g} fps "
-                    f"rendered in {info.render_s:.1f} s ({info.gl_renderer or 'OpenGL'})"
-                )
-            except InputError as exc:  # no OpenGL context (GLUnavailable), or nothing to show
+                with show as cb:
+                    notes.append(o.write(result, out, watchers[o.name], options.get(o.name), progress=cb))
+            except InputError as exc:  # what it cannot make (the video: no OpenGL context, nothing to show)
                 problems.append(str(exc))
     except KeyboardInterrupt as exc:  # while writing the extras: the run itself is complete
         exc.kept = (
@@ -579,6 +564,7 @@ def _table1_in(args: argparse.Namespace, sc, out: Path) -> int:
     from bioform_mj.outputs.progress import progress_bar
 
     results = {}
+    methods = parse_methods(args.methods, "--methods")
 
     with progress_bar(f"table1 {sc.name} {sc.plant.kind}", not args.quiet) as cb:
 
@@ -588,8 +574,8 @@ def _table1_in(args: argparse.Namespace, sc, out: Path) -> int:
                 line = f"  {m}: done in {res.summary['wall_time_s']:.1f} s"
                 cb.write(line) if cb is not None else print(line, file=sys.stderr)
 
-        def per_method(m: str):  # one bar over the four runs: method i fills [i/4, (i+1)/4]
-            i, total = list(METHODS).index(m), len(METHODS)
+        def per_method(m: str):  # one bar over the runs: method i of k fills [i/k, (i+1)/k]
+            i, total = methods.index(m), len(methods)
 
             def part(k: int, n: int) -> None:
                 cb(i * n + k, total * n)
@@ -598,7 +584,7 @@ def _table1_in(args: argparse.Namespace, sc, out: Path) -> int:
             return part
 
         try:
-            table = run_table1(sc, on_result=keep, progress=None if cb is None else per_method)
+            table = run_table1(sc, on_result=keep, progress=None if cb is None else per_method, methods=methods)
         except KeyboardInterrupt as exc:
             done = ", ".join(results) or "none"
             exc.kept = f"no table written (methods finished: {done})"  # type: ignore[attr-defined]
@@ -627,10 +613,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
     from bioform_mj.jobs.sweep import SweepInterrupted, expand, sweep
 
-    methods = list(METHODS) if args.methods == "all" else [m.strip() for m in args.methods.split(",") if m.strip()]
-    for m in methods:
-        if m not in METHODS:
-            raise InputError(f"--methods: unknown method '{m}' (expected one of: {', '.join(METHODS)}, or all)")
+    methods = parse_methods(args.methods, "--methods")
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
     for flag, val in (("--device", args.device), ("--nconmax", args.nconmax), ("--njmax", args.njmax)):

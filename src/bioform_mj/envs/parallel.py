@@ -45,6 +45,7 @@ from bioform_mj.control.kernel import estimator_advance
 from bioform_mj.core.engine import Bounds, check, describe
 from bioform_mj.core.errors import Diverged, InputError
 from bioform_mj.envs.kernels import direct_torque, sense_errors, track_velocity
+from bioform_mj.plants.base import Sensing
 from bioform_mj.scenario.config import Scenario
 from bioform_mj.scenario.loader import load as load_scenario
 
@@ -200,8 +201,8 @@ class FormationParallelEnv(ParallelEnv):
         self.L_vel = np.ascontiguousarray(lv, dtype=float)
 
     def _build_stack(self, sc: Scenario, plant_c_true: np.ndarray | None) -> None:
+        from bioform_mj.control.params import stack_params
         from bioform_mj.control.stack import ControlStack
-        from bioform_mj.run.simulate import stack_params
 
         c = np.array(sc.plant.c_true, dtype=float)[None, :].repeat(sc.n, 0) if plant_c_true is None else plant_c_true
         tau_max = getattr(self._plant, "tau_max", None) if self._plant is not None else None
@@ -233,7 +234,7 @@ class FormationParallelEnv(ParallelEnv):
         self._sc = sc
         plant = self._plant_for(sc)
         plant.reset()
-        self._odometry = getattr(plant, "sensing", "truth") == "odometry"
+        self._odometry = isinstance(plant, Sensing) and plant.sensing == "odometry"
         self._lim = Bounds(float(sc.limits.position), float(sc.limits.speed), float(sc.limits.torque))
         self._diag = np.zeros(3)
         self.k = 0

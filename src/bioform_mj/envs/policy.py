@@ -30,8 +30,9 @@ class ControllerPolicy:
 
     def reset(self) -> None:
         """After ``env.reset``: the controller's initial estimates, as ``bioform run`` sets them."""
+        from bioform_mj.control.params import stack_params
         from bioform_mj.control.stack import ControlStack
-        from bioform_mj.run.simulate import initial_estimates, stack_params
+        from bioform_mj.run.simulate import initial_estimates
 
         env = self.env
         if self.controller is None or isinstance(self.controller, ControlStack):

@@ -14,6 +14,7 @@ rerun recording so that follower 2 is the same colour everywhere.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -85,6 +86,22 @@ def _log_scale(ax: Any, data: np.ndarray) -> None:
     d = np.asarray(data, dtype=float)
     if np.any(np.isfinite(d) & (d > 0)):
         ax.set_yscale("log")
+
+
+def write(result: Any, out: Path, **_: Any) -> str:
+    """The registered output ``figures`` (:mod:`~bioform_mj.outputs.registry`): ``out/figures/*.png``; returns the
+    line the CLI prints.
+
+    Parameters
+    ----------
+    result : RunResult
+        The finished run.
+    out : Path
+        The run folder.
+    """
+    t0 = time.perf_counter()
+    figs = run_figures(result, Path(out) / "figures")
+    return f"figures/: {len(figs)} PNGs in {time.perf_counter() - t0:.1f} s"
 
 
 def run_figures(result: Any, out_dir: str | Path) -> list[Path]:

@@ -38,6 +38,7 @@ import os
 import re
 import shutil
 import sys
+import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -365,6 +366,22 @@ def send_log(rec: Any, log: Mapping[str, np.ndarray]) -> None:
 
 def _label(summary: Mapping[str, Any]) -> str:
     return f"{summary.get('scenario', '')} {summary.get('plant', '')} {summary.get('method', '')}".strip()
+
+
+def write(result: Any, out: Path, **_: Any) -> str:
+    """The registered output ``rrd`` (:mod:`~bioform_mj.outputs.registry`): ``out/run.rrd``; returns the line the
+    CLI prints.
+
+    Parameters
+    ----------
+    result : RunResult
+        The finished run.
+    out : Path
+        The run folder.
+    """
+    t0 = time.perf_counter()
+    write_rrd(result, Path(out) / "run.rrd")
+    return f"run.rrd written in {time.perf_counter() - t0:.1f} s"
 
 
 def write_rrd(result: Any, path: str | Path) -> Path:

@@ -120,6 +120,12 @@ def write_run_bag(result: Any, out: Path, distro: str | None) -> str:
     return f"rosbag/: {bag.messages} messages on {len(bag.topics)} topics ({bag.distro}) written in {bag.write_s:.2f} s"
 
 
+def write(result: Any, out: Path, watcher: Any = None, options: Any = None, progress: Any = None) -> str:
+    """The registered output ``rosbag`` (:mod:`bioform_mj.outputs.registry`): :func:`write_run_bag` with the
+    distribution ``options`` (``--ros-distro``; None: the default)."""
+    return write_run_bag(result, out, options)
+
+
 @dataclass
 class BagInfo:
     """What :func:`write_bag` wrote: the folder, message and topic counts, the distribution, wall time (s)."""

@@ -1,8 +1,9 @@
 """One run per output folder (design §10): claim a folder, lock it, clear an old run with ``--overwrite``.
 
 A folder is refused when it holds another run's files, unless ``overwrite`` is asked, which
-first removes exactly those files (the names in :data:`RUN_FILES`, a ``figures/`` folder of
-PNGs, our own stale temporary files). A folder that holds anything else (the user's files) is
+first removes exactly those files (the names in :data:`RUN_FILES`, the folders of :data:`RUN_DIRS`
+holding only their files, our own stale temporary files; the registered outputs' among them,
+design §22). A folder that holds anything else (the user's files) is
 refused in both cases: nothing we did not write is ever deleted.
 
 Concurrent writers are refused with an ``fcntl.flock`` on ``DIR/.bioform.lock``: the kernel
@@ -21,21 +22,14 @@ from pathlib import Path
 
 from bioform_mj.core.errors import InputError
 from bioform_mj.outputs.files import check_out_dir
+from bioform_mj.outputs.registry import output_dirs, output_files
 from bioform_mj.outputs.scenexml import ASSET_SUFFIXES, ASSETS_DIR
 
-#: Files a run or a table1 writes into its folder (extend when a command writes a new one).
-RUN_FILES = frozenset(
-    {
-        "summary.json",
-        "resolved.toml",
-        "log.npz",
-        "scene.xml",
-        "video.mp4",
-        "run.rrd",
-        "MUJOCO_LOG.TXT",
-        "table1.json",
-        "table1.md",
-    }
+#: Files a run or a table1 writes into its folder: its record, and those of the registered outputs
+#: (:mod:`~bioform_mj.outputs.registry`: video.mp4, run.rrd, ...)
+RUN_FILES = (
+    frozenset({"summary.json", "resolved.toml", "log.npz", "scene.xml", "MUJOCO_LOG.TXT", "table1.json", "table1.md"})
+    | output_files()
 )
 #: Files ``bioform calibrate`` writes into its folder (another kind of run: design §16).
 CALIBRATION_FILES = frozenset(
@@ -44,8 +38,8 @@ CALIBRATION_FILES = frozenset(
 #: Every file name one of our commands writes as its run's record.
 KNOWN_FILES = RUN_FILES | CALIBRATION_FILES
 #: Folders a run writes, and the file suffixes they may hold (``assets/``: the files ``scene.xml``
-#: names, copied beside it, design §12).
-RUN_DIRS = {"figures": (".png",), ASSETS_DIR: ASSET_SUFFIXES, "rosbag": (".yaml", ".mcap")}
+#: names, copied beside it, design §12; the registered outputs', e.g. ``figures/``).
+RUN_DIRS = {**output_dirs(), ASSETS_DIR: ASSET_SUFFIXES}
 LOCK_NAME = ".bioform.lock"
 #: the temporary names of :func:`~bioform_mj.outputs.files.atomic_path` (``.NAME.XXXXXXXX.tmp``)
 _TMP = re.compile(r"^\.(?P<name>.+)\.[A-Za-z0-9_]+\.tmp$")

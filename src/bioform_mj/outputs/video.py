@@ -527,6 +527,42 @@ def render_video(
     return VideoInfo(path, K, options.width, options.height, options.fps, time.perf_counter() - t0, frames.gl_renderer)
 
 
+def frame_capture(options: VideoOptions) -> FrameCapture:
+    """The observer of the registered output ``video`` (:mod:`~bioform_mj.outputs.registry`): snapshots at the
+    video's frame rate.
+
+    Parameters
+    ----------
+    options : VideoOptions
+        The video's size, frame rate (frames per second of simulated time) and camera.
+    """
+    return FrameCapture(options.fps)
+
+
+def write_video(result: Any, out: Path, watcher: FrameCapture, options: VideoOptions, progress: Any = None) -> str:
+    """The registered output ``video``: render ``out/video.mp4`` from the snapshots ``watcher`` took; returns the
+    line the CLI prints.
+
+    Parameters
+    ----------
+    result : RunResult
+        The finished run.
+    out : Path
+        The run folder.
+    watcher : FrameCapture
+        What :func:`frame_capture` made before the run.
+    options : VideoOptions
+        The video's size, frame rate and camera.
+    progress : callable or None
+        ``progress(k, K)`` after each of the ``K`` frames.
+    """
+    info = render_video(watcher, result, Path(out) / "video.mp4", options, progress=progress)
+    return (
+        f"video.mp4: {info.frames} frames {info.width}x{info.height} at {info.fps:g} fps "
+        f"rendered in {info.render_s:.1f} s ({info.gl_renderer or 'OpenGL'})"
+    )
+
+
 def write_still(
     capture: FrameCapture, result: Any, path: str | Path, options: VideoOptions, t: float | None = None
 ) -> Path:

@@ -22,6 +22,7 @@ import numpy as np
 from bioform_mj.control.kernel import StackState
 from bioform_mj.core.engine import GUARD_FAILED, OK, Loop, after_control, describe, record_odometry
 from bioform_mj.core.errors import ControllerError, Diverged
+from bioform_mj.plants.base import DeliveredTorques
 from bioform_mj.run.hooks import _checked_torques, _tag
 
 __all__ = [
@@ -72,7 +73,7 @@ class Stepper:
         self.cname = type(controller).__name__
         self.nonfinite: dict[str, Any] = {}  # design §17: a user's controller returned NaN/inf torques
         self.applied = np.zeros((self.n, 2))  # the torques the plant applies over the next period
-        self.feed = bool(getattr(plant, "feed_delivered", False))
+        self.feed = isinstance(plant, DeliveredTorques) and bool(plant.feed_delivered)
         self.at = [0, 0]  # (steps done, log rows) of the Python chunk so far: kept when a step raises
 
     def measure(self) -> tuple[np.ndarray, np.ndarray]:

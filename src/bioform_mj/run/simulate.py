@@ -27,11 +27,11 @@ from bioform_mj.assess.outcomes import (
     slots_of,
 )
 from bioform_mj.control.kernel import new_state
-from bioform_mj.control.stack import ControlStack, StackParams, parse_method
+from bioform_mj.control.registry import build_controller, is_builtin
 from bioform_mj.core.engine import Bounds, Formation, LogArrays, Loop, new_acc, new_log, new_metrics
 from bioform_mj.core.errors import ControllerError, Diverged, OutcomeWarning, RobotWarning
 from bioform_mj.formation.disturbance import Harmonic as HarmonicDisturbance
-from bioform_mj.plants.base import Plant
+from bioform_mj.plants.base import CompiledChunk, Obstacles, Plant, RobotModels, Sensing, Unmodelled
 from bioform_mj.plants.ideal import IdealPlant
 from bioform_mj.run.hooks import (
     _add_outcome,
@@ -136,7 +136,7 @@ def import_warnings(plant: Any) -> list[str]:
     (empty for MJCF robots and the ideal plant)."""
     out: list[str] = []
     seen: set[str] = set()
-    for lay in getattr(plant, "layouts", ()):
+    for lay in plant.layouts if isinstance(plant, RobotModels) else ():
         if lay.file in seen:
             continue
         seen.add(lay.file)
@@ -204,85 +204,6 @@ def make_plant(sc: Scenario) -> Plant:
     return plant
 
 
-def stack_params(sc: Scenario, c_true: np.ndarray, tau_max: np.ndarray | None = None, plant: Any = None) -> StackParams:
-    """Resolve the scenario's numbers into the control stack's per-follower arrays (``plant``, if
-    given, tells the safety filter each robot's footprint radius and the obstacles, design §19)."""
-    law, learning = parse_method(sc.method)
-    n = sc.n
-    c_hat0 = np.asarray(sc.learner.c_hat0_scale) * c_true
-    lo, hi = sc.learner.c_bounds
-    from bioform_mj.assess.learner_sizing import (
-        sizing as _sizing,  # opt-in (design §14): c and kd sized to the resistance
-    )
-
-    sized = _sizing(sc, plant, np.asarray(c_true, dtype=float))
-    band = sc.learner.projection_band  # opt-in (design §14): a band around the prior c_true, not c_bounds × ĉ(0)
-    c_lo, c_hi = (band[0] * c_true, band[1] * c_true) if band else (lo * c_hat0, hi * c_hat0)
-    return StackParams(
-        offsets=np.array(sc.formation.offsets, dtype=float),
-        kp=np.array(sc.estimator.kp),
-        ka=np.array(sc.estimator.ka),
-        kb=np.array(sc.estimator.kb),
-        est_phi=np.array(sc.estimator.phi),
-        k1=sc.kinematic.k1,
-        k2=sc.kinematic.k2,
-        k3=sc.kinematic.k3,
-        A=sc.kinematic.A,
-        B=sc.kinematic.B,
-        D=sc.kinematic.D,
-        law=law,
-        learning=learning,
-        c_gain=np.array(sized["c_gain"] if sized else sc.torque.c),
-        torque_phi=sc.torque.phi,
-        tau_max=np.full(n, sc.torque.tau_max) if tau_max is None else np.asarray(tau_max, dtype=float),
-        steer_priority=sc.torque.saturation == "steer-priority",
-        deriv_wn=sc.torque.deriv_wn,
-        derivative=sc.torque.derivative,
-        k4=_learner_k4(sc, c_hat0),
-        k5=np.array(sc.learner.k5),
-        kd=np.array(sized["kd"] if sized else sc.learner.kd),
-        kk=np.array(sc.learner.drag_gain) if sc.learner.drag else np.zeros(2),
-        k_max=float(sc.learner.drag_max) if sc.learner.drag else 0.0,
-        c_hat0=c_hat0,
-        c_min=c_lo,
-        c_max=c_hi,
-        dt=sc.sim.control_dt,
-        leader_frame=sc.formation.frame == "leader",
-        **_cbf_params(sc, plant),
-        sizing=sized,
-    )
-
-
-def _cbf_params(sc: Scenario, plant: Any) -> dict[str, Any]:
-    """The safety filter's part of :class:`StackParams` (design §19; empty when it is off)."""
-    sf = sc.safety
-    if sf.filter != "cbf":
-        return {}
-    from bioform_mj.formation.obstacles import to_rows
-
-    radius = getattr(plant, "footprint_radius", None)
-    obstacles = getattr(plant, "obstacles", None) or []
-    return dict(
-        cbf=True,
-        cbf_par=(sf.lookahead, sf.gain, sf.distance, sf.range, sf.pass_right),
-        cbf_radius=None if radius is None else np.asarray(radius, dtype=float),
-        cbf_obstacles=to_rows(obstacles) if obstacles else None,
-    )
-
-
-def _learner_k4(sc: Scenario, c_hat0: np.ndarray) -> np.ndarray:
-    """``k4`` (2,) as configured, or (n, 2) per robot for ``gain_scaling = "c_hat0"``:
-    ``k4 ⊙ (ĉ_i(0) / ĉ_paper(0))²`` with ``ĉ_paper(0) = c_hat0_scale ⊙ PAPER_C``, the initial
-    estimate the paper's robot gets, so that robot keeps the paper's gains exactly."""
-    from bioform_mj.scenario.config import PAPER_C
-
-    k4 = np.array(sc.learner.k4, dtype=float)
-    if sc.learner.gain_scaling == "c_hat0":
-        ref = np.asarray(sc.learner.c_hat0_scale, dtype=float) * np.asarray(PAPER_C)
-        return k4 * (np.asarray(c_hat0, dtype=float) / ref) ** 2
-    return k4
-
-
 def initial_estimates(sc: Scenario, pose0: np.ndarray, leader_pose0: np.ndarray) -> np.ndarray:
     """``P_ir(0)`` (n, 3) per ``estimator.init``: ``zero``, ``self`` (own pose + offset) or ``leader``."""
     n = sc.n
@@ -319,36 +240,13 @@ def simulate(
 ) -> RunResult:
     """Run the closed loop of ``sc`` and return its log and summary.
 
-    Parameters
-    ----------
-    sc
-        The scenario (:func:`~bioform_mj.scenario.loader.load`), checked again here as a file is.
-    observers
-        Objects that watch the run at their own period of simulated time (``period`` in s;
-        ``start``/``sample``/``finish``): video, rerun, one's own.
-    progress
-        Called as ``progress(k, N)`` with the control step ``k`` of ``N``; a ``phase(text)`` method, if
-        present, is told when kernels load or compile. ``None``: silent.
-    engine
-        ``"auto"`` (compiled where plant and controller allow it), ``"compiled"`` (refuse if they do
-        not) or ``"stepwise"`` (one Python call per control step; the same compiled equations, the same
-        bits).
-    record_inputs
-        Compiled MuJoCo loop only: arrays ``(N, nu)`` and ``(N, n, 6)`` that receive each step's ``ctrl``
-        (N·m or the actuator's unit) and chassis ``xfrc_applied`` (N, N·m), for a bare replay.
-    plant
-        A :class:`~bioform_mj.plants.base.Plant`; ``None``: built from ``sc.plant``.
-    controller
-        A :class:`~bioform_mj.control.base.Controller`; ``None``: the paper's stack for ``sc.method``.
-    full_state
-        The log also gets the 3-D state at every row and at the end of the run (m, rad, m/s, rad/s:
-        z, roll, pitch, wheel angles and rates, the IMU; :data:`bioform_mj.outputs.fullstate.STATE_CHANNELS`),
-        what a ROS 2 bag needs (:func:`bioform_mj.outputs.rosbag.write_bag`); the other channels are the same.
-
-    Returns
-    -------
-    RunResult
-        The log (SI units, one row per log sample) and ``summary`` (metrics, outcomes, the robot).
+    ``plant``: a :class:`~bioform_mj.plants.base.Plant` (default: built from ``sc.plant``);
+    ``controller``: a :class:`~bioform_mj.control.base.Controller` (default: the one registered as
+    ``sc.method``, the paper's stack for its four methods, :mod:`bioform_mj.control.registry`).
+    ``engine``: ``auto`` (compiled where plant and controller allow it), ``compiled`` (refuse if they do
+    not) or ``stepwise`` (one Python call per control step; the same compiled equations, the same bits).
+    ``record_inputs`` (compiled MuJoCo loop only): arrays ``(N, nu)``, ``(N, n, 6)`` that receive each step's ``ctrl``
+    and chassis ``xfrc_applied``, for a bare replay.
 
     A divergence (NaN/inf or a state beyond ``sc.limits``, checked after every control
     step; a MuJoCo warning) stops the loop; the result then holds the log up to the last
@@ -382,7 +280,8 @@ def simulate(
     # build the plant and the controller, say what the run will meet, and reset them
     if plant is None:
         plant = make_plant(sc)
-    controller, own_stack = _build_controller(sc, graph, plant, controller)
+    named = controller is None  # built from the registry: the summary's method is sc.method
+    controller, own_stack = _build_controller(sc, plant, controller)
     tl = _timeline(sc, traj)
     warned = _warn_before_run(sc, plant)
     pose0, vel0 = _reset(sc, plant, controller, tl.L_pose[0])
@@ -393,7 +292,7 @@ def simulate(
     c_true = np.ascontiguousarray(plant.c_true(), dtype=float)
     # design §8.3: with sensing = "odometry" the controllers get each robot's dead reckoning
     # (plant.measurement), everything else (metrics, guards, formation error, outcomes) the truth
-    odometry = getattr(plant, "sensing", "truth") == "odometry"
+    odometry = isinstance(plant, Sensing) and plant.sensing == "odometry"
     missing: set[str] = set()  # the signals a user's controller does not give
     step = Stepper(ctx, sc.n, plant, controller, faults, own_stack, kernel, c_true, odometry, missing)
     run_chunk = chunk if chunk is not None else step.python_chunk
@@ -414,6 +313,8 @@ def simulate(
         logd.update(sampler.log_arrays(logd))
     engine_used = "compiled" if chunk else "stepwise"
     summary = _summarise(sc, plant, controller, step, end, logd, warm.setup_s, engine_used, warned)
+    if named:  # a registered controller is named by its method (a given one by its class)
+        summary["method"] = sc.method
     _add_run_notes(summary, sc, plant, step, end, logd, raised)
     result = RunResult(sc, logd, summary, plant, end.diverged, end.interrupted)
     if raised is not None:  # the exception says the run failed (its summary holds the outcomes so far)
@@ -449,12 +350,15 @@ def _check_arguments(engine: str, controller: Any, observers: Sequence[Observer]
     check_observers(observers)
 
 
-def _build_controller(sc: Scenario, graph: Any, plant: Plant, controller: Any) -> tuple[Any, bool]:
-    """``(controller, own_stack)``: the user's, or the paper's stack for ``sc.method`` (own_stack True);
-    both the plant and the controller must have the scenario's ``n`` followers."""
-    own_stack = controller is None
-    if own_stack:
-        controller = ControlStack(graph, stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None), plant))
+def _build_controller(sc: Scenario, plant: Plant, controller: Any) -> tuple[Any, bool]:
+    """``(controller, own_stack)``: the user's, or the one registered as ``sc.method`` (the paper's stack for
+    its four methods: ``own_stack`` True; design §22); both the plant and the controller must have the
+    scenario's ``n`` followers. A registered user's controller is checked as a given one is."""
+    own_stack = controller is None and is_builtin(sc.method)
+    if controller is None:
+        controller = build_controller(sc.method, sc, plant)
+        if not own_stack:
+            check_controller(controller)
     n = sc.n
     if getattr(controller, "n", n) != n or getattr(plant, "n", n) != n:
         raise ValueError(f"the scenario has {n} followers, the plant {plant.n} and the controller {controller.n}")
@@ -497,14 +401,14 @@ def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], 
     for line in imported:
         warnings.warn(line, RobotWarning, stacklevel=3)
     feasibility: list[str] = []
-    if hasattr(plant, "params") and hasattr(plant, "model"):  # MuJoCo robots: what the scenario asks of them
+    if isinstance(plant, RobotModels):  # robots from model files: what the scenario asks of them
         from bioform_mj.assess.check import feasibility as _feasibility
 
         feasibility = _feasibility(sc, plant)  # in summary.json too
         for line in feasibility:
             warnings.warn(line, RobotWarning, stacklevel=3)  # before the run (the CLI prints warning: lines)
     checked = None
-    if sc.plant.kind == "mujoco" and hasattr(plant, "params") and hasattr(plant, "model"):
+    if sc.plant.kind == "mujoco" and isinstance(plant, RobotModels):  # the scenario's robots are the plant's
         from bioform_mj.assess.prerun import before_run  # design §14.2: once per robot, cached
 
         checked = before_run(sc, plant)
@@ -586,7 +490,7 @@ def _compiled_chunk(engine: str, plant: Plant, ctx: Loop, kernel: Any, faults: A
     """The plant's compiled chunk, where the engine, the controller's kernel and no per-step faults
     allow it (None: the Python chunk); ``engine = "compiled"`` without one is refused."""
     chunk = None
-    if engine != "stepwise" and kernel is not None and faults is None and hasattr(plant, "compiled_chunk"):
+    if engine != "stepwise" and kernel is not None and faults is None and isinstance(plant, CompiledChunk):
         chunk = plant.compiled_chunk(ctx, record_inputs) if record_inputs is not None else plant.compiled_chunk(ctx)
     if engine == "compiled" and chunk is None:
         raise ValueError(
@@ -606,7 +510,7 @@ def _log_dict(plant: Plant, graph: Any, lg: LogArrays, j: int, missing: set[str]
         logd["odom_pose"] = logd["pose"].copy()
         logd["odom_vel"] = logd["vel"].copy()
     logd["offsets"] = offsets
-    if getattr(plant, "obstacles", None):  # design §19: drawn by the figures and rerun from the log
+    if isinstance(plant, Obstacles) and plant.obstacles:  # design §19: drawn by the figures and rerun from the log
         from bioform_mj.formation.obstacles import to_rows
 
         logd["obstacles"] = to_rows(plant.obstacles)
@@ -677,11 +581,10 @@ def _add_run_notes(summary: dict[str, Any], sc, plant, step: Stepper, end: LoopE
             "step": ks,
             "time_s": ks * dt,
         }
-    unmodelled = getattr(plant, "unmodelled", None)
-    if unmodelled is not None and len(logd["vel"]):  # damping and frictionloss at the run's speeds
+    if isinstance(plant, Unmodelled) and len(logd["vel"]):  # damping and frictionloss at the run's speeds
         v = float(np.abs(logd["vel"][:, :, 0]).max())
         w = float(np.abs(logd["vel"][:, :, 1]).max())
-        for f, u in zip(summary["followers"], unmodelled(v, w)):
+        for f, u in zip(summary["followers"], plant.unmodelled(v, w)):
             f["unmodelled"] = u
     from bioform_mj.assess.hardware import verdict  # design §19: would this run on the robots as specified?
 

@@ -12,6 +12,7 @@ import numpy as np
 from bioform_mj._version import __version__
 from bioform_mj.assess.outcomes import follower_outcomes, severity, slots_of
 from bioform_mj.core.engine import CHANNELS, MEAN_CHANNELS
+from bioform_mj.plants.base import ContactWatch, LumpedBodies, RobotModels
 from bioform_mj.scenario.config import Scenario
 from bioform_mj.scenario.record import resolved_config
 
@@ -113,14 +114,12 @@ def _robot_used(sc: Scenario, plant: Any, controller: Any, i: int) -> dict[str, 
     """What follower ``i``'s robot really was: torque limit, mass, yaw inertia (design §9)."""
     p = getattr(controller, "p", None)
     out: dict[str, Any] = {"tau_max_nm": float(np.broadcast_to(p.tau_max, (sc.n,))[i]) if p is not None else None}
-    params = getattr(plant, "params", None)
-    if params is not None:
-        rp = params[i]
+    if isinstance(plant, RobotModels):
+        rp = plant.params[i]
         out["mass_kg"] = float(rp.mass)
         out["yaw_inertia_kgm2"] = float(rp.yaw_inertia)
     else:
-        mass = getattr(plant, "mass", None)
-        inertia = getattr(plant, "inertia", None)
+        mass, inertia = (plant.mass, plant.inertia) if isinstance(plant, LumpedBodies) else (None, None)
         out["mass_kg"] = None if mass is None else float(mass[i])
         out["yaw_inertia_kgm2"] = None if inertia is None else float(inertia[i])
     return out
@@ -149,10 +148,10 @@ def _versions() -> dict[str, str]:
 def contact_outcomes(plant: Any, n: int, dt: float) -> list[tuple[dict[str, Any], list[dict]]]:
     """Per follower the contact/proximity fields and outcomes (``collided``, ``too_close``) of a
     plant that watches them (:func:`bioform_mj.formation.safety.follower_fields`); none for the others."""
-    if not hasattr(plant, "contact_watch"):
+    if not isinstance(plant, ContactWatch):
         return [({}, []) for _ in range(n)]
     watch = plant.contact_watch()
     from bioform_mj.formation.safety import follower_fields
 
-    names = [o.name for o in getattr(plant, "obstacles", [])]
+    names = [o.name for o in plant.obstacles]
     return [follower_fields(watch, i, dt, names) for i in range(n)]

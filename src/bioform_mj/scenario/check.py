@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from bioform_mj.control.stack import METHODS
+from bioform_mj.control.registry import is_registered, unknown_method
 from bioform_mj.core.errors import GraphError, ScenarioError
 from bioform_mj.formation.obstacles import validate as _validate_obstacles
 from bioform_mj.formation.safety import validate as _validate_safety
@@ -67,8 +67,8 @@ def _length(key: str, values: tuple, n: int) -> None:
 
 def validate(sc: Scenario) -> None:
     """Check every value the algorithm's assumptions need; raise on the first problem found."""
-    if sc.method not in METHODS:
-        raise ScenarioError("method", f"unknown method '{sc.method}' (expected one of: {', '.join(METHODS)})")
+    if not is_registered(sc.method):  # the paper's four, or a registered controller (design §22)
+        raise ScenarioError("method", unknown_method(sc.method))
     if sc.plant.kind not in PLANTS:
         raise ScenarioError("plant.kind", f"unknown plant '{sc.plant.kind}' (expected one of: {', '.join(PLANTS)})")
     _validate_text(sc)

@@ -17,6 +17,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from bioform_mj.control.tuning import PAPER_C
 from bioform_mj.core.units import unit
 from bioform_mj.formation.graph import Graph
 from bioform_mj.formation.graph import chain as _chain
@@ -64,8 +65,6 @@ SATURATIONS: tuple[str, ...] = typing.get_args(Saturation)
 SENSINGS: tuple[str, ...] = typing.get_args(Sensing)
 DERIVATIVES: tuple[str, ...] = typing.get_args(Derivative)
 GAIN_SCALINGS: tuple[str, ...] = typing.get_args(GainScaling)
-#: the robot the paper's learner gains were tuned for: ``c = (a, b)`` of Sec. IV
-PAPER_C = (0.4, 10.0)
 
 # Bounds on the time axis: beyond them a run would not finish or would not fit in memory
 # (issue 11). Refused up front with the estimate, before any work.
@@ -254,7 +253,7 @@ class PlantCfg:
     robot's own ``package_path`` (the robot's entries first)."""
 
     kind: PlantKind = unit("ideal", "-")
-    c_true: tuple[float, ...] = unit((0.4, 10.0), ("1/kg·m", "1/kg·m^2"))
+    c_true: tuple[float, ...] = unit(PAPER_C, ("1/kg·m", "1/kg·m^2"))
     mass: float = unit(25.0, "kg")
     inertia: float = unit(0.2, "kg·m^2")
     robots: tuple[RobotRef, ...] = unit((RobotRef("paper"),), "-", kept="the robot itself")

@@ -57,7 +57,11 @@ CHOICES: dict[str, tuple[str, ...]] = {
 KEYS: dict[str, tuple[str, str]] = {
     "name": ("", "Scenario name; the default output folder is `runs/<name>-<plant>-<method>` (a plain file name)."),
     "description": ("", "One line shown by `bioform presets`."),
-    "method": ("", "Control method: the paper's four (eq. 31 backstepping or bioinspired, with or without learning)."),
+    "method": (
+        "",
+        "Control method: the paper's four (eq. 31 backstepping or bioinspired, with or without learning), or a "
+        "controller registered by name (bioform_mj.register_controller, entry points bioform_mj.controllers).",
+    ),
     # sim
     "sim.duration": ("s", "Simulated time."),
     "sim.control_dt": ("s", "Control period (zero-order hold between control steps)."),

@@ -19,10 +19,11 @@ from typing import Any
 
 import numpy as np
 
+from bioform_mj.control.tuning import PAPER_C
 from bioform_mj.core.errors import InputError, ScenarioError
 from bioform_mj.robots.refs import PackagePath, RobotRef, as_package_path, as_ref, rebase_entries, rebase_package_path
 from bioform_mj.scenario.check import validate
-from bioform_mj.scenario.config import MAX_INT, PAPER_C, Scenario, keys_of
+from bioform_mj.scenario.config import MAX_INT, Scenario, keys_of
 
 
 def preset_names() -> list[str]:
