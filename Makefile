@@ -24,7 +24,7 @@ $(STAMP): pyproject.toml | $(PY)
 # the test extras on top, the gpu extra (the batch engine's tests run on Warp's CPU device, no GPU needed)
 # and the docs extra (make test builds the documentation strictly)
 $(TEST_STAMP): $(STAMP) pyproject.toml
-	$(PY) -m pip install --quiet -e '.[test,gpu,rl,urdf,docs]'
+	$(PY) -m pip install --quiet -e '.[test,gpu,rl,urdf,docs,ros]'
 	touch $(TEST_STAMP)
 
 install: $(STAMP)
