@@ -293,6 +293,8 @@ def _dispatch(args: argparse.Namespace) -> int:
     with _mujoco_log() as mjlog:
         if args.command == "identify":
             return _identify(args)
+        if args.command == "robot" and getattr(args, "realdata_main", None):
+            return args.realdata_main(args)  # robot fit / replay / drive-program (issue 29)
         if args.command == "robot":
             from .robot_check import main as robot_main
 

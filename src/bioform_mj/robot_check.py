@@ -196,6 +196,9 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     motor = float(min(p.tau_max))
     motor_accel = 2 * motor * p.a_eff  # υ̇ at full torque on both wheels, m/s²
     notes = list(lay.notes) + self_notes
+    from .realdata.calibrated import calibration_note
+
+    notes += calibration_note(model)  # a calibrated robot (robot fit's) says where its numbers came from
     reasons_fail, reasons_warn = [], []
 
     # the first ~2 s under gravity and a drive (forward, then a turn): what moves relative to the base
@@ -717,6 +720,9 @@ def add_parser(sub: Any) -> None:
     chk.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
     mapping_args(chk)
     chk.add_argument("--json", type=str, metavar="FILE", help="write the report as JSON to FILE")
+    from .realdata.cli import add_parsers as _realdata_parsers
+
+    _realdata_parsers(rsub)  # robot fit / replay / drive-program (issue 29)
 
 
 def _num(x: float | None) -> str:

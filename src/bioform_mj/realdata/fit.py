@@ -33,6 +33,7 @@ when the mapping names casters (``--caster``).
 
 from __future__ import annotations
 
+import io
 import math
 import sys
 import time
@@ -64,6 +65,8 @@ DEFAULT_FIT = ("mass", "yaw_inertia", "damping", "frictionloss", "caster_frictio
 GRID_HZ = 50.0
 #: finite-difference step of the optimiser's scaled variables (a tenth of a search range is 1)
 FD_STEP = 1e-3
+#: the optimiser stops when a step changes the scaled variables by less than this
+X_TOL = 1e-4
 
 
 def _sysid():
@@ -479,7 +482,15 @@ def fit(
             )
 
     opt, _ = sysid.optimize(
-        start, fn, optimizer="mujoco", verbose=False, max_iters=max_iters, iter_callback=report, eps=FD_STEP
+        start,
+        fn,
+        optimizer="mujoco",
+        verbose=False,
+        max_iters=max_iters,
+        iter_callback=report,
+        eps=FD_STEP,
+        xtol=X_TOL,
+        output=io.StringIO(),  # the optimiser's own table: progress is report()'s one line on a terminal
     )
     if progress:
         print(file=sys.stderr)
