@@ -13,7 +13,7 @@ alone, so a shared bug cannot make the two agree by construction. Also a CSV wri
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
@@ -30,9 +30,11 @@ class Truth:
     payload_yaw_kgm2: float = 0.0  # added to the chassis body's z inertia
     damping: tuple[float, float] = (0.0, 0.0)  # wheel joint damping, N·m·s/rad (left, right)
     frictionloss: tuple[float, float] = (0.0, 0.0)  # wheel joint dry friction, N·m
+    armature: tuple[float, float] | None = None  # wheel joint armature, kg·m² (None: as published)
+    caster_friction: float | None = None  # sliding friction of the caster geoms (None: as published)
+    casters: tuple[str, ...] = ("back_caster",)
     joints: tuple[str, str] = ("left_wheel", "right_wheel")
     base: str = "base"
-    extra: dict = field(default_factory=dict)
 
 
 def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
@@ -53,6 +55,15 @@ def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
         damping[0] = d
         j.damping = damping
         j.frictionloss = f
+    if truth.armature is not None:
+        for name, a in zip(truth.joints, truth.armature):
+            spec.joint(name).armature = a
+    if truth.caster_friction is not None:
+        for g in truth.casters:
+            geom = spec.geom(g)
+            geom.friction = [truth.caster_friction, 0.005, 0.0001]
+            geom.condim = 3
+            geom.priority = 2  # its own friction wins against the floor's
     spec.worldbody.add_geom(name="test_floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
     return spec.compile()
 

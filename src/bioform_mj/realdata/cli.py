@@ -53,6 +53,12 @@ def add_parsers(rsub: Any) -> None:
     fit.add_argument("--chunk", type=float, default=2.0, help="seconds simulated from each recorded state (default 2)")
     fit.add_argument("--max-chunks", type=int, default=12, help="chunks used at most, spread evenly (default 12)")
     fit.add_argument("--max-iters", type=int, default=30, help="optimiser iterations at most (default 30)")
+    fit.add_argument(
+        "--time-budget",
+        type=float,
+        default=80.0,
+        help="seconds the optimiser may take; then its best point (default 80)",
+    )
     fit.set_defaults(realdata_main=_fit_main)
 
     rep = rsub.add_parser(
@@ -147,11 +153,19 @@ def _fit_main(args: argparse.Namespace) -> int:
     unknown = [w for w in which if w not in FIT_PARAMETERS]
     if unknown:
         raise InputError(f"--fit: unknown parameter '{unknown[0]}' (expected some of: {', '.join(FIT_PARAMETERS)})")
-    if not (args.chunk > 0 and args.max_chunks >= 1 and args.max_iters >= 1):
-        raise InputError("--chunk must be > 0, --max-chunks and --max-iters >= 1")
+    if not (args.chunk > 0 and args.max_chunks >= 1 and args.max_iters >= 1 and args.time_budget > 0):
+        raise InputError("--chunk and --time-budget must be > 0, --max-chunks and --max-iters >= 1")
     ref, robot, rec = _load(args)
     published = sim_spec(ref)  # an untouched copy (the fit edits robot.spec)
-    result, opt = fit(robot, rec, which, chunk_s=args.chunk, max_chunks=args.max_chunks, max_iters=args.max_iters)
+    result, opt = fit(
+        robot,
+        rec,
+        which,
+        chunk_s=args.chunk,
+        max_chunks=args.max_chunks,
+        max_iters=args.max_iters,
+        time_budget_s=args.time_budget,
+    )
     model_pub = published.spec.compile()
     model_cal = sysid.apply_param_modifiers(opt, robot.spec)
     chunks = make_chunks(published, model_pub, rec, args.chunk, args.max_chunks)

@@ -343,22 +343,26 @@ def initial_guess(robot: SimRobot, rec: Recording, info: list[ParamInfo], pd) ->
     ud = savgol_filter(rec.velocity, win, 2, deriv=1, delta=dt, axis=0) * sign
     tau = rec.effort * sign
     moving = np.abs(u) > 0.05 * (np.abs(u).max() or 1.0)
+    r, l = lay.wheel_radius, lay.half_track
+    caster = _caster_regressor(robot, u, r, l) if any(p.name == "caster_friction" for p in info) else None
+    ncol = 6 + (caster is not None)
     rows, rhs = [], []
     for i, j in ((0, 1), (1, 0)):
         for k in range(len(rec.t)):
             if not moving[k, i]:
                 continue
-            row = np.zeros(6)
+            row = np.zeros(ncol)
             row[0], row[1] = ud[k, i], ud[k, j]
             row[2 + i] = u[k, i]
             row[4 + i] = np.sign(u[k, i])
+            if caster is not None:
+                row[6] = caster[k, i]
             rows.append(row)
             rhs.append(tau[k, i])
     if len(rows) < 20:
         return x
     sol, *_ = np.linalg.lstsq(np.asarray(rows), np.asarray(rhs), rcond=None)
-    A, B, dL, dR, fL, fR = sol
-    r, l = lay.wheel_radius, lay.half_track
+    A, B, dL, dR, fL, fR = sol[:6]
     try:
         pub = robot_truth(robot.ref)
         dm = 2 * (A + B) / r**2 - pub.mass_eff
@@ -373,6 +377,8 @@ def initial_guess(robot: SimRobot, rec: Recording, info: list[ParamInfo], pd) ->
         "frictionloss_L": fL,
         "frictionloss_R": fR,
     }
+    if caster is not None:
+        guess["caster_friction"] = sol[6]
     for i, p in enumerate(info):
         if p.name in ("mass", "yaw_inertia"):
             v = p.published + guess[p.name]
@@ -385,7 +391,52 @@ def initial_guess(robot: SimRobot, rec: Recording, info: list[ParamInfo], pd) ->
     return x
 
 
+def _caster_regressor(robot: SimRobot, u: np.ndarray, r: float, l: float) -> np.ndarray | None:
+    """Per sample and wheel, the wheel torque a sliding caster of friction 1 takes (N·m): the casters'
+    loads ``N`` (N) at rest and contact points ``p`` (m, base frame, from the axle midpoint); the drag
+    ``F = −N ĉ`` against the caster's velocity ``v x̂ + ω ẑ × p`` maps to the wheels as
+    ``Q = (r/2) F_x ∓ (r/2l) (p × F)_z`` (left −, right +)."""
+    model = robot.spec.compile()
+    try:
+        geoms = _caster_geoms(robot.spec, model, robot.ref.casters)
+    except InputError:
+        return None
+    ids = {model.geom(g).id for g in geoms}
+    data = mujoco.MjData(model)
+    data.qpos[:] = robot.rest_qpos
+    mujoco.mj_forward(model, data)
+    base = model.body(robot.layout.base).id
+    R = data.xmat[base].reshape(3, 3)
+    axle = data.xpos[base] + R @ robot.axle_base
+    pts = []
+    f6 = np.zeros(6)
+    for c in range(data.ncon):
+        con = data.contact[c]
+        if con.geom1 in ids or con.geom2 in ids:
+            mujoco.mj_contactForce(model, data, c, f6)
+            pts.append((abs(f6[0]), R.T @ (con.pos - axle)))
+    if not pts:
+        return None
+    v = r * (u[:, 0] + u[:, 1]) / 2
+    w = r * (u[:, 1] - u[:, 0]) / (2 * l)
+    out = np.zeros_like(u)
+    for n, p in pts:
+        vc = np.stack([v - w * p[1], w * p[0]], axis=1)
+        speed = np.linalg.norm(vc, axis=1)
+        ok = speed > 1e-3
+        F = np.zeros_like(vc)
+        F[ok] = -n * vc[ok] / speed[ok, None]
+        torque_z = p[0] * F[:, 1] - p[1] * F[:, 0]
+        out[:, 0] += r / 2 * F[:, 0] - r / (2 * l) * torque_z
+        out[:, 1] += r / 2 * F[:, 0] + r / (2 * l) * torque_z
+    return -out  # τ = ... + μ (−Q/μ): the torque the drive spends against the caster
+
+
 # ------------------------------------------------------------------ the fit
+class _OutOfTime(Exception):
+    """Raised from the optimiser's iteration callback when the fit's time budget is spent."""
+
+
 @dataclass
 class FitResult:
     """What :func:`fit` found; ``parameters``: one dict per parameter (fit.json)."""
@@ -449,6 +500,7 @@ def fit(
     chunk_s: float = 2.0,
     max_chunks: int = 12,
     max_iters: int = 30,
+    time_budget_s: float = 80.0,
     progress: bool | None = None,
 ) -> tuple[FitResult, Any]:
     """Fit ``which`` to the recording; returns the result and the fitted ``ParameterDict``."""
@@ -467,12 +519,14 @@ def fit(
     pd.update_from_vector(x0)
     start = pd.copy()
     start.update_from_vector(initial_guess(robot, rec, info, pd))
-    evals = {"n": 0}
+    evals = {"n": 0, "best": start.as_vector(), "best_cost": math.inf}
 
     def report(log) -> None:
         evals["n"] = len(log)
+        e = log[-1]
+        if float(e.objective) < evals["best_cost"]:
+            evals["best"], evals["best_cost"] = np.asarray(e.candidate, float).ravel().copy(), float(e.objective)
         if progress:
-            e = log[-1]
             print(
                 f"\rfit: iteration {len(log)}/{max_iters}, cost {float(e.objective):.4g} "
                 f"(published {0.5 * cost_pub:.4g}), {time.perf_counter() - t_start:.0f} s",
@@ -480,18 +534,29 @@ def fit(
                 file=sys.stderr,
                 flush=True,
             )
+        if time.perf_counter() - t_start > time_budget_s:
+            raise _OutOfTime
 
-    opt, _ = sysid.optimize(
-        start,
-        fn,
-        optimizer="mujoco",
-        verbose=False,
-        max_iters=max_iters,
-        iter_callback=report,
-        eps=FD_STEP,
-        xtol=X_TOL,
-        output=io.StringIO(),  # the optimiser's own table: progress is report()'s one line on a terminal
-    )
+    notes = []
+    try:
+        opt, _ = sysid.optimize(
+            start,
+            fn,
+            optimizer="mujoco",
+            verbose=False,
+            max_iters=max_iters,
+            iter_callback=report,
+            eps=FD_STEP,
+            xtol=X_TOL,
+            output=io.StringIO(),  # the optimiser's own table: progress is report()'s one line on a terminal
+        )
+    except _OutOfTime:
+        opt = start.copy()
+        opt.update_from_vector(evals["best"])
+        notes.append(
+            f"the optimiser stopped at the time budget ({time_budget_s:g} s) after {evals['n']} iterations: "
+            "the best point so far is reported (a shorter --chunk or fewer --max-chunks is faster)"
+        )
     if progress:
         print(file=sys.stderr)
     x = opt.as_vector()
@@ -555,7 +620,8 @@ def fit(
         evals["n"],
         [
             f"{len(chunks.states)} chunks of {chunk_s:g} s (of {rec.duration:.3g} s recorded); compared: "
-            f"{', '.join(chunks.measured_cols)}"
+            f"{', '.join(chunks.measured_cols)}",
+            *notes,
         ],
     )
     return result, opt
