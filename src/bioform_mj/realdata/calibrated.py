@@ -41,7 +41,7 @@ def write_calibrated(
     ref: RobotRef, layout: Any, rows: list[dict[str, Any]], caster_geoms: list[str], path: Path, source: str
 ) -> None:
     """Write ``ref``'s robot with the fitted values of ``rows`` (fit.json's ``parameters``) to ``path``."""
-    from bioform_mj.realdata.fit import _explicit_base
+    from bioform_mj.realdata.fit import _explicit_base, set_yaw_inertia
 
     spec = _source_spec(ref)
     val = {r["name"]: r["fitted"] for r in rows}
@@ -50,9 +50,7 @@ def write_calibrated(
     if "mass" in val:
         body.mass = float(val["mass"])
     if "yaw_inertia" in val:
-        inertia = np.array(body.inertia, float)
-        inertia[axis] = float(val["yaw_inertia"])
-        body.inertia = inertia
+        set_yaw_inertia(body, axis, float(val["yaw_inertia"]))
     for side, j in zip(("L", "R"), layout.wheel_joints):
         el = spec.joint(j)
         if f"damping_{side}" in val:

@@ -210,6 +210,19 @@ def _caster_geoms(spec: mujoco.MjSpec, model: mujoco.MjModel, names: tuple[str, 
     return out
 
 
+def set_yaw_inertia(body: mujoco.MjsBody, axis: int, value: float) -> None:
+    """Set the principal inertia ``axis`` of ``body`` to ``value`` (kg·m²); where that breaks the triangle
+    inequality (a yaw inertia above the sum of roll and pitch ones), the other two grow evenly to meet it
+    (a payload spread in the plane adds to both; a planar robot's roll and pitch barely matter)."""
+    inertia = np.array(body.inertia, float)
+    inertia[axis] = value
+    others = [k for k in range(3) if k != axis]
+    short = value - inertia[others].sum()
+    if short > 0:
+        inertia[others] += 0.5 * short * 1.001 + 1e-12
+    body.inertia = inertia
+
+
 @dataclass
 class ParamInfo:
     """One fitted quantity: its name, unit, what it is, its published value."""
@@ -263,10 +276,7 @@ def parameters(robot: SimRobot, rec: Recording, which: tuple[str, ...]) -> tuple
     if "yaw_inertia" in which:
 
         def set_izz(s, p):
-            body = s.body(lay.base)
-            inertia = np.array(body.inertia, float)
-            inertia[axis] = float(p.value[0])
-            body.inertia = inertia
+            set_yaw_inertia(s.body(lay.base), axis, float(p.value[0]))
 
         add(
             "yaw_inertia", izz, 0.25 * izz, 4.0 * izz, set_izz, "kg·m²", f"yaw inertia of the chassis body '{lay.base}'"

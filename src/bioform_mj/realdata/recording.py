@@ -145,11 +145,10 @@ def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics = T
 
 
 # ------------------------------------------------------------------ rosbag2 / MCAP
-def _stamp_s(msg: object, bag_ns: int) -> float:
+def _stamp_s(msg: object) -> float:
+    """The header stamp, s (0 where the message has none)."""
     st = getattr(getattr(msg, "header", None), "stamp", None)
-    if st is not None and (st.sec or st.nanosec):
-        return st.sec + 1e-9 * st.nanosec
-    return 1e-9 * bag_ns
+    return st.sec + 1e-9 * st.nanosec if st is not None else 0.0
 
 
 def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
@@ -182,10 +181,12 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
                 if have[topic] != typ:
                     raise InputError(f"{name}: topic '{topic}' carries {have[topic]}, expected {typ}")
             conns = [c for c in reader.connections if c.topic in want]
+            bag_t: dict[str, list[float]] = {t: [] for t in want}
             idx: tuple[int, int] | None = None
             for conn, bag_ns, raw in _stream(reader, conns, name):
                 msg = reader.deserialize(raw, conn.msgtype)
-                t = _stamp_s(msg, bag_ns)
+                t = _stamp_s(msg)
+                bag_t[conn.topic].append(1e-9 * bag_ns)
                 if conn.topic == topics.joint_states:
                     names = list(msg.name)
                     if (
@@ -232,8 +233,16 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
         raise InputError(f"{name}: cannot read the recording: {type(exc).__name__}: {exc}") from None
     if not js["t"]:
         raise InputError(f"{name}: '{topics.joint_states}' holds no joint states")
-    t0 = js["t"][0]
     notes = []
+    # one clock for all topics: the header stamps where every topic has them (a stamp of 0 at sim time 0 is
+    # one), else the bag's receive times
+    streams = ((topics.joint_states, js), (topics.odom, od), (topics.imu, im))
+    if not all(any(d["t"]) for _, d in streams if d["t"]):
+        for topic, d in streams:
+            if d["t"]:
+                d["t"] = bag_t[topic]
+        notes.append("times are the bag's receive times (a topic's header stamps are all zero)")
+    t0 = js["t"][0]
     if not od["t"]:
         notes.append(f"no odometry on '{topics.odom}': body velocities not fitted")
     if not im["t"]:
