@@ -44,6 +44,8 @@ def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
         spec.delete(k)
     for a in list(spec.actuators):  # torques go in as qfrc_applied; a DC motor at 0 V would brake (back-EMF)
         spec.delete(a)
+    for s in list(spec.sensors):  # some name the actuators; the recording is written from the state
+        spec.delete(s)
     base = spec.body(truth.base)
     base.mass = base.mass + truth.payload_kg
     inertia = np.array(base.inertia, float)

@@ -510,7 +510,7 @@ def fit(
     chunk_s: float = 2.0,
     max_chunks: int = 12,
     max_iters: int = 30,
-    time_budget_s: float = 80.0,
+    time_budget_s: float = 60.0,
     progress: bool | None = None,
 ) -> tuple[FitResult, Any]:
     """Fit ``which`` to the recording; returns the result and the fitted ``ParameterDict``."""
