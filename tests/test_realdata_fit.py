@@ -234,3 +234,46 @@ def test_drive_program_within_the_robots_limits(capsys):
     assert np.abs(prog[:, 1:]).max() > 0.5 * tau
     assert abs(prog[:, 1].mean()) < 0.1 * tau  # zero-mean pulse pairs: the robot comes back towards rest
     assert math.isclose(prog[-1, 0], 20.0) and not prog[-1, 1:].any()
+
+
+@pytest.mark.slow
+def test_fit_recovers_a_heavy_robots_payload_and_friction(tmp_path):
+    """The paper robot (24.5 kg, CoM on the axle): +5 kg and +0.02 kg·m² payload, damping 0.05/0.04 N·m·s/rad,
+    frictionloss 0.1/0.12 N·m; 30 s at 1 N·m. Same tolerances as the tb3 case."""
+    truth = rr.Truth(payload_kg=5.0, payload_yaw_kgm2=0.02, damping=(0.05, 0.04), frictionloss=(0.1, 0.12))
+    rr.record(tmp_path / "bag", "paper", truth, duration=30.0, tau=1.0, seed=7)
+    out = tmp_path / "out"
+    assert cli.main(["robot", "fit", "paper", "--bag", str(tmp_path / "bag"), "--out", str(out)]) == 0
+    got = {p["name"]: p for p in json.loads((out / "fit.json").read_text())["parameters"]}
+    expect = {
+        "mass": (23.5 + 5.0, 0.05),
+        "yaw_inertia": (0.137366667 + 0.02, 0.05),
+        "damping_L": (0.05, 0.10),
+        "damping_R": (0.04, 0.10),
+        "frictionloss_L": (0.1, 0.10),
+        "frictionloss_R": (0.12, 0.10),
+    }
+    for name, (true, tol) in expect.items():
+        assert got[name]["status"] == "identified", got[name]
+        assert abs(got[name]["fitted"] - true) <= tol * true, (name, got[name]["fitted"], true)
+
+
+def test_armature_fitted_with_mass_is_reported_with_its_correlations(bag, tmp_path):
+    """Armature, mass and yaw inertia act through the same two effective inertias (design §8): fitted
+    together on the tb3 recording, the report says so (a member of the three not identified, or an
+    armature–inertia correlation of |ρ| > 0.8 in the matrix), and a = 1/(m r + 2 I_w/r), what the recording
+    does fix, stays within 5 %."""
+    out = tmp_path / "out"
+    fit = "mass,yaw_inertia,damping,frictionloss,armature"
+    assert cli.main(["robot", "fit", "tb3", "--bag", str(bag), "--out", str(out), "--fit", fit]) == 0
+    rep = json.loads((out / "fit.json").read_text())
+    got = {p["name"]: p for p in rep["parameters"]}
+    names = rep["correlation"]["names"]
+    rho = np.array(rep["correlation"]["matrix"])
+    inertias = ("mass", "yaw_inertia")
+    armatures = ("armature_L", "armature_R")
+    strongest = max(abs(rho[names.index(a), names.index(b)]) for a in armatures for b in inertias)
+    flagged = [n for n in inertias + armatures if got[n]["status"] != "identified"]
+    assert flagged or strongest > 0.8, (strongest, {n: got[n]["ci95_halfwidth"] for n in inertias + armatures})
+    a_true = 1.0 / (1.0 / rep["published"]["a"] + TRUTH.payload_kg * 0.033)
+    assert rep["a"] == pytest.approx(a_true, rel=0.05)

@@ -56,8 +56,8 @@ def add_parsers(rsub: Any) -> None:
     fit.add_argument(
         "--time-budget",
         type=float,
-        default=80.0,
-        help="seconds the optimiser may take; then its best point (default 80)",
+        default=60.0,
+        help="seconds the optimiser may take; then its best point (default 60)",
     )
     fit.set_defaults(realdata_main=_fit_main)
 

@@ -394,8 +394,8 @@ def initial_guess(robot: SimRobot, rec: Recording, info: list[ParamInfo], pd) ->
             v = p.published + guess[p.name]
         elif p.name in guess:
             v = guess[p.name]
-        else:
-            continue
+        else:  # no estimate (armature): the published value, moved off a search bound
+            v = x[i] * p.scale
         if np.isfinite(v):
             x[i] = np.clip(v / p.scale, lo[i] + 0.01 * (hi[i] - lo[i]), hi[i] - 0.01 * (hi[i] - lo[i]))
     return x
