@@ -148,7 +148,10 @@ def build_parser() -> argparse.ArgumentParser:
     from .robot_check import mapping_args
 
     mapping_args(ident)
-    _robot_parser(sub)  # bioform robot check MODEL.xml [--base B] [--left-wheel J] [--right-wheel J] [--json FILE]
+    rsub = _robot_parser(sub)  # bioform robot check MODEL.xml [--base B] [--left-wheel J] [--right-wheel J] [--json F]
+    from .realdata.cli import add_parsers as _realdata_parsers
+
+    _realdata_parsers(rsub)  # bioform robot fit / replay / drive-program (issue 29)
 
     sw = sub.add_parser("sweep", help="many runs: methods x varied keys x seeds, on a process pool or Ray")
     _scenario_args(sw)

@@ -706,8 +706,8 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
     )
 
 
-def add_parser(sub: Any) -> None:
-    """Add ``bioform robot check`` to the CLI's subparsers."""
+def add_parser(sub: Any) -> Any:
+    """Add ``bioform robot check`` to the CLI's subparsers; returns ``bioform robot``'s subparsers."""
     robot = sub.add_parser("robot", help="robot models: check what the project finds in one")
     rsub = robot.add_subparsers(dest="robot_command", required=True, parser_class=type(robot))
     chk = rsub.add_parser(
@@ -720,9 +720,7 @@ def add_parser(sub: Any) -> None:
     chk.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
     mapping_args(chk)
     chk.add_argument("--json", type=str, metavar="FILE", help="write the report as JSON to FILE")
-    from .realdata.cli import add_parsers as _realdata_parsers
-
-    _realdata_parsers(rsub)  # robot fit / replay / drive-program (issue 29)
+    return rsub  # cli.py adds robot fit / replay / drive-program (issue 29)
 
 
 def _num(x: float | None) -> str:
