@@ -19,7 +19,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-MODELS = Path(__file__).resolve().parents[1] / "src" / "bioform_mj" / "models"
+MODELS = Path(__file__).resolve().parents[1] / "src" / "bioform_mj" / "robots" / "models"
 
 
 @dataclass

@@ -28,7 +28,7 @@ pytest.importorskip("tabulate")  # mujoco.sysid's dependency (the 'fit' extra)
 
 sys.path.insert(0, str(Path(__file__).parent))
 import realdata_recorder as rr  # noqa: E402
-from bioform_mj import cli  # noqa: E402
+from bioform_mj.cli import main as cli  # noqa: E402
 
 TRUTH = rr.Truth(payload_kg=0.3, payload_yaw_kgm2=0.001, damping=(0.002, 0.0025), frictionloss=(0.004, 0.003))
 PUBLISHED = {"mass": 0.943, "yaw_inertia": 0.0020064}  # tb3_robot.xml's chassis body
@@ -87,7 +87,7 @@ def test_calibrated_robot_runs_and_says_where_it_came_from(fitted, bag, capsys):
     out, rep, _ = fitted
     cal = Path(rep["calibrated_robot"])
     assert cal.is_file()
-    from bioform_mj.robot_check import check
+    from bioform_mj.assess.check import check
 
     report = check(str(cal), identify_=False)
     notes = [n for n in report["notes"] if n.startswith("calibrated robot:")]
@@ -103,7 +103,7 @@ def test_calibrated_robot_runs_and_says_where_it_came_from(fitted, bag, capsys):
 
 
 def test_csv_fallback_reads_the_same_recording(tmp_path):
-    from bioform_mj.realdata.recording import read_recording
+    from bioform_mj.robots.realdata.recording import read_recording
 
     model = rr.true_model(rr.MODELS / "tb3_robot.xml", TRUTH)
     sim = rr.simulate(model, TRUTH, 3.0, 0.025)
@@ -219,8 +219,8 @@ def test_truncated_and_unreadable_bag(small, capsys, tmp_path):
 
 
 def test_drive_program_within_the_robots_limits(capsys):
-    from bioform_mj.realdata.program import program_torque
-    from bioform_mj.robot_params import robot_truth
+    from bioform_mj.robots.params import robot_truth
+    from bioform_mj.robots.realdata.program import program_torque
 
     assert cli.main(["robot", "drive-program", "tb3", "--seconds", "20", "--rate", "50"]) == 0
     lines = capsys.readouterr().out.splitlines()

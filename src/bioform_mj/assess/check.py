@@ -197,7 +197,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     motor = float(min(p.tau_max))
     motor_accel = 2 * motor * p.a_eff  # υ̇ at full torque on both wheels, m/s²
     notes = list(lay.notes) + self_notes
-    from .realdata.calibrated import calibration_note
+    from ..robots.realdata.calibrated import calibration_note
 
     notes += calibration_note(model)  # a calibrated robot (robot fit's) says where its numbers came from
     reasons_fail, reasons_warn = [], []

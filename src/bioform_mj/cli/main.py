@@ -148,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     mapping_args(ident)
     rsub = _robot_parser(sub)  # bioform robot check MODEL.xml [--base B] [--left-wheel J] [--right-wheel J] [--json F]
-    from .realdata.cli import add_parsers as _realdata_parsers
+    from .realdata import add_parsers as _realdata_parsers
 
     _realdata_parsers(rsub)  # bioform robot fit / replay / drive-program (issue 29)
 

@@ -1,7 +1,7 @@
 """The robot as the fit and the replay simulate it: the project's prepared robot on a floor, with sensors.
 
 :func:`sim_spec` loads the robot exactly as ``bioform robot check`` and ``bioform run`` do
-(:func:`bioform_mj.robot_prepare.prepare_robot`, the same :class:`~bioform_mj.robots.RobotRef` mapping), puts
+(:func:`bioform_mj.robots.prepare.prepare_robot`, the same :class:`~bioform_mj.robots.RobotRef` mapping), puts
 it on a plane and replaces its sensors by the ones a recording measures: the two wheel joints' speeds
 (``jointvel``, rad/s), and at the base body's origin (ROS ``base_link``) its body-frame linear velocity
 (``velocimeter``, m/s) and angular velocity (``gyro``, rad/s). The two motors take the wheel torque in N·m
@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from bioform_mj.robot_layout import RobotLayout
-from bioform_mj.robot_prepare import prepare_robot
-from bioform_mj.robots import RobotRef
+from bioform_mj.robots.layout import RobotLayout
+from bioform_mj.robots.prepare import prepare_robot
+from bioform_mj.robots.refs import RobotRef
 
 __all__ = ["SimRobot", "sim_spec", "initial_state", "SENSOR_COLUMNS"]
 
@@ -46,7 +46,7 @@ class SimRobot:
 
 def sim_spec(ref: RobotRef) -> SimRobot:
     """The prepared robot on a floor with the recording's sensors (module docstring); raises
-    :class:`~bioform_mj.robot_layout.ModelError` (exit 2) as ``robot check`` would."""
+    :class:`~bioform_mj.robots.layout.ModelError` (exit 2) as ``robot check`` would."""
     spec, layout, _, _ = prepare_robot(ref)
     for s in list(spec.sensors):
         spec.delete(s)

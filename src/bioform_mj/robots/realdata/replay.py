@@ -15,8 +15,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from bioform_mj.realdata.recording import Recording
-from bioform_mj.realdata.simmodel import SimRobot, initial_state
+from bioform_mj.robots.realdata.recording import Recording
+from bioform_mj.robots.realdata.simmodel import SimRobot, initial_state
 
 __all__ = ["replay", "compare", "plot_signals"]
 

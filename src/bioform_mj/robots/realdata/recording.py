@@ -14,7 +14,7 @@ Three sources, one result (:class:`Recording`):
   (m/s), ``odom.wz`` and ``imu.wz`` (rad/s).
 
 Times are the messages' header stamps (the bag's receive time where a stamp is zero), shifted so that the
-first joint state is at t = 0. Bad input raises :class:`~bioform_mj.errors.InputError` (exit 2) naming
+first joint state is at t = 0. Bad input raises :class:`~bioform_mj.core.errors.InputError` (exit 2) naming
 what is there: a missing topic or joint, time that goes backwards, a NaN or infinite effort or speed, a
 file that cannot be read.
 """
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bioform_mj.errors import InputError
+from bioform_mj.core.errors import InputError
 
 __all__ = ["Recording", "Topics", "read_recording"]
 

@@ -1,6 +1,6 @@
 """``bioform robot fit``: a real robot's recording in, a calibrated robot out (issue 29; design §8, §13).
 
-The model is the project's own robot (:mod:`bioform_mj.realdata.simmodel`: the file and mapping
+The model is the project's own robot (:mod:`bioform_mj.robots.realdata.simmodel`: the file and mapping
 ``robot check`` uses, on a floor). The recording is cut into chunks (default 2 s); each chunk is simulated
 open loop from the state the recording gives at its start (wheel angles and speeds, the body rolling with
 them) under the recorded wheel torques, and compared with what was measured: wheel speeds, and where the
@@ -43,10 +43,10 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from bioform_mj.errors import InputError
-from bioform_mj.realdata.recording import Recording
-from bioform_mj.realdata.simmodel import SimRobot, initial_state
-from bioform_mj.robot_layout import CONTACT_PRIORITY
+from bioform_mj.core.errors import InputError
+from bioform_mj.robots.layout import CONTACT_PRIORITY
+from bioform_mj.robots.realdata.recording import Recording
+from bioform_mj.robots.realdata.simmodel import SimRobot, initial_state
 
 __all__ = [
     "FIT_PARAMETERS",
@@ -172,7 +172,7 @@ def make_chunks(
 
 
 # ------------------------------------------------------------------ parameters
-def _explicit_base(spec: mujoco.MjSpec, base: str) -> tuple[int, float]:
+def explicit_base(spec: mujoco.MjSpec, base: str) -> tuple[int, float]:
     """Make the chassis body's inertial explicit (as compiled) and return the principal axis nearest the
     vertical and its inertia (kg·m²)."""
     model = spec.compile()
@@ -190,7 +190,7 @@ def _explicit_base(spec: mujoco.MjSpec, base: str) -> tuple[int, float]:
     return k, float(b.inertia[k])
 
 
-def _caster_geoms(spec: mujoco.MjSpec, model: mujoco.MjModel, names: tuple[str, ...]) -> list[str]:
+def caster_geoms(spec: mujoco.MjSpec, model: mujoco.MjModel, names: tuple[str, ...]) -> list[str]:
     out = []
     for n in names:
         g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n)
@@ -246,7 +246,7 @@ def parameters(robot: SimRobot, rec: Recording, which: tuple[str, ...]) -> tuple
     modifiers writing into ``robot.spec``; bounds from the robot and the recording (a physical range)."""
     sysid = _sysid()
     spec, lay = robot.spec, robot.layout
-    axis, izz = _explicit_base(spec, lay.base)
+    axis, izz = explicit_base(spec, lay.base)
     model = spec.compile()
     m0 = float(spec.body(lay.base).mass)
     tau = float(np.abs(rec.effort).max()) or 1e-3
@@ -310,7 +310,7 @@ def parameters(robot: SimRobot, rec: Recording, which: tuple[str, ...]) -> tuple
 
             add(f"{kind}_{side}", pub, 0.0, hi, mod, unit, f"{what} of wheel joint '{j}'")
     if "caster_friction" in which and robot.ref.casters:
-        geoms = _caster_geoms(spec, model, robot.ref.casters)
+        geoms = caster_geoms(spec, model, robot.ref.casters)
         pub = float(max(model.geom(g).friction[0] for g in geoms)) if geoms else 0.0
         pub = pub if all(model.geom(g).condim[0] > 1 for g in geoms) else 0.0
 
@@ -339,7 +339,7 @@ def initial_guess(robot: SimRobot, rec: Recording, info: list[ParamInfo], pd) ->
     Returns the scaled vector, clipped into the search ranges."""
     from scipy.signal import savgol_filter
 
-    from bioform_mj.robot_params import robot_truth
+    from bioform_mj.robots.params import robot_truth
 
     x = pd.as_vector().copy()
     lo, hi = pd.get_bounds()
@@ -408,7 +408,7 @@ def _caster_regressor(robot: SimRobot, u: np.ndarray, r: float, l: float) -> np.
     ``Q = (r/2) F_x ∓ (r/2l) (p × F)_z`` (left −, right +)."""
     model = robot.spec.compile()
     try:
-        geoms = _caster_geoms(robot.spec, model, robot.ref.casters)
+        geoms = caster_geoms(robot.spec, model, robot.ref.casters)
     except InputError:
         return None
     ids = {model.geom(g).id for g in geoms}

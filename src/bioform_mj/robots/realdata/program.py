@@ -17,7 +17,7 @@ __all__ = ["drive_program", "program_torque"]
 
 
 def program_torque(params, accel: float = 1.0) -> float:
-    """The program's torque (N·m) for :class:`~bioform_mj.robot_params.RobotParams` ``params``."""
+    """The program's torque (N·m) for :class:`~bioform_mj.robots.params.RobotParams` ``params``."""
     traction = params.traction_torque(1.0, params.mass * 9.81 / 2)
     by_accel = accel / (2.0 * params.a_eff)  # υ̇ = 2 τ a_eff with both wheels
     return float(min(0.5 * min(params.tau_max), traction / 3.0, by_accel))

@@ -17,8 +17,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from bioform_mj.robot_layout import CONTACT_PRIORITY
-from bioform_mj.robots import RobotRef
+from bioform_mj.robots.layout import CONTACT_PRIORITY
+from bioform_mj.robots.refs import RobotRef
 
 __all__ = ["CALIBRATION_TEXT", "write_calibrated", "calibration_note"]
 
@@ -27,8 +27,8 @@ CALIBRATION_TEXT = "bioform_calibration"
 
 
 def _source_spec(ref: RobotRef) -> mujoco.MjSpec:
-    from bioform_mj.robot_prepare import absolute_asset_files
-    from bioform_mj.urdf import import_urdf, is_urdf
+    from bioform_mj.robots.prepare import absolute_asset_files
+    from bioform_mj.robots.urdf import import_urdf, is_urdf
 
     if is_urdf(Path(ref.model)):
         return import_urdf(ref).spec
@@ -41,11 +41,11 @@ def write_calibrated(
     ref: RobotRef, layout: Any, rows: list[dict[str, Any]], caster_geoms: list[str], path: Path, source: str
 ) -> None:
     """Write ``ref``'s robot with the fitted values of ``rows`` (fit.json's ``parameters``) to ``path``."""
-    from bioform_mj.realdata.fit import _explicit_base, set_yaw_inertia
+    from bioform_mj.robots.realdata.fit import explicit_base, set_yaw_inertia
 
     spec = _source_spec(ref)
     val = {r["name"]: r["fitted"] for r in rows}
-    axis, _ = _explicit_base(spec, layout.base)
+    axis, _ = explicit_base(spec, layout.base)
     body = spec.body(layout.base)
     if "mass" in val:
         body.mass = float(val["mass"])

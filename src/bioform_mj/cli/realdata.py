@@ -1,6 +1,6 @@
 """``bioform robot fit``, ``robot replay`` and ``robot drive-program`` (issue 29).
 
-The robot argument and the mapping flags are ``robot check``'s (:func:`bioform_mj.robot_check.mapping_args`),
+The robot argument and the mapping flags are ``robot check``'s (:func:`bioform_mj.assess.check.mapping_args`),
 so a robot maps the same way everywhere. Bad input (a recording without the named topics or joints, time
 going backwards, NaN efforts, an unreadable bag, wheels that are not in the recording) exits 2 with one
 ``error:`` line before anything is written.
@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from bioform_mj.errors import InputError
+from bioform_mj.core.errors import InputError
 
 __all__ = ["add_parsers", "main"]
 
@@ -33,7 +33,7 @@ def _recording_args(p: argparse.ArgumentParser) -> None:
 
 def add_parsers(rsub: Any) -> None:
     """Add ``fit``, ``replay`` and ``drive-program`` to ``bioform robot``'s subparsers."""
-    from bioform_mj.robot_check import mapping_args
+    from bioform_mj.assess.check import mapping_args
 
     fit = rsub.add_parser(
         "fit",
@@ -94,9 +94,9 @@ def main(args: argparse.Namespace) -> int:
 
 def _load(args: argparse.Namespace):
     """The robot (as robot check maps it) and the recording, checked against each other."""
-    from bioform_mj.realdata.recording import Topics, read_recording
-    from bioform_mj.realdata.simmodel import sim_spec
-    from bioform_mj.robot_check import ref_from_args
+    from bioform_mj.assess.check import ref_from_args
+    from bioform_mj.robots.realdata.recording import Topics, read_recording
+    from bioform_mj.robots.realdata.simmodel import sim_spec
 
     ref = ref_from_args(args.model, args)
     robot = sim_spec(ref)
@@ -142,11 +142,11 @@ def _fit_main(args: argparse.Namespace) -> int:
     from mujoco import sysid
 
     from bioform_mj.outputs.files import check_out_dir, write_json
-    from bioform_mj.realdata.calibrated import write_calibrated
-    from bioform_mj.realdata.fit import FIT_PARAMETERS, _caster_geoms, fit, make_chunks, simulate_chunks
-    from bioform_mj.realdata.replay import plot_signals
-    from bioform_mj.realdata.simmodel import sim_spec
-    from bioform_mj.robot_params import robot_truth
+    from bioform_mj.robots.params import robot_truth
+    from bioform_mj.robots.realdata.calibrated import write_calibrated
+    from bioform_mj.robots.realdata.fit import FIT_PARAMETERS, caster_geoms, fit, make_chunks, simulate_chunks
+    from bioform_mj.robots.realdata.replay import plot_signals
+    from bioform_mj.robots.realdata.simmodel import sim_spec
 
     out = check_out_dir(args.out, "--out")
     which = tuple(w.strip() for w in args.fit.split(",") if w.strip())
@@ -176,7 +176,7 @@ def _fit_main(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     stem = Path(ref.model).stem
     cal_path = out / f"{stem}_calibrated.xml"
-    casters = _caster_geoms(robot.spec, model_cal, ref.casters) if ref.casters else []
+    casters = caster_geoms(robot.spec, model_cal, ref.casters) if ref.casters else []
     write_calibrated(ref, robot.layout, result.parameters, casters, cal_path, str(args.bag))
     cal_ref = replace(ref, model=str(cal_path.resolve()))
     p_pub, p_cal = robot_truth(ref), robot_truth(cal_ref)
@@ -231,8 +231,8 @@ def _replay_main(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from bioform_mj.outputs.files import check_out_dir, write_json
-    from bioform_mj.realdata.replay import compare, measured, plot_signals, replay
-    from bioform_mj.realdata.simmodel import sim_spec
+    from bioform_mj.robots.realdata.replay import compare, measured, plot_signals, replay
+    from bioform_mj.robots.realdata.simmodel import sim_spec
 
     out = check_out_dir(args.out, "--out") if args.out else None
     ref, robot, rec = _load(args)
@@ -264,9 +264,9 @@ def _replay_main(args: argparse.Namespace) -> int:
 
 
 def _program_main(args: argparse.Namespace) -> int:
-    from bioform_mj.realdata.program import drive_program, program_torque
-    from bioform_mj.robot_check import ref_from_args
-    from bioform_mj.robot_params import robot_truth
+    from bioform_mj.assess.check import ref_from_args
+    from bioform_mj.robots.params import robot_truth
+    from bioform_mj.robots.realdata.program import drive_program, program_torque
 
     if not (args.seconds > 0 and args.rate > 0 and args.accel > 0):
         raise InputError("--seconds, --rate and --accel must be > 0")
