@@ -144,9 +144,11 @@ def write_bag(
     topics: tuple[str, str, str] = ("/joint_states", "/odom", "/imu"),
     joint_names: tuple[str, str] | None = None,
     seed: int = 1,
+    velocities: bool = True,
 ) -> None:
     """Write the simulation as a rosbag2 folder (MCAP) at ``rate_hz``; ``noise``: standard deviation of the
-    speed noise (rad/s on wheels, m/s and rad/s on the body); angles get 1e-3 rad, torques 2 % of their scale."""
+    speed noise (rad/s on wheels, m/s and rad/s on the body); angles get 1e-3 rad, torques 2 % of their scale;
+    ``velocities=False``: the joint states carry no velocity (as some drivers publish)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -175,7 +177,7 @@ def write_bag(
                 header=Header(stamp=st, frame_id=""),
                 name=names,
                 position=sim["q"][k] + rng.normal(0, 1e-3, 2),
-                velocity=sim["qd"][k] + rng.normal(0, noise, 2),
+                velocity=sim["qd"][k] + rng.normal(0, noise, 2) if velocities else np.zeros(0),
                 effort=sim["tau"][k] + rng.normal(0, 0.02 * tau_scale, 2),
             )
             w.write(cj, t_ns, ts.serialize_cdr(js, JointState.__msgtype__))

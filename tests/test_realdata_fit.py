@@ -44,13 +44,15 @@ def bag(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def fitted(bag, tmp_path_factory) -> tuple[Path, dict, float]:
-    """``bioform robot fit tb3 --bag BAG --out DIR`` once: the directory, fit.json, wall time (s)."""
+    """``bioform robot fit tb3 --bag BAG --out DIR`` once: the directory, fit.json, CPU time (s, all threads:
+    the machine is shared, so wall time says more about the neighbours than the fit). The optimiser's time
+    budget is lifted so that a loaded machine does not change the answer."""
     import time
 
     out = tmp_path_factory.mktemp("fit") / "out"
-    t0 = time.perf_counter()
-    assert cli.main(["robot", "fit", "tb3", "--bag", str(bag), "--out", str(out)]) == 0
-    return out, json.loads((out / "fit.json").read_text()), time.perf_counter() - t0
+    t0 = time.process_time()
+    assert cli.main(["robot", "fit", "tb3", "--bag", str(bag), "--out", str(out), "--time-budget", "600"]) == 0
+    return out, json.loads((out / "fit.json").read_text()), time.process_time() - t0
 
 
 def test_fit_recovers_the_changed_parameters(fitted):
@@ -79,7 +81,7 @@ def test_fit_recovers_the_changed_parameters(fitted):
     res = rep["residual"]
     assert res["calibrated"]["cost"] < 0.01 * res["published"]["cost"]
     assert res["calibrated"]["left_speed_rms"] < 0.2  # rad/s, against ~5 rad/s of motion
-    assert seconds < 120
+    assert seconds < 120  # CPU s; the issue's bound is 2 min wall for 60 s of recording (this one is 24 s)
     assert (out / "fit.png").stat().st_size > 10_000
 
 
@@ -116,6 +118,19 @@ def test_csv_fallback_reads_the_same_recording(tmp_path):
     assert np.allclose(a.effort, b.effort, atol=0.05 * 0.025 * 4)
     assert np.abs(a.velocity - b.velocity).max() < 0.1
     assert len(b.odom_t) == len(b.imu_t) == 301
+
+
+def test_joint_states_without_velocity_are_differentiated(tmp_path):
+    from bioform_mj.robots.realdata.recording import read_recording
+
+    model = rr.true_model(rr.MODELS / "tb3_robot.xml", TRUTH)
+    sim = rr.simulate(model, TRUTH, 3.0, 0.025)
+    rr.write_bag(tmp_path / "b", sim, TRUTH, velocities=False)
+    rec = read_recording(tmp_path / "b", TRUTH.joints)
+    assert any("differentiated" in n for n in rec.notes)
+    true = sim["qd"][::10][: len(rec.t)]
+    assert np.abs(rec.velocity - true)[5:-5].max() < 0.3  # rad/s: 1e-3 rad angle noise over 0.01 s steps
+    assert np.sqrt(np.mean((rec.velocity - true) ** 2)) < 0.15
 
 
 # ------------------------------------------------------------------ bad input: exit 2, one error line, nothing written
@@ -243,7 +258,8 @@ def test_fit_recovers_a_heavy_robots_payload_and_friction(tmp_path):
     truth = rr.Truth(payload_kg=5.0, payload_yaw_kgm2=0.02, damping=(0.05, 0.04), frictionloss=(0.1, 0.12))
     rr.record(tmp_path / "bag", "paper", truth, duration=30.0, tau=1.0, seed=7)
     out = tmp_path / "out"
-    assert cli.main(["robot", "fit", "paper", "--bag", str(tmp_path / "bag"), "--out", str(out)]) == 0
+    argv = ["robot", "fit", "paper", "--bag", str(tmp_path / "bag"), "--out", str(out), "--time-budget", "600"]
+    assert cli.main(argv) == 0
     got = {p["name"]: p for p in json.loads((out / "fit.json").read_text())["parameters"]}
     expect = {
         "mass": (23.5 + 5.0, 0.05),
@@ -265,7 +281,8 @@ def test_armature_fitted_with_mass_is_reported_with_its_correlations(bag, tmp_pa
     does fix, stays within 5 %."""
     out = tmp_path / "out"
     fit = "mass,yaw_inertia,damping,frictionloss,armature"
-    assert cli.main(["robot", "fit", "tb3", "--bag", str(bag), "--out", str(out), "--fit", fit]) == 0
+    argv = ["robot", "fit", "tb3", "--bag", str(bag), "--out", str(out), "--fit", fit, "--time-budget", "600"]
+    assert cli.main(argv) == 0
     rep = json.loads((out / "fit.json").read_text())
     got = {p["name"]: p for p in rep["parameters"]}
     names = rep["correlation"]["names"]

@@ -207,12 +207,15 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
                         idx = (names.index(joints[0]), names.index(joints[1]))
                     js["t"].append(t)
                     for key, arr in (("pos", msg.position), ("vel", msg.velocity), ("eff", msg.effort)):
+                        if len(arr) == 0 and key != "eff":  # a driver that publishes no speeds (or angles)
+                            js[key].append((math.nan, math.nan))
+                            continue
                         if len(arr) <= max(idx):
                             what = {"pos": "position", "vel": "velocity", "eff": "effort"}[key]
                             raise InputError(
                                 f"{name}: '{topics.joint_states}' at t = {t:.6g} s has no {what} for the wheels "
-                                f"({len(arr)} values for {len(names)} joints): the fit needs position, velocity "
-                                "and effort (the applied torque)"
+                                f"({len(arr)} values for {len(names)} joints): the fit needs the effort (the "
+                                "applied torque) and a position or a velocity"
                             )
                         js[key].append((arr[idx[0]], arr[idx[1]]))
                 elif conn.topic == topics.odom:
@@ -243,6 +246,16 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
                 d["t"] = bag_t[topic]
         notes.append("times are the bag's receive times (a topic's header stamps are all zero)")
     t0 = js["t"][0]
+    pos, vel = np.asarray(js["pos"], float), np.asarray(js["vel"], float)
+    tj = np.asarray(js["t"], float)
+    if np.isnan(vel).all() and np.isfinite(pos).all() and len(tj) > 2:
+        vel = np.stack([np.gradient(pos[:, i], tj) for i in range(2)], axis=1)
+        notes.append("the joint states carry no velocity: wheel speeds differentiated from the positions")
+    elif np.isnan(pos).all() and np.isfinite(vel).all() and len(tj) > 1:
+        dt = np.diff(tj, prepend=tj[0])[:, None]
+        pos = np.cumsum(0.5 * (vel + np.vstack([vel[:1], vel[:-1]])) * dt, axis=0)
+        notes.append("the joint states carry no position: wheel angles integrated from the velocities")
+    js["pos"], js["vel"] = pos, vel
     if not od["t"]:
         notes.append(f"no odometry on '{topics.odom}': body velocities not fitted")
     if not im["t"]:
