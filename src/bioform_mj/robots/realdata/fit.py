@@ -397,7 +397,7 @@ def initial_guess(robot: SimRobot, rec: Recording, info: list[ParamInfo], pd) ->
         else:  # no estimate (armature): the published value, moved off a search bound
             v = x[i] * p.scale
         if np.isfinite(v):
-            x[i] = np.clip(v / p.scale, lo[i] + 0.01 * (hi[i] - lo[i]), hi[i] - 0.01 * (hi[i] - lo[i]))
+            x[i] = np.clip(v / p.scale, lo[i] + 1e-3 * (hi[i] - lo[i]), hi[i] - 1e-3 * (hi[i] - lo[i]))
     return x
 
 
@@ -528,7 +528,16 @@ def fit(
     cost_pub = float(r_pub @ r_pub)
     pd.update_from_vector(x0)
     start = pd.copy()
-    start.update_from_vector(initial_guess(robot, rec, info, pd))
+    notes = []
+    guess = initial_guess(robot, rec, info, pd)
+    r_guess = _flat(fn, guess, pd)
+    if float(r_guess @ r_guess) <= cost_pub:
+        start.update_from_vector(guess)
+    else:  # the regression's model (no casters, no slip) was further off than the maker's numbers
+        span = hi - lo
+        start.update_from_vector(np.clip(x0, lo + 1e-3 * span, hi - 1e-3 * span))
+        notes.append("the fit started from the published values (the linear estimate fitted worse)")
+    pd.update_from_vector(x0)
     evals = {"n": 0, "best": start.as_vector(), "best_cost": math.inf}
 
     def report(log) -> None:
@@ -547,7 +556,6 @@ def fit(
         if time.perf_counter() - t_start > time_budget_s:
             raise _OutOfTime
 
-    notes = []
     try:
         opt, _ = sysid.optimize(
             start,
@@ -571,6 +579,14 @@ def fit(
         print(file=sys.stderr)
     x = opt.as_vector()
     r = _flat(fn, x, opt)
+    if float(r @ r) > cost_pub:  # never report a robot that does worse than the published one
+        x = x0.copy()
+        opt.update_from_vector(x)
+        r = _flat(fn, x, opt)
+        notes.append(
+            "the fit found nothing better than the published values (they are reported; the recording may not "
+            "excite the robot, or the model lacks what the robot does: slip, backlash, a motor's dynamics)"
+        )
     # the Jacobian at the optimum by forward differences, all columns in one parallel rollout
     h = FD_STEP * np.maximum(1.0, np.abs(x))
     h = np.where(x + h > hi, -h, h)
