@@ -307,6 +307,7 @@ def simulate(
     *,
     plant: Plant | None = None,
     controller: Any = None,
+    full_state: bool = False,
 ) -> RunResult:
     """Run the closed loop of ``sc`` and return its log and summary.
 
@@ -331,6 +332,10 @@ def simulate(
         A :class:`~bioform_mj.plants.base.Plant`; ``None``: built from ``sc.plant``.
     controller
         A :class:`~bioform_mj.control.base.Controller`; ``None``: the paper's stack for ``sc.method``.
+    full_state
+        The log also gets the 3-D state at every row and at the end of the run (m, rad, m/s, rad/s:
+        z, roll, pitch, wheel angles and rates, the IMU; :data:`bioform_mj.outputs.fullstate.STATE_CHANNELS`),
+        what a ROS 2 bag needs (:func:`bioform_mj.outputs.rosbag.write_bag`); the other channels are the same.
 
     Returns
     -------
@@ -386,11 +391,19 @@ def simulate(
     run_chunk = chunk if chunk is not None else step.python_chunk
     warm = warm_up(step, run_chunk, progress, t_setup)
     state_obs = RunState(sc, plant, controller)
+    sampler = None
+    if full_state:  # the 3-D state at the log's rows (outputs/fullstate.py): a ROS 2 bag's needs
+        from bioform_mj.outputs.fullstate import StateSampler
+
+        sampler = StateSampler(sc.sim.log_dt, sc.sim.control_dt, in_kernel=chunk is not None)
+        observers = [*observers, sampler]
     started, raised = start_observers(observers, state_obs, warm.raised)
     end = run_loop(sc, step, run_chunk, chunk is not None, observers, state_obs, warm, raised, progress)
     raised = finish_observers(started, state_obs, step, end)
     # summarise: the log, summary.json, the result (attached to what a user's code raised)
     logd = _log_dict(plant, graph, ctx.log, end.j, missing, odometry, tl.offsets)
+    if sampler is not None:
+        logd.update(sampler.log_arrays(logd))
     engine_used = "compiled" if chunk else "stepwise"
     summary = _summarise(sc, plant, controller, step, end, logd, warm.setup_s, engine_used, warned)
     _add_run_notes(summary, sc, plant, step, end, logd, raised)
