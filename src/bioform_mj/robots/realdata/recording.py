@@ -182,11 +182,13 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
                     raise InputError(f"{name}: topic '{topic}' carries {have[topic]}, expected {typ}")
             conns = [c for c in reader.connections if c.topic in want]
             bag_t: dict[str, list[float]] = {t: [] for t in want}
+            no_effort = 0
             idx: tuple[int, int] | None = None
             for conn, bag_ns, raw in _stream(reader, conns, name):
                 msg = reader.deserialize(raw, conn.msgtype)
                 t = _stamp_s(msg)
-                bag_t[conn.topic].append(1e-9 * bag_ns)
+                if conn.topic != topics.joint_states or len(getattr(msg, "effort", ())) or not msg.name:
+                    bag_t[conn.topic].append(1e-9 * bag_ns)
                 if conn.topic == topics.joint_states:
                     names = list(msg.name)
                     if (
@@ -205,6 +207,9 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
                                 "--left-wheel/--right-wheel or name the recorded joints with --left-joint/--right-joint"
                             )
                         idx = (names.index(joints[0]), names.index(joints[1]))
+                    if len(msg.effort) == 0:  # a state-only message (an exporter's last sample at t = T)
+                        no_effort += 1
+                        continue
                     js["t"].append(t)
                     for key, arr in (("pos", msg.position), ("vel", msg.velocity), ("eff", msg.effort)):
                         if len(arr) == 0 and key != "eff":  # a driver that publishes no speeds (or angles)
@@ -235,8 +240,9 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
     except Exception as exc:  # noqa: BLE001 - rosbags raises many types for a bad file: one line
         raise InputError(f"{name}: cannot read the recording: {type(exc).__name__}: {exc}") from None
     if not js["t"]:
-        raise InputError(f"{name}: '{topics.joint_states}' holds no joint states")
-    notes = []
+        what = f" ({no_effort} without an effort: the fit needs the applied torques)" if no_effort else ""
+        raise InputError(f"{name}: '{topics.joint_states}' holds no joint states{what}")
+    notes = [f"{no_effort} joint state(s) without an effort skipped"] if no_effort else []
     # one clock for all topics: the header stamps where every topic has them (a stamp of 0 at sim time 0 is
     # one), else the bag's receive times
     streams = ((topics.joint_states, js), (topics.odom, od), (topics.imu, im))
