@@ -161,7 +161,7 @@ def make_chunks(
         yaw = float(np.interp(t0, rec.odom_t, yaw_pose)) if yaw_pose is not None else 0.0
         states.append(initial_state(robot, model, angle, speed, yaw))
         ct = np.arange(0, int(round(length / dt)) + 2) * dt
-        eff = _interp(t0 + ct, rec.t, rec.effort)
+        eff = rec.effort_at(t0 + ct)
         ctrl = np.zeros((len(ct), model.nu))
         for i in range(2):
             ctrl[:, motor_ids[i]] = sign[i] * eff[:, i]

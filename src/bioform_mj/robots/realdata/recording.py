@@ -67,6 +67,12 @@ class Recording:
     imu_gyro: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     notes: list[str] = field(default_factory=list)
 
+    def effort_at(self, t: np.ndarray) -> np.ndarray:
+        """The wheel torques (N·m, (len(t), 2)) at times ``t`` (s), interpolated linearly between the
+        recorded efforts: a real robot's effort is a sample of a continuous torque (on the tb3 test recording
+        a zero-order hold, the torque held until the next sample, biased the yaw inertia by 6 %)."""
+        return np.stack([np.interp(t, self.t, self.effort[:, i]) for i in range(2)], axis=1)
+
     @property
     def duration(self) -> float:
         """Length of the joint-state stream, s."""

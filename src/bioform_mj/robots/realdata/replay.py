@@ -36,7 +36,7 @@ def replay(robot: SimRobot, rec: Recording) -> dict[str, np.ndarray]:
     sign = np.asarray(lay.wheel_sign, float)
     ctrl = np.zeros((n, model.nu))
     for i, m in enumerate(lay.motors):
-        ctrl[:, model.actuator(m).id] = sign[i] * np.interp(tt, rec.t, rec.effort[:, i])
+        ctrl[:, model.actuator(m).id] = sign[i] * rec.effort_at(tt)[:, i]
     st, sens = rollout.rollout(model, data, state, ctrl)
     st, sens = st[0], sens[0]
     t = st[:, 0]
