@@ -556,6 +556,10 @@ def fit(
         if time.perf_counter() - t_start > time_budget_s:
             raise _OutOfTime
 
+    from absl import logging as absl_logging  # mujoco.sysid's logger: its start-at-bound notice is ours to say
+
+    verbosity = absl_logging.get_verbosity()
+    absl_logging.set_verbosity(absl_logging.ERROR)
     try:
         opt, _ = sysid.optimize(
             start,
@@ -575,6 +579,8 @@ def fit(
             f"the optimiser stopped at the time budget ({time_budget_s:g} s) after {evals['n']} iterations: "
             "the best point so far is reported (a shorter --chunk or fewer --max-chunks is faster)"
         )
+    finally:
+        absl_logging.set_verbosity(verbosity)
     if progress:
         print(file=sys.stderr)
     x = opt.as_vector()
