@@ -294,3 +294,30 @@ def test_armature_fitted_with_mass_is_reported_with_its_correlations(bag, tmp_pa
     assert flagged or strongest > 0.8, (strongest, {n: got[n]["ci95_halfwidth"] for n in inertias + armatures})
     a_true = 1.0 / (1.0 / rep["published"]["a"] + TRUTH.payload_kg * 0.033)
     assert rep["a"] == pytest.approx(a_true, rel=0.05)
+
+
+@pytest.mark.slow
+def test_round_trip_of_the_projects_own_bag(tmp_path):
+    """A paper-robot run written with ``--rosbag`` (the project's exporter, ideal torque motors), fitted with
+    the published paper robot: the recording holds that robot, so the fit stays near the published values
+    (masses within 10 %: the run's torques change at its control rate, the fit interpolates them), finds no
+    damping or dry friction (< 0.01 N·m·s/rad, < 0.02 N·m against 5 N·m of motor), and its a, b stay within
+    5 % of the published ones."""
+    run = tmp_path / "run"
+    argv = ["run", "paper", "--plant", "mujoco", "--rosbag", "--out", str(run), "--set", "sim.duration=12"]
+    assert cli.main(argv) == 0
+    out = tmp_path / "fit"
+    argv = ["robot", "fit", "paper", "--bag", str(run / "rosbag"), "--joint-states-topic", "/f1/joint_states"]
+    argv += ["--odom-topic", "/f1/ground_truth/odom", "--out", str(out), "--time-budget", "600"]
+    assert cli.main(argv) == 0
+    rep = json.loads((out / "fit.json").read_text())
+    got = {p["name"]: p for p in rep["parameters"]}
+    assert got["mass"]["fitted"] == pytest.approx(23.5, rel=0.10)
+    assert got["yaw_inertia"]["fitted"] == pytest.approx(0.137366667, rel=0.10)
+    for side in "LR":
+        assert got[f"damping_{side}"]["fitted"] < 0.01
+        assert got[f"frictionloss_{side}"]["fitted"] < 0.02
+    assert rep["a"] == pytest.approx(rep["published"]["a"], rel=0.05)
+    assert rep["b"] == pytest.approx(rep["published"]["b"], rel=0.05)
+    assert rep["residual"]["calibrated"]["cost"] <= rep["residual"]["published"]["cost"]
+    assert any("without an effort skipped" in n for n in rep["notes"])  # the exporter's state-only t = T
