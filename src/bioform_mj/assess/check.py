@@ -201,6 +201,9 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
     motor = float(min(p.tau_max))
     motor_accel = 2 * motor * p.a_eff  # υ̇ at full torque on both wheels, m/s²
     notes = list(lay.notes) + self_notes
+    from ..robots.realdata.calibrated import calibration_note
+
+    notes += calibration_note(model)  # a calibrated robot (robot fit's) says where its numbers came from
     reasons_fail, reasons_warn = [], []
 
     # the first ~2 s under gravity and a drive (forward, then a turn): what moves relative to the base
@@ -792,8 +795,8 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
     )
 
 
-def add_parser(sub: Any) -> None:
-    """Add ``bioform robot check`` to the CLI's subparsers."""
+def add_parser(sub: Any) -> Any:
+    """Add ``bioform robot check`` to the CLI's subparsers; returns ``bioform robot``'s subparsers."""
     robot = sub.add_parser("robot", help="robot models: check what the project finds in one")
     rsub = robot.add_subparsers(dest="robot_command", required=True, parser_class=type(robot))
     chk = rsub.add_parser(
@@ -806,6 +809,7 @@ def add_parser(sub: Any) -> None:
     chk.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
     mapping_args(chk)
     chk.add_argument("--json", type=str, metavar="FILE", help="write the report as JSON to FILE")
+    return rsub  # cli.py adds robot fit / replay / drive-program (issue 29)
 
 
 def _num(x: float | None) -> str:

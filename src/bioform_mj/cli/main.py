@@ -156,7 +156,10 @@ def build_parser() -> argparse.ArgumentParser:
     from bioform_mj.assess.check import mapping_args
 
     mapping_args(ident)
-    _robot_parser(sub)  # bioform robot check MODEL.xml [--base B] [--left-wheel J] [--right-wheel J] [--json FILE]
+    rsub = _robot_parser(sub)  # bioform robot check MODEL.xml [--base B] [--left-wheel J] [--right-wheel J] [--json F]
+    from .realdata import add_parsers as _realdata_parsers
+
+    _realdata_parsers(rsub)  # bioform robot fit / replay / drive-program (issue 29)
 
     sw = sub.add_parser("sweep", help="many runs: methods x varied keys x seeds, on a process pool or Ray")
     _scenario_args(sw)
@@ -309,6 +312,8 @@ def _dispatch(args: argparse.Namespace) -> int:
     with _mujoco_log() as mjlog:
         if args.command == "identify":
             return _identify(args)
+        if args.command == "robot" and getattr(args, "realdata_main", None):
+            return args.realdata_main(args)  # robot fit / replay / drive-program (issue 29)
         if args.command == "robot":
             from bioform_mj.assess.check import main as robot_main
 

@@ -1,0 +1,284 @@
+"""``bioform robot fit``, ``robot replay`` and ``robot drive-program`` (issue 29).
+
+The robot argument and the mapping flags are ``robot check``'s (:func:`bioform_mj.assess.check.mapping_args`),
+so a robot maps the same way everywhere. Bad input (a recording without the named topics or joints, time
+going backwards, NaN efforts, an unreadable bag, wheels that are not in the recording) exits 2 with one
+``error:`` line before anything is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bioform_mj.core.errors import InputError
+
+__all__ = ["add_parsers", "main"]
+
+
+def _recording_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--bag", required=True, help="the recording: a rosbag2 folder, a .mcap file or a CSV")
+    p.add_argument(
+        "--joint-states-topic", default="/joint_states", help="sensor_msgs/JointState topic (default /joint_states)"
+    )
+    p.add_argument("--odom-topic", default="/odom", help="nav_msgs/Odometry topic (default /odom; optional)")
+    p.add_argument("--imu-topic", default="/imu", help="sensor_msgs/Imu topic (default /imu; optional)")
+    p.add_argument("--left-joint", help="the left wheel's joint name in the recording (default: the robot's)")
+    p.add_argument("--right-joint", help="the right wheel's joint name in the recording (default: the robot's)")
+
+
+def add_parsers(rsub: Any) -> None:
+    """Add ``fit``, ``replay`` and ``drive-program`` to ``bioform robot``'s subparsers."""
+    from bioform_mj.assess.check import mapping_args
+
+    fit = rsub.add_parser(
+        "fit",
+        help="fit a robot's mass, yaw inertia, wheel damping/frictionloss (and armature, caster friction) to a "
+        "recording with mujoco.sysid; writes DIR/fit.json, a calibrated robot file and a figure (exit 2 bad input)",
+    )
+    fit.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
+    mapping_args(fit)
+    _recording_args(fit)
+    fit.add_argument("--out", required=True, type=Path, help="output directory")
+    fit.add_argument(
+        "--fit",
+        default="mass,yaw_inertia,damping,frictionloss,caster_friction",
+        help="comma-separated parameters: mass, yaw_inertia, damping, frictionloss, armature, caster_friction "
+        "(default: all but armature, which the recording cannot tell from mass; caster_friction needs --caster)",
+    )
+    fit.add_argument("--chunk", type=float, default=2.0, help="seconds simulated from each recorded state (default 2)")
+    fit.add_argument("--max-chunks", type=int, default=12, help="chunks used at most, spread evenly (default 12)")
+    fit.add_argument("--max-iters", type=int, default=30, help="optimiser iterations at most (default 30)")
+    fit.add_argument(
+        "--time-budget",
+        type=float,
+        default=60.0,
+        help="seconds the optimiser may take; then its best point (default 60)",
+    )
+    fit.set_defaults(realdata_main=_fit_main)
+
+    rep = rsub.add_parser(
+        "replay",
+        help="drive the robot with a recording's torques open loop; report and plot the difference "
+        "(published robot, and --calibrated FILE)",
+    )
+    rep.add_argument("model", help="shipped robot name or path to an MJCF or URDF file (the published one)")
+    mapping_args(rep)
+    _recording_args(rep)
+    rep.add_argument("--calibrated", help="a calibrated robot file (robot fit's) to replay beside the published one")
+    rep.add_argument("--out", type=Path, help="write replay.json and replay.png into this directory")
+    rep.set_defaults(realdata_main=_replay_main)
+
+    prog = rsub.add_parser(
+        "drive-program",
+        help="print (CSV: time, left, right wheel torque in N·m) the torques to record for robot fit, within "
+        "the robot's limits",
+    )
+    prog.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
+    mapping_args(prog)
+    prog.add_argument("--seconds", type=float, default=60.0, help="length in s (default 60)")
+    prog.add_argument("--rate", type=float, default=100.0, help="samples per second (default 100)")
+    prog.add_argument("--accel", type=float, default=1.0, help="the largest forward acceleration, m/s² (default 1)")
+    prog.add_argument("--seed", type=int, default=0, help="seed of the pulse pattern")
+    prog.set_defaults(realdata_main=_program_main)
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run the subcommand ``args`` names."""
+    return args.realdata_main(args)
+
+
+def _load(args: argparse.Namespace):
+    """The robot (as robot check maps it) and the recording, checked against each other."""
+    from bioform_mj.assess.check import ref_from_args
+    from bioform_mj.robots.realdata.recording import Topics, read_recording
+    from bioform_mj.robots.realdata.simmodel import sim_spec
+
+    ref = ref_from_args(args.model, args)
+    robot = sim_spec(ref)
+    joints = (args.left_joint or robot.layout.wheel_joints[0], args.right_joint or robot.layout.wheel_joints[1])
+    topics = Topics(args.joint_states_topic, args.odom_topic, args.imu_topic)
+    rec = read_recording(args.bag, joints, topics)
+    return ref, robot, rec
+
+
+def _signals_of_chunks(chunks, sims: list[np.ndarray] | None) -> dict[str, np.ndarray]:
+    """Chunks laid end to end on the recording's time axis, NaN between them (for the figure)."""
+    cols = {"left_speed": 0, "right_speed": 1, "vx": 2, "wz": 7}
+    t, out = [], {k: [] for k in cols}
+    for i, (t0, meas) in enumerate(zip(chunks.starts, chunks.measured)):
+        data = meas.data if sims is None else sims[i]
+        t.append(np.append(t0 + meas.times, np.nan))
+        for k, c in cols.items():
+            vals = data[:, c] if (sims is not None or chunks.weights[c] > 0) else np.full(len(meas.times), np.nan)
+            out[k].append(np.append(vals, np.nan))
+    res = {k: np.concatenate(v) for k, v in out.items()}
+    res["t"] = np.concatenate(t)
+    return res
+
+
+def _rms(chunks, sims: list[np.ndarray]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for name, c, _unit in (
+        ("left_speed", 0, "rad/s"),
+        ("right_speed", 1, "rad/s"),
+        ("vx", 2, "m/s"),
+        ("wz", 7, "rad/s"),
+    ):
+        if chunks.weights[c] == 0:
+            continue
+        d = np.concatenate([m.data[:, c] - s[:, c] for m, s in zip(chunks.measured, sims)])
+        out[f"{name}_rms"] = float(np.sqrt(np.mean(d**2)))
+    return out
+
+
+def _fit_main(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from mujoco import sysid
+
+    from bioform_mj.outputs.files import check_out_dir, write_json
+    from bioform_mj.robots.params import robot_truth
+    from bioform_mj.robots.realdata.calibrated import write_calibrated
+    from bioform_mj.robots.realdata.fit import FIT_PARAMETERS, caster_geoms, fit, make_chunks, simulate_chunks
+    from bioform_mj.robots.realdata.replay import plot_signals
+    from bioform_mj.robots.realdata.simmodel import sim_spec
+
+    out = check_out_dir(args.out, "--out")
+    which = tuple(w.strip() for w in args.fit.split(",") if w.strip())
+    unknown = [w for w in which if w not in FIT_PARAMETERS]
+    if unknown:
+        raise InputError(f"--fit: unknown parameter '{unknown[0]}' (expected some of: {', '.join(FIT_PARAMETERS)})")
+    if not (args.chunk > 0 and args.max_chunks >= 1 and args.max_iters >= 1 and args.time_budget > 0):
+        raise InputError("--chunk and --time-budget must be > 0, --max-chunks and --max-iters >= 1")
+    ref, robot, rec = _load(args)
+    published = sim_spec(ref)  # an untouched copy (the fit edits robot.spec)
+    result, opt = fit(
+        robot,
+        rec,
+        which,
+        chunk_s=args.chunk,
+        max_chunks=args.max_chunks,
+        max_iters=args.max_iters,
+        time_budget_s=args.time_budget,
+    )
+    model_pub = published.spec.compile()
+    model_cal = sysid.apply_param_modifiers(opt, robot.spec)
+    chunks = make_chunks(published, model_pub, rec, args.chunk, args.max_chunks)
+    sim_pub = simulate_chunks(published, chunks, model_pub)
+    chunks_cal = make_chunks(robot, model_cal, rec, args.chunk, args.max_chunks)
+    sim_cal = simulate_chunks(robot, chunks_cal, model_cal)
+
+    out.mkdir(parents=True, exist_ok=True)
+    stem = Path(ref.model).stem
+    cal_path = out / f"{stem}_calibrated.xml"
+    casters = caster_geoms(robot.spec, model_cal, ref.casters) if ref.casters else []
+    write_calibrated(ref, robot.layout, result.parameters, casters, cal_path, str(args.bag))
+    cal_ref = replace(ref, model=str(cal_path.resolve()))
+    p_pub, p_cal = robot_truth(ref), robot_truth(cal_ref)
+    unidentified = [r["name"] for r in result.parameters if r["status"] != "identified"]
+    report = {
+        "robot": ref.model,
+        "recording": str(args.bag),
+        "calibrated_robot": str(cal_path),
+        "a": p_cal.a_eff,
+        "b": p_cal.b_eff,
+        "published": {"a": p_pub.a_eff, "b": p_pub.b_eff},
+        "parameters": result.parameters,
+        "unidentified": unidentified,
+        "correlation": {"names": result.names, "matrix": np.round(result.correlation, 4).tolist()},
+        "residual": {
+            "published": {"cost": result.cost_published, **_rms(chunks, sim_pub)},
+            "calibrated": {"cost": result.cost_calibrated, **_rms(chunks_cal, sim_cal)},
+            "units": "cost: sum of squares of the residuals weighted by 1/RMS of each signal; *_rms: rad/s, m/s",
+        },
+        "seconds": result.seconds,
+        "iterations": result.evaluations,
+        "notes": result.notes + rec.notes,
+        "mapping_flags": "the calibrated file keeps the published names: map it with the same flags",
+    }
+    write_json(out / "fit.json", report)
+    meas = _signals_of_chunks(chunks, None)
+    plot_signals(
+        out / "fit.png",
+        meas,
+        {"published": _signals_of_chunks(chunks, sim_pub), "calibrated": _signals_of_chunks(chunks_cal, sim_cal)},
+        f"{stem}: recorded vs simulated from each chunk's recorded start ({args.bag})",
+    )
+    lines = [f"fit: {stem} to {args.bag} ({rec.duration:.3g} s) in {result.seconds:.0f} s"]
+    for r in result.parameters:
+        ci = f"± {r['ci95_halfwidth']:.2g}" if r["ci95_halfwidth"] is not None else "± inf"
+        lines.append(
+            f"  {r['name']:<16} published {r['published']:<10.4g} fitted {r['fitted']:<10.4g} {ci} {r['unit']}"
+            + ("" if r["status"] == "identified" else f"  NOT IDENTIFIED: {r['why']}")
+        )
+    lines.append(
+        f"  a = {p_cal.a_eff:.5g} (published {p_pub.a_eff:.5g}), b = {p_cal.b_eff:.5g} (published {p_pub.b_eff:.5g})"
+    )
+    lines.append(f"  residual cost {result.cost_published:.4g} published -> {result.cost_calibrated:.4g} calibrated")
+    lines.append(f"  wrote {out / 'fit.json'}, {cal_path}, {out / 'fit.png'}")
+    print("\n".join(lines))
+    if unidentified:
+        print(f"warning: not identified by this recording: {', '.join(unidentified)} (see fit.json)", file=sys.stderr)
+    return 0
+
+
+def _replay_main(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from bioform_mj.outputs.files import check_out_dir, write_json
+    from bioform_mj.robots.realdata.replay import compare, measured, plot_signals, replay
+    from bioform_mj.robots.realdata.simmodel import sim_spec
+
+    out = check_out_dir(args.out, "--out") if args.out else None
+    ref, robot, rec = _load(args)
+    robots = {"published": robot}
+    if args.calibrated:
+        if not Path(args.calibrated).is_file():
+            raise InputError(f"--calibrated {args.calibrated}: no such file")
+        robots["calibrated"] = sim_spec(replace(ref, model=str(Path(args.calibrated))))
+    meas = measured(rec)
+    sims = {name: replay(r, rec) for name, r in robots.items()}
+    report = {"recording": str(args.bag), "duration_s": rec.duration}
+    for name, sim in sims.items():
+        report[name] = compare(meas, sim)
+    lines = [f"replay: {Path(ref.model).stem} open loop over {rec.duration:.3g} s of {args.bag}"]
+    for name in sims:
+        c = report[name]
+        parts = [f"{k[:-4]} {v:.3g}" for k, v in c.items() if k.endswith("_rms") and v is not None]
+        lines.append(
+            f"  {name:<10} RMS difference: {', '.join(parts)} (rad/s, m/s)"
+            + (f"; position drift {c['drift_m']:.3g} m" if "drift_m" in c else "")
+        )
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        write_json(out / "replay.json", report)
+        plot_signals(out / "replay.png", meas, sims, f"open-loop replay of {args.bag}")
+        lines.append(f"  wrote {out / 'replay.json'}, {out / 'replay.png'}")
+    print("\n".join(lines))
+    return 0
+
+
+def _program_main(args: argparse.Namespace) -> int:
+    from bioform_mj.assess.check import ref_from_args
+    from bioform_mj.robots.params import robot_truth
+    from bioform_mj.robots.realdata.program import drive_program, program_torque
+
+    if not (args.seconds > 0 and args.rate > 0 and args.accel > 0):
+        raise InputError("--seconds, --rate and --accel must be > 0")
+    ref = ref_from_args(args.model, args)
+    p = robot_truth(ref)
+    tau = program_torque(p, args.accel)
+    prog = drive_program(tau, args.seconds, args.rate, args.seed)
+    print(
+        f"# drive program for {Path(ref.model).stem}: wheel torques up to {tau:.3g} N·m (forward positive), "
+        f"{args.seconds:g} s at {args.rate:g} Hz; apply open loop, record /joint_states (position, velocity, "
+        "effort = the applied torque), /odom and /imu"
+    )
+    print("time,left,right")
+    sys.stdout.write("".join(f"{t:.4f},{a:.6g},{b:.6g}\n" for t, a, b in prog))
+    return 0

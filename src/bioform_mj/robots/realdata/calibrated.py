@@ -1,0 +1,98 @@
+"""The calibrated robot file ``bioform robot fit`` writes, and what ``robot check`` says of one (issue 29).
+
+:func:`write_calibrated` loads the robot file as published (an MJCF as is; a URDF as the project imports
+it, design §12), writes the fitted values into it by name (the chassis body's mass and yaw inertia, the
+wheel joints' damping, frictionloss and armature, the casters' friction) and saves it as MJCF. The file
+carries where its numbers came from as the custom text ``bioform_calibration`` (one line: the recording,
+the date, each value and whether the recording identified it); :func:`calibration_note` reads it back
+from a compiled scene, for ``robot check``'s notes.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from bioform_mj.robots.layout import CONTACT_PRIORITY
+from bioform_mj.robots.refs import RobotRef
+
+__all__ = ["CALIBRATION_TEXT", "write_calibrated", "calibration_note"]
+
+#: name of the custom text a calibrated robot file carries
+CALIBRATION_TEXT = "bioform_calibration"
+
+
+def _source_spec(ref: RobotRef) -> mujoco.MjSpec:
+    from bioform_mj.robots.prepare import absolute_asset_files
+    from bioform_mj.robots.urdf import import_urdf, is_urdf
+
+    if is_urdf(Path(ref.model)):
+        return import_urdf(ref).spec
+    spec = mujoco.MjSpec.from_file(ref.model)
+    absolute_asset_files(spec)
+    return spec
+
+
+def write_calibrated(
+    ref: RobotRef, layout: Any, rows: list[dict[str, Any]], caster_geoms: list[str], path: Path, source: str
+) -> None:
+    """Write ``ref``'s robot with the fitted values of ``rows`` (fit.json's ``parameters``) to ``path``."""
+    from bioform_mj.robots.realdata.fit import explicit_base, set_yaw_inertia
+
+    spec = _source_spec(ref)
+    val = {r["name"]: r["fitted"] for r in rows}
+    axis, _ = explicit_base(spec, layout.base)
+    body = spec.body(layout.base)
+    if "mass" in val:
+        body.mass = float(val["mass"])
+    if "yaw_inertia" in val:
+        set_yaw_inertia(body, axis, float(val["yaw_inertia"]))
+    for side, j in zip(("L", "R"), layout.wheel_joints):
+        el = spec.joint(j)
+        if f"damping_{side}" in val:
+            d = np.array(el.damping, float)
+            d[0] = float(val[f"damping_{side}"])
+            el.damping = d
+        if f"frictionloss_{side}" in val:
+            el.frictionloss = float(val[f"frictionloss_{side}"])
+        if f"armature_{side}" in val:
+            el.armature = float(val[f"armature_{side}"])
+    if "caster_friction" in val:
+        for g in caster_geoms:
+            el = spec.geom(g)
+            if el is None:
+                continue
+            fr = np.array(el.friction, float)
+            fr[0] = float(val["caster_friction"])
+            el.friction = fr
+            el.condim = 3
+            el.priority = CONTACT_PRIORITY
+    when = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    values = ", ".join(
+        f"{r['name']} {r['fitted']:.4g} {r['unit']}".rstrip()
+        + ("" if r["status"] == "identified" else " (not identified)")
+        for r in rows
+    )
+    note = f"fitted by bioform robot fit from {source} on {when}: {values} (published: {Path(ref.model).name})"
+    for t in list(spec.texts):
+        if t.name == CALIBRATION_TEXT:
+            spec.delete(t)
+    spec.add_text(name=CALIBRATION_TEXT, data=note)
+    spec.compile()  # refuse to write a file that would not load
+    path.write_text(spec.to_xml())
+
+
+def calibration_note(model: mujoco.MjModel, prefix: str = "f1/") -> list[str]:
+    """``robot check``'s note on where a calibrated robot's numbers came from (empty for any other)."""
+    tid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, prefix + CALIBRATION_TEXT)
+    if tid < 0:
+        tid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, CALIBRATION_TEXT)
+    if tid < 0:
+        return []
+    adr, size = int(model.text_adr[tid]), int(model.text_size[tid])
+    text = bytes(model.text_data[adr : adr + size]).split(b"\0", 1)[0].decode(errors="replace")
+    return [f"calibrated robot: {text}"]

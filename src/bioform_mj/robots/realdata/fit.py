@@ -1,0 +1,672 @@
+"""``bioform robot fit``: a real robot's recording in, a calibrated robot out (issue 29; design §8, §13).
+
+The model is the project's own robot (:mod:`bioform_mj.robots.realdata.simmodel`: the file and mapping
+``robot check`` uses, on a floor). The recording is cut into chunks (default 2 s); each chunk is simulated
+open loop from the state the recording gives at its start (wheel angles and speeds, the body rolling with
+them) under the recorded wheel torques, and compared with what was measured: wheel speeds, and where the
+recording has them the body's forward speed (``/odom`` twist) and yaw rate (``/imu``, else ``/odom``).
+Each signal is weighted by one over its RMS, so wheels, speed and yaw rate count alike.
+
+The parameters are found by ``mujoco.sysid`` (MuJoCo's system-identification toolbox: its
+``ParameterDict``, residual pipeline, ``mujoco.rollout`` in parallel and least-squares optimiser) and their
+95 % confidence intervals by ``mujoco.sysid.calculate_intervals`` from the Jacobian at the optimum:
+
+==================  ==================================================  =========
+name                what (spec element)                                  unit
+==================  ==================================================  =========
+``mass``            the chassis body's mass (a payload at its CoM)       kg
+``yaw_inertia``     the chassis body's inertia about its vertical axis   kg·m²
+``damping_L/R``     each wheel joint's viscous damping                   N·m·s/rad
+``frictionloss_L/R``each wheel joint's dry friction                       N·m
+``armature_L/R``    each wheel joint's armature (rotor inertia · gear²)   kg·m²
+``caster_friction`` sliding friction of the mapping's casters on the floor  —
+==================  ==================================================  =========
+
+Armature is not fitted unless asked (``--fit ...,armature``): a wheel's armature, the mass and the yaw
+inertia act through the same two effective inertias (design §8: ``a_eff = 1/(m r + 2 I_w/r)``,
+``b_eff = l/(I r + 2 I_w l²/r)``), so a recording of torques and speeds cannot separate the three; fitted
+together, their intervals say so. A parameter is reported ``identified`` only when its interval is
+narrower than 30 % of its value (or than 5 % of its search range, for one found near zero); otherwise it is
+``not identified`` and its most correlated partners (``|ρ| > 0.9``) are named. Caster friction is fitted only
+when the mapping names casters (``--caster``).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from bioform_mj.core.errors import InputError
+from bioform_mj.robots.layout import CONTACT_PRIORITY
+from bioform_mj.robots.realdata.recording import Recording
+from bioform_mj.robots.realdata.simmodel import SimRobot, initial_state
+
+__all__ = [
+    "FIT_PARAMETERS",
+    "DEFAULT_FIT",
+    "Chunks",
+    "make_chunks",
+    "parameters",
+    "fit",
+    "FitResult",
+    "simulate_chunks",
+]
+
+FIT_PARAMETERS = ("mass", "yaw_inertia", "damping", "frictionloss", "armature", "caster_friction")
+DEFAULT_FIT = ("mass", "yaw_inertia", "damping", "frictionloss", "caster_friction")
+#: measured samples per second of a chunk compared with the simulation (Hz)
+GRID_HZ = 50.0
+#: finite-difference step of the optimiser's scaled variables (a tenth of a search range is 1)
+FD_STEP = 1e-3
+#: the optimiser stops when a step changes the scaled variables by less than this
+X_TOL = 1e-4
+
+
+def _sysid():
+    try:
+        from mujoco import sysid
+    except ImportError:  # pragma: no cover
+        sysid = None
+    if sysid is None or not hasattr(sysid, "optimize"):
+        raise InputError(
+            "bioform robot fit needs mujoco.sysid's dependencies (pip install 'mujoco[sysid]==4.0.0', or the "
+            "project's 'ros' extra)"
+        )
+    return sysid
+
+
+# ------------------------------------------------------------------ data
+@dataclass
+class Chunks:
+    """The recording cut for simulation: per chunk its start (s), initial state, controls and the measured
+    signals on a grid (chunk-local times from 0); ``weights``: per sensordata column (1/RMS, 0: not measured)."""
+
+    starts: list[float]
+    states: list[np.ndarray]
+    controls: list[Any]  # sysid TimeSeries of the two motors' ctrl (N·m)
+    measured: list[Any]  # sysid TimeSeries of the 8 sensordata columns
+    weights: np.ndarray
+    measured_cols: list[str]
+    length: float
+
+
+def _interp(t: np.ndarray, tt: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.stack([np.interp(t, tt, y[:, k]) for k in range(y.shape[1])], axis=1)
+
+
+def make_chunks(
+    robot: SimRobot, model: mujoco.MjModel, rec: Recording, length: float = 2.0, max_chunks: int = 12
+) -> Chunks:
+    """Cut ``rec`` into chunks of ``length`` s, at most ``max_chunks`` of them spread evenly (each starts from
+    the recorded state, so the open-loop drift of a long replay does not decide the fit)."""
+    sysid = _sysid()
+    TS = sysid.TimeSeries
+    mapping = TS.compute_all_sensor_mapping(model)
+    ctrl_map = TS.compute_all_control_mapping(model)
+    lay = robot.layout
+    sign = np.asarray(lay.wheel_sign, float)
+    # which motor drives which wheel (gear ±1: ctrl in N·m along the wheel's forward sense)
+    motor_ids = [model.actuator(m).id for m in lay.motors]
+    cols = ["left_speed", "right_speed"]
+    meas_full = np.zeros((len(rec.t), 8))
+    meas_full[:, 0:2] = rec.velocity
+    weights = np.zeros(8)
+    wheel_rms = float(np.sqrt(np.mean(rec.velocity**2))) or 1.0
+    weights[0:2] = 1.0 / wheel_rms
+    if len(rec.odom_t):
+        vx = np.interp(rec.t, rec.odom_t, rec.odom_twist[:, 0])
+        meas_full[:, 2] = vx
+        weights[2] = 1.0 / (float(np.sqrt(np.mean(vx**2))) or 1.0)
+        cols.append("vx")
+    yaw_src = (
+        (rec.imu_t, rec.imu_gyro[:, 2])
+        if len(rec.imu_t)
+        else (rec.odom_t, rec.odom_twist[:, 5])
+        if len(rec.odom_t)
+        else None
+    )
+    if yaw_src is not None:
+        wz = np.interp(rec.t, *yaw_src)
+        meas_full[:, 7] = wz
+        weights[7] = 1.0 / (float(np.sqrt(np.mean(wz**2))) or 1.0)
+        cols.append("wz")
+    yaw_pose = None
+    if len(rec.odom_t):
+        q = rec.odom_pose[:, 3:7]
+        yaw_pose = np.unwrap(
+            np.arctan2(2 * (q[:, 0] * q[:, 3] + q[:, 1] * q[:, 2]), 1 - 2 * (q[:, 2] ** 2 + q[:, 3] ** 2))
+        )
+    n_grid = int(round(length * GRID_HZ))
+    if rec.duration < length + 1.0 / GRID_HZ:
+        raise InputError(f"{rec.source}: {rec.duration:.3g} s of joint states, shorter than one {length:g} s chunk")
+    grid = np.arange(1, n_grid + 1) / GRID_HZ  # chunk-local measured times, s
+    dt = float(model.opt.timestep)
+    starts, states, controls, measured = [], [], [], []
+    n_all = int((rec.t[-1] - rec.t[0] + 1e-9) // length)
+    # at most max_chunks, spread evenly over the recording: the fit's cost stays bounded for a long one
+    picks = np.unique(np.round(np.linspace(0, n_all - 1, min(n_all, max_chunks))).astype(int))
+    for c in picks:
+        t0 = float(rec.t[0]) + c * length
+        k = int(np.searchsorted(rec.t, t0))
+        lo, hi = max(0, k - 2), min(len(rec.t), k + 3)
+        speed = rec.velocity[lo:hi].mean(axis=0)  # a 5-sample mean: the noise of one sample would kick the start
+        angle = np.array([np.interp(t0, rec.t, rec.position[:, i]) for i in range(2)])
+        yaw = float(np.interp(t0, rec.odom_t, yaw_pose)) if yaw_pose is not None else 0.0
+        states.append(initial_state(robot, model, angle, speed, yaw))
+        ct = np.arange(0, int(round(length / dt)) + 2) * dt
+        eff = rec.effort_at(t0 + ct)
+        ctrl = np.zeros((len(ct), model.nu))
+        for i in range(2):
+            ctrl[:, motor_ids[i]] = sign[i] * eff[:, i]
+        controls.append(TS(ct, ctrl, ctrl_map))
+        measured.append(TS(grid.copy(), _interp(t0 + grid, rec.t, meas_full), mapping))
+        starts.append(t0)
+    return Chunks(starts, states, controls, measured, weights, cols, length)
+
+
+# ------------------------------------------------------------------ parameters
+def explicit_base(spec: mujoco.MjSpec, base: str) -> tuple[int, float]:
+    """Make the chassis body's inertial explicit (as compiled) and return the principal axis nearest the
+    vertical and its inertia (kg·m²)."""
+    model = spec.compile()
+    b = model.body(base)
+    body = spec.body(base)
+    body.explicitinertial = True
+    body.fullinertia = np.full(6, np.nan)
+    body.mass = float(b.mass[0])
+    body.inertia = np.array(b.inertia, float)
+    body.ipos = np.array(b.ipos, float)
+    body.iquat = np.array(b.iquat, float)
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, np.array(b.iquat, float))
+    k = int(np.argmax(np.abs(R.reshape(3, 3)[2, :])))  # the principal axis (column) most along the body's z
+    return k, float(b.inertia[k])
+
+
+def caster_geoms(spec: mujoco.MjSpec, model: mujoco.MjModel, names: tuple[str, ...]) -> list[str]:
+    out = []
+    for n in names:
+        g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n)
+        if g >= 0:
+            out.append(n)
+            continue
+        b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n)
+        if b < 0:
+            raise InputError(f"--caster {n}: no geom or body of that name")
+        for g in range(model.ngeom):
+            if model.geom_bodyid[g] == b and (model.geom_contype[g] or model.geom_conaffinity[g]):
+                gname = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
+                if not gname:
+                    gname = f"bioform_caster_{g}"
+                    spec.geoms[g].name = gname
+                out.append(gname)
+    return out
+
+
+def set_yaw_inertia(body: mujoco.MjsBody, axis: int, value: float) -> None:
+    """Set the principal inertia ``axis`` of ``body`` to ``value`` (kg·m²); where that breaks the triangle
+    inequality (a yaw inertia above the sum of roll and pitch ones), the other two grow evenly to meet it
+    (a payload spread in the plane adds to both; a planar robot's roll and pitch barely matter)."""
+    inertia = np.array(body.inertia, float)
+    inertia[axis] = value
+    others = [k for k in range(3) if k != axis]
+    short = value - inertia[others].sum()
+    if short > 0:
+        inertia[others] += 0.5 * short * 1.001 + 1e-12
+    body.inertia = inertia
+
+
+@dataclass
+class ParamInfo:
+    """One fitted quantity: its name, unit, what it is, its published value."""
+
+    name: str
+    unit: str
+    what: str
+    published: float
+    scale: float = 1.0  # the optimiser's x is value / scale
+
+
+@dataclass
+class _Value:
+    """What a modifier reads: ``value`` in the parameter's own unit."""
+
+    value: np.ndarray
+
+
+def parameters(robot: SimRobot, rec: Recording, which: tuple[str, ...]) -> tuple[Any, list[ParamInfo]]:
+    """The ``mujoco.sysid.ParameterDict`` of the parameters in ``which`` (:data:`FIT_PARAMETERS`), their
+    modifiers writing into ``robot.spec``; bounds from the robot and the recording (a physical range)."""
+    sysid = _sysid()
+    spec, lay = robot.spec, robot.layout
+    axis, izz = explicit_base(spec, lay.base)
+    model = spec.compile()
+    m0 = float(spec.body(lay.base).mass)
+    tau = float(np.abs(rec.effort).max()) or 1e-3
+    wmax = float(np.abs(rec.velocity).max()) or 1.0
+    pd = sysid.ParameterDict()
+    info: list[ParamInfo] = []
+    sides = ("L", "R")
+
+    def add(name: str, nominal: float, lo: float, hi: float, modifier, unit: str, what: str) -> None:
+        # the optimiser works on x = value / scale (scale: a tenth of the search range), so that every x is
+        # O(1) and one finite-difference step (FD_STEP in x) is far above the solver's noise for all of them
+        lo, hi = min(lo, nominal), max(hi, nominal)
+        s = (hi - lo) / 10.0 or 1.0
+
+        def scaled(spec, p, modifier=modifier, s=s):
+            modifier(spec, _Value(p.value * s))
+
+        pd.add(sysid.Parameter(name, nominal / s, lo / s, hi / s, modifier=scaled))
+        info.append(ParamInfo(name, unit, what, float(nominal), s))
+
+    if "mass" in which:
+
+        def set_mass(s, p):
+            s.body(lay.base).mass = float(p.value[0])
+
+        add("mass", m0, 0.25 * m0, 4.0 * m0, set_mass, "kg", f"mass of the chassis body '{lay.base}'")
+    if "yaw_inertia" in which:
+
+        def set_izz(s, p):
+            set_yaw_inertia(s.body(lay.base), axis, float(p.value[0]))
+
+        add(
+            "yaw_inertia", izz, 0.25 * izz, 4.0 * izz, set_izz, "kg·m²", f"yaw inertia of the chassis body '{lay.base}'"
+        )
+    for kind, unit, hi, what in (
+        ("damping", "N·m·s/rad", 2.0 * tau / wmax, "viscous damping"),
+        ("frictionloss", "N·m", tau, "dry friction"),
+        ("armature", "kg·m²", None, "armature (rotor inertia × gear²)"),
+    ):
+        if kind not in which:
+            continue
+        for side, j in zip(sides, lay.wheel_joints):
+            jid = model.joint(j).id
+            if kind == "damping":
+                pub = float(model.dof_damping[model.jnt_dofadr[jid]])
+            elif kind == "frictionloss":
+                pub = float(model.dof_frictionloss[model.jnt_dofadr[jid]])
+            else:
+                pub = float(model.dof_armature[model.jnt_dofadr[jid]])
+                hi = pub + 2.0 * m0 * lay.wheel_radius**2
+
+            def mod(s, p, j=j, kind=kind):
+                el = s.joint(j)
+                v = float(p.value[0])
+                if kind == "damping":
+                    d = np.array(el.damping, float)
+                    d[0] = v
+                    el.damping = d
+                else:
+                    setattr(el, kind, v)
+
+            add(f"{kind}_{side}", pub, 0.0, hi, mod, unit, f"{what} of wheel joint '{j}'")
+    if "caster_friction" in which and robot.ref.casters:
+        geoms = caster_geoms(spec, model, robot.ref.casters)
+        pub = float(max(model.geom(g).friction[0] for g in geoms)) if geoms else 0.0
+        pub = pub if all(model.geom(g).condim[0] > 1 for g in geoms) else 0.0
+
+        def set_caster(s, p, geoms=tuple(geoms)):
+            for g in geoms:
+                el = s.geom(g)
+                fr = np.array(el.friction, float)
+                fr[0] = float(p.value[0])
+                el.friction = fr
+                el.condim = 3
+                el.priority = CONTACT_PRIORITY
+
+        add("caster_friction", pub, 0.0, 1.0, set_caster, "", f"sliding friction of the casters {', '.join(geoms)}")
+    if not len(pd.keys()):
+        raise InputError(f"--fit {','.join(which)}: nothing to fit on this robot")
+    return pd, info
+
+
+# ------------------------------------------------------------------ a starting point
+def initial_guess(robot: SimRobot, rec: Recording, info: list[ParamInfo], pd) -> np.ndarray:
+    """A starting point for the optimiser, from a linear regression on the recording (design §8, rolling
+    without slip): per wheel ``τ_i = A u̇_i + B u̇_j + d_i u_i + f_i sign(u_i)`` with ``u`` the forward wheel
+    rates (rad/s) and ``A ± B = r² M_eff/2, r² I_eff/(2 l²)``; the changes of ``M_eff``, ``I_eff`` against
+    the published robot go to the chassis mass and yaw inertia. Only where the fit starts: the open-loop
+    rollouts far from the truth are chaotic (a robot without its friction runs away), near it smooth.
+    Returns the scaled vector, clipped into the search ranges."""
+    from scipy.signal import savgol_filter
+
+    from bioform_mj.robots.params import robot_truth
+
+    x = pd.as_vector().copy()
+    lo, hi = pd.get_bounds()
+    lay = robot.layout
+    sign = np.asarray(lay.wheel_sign, float)
+    dt = float(np.median(np.diff(rec.t)))
+    win = max(5, int(round(0.1 / dt)) | 1)
+    if len(rec.t) <= win + 2:
+        return x
+    u = savgol_filter(rec.velocity, win, 2, axis=0) * sign
+    ud = savgol_filter(rec.velocity, win, 2, deriv=1, delta=dt, axis=0) * sign
+    tau = rec.effort * sign
+    moving = np.abs(u) > 0.05 * (np.abs(u).max() or 1.0)
+    r, l = lay.wheel_radius, lay.half_track
+    caster = _caster_regressor(robot, u, r, l) if any(p.name == "caster_friction" for p in info) else None
+    ncol = 6 + (caster is not None)
+    rows, rhs = [], []
+    for i, j in ((0, 1), (1, 0)):
+        for k in range(len(rec.t)):
+            if not moving[k, i]:
+                continue
+            row = np.zeros(ncol)
+            row[0], row[1] = ud[k, i], ud[k, j]
+            row[2 + i] = u[k, i]
+            row[4 + i] = np.sign(u[k, i])
+            if caster is not None:
+                row[6] = caster[k, i]
+            rows.append(row)
+            rhs.append(tau[k, i])
+    if len(rows) < 20:
+        return x
+    sol, *_ = np.linalg.lstsq(np.asarray(rows), np.asarray(rhs), rcond=None)
+    A, B, dL, dR, fL, fR = sol[:6]
+    try:
+        pub = robot_truth(robot.ref)
+        dm = 2 * (A + B) / r**2 - pub.mass_eff
+        dI = 2 * l**2 * (A - B) / r**2 - pub.inertia_eff
+    except Exception:  # noqa: BLE001 - only a starting point: keep the published inertias
+        dm = dI = 0.0
+    guess = {
+        "mass": dm,
+        "yaw_inertia": dI,
+        "damping_L": dL,
+        "damping_R": dR,
+        "frictionloss_L": fL,
+        "frictionloss_R": fR,
+    }
+    if caster is not None:
+        guess["caster_friction"] = sol[6]
+    for i, p in enumerate(info):
+        if p.name in ("mass", "yaw_inertia"):
+            v = p.published + guess[p.name]
+        elif p.name in guess:
+            v = guess[p.name]
+        else:  # no estimate (armature): the published value, moved off a search bound
+            v = x[i] * p.scale
+        if np.isfinite(v):
+            x[i] = np.clip(v / p.scale, lo[i] + 1e-3 * (hi[i] - lo[i]), hi[i] - 1e-3 * (hi[i] - lo[i]))
+    return x
+
+
+def _caster_regressor(robot: SimRobot, u: np.ndarray, r: float, l: float) -> np.ndarray | None:
+    """Per sample and wheel, the wheel torque a sliding caster of friction 1 takes (N·m): the casters'
+    loads ``N`` (N) at rest and contact points ``p`` (m, base frame, from the axle midpoint); the drag
+    ``F = −N ĉ`` against the caster's velocity ``v x̂ + ω ẑ × p`` maps to the wheels as
+    ``Q = (r/2) F_x ∓ (r/2l) (p × F)_z`` (left −, right +)."""
+    model = robot.spec.compile()
+    try:
+        geoms = caster_geoms(robot.spec, model, robot.ref.casters)
+    except InputError:
+        return None
+    ids = {model.geom(g).id for g in geoms}
+    data = mujoco.MjData(model)
+    data.qpos[:] = robot.rest_qpos
+    mujoco.mj_forward(model, data)
+    base = model.body(robot.layout.base).id
+    R = data.xmat[base].reshape(3, 3)
+    axle = data.xpos[base] + R @ robot.axle_base
+    pts = []
+    f6 = np.zeros(6)
+    for c in range(data.ncon):
+        con = data.contact[c]
+        if con.geom1 in ids or con.geom2 in ids:
+            mujoco.mj_contactForce(model, data, c, f6)
+            pts.append((abs(f6[0]), R.T @ (con.pos - axle)))
+    if not pts:
+        return None
+    v = r * (u[:, 0] + u[:, 1]) / 2
+    w = r * (u[:, 1] - u[:, 0]) / (2 * l)
+    out = np.zeros_like(u)
+    for n, p in pts:
+        vc = np.stack([v - w * p[1], w * p[0]], axis=1)
+        speed = np.linalg.norm(vc, axis=1)
+        ok = speed > 1e-3
+        F = np.zeros_like(vc)
+        F[ok] = -n * vc[ok] / speed[ok, None]
+        torque_z = p[0] * F[:, 1] - p[1] * F[:, 0]
+        out[:, 0] += r / 2 * F[:, 0] - r / (2 * l) * torque_z
+        out[:, 1] += r / 2 * F[:, 0] + r / (2 * l) * torque_z
+    return -out  # τ = ... + μ (−Q/μ): the torque the drive spends against the caster
+
+
+# ------------------------------------------------------------------ the fit
+class _OutOfTime(Exception):
+    """Raised from the optimiser's iteration callback when the fit's time budget is spent."""
+
+
+@dataclass
+class FitResult:
+    """What :func:`fit` found; ``parameters``: one dict per parameter (fit.json)."""
+
+    parameters: list[dict[str, Any]]
+    correlation: np.ndarray
+    names: list[str]
+    cost_published: float
+    cost_calibrated: float
+    seconds: float
+    evaluations: int
+    notes: list[str] = field(default_factory=list)
+
+
+def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int):
+    """A residual ``fn(x, params) -> ([r], None, None)`` over all chunks: ``mujoco.sysid.model_residual``
+    (one model compiled per parameter vector, the chunks rolled out in parallel by ``mujoco.rollout``) with a
+    ``modify_residual`` comparing each chunk's grid samples, weighted by 1/RMS per signal. A 2-D ``x``
+    (finite-difference columns) gives a 2-D residual, one column per ``x`` column."""
+    sysid = _sysid()
+    seqs = sysid.ModelSequences(
+        "robot",
+        robot.spec,
+        [f"chunk{k}" for k in range(len(chunks.states))],
+        chunks.states,
+        chunks.controls,
+        chunks.measured,
+    )
+    trajs = seqs.measured_rollout
+    w = chunks.weights
+
+    def modify_residual(params, pred, meas, model, return_pred_all, state=None, **_):
+        p = pred.interpolate(meas.times)
+        res = (meas.data - p) * w
+        return res[:, w > 0], sysid.TimeSeries(meas.times, p, meas.signal_mapping), meas
+
+    def build(p):
+        return sysid.apply_param_modifiers(p, robot.spec)
+
+    def one(x: np.ndarray, params) -> np.ndarray:
+        res, _, _ = sysid.model_residual(x, params, build, trajs, modify_residual=modify_residual, n_threads=n_threads)
+        return np.asarray(res).ravel()
+
+    def fn(x, params, **_):
+        if np.ndim(x) == 1:
+            return [one(x, params)], None, None
+        return [np.stack([one(x[:, k], params) for k in range(x.shape[1])], axis=1)], None, None
+
+    return fn
+
+
+def _flat(fn, x: np.ndarray, pd) -> np.ndarray:
+    return np.concatenate(fn(x, pd)[0])
+
+
+def fit(
+    robot: SimRobot,
+    rec: Recording,
+    which: tuple[str, ...] = DEFAULT_FIT,
+    *,
+    chunk_s: float = 2.0,
+    max_chunks: int = 12,
+    max_iters: int = 30,
+    time_budget_s: float = 60.0,
+    progress: bool | None = None,
+) -> tuple[FitResult, Any]:
+    """Fit ``which`` to the recording; returns the result and the fitted ``ParameterDict``."""
+    sysid = _sysid()
+    t_start = time.perf_counter()
+    progress = sys.stderr.isatty() if progress is None else progress
+    pd, info = parameters(robot, rec, which)
+    model = robot.spec.compile()
+    chunks = make_chunks(robot, model, rec, chunk_s, max_chunks)
+    n_threads = max(1, min(len(chunks.states), __import__("os").cpu_count() or 1))
+    fn = _residual_fn(robot, chunks, n_threads)
+    x0 = pd.as_vector()
+    lo, hi = pd.get_bounds()
+    r_pub = _flat(fn, x0, pd)
+    cost_pub = float(r_pub @ r_pub)
+    pd.update_from_vector(x0)
+    start = pd.copy()
+    notes = []
+    guess = initial_guess(robot, rec, info, pd)
+    r_guess = _flat(fn, guess, pd)
+    if float(r_guess @ r_guess) <= cost_pub:
+        start.update_from_vector(guess)
+    else:  # the regression's model (no casters, no slip) was further off than the maker's numbers
+        span = hi - lo
+        start.update_from_vector(np.clip(x0, lo + 1e-3 * span, hi - 1e-3 * span))
+        notes.append("the fit started from the published values (the linear estimate fitted worse)")
+    pd.update_from_vector(x0)
+    evals = {"n": 0, "best": start.as_vector(), "best_cost": math.inf}
+
+    def report(log) -> None:
+        evals["n"] = len(log)
+        e = log[-1]
+        if float(e.objective) < evals["best_cost"]:
+            evals["best"], evals["best_cost"] = np.asarray(e.candidate, float).ravel().copy(), float(e.objective)
+        if progress:
+            print(
+                f"\rfit: iteration {len(log)}/{max_iters}, cost {float(e.objective):.4g} "
+                f"(published {0.5 * cost_pub:.4g}), {time.perf_counter() - t_start:.0f} s",
+                end="",
+                file=sys.stderr,
+                flush=True,
+            )
+        if time.perf_counter() - t_start > time_budget_s:
+            raise _OutOfTime
+
+    from absl import logging as absl_logging  # mujoco.sysid's logger: its start-at-bound notice is ours to say
+
+    verbosity = absl_logging.get_verbosity()
+    absl_logging.set_verbosity(absl_logging.ERROR)
+    try:
+        opt, _ = sysid.optimize(
+            start,
+            fn,
+            optimizer="mujoco",
+            verbose=False,
+            max_iters=max_iters,
+            iter_callback=report,
+            eps=FD_STEP,
+            xtol=X_TOL,
+            output=io.StringIO(),  # the optimiser's own table: progress is report()'s one line on a terminal
+        )
+    except _OutOfTime:
+        opt = start.copy()
+        opt.update_from_vector(evals["best"])
+        notes.append(
+            f"the optimiser stopped at the time budget ({time_budget_s:g} s) after {evals['n']} iterations: "
+            "the best point so far is reported (a shorter --chunk or fewer --max-chunks is faster)"
+        )
+    finally:
+        absl_logging.set_verbosity(verbosity)
+    if progress:
+        print(file=sys.stderr)
+    x = opt.as_vector()
+    r = _flat(fn, x, opt)
+    if float(r @ r) > cost_pub:  # never report a robot that does worse than the published one
+        x = x0.copy()
+        opt.update_from_vector(x)
+        r = _flat(fn, x, opt)
+        notes.append(
+            "the fit found nothing better than the published values (they are reported; the recording may not "
+            "excite the robot, or the model lacks what the robot does: slip, backlash, a motor's dynamics)"
+        )
+    # the Jacobian at the optimum by forward differences, all columns in one parallel rollout
+    h = FD_STEP * np.maximum(1.0, np.abs(x))
+    h = np.where(x + h > hi, -h, h)
+    X = x[:, None] + np.diag(h)
+    RX = _flat(fn, X, opt)
+    J = (RX - r[:, None]) / h[None, :]
+    opt.update_from_vector(x)
+    sigma, half = sysid.calculate_intervals([r], J)
+    sd = np.sqrt(np.maximum(np.diag(sigma), 0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = sigma / np.outer(sd, sd)
+    corr = np.where(np.isfinite(corr), corr, 0.0)
+    names = list(opt.keys())
+    rows = []
+    for i, p in enumerate(info):
+        v, hw = float(x[i]) * p.scale, float(half[i]) * p.scale
+        lo_i, hi_i = float(lo[i]) * p.scale, float(hi[i]) * p.scale
+        rng = hi_i - lo_i
+        ident = math.isfinite(hw) and (hw <= 0.3 * abs(v) or hw <= 0.05 * rng)
+        partners = [
+            {"name": names[k], "rho": round(float(corr[i, k]), 3)}
+            for k in np.argsort(-np.abs(corr[i]))
+            if k != i and abs(corr[i, k]) > 0.9
+        ]
+        at_bound = v <= lo_i + 1e-6 * rng or v >= hi_i - 1e-6 * rng
+        why = []
+        if not ident:
+            why.append(
+                f"interval ±{hw:.3g} {p.unit}".rstrip() + (" (unbounded)" if not math.isfinite(hw) else "") + " is wide"
+            )
+        if partners and not ident:
+            why.append("correlated with " + ", ".join(f"{q['name']} (ρ = {q['rho']:+.2f})" for q in partners))
+        if at_bound:
+            why.append(f"at the bound of its search range [{lo_i:.4g}, {hi_i:.4g}]")
+        rows.append(
+            {
+                "name": p.name,
+                "what": p.what,
+                "unit": p.unit,
+                "published": p.published,
+                "fitted": v,
+                "ci95": [v - hw, v + hw] if math.isfinite(hw) else None,
+                "ci95_halfwidth": hw if math.isfinite(hw) else None,
+                "search_range": [lo_i, hi_i],
+                "status": "identified" if ident else "not identified",
+                "correlated_with": partners,
+                "why": "; ".join(why),
+            }
+        )
+    result = FitResult(
+        rows,
+        corr,
+        names,
+        cost_pub,
+        float(r @ r),
+        time.perf_counter() - t_start,
+        evals["n"],
+        [
+            f"{len(chunks.states)} chunks of {chunk_s:g} s (of {rec.duration:.3g} s recorded); compared: "
+            f"{', '.join(chunks.measured_cols)}",
+            *notes,
+        ],
+    )
+    return result, opt
+
+
+def simulate_chunks(robot: SimRobot, chunks: Chunks, model: mujoco.MjModel) -> list[np.ndarray]:
+    """Each chunk simulated with ``model``; per chunk the sensordata at its grid times (n_grid, 8)."""
+    from mujoco import rollout
+
+    out = []
+    data = mujoco.MjData(model)
+    for st, ctrl, meas in zip(chunks.states, chunks.controls, chunks.measured):
+        state, sens = rollout.rollout(model, data, st, ctrl.data[:-1])
+        t = state[0, :, 0]
+        out.append(_interp(meas.times, t, sens[0]))
+    return out

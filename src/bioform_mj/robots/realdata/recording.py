@@ -1,0 +1,348 @@
+"""A real robot's recording read into arrays (issue 29, design §8: the wheel torques and what they did).
+
+Three sources, one result (:class:`Recording`):
+
+- a rosbag2 folder (``metadata.yaml`` + MCAP or SQLite storage) or a bare ``.mcap`` file, read with
+  ``rosbags`` (the optional ``ros`` extra). Messages are streamed one at a time (a bag far larger than
+  memory is never loaded whole) and only the fields the fit uses are kept:
+  ``sensor_msgs/JointState`` (the two wheel joints' position, rad; velocity, rad/s; effort = the applied
+  torque, N·m), ``nav_msgs/Odometry`` (pose in the odometry frame; twist in the body frame, m/s and rad/s)
+  and ``sensor_msgs/Imu`` (angular velocity, rad/s), on the topics given (default ``/joint_states``,
+  ``/odom``, ``/imu``; odometry and IMU optional);
+- a CSV file with named columns, as a fallback: ``time`` (s), ``<joint>.position`` (rad),
+  ``<joint>.velocity`` (rad/s), ``<joint>.effort`` (N·m) for both wheel joints, optional ``odom.vx``
+  (m/s), ``odom.wz`` and ``imu.wz`` (rad/s).
+
+Times are the messages' header stamps (the bag's receive time where a stamp is zero), shifted so that the
+first joint state is at t = 0. Bad input raises :class:`~bioform_mj.core.errors.InputError` (exit 2) naming
+what is there: a missing topic or joint, time that goes backwards, a NaN or infinite effort or speed, a
+file that cannot be read.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from bioform_mj.core.errors import InputError
+
+__all__ = ["Recording", "Topics", "read_recording"]
+
+
+@dataclass(frozen=True)
+class Topics:
+    """Topic names of a recording (rosbag2/MCAP)."""
+
+    joint_states: str = "/joint_states"
+    odom: str = "/odom"
+    imu: str = "/imu"
+
+
+@dataclass
+class Recording:
+    """The arrays of one recording (SI units; times in s from the first joint state).
+
+    ``t``: joint-state times (n,); ``position``, ``velocity``, ``effort``: (n, 2), the left and right
+    wheel joints in that order (rad, rad/s, N·m). ``odom_t``/``odom_twist``: odometry times (m,) and the
+    body-frame twist (m, 6: vx, vy, vz, wx, wy, wz in m/s and rad/s); ``odom_pose``: (m, 7) x, y, z (m),
+    qw, qx, qy, qz. ``imu_t``/``imu_gyro``: IMU times and angular velocity (k, 3), rad/s. Absent streams
+    are empty arrays. ``source``: the file read; ``notes``: what was assumed.
+    """
+
+    source: str
+    joints: tuple[str, str]
+    t: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+    odom_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    odom_twist: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    odom_pose: np.ndarray = field(default_factory=lambda: np.zeros((0, 7)))
+    imu_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    imu_gyro: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    notes: list[str] = field(default_factory=list)
+
+    def effort_at(self, t: np.ndarray) -> np.ndarray:
+        """The wheel torques (N·m, (len(t), 2)) at times ``t`` (s), interpolated linearly between the
+        recorded efforts: a real robot's effort is a sample of a continuous torque (on the tb3 test recording
+        a zero-order hold, the torque held until the next sample, biased the yaw inertia by 6 %)."""
+        return np.stack([np.interp(t, self.t, self.effort[:, i]) for i in range(2)], axis=1)
+
+    @property
+    def duration(self) -> float:
+        """Length of the joint-state stream, s."""
+        return float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
+
+    def window(self, t0: float, t1: float) -> Recording:
+        """The part of the recording with ``t0 <= t <= t1`` (s), every stream cut alike."""
+
+        def cut(t: np.ndarray) -> np.ndarray:
+            return (t >= t0) & (t <= t1)
+
+        j, o, i = cut(self.t), cut(self.odom_t), cut(self.imu_t)
+        return Recording(
+            self.source,
+            self.joints,
+            self.t[j],
+            self.position[j],
+            self.velocity[j],
+            self.effort[j],
+            self.odom_t[o],
+            self.odom_twist[o],
+            self.odom_pose[o],
+            self.imu_t[i],
+            self.imu_gyro[i],
+            list(self.notes),
+        )
+
+
+def _check_stream(name: str, t: np.ndarray, what: str) -> None:
+    """Time must not go backwards; raise naming the first place it does."""
+    if len(t) > 1:
+        back = np.flatnonzero(np.diff(t) < 0)
+        if back.size:
+            k = int(back[0])
+            raise InputError(
+                f"{name}: time goes backwards on {what} at message {k + 1}: {t[k]:.9f} s then {t[k + 1]:.9f} s "
+                "(a recording must be in time order; re-record or sort it)"
+            )
+
+
+def _check_finite(name: str, t: np.ndarray, arr: np.ndarray, what: str) -> None:
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        k, col = np.argwhere(bad)[0]
+        raise InputError(f"{name}: {what} is {arr[k, col]} at t = {t[k]:.6g} s (column {col}): NaN or infinite")
+
+
+def _validate(rec: Recording) -> Recording:
+    name = rec.source
+    if len(rec.t) < 10:
+        raise InputError(f"{name}: only {len(rec.t)} joint states of {rec.joints[0]}/{rec.joints[1]}: too short to fit")
+    _check_stream(name, rec.t, "the joint states")
+    _check_stream(name, rec.odom_t, "the odometry")
+    _check_stream(name, rec.imu_t, "the IMU")
+    _check_finite(name, rec.t, rec.effort, "a wheel effort (applied torque)")
+    _check_finite(name, rec.t, rec.velocity, "a wheel velocity")
+    _check_finite(name, rec.t, rec.position, "a wheel position")
+    if len(rec.odom_t):
+        _check_finite(name, rec.odom_t, rec.odom_twist, "an odometry twist")
+    if len(rec.imu_t):
+        _check_finite(name, rec.imu_t, rec.imu_gyro, "an IMU angular velocity")
+    if float(rec.t[-1] - rec.t[0]) <= 0:
+        raise InputError(f"{name}: the joint states span no time")
+    return rec
+
+
+def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics = Topics()) -> Recording:
+    """Read ``path`` (rosbag2 folder, ``.mcap``/``.db3`` file, or ``.csv``) for the wheel joints ``joints``
+    (left, right). Raises :class:`InputError` (exit 2) for anything that cannot be used (module docstring)."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"--bag {p}: no such file or folder")
+    if p.is_file() and p.suffix.lower() == ".csv":
+        return _validate(_read_csv(p, joints))
+    return _validate(_read_bag(p, joints, topics))
+
+
+# ------------------------------------------------------------------ rosbag2 / MCAP
+def _stamp_s(msg: object) -> float:
+    """The header stamp, s (0 where the message has none)."""
+    st = getattr(getattr(msg, "header", None), "stamp", None)
+    return st.sec + 1e-9 * st.nanosec if st is not None else 0.0
+
+
+def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
+    try:
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:  # pragma: no cover - the optional extra
+        raise InputError(
+            "reading a rosbag2/MCAP recording needs the 'ros' extra: pip install 'bioform-mj[ros]' "
+            "(or give the recording as a CSV with named columns)"
+        ) from None
+    name = str(p)
+    js: dict[str, list] = {"t": [], "pos": [], "vel": [], "eff": []}
+    od: dict[str, list] = {"t": [], "twist": [], "pose": []}
+    im: dict[str, list] = {"t": [], "gyro": []}
+    try:
+        with AnyReader([p], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+            have = {c.topic: c.msgtype for c in reader.connections}
+            want = {topics.joint_states: "sensor_msgs/msg/JointState"}
+            if topics.joint_states not in have:
+                there = ", ".join(f"{k} ({v})" for k, v in sorted(have.items())) or "no topics"
+                raise InputError(
+                    f"{name}: no topic '{topics.joint_states}' with the wheel joint states (it has: {there}); "
+                    "name it with --joint-states-topic"
+                )
+            for topic, typ in ((topics.odom, "nav_msgs/msg/Odometry"), (topics.imu, "sensor_msgs/msg/Imu")):
+                if topic in have:
+                    want[topic] = typ
+            for topic, typ in want.items():
+                if have[topic] != typ:
+                    raise InputError(f"{name}: topic '{topic}' carries {have[topic]}, expected {typ}")
+            conns = [c for c in reader.connections if c.topic in want]
+            bag_t: dict[str, list[float]] = {t: [] for t in want}
+            no_effort = 0
+            idx: tuple[int, int] | None = None
+            for conn, bag_ns, raw in _stream(reader, conns, name):
+                msg = reader.deserialize(raw, conn.msgtype)
+                t = _stamp_s(msg)
+                if conn.topic != topics.joint_states or len(getattr(msg, "effort", ())) or not msg.name:
+                    bag_t[conn.topic].append(1e-9 * bag_ns)
+                if conn.topic == topics.joint_states:
+                    names = list(msg.name)
+                    if (
+                        idx is None
+                        or len(names) <= max(idx)
+                        or names[idx[0]] != joints[0]
+                        or names[idx[1]] != joints[1]
+                    ):
+                        missing = [j for j in joints if j not in names]
+                        if missing:
+                            if not names:
+                                continue
+                            raise InputError(
+                                f"{name}: '{topics.joint_states}' has no joint {', '.join(repr(m) for m in missing)} "
+                                f"(it has: {', '.join(repr(n) for n in names)}); map the robot's wheels with "
+                                "--left-wheel/--right-wheel or name the recorded joints with --left-joint/--right-joint"
+                            )
+                        idx = (names.index(joints[0]), names.index(joints[1]))
+                    if len(msg.effort) == 0:  # a state-only message (an exporter's last sample at t = T)
+                        no_effort += 1
+                        continue
+                    js["t"].append(t)
+                    for key, arr in (("pos", msg.position), ("vel", msg.velocity), ("eff", msg.effort)):
+                        if len(arr) == 0 and key != "eff":  # a driver that publishes no speeds (or angles)
+                            js[key].append((math.nan, math.nan))
+                            continue
+                        if len(arr) <= max(idx):
+                            what = {"pos": "position", "vel": "velocity", "eff": "effort"}[key]
+                            raise InputError(
+                                f"{name}: '{topics.joint_states}' at t = {t:.6g} s has no {what} for the wheels "
+                                f"({len(arr)} values for {len(names)} joints): the fit needs the effort (the "
+                                "applied torque) and a position or a velocity"
+                            )
+                        js[key].append((arr[idx[0]], arr[idx[1]]))
+                elif conn.topic == topics.odom:
+                    tw, ps = msg.twist.twist, msg.pose.pose
+                    od["t"].append(t)
+                    od["twist"].append(
+                        (tw.linear.x, tw.linear.y, tw.linear.z, tw.angular.x, tw.angular.y, tw.angular.z)
+                    )
+                    q = ps.orientation
+                    od["pose"].append((ps.position.x, ps.position.y, ps.position.z, q.w, q.x, q.y, q.z))
+                else:
+                    g = msg.angular_velocity
+                    im["t"].append(t)
+                    im["gyro"].append((g.x, g.y, g.z))
+    except InputError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - rosbags raises many types for a bad file: one line
+        raise InputError(f"{name}: cannot read the recording: {type(exc).__name__}: {exc}") from None
+    if not js["t"]:
+        what = f" ({no_effort} without an effort: the fit needs the applied torques)" if no_effort else ""
+        raise InputError(f"{name}: '{topics.joint_states}' holds no joint states{what}")
+    notes = [f"{no_effort} joint state(s) without an effort skipped"] if no_effort else []
+    # one clock for all topics: the header stamps where every topic has them (a stamp of 0 at sim time 0 is
+    # one), else the bag's receive times
+    streams = ((topics.joint_states, js), (topics.odom, od), (topics.imu, im))
+    if not all(any(d["t"]) for _, d in streams if d["t"]):
+        for topic, d in streams:
+            if d["t"]:
+                d["t"] = bag_t[topic]
+        notes.append("times are the bag's receive times (a topic's header stamps are all zero)")
+    t0 = js["t"][0]
+    pos, vel = np.asarray(js["pos"], float), np.asarray(js["vel"], float)
+    tj = np.asarray(js["t"], float)
+    if np.isnan(vel).all() and np.isfinite(pos).all() and len(tj) > 2:
+        vel = np.stack([np.gradient(pos[:, i], tj) for i in range(2)], axis=1)
+        notes.append("the joint states carry no velocity: wheel speeds differentiated from the positions")
+    elif np.isnan(pos).all() and np.isfinite(vel).all() and len(tj) > 1:
+        dt = np.diff(tj, prepend=tj[0])[:, None]
+        pos = np.cumsum(0.5 * (vel + np.vstack([vel[:1], vel[:-1]])) * dt, axis=0)
+        notes.append("the joint states carry no position: wheel angles integrated from the velocities")
+    js["pos"], js["vel"] = pos, vel
+    if not od["t"]:
+        notes.append(f"no odometry on '{topics.odom}': body velocities not fitted")
+    if not im["t"]:
+        notes.append(f"no IMU on '{topics.imu}': the IMU's yaw rate not fitted")
+    return Recording(
+        name,
+        joints,
+        np.asarray(js["t"]) - t0,
+        np.asarray(js["pos"], float),
+        np.asarray(js["vel"], float),
+        np.asarray(js["eff"], float),
+        np.asarray(od["t"]) - t0 if od["t"] else np.zeros(0),
+        np.asarray(od["twist"], float).reshape(-1, 6),
+        np.asarray(od["pose"], float).reshape(-1, 7),
+        np.asarray(im["t"]) - t0 if im["t"] else np.zeros(0),
+        np.asarray(im["gyro"], float).reshape(-1, 3),
+        notes,
+    )
+
+
+def _stream(reader, conns, name: str) -> Iterator:
+    """The reader's messages one at a time; a truncated file's error is raised when met."""
+    yield from reader.messages(connections=conns)
+
+
+# ------------------------------------------------------------------ CSV
+def _read_csv(p: Path, joints: tuple[str, str]) -> Recording:
+    name = str(p)
+    try:
+        with open(p, newline="") as fh:
+            reader = csv.reader(fh)
+            try:
+                header = [h.strip() for h in next(reader)]
+            except StopIteration:
+                raise InputError(f"{name}: empty CSV file") from None
+            need = ["time"] + [f"{j}.{f}" for j in joints for f in ("position", "velocity", "effort")]
+            missing = [c for c in need if c not in header]
+            if missing:
+                raise InputError(
+                    f"{name}: no column {', '.join(repr(m) for m in missing)} (it has: "
+                    f"{', '.join(repr(h) for h in header)}); expected time, <joint>.position, <joint>.velocity, "
+                    "<joint>.effort for both wheel joints"
+                )
+            col = {h: i for i, h in enumerate(header)}
+            rows = []
+            for k, row in enumerate(reader):
+                if not row:
+                    continue
+                if len(row) != len(header):
+                    raise InputError(f"{name}: line {k + 2} has {len(row)} fields, the header {len(header)}")
+                try:
+                    rows.append([float(x) if x.strip() else math.nan for x in row])
+                except ValueError as exc:
+                    raise InputError(f"{name}: line {k + 2}: {exc}") from None
+    except OSError as exc:
+        raise InputError(f"{name}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{name}: not a text CSV file") from None
+    a = np.asarray(rows, float).reshape(-1, len(header))
+    t = a[:, col["time"]]
+
+    def pair(f: str) -> np.ndarray:
+        return np.stack([a[:, col[f"{joints[0]}.{f}"]], a[:, col[f"{joints[1]}.{f}"]]], axis=1)
+
+    rec = Recording(name, joints, t - (t[0] if len(t) else 0.0), pair("position"), pair("velocity"), pair("effort"))
+    rec.t = rec.t if len(t) else t
+    if "odom.vx" in col and "odom.wz" in col:
+        tw = np.zeros((len(t), 6))
+        tw[:, 0], tw[:, 5] = a[:, col["odom.vx"]], a[:, col["odom.wz"]]
+        rec.odom_t, rec.odom_twist = rec.t.copy(), tw
+        rec.odom_pose = np.tile([0, 0, 0, 1.0, 0, 0, 0], (len(t), 1))
+    else:
+        rec.notes.append("no odom.vx/odom.wz columns: body velocities not fitted")
+    if "imu.wz" in col:
+        g = np.zeros((len(t), 3))
+        g[:, 2] = a[:, col["imu.wz"]]
+        rec.imu_t, rec.imu_gyro = rec.t.copy(), g
+    return rec

@@ -1,0 +1,139 @@
+"""The robot as the fit and the replay simulate it: the project's prepared robot on a floor, with sensors.
+
+:func:`sim_spec` loads the robot exactly as ``bioform robot check`` and ``bioform run`` do
+(:func:`bioform_mj.robots.prepare.prepare_robot`, the same :class:`~bioform_mj.robots.RobotRef` mapping), puts
+it on a plane and replaces its sensors by the ones a recording measures: the two wheel joints' speeds
+(``jointvel``, rad/s), and at the base body's origin (ROS ``base_link``) its body-frame linear velocity
+(``velocimeter``, m/s) and angular velocity (``gyro``, rad/s). The two motors take the wheel torque in N·m
+(``ctrl = wheel_sign · effort``: the recorded effort is about the joint's own axis).
+
+:func:`initial_state` builds the full MuJoCo state a recording implies at one instant: the robot standing
+as it settles on the floor at its recorded heading, its wheels at the recorded angles and speeds and the
+body moving as the wheels roll it (design §8: no slip at the start).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from bioform_mj.robots.layout import RobotLayout
+from bioform_mj.robots.prepare import prepare_robot
+from bioform_mj.robots.refs import RobotRef
+
+__all__ = ["SimRobot", "sim_spec", "initial_state", "SENSOR_COLUMNS"]
+
+#: the sensordata columns: left, right wheel speed (rad/s), velocimeter x y z (m/s), gyro x y z (rad/s)
+SENSOR_COLUMNS = ("left_speed", "right_speed", "vx", "vy", "vz", "wx", "wy", "wz")
+
+
+@dataclass
+class SimRobot:
+    """A fit/replay model: its spec (edited by the fit's parameters), the layout, the settled rest pose."""
+
+    spec: mujoco.MjSpec
+    layout: RobotLayout
+    ref: RobotRef
+    rest_qpos: np.ndarray  # settled on the floor at heading 0, wheels at 0
+    free_qpos: int  # qpos address of the base's free joint
+    free_dof: int
+    wheel_qpos: tuple[int, int]
+    wheel_dof: tuple[int, int]
+    axle_base: np.ndarray  # axle midpoint in the base frame, m
+
+
+def sim_spec(ref: RobotRef) -> SimRobot:
+    """The prepared robot on a floor with the recording's sensors (module docstring); raises
+    :class:`~bioform_mj.robots.layout.ModelError` (exit 2) as ``robot check`` would."""
+    spec, layout, _, _ = prepare_robot(ref)
+    for s in list(spec.sensors):
+        spec.delete(s)
+    spec.worldbody.add_geom(name="bioform_floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    base = spec.body(layout.base)
+    base.add_site(name="bioform_base_link", pos=[0, 0, 0], size=[0.005, 0, 0], group=5)
+    for side, j in zip(("left", "right"), layout.wheel_joints):
+        spec.add_sensor(
+            name=f"bioform_{side}_speed",
+            type=mujoco.mjtSensor.mjSENS_JOINTVEL,
+            objtype=mujoco.mjtObj.mjOBJ_JOINT,
+            objname=j,
+        )
+    spec.add_sensor(
+        name="bioform_velocimeter",
+        type=mujoco.mjtSensor.mjSENS_VELOCIMETER,
+        objtype=mujoco.mjtObj.mjOBJ_SITE,
+        objname="bioform_base_link",
+    )
+    spec.add_sensor(
+        name="bioform_gyro",
+        type=mujoco.mjtSensor.mjSENS_GYRO,
+        objtype=mujoco.mjtObj.mjOBJ_SITE,
+        objname="bioform_base_link",
+    )
+    model = spec.compile()
+    free = [
+        j
+        for j in range(model.njnt)
+        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE and model.jnt_bodyid[j] == model.body(layout.base).id
+    ]
+    fj = free[0]
+    wj = [model.joint(j).id for j in layout.wheel_joints]
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    for _ in range(int(0.5 / model.opt.timestep)):  # settle on the floor
+        mujoco.mj_step(model, data)
+    rest = data.qpos.copy()
+    rest[[int(model.jnt_qposadr[j]) for j in wj]] = 0.0
+    return SimRobot(
+        spec,
+        layout,
+        ref,
+        rest,
+        int(model.jnt_qposadr[fj]),
+        int(model.jnt_dofadr[fj]),
+        tuple(int(model.jnt_qposadr[j]) for j in wj),
+        tuple(int(model.jnt_dofadr[j]) for j in wj),
+        np.asarray(layout.axle, float),
+    )
+
+
+def _yaw_quat(yaw: float) -> np.ndarray:
+    return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+
+
+def initial_state(
+    robot: SimRobot, model: mujoco.MjModel, angle: np.ndarray, speed: np.ndarray, yaw: float = 0.0
+) -> np.ndarray:
+    """The full-physics state (``mjSTATE_FULLPHYSICS``) at wheel angles ``angle`` (rad) and speeds ``speed``
+    (rad/s, the joints' own sense), heading ``yaw`` (rad); the body velocity that rolling implies."""
+    lay = robot.layout
+    data = mujoco.MjData(model)
+    q = robot.rest_qpos.copy()
+    a = robot.free_qpos
+    mujoco.mju_mulQuat(q[a + 3 : a + 7], _yaw_quat(yaw), robot.rest_qpos[a + 3 : a + 7].copy())
+    for k in range(2):
+        q[robot.wheel_qpos[k]] = angle[k]
+    data.qpos[:] = q
+    mujoco.mj_kinematics(model, data)
+    r, l = lay.wheel_radius, lay.half_track
+    fwd = np.asarray(lay.wheel_sign, float) * np.asarray(speed, float) * r  # forward rim speeds, m/s
+    v, w = 0.5 * (fwd[0] + fwd[1]), (fwd[1] - fwd[0]) / (2 * l)
+    base = model.body(lay.base).id
+    R = data.xmat[base].reshape(3, 3)
+    heading = R[:, 0] - R[2, 0] * np.array([0, 0, 1.0])
+    heading /= np.linalg.norm(heading) or 1.0
+    omega = np.array([0.0, 0.0, w])
+    axle_world = data.xpos[base] + R @ robot.axle_base
+    v_origin = v * heading + np.cross(omega, data.xpos[base] - axle_world)
+    qv = np.zeros(model.nv)
+    d = robot.free_dof
+    qv[d : d + 3] = v_origin  # free joint: linear velocity in the world frame
+    qv[d + 3 : d + 6] = R.T @ omega  # angular velocity in the body frame
+    for k in range(2):
+        qv[robot.wheel_dof[k]] = speed[k]
+    data.qvel[:] = qv
+    state = np.empty(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS))
+    mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    return state

@@ -1,0 +1,257 @@
+"""Test-only: a "real robot's" recording, written without the project's exporter or model code (issue 29 item 4).
+
+A published robot file is changed the way a real robot differs from its maker's numbers (a payload on the
+chassis, wheel damping and dry friction in the gearboxes), simulated by a plain MuJoCo loop that applies an
+excitation torque program to the two wheel joints, and written as a rosbag2 folder (MCAP storage) with
+``rosbags``' writer: ``/joint_states`` (wheel angle, speed, applied torque), ``/odom`` (pose and body-frame
+twist) and ``/imu`` (orientation, angular velocity, specific force), each with Gaussian sensor noise.
+
+Nothing here imports ``bioform_mj``: the fit (``bioform robot fit``) must find these numbers from the bag
+alone, so a shared bug cannot make the two agree by construction. Also a CSV writer for the fallback format.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+MODELS = Path(__file__).resolve().parents[1] / "src" / "bioform_mj" / "robots" / "models"
+
+
+@dataclass
+class Truth:
+    """How the "real" robot differs from its published file (SI units)."""
+
+    payload_kg: float = 0.0  # added to the chassis body's mass, at its centre of mass
+    payload_yaw_kgm2: float = 0.0  # added to the chassis body's z inertia
+    damping: tuple[float, float] = (0.0, 0.0)  # wheel joint damping, N·m·s/rad (left, right)
+    frictionloss: tuple[float, float] = (0.0, 0.0)  # wheel joint dry friction, N·m
+    armature: tuple[float, float] | None = None  # wheel joint armature, kg·m² (None: as published)
+    caster_friction: float | None = None  # sliding friction of the caster geoms (None: as published)
+    casters: tuple[str, ...] = ("back_caster",)
+    joints: tuple[str, str] = ("left_wheel", "right_wheel")
+    base: str = "base"
+
+
+def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
+    """The published file with the truth's changes and a floor, compiled."""
+    spec = mujoco.MjSpec.from_file(str(robot_file))
+    for k in list(spec.keys):
+        spec.delete(k)
+    for a in list(spec.actuators):  # torques go in as qfrc_applied; a DC motor at 0 V would brake (back-EMF)
+        spec.delete(a)
+    for s in list(spec.sensors):  # some name the actuators; the recording is written from the state
+        spec.delete(s)
+    base = spec.body(truth.base)
+    base.mass = base.mass + truth.payload_kg
+    inertia = np.array(base.inertia, float)
+    inertia[2] += truth.payload_yaw_kgm2
+    base.inertia = inertia
+    for name, d, f in zip(truth.joints, truth.damping, truth.frictionloss):
+        j = spec.joint(name)
+        damping = np.array(j.damping, float)  # MuJoCo 4: [linear, ...]; the linear coefficient
+        damping[0] = d
+        j.damping = damping
+        j.frictionloss = f
+    if truth.armature is not None:
+        for name, a in zip(truth.joints, truth.armature):
+            spec.joint(name).armature = a
+    if truth.caster_friction is not None:
+        for g in truth.casters:
+            geom = spec.geom(g)
+            geom.friction = [truth.caster_friction, 0.005, 0.0001]
+            geom.condim = 3
+            geom.priority = 2  # its own friction wins against the floor's
+    spec.worldbody.add_geom(name="test_floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    return spec.compile()
+
+
+def torque_program(duration: float, tau: float, seed: int = 0) -> callable:
+    """Wheel torques (N·m) against time: zero-mean pulse pairs (forward, back, turn left, turn right, and
+    single wheels) of random amplitude 0.3–1 × ``tau`` and length 0.3–0.8 s, each followed by its negative, and
+    pauses; so the robot speeds up and slows down in every mode and comes back near rest."""
+    rng = np.random.default_rng(seed)
+    modes = np.array([[1, 1], [1, -1], [-1, 1], [1, 0], [0, 1], [1, 0.5], [0.5, 1]], float)
+    seg_t, seg_u = [0.0], [np.zeros(2)]
+    t = 0.3
+    while t < duration:
+        u = modes[rng.integers(len(modes))] * tau * rng.uniform(0.3, 1.0) * rng.choice([-1, 1])
+        d = rng.uniform(0.3, 0.8)
+        seg_t += [t, t + d, t + 2 * d]
+        seg_u += [u, -u, np.zeros(2)]
+        t += 2 * d + rng.uniform(0.1, 0.4)
+    seg_t, seg_u = np.array(seg_t), np.array(seg_u)
+
+    def program(time: float) -> np.ndarray:
+        return seg_u[np.searchsorted(seg_t, time, side="right") - 1]
+
+    return program
+
+
+def simulate(model: mujoco.MjModel, truth: Truth, duration: float, tau: float, seed: int = 0) -> dict:
+    """Step the true model with the torque program; samples at every step (s, rad, rad/s, N·m, m, m/s)."""
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    for _ in range(300):  # settle on the floor
+        mujoco.mj_step(model, data)
+    data.time = 0.0
+    program = torque_program(duration, tau, seed)
+    dofs = [int(model.joint(j).dofadr[0]) for j in truth.joints]
+    qadr = [int(model.joint(j).qposadr[0]) for j in truth.joints]
+    base = model.body(truth.base).id
+    n = int(round(duration / model.opt.timestep))
+    out = {k: [] for k in ("t", "q", "qd", "tau", "pos", "quat", "vbody", "wbody", "acc")}
+    vel6 = np.zeros(6)
+    acc6 = np.zeros(6)
+    for _ in range(n + 1):
+        u = program(data.time)
+        data.qfrc_applied[:] = 0
+        data.qfrc_applied[dofs] = u
+        mujoco.mj_forward(model, data)
+        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, base, vel6, 1)  # body frame: ang, lin
+        mujoco.mj_rnePostConstraint(model, data)
+        mujoco.mj_objectAcceleration(model, data, mujoco.mjtObj.mjOBJ_BODY, base, acc6, 1)
+        out["t"].append(data.time)
+        out["q"].append(data.qpos[qadr].copy())
+        out["qd"].append(data.qvel[dofs].copy())
+        out["tau"].append(u.copy())
+        out["pos"].append(data.xpos[base].copy())
+        out["quat"].append(data.xquat[base].copy())
+        out["vbody"].append(vel6[3:].copy())
+        out["wbody"].append(vel6[:3].copy())
+        out["acc"].append(acc6[3:].copy())
+        mujoco.mj_step(model, data)
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def _stamp(ts, t_ns: int):
+    Time = ts.types["builtin_interfaces/msg/Time"]
+    return Time(sec=int(t_ns // 1_000_000_000), nanosec=int(t_ns % 1_000_000_000))
+
+
+def write_bag(
+    path: Path,
+    sim: dict,
+    truth: Truth,
+    *,
+    noise: float = 0.01,
+    rate_hz: float = 100.0,
+    start_ns: int = 1_700_000_000_000_000_000,
+    topics: tuple[str, str, str] = ("/joint_states", "/odom", "/imu"),
+    joint_names: tuple[str, str] | None = None,
+    seed: int = 1,
+    velocities: bool = True,
+) -> None:
+    """Write the simulation as a rosbag2 folder (MCAP) at ``rate_hz``; ``noise``: standard deviation of the
+    speed noise (rad/s on wheels, m/s and rad/s on the body); angles get 1e-3 rad, torques 2 % of their scale;
+    ``velocities=False``: the joint states carry no velocity (as some drivers publish)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    rng = np.random.default_rng(seed)
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    Header = T["std_msgs/msg/Header"]
+    JointState = T["sensor_msgs/msg/JointState"]
+    Odometry = T["nav_msgs/msg/Odometry"]
+    Imu = T["sensor_msgs/msg/Imu"]
+    Pose, PoseCov = T["geometry_msgs/msg/Pose"], T["geometry_msgs/msg/PoseWithCovariance"]
+    Twist, TwistCov = T["geometry_msgs/msg/Twist"], T["geometry_msgs/msg/TwistWithCovariance"]
+    Point, Quat, Vec3 = T["geometry_msgs/msg/Point"], T["geometry_msgs/msg/Quaternion"], T["geometry_msgs/msg/Vector3"]
+    names = list(joint_names or truth.joints)
+    step = max(1, int(round(1.0 / (rate_hz * (sim["t"][1] - sim["t"][0])))))
+    tau_scale = float(np.abs(sim["tau"]).max()) or 1.0
+    cov9, cov36 = np.zeros(9), np.zeros(36)
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        cj = w.add_connection(topics[0], JointState.__msgtype__, typestore=ts)
+        co = w.add_connection(topics[1], Odometry.__msgtype__, typestore=ts)
+        ci = w.add_connection(topics[2], Imu.__msgtype__, typestore=ts)
+        for k in range(0, len(sim["t"]), step):
+            t_ns = start_ns + int(round(sim["t"][k] * 1e9))
+            st = _stamp(ts, t_ns)
+            js = JointState(
+                header=Header(stamp=st, frame_id=""),
+                name=names,
+                position=sim["q"][k] + rng.normal(0, 1e-3, 2),
+                velocity=sim["qd"][k] + rng.normal(0, noise, 2) if velocities else np.zeros(0),
+                effort=sim["tau"][k] + rng.normal(0, 0.02 * tau_scale, 2),
+            )
+            w.write(cj, t_ns, ts.serialize_cdr(js, JointState.__msgtype__))
+            p, q = sim["pos"][k], sim["quat"][k]
+            v, om = sim["vbody"][k] + rng.normal(0, noise, 3), sim["wbody"][k] + rng.normal(0, noise, 3)
+            od = Odometry(
+                header=Header(stamp=st, frame_id="odom"),
+                child_frame_id="base_link",
+                pose=PoseCov(
+                    pose=Pose(position=Point(x=p[0], y=p[1], z=p[2]), orientation=Quat(x=q[1], y=q[2], z=q[3], w=q[0])),
+                    covariance=cov36,
+                ),
+                twist=TwistCov(
+                    twist=Twist(linear=Vec3(x=v[0], y=v[1], z=v[2]), angular=Vec3(x=om[0], y=om[1], z=om[2])),
+                    covariance=cov36,
+                ),
+            )
+            w.write(co, t_ns, ts.serialize_cdr(od, Odometry.__msgtype__))
+            g = sim["wbody"][k] + rng.normal(0, noise, 3)
+            a = sim["acc"][k] + rng.normal(0, 0.05, 3)
+            im = Imu(
+                header=Header(stamp=st, frame_id="imu_link"),
+                orientation=Quat(x=q[1], y=q[2], z=q[3], w=q[0]),
+                orientation_covariance=cov9,
+                angular_velocity=Vec3(x=g[0], y=g[1], z=g[2]),
+                angular_velocity_covariance=cov9,
+                linear_acceleration=Vec3(x=a[0], y=a[1], z=a[2]),
+                linear_acceleration_covariance=cov9,
+            )
+            w.write(ci, t_ns, ts.serialize_cdr(im, Imu.__msgtype__))
+
+
+def write_csv(path: Path, sim: dict, truth: Truth, rate_hz: float = 100.0, noise: float = 0.01, seed: int = 1) -> None:
+    """The same recording as a CSV with named columns: ``time`` (s), ``<joint>.position`` (rad),
+    ``<joint>.velocity`` (rad/s), ``<joint>.effort`` (N·m), ``odom.vx`` (m/s), ``odom.wz`` and ``imu.wz`` (rad/s)."""
+    rng = np.random.default_rng(seed)
+    step = max(1, int(round(1.0 / (rate_hz * (sim["t"][1] - sim["t"][0])))))
+    cols = ["time"] + [f"{j}.{f}" for j in truth.joints for f in ("position", "velocity", "effort")]
+    cols += ["odom.vx", "odom.wz", "imu.wz"]
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(cols)
+        for k in range(0, len(sim["t"]), step):
+            row = [sim["t"][k]]
+            for i in range(2):
+                row += [sim["q"][k, i], sim["qd"][k, i] + rng.normal(0, noise), sim["tau"][k, i]]
+            row += [sim["vbody"][k, 0] + rng.normal(0, noise), sim["wbody"][k, 2] + rng.normal(0, noise)]
+            row += [sim["wbody"][k, 2] + rng.normal(0, noise)]
+            w.writerow([f"{x:.9g}" for x in row])
+
+
+def record(
+    out: Path,
+    robot: str = "tb3",
+    truth: Truth | None = None,
+    duration: float = 20.0,
+    tau: float = 0.06,
+    fmt: str = "bag",
+    seed: int = 0,
+    **kw,
+) -> Truth:
+    """Simulate the shipped robot ``robot`` changed by ``truth`` and write ``out`` (a bag folder or a CSV)."""
+    truth = truth or Truth()
+    model = true_model(MODELS / f"{robot}_robot.xml", truth)
+    sim = simulate(model, truth, duration, tau, seed)
+    if fmt == "csv":
+        write_csv(out, sim, truth)
+    else:
+        write_bag(out, sim, truth, **kw)
+    return truth
+
+
+if __name__ == "__main__":  # python tests/realdata_recorder.py OUT_DIR: a 60 s tb3 recording, for timing
+    import sys
+
+    t = Truth(payload_kg=0.3, payload_yaw_kgm2=0.001, damping=(0.002, 0.0025), frictionloss=(0.004, 0.003))
+    record(Path(sys.argv[1]), duration=float(sys.argv[2]) if len(sys.argv) > 2 else 60.0, truth=t)
