@@ -269,12 +269,20 @@ class FormationParallelEnv(ParallelEnv):
 
     def _plant_for(self, sc: Scenario, poses: np.ndarray, draws: Mapping[str, np.ndarray]):
         """The plant of the episode scenario ``sc`` starting at ``poses`` (n, 3). The ideal plant is
-        built anew (microseconds); a MuJoCo scene is compiled once, its robots then moved to each
-        episode's start in ``qpos0`` (:func:`~.randomize.set_start`; no recompilation)."""
+        built anew (microseconds); a MuJoCo scene is compiled once, at the scenario's initial poses
+        as written, its robots then moved to each episode's start in ``qpos0``
+        (:func:`~.randomize.set_start`; no recompilation, 0.2 s saved per reset): an episode depends
+        on its seed alone, not on the episodes before it. A start other than the written one equals a
+        fresh build of it (``bioform run``) within rounding, not bit for bit."""
         from ..sim import make_plant
 
-        if self._plant is None:
-            self._build_plant(sc)
+        if self._plant is None:  # at the scenario's poses as written: every start is moved from the same build
+            b = self.base_scenario
+            self._build_plant(
+                dataclasses.replace(
+                    b, formation=dataclasses.replace(b.formation, init_jitter=0.0, init_jitter_heading=-1.0)
+                )
+            )
         if self._plant_kind() == "ideal":
             self._plant = make_plant(sc)
             if "c_true" in draws:
