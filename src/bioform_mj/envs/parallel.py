@@ -41,12 +41,21 @@ from typing import Any
 
 import numpy as np
 
-from ..control.kernel import estimator_advance
 from ..engine import Bounds, check, describe
 from ..errors import Diverged, InputError
+from ..plants.mujoco_contacts import EVENTS as _EVENTS
 from ..scenario_config import Scenario
 from ..scenario_load import load as load_scenario
-from .kernels import direct_torque, sense_errors, track_velocity
+from .kernels import (
+    actions_within,
+    clip_into,
+    control_phase,
+    formation_error,
+    sense_errors,
+    step_rewards,
+    velocity_error,
+)
+from .kernels import observations as obs_kernel
 from .randomize import MAX_REDRAWS, Randomization, scale_friction, set_start
 
 try:  # the optional extra [rl]
@@ -170,6 +179,14 @@ class FormationParallelEnv(ParallelEnv):
         self._nbr_edges = [np.flatnonzero(src == i).tolist() for i in range(sc.n)]
         self.K = max(1, max(len(x) for x in self._nbrs))
         self.obs_size = 2 + 3 + 2 + 6 * self.K + 6
+        self._slots = np.full((sc.n, self.K), -1, dtype=np.int64)  # in-neighbour slot -> edge index (or -1)
+        for i, edges in enumerate(self._nbr_edges):
+            self._slots[i, : len(edges)] = edges
+        self._ones_e = np.ones(len(graph.src))
+        self._zeros_n = np.zeros(sc.n)
+        self._lacc = np.asarray(graph.leader_access, dtype=float)
+        self._off = np.asarray(sc.formation.offsets, dtype=float).reshape(sc.n, 2)
+        self._leader_frame = sc.formation.frame == "leader"
         self._plant = None
         self._built_sc: Scenario | None = None  # the scenario the plant was built from (its start poses)
         self._sc = sc
@@ -429,8 +446,12 @@ class FormationParallelEnv(ParallelEnv):
                 mp, mv = f.sense(k, t, mp, mv)
             if f.has_comm:
                 comm, lp, lv = f.comm(k, t, st.state.est_pose, st.state.est_vel, lp, lv)
-        self._mp, self._mv = np.array(mp, dtype=float), np.array(mv, dtype=float)
-        self._comm, self._lp_rx, self._lv_rx = comm, np.array(lp, dtype=float), np.array(lv, dtype=float)
+        if f is None:  # fresh arrays of observe() and read-only rows of the leader's trajectory: no copies
+            self._mp, self._mv, self._lp_rx, self._lv_rx = mp, mv, lp, lv
+        else:
+            self._mp, self._mv = np.array(mp, dtype=float), np.array(mv, dtype=float)
+            self._lp_rx, self._lv_rx = np.array(lp, dtype=float), np.array(lv, dtype=float)
+        self._comm = comm
         self._comm_in = st.comm_in(comm)
         sense_errors(self._g, self._s, self._lp_rx, self._lv_rx, self._mp, self._mv, self._comm_in, learn)
 
@@ -464,15 +485,10 @@ class FormationParallelEnv(ParallelEnv):
         divergence or None, new contact events (n,), the agents that acted)``; what a copy replays."""
         g, s, k = self._g, self._s, self.k
         mp, mv = self._measure()
-        if self.action_mode == "velocity":
-            track_velocity(g, s, mv, u)
-        else:
-            direct_torque(g, s, u)
-        self._stats_control(mv)
-        tau = np.array(s.tau, dtype=float)
+        tau = np.empty((self.n, 2))
+        control_phase(g, s, mv, u, self.action_mode == "velocity", self._verr, self._vel, tau)
         if self._faults is not None and self._faults._lim is not None:  # weakened motors deliver no more
             tau = np.clip(tau, -self._faults._lim, self._faults._lim)
-        estimator_advance(g, s)
         diverged = None
         try:
             self._events(k)
@@ -487,14 +503,16 @@ class FormationParallelEnv(ParallelEnv):
         fe = self._formation_error(k)
         self._stats_sample(k, fe)
         tip = getattr(self._plant, "tip_step", None)
-        newly = np.zeros(self.n, dtype=bool) if tip is None else (np.asarray(tip) >= 0) & ~self._tipped
-        self._tipped |= newly
-        eff = ((tau / self._tau_max[:, None]) ** 2).mean(axis=1)
+        newly = self._zeros_n
+        if tip is not None and tip.max() >= 0:
+            newly = ((tip >= 0) & ~self._tipped).astype(float)
+            self._tipped |= newly > 0
         w = self.weights
         end = diverged is not None or bool(self._tipped.any())
         hits = self._new_contacts()
-        r = -self.dt * (w["formation"] * np.where(np.isfinite(fe), fe, 0.0) + w["effort"] * eff) - w["tipped"] * newly
-        r = r - w["collision"] * hits
+        r = np.empty(self.n)
+        step_rewards(fe, tau, self._tau_max, newly, hits, w["formation"], w["effort"], w["tipped"],
+                     w["collision"], self.dt, r)  # fmt: skip
         if end:
             r = r - w["terminal"] * max(0.0, (self.N - k) * self.dt)
         trunc = k >= self.N and not end
@@ -508,10 +526,9 @@ class FormationParallelEnv(ParallelEnv):
     def _new_contacts(self) -> np.ndarray:
         """Contact events (robots and obstacles) of each follower in the period just ended (n,), from the
         plant's contact watch (MuJoCo, design §19; zeros for a plant without one)."""
-        watch = getattr(self._plant, "contact_watch", None)
-        if watch is None:
-            return np.zeros(self.n)
-        ev = np.asarray(watch().events, dtype=float).sum(axis=1)  # since the plant's reset
+        if not hasattr(self._plant, "contacts"):
+            return self._zeros_n
+        ev = self._plant.contacts.contacts.ci[:, :, _EVENTS].sum(axis=1).astype(float)  # since the plant's reset
         new, self._events_seen = ev - self._events_seen, ev
         return new
 
@@ -526,6 +543,8 @@ class FormationParallelEnv(ParallelEnv):
             raise ValueError(f"no action for live agent(s) {', '.join(missing)}")
         try:
             u = np.array([actions[a] for a in self.possible_agents], dtype=float)
+            if u.shape == (self.n, 2) and actions_within(u, self._acc_low, self._acc_high):  # the usual case
+                return clip_into(u, self._low, self._high)
         except (ValueError, TypeError) as exc:  # ragged or non-numeric: find which agent
             for a in self.possible_agents:
                 x = np.asarray(actions[a])
@@ -550,41 +569,34 @@ class FormationParallelEnv(ParallelEnv):
 
         if k == 0:
             self._evq = EventQueue(self._sc.events, self.dt)
-        self._evq.apply(k, self._plant)  # a payload: c_true changes, the learner is not told (as in bioform run)
+            self._ev_next = self._evq.next_step()
+        if self._ev_next is not None and k >= self._ev_next:
+            self._evq.apply(k, self._plant)
+            self._ev_next = self._evq.next_step()  # a payload: c_true changes, the learner is not told
 
     # ------------------------------------------------------------------ observations
     def _observations(self, agents: list[str] | None = None) -> dict[str, np.ndarray]:
         s, comm = self._s, self._comm
         mp, mv = self._measure()
         lp, lv = self._lp_rx, self._lv_rx  # the leader as this step's network delivers it
-        lacc = np.asarray(self.graph.leader_access, dtype=float)
+        lacc = self._lacc
         if comm is not None:
             lacc = lacc * np.asarray(comm.leader_w, dtype=float)
         rp = s.est_pose[self.graph.dst] if comm is None or comm.recv_pose is None else comm.recv_pose
         rv = s.est_vel[self.graph.dst] if comm is None or comm.recv_vel is None else comm.recv_vel
-        ew = np.ones(len(self.graph.src)) if comm is None else np.asarray(comm.edge_w, dtype=float)
-        out = {}
-        for a in self.agents if agents is None else agents:
-            i = self._index[a]
-            o = np.zeros(self.obs_size)
-            o[0:2] = mv[i]
-            o[2:5] = s.err[i]
-            o[5:7] = s.est_vel[i]
-            own = s.est_pose[i]
-            c, sn = math.cos(mp[i, 2]), math.sin(mp[i, 2])
-            for q, e in enumerate(self._nbr_edges[i]):
-                if ew[e] > 0:  # a link that is down delivers nothing
-                    o[7 + 6 * q : 13 + 6 * q] = _relative(rp[e], rv[e], own, s.est_vel[i], c, sn)
-            if lacc[i] > 0:
-                o[7 + 6 * self.K :] = _relative(lp, lv, own, s.est_vel[i], c, sn)
-            np.clip(o, -self.obs_bound, self.obs_bound, out=o)
-            out[a] = o.astype(self._dtype, copy=False)
-        return out
+        ew = self._ones_e if comm is None else np.asarray(comm.edge_w, dtype=float)
+        O = np.zeros((self.n, self.obs_size))  # a new array each step: the agents' rows are views of it
+        obs_kernel(O, mp, mv, s.err, s.est_pose, s.est_vel, self._slots, ew, rp, rv, lacc, lp, lv, self.obs_bound)
+        if self._dtype != O.dtype:
+            O = O.astype(self._dtype)
+        idx = self._index
+        return {a: O[idx[a]] for a in (self.agents if agents is None else agents)}
 
     def _formation_error(self, k: int) -> np.ndarray:
-        from ..sim import slots_of
-
-        return np.hypot(*(self._pose[:, :2] - slots_of(self._sc, self.L_pose[k])).T)
+        """True formation error (n,) m at control step ``k`` (the arithmetic of ``slots_of`` and ``np.hypot``)."""
+        out = np.empty(self.n)
+        formation_error(self._pose, self.L_pose[k], self._off, self._leader_frame, out)
+        return out
 
     # ------------------------------------------------------------------ episode statistics
     def _stats_reset(self) -> None:
@@ -595,8 +607,7 @@ class FormationParallelEnv(ParallelEnv):
         self._stats_sample(0, self._formation_error(0))
 
     def _stats_control(self, mv: np.ndarray) -> None:
-        s = self._s
-        self._verr += np.abs(s.cmd[:, 0] - self._vel[:, 0]) + np.abs(s.cmd[:, 1] - self._vel[:, 1])
+        velocity_error(self._verr, self._s.cmd, self._vel)
 
     def _stats_sample(self, k: int, fe: np.ndarray) -> None:
         if k % self.stride == 0 and k < self.N:
