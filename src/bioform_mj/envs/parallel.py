@@ -17,8 +17,14 @@ pose enter an observation.
 Action: ``action = "velocity"`` (default): ``[υ_cmd m/s, ω_cmd rad/s]`` tracked by the paper's
 sliding-mode torque law with the scenario's learner (eqs. 37-39; the method's ``-learning``
 suffix decides whether ``ĉ`` learns); ``action = "torque"``: wheel torques ``[τ_L, τ_R]`` N·m
-within ``±τ_max``. An action outside its space, NaN, a missing or unknown agent is a
-``ValueError`` naming it: nothing is clipped silently.
+within ``±τ_max``. The action space is float32: an action (float32 or float64) within float32
+rounding of a bound is taken and clipped onto it; one outside the space by more than that, NaN,
+a missing or unknown agent is a ``ValueError`` naming it.
+
+Seeds (Gymnasium's convention): ``reset(seed=s)`` runs the episode of seed ``s`` and reseeds
+:attr:`~FormationParallelEnv.np_random`; ``reset()`` draws the next episode's seed from it.
+``randomize=`` draws start and domain parameters per episode (:mod:`.randomize`). Pickles and
+copies rebuild the plant and replay the episode (bit for bit).
 
 Reward per agent and step (weights in ``reward=``, defaults :data:`REWARD_WEIGHTS`), an integral
 over the period so that an episode's return does not depend on the control rate:
