@@ -4,19 +4,15 @@ A trainer turns it on with ``parallel_env(..., randomize={key: (low, high), ...}
 ``reset`` each key's value is drawn uniformly in ``[low, high]`` from the episode's own random
 stream (seeded by the episode seed, so an episode is a function of its seed alone). The keys:
 
-=================  ==========  ============================================================
-key                unit        what is drawn (per episode)
-=================  ==========  ============================================================
-``position``       m           an offset added to each follower's initial x and y (2·n draws)
-``heading``        rad         an offset added to each follower's initial heading (n draws)
-``c_true``         –           a factor on each follower's true ``[a, b]`` (2·n draws; ideal plant)
-``payload``        kg          a point mass at each follower's axle midpoint from t = 0 (n draws)
-``friction``       –           a factor on every sliding friction of the scene (1 draw; MuJoCo)
-``actuator``       –           each follower's wheel torque limit × this factor (n draws; a fault)
-``faults.packet_loss``, ``faults.delay``, ``leader.speed``, ``leader.amplitude``,
-``leader.frequency``, ``leader.radius``, ``plant.gyro_noise``, ``plant.gyro_bias``:
-                   the key's   the scenario's own number (1 draw), as ``--set KEY=VALUE`` would set it
-=================  ==========  ============================================================
+- ``position`` (m): an offset added to each follower's initial x and y (2·n draws);
+- ``heading`` (rad): an offset added to each follower's initial heading (n draws);
+- ``c_true`` (factor): on each follower's true ``[a, b]`` (2·n draws; ideal plant);
+- ``payload`` (kg): a point mass at each follower's axle midpoint from t = 0 (n draws);
+- ``friction`` (factor): on every sliding friction of the scene (1 draw; MuJoCo);
+- ``actuator`` (factor): each follower's wheel torque limit for the whole episode (n draws; a fault);
+- ``faults.packet_loss``, ``faults.delay``, ``leader.speed``, ``leader.amplitude``,
+  ``leader.frequency``, ``leader.radius``, ``plant.gyro_noise``, ``plant.gyro_bias`` (the key's
+  unit): the scenario's own number (1 draw), as ``--set KEY=VALUE`` would set it.
 
 The controller's prior is the nominal robot: the velocity action's learner starts from the
 scenario's ``ĉ(0)`` whatever ``c_true``, ``payload`` or ``friction`` were drawn (as a payload
