@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from bioform_mj.control.cbf import cbf_filter
-from bioform_mj.errors import ScenarioError
-from bioform_mj.scenario import load
-from bioform_mj.sim import simulate
+from bioform_mj.core.errors import ScenarioError
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load
 from crossing import CROSSING
 
 

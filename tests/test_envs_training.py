@@ -289,7 +289,7 @@ def test_a_moved_mujoco_start_equals_a_fresh_build_within_rounding():
     """The MuJoCo scene is compiled once at the written poses and each start set in ``qpos0``: the robots'
     poses after reset equal those of a scene compiled at that start (``bioform run``'s) within 1e-12 m/rad,
     and the written start (no randomisation drawn) is bit for bit the fresh build's."""
-    from bioform_mj.sim import make_plant
+    from bioform_mj.run.simulate import make_plant
 
     env = _mk("mujoco", randomize=RAND)
     env.reset(seed=11)

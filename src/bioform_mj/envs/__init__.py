@@ -9,10 +9,10 @@ policy in it. Design §20; docs/envs.md.
 
 from __future__ import annotations
 
-from .parallel import ACTIONS, OBS_FIELDS, REWARD_WEIGHTS, FormationParallelEnv, parallel_env
-from .policy import ControllerPolicy, run_episode
-from .randomize import KEYS as RANDOMIZE_KEYS
-from .single import FollowerEnv, follower_env
+from bioform_mj.envs.parallel import ACTIONS, OBS_FIELDS, REWARD_WEIGHTS, FormationParallelEnv, parallel_env
+from bioform_mj.envs.policy import ControllerPolicy, run_episode
+from bioform_mj.envs.randomize import KEYS as RANDOMIZE_KEYS
+from bioform_mj.envs.single import FollowerEnv, follower_env
 
 
 def env(scenario="paper", **options):
@@ -28,7 +28,7 @@ aec_env = env
 
 def batch_env(*args, **kwargs):
     """The batched environment on MuJoCo Warp (:func:`.batch.batch_env`; optional extra ``gpu``)."""
-    from .batch import batch_env as _batch_env
+    from bioform_mj.envs.batch import batch_env as _batch_env
 
     return _batch_env(*args, **kwargs)
 

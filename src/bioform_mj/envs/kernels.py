@@ -3,7 +3,7 @@
 The environment runs the paper's distributed estimator for every follower (so each agent's
 observation holds what the communication graph gives it), and, in ``action = "velocity"``,
 the paper's sliding-mode torque law with the online learner tracking the agent's
-``(υ_cmd, ω_cmd)``. Everything here calls the equations of ``control/equations.py`` and the
+``(υ_cmd, ω_cmd)``. Everything here calls the equations of ``core/equations.py`` and the
 kernels of ``control/kernel.py`` (written once); only the order differs: the agent, not the
 kinematic controller, supplies the velocity command.
 """
@@ -12,8 +12,7 @@ from __future__ import annotations
 
 import math
 
-from ..control.equations import njit
-from ..control.kernel import (
+from bioform_mj.control.kernel import (
     apply_torque,
     estimator_advance,
     estimator_consensus,
@@ -22,6 +21,7 @@ from ..control.kernel import (
     follower_torques,
     learner_update,
 )
+from bioform_mj.core.equations import njit
 
 
 @njit

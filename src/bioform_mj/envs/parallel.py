@@ -47,12 +47,9 @@ from typing import Any
 
 import numpy as np
 
-from ..engine import Bounds, check, describe
-from ..errors import Diverged, InputError
-from ..plants.mujoco_contacts import EVENTS as _EVENTS
-from ..scenario_config import Scenario
-from ..scenario_load import load as load_scenario
-from .kernels import (
+from bioform_mj.core.engine import Bounds, check, describe
+from bioform_mj.core.errors import Diverged, InputError
+from bioform_mj.envs.kernels import (
     actions_within,
     clip_into,
     control_phase,
@@ -61,8 +58,11 @@ from .kernels import (
     step_rewards,
     velocity_error,
 )
-from .kernels import observations as obs_kernel
-from .randomize import MAX_REDRAWS, Randomization, scale_friction, set_start
+from bioform_mj.envs.kernels import observations as obs_kernel
+from bioform_mj.envs.randomize import MAX_REDRAWS, Randomization, scale_friction, set_start
+from bioform_mj.plants.mujoco.contacts import EVENTS as _EVENTS
+from bioform_mj.scenario.config import Scenario
+from bioform_mj.scenario.loader import load as load_scenario
 
 try:  # the optional extra [rl]
     from gymnasium import spaces
@@ -103,7 +103,7 @@ def _scenario_of(scenario: str | Path | Scenario, overrides: Any = None) -> Scen
     if isinstance(scenario, Scenario):
         if overrides:
             raise ValueError("overrides= needs a preset name or TOML path, not a Scenario object")
-        from ..scenario_load import checked
+        from bioform_mj.scenario.loader import checked
 
         return checked(scenario)  # as simulate: a Scenario changed in Python is checked as load checks a file
     return load_scenario(scenario, overrides)
@@ -114,7 +114,7 @@ class FormationParallelEnv(ParallelEnv):
 
     Parameters
     ----------
-    scenario : a preset name, a TOML path or a :class:`~bioform_mj.scenario.Scenario`.
+    scenario : a preset name, a TOML path or a :class:`~bioform_mj.scenario.config.Scenario`.
     action : ``"velocity"`` or ``"torque"``.
     reward : weights overriding :data:`REWARD_WEIGHTS` (unknown names are refused).
     v_max, w_max : bounds of the velocity action (m/s, rad/s); default ``limits.speed`` bounded to 2 m/s,
@@ -264,8 +264,8 @@ class FormationParallelEnv(ParallelEnv):
         self.L_vel = np.ascontiguousarray(lv, dtype=float)
 
     def _build_stack(self, sc: Scenario, plant_c_true: np.ndarray | None) -> None:
-        from ..control.stack import ControlStack
-        from ..sim import stack_params
+        from bioform_mj.control.stack import ControlStack
+        from bioform_mj.run.simulate import stack_params
 
         c = np.array(sc.plant.c_true, dtype=float)[None, :].repeat(sc.n, 0) if plant_c_true is None else plant_c_true
         tau_max = getattr(self._plant, "tau_max", None) if self._plant is not None else None
@@ -274,8 +274,8 @@ class FormationParallelEnv(ParallelEnv):
     def _build_plant(self, sc: Scenario) -> None:
         """Build the scenario's plant at ``sc``'s initial poses and the control stack for its nominal
         ``c_true`` (the learner's prior in every episode: randomised parameters are not told to it)."""
-        from ..errors import InputError
-        from ..sim import make_plant
+        from bioform_mj.core.errors import InputError
+        from bioform_mj.run.simulate import make_plant
 
         try:
             self._plant = make_plant(sc)
@@ -297,7 +297,7 @@ class FormationParallelEnv(ParallelEnv):
         (:func:`~.randomize.set_start`; no recompilation, 0.2 s saved per reset): an episode depends
         on its seed alone, not on the episodes before it. A start other than the written one equals a
         fresh build of it (``bioform run``) within rounding, not bit for bit."""
-        from ..sim import make_plant
+        from bioform_mj.run.simulate import make_plant
 
         if self._plant is None:  # at the scenario's poses as written: every start is moved from the same build
             b = self.base_scenario
@@ -367,7 +367,7 @@ class FormationParallelEnv(ParallelEnv):
 
     def _start(self, ep: int) -> None:
         """Everything of ``reset`` but the random stream: the episode of seed ``ep``."""
-        from ..sim import initial_estimates
+        from bioform_mj.run.simulate import initial_estimates
 
         base = self.base_scenario
         sc = base if ep == base.sim.seed else dataclasses.replace(base, sim=dataclasses.replace(base.sim, seed=ep))
@@ -407,7 +407,7 @@ class FormationParallelEnv(ParallelEnv):
         self._tau_max = np.broadcast_to(np.asarray(st.p.tau_max, dtype=float), (self.n,))
         self._faults = None
         if sc.faults.per_step:  # faults.py: the same Faults object, in the same order, as bioform run
-            from ..faults import Faults
+            from bioform_mj.run.faults import Faults
 
             self._faults = Faults(sc, self.graph, np.array(self._tau_max))
             st.set_tau_max(np.array(self._tau_max))
@@ -571,7 +571,7 @@ class FormationParallelEnv(ParallelEnv):
         return np.clip(u, self._low, self._high)  # within float32 rounding of a bound: onto it
 
     def _events(self, k: int) -> None:
-        from ..runloop import EventQueue
+        from bioform_mj.run.loop import EventQueue
 
         if k == 0:
             self._evq = EventQueue(self._sc.events, self.dt)
@@ -640,7 +640,7 @@ class FormationParallelEnv(ParallelEnv):
         """Per follower the run metrics of ``bioform run``'s ``summary.json`` for this episode so far:
         ``total_velocity_error`` (Table I's metric), ``final_formation_error_m``, ``rms_formation_error_m``,
         ``c_hat``, ``outcome`` and every outcome in ``outcomes`` (``sim.follower_outcomes``)."""
-        from ..sim import follower_outcomes
+        from bioform_mj.assess.outcomes import follower_outcomes
 
         sc, n = self._sc, self.n
         fe_rows = np.array(self._rows_fe).reshape(-1, n)
@@ -654,12 +654,12 @@ class FormationParallelEnv(ParallelEnv):
         sig = controller.signals() if controller is not None and hasattr(controller, "signals") else {}
         if sig.get("c_hat") is not None:  # the controller's own learner, not the environment's
             c_hat = np.array(sig["c_hat"], dtype=float)
-        from ..outcomes import severity
-        from ..runsummary import _contact_outcomes
+        from bioform_mj.assess.outcomes import severity
+        from bioform_mj.run.summary import contact_outcomes
 
         ctrl = controller if controller is not None else self._stack
         oc = follower_outcomes(sc, self._plant, ctrl, logd, final, c_hat, self.dt)
-        contact = _contact_outcomes(self._plant, n, self.dt)
+        contact = contact_outcomes(self._plant, n, self.dt)
         oc = [sorted(o + contact[i][1], key=severity) for i, o in enumerate(oc)]
 
         followers = []
@@ -706,7 +706,7 @@ class FormationParallelEnv(ParallelEnv):
         if not hasattr(self, "_pose"):
             raise RuntimeError("render() before reset(): call reset() first")
         if self._renderer is None:
-            from .render import EnvRenderer
+            from bioform_mj.envs.render import EnvRenderer
 
             self._renderer = EnvRenderer(self)
         return self._renderer.frame(self)

@@ -34,8 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
-from ..scenario_config import EventCfg, Scenario
+from bioform_mj.core.errors import InputError
+from bioform_mj.scenario.config import EventCfg, Scenario
 
 #: the scenario's own scalar numbers a trainer may draw (``section.field``)
 SCENARIO_KEYS: tuple[str, ...] = (
@@ -88,7 +88,7 @@ class Randomization:
     """
 
     def __init__(self, spec: Mapping[str, Any] | None, base: Scenario, t_end: float) -> None:
-        from ..scenario_load import checked
+        from bioform_mj.scenario.loader import checked
 
         self.ranges: dict[str, tuple[float, float]] = {}
         if spec is None:

@@ -40,9 +40,9 @@ class EnvRenderer:
     simulated time the caller means to take (the camera smooths over one second of them)."""
 
     def __init__(self, env: Any, width: int = WIDTH, height: int = HEIGHT, fps: float = 30.0) -> None:
-        from ..outputs.gl import make_renderer
-        from ..outputs.video import FrameCapture, _Caption, _Replay, follower_rgb
-        from ..scene import robot_unit
+        from bioform_mj.outputs.gl import make_renderer
+        from bioform_mj.outputs.video import FrameCapture, _Caption, _Replay, follower_rgb
+        from bioform_mj.robots.scene import robot_unit
 
         self.width, self.height = int(width), int(height)
         self.capture = FrameCapture(fps)
@@ -57,7 +57,7 @@ class EnvRenderer:
 
     def _sample(self, env: Any) -> None:
         """Append the environment's state now to the capture (as ``FrameCapture.sample`` does in a run)."""
-        from ..sim import slots_of
+        from bioform_mj.assess.outcomes import slots_of
 
         c, k = self.capture, env.k
         lp = env.L_pose[k]
@@ -81,7 +81,7 @@ class EnvRenderer:
         """The picture of the environment now, ``(height, width, 3)`` uint8."""
         import mujoco
 
-        from ..outputs.video import _AZIMUTH, _ELEVATION, LEADER_RGB, _add_geoms, _Trails, auto_camera_path
+        from bioform_mj.outputs.video import _AZIMUTH, _ELEVATION, LEADER_RGB, _add_geoms, _Trails, auto_camera_path
 
         if not self._fresh:
             self._sample(env)

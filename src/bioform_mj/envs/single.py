@@ -20,8 +20,8 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-from .parallel import FormationParallelEnv, parallel_env
-from .policy import ControllerPolicy
+from bioform_mj.envs.parallel import FormationParallelEnv, parallel_env
+from bioform_mj.envs.policy import ControllerPolicy
 
 
 class FollowerEnv(gymnasium.Env):
