@@ -327,3 +327,23 @@ def test_gymnasium_vector_env_auto_resets_explore():
     a, b = run(), run()
     assert a.tobytes() == b.tobytes()
     assert len(a) >= 34 and len({row.tobytes() for row in a}) == len(a)
+
+
+@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
+def test_a_follower_env_copy_continues_bit_for_bit(how):
+    """``follower_env`` mid-episode (the other followers run the paper's controller, whose state is copied
+    with it): a pickled or deep-copied environment gives the same observations and rewards, bit for bit,
+    to the episode's end."""
+    e = follower_env("paper", overrides=["sim.duration=0.5", "sim.control_dt=0.01", "plant.kind=mujoco"])
+    e.reset(seed=0)
+    for _ in range(10):
+        e.step(np.float32([0.3, 0.1]))
+    c = pickle.loads(pickle.dumps(e)) if how == "pickle" else copy.deepcopy(e)
+    n = 0
+    while True:
+        a, b = e.step(np.float32([0.3, -0.2])), c.step(np.float32([0.3, -0.2]))
+        assert a[0].tobytes() == b[0].tobytes() and a[1:4] == b[1:4]
+        n += 1
+        if a[2] or a[3]:
+            break
+    assert n == 40
