@@ -3,7 +3,8 @@
 
 BenchMARL builds its PettingZoo tasks on TorchRL's ``PettingZooWrapper``; this task class hands it
 ``bioform_mj.envs.parallel_env`` (continuous ``(υ_cmd, ω_cmd)`` actions, one group ``follower``).
-Needs ``pip install benchmarl torchrl`` (tried with benchmarl 1.5.2, torchrl 0.14.1, torch 2.13.0):
+Needs ``pip install benchmarl==1.5.2`` in a virtual environment of its own (it requires torchrl < 0.12:
+pip resolves torchrl 0.11.1; first tried with torchrl 0.14.1, which pip does not pair with it):
 
     python examples/benchmarl_formation.py --iters 2
 """

@@ -418,6 +418,7 @@ class FormationParallelEnv(ParallelEnv):
         self._done = False
         self._diverged = None
         self._tipped = np.zeros(self.n, dtype=bool)
+        self._any_tipped = False
         self._events_seen = np.zeros(self.n)
         if self._renderer is not None:
             self._renderer.new_episode(self)
@@ -476,7 +477,7 @@ class FormationParallelEnv(ParallelEnv):
         info = {"t": self.k * self.dt}
         if diverged is not None:
             info["diverged"] = diverged
-        if self._tipped.any():
+        if self._any_tipped:
             info["tipped"] = [self.possible_agents[i] for i in np.flatnonzero(self._tipped)]
         if hits.any():
             info["collided"] = [self.possible_agents[i] for i in np.flatnonzero(hits)]
@@ -513,8 +514,9 @@ class FormationParallelEnv(ParallelEnv):
         if tip is not None and tip.max() >= 0:
             newly = ((tip >= 0) & ~self._tipped).astype(float)
             self._tipped |= newly > 0
+            self._any_tipped = bool(self._tipped.any())
         w = self.weights
-        end = diverged is not None or bool(self._tipped.any())
+        end = diverged is not None or self._any_tipped
         hits = self._new_contacts()
         r = np.empty(self.n)
         step_rewards(fe, tau, self._tau_max, newly, hits, w["formation"], w["effort"], w["tipped"],
