@@ -56,7 +56,6 @@ from bioform_mj.envs.kernels import (
     formation_error,
     sense_errors,
     step_rewards,
-    velocity_error,
 )
 from bioform_mj.envs.kernels import observations as obs_kernel
 from bioform_mj.envs.randomize import MAX_REDRAWS, Randomization, scale_friction, set_start
@@ -614,9 +613,6 @@ class FormationParallelEnv(ParallelEnv):
         self._rows_vel: list[np.ndarray] = []
         self._stats_sample(0, self._formation_error(0))
 
-    def _stats_control(self, mv: np.ndarray) -> None:
-        velocity_error(self._verr, self._s.cmd, self._vel)
-
     def _stats_sample(self, k: int, fe: np.ndarray) -> None:
         if k % self.stride == 0 and k < self.N:
             self._rows_t.append(k * self.dt)
@@ -747,13 +743,6 @@ class FormationParallelEnv(ParallelEnv):
         if state["rng"] is not None:
             self._np_random = np.random.default_rng()
             self._np_random.bit_generator.state = state["rng"]
-
-
-def _relative(p: np.ndarray, v: np.ndarray, own_p: np.ndarray, own_v: np.ndarray, c: float, s: float) -> np.ndarray:
-    """``[1, Δx, Δy, Δθ, Δυ, Δω]`` of ``(p, v)`` minus the own estimate, positions in the body frame (c, s)."""
-    dx, dy = p[0] - own_p[0], p[1] - own_p[1]
-    dth = (p[2] - own_p[2] + math.pi) % (2 * math.pi) - math.pi
-    return np.array([1.0, c * dx + s * dy, -s * dx + c * dy, dth, v[0] - own_v[0], v[1] - own_v[1]])
 
 
 def parallel_env(scenario: str | Path | Scenario = "paper", **options: Any) -> FormationParallelEnv:
