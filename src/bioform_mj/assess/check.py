@@ -352,6 +352,10 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     if tcs and min(tcs) < 5.0:
         reasons_warn.append(f"wheel damping: drag time constant {min(tcs):.2g} s (< 5 s), a large unmodelled term")
     verdict = "fail" if reasons_fail else "warn" if reasons_warn else "pass"
+    from bioform_mj.robots.limits import limits_of  # design §21: the limits in one place
+
+    ref0 = entry if isinstance(entry, RobotRef) else None
+    limits = limits_of(plant, 0, ref0, loads, ta)
     layout = asdict(lay)
     layout["file"] = lay.file
     named = ("base", "wheel_joints", "motors", "wheel_geoms", "disabled_actuators", "frozen_joints", "locked_joints")
@@ -397,6 +401,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         "weight_on_wheels": float(loads.sum() / (p.mass * G)),
         "motor_accel_mps2": motor_accel,
         "tip_accel_mps2": ta,
+        "limits": limits,
         "support_m": tips["support_m"],
         "support_geoms": [g[len("f1/") :] for g in tips["support_geoms"]],
         "com_height_m": tips["com_height_m"],
@@ -636,6 +641,12 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--half-track", type=float, help="half the track in m (default: from the wheel joint anchors)")
     p.add_argument("--tau-max", type=float, help="wheel torque limit in N·m (default: the model's own drive limit)")
     p.add_argument(
+        "--top-speed",
+        type=float,
+        help="top speed in m/s at the tyre, the maker's figure (default: the URDF's wheel <limit velocity> or "
+        "the <dcmotor>'s no-load speed; design §21)",
+    )
+    p.add_argument(
         "--caster",
         action="append",
         metavar="NAME",
@@ -678,7 +689,7 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
     from bioform_mj.core.errors import InputError
     from bioform_mj.robots.refs import package_path_from_args, resolve_robot
 
-    for flag in ("wheel_radius", "half_track", "tau_max"):
+    for flag in ("wheel_radius", "half_track", "tau_max", "top_speed"):
         v = getattr(args, flag, None)
         if v is not None and not (math.isfinite(v) and v > 0):
             raise InputError(f"--{flag.replace('_', '-')} must be a number > 0, got {v}")
@@ -700,6 +711,7 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
             self_collide=bool(getattr(args, "self_collide", False)),
             package_path=package_path_from_args(getattr(args, "package_path", None)),
             keyframe=getattr(args, "keyframe", None) or "",
+            top_speed=getattr(args, "top_speed", None) or 0.0,
         )
     )
 
@@ -750,6 +762,9 @@ def main(args: argparse.Namespace) -> int:
         f"CoM {1e3 * report['com_offset_m']:.1f} mm off the axle, "
         f"{report['com_height_m']:.3g} m high",
     ]
+    from bioform_mj.robots.limits import block
+
+    lines += block(report["limits"])
     lines.append(
         f"  mass {report['mass_kg']:.4g} kg, yaw inertia {report['yaw_inertia_kgm2']:.4g} kg·m² "
         f"(the file's configuration: {report['yaw_inertia_file_kgm2']:.4g}), c_true = "

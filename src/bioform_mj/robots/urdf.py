@@ -706,7 +706,10 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
             "tau_max is mapped)"
         )
     if vel:
-        notes.append(f"<limit velocity> of {vel} joint(s) ignored (MuJoCo has no joint speed limit)")
+        notes.append(
+            f"<limit velocity> of {vel} joint(s): MuJoCo has no joint speed limit; a wheel joint's is read as the "
+            "robot's top speed unless the mapping gives top_speed (design §21)"
+        )
 
     # self-collision: off between the robot's own links (URDF/Gazebo), unless asked
     if not ref.self_collide:  # the bodies that collide, or may (a wheel gets a contact proxy: scene.py)

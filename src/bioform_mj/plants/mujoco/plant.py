@@ -214,6 +214,7 @@ class MujocoPlant:
         self._wheel_sign = np.array([lay.wheel_sign for lay in lays], dtype=float)  # (n, 2)
         self._to_wheel = np.where(self._feed[:, None], m.actuator_gear[self._ctrl, 0] * self._wheel_sign, 0.0)
         self._dacc = np.zeros((n, 2))  # delivered wheel torque summed over the period's physics steps
+        self.row_state = np.zeros((0, 0))  # (K, width): the compiled chunk copies each log row's raw state here
         self._wheel_radius = np.array([lay.wheel_radius for lay in lays], dtype=float)
         self._half_track = np.array([lay.half_track for lay in lays], dtype=float)
         self._axle_zero = not np.any(self._axle)  # shipped robots: base origin on the axle
@@ -735,6 +736,7 @@ class MujocoPlant:
                 self.odo,
                 self.contacts.contacts,
                 self.contacts.proximity,
+                self.row_state,
             )
             self.contacts.check()
             self._step_count = k0 + done
