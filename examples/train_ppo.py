@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Train a shared PPO policy for the followers, and compare it with the paper's four methods.
 
-The formation environment (``bioform_mj.envs``, MuJoCo robots, ``action = "velocity"``: the
+The formation environment (``bioform_mj.envs``, MuJoCo robots or ``--plant ideal``, ``action = "velocity"``: the
 policy gives ``(υ_cmd, ω_cmd)``, the paper's sliding-mode torque law with its online learner
 turns them into wheel torques) is trained with Stable-Baselines3's PPO, one network shared by
 every follower (parameter sharing: each follower of each environment copy is one slot of an SB3
@@ -113,6 +113,7 @@ def make_vec_env(make_env, copies: int, seed: int):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="paper")
+    ap.add_argument("--plant", choices=("ideal", "mujoco"), default="mujoco", help="the plant (plant.kind)")
     ap.add_argument("--timesteps", type=int, default=200_000, help="samples (agent-steps) of training")
     ap.add_argument("--duration", type=float, default=10.0, help="episode length (s)")
     ap.add_argument("--control-dt", type=float, default=0.01)
@@ -135,7 +136,7 @@ def main() -> None:
     ov = [
         f"sim.duration={a.duration}",
         f"sim.control_dt={a.control_dt}",
-        "plant.kind=mujoco",
+        f"plant.kind={a.plant}",
         f"formation.init_jitter={a.jitter}",
     ]
     rw = {"collision": a.collision_weight}
@@ -179,7 +180,8 @@ def main() -> None:
         return v.mean(axis=0)
 
     lines = [
-        f"# PPO against the paper's methods: {a.scenario}, MuJoCo, {a.duration:g} s, control {a.control_dt:g} s, "
+        f"# PPO against the paper's methods: {a.scenario}, {a.plant} plant, {a.duration:g} s, "
+        f"control {a.control_dt:g} s, "
         f"jitter {a.jitter:g}, seeds {seeds.start}..{seeds.stop - 1} (trained {a.timesteps} samples, {train_s:.0f} s)",
         "",
         "| method | total velocity error (F1, F2, F3) | final formation error m (F1, F2, F3) | RMS formation error m | "
@@ -211,7 +213,7 @@ def main() -> None:
     ax.plot(np.arange(1, len(venv.episode_returns) + 1), venv.episode_returns, ".-")
     ax.set_xlabel("training episode (per environment copy)")
     ax.set_ylabel("mean return per follower")
-    ax.set_title(f"PPO, shared policy: {a.scenario} on MuJoCo")
+    ax.set_title(f"PPO, shared policy: {a.scenario}, {a.plant} plant")
     fig.tight_layout()
     fig.savefig(a.out / "learning_curve.png", dpi=120)
     print(table)

@@ -17,8 +17,14 @@ pose enter an observation.
 Action: ``action = "velocity"`` (default): ``[υ_cmd m/s, ω_cmd rad/s]`` tracked by the paper's
 sliding-mode torque law with the scenario's learner (eqs. 37-39; the method's ``-learning``
 suffix decides whether ``ĉ`` learns); ``action = "torque"``: wheel torques ``[τ_L, τ_R]`` N·m
-within ``±τ_max``. An action outside its space, NaN, a missing or unknown agent is a
-``ValueError`` naming it: nothing is clipped silently.
+within ``±τ_max``. The action space is float32: an action (float32 or float64) within float32
+rounding of a bound is taken and clipped onto it; one outside the space by more than that, NaN,
+a missing or unknown agent is a ``ValueError`` naming it.
+
+Seeds (Gymnasium's convention): ``reset(seed=s)`` runs the episode of seed ``s`` and reseeds
+:attr:`~FormationParallelEnv.np_random`; ``reset()`` draws the next episode's seed from it.
+``randomize=`` draws start and domain parameters per episode (:mod:`.randomize`). Pickles and
+copies rebuild the plant and replay the episode (bit for bit).
 
 Reward per agent and step (weights in ``reward=``, defaults :data:`REWARD_WEIGHTS`), an integral
 over the period so that an episode's return does not depend on the control rate:
@@ -41,11 +47,20 @@ from typing import Any
 
 import numpy as np
 
-from bioform_mj.control.kernel import estimator_advance
 from bioform_mj.core.engine import Bounds, check, describe
 from bioform_mj.core.errors import Diverged, InputError
-from bioform_mj.envs.kernels import direct_torque, sense_errors, track_velocity
+from bioform_mj.envs.kernels import (
+    actions_within,
+    clip_into,
+    control_phase,
+    formation_error,
+    sense_errors,
+    step_rewards,
+)
+from bioform_mj.envs.kernels import observations as obs_kernel
+from bioform_mj.envs.randomize import MAX_REDRAWS, Randomization, scale_friction, set_start
 from bioform_mj.plants.base import Sensing
+from bioform_mj.plants.mujoco.contacts import EVENTS as _EVENTS
 from bioform_mj.scenario.config import Scenario
 from bioform_mj.scenario.loader import load as load_scenario
 
@@ -107,9 +122,18 @@ class FormationParallelEnv(ParallelEnv):
     overrides : ``--set``-style overrides (``["sim.control_dt=0.01"]`` or a mapping), with a name/path.
     dtype : ``"float64"`` (default: the controller's own numbers) or ``"float32"`` observations (what most
         learning libraries' networks take; BenchMARL, SB3).
+    randomize : start and domain randomisation ``{key: (low, high)}`` drawn per episode
+        (:mod:`~bioform_mj.envs.randomize`; units there); None: the scenario's own start.
+    max_cycles : control steps per episode (truncation); default ``sim.duration / sim.control_dt``.
+    render_mode : None or ``"rgb_array"`` (:meth:`render` returns the frame of ``bioform run --video``).
     """
 
-    metadata = {"name": "bioform_formation_v0", "render_modes": [], "is_parallelizable": True}
+    metadata = {
+        "name": "bioform_formation_v0",
+        "render_modes": ["rgb_array"],
+        "is_parallelizable": True,
+        "render_fps": 30,
+    }
 
     def __init__(
         self,
@@ -121,12 +145,22 @@ class FormationParallelEnv(ParallelEnv):
         w_max: float | None = None,
         overrides: Any = None,
         dtype: str = "float64",
+        randomize: Mapping[str, Any] | None = None,
+        max_cycles: int | None = None,
+        render_mode: str | None = None,
     ) -> None:
         if action not in ACTIONS:
             raise ValueError(f"unknown action mode {action!r} (expected one of: {', '.join(ACTIONS)})")
         if dtype not in ("float64", "float32"):
             raise ValueError(f"unknown observation dtype {dtype!r} (expected float64 or float32)")
         self._dtype = np.dtype(dtype)
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"unknown render_mode {render_mode!r} (expected None or one of: rgb_array)")
+        if max_cycles is not None:
+            if isinstance(max_cycles, bool) or not isinstance(max_cycles, (int, np.integer)) or max_cycles < 1:
+                raise ValueError(f"max_cycles must be a positive integer (control steps), got {max_cycles!r}")
+            max_cycles = int(max_cycles)
+        self._max_cycles = max_cycles
         sc = _scenario_of(scenario, overrides)
         weights = dict(REWARD_WEIGHTS)
         for k, v in (reward or {}).items():
@@ -142,7 +176,8 @@ class FormationParallelEnv(ParallelEnv):
         self.possible_agents = [f"follower_{i + 1}" for i in range(sc.n)]
         self.agents: list[str] = []
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
-        self.render_mode = None
+        self.render_mode = render_mode
+        self._renderer = None
         graph = sc.build_graph()
         self.graph = graph
         src, dst = np.asarray(graph.src), np.asarray(graph.dst)
@@ -150,28 +185,56 @@ class FormationParallelEnv(ParallelEnv):
         self._nbr_edges = [np.flatnonzero(src == i).tolist() for i in range(sc.n)]
         self.K = max(1, max(len(x) for x in self._nbrs))
         self.obs_size = 2 + 3 + 2 + 6 * self.K + 6
+        self._slots = np.full((sc.n, self.K), -1, dtype=np.int64)  # in-neighbour slot -> edge index (or -1)
+        for i, edges in enumerate(self._nbr_edges):
+            self._slots[i, : len(edges)] = edges
+        self._ones_e = np.ones(len(graph.src))
+        self._zeros_n = np.zeros(sc.n)
+        self._lacc = np.asarray(graph.leader_access, dtype=float)
+        self._off = np.asarray(sc.formation.offsets, dtype=float).reshape(sc.n, 2)
+        self._leader_frame = sc.formation.frame == "leader"
         self._plant = None
-        self._plant_poses: np.ndarray | None = None
+        self._built_sc: Scenario | None = None  # the scenario the plant was built from (its start poses)
         self._sc = sc
         self._build_time_axis(sc)
+        self._rand = Randomization(randomize, sc, self.N * self.dt)
+        self._init_kwargs = dict(
+            action=action, reward=dict(reward or {}), v_max=v_max, w_max=w_max, dtype=dtype,
+            randomize=None if randomize is None else {k: tuple(v) for k, v in randomize.items()},
+            max_cycles=max_cycles, render_mode=render_mode,
+        )  # fmt: skip
+        self._np_random: np.random.Generator | None = None
+        self._episode_seed: int | None = None
+        self._log: list[np.ndarray] = []
+        self.metadata = {**type(self).metadata, "render_fps": 30}
         self._build_stack(sc, plant_c_true=None)
         tau_max = np.broadcast_to(np.asarray(self._stack.p.tau_max, dtype=float), (sc.n,))
         vm = float(min(sc.limits.speed, 2.0)) if v_max is None else float(v_max)
         wm = float(2 * math.pi) if w_max is None else float(w_max)
         if not (vm > 0 and wm > 0 and math.isfinite(vm) and math.isfinite(wm)):
             raise ValueError(f"v_max and w_max must be positive and finite, got {vm!r}, {wm!r}")
-        hi_obs = np.full(self.obs_size, np.inf, dtype=self._dtype)
+        # finite bounds (checkers warn on infinite ones): nothing a run the guards let go on can reach
+        pos_lim, spd = float(sc.limits.position), float(sc.limits.speed)
+        off = float(np.max(np.abs(np.asarray(sc.formation.offsets, dtype=float)), initial=0.0))
+        self.obs_bound = 2.0 * (pos_lim + spd) + off
+        hi_obs = np.full(self.obs_size, self.obs_bound, dtype=self._dtype)
         self._obs_spaces = {a: spaces.Box(-hi_obs, hi_obs, dtype=self._dtype) for a in self.possible_agents}
+        self._state_hi = np.concatenate([np.tile([pos_lim, pos_lim, math.pi], sc.n), np.full(2 * sc.n, spd)])
+        shi = self._state_hi.astype(self._dtype)
+        self.state_space = spaces.Box(-shi, shi, dtype=self._dtype)
         if action == "velocity":
-            hi = np.array([vm, wm])
-            self._act_spaces = {a: spaces.Box(-hi, hi, dtype=np.float64) for a in self.possible_agents}
+            hi = np.tile([vm, wm], (sc.n, 1))
         else:
-            self._act_spaces = {
-                a: spaces.Box(-np.full(2, tau_max[i]), np.full(2, tau_max[i]), dtype=np.float64)
-                for a, i in self._index.items()
-            }
-        self._low = np.array([self._act_spaces[a].low for a in self.possible_agents])
-        self._high = np.array([self._act_spaces[a].high for a in self.possible_agents])
+            hi = np.repeat(tau_max[:, None], 2, axis=1)
+        # float32, what trainers' networks give; a float64 action within float32 rounding of a bound is taken
+        self._act_spaces = {
+            a: spaces.Box(-hi[i].astype(np.float32), hi[i].astype(np.float32), dtype=np.float32)
+            for a, i in self._index.items()
+        }
+        self._low, self._high = -hi, hi  # the bounds themselves (float64): an accepted action is clipped to them
+        hi32 = hi.astype(np.float32).astype(float)
+        self._acc_high = np.maximum(hi, hi32)
+        self._acc_low = -self._acc_high
         self._done = True
 
     # ------------------------------------------------------------------ spaces
@@ -193,7 +256,7 @@ class FormationParallelEnv(ParallelEnv):
     def _build_time_axis(self, sc: Scenario) -> None:
         dt = sc.sim.control_dt
         self.dt = dt
-        self.N = max(1, int(round(sc.sim.duration / dt)))
+        self.N = self._max_cycles or max(1, int(round(sc.sim.duration / dt)))
         self.stride = max(1, int(round(sc.sim.log_dt / dt)))
         t_all = np.arange(self.N + 1) * dt
         lp, lv, _ = sc.build_leader().states(t_all)
@@ -208,31 +271,129 @@ class FormationParallelEnv(ParallelEnv):
         tau_max = getattr(self._plant, "tau_max", None) if self._plant is not None else None
         self._stack = ControlStack(self.graph, stack_params(sc, c, tau_max))
 
-    def _plant_for(self, sc: Scenario):
-        """The scenario's plant at ``sc``'s initial poses (rebuilt only when the poses change: a seeded jitter)."""
+    def _build_plant(self, sc: Scenario) -> None:
+        """Build the scenario's plant at ``sc``'s initial poses and the control stack for its nominal
+        ``c_true`` (the learner's prior in every episode: randomised parameters are not told to it)."""
+        from bioform_mj.core.errors import InputError
         from bioform_mj.run.simulate import make_plant
 
-        poses = sc.initial_poses()
-        if self._plant is None or not np.array_equal(poses, self._plant_poses):
+        try:
             self._plant = make_plant(sc)
-            self._plant_poses = poses
-            self._build_stack(sc, np.ascontiguousarray(self._plant.c_true(), dtype=float))
-        return self._plant
+        except InputError as exc:
+            raise ValueError(str(exc)) from exc
+        self._built_sc = sc
+        self._built_poses = np.array(sc.initial_poses(), dtype=float)
+        self.nominal_c_true = np.ascontiguousarray(self._plant.c_true(), dtype=float)
+        if hasattr(self._plant, "model"):
+            m = self._plant.model
+            self._built_qpos0 = m.qpos0.copy()
+            self._nominal_friction = (m.geom_friction[:, 0].copy(), m.pair_friction[:, :2].copy())
+        self._build_stack(sc, self.nominal_c_true)
+
+    def _plant_for(self, sc: Scenario, poses: np.ndarray, draws: Mapping[str, np.ndarray]):
+        """The plant of the episode scenario ``sc`` starting at ``poses`` (n, 3). The ideal plant is
+        built anew (microseconds); a MuJoCo scene is compiled once, at the scenario's initial poses
+        as written, its robots then moved to each episode's start in ``qpos0``
+        (:func:`~.randomize.set_start`; no recompilation, 0.2 s saved per reset): an episode depends
+        on its seed alone, not on the episodes before it. A start other than the written one equals a
+        fresh build of it (``bioform run``) within rounding, not bit for bit."""
+        from bioform_mj.run.simulate import make_plant
+
+        if self._plant is None:  # at the scenario's poses as written: every start is moved from the same build
+            b = self.base_scenario
+            self._build_plant(
+                dataclasses.replace(
+                    b, formation=dataclasses.replace(b.formation, init_jitter=0.0, init_jitter_heading=-1.0)
+                )
+            )
+        if self._plant_kind() == "ideal":
+            self._plant = make_plant(sc)
+            if "c_true" in draws:
+                self._plant._c *= draws["c_true"]
+            return self._plant
+        p = self._plant
+        set_start(p, poses, self._built_poses, self._built_qpos0)
+        if "friction" in draws:
+            scale_friction(p, float(draws["friction"]), self._nominal_friction)
+        if p.sensors.on:  # the gyro noise of this episode's seed (a counter hash: no state)
+            p.sensors = p.sensors._replace(
+                seed=float(sc.sim.seed % 2147483647), sigma=float(sc.plant.gyro_noise), bias=float(sc.plant.gyro_bias)
+            )
+        return p
+
+    def _plant_kind(self) -> str:
+        return "ideal" if not hasattr(self._plant, "model") else "mujoco"
+
+    @property
+    def np_random(self) -> np.random.Generator:
+        """The environment's random stream (Gymnasium's convention): seeded by ``reset(seed=s)``, it
+        draws the seed of every episode that ``reset()`` starts without one."""
+        if self._np_random is None:
+            self._np_random = np.random.default_rng(int(self.base_scenario.sim.seed))
+        return self._np_random
+
+    @property
+    def episode_scenario(self) -> Scenario:
+        """The scenario of the current episode: its seed, start poses and drawn scenario keys
+        (``bioform run`` of it starts the same episode, but for drawn ``c_true`` and ``friction``)."""
+        return self._sc
+
+    @property
+    def episode_parameters(self) -> dict[str, Any]:
+        """The current episode's seed and randomised values (:meth:`~.randomize.Randomization.draw`)."""
+        return {"seed": self._episode_seed, **{k: np.array(v) for k, v in self._draws.items()}}
 
     # ------------------------------------------------------------------ PettingZoo API
     def reset(self, seed: int | None = None, options: Mapping[str, Any] | None = None):
-        """Start an episode; ``seed`` (≥ 0) replaces ``sim.seed`` (the jitter of the initial poses and
-        every fault draw), None keeps the last one. Returns ``(observations, infos)``."""
+        """Start an episode; returns ``(observations, infos)``. ``seed`` (>= 0) is the episode's seed
+        (``sim.seed``: the scenario's jitter, every fault draw, the randomisation) and reseeds the
+        environment's random stream (:attr:`np_random`); ``seed=None`` draws the next episode's seed
+        from that stream (the first time: seeded by the scenario's ``sim.seed``), as Gymnasium's
+        environments do: auto-resets explore, and the whole sequence is reproducible from the first seed."""
+        if seed is not None:
+            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or int(seed) < 0:
+                raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+            ep = int(seed)
+            self._np_random = np.random.default_rng(ep)
+        elif self._np_random is None:
+            ep = int(self.base_scenario.sim.seed)
+            self._np_random = np.random.default_rng(ep)
+        else:
+            ep = int(self._np_random.integers(0, 2**31 - 1))
+        self._start(ep)
+        self._log = []
+        obs = self._observations()
+        return obs, {a: {"t": 0.0, "seed": ep} for a in self.agents}
+
+    def _start(self, ep: int) -> None:
+        """Everything of ``reset`` but the random stream: the episode of seed ``ep``."""
         from bioform_mj.run.simulate import initial_estimates
 
-        sc = self._sc
-        if seed is not None:
-            if int(seed) < 0:
-                raise ValueError(f"seed must be >= 0, got {seed}")
-            base = self.base_scenario
-            sc = dataclasses.replace(base, sim=dataclasses.replace(base.sim, seed=int(seed)))
-        self._sc = sc
-        plant = self._plant_for(sc)
+        base = self.base_scenario
+        sc = base if ep == base.sim.seed else dataclasses.replace(base, sim=dataclasses.replace(base.sim, seed=ep))
+        rz = self._rand
+        draws: dict[str, np.ndarray] = {}
+        poses = Randomization.start_poses(sc, draws)
+        sc_ep = sc
+        for attempt in range(MAX_REDRAWS):
+            if rz:
+                draws = rz.draw(ep, self.n, attempt)
+                poses = Randomization.start_poses(sc, draws)
+                sc_ep = rz.scenario(sc, draws, poses)
+            plant = self._plant_for(sc_ep, poses, draws)
+            if not (rz and ("position" in draws or "heading" in draws)) or self._plant_kind() == "ideal":
+                break
+            if not plant.start_overlaps():
+                break
+        else:
+            raise ValueError(
+                f"randomize: {MAX_REDRAWS} draws of the start positions all overlap robots or obstacles (seed {ep}): "
+                "narrow 'position'/'heading' or spread the formation"
+            )
+        sc = sc_ep
+        self._sc, self._draws, self._episode_seed = sc, draws, ep
+        if any(k.startswith("leader.") for k in draws):
+            self._build_time_axis(sc)
         plant.reset()
         self._odometry = isinstance(plant, Sensing) and plant.sensing == "odometry"
         self._lim = Bounds(float(sc.limits.position), float(sc.limits.speed), float(sc.limits.torque))
@@ -255,10 +416,12 @@ class FormationParallelEnv(ParallelEnv):
         self._stats_reset()
         self.agents = list(self.possible_agents)
         self._done = False
+        self._diverged = None
         self._tipped = np.zeros(self.n, dtype=bool)
+        self._any_tipped = False
         self._events_seen = np.zeros(self.n)
-        obs = self._observations()
-        return obs, {a: {"t": 0.0} for a in self.agents}
+        if self._renderer is not None:
+            self._renderer.new_episode(self)
 
     def _raw_measurement(self) -> tuple[np.ndarray, np.ndarray]:
         """The sensors' pose and velocity now (odometry where ``plant.sensing`` says), before fault noise."""
@@ -290,8 +453,12 @@ class FormationParallelEnv(ParallelEnv):
                 mp, mv = f.sense(k, t, mp, mv)
             if f.has_comm:
                 comm, lp, lv = f.comm(k, t, st.state.est_pose, st.state.est_vel, lp, lv)
-        self._mp, self._mv = np.array(mp, dtype=float), np.array(mv, dtype=float)
-        self._comm, self._lp_rx, self._lv_rx = comm, np.array(lp, dtype=float), np.array(lv, dtype=float)
+        if f is None:  # fresh arrays of observe() and read-only rows of the leader's trajectory: no copies
+            self._mp, self._mv, self._lp_rx, self._lv_rx = mp, mv, lp, lv
+        else:
+            self._mp, self._mv = np.array(mp, dtype=float), np.array(mv, dtype=float)
+            self._lp_rx, self._lv_rx = np.array(lp, dtype=float), np.array(lv, dtype=float)
+        self._comm = comm
         self._comm_in = st.comm_in(comm)
         sense_errors(self._g, self._s, self._lp_rx, self._lv_rx, self._mp, self._mv, self._comm_in, learn)
 
@@ -300,17 +467,35 @@ class FormationParallelEnv(ParallelEnv):
         if self._done:
             raise RuntimeError("step() after the episode ended: call reset() first")
         u = self._actions(actions)
+        self._log.append(u)
+        r, end, trunc, diverged, hits, agents = self._advance(u)
+        obs = (
+            self._observations(agents)
+            if diverged is None
+            else {a: np.zeros(self.obs_size, self._dtype) for a in agents}
+        )
+        info = {"t": self.k * self.dt}
+        if diverged is not None:
+            info["diverged"] = diverged
+        if self._any_tipped:
+            info["tipped"] = [self.possible_agents[i] for i in np.flatnonzero(self._tipped)]
+        if hits.any():
+            info["collided"] = [self.possible_agents[i] for i in np.flatnonzero(hits)]
+        rewards = {a: float(r[self._index[a]]) for a in agents}
+        terms = dict.fromkeys(agents, end)
+        truncs = dict.fromkeys(agents, trunc)
+        infos = {a: dict(info) for a in agents}
+        return obs, rewards, terms, truncs, infos
+
+    def _advance(self, u: np.ndarray) -> tuple[np.ndarray, bool, bool, str | None, np.ndarray, list[str]]:
+        """The control period of the checked actions ``u`` (n, 2): ``(rewards (n,), terminated, truncated,
+        divergence or None, new contact events (n,), the agents that acted)``; what a copy replays."""
         g, s, k = self._g, self._s, self.k
         mp, mv = self._measure()
-        if self.action_mode == "velocity":
-            track_velocity(g, s, mv, u)
-        else:
-            direct_torque(g, s, u)
-        self._stats_control(mv)
-        tau = np.array(s.tau, dtype=float)
+        tau = np.empty((self.n, 2))
+        control_phase(g, s, mv, u, self.action_mode == "velocity", self._verr, self._vel, tau)
         if self._faults is not None and self._faults._lim is not None:  # weakened motors deliver no more
             tau = np.clip(tau, -self._faults._lim, self._faults._lim)
-        estimator_advance(g, s)
         diverged = None
         try:
             self._events(k)
@@ -325,45 +510,33 @@ class FormationParallelEnv(ParallelEnv):
         fe = self._formation_error(k)
         self._stats_sample(k, fe)
         tip = getattr(self._plant, "tip_step", None)
-        newly = np.zeros(self.n, dtype=bool) if tip is None else (np.asarray(tip) >= 0) & ~self._tipped
-        self._tipped |= newly
-        eff = ((tau / self._tau_max[:, None]) ** 2).mean(axis=1)
+        newly = self._zeros_n
+        if tip is not None and tip.max() >= 0:
+            newly = ((tip >= 0) & ~self._tipped).astype(float)
+            self._tipped |= newly > 0
+            self._any_tipped = bool(self._tipped.any())
         w = self.weights
-        end = diverged is not None or bool(self._tipped.any())
+        end = diverged is not None or self._any_tipped
         hits = self._new_contacts()
-        r = -self.dt * (w["formation"] * np.where(np.isfinite(fe), fe, 0.0) + w["effort"] * eff) - w["tipped"] * newly
-        r = r - w["collision"] * hits
+        r = np.empty(self.n)
+        step_rewards(fe, tau, self._tau_max, newly, hits, w["formation"], w["effort"], w["tipped"],
+                     w["collision"], self.dt, r)  # fmt: skip
         if end:
             r = r - w["terminal"] * max(0.0, (self.N - k) * self.dt)
         trunc = k >= self.N and not end
-        obs = (
-            self._observations() if diverged is None else {a: np.zeros(self.obs_size, self._dtype) for a in self.agents}
-        )
-        info = {"t": k * self.dt}
-        if diverged is not None:
-            info["diverged"] = diverged
-        if self._tipped.any():
-            info["tipped"] = [self.possible_agents[i] for i in np.flatnonzero(self._tipped)]
-        if hits.any():
-            info["collided"] = [self.possible_agents[i] for i in np.flatnonzero(hits)]
         agents = self.agents
-        rewards = {a: float(r[self._index[a]]) for a in agents}
-        terms = dict.fromkeys(agents, end)
-        truncs = dict.fromkeys(agents, trunc)
-        infos = {a: dict(info) for a in agents}
         if end or trunc:
             self._done = True
             self._diverged = diverged
             self.agents = []
-        return obs, rewards, terms, truncs, infos
+        return r, end, trunc, diverged, hits, agents
 
     def _new_contacts(self) -> np.ndarray:
         """Contact events (robots and obstacles) of each follower in the period just ended (n,), from the
         plant's contact watch (MuJoCo, design §19; zeros for a plant without one)."""
-        watch = getattr(self._plant, "contact_watch", None)
-        if watch is None:
-            return np.zeros(self.n)
-        ev = np.asarray(watch().events, dtype=float).sum(axis=1)  # since the plant's reset
+        if not hasattr(self._plant, "contacts"):
+            return self._zeros_n
+        ev = self._plant.contacts.contacts.ci[:, :, _EVENTS].sum(axis=1).astype(float)  # since the plant's reset
         new, self._events_seen = ev - self._events_seen, ev
         return new
 
@@ -378,6 +551,8 @@ class FormationParallelEnv(ParallelEnv):
             raise ValueError(f"no action for live agent(s) {', '.join(missing)}")
         try:
             u = np.array([actions[a] for a in self.possible_agents], dtype=float)
+            if u.shape == (self.n, 2) and actions_within(u, self._acc_low, self._acc_high):  # the usual case
+                return clip_into(u, self._low, self._high)
         except (ValueError, TypeError) as exc:  # ragged or non-numeric: find which agent
             for a in self.possible_agents:
                 x = np.asarray(actions[a])
@@ -388,53 +563,48 @@ class FormationParallelEnv(ParallelEnv):
             for a in self.possible_agents:
                 if np.shape(actions[a]) != (2,):
                     raise ValueError(f"action of {a} must have shape (2,), got {np.shape(actions[a])}")
-        bad = ~np.isfinite(u).all(axis=1) | (u < self._low).any(axis=1) | (u > self._high).any(axis=1)
+        bad = ~np.isfinite(u).all(axis=1) | (u < self._acc_low).any(axis=1) | (u > self._acc_high).any(axis=1)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            a, sp = self.possible_agents[i], self._act_spaces[self.possible_agents[i]]
+            a = self.possible_agents[i]
             what = "is not finite" if not np.isfinite(u[i]).all() else "is outside the action space"
-            raise ValueError(f"action of {a} {u[i].tolist()} {what} [{sp.low.tolist()}, {sp.high.tolist()}]")
-        return u
+            bounds = f"[{self._low[i].tolist()}, {self._high[i].tolist()}]"
+            raise ValueError(f"action of {a} {u[i].tolist()} {what} {bounds}")
+        return np.clip(u, self._low, self._high)  # within float32 rounding of a bound: onto it
 
     def _events(self, k: int) -> None:
         from bioform_mj.run.loop import EventQueue
 
         if k == 0:
             self._evq = EventQueue(self._sc.events, self.dt)
-        self._evq.apply(k, self._plant)  # a payload: c_true changes, the learner is not told (as in bioform run)
+            self._ev_next = self._evq.next_step()
+        if self._ev_next is not None and k >= self._ev_next:
+            self._evq.apply(k, self._plant)
+            self._ev_next = self._evq.next_step()  # a payload: c_true changes, the learner is not told
 
     # ------------------------------------------------------------------ observations
-    def _observations(self) -> dict[str, np.ndarray]:
+    def _observations(self, agents: list[str] | None = None) -> dict[str, np.ndarray]:
         s, comm = self._s, self._comm
         mp, mv = self._measure()
         lp, lv = self._lp_rx, self._lv_rx  # the leader as this step's network delivers it
-        lacc = np.asarray(self.graph.leader_access, dtype=float)
+        lacc = self._lacc
         if comm is not None:
             lacc = lacc * np.asarray(comm.leader_w, dtype=float)
         rp = s.est_pose[self.graph.dst] if comm is None or comm.recv_pose is None else comm.recv_pose
         rv = s.est_vel[self.graph.dst] if comm is None or comm.recv_vel is None else comm.recv_vel
-        ew = np.ones(len(self.graph.src)) if comm is None else np.asarray(comm.edge_w, dtype=float)
-        out = {}
-        for a in self.agents:
-            i = self._index[a]
-            o = np.zeros(self.obs_size)
-            o[0:2] = mv[i]
-            o[2:5] = s.err[i]
-            o[5:7] = s.est_vel[i]
-            own = s.est_pose[i]
-            c, sn = math.cos(mp[i, 2]), math.sin(mp[i, 2])
-            for q, e in enumerate(self._nbr_edges[i]):
-                if ew[e] > 0:  # a link that is down delivers nothing
-                    o[7 + 6 * q : 13 + 6 * q] = _relative(rp[e], rv[e], own, s.est_vel[i], c, sn)
-            if lacc[i] > 0:
-                o[7 + 6 * self.K :] = _relative(lp, lv, own, s.est_vel[i], c, sn)
-            out[a] = o.astype(self._dtype, copy=False)
-        return out
+        ew = self._ones_e if comm is None else np.asarray(comm.edge_w, dtype=float)
+        O = np.zeros((self.n, self.obs_size))  # a new array each step: the agents' rows are views of it
+        obs_kernel(O, mp, mv, s.err, s.est_pose, s.est_vel, self._slots, ew, rp, rv, lacc, lp, lv, self.obs_bound)
+        if self._dtype != O.dtype:
+            O = O.astype(self._dtype)
+        idx = self._index
+        return {a: O[idx[a]] for a in (self.agents if agents is None else agents)}
 
     def _formation_error(self, k: int) -> np.ndarray:
-        from bioform_mj.assess.outcomes import slots_of
-
-        return np.hypot(*(self._pose[:, :2] - slots_of(self._sc, self.L_pose[k])).T)
+        """True formation error (n,) m at control step ``k`` (the arithmetic of ``slots_of`` and ``np.hypot``)."""
+        out = np.empty(self.n)
+        formation_error(self._pose, self.L_pose[k], self._off, self._leader_frame, out)
+        return out
 
     # ------------------------------------------------------------------ episode statistics
     def _stats_reset(self) -> None:
@@ -443,10 +613,6 @@ class FormationParallelEnv(ParallelEnv):
         self._rows_fe: list[np.ndarray] = []
         self._rows_vel: list[np.ndarray] = []
         self._stats_sample(0, self._formation_error(0))
-
-    def _stats_control(self, mv: np.ndarray) -> None:
-        s = self._s
-        self._verr += np.abs(s.cmd[:, 0] - self._vel[:, 0]) + np.abs(s.cmd[:, 1] - self._vel[:, 1])
 
     def _stats_sample(self, k: int, fe: np.ndarray) -> None:
         if k % self.stride == 0 and k < self.N:
@@ -518,21 +684,66 @@ class FormationParallelEnv(ParallelEnv):
         }
 
     def state(self) -> np.ndarray:
-        """The global state (for centralised critics): every follower's true pose and velocity, (n·5,)."""
-        return np.concatenate([self._pose.ravel(), self._vel.ravel()])
+        """The global state (for centralised critics), :attr:`state_space`: every follower's true pose
+        ``[x m, y m, θ rad]`` then every velocity ``[υ m/s, ω rad/s]``, (n·5,) in the observations'
+        dtype; within ``±limits.position``, ``±π``, ``±limits.speed`` (beyond them the guards end the
+        episode; the last state is clipped to the space)."""
+        if not hasattr(self, "_pose"):
+            raise RuntimeError("state() before reset(): call reset() first")
+        x = np.concatenate([self._pose.ravel(), self._vel.ravel()])
+        return np.clip(np.nan_to_num(x), -self._state_hi, self._state_hi).astype(self._dtype)
 
-    def render(self) -> None:
-        return None
+    def render(self) -> np.ndarray:
+        """The current frame, ``(height, width, 3)`` uint8, with ``render_mode = "rgb_array"``: the
+        renderer of ``bioform run --video`` (:mod:`~bioform_mj.envs.render`; needs off-screen OpenGL,
+        ``MUJOCO_GL=egl`` or ``osmesa``)."""
+        if self.render_mode is None:
+            raise RuntimeError(
+                "render() needs a render mode: build the environment with render_mode='rgb_array' "
+                "(parallel_env(..., render_mode='rgb_array'))"
+            )
+        if not hasattr(self, "_pose"):
+            raise RuntimeError("render() before reset(): call reset() first")
+        if self._renderer is None:
+            from bioform_mj.envs.render import EnvRenderer
+
+            self._renderer = EnvRenderer(self)
+        return self._renderer.frame(self)
 
     def close(self) -> None:
-        self._plant = None
+        """Free the renderer's OpenGL context (the plant is kept: a closed environment may be reset again)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
 
+    # ------------------------------------------------------------------ pickling and copies
+    def __getstate__(self) -> dict[str, Any]:
+        """What rebuilds this environment in another process (MjSpec and compiled objects are not
+        picklable): its scenario and options, the scenario its plant was built from, the random
+        stream, and the current episode as its seed and the checked actions so far (replayed)."""
+        return {
+            "scenario": self.base_scenario,
+            "kwargs": self._init_kwargs,
+            "built": self._built_sc,
+            "rng": None if self._np_random is None else self._np_random.bit_generator.state,
+            "episode": self._episode_seed if hasattr(self, "_pose") else None,
+            "log": [u.copy() for u in self._log],
+        }
 
-def _relative(p: np.ndarray, v: np.ndarray, own_p: np.ndarray, own_v: np.ndarray, c: float, s: float) -> np.ndarray:
-    """``[1, Δx, Δy, Δθ, Δυ, Δω]`` of ``(p, v)`` minus the own estimate, positions in the body frame (c, s)."""
-    dx, dy = p[0] - own_p[0], p[1] - own_p[1]
-    dth = (p[2] - own_p[2] + math.pi) % (2 * math.pi) - math.pi
-    return np.array([1.0, c * dx + s * dy, -s * dx + c * dy, dth, v[0] - own_v[0], v[1] - own_v[1]])
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Rebuild from :meth:`__getstate__`: the same plant, then the episode replayed action by
+        action; the copy continues it bit for bit (same machine; ``tests/test_envs_training.py``)."""
+        self.__init__(state["scenario"], **state["kwargs"])
+        if state["built"] is not None:
+            self._build_plant(state["built"])
+        if state["episode"] is not None:
+            self._start(state["episode"])
+            for u in state["log"]:
+                self._log.append(u)
+                self._advance(u)
+        if state["rng"] is not None:
+            self._np_random = np.random.default_rng()
+            self._np_random.bit_generator.state = state["rng"]
 
 
 def parallel_env(scenario: str | Path | Scenario = "paper", **options: Any) -> FormationParallelEnv:

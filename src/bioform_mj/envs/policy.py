@@ -19,11 +19,14 @@ from bioform_mj.envs.parallel import FormationParallelEnv
 
 
 class ControllerPolicy:
-    """Runs ``controller`` (default: the paper's stack for the scenario's method) in ``env``."""
+    """Runs ``controller`` (default: the paper's stack for the scenario's method) in ``env``.
+
+    ``action = "torque"``: its wheel torques (``bioform run``'s episode). ``action = "velocity"``:
+    its kinematic law's command ``(υ_cmd, ω_cmd)`` (the ``cmd`` of ``controller.signals()``),
+    clipped to the action space, which the environment's own torque law then tracks (a baseline
+    for a velocity-action agent, and the other followers of :class:`~.single.FollowerEnv`)."""
 
     def __init__(self, env: FormationParallelEnv, controller: Any = None) -> None:
-        if env.action_mode != "torque":
-            raise ValueError("ControllerPolicy drives wheel torques: build the environment with action='torque'")
         self.env = env
         self.controller = controller
         self.verr = np.zeros(env.n)
@@ -37,7 +40,9 @@ class ControllerPolicy:
         env = self.env
         if self.controller is None or isinstance(self.controller, ControlStack):
             p = env._plant
-            self.controller = ControlStack(env.graph, stack_params(env._sc, p.c_true(), getattr(p, "tau_max", None)))
+            c = getattr(env, "nominal_c_true", None)  # the prior of the scenario's robot, not a randomised truth
+            c = p.c_true() if c is None else c
+            self.controller = ControlStack(env.graph, stack_params(env._sc, c, getattr(p, "tau_max", None)))
         self.controller.reset(initial_estimates(env._sc, env._pose, env.L_pose[0]), env._vel)  # as sim.simulate
         self.verr[:] = 0.0
 
@@ -61,6 +66,13 @@ class ControllerPolicy:
             self.verr += np.abs(cmd[:, 0] - v[:, 0]) + np.abs(cmd[:, 1] - v[:, 1])
         else:
             self.verr[:] = np.nan
+        if env.action_mode == "velocity":
+            if cmd is None:
+                raise ValueError(
+                    "ControllerPolicy with action='velocity' needs a controller whose signals() give 'cmd'"
+                )
+            u = np.clip(np.asarray(cmd, dtype=float), env._low, env._high)
+            return {a: u[env._index[a]].copy() for a in env.agents}
         return {a: tau[env._index[a]].copy() for a in env.agents}
 
 
