@@ -342,7 +342,7 @@ def test_package_uri_resolved_by_the_package_path_flag(tmp_path, monkeypatch):
     monkeypatch.delenv("BIOFORM_PACKAGE_PATH", raising=False)
     path = write(tmp_path / "robot" / "dd.urdf", text)
     args = cli.build_parser().parse_args(["robot", "check", str(path), "--package-path", f"ddpkg={pkg}"])
-    from bioform_mj.assess.check import ref_from_args
+    from bioform_mj.cli.robot import ref_from_args
 
     ref = ref_from_args(args.model, args)
     assert ref.package_path == PackagePath([("ddpkg", str(pkg.resolve()))])

@@ -37,7 +37,7 @@ def _segment(fr, k, unit):
     markers and the camera; returns (pixels per robot, pixels of each robot's halo, robot pixel columns)."""
     import mujoco
 
-    from bioform_mj.outputs.video import _add_geoms, _Trails, auto_camera_path
+    from bioform_mj.outputs.video import Trails, add_geoms, auto_camera_path
     from bioform_mj.robots.scene import follower_prefix
 
     cap, r, m = fr.capture, fr.renderer, fr.replay.model
@@ -50,7 +50,7 @@ def _segment(fr, k, unit):
     cam.lookat[:], cam.distance = centers[k], dists[k]
     r.update_scene(fr.replay.data, camera=cam)
     first = r.scene.ngeom
-    _add_geoms(r, cap, _Trails(cap, tol=0.015 * unit), k, line_px=2.0, unit=unit)
+    add_geoms(r, cap, Trails(cap, tol=0.015 * unit), k, line_px=2.0, unit=unit)
     n = cap.pose[k].shape[0]
     for j in range(first, r.scene.ngeom):  # mark each follower's halo: a disc of radius 0.3 unit at its pose
         g = r.scene.geoms[j]

@@ -152,8 +152,8 @@ def build_parser() -> argparse.ArgumentParser:
     ident = sub.add_parser("identify", help="system identification of a robot MJCF: formula vs measured a, b")
     ident.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
     ident.add_argument("--out", type=Path, help="write the result as JSON to this file")
-    from bioform_mj.assess.check import add_parser as _robot_parser
-    from bioform_mj.assess.check import mapping_args
+    from bioform_mj.cli.robot import add_parser as _robot_parser
+    from bioform_mj.cli.robot import mapping_args
 
     mapping_args(ident)
     rsub = _robot_parser(sub)  # bioform robot check MODEL.xml [--base B] [--left-wheel J] [--right-wheel J] [--json F]
@@ -315,7 +315,7 @@ def _dispatch(args: argparse.Namespace) -> int:
         if args.command == "robot" and getattr(args, "realdata_main", None):
             return args.realdata_main(args)  # robot fit / replay / drive-program (issue 29)
         if args.command == "robot":
-            from bioform_mj.assess.check import main as robot_main
+            from bioform_mj.cli.robot import main as robot_main
 
             return robot_main(args)
         if args.command == "sweep":
@@ -759,8 +759,8 @@ def _calibrate(args: argparse.Namespace) -> int:
 
 
 def _identify(args: argparse.Namespace) -> int:
-    from bioform_mj.assess.check import ref_from_args
     from bioform_mj.assess.identify import identify_main
+    from bioform_mj.cli.robot import ref_from_args
 
     if args.out is not None:
         from bioform_mj.outputs.files import check_out_file

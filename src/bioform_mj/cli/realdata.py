@@ -1,6 +1,6 @@
 """``bioform robot fit``, ``robot replay`` and ``robot drive-program`` (issue 29).
 
-The robot argument and the mapping flags are ``robot check``'s (:func:`bioform_mj.assess.check.mapping_args`),
+The robot argument and the mapping flags are ``robot check``'s (:func:`bioform_mj.cli.robot.mapping_args`),
 so a robot maps the same way everywhere. Bad input (a recording without the named topics or joints, time
 going backwards, NaN efforts, an unreadable bag, wheels that are not in the recording) exits 2 with one
 ``error:`` line before anything is written.
@@ -33,7 +33,7 @@ def _recording_args(p: argparse.ArgumentParser) -> None:
 
 def add_parsers(rsub: Any) -> None:
     """Add ``fit``, ``replay`` and ``drive-program`` to ``bioform robot``'s subparsers."""
-    from bioform_mj.assess.check import mapping_args
+    from bioform_mj.cli.robot import mapping_args
 
     fit = rsub.add_parser(
         "fit",
@@ -94,7 +94,7 @@ def main(args: argparse.Namespace) -> int:
 
 def _load(args: argparse.Namespace):
     """The robot (as robot check maps it) and the recording, checked against each other."""
-    from bioform_mj.assess.check import ref_from_args
+    from bioform_mj.cli.robot import ref_from_args
     from bioform_mj.robots.realdata.recording import Topics, read_recording
     from bioform_mj.robots.realdata.simmodel import sim_spec
 
@@ -264,7 +264,7 @@ def _replay_main(args: argparse.Namespace) -> int:
 
 
 def _program_main(args: argparse.Namespace) -> int:
-    from bioform_mj.assess.check import ref_from_args
+    from bioform_mj.cli.robot import ref_from_args
     from bioform_mj.robots.params import robot_truth
     from bioform_mj.robots.realdata.program import drive_program, program_torque
 

@@ -41,15 +41,15 @@ class EnvRenderer:
 
     def __init__(self, env: Any, width: int = WIDTH, height: int = HEIGHT, fps: float = 30.0) -> None:
         from bioform_mj.outputs.gl import make_renderer
-        from bioform_mj.outputs.video import FrameCapture, _Caption, _Replay, follower_rgb
+        from bioform_mj.outputs.video import Caption, FrameCapture, Replay, follower_rgb
         from bioform_mj.robots.scene import robot_unit
 
         self.width, self.height = int(width), int(height)
         self.capture = FrameCapture(fps)
         self._sample(env)
-        self.replay = _Replay(SimpleNamespace(scenario=env._sc, plant=env._plant), self.capture)
+        self.replay = Replay(SimpleNamespace(scenario=env._sc, plant=env._plant), self.capture)
         self.renderer, self.fast = make_renderer(self.replay.model, self.width, self.height)
-        self.caption = _Caption(self.height)
+        self.caption = Caption(self.height)
         self.colors = [follower_rgb(i) for i in range(env.n)]
         self.line_px = max(2.0, self.height / 200)
         self.unit = robot_unit(self.replay.half_track)
@@ -81,7 +81,7 @@ class EnvRenderer:
         """The picture of the environment now, ``(height, width, 3)`` uint8."""
         import mujoco
 
-        from bioform_mj.outputs.video import _AZIMUTH, _ELEVATION, LEADER_RGB, _add_geoms, _Trails, auto_camera_path
+        from bioform_mj.outputs.video import AZIMUTH, ELEVATION, LEADER_RGB, Trails, add_geoms, auto_camera_path
 
         if not self._fresh:
             self._sample(env)
@@ -94,14 +94,14 @@ class EnvRenderer:
         centers, dists = auto_camera_path(win, fovy, self.width / self.height, unit=self.unit)
         cam = mujoco.MjvCamera()
         cam.type = mujoco.mjtCamera.mjCAMERA_FREE
-        cam.azimuth, cam.elevation = _AZIMUTH, _ELEVATION
+        cam.azimuth, cam.elevation = AZIMUTH, ELEVATION
         cam.lookat[:] = centers[-1]
         cam.distance = float(dists[-1])
         r.update_scene(self.replay.data, camera=cam)
         if self.fast:
             r.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
             r.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = 0
-        _add_geoms(r, cap, _Trails(cap, tol=0.015 * self.unit), k, line_px=self.line_px, unit=self.unit)
+        add_geoms(r, cap, Trails(cap, tol=0.015 * self.unit), k, line_px=self.line_px, unit=self.unit)
         img = r.render()
         fe = np.linalg.norm(cap.pose[k][:, :2] - cap.slots[k], axis=1)
         lines = [

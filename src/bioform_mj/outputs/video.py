@@ -39,8 +39,8 @@ log = logging.getLogger(__name__)
 #: ``--camera`` choices: a free camera fitted to the formation, or the scene's cameras.
 CAMERAS = ("auto", "track", "top")
 
-_AZIMUTH = 15.0  # deg, auto camera: behind the formation (the leader drives along +x), a little to its right
-_ELEVATION = -55.0  # deg, looking down
+AZIMUTH = 15.0  # deg, auto camera: behind the formation (the leader drives along +x), a little to its right
+ELEVATION = -55.0  # deg, looking down
 _MARGIN = 1.0  # m kept in view around every robot, the leader and every slot (× robot_unit)
 
 
@@ -116,7 +116,7 @@ class VideoInfo:
 
 
 # ---------------------------------------------------------------------------- scene for the replay
-class _Replay:
+class Replay:
     """A compiled model and data posed from snapshots (the plant's own model or a composed one)."""
 
     def __init__(self, result: Any, capture: FrameCapture) -> None:
@@ -203,8 +203,8 @@ def auto_camera_path(
     capture: FrameCapture,
     fovy_deg: float,
     aspect: float,
-    azimuth: float = _AZIMUTH,
-    elevation: float = _ELEVATION,
+    azimuth: float = AZIMUTH,
+    elevation: float = ELEVATION,
     unit: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per frame ``lookat`` (K, 3) and ``distance`` (K,) m of a free camera that shows everyone.
@@ -268,7 +268,7 @@ def _moving_max(x: np.ndarray, half: int) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------- decorations
-class _Trails:
+class Trails:
     """Paths of the leader and each follower, simplified as they grow (one new point per frame).
 
     A point is kept when dropping it would move the polyline by more than ``tol`` m (its
@@ -310,9 +310,7 @@ class _Trails:
         return self.xy[track, idx]
 
 
-def _add_geoms(
-    renderer: Any, capture: FrameCapture, trails: _Trails, k: int, line_px: float, unit: float = 1.0
-) -> None:
+def add_geoms(renderer: Any, capture: FrameCapture, trails: Trails, k: int, line_px: float, unit: float = 1.0) -> None:
     """Trails, formation shape and robot halos, appended to the renderer's scene after ``update_scene``.
 
     Disc radii are the paper-scale sizes (halo 0.3 m, slot 0.18 m, leader 0.3 m) × ``unit``
@@ -380,7 +378,7 @@ def _font_path() -> str | None:
     return str(path) if path.is_file() else None
 
 
-class _Caption:
+class Caption:
     """Text box in the top-left corner, drawn with Pillow onto the frame (a few ms)."""
 
     def __init__(self, height: int) -> None:
@@ -441,23 +439,23 @@ class FrameRenderer:
         if len(capture) == 0:
             raise InputError("no frames to render: the run ended before its first frame")
         self.capture, self.options, self.sc = capture, options, result.scenario
-        self.replay = _Replay(result, capture)
+        self.replay = Replay(result, capture)
         self.renderer, self.fast = make_renderer(self.replay.model, options.width, options.height)
         self.gl_renderer = gl_renderer_name()
-        self.caption = _Caption(options.height)
+        self.caption = Caption(options.height)
         self.colors = [follower_rgb(i) for i in range(self.sc.n)]
         self.line_px = max(2.0, options.height / 200)  # trail width, pixels
         from bioform_mj.robots.scene import robot_unit
 
         self.unit = robot_unit(self.replay.half_track)  # markers and margins at the robots' size (design §9)
-        self.trails = _Trails(capture, tol=0.015 * self.unit)
+        self.trails = Trails(capture, tol=0.015 * self.unit)
         self.centers: np.ndarray | None = None
         if options.camera == "auto":
             fovy = float(self.replay.model.vis.global_.fovy)
             self.centers, self.dists = auto_camera_path(capture, fovy, options.width / options.height, unit=self.unit)
             self.camera: Any = mujoco.MjvCamera()
             self.camera.type = mujoco.mjtCamera.mjCAMERA_FREE
-            self.camera.azimuth, self.camera.elevation = _AZIMUTH, _ELEVATION
+            self.camera.azimuth, self.camera.elevation = AZIMUTH, ELEVATION
         else:
             self.camera = options.camera
 
@@ -474,7 +472,7 @@ class FrameRenderer:
         if self.fast:  # invisible from these cameras, or not worth a CPU rasteriser's time
             r.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
             r.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = 0
-        _add_geoms(r, cap, self.trails, k, line_px=self.line_px, unit=self.unit)
+        add_geoms(r, cap, self.trails, k, line_px=self.line_px, unit=self.unit)
         img = r.render()
         fe = np.linalg.norm(cap.pose[k][:, :2] - cap.slots[k], axis=1)
         lines = [
