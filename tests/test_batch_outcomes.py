@@ -134,6 +134,7 @@ def test_physics_probe_tells_a_contact_model_apart_from_float32(tmp_path, capsys
     (MuJoCo Warp's ellipsoid–box contacts are not C MuJoCo's): ≥ 0.1. A scene beyond PROBE_TOL is
     refused up front by the sweep (exit 2, one line) and by BatchRun."""
     from bioform_mj.batch import probe as control
+    from bioform_mj.batch.runner import BatchRun
     from bioform_mj.run.simulate import make_plant
 
     ok = control.physics_probe(make_plant(load("paper", overrides=["plant.kind=mujoco"])))
@@ -150,4 +151,4 @@ def test_physics_probe_tells_a_contact_model_apart_from_float32(tmp_path, capsys
     assert len(err) == 1 and err[0].startswith("error: --backend warp: scenario 'paper': MuJoCo Warp's physics")
     assert not out.exists()
     with pytest.raises(ValueError, match="differs from C MuJoCo's"):
-        control.BatchRun([load("paper", overrides=["plant.kind=mujoco", "sim.duration=0.01"])])
+        BatchRun([load("paper", overrides=["plant.kind=mujoco", "sim.duration=0.01"])])
