@@ -69,6 +69,9 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
         metavar="NAME=DIR",
         help="URDF robots: where package://NAME/... points (repeatable; adds to plant.package_path)",
     )
+    from .xacro_sandbox import add_flags
+
+    add_flags(p, scenario=True)  # design §12: a xacro file is a program, run only when asked
     p.add_argument("--quiet", action="store_true", help="no progress bar, no result lines")
     p.add_argument(
         "--no-robot-check",
@@ -279,6 +282,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
+    from .xacro_sandbox import grant_from_args
+
+    grant_from_args(args)  # --xacro / --xacro-arg, or nothing granted (design §12)
     if getattr(args, "no_robot_check", False):  # design §14.2; inherited by a sweep's worker processes
         from .prerun import SKIP_ENV
 

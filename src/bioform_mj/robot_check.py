@@ -670,12 +670,16 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="URDF: keep contacts between the robot's own links (default off, as in Gazebo)",
     )
+    from .xacro_sandbox import add_flags
+
+    add_flags(p)  # --xacro, --xacro-arg NAME=VALUE (design §12: a xacro file is a program, run when asked)
 
 
 def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
     """A :class:`RobotRef` from a model argument and the :func:`mapping_args` flags."""
     from .errors import InputError
     from .robots import package_path_from_args, resolve_robot
+    from .xacro_sandbox import xacro_args_from_flags
 
     for flag in ("wheel_radius", "half_track", "tau_max"):
         v = getattr(args, flag, None)
@@ -699,6 +703,8 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
             self_collide=bool(getattr(args, "self_collide", False)),
             package_path=package_path_from_args(getattr(args, "package_path", None)),
             keyframe=getattr(args, "keyframe", None) or "",
+            xacro=bool(getattr(args, "xacro", False)),
+            xacro_args=xacro_args_from_flags(getattr(args, "xacro_arg", None)),
         )
     )
 
