@@ -4,7 +4,7 @@ A robot file is data. A ``.urdf`` or ``.xml`` is parsed as XML and never evaluat
 needs xacro (a ``.xacro`` file, or one holding ``<xacro:…>``, ``${…}`` or ``$(find|arg|env|optenv|eval …)``
 outside comments and ``<gazebo>`` blocks: :func:`needs_xacro`) is refused with one ``error:``
 line saying how to ask (:func:`refusal`), unless the user asked: ``--xacro`` (``robot check``,
-``identify``, ``run``, ``table1``, ``sweep``) or ``xacro = true`` in the robot's table, with
+``identify``, ``run``, ``table1``; a sweep refuses it) or ``xacro = true`` in the robot's table, with
 ``$(arg NAME)`` values from ``--xacro-arg NAME=VALUE`` or ``xacro_args = {NAME = "VALUE"}``.
 
 :func:`expand` then runs xacro in a child process (``bioform_mj/_xacro_child.py`` under
@@ -134,6 +134,11 @@ def grant_from_args(args: argparse.Namespace) -> None:
     values = xacro_args_from_flags(getattr(args, "xacro_arg", None))
     if values and not getattr(args, "xacro", False):
         raise InputError("--xacro-arg without --xacro: xacro runs only when asked (add --xacro)")
+    if getattr(args, "xacro", False) and getattr(args, "command", "") == "sweep":  # its runs are other processes
+        raise InputError(
+            "sweep --xacro: a sweep's runs are other processes; write xacro = true (and "
+            'xacro_args = {NAME = "VALUE"}) in the robot\'s table of the scenario instead (design §12)'
+        )
     grant(bool(getattr(args, "xacro", False)), values)
 
 
