@@ -179,6 +179,10 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
             raise ModelError(f"{path}: does not compile: {_one_line(exc)}") from exc
         absolute_asset_files(spec)
         spec, model, key, key_q, key_notes = apply_keyframe(spec, model, path, ref)  # design §13.2
+    from bioform_mj.limits import model_value_problem  # NaN or negative masses, axes, friction: refused
+
+    if bad := model_value_problem(model):
+        raise ModelError(f"{path}: {bad}")
     layout, plan = _analyse(model, path, ref)
     if imported:
         layout = replace(layout, notes=imported + layout.notes, import_notes=imported)

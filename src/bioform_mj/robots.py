@@ -272,7 +272,11 @@ def resolve_robot(entry: Any) -> RobotRef:
     path = Path(name)
     if _is_path(name):
         if not path.is_file():
-            raise InputError(f"model file '{path}' does not exist")
+            from .limits import not_regular  # a FIFO or a device: said as such, never opened
+
+            raise InputError(
+                f"model file {not_regular(path)}" if not_regular(path) else f"model file '{path}' does not exist"
+            )
         return replace(ref, model=str(path))
     raise InputError(f"unknown robot '{name}' (expected one of: {', '.join(robot_names())}, or an MJCF or URDF path)")
 

@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
+from .limits import mesh_problem, not_regular, urdf_value_problem
 from .packages import find_package, package_search_path, resolve_uri
 from .robots import PackagePath, RobotRef
 from .urdf_wheels import find_wheels, left_of, welded_to
@@ -105,7 +106,7 @@ def is_urdf(path: str | Path) -> bool:
     p = str(path).lower()
     if p.endswith(URDF_SUFFIXES):
         return True
-    if not p.endswith(".xml"):
+    if not p.endswith(".xml") or not_regular(path):
         return False
     try:
         for _event, elem in ET.iterparse(str(path), events=("start",)):
@@ -140,6 +141,8 @@ def _read_text(
     sandboxed process with ``xacro_args`` (:mod:`bioform_mj.xacro_sandbox`, design §12)."""
     from .xacro_sandbox import expand, granted, needs_xacro, refusal
 
+    if not_regular(path):
+        raise UrdfError(f"model file {not_regular(path)}")
     if not path.is_file():
         raise UrdfError(f"model file '{path}' does not exist")
     text = None
@@ -196,6 +199,9 @@ def _parse(
         raise UrdfError(f"{path}: not valid XML ({exc})") from None
     if robot.tag != "robot":
         raise UrdfError(f"{path}: the root element is <{robot.tag}>, not <robot> (is it a URDF?)")
+    bad_value = urdf_value_problem(robot)  # NaN, negative, zero where it cannot be: refused naming it
+    if bad_value:
+        raise UrdfError(f"{path}: {bad_value}")
     notes: list[str] = [XACRO_NOTE] if expanded else []
     links = {}
     for link in robot.findall("link"):
@@ -299,7 +305,9 @@ def _parse(
                 file, why, how = resolve_uri(uri, packages, path, meshdir) if uri else (None, "no filename", "")
                 if how.endswith("a parent folder of the URDF file"):
                     found_by.add(how)
-                if file is not None and not file.is_file():
+                if file is not None and (bad := mesh_problem(file)):
+                    why = f"mesh file {file}: {bad}"  # a FIFO, a device, a zip bomb: never opened or unpacked
+                elif file is not None and not file.is_file():
                     why = f"no file {file}"
                 elif file is not None and not os.access(file, os.R_OK):
                     why = f"file {file} cannot be read"
