@@ -94,6 +94,8 @@ def mesh_problem(file: str | Path) -> str:
         return why
     try:
         size = os.path.getsize(file)
+    except FileNotFoundError:
+        return ""  # missing: the caller says so
     except OSError as exc:
         return f"cannot be read ({exc.strerror})"
     if size > MESH_MAX_MB * 10**6:

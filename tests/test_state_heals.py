@@ -1,0 +1,82 @@
+"""State that heals (issue 28 item 3): a robot-check cache entry of the wrong shape is ignored and
+rewritten with one warning naming the file, never an internal error."""
+
+from __future__ import annotations
+
+import json
+import os
+import warnings
+
+import pytest
+
+from bioform_mj import prerun
+from bioform_mj.cache_schema import entry_problem
+from bioform_mj.errors import RobotWarning
+
+GOOD = {
+    "format": prerun.CACHE_FORMAT,
+    "verdict": "pass",
+    "fail_reasons": [],
+    "cause": None,
+    "formula": {"a": 1.0, "b": 2.0},
+    "identified": {"a": 1.0, "b": None},
+    "relative_error": {"a": 0.0, "b": None},
+    "seconds": 0.5,
+}
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    """An empty cache and memo; the check itself a stand-in that counts its calls."""
+    monkeypatch.setenv(prerun.CACHE_ENV, str(tmp_path / "cache"))
+    monkeypatch.setattr(prerun, "_MEMO", {})
+    calls = []
+    monkeypatch.setattr(prerun, "_check", lambda ref: calls.append(ref) or dict(GOOD))
+    (tmp_path / "cache" / "robot-check").mkdir(parents=True)
+    return tmp_path / "cache" / "robot-check", calls
+
+
+BAD = [
+    ("missing keys", {"format": prerun.CACHE_FORMAT, "verdict": "pass"}),
+    ("wrong verdict", {**GOOD, "verdict": "great"}),
+    ("reasons not a list", {**GOOD, "fail_reasons": "x"}),
+    ("formula of strings", {**GOOD, "formula": {"a": "1", "b": 2}}),
+    ("a list", [1, 2]),
+    ("cause of the wrong shape", {**GOOD, "cause": {"kind": 1}}),
+]
+
+
+@pytest.mark.parametrize("desc,entry", BAD, ids=[b[0] for b in BAD])
+def test_wrong_shape_ignored_rewritten_and_said_once(desc, entry, cache):
+    folder, calls = cache
+    path = folder / "k.json"
+    path.write_text(json.dumps(entry))
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        out = prerun._cached_check("ref", "k")
+    said = [str(w.message) for w in got if issubclass(w.category, RobotWarning)]
+    assert len(said) == 1 and str(path) in said[0] and "ignored and rewritten" in said[0], said
+    assert out["verdict"] == "pass" and out["from"] == "computed" and len(calls) == 1
+    assert entry_problem(json.loads(path.read_text()), prerun.CACHE_FORMAT) == ""
+    prerun._MEMO.clear()
+    with warnings.catch_warnings(record=True) as got:  # healed: read from disk, nothing said
+        warnings.simplefilter("always")
+        assert prerun._cached_check("ref", "k")["from"] == "disk"
+    assert not [w for w in got if issubclass(w.category, RobotWarning)] and len(calls) == 1
+
+
+def test_broken_json_and_a_fifo_heal_too(cache):
+    folder, calls = cache
+    (folder / "j.json").write_text("{not json")
+    os.mkfifo(folder / "f.json")
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        assert prerun._cached_check("ref", "j")["verdict"] == "pass"
+        assert prerun._cached_check("ref", "f")["verdict"] == "pass"  # a FIFO is never opened (it would block)
+    said = [str(w.message) for w in got if issubclass(w.category, RobotWarning)]
+    assert len(said) == 2 and "unreadable" in said[0] and "FIFO" in said[1], said
+
+
+def test_good_entry_passes_the_schema():
+    assert entry_problem(GOOD, prerun.CACHE_FORMAT) == ""
+    assert "format" in entry_problem({**GOOD, "format": 0}, prerun.CACHE_FORMAT)
