@@ -80,3 +80,41 @@ def test_broken_json_and_a_fifo_heal_too(cache):
 def test_good_entry_passes_the_schema():
     assert entry_problem(GOOD, prerun.CACHE_FORMAT) == ""
     assert "format" in entry_problem({**GOOD, "format": 0}, prerun.CACHE_FORMAT)
+
+
+# ------------------------------------------------------------------ environments and batches
+def test_parallel_env_is_freed_when_dropped():
+    """No cache on the space methods keeps an environment alive (each held ~6 MB, issue 28)."""
+    import gc
+    import weakref
+
+    pytest.importorskip("pettingzoo")
+    from bioform_mj.envs import parallel_env
+
+    env = parallel_env("paper")
+    agent = env.possible_agents[0]
+    assert env.observation_space(agent) is env.observation_space(agent)  # one space object per agent
+    assert env.action_space(agent) is env.action_space(agent)
+    env.reset(seed=0)
+    env.step({a: env.action_space(a).sample() * 0 for a in env.agents})
+    env.close()
+    ref = weakref.ref(env)
+    del env
+    gc.collect()
+    assert ref() is None
+
+
+@pytest.mark.parametrize(
+    "kw,needle",
+    [({"worlds": 10**9}, "GiB estimated"), ({"worlds": 1, "nconmax": 10**12}, "nconmax/njmax"), ({"njmax": 0}, ">= 1")],
+)
+def test_batch_env_estimates_memory_before_allocating(kw, needle):
+    """worlds, nconmax and njmax all enter the estimate, before the seed list or any array."""
+    import time
+
+    from bioform_mj.envs import batch_env
+
+    t0 = time.monotonic()
+    with pytest.raises(ValueError, match=needle):
+        batch_env("paper", device="cpu", **kw)
+    assert time.monotonic() - t0 < 30
