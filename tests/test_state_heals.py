@@ -118,3 +118,36 @@ def test_batch_env_estimates_memory_before_allocating(kw, needle):
     with pytest.raises(ValueError, match=needle):
         batch_env("paper", device="cpu", **kw)
     assert time.monotonic() - t0 < 30
+
+
+# ------------------------------------------------------------------ provenance: every file a robot loads
+def test_provenance_hashes_package_meshes_and_xacro_includes(tmp_path):
+    """A sweep whose robot's package:// mesh (or xacro include) changed is redone (it resumed as done)."""
+    import bioform_mj
+    from bioform_mj.provenance import differences, provenance
+    from test_urdf import _package, box_stl, write
+
+    pkg, urdf = _package(tmp_path)
+    write(tmp_path / "robot" / "dd.urdf", urdf)
+    toml = '[plant]\nkind = "mujoco"\nrobots = [{model = "robot/dd.urdf", package_path = {ddpkg = "ws/src/ddpkg"}}]\n'
+    sc = bioform_mj.load(str(write(tmp_path / "s.toml", toml)))
+    before = provenance(sc)
+    mesh = str((pkg / "meshes" / "chassis.stl").resolve())
+    assert before["files"].get(mesh) not in (None, "missing"), before["files"]
+    box_stl(pkg / "meshes" / "chassis.stl", 0.15, 0.1, 0.03)  # the mesh changes
+    assert any("robot file changed" in w and "chassis.stl" in w for w in differences(before, provenance(sc)))
+
+    pytest.importorskip("xacro")
+    ns = 'xmlns:xacro="http://ros.org/wiki/xacro"'
+    write(pkg / "urdf" / "part.xacro", f'<robot {ns}><xacro:property name="mc" value="2.0"/></robot>')
+    text = urdf.replace(
+        '<robot name="dd">', f'<robot name="dd" {ns}><xacro:include filename="$(find ddpkg)/urdf/part.xacro"/>'
+    )
+    write(pkg / "urdf" / "dd.urdf.xacro", text)
+    toml = '[plant]\nkind = "mujoco"\nrobots = [{model = "ws/src/ddpkg/urdf/dd.urdf.xacro", xacro = true}]\n'
+    sc = bioform_mj.load(str(write(tmp_path / "x.toml", toml)))
+    before = provenance(sc)
+    part = str((pkg / "urdf" / "part.xacro").resolve())
+    assert before["files"].get(part) not in (None, "missing"), before["files"]
+    write(pkg / "urdf" / "part.xacro", f'<robot {ns}><xacro:property name="mc" value="3.0"/></robot>')
+    assert any("part.xacro" in w for w in differences(before, provenance(sc)))

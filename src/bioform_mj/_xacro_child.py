@@ -241,7 +241,7 @@ def main() -> int:
     sys.dont_write_bytecode = True
     sys.stdout = sys.stderr  # xacro's own prints never reach the answer
     try:
-        xml = _expand(req)
+        xml, includes = _expand(req)
     except MemoryError:
         _answer({"kind": "memory", "error": "it needed more memory than the limit"})
         return 3
@@ -275,7 +275,7 @@ def main() -> int:
     if len(xml) > int(req["max_out_bytes"]):
         _answer({"kind": "size", "error": f"its expansion is {len(xml) / 1e6:.0f} MB"})
         return 3
-    _answer({"xml": xml})
+    _answer({"xml": xml, "includes": includes})
     return 0
 
 
@@ -287,8 +287,8 @@ class _Missing(Exception):
         self.package = package
 
 
-def _expand(req: dict) -> str:
-    """The expanded XML of ``req["file"]`` (see the module docstring)."""
+def _expand(req: dict) -> tuple[str, list[str]]:
+    """The expanded XML of ``req["file"]`` (see the module docstring) and the files it included or loaded."""
     for var, val in req["search_env"].items():  # the package search path only, for $(find)
         os.environ[var] = val
     # bioform_mj's find_package (same search path as package://), without the package's __init__
@@ -391,7 +391,7 @@ def _expand(req: dict) -> str:
     python_dirs = sorted({os.path.realpath(p) for p in sys.path if p and os.path.isdir(p)})  # lazy imports
     _install_hook(roots, search, python_dirs)
     doc = xacro.process_file(path, mappings=dict(req["args"]))
-    return doc.toxml()
+    return doc.toxml(), sorted({os.path.realpath(f) for f in getattr(xacro, "all_includes", [])})
 
 
 if __name__ == "__main__":

@@ -77,7 +77,10 @@ _SEARCH_VARS = ("BIOFORM_PACKAGE_PATH", "ROS_PACKAGE_PATH", "AMENT_PREFIX_PATH")
 
 
 class Expanded(str):
-    """URDF text that xacro made (its import notes say so, :data:`XACRO_NOTE`)."""
+    """URDF text that xacro made (its import notes say so, :data:`XACRO_NOTE`); ``includes``: the
+    files it included or loaded (``xacro:include``, ``load_yaml``), real paths, for provenance."""
+
+    includes: tuple[str, ...] = ()
 
 
 class XacroRefused(InputError):
@@ -217,8 +220,10 @@ def expand(path: Path, packages: PackagePath, args: tuple[tuple[str, str], ...] 
     }
     answer = _run_child(path, req)
     if isinstance(answer.get("xml"), str):
-        _EXPANDED[key] = Expanded(answer["xml"])
-        return _EXPANDED[key]
+        out = Expanded(answer["xml"])
+        out.includes = tuple(str(f) for f in answer.get("includes") or () if isinstance(f, str))
+        _EXPANDED[key] = out
+        return out
     kind, why = answer.get("kind"), " ".join(str(answer.get("error", "")).split())
     if kind == "missing":
         pkg = answer.get("package", "?")
