@@ -151,3 +151,30 @@ def test_provenance_hashes_package_meshes_and_xacro_includes(tmp_path):
     assert before["files"].get(part) not in (None, "missing"), before["files"]
     write(pkg / "urdf" / "part.xacro", f'<robot {ns}><xacro:property name="mc" value="3.0"/></robot>')
     assert any("part.xacro" in w for w in differences(before, provenance(sc)))
+
+
+# ------------------------------------------------------------------ a file-size limit (or a full disk) with --rrd
+def test_rrd_past_a_file_size_limit_is_one_error_line_no_tmp_no_lock(tmp_path):
+    """``ulimit -f`` below run.rrd's size: one ``error:`` line naming the file (it was an internal error from
+    rerun's writer thread), no ``.tmp``, no lock; what was written before is kept and said."""
+    import resource
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out = tmp_path / "r"
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    res = subprocess.run(
+        [sys.executable, "-m", "bioform_mj.cli", "run", "paper", "--plant", "ideal", "--duration", "5"]
+        + ["--rrd", "--out", str(out), "--quiet"],
+        preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (700_000, 700_000)),  # log.npz ~0.5 MB fits
+        env={**os.environ, "PYTHONPATH": src},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    err = [line for line in res.stderr.splitlines() if line.strip()]
+    assert res.returncode != 0 and len(err) == 1, res.stderr
+    assert err[0].startswith("error: cannot write") and "run.rrd" in err[0] and "File too large" in err[0], err
+    left = sorted(p.name for p in out.iterdir())
+    assert not [n for n in left if n.endswith(".tmp") or n == ".bioform.lock"] and "run.rrd" not in left, left
