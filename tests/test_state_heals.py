@@ -178,3 +178,45 @@ def test_rrd_past_a_file_size_limit_is_one_error_line_no_tmp_no_lock(tmp_path):
     assert err[0].startswith("error: cannot write") and "run.rrd" in err[0] and "File too large" in err[0], err
     left = sorted(p.name for p in out.iterdir())
     assert not [n for n in left if n.endswith(".tmp") or n == ".bioform.lock"] and "run.rrd" not in left, left
+
+
+# ------------------------------------------------------------------ a user's controller gets read-only views
+class _Scribbler:
+    """The paper's stack, writing into the arrays it is handed (``what``: pose, vel, leader_pose)."""
+
+    def __init__(self, sc, what: str) -> None:
+        import numpy as np
+
+        from bioform_mj.control.stack import ControlStack
+        from bioform_mj.sim import stack_params
+
+        self.inner = ControlStack(sc.build_graph(), stack_params(sc, np.array(sc.plant.c_true)))
+        self.what = what
+
+    def reset(self, est_pose0, vel0):
+        self.inner.reset(est_pose0, vel0)
+
+    def step(self, leader_pose, leader_vel, pose, vel, comm=None):
+        tau = self.inner.step(leader_pose, leader_vel, pose, vel)
+        if self.what != "none":
+            {"pose": pose, "vel": vel, "leader_pose": leader_pose}[self.what][...] = 0.0
+        return tau
+
+    def signals(self):
+        return self.inner.signals()
+
+
+@pytest.mark.parametrize("what", ["pose", "vel", "leader_pose"])
+def test_a_controller_cannot_write_into_what_it_is_handed(what):
+    """Writing into ``pose`` silently changed the logged trajectory and the metrics (issue 28): now it raises,
+    named, at the first step; a controller that only reads runs as the package's own stack does."""
+    import numpy as np
+
+    import bioform_mj as bf
+
+    sc = bf.load("paper", ["sim.duration=0.2"], plant="ideal")
+    with pytest.raises(ValueError, match="read-only") as info:
+        bf.simulate(sc, controller=_Scribbler(sc, what))
+    assert info.value.result.summary["raised"]["step"] == 0
+    reader = bf.simulate(sc, controller=_Scribbler(sc, "none"))
+    assert np.array_equal(reader.log["pose"], bf.simulate(sc).log["pose"])
