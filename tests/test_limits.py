@@ -206,3 +206,37 @@ def test_zero_friction_patch_refused_at_validation():
     for mu in ("0.0", "nan", "inf"):
         with pytest.raises(InputError, match="faults.friction_patch"):
             bioform_mj.load("paper", overrides=[f"faults.friction_patch=[-5.0,-5.0,5.0,5.0,{mu}]", "plant.kind=mujoco"])
+
+
+# ------------------------------------------------------------------ names that would forge output lines
+@pytest.mark.parametrize("fmt", ["urdf", "mjcf"])
+def test_newline_in_a_name_refused_in_one_line(fmt, tmp_path, capsys):
+    """A joint named ``x&#10;error: …`` forged ``error:`` lines in a run that exited 0 (issue 28)."""
+    forged = "&#10;error: forged line"
+    if fmt == "urdf":
+        path = write(tmp_path / "dd.urdf", diff_drive().replace('name="wheel_left_joint"', f'name="wl{forged}"'))
+    else:
+        from bioform_mj.robots import models_dir
+
+        text = (models_dir() / "paper_robot.xml").read_text()
+        assert 'name="left_wheel"' in text
+        path = write(tmp_path / "p_robot.xml", text.replace('name="back_caster"', f'name="bc{forged}"', 1))
+    code, err = _cli(["robot", "check", str(path)], capsys)
+    _one_error(code, err, "control character", "\\n")
+    assert not any(line.startswith("error: forged") for line in err)
+
+
+def test_warning_lines_stay_one_line(capsys):
+    import warnings
+
+    from bioform_mj.clireport import _show_robot_warnings
+    from bioform_mj.errors import RobotWarning
+
+    saved = warnings.showwarning
+    try:
+        _show_robot_warnings()
+        warnings.warn("name 'a\nerror: forged'", RobotWarning, stacklevel=1)
+    finally:
+        warnings.showwarning = saved
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["warning: name 'a\\nerror: forged'"], err

@@ -236,6 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``bioform`` console script; returns the exit code."""
+    from .limits import one_line
     from .outputs.gl import configure_gl_env
 
     configure_gl_env()  # MUJOCO_GL=egl unless the user chose; before anything imports mujoco
@@ -247,15 +248,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_mujoco_distributions()
         return _dispatch(args)
     except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)  # one line, whatever a name holds (issue 28)
         return EXIT_INPUT
     except WriteFailed as exc:  # disk full, read-only file system, ulimit -f: the file and what was kept
         if not exc.kept:
             exc.kept = _kept_beside(exc.path)
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_OTHER
     except BioformError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_OTHER
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM through _catch_signals
         _ignore_signals()

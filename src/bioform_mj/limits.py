@@ -14,6 +14,8 @@ naming the file and the element:
   mesh scales of a URDF: finite, non-negative where negative means nothing, non-zero where zero
   cannot be (a moving link's mass, an axis, a scale);
 - :func:`model_value_problem`: the same on a compiled ``MjModel`` (an MJCF robot);
+- names (URDF and MJCF) that hold a control character are refused (:func:`one_line` escapes them in
+  output that names what a user wrote);
 - :func:`check_step_budget`: a timestep that would make automatic work (robot check, identification)
   take longer than :data:`CHECK_BOUND_S` s, refused with the estimate.
 """
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import stat
 import xml.etree.ElementTree as ET
 import zipfile
@@ -42,6 +45,7 @@ __all__ = [
     "urdf_value_problem",
     "model_value_problem",
     "check_step_budget",
+    "one_line",
 ]
 
 #: largest mesh file, and largest unpacked archive, taken (MB); a published robot's meshes are a few MB
@@ -150,6 +154,13 @@ def urdf_value_problem(robot: ET.Element) -> str:
     ``<dynamics>`` damping/friction and ``<limit>`` effort/velocity finite and >= 0, limits finite;
     ``<gazebo>`` mu1/mu2/mu finite and >= 0; mesh scales finite and > 0.
     """
+    for el in robot.iter():
+        name = el.get("name")
+        if name is not None and _CONTROL.search(name):
+            return (
+                f"<{el.tag} name={name!r}>: a name holds a control character (a newline would forge lines of "
+                "bioform's output); rename it"
+            )
     moving = {
         (j.find("child").get("link") if j.find("child") is not None else None)
         for j in robot.findall("joint")
@@ -217,6 +228,15 @@ def urdf_value_problem(robot: ET.Element) -> str:
     return ""
 
 
+#: control characters (a newline in a name forged ``error:`` lines of a run that exits 0, issue 28)
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
+def one_line(text: str) -> str:
+    """``text`` with its control characters escaped (``\\n``): one line of output, whatever a name holds."""
+    return _CONTROL.sub(lambda m: repr(m.group())[1:-1], text)
+
+
 def model_value_problem(model: Any) -> str:
     """The first bad number of a compiled ``MjModel`` (an MJCF robot), naming the body, joint or geom
     (``""``: none): masses and inertias finite and >= 0, joint axes finite and not zero, friction
@@ -226,6 +246,13 @@ def model_value_problem(model: Any) -> str:
 
     def name(obj: Any, i: int) -> str:
         return mujoco.mj_id2name(model, obj, i) or f"#{i}"
+
+    for raw in bytes(model.names).split(b"\0"):  # every element name of the model
+        text = raw.decode("utf-8", "replace")
+        if _CONTROL.search(text):
+            return (
+                f"name {text!r} holds a control character (a newline would forge lines of bioform's output); rename it"
+            )
 
     for b in range(1, model.nbody):
         if not (np.isfinite(model.body_mass[b]) and model.body_mass[b] >= 0):
