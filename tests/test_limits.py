@@ -240,3 +240,33 @@ def test_warning_lines_stay_one_line(capsys):
         warnings.showwarning = saved
     err = capsys.readouterr().err.splitlines()
     assert err == ["warning: name 'a\\nerror: forged'"], err
+
+
+# ------------------------------------------------------------------ a mesh symlinked out of its package
+def test_mesh_symlinked_out_of_its_package_is_not_read(tmp_path, capsys):
+    """A link to a file outside the package was copied into a run's assets/ under the target's name."""
+    from test_urdf import box_stl
+
+    outside = box_stl(tmp_path / "secret" / "id_rsa.stl", 0.15, 0.1, 0.025)
+    pkg = tmp_path / "ws" / "ddpkg"
+    write(pkg / "package.xml", "<package><name>ddpkg</name></package>")
+    (pkg / "meshes").mkdir()
+    (pkg / "meshes" / "chassis.stl").symlink_to(outside)
+    box_stl(pkg / "meshes" / "real.stl", 0.15, 0.1, 0.025)
+    (pkg / "meshes" / "inside.stl").symlink_to(pkg / "meshes" / "real.stl")  # a link inside: fine
+    for uri in (
+        "package://ddpkg/meshes/chassis.stl",
+        "../meshes/chassis.stl",
+        "package://ddpkg/../../secret/id_rsa.stl",
+    ):
+        path = write(pkg / "urdf" / "dd.urdf", diff_drive(chassis_collision=f'<mesh filename="{uri}"/>'))
+        code, err = _cli(["robot", "check", str(path), "--package-path", f"ddpkg={pkg}"], capsys)
+        if uri.startswith("package://ddpkg/.."):
+            _one_error(code, err, "outside its package")
+        else:
+            _one_error(code, err, "a symlink to", "id_rsa.stl", "outside its package")
+    from bioform_mj.robots import PackagePath, RobotRef
+    from bioform_mj.urdf import check_file
+
+    path = write(pkg / "urdf" / "dd.urdf", diff_drive(chassis_collision='<mesh filename="../meshes/inside.stl"/>'))
+    check_file(RobotRef(str(path), package_path=PackagePath([("ddpkg", str(pkg))])))

@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
-from .limits import mesh_problem, not_regular, urdf_value_problem
+from .limits import mesh_problem, not_regular, symlink_escape, urdf_value_problem
 from .packages import find_package, package_search_path, resolve_uri
 from .robots import PackagePath, RobotRef
 from .urdf_wheels import find_wheels, left_of, welded_to
@@ -305,7 +305,9 @@ def _parse(
                 file, why, how = resolve_uri(uri, packages, path, meshdir) if uri else (None, "no filename", "")
                 if how.endswith("a parent folder of the URDF file"):
                     found_by.add(how)
-                if file is not None and (bad := mesh_problem(file)):
+                if file is not None and (bad := symlink_escape(uri, packages, path, meshdir)):
+                    why = bad  # never copied into a run's assets/ under the target's name
+                elif file is not None and (bad := mesh_problem(file)):
                     why = f"mesh file {file}: {bad}"  # a FIFO, a device, a zip bomb: never opened or unpacked
                 elif file is not None and not file.is_file():
                     why = f"no file {file}"
