@@ -220,3 +220,31 @@ def test_a_controller_cannot_write_into_what_it_is_handed(what):
     assert info.value.result.summary["raised"]["step"] == 0
     reader = bf.simulate(sc, controller=_Scribbler(sc, "none"))
     assert np.array_equal(reader.log["pose"], bf.simulate(sc).log["pose"])
+
+
+# ------------------------------------------------------------------ the Python API: nothing in the caller's folder
+def test_api_turns_mujoco_warnings_into_python_warnings(tmp_path, monkeypatch):
+    """``bioform_mj.simulate`` wrote MUJOCO_LOG.TXT into the caller's folder (MuJoCo's default handler)."""
+    import mujoco
+
+    import bioform_mj
+    from bioform_mj.outputs.mjlog import api_warnings
+
+    assert getattr(bioform_mj.simulate, "__wrapped__", None) is not None  # simulate carries the handler
+
+    @api_warnings
+    def noisy(sc=None):
+        m = mujoco.MjModel.from_xml_string(
+            "<mujoco><worldbody><body><freejoint/><geom size='.1'/></body></worldbody></mujoco>"
+        )
+        d = mujoco.MjData(m)
+        d.qvel[:] = 1e20
+        mujoco.mj_step(m, d)  # "Nan, Inf or huge value in QVEL"
+        return "done"
+
+    monkeypatch.chdir(tmp_path)
+    assert mujoco.get_mju_user_warning() is None
+    with pytest.warns(RuntimeWarning, match="MuJoCo: .*QVEL"):
+        assert noisy() == "done"
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+    assert mujoco.get_mju_user_warning() is None  # MuJoCo's own handler is back

@@ -44,6 +44,7 @@ from .outcomes import (  # noqa: F401 - re-exported: sim is where callers have f
     slots_of,
     unmodelled_causes,
 )
+from .outputs.mjlog import api_warnings
 from .plants.base import Plant
 from .plants.ideal import IdealPlant
 from .runloop import (  # noqa: F401 - MAX_CHUNK_S, ObserverClock, EventQueue, first_step_at: importable from sim as before
@@ -319,6 +320,7 @@ ENGINES = ("auto", "compiled", "stepwise")
 LoopContext = Loop
 
 
+@api_warnings  # MuJoCo's warnings as Python warnings, not a MUJOCO_LOG.TXT in the caller's folder (issue 28)
 def simulate(
     sc: Scenario,
     observers: Sequence[Observer] = (),
