@@ -655,6 +655,18 @@ def _add_run_notes(summary: dict[str, Any], sc, plant, step: Stepper, end: LoopE
         w = float(np.abs(logd["vel"][:, :, 1]).max())
         for f, u in zip(summary["followers"], unmodelled(v, w)):
             f["unmodelled"] = u
+    bad = getattr(getattr(step.controller, "gains", None), "cbf_bad", None)
+    if bad is not None and sc.safety.filter == "cbf":  # design §19: the filter says when its QP had no solution
+        for i, f in enumerate(summary["followers"]):
+            f["cbf_infeasible_steps"] = int(bad[i])
+            if bad[i]:
+                warnings.warn(
+                    f"follower {i + 1}: the safety filter's QP had no solution at {int(bad[i])} of {k_done} control "
+                    "steps (robots or obstacles closer than it can keep apart; its command there is the solver's "
+                    "last iterate, not a safe one)",
+                    RobotWarning,
+                    stacklevel=3,
+                )
     from .hardware import verdict  # design §19: would this run on the robots as specified?
 
     summary["hardware"] = verdict(sc, plant, summary, logd)
