@@ -265,3 +265,14 @@ def test_child_environment_holds_nothing_of_the_user(hostile, monkeypatch, tmp_p
     env = json.loads(expand(write(folder / "e.urdf.xacro", robot("")), PackagePath()))
     assert SECRET not in json.dumps(env) and "HOME" not in env and "PATH" not in env, env
     assert set(env) <= {"LC_ALL", "PYTHONHASHSEED", "LC_CTYPE"}, env
+
+
+def test_without_the_xacro_package_says_how_to_install(tmp_path, monkeypatch):
+    """--xacro where the child's Python has no xacro: one line naming the extra and the manual way."""
+    blocked = "import runpy, sys\nsys.modules['xacro'] = None\nrunpy.run_path({!r}, run_name='__main__')\n"
+    spy = write(tmp_path / "child.py", blocked.format(str(xacro_sandbox._CHILD)))
+    monkeypatch.setattr(xacro_sandbox, "_CHILD", spy)
+    xacro_sandbox._EXPANDED.clear()
+    path = write(tmp_path / "r.urdf.xacro", robot(""))
+    with pytest.raises(XacroRefused, match=r"pip install 'bioform-mj\[urdf\]'.*`xacro .* > r.urdf`"):
+        expand(path, PackagePath())

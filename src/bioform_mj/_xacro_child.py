@@ -254,6 +254,9 @@ def main() -> int:
     except _Missing as exc:
         _answer({"kind": "missing", "error": str(exc), "package": exc.package})
         return 3
+    except _NoXacro:
+        _answer({"kind": "no_xacro", "error": "the xacro package is not installed"})
+        return 3
     except RecursionError:
         _answer({"kind": "error", "error": "too deeply nested (a macro that calls itself?)"})
         return 3
@@ -279,6 +282,10 @@ def main() -> int:
     return 0
 
 
+class _NoXacro(Exception):
+    """The xacro package is not installed where this Python looks."""
+
+
 class _Missing(Exception):
     """``$(find NAME)`` of a package on no search path."""
 
@@ -301,8 +308,11 @@ def _expand(req: dict) -> tuple[str, list[str]]:
     import xml.dom.expatbuilder  # noqa: F401 - imported before the hook: minidom imports it lazily
     import xml.dom.minidom  # noqa: F401
 
-    import xacro
-    import xacro.substitution_args as subst
+    try:
+        import xacro
+        import xacro.substitution_args as subst
+    except ImportError:
+        raise _NoXacro() from None
 
     try:
         import xacro.color  # noqa: F401

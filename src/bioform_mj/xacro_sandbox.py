@@ -231,6 +231,12 @@ def expand(path: Path, packages: PackagePath, args: tuple[tuple[str, str], ...] 
             f"{path}: $(find {pkg}): package '{pkg}' is on no search path (searched: "
             f"{'; '.join(package_search_path(packages))}; give --package-path {pkg}=DIR)"
         )
+    if kind == "no_xacro":
+        stem = path.name[: -len(".xacro")] if path.name.lower().endswith(".xacro") else path.stem + ".expanded.urdf"
+        raise XacroRefused(
+            f"{path}: --xacro needs the xacro package: pip install 'bioform-mj[urdf]', or expand it yourself "
+            f"(`xacro {path} > {stem}`, ROS's xacro tool) and give the .urdf"
+        )
     if kind == "memory":
         raise XacroRefused(
             f"{path}: xacro stopped: it needed more than {XACRO_MEMORY_MB} MiB (a macro that multiplies itself?); "
