@@ -270,3 +270,15 @@ def test_mesh_symlinked_out_of_its_package_is_not_read(tmp_path, capsys):
 
     path = write(pkg / "urdf" / "dd.urdf", diff_drive(chassis_collision='<mesh filename="../meshes/inside.stl"/>'))
     check_file(RobotRef(str(path), package_path=PackagePath([("ddpkg", str(pkg))])))
+
+
+def test_scenario_file_that_is_a_fifo_or_huge_is_refused(tmp_path, capsys):
+    fifo = tmp_path / "s.toml"
+    os.mkfifo(fifo)
+    code, err = _cli(["run", str(fifo)], capsys)
+    _one_error(code, err, "is a FIFO")
+    big = tmp_path / "big.toml"
+    with open(big, "wb") as fh:
+        fh.truncate(20_000_000)  # sparse
+    code, err = _cli(["run", str(big)], capsys)
+    _one_error(code, err, "20 MB: not a scenario")
