@@ -282,3 +282,23 @@ def test_scenario_file_that_is_a_fifo_or_huge_is_refused(tmp_path, capsys):
         fh.truncate(20_000_000)  # sparse
     code, err = _cli(["run", str(big)], capsys)
     _one_error(code, err, "20 MB: not a scenario")
+
+
+def test_mjcf_mesh_that_is_a_fifo_or_too_large_is_refused(tmp_path, capsys, monkeypatch):
+    """An MJCF robot's mesh is checked before MuJoCo's compiler opens it (a FIFO blocked it)."""
+    from bioform_mj.robots import models_dir
+    from test_urdf import box_stl
+
+    text = (models_dir() / "paper_robot.xml").read_text()
+    geom = '<geom name="back_caster"'
+    assert geom in text and "<asset>" not in text
+    text = text.replace("<worldbody>", '<asset><mesh name="m" file="m.stl"/></asset><worldbody>', 1)
+    path = write(tmp_path / "m_robot.xml", text)
+    os.mkfifo(tmp_path / "m.stl")
+    code, err = _cli(["robot", "check", str(path)], capsys)
+    _one_error(code, err, "mesh file", "is a FIFO")
+    (tmp_path / "m.stl").unlink()
+    box_stl(tmp_path / "m.stl", 0.1, 0.1, 0.1)
+    monkeypatch.setattr(limits, "MESH_MAX_MB", 0)
+    code, err = _cli(["robot", "check", str(path)], capsys)
+    _one_error(code, err, "above the 0 MB a mesh may be")

@@ -47,6 +47,7 @@ __all__ = [
     "check_step_budget",
     "one_line",
     "symlink_escape",
+    "spec_file_problem",
 ]
 
 #: largest mesh file, and largest unpacked archive, taken (MB); a published robot's meshes are a few MB
@@ -333,3 +334,24 @@ def symlink_escape(uri: str, packages: Any, urdf: Path, meshdir: Path) -> str:
 
 def _inside(path: str, root: str) -> bool:
     return path == root or path.startswith(root.rstrip(os.sep) + os.sep)
+
+
+def spec_file_problem(spec: Any) -> str:
+    """Why an MJCF ``MjSpec``'s mesh, skin, height-field or texture file is not loaded (``""``: none):
+    checked by :func:`mesh_problem` before MuJoCo's compiler opens it (a FIFO blocks it, a 10 GB STL
+    exhausts memory). Names resolve as the compiler resolves them (the model's folder and its
+    ``meshdir``/``texturedir``); files of the spec's own asset dictionary are not files."""
+    top = Path(spec.modelfiledir or ".")
+    own = set(spec.assets) if spec.assets else set()
+    items = [(m.file, spec.meshdir, "mesh") for m in spec.meshes]
+    items += [(s.file, spec.meshdir, "skin") for s in spec.skins]
+    items += [(h.file, spec.meshdir, "hfield") for h in spec.hfields]
+    items += [(t.file, spec.texturedir, "texture") for t in spec.textures]
+    for name, folder, kind in items:
+        if not name or name in own:
+            continue
+        f = Path(name) if Path(name).is_absolute() else top / (folder or "") / name
+        why = mesh_problem(f)
+        if why:
+            return f"{kind} file {f}: {why}"
+    return ""
