@@ -402,7 +402,7 @@ def simulate(
     if raised is not None:  # the exception says the run failed (its summary holds the outcomes so far)
         raise _with_result(raised, result)
     for w in outcome_warnings(summary):  # never silent (design §18.1): the CLI prints its own lines instead
-        warnings.warn(w, stacklevel=2)
+        warnings.warn(w, stacklevel=3)  # the caller of simulate, past its api_warnings wrapper
     return result
 
 
@@ -478,21 +478,21 @@ def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], 
     CLI prints ``warning:`` lines) and kept for summary.json."""
     imported = import_warnings(plant)  # design §12: the guesses of a URDF import, said before the run
     for line in imported:
-        warnings.warn(line, RobotWarning, stacklevel=3)
+        warnings.warn(line, RobotWarning, stacklevel=4)  # simulate's caller, past its api_warnings wrapper
     feasibility: list[str] = []
     if hasattr(plant, "params") and hasattr(plant, "model"):  # MuJoCo robots: what the scenario asks of them
         from .robot_check import feasibility as _feasibility
 
         feasibility = _feasibility(sc, plant)  # in summary.json too
         for line in feasibility:
-            warnings.warn(line, RobotWarning, stacklevel=3)  # before the run (the CLI prints warning: lines)
+            warnings.warn(line, RobotWarning, stacklevel=4)  # before the run (the CLI prints warning: lines)
     checked = None
     if sc.plant.kind == "mujoco" and hasattr(plant, "params") and hasattr(plant, "model"):
         from .prerun import before_run  # design §14.2: once per robot, cached
 
         checked = before_run(sc, plant)
         for line in checked["warnings"]:
-            warnings.warn(line, RobotWarning, stacklevel=3)
+            warnings.warn(line, RobotWarning, stacklevel=4)
     return imported, feasibility, checked
 
 
@@ -665,7 +665,7 @@ def _add_run_notes(summary: dict[str, Any], sc, plant, step: Stepper, end: LoopE
                     "steps (robots or obstacles closer than it can keep apart; its command there is the solver's "
                     "last iterate, not a safe one)",
                     RobotWarning,
-                    stacklevel=3,
+                    stacklevel=4,
                 )
     from .hardware import verdict  # design §19: would this run on the robots as specified?
 
