@@ -176,7 +176,7 @@ def provenance(sc: Any) -> dict[str, Any]:
                     from .robot_files import urdf_files
                     from .urdf import is_urdf
 
-                    files.update(urdf_files(ref) if is_urdf(ref.model) else model_files(ref.model))
+                    files.update(urdf_files(ref, file_hash) if is_urdf(ref.model) else model_files(ref.model))
                 except BioformError:
                     files.update(model_files(ref.model))
     return {"version": __version__, "code": code_hash(), "mujoco": mj, "files": files}

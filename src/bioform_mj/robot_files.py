@@ -11,17 +11,18 @@ changed is then redone (it was recorded as missing and never compared).
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 __all__ = ["urdf_files"]
 
 
-def urdf_files(ref: Any) -> dict[str, str]:
-    """``{absolute file: hash}`` of URDF robot ``ref`` (a resolved :class:`~bioform_mj.robots.RobotRef`).
+def urdf_files(ref: Any, file_hash: Callable[[str | Path], str]) -> dict[str, str]:
+    """``{absolute file: file_hash(file)}`` of URDF robot ``ref`` (a resolved :class:`~bioform_mj.robots.RobotRef`;
+    ``file_hash``: :func:`bioform_mj.provenance.file_hash`).
 
     Raises :class:`~bioform_mj.errors.InputError` when the import itself would refuse the robot."""
-    from .provenance import file_hash
     from .urdf import _parse, _read_text
 
     path = Path(ref.model).resolve()

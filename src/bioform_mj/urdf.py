@@ -49,7 +49,8 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
-from .limits import mesh_problem, not_regular, symlink_escape, urdf_value_problem
+from .limits import mesh_problem, not_regular, urdf_value_problem
+from .mesh_paths import symlink_escape
 from .packages import find_package, package_search_path, resolve_uri
 from .robots import PackagePath, RobotRef
 from .urdf_wheels import find_wheels, left_of, welded_to
