@@ -33,12 +33,13 @@ from pathlib import Path
 import numpy as np
 
 from bioform_mj.control.base import Comm
-from bioform_mj.control.equations import saturate, slot_reference, tracking_error
 from bioform_mj.control.kernel import estimator_update, reset_state
 from bioform_mj.control.stack import METHODS, ControlStack
-from bioform_mj.errors import InputError
-from bioform_mj.scenario import Scenario, load
-from bioform_mj.sim import make_plant, simulate, stack_params
+from bioform_mj.core.equations import saturate, slot_reference, tracking_error
+from bioform_mj.core.errors import InputError
+from bioform_mj.run.simulate import make_plant, simulate, stack_params
+from bioform_mj.scenario.config import Scenario
+from bioform_mj.scenario.loader import load
 
 
 class Kanayama:

@@ -4,7 +4,7 @@
 Usage: ``python scripts/bench.py [--sizes 3,16,64,256] [--json runs/bench.json]``.
 """
 
-from bioform_mj.bench import main
+from bioform_mj.jobs.bench import main
 
 if __name__ == "__main__":
     raise SystemExit(main())

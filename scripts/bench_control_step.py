@@ -17,10 +17,10 @@ import time
 
 import numpy as np
 
-from bioform_mj import graph
 from bioform_mj.control.stack import ControlStack
-from bioform_mj.scenario import Scenario
-from bioform_mj.sim import stack_params
+from bioform_mj.formation import graph
+from bioform_mj.run.simulate import stack_params
+from bioform_mj.scenario.config import Scenario
 
 
 def stack_for(n: int, cls=ControlStack) -> ControlStack:

@@ -16,8 +16,8 @@ import time
 import numpy as np
 
 from bioform_mj.envs import parallel_env
-from bioform_mj.scenario import load
-from bioform_mj.sim import simulate
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load
 
 
 def main() -> None:

@@ -15,11 +15,11 @@ from __future__ import annotations
 import argparse
 import time
 
-from bioform_mj.control.equations import njit
-from bioform_mj.plants.mujoco_contacts import watch_contacts, watch_proximity
-from bioform_mj.plants.mujoco_kernels import _mj_step
-from bioform_mj.scenario import load
-from bioform_mj.sim import make_plant
+from bioform_mj.core.equations import njit
+from bioform_mj.plants.mujoco.contacts import watch_contacts, watch_proximity
+from bioform_mj.plants.mujoco.kernels import _mj_step
+from bioform_mj.run.simulate import make_plant
+from bioform_mj.scenario.loader import load
 
 
 @njit

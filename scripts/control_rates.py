@@ -20,7 +20,7 @@ import json
 import sys
 from pathlib import Path
 
-from bioform_mj.cli import main
+from bioform_mj.cli.main import main
 
 METHODS = ["backstepping", "bioinspired", "backstepping-learning", "bioinspired-learning"]
 RATES = [(0.001, "1 kHz"), (0.005, "200 Hz"), (0.01, "100 Hz"), (0.02, "50 Hz")]

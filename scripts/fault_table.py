@@ -3,7 +3,7 @@
 
 Runs the ``fault_*`` presets, harder variants of them (``SEVERE``: where the methods break) and
 the fault-free paper scenario on the same plant and duration as a reference, for each method.
-Writes ``OUT/fault_table.json`` (one row per run, see :func:`bioform_mj.faults.outcome`),
+Writes ``OUT/fault_table.json`` (one row per run, see :func:`bioform_mj.run.faults.outcome`),
 ``OUT/fault_table.md`` (every number) and ``OUT/fault_table_compact.md`` (faults × methods, as in
 the README); prints both.
 
@@ -18,10 +18,10 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from bioform_mj.control.stack import METHODS
-from bioform_mj.faults import TOLERANCE, outcome
 from bioform_mj.outputs.files import write_json, write_text
-from bioform_mj.scenario import load, preset_names
-from bioform_mj.sim import simulate
+from bioform_mj.run.faults import TOLERANCE, outcome
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load, preset_names
 
 REFERENCE = "paper (no fault)"
 

@@ -29,7 +29,7 @@ import numpy as np
 
 
 def _scenario(a):
-    from bioform_mj.scenario import load
+    from bioform_mj.scenario.loader import load
 
     ov = ["plant.kind=mujoco", f"sim.duration={a.duration}", "formation.init_jitter=0.05", f"sim.seed={a.seed}"]
     return load("paper", overrides=[*ov, *a.set])
@@ -40,7 +40,7 @@ def local(a) -> None:
     import mujoco_warp as mjw
     import warp as wp
 
-    from bioform_mj.sim import make_plant, simulate
+    from bioform_mj.run.simulate import make_plant, simulate
 
     sc = _scenario(a)
     p = make_plant(sc)
@@ -80,7 +80,7 @@ def local(a) -> None:
 def initial(a) -> None:
     import mujoco  # noqa: F401  (the plant's model)
 
-    from bioform_mj.sim import make_plant, simulate
+    from bioform_mj.run.simulate import make_plant, simulate
 
     sc = _scenario(a)
     base = simulate(sc).summary["followers"]
@@ -132,8 +132,8 @@ def noise(a) -> None:
 def trace(a) -> None:
     import warp as wp
 
-    from bioform_mj.batch.control import BatchRun
-    from bioform_mj.sim import simulate
+    from bioform_mj.batch.runner import BatchRun
+    from bioform_mj.run.simulate import simulate
 
     wp.config.quiet = True
     sc = _scenario(a)
@@ -180,9 +180,9 @@ PROBES = [
 def probe(a) -> None:
     import warp as wp
 
-    from bioform_mj.batch.control import PROBE_TOL, physics_probe
-    from bioform_mj.scenario import load
-    from bioform_mj.sim import make_plant
+    from bioform_mj.batch.probe import PROBE_TOL, physics_probe
+    from bioform_mj.run.simulate import make_plant
+    from bioform_mj.scenario.loader import load
 
     wp.config.quiet = True
     for name, ov in PROBES:

@@ -2,7 +2,7 @@
 
 Run by the ``gen-files`` plugin of ``mkdocs build`` (``mkdocs.yml``), so the pages never go stale:
 
-- ``reference/scenario.md`` from the scenario dataclasses (``scenario_config.py``) and their descriptions
+- ``reference/scenario.md`` from the scenario dataclasses (``scenario/config.py``) and their descriptions
   (``scenario_doc.KEYS``, ``scenario_doc.CHOICES``);
 - ``reference/cli.md`` from the ``bioform`` argparse parser (``cli.build_parser``).
 
@@ -15,9 +15,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from bioform_mj import logtable, scenario_doc
-from bioform_mj.cli import build_parser
-from bioform_mj.engine import CHANNELS, MEAN_CHANNELS
+from bioform_mj.cli.main import build_parser
+from bioform_mj.core.engine import CHANNELS, MEAN_CHANNELS
+from bioform_mj.run import logtable
+from bioform_mj.scenario import doc as scenario_doc
 
 
 def _cell(text: str) -> str:
@@ -36,7 +37,7 @@ def scenario_reference() -> str:
         "# Scenario reference",
         "",
         "Every key a scenario file (TOML) or `--set KEY=VALUE` accepts, generated from the scenario dataclasses "
-        "(`bioform_mj/scenario_config.py`) and their descriptions (`bioform_mj/scenario_doc.py`). "
+        "(`bioform_mj/scenario/config.py`) and their descriptions (`bioform_mj/scenario/doc.py`). "
         "Unknown keys are refused. The defaults are the paper scenario (`scenarios/paper.toml` restates them). "
         "Follower ids are 1-based. "
         '"× scale": multiplied by `formation.scale` when the scenario is loaded '
@@ -92,7 +93,7 @@ def cli_reference() -> str:
     out = [
         "# Command-line reference",
         "",
-        "Generated from the `bioform` argparse parser (`bioform_mj/cli.py`). Exit codes: 0 done; 2 bad input "
+        "Generated from the `bioform` argparse parser (`bioform_mj/cli/main.py`). Exit codes: 0 done; 2 bad input "
         "(one `error:` line on stderr, before any work); 3 the simulation diverged (log kept); 4 `robot check` "
         "verdict `fail`; 130/143 interrupted (SIGINT/SIGTERM, log so far kept); 1 anything else.",
         "",
@@ -113,7 +114,7 @@ def log_reference() -> str:
     out = [
         "# Log channels",
         "",
-        "Generated from `bioform_mj.engine.CHANNELS` and `bioform_mj.logtable.COMPONENTS`. `log.npz` and "
+        "Generated from `bioform_mj.core.engine.CHANNELS` and `bioform_mj.run.logtable.COMPONENTS`. `log.npz` and "
         "`RunResult.log` hold one array per channel, `K` rows (one every `sim.log_dt`, the first at t = 0); "
         "`n` is the number of followers, follower `i` at index `i − 1`. States are point samples at the row's "
         f"time; {', '.join(f'`{c}`' for c in MEAN_CHANNELS)} are means over the row's interval `(t_(j−1), t_j]`, "

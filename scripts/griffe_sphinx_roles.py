@@ -1,5 +1,5 @@
 """A griffe extension for the API reference (``mkdocs.yml``): the package's docstrings cross-reference
-with Sphinx roles (``:func:`~bioform_mj.sim.simulate```), which mkdocstrings' Markdown would print as
+with Sphinx roles (``:func:`~bioform_mj.run.simulate.simulate```), which mkdocstrings' Markdown would print as
 they stand; this turns each into inline code (``simulate``; the full path without ``~``)."""
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-OUT = Path(__file__).resolve().parent.parent / "src" / "bioform_mj" / "scenarios"
+OUT = Path(__file__).resolve().parent.parent / "src" / "bioform_mj" / "scenario" / "presets"
 
 
 def preset(side: int, spacing: float = 1.5, block: int = 2) -> str:

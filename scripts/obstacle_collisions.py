@@ -14,8 +14,8 @@ import argparse
 import numpy as np
 
 from bioform_mj.control.stack import METHODS
-from bioform_mj.scenario import load
-from bioform_mj.sim import simulate
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load
 
 
 def main() -> None:

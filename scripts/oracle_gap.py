@@ -17,8 +17,8 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent / "tests"))
 
-from bioform_mj.scenario import load  # noqa: E402
-from bioform_mj.sim import simulate  # noqa: E402
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load
 from test_engines import oracle_run  # noqa: E402
 
 for method in ("bioinspired-learning", "backstepping"):

@@ -17,7 +17,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from bioform_mj.sweep import expand, sweep
+from bioform_mj.jobs.sweep import expand, sweep
 
 
 def main() -> int:

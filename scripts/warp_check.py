@@ -3,7 +3,7 @@
 
 Runs ``--worlds`` seeds of a scenario (``--scenario``: a preset or a TOML file; default the paper's)
 in MuJoCo (jittered initial poses) on the Warp
-device and with :func:`bioform_mj.sim.simulate`, measures each world's own float32 spread
+device and with :func:`bioform_mj.run.simulate.simulate`, measures each world's own float32 spread
 (:func:`bioform_mj.batch.agreement.float32_spread`: the CPU engine perturbed by rounding-sized
 noise) and judges every follower (:func:`~bioform_mj.batch.agreement.judge`): within the issue's
 tolerance, within the world's own spread (ill-conditioned world), or failed. Prints one line
@@ -32,8 +32,8 @@ def main() -> int:
     ap.add_argument("--json")
     a = ap.parse_args()
     from bioform_mj.batch.agreement import DEFAULT_EPS, METRICS, TOLERANCES, differences, float32_spread, judge
-    from bioform_mj.batch.control import run_batch
-    from bioform_mj.scenario import load
+    from bioform_mj.batch.runner import run_batch
+    from bioform_mj.scenario.loader import load
 
     eps = DEFAULT_EPS if a.eps is None else a.eps
     scs = [

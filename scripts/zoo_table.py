@@ -41,10 +41,10 @@ def main() -> int:
     expect = json.loads((ZOO / "expectations.json").read_text())
     os.environ["ROS_PACKAGE_PATH"] = ":".join(str(ZOO / r.name) for r in ref_mod.ROBOTS)
 
-    from bioform_mj.robot_check import check
-    from bioform_mj.robots import RobotRef
-    from bioform_mj.scenario import load
-    from bioform_mj.sim import simulate
+    from bioform_mj.assess.check import check
+    from bioform_mj.robots.refs import RobotRef
+    from bioform_mj.run.simulate import simulate
+    from bioform_mj.scenario.loader import load
 
     paper_l = check("paper", identify_=False)["half_track_m"]
     names = [n for n in a.robots.split(",") if n] or [r.name for r in ref_mod.ROBOTS]

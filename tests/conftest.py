@@ -31,7 +31,7 @@ def table1_ideal(tmp_path_factory):
     """``bioform table1 paper --plant ideal`` through the CLI; returns (out_dir, table dict, logs)."""
     import json
 
-    from bioform_mj.cli import main
+    from bioform_mj.cli.main import main
 
     out = tmp_path_factory.mktemp("table1_ideal")
     code = main(["table1", "paper", "--plant", "ideal", "--out", str(out), "--quiet"])

@@ -1,7 +1,7 @@
 """Vectorised numpy forms of the control equations: independent test oracles only.
 
 These are the numpy implementations the project shipped before the equations were
-written once (src/bioform_mj/control/equations.py). They are kept here, outside the
+written once (src/bioform_mj/core/equations.py). They are kept here, outside the
 package, to check the compiled equations against a second, independent reading of the
 paper, with stated tolerances (numpy and libm may differ in the last bit, and do on
 CPUs with AVX-512).
@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from bioform_mj.control.base import Comm
-from bioform_mj.graph import Graph
+from bioform_mj.formation.graph import Graph
 
 TWO_PI = 2.0 * np.pi
 

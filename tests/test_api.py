@@ -17,7 +17,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def test_import_is_cheap_and_the_names_are_lazy():
     code = (
-        "import sys, bioform_mj as bf; heavy = [m for m in ('numba', 'mujoco', 'bioform_mj.sim') if m in sys.modules]; "
+        "import sys, bioform_mj as bf; heavy = [m for m in ('numba', 'mujoco', 'bioform_mj.run.simulate') "
+        "if m in sys.modules]; "
         "print(heavy); print(bf.simulate.__module__, bf.load.__module__, bf.RunResult.__name__, bf.Controller.__name__)"
     )
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))
@@ -25,14 +26,17 @@ def test_import_is_cheap_and_the_names_are_lazy():
     assert out.returncode == 0, out.stderr
     heavy, names = out.stdout.splitlines()
     assert heavy == "[]"  # import bioform_mj loads neither numba nor MuJoCo nor the simulator
-    assert names == "bioform_mj.sim bioform_mj.scenario_load RunResult Controller"  # scenario.py re-exports it
+    assert (
+        names == "bioform_mj.run.simulate bioform_mj.scenario.loader RunResult Controller"
+    )  # scenario.py re-exports it
     with pytest.raises(AttributeError, match="no_such_name"):
         bf.no_such_name  # noqa: B018
 
 
 def test_top_level_names_are_the_modules_objects():
-    from bioform_mj import scenario, sim
+    from bioform_mj import scenario
     from bioform_mj.control import base
+    from bioform_mj.run import simulate as sim
 
     assert bf.load is scenario.load and bf.simulate is sim.simulate and bf.RunResult is sim.RunResult
     assert bf.Controller is base.Controller and bf.Scenario is scenario.Scenario

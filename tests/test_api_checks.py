@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import bioform_mj as bf
-from bioform_mj.errors import InputError, OutcomeWarning, ScenarioError
+from bioform_mj.core.errors import InputError, OutcomeWarning, ScenarioError
 
 SHORT = ["sim.duration=0.2"]
 #: backstepping beyond a speed limit of 0.05 m/s: diverges at the first step, every follower lost (ideal plant)
@@ -131,7 +131,7 @@ def test_a_tipped_follower_gets_exactly_one_warning_naming_it():
 
 
 def test_the_cli_prints_each_outcome_line_once(tmp_path, capsys):
-    from bioform_mj.cli import main
+    from bioform_mj.cli.main import main
 
     with warnings.catch_warnings(record=True) as got:
         warnings.simplefilter("always")
@@ -150,7 +150,7 @@ def test_the_cli_prints_each_outcome_line_once(tmp_path, capsys):
 
 
 def test_a_sweep_row_tabulates_outcomes_without_warning():
-    from bioform_mj.sweep import expand, run_one
+    from bioform_mj.jobs.sweep import expand, run_one
 
     spec = expand("paper", 1, ["backstepping"], [], DIVERGES, plant="ideal")[0]
     row, got = _outcome_warnings(lambda: run_one(spec))
@@ -161,8 +161,8 @@ def test_a_sweep_row_tabulates_outcomes_without_warning():
 def test_a_sweeps_runs_are_not_checked_again():
     """``expand`` validated each configuration by ``load`` and each seed itself: its per-seed copies
     are marked, so ``simulate`` spends nothing on them (the check costs 2-5 ms; an ideal run's set-up ~10 ms)."""
-    from bioform_mj.scenario_load import checked
-    from bioform_mj.sweep import expand
+    from bioform_mj.jobs.sweep import expand
+    from bioform_mj.scenario.loader import checked
 
     specs = expand("paper", 3, ["bioinspired"], [], ["formation.init_jitter=0.1"], plant="ideal")
     assert [sp.scenario.sim.seed for sp in specs] == [0, 1, 2]
@@ -172,7 +172,7 @@ def test_a_sweeps_runs_are_not_checked_again():
 
 
 def test_quiet_outcomes_ignores_only_outcome_warnings():
-    from bioform_mj.errors import quiet_outcomes
+    from bioform_mj.core.errors import quiet_outcomes
 
     sc = bf.load("paper", DIVERGES, method="backstepping", plant="ideal")
     with warnings.catch_warnings(record=True) as got:
@@ -187,7 +187,7 @@ def test_quiet_outcomes_ignores_only_outcome_warnings():
 
 def test_the_kernels_warm_up_says_nothing_of_its_outcomes(monkeypatch):
     """A 0.01 s run per plant leaves every follower c_hat_off: a sweep's warm-up must not say so."""
-    from bioform_mj import jobs
+    from bioform_mj.jobs import runner as jobs
 
     monkeypatch.setattr(jobs, "_KERNELS", [])
     _, got = _outcome_warnings(jobs.load_kernels)
@@ -197,7 +197,7 @@ def test_the_kernels_warm_up_says_nothing_of_its_outcomes(monkeypatch):
 
 
 def test_table1_prints_each_followers_outcome_warning_once_and_the_divergence_as_its_error(tmp_path, capsys):
-    from bioform_mj.cli import main
+    from bioform_mj.cli.main import main
 
     sets = [a for s in DIVERGES for a in ("--set", s)]
     assert main(["table1", "paper", "--plant", "ideal", *sets, "--quiet", "--out", str(tmp_path / "t")]) == 3
@@ -216,7 +216,7 @@ class _Spoiled:
 
     def __init__(self, sc, mode: str) -> None:
         from bioform_mj.control.stack import ControlStack
-        from bioform_mj.sim import stack_params
+        from bioform_mj.run.simulate import stack_params
 
         self.inner = ControlStack(sc.build_graph(), stack_params(sc, np.array(sc.plant.c_true)))
         self.n, self.k, self.mode = sc.n, 0, mode

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from bioform_mj.batch.agreement import SPREAD_FACTOR, TOLERANCES, differences, float32_spread, judge
-from bioform_mj.scenario import load
+from bioform_mj.scenario.loader import load
 
 OV = ["plant.kind=mujoco", "formation.init_jitter=0.05"]
 
@@ -71,7 +71,7 @@ def test_differences_are_per_follower():
 def test_every_world_agrees_within_tolerance_or_its_own_float32_spread(extra):
     wp = pytest.importorskip("warp")
     pytest.importorskip("mujoco_warp")
-    from bioform_mj.batch.control import run_batch
+    from bioform_mj.batch.runner import run_batch
 
     wp.config.quiet = True
     scs = [load("paper", overrides=[*OV, "sim.duration=1", f"sim.seed={s}", *extra]) for s in (0, 2, 6)]

@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from bioform_mj.cli import main
+from bioform_mj.cli.main import main
 
 SWEEP = [
     "sweep",
@@ -173,8 +173,8 @@ def test_warp_sweep_groups_per_scene(tmp_path):
 def test_replay_reproduces_the_closed_loop():
     """The physics-alone benchmark replays the closed loop's own inputs: same final state."""
     _need_warp()
-    from bioform_mj.batch.control import BatchRun
-    from bioform_mj.scenario import load
+    from bioform_mj.batch.runner import BatchRun
+    from bioform_mj.scenario.loader import load
 
     ov = ["plant.kind=mujoco", "sim.duration=0.05", "formation.init_jitter=0.05"]
     b = BatchRun([load("paper", overrides=[*ov, f"sim.seed={s}"]) for s in range(2)], "cpu")

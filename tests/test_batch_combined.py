@@ -14,7 +14,7 @@ wp = pytest.importorskip("warp")
 pytest.importorskip("mujoco_warp")
 
 from bioform_mj.batch.agreement import TOLERANCES, differences, float32_spread, judge  # noqa: E402
-from bioform_mj.scenario import load  # noqa: E402
+from bioform_mj.scenario.loader import load  # noqa: E402
 
 wp.config.quiet = True
 
@@ -61,8 +61,8 @@ WORLDS = [
 
 
 def test_all_device_features_in_one_batch_agree_per_world():
-    from bioform_mj.batch.backend import unsupported
-    from bioform_mj.batch.control import run_batch
+    from bioform_mj.batch.runner import run_batch
+    from bioform_mj.batch.support import unsupported
 
     scs = [load("paper", overrides=[*BASE, f"sim.seed={s}", f"torque.derivative={m}", *ev]) for s, m, ev in WORLDS]
     assert all(unsupported(sc) is None for sc in scs)

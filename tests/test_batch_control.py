@@ -9,8 +9,8 @@ import pytest
 wp = pytest.importorskip("warp")
 pytest.importorskip("mujoco_warp")
 
-from bioform_mj.scenario import load  # noqa: E402
-from bioform_mj.sim import simulate  # noqa: E402
+from bioform_mj.run.simulate import simulate  # noqa: E402
+from bioform_mj.scenario.loader import load  # noqa: E402
 
 wp.config.quiet = True
 DURATION = 1.0  # s simulated (Warp's CPU device: ~10 ms per physics step, launch-bound)
@@ -47,7 +47,8 @@ def _compare(batch, ref, form_tol, chat_tol=5e-3):
 # ≤ 6.0e-4 / 4.0e-6 / 6.6e-6 rel. So the issue's 1 mm holds here (0.5 s, not 1 s).
 @pytest.mark.parametrize("mode", ["filter", "difference", "analytic"])
 def test_each_derivative_mode_matches_cpu_engine(mode):
-    from bioform_mj.batch.control import DERIV, BatchRun
+    from bioform_mj.batch.device import DERIV
+    from bioform_mj.batch.runner import BatchRun
     from bioform_mj.control.kernel import DERIVATIVES
 
     ov = ["plant.kind=mujoco", "sim.duration=0.5", "formation.init_jitter=0.05", f"torque.derivative={mode}"]
@@ -61,7 +62,7 @@ def test_each_derivative_mode_matches_cpu_engine(mode):
 
 def test_derivative_mode_is_per_world():
     """One batch whose worlds use different modes: each world follows its own (as its CPU run)."""
-    from bioform_mj.batch.control import run_batch
+    from bioform_mj.batch.runner import run_batch
 
     ov = ["plant.kind=mujoco", "sim.duration=0.1", "formation.init_jitter=0.05"]
     scs = [load("paper", overrides=[*ov, f"torque.derivative={m}"]) for m in ("filter", "difference", "analytic")]
@@ -85,8 +86,9 @@ CIRCLE = ("leader.kind=circle", "leader.x0=0", "leader.y0=8", "leader.radius=5",
 
 
 def test_leader_frame_matches_cpu_engine():
-    from bioform_mj.batch.backend import unsupported
-    from bioform_mj.batch.control import LFRAME, BatchRun
+    from bioform_mj.batch.device import LFRAME
+    from bioform_mj.batch.runner import BatchRun
+    from bioform_mj.batch.support import unsupported
 
     ov = ["plant.kind=mujoco", "sim.duration=0.5", "formation.init_jitter=0.05", *CIRCLE]
     modes = ("filter", "difference", "analytic")  # each command-derivative mode in one leader-frame world
@@ -132,8 +134,8 @@ def test_leader_frame_matches_cpu_engine():
 # everything else equal) ĉ ends 22–51 % off the CPU engine's and the formation error 7–15 mm off,
 # so the agreement below fails without the feed.
 def test_dc_motors_match_cpu_engine_with_the_delivered_torque_fed():
-    from bioform_mj.batch.backend import unsupported
-    from bioform_mj.batch.control import BatchRun
+    from bioform_mj.batch.runner import BatchRun
+    from bioform_mj.batch.support import unsupported
 
     robots = 'plant.robots=[{model="paper", motor="dc", driver="voltage"}]'
     ov = ["plant.kind=mujoco", "sim.duration=0.5", "formation.init_jitter=0.05", robots]
@@ -159,7 +161,7 @@ def test_dc_motors_match_cpu_engine_with_the_delivered_torque_fed():
 # followers, 0.2 s) ≤ 1.4e-6 m, ĉ ≤ 3.2e-5, velocity error ≤ 6.2e-7; with the device's feed off
 # ĉ ends 2.4–62 % off (and one formation error 1.06 mm off).
 def test_dc_feed_is_the_mean_over_the_period():
-    from bioform_mj.batch.control import BatchRun
+    from bioform_mj.batch.runner import BatchRun
 
     robots = 'plant.robots=[{model="paper", motor="dc", driver="voltage"}]'
     ov = ["plant.kind=mujoco", "sim.duration=0.2", "sim.physics_dt=0.0005", "formation.init_jitter=0.05", robots]
@@ -172,7 +174,7 @@ def test_dc_feed_is_the_mean_over_the_period():
 
 def test_guard_marks_the_world_that_diverged():
     """A world whose limits are exceeded stops (its flag set, the step recorded); the others run on."""
-    from bioform_mj.batch.control import run_batch
+    from bioform_mj.batch.runner import run_batch
 
     ov = ["plant.kind=mujoco", "sim.duration=0.05"]
     scs = [load("paper", overrides=ov), load("paper", overrides=[*ov, "limits.speed=0.2"])]
@@ -182,7 +184,7 @@ def test_guard_marks_the_world_that_diverged():
 
 
 def test_unsupported_features_are_refused():
-    from bioform_mj.batch.control import run_batch
+    from bioform_mj.batch.runner import run_batch
 
     with pytest.raises(ValueError, match="MuJoCo plant"):
         run_batch([load("paper")])
@@ -190,7 +192,7 @@ def test_unsupported_features_are_refused():
     with pytest.raises(ValueError, match="leader"):
         run_batch([load("paper", overrides=ov), load("paper", overrides=[*ov, "leader.speed=0.5"])])
     # run_batch/BatchRun refuse what the sweep refuses; odometry runs now (tests/test_batch_odometry.py)
-    from bioform_mj.batch.backend import unsupported
+    from bioform_mj.batch.support import unsupported
 
     with pytest.raises(ValueError, match="faults.friction_patch"):  # every per-step fault runs (test_batch_faults_*)
         run_batch([load("paper", overrides=[*ov, "faults.friction_patch=[-5.0,-5.0,5.0,5.0,0.3]"])])

@@ -15,8 +15,8 @@ import pytest
 wp = pytest.importorskip("warp")
 pytest.importorskip("mujoco_warp")
 
-from bioform_mj.scenario import load  # noqa: E402
-from bioform_mj.sim import make_plant, simulate  # noqa: E402
+from bioform_mj.run.simulate import make_plant, simulate  # noqa: E402
+from bioform_mj.scenario.loader import load  # noqa: E402
 
 wp.config.quiet = True
 OV = ["plant.kind=mujoco", "sim.duration=0.5", "formation.init_jitter=0.05"]
@@ -40,7 +40,7 @@ def _scenarios():
 @pytest.fixture(scope="module")
 def runs():
     """The batch (run twice: a rerun must restore the initial model) and the CPU runs."""
-    from bioform_mj.batch.control import BatchRun
+    from bioform_mj.batch.runner import BatchRun
 
     scs = _scenarios()
     b = BatchRun(scs, device="cpu")
@@ -51,7 +51,8 @@ def runs():
 
 
 def test_events_are_supported_and_not_part_of_the_scene():
-    from bioform_mj.batch.backend import group_key, unsupported
+    from bioform_mj.batch.backend import group_key
+    from bioform_mj.batch.support import unsupported
 
     scs = _scenarios()
     assert all(unsupported(sc) is None for sc in scs)
@@ -101,7 +102,7 @@ def test_events_land_on_their_own_world(runs):
     their runs differ from the same worlds without events by far more than the tolerances; the
     world without events is the same run either way (an event applied to the wrong world, or
     not at all, fails here or in the agreement test)."""
-    from bioform_mj.batch.control import run_batch
+    from bioform_mj.batch.runner import run_batch
 
     scs, b, res, _, _ = runs
     m0 = make_plant(scs[0])._m_eff  # kg, nominal effective masses

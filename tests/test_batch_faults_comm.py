@@ -18,8 +18,8 @@ wp = pytest.importorskip("warp")
 pytest.importorskip("mujoco_warp")
 
 from bioform_mj.batch.agreement import METRICS, TOLERANCES, differences, judge  # noqa: E402
-from bioform_mj.scenario import load  # noqa: E402
-from bioform_mj.sim import simulate  # noqa: E402
+from bioform_mj.run.simulate import simulate  # noqa: E402
+from bioform_mj.scenario.loader import load  # noqa: E402
 
 wp.config.quiet = True
 
@@ -40,8 +40,8 @@ def _sc_summary(seed: int):
 
 def _run(scs):
     """The batch's summaries (one world per scenario) and each world's CPU summary."""
-    from bioform_mj.batch.backend import unsupported
-    from bioform_mj.batch.control import BatchRun
+    from bioform_mj.batch.runner import BatchRun
+    from bioform_mj.batch.support import unsupported
 
     assert all(unsupported(sc) is None for sc in scs)
     b = BatchRun(scs, device="cpu")

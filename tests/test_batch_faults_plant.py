@@ -22,8 +22,8 @@ wp = pytest.importorskip("warp")
 pytest.importorskip("mujoco_warp")
 
 from bioform_mj.batch.agreement import TOLERANCES, differences  # noqa: E402
-from bioform_mj.scenario import load  # noqa: E402
-from bioform_mj.sim import make_plant, simulate  # noqa: E402
+from bioform_mj.run.simulate import make_plant, simulate  # noqa: E402
+from bioform_mj.scenario.loader import load  # noqa: E402
 
 wp.config.quiet = True
 BASE = {"plant.kind": "mujoco", "sim.duration": 0.5, "formation.init_jitter": 0.05}
@@ -71,7 +71,7 @@ def _cpu(sc):
 @pytest.fixture(scope="module")
 def runs():
     """The batch (summaries of a full run, then the inputs of every control step) and the CPU runs."""
-    from bioform_mj.batch.control import BatchRun
+    from bioform_mj.batch.runner import BatchRun
 
     scs = _scenarios()
     b = BatchRun(scs, device="cpu")
@@ -83,7 +83,8 @@ def runs():
 
 
 def test_plant_faults_are_supported_and_not_part_of_the_scene():
-    from bioform_mj.batch.backend import group_key, unsupported
+    from bioform_mj.batch.backend import group_key
+    from bioform_mj.batch.support import unsupported
 
     scs = _scenarios()
     assert all(unsupported(sc) is None for sc in scs)
@@ -95,7 +96,7 @@ def test_plant_faults_are_supported_and_not_part_of_the_scene():
 
 def test_fault_tables_resolve_times_as_the_cpu_loop():
     """Row times to control steps by ``Faults.step``'s own comparisons at ``t = k dt``."""
-    from bioform_mj.batch.control import plant_fault_tables
+    from bioform_mj.batch.tables import plant_fault_tables
 
     scs = _scenarios()
     tab = plant_fault_tables(scs, 500, 1e-3)

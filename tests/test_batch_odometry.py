@@ -12,8 +12,8 @@ import pytest
 wp = pytest.importorskip("warp")
 pytest.importorskip("mujoco_warp")
 
-from bioform_mj.scenario import load  # noqa: E402
-from bioform_mj.sim import simulate  # noqa: E402
+from bioform_mj.run.simulate import simulate  # noqa: E402
+from bioform_mj.scenario.loader import load  # noqa: E402
 
 wp.config.quiet = True
 
@@ -61,9 +61,10 @@ def _compare(batch, ref):
 # ĉ ≤ 4.1e-7 rel., total velocity error ≤ 2.8e-6 rel., odometry drift ≤ 3.9e-6 m, heading drift
 # ≤ 1.8e-6 rad (gyro noise 0.01 rad/s per sample, bias 0.005 rad/s: the hash's draws are the CPU's).
 def test_odometry_with_gyro_noise_and_bias_matches_cpu_engine():
-    from bioform_mj.batch.backend import unsupported
-    from bioform_mj.batch.control import ODO as ODO_COL
-    from bioform_mj.batch.control import OSEED, BatchRun
+    from bioform_mj.batch.device import ODO as ODO_COL
+    from bioform_mj.batch.device import OSEED
+    from bioform_mj.batch.runner import BatchRun
+    from bioform_mj.batch.support import unsupported
 
     scs = _scenarios(("plant.gyro_noise=0.01", "plant.gyro_bias=0.005"))
     assert all(unsupported(sc) is None for sc in scs)
@@ -83,8 +84,8 @@ def test_device_feeds_the_odometry_not_the_truth():
     zeroed (the truth fed) it agrees with the truth run instead, so the agreement would fail if the
     device fed the truth. Sensor period 2 physics steps (``plant.sensor_dt``)."""
     from bioform_mj.batch.agreement import TOLERANCES, differences
-    from bioform_mj.batch.control import ODO as ODO_COL
-    from bioform_mj.batch.control import BatchRun
+    from bioform_mj.batch.device import ODO as ODO_COL
+    from bioform_mj.batch.runner import BatchRun
 
     scs = _scenarios(("plant.gyro_bias=0.5", "plant.sensor_dt=0.002"), seeds=(0, 1))
     b = BatchRun(scs, device="cpu")
@@ -111,7 +112,7 @@ def test_device_feeds_the_odometry_not_the_truth():
 
 def test_sensing_separates_sweep_groups_and_truth_worlds_report_no_drift():
     from bioform_mj.batch.backend import group_key
-    from bioform_mj.batch.control import run_batch
+    from bioform_mj.batch.runner import run_batch
 
     odo = _scenarios(seeds=(0, 1))
     (truth,) = _scenarios(seeds=(0,), sensors=())
@@ -134,7 +135,7 @@ def test_sensing_separates_sweep_groups_and_truth_worlds_report_no_drift():
 # beyond 0.5 %, each within 2 × its spread), velocity error ≤ 2.3e-3, odometry drift ≤ 0.71 mm.
 def test_odometry_at_1khz_agrees_within_tolerance_or_float32_spread():
     from bioform_mj.batch.agreement import differences, float32_spread, judge
-    from bioform_mj.batch.control import run_batch
+    from bioform_mj.batch.runner import run_batch
 
     ov = ["plant.kind=mujoco", "sim.duration=0.5", "formation.init_jitter=0.05", *SENSORS]
     scs = [load("paper", overrides=[*ov, f"sim.seed={s}"]) for s in range(3)]

@@ -11,9 +11,9 @@ import pytest
 wp = pytest.importorskip("warp")
 pytest.importorskip("mujoco_warp")
 
-from bioform_mj.cli import main  # noqa: E402
-from bioform_mj.scenario import load  # noqa: E402
-from bioform_mj.sim import simulate  # noqa: E402
+from bioform_mj.cli.main import main  # noqa: E402
+from bioform_mj.run.simulate import simulate  # noqa: E402
+from bioform_mj.scenario.loader import load  # noqa: E402
 
 wp.config.quiet = True
 
@@ -26,7 +26,7 @@ SLIPPERY = ["plant.kind=mujoco", "sim.duration=1.0", 'plant.robots=[{model="pape
 
 
 def test_slipping_robot_is_reported_by_both_engines():
-    from bioform_mj.batch.control import run_batch
+    from bioform_mj.batch.runner import run_batch
 
     sc = load("paper", overrides=SLIPPERY)
     cpu = simulate(sc).summary
@@ -52,8 +52,8 @@ def test_friction_patch_is_refused():
     Warp against C MuJoCo: qvel differs by up to 35× (relative) in some steps, against ≤ 1.5e-2 on
     the bare floor; seed 2 ended with all three followers tipped on the device, one on the CPU. So the
     batch engine refuses patches up front instead of running worlds that differ from the CPU's."""
-    from bioform_mj.batch.backend import unsupported
-    from bioform_mj.batch.control import run_batch
+    from bioform_mj.batch.runner import run_batch
+    from bioform_mj.batch.support import unsupported
 
     sc = load("paper", overrides=["plant.kind=mujoco", "sim.duration=0.1", "faults.friction_patch=[-5,-5,5,5,0.3]"])
     assert "faults.friction_patch" in unsupported(sc)
@@ -63,7 +63,7 @@ def test_friction_patch_is_refused():
 
 def test_no_slip_on_the_paper_floor():
     """The watch does not fire on the ordinary floor (the batch engine's ok detail is empty, as the CPU's)."""
-    from bioform_mj.batch.control import run_batch
+    from bioform_mj.batch.runner import run_batch
 
     (bat,) = run_batch([load("paper", overrides=["plant.kind=mujoco", "sim.duration=0.6"])])
     assert [(f["outcome"], f["outcome_detail"]) for f in bat["followers"]] == [("ok", "")] * 3
@@ -72,7 +72,7 @@ def test_no_slip_on_the_paper_floor():
 def test_contact_capacity_overflow_marks_every_affected_world_diverged():
     """6 contacts per world (the scene has 6 at rest; broadphase finds more candidates): MuJoCo Warp
     only prints a warning, the batch engine stops both worlds with the reason."""
-    from bioform_mj.batch.control import run_batch
+    from bioform_mj.batch.runner import run_batch
 
     ov = ["plant.kind=mujoco", "sim.duration=0.02"]
     out = run_batch([load("paper", overrides=[*ov, f"sim.seed={s}"]) for s in range(2)], nconmax=6)
@@ -123,7 +123,7 @@ def test_capacity_flags_need_the_warp_backend(tmp_path, capsys):
     assert main(["sweep", "paper", "--nconmax", "8", "--out", str(tmp_path / "x")]) == 2
     assert "--nconmax applies to --backend warp only" in capsys.readouterr().err
     with pytest.raises(ValueError, match="njmax must be >= 1"):
-        from bioform_mj.batch.control import BatchRun
+        from bioform_mj.batch.runner import BatchRun
 
         BatchRun([load("paper", overrides=["plant.kind=mujoco", "sim.duration=0.01"])], njmax=0)
 
@@ -133,8 +133,8 @@ def test_physics_probe_tells_a_contact_model_apart_from_float32(tmp_path, capsys
     MuJoCo's. Float32 on the bare floor: ≤ 2e-3 (measured 1.9e-4 here); a box patch under the wheels
     (MuJoCo Warp's ellipsoid–box contacts are not C MuJoCo's): ≥ 0.1. A scene beyond PROBE_TOL is
     refused up front by the sweep (exit 2, one line) and by BatchRun."""
-    from bioform_mj.batch import control
-    from bioform_mj.sim import make_plant
+    from bioform_mj.batch import probe as control
+    from bioform_mj.run.simulate import make_plant
 
     ok = control.physics_probe(make_plant(load("paper", overrides=["plant.kind=mujoco"])))
     patch = ["plant.kind=mujoco", "faults.friction_patch=[-50.0,-50.0,50.0,50.0,1.0]"]

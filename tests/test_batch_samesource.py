@@ -11,7 +11,7 @@ wp = pytest.importorskip("warp")
 pytest.importorskip("numba")
 
 from bioform_mj.batch.samesource import warp_equations, warp_map  # noqa: E402
-from bioform_mj.control import equations as E  # noqa: E402
+from bioform_mj.core import equations as E  # noqa: E402
 
 wp.config.quiet = True
 N = 400

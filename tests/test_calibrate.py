@@ -9,10 +9,10 @@ import pytest
 
 pytest.importorskip("scipy")
 
-from bioform_mj import calibrate as cal  # noqa: E402
-from bioform_mj.cli import main  # noqa: E402
-from bioform_mj.scenario import load  # noqa: E402
-from bioform_mj.table1 import PAPER_TABLE1  # noqa: E402
+from bioform_mj.cli.main import main
+from bioform_mj.jobs import calibrate as cal
+from bioform_mj.jobs.table1 import PAPER_TABLE1
+from bioform_mj.scenario.loader import load
 
 
 def test_conditions_round_trip_and_the_scenario_is_inside_the_search_space():

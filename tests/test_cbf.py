@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from bioform_mj.control.cbf import cbf_filter
-from bioform_mj.errors import ScenarioError
-from bioform_mj.scenario import load
-from bioform_mj.sim import simulate
+from bioform_mj.core.errors import ScenarioError
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load
 from crossing import CROSSING
 
 
@@ -123,7 +123,7 @@ def test_an_infeasible_qp_is_said():
     ``cbf_infeasible_steps`` and warns, once per follower, naming it."""
     import warnings
 
-    from bioform_mj.errors import RobotWarning
+    from bioform_mj.core.errors import RobotWarning
 
     la, gam, d = 0.1, 5.0, 0.5
     pose = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [-0.1, 0.0, 0.0]])

@@ -9,8 +9,9 @@ import sys
 import numpy as np
 import pytest
 
-from bioform_mj.cli import main
-from bioform_mj.scenario import Scenario, load
+from bioform_mj.cli.main import main
+from bioform_mj.scenario.config import Scenario
+from bioform_mj.scenario.loader import load
 
 SUMMARY_KEYS = {
     "id",

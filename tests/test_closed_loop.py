@@ -7,9 +7,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bioform_mj.scenario import EventCfg, load
-from bioform_mj.sim import simulate
-from bioform_mj.table1 import ordering_holds
+from bioform_mj.jobs.table1 import ordering_holds
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.config import EventCfg
+from bioform_mj.scenario.loader import load
 
 
 @pytest.fixture(scope="module")

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from oracle import Estimator, wheel_to_body  # the estimator's graph sums are checked against the kernel in test_engines
 
-from bioform_mj import graph
-from bioform_mj.control import equations as eq
+from bioform_mj.core import equations as eq
+from bioform_mj.formation import graph
 from bioform_mj.plants.ideal import IdealPlant
 
 # The properties below are asserted on the package's own equations (control/equations.py),

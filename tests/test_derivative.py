@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from bioform_mj.cli import main
-from bioform_mj.control import equations as eq
-from bioform_mj.scenario import load
-from bioform_mj.sim import simulate
+from bioform_mj.cli.main import main
+from bioform_mj.core import equations as eq
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load
 
 DT = 1e-3
 

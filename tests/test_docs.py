@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from bioform_mj import scenario_doc
-from bioform_mj.errors import InputError
-from bioform_mj.scenario import load
+from bioform_mj.core.errors import InputError
+from bioform_mj.scenario import doc as scenario_doc
+from bioform_mj.scenario.loader import load
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
@@ -57,7 +57,7 @@ def test_scenario_reference_has_one_row_per_key_with_type_default_and_choices():
 def test_cli_reference_lists_every_subcommand_and_option():
     gen = _gen_docs()
     md = gen.cli_reference()
-    from bioform_mj.cli import build_parser
+    from bioform_mj.cli.main import build_parser
 
     subs = gen._subcommands(build_parser(), "bioform")
     assert {c for c, _h, _p in subs} >= {"bioform run", "bioform sweep", "bioform robot check", "bioform bench"}
@@ -70,8 +70,8 @@ def test_cli_reference_lists_every_subcommand_and_option():
 
 
 def test_log_reference_names_every_channel_and_column():
-    from bioform_mj.engine import CHANNELS
-    from bioform_mj.logtable import column_units
+    from bioform_mj.core.engine import CHANNELS
+    from bioform_mj.run.logtable import column_units
 
     md = _gen_docs().log_reference()
     for ch in CHANNELS:
@@ -180,7 +180,7 @@ def test_docs_build_strictly(tmp_path):
     scen = (tmp_path / "site" / "reference" / "scenario" / "index.html").read_text()
     assert "formation.init_jitter" in scen and "faults.friction_patch" in scen
     api = (tmp_path / "site" / "reference" / "api" / "index.html").read_text()
-    for name in ("bioform_mj.robot_check.check", "bioform_mj.robot_prepare.prepare_robot", "RobotLayout"):
+    for name in ("bioform_mj.assess.check.check", "bioform_mj.robots.prepare.prepare_robot", "RobotLayout"):
         assert name in api, name  # the robot modules' public names (after the split of scene.py)
     assert not re.search(r":(func|class|mod|meth|data):", api)  # Sphinx roles rendered as code, not as typed
     tut = (tmp_path / "site" / "tutorials" / "own-controller" / "index.html").read_text()
@@ -221,7 +221,7 @@ def test_make_docs_without_the_docs_extra_says_how_to_install_it(tmp_path):
 
 
 def _package_modules() -> dict[str, str]:
-    """``{"robot_prepare": "bioform_mj.robot_prepare", "batch.support": ..., ...}``: every module by its short name."""
+    """``{"robot_prepare": "bioform_mj.robots.prepare", "batch.support": ..., ...}``: every module by its short name."""
     pkg = ROOT / "src" / "bioform_mj"
     out = {}
     for p in pkg.rglob("*.py"):
@@ -271,7 +271,10 @@ def test_code_the_docs_name_exists_and_the_design_names_its_home():
             )
             if not generated and not list(ROOT.glob(path)):
                 bad.append(f"{page.relative_to(ROOT)}: `{path}` does not exist")
-        for path in re.findall(r"`((?:control|batch|plants|outputs|envs)/\w+\.py)", page.read_text()):
+        for path in re.findall(
+            r"`((?:core|formation|control|robots|scenario|plants|outputs|assess|run|batch|envs|jobs|cli)/[\w/]+\.py)",
+            page.read_text(),
+        ):
             if not (ROOT / "src" / "bioform_mj" / path).exists():  # a subpackage's module, named from the package
                 bad.append(f"{page.relative_to(ROOT)}: `{path}` does not exist")
     assert not bad, "\n".join(bad)

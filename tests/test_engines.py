@@ -22,8 +22,9 @@ from oracle import OracleStack, ideal_rk4_step
 
 from bioform_mj.control.base import Comm
 from bioform_mj.control.stack import ControlStack
-from bioform_mj.scenario import EventCfg, load
-from bioform_mj.sim import initial_estimates, simulate, stack_params
+from bioform_mj.run.simulate import initial_estimates, simulate, stack_params
+from bioform_mj.scenario.config import EventCfg
+from bioform_mj.scenario.loader import load
 
 #: equations vs oracle: relative tolerance (measured over 20 s by scripts/oracle_gap.py: 2.6e-14 m, 0 without AVX-512)
 RTOL = 1e-9

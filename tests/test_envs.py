@@ -15,9 +15,9 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test  # noqa: E402
 from pettingzoo.test.seed_test import seed_test  # noqa: E402
 from pettingzoo.utils import parallel_to_aec  # noqa: E402
 
-from bioform_mj.envs import ControllerPolicy, parallel_env, run_episode  # noqa: E402
-from bioform_mj.scenario import load  # noqa: E402
-from bioform_mj.sim import simulate  # noqa: E402
+from bioform_mj.envs import ControllerPolicy, parallel_env, run_episode
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load
 
 SHORT = ["sim.duration=0.3", "sim.control_dt=0.01", "formation.init_jitter=0.05"]
 

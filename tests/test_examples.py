@@ -38,8 +38,8 @@ def test_user_controller_holds_the_formation_and_is_compared_with_the_four_metho
 
 
 def test_user_controller_satisfies_the_protocol(kanayama):
-    from bioform_mj.scenario import load
-    from bioform_mj.sim import make_plant
+    from bioform_mj.run.simulate import make_plant
+    from bioform_mj.scenario.loader import load
 
     sc = load("paper")
     pl = make_plant(sc)
@@ -49,8 +49,8 @@ def test_user_controller_satisfies_the_protocol(kanayama):
 def test_user_controller_honours_offsets_in_the_leaders_frame(kanayama):
     """formation.frame = "leader" on an 8 m circle: the example used to track world-frame slots and lose
     the formation (0.6-2.2 m); it now tracks the slot's own pose and velocity (measured 6-29 mm)."""
-    from bioform_mj.scenario import load
-    from bioform_mj.sim import make_plant, simulate
+    from bioform_mj.run.simulate import make_plant, simulate
+    from bioform_mj.scenario.loader import load
 
     ov = ["sim.duration=10", "formation.frame=leader", "leader.kind=circle", "leader.radius=8", "leader.y0=8"]
     sc = load("paper", ov, plant="ideal")
@@ -67,8 +67,8 @@ def test_user_controller_honours_offsets_in_the_leaders_frame(kanayama):
 
 
 def test_user_controller_honours_the_saturation_mode(kanayama):
-    from bioform_mj.control.equations import saturate
-    from bioform_mj.scenario import load
+    from bioform_mj.core.equations import saturate
+    from bioform_mj.scenario.loader import load
 
     got = {}
     for mode, steer in (("steer-priority", True), ("wheel", False)):

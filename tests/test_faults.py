@@ -13,11 +13,12 @@ import functools
 import numpy as np
 import pytest
 
-from bioform_mj.errors import ScenarioError
-from bioform_mj.faults import TOLERANCE, Faults, outcome
+from bioform_mj.core.errors import ScenarioError
 from bioform_mj.plants.ideal import IdealPlant
-from bioform_mj.scenario import FaultsCfg, Scenario, from_dict, load, preset_names
-from bioform_mj.sim import simulate
+from bioform_mj.run.faults import TOLERANCE, Faults, outcome
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.config import FaultsCfg, Scenario
+from bioform_mj.scenario.loader import from_dict, load, preset_names
 
 DURATION = 15.0  # s: 6 s of recovery after the fault window [6, 9] s
 FAULT_PRESETS = [p for p in preset_names() if p.startswith("fault_")]
@@ -48,7 +49,7 @@ def _assert_survives(o: dict, during_max: float, recovery_max: float) -> None:
 
 
 def test_presets_load_round_trip_and_are_faulty():
-    from bioform_mj.scenario import preset_names
+    from bioform_mj.scenario.loader import preset_names
 
     assert set(FAULT_PRESETS) == {p for p in preset_names() if p.startswith("fault_")}  # every shipped one
     for p in FAULT_PRESETS:
@@ -91,7 +92,7 @@ def test_bad_fault_values_name_the_key(key, value, needle):
 
 def test_no_faults_means_no_fault_code(monkeypatch):
     """A run without faults never builds the fault machinery (zero cost per step)."""
-    import bioform_mj.faults as fmod
+    import bioform_mj.run.faults as fmod
 
     def boom(*a, **k):
         raise AssertionError("Faults built for a fault-free run")
@@ -178,8 +179,8 @@ def test_ideal_plant_push_acts_along_the_heading_only():
 
 
 def test_mujoco_push_and_friction_patch():
-    from bioform_mj.plants.mujoco_plant import MujocoPlant
-    from bioform_mj.robots import resolve_robot
+    from bioform_mj.plants.mujoco.plant import MujocoPlant
+    from bioform_mj.robots.refs import resolve_robot
 
     poses = np.array([[0.0, 0.0, 0.0], [0.0, 3.0, 0.0]])
     p = MujocoPlant([resolve_robot("paper")] * 2, poses, 0.001, 0.001, friction_patch=(-1.0, 2.0, 1.0, 4.0, 0.05))

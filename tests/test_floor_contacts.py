@@ -20,12 +20,14 @@ import mujoco
 import numpy as np
 import pytest
 
-from bioform_mj import cli
-from bioform_mj.plants.mujoco_plant import MujocoPlant
-from bioform_mj.robot_check import check
-from bioform_mj.robot_params import robot_truth
-from bioform_mj.robots import RobotRef, as_ref
-from bioform_mj.scene import CONTACT_PRIORITY, ModelError, build_scene, compile_scene, prepare_robot
+from bioform_mj.assess.check import check
+from bioform_mj.cli import main as cli
+from bioform_mj.plants.mujoco.plant import MujocoPlant
+from bioform_mj.robots.layout import CONTACT_PRIORITY, ModelError
+from bioform_mj.robots.params import robot_truth
+from bioform_mj.robots.prepare import prepare_robot
+from bioform_mj.robots.refs import RobotRef, as_ref
+from bioform_mj.robots.scene import build_scene, compile_scene
 
 R, L, G = 0.05, 0.15, 9.81
 M_BASE, M_WHEEL, I_SPIN = 5.0, 0.5, 6.25e-4
@@ -411,8 +413,8 @@ def test_heavy_rotor_passes_little_torque_to_the_floor(tmp_path):
 
 
 def test_scenario_robot_table_takes_the_keys_and_a_run_says_the_configuration_changed(tmp_path):
-    from bioform_mj.robot_check import feasibility
-    from bioform_mj.scenario import load
+    from bioform_mj.assess.check import feasibility
+    from bioform_mj.scenario.loader import load
 
     _write(tmp_path, "arm.xml", _robot(extra=ARM, actuators='<motor name="arm_motor" joint="arm_joint"/>'))
     (tmp_path / "s.toml").write_text(
@@ -441,8 +443,8 @@ def test_no_import_cycle_between_identify_and_the_plant():
     import sys
 
     code = (
-        "import sys, bioform_mj.plants.mujoco_plant, bioform_mj.robot_check; "
-        "assert 'bioform_mj.identify' not in sys.modules, 'the plant imports identify'"
+        "import sys, bioform_mj.plants.mujoco.plant, bioform_mj.assess.check; "
+        "assert 'bioform_mj.assess.identify' not in sys.modules, 'the plant imports identify'"
     )
     assert subprocess.run([sys.executable, "-c", code], capture_output=True).returncode == 0
 
@@ -477,8 +479,8 @@ def test_a_swivel_caster_wheel_rolls_free_and_does_not_brake(tmp_path):
 
 
 def test_a_run_warns_about_a_braking_caster_before_it_starts(tmp_path):
-    from bioform_mj.robot_check import feasibility
-    from bioform_mj.scenario import load
+    from bioform_mj.assess.check import feasibility
+    from bioform_mj.scenario.loader import load
 
     fr = _write(tmp_path, "fr.xml", _robot(caster='friction="0.8" condim="3"'))
     sc = load(

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bioform_mj import graph
-from bioform_mj.errors import GraphError
+from bioform_mj.core.errors import GraphError
+from bioform_mj.formation import graph
 
 
 def test_paper_default_topology_matrices():

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bioform_mj.hardware import line, preset_control_rate
-from bioform_mj.robots import resolve_robot
-from bioform_mj.scenario import load
-from bioform_mj.sim import simulate
+from bioform_mj.assess.hardware import line, preset_control_rate
+from bioform_mj.robots.refs import resolve_robot
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load
 from crossing import CROSSING
 
 
@@ -84,7 +84,7 @@ def test_ideal_plant_skips_what_it_cannot_know():
 def test_cli_prints_one_verdict_line_and_writes_the_block(tmp_path, capsys):
     import json
 
-    from bioform_mj.cli import main
+    from bioform_mj.cli.main import main
 
     code = main(["run", "paper", "--plant", "mujoco", "--set", "sim.duration=0.2", "--out", str(tmp_path / "r")])
     out = capsys.readouterr()

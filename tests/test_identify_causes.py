@@ -12,10 +12,10 @@ from pathlib import Path
 import mujoco
 import pytest
 
-import bioform_mj.identify as identify_module
-from bioform_mj.identify import identify
-from bioform_mj.identify_causes import FIT_RESIDUAL_MAX
-from bioform_mj.robot_check import check
+import bioform_mj.assess.identify as identify_module
+from bioform_mj.assess.causes import FIT_RESIDUAL_MAX
+from bioform_mj.assess.check import check
+from bioform_mj.assess.identify import identify
 
 
 def _caster_base(tmp_path: Path, damping: float) -> str:
@@ -186,7 +186,7 @@ def test_bioform_identify_warns_where_a_fit_does_not_hold(tmp_path, capsys, monk
     saying the drive fit does not hold (exit 0: it identified, and says what its a is not), the rerun off."""
     import json
 
-    from bioform_mj.cli import main
+    from bioform_mj.cli.main import main
 
     monkeypatch.setattr(identify_module, "FIT_RERUN_SCALE", 1.0)
     p = tmp_path / "dragging.urdf"

@@ -16,11 +16,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from bioform_mj import cli
-from bioform_mj.robot_analysis import layout_of
-from bioform_mj.robot_params import robot_parameters, running_data
-from bioform_mj.robots import RobotRef
-from bioform_mj.scene import build_scene, compile_scene
+from bioform_mj.cli import main as cli
+from bioform_mj.robots.analysis import layout_of
+from bioform_mj.robots.params import robot_parameters, running_data
+from bioform_mj.robots.refs import RobotRef
+from bioform_mj.robots.scene import build_scene, compile_scene
 
 HOME_Q = {"shoulder": 0.9, "wrist_a": 0.5, "wrist_b": -0.7, "head": 1.2, "flap_a": 0.2, "flap_b": 0.5}
 STOW_CTRL = {"shoulder": -0.4, "wrist_a": 0.3, "wrist_b": 0.6}
@@ -206,8 +206,8 @@ def test_a_coupling_equality_keeps_the_files_relation(robot_file):
 
 
 def test_robot_table_keyframe_key_is_checked():
-    from bioform_mj.errors import InputError
-    from bioform_mj.robots import as_ref
+    from bioform_mj.core.errors import InputError
+    from bioform_mj.robots.refs import as_ref
 
     assert as_ref({"model": "x.xml", "keyframe": "home"}).keyframe == "home"
     assert as_ref({"model": "x.xml"}).keyframe == ""
@@ -261,8 +261,8 @@ def test_unknown_keyframe_exits_2_naming_the_files_keyframes(robot_file, capsys)
 
 
 def test_a_urdf_with_a_keyframe_is_refused_naming_it():
-    from bioform_mj.robot_layout import ModelError
-    from bioform_mj.robot_prepare import prepare_robot
+    from bioform_mj.robots.layout import ModelError
+    from bioform_mj.robots.prepare import prepare_robot
 
     urdf = Path(__file__).resolve().parent / "zoo" / "diffbot_urdf" / "diffbot.urdf"
     with pytest.raises(ModelError, match="keyframe 'home': a URDF has no keyframes"):
@@ -271,7 +271,7 @@ def test_a_urdf_with_a_keyframe_is_refused_naming_it():
 
 
 def test_scenario_robot_table_takes_the_keyframe_and_a_run_refuses_an_unknown_one(robot_file, tmp_path, capsys):
-    from bioform_mj.scenario import load
+    from bioform_mj.scenario.loader import load
 
     (tmp_path / "s.toml").write_text(
         f'[plant]\nkind = "mujoco"\nrobots = [{{model = "{robot_file.name}", keyframe = "stow"}}]\n'

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from bioform_mj import leader
+from bioform_mj.formation import leader
 
 
 def test_paper_leader_closed_form():

@@ -1,4 +1,4 @@
-"""Bounded answers to hostile inputs (issue 28 item 2, :mod:`bioform_mj.limits`): each one ``error:`` line,
+"""Bounded answers to hostile inputs (issue 28 item 2, :mod:`bioform_mj.robots.limits`): each one ``error:`` line,
 exit 2, promptly: FIFOs and devices never opened, archives never unpacked past their declared sizes, a
 timestep that would step for hours refused with the estimate, bad numbers refused naming the element."""
 
@@ -13,8 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from bioform_mj import cli, limits
-from bioform_mj.errors import InputError
+from bioform_mj.cli import main as cli
+from bioform_mj.core.errors import InputError
+from bioform_mj.robots import limits
 from test_urdf import diff_drive, write
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
@@ -191,7 +192,7 @@ def test_bad_number_refused_naming_the_element(desc, make, needle, tmp_path, cap
 
 
 def test_nan_in_an_mjcf_robot_refused_naming_the_joint(tmp_path, capsys):
-    from bioform_mj.robots import models_dir
+    from bioform_mj.robots.refs import models_dir
 
     text = (models_dir() / "paper_robot.xml").read_text()
     assert 'axis="0 1 0"' in text
@@ -216,7 +217,7 @@ def test_newline_in_a_name_refused_in_one_line(fmt, tmp_path, capsys):
     if fmt == "urdf":
         path = write(tmp_path / "dd.urdf", diff_drive().replace('name="wheel_left_joint"', f'name="wl{forged}"'))
     else:
-        from bioform_mj.robots import models_dir
+        from bioform_mj.robots.refs import models_dir
 
         text = (models_dir() / "paper_robot.xml").read_text()
         assert 'name="left_wheel"' in text
@@ -229,8 +230,8 @@ def test_newline_in_a_name_refused_in_one_line(fmt, tmp_path, capsys):
 def test_warning_lines_stay_one_line(capsys):
     import warnings
 
-    from bioform_mj.clireport import _show_robot_warnings
-    from bioform_mj.errors import RobotWarning
+    from bioform_mj.cli.report import _show_robot_warnings
+    from bioform_mj.core.errors import RobotWarning
 
     saved = warnings.showwarning
     try:
@@ -265,8 +266,8 @@ def test_mesh_symlinked_out_of_its_package_is_not_read(tmp_path, capsys):
             _one_error(code, err, "outside its package")
         else:
             _one_error(code, err, "a symlink to", "id_rsa.stl", "outside its package")
-    from bioform_mj.robots import PackagePath, RobotRef
-    from bioform_mj.urdf import check_file
+    from bioform_mj.robots.refs import PackagePath, RobotRef
+    from bioform_mj.robots.urdf import check_file
 
     path = write(pkg / "urdf" / "dd.urdf", diff_drive(chassis_collision='<mesh filename="../meshes/inside.stl"/>'))
     check_file(RobotRef(str(path), package_path=PackagePath([("ddpkg", str(pkg))])))
@@ -286,7 +287,7 @@ def test_scenario_file_that_is_a_fifo_or_huge_is_refused(tmp_path, capsys):
 
 def test_mjcf_mesh_that_is_a_fifo_or_too_large_is_refused(tmp_path, capsys, monkeypatch):
     """An MJCF robot's mesh is checked before MuJoCo's compiler opens it (a FIFO blocked it)."""
-    from bioform_mj.robots import models_dir
+    from bioform_mj.robots.refs import models_dir
     from test_urdf import box_stl
 
     text = (models_dir() / "paper_robot.xml").read_text()

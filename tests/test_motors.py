@@ -9,12 +9,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from bioform_mj.cli import main
-from bioform_mj.identify import identify, robot_truth
-from bioform_mj.plants.mujoco_plant import MujocoPlant
-from bioform_mj.robots import RobotRef, models_dir
-from bioform_mj.scenario import load
-from bioform_mj.sim import simulate
+from bioform_mj.assess.identify import identify
+from bioform_mj.cli.main import main
+from bioform_mj.plants.mujoco.plant import MujocoPlant
+from bioform_mj.robots.params import robot_truth
+from bioform_mj.robots.refs import RobotRef, models_dir
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load
 
 # Dynamixel XL430-W250-T, ROBOTIS e-Manual: 1.4 N·m stall, 57 rpm no load, both at 11.1 V; gear 258.5
 XL430_STALL_NM = 1.4

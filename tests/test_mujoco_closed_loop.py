@@ -19,12 +19,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from bioform_mj.cli import main
-from bioform_mj.identify import ground_truth
-from bioform_mj.robots import models_dir
-from bioform_mj.scenario import EventCfg, load
-from bioform_mj.sim import simulate, stack_params
-from bioform_mj.table1 import ordering_holds, run_table1
+from bioform_mj.cli.main import main
+from bioform_mj.jobs.table1 import ordering_holds, run_table1
+from bioform_mj.robots.params import ground_truth
+from bioform_mj.robots.refs import models_dir
+from bioform_mj.run.simulate import simulate, stack_params
+from bioform_mj.scenario.config import EventCfg
+from bioform_mj.scenario.loader import load
 
 PAPER_C = np.array([0.4, 10.0])  # the paper robot's a_eff, b_eff (models/paper_robot.xml)
 

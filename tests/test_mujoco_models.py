@@ -14,11 +14,14 @@ import mujoco
 import numpy as np
 import pytest
 
-from bioform_mj.errors import Diverged
-from bioform_mj.identify import ground_truth, identify, identify_main, robot_parameters
-from bioform_mj.plants.mujoco_plant import MujocoPlant
-from bioform_mj.robots import models_dir, robot_names
-from bioform_mj.scene import ModelError, build_scene, compile_scene, load_robot, model_path, prepare_robot
+from bioform_mj.assess.identify import identify, identify_main
+from bioform_mj.core.errors import Diverged
+from bioform_mj.plants.mujoco.plant import MujocoPlant
+from bioform_mj.robots.layout import ModelError, model_path
+from bioform_mj.robots.params import ground_truth, robot_parameters
+from bioform_mj.robots.prepare import load_robot, prepare_robot
+from bioform_mj.robots.refs import models_dir, robot_names
+from bioform_mj.robots.scene import build_scene, compile_scene
 
 MODELS_DIR = models_dir()
 

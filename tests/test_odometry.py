@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from bioform_mj import scenario as S
-from bioform_mj.cli import main
-from bioform_mj.control.equations import encoder_angle, hash_normal, hash_uniform
-from bioform_mj.plants.mujoco_plant import MujocoPlant
-from bioform_mj.robots import RobotRef
-from bioform_mj.sim import simulate
+from bioform_mj.cli.main import main
+from bioform_mj.core.equations import encoder_angle, hash_normal, hash_uniform
+from bioform_mj.plants.mujoco.plant import MujocoPlant
+from bioform_mj.robots.refs import RobotRef
+from bioform_mj.run.simulate import simulate
 
 #: tb3 IMU (OpenCR's MPU9250-class gyro): white noise per 1 kHz sample and a residual bias after calibration
 GYRO_NOISE = 0.004  # rad/s
@@ -146,8 +146,8 @@ def test_rerun_recording_holds_the_odometry_beside_the_truth(tmp_path):
     """With sensing = odometry the recording has each follower's dead-reckoned path and its drift
     from the true pose (the log holds both; the truth is the robot's own entity)."""
     from bioform_mj.outputs.rerun_log import read_entities, write_rrd
-    from bioform_mj.scenario import load
-    from bioform_mj.sim import simulate
+    from bioform_mj.run.simulate import simulate
+    from bioform_mj.scenario.loader import load
 
     res = simulate(load("tb3", overrides=['plant.sensing="odometry"', "sim.control_dt=0.01", "sim.duration=1"]))
     rows = read_entities(write_rrd(res, tmp_path / "run.rrd"))

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bioform_mj.cli import main
+from bioform_mj.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = ["--set", "sim.duration=2"]
@@ -237,7 +237,7 @@ import sys, mujoco
 def boom(*a, **k):
     raise AssertionError("renderer touched")
 mujoco.Renderer = mujoco.GLContext = boom
-from bioform_mj.cli import main
+from bioform_mj.cli.main import main
 out = {str(tmp_path / "plain")!r}
 rc = main(["run", "paper", "--plant", "mujoco", "--set", "sim.duration=0.2", "--out", out, "--quiet"])
 loaded = [m for m in ("rerun", "mediapy", "matplotlib", "tqdm", "bioform_mj.outputs.video",
@@ -445,8 +445,8 @@ def test_logged_torque_is_the_interval_mean_not_an_aliased_sample():
     """Paper scenario in MuJoCo: the mean torque of follower 1 over t > 10 s from the default log
     (log_dt = 10 control steps) agrees with the same run logged every step within 0.05 N·m, and
     the logged min/max envelope holds the chatter that a point sample would hide."""
-    from bioform_mj.scenario import load
-    from bioform_mj.sim import simulate
+    from bioform_mj.run.simulate import simulate
+    from bioform_mj.scenario.loader import load
 
     a = simulate(load("paper", plant="mujoco", overrides=["sim.duration=14"]))
     b = simulate(load("paper", plant="mujoco", overrides=["sim.duration=14", "sim.log_dt=0.001"]))

@@ -6,9 +6,9 @@ from __future__ import annotations
 import mujoco
 import pytest
 
-from bioform_mj.overlaps import geom_overlaps
-from bioform_mj.robot_check import check
-from bioform_mj.robots import RobotRef
+from bioform_mj.assess.check import check
+from bioform_mj.robots.overlaps import geom_overlaps
+from bioform_mj.robots.refs import RobotRef
 
 R, L, W = 0.05, 0.12, 0.01  # wheel radius, half track, half width (m)
 

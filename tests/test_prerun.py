@@ -16,10 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bioform_mj import cli, prerun
-from bioform_mj.robot_check import check
-from bioform_mj.robots import models_dir
-from bioform_mj.scenario import load
+from bioform_mj.assess import prerun
+from bioform_mj.assess.check import check
+from bioform_mj.cli import main as cli
+from bioform_mj.robots.refs import models_dir
+from bioform_mj.scenario.loader import load
 
 PAPER = (models_dir() / "paper_robot.xml").read_text()
 
@@ -107,7 +108,7 @@ def test_a_mapping_that_fixes_the_caster_is_another_robot_and_does_not_warn(tmp_
     path = _braking(tmp_path)
     n0 = prerun.COMPUTED[0]
     sc = load("paper", overrides=["plant.kind=mujoco", f'plant.robots=[{{model="{path}", caster_friction=0.0}}]'])
-    from bioform_mj.sim import make_plant
+    from bioform_mj.run.simulate import make_plant
 
     res = prerun.before_run(sc, make_plant(sc))
     assert prerun.COMPUTED[0] == n0 + 1
@@ -118,7 +119,7 @@ def test_a_mapping_that_fixes_the_caster_is_another_robot_and_does_not_warn(tmp_
 
 @pytest.mark.parametrize("preset, robot", [("paper", "paper"), ("tb3", "tb3")])
 def test_shipped_robots_do_not_warn(preset, robot, fresh_cache):
-    from bioform_mj.sim import make_plant
+    from bioform_mj.run.simulate import make_plant
 
     sc = load(preset, overrides=["plant.kind=mujoco", f'plant.robots=["{robot}"]'])
     res = prerun.before_run(sc, make_plant(sc))
@@ -148,9 +149,9 @@ def test_no_robot_check_skips_it(tmp_path, capsys, fresh_cache, monkeypatch):
 def test_a_runs_braking_caster_is_labelled_and_chosen_as_robot_check_does(tmp_path):
     """Was: an unnamed caster was '#52' in a follower's outcome, and a run's threshold (1 % of the
     weight) was not robot check's (0.5 %): Fetch Freight's 7.8 N of 790 N was 'none the plant knows'."""
-    from bioform_mj.contacts import brakes
-    from bioform_mj.outcomes import braking_casters, unmodelled_causes
-    from bioform_mj.sim import make_plant
+    from bioform_mj.assess.outcomes import braking_casters, unmodelled_causes
+    from bioform_mj.robots.contacts import brakes
+    from bioform_mj.run.simulate import make_plant
 
     path = _braking(tmp_path, "unnamed", unnamed=True)
     rep = check(path)
@@ -166,8 +167,8 @@ def test_a_runs_braking_caster_is_labelled_and_chosen_as_robot_check_does(tmp_pa
 
 
 def test_a_check_that_breaks_is_a_warning_not_a_failed_run(tmp_path, fresh_cache, monkeypatch):
-    import bioform_mj.robot_check as rc
-    from bioform_mj.sim import make_plant
+    import bioform_mj.assess.check as rc
+    from bioform_mj.run.simulate import make_plant
 
     def broken(*a, **k):
         raise RuntimeError("boom")
@@ -182,9 +183,9 @@ def test_a_check_that_breaks_is_a_warning_not_a_failed_run(tmp_path, fresh_cache
 
 def test_simulate_and_a_sweep_row_say_it(tmp_path, fresh_cache):
     """The Python API warns it (a RobotWarning before the run) and a sweep's row has the column."""
-    from bioform_mj.errors import RobotWarning
-    from bioform_mj.sim import simulate
-    from bioform_mj.sweep import expand, run_one
+    from bioform_mj.core.errors import RobotWarning
+    from bioform_mj.jobs.sweep import expand, run_one
+    from bioform_mj.run.simulate import simulate
 
     path = _braking(tmp_path)
     sets = ["plant.kind=mujoco", f'plant.robots=[{{model="{path}"}}]', "sim.duration=0.05"]
@@ -204,8 +205,8 @@ def test_simulate_and_a_sweep_row_say_it(tmp_path, fresh_cache):
 def test_an_identification_off_the_formula_is_warned_with_its_size_and_cause(fresh_cache):
     """The paper robot mapped with wheel_radius 0.14 m (its wheels are 0.1 m): the formula takes the
     mapped radius, the physics the wheels': robot check fails it, cause ``mapping``."""
-    from bioform_mj.robots import RobotRef, resolve_robot
-    from bioform_mj.sim import make_plant
+    from bioform_mj.robots.refs import RobotRef, resolve_robot
+    from bioform_mj.run.simulate import make_plant
 
     sc = load("paper", overrides=["plant.kind=mujoco", 'plant.robots=[{model="paper", wheel_radius=0.14}]'])
     res = prerun.before_run(sc, make_plant(sc))

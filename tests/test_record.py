@@ -8,10 +8,10 @@ import tomllib
 import numpy as np
 import pytest
 
-from bioform_mj.cli import main
-from bioform_mj.record import resolved_config, to_toml
-from bioform_mj.scenario import load
-from bioform_mj.sim import follower_outcomes, lost_threshold_m
+from bioform_mj.assess.outcomes import follower_outcomes, lost_threshold_m
+from bioform_mj.cli.main import main
+from bioform_mj.scenario.loader import load
+from bioform_mj.scenario.record import resolved_config, to_toml
 
 
 def test_lost_threshold_scales_with_the_formation():

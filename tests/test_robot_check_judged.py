@@ -14,9 +14,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from bioform_mj.robot_check import G, check, tip_margins
-from bioform_mj.robots import RobotRef
-from bioform_mj.scene import prepare_robot
+from bioform_mj.assess.check import G, check, tip_margins
+from bioform_mj.robots.prepare import prepare_robot
+from bioform_mj.robots.refs import RobotRef
 from test_urdf import box_stl  # a binary STL box, as the URDF tests write it
 
 HALF_PI = repr(math.pi / 2)
@@ -158,8 +158,8 @@ def test_a_robot_still_moving_after_the_settle_is_said(tmp_path):
     'floor contacts at rest' were a snapshot (one wheel 342 N, the other and the caster 0 N, of 284 N) that
     nothing flagged. ``not_at_rest`` says so; a robot that stands still gets ''. Gravcomp bodies (the
     Stretch's lift and arm) weigh nothing on the floor."""
-    from bioform_mj.contacts import floor_contacts, not_at_rest
-    from bioform_mj.plants.mujoco_plant import MujocoPlant
+    from bioform_mj.plants.mujoco.plant import MujocoPlant
+    from bioform_mj.robots.contacts import floor_contacts, not_at_rest
 
     path = tmp_path / "flat.xml"
     chassis = f'<geom type="box" size="{CHASSIS_HX} {CHASSIS_HY} 0.02" pos="0 0 0.025" mass="2"/>'
@@ -227,8 +227,8 @@ class _Kicked:
 def test_a_robot_moving_at_0_2_s_is_settled_longer_then_said(tmp_path):
     """robot check's settle: 0.2 s, then 0.1 s more at a time while the robot moves (a Pioneer 3-DX on its
     caster: 73 N of 55 N at 0.2 s, at rest at 0.3 s), up to 1 s; a robot still moving then is said."""
-    from bioform_mj.contacts import settle
-    from bioform_mj.plants.mujoco_plant import MujocoPlant
+    from bioform_mj.plants.mujoco.plant import MujocoPlant
+    from bioform_mj.robots.contacts import settle
 
     path = tmp_path / "flat.xml"
     path.write_text(_flat_chassis_mjcf(f'<geom type="box" size="{CHASSIS_HX} {CHASSIS_HY} 0.02" pos="0 0 0.025"/>'))
@@ -271,7 +271,7 @@ def test_a_caster_mapped_on_a_driven_wheel_is_refused(tmp_path, capsys):
     """``--caster l_wheel_link`` on the Freight was taken: the wheel's published mesh (off for contacts, the
     scene rolls the wheel on its proxy) was made frictionless with a note, and the check ran as if nothing was
     wrong. A caster on a driven wheel's body is bad input: one error line, exit 2, nothing written."""
-    from bioform_mj import cli
+    from bioform_mj.cli import main as cli
 
     path = tmp_path / "dd.urdf"
     path.write_text(_urdf())
@@ -290,7 +290,7 @@ def test_a_gazebo_mu_above_the_floors_is_the_floors(tmp_path):
     pyramidal cone left the wheels of a base on four level supports with almost no normal load (MiR: 0 N of
     850 N; the check said 'the wheels do not stand on the floor'). Now the wheels keep the floor's μ 1 and
     no priority; a mu below the floor's (a caster's 0.3) still wins by priority."""
-    from bioform_mj.scene import CONTACT_PRIORITY
+    from bioform_mj.robots.layout import CONTACT_PRIORITY
 
     tail = """
   <gazebo reference="wheel_left"><mu1>200</mu1><mu2>200</mu2></gazebo>
@@ -317,7 +317,7 @@ def test_a_dropped_visual_mesh_leaves_no_machine_path_in_the_runs_scene(tmp_path
     """The Pioneer 3-DX and Freight copies have no visual meshes: the import drops them with a note, which a
     run's scene.xml keeps (the robot's layout text); it said 'no file /abs/path/…' (issue 18 item 7: no
     absolute path of the machine but the asset paths). The note gives the path from the URDF's folder."""
-    from bioform_mj import cli
+    from bioform_mj.cli import main as cli
 
     deco = """
   <joint name="deco_joint" type="fixed"><parent link="base_link"/><child link="deco"/></joint>

@@ -15,13 +15,14 @@ import mujoco
 import numpy as np
 import pytest
 
-from bioform_mj import cli
-from bioform_mj.identify import identify, robot_truth
-from bioform_mj.plants.mujoco_plant import MujocoPlant
-from bioform_mj.robot_check import EXIT_FAIL, check, feasibility
-from bioform_mj.robots import RobotRef, models_dir
-from bioform_mj.scenario import load
-from bioform_mj.scene import prepare_robot
+from bioform_mj.assess.check import EXIT_FAIL, check, feasibility
+from bioform_mj.assess.identify import identify
+from bioform_mj.cli import main as cli
+from bioform_mj.plants.mujoco.plant import MujocoPlant
+from bioform_mj.robots.params import robot_truth
+from bioform_mj.robots.prepare import prepare_robot
+from bioform_mj.robots.refs import RobotRef, models_dir
+from bioform_mj.scenario.loader import load
 
 DATA = Path(__file__).parent / "data"
 TP_FILE = DATA / "thirdparty_base.xml"
@@ -230,7 +231,7 @@ def test_robots_on_the_ideal_plant_give_c_true():
     assert sc.plant.mass == pytest.approx(lab.mass_eff) and sc.plant.inertia == pytest.approx(lab.inertia_eff)
     assert load("paper").plant.c_true == (0.4, 10.0)  # the paper robot: as given
     assert load("paper", overrides=["plant.c_true=[1.0, 5.0]"]).plant.c_true == (1.0, 5.0)
-    from bioform_mj.errors import ScenarioError
+    from bioform_mj.core.errors import ScenarioError
 
     with pytest.raises(ScenarioError, match="one c_true"):
         load("hetero", plant="ideal")
@@ -256,7 +257,7 @@ def test_a_mapped_size_far_from_the_geometry_is_said_not_a_crash():
     estimate (no geom reached the floor that radius implies). Now: a pre-run warning naming both
     values, and the run reports the wheels as slipping (their rate × the given radius is not the
     chassis speed), never silently."""
-    from bioform_mj.sim import make_plant, simulate
+    from bioform_mj.run.simulate import make_plant, simulate
 
     ov = ["plant.kind=mujoco", "sim.duration=0.6", 'plant.robots=[{model="paper", wheel_radius=0.14}]']
     res = simulate(load("paper", overrides=ov))
@@ -275,7 +276,7 @@ def test_shipped_robot_scaled_paper_scenario_holds_formation(preset, robot):
 
     Measured (20 s): tb3 final errors 3.8-4.6 mm, c_hat within 7 %; stretch 6-7.5 mm, b_hat 13-15 % low
     (centre of mass 4 cm behind the axle, design §8.1)."""
-    from bioform_mj.sim import simulate
+    from bioform_mj.run.simulate import simulate
 
     sc = load(preset, overrides=["sim.duration=12"])
     assert sc.plant.kind == "mujoco" and sc.formation.scale < 1
@@ -299,7 +300,7 @@ def test_scale_maps_lengths_and_keeps_times():
     )
     assert s.kinematic.k2 == pytest.approx(p.kinematic.k2 / 0.01) and s.kinematic.k1 == p.kinematic.k1
     assert s.disturbance.bias[0] == pytest.approx(0.1 * p.disturbance.bias[0])
-    from bioform_mj.errors import ScenarioError
+    from bioform_mj.core.errors import ScenarioError
 
     with pytest.raises(ScenarioError, match="formation.scale"):
         load("paper", overrides=["formation.scale=-1"])
@@ -311,9 +312,9 @@ def test_a_robot_the_scenario_overturns_is_reported_tipped_at_the_moment_it_tips
     chassis tilt (measured every step by an observer of the step-by-step loop) crossed 30°."""
     import math
 
-    from bioform_mj.plants.mujoco_plant import TIP_ANGLE_DEG
-    from bioform_mj.scenario import load
-    from bioform_mj.sim import simulate
+    from bioform_mj.plants.mujoco.plant import TIP_ANGLE_DEG
+    from bioform_mj.run.simulate import simulate
+    from bioform_mj.scenario.loader import load
 
     sc = load("paper", plant="mujoco", overrides=['plant.robots=["tb3"]', "sim.duration=0.5"])
 

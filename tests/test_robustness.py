@@ -14,7 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from bioform_mj.cli import main
+from bioform_mj.cli.main import main
 
 # (description, scenario-file text or None, extra argv, substring the error line must contain)
 BAD = [
@@ -160,7 +160,7 @@ def _leaf_keys(cls=None, prefix=""):
     import dataclasses
     import typing
 
-    from bioform_mj.scenario import Scenario
+    from bioform_mj.scenario.config import Scenario
 
     cls = cls or Scenario
     for name, tp in typing.get_type_hints(cls).items():
@@ -178,8 +178,8 @@ WRONG = ["x", 3, -1, 2.5, True, [1, 2], [[1, 2], [3, 4]], {"a": 1}, [], 1e300, 1
 def test_any_type_anywhere_loads_or_is_refused(key, is_table):
     """Every key of a scenario, given values of every type: a Scenario or an InputError, never another
     exception (a TypeError would be exit 1). Tables also get a scalar then a key below them."""
-    from bioform_mj.errors import InputError
-    from bioform_mj.scenario import load
+    from bioform_mj.core.errors import InputError
+    from bioform_mj.scenario.loader import load
 
     for value in WRONG:
         overrides = {key: value}

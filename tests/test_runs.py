@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bioform_mj.cli import main
+from bioform_mj.cli.main import main
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 ENV = {**os.environ, "PYTHONPATH": SRC + os.pathsep + os.environ.get("PYTHONPATH", "")}
@@ -145,8 +145,8 @@ def test_lock_is_released_and_removed(tmp_path):
 
 def test_failed_start_leaves_no_folder(tmp_path, capsys, monkeypatch):
     """An error after the folder was claimed but before anything was written removes the folder again."""
-    import bioform_mj.sim as sim
-    from bioform_mj.errors import InputError
+    import bioform_mj.run.simulate as sim
+    from bioform_mj.core.errors import InputError
 
     monkeypatch.setattr(sim, "simulate", lambda *a, **k: (_ for _ in ()).throw(InputError("plant could not be built")))
     out = tmp_path / "a" / "b"
@@ -246,7 +246,7 @@ def test_read_only_out_dir(tmp_path, capsys, monkeypatch):
     ],
 )
 def test_bench_json_checked_before_the_work(target, needle, tmp_path, capsys, monkeypatch):
-    import bioform_mj.bench as bench
+    import bioform_mj.jobs.bench as bench
 
     monkeypatch.setattr(bench, "bench_case", lambda *a, **k: pytest.fail("the benchmark ran before the check"))
     target = {"DANGLING": str(_dangling(tmp_path)), "DIR": str(tmp_path)}.get(target, target)
@@ -256,7 +256,7 @@ def test_bench_json_checked_before_the_work(target, needle, tmp_path, capsys, mo
 
 
 def test_bench_in_a_folder_without_runs_writes_its_json(tmp_path, capsys, monkeypatch):
-    import bioform_mj.bench as bench
+    import bioform_mj.jobs.bench as bench
 
     monkeypatch.chdir(tmp_path)
     row = {
@@ -281,7 +281,7 @@ def test_bench_in_a_folder_without_runs_writes_its_json(tmp_path, capsys, monkey
     [("/proc/id.json", "special file system"), ("DANGLING", "dangling symlink"), ("FILEDIR", "not a directory")],
 )
 def test_identify_out_checked_before_the_work(target, needle, tmp_path, capsys, monkeypatch):
-    import bioform_mj.identify as identify
+    import bioform_mj.assess.identify as identify
 
     monkeypatch.setattr(identify, "identify_main", lambda *a, **k: pytest.fail("identified before the check"))
     if target == "FILEDIR":
@@ -437,8 +437,8 @@ def test_sigterm_while_rendering_the_video_leaves_no_temporary_file(tmp_path):
 def test_interrupt_carrying_a_result_is_kept(tmp_path, capsys, monkeypatch):
     """A KeyboardInterrupt that carries ``.result`` (simulate's alternative to returning a result with
     ``interrupted`` set) is written like a divergence (summary marked ``interrupted``), exit 128 + signum."""
-    import bioform_mj.sim as sim
-    from bioform_mj.errors import Interrupted
+    import bioform_mj.run.simulate as sim
+    from bioform_mj.core.errors import Interrupted
 
     real = sim.simulate
 
@@ -458,7 +458,7 @@ def test_interrupt_carrying_a_result_is_kept(tmp_path, capsys, monkeypatch):
 
 
 def test_interrupt_without_result_leaves_no_folder(tmp_path, capsys, monkeypatch):
-    import bioform_mj.sim as sim
+    import bioform_mj.run.simulate as sim
 
     def stop(sc, **kw):
         raise KeyboardInterrupt
@@ -479,7 +479,7 @@ def test_mujoco_warnings_go_to_the_run_folder_not_the_cwd(tmp_path, monkeypatch,
     DIR/MUJOCO_LOG.TXT and on stderr as a warning line; the working directory stays clean."""
     import mujoco
 
-    import bioform_mj.sim as sim
+    import bioform_mj.run.simulate as sim
 
     real = sim.simulate
 
@@ -513,7 +513,7 @@ def test_mujoco_warnings_of_the_compiled_loop_are_captured(tmp_path):
     import mujoco
 
     from bioform_mj.outputs.mjlog import MujocoLog
-    from bioform_mj.plants import mujoco_kernels as mk
+    from bioform_mj.plants.mujoco import kernels as mk
 
     numba = pytest.importorskip("numba")
     if getattr(mk, "_mj_step", None) is None:
@@ -563,7 +563,7 @@ def test_progress_phase_is_shown_and_ends_when_stepping_starts():
 
 
 def test_presets_have_descriptions(capsys):
-    from bioform_mj.scenario import load, preset_descriptions, preset_names
+    from bioform_mj.scenario.loader import load, preset_descriptions, preset_names
 
     desc = preset_descriptions()
     assert set(desc) == set(preset_names())
@@ -597,7 +597,7 @@ def _table(diverged=None, outcome=None):
 
 
 def test_table1_marks_diverged_methods():
-    from bioform_mj.table1 import markdown
+    from bioform_mj.jobs.table1 import markdown
 
     md = markdown(_table(diverged="backstepping"))
     rows = [line for line in md.splitlines() if line.startswith("| 1 |")]
@@ -609,7 +609,7 @@ def test_table1_marks_diverged_methods():
 
 
 def test_table1_marks_failed_outcomes_and_handles_their_absence():
-    from bioform_mj.table1 import markdown
+    from bioform_mj.jobs.table1 import markdown
 
     md = markdown(_table(outcome=("bioinspired", 1, "tipped")))
     row2 = next(line for line in md.splitlines() if line.startswith("| 2 |"))

@@ -12,10 +12,10 @@ import json
 import numpy as np
 import pytest
 
-from bioform_mj.cli import main
-from bioform_mj.errors import InputError, ScenarioError
-from bioform_mj.scenario import load
-from bioform_mj.sim import make_plant, simulate
+from bioform_mj.cli.main import main
+from bioform_mj.core.errors import InputError, ScenarioError
+from bioform_mj.run.simulate import make_plant, simulate
+from bioform_mj.scenario.loader import load
 from crossing import CROSSING
 
 CROSS = {
@@ -159,7 +159,7 @@ def test_overlapping_start_cli_exit_2(tmp_path, capsys):
 
 
 def test_sweep_row_fails_for_an_impossible_start_only():
-    from bioform_mj.sweep import expand, run_one
+    from bioform_mj.jobs.sweep import expand, run_one
 
     specs = expand(
         "paper",
@@ -232,7 +232,7 @@ def test_obstacle_field_seeded_keeps_out_of_leader_path():
 
 def test_box_distance_matches_geometry():
     """Signed footprint distance of a yawed box: inside −, on the edge 0, corners by Pythagoras."""
-    from bioform_mj.obstacles import Obstacle
+    from bioform_mj.formation.obstacles import Obstacle
 
     ob = Obstacle("obstacle_1", "box", 1.0, 2.0, (0.5, 0.2, 0.3), np.pi / 2)  # long side along y
     d = ob.distance(np.array([[1.0, 2.0], [1.0, 2.5], [1.3, 2.0], [1.5, 3.0]]))
@@ -249,7 +249,7 @@ def test_no_contact_fields_on_the_ideal_plant():
 def test_obstacles_drawn_in_figure_and_rerun(tmp_path):
     """The log keeps the obstacles; the trajectory figure fills one footprint per obstacle and the
     rerun recording holds them as static boxes and cylinders."""
-    from bioform_mj.obstacles import from_rows
+    from bioform_mj.formation.obstacles import from_rows
     from bioform_mj.outputs.figures import _trajectories
     from bioform_mj.outputs.rerun_log import read_entities, write_rrd
 
@@ -287,7 +287,7 @@ def test_obstacles_preset_followers_hit_the_fixed_obstacles():
 
 
 def test_table1_marks_every_outcome_kind():
-    from bioform_mj.table1 import _mark
+    from bioform_mj.jobs.table1 import _mark
 
     f = {
         "outcome": "tipped",

@@ -9,9 +9,9 @@ import warnings
 
 import pytest
 
-from bioform_mj import prerun
-from bioform_mj.cache_schema import entry_problem
-from bioform_mj.errors import RobotWarning
+from bioform_mj.assess import prerun
+from bioform_mj.assess.cache_schema import entry_problem
+from bioform_mj.core.errors import RobotWarning
 
 GOOD = {
     "format": prerun.CACHE_FORMAT,
@@ -124,7 +124,7 @@ def test_batch_env_estimates_memory_before_allocating(kw, needle):
 def test_provenance_hashes_package_meshes_and_xacro_includes(tmp_path):
     """A sweep whose robot's package:// mesh (or xacro include) changed is redone (it resumed as done)."""
     import bioform_mj
-    from bioform_mj.provenance import differences, provenance
+    from bioform_mj.jobs.provenance import differences, provenance
     from test_urdf import _package, box_stl, write
 
     pkg, urdf = _package(tmp_path)
@@ -188,7 +188,7 @@ class _Scribbler:
         import numpy as np
 
         from bioform_mj.control.stack import ControlStack
-        from bioform_mj.sim import stack_params
+        from bioform_mj.run.simulate import stack_params
 
         self.inner = ControlStack(sc.build_graph(), stack_params(sc, np.array(sc.plant.c_true)))
         self.what = what

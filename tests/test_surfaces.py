@@ -11,9 +11,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from bioform_mj.robots import models_dir, resolve_robot
-from bioform_mj.scene import build_scene
-from bioform_mj.surfaces import min_friction_candidates
+from bioform_mj.robots.refs import models_dir, resolve_robot
+from bioform_mj.robots.scene import build_scene
+from bioform_mj.robots.surfaces import min_friction_candidates
 
 #: robot 1 on a patch around the origin, robot 2 two metres away on the floor
 POSES = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
@@ -76,7 +76,7 @@ def test_floor_friction_below_the_wheels_is_the_floors(robot):
     assert m.npair == 4
     assert c[("f2/right_wheel_collision", "floor")].friction[0] == pytest.approx(0.3)
     assert c[("f2/back_caster", "floor")].dim == 1
-    from bioform_mj.plants.mujoco_plant import MujocoPlant
+    from bioform_mj.plants.mujoco.plant import MujocoPlant
 
     plant = MujocoPlant([robot, robot], POSES, 0.001, 0.001, floor_friction=0.3)
     assert plant._wheel_friction(1) == pytest.approx(0.3)  # the traction limit's μ is the pair's
@@ -94,7 +94,7 @@ def test_published_urdf_caster_with_gazebo_mu_gets_the_patch_friction(monkeypatc
     """The Create 3 URDF (tests/zoo): caster and bumper with Gazebo mu1 0.1 (priority 2), wheels mu1 1."""
     from pathlib import Path
 
-    from bioform_mj.robots import RobotRef
+    from bioform_mj.robots.refs import RobotRef
 
     zoo = Path(__file__).resolve().parent / "zoo" / "create3_urdf"
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(zoo))
@@ -121,7 +121,7 @@ def test_published_urdf_caster_with_gazebo_mu_gets_the_patch_friction(monkeypatc
 def test_obstacle_against_a_priority_wheel_is_the_smaller_friction_already(robot):
     """An obstacle (mu 1, priority 0) touching the left wheel's side: MuJoCo's priority rule gives the wheel's
     0.5 = min(0.5, 1), no pair needed; the shipped tb3 wheel (mu 1, priority 0) gets max(1, 1) = 1."""
-    from bioform_mj.obstacles import Obstacle
+    from bioform_mj.formation.obstacles import Obstacle
 
     wall = Obstacle(
         name="obstacle_1", shape="box", x=0.0, y=0.08 + 0.009 + 0.05 - 5e-4, size=(0.02, 0.05, 0.05), yaw=0.0

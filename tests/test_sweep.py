@@ -7,8 +7,8 @@ import json
 
 import pytest
 
-from bioform_mj.cli import main
-from bioform_mj.sweep import expand, run_one, sweep
+from bioform_mj.cli.main import main
+from bioform_mj.jobs.sweep import expand, run_one, sweep
 
 ARGS = [
     "--seeds",

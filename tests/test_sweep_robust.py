@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from bioform_mj import sweep as sweep_mod
-from bioform_mj.cli import main
-from bioform_mj.scenario import load
-from bioform_mj.sweep import RunSpec, expand, randomness, run_one, sweep
+from bioform_mj.cli.main import main
+from bioform_mj.jobs import sweep as sweep_mod
+from bioform_mj.jobs.sweep import RunSpec, expand, randomness, run_one, sweep
+from bioform_mj.scenario.loader import load
 
 SRC = str(Path(sweep_mod.__file__).resolve().parents[1])
 
@@ -265,7 +265,7 @@ def test_resume_keys_on_content_not_path(tmp_path):
 
 def test_package_version_change_redoes_rows(tmp_path, monkeypatch, capsys):
     """The version is part of a row's provenance: a resume under another version redoes the row, saying why."""
-    from bioform_mj import provenance
+    from bioform_mj.jobs import provenance
 
     out = tmp_path / "sw"
     args = ("paper", 1, ["bioinspired"], [], ["sim.duration=0.2"])
@@ -414,7 +414,7 @@ def test_diverged_run_marked_in_tables(tmp_path):
 
 
 def test_follower_outcomes_when_summary_has_them(monkeypatch):
-    from bioform_mj import sim
+    from bioform_mj.run import simulate as sim
 
     real = sim.simulate
 

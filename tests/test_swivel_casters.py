@@ -21,12 +21,12 @@ import mujoco
 import numpy as np
 import pytest
 
-import bioform_mj.identify as identify_module
-from bioform_mj.contacts import align_swivels, swivel_casters
-from bioform_mj.identify import identify
-from bioform_mj.plants.mujoco_plant import MujocoPlant
-from bioform_mj.robot_check import check
-from bioform_mj.robots import RobotRef
+import bioform_mj.assess.identify as identify_module
+from bioform_mj.assess.check import check
+from bioform_mj.assess.identify import identify
+from bioform_mj.plants.mujoco.plant import MujocoPlant
+from bioform_mj.robots.contacts import align_swivels, swivel_casters
+from bioform_mj.robots.refs import RobotRef
 
 R, L, R_CASTER, X_CASTER = 0.05, 0.15, 0.02, 0.2
 

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from bioform_mj.scenario import load
-from bioform_mj.table1 import PAPER_TABLE1, markdown, paper_differences
+from bioform_mj.jobs.table1 import PAPER_TABLE1, markdown, paper_differences
+from bioform_mj.scenario.loader import load
 
 
 def _table(sc, j=1.0):
-    from bioform_mj.table1 import paper_differences
+    from bioform_mj.jobs.table1 import paper_differences
 
     f = {"total_velocity_error": j, "final_formation_error_m": 0.01, "max_abs_v_cmd": 1.0, "saturation_fraction": 0.0}
     summ = {"followers": [dict(f, id=i + 1, outcome="ok") for i in range(3)], "diverged": None}

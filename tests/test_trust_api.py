@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 import bioform_mj
-from bioform_mj.cli import main
-from bioform_mj.errors import ControllerError, WriteFailed
-from bioform_mj.scenario import load
-from bioform_mj.sim import simulate
+from bioform_mj.cli.main import main
+from bioform_mj.core.errors import ControllerError, WriteFailed
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load
 
 SRC = str(Path(bioform_mj.__file__).resolve().parents[1])
 CLI = f"{sys.executable} -m bioform_mj.cli"
@@ -214,7 +214,7 @@ class Wrapped:
 
     def __init__(self, mode: str, k_bad: int = 50) -> None:
         from bioform_mj.control.stack import ControlStack
-        from bioform_mj.sim import stack_params
+        from bioform_mj.run.simulate import stack_params
 
         self.inner = ControlStack(SC.build_graph(), stack_params(SC, np.array(SC.plant.c_true)))
         self.n, self.k, self.k_bad, self.mode = SC.n, 0, k_bad, mode
@@ -330,7 +330,7 @@ def test_an_observer_without_a_period_is_refused_before_any_step():
 def test_installed_mujoco_distributions_are_one_release():
     from importlib import metadata
 
-    from bioform_mj.deps import MUJOCO_RELEASE, installed_versions, mujoco_distribution_problem
+    from bioform_mj.core.deps import MUJOCO_RELEASE, installed_versions, mujoco_distribution_problem
 
     v = installed_versions()
     assert mujoco_distribution_problem() is None, v
@@ -344,7 +344,7 @@ def test_installed_mujoco_distributions_are_one_release():
 
 
 def test_mixed_mujoco_releases_are_refused_with_the_fix(monkeypatch, capsys):
-    from bioform_mj import deps
+    from bioform_mj.core import deps
 
     msg = deps.mujoco_distribution_problem({"mujoco": "3.17.0", "mujoco-core": "4.0.1"})
     assert "mujoco 3.17.0, mujoco-core 4.0.1" in msg and "pip uninstall -y mujoco mujoco-core" in msg
@@ -370,8 +370,8 @@ def test_pyproject_pins_the_mujoco_metapackage_not_mujoco_core():
 
 
 def _composed(robots: list[str]):
-    from bioform_mj.robots import resolve_robot
-    from bioform_mj.scene import build_scene, compile_scene
+    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.scene import build_scene, compile_scene
 
     n = len(robots)
     poses = np.column_stack([np.arange(n) * 1.5, np.zeros(n), np.zeros(n)])
@@ -472,8 +472,8 @@ def test_an_event_at_the_last_control_step_is_applied():
 
 
 def test_vary_values_in_quotes_are_labelled_without_them():
-    from bioform_mj.errors import InputError
-    from bioform_mj.sweep import expand, unquote
+    from bioform_mj.core.errors import InputError
+    from bioform_mj.jobs.sweep import expand, unquote
 
     specs = expand(
         "paper", 1, ["bioinspired"], ["estimator.init='zero',\"self\"", "kinematic.k1=2"], ["sim.duration=0.1"]
@@ -521,7 +521,7 @@ def test_warp_is_silenced():
 def test_cli_run_whose_observer_raises_keeps_the_log_and_names_it(tmp_path, monkeypatch, capsys):
     """An observer of the CLI (video capture, live viewer) that raises mid-run: the log so far is
     written and the error line names the observer and the time (exit 1, not an internal error)."""
-    import bioform_mj.sim as sim
+    import bioform_mj.run.simulate as sim
 
     real = sim.simulate
 
@@ -548,8 +548,8 @@ def test_cli_run_whose_observer_raises_keeps_the_log_and_names_it(tmp_path, monk
 
 def test_building_a_scene_checks_the_mujoco_distributions(monkeypatch):
     """The Python API's startup check: compile_scene refuses a mixed installation (once per process)."""
-    from bioform_mj import deps
-    from bioform_mj.errors import InputError
+    from bioform_mj.core import deps
+    from bioform_mj.core.errors import InputError
 
     monkeypatch.setattr(deps, "installed_versions", lambda: {"mujoco": "3.17.0", "mujoco-core": "4.0.1"})
     deps.check_mujoco_once.cache_clear()

@@ -16,11 +16,11 @@ from pathlib import Path
 
 import pytest
 
-from bioform_mj import provenance
-from bioform_mj import sweep as sweep_mod
-from bioform_mj.cli import main
-from bioform_mj.robots import models_dir
-from bioform_mj.sweep import expand, sweep
+from bioform_mj.cli.main import main
+from bioform_mj.jobs import provenance
+from bioform_mj.jobs import sweep as sweep_mod
+from bioform_mj.jobs.sweep import expand, sweep
+from bioform_mj.robots.refs import models_dir
 
 SRC = str(Path(sweep_mod.__file__).resolve().parents[1])
 #: address-space limit for the memory refusals: a normal start of the CLI (numba, LLVM, MuJoCo, Warp on
@@ -529,7 +529,7 @@ def test_sigint_while_ray_connects_stops_in_seconds(tmp_path):
 
 
 def test_calibration_folder_resumes_unfinished_and_overwrites_finished(tmp_path):
-    from bioform_mj.errors import InputError
+    from bioform_mj.core.errors import InputError
     from bioform_mj.outputs.rundir import CALIBRATION_FILES, RunDir
 
     resumable = frozenset({"evaluations.jsonl", "calibration.partial.json"})
@@ -551,9 +551,9 @@ def test_calibration_folder_resumes_unfinished_and_overwrites_finished(tmp_path)
 
 def test_evaluations_file_skips_a_cut_line_and_refuses_another_calibration(tmp_path):
     pytest.importorskip("scipy")
-    from bioform_mj import calibrate as cal
-    from bioform_mj.errors import InputError
-    from bioform_mj.scenario import load
+    from bioform_mj.core.errors import InputError
+    from bioform_mj.jobs import calibrate as cal
+    from bioform_mj.scenario.loader import load
 
     base = load("paper", plant="ideal")
     ctx = cal._context(base, "table1", "ideal", 0)

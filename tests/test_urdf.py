@@ -18,12 +18,14 @@ import mujoco
 import numpy as np
 import pytest
 
-from bioform_mj import cli
-from bioform_mj.errors import InputError
-from bioform_mj.robot_check import EXIT_FAIL
-from bioform_mj.robots import PackagePath, RobotRef, resolve_robot
-from bioform_mj.scene import layout_of, prepare_robot
-from bioform_mj.urdf import check_file, find_package
+from bioform_mj.assess.check import EXIT_FAIL
+from bioform_mj.cli import main as cli
+from bioform_mj.core.errors import InputError
+from bioform_mj.robots.analysis import layout_of
+from bioform_mj.robots.packages import find_package
+from bioform_mj.robots.prepare import prepare_robot
+from bioform_mj.robots.refs import PackagePath, RobotRef, resolve_robot
+from bioform_mj.robots.urdf import check_file
 
 HALF_PI = repr(math.pi / 2)
 
@@ -340,7 +342,7 @@ def test_package_uri_resolved_by_the_package_path_flag(tmp_path, monkeypatch):
     monkeypatch.delenv("BIOFORM_PACKAGE_PATH", raising=False)
     path = write(tmp_path / "robot" / "dd.urdf", text)
     args = cli.build_parser().parse_args(["robot", "check", str(path), "--package-path", f"ddpkg={pkg}"])
-    from bioform_mj.robot_check import ref_from_args
+    from bioform_mj.assess.check import ref_from_args
 
     ref = ref_from_args(args.model, args)
     assert ref.package_path == PackagePath([("ddpkg", str(pkg.resolve()))])
@@ -520,7 +522,7 @@ def test_xacro_not_asked_for_says_how_to_ask(tmp_path, capsys, monkeypatch):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "$(find nopkg): package 'nopkg' is on no search path" in err[0], err
     commented = diff_drive().replace("<robot name", '<!-- <xacro:include filename="x"/> -->\n<robot name')
-    from bioform_mj.urdf import _read_text
+    from bioform_mj.robots.urdf import _read_text
 
     assert _read_text(write(tmp_path / "c.urdf", commented), PackagePath()) == commented
 
@@ -537,7 +539,7 @@ def test_package_path_flag_and_key_refuse_a_missing_directory(tmp_path, capsys):
 
 # ------------------------------------------------------------------ entries, TOML, scenario key
 def test_bare_urdf_and_xml_names_in_a_toml_file_are_relative_to_it(tmp_path, monkeypatch):
-    from bioform_mj.scenario import load
+    from bioform_mj.scenario.loader import load
 
     d = tmp_path / "proj"
     write(d / "dd.urdf", diff_drive())
@@ -555,7 +557,7 @@ def test_bare_urdf_and_xml_names_in_a_toml_file_are_relative_to_it(tmp_path, mon
     assert models == [str((d / "dd.urdf").resolve()), str((d / "robot.xml").resolve()), str((d / "dd.urdf").resolve())]
     assert sc.plant.robots[2].self_collide and not sc.plant.robots[0].self_collide
     assert all(r.package_path == PackagePath([("ddpkg", str((d / "pkgs/ddpkg").resolve()))]) for r in sc.plant.robots)
-    from bioform_mj.scenario import from_dict
+    from bioform_mj.scenario.loader import from_dict
 
     assert from_dict(sc.to_dict()) == sc  # the tables and the scenario's package_path round-trip
     assert "package_path" not in load("paper").to_dict()["plant"]  # absent when unused: sweep keys unchanged
@@ -682,7 +684,7 @@ def test_a_runs_assets_folder_is_a_runs_own_and_overwrite_clears_it(tmp_path):
 def test_an_xml_urdf_and_model_uris_and_file_uris(tmp_path, monkeypatch):
     """An ``.xml`` whose root is ``<robot>`` is URDF; ``model://NAME`` is searched like a package;
     ``file://`` is a file."""
-    from bioform_mj.urdf import is_urdf
+    from bioform_mj.robots.urdf import is_urdf
 
     monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
     pkg, _ = _package(tmp_path)

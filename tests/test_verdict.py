@@ -14,10 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bioform_mj import cli
-from bioform_mj.identify import identify, robot_truth
-from bioform_mj.robot_check import EXIT_FAIL, check
-from bioform_mj.robots import models_dir
+from bioform_mj.assess.check import EXIT_FAIL, check
+from bioform_mj.assess.identify import identify
+from bioform_mj.cli import main as cli
+from bioform_mj.robots.params import robot_truth
+from bioform_mj.robots.refs import models_dir
 
 PAPER = (models_dir() / "paper_robot.xml").read_text()
 
@@ -150,7 +151,7 @@ def test_absurd_wheel_radius_or_half_track_exits_2_one_line(capsys, value, flag,
 
 
 def test_a_mapped_half_track_off_the_anchors_is_the_named_cause(capsys):
-    from bioform_mj.robots import RobotRef
+    from bioform_mj.robots.refs import RobotRef
 
     rep = check(RobotRef("paper", half_track=0.25))
     assert rep["verdict"] == "fail" and rep["cause"]["kind"] == "mapping"
@@ -160,7 +161,7 @@ def test_a_mapped_half_track_off_the_anchors_is_the_named_cause(capsys):
 
 
 def test_robot_check_json_path_checked_before_any_work(tmp_path, capsys, monkeypatch):
-    import bioform_mj.robot_check as rc
+    import bioform_mj.assess.check as rc
 
     def no_work(*a, **k):
         raise AssertionError("check ran before the --json path was checked")
@@ -179,7 +180,7 @@ def test_robot_check_json_path_checked_before_any_work(tmp_path, capsys, monkeyp
 
 # ---------------------------------------------------------------- outcomes (design §14)
 def _outcomes(**kw):
-    from bioform_mj.sim import outcome_list
+    from bioform_mj.assess.outcomes import outcome_list
 
     base = dict(
         tip_t=None,
@@ -198,7 +199,7 @@ def _outcomes(**kw):
 
 
 def test_every_outcome_is_listed_most_severe_first():
-    from bioform_mj.sim import LOST_M, OUTCOME_ORDER
+    from bioform_mj.assess.outcomes import LOST_M, OUTCOME_ORDER
 
     assert _outcomes() == []
     got = _outcomes(slip_t=3.2, final=2.0)  # a follower 2 m off that also slips: both
@@ -223,7 +224,7 @@ def test_c_hat_bound_is_a_band_not_equality():
 
 
 def test_c_hat_off_names_the_likely_cause():
-    from bioform_mj.sim import C_HAT_OFF, unmodelled_causes
+    from bioform_mj.assess.outcomes import C_HAT_OFF, unmodelled_causes
 
     assert C_HAT_OFF == 0.25
     assert _outcomes(c_hat=np.array([0.4 * 0.76, 10.0 * 1.24])) == []  # within 25 %: ok
@@ -244,8 +245,8 @@ def test_c_hat_off_names_the_likely_cause():
 def test_slot_accelerations_follow_each_slot():
     """Paper leader x = t, y = 3 + 0.4 sin t: acceleration (0, −0.4 sin t), |a| ≤ 0.4 m/s². World-frame
     offsets: every slot moves as the leader. Leader-frame offsets: the slots swing with the heading."""
-    from bioform_mj.robot_check import slot_accelerations
-    from bioform_mj.scenario import load
+    from bioform_mj.assess.check import slot_accelerations
+    from bioform_mj.scenario.loader import load
 
     sc = load("paper", overrides=["sim.duration=10"])
     t = np.linspace(0.0, 10.0, 2001)
@@ -295,9 +296,9 @@ def test_run_warns_about_a_braking_caster_naming_it(tmp_path, capsys):
     text = text.replace('pos="-0.13 0 -0.0745"', 'pos="-0.13 0 -0.0755"')
     text = text.replace('<inertial pos="0 0 0" mass="23.5"', '<inertial pos="-0.03 0 0" mass="23.5"')
     path = _write(tmp_path, "caster", text)
-    from bioform_mj.robot_check import feasibility
-    from bioform_mj.scenario import load
-    from bioform_mj.sim import make_plant
+    from bioform_mj.assess.check import feasibility
+    from bioform_mj.run.simulate import make_plant
+    from bioform_mj.scenario.loader import load
 
     sc = load("paper", overrides=["plant.kind=mujoco", f'plant.robots=[{{model="{path}"}}]'])
     plant = make_plant(sc)
@@ -316,7 +317,7 @@ def test_run_warns_about_a_braking_caster_naming_it(tmp_path, capsys):
 
 # ---------------------------------------------------------------- opt-in learned drag (design §14)
 def test_learner_drag_step_is_the_papers_step_when_off_and_learns_a_drag_when_on():
-    from bioform_mj.control import equations as eq
+    from bioform_mj.core import equations as eq
 
     args = dict(z_hat=0.3, e_int=0.01, c_hat=0.35, d_hat=0.0, tau=2.0, z=0.5, k4=6.0, k5=25.0, kd=0.0)
     bounds = dict(c_min=0.02, c_max=2.0, h=0.01)
@@ -348,9 +349,9 @@ def test_learner_drag_step_is_the_papers_step_when_off_and_learns_a_drag_when_on
 
 
 def test_learner_drag_refused_by_the_batch_engine_and_validated():
-    from bioform_mj.batch.backend import unsupported
-    from bioform_mj.errors import ScenarioError
-    from bioform_mj.scenario import load
+    from bioform_mj.batch.support import unsupported
+    from bioform_mj.core.errors import ScenarioError
+    from bioform_mj.scenario.loader import load
 
     sc = load("paper", overrides=["plant.kind=mujoco", "learner.drag=true"])
     assert "learner.drag" in unsupported(sc)
@@ -365,8 +366,8 @@ def test_learner_drag_on_a_damped_robot_unbiases_c_hat(tmp_path):
     """Paper scenario (20 s, bioinspired-learning), wheel damping 0.1 N·m·s/rad (drag time constant
     1.25 s): measured â −74 … −75 %, b̂ −18 … −40 % (c_hat_off, cause named) with the paper's learner;
     with learner.drag â +0.4 … +1.0 %, b̂ −2 … −13 %, k̂_υ 0.71 (true 0.80) and the same formation error."""
-    from bioform_mj.scenario import load
-    from bioform_mj.sim import simulate
+    from bioform_mj.run.simulate import simulate
+    from bioform_mj.scenario.loader import load
 
     path = _damped(tmp_path, 0.1)
     ov = ["plant.kind=mujoco", f'plant.robots=[{{model="{path}"}}]', 'method="bioinspired-learning"']
@@ -381,8 +382,8 @@ def test_learner_drag_on_a_damped_robot_unbiases_c_hat(tmp_path):
 
 
 def test_warnings_table_marks_and_sweep_columns_show_every_outcome(capsys):
-    from bioform_mj.cli import _warn_outcomes
-    from bioform_mj.table1 import _mark
+    from bioform_mj.cli.report import _warn_outcomes
+    from bioform_mj.jobs.table1 import _mark
 
     lost_slip = [
         {"kind": "slipping", "detail": "wheel slip ratio > 0.2 for 0.5 s, by t = 3.000 s", "t": 3.0},
@@ -404,8 +405,8 @@ def test_warnings_table_marks_and_sweep_columns_show_every_outcome(capsys):
 
 
 def test_sweep_row_lists_every_outcome(monkeypatch):
-    from bioform_mj import sim
-    from bioform_mj.sweep import expand, run_one
+    from bioform_mj.jobs.sweep import expand, run_one
+    from bioform_mj.run import simulate as sim
 
     real = sim.simulate
 
@@ -435,7 +436,7 @@ def test_frictionless_wheels_are_a_named_structural_cause_not_an_error(tmp_path,
 def test_drag_gain_follows_the_formation_scale():
     """k̂' = drag_gain z S: the υ channel's gain is 1/m², so a formation shrunk by s gets / s² (the
     shrunk closed loop learns the drag as fast as the paper-sized one); the ω channel stays."""
-    from bioform_mj.scenario import load
+    from bioform_mj.scenario.loader import load
 
     base = load("paper", overrides=["learner.drag=true"]).learner.drag_gain
     scaled = load("paper", overrides=["learner.drag=true", "formation.scale=0.15"]).learner.drag_gain
@@ -446,9 +447,9 @@ def test_self_contact_at_rest_is_the_named_structural_cause(tmp_path):
     """A fender on its own (limited) hinge 5 mm into the left wheel's tread: not parent and child, so
     MuJoCo collides them (URDF/Gazebo would not): kilonewtons at rest, the wheel braked. Was: 'the
     wheels do not roll' with nothing named."""
-    from bioform_mj.robot_check import feasibility
-    from bioform_mj.scenario import load
-    from bioform_mj.sim import make_plant
+    from bioform_mj.assess.check import feasibility
+    from bioform_mj.run.simulate import make_plant
+    from bioform_mj.scenario.loader import load
 
     fender = (
         '<body name="fender" pos="0 0.2 0.095"><joint name="fender_hinge" type="hinge" axis="1 0 0" '
@@ -457,7 +458,7 @@ def test_self_contact_at_rest_is_the_named_structural_cause(tmp_path):
         '</body>\n      <site name="imu"'
     )
     path = _write(tmp_path, "fender", PAPER.replace('<site name="imu"', fender, 1))
-    from bioform_mj.robots import RobotRef
+    from bioform_mj.robots.refs import RobotRef
 
     # free_joints: by default the hinge is frozen (design §13), the fender welded to the base, and MuJoCo's
     # parent-child filter then drops its contact with the wheel: the robot that runs has no simulated self
@@ -475,9 +476,9 @@ def test_self_contact_at_rest_is_the_named_structural_cause(tmp_path):
 def test_batch_engine_refuses_what_run_refuses(tmp_path):
     pytest.importorskip("warp")
     pytest.importorskip("mujoco_warp")
-    from bioform_mj.batch.control import run_batch
-    from bioform_mj.errors import InputError
-    from bioform_mj.scenario import load
+    from bioform_mj.batch.runner import run_batch
+    from bioform_mj.core.errors import InputError
+    from bioform_mj.scenario.loader import load
 
     off = _write(
         tmp_path,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bioform_mj.scene import robot_unit
+from bioform_mj.robots.scene import robot_unit
 
 
 def test_robot_unit_is_the_half_track_relative_to_the_paper_robot():
@@ -23,8 +23,8 @@ def tb3_frames():
     except GLUnavailable as exc:
         pytest.skip(f"no OpenGL context in this process ({exc})")
     from bioform_mj.outputs.video import FrameCapture
-    from bioform_mj.scenario import load
-    from bioform_mj.sim import simulate
+    from bioform_mj.run.simulate import simulate
+    from bioform_mj.scenario.loader import load
 
     sc = load("tb3", ["sim.duration=0.5"], plant="mujoco")
     cap = FrameCapture(fps=10)
@@ -38,7 +38,7 @@ def _segment(fr, k, unit):
     import mujoco
 
     from bioform_mj.outputs.video import _add_geoms, _Trails, auto_camera_path
-    from bioform_mj.scene import follower_prefix
+    from bioform_mj.robots.scene import follower_prefix
 
     cap, r, m = fr.capture, fr.renderer, fr.replay.model
     fovy = float(m.vis.global_.fovy)

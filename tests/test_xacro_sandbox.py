@@ -15,11 +15,12 @@ from pathlib import Path
 
 import pytest
 
-from bioform_mj import cli, xacro_sandbox
-from bioform_mj.errors import InputError
-from bioform_mj.robots import PackagePath, RobotRef, as_ref
-from bioform_mj.urdf import check_file
-from bioform_mj.xacro_sandbox import XacroRefused, expand
+from bioform_mj.cli import main as cli
+from bioform_mj.core.errors import InputError
+from bioform_mj.robots import xacro_sandbox
+from bioform_mj.robots.refs import PackagePath, RobotRef, as_ref
+from bioform_mj.robots.urdf import check_file
+from bioform_mj.robots.xacro_sandbox import XacroRefused, expand
 from test_urdf import diff_drive, write
 
 pytest.importorskip("xacro")

@@ -5,7 +5,7 @@ Three layers, each against numbers committed in ``tests/zoo/expectations.json``:
 1. the zoo's independent reference (``tests/zoo/reference.py``: mujoco + numpy, no bioform_mj)
    run live: it reproduces the committed numbers, and its identification agrees with its own
    rigid-body formula within 5 % — or, where it does not, the committed cause is the one it finds;
-2. the project's ground truth (:func:`bioform_mj.identify.robot_truth`) matches the reference's
+2. the project's ground truth (:func:`bioform_mj.robots.params.robot_truth`) matches the reference's
    a_eff, b_eff within 5 % (URDF ones once URDF import lands);
 3. the project's ``robot check`` verdict is the one we expect by physical reasoning, and its floor
    contacts are the reference's (those that need other branches are strict xfails, so they flip
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from bioform_mj.robots import RobotRef
+from bioform_mj.robots.refs import RobotRef
 
 ZOO = Path(__file__).resolve().parent / "zoo"
 _spec = importlib.util.spec_from_file_location("zoo_reference", ZOO / "reference.py")
@@ -148,7 +148,7 @@ def test_frictionless_as_published_stays_frictionless(name, live):
 def test_project_ground_truth_matches_reference(name, package_path):
     """robot_truth's a_eff, b_eff (and m, r, l) within 5 % of the reference's; of the identified values too
     where the reference's identification agrees with its formula."""
-    from bioform_mj.identify import robot_truth
+    from bioform_mj.robots.params import robot_truth
 
     exp = EXPECT[name]
     p = robot_truth(_ref(name))
@@ -171,7 +171,7 @@ def _verdict_param(name: str):
 @pytest.mark.parametrize("name", [_verdict_param(n) for n in NAMES])
 def test_project_verdict_is_the_expected_one(name, package_path):
     """robot check's verdict is the one expectations.json holds (reasoned in docs/zoo.md)."""
-    from bioform_mj.robot_check import check
+    from bioform_mj.assess.check import check
 
     assert check(_ref(name))["verdict"] == EXPECT[name]["expected_verdict"]
 
@@ -189,7 +189,7 @@ def _mu(x) -> float:
 def test_project_floor_contacts_match_reference(name, package_path):
     """robot check names the bodies on the floor, their loads within 10 % of the weight's share, and keeps the
     frictionless ones frictionless."""
-    from bioform_mj.robot_check import check
+    from bioform_mj.assess.check import check
 
     exp = EXPECT[name]
     got = check(_ref(name), identify_=False)["floor_contacts"]
@@ -220,7 +220,7 @@ def test_project_names_self_contacts_at_rest(name, package_path):
     published), with the reference's depth within 1 mm: for the URDFs those MuJoCo would collide and Gazebo does
     not (Create 3: wheels 55 mm inside the chassis cylinder; PMB2: wheels and caster rollers inside the base mesh),
     none of them simulated; for the MJCFs none."""
-    from bioform_mj.robot_check import check
+    from bioform_mj.assess.check import check
 
     got = check(_ref(name), identify_=False)["self_contacts"]
     depth = {}

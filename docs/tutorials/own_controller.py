@@ -8,10 +8,10 @@ torques. The estimate comes from the package's own distributed estimator (eqs. 1
 import numpy as np
 
 import bioform_mj as bf
-from bioform_mj.control.equations import saturate, slot_reference, tracking_error
 from bioform_mj.control.kernel import estimator_update, reset_state
 from bioform_mj.control.stack import ControlStack
-from bioform_mj.sim import make_plant, stack_params
+from bioform_mj.core.equations import saturate, slot_reference, tracking_error
+from bioform_mj.run.simulate import make_plant, stack_params
 
 
 class SlotTracker:

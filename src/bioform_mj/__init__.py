@@ -13,25 +13,26 @@ from __future__ import annotations
 from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
-from ._version import __version__
+from bioform_mj._version import __version__
 
 #: public name -> (module, attribute), imported on first access
 _LAZY = {
-    "load": ("bioform_mj.scenario", "load"),
-    "Scenario": ("bioform_mj.scenario", "Scenario"),
-    "simulate": ("bioform_mj.sim", "simulate"),
-    "RunResult": ("bioform_mj.sim", "RunResult"),
+    "load": ("bioform_mj.scenario.loader", "load"),
+    "Scenario": ("bioform_mj.scenario.config", "Scenario"),
+    "simulate": ("bioform_mj.run.simulate", "simulate"),
+    "RunResult": ("bioform_mj.run.simulate", "RunResult"),
     "Controller": ("bioform_mj.control.base", "Controller"),
-    "OutcomeWarning": ("bioform_mj.errors", "OutcomeWarning"),
+    "OutcomeWarning": ("bioform_mj.core.errors", "OutcomeWarning"),
 }
 
 __all__ = ["Controller", "OutcomeWarning", "RunResult", "Scenario", "__version__", "load", "simulate"]
 
 if TYPE_CHECKING:  # for type checkers and editors; at run time __getattr__ imports lazily
-    from .control.base import Controller
-    from .errors import OutcomeWarning
-    from .scenario import Scenario, load
-    from .sim import RunResult, simulate
+    from bioform_mj.control.base import Controller
+    from bioform_mj.core.errors import OutcomeWarning
+    from bioform_mj.run.simulate import RunResult, simulate
+    from bioform_mj.scenario.config import Scenario
+    from bioform_mj.scenario.loader import load
 
 
 def __getattr__(name: str) -> Any:

@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from ..scenario_config import Scenario
+from bioform_mj.scenario.config import Scenario
 
 __all__ = ["TOLERANCES", "METRICS", "differences", "float32_spread", "judge", "DEFAULT_EPS", "SPREAD_FACTOR"]
 
@@ -101,8 +101,8 @@ def float32_spread(
     between ``ref`` and each of ``realisations`` perturbed runs (noise streams seeded by
     ``(seed, realisation)``: the same call gives the same numbers, bit for bit). A perturbed run
     that diverges where ``ref`` did not gives ``inf`` (the world is at a divergence edge)."""
-    from ..errors import quiet_outcomes
-    from ..sim import make_plant, simulate
+    from bioform_mj.core.errors import quiet_outcomes
+    from bioform_mj.run.simulate import make_plant, simulate
 
     if sc.plant.kind != "mujoco":
         raise ValueError("float32_spread perturbs MuJoCo's state: plant.kind must be 'mujoco'")

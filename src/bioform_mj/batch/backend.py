@@ -21,8 +21,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from ..errors import InputError
-from .support import default_capacity, unsupported
+from bioform_mj.batch.support import default_capacity, unsupported
+from bioform_mj.core.errors import InputError
 
 INSTALL = "pip install 'bioform-mj[gpu]'"
 
@@ -141,7 +141,7 @@ def free_memory(device: str) -> int:
     dev = wp.get_device(device)
     if dev.is_cuda:
         return int(dev.free_memory)
-    from ..budget import available_memory
+    from bioform_mj.core.budget import available_memory
 
     return available_memory()  # MemAvailable, or the cgroup's limit when lower
 
@@ -175,7 +175,7 @@ def plan(specs: Sequence[Any], device: str, nconmax: int | None = None, njmax: i
     """Check ``specs`` (with resolved scenarios) for the batch engine and group them; InputError
     naming the first unsupported feature, or the memory estimate of a batch that does not fit
     (with ``nconmax`` contacts and ``njmax`` constraint rows per world; None: the defaults)."""
-    from ..scenario_load import load
+    from bioform_mj.scenario.loader import load
 
     if specs:  # the capacity alone, before any scene is built: --nconmax 1e9 must not reach put_data
         free = free_memory(device)
@@ -204,7 +204,7 @@ def plan(specs: Sequence[Any], device: str, nconmax: int | None = None, njmax: i
             )
         k = group_key(sc)
         if k not in groups:  # a new scene: its physics on MuJoCo Warp must be C MuJoCo's
-            from .control import check_physics
+            from bioform_mj.batch.probe import check_physics
 
             try:
                 check_physics(sc, device)
@@ -252,7 +252,7 @@ def rows_from_summaries(
         row["status"] = "diverged" if div else "ok"
         row["error"] = s["diverged_reason"] if div else ""
         row["diverged_at_s"] = s["sim_time"] if div else None
-        from ..sim import outcome_kinds
+        from bioform_mj.assess.outcomes import outcome_kinds
 
         row["follower_outcomes"] = ";".join("+".join(outcome_kinds(f)) or "ok" for f in s["followers"])
         bad = sorted({k for f in s["followers"] for k in outcome_kinds(f)})
@@ -294,8 +294,8 @@ def run_warp(
     ``nconmax``/``njmax``: MuJoCo Warp's capacities per world (None: :class:`~.control.BatchRun`'s).
     ``stop()`` is asked between batches. A batch that raises fails its rows (``failed_row``)."""
 
-    from ..scenario_load import load
-    from .control import BatchRun
+    from bioform_mj.batch.runner import BatchRun
+    from bioform_mj.scenario.loader import load
 
     quiet_warp()
     for g in groups:

@@ -45,9 +45,9 @@ def bench_worlds(
     import numpy as np
     import warp as wp
 
-    from ..scenario_load import load
-    from .backend import free_memory
-    from .control import BatchRun
+    from bioform_mj.batch.backend import free_memory
+    from bioform_mj.batch.runner import BatchRun
+    from bioform_mj.scenario.loader import load
 
     t0 = time.perf_counter()
     ov = ["plant.kind=mujoco", f"sim.duration={duration}", "formation.init_jitter=0.05"]
@@ -106,9 +106,9 @@ HOST_BYTES_PER_WORLD = 20e3
 def check_worlds(W: int, base: Any, device: str) -> None:
     """InputError (exit 2) with the estimate when ``W`` worlds of scenario ``base`` do not fit on
     ``device`` (:func:`~.backend.world_bytes`) or their scenarios in this machine's memory."""
-    from ..budget import available_memory, fmt_bytes
-    from ..errors import InputError
-    from .backend import MEMORY_SHARE, free_memory, world_bytes
+    from bioform_mj.batch.backend import MEMORY_SHARE, free_memory, world_bytes
+    from bioform_mj.core.budget import available_memory, fmt_bytes
+    from bioform_mj.core.errors import InputError
 
     one = world_bytes(base.n)
     free = free_memory(device)
@@ -125,8 +125,8 @@ def check_worlds(W: int, base: Any, device: str) -> None:
 
 def cpu_engine(scenario: str = "paper", duration: float = 1.0) -> dict[str, Any]:
     """The CPU engine (compiled loop, C MuJoCo, one core) on the same scenario: robot-steps/s."""
-    from ..looptime import loop_time as _loop
-    from ..scenario_load import load
+    from bioform_mj.run.looptime import loop_time as _loop
+    from bioform_mj.scenario.loader import load
 
     sc = load(scenario, overrides=["plant.kind=mujoco", f"sim.duration={duration}", "formation.init_jitter=0.05"])
     _loop(load(scenario, overrides=["plant.kind=mujoco", "sim.duration=0.05"]), 1)  # compile / load the kernels
@@ -183,13 +183,13 @@ def run(
     import mujoco
     import warp as wp
 
-    from .._version import __version__
-    from .backend import require_warp, resolve_device
+    from bioform_mj._version import __version__
+    from bioform_mj.batch.backend import require_warp, resolve_device
 
     require_warp()
     device = resolve_device(device)
     dev = wp.get_device(device)
-    from ..scenario_load import load
+    from bioform_mj.scenario.loader import load
 
     base = load(scenario, overrides=["plant.kind=mujoco", f"sim.duration={duration}"])
     for W in worlds:  # every count checked before the first batch runs
@@ -227,7 +227,7 @@ def run(
     echo("")
     echo(format_table(rows, cpu))
     if json_path is not None:
-        from ..outputs.files import write_json
+        from bioform_mj.outputs.files import write_json
 
         write_json(json_path, out)
         echo(f"wrote {json_path}")
@@ -238,7 +238,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``scripts/bench_warp.py``: the same benchmark with its own flags."""
     import argparse
 
-    from ..errors import InputError
+    from bioform_mj.core.errors import InputError
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default=None, help="Warp device: cpu, cuda, cuda:0 (default: cuda if present)")
@@ -276,7 +276,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def parse_worlds(text: str) -> list[int]:
-    from ..errors import InputError
+    from bioform_mj.core.errors import InputError
 
     try:
         w = [int(x) for x in str(text).split(",") if x.strip()]

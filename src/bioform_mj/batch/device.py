@@ -1,7 +1,7 @@
-"""The batch engine's device side, shared by its kernels: the Warp translation of ``control/equations.py``
+"""The batch engine's device side, shared by its kernels: the Warp translation of ``core/equations.py``
 (:mod:`.samesource`), the per-world columns (``SCALARS``, ``FAULT_SCALARS``) and their indices, the
 device structs (:class:`BatchGains`, :class:`BatchState`, :class:`PlantFaults`, :class:`CommFaults`) and
-the device functions of the network faults (:func:`_comm`) and the divergence guards (:func:`_check`).
+the device functions of the network faults (:func:`_comm`) and the divergence guards (:func:`check_world`).
 
 Precision: controller state, gains and metrics are float64 (the learner is stiff and ``ĉ`` must match
 the CPU engine to 0.5 %); MuJoCo Warp's physics is float32, converted at the boundary.
@@ -12,11 +12,11 @@ from __future__ import annotations
 import mujoco_warp as mjw
 import warp as wp
 
-from ..control import equations as _E
-from ..control.kernel import DERIV_ANALYTIC, DERIV_DIFFERENCE
-from ..faults import counter
-from ..sim import SPIN_RAD_S
-from .samesource import warp_equations
+from bioform_mj.assess.outcomes import SPIN_RAD_S
+from bioform_mj.batch.samesource import warp_equations
+from bioform_mj.control.kernel import DERIV_ANALYTIC, DERIV_DIFFERENCE
+from bioform_mj.core import equations as _E
+from bioform_mj.run.faults import counter
 
 F = wp.float64
 EQ = warp_equations(_E, F)
@@ -261,7 +261,7 @@ class BatchState:
 
 @wp.struct
 class PlantFaults:
-    """Per-world actuator faults and pushes (``faults.actuator``, ``faults.push``; ``faults.py``) as
+    """Per-world actuator faults and pushes (``faults.actuator``, ``faults.push``; ``run/faults.py``) as
     padded tables of rows (``W`` worlds; ``Ra``, ``Rp`` the most rows of a world, at least 1; padding
     rows have follower −1). Times are control steps, resolved on the host exactly as ``Faults.step``
     compares ``t = k dt`` (:func:`plant_fault_tables`)."""
@@ -443,7 +443,7 @@ def _finite3(a: wp.array3d(dtype=F), w: int, i: int, nc: int) -> bool:
 
 
 @wp.func
-def _check(g: BatchGains, s: BatchState, w: int, n: int) -> int:
+def check_world(g: BatchGains, s: BatchState, w: int, n: int) -> int:
     """``engine.check`` for world ``w``: 0 if all guards pass, else writes ``s.diag[w]``."""
     for i in range(n):
         bad = 0

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .device import GBIAS, GSIGMA, ODO, OSEED, F, encoder_angle, gyro_reading, odometry_step
+from bioform_mj.batch.device import GBIAS, GSIGMA, ODO, OSEED, F, encoder_angle, gyro_reading, odometry_step
 
 
 @wp.kernel

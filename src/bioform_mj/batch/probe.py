@@ -11,8 +11,8 @@ import mujoco_warp as mjw
 import numpy as np
 import warp as wp
 
-from ..scenario_config import Scenario
-from .support import default_capacity
+from bioform_mj.batch.support import default_capacity
+from bioform_mj.scenario.config import Scenario
 
 #: :func:`physics_probe`'s limit on the one-step velocity difference (relative to |qvel|). Measured
 #: (60 steps, Warp CPU device): bare floor 1.9e-4 (paper), 2.3e-4 (paper, DC motors), 1.4e-3
@@ -80,7 +80,7 @@ def check_physics(sc: Scenario, device: str = "cpu", plant: Any = None) -> None:
     key = (json.dumps(scene, sort_keys=True, default=repr), str(device))  # what the composed scene is made of
     if key not in _probed:
         if plant is None:
-            from ..sim import make_plant
+            from bioform_mj.run.simulate import make_plant
 
             plant = make_plant(sc)
         _probed[key] = physics_probe(plant, device)

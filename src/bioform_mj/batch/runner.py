@@ -16,15 +16,9 @@ import mujoco_warp as mjw
 import numpy as np
 import warp as wp
 
-from ..control.stack import ControlStack
-from ..disturbance import Harmonic
-from ..engine import GUARDS
-from ..faults import Faults
-from ..plants.mujoco_plant import TIP_ANGLE_DEG
-from ..prerun import for_summary as _prerun_summary
-from ..scenario_config import Scenario
-from ..sim import lost_threshold_m
-from .device import (
+from bioform_mj.assess.outcomes import lost_threshold_m
+from bioform_mj.assess.prerun import for_summary as _prerun_summary
+from bioform_mj.batch.device import (
     CAPACITY_EXCEEDED,
     FAULT_SCALARS,
     GAIN_SCALARS,
@@ -37,11 +31,17 @@ from .device import (
     F,
     PlantFaults,
 )
-from .plant_kernels import EVENT_FIELDS, _delivered, _events, _record, _replay, _sense
-from .probe import check_physics
-from .step import _control
-from .support import default_capacity
-from .tables import _check_compatible, _yaw_quat, event_tables, plant_fault_tables
+from bioform_mj.batch.plant_kernels import EVENT_FIELDS, _delivered, _events, _record, _replay, _sense
+from bioform_mj.batch.probe import check_physics
+from bioform_mj.batch.step import _control
+from bioform_mj.batch.support import default_capacity
+from bioform_mj.batch.tables import _check_compatible, _yaw_quat, event_tables, plant_fault_tables
+from bioform_mj.control.stack import ControlStack
+from bioform_mj.core.engine import GUARDS
+from bioform_mj.formation.disturbance import Harmonic
+from bioform_mj.plants.mujoco.plant import TIP_ANGLE_DEG
+from bioform_mj.run.faults import Faults
+from bioform_mj.scenario.config import Scenario
 
 
 class BatchRun:
@@ -62,7 +62,7 @@ class BatchRun:
         njmax: int | None = None,
         probe: bool = True,
     ) -> None:
-        from ..sim import initial_estimates, make_plant, stack_params
+        from bioform_mj.run.simulate import initial_estimates, make_plant, stack_params
 
         scs = list(scenarios)
         if not scs:
@@ -503,7 +503,7 @@ class BatchRun:
         ``(outcome, detail, outcomes)``; ``spinning`` is not checked in a world that diverged (its
         log would end earlier). ``c_hat_off``'s causes: the CPU plant's robot parameters (no
         braking-caster check: the device's contacts are not read back)."""
-        from ..sim import outcome_list, unmodelled_causes
+        from bioform_mj.assess.outcomes import outcome_list, unmodelled_causes
 
         p = self.plant
         params = getattr(p, "params", None)
@@ -675,8 +675,8 @@ def _refuse_what_robot_check_fails(plant: Any) -> None:
     limit are exit 2 before any world runs."""
     import mujoco
 
-    from ..errors import InputError
-    from ..robot_check import run_refusals
+    from bioform_mj.assess.check import run_refusals
+    from bioform_mj.core.errors import InputError
 
     scratch = mujoco.MjData(plant.model)
     mujoco.mj_kinematics(plant.model, scratch)
@@ -690,8 +690,8 @@ def _warn_what_robot_check_fails(sc: Scenario, plant: Any) -> dict[str, Any] | N
     (a ``RobotWarning`` each) before any world runs; None for a plant that is not MuJoCo's."""
     import warnings
 
-    from ..errors import RobotWarning
-    from ..prerun import before_run
+    from bioform_mj.assess.prerun import before_run
+    from bioform_mj.core.errors import RobotWarning
 
     if sc.plant.kind != "mujoco":
         return None

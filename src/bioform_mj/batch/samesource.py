@@ -1,7 +1,7 @@
 """One equation source, two compilers: numba (CPU engine) and Warp (batch engine).
 
 The control law is written once as small scalar Python functions (see
-``bioform_mj.control.equations``, registry ``EQUATIONS``). :func:`warp_equations` turns such a module
+``bioform_mj.core.equations``, registry ``EQUATIONS``). :func:`warp_equations` turns such a module
 into ``wp.func`` objects *from the same source text*; :func:`numba_equations` does the
 same for numba (used by the tests as the CPU reference). What the Warp translation does,
 and nothing more:
@@ -47,7 +47,7 @@ def _plain(obj):
 
 def equation_functions(module: types.ModuleType, names: Iterable[str] | None = None) -> dict[str, types.FunctionType]:
     """The equations of ``module``, by name: its registry ``EQUATIONS`` (name → plain function,
-    as in ``bioform_mj.control.equations``) if it has one, else its functions defined in it
+    as in ``bioform_mj.core.equations``) if it has one, else its functions defined in it
     (not imported, not ``_private``)."""
     out = {}
     registry = getattr(module, "EQUATIONS", None)

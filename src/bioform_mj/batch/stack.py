@@ -3,8 +3,8 @@ engine's kernels: :func:`~.step._control` (the closed loop) and :func:`~.env._en
 (the batched environment) call them.
 
 Each is the Warp form of a numba kernel of ``control/kernel.py`` (named in its docstring) or of the
-plant glue of ``plants/mujoco_kernels.py``, on the world's rows of :class:`~.device.BatchGains` and
-:class:`~.device.BatchState`; the equations are ``control/equations.py``'s, translated by
+plant glue of ``plants/mujoco/kernels.py``, on the world's rows of :class:`~.device.BatchGains` and
+:class:`~.device.BatchState`; the equations are ``core/equations.py``'s, translated by
 :mod:`.samesource`. Only loops, indexing and bookkeeping are written here.
 """
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .device import (
+from bioform_mj.batch.device import (
     A_,
     B_,
     CA,

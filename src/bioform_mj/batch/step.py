@@ -1,13 +1,13 @@
 """The control step of many formations on MuJoCo Warp, one thread per world: :func:`_control`.
 
 ``control/kernel.py``'s ``control_step`` (learner, estimator consensus, command and torques with the
-world's ``torque.derivative`` mode, estimator advance) plus the loop bookkeeping of ``engine.py`` (run
-metrics, divergence guards) and the plant glue of ``plants/mujoco_kernels.py`` (observe, wheel torques
+world's ``torque.derivative`` mode, estimator advance) plus the loop bookkeeping of ``core/engine.py`` (run
+metrics, divergence guards) and the plant glue of ``plants/mujoco/kernels.py`` (observe, wheel torques
 and the eq. 34 disturbance as chassis ``xfrc_applied``; ``ctrl = scale · τ``, the DC motors' driver input
 per N·m, design §8.2; actuator limits and pushes from :class:`~.device.PlantFaults`), looping over the
 followers and graph edges in the same order as the CPU kernels, with each world's network faults and
 sensor noise (:class:`~.device.CommFaults`, :func:`~.device._comm`). Every equation is the Warp
-translation of ``control/equations.py``; the stack's steps (observe, reset, learner, consensus,
+translation of ``core/equations.py``; the stack's steps (observe, reset, learner, consensus,
 tracking error, command derivative, torque law, estimator advance) are the device functions of
 :mod:`.stack`, shared with the batched environment: only the loop's own bookkeeping is written here.
 """
@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import warp as wp
 
-from . import stack
-from .device import (
+from bioform_mj.batch import stack
+from bioform_mj.batch.device import (
     A_,
     B_,
     BIO,
@@ -58,9 +58,9 @@ from .device import (
     F,
     PlantFaults,
     _act_scale,
-    _check,
     _comm,
     _push_row,
+    check_world,
     clip,
     command_rate,
     encoder_angle,
@@ -305,7 +305,7 @@ def _control(
                 s.tauraw_max[w, i], wp.max(wp.abs(s.tau_raw[w, i, 0]), wp.abs(s.tau_raw[w, i, 1]))
             )
         s.k_done[w] = k
-        if _check(g, s, w, n) != 0:
+        if check_world(g, s, w, n) != 0:
             s.status[w] = 1  # GUARD_FAILED
             running = False
         elif k % int(g.sc[w, STRIDE]) == 0:  # engine.record's row (formation error, vel) for the summary

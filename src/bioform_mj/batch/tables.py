@@ -9,9 +9,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..scenario_config import Scenario
-from .plant_kernels import EVENT_FIELDS
-from .support import unsupported
+from bioform_mj.batch.plant_kernels import EVENT_FIELDS
+from bioform_mj.batch.support import unsupported
+from bioform_mj.scenario.config import Scenario
 
 
 def _check_compatible(scs: Sequence[Scenario]) -> None:
@@ -59,8 +59,8 @@ def event_tables(sc0: Scenario, scs: Sequence[Scenario], N: int, dt: float) -> d
     −1; per field of :data:`EVENT_FIELDS` an array (W, E + 1, *the field's C shape*): row 0 the
     initial model, row ``e + 1`` the model after events ``0..e`` (padding rows repeat the last);
     ``m_eff`` (W, E + 1, n) kg, ``i_eff`` (W, E + 1, n) kg·m², ``c_true`` (W, E + 1, n, 2)."""
-    from ..runloop import first_step_at
-    from ..sim import make_plant
+    from bioform_mj.run.loop import first_step_at
+    from bioform_mj.run.simulate import make_plant
 
     if not any(sc.events for sc in scs):
         return None

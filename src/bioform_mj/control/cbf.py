@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from math import cos, hypot, sin, sqrt
 
-from .equations import njit
+from bioform_mj.core.equations import njit
 
 HILDRETH_SWEEPS = 200
 #: a constraint violated by more than this after :data:`HILDRETH_SWEEPS` sweeps: the QP has no solution
@@ -39,7 +39,7 @@ def cbf_filter(i, v, w, pose, rad, obst, par, A, b, lam):
     """The filtered ``(υ, ω)`` of follower ``i`` (see the module docstring).
 
     ``pose`` (n, 3) every robot's ``[x, y, θ]``; ``rad`` (n,) footprint radii m; ``obst`` (m, 7)
-    rows ``[shape (0 box, 1 cylinder), x, y, s0, s1, s2, yaw]`` (:func:`bioform_mj.obstacles.to_rows`);
+    rows ``[shape (0 box, 1 cylinder), x, y, s0, s1, s2, yaw]`` (:func:`bioform_mj.formation.obstacles.to_rows`);
     ``par`` (4,) or (5,) ``[l m, γ 1/s, d m, range m, pass_right]``; scratch ``A`` (K, 2), ``b``,
     ``lam`` (K,), K ≥ n + m. On return ``lam[K - 1]`` (a slot no constraint uses: at most n − 1 + m
     are active) holds the QP's largest remaining violation, 0 when it was solved; above

@@ -22,8 +22,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .cbf import CBF_RESIDUAL, cbf_filter
-from .equations import (
+from bioform_mj.control.cbf import CBF_RESIDUAL, cbf_filter
+from bioform_mj.core.equations import (
     command_derivative,
     command_rate,
     error_rate,

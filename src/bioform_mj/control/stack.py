@@ -13,10 +13,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..graph import Graph
-from .base import Comm
-from .equations import filter_coefficients
-from .kernel import DERIVATIVES, CommIn, Gains, StackState, control_step, new_state, perfect_comm, reset_state
+from bioform_mj.control.base import Comm
+from bioform_mj.control.kernel import (
+    DERIVATIVES,
+    CommIn,
+    Gains,
+    StackState,
+    control_step,
+    new_state,
+    perfect_comm,
+    reset_state,
+)
+from bioform_mj.core.equations import filter_coefficients
+from bioform_mj.formation.graph import Graph
 
 METHODS = ("backstepping", "bioinspired", "backstepping-learning", "bioinspired-learning")
 

@@ -7,13 +7,13 @@
 
 from __future__ import annotations
 
-from .parallel import ACTIONS, OBS_FIELDS, REWARD_WEIGHTS, FormationParallelEnv, parallel_env
-from .policy import ControllerPolicy, run_episode
+from bioform_mj.envs.parallel import ACTIONS, OBS_FIELDS, REWARD_WEIGHTS, FormationParallelEnv, parallel_env
+from bioform_mj.envs.policy import ControllerPolicy, run_episode
 
 
 def batch_env(*args, **kwargs):
     """The batched environment on MuJoCo Warp (:func:`.batch.batch_env`; optional extra ``gpu``)."""
-    from .batch import batch_env as _batch_env
+    from bioform_mj.envs.batch import batch_env as _batch_env
 
     return _batch_env(*args, **kwargs)
 

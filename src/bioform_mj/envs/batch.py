@@ -6,7 +6,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any
 
-from ..scenario_config import Scenario
+from bioform_mj.scenario.config import Scenario
 
 
 def batch_env(
@@ -19,11 +19,11 @@ def batch_env(
     **options: Any,
 ):
     """``worlds`` formations of ``scenario`` stepped together on a MuJoCo Warp ``device`` (``"cpu"``,
-    ``"cuda:0"`` …): a :class:`~bioform_mj.batch.env.BatchEnv` with the observation and action layout of
+    ``"cuda:0"`` …): a :class:`~bioform_mj.envs.batched.BatchEnv` with the observation and action layout of
     :func:`~bioform_mj.envs.parallel_env`, per world and agent. World ``w`` runs ``sim.seed = seeds[w]``
     (default ``0 … worlds − 1``: the seeded jitter of the initial poses). ``options``: ``action``,
     ``reward``, ``v_max``, ``w_max``, ``nconmax``, ``njmax``."""
-    from ..scenario_load import checked, load
+    from bioform_mj.scenario.loader import checked, load
 
     if isinstance(scenario, Scenario):
         if overrides:
@@ -34,7 +34,7 @@ def batch_env(
     W = int(worlds)
     if W < 1:
         raise ValueError(f"worlds must be >= 1, got {worlds}")
-    from ..batch.backend import world_bytes
+    from bioform_mj.batch.backend import world_bytes
 
     # the memory first, from every number that sizes it (worlds, robots, nconmax, njmax): before the seed
     # list or any array (worlds=10**9 built a list of 10**9 seeds and died in a bare MemoryError, issue 28)
@@ -47,7 +47,7 @@ def batch_env(
     if len(seeds) != W:
         raise ValueError(f"{len(seeds)} seeds for {W} worlds")
     try:
-        from ..batch.env import BatchEnv
+        from bioform_mj.envs.batched import BatchEnv
     except ImportError as exc:  # pragma: no cover - without the extra
         raise ImportError("batch_env needs the optional extra 'gpu': pip install -e '.[gpu]'") from exc
     scs = [dataclasses.replace(sc, sim=dataclasses.replace(sc.sim, seed=s)) for s in seeds]

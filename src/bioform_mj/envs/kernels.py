@@ -3,15 +3,14 @@
 The environment runs the paper's distributed estimator for every follower (so each agent's
 observation holds what the communication graph gives it), and, in ``action = "velocity"``,
 the paper's sliding-mode torque law with the online learner tracking the agent's
-``(υ_cmd, ω_cmd)``. Everything here calls the equations of ``control/equations.py`` and the
+``(υ_cmd, ω_cmd)``. Everything here calls the equations of ``core/equations.py`` and the
 kernels of ``control/kernel.py`` (written once); only the order differs: the agent, not the
 kinematic controller, supplies the velocity command.
 """
 
 from __future__ import annotations
 
-from ..control.equations import njit
-from ..control.kernel import (
+from bioform_mj.control.kernel import (
     apply_torque,
     estimator_consensus,
     follower_derivative,
@@ -19,6 +18,7 @@ from ..control.kernel import (
     follower_torques,
     learner_update,
 )
+from bioform_mj.core.equations import njit
 
 
 @njit

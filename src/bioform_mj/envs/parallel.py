@@ -40,12 +40,12 @@ from typing import Any
 
 import numpy as np
 
-from ..control.kernel import estimator_advance
-from ..engine import Bounds, check, describe
-from ..errors import Diverged, InputError
-from ..scenario_config import Scenario
-from ..scenario_load import load as load_scenario
-from .kernels import direct_torque, sense_errors, track_velocity
+from bioform_mj.control.kernel import estimator_advance
+from bioform_mj.core.engine import Bounds, check, describe
+from bioform_mj.core.errors import Diverged, InputError
+from bioform_mj.envs.kernels import direct_torque, sense_errors, track_velocity
+from bioform_mj.scenario.config import Scenario
+from bioform_mj.scenario.loader import load as load_scenario
 
 try:  # the optional extra [rl]
     from gymnasium import spaces
@@ -86,7 +86,7 @@ def _scenario_of(scenario: str | Path | Scenario, overrides: Any = None) -> Scen
     if isinstance(scenario, Scenario):
         if overrides:
             raise ValueError("overrides= needs a preset name or TOML path, not a Scenario object")
-        from ..scenario_load import checked
+        from bioform_mj.scenario.loader import checked
 
         return checked(scenario)  # as simulate: a Scenario changed in Python is checked as load checks a file
     return load_scenario(scenario, overrides)
@@ -97,7 +97,7 @@ class FormationParallelEnv(ParallelEnv):
 
     Parameters
     ----------
-    scenario : a preset name, a TOML path or a :class:`~bioform_mj.scenario.Scenario`.
+    scenario : a preset name, a TOML path or a :class:`~bioform_mj.scenario.config.Scenario`.
     action : ``"velocity"`` or ``"torque"``.
     reward : weights overriding :data:`REWARD_WEIGHTS` (unknown names are refused).
     v_max, w_max : bounds of the velocity action (m/s, rad/s); default ``limits.speed`` bounded to 2 m/s,
@@ -201,8 +201,8 @@ class FormationParallelEnv(ParallelEnv):
         self.L_vel = np.ascontiguousarray(lv, dtype=float)
 
     def _build_stack(self, sc: Scenario, plant_c_true: np.ndarray | None) -> None:
-        from ..control.stack import ControlStack
-        from ..sim import stack_params
+        from bioform_mj.control.stack import ControlStack
+        from bioform_mj.run.simulate import stack_params
 
         c = np.array(sc.plant.c_true, dtype=float)[None, :].repeat(sc.n, 0) if plant_c_true is None else plant_c_true
         tau_max = getattr(self._plant, "tau_max", None) if self._plant is not None else None
@@ -210,7 +210,7 @@ class FormationParallelEnv(ParallelEnv):
 
     def _plant_for(self, sc: Scenario):
         """The scenario's plant at ``sc``'s initial poses (rebuilt only when the poses change: a seeded jitter)."""
-        from ..sim import make_plant
+        from bioform_mj.run.simulate import make_plant
 
         poses = sc.initial_poses()
         if self._plant is None or not np.array_equal(poses, self._plant_poses):
@@ -223,7 +223,7 @@ class FormationParallelEnv(ParallelEnv):
     def reset(self, seed: int | None = None, options: Mapping[str, Any] | None = None):
         """Start an episode; ``seed`` (≥ 0) replaces ``sim.seed`` (the jitter of the initial poses and
         every fault draw), None keeps the last one. Returns ``(observations, infos)``."""
-        from ..sim import initial_estimates
+        from bioform_mj.run.simulate import initial_estimates
 
         sc = self._sc
         if seed is not None:
@@ -246,7 +246,7 @@ class FormationParallelEnv(ParallelEnv):
         self._tau_max = np.broadcast_to(np.asarray(st.p.tau_max, dtype=float), (self.n,))
         self._faults = None
         if sc.faults.per_step:  # faults.py: the same Faults object, in the same order, as bioform run
-            from ..faults import Faults
+            from bioform_mj.run.faults import Faults
 
             self._faults = Faults(sc, self.graph, np.array(self._tau_max))
             st.set_tau_max(np.array(self._tau_max))
@@ -397,7 +397,7 @@ class FormationParallelEnv(ParallelEnv):
         return u
 
     def _events(self, k: int) -> None:
-        from ..runloop import EventQueue
+        from bioform_mj.run.loop import EventQueue
 
         if k == 0:
             self._evq = EventQueue(self._sc.events, self.dt)
@@ -432,7 +432,7 @@ class FormationParallelEnv(ParallelEnv):
         return out
 
     def _formation_error(self, k: int) -> np.ndarray:
-        from ..sim import slots_of
+        from bioform_mj.assess.outcomes import slots_of
 
         return np.hypot(*(self._pose[:, :2] - slots_of(self._sc, self.L_pose[k])).T)
 
@@ -473,7 +473,7 @@ class FormationParallelEnv(ParallelEnv):
         """Per follower the run metrics of ``bioform run``'s ``summary.json`` for this episode so far:
         ``total_velocity_error`` (Table I's metric), ``final_formation_error_m``, ``rms_formation_error_m``,
         ``c_hat``, ``outcome`` and every outcome in ``outcomes`` (``sim.follower_outcomes``)."""
-        from ..sim import follower_outcomes
+        from bioform_mj.assess.outcomes import follower_outcomes
 
         sc, n = self._sc, self.n
         fe_rows = np.array(self._rows_fe).reshape(-1, n)
@@ -487,12 +487,12 @@ class FormationParallelEnv(ParallelEnv):
         sig = controller.signals() if controller is not None and hasattr(controller, "signals") else {}
         if sig.get("c_hat") is not None:  # the controller's own learner, not the environment's
             c_hat = np.array(sig["c_hat"], dtype=float)
-        from ..outcomes import severity
-        from ..runsummary import _contact_outcomes
+        from bioform_mj.assess.outcomes import severity
+        from bioform_mj.run.summary import contact_outcomes
 
         ctrl = controller if controller is not None else self._stack
         oc = follower_outcomes(sc, self._plant, ctrl, logd, final, c_hat, self.dt)
-        contact = _contact_outcomes(self._plant, n, self.dt)
+        contact = contact_outcomes(self._plant, n, self.dt)
         oc = [sorted(o + contact[i][1], key=severity) for i, o in enumerate(oc)]
 
         followers = []

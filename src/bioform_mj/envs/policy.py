@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from .parallel import FormationParallelEnv
+from bioform_mj.envs.parallel import FormationParallelEnv
 
 
 class ControllerPolicy:
@@ -30,8 +30,8 @@ class ControllerPolicy:
 
     def reset(self) -> None:
         """After ``env.reset``: the controller's initial estimates, as ``bioform run`` sets them."""
-        from ..control.stack import ControlStack
-        from ..sim import initial_estimates, stack_params
+        from bioform_mj.control.stack import ControlStack
+        from bioform_mj.run.simulate import initial_estimates, stack_params
 
         env = self.env
         if self.controller is None or isinstance(self.controller, ControlStack):

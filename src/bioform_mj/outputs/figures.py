@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from ..control.common import wrap
-from .files import atomic_path
+from bioform_mj.control.common import wrap
+from bioform_mj.outputs.files import atomic_path
 
 #: Leader colour (the ghost's orange), RGB in 0..1.
 LEADER_RGB: tuple[float, float, float] = (1.0, 0.5, 0.05)
@@ -88,7 +88,8 @@ def _log_scale(ax: Any, data: np.ndarray) -> None:
 
 
 def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
-    """Write the figures of one run (a :class:`~bioform_mj.sim.RunResult`) into ``out_dir``; return their paths."""
+    """Write the figures of one run (a :class:`~bioform_mj.run.simulate.RunResult`) into ``out_dir``; return their
+    paths."""
     log, summary = result.log, result.summary
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -220,7 +221,7 @@ def _trajectories(log: Mapping[str, np.ndarray], title: str, ax: Any = None) -> 
     offsets = np.asarray(log["offsets"], dtype=float) if "offsets" in log else np.zeros((n, 2))
     ax.plot(lp[:, 0], lp[:, 1], color=LEADER_RGB, lw=2.0, ls="--", label="leader")
     if "obstacles" in log and len(log["obstacles"]):  # design §19: their footprints
-        from ..obstacles import from_rows
+        from bioform_mj.formation.obstacles import from_rows
 
         for k, ob in enumerate(from_rows(log["obstacles"])):
             xy = ob.outline()
@@ -270,9 +271,14 @@ def _finish(fig: Any, ax: np.ndarray, title: str, *, legend: bool = True) -> Non
 
 
 # ---------------------------------------------------------------------------- Table I
-def table1_figures(results_by_method: Mapping[str, Any], out_dir: str | Path) -> list[Path]:
-    """Figures comparing the methods of Table I (``{method: RunResult}``); returns the paths written."""
-    from ..table1 import PAPER_TABLE1
+def table1_figures(
+    results_by_method: Mapping[str, Any], out_dir: str | Path, paper_table: Mapping[str, Any] | None = None
+) -> list[Path]:
+    """Figures comparing the methods of Table I (``{method: RunResult}``); returns the paths written.
+
+    ``paper_table`` is the paper's own Table I (:data:`bioform_mj.jobs.table1.PAPER_TABLE1`), drawn beside
+    ours; the caller passes it (this module is a floor below ``jobs``); ``None``: ours alone."""
+    paper_table = paper_table or {}
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -330,7 +336,7 @@ def table1_figures(results_by_method: Mapping[str, Any], out_dir: str | Path) ->
     for j, m in enumerate(methods):
         ours = [f["total_velocity_error"] for f in results_by_method[m].summary["followers"]]
         ax1.bar(x + (j - (len(methods) - 1) / 2) * width, ours, width * 0.9, color=color[m], label=m)
-        paper = PAPER_TABLE1.get(m)
+        paper = paper_table.get(m)
         if paper is not None and n == len(paper):
             ax1.plot(
                 x + (j - (len(methods) - 1) / 2) * width,

@@ -23,9 +23,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     On any exception the temporary file is removed and ``path`` is untouched, so a
     reader never sees a half-written file (SIGKILL leaves at most a hidden ``.tmp``).
     An ``OSError`` on the way (disk full, read-only file system, a file-size limit) becomes a
-    :class:`~bioform_mj.errors.WriteFailed` naming ``path`` (design §17).
+    :class:`~bioform_mj.core.errors.WriteFailed` naming ``path`` (design §17).
     """
-    from ..errors import WriteFailed
+    from bioform_mj.core.errors import WriteFailed
 
     path = Path(path)
     tmp: str | None = None
@@ -112,14 +112,14 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
-# ---- output paths checked before any work (SPEC §10: bad input exits 2 before anything runs) ----
+# ---- output paths checked before any work (design §10: bad input exits 2 before anything runs) ----
 
 #: Trees no output of ours belongs in: kernel and device file systems.
 _SPECIAL_ROOTS = ("/proc", "/sys", "/dev")
 
 
 def _bad(what: str, path: str, why: str) -> Exception:
-    from ..errors import InputError
+    from bioform_mj.core.errors import InputError
 
     return InputError(f"{what} '{path}' {why}")
 
@@ -172,7 +172,7 @@ def _probe_writable(d: Path, what: str, orig: str) -> None:
 def check_out_dir(path: str | Path, what: str = "output directory") -> Path:
     """Check that the directory ``path`` exists or can be created, and can be written; create nothing.
 
-    Raises :class:`~bioform_mj.errors.InputError` (exit 2) for an empty or NUL-containing
+    Raises :class:`~bioform_mj.core.errors.InputError` (exit 2) for an empty or NUL-containing
     name, a path under /proc, /sys or /dev, a dangling symlink, a file where a directory is
     needed, or a place the process cannot write.
     """
@@ -191,7 +191,7 @@ def check_out_file(path: str | Path, what: str = "output file") -> Path:
 
     An existing target must be a regular file (never a directory, device or FIFO: the
     atomic rename would replace the node itself); a symlink to one is followed, and the
-    resolved path is returned. Raises :class:`~bioform_mj.errors.InputError` (exit 2).
+    resolved path is returned. Raises :class:`~bioform_mj.core.errors.InputError` (exit 2).
     """
     orig = str(path)
     p = _plain_checks(path, what)

@@ -22,7 +22,7 @@ import platform
 import sys
 from typing import Any
 
-from ..errors import InputError
+from bioform_mj.core.errors import InputError
 
 #: Backend used when the user sets none (headless; Mesa or a GPU vendor's EGL).
 DEFAULT_BACKEND = "egl"

@@ -65,7 +65,7 @@ class MujocoLog:
                 for t, msg in new:
                     fh.write(f"WARNING {time.strftime('%a %b %d %H:%M:%S %Y', time.localtime(t))}: {msg}\n\n")
         except OSError as exc:  # disk full, ulimit -f: named like every other output (design §17)
-            from ..errors import WriteFailed
+            from bioform_mj.core.errors import WriteFailed
 
             raise WriteFailed(str(path), exc) from exc
         self.written += len(new)

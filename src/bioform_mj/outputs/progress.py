@@ -1,7 +1,7 @@
 """Progress bars on a terminal (tqdm on stderr), silence everywhere else.
 
 :func:`progress_bar` yields a callback ``cb(k, n)`` (the signature
-:func:`bioform_mj.sim.simulate` calls with ``k`` of ``n`` control steps done) when
+:func:`bioform_mj.run.simulate.simulate` calls with ``k`` of ``n`` control steps done) when
 stderr is a terminal and progress is wanted, and ``None`` otherwise, so a run piped to
 a file, a test or CI prints nothing and pays nothing.
 

@@ -2,10 +2,10 @@
 
 Two ways, sharing one entity layout:
 
-- :func:`write_rrd` writes ``run.rrd`` after the run from the :class:`~bioform_mj.sim.RunResult`
+- :func:`write_rrd` writes ``run.rrd`` after the run from the :class:`~bioform_mj.run.simulate.RunResult`
   log with ``send_columns`` (a whole series per call: fast, nothing in the loop), to a
   temporary name in the same directory that is renamed once the file sink is closed.
-- :class:`RerunLive` is an :class:`~bioform_mj.sim.Observer` that streams the run as it
+- :class:`RerunLive` is an :class:`~bioform_mj.run.simulate.Observer` that streams the run as it
   happens to a viewer it spawns (``--rerun-spawn``) or to one already running
   (``--rerun-connect rerun+http://HOST:PORT/proxy``), at ``period`` s of simulated time.
 
@@ -44,9 +44,9 @@ from typing import Any
 
 import numpy as np
 
-from ..control.common import wrap
-from ..errors import InputError
-from .figures import LEADER_RGB, follower_rgb
+from bioform_mj.control.common import wrap
+from bioform_mj.core.errors import InputError
+from bioform_mj.outputs.figures import LEADER_RGB, follower_rgb
 
 #: Rerun application id of every recording this package writes.
 APP_ID = "bioform_mj"
@@ -177,8 +177,8 @@ def _log_obstacles(rec: Any, obstacles: Any) -> None:
     """The obstacles (design §19) as static boxes and cylinders under ``/world/obstacles``."""
     import rerun as rr
 
-    from ..obstacles import from_rows
-    from .figures import OBSTACLE_RGB
+    from bioform_mj.formation.obstacles import from_rows
+    from bioform_mj.outputs.figures import OBSTACLE_RGB
 
     obs = from_rows(obstacles) if obstacles is not None and len(obstacles) else []
     boxes = [o for o in obs if o.shape == "box"]
@@ -214,7 +214,7 @@ def _log_obstacles(rec: Any, obstacles: Any) -> None:
 
 def _log_static(rec: Any, n: int, summary: Mapping[str, Any] | None, label: str, obstacles: Any = None) -> None:
     """Everything that does not change: view coordinates, boxes, series names and colours, summary,
-    obstacles (``(m, 7)`` rows of :func:`bioform_mj.obstacles.to_rows`)."""
+    obstacles (``(m, 7)`` rows of :func:`bioform_mj.formation.obstacles.to_rows`)."""
     import rerun as rr
 
     rec.send_recording_name(label)
@@ -372,19 +372,19 @@ _WRITE_CHUNK = 1 << 20
 
 
 def write_rrd(result: Any, path: str | Path) -> Path:
-    """Write ``run.rrd`` of a :class:`~bioform_mj.sim.RunResult` atomically; returns the path.
+    """Write ``run.rrd`` of a :class:`~bioform_mj.run.simulate.RunResult` atomically; returns the path.
 
     The recording goes to rerun's in-memory binary stream and is written by Python, 1 MiB at a time,
     under a temporary name in the target's directory, renamed once complete (the stream flushed and
     closed: its footer written), so ``path`` is complete or absent. Writing in Python (not rerun's own
     file sink, a thread of its own) makes a full disk or ``ulimit -f`` an ``OSError`` at once (a
-    :class:`~bioform_mj.errors.WriteFailed`, one ``error:`` line, the temporary file removed) and
+    :class:`~bioform_mj.core.errors.WriteFailed`, one ``error:`` line, the temporary file removed) and
     leaves SIGINT/SIGTERM to interrupt between chunks (rerun's sink ignored both for over 10 min on a
     full disk, issue 28).
     """
     import rerun as rr
 
-    from .files import atomic_path
+    from bioform_mj.outputs.files import atomic_path
 
     path = Path(path)
     n = result.log["pose"].shape[1]
@@ -436,7 +436,7 @@ class RerunLive:
             else:
                 self.rec.connect_grpc(self.url, default_blueprint=blueprint(n))
             sc = run.scenario
-            from ..obstacles import to_rows
+            from bioform_mj.formation.obstacles import to_rows
 
             obstacles = to_rows(getattr(run.plant, "obstacles", None) or [])
             _log_static(self.rec, n, None, f"{sc.name} {sc.plant.kind} {sc.method} (live)", obstacles)
@@ -499,7 +499,8 @@ class RerunLive:
 
 
 def state_row(run: Any) -> dict[str, np.ndarray]:
-    """The log channels of one instant of a live run (:class:`~bioform_mj.sim.RunState`), with a time axis of 1."""
+    """The log channels of one instant of a live run (:class:`~bioform_mj.run.simulate.RunState`), with a time
+    axis of 1."""
     sig = run.stack.signals()
     n = run.pose.shape[0]
 

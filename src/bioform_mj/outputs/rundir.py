@@ -1,4 +1,4 @@
-"""One run per output folder (SPEC §10): claim a folder, lock it, clear an old run with ``--overwrite``.
+"""One run per output folder (design §10): claim a folder, lock it, clear an old run with ``--overwrite``.
 
 A folder is refused when it holds another run's files, unless ``overwrite`` is asked, which
 first removes exactly those files (the names in :data:`RUN_FILES`, a ``figures/`` folder of
@@ -19,9 +19,9 @@ import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
-from ..errors import InputError
-from .files import check_out_dir
-from .scenexml import ASSET_SUFFIXES, ASSETS_DIR
+from bioform_mj.core.errors import InputError
+from bioform_mj.outputs.files import check_out_dir
+from bioform_mj.outputs.scenexml import ASSET_SUFFIXES, ASSETS_DIR
 
 #: Files a run or a table1 writes into its folder (extend when a command writes a new one).
 RUN_FILES = frozenset(
@@ -83,7 +83,7 @@ def take_lock(path: Path, what: str = "output directory", doing: str = "writing 
         os.ftruncate(fd, 0)
         os.write(fd, str(os.getpid()).encode())
     except OSError as exc:  # disk full, ulimit -f (design §17): the run could write nothing either
-        from ..errors import WriteFailed
+        from bioform_mj.core.errors import WriteFailed
 
         os.close(fd)
         raise WriteFailed(str(lock), exc) from exc

@@ -1,6 +1,6 @@
 """``video.mp4`` of a run: captured during the loop as cheap state snapshots, rendered afterwards.
 
-:class:`FrameCapture` is an :class:`~bioform_mj.sim.Observer` with ``period = 1/fps`` s of
+:class:`FrameCapture` is an :class:`~bioform_mj.run.simulate.Observer` with ``period = 1/fps`` s of
 simulated time: each call copies a few arrays (the robots' poses and, on the MuJoCo plant,
 the whole ``qpos``), a few microseconds, so the loop pays nothing for the picture and
 ``summary.json``'s ``wall_time_s`` stays the loop's own time. :func:`render_video` then
@@ -8,7 +8,7 @@ replays the snapshots through ``mujoco.Renderer`` off-screen (see :mod:`.gl`) an
 the frames to ffmpeg (from ``imageio-ffmpeg``, no system ffmpeg needed) via mediapy.
 
 The MuJoCo plant is replayed in its own compiled model (wheels turn as simulated); the
-ideal plant has no scene, so one is composed for it (:func:`bioform_mj.scene.build_scene`
+ideal plant has no scene, so one is composed for it (:func:`bioform_mj.robots.scene.build_scene`
 with the scenario's robot MJCF, wheels turned from the logged ``υ, ω``).
 
 Each frame shows the robots, the leader's ghost and every follower's formation slot
@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
-from .figures import LEADER_RGB, follower_rgb
-from .files import atomic_path
+from bioform_mj.core.errors import InputError
+from bioform_mj.outputs.figures import LEADER_RGB, follower_rgb
+from bioform_mj.outputs.files import atomic_path
 
 log = logging.getLogger(__name__)
 
@@ -122,8 +122,8 @@ class _Replay:
     def __init__(self, result: Any, capture: FrameCapture) -> None:
         import mujoco
 
-        from ..robot_analysis import layout_of
-        from ..scene import Markers, build_scene, compile_scene, follower_prefix
+        from bioform_mj.robots.analysis import layout_of
+        from bioform_mj.robots.scene import Markers, build_scene, compile_scene, follower_prefix
 
         self.mujoco = mujoco
         sc = result.scenario
@@ -134,7 +134,7 @@ class _Replay:
         if self.live_qpos:
             self.model = plant.model
         else:  # ideal plant: compose a scene with the scenario's robot for the looks
-            from ..robots import resolve_robot
+            from bioform_mj.robots.refs import resolve_robot
 
             robots = list(sc.plant.robots) * (n if len(sc.plant.robots) == 1 else 1)
             spec = build_scene([resolve_robot(r) for r in robots], np.asarray(sc.initial_poses(), float))
@@ -210,7 +210,8 @@ def auto_camera_path(
     """Per frame ``lookat`` (K, 3) and ``distance`` (K,) m of a free camera that shows everyone.
 
     Each frame's requirement is the smallest distance at which every follower, the leader
-    and every slot, each with a ``_MARGIN × unit`` m disc around it (``unit``: :func:`bioform_mj.scene.robot_unit`),
+    and every slot, each with a ``_MARGIN × unit`` m disc around it
+    (``unit``: :func:`bioform_mj.robots.scene.robot_unit`),
     lies inside the frustum, the camera looking at the middle of their extent on the ground. A centred moving average
     (±1 s) of the look-at point and a moving maximum then average of the distance make
     the path smooth while still containing everyone.
@@ -315,7 +316,7 @@ def _add_geoms(
     """Trails, formation shape and robot halos, appended to the renderer's scene after ``update_scene``.
 
     Disc radii are the paper-scale sizes (halo 0.3 m, slot 0.18 m, leader 0.3 m) × ``unit``
-    (:func:`bioform_mj.scene.robot_unit`): a halo is 1.5 half tracks, a slot disc 0.9, whatever the robot's size.
+    (:func:`bioform_mj.robots.scene.robot_unit`): a halo is 1.5 half tracks, a slot disc 0.9, whatever the robot's size.
 
     Trails are ``mjGEOM_LINE`` connectors (``line_px`` pixels wide): a capsule per segment
     costs ~25× more triangles, which a software rasteriser feels (0.3 s per frame).
@@ -435,7 +436,7 @@ class FrameRenderer:
     def __init__(self, capture: FrameCapture, result: Any, options: VideoOptions) -> None:
         import mujoco
 
-        from .gl import gl_renderer_name, make_renderer
+        from bioform_mj.outputs.gl import gl_renderer_name, make_renderer
 
         if len(capture) == 0:
             raise InputError("no frames to render: the run ended before its first frame")
@@ -446,7 +447,7 @@ class FrameRenderer:
         self.caption = _Caption(options.height)
         self.colors = [follower_rgb(i) for i in range(self.sc.n)]
         self.line_px = max(2.0, options.height / 200)  # trail width, pixels
-        from ..scene import robot_unit
+        from bioform_mj.robots.scene import robot_unit
 
         self.unit = robot_unit(self.replay.half_track)  # markers and margins at the robots' size (design §9)
         self.trails = _Trails(capture, tol=0.015 * self.unit)

@@ -1,6 +1,6 @@
 """The paper's idealised plant: unicycle kinematics with ``ż = diag(τ_a, τ_b) c + d`` (eq. 34).
 
-The RK4 step is :func:`~bioform_mj.control.equations.unicycle_rk4` (written once); the
+The RK4 step is :func:`~bioform_mj.core.equations.unicycle_rk4` (written once); the
 plant object and the compiled chunk kernel :func:`run_chunk` both call it, so the
 step-by-step loop and the compiled loop compute the same bits.
 """
@@ -12,11 +12,11 @@ from typing import Any
 
 import numpy as np
 
-from ..control.equations import njit, unicycle_rk4, wrap
-from ..control.kernel import control_step
-from ..disturbance import harmonic_rows
-from ..engine import OK, after_control
-from .base import DisturbanceFn
+from bioform_mj.control.kernel import control_step
+from bioform_mj.core.engine import OK, after_control
+from bioform_mj.core.equations import njit, unicycle_rk4, wrap
+from bioform_mj.formation.disturbance import harmonic_rows
+from bioform_mj.plants.base import DisturbanceFn
 
 
 @njit
@@ -63,7 +63,7 @@ def _observe(x, pose, vel):
 
 @njit
 def run_chunk(lp, k0, k1, n_sub, c, dist, x, extra, j0):
-    """Plant steps ``k0 … k1−1`` of the closed loop (``lp``: :class:`~bioform_mj.engine.Loop`), each
+    """Plant steps ``k0 … k1−1`` of the closed loop (``lp``: :class:`~bioform_mj.core.engine.Loop`), each
     followed by the control step of ``k+1`` (the control step of ``k0`` must be done). ``c`` (n, 2)
     the true ``[a, b]``, ``dist`` (2, 4) the harmonic disturbance, ``x`` (n, 5) the state, ``extra``
     (n, 2) added accelerations. Returns ``(plant steps done, next log row, status)``."""
@@ -134,7 +134,8 @@ class IdealPlant:
         return self._c.copy()
 
     def _dist_rows(self) -> np.ndarray | None:
-        """Rows of a harmonic disturbance for the compiled loop (:func:`~bioform_mj.disturbance.harmonic_rows`)."""
+        """Rows of a harmonic disturbance for the compiled loop
+        (:func:`~bioform_mj.formation.disturbance.harmonic_rows`)."""
         return harmonic_rows(self.disturbance)
 
     def step(self, tau: np.ndarray, t: float) -> None:

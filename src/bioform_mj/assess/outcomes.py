@@ -1,0 +1,241 @@
+"""What each follower's run came to (design §9, §14): the formation slots, the thresholds and
+:func:`outcome_list`, the one list of outcomes both engines give a follower (:func:`follower_outcomes`
+for the CPU loops, ``batch.runner``'s ``_outcome`` for the device). Below :mod:`bioform_mj.run.simulate` and
+:mod:`bioform_mj.assess.check`, which both import it."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from bioform_mj.scenario.config import Scenario
+
+
+def slots_of(sc: Scenario, leader_pose: np.ndarray) -> np.ndarray:
+    """Formation slots (n, 2) m of the true leader at ``leader_pose`` (3,): ``p_r − Δ_i``, with the
+    offsets rotated by the leader's heading for ``formation.frame = "leader"`` (design §4)."""
+    off = np.asarray(sc.formation.offsets, dtype=float).reshape(sc.n, 2)
+    if sc.formation.frame == "leader":
+        c, s = np.cos(leader_pose[2]), np.sin(leader_pose[2])
+        off = np.column_stack([c * off[:, 0] - s * off[:, 1], s * off[:, 0] + c * off[:, 1]])
+    return np.asarray(leader_pose[:2], dtype=float)[None, :] - off
+
+
+#: follower outcomes (design §9): thresholds
+LOST_FRACTION = 0.1  # final formation error beyond this fraction of the formation's extent → lost ...
+LOST_AFTER_S = 10.0  # s: ... once the run has had this long to converge (or if the error grew over the run)
+SPIN_RAD_S = 6.0  # rad/s: |ω| beyond this over the last second → spinning
+#: the ``lost`` threshold of the paper's formation (extent 10 m), kept for reference
+LOST_M = 1.0
+
+
+def lost_threshold_m(sc: Scenario) -> float:
+    """The ``lost`` outcome's threshold, m: :data:`LOST_FRACTION` × the formation's extent, the
+    largest distance between two points of the leader and the followers' slots (``p_r − Δ_i``), from
+    the resolved offsets (design §9). 1 m for the paper's formation (offsets (3, 0), (4, ±5): 10 m), so
+    it scales with the experiment: 0.15 m for the ``tb3`` preset (``formation.scale = 0.15``), 0.25 m for
+    ``stretch``. The one place both engines take it from."""
+    pts = np.vstack([np.zeros((1, 2)), np.asarray(sc.formation.offsets, dtype=float)])
+    extent = float(np.max(np.linalg.norm(pts[:, None, :] - pts[None, :, :], axis=-1)))
+    return LOST_FRACTION * extent
+
+
+#: outcome kinds, the most severe first: a follower's ``outcome`` is the first of its ``outcomes`` (design §14)
+OUTCOME_ORDER = (
+    "controller_nonfinite",
+    "tipped",
+    "collided",
+    "slipping",
+    "spinning",
+    "lost",
+    "too_close",
+    "c_hat_at_bound",
+    "c_hat_off",
+)
+#: a learned parameter within this fraction of its projection bound counts as at the bound
+C_HAT_BOUND_BAND = 0.01
+#: a learned ĉ farther than this (relative, either component) from c_true at the end: ``c_hat_off``
+C_HAT_OFF = 0.25
+
+
+def severity(outcome: dict[str, Any]) -> int:
+    """Sort key of an outcome ``{"kind", …}``: its place in :data:`OUTCOME_ORDER` (unknown kinds last)."""
+    k = outcome.get("kind")
+    return OUTCOME_ORDER.index(k) if k in OUTCOME_ORDER else len(OUTCOME_ORDER)
+
+
+def outcome_kinds(follower: dict[str, Any]) -> list[str]:
+    """Every outcome kind of one follower's summary entry, the most severe first (``[]`` when ok); a
+    summary from before the ``outcomes`` list has only ``outcome``."""
+    kinds = list(dict.fromkeys(o["kind"] for o in follower.get("outcomes") or []))  # a kind once (two collisions)
+    o = follower.get("outcome")
+    return kinds if o in (None, "ok") or o in kinds else [str(o), *kinds]
+
+
+def unmodelled_causes(params: Any, slipping: bool = False, casters: Sequence[str] = ()) -> list[str]:
+    """The terms a plant knows that the paper's model lacks and that bias ĉ (design §8, §14): wheel
+    drag (damping, back-EMF; time constant), a dead band (frictionloss), slip, braking casters, a
+    centre of mass off the axle (b̂). ``params``: the robot's
+    :class:`~bioform_mj.robots.params.RobotParams` or None (ideal plant: none)."""
+    out = []
+    if params is not None:
+        um = params.unmodelled(0.0, 0.0)
+        k = um["drag_rate_per_s"]
+        if max(k) > 0:
+            out.append(
+                "wheel drag (damping/back-EMF: time constants "
+                + ", ".join(f"{1 / x:.3g} s" for x in k if x > 0)
+                + "; the opt-in learner.drag would estimate it)"
+            )
+        if params.wheel_frictionloss > 0:
+            out.append(f"a dead band of {2 * params.wheel_frictionloss:.3g} N·m (wheel frictionloss)")
+        if params.com_offset > 0.01:
+            out.append(f"a centre of mass {1e3 * params.com_offset:.0f} mm off the axle (b̂ biased, design §8.1)")
+    if slipping:
+        out.append("wheel slip")
+    out += [f"caster '{c}' braking" for c in casters]
+    return out
+
+
+def outcome_list(
+    *,
+    tip_t: float | None,
+    slip_t: float | None,
+    spinning: bool,
+    final: float,
+    fe0: float,
+    t_end: float,
+    learning: bool,
+    c_hat: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    c_true: np.ndarray,
+    causes: Any = None,
+    slip_ratio: float = 0.2,
+    slip_time: float = 0.5,
+    lost_m: float = LOST_M,
+) -> list[dict[str, Any]]:
+    """Every outcome of one follower, the most severe first (:data:`OUTCOME_ORDER`), each
+    ``{"kind", "detail", "t"}`` (``t``: s when it happened, None for an end-of-run outcome); empty
+    when ok. Shared by both engines (:func:`follower_outcomes`, ``batch/runner.py``'s ``BatchRun._outcome``).
+    ``causes``: a callable giving :func:`unmodelled_causes`' list (called only for ``c_hat_off``);
+    ``lost_m``: the scenario's :func:`lost_threshold_m` (m)."""
+    from bioform_mj.plants.mujoco.plant import TIP_ANGLE_DEG
+
+    out: list[dict[str, Any]] = []
+    if tip_t is not None:
+        out.append({"kind": "tipped", "detail": f"tilt beyond {TIP_ANGLE_DEG:g} deg at t = {tip_t:.3f} s", "t": tip_t})
+    if slip_t is not None:
+        out.append(
+            {
+                "kind": "slipping",
+                "detail": f"wheel slip ratio > {slip_ratio:g} for {slip_time:g} s, by t = {slip_t:.3f} s",
+                "t": slip_t,
+            }
+        )
+    if spinning:
+        out.append(
+            {"kind": "spinning", "detail": f"|omega| > {SPIN_RAD_S:g} rad/s over the last second", "t": t_end - 1.0}
+        )
+    if final > lost_m and (t_end >= LOST_AFTER_S - 1e-9 or final > 1.5 * fe0):
+        out.append({"kind": "lost", "detail": f"final formation error {final:.3g} m > {lost_m:.3g} m", "t": None})
+    if learning:
+        at = [
+            k
+            for k in range(2)
+            if c_hat[k] <= lo[k] + C_HAT_BOUND_BAND * abs(lo[k]) or c_hat[k] >= hi[k] - C_HAT_BOUND_BAND * abs(hi[k])
+        ]
+        if at:
+            out.append(
+                {
+                    "kind": "c_hat_at_bound",
+                    "detail": "learned "
+                    + ", ".join("ab"[k] for k in at)
+                    + f" at its bound (within {C_HAT_BOUND_BAND:.0%})",
+                    "t": None,
+                }
+            )
+        rel = [float(c_hat[k] / c_true[k] - 1.0) for k in range(2)]
+        off = [k for k in range(2) if not abs(rel[k]) <= C_HAT_OFF]  # NaN counts as off
+        if off:
+            why = list(causes()) if callable(causes) else list(causes or [])
+            out.append(
+                {
+                    "kind": "c_hat_off",
+                    "detail": ", ".join(f"learned {'ab'[k]} {rel[k]:+.0%} from c_true" for k in off)
+                    + f" (> {C_HAT_OFF:.0%}); likely cause: "
+                    + ("; ".join(why) if why else "none the plant knows (too little excitation, or the learner gains)"),
+                    "t": None,
+                }
+            )
+    return out
+
+
+def braking_casters(plant: Any, i: int) -> list[str]:
+    """Follower ``i``'s casters that brake on the floor now, labelled as ``robot check`` labels them
+    (``contacts.floor_contacts``: a geom's name, or ``BODY#K``), by ``robot check``'s test
+    (``contacts.brakes``: loaded, cannot roll, with friction; design §14.2)."""
+    if not hasattr(plant, "layouts") or not hasattr(plant, "data"):
+        return []
+    try:
+        from bioform_mj.robots.contacts import brakes, floor_contacts
+
+        floor = floor_contacts(plant.model, plant.data, plant.layouts[i], f"f{i + 1}/")
+        return [c["geom"] for c in floor if brakes(c)]
+    except Exception:  # noqa: BLE001 - a cause is a hint; never fail a run's summary for it
+        return []
+
+
+def follower_outcomes(
+    sc: Scenario,
+    plant: Any,
+    controller: Any,
+    logd: dict[str, np.ndarray],
+    final_form: np.ndarray,
+    c_hat: np.ndarray,
+    dt: float,
+) -> list[list[dict[str, Any]]]:
+    """Per follower every outcome (:func:`outcome_list`: ``tipped`` (tilt beyond the plant's
+    ``TIP_ANGLE_DEG``, with the time), ``slipping`` (a wheel's slip ratio beyond the plant's
+    ``SLIP_RATIO`` for ``SLIP_TIME`` s), ``spinning`` (|ω| > :data:`SPIN_RAD_S` over the last
+    second), ``lost`` (final formation error > :func:`lost_threshold_m` after :data:`LOST_AFTER_S` s, or
+    grown by half over a shorter run), ``c_hat_at_bound`` (a learned parameter within
+    :data:`C_HAT_BOUND_BAND` of its projection bound at the end), ``c_hat_off`` (ĉ more than
+    :data:`C_HAT_OFF` from c_true, with the likely cause); empty when ok."""
+    n = sc.n
+    out: list[list[dict[str, Any]]] = []
+    tip = getattr(plant, "tip_step", None)
+    slip = getattr(plant, "slip_step", None)
+    p = getattr(controller, "p", None)
+    t = logd["t"]
+    last = t >= (t[-1] - 1.0) if len(t) else np.zeros(0, bool)
+    c_true = plant.c_true() if plant is not None else np.full((n, 2), np.nan)
+    params = getattr(plant, "params", None)
+    lost_m = lost_threshold_m(sc)
+    for i in range(n):
+        slipping = slip is not None and slip[i] >= 0
+        learning = p is not None and p.learning
+        out.append(
+            outcome_list(
+                tip_t=float(tip[i] * dt) if tip is not None and tip[i] >= 0 else None,
+                slip_t=float(slip[i] * dt) if slipping else None,
+                spinning=bool(len(t) and np.all(np.abs(logd["vel"][last, i, 1]) > SPIN_RAD_S)),
+                final=float(final_form[i]),
+                fe0=float(logd["formation_error"][0, i]) if len(t) else 0.0,
+                t_end=float(t[-1]) if len(t) else 0.0,
+                learning=learning,
+                c_hat=c_hat[i],
+                lo=np.broadcast_to(p.c_min, (n, 2))[i] if learning else np.zeros(2),
+                hi=np.broadcast_to(p.c_max, (n, 2))[i] if learning else np.zeros(2),
+                c_true=c_true[i],
+                causes=lambda i=i, s=slipping: unmodelled_causes(
+                    params[i] if params is not None else None, s, braking_casters(plant, i)
+                ),
+                slip_ratio=getattr(plant, "SLIP_RATIO", 0.2),
+                slip_time=getattr(plant, "SLIP_TIME", 0.5),
+                lost_m=lost_m,
+            )
+        )
+    return out

@@ -1,0 +1,1 @@
+"""The ``bioform`` command (design §10): the only package that prints."""

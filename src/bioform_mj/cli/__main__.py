@@ -1,0 +1,5 @@
+"""``python -m bioform_mj.cli``: the ``bioform`` command."""
+
+from bioform_mj.cli.main import main
+
+raise SystemExit(main())

@@ -1,0 +1,417 @@
+"""Loading scenarios: presets, TOML files, a run's record, ``--set`` overrides, and the transforms made on load.
+
+Unknown keys are an error, never ignored. :func:`load` reads, overrides, scales
+(:func:`apply_scale`), validates (:func:`bioform_mj.scenario.check.validate`) and, on the ideal
+plant, takes ``c_true`` from the robots (:func:`apply_robots_to_ideal`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+import typing
+from collections.abc import Mapping
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bioform_mj.core.errors import InputError, ScenarioError
+from bioform_mj.formation.obstacles import scaled as _scaled_obstacles
+from bioform_mj.robots.refs import PackagePath, RobotRef, as_package_path, as_ref, rebase_entries, rebase_package_path
+from bioform_mj.scenario.check import validate
+from bioform_mj.scenario.config import MAX_INT, PAPER_C, Scenario, keys_of
+
+
+def preset_names() -> list[str]:
+    """Names of the shipped presets (``scenarios/*.toml`` inside the package)."""
+    d = resources.files("bioform_mj.scenario") / "presets"
+    return sorted(p.name[:-5] for p in d.iterdir() if p.name.endswith(".toml"))
+
+
+def preset_descriptions() -> dict[str, str]:
+    """``{preset name: its one-line description}`` (the file's ``description``, else the default's)."""
+    out = {}
+    for name in preset_names():
+        raw = (resources.files("bioform_mj.scenario") / "presets" / f"{name}.toml").read_bytes()
+        text = _read_toml(raw, f"preset {name}").get("description", Scenario.description)
+        out[name] = " ".join(str(text).split())
+    return out
+
+
+def load(
+    source: str | Path | None = None,
+    overrides: Mapping[str, Any] | list[str] | None = None,
+    method: str | None = None,
+    plant: str | None = None,
+) -> Scenario:
+    """Load a preset name, a TOML path or a run's ``summary.json`` (its ``config``: the run again, bit for
+    bit), apply ``--set`` overrides, method and plant; validate.
+
+    Parameters
+    ----------
+    source
+        A preset name (``bioform presets``), a path to a scenario TOML file, or a run's ``summary.json``
+        or ``resolved.toml``; ``None``: the paper scenario (the dataclass defaults).
+    overrides
+        ``--set`` overrides: a list of ``"KEY=VALUE"`` strings (``"kinematic.k1=3"``, values in TOML syntax) or
+        a mapping of dotted keys to values; applied in order, after the file. Units are each key's
+        (docs/reference/scenario.md).
+    method
+        The controller, as ``--method``: one of the paper's four (``bioinspired-learning``, ...); ``None``
+        keeps the file's.
+    plant
+        ``"ideal"`` or ``"mujoco"``, as ``--plant``; ``None`` keeps the file's.
+
+    Returns
+    -------
+    Scenario
+        The frozen, validated scenario.
+
+    Raises :class:`InputError` (or a subclass) with one line naming the problem.
+    """
+    data: dict[str, Any]
+    if source is None:
+        source = "paper"
+    src = str(source)
+    if "\x00" in src:
+        raise InputError(f"scenario {src!r} contains a NUL character")
+    if src.endswith(".toml") or "/" in src or Path(src).is_file():
+        path = Path(src)
+        if path.is_dir():
+            raise InputError(f"scenario file '{path}' is a directory")
+        if not path.exists():
+            raise InputError(f"scenario file '{path}' does not exist")
+        from bioform_mj.robots.limits import not_regular  # a FIFO or a device would block the read (issue 28)
+
+        if not_regular(path):
+            raise InputError(f"scenario file {not_regular(path)}")
+        if path.stat().st_size > 16 * 10**6:
+            raise InputError(
+                f"scenario file '{path}' is {path.stat().st_size / 1e6:.0f} MB: not a scenario (at most 16 MB)"
+            )
+        try:
+            raw = path.read_bytes()
+        except OSError as exc:  # PermissionError, a FIFO that errors, an I/O error
+            raise InputError(f"scenario file '{path}' cannot be read: {exc.strerror or exc}") from None
+        data = _read_record(raw, str(path)) if path.suffix.lower() == ".json" else _read_toml(raw, str(path))
+        if isinstance(data.get("plant"), dict) and "robots" in data["plant"]:  # design §10: relative to the file
+            data["plant"]["robots"] = rebase_entries(data["plant"]["robots"], path.parent.resolve())
+        if isinstance(data.get("plant"), dict) and "package_path" in data["plant"]:  # design §12: likewise
+            data["plant"]["package_path"] = rebase_package_path(data["plant"]["package_path"], path.parent.resolve())
+    else:
+        names = preset_names()
+        if src not in names:
+            raise InputError(f"unknown preset '{src}' (expected one of: {', '.join(names)}, or a .toml path)")
+        data = _read_toml(
+            (resources.files("bioform_mj.scenario") / "presets" / f"{src}.toml").read_bytes(), f"preset {src}"
+        )
+    if overrides:
+        items = overrides.items() if isinstance(overrides, Mapping) else [parse_override(s) for s in overrides]
+        for key, value in items:
+            _set_path(data, key, value)
+    if method is not None:
+        data["method"] = method
+    if plant is not None:
+        data.setdefault("plant", {})["kind"] = plant
+    sc = apply_scale(from_dict(data))
+    validate(sc)
+    return mark_checked(apply_robots_to_ideal(sc))
+
+
+def mark_checked(sc: Scenario) -> Scenario:
+    """``sc``, marked as checked (:func:`checked` then returns it at once): an attribute of this
+    frozen object, not a field, so ``dataclasses.replace`` makes an unmarked one (design §18.1). For
+    :func:`load`, and a caller that changed a loaded scenario only where it checked the value itself
+    (a sweep's seeds)."""
+    object.__setattr__(sc, "_bioform_checked", True)
+    return sc
+
+
+def checked(sc: Scenario) -> Scenario:
+    """``sc`` refused as :func:`load` refuses a file (the same :class:`InputError` subclasses and
+    messages: types, finite numbers, then :func:`validate`), and scaled if its ``formation.scale``
+    is not yet applied (:func:`apply_scale`); ``sc`` itself when it needs no scaling. For a scenario
+    built or changed in Python (``dataclasses.replace``), which :func:`load` has not seen:
+    :func:`bioform_mj.run.simulate.simulate` calls it before any work (design §18.1; 2-5 ms, nothing for a
+    scenario :func:`load` returned or this function scaled)."""
+    if getattr(sc, "_bioform_checked", False):
+        return sc
+    plain = _plain_values(sc.to_dict())
+    again = _build(Scenario, plain, "")  # what from_dict refuses in a file (NaN, a string for a number, ...)
+    again = dataclasses.replace(
+        again, formation=dataclasses.replace(again.formation, scale_applied=sc.formation.scale_applied)
+    )
+    scaled = apply_scale(again)  # a scale changed after loading: applied now (its range checked)
+    validate(scaled)
+    return sc if scaled is again else mark_checked(scaled)  # (sc unmarked: it may hold numpy arrays)
+
+
+def _plain_values(obj: Any) -> Any:
+    """``obj`` with numpy arrays and scalars as Python lists and numbers (a scenario changed in
+    Python may hold them; a file cannot)."""
+    if isinstance(obj, dict):
+        return {k: _plain_values(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [_plain_values(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def _read_record(raw: bytes, where: str) -> dict[str, Any]:
+    """A run's ``summary.json``: its ``config`` (:func:`bioform_mj.scenario.record.resolved_config`)."""
+    import json
+
+    try:
+        data = json.loads(raw.decode("utf-8"))
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InputError(f"{where} is not valid JSON: {exc}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("config"), dict):
+        raise InputError(f"{where} is not a run's summary.json (no 'config' table); give a scenario TOML file")
+    return data["config"]
+
+
+def _read_toml(raw: bytes, where: str) -> dict[str, Any]:
+    try:
+        return tomllib.loads(raw.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{where} is not valid TOML: {exc}") from None
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """``'kinematic.k1=3'`` → ``('kinematic.k1', 3)``; values are TOML literals, bare words are strings."""
+    key, sep, raw = text.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise InputError(f"--set '{text}': expected KEY=VALUE, e.g. kinematic.k1=3")
+    raw = raw.strip()
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key, value
+
+
+def _set_path(data: dict[str, Any], key: str, value: Any) -> None:
+    parts = key.split(".")
+    cls: Any = Scenario
+    node = data
+    for i, part in enumerate(parts):
+        hints = keys_of(cls)  # an internal field (FormationCfg.scale_applied) is no key
+        if part not in hints:
+            raise ScenarioError(key, f"unknown key (expected one of: {', '.join(hints)})")
+        if i == len(parts) - 1:
+            node[part] = value
+            return
+        cls = hints[part]
+        if cls is PackagePath and i == len(parts) - 2:  # plant.package_path.NAME=DIR adds one package
+            table = node.get(part)
+            node[part] = {**(table if isinstance(table, Mapping) else {}), parts[-1]: value}
+            return
+        if not dataclasses.is_dataclass(cls):
+            raise ScenarioError(key, f"'{'.'.join(parts[: i + 1])}' is a value, not a table")
+        node = node.setdefault(part, {})
+        if not isinstance(node, dict):  # e.g. `sim = 3` in the file, then --duration
+            raise ScenarioError(".".join(parts[: i + 1]), f"expected a table, got {type(node).__name__} {node!r}")
+
+
+def from_dict(data: Mapping[str, Any]) -> Scenario:
+    """Build a :class:`Scenario` from nested dicts; unknown keys and wrong types raise ScenarioError."""
+    return _build(Scenario, data, "")
+
+
+def _build(cls: Any, data: Any, prefix: str) -> Any:
+    if not isinstance(data, Mapping):
+        raise ScenarioError(prefix.rstrip("."), f"expected a table, got {type(data).__name__}")
+    hints = keys_of(cls)  # an internal field (FormationCfg.scale_applied) is no key
+    unknown = [k for k in data if k not in hints]
+    if unknown:
+        raise ScenarioError(prefix + unknown[0], f"unknown key (expected one of: {', '.join(hints)})")
+    kwargs = {k: _convert(v, hints[k], prefix + k) for k, v in data.items()}
+    return cls(**kwargs)
+
+
+def _convert(value: Any, tp: Any, key: str) -> Any:
+    if tp is RobotRef:  # a name, a path or a mapping table (robots.py)
+        return as_ref(value, key)
+    if tp is PackagePath:  # {NAME = "DIR"} (robots.py, design §12)
+        return as_package_path(value, key)
+    if dataclasses.is_dataclass(tp):
+        return _build(tp, value, key + ".")
+    origin = typing.get_origin(tp)
+    if origin is tuple:
+        (inner, *_rest) = typing.get_args(tp)
+        if not isinstance(value, (list, tuple)):
+            raise ScenarioError(key, f"expected an array, got {type(value).__name__} {value!r}")
+        if dataclasses.is_dataclass(inner) and inner is not RobotRef:
+            return tuple(_build(inner, v, f"{key}[{i}].") for i, v in enumerate(value))
+        return tuple(_convert(v, inner, f"{key}[{i}]") for i, v in enumerate(value))
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ScenarioError(key, f"expected a number, got {type(value).__name__} {value!r}")
+        if not math.isfinite(value):
+            raise ScenarioError(key, f"expected a finite number, got {value}")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            if isinstance(value, float) and value.is_integer():
+                value = int(value)
+            else:
+                raise ScenarioError(key, f"expected an integer, got {type(value).__name__} {value!r}")
+        if not -MAX_INT <= value <= MAX_INT:  # numpy and the compiled loop take 64-bit integers
+            raise ScenarioError(key, f"integer out of range (|value| <= 2^62), got {value}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ScenarioError(key, f"expected a string, got {type(value).__name__} {value!r}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ScenarioError(key, f"expected true or false, got {value!r}")
+        return value
+    raise TypeError(f"unsupported field type {tp} for {key}")  # programming error, not user input
+
+
+# ---------------------------------------------------------------------------------------
+# Robots on the ideal plant (issue 10: plant.robots is never ignored)
+# ---------------------------------------------------------------------------------------
+
+
+def apply_robots_to_ideal(sc: Scenario) -> Scenario:
+    """On the ideal plant, ``plant.robots`` other than the shipped ``paper`` robot decide ``c_true``.
+
+    The ideal plant is then the paper's model of that robot: ``c_true = (a_eff, b_eff)`` from its
+    compiled model, ``mass = M_eff = 1/(a_eff r)`` and ``inertia = I_eff = l/(b_eff r)`` (for
+    payload events). The ``paper`` robot (the default) leaves ``plant.c_true`` as given, so the
+    paper's abstract plant keeps ``--set plant.c_true=…``. Refused (ScenarioError): robots whose
+    ``c_true`` differ (the ideal plant takes one ``c_true``), and a ``plant.c_true`` other than the
+    paper's that disagrees with the robots. The MuJoCo plant is returned unchanged.
+    """
+    pc = sc.plant
+    if pc.kind != "ideal":
+        return sc
+    from bioform_mj.robots.refs import resolve_robot
+
+    refs = [resolve_robot(r) for r in pc.robots]
+    paper = resolve_robot("paper")
+    if all(Path(r.model).resolve() == Path(paper.model).resolve() and not r.mapped for r in refs):
+        return sc
+    from bioform_mj.robots.params import robot_truth  # MuJoCo only when a robot asks for it
+
+    truths = [robot_truth(r) for r in refs]
+    c = np.array([t.c for t in truths])
+    if np.any(np.abs(c / c[0] - 1) > 1e-6):
+        raise ScenarioError(
+            "plant.robots",
+            "the ideal plant takes one c_true, but the robots differ "
+            f"({'; '.join(f'{r.model}: a={x[0]:.4g}, b={x[1]:.4g}' for r, x in zip(refs, c))}); "
+            "use plant.kind = 'mujoco' for a heterogeneous team",
+        )
+    if tuple(pc.c_true) != PAPER_C and np.any(np.abs(np.asarray(pc.c_true) / c[0] - 1) > 1e-3):
+        raise ScenarioError(
+            "plant.c_true",
+            f"{list(pc.c_true)} disagrees with plant.robots ({refs[0].model}: "
+            f"a={c[0, 0]:.4g}, b={c[0, 1]:.4g}); give one of them",
+        )
+    t = truths[0]
+    plant = dataclasses.replace(pc, c_true=(float(c[0, 0]), float(c[0, 1])), mass=t.mass_eff, inertia=t.inertia_eff)
+    return dataclasses.replace(sc, plant=plant)
+
+
+# ---------------------------------------------------------------------------------------
+# The paper's experiment at a robot's scale (issue 10)
+# ---------------------------------------------------------------------------------------
+
+
+def apply_scale(sc: Scenario) -> Scenario:
+    """Scale the experiment by ``s = formation.scale``: every length × s, every time unchanged.
+
+    So every speed and acceleration is × s and every angle, rate and time constant stays: the
+    leader (``x0, y0, speed, amplitude, radius, vx, vy`` and the amplitudes of ``x_terms`` /
+    ``y_terms``), the offsets and initial positions (and ``init_jitter``, the positions' jitter; the
+    headings' jitter ``init_jitter_heading`` is an angle and stays, resolved from -1 to the
+    ``init_jitter`` as written), and the gains that
+    carry a length so that the closed loop is the paper's, shrunk: the estimator's ``υ``-channel
+    sign gain ``ka[0]`` and boundary layer ``phi[0]`` (m/s², m/s), the torque law's ``c[0]``
+    (m/s²), the disturbance's ``υ`` channel (m/s²) × s; the obstacles (positions, sizes, the
+    field's numbers) and ``safety.distance``, ``lookahead``, ``range`` × s (design §19);
+    ``k2 / s²`` and ``k3 / s`` (eq. 31:
+    ``ω_cmd = ω_ir + k2 υ_ir ỹ + k3 υ_ir sin θ̃`` is then unchanged). ``k1`` stays: the neuron
+    (eq. 32) works in metres, and in its linear range (``|x̃| ≪ A``, which a small robot's
+    errors are) ``k1 V_s ≈ k1 B x̃ / A`` already scales with the error; its bound ``k1 B`` does
+    not shrink. The torque law's ``phi`` (one layer on both channels) and the learner's gains
+    are not scaled: use ``learner.gain_scaling = "c_hat0"`` (the scaled presets do); the
+    learned-drag gain's ``υ`` channel (``k̂' = drag_gain z S``: 1/m²) is ``/ s²`` (design §14). The values
+    are those written (file and ``--set``); the returned scenario holds the scaled values and
+    ``scale``; a run's record (:func:`bioform_mj.scenario.record.resolved_config`) holds the scaled values
+    with ``scale = 1``, so loading it again does not scale twice (the ``lost`` threshold and the
+    video's sizes are taken from the scaled lengths, not from ``scale``).
+
+    The returned scenario's ``formation.scale_applied`` says the lengths carry ``scale`` (design
+    §18.1); a scenario whose ``scale`` was then changed (``dataclasses.replace``) is scaled by
+    ``scale / scale_applied``, so its lengths end at ``scale`` × those written (a loaded scenario has
+    ``scale_applied = 1``: scaled by ``scale``, as before).
+    """
+    want = sc.formation.scale
+    if want == sc.formation.scale_applied:
+        return sc
+    if not (math.isfinite(want) and want > 0):
+        raise ScenarioError("formation.scale", f"must be a number > 0, got {want:g}")
+    if not 1e-3 <= want <= 1e3:  # beyond, k2 / s² and the lengths leave floating point's comfortable range
+        raise ScenarioError("formation.scale", f"must lie in [0.001, 1000], got {want:g}")
+    s = want / sc.formation.scale_applied  # exactly `want` for a scenario as written
+
+    def rows(values: tuple, cols: int) -> tuple:
+        return tuple(tuple(v * s if j < cols else v for j, v in enumerate(r)) for r in values)
+
+    ld = sc.leader
+    leader = dataclasses.replace(
+        ld,
+        x0=ld.x0 * s,
+        y0=ld.y0 * s,
+        speed=ld.speed * s,
+        amplitude=ld.amplitude * s,
+        radius=ld.radius * s,
+        vx=ld.vx * s,
+        vy=ld.vy * s,
+        x_terms=rows(ld.x_terms, 1),
+        y_terms=rows(ld.y_terms, 1),
+    )
+    f = sc.formation
+    formation = dataclasses.replace(
+        f,
+        offsets=rows(f.offsets, 2),
+        initial_poses=rows(f.initial_poses, 2),
+        init_jitter=f.init_jitter * s,  # positions: a length
+        init_jitter_heading=f.init_jitter if f.init_jitter_heading < 0 else f.init_jitter_heading,  # an angle
+        scale_applied=want,
+    )
+    e = sc.estimator
+    first = lambda v: (v[0] * s, *v[1:]) if v else v  # noqa: E731 - the υ channel of a (υ, ω) pair
+    estimator = dataclasses.replace(e, ka=first(e.ka), phi=first(e.phi))
+    k = sc.kinematic
+    kinematic = dataclasses.replace(k, k2=k.k2 / s**2, k3=k.k3 / s)
+    torque = dataclasses.replace(sc.torque, c=first(sc.torque.c))
+    d = sc.disturbance
+    disturbance = dataclasses.replace(d, bias=first(d.bias), amp=first(d.amp))
+    lg = sc.learner.drag_gain
+    learner = dataclasses.replace(sc.learner, drag_gain=(lg[0] / s**2, *lg[1:]) if lg else lg)
+    obstacles, obstacle_field = _scaled_obstacles(sc.obstacles, sc.obstacle_field, s)
+    sf = sc.safety
+    safety = dataclasses.replace(sf, distance=sf.distance * s, lookahead=sf.lookahead * s, range=sf.range * s)
+    return dataclasses.replace(
+        sc,
+        learner=learner,
+        obstacles=obstacles,
+        obstacle_field=obstacle_field,
+        safety=safety,
+        leader=leader,
+        formation=formation,
+        estimator=estimator,
+        kinematic=kinematic,
+        torque=torque,
+        disturbance=disturbance,
+    )
