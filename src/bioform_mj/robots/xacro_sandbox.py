@@ -7,7 +7,7 @@ line saying how to ask (:func:`refusal`), unless the user asked: ``--xacro`` (``
 ``identify``, ``run``, ``table1``; a sweep refuses it) or ``xacro = true`` in the robot's table, with
 ``$(arg NAME)`` values from ``--xacro-arg NAME=VALUE`` or ``xacro_args = {NAME = "VALUE"}``.
 
-:func:`expand` then runs xacro in a child process (``bioform_mj/_xacro_child.py`` under
+:func:`expand` then runs xacro in a child process (``bioform_mj/robots/_xacro_child.py`` under
 ``python -I -B``) that
 
 - has no variable of the user's environment (only the package search path it is told, for ``$(find)``),
