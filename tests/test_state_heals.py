@@ -248,3 +248,46 @@ def test_api_turns_mujoco_warnings_into_python_warnings(tmp_path, monkeypatch):
         assert noisy() == "done"
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
     assert mujoco.get_mju_user_warning() is None  # MuJoCo's own handler is back
+
+
+def test_rrd_write_interrupted_leaves_no_tmp(tmp_path, monkeypatch):
+    """SIGINT/SIGTERM (a KeyboardInterrupt from the CLI's handler) between run.rrd's writes: the temporary
+    file is removed, run.rrd is absent, the interrupt goes on."""
+    import builtins
+
+    import bioform_mj as bf
+    from bioform_mj.outputs import rerun_log
+
+    res = bf.simulate(bf.load("paper", ["sim.duration=2.0"], plant="ideal"))
+    monkeypatch.setattr(rerun_log, "_WRITE_CHUNK", 4096)
+    real_open = builtins.open
+    writes = []
+
+    class Interrupting:
+        def __init__(self, fh):
+            self.fh = fh
+
+        def write(self, data):
+            writes.append(len(data))
+            if len(writes) == 3:
+                raise KeyboardInterrupt
+            return self.fh.write(data)
+
+        def __getattr__(self, name):
+            return getattr(self.fh, name)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.fh.close()
+
+    def fake_open(file, mode="r", *a, **k):
+        fh = real_open(file, mode, *a, **k)
+        return Interrupting(fh) if "w" in mode and str(file).endswith(".tmp") else fh
+
+    monkeypatch.setattr(builtins, "open", fake_open)
+    with pytest.raises(KeyboardInterrupt):
+        rerun_log.write_rrd(res, tmp_path / "run.rrd")
+    monkeypatch.setattr(builtins, "open", real_open)
+    assert len(writes) == 3 and sorted(p.name for p in tmp_path.iterdir()) == [], list(tmp_path.iterdir())
