@@ -35,6 +35,7 @@ import resource
 import signal
 import sys
 import types
+from pathlib import Path
 
 
 def _limit(mem_bytes: int, cpu_s: int) -> None:
@@ -325,7 +326,7 @@ def _expand(req: dict) -> tuple[str, list[str]]:
     search = [os.path.realpath(s) for s in req["search_dirs"]]
 
     def find(name: str) -> str:
-        found, _ = find_mod.find_package(name, packages, __import__("pathlib").Path(path))
+        found, _ = find_mod.find_package(name, packages, Path(path))
         if found is None:
             raise _Missing(name)
         real = os.path.realpath(str(found))
