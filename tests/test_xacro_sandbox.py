@@ -277,3 +277,21 @@ def test_without_the_xacro_package_says_how_to_install(tmp_path, monkeypatch):
     path = write(tmp_path / "r.urdf.xacro", robot(""))
     with pytest.raises(XacroRefused, match=r"pip install 'bioform-mj\[urdf\]'.*`xacro .* > r.urdf`"):
         expand(path, PackagePath())
+
+
+def test_run_with_the_xacro_flag(tmp_path, capsys, monkeypatch):
+    """``bioform run --xacro --xacro-arg`` expands the scenario's xacro robot; its summary says xacro ran."""
+    monkeypatch.chdir(tmp_path)
+    text = diff_drive().replace('<robot name="dd">', f'<robot name="dd" {NS}><xacro:arg name="m" default="x"/>')
+    write(tmp_path / "dd.urdf.xacro", text.replace('"0.2"', '"$(arg m)"', 1))
+    sc = write(tmp_path / "a.toml", '[plant]\nkind = "mujoco"\nrobots = ["dd.urdf.xacro"]\n')
+    out = tmp_path / "out"
+    args = ["run", str(sc), "--duration", "0.05", "--out", str(out), "--no-robot-check", "--quiet"]
+    code = cli.main([*args, "--xacro", "--xacro-arg", "m=0.2"])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert any("expanded by xacro" in w for w in summary["import_warnings"]), summary["import_warnings"]
+    assert "expanded by xacro" in err  # said before the run, as a warning: line
+    assert cli.main(["sweep", str(sc), "--xacro", "--out", str(tmp_path / "sw")]) == 2
+    assert "write xacro = true" in capsys.readouterr().err
