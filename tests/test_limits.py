@@ -1,4 +1,4 @@
-"""Bounded answers to hostile inputs (issue 28 item 2, :mod:`bioform_mj.robots.limits`): each one ``error:`` line,
+"""Bounded answers to hostile inputs (issue 28 item 2, :mod:`bioform_mj.robots.sanity`): each one ``error:`` line,
 exit 2, promptly: FIFOs and devices never opened, archives never unpacked past their declared sizes, a
 timestep that would step for hours refused with the estimate, bad numbers refused naming the element."""
 
@@ -15,7 +15,7 @@ import pytest
 
 from bioform_mj.cli import main as cli
 from bioform_mj.core.errors import InputError
-from bioform_mj.robots import limits
+from bioform_mj.robots import sanity as limits
 from test_urdf import diff_drive, write
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")

@@ -177,7 +177,7 @@ def identify(
     params, lay = plant.params[0], plant.layouts[0]
     model, data = plant.model, plant.data
     dt = float(model.opt.timestep)
-    from bioform_mj.robots.limits import check_step_budget  # a <option timestep="1e-9"/> would step for days
+    from bioform_mj.robots.sanity import check_step_budget  # a <option timestep="1e-9"/> would step for days
 
     check_step_budget(
         settle + 2 * len(ID_LEVELS) * (settle + duration),

@@ -115,7 +115,7 @@ def _cached_check(ref: Any, key: str) -> dict[str, Any]:
         return {**_MEMO[key], "from": "memory"}
     path = cache_dir() / f"{key}.json"
     from bioform_mj.assess.cache_schema import entry_problem
-    from bioform_mj.robots.limits import not_regular
+    from bioform_mj.robots.sanity import not_regular
 
     stale = ""
     try:

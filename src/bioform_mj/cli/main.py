@@ -236,7 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``bioform`` console script; returns the exit code."""
     from bioform_mj.outputs.gl import configure_gl_env
-    from bioform_mj.robots.limits import one_line
+    from bioform_mj.robots.sanity import one_line
 
     configure_gl_env()  # MUJOCO_GL=egl unless the user chose; before anything imports mujoco
     _show_robot_warnings()

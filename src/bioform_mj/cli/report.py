@@ -37,7 +37,7 @@ def _show_robot_warnings() -> None:
 
     show = warnings.showwarning
 
-    from bioform_mj.robots.limits import one_line  # a newline in a name must not forge an error: line (issue 28)
+    from bioform_mj.robots.sanity import one_line  # a newline in a name must not forge an error: line (issue 28)
 
     def showwarning(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
         if issubclass(category, RobotWarning):

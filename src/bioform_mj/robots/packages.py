@@ -26,7 +26,7 @@ _NO_PACKAGES = PackagePath()
 
 def _package_name(d: Path) -> str | None:
     """The ``<name>`` in ``d/package.xml``, None without one (or when it is no regular file: a FIFO would block)."""
-    from bioform_mj.robots.limits import not_regular
+    from bioform_mj.robots.sanity import not_regular
 
     if not_regular(d / "package.xml"):
         return None

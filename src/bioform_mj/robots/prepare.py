@@ -172,7 +172,7 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
             raise ModelError(str(exc)) from None
         spec, model, ref, imported = imp.spec, imp.model, imp.ref, imp.notes
     else:
-        from bioform_mj.robots.limits import spec_file_problem  # a FIFO or a 10 GB mesh: before the compiler opens it
+        from bioform_mj.robots.sanity import spec_file_problem  # a FIFO or a 10 GB mesh: before the compiler opens it
 
         try:
             spec = mujoco.MjSpec.from_file(str(path))
@@ -184,7 +184,7 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
             raise ModelError(f"{path}: {bad}")
         absolute_asset_files(spec)
         spec, model, key, key_q, key_notes = apply_keyframe(spec, model, path, ref)  # design §13.2
-    from bioform_mj.robots.limits import model_value_problem  # NaN or negative masses, axes, friction: refused
+    from bioform_mj.robots.sanity import model_value_problem  # NaN or negative masses, axes, friction: refused
 
     if bad := model_value_problem(model):
         raise ModelError(f"{path}: {bad}")

@@ -272,7 +272,7 @@ def resolve_robot(entry: Any) -> RobotRef:
     path = Path(name)
     if _is_path(name):
         if not path.is_file():
-            from bioform_mj.robots.limits import not_regular  # a FIFO or a device: said as such, never opened
+            from bioform_mj.robots.sanity import not_regular  # a FIFO or a device: said as such, never opened
 
             raise InputError(
                 f"model file {not_regular(path)}" if not_regular(path) else f"model file '{path}' does not exist"

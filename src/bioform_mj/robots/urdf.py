@@ -49,10 +49,10 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.core.errors import InputError
-from bioform_mj.robots.limits import mesh_problem, not_regular, urdf_value_problem
 from bioform_mj.robots.mesh_paths import symlink_escape
 from bioform_mj.robots.packages import find_package, package_search_path, resolve_uri
 from bioform_mj.robots.refs import PackagePath, RobotRef
+from bioform_mj.robots.sanity import mesh_problem, not_regular, urdf_value_problem
 from bioform_mj.robots.urdf_wheels import find_wheels, left_of, welded_to
 
 __all__ = [

@@ -84,7 +84,7 @@ def load(
             raise InputError(f"scenario file '{path}' is a directory")
         if not path.exists():
             raise InputError(f"scenario file '{path}' does not exist")
-        from bioform_mj.robots.limits import not_regular  # a FIFO or a device would block the read (issue 28)
+        from bioform_mj.robots.sanity import not_regular  # a FIFO or a device would block the read (issue 28)
 
         if not_regular(path):
             raise InputError(f"scenario file {not_regular(path)}")
