@@ -1,7 +1,8 @@
 # Two commands do all the set-up on a fresh machine (Python 3.11 with venv):
 #   make demo   - create .venv if needed, install what the demo needs, run the paper scenario, say where the outputs are
 #   make test   - same set-up plus the test extras (pytest, hypothesis, ray), the gpu extra (mujoco-warp,
-#                 warp-lang: the batch engine's tests run on Warp's CPU device) and the docs extra (MkDocs),
+#                 warp-lang: the batch engine's tests run on Warp's CPU device), the docs extra (MkDocs) and the
+#                 ros extra (rosbags: the --rosbag tests),
 #                 run the test suite and build the documentation with warnings as errors
 #   make docs   - build the documentation site into site/ (needs the docs extra)
 PYTHON ?= python3
@@ -24,7 +25,7 @@ $(STAMP): pyproject.toml | $(PY)
 # the test extras on top, the gpu extra (the batch engine's tests run on Warp's CPU device, no GPU needed)
 # and the docs extra (make test builds the documentation strictly)
 $(TEST_STAMP): $(STAMP) pyproject.toml
-	$(PY) -m pip install --quiet -e '.[test,gpu,rl,urdf,docs]'
+	$(PY) -m pip install --quiet -e '.[test,gpu,rl,urdf,docs,ros]'
 	touch $(TEST_STAMP)
 
 install: $(STAMP)

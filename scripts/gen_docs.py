@@ -131,6 +131,23 @@ def log_reference() -> str:
         else:
             cols = ", ".join(f"`{logtable.column_name(ch, c, u)}`" for c, u in logtable.COMPONENTS[ch])
         out.append(f"| `{ch}` | ({dims}) | {_prose(doc)} | {cols} |")
+    from bioform_mj.outputs.fullstate import STATE_CHANNELS, STATE_STATICS
+
+    out += [
+        "",
+        "## The 3-D state",
+        "",
+        "With `bioform run --rosbag` or `simulate(sc, full_state=True)` the log also holds the state a ROS 2 bag "
+        "needs ([ROS 2 bags](../guide/rosbag.md)), sampled at every row and once more at the end of the run "
+        "(`K + 1` rows; generated from `bioform_mj.outputs.fullstate.STATE_CHANNELS`). Not in the tidy table.",
+        "",
+        "| array | shape | what |",
+        "|---|---|---|",
+    ]
+    for ch, (shape, doc) in STATE_CHANNELS.items():
+        out.append(f"| `{ch}` | ({', '.join(('K + 1', *shape))}) | {_prose(doc)} |")
+    for ch, (shape, doc) in STATE_STATICS.items():
+        out.append(f"| `{ch}` | ({', '.join(shape)}) | {_prose(doc)} |")
     return "\n".join(out) + "\n"
 
 

@@ -25,6 +25,7 @@ def test_paper_robot_at_its_own_rate_passes_and_says_what_it_skipped():
     assert c["control_rate"]["value"] == pytest.approx(1000.0) and c["control_rate"]["limit"] == pytest.approx(1000.0)
     assert c["control_rate"]["pass"] is True
     assert c["wheel_speed"]["pass"] is None and "no-load" in c["wheel_speed"]["reason"]
+    assert "top_speed" in c["wheel_speed"]["reason"]  # how to give it (design §21)
     f = res.summary["followers"]
     assert c["torque"]["value"] == pytest.approx(max(x["peak_abs_torque"] for x in f))
     assert c["torque"]["limit"] == pytest.approx(5.0) and c["torque"]["pass"] is True
@@ -33,7 +34,9 @@ def test_paper_robot_at_its_own_rate_passes_and_says_what_it_skipped():
     v = res.log["vel"][:, :, 0]
     acc = np.abs(np.diff(v, axis=0)) / np.diff(res.log["t"])[:, None]
     assert c["tip_over"]["value"] == pytest.approx(acc.max())
-    assert hw["verdict"] == ("fail" if hw["failed"] else "pass")
+    # never "pass" with a check skipped (design §21): incomplete, naming it
+    assert hw["verdict"] == ("fail" if hw["failed"] else "incomplete")
+    assert "wheel_speed" in hw["not_checked"] and "wheel_speed" in line(hw)
     assert set(hw["failed"]) == {k for k, x in c.items() if x["pass"] is False}
 
 
@@ -78,7 +81,8 @@ def test_ideal_plant_skips_what_it_cannot_know():
     for k in ("wheel_speed", "tip_over", "control_rate", "slip", "separation"):
         assert c[k]["pass"] is None and c[k]["reason"]
     assert c["torque"]["pass"] is True
-    assert "skipped" in line(res.summary["hardware"]) or res.summary["hardware"]["verdict"] == "fail"
+    assert res.summary["hardware"]["verdict"] in ("incomplete", "fail")
+    assert res.summary["hardware"]["verdict"] == "fail" or "not checked" in line(res.summary["hardware"])
 
 
 def test_cli_prints_one_verdict_line_and_writes_the_block(tmp_path, capsys):
@@ -91,5 +95,9 @@ def test_cli_prints_one_verdict_line_and_writes_the_block(tmp_path, capsys):
     lines = [x for x in (out.out + out.err).splitlines() if "hardware:" in x]
     assert code == 0 and len(lines) == 1
     hw = json.loads((tmp_path / "r" / "summary.json").read_text())["hardware"]
-    assert hw["verdict"] in ("pass", "fail") and set(hw["checks"]) >= {"torque", "tip_over", "control_rate"}
+    assert hw["verdict"] in ("pass", "fail", "incomplete") and set(hw["checks"]) >= {
+        "torque",
+        "tip_over",
+        "control_rate",
+    }
     assert lines[0].startswith("hardware: pass") == (hw["verdict"] == "pass")

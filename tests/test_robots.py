@@ -312,7 +312,7 @@ def test_a_robot_the_scenario_overturns_is_reported_tipped_at_the_moment_it_tips
     chassis tilt (measured every step by an observer of the step-by-step loop) crossed 30°."""
     import math
 
-    from bioform_mj.plants.mujoco.plant import TIP_ANGLE_DEG
+    from bioform_mj.core.thresholds import TIP_ANGLE_DEG
     from bioform_mj.run.simulate import simulate
     from bioform_mj.scenario.loader import load
 

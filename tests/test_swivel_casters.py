@@ -162,7 +162,8 @@ def test_a_sphere_on_a_swivel_alone_slides_and_is_named_a_braking_caster(tmp_pat
     rep = identify(path)
     braking = {f["geom"] for f in rep["findings"] if f["kind"] == "braking_caster"}
     assert braking == {"front_tire", "back_tire"}
-    assert {c["role"] for c in rep["floor_contacts"] if c["geom"] in braking} == {"other"}
+    # one classification (design §0): identify's floor contacts are robot check's, casters that cannot roll
+    assert {(c["role"], c["rolls"]) for c in rep["floor_contacts"] if c["geom"] in braking} == {("caster", False)}
     chk = check(path)
     assert chk["verdict"] == "fail" and chk["cause"]["kind"] == "braking_caster"
     rows = [c for c in chk["floor_contacts"] if c["geom"] in braking]
@@ -235,7 +236,8 @@ def test_a_urdf_base_with_a_rear_swivel_caster_turned_sideways(tmp_path, monkeyp
     rep = identify(ref)
     assert rep["test"]["caster_swivels"] == ["swivel_joint"]
     assert abs(rep["relative_error"]["a"]) < 0.03 and abs(rep["relative_error"]["b"]) < 0.03, rep["relative_error"]
-    assert [c["role"] for c in rep["floor_contacts"] if c["body"] == "center_wheel"] == ["rolling"]
+    # one classification (design §0): a loaded caster whose wheel rolls
+    assert [(c["role"], c["rolls"]) for c in rep["floor_contacts"] if c["body"] == "center_wheel"] == [("caster", True)]
     assert check(ref)["verdict"] != "fail"
     monkeypatch.setattr(identify_module, "align_swivels", lambda *a, **k: [])
     assert identify(ref)["relative_error"]["a"] < -0.3

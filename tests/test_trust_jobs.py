@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from bioform_mj.cli.main import main
+from bioform_mj.core import codehash
 from bioform_mj.jobs import provenance
 from bioform_mj.jobs import sweep as sweep_mod
 from bioform_mj.jobs.sweep import expand, sweep
@@ -107,7 +108,7 @@ def test_resume_after_a_code_change_redoes_rows(tmp_path, monkeypatch, capsys):
     out = tmp_path / "sw"
     args = ("paper", 2, ["bioinspired"], [], ["sim.duration=0.2", "formation.init_jitter=0.1"])
     assert sweep(expand(*args, plant="ideal", warn=None), out, workers=1)["ran"] == 2
-    monkeypatch.setitem(provenance._CODE, "hash", "0123456789abcdef")  # as an edit of an equation would
+    monkeypatch.setattr(provenance, "code_hash", lambda: "0123456789abcdef")  # as an edit of an equation would
     capsys.readouterr()
     again = sweep(expand(*args, plant="ideal", warn=None), out, workers=1)
     assert again["ran"] == 2 and again["skipped"] == 0
@@ -116,7 +117,8 @@ def test_resume_after_a_code_change_redoes_rows(tmp_path, monkeypatch, capsys):
 
 
 def test_code_hash_covers_every_source_file_and_is_cached():
-    provenance._CODE.pop("hash", None)
+    codehash.source_digest.cache_clear()
+    codehash.code_hash.cache_clear()
     t0 = time.perf_counter()
     h = provenance.code_hash()
     first_ms = (time.perf_counter() - t0) * 1e3

@@ -199,7 +199,8 @@ def _outcomes(**kw):
 
 
 def test_every_outcome_is_listed_most_severe_first():
-    from bioform_mj.assess.outcomes import LOST_M, OUTCOME_ORDER
+    from bioform_mj.assess.outcomes import OUTCOME_ORDER
+    from bioform_mj.core.thresholds import LOST_M
 
     assert _outcomes() == []
     got = _outcomes(slip_t=3.2, final=2.0)  # a follower 2 m off that also slips: both
@@ -224,7 +225,8 @@ def test_c_hat_bound_is_a_band_not_equality():
 
 
 def test_c_hat_off_names_the_likely_cause():
-    from bioform_mj.assess.outcomes import C_HAT_OFF, unmodelled_causes
+    from bioform_mj.assess.outcomes import unmodelled_causes
+    from bioform_mj.core.thresholds import C_HAT_OFF
 
     assert C_HAT_OFF == 0.25
     assert _outcomes(c_hat=np.array([0.4 * 0.76, 10.0 * 1.24])) == []  # within 25 %: ok
@@ -470,7 +472,8 @@ def test_self_contact_at_rest_is_the_named_structural_cause(tmp_path):
     assert {pair["body1"], pair["body2"]} == {"left_wheel", "fender"} and pair["force_n"] > 1e3
     sc = load("paper", overrides=["plant.kind=mujoco", f'plant.robots=[{{model="{path}", free_joints=true}}]'])
     warns = feasibility(sc, make_plant(sc))
-    assert any(w.startswith("followers 1, 2, 3: self contact: ") and "'left_wheel'/'fender'" in w for w in warns)
+    # the pair as robots/contacts.self_contacts lists it, in body order (design §0: one self_contacts)
+    assert any(w.startswith("followers 1, 2, 3: self contact: ") and "'fender'/'left_wheel'" in w for w in warns)
 
 
 def test_batch_engine_refuses_what_run_refuses(tmp_path):

@@ -1,5 +1,6 @@
 """Cause attribution of :func:`bioform_mj.assess.identify.identify` (design §14): what touches the floor and
-with what load, the robot's own bodies pressing on each other, the findings at rest (structural,
+with what load and the robot's own bodies pressing on each other (read with ``robots/contacts.py``'s one
+classification, design §0), the findings at rest (structural,
 braking geoms, mapping) and those the fit reads (damping, dead band, rocking, slip).
 
 Split from :mod:`bioform_mj.assess.identify`, which re-exports the public names.
@@ -13,7 +14,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from bioform_mj.robots.contacts import rolling_bodies, strip_prefix
+from bioform_mj.robots.contacts import brakes, floor_contacts, is_caster, self_contacts, strip_prefix
 from bioform_mj.robots.layout import element_name, subtree
 
 #: a finding of :func:`identify` (design §14): drag when it changes the speed by this fraction over a test
@@ -26,10 +27,8 @@ ROCK_DEG = 0.5
 ROCK_GAP = 0.03
 #: ... slip: the wheels' rim speed this far (relative) from the axle's speed at the end of a drive test
 SLIP_FINDING = 0.05
-#: ... a braking geom: a non-wheel geom on the floor at rest with more load than this share of the weight
-#: and more friction than :data:`CASTER_MU`
-CASTER_LOAD = 0.01
-CASTER_MU = 0.01
+# ... a braking geom: robot check's own test, robots/contacts.py: brakes (a caster by is_caster, CASTER_LOAD =
+# 0.5 % of the weight, that cannot roll, with friction; design §0, §14.2)
 #: a fit whose RMS residual exceeds this share of its torque term's RMS does not hold (design §14.3: measured
 #: ≤ 0.6 % on a and ≤ 4.8 % on b over the zoo but for a skid-steer's b, 16 %; 8–31 % where a chassis edge drags)
 FIT_RESIDUAL_MAX = 0.06
@@ -62,45 +61,17 @@ def _finding(kind: str, detail: str, **numbers: Any) -> dict[str, Any]:
     return {"kind": kind, "detail": detail, **numbers}
 
 
-def floor_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> list[dict[str, Any]]:
-    """Robot ``i``'s geoms touching the floor now (after the robot settled): ``body``, ``geom``,
-    ``role`` (``wheel``; ``rolling``: below a passive caster joint that rolls, not a swivel alone; or
-    ``other``), ``load_n`` (normal force, N), ``friction`` (the contact's sliding μ as simulated),
-    ``condim``. A minimal list for the verdict's braking-caster cause.
-    ``data``: another state of the plant's model (a settled copy) instead of the plant's own."""
-    m, d = plant.model, (plant.data if data is None else data)
+def _prefix(lay: Any) -> str:
+    """The robot's name prefix in the scene (``f1/``), from its layout's base body."""
+    return lay.base[: lay.base.index("/") + 1] if "/" in lay.base else ""
+
+
+def on_floor(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> list[dict[str, Any]]:
+    """Robot ``i``'s floor contacts now, :func:`bioform_mj.robots.contacts.floor_contacts` (the one
+    classification: ``role`` wheel, caster or other, ``rolls``, ``load_n``, the simulated ``friction`` and
+    ``condim``, ...). ``data``: another state of the plant's model (a settled copy) instead of the plant's own."""
     lay = plant.layouts[i]
-    prefix = lay.base[: lay.base.index("/") + 1] if "/" in lay.base else ""
-    inside = set(subtree(m, m.body(lay.base).id).tolist())
-    wheels = {m.geom(g).id for g in lay.wheel_geoms}
-    rolling = rolling_bodies(m, lay)  # below a passive caster joint that rolls (design §13, §14.1)
-    out: dict[int, dict[str, Any]] = {}
-    f = np.zeros(6)
-    for c in range(d.ncon):
-        con = d.contact[c]
-        g1, g2 = int(con.geom1), int(con.geom2)
-        b1, b2 = int(m.geom_bodyid[g1]), int(m.geom_bodyid[g2])
-        if b1 == 0 and b2 in inside:
-            g = g2
-        elif b2 == 0 and b1 in inside:
-            g = g1
-        else:
-            continue
-        mujoco.mj_contactForce(m, d, c, f)
-        body = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.geom_bodyid[g])) or ""
-        e = out.setdefault(
-            g,
-            {
-                "body": strip_prefix(body, prefix),
-                "geom": strip_prefix(element_name(m, mujoco.mjtObj.mjOBJ_GEOM, g), prefix),
-                "role": "wheel" if g in wheels else ("rolling" if int(m.geom_bodyid[g]) in rolling else "other"),
-                "load_n": 0.0,
-                "friction": float(con.friction[0]) if int(con.dim) > 1 else 0.0,
-                "condim": int(con.dim),
-            },
-        )
-        e["load_n"] += float(f[0])
-    return list(out.values())
+    return floor_contacts(plant.model, plant.data if data is None else data, lay, _prefix(lay))
 
 
 def _given(lay: Any, what: str, says: str) -> float | None:
@@ -109,41 +80,6 @@ def _given(lay: Any, what: str, says: str) -> float | None:
         if n.startswith(f"{what} ") and f"{says} say" in n:
             return float(n.rsplit("say ", 1)[1].split()[0])
     return None
-
-
-def self_contacts(plant: Any, i: int = 0, data: mujoco.MjData | None = None) -> list[dict[str, Any]]:
-    """Pairs of robot ``i``'s own bodies in contact now: ``body1``, ``body2``, ``geom1``, ``geom2``,
-    ``force_n`` (normal force, N). MuJoCo collides every pair but parent and child; URDF/Gazebo
-    collide none of one model's links by default, so a published description may overlap at rest."""
-    m, d = plant.model, (plant.data if data is None else data)
-    lay = plant.layouts[i]
-    prefix = lay.base[: lay.base.index("/") + 1] if "/" in lay.base else ""
-    inside = set(subtree(m, m.body(lay.base).id).tolist())
-    out: dict[tuple[int, int], dict[str, Any]] = {}
-    f = np.zeros(6)
-
-    def name(kind: Any, k: int) -> str:
-        return strip_prefix(element_name(m, kind, k), prefix)
-
-    for c in range(d.ncon):
-        con = d.contact[c]
-        g1, g2 = int(con.geom1), int(con.geom2)
-        b1, b2 = int(m.geom_bodyid[g1]), int(m.geom_bodyid[g2])
-        if b1 not in inside or b2 not in inside:
-            continue
-        mujoco.mj_contactForce(m, d, c, f)
-        e = out.setdefault(
-            (g1, g2),
-            {
-                "body1": name(mujoco.mjtObj.mjOBJ_BODY, b1),
-                "body2": name(mujoco.mjtObj.mjOBJ_BODY, b2),
-                "geom1": name(mujoco.mjtObj.mjOBJ_GEOM, g1),
-                "geom2": name(mujoco.mjtObj.mjOBJ_GEOM, g2),
-                "force_n": 0.0,
-            },
-        )
-        e["force_n"] += float(f[0])
-    return list(out.values())
 
 
 def check_radius(plant: Any) -> None:
@@ -193,10 +129,14 @@ def _brake_what(c: dict[str, Any], base: str) -> str:
     return f"'{c['geom']}' (body '{c['body']}') is not a wheel,"
 
 
-def _brakes(c: dict[str, Any], weight: float) -> bool:
-    """True when floor contact ``c`` (a :func:`floor_contacts` entry, or a driving mean of one) carries over
-    :data:`CASTER_LOAD` of ``weight`` N and slides with more friction than :data:`CASTER_MU`."""
-    return c["load_n"] > CASTER_LOAD * weight and c["friction"] > CASTER_MU
+def dragging_brakes(c: dict[str, Any], weight: float, named: bool = False) -> bool:
+    """Whether a driving mean of a floor contact (``c``: a :func:`on_floor` entry whose ``load_n`` is its mean
+    over a drive test) brakes: ``robot check``'s test (:func:`~bioform_mj.robots.contacts.brakes`) with the
+    caster rule (:func:`~bioform_mj.robots.contacts.is_caster`) applied to the mean load (``weight`` N;
+    ``named``: the mapping names it a caster)."""
+    if c["role"] == "wheel":
+        return False
+    return brakes({**c, "role": "caster" if is_caster(c["load_n"], weight, named) else "other"})
 
 
 def _braking_finding(c: dict[str, Any], base: str, detail: str, while_driving: bool = False) -> dict[str, Any]:
@@ -218,16 +158,22 @@ def _braking_finding(c: dict[str, Any], base: str, detail: str, while_driving: b
 
 
 def moving_brakes(
-    findings: list[dict[str, Any]], dragging: list[dict[str, Any]], weight: float, r: float, base: str, tau_a: float
+    findings: list[dict[str, Any]],
+    dragging: list[dict[str, Any]],
+    weight: float,
+    r: float,
+    base: str,
+    tau_a: float,
+    named: frozenset[str] = frozenset(),
 ) -> list[dict[str, Any]]:
     """``braking_caster`` findings for geoms that are no wheel and do not roll and drag on the floor while the
-    robot drives (``dragging``: :func:`floor_contacts` entries with their mean ``load_n`` and their ``peak_n``
-    over the top drive test, ``tau_a`` N·m), with a mean load over :data:`CASTER_LOAD` of ``weight`` N, not
-    already named at rest."""
-    named = {x.get("geom") for x in findings if x["kind"] == "braking_caster"}
+    robot drives (``dragging``: :func:`on_floor` entries with their mean ``load_n`` and their ``peak_n``
+    over the top drive test, ``tau_a`` N·m) and brake by :func:`dragging_brakes` (``weight`` N; ``named``: the
+    geoms the mapping names casters), not already named at rest."""
+    done = {x.get("geom") for x in findings if x["kind"] == "braking_caster"}
     out = []
     for c in dragging:
-        if c["geom"] in named or not _brakes(c, weight):
+        if c["geom"] in done or not dragging_brakes(c, weight, c["geom"] in named):
             continue
         brake = c["friction"] * c["load_n"]
         out.append(
@@ -248,9 +194,11 @@ def rest_findings(
     plant: Any, params: Any, lay: Any, weight: float, loads: np.ndarray, contacts: list[dict[str, Any]]
 ) -> list[dict[str, Any]]:
     """The findings at rest (design §14): self contacts, braking geoms, wheels off the floor, a mapped
-    size off the model's. ``weight`` N, ``loads`` (2,) the wheel loads N, ``contacts`` :func:`floor_contacts`."""
+    size off the model's. ``weight`` N, ``loads`` (2,) the wheel loads N, ``contacts`` :func:`on_floor`;
+    self contacts: :func:`bioform_mj.robots.contacts.self_contacts`, per pair of bodies."""
     findings: list[dict[str, Any]] = []
-    selfc = [c for c in self_contacts(plant) if c["force_n"] > SELF_CONTACT_LOAD * weight]
+    pressing = self_contacts(plant.model, plant.data, plant.layouts[0], _prefix(plant.layouts[0]))
+    selfc = [c for c in pressing if c["force_n"] > SELF_CONTACT_LOAD * weight]
     if selfc:
         findings.append(
             _finding(
@@ -262,7 +210,7 @@ def rest_findings(
             )
         )
     for c in contacts:
-        if c["role"] == "other" and _brakes(c, weight):
+        if brakes(c):
             brake = c["friction"] * c["load_n"]
             findings.append(
                 _braking_finding(

@@ -11,7 +11,7 @@ the ground truth from the compiled model, identifies ``a, b`` (constant torques 
   against the **motor limit** (N·m);
 - **static tip-over margins**: the forward, backward and lateral accelerations (m/s²) at which
   the chassis tips, from the centre of mass (height ``h``, position ``c`` from the axle midpoint)
-  and the support rectangle of every collision geom within :data:`SUPPORT_CLEARANCE` of the
+  and the support rectangle of every collision geom within :data:`~bioform_mj.robots.layout.SUPPORT_CLEARANCE` of the
   floor (wheels, casters): accelerating forward tips it backwards about the rearmost support
   ``x_rear`` once ``a > g (c_x − x_rear)/h``; braking tips it forwards once
   ``a > g (x_front − c_x)/h``; turning tips it sideways once ``υω > g min(y_left − c_y, c_y − y_right)/h``;
@@ -48,7 +48,6 @@ __all__ = [
     "main",
     "EXIT_FAIL",
     "G",
-    "SUPPORT_CLEARANCE",
 ]
 
 #: exit code of ``bioform robot check`` for a ``fail`` verdict (0: pass or warn, 2: bad input)
@@ -61,14 +60,13 @@ GIVEN_TOL = 0.05
 _GIVEN = re.compile(
     r"(?P<what>wheel_radius|half_track) (?P<given>[-+.\deE]+) m given; the [a-z ]+ say (?P<model>[-+.\deE]+) m$"
 )
-#: a collision geom whose lowest point is within this of the floor (m, or 0.25 r if larger) supports the chassis
-SUPPORT_CLEARANCE = 0.005
 #: identification vs formula: above WARN_ID the verdict is warn, above FAIL_ID fail (relative)
 WARN_ID, FAIL_ID = 0.03, 0.10
 #: the yaw inertia of the robot that runs differs from the file's (or changes while driving) by more: a warning
 YAW_TOL = 0.01
-#: a self contact at rest deeper than this (m) or pushing more than this fraction of the weight is a warning
-SELF_DEPTH, SELF_FORCE = 1e-3, 0.01
+#: a self contact at rest deeper than this (m), or pushing more than ``causes.SELF_CONTACT_LOAD`` of the weight
+#: (identification's structural threshold, the one definition: design §0), is a warning
+SELF_DEPTH = 1e-3
 
 
 def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
@@ -82,7 +80,7 @@ def tip_margins(model: Any, data: Any, prefix: str = "") -> dict[str, Any]:
 
     from bioform_mj.robots.analysis import layout_of
     from bioform_mj.robots.contacts import floor_points
-    from bioform_mj.robots.layout import geom_support, subtree
+    from bioform_mj.robots.layout import SUPPORT_CLEARANCE, geom_support, subtree
 
     lay = layout_of(model, prefix)
     base = model.body(lay.base).id
@@ -151,7 +149,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     """
     import mujoco
 
-    from bioform_mj.assess.causes import check_radius, identify_notes
+    from bioform_mj.assess.causes import SELF_CONTACT_LOAD, check_radius, identify_notes
     from bioform_mj.assess.identify import DRAG_STEP, identify
     from bioform_mj.plants.mujoco.plant import MujocoPlant
     from bioform_mj.robots.contacts import (
@@ -243,7 +241,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         pushed = [f"'{c['body1']}'/'{c['body2']}'" for c in selfc if c["simulated"]]
         reasons_warn.append(moving_at_rest + (f"; its own bodies push it: {', '.join(pushed)}" if pushed else ""))
     for sc in selfc:  # a pair the scene does not collide is a note (self_notes), not a warning
-        if sc["simulated"] and (sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_FORCE * weight):
+        if sc["simulated"] and (sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_CONTACT_LOAD * weight):
             reasons_warn.append(
                 f"the robot's own bodies '{sc['body1']}' and '{sc['body2']}' touch at rest "
                 f"({1e3 * sc['depth_m']:.2g} mm deep, {sc['force_n']:.3g} N; self_contacts): MuJoCo collides all but "
@@ -352,6 +350,10 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
     if tcs and min(tcs) < 5.0:
         reasons_warn.append(f"wheel damping: drag time constant {min(tcs):.2g} s (< 5 s), a large unmodelled term")
     verdict = "fail" if reasons_fail else "warn" if reasons_warn else "pass"
+    from bioform_mj.robots.limits import limits_of  # design §21: the limits in one place
+
+    ref0 = entry if isinstance(entry, RobotRef) else None
+    limits = limits_of(plant, 0, ref0, loads, ta)
     layout = asdict(lay)
     layout["file"] = lay.file
     named = ("base", "wheel_joints", "motors", "wheel_geoms", "disabled_actuators", "frozen_joints", "locked_joints")
@@ -397,6 +399,7 @@ def check(entry: Any, *, identify_: bool = True) -> dict[str, Any]:
         "weight_on_wheels": float(loads.sum() / (p.mass * G)),
         "motor_accel_mps2": motor_accel,
         "tip_accel_mps2": ta,
+        "limits": limits,
         "support_m": tips["support_m"],
         "support_geoms": [g[len("f1/") :] for g in tips["support_geoms"]],
         "com_height_m": tips["com_height_m"],
@@ -467,8 +470,9 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
     """
     import mujoco
 
-    from bioform_mj.assess.causes import SELF_CONTACT_LOAD, self_contacts
+    from bioform_mj.assess.causes import SELF_CONTACT_LOAD
     from bioform_mj.core.errors import InputError
+    from bioform_mj.robots.contacts import self_contacts
 
     t = np.linspace(0.0, scenario.sim.duration, max(200, int(scenario.sim.duration * 200)) + 1)
     _, vel, _ = scenario.build_leader().states(t)
@@ -484,7 +488,8 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
     pressed: dict[str, list[int]] = {}
     for i, p in enumerate(plant.params):  # braking casters: below, with contacts.braking_casters
         weight = p.mass * G
-        pressing = [c for c in self_contacts(plant, i, settled) if c["force_n"] > SELF_CONTACT_LOAD * weight]
+        mine = self_contacts(plant.model, settled, plant.layouts[i], f"f{i + 1}/")
+        pressing = [c for c in mine if c["force_n"] > SELF_CONTACT_LOAD * weight]
         if pressing:
             note = (
                 "the robot's own bodies press on each other at rest: "
@@ -636,6 +641,12 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--half-track", type=float, help="half the track in m (default: from the wheel joint anchors)")
     p.add_argument("--tau-max", type=float, help="wheel torque limit in N·m (default: the model's own drive limit)")
     p.add_argument(
+        "--top-speed",
+        type=float,
+        help="top speed in m/s at the tyre, the maker's figure (default: the URDF's wheel <limit velocity> or "
+        "the <dcmotor>'s no-load speed; design §21)",
+    )
+    p.add_argument(
         "--caster",
         action="append",
         metavar="NAME",
@@ -671,18 +682,15 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="URDF: keep contacts between the robot's own links (default off, as in Gazebo)",
     )
-    from bioform_mj.robots.xacro_sandbox import add_flags
-
-    add_flags(p)  # --xacro, --xacro-arg NAME=VALUE (design §12: a xacro file is a program, run when asked)
+    __import__("bioform_mj.robots.xacro_sandbox", fromlist=["add_flags"]).add_flags(p)  # --xacro (design §12)
 
 
 def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
     """A :class:`RobotRef` from a model argument and the :func:`mapping_args` flags."""
     from bioform_mj.core.errors import InputError
     from bioform_mj.robots.refs import package_path_from_args, resolve_robot
-    from bioform_mj.robots.xacro_sandbox import xacro_args_from_flags
 
-    for flag in ("wheel_radius", "half_track", "tau_max"):
+    for flag in ("wheel_radius", "half_track", "tau_max", "top_speed"):
         v = getattr(args, flag, None)
         if v is not None and not (math.isfinite(v) and v > 0):
             raise InputError(f"--{flag.replace('_', '-')} must be a number > 0, got {v}")
@@ -704,8 +712,7 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
             self_collide=bool(getattr(args, "self_collide", False)),
             package_path=package_path_from_args(getattr(args, "package_path", None)),
             keyframe=getattr(args, "keyframe", None) or "",
-            xacro=bool(getattr(args, "xacro", False)),
-            xacro_args=xacro_args_from_flags(getattr(args, "xacro_arg", None)),
+            top_speed=getattr(args, "top_speed", None) or 0.0,
         )
     )
 
@@ -756,6 +763,9 @@ def main(args: argparse.Namespace) -> int:
         f"CoM {1e3 * report['com_offset_m']:.1f} mm off the axle, "
         f"{report['com_height_m']:.3g} m high",
     ]
+    from bioform_mj.robots.limits import block
+
+    lines += block(report["limits"])
     lines.append(
         f"  mass {report['mass_kg']:.4g} kg, yaw inertia {report['yaw_inertia_kgm2']:.4g} kg·m² "
         f"(the file's configuration: {report['yaw_inertia_file_kgm2']:.4g}), c_true = "

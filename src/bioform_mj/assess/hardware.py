@@ -18,8 +18,11 @@ robot does not say: a check that cannot be made is skipped, never passed silentl
   ``tb3`` for the TurtleBot3 model …; a robot without a preset: skipped);
 * ``slip`` s: the time followers spent slipping (outcome ``slipping``) against 0.
 
-The verdict is ``fail`` if any check failed, else ``pass``. The ideal plant has no robot
-model: only the checks its numbers allow run, the others are skipped with the reason.
+The verdict is ``fail`` if any check failed, else ``incomplete`` if one could not be made
+(``not_checked`` names them; never ``pass`` with a check skipped, design §21), else ``pass``. The
+ideal plant has no robot model: only the checks its numbers allow run, the others are skipped with
+the reason. ``wheel_speed`` of torque-source motors is checked against the robot's top speed
+(:mod:`bioform_mj.robots.limits`: the mapping's ``top_speed``, the URDF's ``<limit velocity>``).
 """
 
 from __future__ import annotations
@@ -91,7 +94,8 @@ def _preset_rates() -> list[tuple[float, str, str]]:
 
 
 def verdict(sc: Any, plant: Any, summary: dict[str, Any], logd: dict[str, np.ndarray]) -> dict[str, Any]:
-    """``{"verdict": "pass"|"fail", "checks": {name: {"value", "limit", "pass"[, "reason"]}}}``
+    """``{"verdict": "pass"|"fail"|"incomplete", "failed", "not_checked", "checks": {name: {"value", "limit",
+    "pass"[, "reason"]}}}``
     for a finished run (``summary``: its ``summary.json`` dict, ``logd``: its log)."""
     fs = summary["followers"]
     checks: dict[str, dict[str, Any]] = {}
@@ -117,8 +121,15 @@ def verdict(sc: Any, plant: Any, summary: dict[str, Any], logd: dict[str, np.nda
                     if K > 0 and g > 0 and vmax > 0:
                         nl.append(vmax / (K * g))
             limits.append(min(nl) if nl else None)
+        tops = _top_speeds(summary, len(fs))  # design §21: m/s at the tyre, for torque-source motors
+        for i, p in enumerate(params):
+            if limits[i] is None and tops[i] is not None:
+                limits[i] = tops[i] / p.wheel_radius
         if all(v is None for v in limits):
-            checks["wheel_speed"] = _skip("torque-source motors have no no-load speed (no <dcmotor> in the model)")
+            checks["wheel_speed"] = _skip(
+                "no top speed known: torque-source motors have no no-load speed (no <dcmotor> in the model) and "
+                "the robot gives none (map top_speed, m/s at the tyre; design §21)"
+            )
         elif len(vel):
             worst, lim_w = 0.0, None
             for i, p in enumerate(params):
@@ -223,20 +234,39 @@ def verdict(sc: Any, plant: Any, summary: dict[str, Any], logd: dict[str, np.nda
         checks["slip"]["unit"] = "followers"
 
     failed = [k for k, c in checks.items() if c["pass"] is False]
-    return {"verdict": "fail" if failed else "pass", "failed": failed, "checks": checks}
+    unchecked = [k for k, c in checks.items() if c["pass"] is None]  # never "pass" with a check skipped
+    verdict_ = "fail" if failed else "incomplete" if unchecked else "pass"
+    return {"verdict": verdict_, "failed": failed, "not_checked": unchecked, "checks": checks}
+
+
+def _top_speeds(summary: dict[str, Any], n: int) -> list[float | None]:
+    """Per follower, the top speed (m/s at the tyre) of the pre-run demand check's limits
+    (``summary["demand"]``, :mod:`bioform_mj.run.demand`), None where unknown."""
+    out: list[float | None] = [None] * n
+    for r in (summary.get("demand") or {}).get("robots", []):
+        for i in r.get("followers", []):
+            if 1 <= i <= n:
+                out[i - 1] = r.get("limits", {}).get("top_speed_mps")
+    return out
 
 
 def line(hw: dict[str, Any]) -> str:
-    """One line for the end of a run: ``hardware: pass (7 checks, 2 skipped)`` or the failures."""
+    """One line for the end of a run: ``hardware: pass (7 checks passed)``, ``hardware: incomplete (…, not
+    checked: wheel_speed (why))`` or the failures."""
     checks = hw["checks"]
     skipped = sum(1 for c in checks.values() if c["pass"] is None)
     ran = len(checks) - skipped
     if hw["verdict"] == "pass":
-        return f"hardware: pass ({ran} checks passed, {skipped} skipped)"
+        return f"hardware: pass ({ran} checks passed)"
+    if hw["verdict"] == "incomplete":
+        why = "; ".join(f"{k} ({checks[k].get('reason', '')})" for k in hw.get("not_checked", []))
+        return f"hardware: incomplete ({ran} checks passed, {skipped} not checked: {why})"
     bits = []
     for k in hw["failed"]:
         c = checks[k]
         v, lim = c["value"], c["limit"]
         txt = f"{k} {v:.3g} (limit {lim:.3g})" if isinstance(v, float) and isinstance(lim, float) else k
         bits.append(txt + (f" ({c['reason']})" if c.get("reason") else ""))
-    return f"hardware: FAIL, would not run on the robot as specified: {'; '.join(bits)}"
+    rest = hw.get("not_checked", [])
+    tail = f" (not checked: {', '.join(rest)})" if rest else ""
+    return f"hardware: FAIL, would not run on the robot as specified: {'; '.join(bits)}{tail}"

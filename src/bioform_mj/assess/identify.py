@@ -27,8 +27,6 @@ import numpy as np
 
 from bioform_mj.assess.causes import (
     CASTER_CF_DEV,
-    CASTER_LOAD,
-    CASTER_MU,
     CAUSE_ORDER,
     DEADBAND_FINDING,
     DRAG_FINDING,
@@ -40,20 +38,20 @@ from bioform_mj.assess.causes import (
     SLIP_FINDING,
     WHEEL_LOAD_MIN,
     _finding,
+    _prefix,
     caster_counterfactual,
     caster_finding,
     caster_parts,
     check_radius,
     fit_findings,
     fit_holds,
-    floor_contacts,
     identify_notes,
     moving_brakes,
+    on_floor,
     rest_findings,
-    self_contacts,
 )
 from bioform_mj.assess.fit import fit_levels
-from bioform_mj.robots.contacts import align_swivels, swivel_casters
+from bioform_mj.robots.contacts import CASTER_LOAD, align_swivels, strip_prefix, swivel_casters
 from bioform_mj.robots.params import COM_TOLERANCE_M, RobotParams, ground_truth, robot_parameters, robot_truth
 
 log = logging.getLogger(__name__)
@@ -67,12 +65,8 @@ __all__ = [
     "identify",
     "identify_main",
     "identify_notes",
-    "floor_contacts",
-    "self_contacts",
     "check_radius",
     "CAUSE_ORDER",
-    "CASTER_LOAD",
-    "CASTER_MU",
     "DEADBAND_FINDING",
     "DRAG_FINDING",
     "MAPPING_TOL",
@@ -190,7 +184,7 @@ def identify(
         plant.step(np.zeros((1, 2)), k * dt)
     weight = params.mass * 9.81
     loads = plant.wheel_loads()[0]
-    contacts = floor_contacts(plant)
+    contacts = on_floor(plant)
     findings = rest_findings(plant, params, lay, weight, loads, contacts)
     # μ N r / f: the least-loaded wheel's own load, and only the share f of the torque that passes the
     # wheel's rotor pushes on the floor (design §13; a rotor of 10 m r² passes 5 %)
@@ -326,8 +320,8 @@ def identify(
             plant.step(tau, k * dt)
             sample(k + 1)
             if k % DRAG_SAMPLE == DRAG_SAMPLE - 1:
-                for c in floor_contacts(plant):
-                    if c["role"] == "other":
+                for c in on_floor(plant):
+                    if c["role"] != "wheel" and not c["rolls"]:
                         e = dragging.setdefault(c["geom"], {**c, "load_n": 0.0, "peak_n": 0.0})
                         e["load_n"] += c["load_n"] / n_samples
                         e["peak_n"] = max(e["peak_n"], c["load_n"])
@@ -406,7 +400,10 @@ def identify(
     turn = [run(-T, T, n_turn) for T in turn_levels]
     # design §14.2: a geom that is no wheel and no caster and drags on the floor while the robot drives (a chassis
     # edge the drive torque pitches onto) brakes it, whether or not it carried load at rest
-    findings += moving_brakes(findings, drive[0]["dragging"], weight, params.wheel_radius, lay.base, 2 * levels[0])
+    named = frozenset(strip_prefix(g, _prefix(lay)) for g in lay.casters)  # the mapping's casters (design §13)
+    findings += moving_brakes(
+        findings, drive[0]["dragging"], weight, params.wheel_radius, lay.base, 2 * levels[0], named
+    )
     tau_a = [2 * T for T in levels]  # τ_a = τ_L + τ_R
     tau_b = [2 * T for T in turn_levels]  # τ_b = τ_R − τ_L (design §5 sign fix)
     # the drag term only where the model has a drag (wheel damping, back-EMF): free, it reads the

@@ -1,7 +1,7 @@
-"""What each follower's run came to (design §9, §14): the formation slots, the thresholds and
-:func:`outcome_list`, the one list of outcomes both engines give a follower (:func:`follower_outcomes`
-for the CPU loops, ``batch.runner``'s ``_outcome`` for the device). Below :mod:`bioform_mj.run.simulate` and
-:mod:`bioform_mj.assess.check`, which both import it."""
+"""What each follower's run came to (design §9, §14): the formation slots and :func:`outcome_list`, the one
+list of outcomes both engines give a follower (:func:`follower_outcomes` for the CPU loops, ``batch.runner``'s
+``_outcome`` for the device), on the one table of thresholds, ``core/thresholds.py``. Below
+:mod:`bioform_mj.run.simulate` and :mod:`bioform_mj.assess.check`, which both import it."""
 
 from __future__ import annotations
 
@@ -10,6 +10,17 @@ from typing import Any
 
 import numpy as np
 
+from bioform_mj.core.thresholds import (
+    C_HAT_BOUND_BAND,
+    C_HAT_OFF,
+    LOST_AFTER_S,
+    LOST_FRACTION,
+    LOST_M,
+    SLIP_RATIO,
+    SLIP_TIME,
+    SPIN_RAD_S,
+    TIP_ANGLE_DEG,
+)
 from bioform_mj.scenario.config import Scenario
 
 
@@ -23,16 +34,8 @@ def slots_of(sc: Scenario, leader_pose: np.ndarray) -> np.ndarray:
     return np.asarray(leader_pose[:2], dtype=float)[None, :] - off
 
 
-#: follower outcomes (design §9): thresholds
-LOST_FRACTION = 0.1  # final formation error beyond this fraction of the formation's extent → lost ...
-LOST_AFTER_S = 10.0  # s: ... once the run has had this long to converge (or if the error grew over the run)
-SPIN_RAD_S = 6.0  # rad/s: |ω| beyond this over the last second → spinning
-#: the ``lost`` threshold of the paper's formation (extent 10 m), kept for reference
-LOST_M = 1.0
-
-
 def lost_threshold_m(sc: Scenario) -> float:
-    """The ``lost`` outcome's threshold, m: :data:`LOST_FRACTION` × the formation's extent, the
+    """The ``lost`` outcome's threshold, m: ``LOST_FRACTION`` (``core/thresholds.py``) × the formation's extent, the
     largest distance between two points of the leader and the followers' slots (``p_r − Δ_i``), from
     the resolved offsets (design §9). 1 m for the paper's formation (offsets (3, 0), (4, ±5): 10 m), so
     it scales with the experiment: 0.15 m for the ``tb3`` preset (``formation.scale = 0.15``), 0.25 m for
@@ -54,10 +57,6 @@ OUTCOME_ORDER = (
     "c_hat_at_bound",
     "c_hat_off",
 )
-#: a learned parameter within this fraction of its projection bound counts as at the bound
-C_HAT_BOUND_BAND = 0.01
-#: a learned ĉ farther than this (relative, either component) from c_true at the end: ``c_hat_off``
-C_HAT_OFF = 0.25
 
 
 def severity(outcome: dict[str, Any]) -> int:
@@ -113,8 +112,8 @@ def outcome_list(
     hi: np.ndarray,
     c_true: np.ndarray,
     causes: Any = None,
-    slip_ratio: float = 0.2,
-    slip_time: float = 0.5,
+    slip_ratio: float = SLIP_RATIO,
+    slip_time: float = SLIP_TIME,
     lost_m: float = LOST_M,
 ) -> list[dict[str, Any]]:
     """Every outcome of one follower, the most severe first (:data:`OUTCOME_ORDER`), each
@@ -122,8 +121,6 @@ def outcome_list(
     when ok. Shared by both engines (:func:`follower_outcomes`, ``batch/runner.py``'s ``BatchRun._outcome``).
     ``causes``: a callable giving :func:`unmodelled_causes`' list (called only for ``c_hat_off``);
     ``lost_m``: the scenario's :func:`lost_threshold_m` (m)."""
-    from bioform_mj.plants.mujoco.plant import TIP_ANGLE_DEG
-
     out: list[dict[str, Any]] = []
     if tip_t is not None:
         out.append({"kind": "tipped", "detail": f"tilt beyond {TIP_ANGLE_DEG:g} deg at t = {tip_t:.3f} s", "t": tip_t})
@@ -197,13 +194,13 @@ def follower_outcomes(
     c_hat: np.ndarray,
     dt: float,
 ) -> list[list[dict[str, Any]]]:
-    """Per follower every outcome (:func:`outcome_list`: ``tipped`` (tilt beyond the plant's
-    ``TIP_ANGLE_DEG``, with the time), ``slipping`` (a wheel's slip ratio beyond the plant's
-    ``SLIP_RATIO`` for ``SLIP_TIME`` s), ``spinning`` (|ω| > :data:`SPIN_RAD_S` over the last
-    second), ``lost`` (final formation error > :func:`lost_threshold_m` after :data:`LOST_AFTER_S` s, or
+    """Per follower every outcome (:func:`outcome_list`; the thresholds are ``core/thresholds.py``'s:
+    ``tipped`` (tilt beyond ``TIP_ANGLE_DEG``, with the time), ``slipping`` (a wheel's slip ratio beyond
+    ``SLIP_RATIO`` for ``SLIP_TIME`` s), ``spinning`` (|ω| > ``SPIN_RAD_S`` over the last
+    second), ``lost`` (final formation error > :func:`lost_threshold_m` after ``LOST_AFTER_S`` s, or
     grown by half over a shorter run), ``c_hat_at_bound`` (a learned parameter within
-    :data:`C_HAT_BOUND_BAND` of its projection bound at the end), ``c_hat_off`` (ĉ more than
-    :data:`C_HAT_OFF` from c_true, with the likely cause); empty when ok."""
+    ``C_HAT_BOUND_BAND`` of its projection bound at the end), ``c_hat_off`` (ĉ more than
+    ``C_HAT_OFF`` from c_true, with the likely cause); empty when ok."""
     n = sc.n
     out: list[list[dict[str, Any]]] = []
     tip = getattr(plant, "tip_step", None)
@@ -233,8 +230,8 @@ def follower_outcomes(
                 causes=lambda i=i, s=slipping: unmodelled_causes(
                     params[i] if params is not None else None, s, braking_casters(plant, i)
                 ),
-                slip_ratio=getattr(plant, "SLIP_RATIO", 0.2),
-                slip_time=getattr(plant, "SLIP_TIME", 0.5),
+                slip_ratio=SLIP_RATIO,
+                slip_time=SLIP_TIME,
                 lost_m=lost_m,
             )
         )

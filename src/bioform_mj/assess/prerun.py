@@ -52,7 +52,7 @@ def cache_dir() -> Path:
 
 
 @functools.cache
-def _code_hash() -> bytes:
+def code_digest() -> bytes:
     """The package's Python source (:func:`bioform_mj.core.codehash.source_digest`) and MuJoCo's version:
     a check computed by other code is not reused."""
     import mujoco
@@ -65,11 +65,11 @@ def _code_hash() -> bytes:
 def robot_key(ref: Any) -> str:
     """The cache key of one resolved :class:`~bioform_mj.robots.refs.RobotRef`: the prepared robot's MJCF
     (``prepare_robot``: the file with its mapping applied, a URDF imported; not its path), the bytes of every asset
-    file it names (meshes), the mapping, and :func:`_code_hash`. Hex, 32 characters."""
+    file it names (meshes), the mapping, and :func:`code_digest`. Hex, 32 characters."""
     from bioform_mj.robots.prepare import prepare_robot
 
     spec, lay = prepare_robot(ref)[:2]
-    h = hashlib.sha256(_code_hash())
+    h = hashlib.sha256(code_digest())
     # the layout stored in the spec names the file: the same content elsewhere is the same robot
     h.update(spec.to_xml().replace(f'"file": {json.dumps(str(lay.file))}', '"file": ""').encode())
     for asset in [*spec.meshes, *spec.hfields, *spec.textures]:

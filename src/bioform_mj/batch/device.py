@@ -12,10 +12,10 @@ from __future__ import annotations
 import mujoco_warp as mjw
 import warp as wp
 
-from bioform_mj.assess.outcomes import SPIN_RAD_S
 from bioform_mj.batch.samesource import warp_equations
 from bioform_mj.control.kernel import DERIV_ANALYTIC, DERIV_DIFFERENCE
 from bioform_mj.core import equations as _E
+from bioform_mj.core.thresholds import SPIN_RAD_S
 from bioform_mj.run.faults import counter
 
 F = wp.float64
@@ -151,6 +151,7 @@ CAPACITY = wp.constant(int(CAPACITY_BITS))
 #: MuJoCo Warp's capacities (``diag[w, 0]`` = the ``Data.overflow`` bits)
 RUNNING, GUARD_FAILED, CAPACITY_EXCEEDED = 0, 1, 2
 ST_CAP = wp.constant(CAPACITY_EXCEEDED)
+#: the ``spinning`` outcome's |ω| threshold, rad/s: ``core/thresholds.py``'s, not typed again (design §0)
 SPIN = wp.constant(F(SPIN_RAD_S))
 
 #: per-world network and sensor faults (``faults.Faults``), columns of ``CommFaults.sc``: the counter

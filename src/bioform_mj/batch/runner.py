@@ -38,8 +38,8 @@ from bioform_mj.batch.support import default_capacity
 from bioform_mj.batch.tables import _check_compatible, _yaw_quat, event_tables, plant_fault_tables
 from bioform_mj.control.stack import ControlStack
 from bioform_mj.core.engine import GUARDS
+from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_TIME, SLIP_V_FLOOR, TIP_ANGLE_DEG
 from bioform_mj.formation.disturbance import Harmonic
-from bioform_mj.plants.mujoco.plant import TIP_ANGLE_DEG
 from bioform_mj.run.faults import Faults
 from bioform_mj.scenario.config import Scenario
 
@@ -125,8 +125,8 @@ class BatchRun:
             row["stride"] = float(stride)
             row["t_spin"] = ((N - 1) // stride) * stride * dt - 1.0  # sim.follower_outcomes: the last second of rows
             row["tilt_cos"] = math.cos(math.radians(TIP_ANGLE_DEG))
-            row["slip_max"] = plant.SLIP_RATIO  # mujoco_plant's watch_slip thresholds
-            row["slip_floor"] = plant.SLIP_V_FLOOR
+            row["slip_max"] = SLIP_RATIO  # the thresholds of the MuJoCo plant's watch_slip (core/thresholds.py)
+            row["slip_floor"] = SLIP_V_FLOOR
             row["slip_need"] = float(plant._slip_need)
             row["odometry"] = 1.0 if sen.on else 0.0
             row["odo_seed"] = float(sc.sim.seed % 2147483647)  # as MujocoPlant: the seed of the gyro noise
@@ -520,8 +520,8 @@ class BatchRun:
             hi=hi,
             c_true=c_true,
             causes=lambda: unmodelled_causes(params[i] if params is not None else None, slip >= 0),
-            slip_ratio=p.SLIP_RATIO,
-            slip_time=p.SLIP_TIME,
+            slip_ratio=SLIP_RATIO,
+            slip_time=SLIP_TIME,
             lost_m=lost_threshold_m(self.scenarios[w]),
         )
         if lst:

@@ -119,6 +119,8 @@ def build_parser() -> argparse.ArgumentParser:
         "the ideal plant is shown in a composed scene)",
     )
     run.add_argument("--rrd", action="store_true", help="write run.rrd (rerun recording)")
+    run.add_argument("--rosbag", action="store_true", help="write rosbag/: the run as a ROS 2 bag (ros extra)")
+    run.add_argument("--ros-distro", choices=("humble", "iron", "jazzy", "kilted"), help="the bag's (default jazzy)")
     run.add_argument("--figures", action="store_true", help="write figures/*.png")
     run.add_argument("--rerun-spawn", action="store_true", help="stream the run live to a rerun viewer spawned for it")
     run.add_argument(
@@ -399,6 +401,10 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
         given = [f"--{k}" for k in ("width", "height", "fps", "camera") if getattr(args, k) is not None]
         if given:
             raise InputError(f"{', '.join(given)} only apply to --video")
+    if args.rosbag or args.ros_distro:  # before any work: the ros extra is installed (else: how to install it)
+        from bioform_mj.outputs.rosbag import check_args
+
+        check_args(args.rosbag, args.ros_distro)
     live_url = None
     if args.rerun_spawn and args.rerun_connect:
         raise InputError("--rerun-spawn and --rerun-connect exclude each other")
@@ -446,7 +452,7 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
             progress_bar(f"{sc.name} {sc.method}", not args.quiet) as cb,
             quiet_outcomes(),  # said once, by _warn_outcomes after the files
         ):
-            result = simulate(sc, observers=observers, progress=cb, engine=args.engine)
+            result = simulate(sc, observers=observers, progress=cb, engine=args.engine, full_state=args.rosbag)
     except KeyboardInterrupt as exc:  # SIGINT/SIGTERM mid-run: keep what the loop returns with it
         result = getattr(exc, "result", None)
         if result is None:
@@ -500,6 +506,10 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, video_opts, live_url
             t0 = time.perf_counter()
             write_rrd(result, out / "run.rrd")
             notes.append(f"run.rrd written in {time.perf_counter() - t0:.1f} s")
+        if args.rosbag:
+            from bioform_mj.outputs.rosbag import write_run_bag
+
+            notes.append(write_run_bag(result, out, args.ros_distro))
         if args.figures:
             from bioform_mj.outputs.figures import run_figures
 

@@ -21,6 +21,11 @@ def _record_toml(summary: dict[str, Any]) -> str:
             if scale != 1
             else ""
         )
+        + (
+            f"\nTimes are already x formation.time_scale = {summary['time_scale']:g}: time_scale = 1 here."
+            if summary.get("time_scale", 1.0) != 1
+            else ""
+        )
     )
     return to_toml(summary["config"], note)
 

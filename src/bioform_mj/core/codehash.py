@@ -32,11 +32,13 @@ def source_digest(patterns: tuple[str, ...] = ("**/*.py",)) -> bytes:
     return h.digest()
 
 
+@functools.cache
 def code_hash() -> str:
     """The whole package's Python source, as 16 hex digits (provenance of results, caches of checks)."""
     return source_digest().hex()[:16]
 
 
+@functools.cache
 def kernel_hash() -> str:
     """The kernel modules' source (:data:`KERNEL_SOURCES`), as 16 hex digits: the numba cache's key."""
     return source_digest(KERNEL_SOURCES).hex()[:16]

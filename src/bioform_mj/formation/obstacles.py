@@ -6,7 +6,7 @@ drawn from ``sim.seed``, kept away from the leader's path if asked); :mod:`biofo
 composes them into the MuJoCo scene as static geoms of the world body, and the figures, the
 video and rerun draw them. The ideal plant refuses obstacles (it has no bodies to touch them).
 
-This module imports nothing of the package but the errors (the scenario imports it).
+This module imports nothing of the package but the errors and the unit helper (the scenario imports it).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bioform_mj.core.errors import ScenarioError
+from bioform_mj.core.units import unit
 
 SHAPES = ("box", "cylinder")
 
@@ -30,10 +31,10 @@ class ObstacleCfg:
     ``cylinder`` (``size = [radius, half_height]``, m); ``position = [x, y]`` m of its centre on the
     floor (it stands on the floor); ``yaw`` rad (boxes). A wall is a long, thin box."""
 
-    shape: str = "box"
-    position: tuple[float, ...] = (0.0, 0.0)
-    size: tuple[float, ...] = (0.5, 0.5, 0.5)
-    yaw: float = 0.0
+    shape: str = unit("box", "-")
+    position: tuple[float, ...] = unit((0.0, 0.0), "m")
+    size: tuple[float, ...] = unit((0.5, 0.5, 0.5), "m")
+    yaw: float = unit(0.0, "rad")
 
 
 @dataclass(frozen=True)
@@ -45,13 +46,13 @@ class ObstacleFieldCfg:
     nor to a follower's initial position;
     ``gap`` m: least distance between two obstacles. ``count = 0``: no field."""
 
-    count: int = 0
-    shape: str = "cylinder"
-    size: tuple[float, ...] = (0.2, 0.5)
-    height: float = 0.5
-    region: tuple[float, ...] = (0.0, -5.0, 20.0, 5.0)
-    keep_out: float = 0.0
-    gap: float = 0.0
+    count: int = unit(0, "1")
+    shape: str = unit("cylinder", "-")
+    size: tuple[float, ...] = unit((0.2, 0.5), "m")
+    height: float = unit(0.5, "m")
+    region: tuple[float, ...] = unit((0.0, -5.0, 20.0, 5.0), "m")
+    keep_out: float = unit(0.0, "m")
+    gap: float = unit(0.0, "m")
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.core.errors import ScenarioError
+from bioform_mj.core.units import unit
 
 FILTERS = ("none", "cbf")
 
@@ -28,12 +29,12 @@ class SafetyCfg:
     neighbours within ``range`` m enter its QP; ``pass_right``: the right-hand rule that breaks the
     deadlock of two robots meeting, 0: off)."""
 
-    distance: float = 0.0
-    filter: str = "none"
-    lookahead: float = 0.1
-    gain: float = 5.0
-    range: float = 2.0
-    pass_right: float = 1.0
+    distance: float = unit(0.0, "m")
+    filter: str = unit("none", "-")
+    lookahead: float = unit(0.1, "m")
+    gain: float = unit(5.0, "1/s")
+    range: float = unit(2.0, "m")
+    pass_right: float = unit(1.0, "1")
 
 
 def validate(cfg: SafetyCfg) -> None:

@@ -57,7 +57,8 @@ ESTS = ("eq13", "eq15")
 EST_GAINS = {"eq13": (25.0, 1.0), "eq15": (1.0, 25.0)}
 #: Fig. 4: backstepping's peak υ_cmd "over 8 m/s", read as this band (m/s)
 PEAK_BAND = (8.0, 10.0)
-LOST_M = 0.5
+#: the calibration's own penalty threshold (m; not the ``lost`` outcome's, ``core/thresholds.py``)
+PENALTY_LOST_M = 0.5
 DIVERGED_PENALTY = 10.0
 LOST_PENALTY = 1.0
 POSE_HALF_RANGE = 3.0
@@ -199,7 +200,7 @@ def evaluate(
     peak = max(float(f["max_abs_v_cmd"]) for f in ms["backstepping"]["followers"])
     final = {m: max(float(f["final_formation_error_m"]) for f in ms[m]["followers"]) for m in PAPER_TABLE1}
     diverged = [m for m in PAPER_TABLE1 if ms[m].get("diverged")]
-    lost = [m for m in PAPER_TABLE1 if not final[m] <= LOST_M]
+    lost = [m for m in PAPER_TABLE1 if not final[m] <= PENALTY_LOST_M]
     sat = {m: max(float(f["saturation_fraction"]) for f in ms[m]["followers"]) for m in PAPER_TABLE1}
     lim = [
         f.get("robot", {}).get("tau_max_nm") if isinstance(f.get("robot"), dict) else f.get("tau_max_nm")
@@ -610,7 +611,7 @@ def calibrate(
         "objective_definition": (
             "RMS of 13 log residuals: log(ours/paper) for the 12 Table I cells and, for "
             "backstepping's peak |v_cmd|, log(peak/8) below 8 m/s, log(peak/10) above 10, 0 "
-            f"between; + {LOST_PENALTY} when a method ends > {LOST_M} m off the formation, "
+            f"between; + {LOST_PENALTY} when a method ends > {PENALTY_LOST_M} m off the formation, "
             f"+ {DIVERGED_PENALTY} when a run diverges"
         ),
         "search_space": {

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from bioform_mj.control.common import wrap
+from bioform_mj.control.common import wrap_angles
 from bioform_mj.outputs.files import atomic_path
 
 #: Leader colour (the ghost's orange), RGB in 0..1.
@@ -122,7 +122,7 @@ def run_figures(result: Any, out_dir: str | Path) -> list[Path]:
     fig, ax = _figure(4)
     rows = [
         ("position (m)", log["estimation_error"]),
-        ("heading (rad)", wrap(log["est_pose"][:, :, 2] - lp[:, None, 2])),
+        ("heading (rad)", wrap_angles(log["est_pose"][:, :, 2] - lp[:, None, 2])),
         ("υ_ir − υ_r (m/s)", log["est_vel"][:, :, 0] - lv[:, None, 0]),
         ("ω_ir − ω_r (rad/s)", log["est_vel"][:, :, 1] - lv[:, None, 1]),
     ]

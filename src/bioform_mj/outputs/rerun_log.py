@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from bioform_mj.control.common import wrap
+from bioform_mj.control.common import wrap_angles
 from bioform_mj.core.errors import InputError
 from bioform_mj.outputs.figures import LEADER_RGB, follower_rgb
 
@@ -112,7 +112,7 @@ _SERIES: list[tuple[str, Callable[[Mapping[str, np.ndarray], int], np.ndarray], 
     (
         "estimation_error",
         lambda g, i: np.column_stack(
-            [g["estimation_error"][:, i], wrap(g["est_pose"][:, i, 2] - g["leader_pose"][:, 2])]
+            [g["estimation_error"][:, i], wrap_angles(g["est_pose"][:, i, 2] - g["leader_pose"][:, 2])]
         ),
         ("position (m)", "heading (rad)"),
     ),

@@ -45,7 +45,7 @@ CALIBRATION_FILES = frozenset(
 KNOWN_FILES = RUN_FILES | CALIBRATION_FILES
 #: Folders a run writes, and the file suffixes they may hold (``assets/``: the files ``scene.xml``
 #: names, copied beside it, design §12).
-RUN_DIRS = {"figures": (".png",), ASSETS_DIR: ASSET_SUFFIXES}
+RUN_DIRS = {"figures": (".png",), ASSETS_DIR: ASSET_SUFFIXES, "rosbag": (".yaml", ".mcap")}
 LOCK_NAME = ".bioform.lock"
 #: the temporary names of :func:`~bioform_mj.outputs.files.atomic_path` (``.NAME.XXXXXXXX.tmp``)
 _TMP = re.compile(r"^\.(?P<name>.+)\.[A-Za-z0-9_]+\.tmp$")
@@ -115,6 +115,12 @@ def _is_tmp(name: str, allowed: frozenset[str] | tuple[str, ...]) -> bool:
     return inner in allowed if isinstance(allowed, frozenset) else inner.endswith(allowed)
 
 
+def _stale_dir(name: str, files: frozenset[str]) -> bool:
+    """A run folder's temporary (``.rosbag.XXXX.tmp``, outputs/rosbag.py: renamed when complete)."""
+    m = _TMP.match(name)
+    return bool(m) and files is RUN_FILES and m.group("name") in RUN_DIRS
+
+
 def survey(path: Path, files: frozenset[str] = RUN_FILES) -> tuple[list[str], list[str]]:
     """``(run files, foreign entries)`` in ``path`` (names; folders end with ``/``); ``files``: the
     names a run of this kind writes (:data:`RUN_FILES`, :data:`CALIBRATION_FILES`)."""
@@ -128,6 +134,8 @@ def survey(path: Path, files: frozenset[str] = RUN_FILES) -> tuple[list[str], li
             continue
         if name in files or _is_tmp(name, files):
             (ours if entry.is_file(follow_symlinks=False) else foreign).append(name)
+        elif _stale_dir(name, files) and entry.is_dir(follow_symlinks=False):  # a bag folder being written
+            ours.append(name + "/")
         elif name in RUN_DIRS and files is RUN_FILES and entry.is_dir(follow_symlinks=False):
             sfx = RUN_DIRS[name]
             inner = [e for e in os.scandir(entry.path)]
@@ -185,7 +193,7 @@ class RunDir:
 
     def _check_contents(self) -> None:
         ours, foreign = survey(self.path, self.files)
-        real = [n for n in ours if not _TMP.match(n)]
+        real = [n for n in ours if not _TMP.match(n.rstrip("/"))]
         other = [n for n in foreign if n in KNOWN_FILES or n.rstrip("/") in RUN_DIRS]
         if other:
             raise InputError(
@@ -231,7 +239,7 @@ class RunDir:
         ours, _ = survey(self.path, self.files)
         for name in ours:
             target = self.path / name.rstrip("/")
-            if not (self.overwrite or _TMP.match(name)):
+            if not (self.overwrite or _TMP.match(name.rstrip("/"))):
                 continue
             if name.endswith("/"):
                 shutil.rmtree(target)

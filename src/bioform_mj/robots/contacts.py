@@ -29,6 +29,7 @@ from bioform_mj.robots.layout import FRICTIONLESS, RobotLayout, _label, element_
 
 __all__ = [
     "CASTER_LOAD",
+    "is_caster",
     "MOVE_M",
     "MOVE_DEG",
     "floor_contacts",
@@ -45,7 +46,8 @@ __all__ = [
     "align_swivels",
 ]
 
-#: a non-wheel geom carrying more than this fraction of the robot's weight is a caster
+#: a non-wheel geom carrying more than this fraction of the robot's weight is a caster (:func:`is_caster`); the
+#: one load rule of ``robot check``, a run's outcomes and identification (design §0, §14.2)
 CASTER_LOAD = 0.005
 #: a body whose position relative to the base changes by more than this (m) or whose orientation
 #: by more than :data:`MOVE_DEG` (deg) is a moving part
@@ -116,6 +118,13 @@ def _contact_bodies(model: mujoco.MjModel, data: mujoco.MjData) -> tuple[np.ndar
     return model.geom_bodyid[g1], model.geom_bodyid[g2]
 
 
+def is_caster(load_n: float, weight: float, named: bool = False) -> bool:
+    """Whether a non-wheel geom on the floor is a caster: the mapping ``named`` it, or it carries more than
+    :data:`CASTER_LOAD` of the robot's ``weight`` (``load_n``, N: at rest, or a drive test's mean). The one
+    caster rule (design §0, §13)."""
+    return named or load_n > CASTER_LOAD * weight
+
+
 def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout, prefix: str = "") -> list[dict]:
     """Every geom of the robot (layout ``lay``, names with ``prefix``) that touches the floor now.
 
@@ -171,7 +180,7 @@ def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout,
         named, wheel = row.pop("_named"), row.pop("_wheel")
         if wheel:
             row["role"] = "wheel"
-        elif named or row["load_n"] > CASTER_LOAD * weight:
+        elif is_caster(row["load_n"], weight, named):
             row["role"] = "caster"
         else:
             row["role"] = "other"
@@ -329,9 +338,10 @@ def settle(plant: Any, lay: RobotLayout, track: Any, prefix: str = "f1/", cap: i
 
 
 def brakes(c: dict) -> bool:
-    """Whether a contact of :func:`floor_contacts` brakes the robot: a caster (a non-wheel geom with more
-    than :data:`CASTER_LOAD` of the weight, or one the mapping names) that cannot roll, with friction
-    (μ ≥ ``FRICTIONLESS`` and condim > 1). The one test ``robot check`` and a run's outcomes use (design §14.2)."""
+    """Whether a contact of :func:`floor_contacts` brakes the robot: a caster (:func:`is_caster`: a non-wheel
+    geom with more than :data:`CASTER_LOAD` of the weight, or one the mapping names) that cannot roll, with
+    friction (μ ≥ ``FRICTIONLESS`` and condim > 1). The one test ``robot check``, a run's outcomes and
+    identification's ``braking_caster`` findings use (design §0, §14.2)."""
     return c["role"] == "caster" and not c["rolls"] and c["friction"] >= FRICTIONLESS and c["condim"] != 1
 
 

@@ -118,6 +118,7 @@ class RobotRef:
     self_collide: bool = False  # URDF only (design §12): keep contacts between the robot's own links
     package_path: PackagePath = PackagePath()  # URDF only: package:// search path, before the environment
     keyframe: str = ""  # MJCF keyframe to start in (design §13.2); "": 'home' if the file has one; "none": qpos0
+    top_speed: float = 0.0  # m/s at the tyre, the maker's datasheet figure (design §21); 0: not given
     xacro: bool = False  # URDF only (design §12): the file may be expanded by xacro (a program), sandboxed
     xacro_args: tuple[tuple[str, str], ...] = ()  # URDF only: xacro's $(arg NAME) values, ((NAME, VALUE), ...)
 
@@ -212,6 +213,13 @@ def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:
             if not isinstance(value, bool):
                 raise InputError(f"scenario key '{key}.free_joints': expected true or false, got {value!r}")
             kw[name] = value
+        elif name == "top_speed":  # design §21: the maker's figure, m/s at the tyre
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 < value < math.inf):
+                raise InputError(
+                    f"scenario key '{key}.top_speed': expected a number > 0 (m/s at the tyre, the maker's "
+                    f"figure), got {value!r}"
+                )
+            kw[name] = float(value)
         else:  # finite (design §17: tau_max = inf was taken as "no limit" while robot check refused it)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 <= value < math.inf):
                 raise InputError(f"scenario key '{key}.{name}': expected a finite number >= 0, got {value!r}")

@@ -53,7 +53,7 @@ from bioform_mj.robots.mesh_paths import symlink_escape
 from bioform_mj.robots.packages import find_package, package_search_path, resolve_uri
 from bioform_mj.robots.refs import PackagePath, RobotRef
 from bioform_mj.robots.sanity import mesh_problem, not_regular, urdf_value_problem
-from bioform_mj.robots.urdf_wheels import find_wheels, left_of, welded_to
+from bioform_mj.robots.urdf_wheels import find_wheels, left_of
 
 __all__ = [
     "UrdfError",
@@ -610,7 +610,9 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
         b = body_id.get(base)
         if b is None:
             raise UrdfError(f"{path}: no link '{base}' (the base; the URDF's root link is '{pr.root}')")
-        if not welded_to(model, b, body_id[pr.root]):
+        from bioform_mj.robots.layout import welded_to  # MuJoCo only when a URDF is read
+
+        if b not in welded_to(model, body_id[pr.root]).tolist():
             raise UrdfError(
                 f"{path}: base '{base}' moves against the root link '{pr.root}' (a joint lies between them): "
                 f"the base of a URDF robot is its root link; leave base unset or map '{pr.root}'"
@@ -674,7 +676,10 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
             "tau_max is mapped)"
         )
     if vel:
-        notes.append(f"<limit velocity> of {vel} joint(s) ignored (MuJoCo has no joint speed limit)")
+        notes.append(
+            f"<limit velocity> of {vel} joint(s): MuJoCo has no joint speed limit; a wheel joint's is read as the "
+            "robot's top speed unless the mapping gives top_speed (design §21)"
+        )
 
     # self-collision: off between the robot's own links (URDF/Gazebo), unless asked
     if not ref.self_collide:  # the bodies that collide, or may (a wheel gets a contact proxy: scene.py)

@@ -13,17 +13,6 @@ import numpy as np
 from bioform_mj.core.errors import InputError
 
 
-def welded_to(model: Any, b: int, top: int) -> bool:
-    """True when body ``b`` is ``top`` or welded to it (no joint on the way up): the climbing form of
-    :func:`bioform_mj.robots.layout.welded_to`, kept here so that :mod:`bioform_mj.robots.urdf` imports no
-    MuJoCo at import time."""
-    while b != top:
-        if b == 0 or model.body_jntnum[b]:
-            return False
-        b = int(model.body_parentid[b])
-    return True
-
-
 def collision_zmin(model: Any, data: Any, g: int) -> float:
     """Lowest world z of geom ``g``'s bounding box, m."""
     rot = data.geom_xmat[g].reshape(3, 3)
@@ -34,6 +23,8 @@ def collision_zmin(model: Any, data: Any, g: int) -> float:
 def find_wheels(model: Any, base: int, path: Path) -> tuple[str, str, str]:
     """``(left, right, note)``: the two joints that can be the driven wheels (see the module docstring)."""
     import mujoco
+
+    from bioform_mj.robots.layout import SUPPORT_CLEARANCE, welded_to  # MuJoCo only when a URDF is read
 
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
@@ -49,18 +40,20 @@ def find_wheels(model: Any, base: int, path: Path) -> tuple[str, str, str]:
         raise InputError(f"{path}: the robot has no collision geometry: nothing can touch the floor")
     floor = min(collision_zmin(model, data, g) for g in robot)
     sides: dict[int, list[tuple[str, float]]] = {1: [], -1: []}
+    on_base = set(welded_to(model, base).tolist())
     for j in range(model.njnt):
         if model.jnt_type[j] != hinge or abs(float(data.xaxis[j] @ left)) < 0.99:
             continue
         b = int(model.jnt_bodyid[j])
-        if model.body_jntnum[b] != 1 or not welded_to(model, int(model.body_parentid[b]), base):
+        if model.body_jntnum[b] != 1 or int(model.body_parentid[b]) not in on_base:
             continue
-        mine = [g for g in robot if welded_to(model, int(model.geom_bodyid[g]), b)]
+        on_wheel = set(welded_to(model, b).tolist())
+        mine = [g for g in robot if int(model.geom_bodyid[g]) in on_wheel]
         if not mine:
             continue
         low = min(collision_zmin(model, data, g) for g in mine)
         radius = float(data.xanchor[j][2]) - low
-        if radius <= 0 or low - floor > max(0.005, 0.25 * radius):
+        if radius <= 0 or low - floor > max(SUPPORT_CLEARANCE, 0.25 * radius):
             continue
         side = 1 if float((data.xanchor[j] - data.xpos[base]) @ left) > 0 else -1
         sides[side].append((mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or f"#{j}", radius))

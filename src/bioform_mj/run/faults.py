@@ -36,6 +36,7 @@ a draw. Runs are bit-identical for a seed and differ between seeds where noise o
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -43,6 +44,7 @@ import numpy as np
 from bioform_mj.control.base import Comm
 from bioform_mj.control.stack import ControlStack
 from bioform_mj.core.equations import njit, noisy_reading, packet_received, wrap
+from bioform_mj.core.thresholds import SPIN_RAD_S, TIP_ANGLE_DEG
 from bioform_mj.formation.graph import Graph
 from bioform_mj.scenario.config import Scenario
 
@@ -82,8 +84,6 @@ def arrivals(out, p, seed, base, k):
 
 #: Formation error (m) under which a follower counts as back in formation.
 TOLERANCE = 0.1
-#: Yaw rate (rad/s) above which a follower counts as spinning out of control.
-SPIN = 10.0
 
 
 class Faults:
@@ -308,8 +308,9 @@ def outcome(
     ``peak_after``: peak from its end to the end of the run; ``final``: at the end; ``recovered``:
     no divergence and below ``tol`` over the last ``final_window`` s; ``recovery_s``: time after
     the fault's end until the error stays below ``tol`` (None if it never does); ``tipped_over``:
-    followers (1-based) tilted more than 60° at the end (MuJoCo); ``spinning``: followers turning
-    faster than :data:`SPIN` at the end. ``interval``
+    followers (1-based) tilted more than ``TIP_ANGLE_DEG`` at the end (MuJoCo); ``spinning``: followers
+    turning faster than ``SPIN_RAD_S`` at the end (the run's outcomes' thresholds, ``core/thresholds.py``:
+    30°, 6 rad/s; they were 60° and 10 rad/s here, design §0). ``interval``
     overrides :func:`fault_interval` (e.g. to measure a fault-free reference run).
     """
     sc, log = result.scenario, result.log
@@ -322,7 +323,8 @@ def outcome(
 
     diverged = result.diverged is not None
     upright = getattr(result.plant, "upright", None)
-    tipped = (np.flatnonzero(upright() < 0.5) + 1).tolist() if upright is not None else []
+    tilt_cos = math.cos(math.radians(TIP_ANGLE_DEG))
+    tipped = (np.flatnonzero(upright() < tilt_cos) + 1).tolist() if upright is not None else []
     T = float(t[-1]) if len(t) else 0.0
     above = np.flatnonzero((fe >= tol) & (t >= t1)) if len(t) else np.zeros(0, int)
     if diverged or (above.size and above[-1] == len(t) - 1):
@@ -345,6 +347,6 @@ def outcome(
         "recovery_s": recovery,
         "diverged": None if not diverged else str(result.diverged),
         "tipped_over": tipped,
-        "spinning": (np.flatnonzero(np.abs(log["vel"][-1, :, 1]) > SPIN) + 1).tolist() if len(t) else [],
+        "spinning": (np.flatnonzero(np.abs(log["vel"][-1, :, 1]) > SPIN_RAD_S) + 1).tolist() if len(t) else [],
         "sim_time_s": T,
     }

@@ -309,6 +309,7 @@ def simulate(
     *,
     plant: Plant | None = None,
     controller: Any = None,
+    full_state: bool = False,
 ) -> RunResult:
     """Run the closed loop of ``sc`` and return its log and summary.
 
@@ -333,6 +334,10 @@ def simulate(
         A :class:`~bioform_mj.plants.base.Plant`; ``None``: built from ``sc.plant``.
     controller
         A :class:`~bioform_mj.control.base.Controller`; ``None``: the paper's stack for ``sc.method``.
+    full_state
+        The log also gets the 3-D state at every row and at the end of the run (m, rad, m/s, rad/s:
+        z, roll, pitch, wheel angles and rates, the IMU; :data:`bioform_mj.outputs.fullstate.STATE_CHANNELS`),
+        what a ROS 2 bag needs (:func:`bioform_mj.outputs.rosbag.write_bag`); the other channels are the same.
 
     Returns
     -------
@@ -388,11 +393,19 @@ def simulate(
     run_chunk = chunk if chunk is not None else step.python_chunk
     warm = warm_up(step, run_chunk, progress, t_setup)
     state_obs = RunState(sc, plant, controller)
+    sampler = None
+    if full_state:  # the 3-D state at the log's rows (outputs/fullstate.py): a ROS 2 bag's needs
+        from bioform_mj.outputs.fullstate import StateSampler
+
+        sampler = StateSampler(sc.sim.log_dt, sc.sim.control_dt, in_kernel=chunk is not None)
+        observers = [*observers, sampler]
     started, raised = start_observers(observers, state_obs, warm.raised)
     end = run_loop(sc, step, run_chunk, chunk is not None, observers, state_obs, warm, raised, progress)
     raised = finish_observers(started, state_obs, step, end)
     # summarise: the log, summary.json, the result (attached to what a user's code raised)
     logd = _log_dict(plant, graph, ctx.log, end.j, missing, odometry, tl.offsets)
+    if sampler is not None:
+        logd.update(sampler.log_arrays(logd))
     engine_used = "compiled" if chunk else "stepwise"
     summary = _summarise(sc, plant, controller, step, end, logd, warm.setup_s, engine_used, warned)
     _add_run_notes(summary, sc, plant, step, end, logd, raised)
@@ -469,8 +482,8 @@ def _timeline(sc: Scenario, traj: Any) -> _Timeline:
     return _Timeline(dt, N, stride, L_pose, L_vel, offsets, form)
 
 
-def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], dict[str, Any] | None]:
-    """``(imported, feasibility, robot_check)``: the guesses of a URDF import (design §12), what the
+def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], dict | None, dict | None]:
+    """``(imported, feasibility, robot_check, demand)``: the guesses of a URDF import (design §12), what the
     scenario asks of the MuJoCo robots (``robot_check.feasibility``) and what ``robot check`` fails
     them for (``prerun.before_run``, design §14.2; None for other plants), warned before the run (the
     CLI prints ``warning:`` lines) and kept for summary.json."""
@@ -491,7 +504,14 @@ def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], 
         checked = before_run(sc, plant)
         for line in checked["warnings"]:
             warnings.warn(line, RobotWarning, stacklevel=4)
-    return imported, feasibility, checked
+    demand = None
+    if checked is not None and not checked.get("skipped"):  # design §21: the scenario's demand vs the limits
+        from bioform_mj.run.demand import before_run as _demand
+
+        demand = _demand(sc, plant)
+        for line in demand["warnings"]:
+            warnings.warn(line, RobotWarning, stacklevel=4)
+    return imported, feasibility, checked, demand
 
 
 def _reset(sc: Scenario, plant: Plant, controller: Any, leader_pose0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -615,6 +635,10 @@ def _summarise(sc, plant, controller, step: Stepper, end: LoopEnd, logd, setup_s
         from bioform_mj.assess.prerun import for_summary
 
         summary["robot_check"] = for_summary(warned[2])
+    if warned[3] is not None:  # design §21: the scenario's demand against the robots' limits
+        from bioform_mj.run.demand import for_summary as _demand_summary
+
+        summary["demand"] = _demand_summary(warned[3])
     return summary
 
 

@@ -100,6 +100,8 @@ def _summary(sc: Scenario, plant: Any, controller: Any, run: RunEnd) -> dict[str
         "log_interval_means": list(MEAN_CHANNELS),
         "versions": _versions(),
         "formation_scale": sc.formation.scale,  # applied: config holds the scaled values with scale = 1
+        "time_scale": sc.formation.time_scale,  # design §21: applied likewise (config: time_scale = 1)
+        "scale_note": sc.formation.scale_note,  # why ("auto": from what, which limit set σ)
         "config": resolved_config(sc),  # the run's own record: load() takes it back unchanged
         "followers": followers,
     }

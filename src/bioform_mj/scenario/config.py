@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import typing
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
+from bioform_mj.core.units import unit
 from bioform_mj.formation.graph import Graph
 from bioform_mj.formation.graph import chain as _chain
 from bioform_mj.formation.graph import complete as _complete
@@ -33,16 +35,35 @@ from bioform_mj.formation.obstacles import resolve as _resolve_obstacles
 from bioform_mj.formation.safety import SafetyCfg
 from bioform_mj.robots.refs import PackagePath, RobotRef
 
-PLANTS = ("ideal", "mujoco")
-LEADER_KINDS = ("paper", "line", "circle", "figure8", "harmonic")
-GRAPH_KINDS = ("explicit", "chain", "ring", "star", "complete")
-ESTIMATOR_INITS = ("zero", "self", "leader")
-EVENT_KINDS = ("payload",)
-SATURATIONS = ("steer-priority", "wheel")
-SENSINGS = ("truth", "odometry")
+# Why a key is not scaled with the experiment, and the paper's mixed-unit places (design §21)
+_STEP = "a numerical step (the robot's and the computer's): a slower scenario is stepped finer"
+_GUARD = "a divergence guard, not a quantity of the experiment"
+_SENSOR = "a property of the robot's sensor"
+_EQ32 = "eq. 32 adds |x̃| (m) to A (1/s): A, B, D scaled as rates, similar where |x̃| ≪ A (design §21)"
+_EQ37 = "eq. 37: k4 is S's integral gain (1/s) and the adaptation gain; × σ² keeps k4 τ²/k5 × 1/σ (design §21)"
+
+#: the kinds of the string keys, as ``Literal`` types (the annotation of each key) and their allowed values
+#: (``typing.get_args`` of the same type: one source)
+PlantKind = Literal["ideal", "mujoco"]
+LeaderKind = Literal["paper", "line", "circle", "figure8", "harmonic"]
+GraphKind = Literal["explicit", "chain", "ring", "star", "complete"]
+EstimatorInit = Literal["zero", "self", "leader"]
+EventKind = Literal["payload"]
+Saturation = Literal["steer-priority", "wheel"]
+Sensing = Literal["truth", "odometry"]
 #: how the torque law gets ``υ̇_cmd, ω̇_cmd`` (design §6)
-DERIVATIVES = ("filter", "difference", "analytic")
-GAIN_SCALINGS = ("none", "c_hat0")
+Derivative = Literal["filter", "difference", "analytic"]
+GainScaling = Literal["none", "c_hat0"]
+OffsetFrame = Literal["world", "leader"]
+PLANTS: tuple[str, ...] = typing.get_args(PlantKind)
+LEADER_KINDS: tuple[str, ...] = typing.get_args(LeaderKind)
+GRAPH_KINDS: tuple[str, ...] = typing.get_args(GraphKind)
+ESTIMATOR_INITS: tuple[str, ...] = typing.get_args(EstimatorInit)
+EVENT_KINDS: tuple[str, ...] = typing.get_args(EventKind)
+SATURATIONS: tuple[str, ...] = typing.get_args(Saturation)
+SENSINGS: tuple[str, ...] = typing.get_args(Sensing)
+DERIVATIVES: tuple[str, ...] = typing.get_args(Derivative)
+GAIN_SCALINGS: tuple[str, ...] = typing.get_args(GainScaling)
 #: the robot the paper's learner gains were tuned for: ``c = (a, b)`` of Sec. IV
 PAPER_C = (0.4, 10.0)
 
@@ -67,11 +88,11 @@ MAX_NAME = 120
 class SimCfg:
     """Time axis. duration, control_dt, physics_dt, log_dt in s."""
 
-    duration: float = 20.0
-    control_dt: float = 0.001
-    physics_dt: float = 0.001
-    log_dt: float = 0.01
-    seed: int = 0
+    duration: float = unit(20.0, "s")
+    control_dt: float = unit(0.001, "s", kept=_STEP)
+    physics_dt: float = unit(0.001, "s", kept=_STEP)
+    log_dt: float = unit(0.01, "s", kept=_STEP)
+    seed: int = unit(0, "1")
 
 
 @dataclass(frozen=True)
@@ -84,28 +105,28 @@ class LeaderCfg:
     harmonic: ``x = x0 + vx t + Σ A cos(w t + φ)`` with ``x_terms = [[A, w, φ], …]``, same for y.
     """
 
-    kind: str = "paper"
-    x0: float = 0.0
-    y0: float = 3.0
-    speed: float = 1.0
-    heading: float = 0.0
-    amplitude: float = 0.4
-    frequency: float = 1.0
-    radius: float = 5.0
-    vx: float = 0.0
-    vy: float = 0.0
-    x_terms: tuple[tuple[float, ...], ...] = ()
-    y_terms: tuple[tuple[float, ...], ...] = ()
+    kind: LeaderKind = unit("paper", "-")
+    x0: float = unit(0.0, "m")
+    y0: float = unit(3.0, "m")
+    speed: float = unit(1.0, "m/s")
+    heading: float = unit(0.0, "rad")
+    amplitude: float = unit(0.4, "m")
+    frequency: float = unit(1.0, "rad/s")
+    radius: float = unit(5.0, "m")
+    vx: float = unit(0.0, "m/s")
+    vy: float = unit(0.0, "m/s")
+    x_terms: tuple[tuple[float, ...], ...] = unit((), ("m", "rad/s", "rad"))
+    y_terms: tuple[tuple[float, ...], ...] = unit((), ("m", "rad/s", "rad"))
 
 
 @dataclass(frozen=True)
 class GraphCfg:
     """Communication graph (design §1). The paper's Fig. 1 is missing; default: leader → 1, edges 1–2, 1–3."""
 
-    kind: str = "explicit"
-    edges: tuple[tuple[int, ...], ...] = ((1, 2), (1, 3))
-    leader_access: tuple[int, ...] = (1,)
-    center: int = 1
+    kind: GraphKind = unit("explicit", "-")
+    edges: tuple[tuple[int, ...], ...] = unit(((1, 2), (1, 3)), "1")
+    leader_access: tuple[int, ...] = unit((1,), "1")
+    center: int = unit(1, "1")
 
 
 @dataclass(frozen=True)
@@ -122,16 +143,27 @@ class FormationCfg:
     paper's, when the scenario is loaded (:func:`apply_scale`).
     """
 
-    offsets: tuple[tuple[float, ...], ...] = ((3.0, 0.0), (4.0, 5.0), (4.0, -5.0))
-    initial_poses: tuple[tuple[float, ...], ...] = ((0.0, 0.0, 0.0), (-1.0, -4.0, 0.0), (-1.0, 4.0, 0.0))
-    init_jitter: float = 0.0
-    init_jitter_heading: float = -1.0  # rad; -1: the number of init_jitter (as written, unscaled)
-    scale: float = 1.0  # the whole experiment at a robot's scale (apply_scale); 1 = as written
-    frame: str = "world"  # offsets in "world" axes (the paper) or in the "leader"'s frame (turns with it)
+    offsets: tuple[tuple[float, ...], ...] = unit(((3.0, 0.0), (4.0, 5.0), (4.0, -5.0)), ("m", "m"))
+    initial_poses: tuple[tuple[float, ...], ...] = unit(
+        ((0.0, 0.0, 0.0), (-1.0, -4.0, 0.0), (-1.0, 4.0, 0.0)), ("m", "m", "rad")
+    )
+    init_jitter: float = unit(0.0, "m")
+    init_jitter_heading: float = unit(-1.0, "rad")  # rad; -1: the number of init_jitter (as written, unscaled)
+    #: the whole experiment at a robot's scale (apply_scale); 1 = as written, "auto": s from the half track
+    scale: float | str = unit(1.0, "1", kept="the length factor itself")
+    #: offsets in "world" axes (the paper) or in the "leader"'s frame (turns with it)
+    frame: OffsetFrame = unit("world", "-")
+    #: time factor σ (design §21): every time × σ and every key by its unit; 1 = as written, "auto": from
+    #: the robot's limits and the scenario's demand (:mod:`bioform_mj.run.auto_scale`)
+    time_scale: float | str = unit(1.0, "1", kept="the time factor itself")
     #: not a scenario key: the ``scale`` the lengths already carry, set by :func:`apply_scale` (1: as
     #: written), so :func:`~bioform_mj.run.simulate.simulate` can tell a ``scale`` changed by ``dataclasses.replace``
     #: from one applied (design §18.1); not in ``to_dict``, files, ``--set`` nor equality
     scale_applied: float = field(default=1.0, compare=False, repr=False, metadata={"internal": True})
+    #: not a scenario key: the ``time_scale`` the times already carry (as ``scale_applied``)
+    time_scale_applied: float = field(default=1.0, compare=False, repr=False, metadata={"internal": True})
+    #: not a scenario key: why ``scale`` / ``time_scale`` have their values ("auto": which limit set σ)
+    scale_note: str = field(default="", compare=False, repr=False, metadata={"internal": True})
 
 
 @dataclass(frozen=True)
@@ -143,23 +175,23 @@ class EstimatorCfg:
     The proof (eq. 15) swaps the gains (ka = 1, kb = 25): 25× less chatter.
     """
 
-    kp: tuple[float, ...] = (15.0, 15.0, 15.0)
-    ka: tuple[float, ...] = (25.0, 25.0)
-    kb: tuple[float, ...] = (1.0, 1.0)
-    phi: tuple[float, ...] = (0.0, 0.0)
-    init: str = "zero"
+    kp: tuple[float, ...] = unit((15.0, 15.0, 15.0), "1/s")
+    ka: tuple[float, ...] = unit((25.0, 25.0), ("m/s^2", "rad/s^2"))
+    kb: tuple[float, ...] = unit((1.0, 1.0), "1/s")
+    phi: tuple[float, ...] = unit((0.0, 0.0), ("m/s", "rad/s"))
+    init: EstimatorInit = unit("zero", "-")
 
 
 @dataclass(frozen=True)
 class KinematicCfg:
     """Eq. 31 gains ``k1, k2, k3`` and neuron parameters ``A, B, D`` (eq. 32)."""
 
-    k1: float = 2.0
-    k2: float = 3.0
-    k3: float = 4.0
-    A: float = 2.0
-    B: float = 2.0
-    D: float = 2.0
+    k1: float = unit(2.0, "1/s")
+    k2: float = unit(3.0, "1/m^2")
+    k3: float = unit(4.0, "1/m")
+    A: float = unit(2.0, "1/s", mixed=_EQ32)
+    B: float = unit(2.0, "1/s", mixed=_EQ32)
+    D: float = unit(2.0, "1/s", mixed=_EQ32)
 
 
 @dataclass(frozen=True)
@@ -171,12 +203,12 @@ class TorqueCfg:
     output's change over the step), ``difference`` (backward difference of the command) or
     ``analytic`` (chain rule through the estimator, neuron and error dynamics)."""
 
-    c: tuple[float, ...] = (3.0, 3.0)
-    phi: float = 0.0
-    tau_max: float = 20.0
-    deriv_wn: float = 50.0
-    saturation: str = "steer-priority"
-    derivative: str = "filter"
+    c: tuple[float, ...] = unit((3.0, 3.0), ("m/s^2", "rad/s^2"))
+    phi: float = unit(0.0, "rad/s", mixed="one boundary layer for υ̃ (m/s) and ω̃ (rad/s): scaled as rad/s")
+    tau_max: float = unit(20.0, "N·m")
+    deriv_wn: float = unit(50.0, "rad/s")
+    saturation: Saturation = unit("steer-priority", "-")
+    derivative: Derivative = unit("filter", "-")
 
 
 @dataclass(frozen=True)
@@ -191,15 +223,15 @@ class LearnerCfg:
     learns a viscous drag rate ``k̂`` per channel, ``ẑ' = τ ĉ + d̂ − k̂ z − …``, ``k̂' = drag_gain z S``
     projected onto ``[0, drag_max]`` (1/s), so that wheel damping or back-EMF does not bias ``ĉ``."""
 
-    k4: tuple[float, ...] = (6.0, 50.0)
-    k5: tuple[float, ...] = (25.0, 50.0)
-    kd: tuple[float, ...] = (0.0, 0.0)
-    c_hat0_scale: tuple[float, ...] = (0.5, 0.5)
-    c_bounds: tuple[float, ...] = (0.1, 10.0)
-    gain_scaling: str = "none"
-    drag: bool = False
-    drag_gain: tuple[float, ...] = (30.0, 50.0)
-    drag_max: float = 50.0
+    k4: tuple[float, ...] = unit((6.0, 50.0), "s^2", mixed=_EQ37)
+    k5: tuple[float, ...] = unit((25.0, 50.0), "1/s")
+    kd: tuple[float, ...] = unit((0.0, 0.0), "1/s^2")
+    c_hat0_scale: tuple[float, ...] = unit((0.5, 0.5), "1")
+    c_bounds: tuple[float, ...] = unit((0.1, 10.0), "1")
+    gain_scaling: GainScaling = unit("none", "-")
+    drag: bool = unit(False, "-")
+    drag_gain: tuple[float, ...] = unit((30.0, 50.0), ("1/m^2", "1/rad^2"))
+    drag_max: float = unit(50.0, "1/s")
 
 
 @dataclass(frozen=True)
@@ -214,18 +246,18 @@ class PlantCfg:
     ``package://NAME/…`` URIs point (design §12; relative to the TOML file), merged into every
     robot's own ``package_path`` (the robot's entries first)."""
 
-    kind: str = "ideal"
-    c_true: tuple[float, ...] = (0.4, 10.0)
-    mass: float = 25.0
-    inertia: float = 0.2
-    robots: tuple[RobotRef, ...] = (RobotRef("paper"),)
+    kind: PlantKind = unit("ideal", "-")
+    c_true: tuple[float, ...] = unit((0.4, 10.0), ("1/kg·m", "1/kg·m^2"))
+    mass: float = unit(25.0, "kg")
+    inertia: float = unit(0.2, "kg·m^2")
+    robots: tuple[RobotRef, ...] = unit((RobotRef("paper"),), "-", kept="the robot itself")
     # design §8.3, MuJoCo only: what the controllers are given ("truth" or "odometry")
-    sensing: str = "truth"
-    encoder_cpr: int = -1  # counts per wheel revolution; -1: each robot file's <numeric name="encoder_cpr">
-    sensor_dt: float = 0.0  # s, encoder and gyro period; 0: every physics step
-    gyro_noise: float = 0.0  # rad/s, standard deviation per sample
-    gyro_bias: float = 0.0  # rad/s, constant
-    package_path: PackagePath = PackagePath()  # design §12: package:// search path of URDF robots
+    sensing: Sensing = unit("truth", "-")
+    encoder_cpr: int = unit(-1, "1")  # counts per wheel revolution; -1: each robot file's <numeric name="encoder_cpr">
+    sensor_dt: float = unit(0.0, "s", kept=_STEP)  # s, encoder and gyro period; 0: every physics step
+    gyro_noise: float = unit(0.0, "rad/s", kept=_SENSOR)  # rad/s, standard deviation per sample
+    gyro_bias: float = unit(0.0, "rad/s", kept=_SENSOR)  # rad/s, constant
+    package_path: PackagePath = unit(PackagePath(), "-")  # design §12: package:// search path of URDF robots
 
     def __post_init__(self) -> None:
         if self.package_path:  # every robot searches the scenario's packages after its own
@@ -242,30 +274,30 @@ class PlantCfg:
 class DisturbanceCfg:
     """``d_k = bias_k + amp_k cos(freq_k t + phase_k)``, k = (υ m/s², ω rad/s²). Paper: d1 = 0.1, d2 = 0.1 cos t."""
 
-    bias: tuple[float, ...] = (0.1, 0.0)
-    amp: tuple[float, ...] = (0.0, 0.1)
-    freq: tuple[float, ...] = (0.0, 1.0)
-    phase: tuple[float, ...] = (0.0, 0.0)
+    bias: tuple[float, ...] = unit((0.1, 0.0), ("m/s^2", "rad/s^2"))
+    amp: tuple[float, ...] = unit((0.0, 0.1), ("m/s^2", "rad/s^2"))
+    freq: tuple[float, ...] = unit((0.0, 1.0), "rad/s")
+    phase: tuple[float, ...] = unit((0.0, 0.0), "rad")
 
 
 @dataclass(frozen=True)
 class EventCfg:
     """A timed event. ``payload``: follower (1-based) gains ``mass`` kg and yaw ``inertia`` kg·m²."""
 
-    time: float = 0.0
-    kind: str = "payload"
-    follower: int = 1
-    mass: float = 0.0
-    inertia: float = 0.0
+    time: float = unit(0.0, "s")
+    kind: EventKind = unit("payload", "-")
+    follower: int = unit(1, "1")
+    mass: float = unit(0.0, "kg")
+    inertia: float = unit(0.0, "kg·m^2")
 
 
 @dataclass(frozen=True)
 class LimitsCfg:
     """Divergence guard: the run stops (exit 3) beyond these magnitudes."""
 
-    speed: float = 100.0  # m/s, measured or commanded
-    position: float = 1.0e4  # m, robot or estimate
-    torque: float = 1.0e6  # N·m, commanded before saturation
+    speed: float = unit(100.0, "m/s", kept=_GUARD)  # m/s, measured or commanded
+    position: float = unit(1.0e4, "m", kept=_GUARD)  # m, robot or estimate
+    torque: float = unit(1.0e6, "N·m", kept=_GUARD)  # N·m, commanded before saturation
 
 
 @dataclass(frozen=True)
@@ -285,16 +317,16 @@ class FaultsCfg:
     [x0, y0, x1, y1, mu]``: a floor rectangle with sliding friction ``mu`` (MuJoCo only).
     """
 
-    link_fail: tuple[tuple[float, ...], ...] = ()
-    packet_loss: float = 0.0
-    delay: float = 0.0
-    noise_pose: tuple[float, ...] = (0.0, 0.0, 0.0)
-    noise_vel: tuple[float, ...] = (0.0, 0.0)
-    window: tuple[float, ...] = ()
-    actuator: tuple[tuple[float, ...], ...] = ()
-    actuator_known: bool = True
-    push: tuple[tuple[float, ...], ...] = ()
-    friction_patch: tuple[float, ...] = ()
+    link_fail: tuple[tuple[float, ...], ...] = unit((), ("1", "1", "s", "s"))
+    packet_loss: float = unit(0.0, "1")
+    delay: float = unit(0.0, "s")
+    noise_pose: tuple[float, ...] = unit((0.0, 0.0, 0.0), ("m", "m", "rad"))
+    noise_vel: tuple[float, ...] = unit((0.0, 0.0), ("m/s", "rad/s"))
+    window: tuple[float, ...] = unit((), "s")
+    actuator: tuple[tuple[float, ...], ...] = unit((), ("1", "s", "s", "1"))
+    actuator_known: bool = unit(True, "-")
+    push: tuple[tuple[float, ...], ...] = unit((), ("1", "s", "s", "N", "N", "N·m"))
+    friction_patch: tuple[float, ...] = unit((), ("m", "m", "m", "m", "1"))
 
     @property
     def configured(self) -> bool:
@@ -320,9 +352,9 @@ class FaultsCfg:
 class Scenario:
     """A complete, validated run description."""
 
-    name: str = "paper"
-    description: str = "Xu et al. 2024, Sec. IV: three followers track a sinusoidal leader."
-    method: str = "bioinspired-learning"
+    name: str = unit("paper", "-")
+    description: str = unit("Xu et al. 2024, Sec. IV: three followers track a sinusoidal leader.", "-")
+    method: str = unit("bioinspired-learning", "-")
     sim: SimCfg = field(default_factory=SimCfg)
     leader: LeaderCfg = field(default_factory=LeaderCfg)
     graph: GraphCfg = field(default_factory=GraphCfg)
@@ -349,7 +381,9 @@ class Scenario:
         """Plain nested dict (JSON/TOML-able) of every resolved value (a robot without a mapping
         as its name or path, one with a mapping as a table)."""
         d = _to_plain(dataclasses.asdict(self))
-        del d["formation"]["scale_applied"]  # internal (design §18.1): not a key of a file or a record
+        for f in dataclasses.fields(FormationCfg):  # internal (design §18.1): not a key of a file or a record
+            if f.metadata.get("internal"):
+                del d["formation"][f.name]
         d["plant"]["robots"] = [_to_plain(r.to_entry()) for r in self.plant.robots]
         d["plant"]["package_path"] = dict(self.plant.package_path)
         if not d["plant"]["package_path"]:  # absent when unused: a sweep's content keys stay as they were

@@ -12,6 +12,7 @@ build time, and ``tests/test_docs.py`` fails when a key has no entry (or an entr
 from __future__ import annotations
 
 import dataclasses
+import types
 import typing
 from typing import Any
 
@@ -97,7 +98,13 @@ KEYS: dict[str, tuple[str, str]] = {
     ),
     "formation.scale": (
         "",
-        "The whole experiment at a robot's size: every length × scale, times kept (our extension).",
+        "The whole experiment at a robot's size: every length × scale (our extension; design §21). "
+        "`\"auto\"`: the robot's half track / the paper's 0.2 m.",
+    ),
+    "formation.time_scale": (
+        "",
+        "Time factor σ (our extension; design §21): every time × σ and every key by its unit (speeds × "
+        'scale/σ, rates × 1/σ, accelerations × 1/σ²); 1 = as written; `"auto"`: from the robot\'s limits.',
     ),
     "formation.frame": (
         "",
@@ -116,18 +123,21 @@ KEYS: dict[str, tuple[str, str]] = {
     "kinematic.k1": ("1/s", "Eq. 31 gain on `x̃` (through the neuron for bioinspired methods)."),
     "kinematic.k2": ("1/m²", "Eq. 31 gain on `ỹ`; ÷ scale²."),
     "kinematic.k3": ("1/m", "Eq. 31 gain on `sin θ̃`; ÷ scale."),
-    "kinematic.A": ("1/s", "Eq. 32 neuron decay rate."),
-    "kinematic.B": ("", "Eq. 32 neuron upper bound."),
-    "kinematic.D": ("", "Eq. 32 neuron lower bound (the state stays in `(−D, B)`)."),
+    "kinematic.A": ("1/s", "Eq. 32 neuron decay rate; × 1/σ (eq. 32 adds |x̃| in m to it: design §21)."),
+    "kinematic.B": ("", "Eq. 32 neuron upper bound; × 1/σ, as a rate (design §21)."),
+    "kinematic.D": ("", "Eq. 32 neuron lower bound (the state stays in `(−D, B)`); × 1/σ (design §21)."),
     # torque
     "torque.c": ("m/s², rad/s²", "Eqs. 38–39 sliding-mode gains `(c_a, c_b)`; `c_a` × scale."),
-    "torque.phi": ("m/s, rad/s", "Boundary layer of the torque law's sign terms; 0 = the paper's `sgn`."),
+    "torque.phi": (
+        "m/s, rad/s",
+        "Boundary layer of the torque law's sign terms (one for both channels: × 1/σ); 0 = the paper's `sgn`.",
+    ),
     "torque.tau_max": ("N·m", "Wheel torque limit on the ideal plant (MuJoCo robots bring their actuator limits)."),
     "torque.deriv_wn": ("rad/s", "Natural frequency of the command-derivative filter (`derivative = filter`)."),
     "torque.saturation": ("", "`steer-priority`: keep `τ_R − τ_L`, clip the common mode; `wheel`: clip each wheel."),
     "torque.derivative": ("", "How `υ̇_cmd, ω̇_cmd` are obtained (design §6): filter, backward difference or analytic."),
     # learner
-    "learner.k4": ("", "Eq. 37 learning gains `(k4_a, k4_b)`."),
+    "learner.k4": ("", "Eq. 37 learning gains `(k4_a, k4_b)`; × σ², the adaptation rate's scaling (design §21)."),
     "learner.k5": ("", "Eq. 37 leakage gains `(k5_a, k5_b)`."),
     "learner.kd": ("", "Disturbance estimate `d̂' = −kd S` (our extension; 0 = the paper)."),
     "learner.c_hat0_scale": ("", "`ĉ(0) = c_hat0_scale ⊙ c_true` per follower."),
@@ -169,6 +179,11 @@ KEYS: dict[str, tuple[str, str]] = {
         "",
         'MJCF: the keyframe the robot starts and is held in (`""`: `home` where the file has one, else '
         '`qpos0`; `"none"`: `qpos0`; design §13.2).',
+    ),
+    "plant.robots[].top_speed": (
+        "m/s",
+        "The robot's top speed at the tyre, the maker's figure (design §21); 0: from the URDF wheel "
+        "`<limit velocity>` or the `<dcmotor>` no-load speed.",
     ),
     "plant.robots[].self_collide": (
         "",
@@ -270,6 +285,10 @@ def _type_name(tp: Any) -> str:
         return f"array of {inner}" if args[-1] is Ellipsis else f"[{', '.join(_type_name(a) for a in args)}]"
     if tp is RobotRef:
         return "robot"
+    if typing.get_origin(tp) is typing.Literal:  # a kind: its values are the choices column
+        return "string"
+    if isinstance(tp, types.UnionType):  # formation.scale, time_scale (design §21)
+        return 'number or "auto"'
     return {float: "number", int: "integer", str: "string", bool: "boolean"}.get(tp, getattr(tp, "__name__", str(tp)))
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+import types
 import typing
 from collections.abc import Mapping
 from importlib import resources
@@ -19,7 +20,6 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.core.errors import InputError, ScenarioError
-from bioform_mj.formation.obstacles import scaled as _scaled_obstacles
 from bioform_mj.robots.refs import PackagePath, RobotRef, as_package_path, as_ref, rebase_entries, rebase_package_path
 from bioform_mj.scenario.check import validate
 from bioform_mj.scenario.config import MAX_INT, PAPER_C, Scenario, keys_of
@@ -141,8 +141,15 @@ def checked(sc: Scenario) -> Scenario:
         return sc
     plain = _plain_values(sc.to_dict())
     again = _build(Scenario, plain, "")  # what from_dict refuses in a file (NaN, a string for a number, ...)
+    f = sc.formation  # what the values already carry (design §18.1, §21)
     again = dataclasses.replace(
-        again, formation=dataclasses.replace(again.formation, scale_applied=sc.formation.scale_applied)
+        again,
+        formation=dataclasses.replace(
+            again.formation,
+            scale_applied=f.scale_applied,
+            time_scale_applied=f.time_scale_applied,
+            scale_note=f.scale_note,
+        ),
     )
     scaled = apply_scale(again)  # a scale changed after loading: applied now (its range checked)
     validate(scaled)
@@ -249,6 +256,14 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
         if dataclasses.is_dataclass(inner) and inner is not RobotRef:
             return tuple(_build(inner, v, f"{key}[{i}].") for i, v in enumerate(value))
         return tuple(_convert(v, inner, f"{key}[{i}]") for i, v in enumerate(value))
+    if origin is typing.Literal:  # a kind (scenario/config.py): a string here, its value checked by validate()
+        tp = str
+    if typing.get_origin(tp) is types.UnionType:  # formation.scale, time_scale: a number or "auto" (design §21)
+        if value == "auto":
+            return value
+        if isinstance(value, str):
+            raise ScenarioError(key, f'expected a number > 0 or "auto", got {value!r}')
+        tp = float
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ScenarioError(key, f"expected a number, got {type(value).__name__} {value!r}")
@@ -327,91 +342,56 @@ def apply_robots_to_ideal(sc: Scenario) -> Scenario:
 
 
 def apply_scale(sc: Scenario) -> Scenario:
-    """Scale the experiment by ``s = formation.scale``: every length × s, every time unchanged.
+    """Scale the experiment: lengths × ``s = formation.scale``, times × ``σ = formation.time_scale``,
+    every key by its declared unit (:func:`bioform_mj.scenario.similarity.transform`, design §21).
 
-    So every speed and acceleration is × s and every angle, rate and time constant stays: the
-    leader (``x0, y0, speed, amplitude, radius, vx, vy`` and the amplitudes of ``x_terms`` /
-    ``y_terms``), the offsets and initial positions (and ``init_jitter``, the positions' jitter; the
-    headings' jitter ``init_jitter_heading`` is an angle and stays, resolved from -1 to the
-    ``init_jitter`` as written), and the gains that
-    carry a length so that the closed loop is the paper's, shrunk: the estimator's ``υ``-channel
-    sign gain ``ka[0]`` and boundary layer ``phi[0]`` (m/s², m/s), the torque law's ``c[0]``
-    (m/s²), the disturbance's ``υ`` channel (m/s²) × s; the obstacles (positions, sizes, the
-    field's numbers) and ``safety.distance``, ``lookahead``, ``range`` × s (design §19);
-    ``k2 / s²`` and ``k3 / s`` (eq. 31:
-    ``ω_cmd = ω_ir + k2 υ_ir ỹ + k3 υ_ir sin θ̃`` is then unchanged). ``k1`` stays: the neuron
-    (eq. 32) works in metres, and in its linear range (``|x̃| ≪ A``, which a small robot's
-    errors are) ``k1 V_s ≈ k1 B x̃ / A`` already scales with the error; its bound ``k1 B`` does
-    not shrink. The torque law's ``phi`` (one layer on both channels) and the learner's gains
-    are not scaled: use ``learner.gain_scaling = "c_hat0"`` (the scaled presets do); the
-    learned-drag gain's ``υ`` channel (``k̂' = drag_gain z S``: 1/m²) is ``/ s²`` (design §14). The values
-    are those written (file and ``--set``); the returned scenario holds the scaled values and
-    ``scale``; a run's record (:func:`bioform_mj.scenario.record.resolved_config`) holds the scaled values
-    with ``scale = 1``, so loading it again does not scale twice (the ``lost`` threshold and the
-    video's sizes are taken from the scaled lengths, not from ``scale``).
+    So the leader, the offsets and initial positions, the obstacles and the safety distances are ×
+    s; the duration, the events' and faults' times × σ; speeds × s/σ, accelerations and sign gains
+    × s/σ² (υ) or 1/σ² (ω), rates and frequencies × 1/σ, ``k2 / s²``, ``k3 / s``; ``init_jitter``
+    × s, ``init_jitter_heading`` (an angle) kept, resolved from -1 to the ``init_jitter`` as written.
+    Kept: the numerical steps, the divergence guards, the sensor's noise, the robot and what carries
+    a mass (``torque.tau_max``, ``plant.c_true``). The paper's mixed-unit places (eq. 32's ``A, B,
+    D``, eq. 37's ``k4``, ``torque.phi``) are said in :mod:`bioform_mj.scenario.similarity`. With ``σ = 1``
+    this is the lengths-only scaling of before, bit for bit (``k1, A, B, D, k4`` unchanged).
+    ``"auto"`` (either key): from the robot's half track and limits
+    (:func:`bioform_mj.run.auto_scale.resolve_auto`), the reason in ``formation.scale_note``.
 
-    The returned scenario's ``formation.scale_applied`` says the lengths carry ``scale`` (design
-    §18.1); a scenario whose ``scale`` was then changed (``dataclasses.replace``) is scaled by
-    ``scale / scale_applied``, so its lengths end at ``scale`` × those written (a loaded scenario has
-    ``scale_applied = 1``: scaled by ``scale``, as before).
+    The values are those written (file and ``--set``); the returned scenario holds the scaled values
+    and the numeric ``scale``, ``time_scale``; a run's record (:func:`bioform_mj.scenario.record.resolved_config`)
+    holds the scaled values with both = 1, so loading it again does not scale twice.
+    ``formation.scale_applied`` / ``time_scale_applied`` say what the values already carry (design
+    §18.1); a scenario changed after loading (``dataclasses.replace``) is scaled by ``scale /
+    scale_applied`` and ``time_scale / time_scale_applied``.
     """
-    want = sc.formation.scale
-    if want == sc.formation.scale_applied:
-        return sc
-    if not (math.isfinite(want) and want > 0):
-        raise ScenarioError("formation.scale", f"must be a number > 0, got {want:g}")
-    if not 1e-3 <= want <= 1e3:  # beyond, k2 / s² and the lengths leave floating point's comfortable range
-        raise ScenarioError("formation.scale", f"must lie in [0.001, 1000], got {want:g}")
-    s = want / sc.formation.scale_applied  # exactly `want` for a scenario as written
+    from bioform_mj.scenario.similarity import check_factor, transform
 
-    def rows(values: tuple, cols: int) -> tuple:
-        return tuple(tuple(v * s if j < cols else v for j, v in enumerate(r)) for r in values)
-
-    ld = sc.leader
-    leader = dataclasses.replace(
-        ld,
-        x0=ld.x0 * s,
-        y0=ld.y0 * s,
-        speed=ld.speed * s,
-        amplitude=ld.amplitude * s,
-        radius=ld.radius * s,
-        vx=ld.vx * s,
-        vy=ld.vy * s,
-        x_terms=rows(ld.x_terms, 1),
-        y_terms=rows(ld.y_terms, 1),
-    )
     f = sc.formation
+    if f.scale == f.scale_applied and f.time_scale == f.time_scale_applied:
+        return sc
+    want_s, want_t, note = f.scale, f.time_scale, f.scale_note
+    if isinstance(want_s, str) or isinstance(want_t, str):
+        for key, v in (("formation.scale", want_s), ("formation.time_scale", want_t)):
+            if isinstance(v, str) and v != "auto":
+                raise ScenarioError(key, f'must be a number > 0 or "auto", got {v!r}')
+        from bioform_mj.run.auto_scale import resolve_auto
+
+        want_s, want_t, note = resolve_auto(sc)
+    want_s = check_factor("formation.scale", want_s)
+    want_t = check_factor("formation.time_scale", want_t)
+    if want_s == f.scale_applied and want_t == f.time_scale_applied:
+        return dataclasses.replace(
+            sc, formation=dataclasses.replace(f, scale=want_s, time_scale=want_t, scale_note=note)
+        )
+    s = want_s / f.scale_applied  # exactly `want_s` for a scenario as written
+    sigma = want_t / f.time_scale_applied
+    jh = f.init_jitter if f.init_jitter_heading < 0 else f.init_jitter_heading  # an angle, as written
+    out = transform(dataclasses.replace(sc, formation=dataclasses.replace(f, init_jitter_heading=jh)), s, sigma)
     formation = dataclasses.replace(
-        f,
-        offsets=rows(f.offsets, 2),
-        initial_poses=rows(f.initial_poses, 2),
-        init_jitter=f.init_jitter * s,  # positions: a length
-        init_jitter_heading=f.init_jitter if f.init_jitter_heading < 0 else f.init_jitter_heading,  # an angle
-        scale_applied=want,
+        out.formation,
+        scale=want_s,
+        time_scale=want_t,
+        scale_applied=want_s,
+        time_scale_applied=want_t,
+        scale_note=note,
     )
-    e = sc.estimator
-    first = lambda v: (v[0] * s, *v[1:]) if v else v  # noqa: E731 - the υ channel of a (υ, ω) pair
-    estimator = dataclasses.replace(e, ka=first(e.ka), phi=first(e.phi))
-    k = sc.kinematic
-    kinematic = dataclasses.replace(k, k2=k.k2 / s**2, k3=k.k3 / s)
-    torque = dataclasses.replace(sc.torque, c=first(sc.torque.c))
-    d = sc.disturbance
-    disturbance = dataclasses.replace(d, bias=first(d.bias), amp=first(d.amp))
-    lg = sc.learner.drag_gain
-    learner = dataclasses.replace(sc.learner, drag_gain=(lg[0] / s**2, *lg[1:]) if lg else lg)
-    obstacles, obstacle_field = _scaled_obstacles(sc.obstacles, sc.obstacle_field, s)
-    sf = sc.safety
-    safety = dataclasses.replace(sf, distance=sf.distance * s, lookahead=sf.lookahead * s, range=sf.range * s)
-    return dataclasses.replace(
-        sc,
-        learner=learner,
-        obstacles=obstacles,
-        obstacle_field=obstacle_field,
-        safety=safety,
-        leader=leader,
-        formation=formation,
-        estimator=estimator,
-        kinematic=kinematic,
-        torque=torque,
-        disturbance=disturbance,
-    )
+    return dataclasses.replace(out, formation=formation)

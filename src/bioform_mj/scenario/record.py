@@ -27,6 +27,7 @@ def resolved_config(sc: Scenario) -> dict[str, Any]:
     robot model paths become absolute (the record may be read from another folder)."""
     d = sc.to_dict()
     d["formation"]["scale"] = 1.0
+    d["formation"]["time_scale"] = 1.0  # design §21: the times are already × σ
 
     def absolute(model: str) -> str:
         if is_shipped(model) or Path(model).is_absolute():

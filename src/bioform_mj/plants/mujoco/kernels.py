@@ -321,7 +321,7 @@ class Watch(NamedTuple):
 
 
 @njit
-def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, sd, sen, odo, cl, px):
+def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, sd, sen, odo, cl, px, rows):
     """Plant steps ``k0 … k1−1`` on MuJoCo (``n_sub`` physics steps each), each followed by the
     control step of ``k+1`` (``lp``: :class:`~bioform_mj.core.engine.Loop`; the control step of ``k0``
     must be done). ``io``: :class:`MjIO`; ``w``: :class:`Watch`; ``c_true`` (n, 2).
@@ -336,8 +336,10 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
     the outcome watches stay on the truth. ``cl``, ``px``: the contact and proximity watches
     (:mod:`.mujoco_contacts`, design §19): MuJoCo's contact list after every physics step, distances
     every ``px.ranges[3]`` control steps. If ``rec_ctrl`` has rows, the inputs of step ``k`` are
-    copied to ``rec_ctrl[k]``, ``rec_xfrc[k]`` (for a bare-physics replay). Returns ``(steps done,
-    next log row, status)``.
+    copied to ``rec_ctrl[k]``, ``rec_xfrc[k]`` (for a bare-physics replay). If ``rows`` has rows, the
+    raw state of each log row ``j`` written here (``qpos``, ``qvel``, ``sensordata``, as far as its
+    width goes) is copied to ``rows[j]`` (``outputs/fullstate.py``: a bag's 3-D state). Returns
+    ``(steps done, next log row, status)``.
     """
     # unpacked once (see plants/ideal.py: reading a named structure's field increfs its arrays)
     g, s, comm, N, dt, L_pose, L_vel, pose, vel, met, acc, lg, stride, form, lim, diag = lp
@@ -429,10 +431,24 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
             )
             if sen.on and j1 > j:
                 record_odometry(lg, j, odo.mpose, odo.mvel)
+            if j1 > j and rows.shape[0] > j:
+                copy_row(rows, j, qpos, qvel, sd)
             j = j1
             if status != OK:
                 return k + 1 - k0, j, status
     return k1 - k0, j, OK
+
+
+@njit
+def copy_row(rows, j, qpos, qvel, sd):
+    """``rows[j]`` = ``qpos``, ``qvel``, then ``sensordata`` up to the row's width."""
+    nq, nv = qpos.shape[0], qvel.shape[0]
+    for c in range(nq):
+        rows[j, c] = qpos[c]
+    for c in range(nv):
+        rows[j, nq + c] = qvel[c]
+    for c in range(rows.shape[1] - nq - nv):
+        rows[j, nq + nv + c] = sd[c]
 
 
 @njit

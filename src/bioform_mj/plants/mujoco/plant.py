@@ -24,6 +24,7 @@ import numpy as np
 
 from bioform_mj.core.equations import slip_ratio
 from bioform_mj.core.errors import Diverged
+from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_TIME, SLIP_V_FLOOR, TIP_ANGLE_DEG
 from bioform_mj.formation.disturbance import harmonic_rows
 from bioform_mj.plants.mujoco.contacts import ContactReader, robot_geoms, watch_contacts, watch_proximity
 from bioform_mj.plants.mujoco.kernels import (
@@ -51,9 +52,6 @@ from bioform_mj.robots.prepare import prepare_robot
 from bioform_mj.robots.scene import Markers, build_scene, compile_scene, follower_prefix, payload_inertial
 
 log = logging.getLogger(__name__)
-
-#: a chassis tilted further than this from upright (deg) counts as tipped over (outcome ``tipped``)
-TIP_ANGLE_DEG = 30.0
 
 __all__ = ["MujocoPlant"]
 
@@ -117,14 +115,8 @@ class MujocoPlant:
     """
 
     #: a chassis whose z axis is tilted more than this from vertical has tipped over (rad);
-    #: compare ``upright()`` (cos tilt) with ``cos(TIP_ANGLE)``
+    #: compare ``upright()`` (cos tilt) with ``cos(TIP_ANGLE)`` (``core/thresholds.py: TIP_ANGLE_DEG``)
     TIP_ANGLE = float(np.radians(TIP_ANGLE_DEG))
-    #: wheel slip ratio |r φ̇ − v_contact| / max(|r φ̇|, |v_contact|, SLIP_V_FLOOR) beyond which a wheel
-    #: is slipping (see :meth:`wheel_slip`), and how long it must last to count, s
-    SLIP_RATIO = 0.2
-    SLIP_TIME = 0.5
-    #: speed below which slip is measured against this floor instead of the speed itself, m/s
-    SLIP_V_FLOOR = 0.05
 
     def __init__(
         self,
@@ -214,6 +206,7 @@ class MujocoPlant:
         self._wheel_sign = np.array([lay.wheel_sign for lay in lays], dtype=float)  # (n, 2)
         self._to_wheel = np.where(self._feed[:, None], m.actuator_gear[self._ctrl, 0] * self._wheel_sign, 0.0)
         self._dacc = np.zeros((n, 2))  # delivered wheel torque summed over the period's physics steps
+        self.row_state = np.zeros((0, 0))  # (K, width): the compiled chunk copies each log row's raw state here
         self._wheel_radius = np.array([lay.wheel_radius for lay in lays], dtype=float)
         self._half_track = np.array([lay.half_track for lay in lays], dtype=float)
         self._axle_zero = not np.any(self._axle)  # shipped robots: base origin on the axle
@@ -224,7 +217,7 @@ class MujocoPlant:
         self.tilt_cos = float(np.cos(np.radians(TIP_ANGLE_DEG)))
         self.slip_run = np.zeros(n, dtype=np.int64)  # consecutive control steps with a wheel slipping
         self.slip_step = np.full(n, -1, dtype=np.int64)  # step at which a slip first lasted SLIP_TIME
-        self._slip_need = max(1, int(round(self.SLIP_TIME / self.control_dt)))
+        self._slip_need = max(1, int(round(SLIP_TIME / self.control_dt)))
         self._wdof = np.ascontiguousarray(self._wheel_dof, dtype=np.int64)
         self._warnings = [self.data.warning[i] for i in range(int(mujoco.mjtWarning.mjNWARNING))]
         self._warn = self.data.warning.number  # view of the warning counters, read by the compiled loop
@@ -434,8 +427,8 @@ class MujocoPlant:
             self._wheel_radius,
             self._half_track,
             vel,
-            self.SLIP_RATIO,
-            self.SLIP_V_FLOOR,
+            SLIP_RATIO,
+            SLIP_V_FLOOR,
             self._slip_need,
             self.slip_run,
             self.slip_step,
@@ -460,7 +453,7 @@ class MujocoPlant:
         """(n, 2) slip ratio of the [left, right] wheels: ``|r φ̇ − v_c| / max(|r φ̇|, |v_c|, SLIP_V_FLOOR)``
         with ``φ̇ = sign · qvel`` the forward wheel rate and ``v_c = υ ∓ l ω`` the forward speed of
         the wheel's contact point if it rolled (left: −, right: +). 0 when rolling; compare with
-        :attr:`SLIP_RATIO` held for :attr:`SLIP_TIME` s."""
+        ``core.thresholds.SLIP_RATIO`` held for ``SLIP_TIME`` s."""
         _, vel = self.observe()
         qv = self.data.qvel
         return np.array(
@@ -472,7 +465,7 @@ class MujocoPlant:
                         float(vel[i, 0]),
                         float(vel[i, 1]),
                         (2 * w - 1) * float(self._half_track[i]),
-                        self.SLIP_V_FLOOR,
+                        SLIP_V_FLOOR,
                     )
                     for w in range(2)
                 ]
@@ -684,8 +677,8 @@ class MujocoPlant:
             self._wheel_sign,
             self._wheel_radius,
             self._half_track,
-            self.SLIP_RATIO,
-            self.SLIP_V_FLOOR,
+            SLIP_RATIO,
+            SLIP_V_FLOOR,
             self._slip_need,
             self.slip_run,
             self.slip_step,
@@ -735,6 +728,7 @@ class MujocoPlant:
                 self.odo,
                 self.contacts.contacts,
                 self.contacts.proximity,
+                self.row_state,
             )
             self.contacts.check()
             self._step_count = k0 + done

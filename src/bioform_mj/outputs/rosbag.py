@@ -1,0 +1,708 @@
+"""A run as a ROS 2 bag: a rosbag2 folder (``metadata.yaml`` + MCAP storage) of standard messages.
+
+``bioform run … --rosbag`` writes ``rosbag/`` beside ``log.npz``; from Python,
+``write_bag(simulate(sc, full_state=True), "run/rosbag")``. The topics, frames and the meaning of
+every field are in ``docs/guide/rosbag.md``; in short, per follower ``fI``
+(``I`` = 1 … n) and for the virtual leader:
+
+- ``/clock`` (``rosgraph_msgs/Clock``), ``/tf`` and ``/tf_static`` (``tf2_msgs/TFMessage``: a common
+  ``world`` frame, ``world → fI/odom`` identity, ``fI/odom → fI/base_link`` the true 3-D pose);
+- ``/fI/ground_truth/odom`` (``nav_msgs/Odometry``, the truth), ``/fI/odom`` (the dead reckoning,
+  ``plant.sensing = "odometry"`` only), ``/fI/cmd_vel`` (``geometry_msgs/Twist``, the kinematic
+  command), ``/fI/joint_states`` (``sensor_msgs/JointState``: wheel angle, rate, applied torque),
+  ``/fI/imu`` (``sensor_msgs/Imu``, where the plant has one), ``/fI/leader_estimate``
+  (``nav_msgs/Odometry``, the follower's estimate of the leader), ``/leader/ground_truth/odom``.
+
+Messages are stamped with simulated time (``start_ns`` + t; ``/clock`` says it), one message per topic
+at every log row and, for the state topics, at the run's end ``T``. The message definitions and type
+hashes are those of the chosen ROS 2 distribution (:data:`DISTROS`, default :data:`DEFAULT_DISTRO`)
+from ``rosbags`` (the ``ros`` extra), which writes the folder; no ROS install is needed.
+
+Speed (design §9, a run as a ROS 2 bag: a fraction of the run's stepping time): each topic's message has
+one fixed layout, so one message is serialised by ``rosbags`` with marker values, the markers'
+byte offsets are found, and every row's numbers are written into a copy of it with numpy; the
+MCAP chunks and their message indexes are built the same way (:func:`_writer_classes`). ``rosbags``'
+reader reads the result back (``tests/test_rosbag.py`` compares it with ``log.npz``).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import shutil
+import struct
+import tempfile
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bioform_mj.core.errors import InputError
+from bioform_mj.outputs.fullstate import quat_of_rpy
+
+__all__ = ["DISTROS", "DEFAULT_DISTRO", "BagInfo", "check_available", "warm_up", "write_bag", "topics_of"]
+
+#: ROS 2 distributions whose message definitions and type hashes a bag can carry (``rosbags`` stores)
+DISTROS = ("humble", "iron", "jazzy", "kilted")
+#: the current long-term-support release
+DEFAULT_DISTRO = "jazzy"
+#: rosbag2 metadata version written (``rosbags`` writes 8 or 9; 9 = Jazzy's)
+BAG_VERSION = 9
+#: bytes of records per MCAP chunk (as ``rosbags``' own writer: 1 MiB)
+CHUNK_BYTES = 1 << 20
+
+INSTALL_HINT = "pip install 'bioform-mj[ros]' (or: pip install rosbags==0.11.9)"
+
+
+def check_available() -> None:
+    """Raise :class:`~bioform_mj.errors.InputError` saying how to install ``rosbags`` when it is missing."""
+    import importlib.util
+
+    if importlib.util.find_spec("rosbags") is None:
+        raise InputError(f"--rosbag needs the ros extra (the rosbags package), which is not installed: {INSTALL_HINT}")
+
+
+def check_args(rosbag: bool, distro: str | None) -> None:
+    """``bioform run``'s ``--rosbag`` and ``--ros-distro``, before any work: the extra is installed
+    (else :func:`check_available`'s error), ``--ros-distro`` only with ``--rosbag``."""
+    if not rosbag:
+        raise InputError("--ros-distro only applies to --rosbag")
+    check_available()
+    try:
+        warm_up(distro or DEFAULT_DISTRO)
+    except OSError as exc:  # the temporary folder, not the package
+        raise InputError(f"--rosbag: could not write a trial bag in the temporary folder: {exc}") from exc
+    except Exception as exc:  # noqa: BLE001 - a broken install: one error: line, before the run
+        raise InputError(
+            f"--rosbag: the rosbags package does not work ({type(exc).__name__}: {exc}); reinstall it: {INSTALL_HINT}"
+        ) from exc
+
+
+def warm_up(distro: str = DEFAULT_DISTRO) -> float:
+    """Import ``rosbags``, build ``distro``'s type store and every serialiser a bag uses, once per
+    process (about 0.3 s, the first time), by writing a one-row stand-in log's bag into a temporary
+    folder; returns the seconds it took.
+    ``bioform run --rosbag`` does it before the run, with its other start-up work: a broken install
+    fails there, and the bag's own write time is then what the run's numbers cost."""
+    t0 = time.perf_counter()
+    z = np.zeros
+    log = {
+        "t": z(1),
+        "t_state": np.array([0.0, 0.001]),
+        "pose_3d": z((2, 1, 6)),
+        "twist_3d": z((2, 1, 6)),
+        "wheel_angle": z((2, 1, 2)),
+        "wheel_speed": z((2, 1, 2)),
+        "imu_gyro": z((2, 1, 3)),
+        "imu_accel": z((2, 1, 3)),
+        "leader_state": z((2, 5)),
+        "wheel_sign": np.ones((1, 2)),
+        "wheel_joints": np.array([["l", "r"]]),
+        "cmd": z((1, 1, 2)),
+        "tau": z((1, 1, 2)),
+        "est_pose": z((1, 1, 3)),
+        "est_vel": z((1, 1, 2)),
+        "odom_pose": z((1, 1, 3)),
+        "odom_vel": z((1, 1, 2)),
+    }
+    with tempfile.TemporaryDirectory(prefix="bioform-rosbag-") as tmp:  # every path once: YAML, MCAP, files
+        _write(Path(tmp) / "bag", log, {}, "odometry", distro, 0)
+    return time.perf_counter() - t0
+
+
+def write_run_bag(result: Any, out: Path, distro: str | None) -> str:
+    """``bioform run --rosbag``: write ``out/rosbag`` (:func:`write_bag`); the line the run prints about it."""
+    bag = write_bag(result, Path(out) / "rosbag", distro=distro or DEFAULT_DISTRO)
+    return f"rosbag/: {bag.messages} messages on {len(bag.topics)} topics ({bag.distro}) written in {bag.write_s:.2f} s"
+
+
+@dataclass
+class BagInfo:
+    """What :func:`write_bag` wrote: the folder, message and topic counts, the distribution, wall time (s)."""
+
+    path: Path
+    messages: int
+    topics: dict[str, int]  # topic → message count
+    distro: str
+    write_s: float
+
+
+@dataclass
+class _Topic:
+    """One topic: its rows (indices into ``t_state``), the message template and where each row's numbers go."""
+
+    name: str
+    msgtype: str
+    rows: np.ndarray  # (m,) int: the state samples it is published at
+    template: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8))  # (L,) uint8, CDR
+    fields: list[tuple[int, str, np.ndarray]] = field(default_factory=list)  # (offset, dtype, (m,) values)
+    extra: list[tuple[int, bytes]] = field(default_factory=list)  # (row, CDR bytes): messages of another layout
+    qos: list[Any] = field(default_factory=list)
+
+    def fill(self, out: np.ndarray, cid: int, stamps: np.ndarray, rows: slice = slice(None)) -> None:
+        """Write this topic's MCAP message records (:data:`_MSG_HEAD` bytes of record header, then the
+        template with the numbers of its messages ``rows``) into ``out`` (m, :data:`_MSG_HEAD` + L) uint8,
+        a view into the samples' byte matrix; ``stamps`` (m,) ns: log and publish time of each."""
+        m, L = out.shape[0], self.template.size
+        out[:, :_MSG_HEAD] = np.frombuffer(struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + L, cid, 0, 0, 0), np.uint8)
+        t8 = np.ascontiguousarray(stamps, dtype="<u8").view(np.uint8).reshape(m, 8)
+        out[:, 15:23] = t8  # log time
+        out[:, 23:31] = t8  # publish time
+        body = out[:, _MSG_HEAD:]
+        body[:] = self.template
+        for off, dt, vals in self.fields:
+            w = np.dtype(dt).itemsize
+            body[:, off : off + w] = np.ascontiguousarray(vals[rows], dtype=dt).view(np.uint8).reshape(m, w)
+
+    @property
+    def width(self) -> int:
+        """Bytes of one message record of this topic."""
+        return _MSG_HEAD + self.template.size
+
+
+class _Markers:
+    """Marker values for the fields of a template message, and the rows' values they stand for."""
+
+    def __init__(self) -> None:
+        self.items: list[tuple[bytes, str, np.ndarray]] = []
+
+    def f64(self, values: np.ndarray) -> float:
+        """A marker float64 for ``values`` (m,)."""
+        v = 1.2345678901234567e250 * (1.0 + len(self.items) * 2.0**-30)
+        self.items.append((struct.pack("<d", v), "<f8", np.asarray(values, dtype=float)))
+        return v
+
+    def int32(self, values: np.ndarray, dt: str) -> int:
+        """A marker 32-bit integer (``dt`` ``<i4`` or ``<u4``) for ``values`` (m,)."""
+        v = 0x3A5B0000 + 2 * len(self.items) + 1
+        self.items.append((struct.pack("<I", v), dt, np.asarray(values)))
+        return v
+
+    def locate(self, raw: bytes) -> list[tuple[int, str, np.ndarray]]:
+        """Each marker's byte offset in the serialised template (exactly one match each)."""
+        out = []
+        for pat, dt, vals in self.items:
+            off = raw.find(pat)
+            if off < 0 or raw.find(pat, off + 1) >= 0:
+                raise RuntimeError(f"rosbag template: marker {pat.hex()} found {raw.count(pat)} times")
+            out.append((off, dt, vals))
+        return out
+
+
+class _Messages:
+    """Builders of the ROS 2 message objects of one ``rosbags`` typestore."""
+
+    def __init__(self, store: Any) -> None:
+        self.store = store
+        self.T = store.types
+
+    def _t(self, name: str) -> Any:
+        return self.T[name]
+
+    def time(self, sec: int, nsec: int) -> Any:
+        return self._t("builtin_interfaces/msg/Time")(sec=sec, nanosec=nsec)
+
+    def header(self, stamp: Any, frame: str) -> Any:
+        return self._t("std_msgs/msg/Header")(stamp=stamp, frame_id=frame)
+
+    def vec(self, x: float, y: float, z: float) -> Any:
+        return self._t("geometry_msgs/msg/Vector3")(x=x, y=y, z=z)
+
+    def quat(self, wxyz: tuple[float, float, float, float]) -> Any:
+        w, x, y, z = wxyz
+        return self._t("geometry_msgs/msg/Quaternion")(x=x, y=y, z=z, w=w)
+
+    def twist(self, lin: tuple[float, ...], ang: tuple[float, ...]) -> Any:
+        return self._t("geometry_msgs/msg/Twist")(linear=self.vec(*lin), angular=self.vec(*ang))
+
+    def odometry(self, stamp: Any, frame: str, child: str, pos, wxyz, lin, ang) -> Any:
+        T = self._t
+        pose = T("geometry_msgs/msg/Pose")(position=T("geometry_msgs/msg/Point")(*pos), orientation=self.quat(wxyz))
+        return T("nav_msgs/msg/Odometry")(
+            header=self.header(stamp, frame),
+            child_frame_id=child,
+            pose=T("geometry_msgs/msg/PoseWithCovariance")(pose=pose, covariance=np.zeros(36)),
+            twist=T("geometry_msgs/msg/TwistWithCovariance")(twist=self.twist(lin, ang), covariance=np.zeros(36)),
+        )
+
+    def transform(self, stamp: Any, frame: str, child: str, xyz, wxyz) -> Any:
+        T = self._t
+        tf = T("geometry_msgs/msg/Transform")(translation=self.vec(*xyz), rotation=self.quat(wxyz))
+        return T("geometry_msgs/msg/TransformStamped")(
+            header=self.header(stamp, frame), child_frame_id=child, transform=tf
+        )
+
+    def tf(self, transforms: list[Any]) -> Any:
+        return self._t("tf2_msgs/msg/TFMessage")(transforms=transforms)
+
+    def joint_state(self, stamp: Any, names: list[str], pos, vel, eff) -> Any:
+        return self._t("sensor_msgs/msg/JointState")(
+            header=self.header(stamp, ""),
+            name=list(names),
+            position=np.asarray(pos, dtype=float),
+            velocity=np.asarray(vel, dtype=float),
+            effort=np.asarray(eff, dtype=float),
+        )
+
+    def imu(self, stamp: Any, frame: str, gyro, accel) -> Any:
+        cov = np.zeros(9)
+        unknown = np.zeros(9)
+        unknown[0] = -1.0  # REP 145: no orientation estimate
+        return self._t("sensor_msgs/msg/Imu")(
+            header=self.header(stamp, frame),
+            orientation=self.quat((1.0, 0.0, 0.0, 0.0)),
+            orientation_covariance=unknown,
+            angular_velocity=self.vec(*gyro),
+            angular_velocity_covariance=cov,
+            linear_acceleration=self.vec(*accel),
+            linear_acceleration_covariance=cov.copy(),
+        )
+
+    def clock(self, stamp: Any) -> Any:
+        return self._t("rosgraph_msgs/msg/Clock")(clock=stamp)
+
+
+@functools.cache
+def _messages(distro: str) -> _Messages:
+    """The message builders of ``distro``'s ``rosbags`` type store, made once per process (``rosbags``
+    generates each type's serialiser on first use: about 0.1 s for a bag's types)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return _Messages(get_typestore(Stores[f"ROS2_{distro.upper()}"]))
+
+
+def _static_qos() -> list[Any]:
+    """``/tf_static``'s QoS as ROS publishes it: reliable, transient local (latched), keep last 1."""
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    inf = QosTime(2147483647, 4294967295)  # rosbag2's "infinite"
+    return [
+        Qos(
+            QosHistory.KEEP_LAST,
+            1,
+            QosReliability.RELIABLE,
+            QosDurability.TRANSIENT_LOCAL,
+            inf,
+            inf,
+            QosLiveliness.AUTOMATIC,
+            inf,
+            False,
+        )
+    ]
+
+
+def _need(log: Mapping[str, Any], key: str) -> np.ndarray:
+    if key not in log:
+        raise ValueError(
+            f"the log has no '{key}': a bag needs the 3-D state of simulate(sc, full_state=True) (bioform run --rosbag)"
+        )
+    return np.asarray(log[key])
+
+
+def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: int = 0) -> list[_Topic]:
+    """Every topic of the bag of ``log`` (a ``simulate(..., full_state=True)`` log or its ``log.npz``),
+    templates built and fields located, in the order a sample's messages are written."""
+    ts = _need(log, "t_state")
+    K = int(np.asarray(log["t"]).shape[0])
+    n = int(_need(log, "pose_3d").shape[1])
+    S = K + 1  # state samples: the log rows and the end
+    ns = start_ns + np.rint(ts * 1e9).astype(np.int64)
+    sec, nsec = ns // 1_000_000_000, ns % 1_000_000_000
+    all_rows, log_rows = np.arange(S), np.arange(K)
+    pose3, twist3 = np.asarray(log["pose_3d"], float), np.asarray(log["twist_3d"], float)
+    q = quat_of_rpy(pose3[..., 3:6])  # (S, n, 4) w x y z
+    leader = np.asarray(log["leader_state"], float)  # (S, 5)
+    lq = quat_of_rpy(np.stack([np.zeros(S), np.zeros(S), leader[:, 2]], axis=-1))
+    sign = np.asarray(log["wheel_sign"], float)
+    names = np.asarray(log["wheel_joints"]).astype(str)
+    wa, ws = np.asarray(log["wheel_angle"], float), np.asarray(log["wheel_speed"], float)
+    wheels = bool(np.isfinite(wa).any())
+    imu = "imu_gyro" in log
+    cmd, tau = np.asarray(log["cmd"], float), np.asarray(log["tau"], float)
+    ep, ev = np.asarray(log["est_pose"], float), np.asarray(log["est_vel"], float)
+    topics: list[_Topic] = []
+
+    def build(name: str, msgtype: str, rows: np.ndarray, make) -> _Topic:
+        mk = _Markers()
+        stamp = msgs.time(mk.int32(sec[rows], "<i4"), mk.int32(nsec[rows], "<u4"))
+        msg = make(mk, stamp, rows)
+        raw = msgs.store.serialize_cdr(msg, msgtype)
+        tp = _Topic(name, msgtype, rows, np.frombuffer(bytes(raw), np.uint8).copy(), mk.locate(bytes(raw)))
+        topics.append(tp)
+        return tp
+
+    def stamp_of(mk: _Markers, rows: np.ndarray) -> Any:
+        return msgs.time(mk.int32(sec[rows], "<i4"), mk.int32(nsec[rows], "<u4"))
+
+    build("/clock", "rosgraph_msgs/msg/Clock", all_rows, lambda mk, st, r: msgs.clock(st))
+
+    def tf(mk: _Markers, st: Any, r: np.ndarray) -> Any:
+        out = []
+        for i in range(n):
+            f = f"f{i + 1}"
+            xyz = tuple(mk.f64(pose3[r, i, c]) for c in range(3))
+            wxyz = tuple(mk.f64(q[r, i, c]) for c in range(4))
+            out.append(msgs.transform(st if i == 0 else stamp_of(mk, r), f"{f}/odom", f"{f}/base_link", xyz, wxyz))
+        xyz = (mk.f64(leader[r, 0]), mk.f64(leader[r, 1]), 0.0)
+        wxyz = tuple(mk.f64(lq[r, c]) for c in range(4))
+        out.append(msgs.transform(stamp_of(mk, r), "leader/odom", "leader/base_link", xyz, wxyz))
+        return msgs.tf(out)
+
+    build("/tf", "tf2_msgs/msg/TFMessage", all_rows, tf)
+    build(
+        "/leader/ground_truth/odom",
+        "nav_msgs/msg/Odometry",
+        all_rows,
+        lambda mk, st, r: msgs.odometry(
+            st,
+            "leader/odom",
+            "leader/base_link",
+            (mk.f64(leader[r, 0]), mk.f64(leader[r, 1]), 0.0),
+            tuple(mk.f64(lq[r, c]) for c in range(4)),
+            (mk.f64(leader[r, 3]), 0.0, 0.0),
+            (0.0, 0.0, mk.f64(leader[r, 4])),
+        ),
+    )
+    for i in range(n):
+        f = f"f{i + 1}"
+        build(
+            f"/{f}/ground_truth/odom",
+            "nav_msgs/msg/Odometry",
+            all_rows,
+            lambda mk, st, r, i=i, f=f: msgs.odometry(
+                st,
+                f"{f}/odom",
+                f"{f}/base_link",
+                tuple(mk.f64(pose3[r, i, c]) for c in range(3)),
+                tuple(mk.f64(q[r, i, c]) for c in range(4)),
+                tuple(mk.f64(twist3[r, i, c]) for c in range(3)),
+                tuple(mk.f64(twist3[r, i, c]) for c in range(3, 6)),
+            ),
+        )
+        if sensing == "odometry":
+            op, ov = np.asarray(log["odom_pose"], float), np.asarray(log["odom_vel"], float)
+            oq = quat_of_rpy(np.stack([np.zeros(K), np.zeros(K), op[:, i, 2]], axis=-1))
+            build(
+                f"/{f}/odom",
+                "nav_msgs/msg/Odometry",
+                log_rows,
+                lambda mk, st, r, i=i, f=f, op=op, ov=ov, oq=oq: msgs.odometry(
+                    st,
+                    f"{f}/odom",
+                    f"{f}/base_link",
+                    (mk.f64(op[r, i, 0]), mk.f64(op[r, i, 1]), 0.0),
+                    tuple(mk.f64(oq[r, c]) for c in range(4)),
+                    (mk.f64(ov[r, i, 0]), 0.0, 0.0),
+                    (0.0, 0.0, mk.f64(ov[r, i, 1])),
+                ),
+            )
+        mk_cmd = _Markers()
+        raw = msgs.store.serialize_cdr(
+            msgs.twist((mk_cmd.f64(cmd[:, i, 0]), 0.0, 0.0), (0.0, 0.0, mk_cmd.f64(cmd[:, i, 1]))),
+            "geometry_msgs/msg/Twist",
+        )
+        topics.append(
+            _Topic(
+                f"/{f}/cmd_vel",
+                "geometry_msgs/msg/Twist",
+                log_rows,
+                np.frombuffer(bytes(raw), np.uint8).copy(),
+                mk_cmd.locate(bytes(raw)),
+            )
+        )
+        jn = [str(x) for x in names[i]]
+        sg = sign[i]
+        if wheels:
+            js = build(
+                f"/{f}/joint_states",
+                "sensor_msgs/msg/JointState",
+                log_rows,
+                lambda mk, st, r, i=i, sg=sg, jn=jn: msgs.joint_state(
+                    st,
+                    jn,
+                    [mk.f64(sg[c] * wa[r, i, c]) for c in range(2)],
+                    [mk.f64(sg[c] * ws[r, i, c]) for c in range(2)],
+                    [mk.f64(sg[c] * tau[r, i, c]) for c in range(2)],
+                ),
+            )
+            # at T no torque interval ends: the last message has positions and rates only
+            last = msgs.joint_state(msgs.time(int(sec[K]), int(nsec[K])), jn, sg * wa[K, i], sg * ws[K, i], [])
+            js.extra.append((K, bytes(msgs.store.serialize_cdr(last, js.msgtype))))
+        else:  # no wheels (the ideal plant): the applied torques only
+            build(
+                f"/{f}/joint_states",
+                "sensor_msgs/msg/JointState",
+                log_rows,
+                lambda mk, st, r, i=i, jn=jn: msgs.joint_state(
+                    st, jn, [], [], [mk.f64(tau[r, i, c]) for c in range(2)]
+                ),
+            )
+        if imu:
+            g, a = np.asarray(log["imu_gyro"], float), np.asarray(log["imu_accel"], float)
+            build(
+                f"/{f}/imu",
+                "sensor_msgs/msg/Imu",
+                all_rows,
+                lambda mk, st, r, i=i, f=f, g=g, a=a: msgs.imu(
+                    st,
+                    f"{f}/imu_link",
+                    tuple(mk.f64(g[r, i, c]) for c in range(3)),
+                    tuple(mk.f64(a[r, i, c]) for c in range(3)),
+                ),
+            )
+        eq = quat_of_rpy(np.stack([np.zeros(K), np.zeros(K), ep[:, i, 2]], axis=-1))
+        build(
+            f"/{f}/leader_estimate",
+            "nav_msgs/msg/Odometry",
+            log_rows,
+            lambda mk, st, r, i=i, f=f, eq=eq: msgs.odometry(
+                st,
+                "world",
+                f"{f}/leader_estimate",
+                (mk.f64(ep[r, i, 0]), mk.f64(ep[r, i, 1]), 0.0),
+                tuple(mk.f64(eq[r, c]) for c in range(4)),
+                (mk.f64(ev[r, i, 0]), 0.0, 0.0),
+                (0.0, 0.0, mk.f64(ev[r, i, 1])),
+            ),
+        )
+    return topics
+
+
+def _static_tf(log: Mapping[str, Any], msgs: _Messages, start_ns: int) -> bytes:
+    """``/tf_static``: ``world → fI/odom`` and ``world → leader/odom`` (identity: the odometry frames
+    are the world's), ``fI/base_link → fI/imu_link`` (the IMU site at the axle midpoint) with an IMU."""
+    n = int(np.asarray(log["pose_3d"]).shape[1])
+    t0 = start_ns + int(np.rint(float(np.asarray(log["t_state"])[0]) * 1e9))
+    st = msgs.time(t0 // 1_000_000_000, t0 % 1_000_000_000)
+    one = (1.0, 0.0, 0.0, 0.0)
+    out = [msgs.transform(st, "world", f"f{i + 1}/odom", (0.0, 0.0, 0.0), one) for i in range(n)]
+    out.append(msgs.transform(st, "world", "leader/odom", (0.0, 0.0, 0.0), one))
+    if "imu_gyro" in log:
+        axle = np.asarray(log.get("axle", np.zeros((n, 3))), float)
+        out += [msgs.transform(st, f"f{i + 1}/base_link", f"f{i + 1}/imu_link", tuple(axle[i]), one) for i in range(n)]
+    return bytes(msgs.store.serialize_cdr(msgs.tf(out), "tf2_msgs/msg/TFMessage"))
+
+
+def write_bag(
+    result: Any,
+    path: str | Path,
+    *,
+    distro: str = DEFAULT_DISTRO,
+    start_ns: int = 0,
+    overwrite: bool = False,
+) -> BagInfo:
+    """Write the run ``result`` (a :class:`~bioform_mj.run.simulate.RunResult` of ``simulate(sc, full_state=True)``)
+    as the rosbag2 folder ``path`` (``metadata.yaml`` and ``<name>.mcap``), complete or not at all.
+
+    ``distro``: the ROS 2 distribution whose message definitions and type hashes the bag carries
+    (:data:`DISTROS`); ``start_ns``: the stamp of t = 0, ns since the epoch (0: simulated time from 0,
+    as ``/clock`` of a simulator); ``overwrite``: replace an existing ``path`` (else ``FileExistsError``).
+    The folder is written under a temporary name beside ``path`` and renamed when complete.
+    """
+    if distro not in DISTROS:
+        raise InputError(f"unknown ROS 2 distribution '{distro}' (expected one of: {', '.join(DISTROS)})")
+    if start_ns < 0:
+        raise InputError(f"start_ns must be >= 0 ns, got {start_ns}")
+    check_available()
+    t0 = time.perf_counter()
+    log = result.log
+    _need(log, "t_state")  # before anything is written
+    summary = getattr(result, "summary", {}) or {}
+    sensing = str(summary.get("sensing", "truth"))
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists (overwrite=True replaces it)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    try:
+        inner = tmp / path.name
+        counts = _write(inner, log, summary, sensing, distro, start_ns)
+        if path.exists():
+            shutil.rmtree(path)
+        os.replace(inner, path)
+    except OSError as exc:
+        from bioform_mj.core.errors import WriteFailed
+
+        raise WriteFailed(str(path), exc) from exc
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return BagInfo(path, sum(counts.values()), counts, distro, time.perf_counter() - t0)
+
+
+def _write(path: Path, log: Mapping[str, Any], summary: Mapping[str, Any], sensing: str, distro: str, start_ns: int):
+    """Write the bag folder ``path`` (must not exist); returns ``{topic: messages}``."""
+    from rosbags.rosbag2 import StoragePlugin
+
+    msgs = _messages(distro)
+    topics = topics_of(log, sensing, msgs, start_ns)
+    static = _static_tf(log, msgs, start_ns)
+    with _BulkWriter(path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP) as w:
+        w.set_custom_data(
+            "bioform_mj",
+            json.dumps(
+                {
+                    "scenario": summary.get("scenario"),
+                    "method": summary.get("method"),
+                    "plant": summary.get("plant"),
+                    "sensing": sensing,
+                    "ros_distro": distro,
+                    "followers": int(np.asarray(log["pose_3d"]).shape[1]),
+                },
+                sort_keys=True,
+            ),
+        )
+        conns = {}
+        c_static = w.add_connection(
+            "/tf_static", "tf2_msgs/msg/TFMessage", typestore=msgs.store, offered_qos_profiles=_static_qos()
+        )
+        for tp in topics:
+            if tp.name not in conns:
+                conns[tp.name] = w.add_connection(tp.name, tp.msgtype, typestore=msgs.store)
+        ts = np.asarray(log["t_state"], float)
+        stamps = start_ns + np.rint(ts * 1e9).astype(np.int64)
+        w.write_samples(c_static, static, topics, conns, stamps)
+        counts = {"/tf_static": 1} | {tp.name: len(tp.rows) + len(tp.extra) for tp in topics}
+    return counts
+
+
+# ------------------------------------------------------------------------------ bulk MCAP writing
+_MSG_HEAD = 1 + 8 + 2 + 4 + 8 + 8  # opcode, record length, channel id, sequence, log time, publish time
+
+
+def _record(cid: int, stamp: int, data: bytes) -> bytes:
+    return struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + len(data), cid, 0, stamp, stamp) + data
+
+
+@functools.cache
+def _writer_classes():
+    """``(_BulkWriter, _BulkMcap)``: rosbags' writer with a storage that takes whole chunks at once."""
+    from io import BytesIO
+
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
+
+    class BulkMcap(McapWriter):
+        """``rosbags``' MCAP storage (rosbags 0.11.9) plus :meth:`write_chunk`: one chunk of ready records."""
+
+        def write_chunk(self, pieces: list[Any], index: dict[int, tuple[np.ndarray, np.ndarray]]) -> None:
+            """Write the message records ``pieces`` (bytes or contiguous uint8 arrays, in time order) as
+            one chunk; ``index``: channel id → (log times, offsets of its records in the pieces). The
+            schema and channel records ``rosbags`` keeps pending go first."""
+            from collections import defaultdict
+
+            pending = self.chunk.bio.getvalue()
+            self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+            if not index:
+                return
+            pieces = [pending, *pieces]
+            size = sum(len(p) if isinstance(p, bytes) else p.nbytes for p in pieces)
+            t_start = min(int(t.min()) for t, _ in index.values())
+            t_end = max(int(t.max()) for t, _ in index.values())
+            if self.compression:
+                pieces = [self.compressor(b"".join(bytes(p) for p in pieces))]
+            comp_size = sum(len(p) if isinstance(p, bytes) else p.nbytes for p in pieces)
+            cname = self.compression.encode()
+            head = struct.pack("<QQQI", t_start, t_end, size, 0) + struct.pack("<I", len(cname)) + cname
+            body = head + struct.pack("<Q", comp_size)
+            chunk_start = self.bio.tell()
+            self.bio.write(struct.pack("<BQ", 0x06, len(body) + comp_size))
+            self.bio.write(body)
+            for p in pieces:
+                self.bio.write(p if isinstance(p, bytes) else memoryview(p))
+            chunk_end = self.bio.tell()
+            offsets = []
+            for cid in sorted(index):
+                t, off = index[cid]
+                offsets.append((cid, self.bio.tell()))
+                pairs = np.empty((len(t), 2), "<u8")
+                pairs[:, 0], pairs[:, 1] = t, off + len(pending)
+                self.bio.write(struct.pack("<BQHI", 0x07, 2 + 4 + pairs.nbytes, cid, pairs.nbytes))
+                self.bio.write(pairs.tobytes())
+                self.channel_stats[cid] += len(t)
+            rec = BytesIO()
+            rec.write(struct.pack("<QQQQ", t_start, t_end, chunk_start, chunk_end - chunk_start))
+            rec.write(struct.pack("<I", len(offsets) * 10))
+            for cid, o in offsets:
+                rec.write(struct.pack("<HQ", cid, o))
+            rec.write(struct.pack("<Q", self.bio.tell() - chunk_end))
+            rec.write(struct.pack("<I", len(cname)) + cname)
+            rec.write(struct.pack("<QQ", comp_size, size))
+            self.chunks.append(rec)
+            self.message_start_time = min(self.message_start_time, t_start)
+            self.message_end_time = max(self.message_end_time, t_end)
+
+    class BulkWriter(Writer):
+        """``rosbags``' rosbag2 writer whose MCAP storage takes a run's messages in whole chunks."""
+
+        STORAGE_PLUGINS = {StoragePlugin.MCAP: BulkMcap}
+
+        def write_samples(self, c_static: Any, static: bytes, topics: list[_Topic], conns: dict, stamps) -> None:
+            """``/tf_static`` at the first stamp, then every sample's messages in topic order, in chunks of
+            whole samples of about :data:`CHUNK_BYTES`. Every topic has a message at each of the first
+            ``K`` samples (the log rows, all of one layout: a chunk is a ``(samples, B)`` byte matrix,
+            filled when it is written: memory stays at one chunk); the last sample (the end of the run)
+            holds the state topics' messages only."""
+            S = len(stamps)
+            K = S - 1
+            cids = [conns[tp.name].id for tp in topics]
+            cols, c = [], 0
+            for tp in topics:
+                cols.append(c)
+                c += tp.width
+            B = c
+            tail, tail_idx = [], []  # the last sample: (cid, record bytes)
+            for tp, cid in zip(topics, cids):
+                full = len(tp.rows) == S
+                if full:  # the state topics: one more message, at the end of the run
+                    last = np.empty((1, tp.width), np.uint8)
+                    tp.fill(last, cid, stamps[K:], slice(K, S))
+                    tail.append(last.tobytes())
+                    tail_idx.append(cid)
+                for row, data in tp.extra:
+                    assert row == K, "only the last sample has messages of another layout"
+                    tail.append(_record(cid, int(stamps[row]), data))
+                    tail_idx.append(cid)
+            first = _record(c_static.id, int(stamps[0]), static)
+            per = max(1, CHUNK_BYTES // max(B, 1))
+            storage = self.storage
+            j0 = 0
+            while True:
+                j1 = min(K, j0 + per)
+                parts = [first] if j0 == 0 else []
+                at = len(first) if j0 == 0 else 0
+                index: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+                if j0 == 0:
+                    index[c_static.id] = (stamps[:1], np.zeros(1, np.int64))
+                js = np.arange(j0, j1)
+                for cid, col in zip(cids, cols):
+                    index[cid] = (stamps[js], at + (js - j0) * B + col)
+                M = np.empty((j1 - j0, B), np.uint8)  # this chunk's samples, every topic's record side by side
+                for tp, cid, col in zip(topics, cids, cols):
+                    tp.fill(M[:, col : col + tp.width], cid, stamps[j0:j1], slice(j0, j1))
+                parts.append(M.reshape(-1))
+                at += (j1 - j0) * B
+                if j1 == K:  # the last chunk: the end of the run's messages too
+                    for cid, rec in zip(tail_idx, tail):
+                        t_old, o_old = index.get(cid, (np.zeros(0, np.int64), np.zeros(0, np.int64)))
+                        index[cid] = (np.append(t_old, stamps[K]), np.append(o_old, at))
+                        parts.append(rec)
+                        at += len(rec)
+                storage.write_chunk(parts, {k: v for k, v in index.items() if len(v[0])})
+                for cid, (t, _) in index.items():
+                    self.counts[cid] += len(t)
+                if j1 == K:
+                    break
+                j0 = j1
+            if S:
+                self.min_timestamp = min(self.min_timestamp, int(stamps.min()))
+                self.max_timestamp = max(self.max_timestamp, int(stamps.max()))
+
+    return BulkWriter, BulkMcap
+
+
+def _BulkWriter(*args: Any, **kwargs: Any) -> Any:  # noqa: N802 - a class, built on first use (rosbags optional)
+    return _writer_classes()[0](*args, **kwargs)

@@ -1,0 +1,299 @@
+"""The scenario's demand against the robot's limits, before the run (design §21).
+
+The demand is the same scenario on the paper's ideal plant (eq. 34) with the robot's ``c_true`` and
+no torque limit: what the controller asks of a robot that can give everything. From its log:
+
+- ``wheel_speed`` m/s: the largest wheel ground speed ``max |υ ± l ω|`` (``l`` the robot's half track)
+  against the top speed (:func:`~bioform_mj.robots.limits.top_speed`);
+- ``accel`` m/s²: the largest ``|dυ/dt|`` (log differences) against the acceleration the torque,
+  traction and tip-over allow (:func:`~bioform_mj.robots.limits.limits_of`);
+- ``yaw_accel`` rad/s²: the largest ``|dω/dt|`` against ``2 b min(τ_max, τ_traction)``;
+- ``lateral_accel`` m/s²: the largest ``|υ ω|`` against the lateral tip-over margin;
+- ``sign_torque`` N·m: the sliding-mode sign terms' torque amplitude per wheel, ``c_a / (2 â) +
+  c_b / (2 b̂)`` (eqs. 38–39 with the least ``ĉ`` of the run), against ``min(τ_max, τ_traction)``;
+- ``torque_vs_traction`` N·m: the motor limit against the traction limit (above it the wheels skid).
+- ``sliding_gain_v`` / ``_w`` (where the robot has a wheel dead band or damping): its resistance,
+  ``2 a f + k_υ |υ|max`` m/s² (resp. ``2 b f + k_ω |ω|max`` rad/s²), against the sliding gain
+  ``torque.c`` that must dominate it (eqs. 38–39); the gain scales × 1/σ², the resistance not.
+
+Each is ``{"value", "limit", "ratio", "unit", "limit_by"}`` (``limit`` None and ``missing`` where the
+robot does not say); a ``warning:`` line per ratio above 1. The ideal run is cached per scenario and
+robot (memory and :func:`bioform_mj.assess.prerun.cache_dir`'s sibling ``demand``): ≤ 2 s once, nothing again.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: cache entries of another format are recomputed
+CACHE_FORMAT = 3
+_MEMO: dict[str, dict[str, Any]] = {}
+
+
+def ideal_twin(sc: Any, c_true: tuple[float, float]) -> Any:
+    """``sc`` on the paper's ideal plant with ``c_true`` and no torque limit (the demand's run): what
+    needs MuJoCo left out — a friction patch, the odometry sensing, the obstacles and the safety filter
+    (the formation's own demand; an avoidance manoeuvre asks more). A scenario slowed by σ > 1 is
+    stepped × σ (control, physics and log steps): the twin of a similar scenario is then the σ = 1
+    twin with every time × σ (design §21), and costs what it costs, ≤ 2 s."""
+    from bioform_mj.formation.obstacles import ObstacleFieldCfg
+    from bioform_mj.formation.safety import SafetyCfg
+    from bioform_mj.robots.refs import RobotRef
+
+    plant = dataclasses.replace(
+        sc.plant,
+        kind="ideal",
+        c_true=(float(c_true[0]), float(c_true[1])),
+        robots=(RobotRef("paper"),),
+        sensing="truth",
+    )
+    faults = dataclasses.replace(sc.faults, friction_patch=())
+    sim = sc.sim
+    sigma = float(sc.formation.time_scale_applied)
+    if sigma > 1:  # stepped × σ: it costs what the unscaled scenario costs (similar; the sign terms chatter more)
+        sim = dataclasses.replace(
+            sim, control_dt=sim.control_dt * sigma, physics_dt=sim.physics_dt * sigma, log_dt=sim.log_dt * sigma
+        )
+    torque = dataclasses.replace(sc.torque, tau_max=1e5)
+    limits = dataclasses.replace(sc.limits, torque=max(sc.limits.torque, 1e7))
+    return dataclasses.replace(
+        sc,
+        sim=sim,
+        plant=plant,
+        faults=faults,
+        torque=torque,
+        limits=limits,
+        obstacles=(),
+        obstacle_field=ObstacleFieldCfg(),
+        safety=SafetyCfg(),
+    )
+
+
+def _key(sc: Any, c_true: tuple[float, float], half_track: float) -> str:
+    from bioform_mj.assess.prerun import code_digest
+
+    h = hashlib.sha256(code_digest())
+    h.update(json.dumps(ideal_twin(sc, c_true).to_dict(), sort_keys=True, default=str).encode())
+    h.update(repr(float(half_track)).encode())
+    return h.hexdigest()[:32]
+
+
+def peaks(sc: Any, c_true: tuple[float, float], half_track: float) -> dict[str, Any]:
+    """The demand's peaks (module docstring) of ``sc`` on the ideal plant with ``c_true`` and a robot of
+    half track ``half_track`` m; cached. ``{"wheel_speed_mps", "accel_mps2", "yaw_accel_radps2",
+    "lateral_accel_mps2", "c_hat_min", "seconds", "from"}``."""
+    key = _key(sc, c_true, half_track)
+    if key in _MEMO:
+        return {**_MEMO[key], "from": "memory"}
+    from bioform_mj.assess.prerun import cache_dir
+
+    path = cache_dir().parent / "demand" / f"{key}.json"
+    try:
+        entry = json.loads(path.read_text())
+        if isinstance(entry, dict) and entry.get("format") == CACHE_FORMAT:
+            _MEMO[key] = entry
+            return {**entry, "from": "disk"}
+    except (OSError, ValueError):
+        pass
+    from bioform_mj.run.simulate import simulate
+
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():  # the twin's outcomes are not the run's
+        warnings.simplefilter("ignore")
+        res = simulate(ideal_twin(sc, c_true), engine="auto")
+    t = np.asarray(res.log["t"])
+    vel = np.asarray(res.log["vel"])  # (K, n, 2) υ m/s, ω rad/s
+    v, w = vel[:, :, 0], vel[:, :, 1]
+    dt = np.diff(t)[:, None] if len(t) > 1 else np.ones((0, 1))
+    ch = np.asarray(res.log.get("c_hat", np.full((1, 1, 2), np.nan)))
+    entry = {
+        "format": CACHE_FORMAT,
+        "wheel_speed_mps": float(np.max(np.abs(v) + half_track * np.abs(w))) if len(t) else 0.0,
+        "accel_mps2": float(np.max(np.abs(np.diff(v, axis=0)) / dt)) if len(t) > 1 else 0.0,
+        "yaw_accel_radps2": float(np.max(np.abs(np.diff(w, axis=0)) / dt)) if len(t) > 1 else 0.0,
+        "lateral_accel_mps2": float(np.max(np.abs(v * w))) if len(t) else 0.0,
+        "speed_mps": float(np.max(np.abs(v))) if len(t) else 0.0,
+        "yaw_rate_radps": float(np.max(np.abs(w))) if len(t) else 0.0,
+        "c_hat_min": [float(np.nanmin(ch[..., 0])), float(np.nanmin(ch[..., 1]))],
+        "duration_s": float(sc.sim.duration),
+        "seconds": time.perf_counter() - t0,
+    }
+    _MEMO[key] = entry
+    try:
+        from bioform_mj.outputs.files import write_json
+
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_json(path, entry)
+    except Exception:  # noqa: BLE001 - a cache that cannot be written costs time, not the run
+        pass
+    return {**entry, "from": "computed"}
+
+
+def _item(value: float, limit: float | None, unit: str, by: str) -> dict[str, Any]:
+    out: dict[str, Any] = {"value": float(value), "limit": None if limit is None else float(limit), "unit": unit}
+    out["ratio"] = None if limit is None or limit <= 0 else float(value) / float(limit)
+    out["limit_by"] = by
+    return out
+
+
+def compare(
+    sc: Any, pk: dict[str, Any], lim: dict[str, Any], resist: dict[str, Any] | None = None
+) -> dict[str, dict[str, Any]]:
+    """The demand ``pk`` (:func:`peaks`) of ``sc`` against the robot's limits ``lim``
+    (:func:`~bioform_mj.robots.limits.limits_of`), one item per quantity (module docstring).
+    ``resist``: the robot's unmodelled resistance (:meth:`~bioform_mj.robots.params.RobotParams.unmodelled`:
+    ``deadband_accel``, ``drag_rate_per_s``); where it has one, ``sliding_gain_v`` / ``_w`` put it, at
+    the demand's peak speed, against the sliding gain ``torque.c`` that must dominate it (eqs. 38–39)."""
+    grip = min(lim["torque_nm"], lim["traction_torque_nm"])
+    ca, cb = (float(x) for x in sc.torque.c)
+    a_min, b_min = pk["c_hat_min"]
+    sign = ca / (2 * a_min) + cb / (2 * b_min) if a_min > 0 and b_min > 0 else float("inf")
+    out = {
+        "wheel_speed": _item(
+            pk["wheel_speed_mps"], lim["top_speed_mps"], "m/s", f"top speed ({lim['top_speed_source'] or 'unknown'})"
+        ),
+        "accel": _item(pk["accel_mps2"], lim["accel_mps2"], "m/s²", lim["accel_limited_by"]),
+        "yaw_accel": _item(pk["yaw_accel_radps2"], lim["yaw_accel_radps2"], "rad/s²", lim["yaw_accel_limited_by"]),
+        "lateral_accel": _item(pk["lateral_accel_mps2"], lim["lateral_accel_mps2"], "m/s²", "tip lateral"),
+        "sign_torque": _item(
+            sign, grip, "N·m", "torque" if lim["torque_nm"] <= lim["traction_torque_nm"] else "traction"
+        ),
+        "torque_vs_traction": _item(lim["torque_nm"], lim["traction_torque_nm"], "N·m", "traction"),
+    }
+    if resist is not None:
+        dead, drag = resist["deadband_accel"], resist["drag_rate_per_s"]
+        for k, j, speed, gain, unit in (
+            ("sliding_gain_v", 0, pk.get("speed_mps", 0.0), ca, "m/s²"),
+            ("sliding_gain_w", 1, pk.get("yaw_rate_radps", 0.0), cb, "rad/s²"),
+        ):
+            r = float(dead[j]) + float(drag[j]) * float(speed)
+            if r > 0:
+                out[k] = _item(r, gain, unit, f"torque.c[{j}], the sliding gain")
+    return out
+
+
+_WHAT = {
+    "wheel_speed": "peak wheel ground speed",
+    "accel": "peak acceleration",
+    "yaw_accel": "peak yaw acceleration",
+    "lateral_accel": "peak centripetal acceleration",
+    "sign_torque": "sliding-mode sign terms' torque amplitude",
+    "torque_vs_traction": "the torque limit",
+    "sliding_gain_v": "the robot's resistance (dead band and drag at peak speed) on υ",
+    "sliding_gain_w": "the robot's resistance (dead band and drag at peak yaw rate) on ω",
+}
+
+
+#: how the demand scales with the time factor σ (design §21): speeds 1/σ, accelerations and the sign terms 1/σ²
+_POWER = {"wheel_speed": 1.0, "accel": 2.0, "yaw_accel": 2.0, "lateral_accel": 2.0, "sign_torque": 2.0}
+
+
+def warning_lines(who: str, items: dict[str, dict[str, Any]], sigma: float = 1.0) -> list[str]:
+    """One line per exceeded limit, with the ratio and, where slowing the scenario helps, the
+    ``formation.time_scale`` that would bring it to the limit (similarity: the ratio × σ^(1/power))."""
+    out = []
+    for k, it in items.items():
+        if it["ratio"] is not None and it["ratio"] > 1:
+            u = it["unit"]
+            if k.startswith("sliding_gain"):  # the gain must dominate the resistance; slowing makes it worse
+                out.append(
+                    f"{who}: {_WHAT[k]} {it['value']:.3g} {u} is {it['ratio']:.2g}x the sliding gain "
+                    f"{it['limit_by'].split(',')[0]} = {it['limit']:.3g} {u}: the sign terms cannot hold it and "
+                    "the learner reads it as a smaller ĉ (design §21)"
+                )
+                continue
+            hint = ""
+            if k in _POWER:
+                hint = f'; formation.time_scale >= {sigma * it["ratio"] ** (1 / _POWER[k]):.3g} or "auto" slows it'
+            out.append(
+                f"{who}: {_WHAT[k]} {it['value']:.3g} {u} is {it['ratio']:.2g}x the robot's limit "
+                f"{it['limit']:.3g} {u} ({it['limit_by']}{hint})"
+            )
+    return out
+
+
+def _rounded(x: Any) -> Any:
+    """``x`` with every float at 9 significant digits (the same robot built twice differs in the last bits)."""
+    if isinstance(x, float):
+        return float(f"{x:.9g}")
+    if isinstance(x, dict):
+        return {k: _rounded(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_rounded(v) for v in x]
+    return x
+
+
+def run_limits(sc: Any, plant: Any) -> list[dict[str, Any]]:
+    """Per follower of a built MuJoCo ``plant``: its limits (:func:`~bioform_mj.robots.limits.limits_of`)."""
+    import mujoco
+
+    from bioform_mj.assess.check import tip_margins
+    from bioform_mj.robots.limits import limits_of
+    from bioform_mj.robots.refs import resolve_robot
+
+    scratch = mujoco.MjData(plant.model)
+    mujoco.mj_kinematics(plant.model, scratch)
+    loads = plant.settled_wheel_loads()
+    entries = list(sc.plant.robots) * (sc.n if len(sc.plant.robots) == 1 else 1)
+    out = []
+    for i in range(plant.n):
+        tips = tip_margins(plant.model, scratch, f"f{i + 1}/")["tip_accel_mps2"]
+        out.append(limits_of(plant, i, resolve_robot(entries[i]), loads[i], tips))
+    return out
+
+
+def before_run(sc: Any, plant: Any) -> dict[str, Any]:
+    """summary.json's ``demand`` for a MuJoCo run: ``{"robots": [{"followers", "model", "c_true",
+    "limits", "demand", "ideal_run"}], "warnings", "seconds"}`` (one entry per distinct robot)."""
+    t0 = time.perf_counter()
+    lims = run_limits(sc, plant)
+    groups: dict[str, list[int]] = {}
+    for i, p in enumerate(plant.params):
+        k = json.dumps(_rounded([p.a_eff, p.b_eff, p.half_track, lims[i]]), sort_keys=True, default=str)
+        groups.setdefault(k, []).append(i)
+    robots, lines = [], []
+    for idx in groups.values():
+        i = idx[0]
+        p = plant.params[i]
+        who = f"follower{'s' if len(idx) > 1 else ''} {', '.join(str(j + 1) for j in idx)}"
+        try:
+            pk = peaks(sc, (p.a_eff, p.b_eff), p.half_track)
+        except Exception as exc:  # noqa: BLE001 - a demand that cannot be computed is said, the run goes ahead
+            why = f"{type(exc).__name__}: {exc}"
+            lines.append(f"{who}: the scenario's demand could not be computed on the ideal plant ({why})")
+            robots.append({"followers": [j + 1 for j in idx], "limits": lims[i], "demand": None, "error": why})
+            continue
+        items = compare(sc, pk, lims[i], p.unmodelled(1.0, 1.0))
+        sigma = sc.formation.time_scale if isinstance(sc.formation.time_scale, float) else 1.0
+        lines += warning_lines(who, items, sigma)
+        robots.append(
+            {
+                "followers": [j + 1 for j in idx],
+                "model": Path(plant.robot_files[i]).name,
+                "c_true": [p.a_eff, p.b_eff],
+                "limits": lims[i],
+                "demand": items,
+                "ideal_run": {k: pk[k] for k in ("seconds", "from") if k in pk},
+            }
+        )
+    return {"robots": robots, "warnings": lines, "seconds": time.perf_counter() - t0}
+
+
+#: what :func:`before_run` measures of itself: said on a run's log, not kept in its summary (same bits per seed)
+VOLATILE = ("seconds", "from", "ideal_run")
+
+
+def for_summary(d: dict[str, Any]) -> dict[str, Any]:
+    """:func:`before_run`'s result without its times and cache provenance."""
+    return {
+        **{k: v for k, v in d.items() if k not in VOLATILE},
+        "robots": [{k: v for k, v in r.items() if k not in VOLATILE} for r in d.get("robots", [])],
+    }

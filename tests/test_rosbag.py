@@ -1,0 +1,292 @@
+"""`bioform run --rosbag`: the run as a ROS 2 bag, read back with rosbags' own reader and compared with
+log.npz number by number; the 3-D state the log gains (simulate(full_state=True)) leaves every other
+channel as it was; bad input says how to install the extra; --overwrite knows the bag folder."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from bioform_mj.cli.main import main
+from bioform_mj.outputs.fullstate import quat_of_rpy, rpy_of_quat
+from bioform_mj.run.simulate import simulate
+from bioform_mj.scenario.loader import load
+
+needs_rosbags = pytest.mark.skipif(importlib.util.find_spec("rosbags") is None, reason="the ros extra is not installed")
+
+
+def _read(bag):
+    """{topic: [(log time ns, message)]} and the connections, with rosbags' reader and jazzy's typestore."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    out: dict[str, list] = {}
+    with Reader(bag) as rd:
+        conns = {c.topic: c for c in rd.connections}
+        for c, t, raw in rd.messages():
+            out.setdefault(c.topic, []).append((t, store.deserialize_cdr(raw, c.msgtype)))
+    return out, conns, store
+
+
+def _stamp(m) -> int:
+    return m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+
+
+def _xyzw(q) -> np.ndarray:
+    return np.array([q.w, q.x, q.y, q.z])
+
+
+@needs_rosbags
+def test_mujoco_odometry_bag_round_trip_equals_log(tmp_path, capsys):
+    """MuJoCo, dead reckoning (an IMU): every topic's messages are log.npz's numbers, bit for bit
+    (quaternions: of the logged roll/pitch/yaw, to 1e-15)."""
+    out = tmp_path / "run"
+    argv = ["run", "paper", "--plant", "mujoco", "--duration", "0.3", "--set", 'plant.sensing="odometry"']
+    assert main([*argv, "--out", str(out), "--rosbag"]) == 0
+    assert "rosbag/: " in capsys.readouterr().out
+    assert sorted(p.name for p in (out / "rosbag").iterdir()) == ["metadata.yaml", "rosbag.mcap"]
+    assert not list(out.glob(".*tmp"))
+    log = dict(np.load(out / "log.npz"))
+    K = log["t"].shape[0]
+    assert K == 30 and log["t_state"].shape == (K + 1,) and log["t_state"][-1] == pytest.approx(0.3, abs=1e-12)
+    assert np.array_equal(log["t_state"][:K], log["t"])
+    msgs, conns, store = _read(out / "rosbag")
+    ns = np.rint(log["t_state"] * 1e9).astype(np.int64)
+
+    # the topics, their counts and types (the jazzy type hashes)
+    want = {"/tf_static": 1, "/clock": K + 1, "/tf": K + 1, "/leader/ground_truth/odom": K + 1}
+    for f in ("f1", "f2", "f3"):
+        want |= {f"/{f}/ground_truth/odom": K + 1, f"/{f}/odom": K, f"/{f}/cmd_vel": K}
+        want |= {f"/{f}/joint_states": K + 1, f"/{f}/imu": K + 1, f"/{f}/leader_estimate": K}
+    assert {t: len(v) for t, v in msgs.items()} == want
+    assert conns["/f1/odom"].digest == store.hash_rihs01("nav_msgs/msg/Odometry")
+    assert conns["/f1/imu"].msgtype == "sensor_msgs/msg/Imu"
+    assert [t for t, _ in msgs["/clock"]] == ns.tolist()
+    assert [m.clock.sec * 10**9 + m.clock.nanosec for _, m in msgs["/clock"]] == ns.tolist()
+    static = msgs["/tf_static"][0][1].transforms
+    assert [(s.header.frame_id, s.child_frame_id) for s in static][:4] == [
+        ("world", "f1/odom"),
+        ("world", "f2/odom"),
+        ("world", "f3/odom"),
+        ("world", "leader/odom"),
+    ]
+
+    for i, f in enumerate(("f1", "f2", "f3")):
+        # truth: the 3-D pose (z, roll, pitch included) and the body-frame twist
+        gt = [m for _, m in msgs[f"/{f}/ground_truth/odom"]]
+        assert [_stamp(m) for m in gt] == ns.tolist()
+        assert gt[0].header.frame_id == f"{f}/odom" and gt[0].child_frame_id == f"{f}/base_link"
+        pos = np.array([[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z] for m in gt])
+        assert np.array_equal(pos, log["pose_3d"][:, i, :3])
+        q = np.array([_xyzw(m.pose.pose.orientation) for m in gt])
+        assert np.abs(q - quat_of_rpy(log["pose_3d"][:, i, 3:])).max() < 1e-15
+        assert np.abs(rpy_of_quat(q) - log["pose_3d"][:, i, 3:]).max() < 1e-9
+        tw = np.array([[m.twist.twist.linear.x, m.twist.twist.linear.y, m.twist.twist.linear.z] for m in gt])
+        assert np.array_equal(tw, log["twist_3d"][:, i, :3])
+        assert np.array_equal([m.twist.twist.angular.z for m in gt], log["twist_3d"][:, i, 5])
+        # the 3-D state is the planar log's where they overlap (the paper robot's base origin is on the
+        # axle): x, y exactly, heading to 1e-12 rad; forward speed and yaw rate to 1e-4 m/s and 1e-2
+        # rad/s (a chassis pitched by a few mrad: measured 2.2e-5 m/s, 6.5e-4 rad/s of 0.38 m/s, 9.3 rad/s)
+        assert np.array_equal(log["pose_3d"][:K, i, :2], log["pose"][:, i, :2])
+        assert np.abs(np.angle(np.exp(1j * (log["pose_3d"][:K, i, 5] - log["pose"][:, i, 2])))).max() < 1e-12
+        assert np.abs(log["twist_3d"][:K, i, 0] - log["vel"][:, i, 0]).max() < 1e-4
+        assert np.abs(log["twist_3d"][:K, i, 5] - log["vel"][:, i, 1]).max() < 1e-2
+        # the robot stands on its wheels: z > 0 and nearly level
+        assert np.all(pos[:, 2] > 0.01) and np.abs(log["pose_3d"][:, i, 3:5]).max() < 0.2
+        # /tf: odom → base_link is the same pose
+        tf = [m.transforms[i] for _, m in msgs["/tf"]]
+        assert np.array_equal([t.transform.translation.z for t in tf], log["pose_3d"][:, i, 2])
+        # the dead reckoning the controller was given
+        od = [m for _, m in msgs[f"/{f}/odom"]]
+        assert np.array_equal([m.pose.pose.position.x for m in od], log["odom_pose"][:, i, 0])
+        assert np.array_equal([m.twist.twist.angular.z for m in od], log["odom_vel"][:, i, 1])
+        # the kinematic command (Twist: no header; the bag's log time is the row's)
+        cv = msgs[f"/{f}/cmd_vel"]
+        assert [t for t, _ in cv] == ns[:K].tolist()
+        assert np.array_equal([m.linear.x for _, m in cv], log["cmd"][:, i, 0])
+        assert np.array_equal([m.angular.z for _, m in cv], log["cmd"][:, i, 1])
+        # wheels: in the joints' own sense (sign), the robot file's joint names; effort = applied torque
+        js = [m for _, m in msgs[f"/{f}/joint_states"]]
+        sg = log["wheel_sign"][i]
+        assert js[0].name == [str(x) for x in log["wheel_joints"][i]]
+        assert np.array_equal(np.array([m.position for m in js]), sg * log["wheel_angle"][:, i])
+        assert np.array_equal(np.array([m.velocity for m in js]), sg * log["wheel_speed"][:, i])
+        assert np.array_equal(np.array([m.effort for m in js[:K]]), sg * log["tau"][:, i])
+        assert js[K].effort.size == 0 and _stamp(js[K]) == ns[K]
+        # the angle is the integral of the rate (trapezoid over the 0.01 s rows: within 0.05 rad of
+        # 0.6 … 3.8 rad turned in 0.3 s; measured 0.013 … 0.030) and the wheels turn
+        wa, ws = log["wheel_angle"][:, i], log["wheel_speed"][:, i]
+        dt = np.diff(log["t_state"])[:, None]
+        turned = np.concatenate([np.zeros((1, 2)), np.cumsum(dt * (ws[1:] + ws[:-1]) / 2, axis=0)])
+        assert np.abs(wa - wa[0] - turned).max() < 0.05
+        assert np.abs(wa - wa[0]).max() > 0.5
+        # the IMU: MuJoCo's gyro and accelerometer (gravity included)
+        imu = [m for _, m in msgs[f"/{f}/imu"]]
+        assert np.array_equal([m.angular_velocity.z for m in imu], log["imu_gyro"][:, i, 2])
+        assert np.array_equal([m.linear_acceleration.z for m in imu], log["imu_accel"][:, i, 2])
+        assert imu[0].orientation_covariance[0] == -1.0 and imu[0].header.frame_id == f"{f}/imu_link"
+        assert abs(np.median(log["imu_accel"][:, i, 2]) - 9.81) < 0.1  # gravity, through contact bumps
+        # the follower's estimate of the leader
+        le = [m for _, m in msgs[f"/{f}/leader_estimate"]]
+        assert le[0].header.frame_id == "world"
+        assert np.array_equal([m.pose.pose.position.y for m in le], log["est_pose"][:, i, 1])
+        assert np.array_equal([m.twist.twist.linear.x for m in le], log["est_vel"][:, i, 0])
+    lead = [m for _, m in msgs["/leader/ground_truth/odom"]]
+    assert np.array_equal([m.pose.pose.position.x for m in lead], log["leader_state"][:, 0])
+    assert np.array_equal(log["leader_state"][:K, :3], log["leader_pose"])
+    assert np.array_equal(log["leader_state"][:K, 3:], log["leader_vel"])
+
+    meta = (out / "rosbag" / "metadata.yaml").read_text()
+    assert "version: 9" in meta and "storage_identifier: mcap" in meta and "transient_local" in meta
+    custom = json.loads(meta.split("bioform_mj: ")[1].split("\n  duration")[0].replace("\n      ", " ").strip("'"))
+    assert custom == {
+        "followers": 3,
+        "method": "bioinspired-learning",
+        "plant": "mujoco",
+        "ros_distro": "jazzy",
+        "scenario": "paper",
+        "sensing": "odometry",
+    }
+
+
+def test_full_state_leaves_the_log_as_it_was():
+    """simulate(full_state=True) adds channels and changes none (ideal plant: planar, no wheels)."""
+    sc = load("paper", plant="ideal", overrides={"sim.duration": 1.0})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        a, b = simulate(sc), simulate(sc, full_state=True)
+    assert set(a.log) < set(b.log)
+    for k in a.log:
+        assert np.array_equal(a.log[k], b.log[k]), k
+    assert set(b.log) - set(a.log) == {
+        "t_state",
+        "pose_3d",
+        "twist_3d",
+        "wheel_angle",
+        "wheel_speed",
+        "leader_state",
+        "wheel_sign",
+        "wheel_joints",
+    }
+    K = a.log["t"].shape[0]
+    assert K == 100 and b.log["pose_3d"].shape == (K + 1, 3, 6) and b.log["t_state"][-1] == 1.0
+    assert np.array_equal(b.log["pose_3d"][:K, :, [0, 1, 5]], a.log["pose"])
+    assert np.array_equal(b.log["twist_3d"][:K, :, [0, 5]], a.log["vel"])
+    assert np.all(b.log["pose_3d"][:, :, 2:5] == 0.0) and np.all(np.isnan(b.log["wheel_angle"]))
+    assert np.array_equal(b.log["pose_3d"][K][:, [0, 1, 5]], b.plant.x[:, :3])  # the state at T
+    assert np.array_equal(b.log["leader_state"][K, :3], sc.build_leader().states(np.array([1.0]))[0][0])
+    assert b.summary["sim_time_s"] == a.summary["sim_time_s"]
+
+
+@needs_rosbags
+def test_ideal_bag_humble(tmp_path):
+    """The ideal plant's bag: no wheels (joint_states carry the torques only), no IMU, no /fI/odom;
+    humble's message definitions on request."""
+    from bioform_mj.outputs.rosbag import write_bag
+
+    sc = load("paper", plant="ideal", overrides={"sim.duration": 0.5})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = simulate(sc, full_state=True)
+    info = write_bag(r, tmp_path / "bag", distro="humble")
+    K = r.log["t"].shape[0]
+    assert info.distro == "humble" and info.messages == 1 + (3 + 3) * (K + 1) + 3 * 3 * K
+    msgs, conns, _ = _read(tmp_path / "bag")
+    assert "/f1/imu" not in msgs and "/f1/odom" not in msgs
+    js = [m for _, m in msgs["/f2/joint_states"]]
+    assert len(js) == K and js[0].position.size == 0 and js[0].velocity.size == 0
+    assert np.array_equal(np.array([m.effort for m in js]), r.log["tau"][:, 1])
+    gt = [m for _, m in msgs["/f3/ground_truth/odom"]]
+    assert np.array_equal([m.pose.pose.position.x for m in gt][:K], r.log["pose"][:, 2, 0])
+    assert [m.pose.pose.position.z for m in gt] == [0.0] * (K + 1)
+    with pytest.raises(FileExistsError):
+        write_bag(r, tmp_path / "bag")
+    # an absolute start: every stamp and log time shifted by it
+    t0 = 1_764_633_600_000_000_000  # 2025-12-02 00:00 UTC, ns
+    write_bag(r, tmp_path / "bag", start_ns=t0, overwrite=True)
+    shifted, _, _ = _read(tmp_path / "bag")
+    clock = shifted["/clock"]
+    assert clock[0][0] == t0 and clock[-1][0] == t0 + 500_000_000
+    assert [m.clock.sec * 10**9 + m.clock.nanosec for _, m in clock] == [t for t, _ in clock]
+    assert _stamp(shifted["/f1/ground_truth/odom"][7][1]) == t0 + 70_000_000
+    with pytest.raises(ValueError, match="full_state=True"):
+        write_bag(simulate(sc), tmp_path / "bag2")
+    assert not (tmp_path / "bag2").exists() and not list(tmp_path.glob(".*tmp"))
+
+
+def test_rosbag_without_the_extra_says_how_to_install(tmp_path, capsys, monkeypatch):
+    """--rosbag with rosbags missing: exit 2 before any work, one error: line naming the extra."""
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "rosbags" else real(name, *a))
+    out = tmp_path / "run"
+    assert main(["run", "paper", "--duration", "0.1", "--out", str(out), "--rosbag"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --rosbag needs the ros extra")
+    assert "pip install 'bioform-mj[ros]'" in err[0]
+    assert not out.exists()
+    assert main(["run", "paper", "--duration", "0.1", "--out", str(out), "--ros-distro", "humble"]) == 2
+    assert "--ros-distro only applies to --rosbag" in capsys.readouterr().err
+
+
+@needs_rosbags
+def test_rosbag_with_a_broken_install_fails_before_the_run(tmp_path, capsys, monkeypatch):
+    """rosbags importable but failing: exit 2 before the run, one error: line, nothing written."""
+    from bioform_mj.outputs import rosbag
+
+    def broken(distro):
+        raise ImportError("no module named rosbags.typesys.stores.ros2_jazzy")
+
+    monkeypatch.setattr(rosbag, "_messages", broken)
+    out = tmp_path / "run"
+    assert main(["run", "paper", "--duration", "0.1", "--out", str(out), "--rosbag"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --rosbag: the rosbags package does not work (ImportError")
+    assert not out.exists()
+
+
+@needs_rosbags
+def test_overwrite_replaces_the_bag_folder(tmp_path, capsys):
+    """rosbag/ is a run's folder: refused without --overwrite, replaced with it; a stale temporary
+    bag folder is cleared; a foreign file inside rosbag/ makes the folder not ours."""
+    out = tmp_path / "run"
+    argv = ["run", "paper", "--duration", "0.1", "--out", str(out), "--quiet"]
+    assert main([*argv, "--rosbag"]) == 0
+    first = (out / "rosbag" / "rosbag.mcap").stat().st_mtime_ns
+    (out / ".rosbag.abc123.tmp").mkdir()
+    (out / ".rosbag.abc123.tmp" / "half.mcap").write_bytes(b"x")
+    assert main([*argv, "--rosbag"]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert main([*argv, "--rosbag", "--overwrite"]) == 0
+    assert (out / "rosbag" / "rosbag.mcap").stat().st_mtime_ns >= first
+    assert not (out / ".rosbag.abc123.tmp").exists()
+    assert main([*argv, "--overwrite"]) == 0  # no bag asked: the old one is gone with the old run
+    assert not (out / "rosbag").exists()
+    (out / "rosbag").mkdir()
+    (out / "rosbag" / "notes.txt").write_text("mine")
+    assert main([*argv, "--overwrite"]) == 2
+    assert "not a run's" in capsys.readouterr().err
+
+
+def test_mujoco_3d_state_same_from_the_compiled_chunk_and_step_by_step():
+    """MuJoCo: the compiled chunk copies each row's raw state (plants/mujoco/kernels.py: copy_row),
+    the step-by-step loop samples it as an observer; the 3-D channels agree bit for bit, and the
+    other channels are those of a run without full_state."""
+    sc = load("paper", plant="mujoco", overrides={"sim.duration": 0.3, "plant.sensing": "odometry"})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        a = simulate(sc, full_state=True, engine="compiled")
+        b = simulate(sc, full_state=True, engine="stepwise")
+        c = simulate(sc, engine="compiled")
+    assert a.summary["engine"] == "compiled" and b.summary["engine"] == "stepwise"
+    assert set(a.log) == set(b.log) and "imu_gyro" in a.log
+    for k in a.log:
+        assert np.array_equal(a.log[k], b.log[k]), k
+    for k in c.log:
+        assert np.array_equal(a.log[k], c.log[k]), k
+    assert not np.isnan(a.log["pose_3d"]).any() and not np.isnan(a.log["wheel_speed"]).any()
+    assert a.plant.row_state.shape == (0, 0)  # the plant copies no rows after the run
