@@ -115,3 +115,36 @@ def test_right_hand_rule_breaks_the_crossing_deadlock():
     assert all(f["robot_contacts"] == 0 for f in stuck + passed)
     assert min(f["final_formation_error_m"] for f in stuck) > 0.8
     assert max(f["final_formation_error_m"] for f in passed) < 0.4
+
+
+def test_an_infeasible_qp_is_said():
+    """Robots closer than the filter can keep apart, on both sides of one: its QP has no solution (issue 28).
+    The filter leaves the residual violation in the free scratch slot; a run counts the steps per follower in
+    ``cbf_infeasible_steps`` and warns, once per follower, naming it."""
+    import warnings
+
+    from bioform_mj.core.errors import RobotWarning
+
+    la, gam, d = 0.1, 5.0, 0.5
+    pose = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [-0.1, 0.0, 0.0]])
+    par = np.array([la, gam, d, 2.0])
+    A, b, lam = _scratch(3)
+    cbf_filter(0, 1.0, 0.0, pose, np.zeros(3), np.zeros((0, 7)), par, A, b, lam)
+    assert lam[-1] > 1e-6  # the middle robot must move away from both neighbours at once
+    cbf_filter(1, 1.0, 0.0, pose, np.zeros(3), np.zeros((0, 7)), par, A, b, lam)
+    assert lam[-1] == 0.0  # an end robot's constraints are compatible: solved
+    over = {
+        "sim.duration": 0.2,
+        "safety.filter": "cbf",
+        "safety.distance": d,
+        "formation.initial_poses": [[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [-0.1, 0.0, 0.0]],
+    }
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always")
+        res = simulate(load("paper", over))
+    counts = [f["cbf_infeasible_steps"] for f in res.summary["followers"]]
+    assert counts[0] > 0, counts
+    said = [str(w.message) for w in got if issubclass(w.category, RobotWarning) and "no solution" in str(w.message)]
+    assert said and said[0].startswith("follower 1: the safety filter's QP had no solution at"), said
+    quiet = simulate(load("paper", {"sim.duration": 0.2, "safety.filter": "cbf"})).summary["followers"]
+    assert [f["cbf_infeasible_steps"] for f in quiet] == [0, 0, 0]

@@ -404,7 +404,8 @@ def test_collada_collision_mesh_converted_with_its_unit(tmp_path):
 
 
 def test_xacro_expanded_when_the_package_is_there(tmp_path, monkeypatch):
-    """A property, and ``$(find NAME)`` resolved through the same search path as ``package://``."""
+    """Asked for (``xacro = true``): a property, and ``$(find NAME)`` resolved through the same search path
+    as ``package://``, in the sandboxed process (design §12); the import says xacro ran."""
     pytest.importorskip("xacro")
     monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
     pkg, _ = _package(tmp_path)
@@ -415,8 +416,9 @@ def test_xacro_expanded_when_the_package_is_there(tmp_path, monkeypatch):
     text = text.replace(f'<mass value="{M_CHASSIS!r}"/>', '<mass value="${mc}"/>', 1)
     assert "${mc}" in text
     path = write(tmp_path / "robot" / "dd.urdf.xacro", text)
-    model, _ = compiled(RobotRef(str(path), package_path=PackagePath([("ddpkg", str(pkg))])))
+    model, layout = compiled(RobotRef(str(path), package_path=PackagePath([("ddpkg", str(pkg))]), xacro=True))
     assert abs(model.body_subtreemass[body(model, "base_footprint")] - hand_formula()[0]) < 1e-9
+    assert any("expanded by xacro, which runs the file as a program" in n for n in layout.notes)
     assert np.allclose(_chassis_half_extent(model), [0.025, 0.1, 0.15], atol=1e-6)
 
 
@@ -500,24 +502,23 @@ def test_collada_collision_without_trimesh_says_how_to_convert(tmp_path, capsys,
     assert "convert it to STL" in err[0]
 
 
-def test_xacro_without_the_package_says_how_to_expand(tmp_path, capsys, monkeypatch):
-    monkeypatch.setitem(sys.modules, "xacro", None)
+def test_xacro_not_asked_for_says_how_to_ask(tmp_path, capsys, monkeypatch):
+    """A robot file is data (design §12): a file that needs xacro is refused, naming --xacro, unless asked."""
     path = write(tmp_path / "dd.urdf.xacro", diff_drive())
     assert cli.main(["robot", "check", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and f"`xacro {path} > dd.urdf`" in err[0], err
+    assert len(err) == 1 and "pass --xacro" in err[0] and f"`xacro {path} > dd.urdf`" in err[0], err
     # a .urdf that still holds macros is xacro too; a commented-out include (as published) is not
     macro = write(tmp_path / "m.urdf", diff_drive().replace('"0.2"', '"${0.1*2}"', 1))
     assert cli.main(["robot", "check", str(macro)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "(it holds xacro macros)" in err[0] and "> m.expanded.urdf`" in err[0], err
-    monkeypatch.delitem(sys.modules, "xacro")
-    if importlib.util.find_spec("xacro") is not None:  # with the package: $(find) through our search path
+    if importlib.util.find_spec("xacro") is not None:  # asked for: $(find) through our search path
         missing = write(tmp_path / "f.urdf.xacro", diff_drive(tail='<xacro:include filename="$(find nopkg)/x.xacro"/>'))
         missing.write_text(
             missing.read_text().replace('name="dd"', 'name="dd" xmlns:xacro="http://ros.org/wiki/xacro"')
         )
-        assert cli.main(["robot", "check", str(missing)]) == 2
+        assert cli.main(["robot", "check", str(missing), "--xacro"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "$(find nopkg): package 'nopkg' is on no search path" in err[0], err
     commented = diff_drive().replace("<robot name", '<!-- <xacro:include filename="x"/> -->\n<robot name')

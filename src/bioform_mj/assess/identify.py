@@ -175,6 +175,14 @@ def identify(
     params, lay = plant.params[0], plant.layouts[0]
     model, data = plant.model, plant.data
     dt = float(model.opt.timestep)
+    from bioform_mj.robots.sanity import check_step_budget  # a <option timestep="1e-9"/> would step for days
+
+    check_step_budget(
+        settle + 2 * len(ID_LEVELS) * (settle + duration),
+        dt,
+        f"{getattr(model_file, 'model', model_file)}: identification",
+        "give the robot file an <option timestep> of 1e-4 s or more (MuJoCo's default is 0.002 s)",
+    )
     # at rest: what touches the floor, with what load (design §14: structural and braking-geom causes)
     for k in range(max(1, round(settle / dt))):
         plant.step(np.zeros((1, 2)), k * dt)

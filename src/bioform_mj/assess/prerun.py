@@ -115,13 +115,33 @@ def cached_check(ref: Any, key: str, run_step: float | None = None) -> dict[str,
     if key in _MEMO:
         return {**_MEMO[key], "from": "memory"}
     path = cache_dir() / f"{key}.json"
+    from bioform_mj.assess.cache_schema import entry_problem
+    from bioform_mj.robots.sanity import not_regular
+
+    stale = ""
     try:
+        if not_regular(path):  # a FIFO or a device in the cache folder: never opened
+            raise OSError(not_regular(path))
         entry = json.loads(path.read_text())
-        if isinstance(entry, dict) and entry.get("format") == CACHE_FORMAT and "verdict" in entry:
+        stale = entry_problem(entry, CACHE_FORMAT)
+        if not stale:
             _MEMO[key] = entry
             return {**entry, "from": "disk"}
-    except (OSError, ValueError):
-        pass  # absent or unreadable: computed below
+    except FileNotFoundError:
+        pass  # not checked yet: computed below
+    except (OSError, ValueError, UnicodeDecodeError) as exc:
+        stale = f"unreadable ({' '.join(str(exc).split())})"
+    if stale:  # issue 28: a cache never breaks a run; one warning names the file, the entry is rewritten
+        import warnings
+
+        from bioform_mj.core.errors import RobotWarning
+
+        warnings.warn(f"robot-check cache entry '{path}' ignored and rewritten: {stale}", RobotWarning, stacklevel=2)
+        try:
+            if not not_regular(path):
+                path.unlink(missing_ok=True)
+        except OSError:
+            pass
     COMPUTED[0] += 1
     entry = _check(ref, run_step)
     _MEMO[key] = entry

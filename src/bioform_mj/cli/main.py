@@ -72,6 +72,9 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
         metavar="NAME=DIR",
         help="URDF robots: where package://NAME/... points (repeatable; adds to plant.package_path)",
     )
+    from bioform_mj.robots.xacro_sandbox import add_flags
+
+    add_flags(p, scenario=True)  # design §12: a xacro file is a program, run only when asked
     p.add_argument("--quiet", action="store_true", help="no progress bar, no result lines")
     p.add_argument(
         "--no-robot-check",
@@ -246,6 +249,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``bioform`` console script; returns the exit code."""
     from bioform_mj.outputs.gl import configure_gl_env
+    from bioform_mj.robots.sanity import one_line
 
     configure_gl_env()  # MUJOCO_GL=egl unless the user chose; before anything imports mujoco
     _show_robot_warnings()
@@ -259,15 +263,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_mujoco_distributions()
         return _dispatch(args)
     except InputError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)  # one line, whatever a name holds (issue 28)
         return EXIT_INPUT
     except WriteFailed as exc:  # disk full, read-only file system, ulimit -f: the file and what was kept
         if not exc.kept:
             exc.kept = _kept_beside(exc.path)
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_OTHER
     except BioformError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_OTHER
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM through _catch_signals
         _ignore_signals()
@@ -298,6 +302,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
+    from bioform_mj.robots.xacro_sandbox import grant_from_args
+
+    grant_from_args(args)  # --xacro / --xacro-arg, or nothing granted (design §12)
     if getattr(args, "no_robot_check", False):  # design §14.2; inherited by a sweep's worker processes
         from bioform_mj.assess.skip import SKIP_ENV
 

@@ -42,12 +42,14 @@ def _show_robot_warnings() -> None:
 
     show = warnings.showwarning
 
+    from bioform_mj.robots.sanity import one_line  # a newline in a name must not forge an error: line (issue 28)
+
     def showwarning(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
         if issubclass(category, RobotWarning):
-            print(f"warning: {message}", file=sys.stderr)
+            print(f"warning: {one_line(str(message))}", file=sys.stderr)
         elif issubclass(category, OutcomeWarning):
             if getattr(message, "follower", None) is not None:
-                print(f"warning: {message}", file=sys.stderr)
+                print(f"warning: {one_line(str(message))}", file=sys.stderr)
         else:
             show(message, category, filename, lineno, file, line)
 

@@ -10,6 +10,7 @@ from typing import Any
 
 from bioform_mj.assess.check import EXIT_FAIL, check
 from bioform_mj.robots.refs import RobotRef
+from bioform_mj.robots.xacro_sandbox import add_flags as add_xacro_flags
 
 
 def mapping_args(p: argparse.ArgumentParser) -> None:
@@ -67,6 +68,7 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="URDF: keep contacts between the robot's own links (default off, as in Gazebo)",
     )
+    add_xacro_flags(p)  # --xacro, --xacro-arg (design §12)
 
 
 def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:

@@ -29,6 +29,9 @@ from math import cos, hypot, sin, sqrt
 from bioform_mj.core.equations import njit
 
 HILDRETH_SWEEPS = 200
+#: a constraint violated by more than this after :data:`HILDRETH_SWEEPS` sweeps: the QP has no solution
+#: (robots or obstacles closer than the filter can keep apart), counted per follower (issue 28)
+CBF_RESIDUAL = 1e-6
 
 
 @njit
@@ -38,7 +41,9 @@ def cbf_filter(i, v, w, pose, rad, obst, par, A, b, lam):
     ``pose`` (n, 3) every robot's ``[x, y, θ]``; ``rad`` (n,) footprint radii m; ``obst`` (m, 7)
     rows ``[shape (0 box, 1 cylinder), x, y, s0, s1, s2, yaw]`` (:func:`bioform_mj.formation.obstacles.to_rows`);
     ``par`` (4,) or (5,) ``[l m, γ 1/s, d m, range m, pass_right]``; scratch ``A`` (K, 2), ``b``,
-    ``lam`` (K,), K ≥ n + m.
+    ``lam`` (K,), K ≥ n + m. On return ``lam[K - 1]`` (a slot no constraint uses: at most n − 1 + m
+    are active) holds the QP's largest remaining violation, 0 when it was solved; above
+    :data:`CBF_RESIDUAL` the QP had no solution and the command returned is the last iterate.
     """
     la, gam, dist, reach = par[0], par[1], par[2], par[3]
     eps = par[4] if par.shape[0] > 4 else 0.0
@@ -94,12 +99,14 @@ def cbf_filter(i, v, w, pose, rad, obst, par, A, b, lam):
         A[k, 1] = -2.0 * dy
         b[k] = gam * (d2 - D * D)
         k += 1
+    lam[lam.shape[0] - 1] = 0.0
     if k == 0:
         return v, w
     # Hildreth: u = û − Aᵀλ, λ ≥ 0, one coordinate at a time
     x0, x1 = u0 + n0, u1 + n1
     for q in range(k):
         lam[q] = 0.0
+    worst = 0.0
     for _ in range(HILDRETH_SWEEPS):
         worst = 0.0
         for q in range(k):
@@ -116,4 +123,6 @@ def cbf_filter(i, v, w, pose, rad, obst, par, A, b, lam):
             worst = max(worst, viol)
         if worst <= 1e-9:
             break
+    if worst > 1e-9:  # no solution within the sweeps: said through the free slot (docstring)
+        lam[lam.shape[0] - 1] = worst
     return c * x0 + s * x1, (-s * x0 + c * x1) / la

@@ -22,7 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from bioform_mj.control.cbf import cbf_filter
+from bioform_mj.control.cbf import CBF_RESIDUAL, cbf_filter
 from bioform_mj.core.equations import (
     command_derivative,
     command_rate,
@@ -117,6 +117,7 @@ class Gains(NamedTuple):
     cbf_A: np.ndarray
     cbf_b: np.ndarray
     cbf_lam: np.ndarray
+    cbf_bad: np.ndarray  # (n,) control steps whose QP had no solution (cbf.CBF_RESIDUAL), since reset
 
 
 class StackState(NamedTuple):
@@ -283,6 +284,8 @@ def command_and_torques(g, s, pose, vel):
         vc, wc = velocity_command(e1, e2, u, v_ref, w_ref, g.k1, g.k2, g.k3)
         if g.cbf:  # the safety filter between eq. 31 and the torque law (design §19)
             vc, wc = cbf_filter(i, vc, wc, pose, g.cbf_rad, g.cbf_obst, g.cbf_par, g.cbf_A, g.cbf_b, g.cbf_lam)
+            if g.cbf_lam[g.cbf_lam.shape[0] - 1] > CBF_RESIDUAL:  # no solution: counted, said after the run
+                g.cbf_bad[i] += 1.0
         s.cmd[i, 0], s.cmd[i, 1] = vc, wc
         if g.deriv == DERIV_ANALYTIC:  # chain rule through the controller's own dynamics (design §6)
             r = s.est_rate  # this step's estimator rates (estimator_consensus)

@@ -165,6 +165,7 @@ class ControlStack:
             cbf_A=np.zeros((n + (0 if p.cbf_obstacles is None else len(p.cbf_obstacles)), 2)),
             cbf_b=np.zeros(n + (0 if p.cbf_obstacles is None else len(p.cbf_obstacles))),
             cbf_lam=np.zeros(n + (0 if p.cbf_obstacles is None else len(p.cbf_obstacles))),
+            cbf_bad=np.zeros(n),
         )
         self.state: StackState = new_state(n)
         self._no_comm = perfect_comm(n, int(graph.src.shape[0]))
@@ -179,6 +180,7 @@ class ControlStack:
 
     def reset(self, est_pose0: np.ndarray, vel0: np.ndarray) -> None:
         """Initial estimates ``P_ir(0)`` (n,3), measured velocities (n,2); ``V_s(0) = 0``."""
+        self.gains.cbf_bad[:] = 0.0  # the safety filter's count of steps without a solution (design §19)
         reset_state(
             self.gains,
             self.state,

@@ -34,6 +34,15 @@ def batch_env(
     W = int(worlds)
     if W < 1:
         raise ValueError(f"worlds must be >= 1, got {worlds}")
+    from bioform_mj.batch.backend import world_bytes
+
+    # the memory first, from every number that sizes it (worlds, robots, nconmax, njmax): before the seed
+    # list or any array (worlds=10**9 built a list of 10**9 seeds and died in a bare MemoryError, issue 28)
+    cap = {k: options.get(k) for k in ("nconmax", "njmax")}
+    for k, v in cap.items():
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
+            raise ValueError(f"batch_env: {k} must be an integer >= 1, got {v!r}")
+    _check_memory(W * world_bytes(sc.n, cap["nconmax"], cap["njmax"]), device)
     seeds = list(range(W)) if seeds is None else [int(s) for s in seeds]
     if len(seeds) != W:
         raise ValueError(f"{len(seeds)} seeds for {W} worlds")
@@ -41,10 +50,6 @@ def batch_env(
         from bioform_mj.envs.batched import BatchEnv
     except ImportError as exc:  # pragma: no cover - without the extra
         raise ImportError("batch_env needs the optional extra 'gpu': pip install -e '.[gpu]'") from exc
-    from bioform_mj.batch.backend import world_bytes
-
-    need = W * world_bytes(sc.n)
-    _check_memory(need, device)
     scs = [dataclasses.replace(sc, sim=dataclasses.replace(sc.sim, seed=s)) for s in seeds]
     return BatchEnv(scs, device, **options)
 
@@ -62,4 +67,7 @@ def _check_memory(need: float, device: str) -> None:
 
         avail = wp.get_device(device).free_memory
     if need > 0.8 * avail:
-        raise ValueError(f"batch_env: ~{need / 2**30:.1f} GiB estimated for the worlds, {avail / 2**30:.1f} GiB free")
+        raise ValueError(
+            f"batch_env: ~{need / 2**30:.1f} GiB estimated for the worlds (with their nconmax/njmax), "
+            f"{avail / 2**30:.1f} GiB free; fewer worlds or a smaller nconmax/njmax"
+        )

@@ -39,7 +39,6 @@ Termination of every agent: a divergence (the run's guards,
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -238,13 +237,15 @@ class FormationParallelEnv(ParallelEnv):
         self._done = True
 
     # ------------------------------------------------------------------ spaces
-    @functools.cache  # noqa: B019 - one space object per agent, as PettingZoo asks
+    # one space object per agent, as PettingZoo asks: the dicts built once hold them (a functools.cache on
+    # these methods kept every environment alive through its cache, issue 28)
     def observation_space(self, agent: str) -> spaces.Box:
+        """The observation space of ``agent`` (the same object every call)."""
         self._check_agent(agent)
         return self._obs_spaces[agent]
 
-    @functools.cache  # noqa: B019
     def action_space(self, agent: str) -> spaces.Box:
+        """The action space of ``agent`` (the same object every call)."""
         self._check_agent(agent)
         return self._act_spaces[agent]
 

@@ -14,7 +14,9 @@ when anything changed, saying what. Three parts:
   skin files (``file``, ``filename`` and the cube-texture ``file*`` attributes), resolved as
   MuJoCo does (``compiler`` ``meshdir`` / ``texturedir`` / ``assetdir`` relative to the main
   file's folder, then the folder itself). A file that cannot be found is recorded as
-  ``"missing"``, so that its later appearance also counts as a change.
+  ``"missing"``, so that its later appearance also counts as a change. A URDF robot's files are
+  the ones its import reads (:func:`bioform_mj.robots.files.urdf_files`: ``package://`` meshes
+  through the package search path, a xacro file's includes).
 * the hashes are cached per ``(path, size, mtime)`` in this process: a 1,000-row resume
   hashes each model once.
 """
@@ -154,7 +156,14 @@ def provenance(sc: Any) -> dict[str, Any]:
 
         for r in sc.plant.robots:
             with contextlib.suppress(BioformError, OSError):
-                files.update(model_files(resolve_robot(r).model))
+                ref = resolve_robot(r)
+                try:  # a URDF: its package:// meshes and xacro includes, as the import finds them (issue 28)
+                    from bioform_mj.robots.files import urdf_files
+                    from bioform_mj.robots.urdf import is_urdf
+
+                    files.update(urdf_files(ref, file_hash) if is_urdf(ref.model) else model_files(ref.model))
+                except BioformError:
+                    files.update(model_files(ref.model))
     return {"version": __version__, "code": code_hash(), "mujoco": mj, "files": files}
 
 

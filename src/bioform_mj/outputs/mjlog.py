@@ -11,9 +11,13 @@ an exception and log nothing. No ``chdir``: the working directory stays the user
 
 from __future__ import annotations
 
+import functools
 import sys
 import time
+import warnings
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 FILENAME = "MUJOCO_LOG.TXT"
 
@@ -77,3 +81,30 @@ class MujocoLog:
 def capture(echo: bool = True) -> MujocoLog:
     """A :class:`MujocoLog` installed now (use as a context manager to restore MuJoCo's handler)."""
     return MujocoLog(echo).install()
+
+
+def api_warnings(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Decorate a Python-API entry point (:func:`bioform_mj.simulate`): while it runs, MuJoCo's warnings
+    become Python ``RuntimeWarning``s (``"MuJoCo: …"``) instead of a ``MUJOCO_LOG.TXT`` appended in the
+    caller's working folder (issue 28). A handler someone already installed (the CLI's
+    :class:`MujocoLog`, the user's own) is left alone."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        sc = args[0] if args else next(iter(kwargs.values()), None)
+        if getattr(getattr(sc, "plant", None), "kind", "mujoco") != "mujoco" and "mujoco" not in sys.modules:
+            return fn(*args, **kwargs)  # the ideal plant: MuJoCo is not even imported
+        import mujoco
+
+        if mujoco.get_mju_user_warning() is not None:
+            return fn(*args, **kwargs)
+        log = MujocoLog(echo=False)
+        log.install()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            log.uninstall()
+            for _t, msg in log.messages:
+                warnings.warn(f"MuJoCo: {msg}", RuntimeWarning, stacklevel=2)
+
+    return wrapper

@@ -368,6 +368,10 @@ def _label(summary: Mapping[str, Any]) -> str:
     return f"{summary.get('scenario', '')} {summary.get('plant', '')} {summary.get('method', '')}".strip()
 
 
+#: bytes per write of run.rrd (signals are handled between writes)
+_WRITE_CHUNK = 1 << 20
+
+
 def write(result: Any, out: Path, **_: Any) -> str:
     """The registered output ``rrd`` (:mod:`~bioform_mj.outputs.registry`): ``out/run.rrd``; returns the line the
     CLI prints.
@@ -387,9 +391,13 @@ def write(result: Any, out: Path, **_: Any) -> str:
 def write_rrd(result: Any, path: str | Path) -> Path:
     """Write ``run.rrd`` of a :class:`~bioform_mj.run.simulate.RunResult` atomically; returns the path.
 
-    The recording is saved under a temporary name in the target's directory and renamed
-    after the file sink has been flushed and closed (its footer written), so ``path`` is
-    complete or absent.
+    The recording goes to rerun's in-memory binary stream and is written by Python, 1 MiB at a time,
+    under a temporary name in the target's directory, renamed once complete (the stream flushed and
+    closed: its footer written), so ``path`` is complete or absent. Writing in Python (not rerun's own
+    file sink, a thread of its own) makes a full disk or ``ulimit -f`` an ``OSError`` at once (a
+    :class:`~bioform_mj.core.errors.WriteFailed`, one ``error:`` line, the temporary file removed) and
+    leaves SIGINT/SIGTERM to interrupt between chunks (rerun's sink ignored both for over 10 min on a
+    full disk, issue 28).
     """
     import rerun as rr
 
@@ -397,15 +405,20 @@ def write_rrd(result: Any, path: str | Path) -> Path:
 
     path = Path(path)
     n = result.log["pose"].shape[1]
-    with atomic_path(path) as tmp:
-        rec = rr.RecordingStream(APP_ID, send_properties=True)
-        rec.save(tmp, default_blueprint=blueprint(n))
-        try:
-            _log_static(rec, n, result.summary, _label(result.summary), result.log.get("obstacles"))
-            send_log(rec, result.log)
-            rec.flush()
-        finally:
-            rec.disconnect()  # closes the file sink and writes the footer
+    rec = rr.RecordingStream(APP_ID, send_properties=True)
+    stream = rec.binary_stream()
+    try:
+        rec.send_blueprint(blueprint(n), make_active=False, make_default=True)
+        _log_static(rec, n, result.summary, _label(result.summary), result.log.get("obstacles"))
+        send_log(rec, result.log)
+    finally:
+        rec.disconnect()  # closes the stream: its footer written
+    data = memoryview(stream.read(flush=True) or b"")  # one read: the footer's checksum covers the stream
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        for k in range(0, len(data), _WRITE_CHUNK):  # Python writes: an OSError at once, signals between chunks
+            fh.write(data[k : k + _WRITE_CHUNK])
+        fh.flush()
+        os.fsync(fh.fileno())  # a full disk that defers its error to the flush says it here, not after the rename
     return path
 
 

@@ -25,7 +25,11 @@ _NO_PACKAGES = PackagePath()
 
 
 def _package_name(d: Path) -> str | None:
-    """The ``<name>`` in ``d/package.xml``, None without one."""
+    """The ``<name>`` in ``d/package.xml``, None without one (or when it is no regular file: a FIFO would block)."""
+    from bioform_mj.robots.sanity import not_regular
+
+    if not_regular(d / "package.xml"):
+        return None
     try:
         return (ET.parse(d / "package.xml").getroot().findtext("name") or "").strip() or None
     except (OSError, ET.ParseError):

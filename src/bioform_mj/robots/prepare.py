@@ -172,17 +172,26 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
             raise ModelError(str(exc)) from None
         spec, model, ref, imported = imp.spec, imp.model, imp.ref, imp.notes
     else:
+        from bioform_mj.robots.sanity import spec_file_problem  # a FIFO or a 10 GB mesh: before the compiler opens it
+
         try:
             spec = mujoco.MjSpec.from_file(str(path))
             if ref.balance_inertia:  # the mapping's balance_inertia (design §12)
                 spec.compiler.balanceinertia = True
-            model = spec.compile()
+            bad = spec_file_problem(spec)
+            model = None if bad else spec.compile()
         except Exception as exc:  # mujoco raises ValueError; be robust to other types
             from bioform_mj.robots.compile_hints import compile_hint
 
             raise ModelError(f"{path}: does not compile: {_one_line(exc)}{compile_hint(exc)}") from exc
+        if bad:
+            raise ModelError(f"{path}: {bad}")
         absolute_asset_files(spec)
         spec, model, key, key_q, key_notes = apply_keyframe(spec, model, path, ref)  # design §13.2
+    from bioform_mj.robots.sanity import model_value_problem  # NaN or negative masses, axes, friction: refused
+
+    if bad := model_value_problem(model):
+        raise ModelError(f"{path}: {bad}")
     layout, plan = _analyse(model, path, ref)
     if imported:
         layout = replace(layout, notes=imported + layout.notes, import_notes=imported)

@@ -99,6 +99,9 @@ class RobotRef:
     ``package://`` URIs point (:class:`PackagePath`; not part of the mapping proper).
     ``keyframe``: the MJCF keyframe the robot starts and is held in (design §13.2; ``""``: ``home``
     where the file has one, else ``qpos0``; ``"none"``: ``qpos0``).
+    ``xacro``: the file may be expanded by xacro, a program, in a sandboxed process
+    (:mod:`bioform_mj.robots.xacro_sandbox`; default: a file that needs xacro is refused); ``xacro_args``:
+    its ``$(arg NAME)`` values, written ``{NAME = "VALUE"}``.
     """
 
     model: str
@@ -118,6 +121,8 @@ class RobotRef:
     keyframe: str = ""  # MJCF keyframe to start in (design §13.2); "": 'home' if the file has one; "none": qpos0
     top_speed: float = 0.0  # m/s at the tyre, the maker's datasheet figure (design §21); 0: not given
     balance_inertia: bool = False  # MuJoCo's compiler option balanceinertia (an inertia breaking A + B >= C)
+    xacro: bool = False  # URDF only (design §12): the file may be expanded by xacro (a program), sandboxed
+    xacro_args: tuple[tuple[str, str], ...] = ()  # URDF only: xacro's $(arg NAME) values, ((NAME, VALUE), ...)
 
     @property
     def mapped(self) -> bool:
@@ -130,7 +135,7 @@ class RobotRef:
         out: dict[str, Any] = {"model": self.model}
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name == "package_path":
+            if f.name in ("package_path", "xacro_args"):
                 if v:
                     out[f.name] = dict(v)
             elif f.name != "model" and v != f.default:
@@ -182,7 +187,9 @@ def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:
         raise InputError(f"scenario key '{key}': a robot table needs 'model' (an MJCF or URDF path or shipped name)")
     kw: dict[str, Any] = {}
     for name, value in entry.items():
-        if name in ("self_collide", "balance_inertia"):
+        if name == "xacro_args":
+            kw[name] = _xacro_args(value, f"{key}.{name}")
+        elif name in ("self_collide", "balance_inertia", "xacro"):
             if not isinstance(value, bool):
                 raise InputError(f"scenario key '{key}.{name}': expected true or false, got {value!r}")
             kw[name] = value
@@ -228,6 +235,25 @@ def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:
     return RobotRef(**kw)
 
 
+def _xacro_args(value: Any, key: str) -> tuple[tuple[str, str], ...]:
+    """A ``{NAME = "VALUE"}`` table of xacro ``$(arg)`` values as ``((NAME, VALUE), …)`` (numbers and
+    booleans as xacro writes them); raises :class:`InputError` naming ``key``."""
+    if isinstance(value, tuple) and all(isinstance(p, tuple) and len(p) == 2 for p in value):
+        return value
+    if not isinstance(value, Mapping):
+        raise InputError(f"scenario key '{key}': expected a table {{NAME = \"VALUE\"}}, got {value!r}")
+    out = []
+    for name, v in value.items():
+        if not isinstance(name, str) or not name or not (name[0].isalpha() or name[0] == "_"):
+            raise InputError(f"scenario key '{key}': xacro arg name {name!r} must start with a letter or '_'")
+        if isinstance(v, bool):
+            v = "true" if v else "false"
+        if not isinstance(v, (str, int, float)) or "\n" in str(v) or "\x00" in str(v):
+            raise InputError(f"scenario key '{key}.{name}': expected a string or a number, got {v!r}")
+        out.append((name, str(v)))
+    return tuple(out)
+
+
 def _is_path(model: str) -> bool:
     """A name with a robot file suffix or a path separator is a path, never a shipped name."""
     return model.lower().endswith(ROBOT_SUFFIXES) or "/" in model or "\\" in model
@@ -256,7 +282,11 @@ def resolve_robot(entry: Any) -> RobotRef:
     path = Path(name)
     if _is_path(name):
         if not path.is_file():
-            raise InputError(f"model file '{path}' does not exist")
+            from bioform_mj.robots.sanity import not_regular  # a FIFO or a device: said as such, never opened
+
+            raise InputError(
+                f"model file {not_regular(path)}" if not_regular(path) else f"model file '{path}' does not exist"
+            )
         return replace(ref, model=str(path))
     raise InputError(f"unknown robot '{name}' (expected one of: {', '.join(robot_names())}, or an MJCF or URDF path)")
 

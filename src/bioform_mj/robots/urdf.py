@@ -6,7 +6,8 @@ link to the world and fuses every link on a fixed joint into its parent (``fuses
 ``<inertial>`` silently and ignores ``<gazebo>`` and ``<transmission>``. :func:`import_urdf` makes
 it the robot its maker published:
 
-- the file is read with ElementTree (xacro expanded if the optional ``xacro`` package is there):
+- the file is read with ElementTree, as data (a file that needs xacro is expanded only when asked,
+  ``--xacro`` or ``xacro = true``, in a sandboxed process: :mod:`bioform_mj.robots.xacro_sandbox`):
   one root link (two roots, a cycle or no link: exit 2 naming it); a massless root ``world`` link
   fixed to the robot is dropped (a robot fixed to the world does not drive);
 - every mesh URI resolved to an absolute file: ``package://NAME/…`` through the search path
@@ -40,7 +41,6 @@ from __future__ import annotations
 
 import functools
 import os
-import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -50,8 +50,10 @@ import numpy as np
 
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.compile_hints import compile_hint
+from bioform_mj.robots.mesh_paths import symlink_escape
 from bioform_mj.robots.packages import find_package, package_search_path, resolve_uri
 from bioform_mj.robots.refs import PackagePath, RobotRef
+from bioform_mj.robots.sanity import mesh_problem, not_regular, urdf_value_problem
 from bioform_mj.robots.urdf_wheels import find_wheels, left_of
 
 __all__ = [
@@ -78,8 +80,6 @@ URDF_SUFFIXES = (".urdf", ".xacro")
 MESH_NATIVE = (".stl", ".obj", ".msh")
 #: the compiler settings that keep a URDF robot a robot (design §12)
 _COMPILER = {"discardvisual": "false", "fusestatic": "false", "strippath": "false"}
-#: what marks xacro in a file: a xacro element, a ``${…}`` expression, ``$(find …)``/``$(arg …)``
-_XACRO = re.compile(r"<xacro:|\$\{|\$\((find|arg|env|optenv|eval) ")
 _INSTALL_HINT = "pip install 'bioform-mj[urdf]' (trimesh + pycollada)"
 
 
@@ -108,7 +108,7 @@ def is_urdf(path: str | Path) -> bool:
     p = str(path).lower()
     if p.endswith(URDF_SUFFIXES):
         return True
-    if not p.endswith(".xml"):
+    if not p.endswith(".xml") or not_regular(path):
         return False
     try:
         for _event, elem in ET.iterparse(str(path), events=("start",)):
@@ -135,9 +135,16 @@ class _Parsed:
     notes: list[str] = field(default_factory=list)
 
 
-def _read_text(path: Path, packages: PackagePath) -> str:
-    """The URDF text; a xacro file expanded with the optional ``xacro`` package (``$(find NAME)``
-    resolved through the same search path)."""
+def _read_text(
+    path: Path, packages: PackagePath, xacro: bool = False, xacro_args: tuple[tuple[str, str], ...] = ()
+) -> str:
+    """The URDF text: the file as it is (data, never evaluated); a file that needs xacro is refused
+    unless ``xacro`` (the mapping's ``xacro = true``) or ``--xacro`` allows it, then expanded in a
+    sandboxed process with ``xacro_args`` (:mod:`bioform_mj.robots.xacro_sandbox`, design §12)."""
+    from bioform_mj.robots.xacro_sandbox import expand, granted, needs_xacro, refusal
+
+    if not_regular(path):
+        raise UrdfError(f"model file {not_regular(path)}")
     if not path.is_file():
         raise UrdfError(f"model file '{path}' does not exist")
     text = None
@@ -146,63 +153,12 @@ def _read_text(path: Path, packages: PackagePath) -> str:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             raise UrdfError(f"model file '{path}' cannot be read: {_one_line(exc)}") from None
-    # a .urdf that still holds xacro macros (outside comments: published URDFs keep commented includes; and
-    # outside <gazebo> tags, whose plugin parameters keep ROS's own $(find …) for Gazebo to resolve) is xacro
-    bare = (
-        None
-        if text is None
-        else re.sub(r"<gazebo\b.*?</gazebo>", "", re.sub(r"<!--.*?-->", "", text, flags=re.S), flags=re.S)
-    )
-    if text is None or _XACRO.search(bare):
-        try:
-            import xacro
-            import xacro.substitution_args as subst
-        except ImportError:
-            stem = path.name[: -len(".xacro")] if path.name.lower().endswith(".xacro") else path.stem + ".expanded"
-            stem = stem if stem.endswith(".urdf") else stem + ".urdf"
-            raise UrdfError(
-                f"{path} is a xacro file{'' if text is None else ' (it holds xacro macros)'}: expand it first "
-                f"(`xacro {path} > {stem}`, ROS's xacro tool), or pip install 'bioform-mj[urdf]' to let bioform "
-                "expand it"
-            ) from None
-
-        missing: list[str] = []
-
-        def find(pkg: str) -> str:
-            found, _ = find_package(pkg, packages, path)
-            if found is None:
-                missing.append(pkg)
-                raise UrdfError(pkg)
-            return str(found)
-
-        st = path.stat()
-        key = (str(path.resolve()), st.st_mtime_ns, st.st_size, packages, _env_key())
-        if key in _EXPANDED:  # a scene builds a robot several times; xacro takes ~0.25 s (Kobuki)
-            return _EXPANDED[key]
-        old = subst._eval_find
-        subst._eval_find = find
-        try:
-            _EXPANDED[key] = xacro.process_file(str(path)).toxml()
-            return _EXPANDED[key]
-        except Exception as exc:  # XacroException (wrapping ours), a missing include, bad XML
-            if missing:
-                raise UrdfError(
-                    f"{path}: $(find {missing[0]}): package '{missing[0]}' is on no search path (searched: "
-                    f"{'; '.join(package_search_path(packages))}; give --package-path {missing[0]}=DIR)"
-                ) from None
-            raise UrdfError(f"{path}: xacro cannot expand it: {_one_line(exc)}") from None
-        finally:
-            subst._eval_find = old
-    return text
-
-
-#: xacro expansions of this process, by file, its (mtime, size), the search path (an included file
-#: edited while one process runs is not seen: a process builds its robots once, at start)
-_EXPANDED: dict[tuple, str] = {}
-
-
-def _env_key() -> tuple[str, ...]:
-    return tuple(os.environ.get(v, "") for v in ("BIOFORM_PACKAGE_PATH", "ROS_PACKAGE_PATH", "AMENT_PREFIX_PATH"))
+    if not needs_xacro(path, text):
+        return text
+    allowed, args = granted()
+    if not (xacro or allowed):
+        raise refusal(path, text is not None)
+    return expand(path, packages, (*xacro_args, *((n, v) for n, v in args if n not in dict(xacro_args))))
 
 
 def _float(text: str | None) -> float | None:
@@ -231,16 +187,24 @@ def _have_trimesh() -> bool:
     return True
 
 
-def _parse(path: Path, packages: PackagePath) -> _Parsed:
+def _parse(
+    path: Path, packages: PackagePath, xacro: bool = False, xacro_args: tuple[tuple[str, str], ...] = ()
+) -> _Parsed:
     """Read, check and rewrite the URDF (no MuJoCo): raises :class:`UrdfError` naming the element."""
-    text = _read_text(path, packages)
+    from bioform_mj.robots.xacro_sandbox import XACRO_NOTE, Expanded
+
+    text = _read_text(path, packages, xacro, xacro_args)
+    expanded = isinstance(text, Expanded)
     try:
         robot = ET.fromstring(text)
     except ET.ParseError as exc:
         raise UrdfError(f"{path}: not valid XML ({exc})") from None
     if robot.tag != "robot":
         raise UrdfError(f"{path}: the root element is <{robot.tag}>, not <robot> (is it a URDF?)")
-    notes: list[str] = []
+    bad_value = urdf_value_problem(robot)  # NaN, negative, zero where it cannot be: refused naming it
+    if bad_value:
+        raise UrdfError(f"{path}: {bad_value}")
+    notes: list[str] = [XACRO_NOTE] if expanded else []
     links = {}
     for link in robot.findall("link"):
         name = link.get("name")
@@ -343,7 +307,11 @@ def _parse(path: Path, packages: PackagePath) -> _Parsed:
                 file, why, how = resolve_uri(uri, packages, path, meshdir) if uri else (None, "no filename", "")
                 if how.endswith("a parent folder of the URDF file"):
                     found_by.add(how)
-                if file is not None and not file.is_file():
+                if file is not None and (bad := symlink_escape(uri, packages, path, meshdir)):
+                    why = bad  # never copied into a run's assets/ under the target's name
+                elif file is not None and (bad := mesh_problem(file)):
+                    why = f"mesh file {file}: {bad}"  # a FIFO, a device, a zip bomb: never opened or unpacked
+                elif file is not None and not file.is_file():
                     why = f"no file {file}"
                 elif file is not None and not os.access(file, os.R_OK):
                     why = f"file {file} cannot be read"
@@ -456,7 +424,7 @@ def _parse(path: Path, packages: PackagePath) -> _Parsed:
 def check_file(ref: RobotRef) -> None:
     """The checks of :func:`import_urdf` that need no MuJoCo: the file reads, has one root link,
     a joint that could be a wheel, and its collision meshes resolve. Raises :class:`UrdfError`."""
-    _parse(Path(ref.model), ref.package_path)
+    _parse(Path(ref.model), ref.package_path, ref.xacro, ref.xacro_args)
 
 
 # ------------------------------------------------------------------ meshes MuJoCo cannot read
@@ -528,7 +496,7 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
     import mujoco
 
     path = Path(ref.model)
-    pr = _parse(path, ref.package_path)
+    pr = _parse(path, ref.package_path, ref.xacro, ref.xacro_args)
     notes = list(pr.notes)
     try:
         spec = mujoco.MjSpec.from_string(pr.text)

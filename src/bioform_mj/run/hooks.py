@@ -64,6 +64,14 @@ def check_observers(observers: Sequence[Any]) -> None:
             raise ControllerError(f"observer {name}: period must be a finite number of seconds > 0, got {period!r}")
 
 
+def read_only(a: np.ndarray) -> np.ndarray:
+    """A read-only view of ``a``: what a user's controller is handed (design §17; a controller that wrote
+    into its ``pose`` changed the logged trajectory and the metrics, issue 28). Writing raises ``ValueError``."""
+    v = np.asarray(a).view()
+    v.flags.writeable = False
+    return v
+
+
 def _checked_torques(tau: Any, n: int, name: str, k: int, dt: float) -> np.ndarray:
     """A user's controller's torques as a float (n, 2) array, or a :class:`ControllerError`."""
     try:

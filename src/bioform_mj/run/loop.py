@@ -23,7 +23,7 @@ from bioform_mj.control.kernel import StackState
 from bioform_mj.core.engine import GUARD_FAILED, OK, Loop, after_control, describe, record_odometry
 from bioform_mj.core.errors import ControllerError, Diverged
 from bioform_mj.plants.base import DeliveredTorques
-from bioform_mj.run.hooks import _checked_torques, _tag
+from bioform_mj.run.hooks import _checked_torques, _tag, read_only
 
 __all__ = [
     "MAX_CHUNK_S",
@@ -86,11 +86,14 @@ class Stepper:
         ctx, controller, cname, dt = self.ctx, self.controller, self.cname, self.ctx.dt
         L_pose, L_vel = ctx.L_pose, ctx.L_vel
         mp, mv = self.measure()
+        lp, lv = L_pose[k], L_vel[k]
+        if not self.own_stack:  # a user's controller reads the loop's arrays through read-only views
+            lp, lv, mp, mv = read_only(lp), read_only(lv), read_only(mp), read_only(mv)
         try:
             if self.faults is None:
-                tau = controller.step(L_pose[k], L_vel[k], mp, mv)
+                tau = controller.step(lp, lv, mp, mv)
             else:  # noisy sensing, faulty network, weakened motors, pushes; tau = what reaches the plant
-                tau = self.faults.step(k, k * dt, controller, self.plant, L_pose[k], L_vel[k], mp, mv)
+                tau = self.faults.step(k, k * dt, controller, self.plant, lp, lv, mp, mv)
         except Exception as exc:
             _tag(exc, f"controller {cname}.step", k, k * dt)
             raise

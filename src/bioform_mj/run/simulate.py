@@ -31,6 +31,7 @@ from bioform_mj.control.registry import build_controller, is_builtin
 from bioform_mj.core.engine import Bounds, Formation, LogArrays, Loop, new_acc, new_log, new_metrics
 from bioform_mj.core.errors import ControllerError, Diverged, OutcomeWarning, RobotWarning
 from bioform_mj.formation.disturbance import Harmonic as HarmonicDisturbance
+from bioform_mj.outputs.mjlog import api_warnings
 from bioform_mj.plants.base import CompiledChunk, Obstacles, Plant, RobotModels, Sensing, Unmodelled
 from bioform_mj.plants.ideal import IdealPlant
 from bioform_mj.run.hooks import (
@@ -227,6 +228,7 @@ ENGINES = ("auto", "compiled", "stepwise")
 LoopContext = Loop
 
 
+@api_warnings  # MuJoCo's warnings as Python warnings, not a MUJOCO_LOG.TXT in the caller's folder (issue 28)
 def simulate(
     sc: Scenario,
     observers: Sequence[Observer] = (),
@@ -320,7 +322,7 @@ def simulate(
     if raised is not None:  # the exception says the run failed (its summary holds the outcomes so far)
         raise _with_result(raised, result)
     for w in outcome_warnings(summary):  # never silent (design §18.1): the CLI prints its own lines instead
-        warnings.warn(w, stacklevel=2)
+        warnings.warn(w, stacklevel=3)  # the caller of simulate, past its api_warnings wrapper
     return result
 
 
@@ -399,28 +401,28 @@ def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], 
     CLI prints ``warning:`` lines) and kept for summary.json."""
     imported = import_warnings(plant)  # design §12: the guesses of a URDF import, said before the run
     for line in imported:
-        warnings.warn(line, RobotWarning, stacklevel=3)
+        warnings.warn(line, RobotWarning, stacklevel=4)  # simulate's caller, past its api_warnings wrapper
     feasibility: list[str] = []
     if isinstance(plant, RobotModels):  # robots from model files: what the scenario asks of them
         from bioform_mj.assess.check import feasibility as _feasibility
 
         feasibility = _feasibility(sc, plant)  # in summary.json too
         for line in feasibility:
-            warnings.warn(line, RobotWarning, stacklevel=3)  # before the run (the CLI prints warning: lines)
+            warnings.warn(line, RobotWarning, stacklevel=4)  # before the run (the CLI prints warning: lines)
     checked = None
     if sc.plant.kind == "mujoco" and isinstance(plant, RobotModels):  # the scenario's robots are the plant's
         from bioform_mj.assess.prerun import before_run  # design §14.2: once per robot, cached
 
         checked = before_run(sc, plant)
         for line in checked["warnings"]:
-            warnings.warn(line, RobotWarning, stacklevel=3)
+            warnings.warn(line, RobotWarning, stacklevel=4)
     demand = None
     if checked is not None and not checked.get("skipped"):  # design §21: the scenario's demand vs the limits
         from bioform_mj.run.demand import before_run as _demand
 
         demand = _demand(sc, plant)
         for line in demand["warnings"]:
-            warnings.warn(line, RobotWarning, stacklevel=3)
+            warnings.warn(line, RobotWarning, stacklevel=4)
     return imported, feasibility, checked, demand
 
 
@@ -586,6 +588,18 @@ def _add_run_notes(summary: dict[str, Any], sc, plant, step: Stepper, end: LoopE
         w = float(np.abs(logd["vel"][:, :, 1]).max())
         for f, u in zip(summary["followers"], plant.unmodelled(v, w)):
             f["unmodelled"] = u
+    bad = getattr(getattr(step.controller, "gains", None), "cbf_bad", None)
+    if bad is not None and sc.safety.filter == "cbf":  # design §19: the filter says when its QP had no solution
+        for i, f in enumerate(summary["followers"]):
+            f["cbf_infeasible_steps"] = int(bad[i])
+            if bad[i]:
+                warnings.warn(
+                    f"follower {i + 1}: the safety filter's QP had no solution at {int(bad[i])} of {k_done} control "
+                    "steps (robots or obstacles closer than it can keep apart; its command there is the solver's "
+                    "last iterate, not a safe one)",
+                    RobotWarning,
+                    stacklevel=4,
+                )
     from bioform_mj.assess.hardware import verdict  # design §19: would this run on the robots as specified?
 
     summary["hardware"] = verdict(sc, plant, summary, logd)

@@ -486,10 +486,10 @@ def _validate_faults(sc: Scenario) -> None:
             raise ScenarioError(key, f"duration must be > 0, got {dur:g}")
     if fc.friction_patch:
         p = fc.friction_patch
-        if len(p) != 5 or not (p[0] < p[2] and p[1] < p[3]) or p[4] < 0:
-            raise ScenarioError(
+        if len(p) != 5 or not (p[0] < p[2] and p[1] < p[3]) or not (0 < p[4] < float("inf")):
+            raise ScenarioError(  # μ 0: no grip, the wheels would not stand on the floor (issue 28)
                 "faults.friction_patch",
-                f"expected [x0, y0, x1, y1, mu] with x0 < x1, y0 < y1, mu >= 0, or [], got {list(p)}",
+                f"expected [x0, y0, x1, y1, mu] with x0 < x1, y0 < y1, 0 < mu < inf, or [], got {list(p)}",
             )
         if sc.plant.kind != "mujoco":
             raise ScenarioError(

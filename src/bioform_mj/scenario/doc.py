@@ -216,6 +216,17 @@ KEYS: dict[str, tuple[str, str]] = {
         "",
         "URDF: `{NAME = \"DIR\"}` where this robot's `package://NAME/…` point (before the scenario's).",
     ),
+    "plant.robots[].xacro": (
+        "",
+        "URDF: the file may be expanded by xacro, which runs it as a program (in a separate process with no "
+        "environment, limited memory and time, reading only the robot's packages; default false: a file that "
+        "needs xacro is refused; `--xacro` on the command line; design §12).",
+    ),
+    "plant.robots[].xacro_args": (
+        "",
+        'URDF with `xacro = true`: `{NAME = "VALUE"}`, the values of xacro\'s `$(arg NAME)` '
+        "(`--xacro-arg NAME=VALUE`).",
+    ),
     "plant.package_path": (
         "",
         'URDF: `{NAME = "DIR"}` where `package://NAME/…` point, before `$BIOFORM_PACKAGE_PATH`, '

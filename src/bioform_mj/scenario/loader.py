@@ -85,6 +85,14 @@ def load(
             raise InputError(f"scenario file '{path}' is a directory")
         if not path.exists():
             raise InputError(f"scenario file '{path}' does not exist")
+        from bioform_mj.robots.sanity import not_regular  # a FIFO or a device would block the read (issue 28)
+
+        if not_regular(path):
+            raise InputError(f"scenario file {not_regular(path)}")
+        if path.stat().st_size > 16 * 10**6:
+            raise InputError(
+                f"scenario file '{path}' is {path.stat().st_size / 1e6:.0f} MB: not a scenario (at most 16 MB)"
+            )
         try:
             raw = path.read_bytes()
         except OSError as exc:  # PermissionError, a FIFO that errors, an I/O error

@@ -1,0 +1,409 @@
+"""The xacro expansion of one robot file, in a process of its own (design §12): a xacro file is a program.
+
+Run by :func:`bioform_mj.robots.xacro_sandbox.expand` as ``python -I -B _xacro_child.py`` (isolated: no
+``PYTHONPATH``, no user site, no current folder on the path), with an environment that holds no
+variable of the user's, its working folder the robot file's folder. It reads one JSON request on
+stdin and writes one JSON answer on stdout (``{"xml": …}`` or ``{"error": …, "kind": …}``).
+
+Before it reads the robot file it limits itself: address space (``RLIMIT_AS``, bytes), CPU time
+(``RLIMIT_CPU``, s), no file written (``RLIMIT_FSIZE`` 0), no core file. Then it narrows xacro:
+
+- ``$(env NAME)`` and ``$(optenv NAME)`` are refused (a robot file reads no environment; values come
+  from ``--xacro-arg NAME=VALUE`` as ``$(arg NAME)``);
+- ``$(eval …)`` runs without Python's builtins (xacro's own gives it ``open``, ``exec``, ``__import__``);
+- a ``${…}`` expression naming a dunder, holding a string with ``__`` or naming ``format``,
+  ``format_map``, ``vars``, ``type``, ``getattr``, ``globals``, ``locals``, ``eval``, ``exec``,
+  ``compile``, ``open`` or ``__import__`` is refused (the known ways out of xacro's expression sandbox);
+- ``xacro:include`` and ``xacro.load_yaml`` read only files inside the allowed folders: the robot
+  file's package (the nearest folder above it holding a ``package.xml``, else its own folder), the
+  ``package_path`` folders, and the packages ``$(find NAME)`` resolves;
+- an audit hook (:func:`sys.addaudithook`, which no code can remove) refuses, for the rest of the
+  process: starting or signalling a process, sockets, ``ctypes``, frame and garbage-collector
+  introspection, changing a function's code, writing, renaming or deleting a file, and opening a file
+  outside the allowed folders (and Python's own installation, for its lazy imports).
+
+This module is run as a script, never imported by the package; it imports ``find_package`` by the
+module name its parent passes (``find_module``).
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import resource
+import signal
+import sys
+import types
+from pathlib import Path
+
+
+def _limit(mem_bytes: int, cpu_s: int) -> None:
+    """Address space ``mem_bytes`` (bytes), CPU time ``cpu_s`` (s), no file written, no core file."""
+    resource.setrlimit(resource.RLIMIT_AS, (mem_bytes, mem_bytes))
+    resource.setrlimit(resource.RLIMIT_CPU, (cpu_s, cpu_s + 1))
+    resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0))
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write fails (EFBIG) instead of killing us silently
+
+
+def _within(path: str, roots: list[str]) -> bool:
+    real = os.path.realpath(path)
+    return any(real == r or real.startswith(r.rstrip(os.sep) + os.sep) for r in roots)
+
+
+#: names a ``${…}`` expression may not use: attribute access by string, introspection, code
+_DENY_NAMES = frozenset(
+    {
+        "format",
+        "format_map",
+        "vars",
+        "type",
+        "getattr",
+        "setattr",
+        "delattr",
+        "globals",
+        "locals",
+        "eval",
+        "exec",
+        "compile",
+        "open",
+        "breakpoint",
+        "mro",
+        "gi_frame",
+        "gi_code",
+        "cr_frame",
+        "f_globals",
+        "f_locals",
+        "f_back",
+        "f_builtins",
+        "tb_frame",
+        "func_globals",
+    }
+)
+
+
+def _consts(code: types.CodeType):
+    for c in code.co_consts:
+        if isinstance(c, types.CodeType):
+            yield from _consts(c)
+        else:
+            yield c
+
+
+def _names(code: types.CodeType):
+    yield from code.co_names
+    for c in code.co_consts:
+        if isinstance(c, types.CodeType):
+            yield from _names(c)
+
+
+def _check_expr(expr: str, what: str) -> types.CodeType:
+    """The compiled expression, or a refusal naming what it uses."""
+    code = compile(expr.strip(), "<expression>", "eval")
+    bad = sorted({n for n in _names(code) if n.startswith("__") or n in _DENY_NAMES})
+    if bad:
+        raise _Refused(
+            f"{what} '{expr.strip()[:80]}' uses {', '.join(bad)}: refused (design §12: a robot file is data)"
+        )
+    for c in _consts(code):
+        if isinstance(c, (str, bytes)) and ("__" in c if isinstance(c, str) else b"__" in c):
+            raise _Refused(
+                f"{what} '{expr.strip()[:80]}' holds a string with '__': refused (design §12: a robot file is data)"
+            )
+    return code
+
+
+class _Refused(Exception):
+    """What the sandbox refuses (reported as kind ``refused``)."""
+
+
+def _install_hook(roots: list[str], search: list[str], python_dirs: list[str]) -> None:
+    """The audit hook: refuses processes, sockets, ctypes, introspection, writes and reads outside ``roots``.
+
+    ``search``: folders of the package search path, whose ``package.xml`` files and listings ``$(find)`` reads.
+    The hook keeps no name in any namespace: no code can reach it to change it.
+    """
+    blocked = (
+        "subprocess.",
+        "os.system",
+        "os.exec",
+        "os.posix_spawn",
+        "os.spawn",
+        "os.fork",
+        "os.forkpty",
+        "os.kill",
+        "os.killpg",
+        "os.putenv",
+        "os.unsetenv",
+        "os.remove",
+        "os.unlink",
+        "os.rename",
+        "os.rmdir",
+        "os.mkdir",
+        "os.chmod",
+        "os.chown",
+        "os.chdir",
+        "os.chroot",
+        "os.symlink",
+        "os.link",
+        "os.truncate",
+        "os.setxattr",
+        "os.removexattr",
+        "os.startfile",
+        "os.add_dll_directory",
+        "socket.",
+        "ctypes.",
+        "mmap.",
+        "shutil.",
+        "urllib.",
+        "http.",
+        "ftplib.",
+        "smtplib.",
+        "webbrowser.",
+        "pty.",
+        "sys._getframe",
+        "sys._current_frames",
+        "sys._current_exceptions",
+        "sys.settrace",
+        "sys.setprofile",
+        "sys.addaudithook",
+        "gc.",
+        "code.__new__",
+        "function.__new__",
+        "cpython.run_",
+        "cpython.remote_debugger",
+        "marshal.",
+        "pickle.",
+        "sqlite3.",
+        "resource.setrlimit",
+        "resource.prlimit",
+    )
+    banned_modules = frozenset(
+        {
+            "ctypes",
+            "_ctypes",
+            "subprocess",
+            "_posixsubprocess",
+            "multiprocessing",
+            "socket",
+            "_socket",
+            "pty",
+            "gc",
+            "pickle",
+            "_pickle",
+            "marshal",
+            "mmap",
+        }
+    )
+    write_flags = os.O_WRONLY | os.O_RDWR | os.O_CREAT | os.O_TRUNC | os.O_APPEND
+
+    def hook(event: str, args: tuple) -> None:
+        if event.startswith(blocked):
+            raise PermissionError(f"refused by bioform's xacro sandbox: {event}")
+        if event == "import" and args and (args[0] in banned_modules or str(args[0]).split(".")[0] in banned_modules):
+            raise PermissionError(f"refused by bioform's xacro sandbox: import {args[0]}")
+        if event == "object.__setattr__" and len(args) > 1 and str(args[1]).startswith("__"):
+            if str(args[1]) in ("__code__", "__globals__", "__closure__", "__defaults__", "__kwdefaults__"):
+                raise PermissionError(f"refused by bioform's xacro sandbox: setting {args[1]}")
+        if event == "open" and args:
+            path, mode, flags = (list(args) + [None, None])[:3]
+            if isinstance(path, int):
+                return
+            if (isinstance(mode, str) and any(c in mode for c in "wax+")) or (
+                isinstance(flags, int) and flags & write_flags
+            ):
+                raise PermissionError(f"refused by bioform's xacro sandbox: writing {path}")
+            p = os.fsdecode(path)
+            if _within(p, roots + python_dirs):
+                return
+            if os.path.basename(p) == "package.xml" and _within(p, search):
+                return
+            raise PermissionError(f"refused by bioform's xacro sandbox: reading {p} (outside the robot's packages)")
+        if event in ("os.listdir", "os.scandir", "glob.glob") and args:
+            p = args[0]
+            p = "." if p is None else os.fsdecode(p) if not isinstance(p, int) else None
+            if p is not None and not _within(p, roots + python_dirs + search):
+                raise PermissionError(f"refused by bioform's xacro sandbox: listing {p}")
+
+    sys.addaudithook(hook)
+
+
+def _answer(obj: dict) -> None:
+    """The answer, on the real stdout (xacro's prints went to stderr)."""
+    sys.__stdout__.buffer.write(json.dumps(obj).encode())
+    sys.__stdout__.flush()
+
+
+def main() -> int:
+    """Read the request, limit the process, expand the file, answer. Returns the exit status."""
+    req = json.loads(sys.stdin.read())
+    _limit(int(req["mem_bytes"]), int(req["cpu_s"]))
+    sys.dont_write_bytecode = True
+    sys.stdout = sys.stderr  # xacro's own prints never reach the answer
+    try:
+        xml, includes = _expand(req)
+    except MemoryError:
+        _answer({"kind": "memory", "error": "it needed more memory than the limit"})
+        return 3
+    except _Refused as exc:
+        _answer({"kind": "refused", "error": str(exc)})
+        return 3
+    except PermissionError as exc:
+        _answer({"kind": "refused", "error": str(exc)})
+        return 3
+    except _Missing as exc:
+        _answer({"kind": "missing", "error": str(exc), "package": exc.package})
+        return 3
+    except _NoXacro:
+        _answer({"kind": "no_xacro", "error": "the xacro package is not installed"})
+        return 3
+    except RecursionError:
+        _answer({"kind": "error", "error": "too deeply nested (a macro that calls itself?)"})
+        return 3
+    except Exception as exc:  # noqa: BLE001 - xacro's errors (XacroException, a bad include, bad XML) in one line
+        chain, e = [], exc
+        while e is not None and len(chain) < 4:
+            if isinstance(e, (_Refused, PermissionError, _Missing)):
+                kind = "missing" if isinstance(e, _Missing) else "refused"
+                extra = {"package": e.package} if isinstance(e, _Missing) else {}
+                _answer({"kind": kind, "error": str(e), **extra})
+                return 3
+            if isinstance(e, MemoryError):
+                _answer({"kind": "memory", "error": "it needed more memory than the limit"})
+                return 3
+            chain.append(e)
+            e = getattr(e, "exc", None) or e.__cause__ or e.__context__
+        _answer({"kind": "error", "error": " ".join(str(exc).split()) or type(exc).__name__})
+        return 3
+    if len(xml) > int(req["max_out_bytes"]):
+        _answer({"kind": "size", "error": f"its expansion is {len(xml) / 1e6:.0f} MB"})
+        return 3
+    _answer({"xml": xml, "includes": includes})
+    return 0
+
+
+class _NoXacro(Exception):
+    """The xacro package is not installed where this Python looks."""
+
+
+class _Missing(Exception):
+    """``$(find NAME)`` of a package on no search path."""
+
+    def __init__(self, package: str) -> None:
+        super().__init__(f"$(find {package}): package '{package}' is on no search path")
+        self.package = package
+
+
+def _expand(req: dict) -> tuple[str, list[str]]:
+    """The expanded XML of ``req["file"]`` (see the module docstring) and the files it included or loaded."""
+    for var, val in req["search_env"].items():  # the package search path only, for $(find)
+        os.environ[var] = val
+    # bioform_mj's find_package (same search path as package://), without the package's __init__
+    pkg = types.ModuleType("bioform_mj")
+    pkg.__path__ = [req["package_dir"]]
+    sys.modules["bioform_mj"] = pkg
+    find_mod = importlib.import_module(req["find_module"])
+    packages = tuple((str(n), str(d)) for n, d in req["packages"])  # find_package takes (NAME, DIR) pairs
+
+    import xml.dom.expatbuilder  # noqa: F401 - imported before the hook: minidom imports it lazily
+    import xml.dom.minidom  # noqa: F401
+
+    try:
+        import xacro
+        import xacro.substitution_args as subst
+    except ImportError:
+        raise _NoXacro() from None
+
+    try:
+        import xacro.color  # noqa: F401
+        import yaml  # noqa: F401 - load_yaml imports it; before the hook
+    except ImportError:
+        pass
+
+    path = req["file"]
+    roots = [os.path.realpath(r) for r in req["roots"]]
+    search = [os.path.realpath(s) for s in req["search_dirs"]]
+
+    def find(name: str) -> str:
+        found, _ = find_mod.find_package(name, packages, Path(path))
+        if found is None:
+            raise _Missing(name)
+        real = os.path.realpath(str(found))
+        if real not in roots:
+            roots.append(real)
+        return str(found)
+
+    def no_env(name: str, *_a: object, **_k: object) -> str:
+        raise _Refused(
+            f"$(env {name}) / $(optenv {name}): refused: a robot file reads no environment variable "
+            f"(design §12); give the value with --xacro-arg {name}=VALUE and write $(arg {name})"
+        )
+
+    subst._eval_find = find
+    subst._eval_env = no_env
+    subst._eval_optenv = no_env
+    subst._eval_dict["env"] = no_env
+    subst._eval_dict["optenv"] = no_env
+    subst._eval_dict["find"] = find
+
+    # the original's eval(s, {}, ...) gets the real builtins from its empty globals: replaced
+    def restricted_eval(s: str, context: dict) -> str:
+        code = _check_expr(s, "$(eval …)")
+        context.setdefault("arg", {})
+        functions = {
+            "arg": lambda name: subst.convert_value(subst._eval_arg(name, args=context["arg"]), "auto"),
+            "dirname": lambda: subst._eval_dirname(context["filename"]),
+        }
+        functions.update(subst._eval_dict)
+        functions["__builtins__"] = {}
+        return str(eval(code, {"__builtins__": {}}, subst._DictWrapper(context["arg"], functions)))
+
+    subst._eval = restricted_eval
+
+    def safe_eval(expr: str, globals: dict, locals: dict | None = None) -> object:  # noqa: A002 - xacro's names
+        code = _check_expr(expr, "expression ${…}")
+        globals.update(__builtins__={})
+        return eval(code, globals, locals)
+
+    xacro.safe_eval = safe_eval
+    # python.vars / python.type reach attributes by string (python['vars'](...)['…']): gone
+    for table in (xacro._global_symbols, xacro._global_symbols.get("python", {})):
+        for name in ("vars", "type", "getattr", "globals", "locals", "eval", "exec", "compile", "open"):
+            table.pop(name, None)
+
+    def check_read(filename: str, what: str) -> None:
+        if not _within(filename, roots):
+            raise _Refused(
+                f"{what} '{filename}' is outside the robot's packages ({', '.join(roots)}): refused "
+                "(design §12: xacro reads only the robot's packages; give its package with --package-path NAME=DIR)"
+            )
+
+    original_load_yaml = xacro.load_yaml
+
+    def load_yaml(filename: str) -> object:
+        check_read(xacro.abs_filename_spec(filename), "xacro.load_yaml")
+        return original_load_yaml(filename)
+
+    for table in (xacro._global_symbols, xacro._global_symbols.get("xacro", {})):
+        if "load_yaml" in table:
+            table["load_yaml"] = load_yaml
+    xacro.load_yaml = load_yaml
+
+    original_parse = xacro.parse
+
+    def parse(inp: object, filename: str | None = None) -> object:
+        if inp is None and filename is not None:
+            check_read(os.path.join(xacro.root_dir, filename), "include")
+        return original_parse(inp, filename)
+
+    xacro.parse = parse
+
+    python_dirs = sorted({os.path.realpath(p) for p in sys.path if p and os.path.isdir(p)})  # lazy imports
+    _install_hook(roots, search, python_dirs)
+    doc = xacro.process_file(path, mappings=dict(req["args"]))
+    return doc.toxml(), sorted({os.path.realpath(f) for f in getattr(xacro, "all_includes", [])})
+
+
+if __name__ == "__main__":
+    sys.exit(main())

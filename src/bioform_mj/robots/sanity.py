@@ -1,0 +1,320 @@
+"""Bounded answers to hostile or broken inputs (design §12, §14; issue 28 item 2).
+
+Each check here answers before any work, in one :class:`~bioform_mj.core.errors.InputError` line (exit 2)
+naming the file and the element:
+
+- :func:`regular_file`: a file that is read must be a regular file (a FIFO named ``package.xml`` on
+  ``ROS_PACKAGE_PATH``, or a device, would block the reader forever); checked with ``os.stat``
+  (``stat.S_ISREG``) before it is opened;
+- :func:`mesh_problem`: a mesh file's size (at most :data:`MESH_MAX_MB` MB), and for a zip archive
+  (COLLADA ``.zae``, or a ``.dae`` that is a zip) the sizes its directory declares, before anything
+  is decompressed (at most :data:`MESH_MAX_MB` MB unpacked, :data:`ZIP_MAX_ENTRIES` entries, a
+  compression ratio of :data:`ZIP_MAX_RATIO`);
+- :func:`urdf_value_problem`: masses, inertias, joint axes, dynamics, limits, Gazebo friction and
+  mesh scales of a URDF: finite, non-negative where negative means nothing, non-zero where zero
+  cannot be (a moving link's mass, an axis, a scale);
+- :func:`model_value_problem`: the same on a compiled ``MjModel`` (an MJCF robot);
+- names (URDF and MJCF) that hold a control character are refused (:func:`one_line` escapes them in
+  output that names what a user wrote);
+- :func:`check_step_budget`: a timestep that would make automatic work (robot check, identification)
+  take longer than :data:`CHECK_BOUND_S` s, refused with the estimate.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import stat
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+from typing import Any
+
+from bioform_mj.core.errors import InputError
+
+__all__ = [
+    "MESH_MAX_MB",
+    "ZIP_MAX_ENTRIES",
+    "ZIP_MAX_RATIO",
+    "CHECK_BOUND_S",
+    "STEP_WALL_S",
+    "regular_file",
+    "not_regular",
+    "mesh_problem",
+    "urdf_value_problem",
+    "model_value_problem",
+    "check_step_budget",
+    "one_line",
+    "spec_file_problem",
+]
+
+#: largest mesh file, and largest unpacked archive, taken (MB); a published robot's meshes are a few MB
+MESH_MAX_MB = 256
+#: most entries of a mesh archive
+ZIP_MAX_ENTRIES = 1000
+#: largest unpacked/packed size ratio of a mesh archive (a mesh compresses 3–10×; a zip bomb 1000×+)
+ZIP_MAX_RATIO = 200
+#: bound on the automatic work a robot file's timestep can ask (robot check, identification): s of wall time
+CHECK_BOUND_S = 300.0
+#: wall time of one physics step of one robot through the plant, s (measured ~50 µs on the 2-core
+#: development machine; the estimate is a lower bound on a slower one)
+STEP_WALL_S = 2e-5
+
+
+def not_regular(path: str | Path) -> str:
+    """Why ``path`` cannot be read without blocking (``""``: a regular file; a missing file is the reader's)."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return ""
+    if stat.S_ISREG(mode):
+        return ""
+    kind = (
+        "a FIFO (named pipe)"
+        if stat.S_ISFIFO(mode)
+        else "a device"
+        if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+        else "a socket"
+        if stat.S_ISSOCK(mode)
+        else "a directory"
+        if stat.S_ISDIR(mode)
+        else "not a regular file"
+    )
+    return f"'{path}' is {kind}, not a regular file: not read (reading it could block)"
+
+
+def regular_file(path: str | Path, what: str = "file") -> None:
+    """Raise :class:`InputError` unless ``path`` is a regular file (or missing: the reader says so)."""
+    why = not_regular(path)
+    if why:
+        raise InputError(f"{what} {why}")
+
+
+def mesh_problem(file: str | Path) -> str:
+    """Why the mesh ``file`` is not read (``""``: fine): not a regular file, too large, or an archive
+    whose declared contents are too large, too many or too compressed. Reads only the zip directory."""
+    why = not_regular(file)
+    if why:
+        return why
+    try:
+        size = os.path.getsize(file)
+    except FileNotFoundError:
+        return ""  # missing: the caller says so
+    except OSError as exc:
+        return f"cannot be read ({exc.strerror})"
+    if size > MESH_MAX_MB * 10**6:
+        return f"{size / 1e6:.0f} MB, above the {MESH_MAX_MB} MB a mesh may be (simplify it)"
+    try:
+        with open(file, "rb") as fh:
+            magic = fh.read(4)
+    except OSError as exc:
+        return f"cannot be read ({exc.strerror})"
+    if magic != b"PK\x03\x04":
+        return ""
+    try:
+        with zipfile.ZipFile(file) as zf:
+            infos = zf.infolist()
+    except (zipfile.BadZipFile, OSError, ValueError) as exc:
+        return f"a broken zip archive ({exc})"
+    unpacked = sum(i.file_size for i in infos)
+    packed = max(1, sum(i.compress_size for i in infos))
+    if len(infos) > ZIP_MAX_ENTRIES:
+        return f"a zip archive of {len(infos)} entries (at most {ZIP_MAX_ENTRIES}): not unpacked"
+    if unpacked > MESH_MAX_MB * 10**6:
+        return (
+            f"a zip archive that unpacks to {unpacked / 1e6:.0f} MB (above the {MESH_MAX_MB} MB a mesh may be): "
+            "not unpacked"
+        )
+    if unpacked > 10**6 and unpacked / packed > ZIP_MAX_RATIO:
+        return f"a zip archive compressed {unpacked / packed:.0f}× (at most {ZIP_MAX_RATIO}×): not unpacked"
+    return ""
+
+
+def _num(text: str | None) -> float | None:
+    try:
+        return float(text) if text is not None and text.strip() else None
+    except ValueError:
+        return math.nan
+
+
+def _vec(text: str | None) -> list[float] | None:
+    if text is None or not text.strip():
+        return None
+    try:
+        return [float(x) for x in text.split()]
+    except ValueError:
+        return [math.nan]
+
+
+def urdf_value_problem(robot: ET.Element) -> str:
+    """The first bad number of a URDF ``<robot>`` as ``"<element> of link/joint 'N': why"`` (``""``: none).
+
+    Masses finite and >= 0 (> 0 on a link that moves on its joint: MuJoCo cannot move a massless body);
+    inertia moments finite and >= 0, products finite; joint axes three finite numbers, not all zero;
+    ``<dynamics>`` damping/friction and ``<limit>`` effort/velocity finite and >= 0, limits finite;
+    ``<gazebo>`` mu1/mu2/mu finite and >= 0; mesh scales finite and > 0.
+    """
+    for el in robot.iter():
+        name = el.get("name")
+        if name is not None and _CONTROL.search(name):
+            return (
+                f"<{el.tag} name={name!r}>: a name holds a control character (a newline would forge lines of "
+                "bioform's output); rename it"
+            )
+    moving = {
+        (j.find("child").get("link") if j.find("child") is not None else None)
+        for j in robot.findall("joint")
+        if j.get("type", "fixed") != "fixed"
+    }
+    for link in robot.findall("link"):
+        name = link.get("name") or "?"
+        inertial = link.find("inertial")
+        if inertial is not None:
+            mass = inertial.find("mass")
+            m = _num(mass.get("value")) if mass is not None else None
+            if m is not None and not (math.isfinite(m) and m >= 0):
+                return f"<mass value='{mass.get('value')}'> of link '{name}': a mass must be a finite number >= 0 kg"
+            if m == 0 and name in moving:
+                return (
+                    f"<mass value='{mass.get('value')}'> of link '{name}': a link that moves on its joint needs a "
+                    "mass > 0 kg (MuJoCo cannot move a massless body); give its real mass"
+                )
+            inertia = inertial.find("inertia")
+            if inertia is not None:
+                for k in ("ixx", "iyy", "izz", "ixy", "ixz", "iyz"):
+                    v = _num(inertia.get(k))
+                    if v is not None and not (math.isfinite(v) and (v >= 0 or k not in ("ixx", "iyy", "izz"))):
+                        return f"<inertia {k}='{inertia.get(k)}'> of link '{name}': " + (
+                            "a moment of inertia must be a finite number >= 0 kg·m²" if k[1] == k[2] else "not finite"
+                        )
+        for role in ("visual", "collision"):
+            for el in link.findall(role):
+                mesh = el.find("geometry/mesh")
+                if mesh is None or mesh.get("scale") is None:
+                    continue
+                s = _vec(mesh.get("scale"))
+                if s is not None and not (len(s) in (1, 3) and all(math.isfinite(x) and x > 0 for x in s)):
+                    return (
+                        f"<{role}><mesh scale='{mesh.get('scale')}'> of link '{name}': a mesh scale must be 3 "
+                        "finite numbers > 0 (mirror the mesh file instead of a negative scale)"
+                    )
+    for j in robot.findall("joint"):
+        name = j.get("name") or "?"
+        axis = j.find("axis")
+        if axis is not None and axis.get("xyz") is not None:
+            a = _vec(axis.get("xyz"))
+            if a is None or len(a) != 3 or not all(math.isfinite(x) for x in a) or not any(a):
+                return f"<axis xyz='{axis.get('xyz')}'> of joint '{name}': an axis must be 3 finite numbers, not all 0"
+        for tag, keys in (("dynamics", ("damping", "friction")), ("limit", ("effort", "velocity"))):
+            el = j.find(tag)
+            for k in keys if el is not None else ():
+                v = _num(el.get(k))
+                if v is not None and not (math.isfinite(v) and v >= 0):
+                    return f"<{tag} {k}='{el.get(k)}'> of joint '{name}': must be a finite number >= 0"
+        lim = j.find("limit")
+        for k in ("lower", "upper") if lim is not None else ():
+            v = _num(lim.get(k))
+            if v is not None and not math.isfinite(v):
+                return f"<limit {k}='{lim.get(k)}'> of joint '{name}': must be a finite number"
+    for gz in robot.findall("gazebo"):
+        for el in gz.iter():
+            if el.tag in ("mu1", "mu2", "mu"):
+                v = _num(el.get("value", el.text))
+                if v is not None and not (math.isfinite(v) and v >= 0):
+                    return (
+                        f"<gazebo reference='{gz.get('reference', '')}'> <{el.tag}> "
+                        f"{el.get('value', el.text)}: a friction coefficient must be a finite number >= 0"
+                    )
+    return ""
+
+
+#: control characters (a newline in a name forged ``error:`` lines of a run that exits 0, issue 28)
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+
+
+def one_line(text: str) -> str:
+    """``text`` with its control characters escaped (``\\n``): one line of output, whatever a name holds."""
+    return _CONTROL.sub(lambda m: repr(m.group())[1:-1], text)
+
+
+def model_value_problem(model: Any) -> str:
+    """The first bad number of a compiled ``MjModel`` (an MJCF robot), naming the body, joint or geom
+    (``""``: none): masses and inertias finite and >= 0, joint axes finite and not zero, friction
+    finite and >= 0, mesh scales finite."""
+    import mujoco
+    import numpy as np
+
+    def name(obj: Any, i: int) -> str:
+        return mujoco.mj_id2name(model, obj, i) or f"#{i}"
+
+    for raw in bytes(model.names).split(b"\0"):  # every element name of the model
+        text = raw.decode("utf-8", "replace")
+        if _CONTROL.search(text):
+            return (
+                f"name {text!r} holds a control character (a newline would forge lines of bioform's output); rename it"
+            )
+
+    for b in range(1, model.nbody):
+        if not (np.isfinite(model.body_mass[b]) and model.body_mass[b] >= 0):
+            return f"body '{name(mujoco.mjtObj.mjOBJ_BODY, b)}': mass {model.body_mass[b]:g} kg (a finite number >= 0)"
+        if not (np.all(np.isfinite(model.body_inertia[b])) and np.all(model.body_inertia[b] >= 0)):
+            return f"body '{name(mujoco.mjtObj.mjOBJ_BODY, b)}': inertia {model.body_inertia[b].tolist()} kg·m²"
+    for j in range(model.njnt):
+        ax = model.jnt_axis[j]
+        if not np.all(np.isfinite(ax)) or (model.jnt_type[j] in (2, 3) and not np.any(ax)):
+            return f"joint '{name(mujoco.mjtObj.mjOBJ_JOINT, j)}': axis {ax.tolist()} (3 finite numbers, not all 0)"
+    for g in range(model.ngeom):
+        fr = model.geom_friction[g]
+        if not (np.all(np.isfinite(fr)) and np.all(fr >= 0)):
+            return f"geom '{name(mujoco.mjtObj.mjOBJ_GEOM, g)}': friction {fr.tolist()} (finite numbers >= 0)"
+    for m in range(model.nmesh):
+        sc = model.mesh_scale[m] if hasattr(model, "mesh_scale") else np.ones(3)
+        if not np.all(np.isfinite(sc)) or not np.all(np.isfinite(model.mesh_vert)):
+            return f"mesh '{name(mujoco.mjtObj.mjOBJ_MESH, m)}': scale {np.asarray(sc).tolist()} (finite numbers)"
+    return ""
+
+
+def _human(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 2 * 86400:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.3g} days"
+
+
+def check_step_budget(sim_seconds: float, dt: float, what: str, hint: str, robots: int = 1) -> None:
+    """Refuse (``InputError``) work of ``sim_seconds`` s of simulated time at step ``dt`` s for ``robots``
+    robots whose estimate (:data:`STEP_WALL_S` per robot-step) exceeds :data:`CHECK_BOUND_S` s."""
+    if not (math.isfinite(dt) and dt > 0):
+        raise InputError(f"{what}: timestep {dt!r} s: expected a finite number > 0")
+    steps = sim_seconds / dt
+    est = steps * robots * STEP_WALL_S
+    if est > CHECK_BOUND_S:
+        raise InputError(
+            f"{what}: timestep {dt:g} s makes {steps:.3g} physics steps for {sim_seconds:.3g} s of simulated time, "
+            f"about {_human(est)} (at {STEP_WALL_S * 1e6:g} µs a step; the bound is {CHECK_BOUND_S:g} s); {hint}"
+        )
+
+
+def spec_file_problem(spec: Any) -> str:
+    """Why an MJCF ``MjSpec``'s mesh, skin, height-field or texture file is not loaded (``""``: none):
+    checked by :func:`mesh_problem` before MuJoCo's compiler opens it (a FIFO blocks it, a 10 GB STL
+    exhausts memory). Names resolve as the compiler resolves them (the model's folder and its
+    ``meshdir``/``texturedir``); files of the spec's own asset dictionary are not files."""
+    top = Path(spec.modelfiledir or ".")
+    own = set(spec.assets) if spec.assets else set()
+    items = [(m.file, spec.meshdir, "mesh") for m in spec.meshes]
+    items += [(s.file, spec.meshdir, "skin") for s in spec.skins]
+    items += [(h.file, spec.meshdir, "hfield") for h in spec.hfields]
+    items += [(t.file, spec.texturedir, "texture") for t in spec.textures]
+    for name, folder, kind in items:
+        if not name or name in own:
+            continue
+        f = Path(name) if Path(name).is_absolute() else top / (folder or "") / name
+        why = mesh_problem(f)
+        if why:
+            return f"{kind} file {f}: {why}"
+    return ""

@@ -1,0 +1,297 @@
+"""A robot file is data (design §12, issue 28 item 1): xacro runs only when asked, in a sandboxed process.
+
+Every hostile file here tries to run a command (creating a marker file), read the machine
+(``/etc/passwd``, the environment) or exhaust it; each must end in one refusal, the marker absent and
+nothing of the machine in the answer.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from bioform_mj.cli import main as cli
+from bioform_mj.core.errors import InputError
+from bioform_mj.robots import xacro_sandbox
+from bioform_mj.robots.refs import PackagePath, RobotRef, as_ref
+from bioform_mj.robots.urdf import check_file
+from bioform_mj.robots.xacro_sandbox import XacroRefused, expand
+from test_urdf import diff_drive, write
+
+pytest.importorskip("xacro")
+
+NS = 'xmlns:xacro="http://ros.org/wiki/xacro"'
+SECRET = "bioform-secret-3141592653"
+#: ')' and '(' as properties: xacro's lexer ends $( … ) at the first ')', so the escapes build them so
+PARENS = '<xacro:property name="r" value=")"/><xacro:property name="l" value="("/>'
+
+
+def robot(body: str, props: str = "") -> str:
+    """A xacro robot file with ``body`` after one link (what follows the expansion does not matter)."""
+    return f'<robot name="h" {NS}>{PARENS}{props}<link name="a"/>{body}</robot>'
+
+
+def _escapes(marker: Path) -> list[tuple[str, str]]:
+    """``(id, xacro body)``: the ways out of xacro's own sandbox, each trying to create ``marker``."""
+    touch = f"import os; os.system('touch {marker}'${{r}}"
+    return [
+        ("subclasses", "<x v=\"${''.__class__.__mro__[1].__subclasses__()}\"/>"),
+        ("subclasses-comprehension", '<x v="${[c for c in (1).__class__.__base__.__subclasses__()]}"/>'),
+        ("dunder-import", f"<x v=\"${{__import__('os').system('touch {marker}')}}\"/>"),
+        ("eval-exec", f'<x v="$(eval exec(&quot;{touch}&quot;, dict(${{r}}${{r}})"/>'),
+        ("eval-open", "<x v=\"$(eval open('/etc/passwd'${r}.read(${r})\"/>"),
+        ("eval-import-by-chr", "<x v=\"$(eval __import__('os'${r}.system('id'${r})\"/>"),
+        ("eval-env", "<x v=\"$(eval env('HOME'${r})\"/>"),
+        ("python-vars", "<x v=\"${python['vars'](python['str'])}\"/>"),
+        ("python-type", "<x v=\"${python.type('x', (), dict())}\"/>"),
+        ("str-format", '<x v="${str.format(t, xacro.load_yaml)}"/>'),
+        ("dunder-in-string", "<x v=\"${xacro.dotify(dict(a='{0.__globals__'))}\"/>"),
+        ("env", '<x v="$(env HOME)"/>'),
+        ("optenv", f'<x v="$(optenv BIOFORM_TEST_SECRET {SECRET[:3]})"/>'),
+        ("load_yaml-etc", "<x v=\"${xacro.load_yaml('/etc/passwd')}\"/>"),
+        ("include-etc", '<xacro:include filename="/etc/hostname"/>'),
+        ("include-up", '<xacro:include filename="../../../../../../../../etc/hostname"/>'),
+    ]
+
+
+@pytest.fixture
+def hostile(tmp_path, monkeypatch):
+    """A robot folder, a marker file path that must stay absent, and the secret in the environment."""
+    monkeypatch.setenv("BIOFORM_TEST_SECRET", SECRET)
+    monkeypatch.setattr(xacro_sandbox, "XACRO_TIME_S", 15)
+    xacro_sandbox._EXPANDED.clear()
+    folder = tmp_path / "robot"
+    folder.mkdir()
+    return folder, tmp_path / "MARKER"
+
+
+@pytest.mark.parametrize("case", range(16), ids=[c[0] for c in _escapes(Path("m"))])
+def test_escape_refused_nothing_runs_nothing_leaks(case, hostile):
+    folder, marker = hostile
+    name, body = _escapes(marker)[case]
+    path = write(folder / f"{name}.urdf.xacro", robot(body, '<xacro:property name="t" value="{0.__globals__}"/>'))
+    with pytest.raises(XacroRefused) as err:
+        expand(path, PackagePath())
+    msg = str(err.value)
+    assert "\n" not in msg and str(path) in msg, msg
+    assert "root:" not in msg and SECRET not in msg and "uid=" not in msg, msg
+    assert not marker.exists()
+
+
+def test_symlink_out_of_the_package_is_not_read(hostile):
+    folder, _ = hostile
+    (folder / "params.yaml").symlink_to("/etc/passwd")
+    path = write(folder / "s.urdf.xacro", robot("<x v=\"${xacro.load_yaml('params.yaml')}\"/>"))
+    with pytest.raises(XacroRefused, match="outside the robot's packages"):
+        expand(path, PackagePath())
+
+
+def test_yaml_and_include_inside_the_package_work_and_args_arrive(hostile, tmp_path):
+    folder, _ = hostile
+    write(folder / "params.yaml", "mass: 2.5\n")
+    write(folder / "part.xacro", f'<robot {NS}><link name="b"/></robot>')
+    body = (
+        '<xacro:include filename="part.xacro"/>'
+        '<x m="${xacro.load_yaml(\'params.yaml\')[\'mass\']}" p="$(arg prefix)" c="$(cwd)"/>'
+    )
+    path = write(
+        folder / "ok.urdf.xacro",
+        f'<robot name="h" {NS}><xacro:arg name="prefix" default="d"/><link name="a"/>{body}</robot>',
+    )
+    out = expand(path, PackagePath(), (("prefix", "left_"),))
+    assert 'm="2.5"' in out and 'p="left_"' in out and '<link name="b"/>' in out, out
+    assert f'c="{folder.resolve()}"' in out  # $(cwd) is the robot's folder, not the caller's
+    assert SECRET not in out
+
+
+def test_exponential_macro_stopped_by_the_memory_or_time_limit(hostile, monkeypatch):
+    folder, _ = hostile
+    monkeypatch.setattr(xacro_sandbox, "XACRO_MEMORY_MB", 256)
+    monkeypatch.setattr(xacro_sandbox, "XACRO_TIME_S", 10)
+    macros = (
+        '<xacro:macro name="m0"><x a="aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa"/></xacro:macro>'
+    )
+    for i in range(1, 9):
+        macros += f'<xacro:macro name="m{i}">' + f"<xacro:m{i - 1}/>" * 10 + "</xacro:macro>"
+    path = write(folder / "bomb.urdf.xacro", robot("<xacro:m8/>", macros))
+    t0 = time.monotonic()
+    with pytest.raises(XacroRefused, match="xacro stopped"):
+        expand(path, PackagePath())
+    assert time.monotonic() - t0 < 25
+
+
+@pytest.mark.parametrize("expr,limit", [("'a'*10**10", "256 MiB"), ("9**9**9", "time limit")])
+def test_huge_values_stopped(expr, limit, hostile, monkeypatch):
+    folder, _ = hostile
+    monkeypatch.setattr(xacro_sandbox, "XACRO_MEMORY_MB", 256)
+    monkeypatch.setattr(xacro_sandbox, "XACRO_TIME_S", 3)
+    path = write(folder / "big.urdf.xacro", robot(f'<x v="${{{expr}}}"/>'))
+    with pytest.raises(XacroRefused, match=limit):
+        expand(path, PackagePath())
+
+
+def test_the_audit_hook_refuses_processes_files_and_introspection(tmp_path):
+    """The layer under the expression checks: in the child, after the hook, nothing of this runs."""
+    child = Path(xacro_sandbox.__file__).with_name("_xacro_child.py")
+    marker = tmp_path / "MARKER"
+    code = f"""
+import json, os, runpy, sys
+m = runpy.run_path({str(child)!r}, run_name="child")
+m["_install_hook"]([{str(tmp_path)!r}], [], [])
+tries = {{
+    "system": lambda: os.system("touch {marker}"),
+    "subprocess": lambda: __import__("subprocess"),
+    "posix_spawn": lambda: os.posix_spawn("/bin/touch", ["touch", "{marker}"], {{}}),
+    "fork": lambda: os.fork(),
+    "read /etc/passwd": lambda: open("/etc/passwd").read(),
+    "write": lambda: open({str(tmp_path / "w.txt")!r}, "w"),
+    "ctypes": lambda: __import__("ctypes"),
+    "frames": lambda: sys._getframe(),
+    "gc": lambda: __import__("gc").get_objects(),
+    "socket": lambda: __import__("socket"),
+    "list /": lambda: os.listdir("/"),
+}}
+out = {{}}
+for k, f in tries.items():
+    try:
+        f()
+        out[k] = "ran"
+    except PermissionError as e:
+        out[k] = "refused"
+    except Exception as e:
+        out[k] = type(e).__name__
+out["read inside"] = "ran" if open({str(tmp_path / "in.txt")!r}).read() == "ok" else "no"
+print(json.dumps(out))
+"""
+    write(tmp_path / "in.txt", "ok")
+    res = subprocess.run([sys.executable, "-I", "-c", code], capture_output=True, text=True, timeout=60)
+    got = json.loads(res.stdout.strip().splitlines()[-1])
+    assert got.pop("read inside") == "ran"  # the robot's own folder stays readable
+    assert all(v == "refused" for v in got.values()), got
+    assert not marker.exists() and not (tmp_path / "w.txt").exists()
+
+
+# ------------------------------------------------------------------ not asked for: refused, one line
+@pytest.mark.parametrize(
+    "name,text",
+    [
+        ("r.urdf.xacro", robot("<x v=\"$(eval exec(&quot;import os; os.system('touch MARKER'${r}&quot;${r})\"/>")),
+        ("r.urdf", diff_drive().replace('"0.2"', "\"${''.__class__}\"", 1)),
+        ("r.xml", diff_drive(tail='<x v="$(env HOME)"/>')),
+    ],
+    ids=["xacro", "urdf-with-macros", "xml-robot-with-macros"],
+)
+@pytest.mark.parametrize("command", ["robot check", "identify"])
+def test_not_asked_refused_before_anything_runs(name, text, command, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    path = write(tmp_path / name, text)
+    assert cli.main([*command.split(), str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "pass --xacro" in err[0], err
+    assert not (tmp_path / "MARKER").exists()
+
+
+def test_asked_but_hostile_one_error_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    path = write(
+        tmp_path / "r.urdf.xacro", robot(f"<x v=\"${{__import__('os').system('touch {tmp_path}/MARKER')}}\"/>")
+    )
+    assert cli.main(["robot", "check", str(path), "--xacro"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "xacro refused" in err[0], err
+    assert not (tmp_path / "MARKER").exists()
+
+
+def test_xacro_arg_without_xacro_is_refused(tmp_path, capsys):
+    path = write(tmp_path / "dd.urdf", diff_drive())
+    assert cli.main(["robot", "check", str(path), "--xacro-arg", "a=1"]) == 2
+    assert "add --xacro" in capsys.readouterr().err
+
+
+def test_scenario_robot_needs_the_mapping_key(tmp_path, capsys, monkeypatch):
+    """``bioform run`` (even --no-robot-check) and ``bioform_mj.load`` refuse; ``xacro = true`` and
+    ``--xacro`` allow, with ``xacro_args`` / ``--xacro-arg`` for $(arg)."""
+    import bioform_mj
+
+    monkeypatch.chdir(tmp_path)
+    text = diff_drive().replace('<robot name="dd">', f'<robot name="dd" {NS}><xacro:arg name="m" default="x"/>')
+    text = text.replace('"0.2"', '"$(arg m)"', 1)
+    write(tmp_path / "dd.urdf.xacro", text)
+    plain = write(tmp_path / "a.toml", '[plant]\nkind = "mujoco"\nrobots = ["dd.urdf.xacro"]\n')
+    out = tmp_path / "out"
+    assert cli.main(["run", str(plain), "--duration", "0.05", "--out", str(out), "--no-robot-check"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pass --xacro" in err[0] and not out.exists(), err
+    with pytest.raises(InputError, match="pass --xacro"):
+        bioform_mj.load(str(plain))
+    asked = write(
+        tmp_path / "b.toml",
+        '[plant]\nkind = "mujoco"\nrobots = [{model = "dd.urdf.xacro", xacro = true, xacro_args = {m = 0.2}}]\n',
+    )
+    sc = bioform_mj.load(str(asked))
+    assert sc.plant.robots[0].xacro and sc.plant.robots[0].xacro_args == (("m", "0.2"),)
+    ref = RobotRef(str(tmp_path / "dd.urdf.xacro"), xacro=True, xacro_args=(("m", "0.2"),))
+    check_file(ref)
+    code = cli.main(["robot", "check", str(tmp_path / "dd.urdf.xacro"), "--xacro", "--xacro-arg", "m=0.2"])
+    err = capsys.readouterr()
+    assert code != 2 and "expanded by xacro, which runs the file as a program" in err.out + err.err, err
+
+
+def test_mapping_key_types(tmp_path):
+    assert as_ref({"model": "r.urdf", "xacro": True, "xacro_args": {"a": 1, "b": True}}).xacro_args == (
+        ("a", "1"),
+        ("b", "true"),
+    )
+    for bad in ({"model": "r.urdf", "xacro": "yes"}, {"model": "r.urdf", "xacro_args": ["a"]}):
+        with pytest.raises(InputError):
+            as_ref(bad)
+    assert RobotRef("r.urdf", xacro=True, xacro_args=(("a", "1"),)).to_table() == {
+        "model": "r.urdf",
+        "xacro": True,
+        "xacro_args": {"a": "1"},
+    }
+
+
+def test_child_environment_holds_nothing_of_the_user(hostile, monkeypatch, tmp_path):
+    """The child starts with no variable of the user's: a stand-in child answers with its environment."""
+    folder, _ = hostile
+    spy = write(tmp_path / "spy.py", "import json, os\nprint(json.dumps({'xml': json.dumps(dict(os.environ))}))\n")
+    monkeypatch.setattr(xacro_sandbox, "_CHILD", spy)
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(folder))
+    env = json.loads(expand(write(folder / "e.urdf.xacro", robot("")), PackagePath()))
+    assert SECRET not in json.dumps(env) and "HOME" not in env and "PATH" not in env, env
+    assert set(env) <= {"LC_ALL", "PYTHONHASHSEED", "LC_CTYPE"}, env
+
+
+def test_without_the_xacro_package_says_how_to_install(tmp_path, monkeypatch):
+    """--xacro where the child's Python has no xacro: one line naming the extra and the manual way."""
+    blocked = "import runpy, sys\nsys.modules['xacro'] = None\nrunpy.run_path({!r}, run_name='__main__')\n"
+    spy = write(tmp_path / "child.py", blocked.format(str(xacro_sandbox._CHILD)))
+    monkeypatch.setattr(xacro_sandbox, "_CHILD", spy)
+    xacro_sandbox._EXPANDED.clear()
+    path = write(tmp_path / "r.urdf.xacro", robot(""))
+    with pytest.raises(XacroRefused, match=r"pip install 'bioform-mj\[urdf\]'.*`xacro .* > r.urdf`"):
+        expand(path, PackagePath())
+
+
+def test_run_with_the_xacro_flag(tmp_path, capsys, monkeypatch):
+    """``bioform run --xacro --xacro-arg`` expands the scenario's xacro robot; its summary says xacro ran."""
+    monkeypatch.chdir(tmp_path)
+    text = diff_drive().replace('<robot name="dd">', f'<robot name="dd" {NS}><xacro:arg name="m" default="x"/>')
+    write(tmp_path / "dd.urdf.xacro", text.replace('"0.2"', '"$(arg m)"', 1))
+    sc = write(tmp_path / "a.toml", '[plant]\nkind = "mujoco"\nrobots = ["dd.urdf.xacro"]\n')
+    out = tmp_path / "out"
+    args = ["run", str(sc), "--duration", "0.05", "--out", str(out), "--no-robot-check", "--quiet"]
+    code = cli.main([*args, "--xacro", "--xacro-arg", "m=0.2"])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert any("expanded by xacro" in w for w in summary["import_warnings"]), summary["import_warnings"]
+    assert "expanded by xacro" in err  # said before the run, as a warning: line
+    assert cli.main(["sweep", str(sc), "--xacro", "--out", str(tmp_path / "sw")]) == 2
+    assert "write xacro = true" in capsys.readouterr().err
