@@ -17,7 +17,7 @@ from bioform_mj.scenario.loader import load  # noqa: E402
 
 wp.config.quiet = True
 
-#: 100 Hz control (as tests/test_odometry.py's tb3), the difference derivative, 4096-count encoders
+#: 100 Hz control (as tests/test_plants_odometry.py's tb3), the difference derivative, 4096-count encoders
 #: and a gyro with noise and bias. At 1 kHz one encoder count is a 0.077 m/s kick in the measured
 #: velocity of the paper robot: worlds then differ by counts that float32 physics puts on the other
 #: side of a count boundary, and ĉ by up to 10 % (docs/warp_engine.md: the spread criterion).

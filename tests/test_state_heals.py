@@ -125,7 +125,7 @@ def test_provenance_hashes_package_meshes_and_xacro_includes(tmp_path):
     """A sweep whose robot's package:// mesh (or xacro include) changed is redone (it resumed as done)."""
     import bioform_mj
     from bioform_mj.jobs.provenance import differences, provenance
-    from test_urdf import _package, box_stl, write
+    from test_robots_urdf import _package, box_stl, write
 
     pkg, urdf = _package(tmp_path)
     write(tmp_path / "robot" / "dd.urdf", urdf)

@@ -17,7 +17,7 @@ Where the values come from (design §8, §8.3):
   speeds 0); no wheels (NaN), no IMU.
 
 Read only: the sampler never calls ``plant.observe()`` (which counts tips and slips), so the run's
-own numbers are those of a run without it (``tests/test_rosbag.py``).
+own numbers are those of a run without it (``tests/test_outputs_rosbag.py``).
 """
 
 from __future__ import annotations

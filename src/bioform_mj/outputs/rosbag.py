@@ -22,7 +22,7 @@ Speed (design §9, a run as a ROS 2 bag: a fraction of the run's stepping time):
 one fixed layout, so one message is serialised by ``rosbags`` with marker values, the markers'
 byte offsets are found, and every row's numbers are written into a copy of it with numpy; the
 MCAP chunks and their message indexes are built the same way (:func:`_writer_classes`). ``rosbags``'
-reader reads the result back (``tests/test_rosbag.py`` compares it with ``log.npz``).
+reader reads the result back (``tests/test_outputs_rosbag.py`` compares it with ``log.npz``).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@
 every value as the run used it (the scale already applied, so ``formation.scale = 1``; robot models
 by shipped name or absolute path). ``bioform run runs/X/resolved.toml`` or ``bioform run
 runs/X/summary.json`` loads it as it stands (:func:`bioform_mj.scenario.loader.load`) and gives the same log
-on the same machine and engine (``tests/test_record.py``). :func:`to_toml` writes it as TOML
+on the same machine and engine (``tests/test_scenario_record.py``). :func:`to_toml` writes it as TOML
 (``tomllib`` reads TOML but writes none).
 """
 

@@ -4,7 +4,7 @@ Every scenario key declares its unit as field metadata (``field(metadata={"unit"
 per-channel pair or a row's columns as a tuple of units). :func:`factor` turns a unit into its
 similarity factor — ``m`` → s, ``s`` → σ, ``rad`` and ``1`` → 1, products and quotients thereof —
 and :func:`transform` multiplies every key by it, so no hand-written list can miss a key
-(``tests/test_similarity.py`` walks every key and fails on one without a unit).
+(``tests/test_scenario_similarity.py`` walks every key and fails on one without a unit).
 
 Kept, and why (metadata ``kept``): the numerical steps (``sim.control_dt``, ``physics_dt``,
 ``log_dt``, ``plant.sensor_dt``: the robot's and the computer's, a slower scenario is stepped finer

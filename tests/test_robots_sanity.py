@@ -16,7 +16,7 @@ import pytest
 from bioform_mj.cli import main as cli
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots import sanity as limits
-from test_urdf import diff_drive, write
+from test_robots_urdf import diff_drive, write
 
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 
@@ -182,7 +182,7 @@ def _scaled(scale: str) -> str:
 
 @pytest.mark.parametrize("desc,make,needle", BAD_VALUES, ids=[b[0] for b in BAD_VALUES])
 def test_bad_number_refused_naming_the_element(desc, make, needle, tmp_path, capsys):
-    from test_urdf import box_stl
+    from test_robots_urdf import box_stl
 
     box_stl(tmp_path / "c.stl", 0.15, 0.1, 0.025)
     text = make()
@@ -246,7 +246,7 @@ def test_warning_lines_stay_one_line(capsys):
 # ------------------------------------------------------------------ a mesh symlinked out of its package
 def test_mesh_symlinked_out_of_its_package_is_not_read(tmp_path, capsys):
     """A link to a file outside the package was copied into a run's assets/ under the target's name."""
-    from test_urdf import box_stl
+    from test_robots_urdf import box_stl
 
     outside = box_stl(tmp_path / "secret" / "id_rsa.stl", 0.15, 0.1, 0.025)
     pkg = tmp_path / "ws" / "ddpkg"
@@ -288,7 +288,7 @@ def test_scenario_file_that_is_a_fifo_or_huge_is_refused(tmp_path, capsys):
 def test_mjcf_mesh_that_is_a_fifo_or_too_large_is_refused(tmp_path, capsys, monkeypatch):
     """An MJCF robot's mesh is checked before MuJoCo's compiler opens it (a FIFO blocked it)."""
     from bioform_mj.robots.refs import models_dir
-    from test_urdf import box_stl
+    from test_robots_urdf import box_stl
 
     text = (models_dir() / "paper_robot.xml").read_text()
     geom = '<geom name="back_caster"'

@@ -17,7 +17,7 @@ import pytest
 from bioform_mj.assess.check import G, check, tip_margins
 from bioform_mj.robots.prepare import prepare_robot
 from bioform_mj.robots.refs import RobotRef
-from test_urdf import box_stl  # a binary STL box, as the URDF tests write it
+from test_robots_urdf import box_stl  # a binary STL box, as the URDF tests write it
 
 HALF_PI = repr(math.pi / 2)
 

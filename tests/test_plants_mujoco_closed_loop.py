@@ -1,7 +1,7 @@
 """The whole stack closed-loop on the MuJoCo plant (issue 3): numbers against the physics.
 
 The learner's target is the ground truth read from the compiled model (``a_eff``, ``b_eff``,
-design §8), which ``test_mujoco_models.py`` checks by system identification. The runs are
+design §8), which ``test_plants_mujoco_models.py`` checks by system identification. The runs are
 shared through module-scoped fixtures: Table I in MuJoCo (4 × 20 s, whose
 bioinspired-learning run also serves the learner and formation checks), the payload preset
 (120 s) and the heterogeneous preset (2 × 20 s). Measured values are quoted at each bound.

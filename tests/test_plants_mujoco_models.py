@@ -371,7 +371,7 @@ def test_unstable_simulation_raises_diverged():
 
 
 # ------------------------------------------------------------------ bad model files
-INCOMPLETE = {  # what no mapping can fix (the mapping cases are in test_robots.py)
+INCOMPLETE = {  # what no mapping can fix (the mapping cases are in test_robots_mapping.py)
     "no base": ('<body name="base"', '<body name="chassis"', "body 'base'"),
     "wheel not a hinge": (
         '<joint name="left_wheel"/>',

@@ -116,7 +116,7 @@ def test_a_diverged_run_warns_each_lost_follower_and_the_divergence():
 
 
 def test_a_tipped_follower_gets_exactly_one_warning_naming_it():
-    """tb3 in the unscaled paper scenario tips every follower within 0.5 s (tests/test_robots.py)."""
+    """tb3 in the unscaled paper scenario tips every follower within 0.5 s (tests/test_robots_mapping.py)."""
     sc = bf.load("paper", plant="mujoco", overrides=['plant.robots=["tb3"]', "sim.duration=0.5"])
     res, got = _outcome_warnings(lambda: bf.simulate(sc))
     for f in res.summary["followers"]:

@@ -103,7 +103,7 @@ def test_control_step_agrees_with_the_oracle(
     kd, est_phi, torque_phi, saturation, method, k4_per_follower, faults, seed, derivative
 ):
     """Per step, on random measurements, leader states and faulty networks, for every option
-    (the oracle has no ``analytic`` derivative: tests/test_derivative.py checks it against closed forms)."""
+    (the oracle has no ``analytic`` derivative: tests/test_control_derivative.py checks it against closed forms)."""
     sc = load(
         "paper",
         method=method,

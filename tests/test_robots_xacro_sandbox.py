@@ -21,7 +21,7 @@ from bioform_mj.robots import xacro_sandbox
 from bioform_mj.robots.refs import PackagePath, RobotRef, as_ref
 from bioform_mj.robots.urdf import check_file
 from bioform_mj.robots.xacro_sandbox import XacroRefused, expand
-from test_urdf import diff_drive, write
+from test_robots_urdf import diff_drive, write
 
 pytest.importorskip("xacro")
 

@@ -251,7 +251,7 @@ def test_a_compile_error_naming_a_compiler_option_names_the_key_that_sets_it(tmp
     inequality: MuJoCo refuses it with "use 'balanceinertia' to fix", an option no bioform key set. The error now
     names the mapping key and the flag; with the flag the robot compiles and is checked."""
     from bioform_mj.cli import main as cli
-    from test_robot_check_judged import _urdf
+    from test_assess_check_published import _urdf
 
     text = _urdf()
     assert 'ixx="0.01" iyy="0.012" izz="0.02"' in text
@@ -272,7 +272,7 @@ def test_identify_names_a_skid_steer_base(tmp_path, capsys):
     import json
 
     from bioform_mj.cli import main as cli
-    from test_robots import _REAR, _published
+    from test_robots_mapping import _REAR, _published
 
     ref = _published(tmp_path, _REAR)
     flags = ["--base", ref.base, "--left-wheel", ref.left_wheel, "--right-wheel", ref.right_wheel]
