@@ -1,21 +1,31 @@
-"""The zoo table of the README and docs/zoo.md: each published robot of ``tests/zoo`` checked and run.
+"""The zoo table of the README and docs/zoo.md: each published robot of ``tests/zoo`` checked and run at its fair scale.
 
-Per robot: ``robot check``'s verdict (and cause), the formula's ``a_eff``/``b_eff`` against the
-project's identification, and the paper scenario at the robot's scale (``formation.scale`` = the
-robot's half track / the paper robot's, ``learner.gain_scaling = "c_hat0"``, the robot's own torque
-limit, MuJoCo plant, ``--duration``) with the learned ``ĉ`` against ``c_true`` and every outcome.
-Writes ``--out`` (Markdown) and ``--json``; about a minute per robot on a 2-core machine::
+Per robot (issue 27 item 6, design §21): ``robot check``'s verdict (and cause); the paper scenario at the
+robot's fair scale (``formation.scale = "auto"``: s from its half track; ``formation.time_scale =
+"auto"``: σ from its limits, the maker's top speed given as the mapping's ``top_speed`` from
+``tests/zoo/reference.py``), ``learner.gain_scaling = "c_hat0"``, its own torque limit, on
 
-    .venv/bin/python scripts/zoo_table.py --out runs/zoo/zoo_table.md --json runs/zoo/zoo_table.json
+- the paper's ideal plant (eq. 34) with the robot's ``c_true`` and torque limit: the method's share;
+- MuJoCo with the robot as published: the method and the physics the paper's model lacks;
+
+and records ``s``, ``σ`` and what set it, the worst demand/limit ratio of the run's ``demand``, the
+hardware verdict, ``ĉ`` against ``c_true`` per follower on both plants, every outcome with its message.
+``--duration`` is the paper's duration (s, before × σ; default the paper's 20 s). Writes ``--json``
+(one row per robot, merged into an existing file so robots can be measured one at a time) and
+``--out`` (the Markdown table of every row in ``--json``)::
+
+    .venv/bin/python scripts/zoo_table.py --robots robotis_tb3_burger --duration 10
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import json
 import os
 import sys
+import time
 import warnings
 from pathlib import Path
 
@@ -24,12 +34,190 @@ ZOO = Path(__file__).resolve().parent.parent / "tests" / "zoo"
 
 def toml_table(d: dict) -> str:
     """``{key = value, ...}`` as TOML writes an inline table (strings quoted by JSON, numbers as they are)."""
-    return "{" + ", ".join(f"{k} = {json.dumps(v)}" for k, v in d.items() if v not in ("", None)) + "}"
+    return "{" + ", ".join(f"{k} = {json.dumps(v)}" for k, v in d.items() if v not in ("", None, 0.0)) + "}"
+
+
+def _outcomes(f: dict) -> list[dict]:
+    """A follower's outcomes as ``[{"kind", "message"}]`` (``ok`` when none)."""
+    out = [{"kind": o.get("kind"), "message": str(o.get("message", ""))[:240]} for o in f.get("outcomes") or []]
+    return out or [{"kind": "ok", "message": ""}]
+
+
+def _worst_ratio(summary: dict) -> dict | None:
+    """The largest demand/limit ratio of ``summary["demand"]`` (``{"name", "ratio", "value", "limit", "unit",
+    "limit_by"}``), None without a demand."""
+    worst = None
+    for r in (summary.get("demand") or {}).get("robots", []):
+        for name, it in (r.get("demand") or {}).items():
+            ratio = it.get("ratio") if isinstance(it, dict) else None
+            if ratio is not None and (worst is None or ratio > worst["ratio"]):
+                worst = {"name": name, **{k: it.get(k) for k in ("ratio", "value", "limit", "unit", "limit_by")}}
+    return worst
+
+
+def _followers(summary: dict) -> dict:
+    fol = summary["followers"]
+    return {
+        "c_hat_rel_error": [f.get("c_hat_rel_error") for f in fol],
+        "outcomes": [_outcomes(f) for f in fol],
+        "final_formation_error_m": [f.get("final_formation_error_m") for f in fol],
+        "diverged": (summary.get("diverged") or {}).get("message"),
+    }
+
+
+def measure(r, a, paper_l: float) -> dict:
+    """One robot's row (module docstring)."""
+    from bioform_mj.assess.check import check
+    from bioform_mj.robots.refs import RobotRef
+    from bioform_mj.run.demand import ideal_twin
+    from bioform_mj.run.simulate import simulate
+    from bioform_mj.scenario.loader import load
+
+    ref = RobotRef(
+        model=str(ZOO / r.file),
+        base=r.base,
+        left_wheel=r.left,
+        right_wheel=r.right,
+        tau_max=r.tau_max,
+        top_speed=r.top_speed,
+    )
+    row: dict = {
+        "robot": r.name,
+        "maker": r.maker,
+        "format": r.format,
+        "source": r.source,
+        "tau_max_nm": r.tau_max,
+        "top_speed_mps": r.top_speed or None,
+        "top_speed_source": r.top_speed_source,
+        "paper_duration_s": a.duration,
+    }
+    rep = check(ref)
+    row.update(
+        verdict=rep["verdict"],
+        cause=(rep.get("cause") or {}).get("kind"),
+        a_formula=rep["a_eff"],
+        b_formula=rep["b_eff"],
+        rel_error=rep.get("relative_error"),
+        limits=rep.get("limits"),
+        lengths_only_scale=rep["half_track_m"] / paper_l,
+    )
+    table = {k: getattr(ref, k) for k in ("model", "base", "left_wheel", "right_wheel", "tau_max", "top_speed")}
+    ov = [
+        "plant.kind=mujoco",
+        f"sim.duration={a.duration}",
+        "formation.scale=auto",
+        "formation.time_scale=auto",
+        "learner.gain_scaling=c_hat0",
+        "plant.robots=[" + toml_table(table) + "]",
+    ]
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            sc = load("paper", ov)
+    except Exception as exc:  # a refusal (exit 2 in the CLI) is the row's result
+        row["run_error"] = f"{type(exc).__name__}: {exc}"[:300]
+        return row
+    f = sc.formation
+    row.update(
+        scale=float(f.scale),
+        time_scale=float(f.time_scale),
+        scale_note=f.scale_note,
+        duration_s=float(sc.sim.duration),
+        load_warnings=[str(w.message)[:240] for w in caught][:5],
+    )
+    # the method's share: the same scenario on the paper's plant with the robot's c_true and torque limit
+    c_true = (rep["a_eff"], rep["b_eff"])
+    twin = ideal_twin(sc, c_true)
+    twin = dataclasses.replace(
+        twin,
+        sim=sc.sim,  # the run's own steps
+        torque=dataclasses.replace(twin.torque, tau_max=r.tau_max),
+        limits=sc.limits,
+    )
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ideal = simulate(twin, engine="auto")
+    row["ideal"] = {**_followers(ideal.summary), "seconds": round(time.perf_counter() - t0, 1)}
+    print(
+        f"{r.name}: ideal plant done in {row['ideal']['seconds']} s (s {row['scale']:.3g}, σ {row['time_scale']:.3g})"
+    )
+    t0 = time.perf_counter()
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = simulate(sc)
+    except Exception as exc:  # a refusal (exit 2 in the CLI) is the row's result
+        row["run_error"] = f"{type(exc).__name__}: {exc}"[:300]
+        return row
+    s = res.summary
+    hw = s.get("hardware") or {}
+    row["mujoco"] = {
+        **_followers(s),
+        "seconds": round(time.perf_counter() - t0, 1),
+        "c_true": [d.get("c_true") for d in (s.get("demand") or {}).get("robots", [])],
+        "worst_demand": _worst_ratio(s),
+        "demand_warnings": (s.get("demand") or {}).get("warnings", []),
+        "hardware": {k: hw.get(k) for k in ("verdict", "failed", "not_checked")},
+        "hardware_checks": hw.get("checks"),
+        "warnings": [str(w.message)[:240] for w in caught][:8],
+    }
+    return row
+
+
+def _pct(c: list | None) -> str:
+    if not c or c[0] is None:
+        return "—"
+    return f"{100 * c[0]:+.0f} %, {100 * c[1]:+.0f} %"
+
+
+def _outs(ff: list[list[dict]]) -> str:
+    """``kind ×n`` over the followers (each kind once per follower)."""
+    counts: dict[str, int] = {}
+    for fo in ff:
+        for k in dict.fromkeys(o["kind"] for o in fo):
+            counts[k] = counts.get(k, 0) + 1
+    return ", ".join(f"{k} ×{n}" if n > 1 else k for k, n in counts.items())
+
+
+def markdown(rows: list[dict]) -> str:
+    lines = [
+        "| robot (maker) | `robot check` | top speed m/s (source) | s | σ (set by) | run s (paper s × σ) "
+        "| worst demand/limit | hardware | ĉ − c_true, ideal plant (a, b per follower) "
+        "| outcomes, ideal | ĉ − c_true, MuJoCo | outcomes, MuJoCo |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        cause = f" ({row['cause']})" if row.get("cause") else ""
+        top = f"{row['top_speed_mps']:g} (datasheet)" if row.get("top_speed_mps") else "— (file's limit)"
+        head = f"| {row['robot']} ({row['maker']}) | {row['verdict']}{cause} | {top} | "
+        if "scale" not in row:
+            lines.append(head + f"— | — | — | — | — | refused: {row.get('run_error', '')[:160]} | | | |")
+            continue
+        note = (row.get("scale_note") or "").split(";")[0][:80]
+        ideal, mj = row.get("ideal") or {}, row.get("mujoco") or {}
+        w = mj.get("worst_demand")
+        worst = f"{w['ratio']:.2f} ({w['name']})" if w else "—"
+        hw = mj.get("hardware") or {}
+        hwv = hw.get("verdict") or "—"
+        if hw.get("failed"):
+            hwv += f" ({', '.join(hw['failed'])})"
+        elif hw.get("not_checked"):
+            hwv += f" (not checked: {', '.join(hw['not_checked'])})"
+        mjc = "; ".join(_pct(c) for c in mj.get("c_hat_rel_error", [])) if mj else "—"
+        mjo = _outs(mj["outcomes"]) if mj else f"run refused: {row.get('run_error', '')[:160]}"
+        lines.append(
+            head + f"{row['scale']:.3g} | {row['time_scale']:.3g} ({note}) | {row['duration_s']:.0f} "
+            f"({row['paper_duration_s']:g} × σ) | {worst} | {hwv} | "
+            + "; ".join(_pct(c) for c in ideal.get("c_hat_rel_error", []))
+            + f" | {_outs(ideal.get('outcomes', []))} | {mjc} | {mjo} |"
+        )
+    return "\n".join(lines) + "\n"
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--duration", type=float, default=20.0)
+    ap.add_argument("--duration", type=float, default=20.0, help="the paper's duration, s (the run's is × σ)")
     ap.add_argument("--robots", default="", help="comma-separated names (default: all)")
     ap.add_argument("--out", type=Path, default=Path("runs/zoo/zoo_table.md"))
     ap.add_argument("--json", type=Path, default=Path("runs/zoo/zoo_table.json"))
@@ -38,91 +226,27 @@ def main() -> int:
     ref_mod = importlib.util.module_from_spec(spec)
     sys.modules["zoo_reference"] = ref_mod
     spec.loader.exec_module(ref_mod)
-    expect = json.loads((ZOO / "expectations.json").read_text())
     os.environ["ROS_PACKAGE_PATH"] = ":".join(str(ZOO / r.name) for r in ref_mod.ROBOTS)
 
     from bioform_mj.assess.check import check
-    from bioform_mj.robots.refs import RobotRef
-    from bioform_mj.run.simulate import simulate
-    from bioform_mj.scenario.loader import load
 
     paper_l = check("paper", identify_=False)["half_track_m"]
     names = [n for n in a.robots.split(",") if n] or [r.name for r in ref_mod.ROBOTS]
-    rows = []
+    old = json.loads(a.json.read_text()) if a.json.exists() else []
+    rows = {row["robot"]: row for row in old}
+    a.json.parent.mkdir(parents=True, exist_ok=True)
     for r in ref_mod.ROBOTS:
         if r.name not in names:
             continue
-        ref = RobotRef(model=str(ZOO / r.file), base=r.base, left_wheel=r.left, right_wheel=r.right, tau_max=r.tau_max)
-        row = {
-            "robot": r.name,
-            "maker": expect[r.name]["maker"],
-            "format": r.format,
-            "source": expect[r.name]["source"],
-        }
-        rep = check(ref)
-        row.update(
-            verdict=rep["verdict"],
-            cause=(rep.get("cause") or {}).get("kind"),
-            a_formula=rep["a_eff"],
-            b_formula=rep["b_eff"],
-            rel_error=rep.get("relative_error"),
-        )
-        scale = rep["half_track_m"] / paper_l
-        table = {"model": ref.model, "base": ref.base, "left_wheel": ref.left_wheel, "right_wheel": ref.right_wheel}
-        if ref.tau_max:
-            table["tau_max"] = ref.tau_max
-        ov = [
-            "plant.kind=mujoco",
-            f"sim.duration={a.duration}",
-            f"formation.scale={scale:.6g}",
-            "learner.gain_scaling=c_hat0",
-            "plant.robots=[" + toml_table(table) + "]",
-        ]
-        try:
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always")
-                sc = load("paper", ov)
-                res = simulate(sc)
-            fol = res.summary["followers"]
-            row.update(
-                scale=scale,
-                c_hat_rel_error=[f["c_hat_rel_error"] for f in fol],
-                outcomes=[[o["kind"] for o in f.get("outcomes", [])] or ["ok"] for f in fol],
-                final_formation_error_m=[f["final_formation_error_m"] for f in fol],
-                diverged=(res.summary.get("diverged") or {}).get("message"),
-                warnings=[str(w.message)[:200] for w in caught][:5],
-            )
-        except Exception as exc:  # a refusal (exit 2 in the CLI) is the row's result
-            row.update(scale=scale, run_error=f"{type(exc).__name__}: {exc}"[:300])
-        rows.append(row)
-        print(json.dumps({k: row.get(k) for k in ("robot", "verdict", "cause", "c_hat_rel_error", "outcomes")}))
-    a.json.parent.mkdir(parents=True, exist_ok=True)
-    a.json.write_text(json.dumps(rows, indent=1, default=str))
-    lines = [
-        "| robot | maker | format | verdict (cause) | identified vs formula a, b | scale | learned ĉ vs c_true (a, b), "
-        "per follower | outcomes |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
-    for row in rows:
-        re_ = row.get("rel_error") or {}
-        ident = (
-            f"{100 * re_['a']:+.1f} %, {100 * re_['b']:+.1f} %"
-            if re_ and re_.get("a") is not None
-            else "not identified"
-        )
-        if "run_error" in row:
-            chat, outc = "—", f"refused: {row['run_error'][:120]}"
-        else:
-            chat = "; ".join(f"{100 * c[0]:+.0f} %, {100 * c[1]:+.0f} %" for c in row["c_hat_rel_error"])
-            outc = "; ".join("+".join(o) for o in row["outcomes"])
-        cause = f" ({row['cause']})" if row.get("cause") else ""
-        lines.append(
-            f"| {row['robot']} | {row['maker']} | {row['format'].upper()} | {row['verdict']}{cause} | {ident} | "
-            f"{row['scale']:.3g} | {chat} | {outc} |"
-        )
+        rows[r.name] = measure(r, a, paper_l)
+        order = [x.name for x in ref_mod.ROBOTS if x.name in rows]
+        a.json.write_text(json.dumps([rows[n] for n in order], indent=1, default=str, ensure_ascii=False) + "\n")
+        print(json.dumps({k: rows[r.name].get(k) for k in ("robot", "scale", "time_scale", "run_error")}))
+    order = [x.name for x in ref_mod.ROBOTS if x.name in rows]
+    md = markdown([rows[n] for n in order])
     a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    a.out.write_text(md)
+    print(md)
     return 0
 
 
