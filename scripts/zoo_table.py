@@ -38,18 +38,22 @@ def toml_table(d: dict) -> str:
 
 
 def _outcomes(f: dict) -> list[dict]:
-    """A follower's outcomes as ``[{"kind", "message"}]`` (``ok`` when none)."""
-    out = [{"kind": o.get("kind"), "message": str(o.get("message", ""))[:240]} for o in f.get("outcomes") or []]
+    """A follower's outcomes as ``[{"kind", "detail"}]`` (``ok`` when none)."""
+    out = [{"kind": o.get("kind"), "detail": str(o.get("detail", ""))[:240]} for o in f.get("outcomes") or []]
     return out or [{"kind": "ok", "message": ""}]
+
+
+#: demand items that compare the robot's resistance with the sliding gain (the method), not a demand with a limit
+GAIN_ITEMS = ("sliding_gain_v", "sliding_gain_w")
 
 
 def _worst_ratio(summary: dict) -> dict | None:
     """The largest demand/limit ratio of ``summary["demand"]`` (``{"name", "ratio", "value", "limit", "unit",
-    "limit_by"}``), None without a demand."""
+    "limit_by"}``) over the robot's limits (not :data:`GAIN_ITEMS`), None without a demand."""
     worst = None
     for r in (summary.get("demand") or {}).get("robots", []):
         for name, it in (r.get("demand") or {}).items():
-            ratio = it.get("ratio") if isinstance(it, dict) else None
+            ratio = it.get("ratio") if isinstance(it, dict) and name not in GAIN_ITEMS else None
             if ratio is not None and (worst is None or ratio > worst["ratio"]):
                 worst = {"name": name, **{k: it.get(k) for k in ("ratio", "value", "limit", "unit", "limit_by")}}
     return worst
@@ -157,6 +161,7 @@ def measure(r, a, paper_l: float) -> dict:
         "seconds": round(time.perf_counter() - t0, 1),
         "c_true": [d.get("c_true") for d in (s.get("demand") or {}).get("robots", [])],
         "worst_demand": _worst_ratio(s),
+        "demand": [d.get("demand") for d in (s.get("demand") or {}).get("robots", [])],
         "demand_warnings": (s.get("demand") or {}).get("warnings", []),
         "hardware": {k: hw.get(k) for k in ("verdict", "failed", "not_checked")},
         "hardware_checks": hw.get("checks"),
@@ -235,9 +240,9 @@ def main() -> int:
     old = json.loads(a.json.read_text()) if a.json.exists() else []
     rows = {row["robot"]: row for row in old}
     a.json.parent.mkdir(parents=True, exist_ok=True)
-    for r in ref_mod.ROBOTS:
-        if r.name not in names:
-            continue
+    by_name = {r.name: r for r in ref_mod.ROBOTS}
+    for name in names:  # in the order given
+        r = by_name[name]
         rows[r.name] = measure(r, a, paper_l)
         order = [x.name for x in ref_mod.ROBOTS if x.name in rows]
         a.json.write_text(json.dumps([rows[n] for n in order], indent=1, default=str, ensure_ascii=False) + "\n")
