@@ -24,6 +24,7 @@ import dataclasses
 import importlib.util
 import json
 import os
+import re
 import sys
 import time
 import warnings
@@ -40,20 +41,29 @@ def toml_table(d: dict) -> str:
 def _outcomes(f: dict) -> list[dict]:
     """A follower's outcomes as ``[{"kind", "detail"}]`` (``ok`` when none)."""
     out = [{"kind": o.get("kind"), "detail": str(o.get("detail", ""))[:240]} for o in f.get("outcomes") or []]
-    return out or [{"kind": "ok", "message": ""}]
+    return out or [{"kind": "ok", "detail": ""}]
 
 
 #: demand items that compare the robot's resistance with the sliding gain (the method), not a demand with a limit
 GAIN_ITEMS = ("sliding_gain_v", "sliding_gain_w")
+#: the mapping's torque limit against traction: a property of the robot, not of the scenario's demand
+MAPPING_ITEMS = ("torque_vs_traction",)
 
 
 def _worst_ratio(summary: dict) -> dict | None:
     """The largest demand/limit ratio of ``summary["demand"]`` (``{"name", "ratio", "value", "limit", "unit",
-    "limit_by"}``) over the robot's limits (not :data:`GAIN_ITEMS`), None without a demand."""
+    "limit_by"}``) of the scenario's demand over the robot's limits (not :data:`GAIN_ITEMS`,
+    :data:`MAPPING_ITEMS`), None without a demand."""
+    return _worst_of([r.get("demand") for r in (summary.get("demand") or {}).get("robots", [])])
+
+
+def _worst_of(demands: list) -> dict | None:
+    """:func:`_worst_ratio` of the ``demand`` dicts of the robots."""
     worst = None
-    for r in (summary.get("demand") or {}).get("robots", []):
-        for name, it in (r.get("demand") or {}).items():
-            ratio = it.get("ratio") if isinstance(it, dict) and name not in GAIN_ITEMS else None
+    for d in demands:
+        for name, it in (d or {}).items():
+            skip = GAIN_ITEMS + MAPPING_ITEMS
+            ratio = it.get("ratio") if isinstance(it, dict) and name not in skip else None
             if ratio is not None and (worst is None or ratio > worst["ratio"]):
                 worst = {"name": name, **{k: it.get(k) for k in ("ratio", "value", "limit", "unit", "limit_by")}}
     return worst
@@ -182,26 +192,52 @@ def _outs(ff: list[list[dict]]) -> str:
     for fo in ff:
         for k in dict.fromkeys(o["kind"] for o in fo):
             counts[k] = counts.get(k, 0) + 1
-    return ", ".join(f"{k} ×{n}" if n > 1 else k for k, n in counts.items())
+    kinds = ", ".join(f"{k} ×{n}" if n > 1 else k for k, n in counts.items())
+    causes = dict.fromkeys(
+        o["detail"].split("likely cause: ", 1)[1] for fo in ff for o in fo if "likely cause: " in o.get("detail", "")
+    )
+    return kinds + (f" (likely cause: {'; '.join(causes)})" if causes else "")
+
+
+def _gain(mj: dict) -> str:
+    """The robot's resistance against the sliding gain, υ and ω channels (``×`` the gain), or ``—``."""
+    d = (mj.get("demand") or [None])[0] or {}
+    r = [(d.get(k) or {}).get("ratio") for k in GAIN_ITEMS]
+    return ", ".join("—" if x is None else f"{x:.2g}" for x in r) if any(x is not None for x in r) else "—"
+
+
+def _traction(mj: dict) -> str:
+    """The mapped torque limit against the traction limit, or ``—``."""
+    d = ((mj.get("demand") or [None])[0] or {}).get("torque_vs_traction") or {}
+    return f"{d['ratio']:.2g}" if d.get("ratio") is not None else "—"
+
+
+def _set_by(note: str) -> str:
+    """What set σ, from the summary's ``scale_note`` (e.g. ``wheel speed 0.158 m/s``)."""
+    m = re.search(r"time_scale = [^(]*\(auto: set by the '[^']+' (.+?) against (.+?) at σ", note or "")
+    return f"{m.group(1)} vs {m.group(2)}" if m else (note or "")[:80]
 
 
 def markdown(rows: list[dict]) -> str:
     lines = [
         "| robot (maker) | `robot check` | top speed m/s (source) | s | σ (set by) | run s (paper s × σ) "
-        "| worst demand/limit | hardware | ĉ − c_true, ideal plant (a, b per follower) "
-        "| outcomes, ideal | ĉ − c_true, MuJoCo | outcomes, MuJoCo |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| worst demand/limit | τ_max/traction | resistance/sliding gain υ, ω | hardware "
+        "| ĉ − c_true, ideal plant (a, b per follower) | outcomes, ideal | ĉ − c_true, MuJoCo | outcomes, MuJoCo |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in rows:
+        if "verdict" not in row:
+            lines.append(f"| {row['robot']} ({row['maker']}) | not measured this round |" + " |" * 12)
+            continue
         cause = f" ({row['cause']})" if row.get("cause") else ""
         top = f"{row['top_speed_mps']:g} (datasheet)" if row.get("top_speed_mps") else "— (file's limit)"
         head = f"| {row['robot']} ({row['maker']}) | {row['verdict']}{cause} | {top} | "
         if "scale" not in row:
-            lines.append(head + f"— | — | — | — | — | refused: {row.get('run_error', '')[:160]} | | | |")
+            lines.append(head + f"— | — | — | — | — | — | — | refused: {row.get('run_error', '')[:160]} | | | |")
             continue
-        note = (row.get("scale_note") or "").split(";")[0][:80]
+        note = _set_by(row.get("scale_note"))
         ideal, mj = row.get("ideal") or {}, row.get("mujoco") or {}
-        w = mj.get("worst_demand")
+        w = _worst_of(mj.get("demand") or [])
         worst = f"{w['ratio']:.2f} ({w['name']})" if w else "—"
         hw = mj.get("hardware") or {}
         hwv = hw.get("verdict") or "—"
@@ -213,7 +249,7 @@ def markdown(rows: list[dict]) -> str:
         mjo = _outs(mj["outcomes"]) if mj else f"run refused: {row.get('run_error', '')[:160]}"
         lines.append(
             head + f"{row['scale']:.3g} | {row['time_scale']:.3g} ({note}) | {row['duration_s']:.0f} "
-            f"({row['paper_duration_s']:g} × σ) | {worst} | {hwv} | "
+            f"({row['paper_duration_s']:g} × σ) | {worst} | {_traction(mj)} | {_gain(mj)} | {hwv} | "
             + "; ".join(_pct(c) for c in ideal.get("c_hat_rel_error", []))
             + f" | {_outs(ideal.get('outcomes', []))} | {mjc} | {mjo} |"
         )
@@ -226,6 +262,7 @@ def main() -> int:
     ap.add_argument("--robots", default="", help="comma-separated names (default: all)")
     ap.add_argument("--out", type=Path, default=Path("runs/zoo/zoo_table.md"))
     ap.add_argument("--json", type=Path, default=Path("runs/zoo/zoo_table.json"))
+    ap.add_argument("--table-only", action="store_true", help="write --out from --json, run nothing")
     a = ap.parse_args()
     spec = importlib.util.spec_from_file_location("zoo_reference", ZOO / "reference.py")
     ref_mod = importlib.util.module_from_spec(spec)
@@ -235,20 +272,20 @@ def main() -> int:
 
     from bioform_mj.assess.check import check
 
-    paper_l = check("paper", identify_=False)["half_track_m"]
     names = [n for n in a.robots.split(",") if n] or [r.name for r in ref_mod.ROBOTS]
+    if a.table_only:
+        names = []
     old = json.loads(a.json.read_text()) if a.json.exists() else []
     rows = {row["robot"]: row for row in old}
     a.json.parent.mkdir(parents=True, exist_ok=True)
     by_name = {r.name: r for r in ref_mod.ROBOTS}
     for name in names:  # in the order given
         r = by_name[name]
-        rows[r.name] = measure(r, a, paper_l)
+        rows[r.name] = measure(r, a, check("paper", identify_=False)["half_track_m"])
         order = [x.name for x in ref_mod.ROBOTS if x.name in rows]
         a.json.write_text(json.dumps([rows[n] for n in order], indent=1, default=str, ensure_ascii=False) + "\n")
         print(json.dumps({k: rows[r.name].get(k) for k in ("robot", "scale", "time_scale", "run_error")}))
-    order = [x.name for x in ref_mod.ROBOTS if x.name in rows]
-    md = markdown([rows[n] for n in order])
+    md = markdown([rows.get(x.name, {"robot": x.name, "maker": x.maker}) for x in ref_mod.ROBOTS])
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(md)
     print(md)
