@@ -95,6 +95,8 @@ def measure(r, a, paper_l: float) -> dict:
         tau_max=r.tau_max,
         top_speed=r.top_speed,
     )
+    extra = {k: tuple(v) if isinstance(v, list) else v for k, v in (a.map or {}).items()}
+    ref = dataclasses.replace(ref, **extra)  # a counterfactual mapping (--map), said in the row
     row: dict = {
         "robot": r.name,
         "maker": r.maker,
@@ -104,6 +106,7 @@ def measure(r, a, paper_l: float) -> dict:
         "top_speed_mps": r.top_speed or None,
         "top_speed_source": r.top_speed_source,
         "paper_duration_s": a.duration,
+        "counterfactual": {"map": a.map, "set": a.set} if (a.map or a.set) else None,
     }
     rep = check(ref)
     row.update(
@@ -115,7 +118,8 @@ def measure(r, a, paper_l: float) -> dict:
         limits=rep.get("limits"),
         lengths_only_scale=rep["half_track_m"] / paper_l,
     )
-    table = {k: getattr(ref, k) for k in ("model", "base", "left_wheel", "right_wheel", "tau_max", "top_speed")}
+    keys = ("model", "base", "left_wheel", "right_wheel", "tau_max", "top_speed", *extra)
+    table = {k: list(getattr(ref, k)) if isinstance(getattr(ref, k), tuple) else getattr(ref, k) for k in keys}
     ov = [
         "plant.kind=mujoco",
         f"sim.duration={a.duration}",
@@ -123,13 +127,14 @@ def measure(r, a, paper_l: float) -> dict:
         "formation.time_scale=auto",
         "learner.gain_scaling=c_hat0",
         "plant.robots=[" + toml_table(table) + "]",
+        *a.set,
     ]
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             sc = load("paper", ov)
     except Exception as exc:  # a refusal (exit 2 in the CLI) is the row's result
-        row["run_error"] = f"{type(exc).__name__}: {exc}"[:300]
+        row["run_error"] = f"{type(exc).__name__}: {exc}".replace(f"{ZOO.parent.parent}/", "")[:300]
         return row
     f = sc.formation
     row.update(
@@ -162,7 +167,7 @@ def measure(r, a, paper_l: float) -> dict:
             warnings.simplefilter("always")
             res = simulate(sc)
     except Exception as exc:  # a refusal (exit 2 in the CLI) is the row's result
-        row["run_error"] = f"{type(exc).__name__}: {exc}"[:300]
+        row["run_error"] = f"{type(exc).__name__}: {exc}".replace(f"{ZOO.parent.parent}/", "")[:300]
         return row
     s = res.summary
     hw = s.get("hardware") or {}
@@ -231,7 +236,10 @@ def markdown(rows: list[dict]) -> str:
             continue
         cause = f" ({row['cause']})" if row.get("cause") else ""
         top = f"{row['top_speed_mps']:g} (datasheet)" if row.get("top_speed_mps") else "— (file's limit)"
-        head = f"| {row['robot']} ({row['maker']}) | {row['verdict']}{cause} | {top} | "
+        cf = row.get("counterfactual") or {}
+        what = [f"{k}={json.dumps(v)}" for k, v in (cf.get("map") or {}).items()] + list(cf.get("set") or [])
+        name = row["robot"] + (f" [{', '.join(what)}]" if what else "")
+        head = f"| {name} ({row['maker']}) | {row['verdict']}{cause} | {top} | "
         if "scale" not in row:
             lines.append(head + f"— | — | — | — | — | — | — | refused: {row.get('run_error', '')[:160]} | | | |")
             continue
@@ -262,8 +270,13 @@ def main() -> int:
     ap.add_argument("--robots", default="", help="comma-separated names (default: all)")
     ap.add_argument("--out", type=Path, default=Path("runs/zoo/zoo_table.md"))
     ap.add_argument("--json", type=Path, default=Path("runs/zoo/zoo_table.json"))
+    ap.add_argument("--set", action="append", default=[], help="a further scenario override KEY=VALUE (repeatable)")
+    ap.add_argument(
+        "--map", action="append", default=[], help="a counterfactual mapping key KEY=JSON, e.g. caster_friction=0"
+    )
     ap.add_argument("--table-only", action="store_true", help="write --out from --json, run nothing")
     a = ap.parse_args()
+    a.map = {k: json.loads(v) for k, v in (m.split("=", 1) for m in a.map)}
     spec = importlib.util.spec_from_file_location("zoo_reference", ZOO / "reference.py")
     ref_mod = importlib.util.module_from_spec(spec)
     sys.modules["zoo_reference"] = ref_mod
