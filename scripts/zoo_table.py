@@ -35,7 +35,7 @@ ZOO = Path(__file__).resolve().parent.parent / "tests" / "zoo"
 
 def toml_table(d: dict) -> str:
     """``{key = value, ...}`` as TOML writes an inline table (strings quoted by JSON, numbers as they are)."""
-    return "{" + ", ".join(f"{k} = {json.dumps(v)}" for k, v in d.items() if v not in ("", None, 0.0)) + "}"
+    return "{" + ", ".join(f"{k} = {json.dumps(v)}" for k, v in d.items()) + "}"
 
 
 def _outcomes(f: dict) -> list[dict]:
@@ -119,7 +119,12 @@ def measure(r, a, paper_l: float) -> dict:
         lengths_only_scale=rep["half_track_m"] / paper_l,
     )
     keys = ("model", "base", "left_wheel", "right_wheel", "tau_max", "top_speed", *extra)
-    table = {k: list(getattr(ref, k)) if isinstance(getattr(ref, k), tuple) else getattr(ref, k) for k in keys}
+    default = {f.name: f.default for f in dataclasses.fields(RobotRef)}
+    table = {  # the keys that differ from RobotRef's defaults (caster_friction = 0 is not its default -1)
+        k: list(getattr(ref, k)) if isinstance(getattr(ref, k), tuple) else getattr(ref, k)
+        for k in keys
+        if k == "model" or getattr(ref, k) != default.get(k)
+    }
     ov = [
         "plant.kind=mujoco",
         f"sim.duration={a.duration}",
@@ -264,6 +269,47 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _span(cs: list, j: int) -> str:
+    """Follower ``ĉ`` errors of channel ``j`` as ``mean %`` or, spread over 10 points, ``lo…hi %``."""
+    v = [100 * c[j] for c in cs if c and c[j] is not None]
+    if not v:
+        return "—"
+    return f"{min(v):+.0f}…{max(v):+.0f} %" if max(v) - min(v) > 10 else f"{sum(v) / len(v):+.0f} %"
+
+
+def compact(rows: list[dict]) -> str:
+    """The README's table: one line per robot, ``ĉ`` over the three followers (mean, or the range)."""
+    lines = [
+        "| robot (maker) | `robot check` | top speed m/s | s | σ | worst demand/limit | hardware | ĉ − c_true, ideal "
+        "plant: a, b | ĉ − c_true, MuJoCo: a, b | outcomes, MuJoCo |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        if "verdict" not in row:
+            lines.append(f"| {row['robot']} ({row['maker']}) | not measured this round |" + " |" * 8)
+            continue
+        link = f"[{row['robot']}]({row['source']}) ({row['maker']}, {row['format'].upper()})"
+        cause = f" ({row['cause']})" if row.get("cause") else ""
+        top = f"{row['top_speed_mps']:g}" if row.get("top_speed_mps") else "0.015 (URDF)"
+        if "scale" not in row:
+            lines.append(f"| {link} | {row['verdict']}{cause} | {top} |" + " — |" * 6 + " refused |")
+            continue
+        ideal, mj = row.get("ideal") or {}, row.get("mujoco") or {}
+        w = _worst_of(mj.get("demand") or [])
+        hw = mj.get("hardware") or {}
+        hwv = (hw.get("verdict") or "—") + (f" ({', '.join(hw['failed'])})" if hw.get("failed") else "")
+        ci, cm = ideal.get("c_hat_rel_error", []), mj.get("c_hat_rel_error", [])
+        outs = _outs(mj["outcomes"]).split(" (likely cause")[0] if mj else "refused (robot check)"
+        lines.append(
+            f"| {link} | {row['verdict']}{cause} | {top} | {row['scale']:.3g} | {row['time_scale']:.3g} | "
+            + (f"{w['ratio']:.2f} ({w['name']})" if w else "—")
+            + f" | {hwv if mj else '—'} | {_span(ci, 0)}, {_span(ci, 1)} | "
+            + (f"{_span(cm, 0)}, {_span(cm, 1)}" if mj else "—")
+            + f" | {outs} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=20.0, help="the paper's duration, s (the run's is × σ)")
@@ -301,6 +347,9 @@ def main() -> int:
     md = markdown([rows.get(x.name, {"robot": x.name, "maker": x.maker}) for x in ref_mod.ROBOTS])
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(md)
+    a.out.with_name(a.out.stem + "_compact.md").write_text(
+        compact([rows.get(x.name, {"robot": x.name, "maker": x.maker}) for x in ref_mod.ROBOTS])
+    )
     print(md)
     return 0
 
