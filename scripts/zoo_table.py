@@ -216,6 +216,12 @@ def _gain(mj: dict) -> str:
     return ", ".join("—" if x is None else f"{x:.2g}" for x in r) if any(x is not None for x in r) else "—"
 
 
+def _mm(mj: dict) -> str:
+    """The followers' final formation errors in mm, or ``—``."""
+    e = [x for x in (mj or {}).get("final_formation_error_m") or [] if x is not None]
+    return ", ".join(f"{1000 * x:.0f}" for x in e) if e else "—"
+
+
 def _traction(mj: dict) -> str:
     """The mapped torque limit against the traction limit, or ``—``."""
     d = ((mj.get("demand") or [None])[0] or {}).get("torque_vs_traction") or {}
@@ -232,12 +238,13 @@ def markdown(rows: list[dict]) -> str:
     lines = [
         "| robot (maker) | `robot check` | top speed m/s (source) | s | σ (set by) | run s (paper s × σ) "
         "| worst demand/limit | τ_max/traction | resistance/sliding gain υ, ω | hardware "
-        "| ĉ − c_true, ideal plant (a, b per follower) | outcomes, ideal | ĉ − c_true, MuJoCo | outcomes, MuJoCo |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| ĉ − c_true, ideal plant (a, b per follower) | outcomes, ideal | ĉ − c_true, MuJoCo | final formation error "
+        "mm, MuJoCo | outcomes, MuJoCo |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in rows:
         if "verdict" not in row:
-            lines.append(f"| {row['robot']} ({row['maker']}) | not measured this round |" + " |" * 12)
+            lines.append(f"| {row['robot']} ({row['maker']}) | not measured this round |" + " |" * 13)
             continue
         cause = f" ({row['cause']})" if row.get("cause") else ""
         top = f"{row['top_speed_mps']:g} (datasheet)" if row.get("top_speed_mps") else "— (file's limit)"
@@ -246,7 +253,7 @@ def markdown(rows: list[dict]) -> str:
         name = row["robot"] + (f" [{', '.join(what)}]" if what else "")
         head = f"| {name} ({row['maker']}) | {row['verdict']}{cause} | {top} | "
         if "scale" not in row:
-            lines.append(head + f"— | — | — | — | — | — | — | refused: {row.get('run_error', '')[:160]} | | | |")
+            lines.append(head + f"— | — | — | — | — | — | — | refused: {row.get('run_error', '')[:160]} | | | | |")
             continue
         note = _set_by(row.get("scale_note"))
         ideal, mj = row.get("ideal") or {}, row.get("mujoco") or {}
@@ -264,7 +271,7 @@ def markdown(rows: list[dict]) -> str:
             head + f"{row['scale']:.3g} | {row['time_scale']:.3g} ({note}) | {row['duration_s']:.0f} "
             f"({row['paper_duration_s']:g} × σ) | {worst} | {_traction(mj)} | {_gain(mj)} | {hwv} | "
             + "; ".join(_pct(c) for c in ideal.get("c_hat_rel_error", []))
-            + f" | {_outs(ideal.get('outcomes', []))} | {mjc} | {mjo} |"
+            + f" | {_outs(ideal.get('outcomes', []))} | {mjc} | {_mm(mj)} | {mjo} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -281,18 +288,18 @@ def compact(rows: list[dict]) -> str:
     """The README's table: one line per robot, ``ĉ`` over the three followers (mean, or the range)."""
     lines = [
         "| robot (maker) | `robot check` | top speed m/s | s | σ | worst demand/limit | hardware | ĉ − c_true, ideal "
-        "plant: a, b | ĉ − c_true, MuJoCo: a, b | outcomes, MuJoCo |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "plant: a, b | ĉ − c_true, MuJoCo: a, b | formation error mm | outcomes, MuJoCo |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in rows:
         if "verdict" not in row:
-            lines.append(f"| {row['robot']} ({row['maker']}) | not measured this round |" + " |" * 8)
+            lines.append(f"| {row['robot']} ({row['maker']}) | not measured this round |" + " |" * 9)
             continue
         link = f"[{row['robot']}]({row['source']}) ({row['maker']}, {row['format'].upper()})"
         cause = f" ({row['cause']})" if row.get("cause") else ""
         top = f"{row['top_speed_mps']:g}" if row.get("top_speed_mps") else "0.015 (URDF)"
         if "scale" not in row:
-            lines.append(f"| {link} | {row['verdict']}{cause} | {top} |" + " — |" * 6 + " refused |")
+            lines.append(f"| {link} | {row['verdict']}{cause} | {top} |" + " — |" * 7 + " refused |")
             continue
         ideal, mj = row.get("ideal") or {}, row.get("mujoco") or {}
         w = _worst_of(mj.get("demand") or [])
@@ -305,7 +312,7 @@ def compact(rows: list[dict]) -> str:
             + (f"{w['ratio']:.2f} ({w['name']})" if w else "—")
             + f" | {hwv if mj else '—'} | {_span(ci, 0)}, {_span(ci, 1)} | "
             + (f"{_span(cm, 0)}, {_span(cm, 1)}" if mj else "—")
-            + f" | {outs} |"
+            + f" | {_mm(mj)} | {outs} |"
         )
     return "\n".join(lines) + "\n"
 
