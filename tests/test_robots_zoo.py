@@ -91,6 +91,18 @@ def test_zoo_is_what_issue_18_asks():
     assert size < 2 * 1024 * 1024, size
 
 
+def test_every_zoo_robot_has_its_makers_top_speed_with_the_source():
+    """The fair scale (design §21) needs a top speed: the maker's datasheet figure with where it is from, in
+    reference.py and expectations.json alike; a robot without one says why (and what bioform reads)."""
+    for r in ROBOTS.values():
+        assert r.top_speed >= 0 and r.top_speed_source, r.name
+        assert EXPECT[r.name]["top_speed_mps"] == (r.top_speed or None), r.name
+        assert EXPECT[r.name]["top_speed_source"] == r.top_speed_source, r.name
+        if r.top_speed:
+            assert f"{r.top_speed:g}" in r.top_speed_source or f"{100 * r.top_speed:g} cm/s" in r.top_speed_source
+    assert sum(r.top_speed > 0 for r in ROBOTS.values()) >= len(ROBOTS) - 1
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_reference_reproduces_expectations(name, live):
     """The committed expectations are what reference.py computes now (regenerate with --write)."""

@@ -89,6 +89,8 @@ class Robot:
     packages: dict = field(default_factory=dict)  # package name -> folder (relative to tests/zoo)
     tau_max: float = 0.0  # N·m per wheel: the motor limit a user maps (the description has none usable)
     tau_max_source: str = ""
+    top_speed: float = 0.0  # m/s at the tyre: the maker's datasheet figure (the `top_speed` mapping key, design §21)
+    top_speed_source: str = ""
     expected_verdict: str = "pass"
     expected_cause: str = ""
 
@@ -127,6 +129,8 @@ ROBOTS: tuple[Robot, ...] = (
         **_robotis("mjcf"),
         source=_MENAGERIE_TB3 + "robotis_tb3/turtlebot3_burger.xml",
         tau_max=1.4,
+        top_speed=0.22,
+        top_speed_source="ROBOTIS e-Manual, TurtleBot3 specifications: max. linear velocity 0.22 m/s (Burger)",
         tau_max_source="Dynamixel XL430-W250 stall torque, 11.1 V (ROBOTIS e-Manual); the MJCF has velocity servos",
         expected_verdict="warn",
         expected_cause=(
@@ -142,6 +146,8 @@ ROBOTS: tuple[Robot, ...] = (
         **_robotis("mjcf"),
         source=_MENAGERIE_TB3 + "robotis_tb3/turtlebot3_waffle_pi.xml",
         tau_max=3.0,
+        top_speed=0.26,
+        top_speed_source="ROBOTIS e-Manual, TurtleBot3 specifications: max. linear velocity 0.26 m/s (Waffle Pi)",
         tau_max_source="Dynamixel XM430-W210 stall torque, 12 V (ROBOTIS e-Manual); the MJCF has velocity servos only",
         expected_verdict="warn",
         expected_cause=(
@@ -164,6 +170,8 @@ ROBOTS: tuple[Robot, ...] = (
         right="wheel_right_joint",
         free_joints=_PAL_CASTERS,
         tau_max=100.0,
+        top_speed=1.0,
+        top_speed_source="PAL Robotics TIAGo datasheet: maximum speed 1 m/s",
         tau_max_source="the wheel joints' actuatorfrcrange (-100, 100) in the published MJCF",
         expected_verdict="warn",
         expected_cause=(
@@ -178,6 +186,8 @@ ROBOTS: tuple[Robot, ...] = (
         **_robotis("urdf"),
         source=_TB3 + "754a9ddd937667839d7c38e88ca08ee0d93c08a8/turtlebot3_description/urdf/turtlebot3_burger.urdf",
         tau_max=1.4,
+        top_speed=0.22,
+        top_speed_source="ROBOTIS e-Manual, TurtleBot3 specifications: max. linear velocity 0.22 m/s (Burger)",
         tau_max_source="Dynamixel XL430-W250 stall torque (ROBOTIS e-Manual); the URDF has no effort limit",
         expected_verdict="fail",
         expected_cause=(
@@ -191,6 +201,8 @@ ROBOTS: tuple[Robot, ...] = (
         **_robotis("urdf"),
         source=_TB3 + "fd74967cd79cd40cc23d2ae907adda93ea92cece/turtlebot3_description/urdf/turtlebot3_waffle_pi.urdf",
         tau_max=3.0,
+        top_speed=0.26,
+        top_speed_source="ROBOTIS e-Manual, TurtleBot3 specifications: max. linear velocity 0.26 m/s (Waffle Pi)",
         tau_max_source="Dynamixel XM430-W210 stall torque (ROBOTIS e-Manual); the URDF has no effort limit",
         expected_verdict="fail",
         expected_cause=(
@@ -211,6 +223,8 @@ ROBOTS: tuple[Robot, ...] = (
         left="wheel_left_joint",
         right="wheel_right_joint",
         tau_max=1.0,
+        top_speed=0.7,
+        top_speed_source="Kobuki specifications (kobuki.yujinrobot.com): max. translational velocity 70 cm/s",
         tau_max_source="<torque>1.0</torque> of the gazebo_ros_kobuki plugin in the published URDF (as expanded)",
         expected_verdict="warn",
         expected_cause=(
@@ -235,6 +249,8 @@ ROBOTS: tuple[Robot, ...] = (
         right="right_wheel_joint",
         packages={"irobot_create_description": "create3_urdf/irobot_create_description"},
         tau_max=0.05,
+        top_speed=0.306,
+        top_speed_source="iRobot Create 3 docs (iroboteducation.github.io/create3_docs): max. speed 0.306 m/s",
         tau_max_source=(
             "our choice (the description publishes none): full torque accelerates at 0.86 m/s², below the margin "
             "1.1 m/s² at which accelerating lifts the front caster (centre of mass 7 mm ahead of the axle)"
@@ -262,6 +278,8 @@ ROBOTS: tuple[Robot, ...] = (
         other_wheels=("rear_left_wheel", "rear_right_wheel"),
         packages={"husky_description": "husky_urdf/husky_description"},
         tau_max=20.0,
+        top_speed=1.0,
+        top_speed_source="Clearpath Robotics Husky UGV datasheet: maximum speed 1.0 m/s",
         tau_max_source="our choice (the URDF's transmissions give none)",
         expected_verdict="fail",
         expected_cause=(
@@ -284,6 +302,8 @@ ROBOTS: tuple[Robot, ...] = (
         free_joints=_PAL_CASTERS,
         packages={"pmb2_description": "pmb2_urdf/pmb2_description"},
         tau_max=6.0,
+        top_speed=1.0,
+        top_speed_source="PAL Robotics PMB-2 datasheet: maximum speed 1 m/s",
         tau_max_source="the wheel joints' <limit effort='6.0'> (PAL's wheel_torque)",
         expected_verdict="warn",
         expected_cause=(
@@ -307,6 +327,7 @@ ROBOTS: tuple[Robot, ...] = (
         left="right_wheel_joint",
         right="left_wheel_joint",
         tau_max=0.05,
+        top_speed_source="none (a ros2_control demo, not a product); the URDF limit 1.0 rad/s × r = 0.015 m/s",
         tau_max_source="our choice (the URDF's effort limit 100 N·m is a placeholder)",
         expected_verdict="fail",
         expected_cause=(
@@ -1096,6 +1117,8 @@ def reference(robot: Robot) -> dict:
         "floor_contacts": ident["floor_contacts"],
         "statics": st,
         "tau_max_source": robot.tau_max_source,
+        "top_speed_mps": robot.top_speed or None,
+        "top_speed_source": robot.top_speed_source,
         "test": ident["test"],
         "published_wheel_shapes": published_wheels,
         "self_contacts_mujoco_rules": self_contacts(robot),
