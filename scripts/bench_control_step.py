@@ -17,9 +17,9 @@ import time
 
 import numpy as np
 
+from bioform_mj.control.params import stack_params
 from bioform_mj.control.stack import ControlStack
 from bioform_mj.formation import graph
-from bioform_mj.run.simulate import stack_params
 from bioform_mj.scenario.config import Scenario
 
 

@@ -311,7 +311,7 @@ def test_run_told_to_skip_the_robot_check_is_not_refused_by_it(tmp_path, capsys)
 # ------------------------------------------------------------- issue 27 item 5: opt-in, the paper's defaults stay
 def test_the_paper_defaults_stay_the_papers():
     """Nothing of item 5 is on unless asked: bounds c_bounds × ĉ(0) = [0.1, 10] × 0.5 c_true, c = (3, 3), kd = 0."""
-    from bioform_mj.run.simulate import stack_params
+    from bioform_mj.control.params import stack_params
 
     sc = load("paper")
     assert sc.learner.projection_band == () and sc.learner.kd_deadband == () and sc.torque.resistance_margin == 0
@@ -325,7 +325,7 @@ def test_projection_band_is_around_the_prior_and_bad_bands_exit_2(tmp_path, caps
     paper's c_true (0.4, 10), ĉ(0) = 0.5 c_true on its lower edge; a band without 1 inside, NaN or one number:
     exit 2, one error: line, nothing written."""
     from bioform_mj.cli import main as cli
-    from bioform_mj.run.simulate import stack_params
+    from bioform_mj.control.params import stack_params
 
     sc = load("paper", overrides=["learner.projection_band=[0.5, 2]"])
     p = stack_params(sc, np.tile([0.4, 10.0], (3, 1)))
@@ -342,7 +342,8 @@ def test_sliding_gain_and_d_hat_sized_to_the_identified_dead_band(tmp_path, monk
     τ_a and τ_b, a resistance a · 0.1 = 0.04 m/s² and b · 0.1 = 1 rad/s². ``torque.resistance_margin = 5``: c =
     max((3, 3), 5 × (0.04, 1)) = (3, 5); ``learner.kd_deadband = [25, 50]``: kd = (25, 50). Without frictionloss no
     dead band is identified: kd stays the scenario's 0."""
-    from bioform_mj.run.simulate import make_plant, stack_params
+    from bioform_mj.control.params import stack_params
+    from bioform_mj.run.simulate import make_plant
 
     monkeypatch.setenv("BIOFORM_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.delenv("BIOFORM_NO_ROBOT_CHECK", raising=False)

@@ -20,7 +20,7 @@ def _run_options() -> set[str]:
 
 
 def test_the_flags_and_the_overwrite_list_come_from_the_registry():
-    assert list(OUTPUTS) == ["video", "rrd", "figures"]
+    assert list(OUTPUTS) == ["video", "rrd", "figures", "rosbag"]
     assert {o.flag for o in OUTPUTS.values()} <= _run_options()
     assert output_files() <= RUN_FILES and output_dirs().items() <= RUN_DIRS.items()
 

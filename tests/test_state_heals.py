@@ -53,7 +53,7 @@ def test_wrong_shape_ignored_rewritten_and_said_once(desc, entry, cache):
     path.write_text(json.dumps(entry))
     with warnings.catch_warnings(record=True) as got:
         warnings.simplefilter("always")
-        out = prerun._cached_check("ref", "k")
+        out = prerun.cached_check("ref", "k")
     said = [str(w.message) for w in got if issubclass(w.category, RobotWarning)]
     assert len(said) == 1 and str(path) in said[0] and "ignored and rewritten" in said[0], said
     assert out["verdict"] == "pass" and out["from"] == "computed" and len(calls) == 1
@@ -61,7 +61,7 @@ def test_wrong_shape_ignored_rewritten_and_said_once(desc, entry, cache):
     prerun._MEMO.clear()
     with warnings.catch_warnings(record=True) as got:  # healed: read from disk, nothing said
         warnings.simplefilter("always")
-        assert prerun._cached_check("ref", "k")["from"] == "disk"
+        assert prerun.cached_check("ref", "k")["from"] == "disk"
     assert not [w for w in got if issubclass(w.category, RobotWarning)] and len(calls) == 1
 
 
@@ -71,8 +71,8 @@ def test_broken_json_and_a_fifo_heal_too(cache):
     os.mkfifo(folder / "f.json")
     with warnings.catch_warnings(record=True) as got:
         warnings.simplefilter("always")
-        assert prerun._cached_check("ref", "j")["verdict"] == "pass"
-        assert prerun._cached_check("ref", "f")["verdict"] == "pass"  # a FIFO is never opened (it would block)
+        assert prerun.cached_check("ref", "j")["verdict"] == "pass"
+        assert prerun.cached_check("ref", "f")["verdict"] == "pass"  # a FIFO is never opened (it would block)
     said = [str(w.message) for w in got if issubclass(w.category, RobotWarning)]
     assert len(said) == 2 and "unreadable" in said[0] and "FIFO" in said[1], said
 
@@ -187,8 +187,8 @@ class _Scribbler:
     def __init__(self, sc, what: str) -> None:
         import numpy as np
 
+        from bioform_mj.control.params import stack_params
         from bioform_mj.control.stack import ControlStack
-        from bioform_mj.run.simulate import stack_params
 
         self.inner = ControlStack(sc.build_graph(), stack_params(sc, np.array(sc.plant.c_true)))
         self.what = what

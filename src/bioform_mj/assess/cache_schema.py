@@ -1,7 +1,7 @@
 """The shape of a robot-check cache entry (design §14.2; issue 28 item 3: state that heals).
 
 :func:`entry_problem` says why a JSON value read from the cache is not an entry a run can use
-(``""``: it is). :func:`bioform_mj.assess.prerun._cached_check` then ignores it, checks the robot again and
+(``""``: it is). :func:`bioform_mj.assess.prerun.cached_check` then ignores it, checks the robot again and
 rewrites the entry, with one warning naming the file: a cache never makes a run fail.
 """
 

@@ -318,7 +318,9 @@ def _dispatch(args: argparse.Namespace) -> int:
         return EXIT_OK
     with _mujoco_log() as mjlog:
         if args.command == "identify":
-            return _identify(args)
+            from bioform_mj.cli.robot import identify_command
+
+            return identify_command(args)
         if args.command == "robot" and getattr(args, "realdata_main", None):
             return args.realdata_main(args)  # robot fit / replay / drive-program (issue 29)
         if args.command == "robot":
@@ -762,41 +764,6 @@ def _calibrate(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(cal.markdown(rep))
         print(f"outputs in {out}/ (calibration.json, calibration.md, {cal.EVALUATIONS_FILE})")
-    return EXIT_OK
-
-
-def _identify(args: argparse.Namespace) -> int:
-    from bioform_mj.assess.identify import identify_main
-    from bioform_mj.cli.robot import ref_from_args
-
-    if args.out is not None:
-        from bioform_mj.outputs.files import check_out_file
-
-        args.out = check_out_file(args.out, "--out")
-    result = identify_main(ref_from_args(args.model, args))
-    text = json.dumps(result, indent=2)
-    if args.out is not None:
-        from bioform_mj.outputs.files import write_text
-
-        write_text(args.out, text + "\n")
-    print(text)
-    if result.get("skid_steer"):  # design §14: named, as robot check names it (and fails it)
-        print(
-            "warning: a 4-wheel / skid-steer base, not the paper's differential drive (robot check fails it): "
-            + "; ".join(result["skid_steer"]),
-            file=sys.stderr,
-        )
-    if result.get("fit_problem"):  # design §14.3: its identified value is a reading of the test, said
-        print(f"warning: {result['fit_problem']}", file=sys.stderr)
-    if not result.get("identifiable", True):  # a named cause, never an internal error (design §14)
-        from bioform_mj.assess.check import EXIT_FAIL, cause_of
-
-        c = cause_of(result["findings"])
-        print(
-            f"error: cannot identify a, b: {c['kind'] + ': ' + c['detail'] if c else result['not_identified']}",
-            file=sys.stderr,
-        )
-        return EXIT_FAIL
     return EXIT_OK
 
 

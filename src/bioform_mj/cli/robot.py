@@ -4,6 +4,7 @@ The check itself is :func:`bioform_mj.assess.check.check`; this module only read
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from typing import Any
@@ -186,3 +187,39 @@ def main(args: argparse.Namespace) -> int:
     if report["verdict"] == "warn":  # never silent: a warn's reasons on stderr too, not only in the report
         print(f"warning: robot check warns: {'; '.join(report['reasons'])}", file=sys.stderr)
     return 0
+
+
+def identify_command(args: argparse.Namespace) -> int:
+    """``bioform identify MODEL``: identification as JSON on stdout (and ``--out``); warnings and the cause of
+    a robot that cannot be identified on stderr."""
+    from bioform_mj.assess.identify import identify_main
+
+    if args.out is not None:
+        from bioform_mj.outputs.files import check_out_file
+
+        args.out = check_out_file(args.out, "--out")
+    result = identify_main(ref_from_args(args.model, args))
+    text = json.dumps(result, indent=2)
+    if args.out is not None:
+        from bioform_mj.outputs.files import write_text
+
+        write_text(args.out, text + "\n")
+    print(text)
+    if result.get("skid_steer"):  # design §14: named, as robot check names it (and fails it)
+        print(
+            "warning: a 4-wheel / skid-steer base, not the paper's differential drive (robot check fails it): "
+            + "; ".join(result["skid_steer"]),
+            file=sys.stderr,
+        )
+    if result.get("fit_problem"):  # design §14.3: its identified value is a reading of the test, said
+        print(f"warning: {result['fit_problem']}", file=sys.stderr)
+    if not result.get("identifiable", True):  # a named cause, never an internal error (design §14)
+        from bioform_mj.assess.check import cause_of
+
+        c = cause_of(result["findings"])
+        print(
+            f"error: cannot identify a, b: {c['kind'] + ': ' + c['detail'] if c else result['not_identified']}",
+            file=sys.stderr,
+        )
+        return EXIT_FAIL
+    return 0  # exit code: done

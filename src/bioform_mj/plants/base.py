@@ -94,12 +94,11 @@ class LumpedBodies(Protocol):
 @runtime_checkable
 class TipSlipWatch(Protocol):
     """Watches each robot's tilt and wheel slip in the loop: the control step each was first found tipped or
-    slipping (n,) (-1: never), with the slip ratio ``SLIP_RATIO`` held for ``SLIP_TIME`` s that counts."""
+    slipping (n,) (-1: never), by the one table of thresholds (``core/thresholds.py``: the slip ratio
+    ``SLIP_RATIO`` held for ``SLIP_TIME`` s, the tilt ``TIP_ANGLE_DEG``)."""
 
     tip_step: np.ndarray
     slip_step: np.ndarray
-    SLIP_RATIO: float
-    SLIP_TIME: float
 
 
 @runtime_checkable

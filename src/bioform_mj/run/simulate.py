@@ -242,13 +242,36 @@ def simulate(
 ) -> RunResult:
     """Run the closed loop of ``sc`` and return its log and summary.
 
-    ``plant``: a :class:`~bioform_mj.plants.base.Plant` (default: built from ``sc.plant``);
-    ``controller``: a :class:`~bioform_mj.control.base.Controller` (default: the one registered as
-    ``sc.method``, the paper's stack for its four methods, :mod:`bioform_mj.control.registry`).
-    ``engine``: ``auto`` (compiled where plant and controller allow it), ``compiled`` (refuse if they do
-    not) or ``stepwise`` (one Python call per control step; the same compiled equations, the same bits).
-    ``record_inputs`` (compiled MuJoCo loop only): arrays ``(N, nu)``, ``(N, n, 6)`` that receive each step's ``ctrl``
-    and chassis ``xfrc_applied``, for a bare replay.
+    Parameters
+    ----------
+    sc
+        The scenario (:func:`~bioform_mj.scenario.loader.load`), checked again here as a file is.
+    observers
+        Objects that watch the run at their own period of simulated time (``period`` in s;
+        ``start``/``sample``/``finish``): video, rerun, one's own.
+    progress
+        Called as ``progress(k, N)`` with the control step ``k`` of ``N``; a ``phase(text)`` method, if
+        present, is told when kernels load or compile. ``None``: silent.
+    engine
+        ``"auto"`` (compiled where plant and controller allow it), ``"compiled"`` (refuse if they do
+        not) or ``"stepwise"`` (one Python call per control step; the same compiled equations, the same
+        bits).
+    record_inputs
+        Compiled MuJoCo loop only: arrays ``(N, nu)`` and ``(N, n, 6)`` that receive each step's ``ctrl``
+        (N·m or the actuator's unit) and chassis ``xfrc_applied`` (N, N·m), for a bare replay.
+    plant
+        A :class:`~bioform_mj.plants.base.Plant`; ``None``: built from ``sc.plant``.
+    controller
+        A :class:`~bioform_mj.control.base.Controller`; ``None``: the one registered as ``sc.method``
+        (the paper's stack for its four methods, :mod:`bioform_mj.control.registry`).
+    full_state
+        Also log the 3-D state, wheel angles and speeds, the IMU and the leader's state with a last sample
+        at t = T (what a ROS 2 bag needs, :mod:`bioform_mj.outputs.rosbag`); off: the log of before.
+
+    Returns
+    -------
+    RunResult
+        The log (SI units, one row per log sample) and ``summary`` (metrics, outcomes, the robot).
 
     A divergence (NaN/inf or a state beyond ``sc.limits``, checked after every control
     step; a MuJoCo warning) stops the loop; the result then holds the log up to the last
