@@ -31,7 +31,7 @@ def cache(tmp_path, monkeypatch):
     monkeypatch.setenv(prerun.CACHE_ENV, str(tmp_path / "cache"))
     monkeypatch.setattr(prerun, "_MEMO", {})
     calls = []
-    monkeypatch.setattr(prerun, "_check", lambda ref: calls.append(ref) or dict(GOOD))
+    monkeypatch.setattr(prerun, "_check", lambda ref, *_a, **_k: calls.append(ref) or dict(GOOD))
     (tmp_path / "cache" / "robot-check").mkdir(parents=True)
     return tmp_path / "cache" / "robot-check", calls
 
