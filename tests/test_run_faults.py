@@ -294,3 +294,29 @@ def test_same_seed_bit_identical_different_seeds_differ():
     for key in ("pose", "vel", "tau", "est_pose"):
         assert np.array_equal(a[key], b[key]), key
     assert not np.array_equal(a["tau"], c["tau"]) and not np.array_equal(a["est_pose"], c["est_pose"])
+
+
+def test_a_fault_the_scenario_injects_is_named_as_the_likely_cause():
+    """issue 28: ``c_hat_off`` names the scenario's own fault before any physics ("none the plant knows" was said of
+    fault_push's follower 2, learned b -29 %, although the scenario pushed it with 200, 200 N, 5 N·m at t = 6 s)."""
+    from bioform_mj.assess.outcomes import injected_causes
+
+    sc = load("fault_push", plant="ideal")
+    res = simulate(sc)
+    f2 = next(f for f in res.summary["followers"] if f["id"] == 2)
+    off = [o["detail"] for o in f2["outcomes"] if o["kind"] == "c_hat_off"]
+    assert off and "the scenario's push at t = 6 s" in off[0] and "none the plant knows" not in off[0], off
+    sc2 = load(
+        "paper",
+        {
+            "faults.actuator": [[3, 2.0, 5.0, 0.5]],
+            "faults.actuator_known": False,
+            "events": [{"time": 4.0, "kind": "payload", "follower": 3, "mass": 5.0, "inertia": 0.1}],
+        },
+    )
+    causes = injected_causes(sc2, 2)
+    assert causes == [
+        "the scenario's actuator fault (torque × 0.5 from t = 2 s, unknown to the controller)",
+        "the scenario's payload event at t = 4 s (+5 kg, +0.1 kg·m²)",
+    ]
+    assert injected_causes(sc2, 0) == []  # another follower's fault is not its cause

@@ -108,6 +108,28 @@ def unmodelled_causes(
     return out
 
 
+def injected_causes(sc: Any, i: int) -> list[str]:
+    """The faults and events the scenario itself injects into follower ``i`` (0-based) that bias what the learner
+    sees (design §9, issue 28): a ``c_hat_off`` names them as its likely cause before any physics. Network faults
+    and a leader's path are left out: they change what the follower tracks, not the plant ĉ estimates."""
+    fc, fid, out = sc.faults, i + 1, []
+    for row in fc.actuator:
+        if int(row[0]) == fid:
+            known = "" if fc.actuator_known else ", unknown to the controller"
+            out.append(f"the scenario's actuator fault (torque × {row[3]:g} from t = {row[1]:g} s{known})")
+    for row in fc.push:
+        if int(row[0]) == fid:
+            out.append(f"the scenario's push at t = {row[1]:g} s ({row[3]:g}, {row[4]:g} N, {row[5]:g} N·m)")
+    for ev in sc.events:
+        if ev.kind == "payload" and ev.follower == fid:
+            out.append(f"the scenario's payload event at t = {ev.time:g} s (+{ev.mass:g} kg, +{ev.inertia:g} kg·m²)")
+    if len(fc.friction_patch) == 5:
+        out.append(f"the scenario's friction patch (μ = {fc.friction_patch[4]:g})")
+    if any(v > 0 for v in (*fc.noise_pose, *fc.noise_vel)):
+        out.append("the scenario's sensor noise")
+    return out
+
+
 def outcome_list(
     *,
     tip_t: float | None,
@@ -245,8 +267,11 @@ def follower_outcomes(
                 lo=np.broadcast_to(p.c_min, (n, 2))[i] if learning else np.zeros(2),
                 hi=np.broadcast_to(p.c_max, (n, 2))[i] if learning else np.zeros(2),
                 c_true=c_true[i],
-                causes=lambda i=i, s=slipping: unmodelled_causes(
-                    params[i] if params is not None else None, s, braking_casters(plant, i), sc.learner.drag_max
+                causes=lambda i=i, s=slipping: (
+                    injected_causes(sc, i)
+                    + unmodelled_causes(
+                        params[i] if params is not None else None, s, braking_casters(plant, i), sc.learner.drag_max
+                    )
                 ),
                 slip_ratio=SLIP_RATIO,
                 slip_time=SLIP_TIME,

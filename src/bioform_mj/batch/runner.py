@@ -505,7 +505,7 @@ class BatchRun:
         ``(outcome, detail, outcomes)``; ``spinning`` is not checked in a world that diverged (its
         log would end earlier). ``c_hat_off``'s causes: the CPU plant's robot parameters (no
         braking-caster check: the device's contacts are not read back)."""
-        from bioform_mj.assess.outcomes import outcome_list, unmodelled_causes
+        from bioform_mj.assess.outcomes import injected_causes, outcome_list, unmodelled_causes
 
         p = self.plant
         params = getattr(p, "params", None)
@@ -521,7 +521,10 @@ class BatchRun:
             lo=lo,
             hi=hi,
             c_true=c_true,
-            causes=lambda: unmodelled_causes(params[i] if params is not None else None, slip >= 0),
+            causes=lambda: (
+                injected_causes(self.scenarios[w], i)
+                + unmodelled_causes(params[i] if params is not None else None, slip >= 0)
+            ),
             slip_ratio=SLIP_RATIO,
             slip_time=SLIP_TIME,
             lost_m=lost_threshold_m(self.scenarios[w]),
