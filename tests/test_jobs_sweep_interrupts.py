@@ -130,6 +130,11 @@ def test_signal_stops_sweep_keeps_rows_no_orphans(tmp_path, sig, workers, backen
         if len(kids) >= 2 or workers == 1:
             break
         time.sleep(0.01)
+    if backend == "ray" and proc.poll() is not None:  # ended before any signal: nothing of its subject to test
+        err = proc.communicate(timeout=30)[1]
+        if "Ray head" in err and "was lost" in err:  # Ray's own head died under load (seen once at load ~3 on 2 cores)
+            pytest.skip(f"the Ray head died before the signal was sent: {err.strip().splitlines()[-1][:200]}")
+        pytest.fail(f"the sweep ended before the signal: {err[-2000:]}")
     t0 = time.perf_counter()
     if sig == signal.SIGINT:
         os.killpg(proc.pid, sig)
