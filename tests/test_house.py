@@ -8,19 +8,8 @@ from pathlib import Path
 
 PKG = Path(__file__).resolve().parent.parent / "src" / "bioform_mj"
 
-#: cycles allowed; the list may only shrink. One, through the one upward import below (KNOWN_UPWARD): a scenario
-#: with ``"auto"`` scale is resolved on load by a run of its demand (design §21), and that run loads scenarios.
-KNOWN_CYCLES: set[frozenset[str]] = {
-    frozenset(
-        {
-            "bioform_mj.assess.hardware",
-            "bioform_mj.run.auto_scale",
-            "bioform_mj.run.demand",
-            "bioform_mj.run.simulate",
-            "bioform_mj.scenario.loader",
-        }
-    )
-}
+#: cycles allowed (none; the list may only shrink)
+KNOWN_CYCLES: set[frozenset[str]] = set()
 #: modules over the limit before this test existed (remove an entry when the file is split)
 KNOWN_LONG: set[str] = set()
 MAX_LINES = 800
@@ -45,12 +34,9 @@ FLOORS: dict[str, int] = {
 #: the only modules at the package's top level: the lazy public API and the version
 TOP_LEVEL = {"__init__.py", "_version.py"}
 #: imports that go up or sideways, by (importing module, imported module); the list may only shrink.
-#: ``formation.scale/time_scale = "auto"`` is resolved when a scenario is loaded, from the robot's limits and the
-#: scenario's demand on the ideal plant: a run (design §21). The loader imports it lazily, only for "auto".
 #: ``torque.resistance_margin`` / ``learner.kd_deadband`` (opt-in, design §14.4) size the paper's gains to the
 #: resistance robot check identifies: an assessment the controller's parameters read, imported lazily when asked.
 KNOWN_UPWARD: set[tuple[str, str]] = {
-    ("bioform_mj.scenario.loader", "bioform_mj.run.auto_scale"),
     ("bioform_mj.control.params", "bioform_mj.assess.learner_sizing"),
 }
 

@@ -210,3 +210,19 @@ def test_a_scaled_scenario_changed_in_python_is_not_scaled_twice():
     assert again.sim.duration == 40.0 and again.leader.speed == 0.25 and again.kinematic.k2 == 12.0
     twice = checked(dataclasses.replace(sc, formation=dataclasses.replace(sc.formation, time_scale=4.0)))
     assert twice.sim.duration == 80.0 and twice.leader.speed == 0.125  # × 4 of the written, not × 8
+
+
+def test_auto_without_the_run_package_is_refused_naming_it():
+    """The loader resolves "auto" through the resolver the run package registers (no upward import, design §0):
+    in a process that imported only the scenario package it says what to import; bioform_mj.load imports it."""
+    import subprocess
+    import sys
+
+    code = (
+        "from bioform_mj.scenario.loader import load\n"
+        "try:\n    load('tb3', ['formation.time_scale=auto'])\nexcept Exception as e:\n    print(type(e).__name__, e)\n"
+        "import bioform_mj as bf\nprint(round(bf.load('tb3', ['formation.time_scale=auto']).formation.time_scale, 2))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300).stdout.splitlines()
+    assert out[0].startswith("ScenarioError") and "import bioform_mj.run first" in out[0], out
+    assert float(out[1]) > 1.0, out  # resolved: the tb3 preset asks its robot for more than its top speed

@@ -52,6 +52,8 @@ def __getattr__(name: str) -> Any:
         module, attr = _LAZY[name]
     except KeyError:
         raise AttributeError(f"module 'bioform_mj' has no attribute {name!r}") from None
+    if name == "load":  # a scenario with "auto" scale is resolved by the run package's resolver (design §21)
+        import_module("bioform_mj.run")
     value = getattr(import_module(module), attr)
     globals()[name] = value  # later look-ups skip this function
     return value

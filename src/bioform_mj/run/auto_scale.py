@@ -20,6 +20,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+from bioform_mj.scenario.loader import register_auto_scale
+
 #: the paper robot's half track, m (Sec. IV: l = 0.2 m with a = 0.4, b = 10)
 PAPER_HALF_TRACK = 0.2
 #: share of the robot's top speed the scenario may ask (σ from speed)
@@ -76,6 +78,7 @@ def resolve_auto(sc: Any) -> tuple[float, float, str]:
     if f.time_scale != "auto":
         return s, check_factor("formation.time_scale", f.time_scale), "; ".join(notes)
     from bioform_mj.run.demand import peaks
+    from bioform_mj.run.simulate import simulate
 
     for ref, _p, lim in robots:
         if lim["top_speed_mps"] is None:
@@ -91,7 +94,7 @@ def resolve_auto(sc: Any) -> tuple[float, float, str]:
         at = apply_scale(dataclasses.replace(sc, formation=dataclasses.replace(f, scale=s, time_scale=sigma)))
         worst, why = 0.0, ""
         for ref, p, lim in robots:
-            pk = peaks(at, (p.a_eff, p.b_eff), p.half_track)
+            pk = peaks(at, (p.a_eff, p.b_eff), p.half_track, run=simulate)
             cand = {
                 f"wheel speed {pk['wheel_speed_mps']:.3g} m/s against {SPEED_MARGIN:g} x top speed "
                 f"{lim['top_speed_mps']:.3g} m/s ({lim['top_speed_source']})": pk["wheel_speed_mps"]
@@ -144,3 +147,6 @@ def _solve(need: Any, tries: int = 4) -> tuple[float, float, str]:
         return min(fits)
     sb, fb, whyb = max(pts)  # none fits yet: extrapolate with the slowest fall (demand ∝ σ^-0.5)
     return sb * fb**2, fb, whyb + " (extrapolated)"
+
+
+register_auto_scale(resolve_auto)  # the loader resolves "auto" with it (design §21)

@@ -86,9 +86,11 @@ def _key(sc: Any, c_true: tuple[float, float], half_track: float) -> str:
     return h.hexdigest()[:32]
 
 
-def peaks(sc: Any, c_true: tuple[float, float], half_track: float) -> dict[str, Any]:
+def peaks(sc: Any, c_true: tuple[float, float], half_track: float, *, run: Any) -> dict[str, Any]:
     """The demand's peaks (module docstring) of ``sc`` on the ideal plant with ``c_true`` and a robot of
-    half track ``half_track`` m; cached. ``{"wheel_speed_mps", "accel_mps2", "yaw_accel_radps2",
+    half track ``half_track`` m, run by ``run`` (:func:`bioform_mj.run.simulate.simulate`, passed in: the
+    loop calls this module before a run, so this module does not import the loop); cached.
+    ``{"wheel_speed_mps", "accel_mps2", "yaw_accel_radps2",
     "lateral_accel_mps2", "c_hat_min", "seconds", "from"}``."""
     key = _key(sc, c_true, half_track)
     if key in _MEMO:
@@ -103,12 +105,10 @@ def peaks(sc: Any, c_true: tuple[float, float], half_track: float) -> dict[str, 
             return {**entry, "from": "disk"}
     except (OSError, ValueError):
         pass
-    from bioform_mj.run.simulate import simulate
-
     t0 = time.perf_counter()
     with warnings.catch_warnings():  # the twin's outcomes are not the run's
         warnings.simplefilter("ignore")
-        res = simulate(ideal_twin(sc, c_true), engine="auto")
+        res = run(ideal_twin(sc, c_true), engine="auto")
     t = np.asarray(res.log["t"])
     vel = np.asarray(res.log["vel"])  # (K, n, 2) υ m/s, ω rad/s
     v, w = vel[:, :, 0], vel[:, :, 1]
@@ -250,8 +250,9 @@ def run_limits(sc: Any, plant: Any) -> list[dict[str, Any]]:
     return out
 
 
-def before_run(sc: Any, plant: Any) -> dict[str, Any]:
-    """summary.json's ``demand`` for a MuJoCo run: ``{"robots": [{"followers", "model", "c_true",
+def before_run(sc: Any, plant: Any, run: Any) -> dict[str, Any]:
+    """summary.json's ``demand`` for a MuJoCo run (the ideal twin run by ``run``, :func:`peaks`):
+    ``{"robots": [{"followers", "model", "c_true",
     "limits", "demand", "ideal_run"}], "warnings", "seconds"}`` (one entry per distinct robot)."""
     t0 = time.perf_counter()
     lims = run_limits(sc, plant)
@@ -265,7 +266,7 @@ def before_run(sc: Any, plant: Any) -> dict[str, Any]:
         p = plant.params[i]
         who = f"follower{'s' if len(idx) > 1 else ''} {', '.join(str(j + 1) for j in idx)}"
         try:
-            pk = peaks(sc, (p.a_eff, p.b_eff), p.half_track)
+            pk = peaks(sc, (p.a_eff, p.b_eff), p.half_track, run=run)
         except Exception as exc:  # noqa: BLE001 - a demand that cannot be computed is said, the run goes ahead
             why = f"{type(exc).__name__}: {exc}"
             lines.append(f"{who}: the scenario's demand could not be computed on the ideal plant ({why})")

@@ -342,6 +342,23 @@ def apply_robots_to_ideal(sc: Scenario) -> Scenario:
 # ---------------------------------------------------------------------------------------
 
 
+#: the resolver of ``formation.scale/time_scale = "auto"``: ``resolver(sc) -> (s, σ, note)``. "auto" needs a run of the
+#: scenario's demand (design §21), a floor above this one, so the run package registers it on import
+#: (:func:`register_auto_scale`) instead of this module importing upwards.
+_AUTO_SCALE: list[Any] = []
+
+
+def register_auto_scale(resolver: Any) -> None:
+    """Set the resolver of ``"auto"`` scale and time scale (called by :mod:`bioform_mj.run.auto_scale`).
+
+    Parameters
+    ----------
+    resolver
+        ``resolver(sc) -> (s, sigma, note)``: the length and time factors for scenario ``sc`` and why.
+    """
+    _AUTO_SCALE[:] = [resolver]
+
+
 def apply_scale(sc: Scenario) -> Scenario:
     """Scale the experiment: lengths × ``s = formation.scale``, times × ``σ = formation.time_scale``,
     every key by its declared unit (:func:`bioform_mj.scenario.similarity.transform`, design §21).
@@ -355,7 +372,8 @@ def apply_scale(sc: Scenario) -> Scenario:
     D``, eq. 37's ``k4``, ``torque.phi``) are said in :mod:`bioform_mj.scenario.similarity`. With ``σ = 1``
     this is the lengths-only scaling of before, bit for bit (``k1, A, B, D, k4`` unchanged).
     ``"auto"`` (either key): from the robot's half track and limits
-    (:func:`bioform_mj.run.auto_scale.resolve_auto`), the reason in ``formation.scale_note``.
+    (the resolver the run package registers, :func:`register_auto_scale`:
+    :func:`bioform_mj.run.auto_scale.resolve_auto`), the reason in ``formation.scale_note``.
 
     The values are those written (file and ``--set``); the returned scenario holds the scaled values
     and the numeric ``scale``, ``time_scale``; a run's record (:func:`bioform_mj.scenario.record.resolved_config`)
@@ -374,9 +392,13 @@ def apply_scale(sc: Scenario) -> Scenario:
         for key, v in (("formation.scale", want_s), ("formation.time_scale", want_t)):
             if isinstance(v, str) and v != "auto":
                 raise ScenarioError(key, f'must be a number > 0 or "auto", got {v!r}')
-        from bioform_mj.run.auto_scale import resolve_auto
-
-        want_s, want_t, note = resolve_auto(sc)
+        if not _AUTO_SCALE:
+            raise ScenarioError(
+                "formation.scale" if isinstance(want_s, str) else "formation.time_scale",
+                '"auto" is resolved by a run of the scenario\'s demand: import bioform_mj.run first '
+                "(bioform_mj.load and the bioform command do)",
+            )
+        want_s, want_t, note = _AUTO_SCALE[-1](sc)
     want_s = check_factor("formation.scale", want_s)
     want_t = check_factor("formation.time_scale", want_t)
     if want_s == f.scale_applied and want_t == f.time_scale_applied:
