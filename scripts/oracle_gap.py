@@ -19,7 +19,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent.parent / "tests")
 
 from bioform_mj.run.simulate import simulate
 from bioform_mj.scenario.loader import load
-from test_engines import oracle_run  # noqa: E402
+from test_run_engines import oracle_run  # noqa: E402
 
 for method in ("bioinspired-learning", "backstepping"):
     sc = load("paper", method=method)
