@@ -17,12 +17,19 @@ if "BIOFORM_CACHE_DIR" not in os.environ:
     atexit.register(shutil.rmtree, _CACHE, ignore_errors=True)  # one per session (and per xdist worker): not left
 
 
+#: test modules whose sweeps may start Ray or stop every Ray cluster: one worker runs them one after another
+_JOB_MODULES = {"test_jobs_sweep.py", "test_jobs_resume.py", "test_jobs_sweep_interrupts.py", "test_jobs_calibrate.py"}
+
+
 def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist (``make test`` runs two workers, ``--dist loadgroup``), the tests that start a Ray
     cluster run one after another on one worker: two local clusters on one machine share Ray's fixed ports
     (the dashboard agent's, the client server's). Without xdist the mark does nothing."""
     for item in items:
-        if "ray" in item.nodeid.lower().replace("array", ""):
+        # the long-job test modules too: two Ray clusters started 1 s apart from both workers were seen, and
+        # `ray stop --force` (the head-lost test) ends every cluster on the machine
+        jobs = item.nodeid.split("::")[0].rsplit("/", 1)[-1] in _JOB_MODULES
+        if jobs or "ray" in item.nodeid.lower().replace("array", ""):
             item.add_marker(pytest.mark.xdist_group("ray"))
 
 
