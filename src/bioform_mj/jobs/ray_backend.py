@@ -154,10 +154,6 @@ def run_ray(
     if not ray.is_initialized():
         kwargs: dict[str, Any] = {"address": address, "include_dashboard": False, "log_to_driver": False}
         if address is None:
-            # "local": a new local cluster of our own, never one that happens to run on the machine (ray.init()
-            # without an address joins the cluster recorded in /tmp/ray, e.g. one `ray start --head` left behind,
-            # and then refuses num_cpus, or dies with that cluster's head)
-            kwargs["address"] = "local"
             kwargs["num_cpus"] = workers
         wlog = logging.getLogger("ray._private.worker")
         level = wlog.level
