@@ -17,6 +17,14 @@ if "BIOFORM_CACHE_DIR" not in os.environ:
     atexit.register(shutil.rmtree, _CACHE, ignore_errors=True)  # one per session (and per xdist worker): not left
 
 
+# Ray's folder (sessions, and the cluster `ray start` records): per test session, so that a cluster left on the
+# machine is never joined by a test's sweep, and the head-lost test's record is not seen by anyone else
+if "RAY_TMPDIR" not in os.environ:
+    _RAY_TMP = tempfile.mkdtemp(prefix="bf-ray-")  # short: Ray's socket paths live below it (107-byte limit)
+    os.environ["RAY_TMPDIR"] = _RAY_TMP
+    atexit.register(shutil.rmtree, _RAY_TMP, ignore_errors=True)
+
+
 #: test modules whose sweeps may start Ray or stop every Ray cluster: one worker runs them one after another
 _JOB_MODULES = {"test_jobs_sweep.py", "test_jobs_resume.py", "test_jobs_sweep_interrupts.py", "test_jobs_calibrate.py"}
 

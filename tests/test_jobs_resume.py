@@ -319,6 +319,57 @@ def test_closed_ray_address_exits_2_within_seconds(tmp_path):
     assert not (out / "runs").exists()
 
 
+def _recorded(tmp_path: Path, address: str) -> Path:
+    """A Ray folder whose ``ray_current_cluster`` records ``address``, as ``ray start --head`` leaves it."""
+    (tmp_path / "raytmp" / "ray").mkdir(parents=True)
+    (tmp_path / "raytmp" / "ray" / "ray_current_cluster").write_text(address)
+    return tmp_path / "raytmp"
+
+
+def test_a_live_recorded_ray_cluster_is_named_not_joined(tmp_path, monkeypatch):
+    """A cluster `ray start` left running: the local sweep refuses in seconds, naming it and the two ways on
+    (ray.init() without an address would join it and then refuse num_cpus, or die with its head)."""
+    import socket
+
+    from bioform_mj.core.errors import InputError
+    from bioform_mj.jobs.ray_backend import check_ray_address, local_cluster
+
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    with socket.socket() as srv:
+        srv.bind(("127.0.0.1", 0))
+        srv.listen(4)
+        port = srv.getsockname()[1]
+        monkeypatch.setenv("RAY_TMPDIR", str(_recorded(tmp_path, f"127.0.0.1:{port}")))
+        with pytest.raises(InputError) as e:
+            check_ray_address(None)
+    msg = str(e.value)
+    assert f"runs on this machine at 127.0.0.1:{port}" in msg and f"--ray-address 127.0.0.1:{port}" in msg
+    assert "ray stop" in msg and "ray_current_cluster" in msg
+    # the same record once the cluster is gone (a stale file): a local cluster of the sweep's own
+    assert local_cluster() == ("local", None)
+    check_ray_address(None)
+
+
+def test_ray_address_variable_is_joined_and_checked(tmp_path, monkeypatch):
+    """$RAY_ADDRESS (Ray's own convention) is the address a sweep without --ray-address joins; closed: exit 2
+    naming the variable."""
+    import socket
+
+    from bioform_mj.core.errors import InputError
+    from bioform_mj.jobs.ray_backend import check_ray_address, local_cluster
+
+    monkeypatch.setenv("RAY_TMPDIR", str(tmp_path))  # nothing recorded
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    assert local_cluster() == ("local", None)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    monkeypatch.setenv("RAY_ADDRESS", f"127.0.0.1:{port}")
+    assert local_cluster() == ("env", f"127.0.0.1:{port}")
+    with pytest.raises(InputError, match=rf"^RAY_ADDRESS 127\.0\.0\.1:{port}: cannot connect"):
+        check_ray_address(None)
+
+
 # ------------------------------------------------------------------------------------------ calibrate
 
 

@@ -59,20 +59,65 @@ def _probe(host: str, port: int, timeout: float = 2.0) -> str | None:
         )
 
 
+def _ray_temp_dir() -> str:
+    """The folder where ``ray start`` records its cluster (Ray's rule: ``$RAY_TMPDIR``, else ``$TMPDIR``
+    on Linux, else ``/tmp``; then ``ray/``)."""
+    import os
+    import sys
+    import tempfile
+
+    base = os.environ.get("RAY_TMPDIR") or (os.environ.get("TMPDIR") if sys.platform.startswith("linux") else None)
+    if not base:
+        base = "/tmp" if sys.platform.startswith(("linux", "darwin")) else tempfile.gettempdir()
+    return os.path.join(base, "ray")
+
+
+def local_cluster() -> tuple[str, str | None]:
+    """How a sweep without ``--ray-address`` gets its cluster: ``("env", ADDR)`` to join ``$RAY_ADDRESS``
+    (Ray's own convention), ``("local", None)`` to start a local cluster of the sweep's own.
+
+    ``ray.init()`` without an address joins whatever cluster ``ray start`` recorded in
+    ``/tmp/ray/ray_current_cluster`` (and then refuses ``num_cpus``), or waits on a stale record of a dead
+    one. A live recorded cluster is an :class:`InputError` naming it and the two ways on (join it with
+    ``--ray-address``, or stop it); a stale record is ignored (``address="local"``)."""
+    import os
+
+    env = os.environ.get("RAY_ADDRESS", "").strip()
+    if env:
+        return "env", env
+    path = os.path.join(_ray_temp_dir(), "ray_current_cluster")
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            recorded = f.read(4096).strip()
+    except OSError:
+        return "local", None
+    hp = _host_port(recorded) if recorded else None
+    if hp is not None and _probe(*hp, timeout=1.0) is None:
+        raise InputError(
+            f"--backend ray without --ray-address: a Ray cluster runs on this machine at {recorded} (recorded in "
+            f"{path}); join it with --ray-address {recorded}, or stop it (`ray stop`) so that the sweep starts a "
+            "local cluster of its own"
+        )
+    return "local", None
+
+
 def check_ray_address(address: str | None) -> None:
-    """InputError (exit 2) within seconds when nothing listens at ``--ray-address``, naming it and what to check."""
+    """InputError (exit 2) within seconds when nothing listens at ``--ray-address`` (or ``$RAY_ADDRESS``),
+    naming it and what to check; without either, when a cluster ``ray start`` left runs (:func:`local_cluster`)."""
+    flag = "--ray-address"
     if address is None:
-        return
+        how, address = local_cluster()
+        if how == "local" or address is None:
+            return
+        flag = "RAY_ADDRESS"
     hp = _host_port(address)
     if address not in ("auto", "local") and hp is None:
-        raise InputError(
-            f"--ray-address '{address}': expected HOST:PORT (e.g. 127.0.0.1:6379), ray://HOST:PORT or auto"
-        )
+        raise InputError(f"{flag} '{address}': expected HOST:PORT (e.g. 127.0.0.1:6379), ray://HOST:PORT or auto")
     if hp is None:
         return
     why = _probe(*hp)
     if why is not None:
-        raise InputError(f"--ray-address {address}: cannot connect ({why}); {_RAY_HELP.replace('ADDR', address)}")
+        raise InputError(f"{flag} {address}: cannot connect ({why}); {_RAY_HELP.replace('ADDR', address)}")
 
 
 def _in_thread(fn: Callable[[], Any], seconds: float, sig: Signals) -> tuple[str, Any]:
@@ -152,8 +197,11 @@ def run_ray(
         raise InputError("--backend ray needs Ray: pip install 'bioform-mj[ray]'") from None
     started = False
     if not ray.is_initialized():
+        if address is None:  # $RAY_ADDRESS, or a local cluster of the sweep's own (never one left on the machine)
+            how, address = local_cluster()
         kwargs: dict[str, Any] = {"address": address, "include_dashboard": False, "log_to_driver": False}
         if address is None:
+            kwargs["address"] = "local"
             kwargs["num_cpus"] = workers
         wlog = logging.getLogger("ray._private.worker")
         level = wlog.level
