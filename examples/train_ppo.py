@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 from pathlib import Path
 
@@ -133,6 +134,7 @@ def main() -> None:
 
     torch.manual_seed(a.seed)
     torch.set_num_threads(1)
+    os.environ.setdefault("SB3_LOGDIR", str(a.out / "sb3"))  # SB3's logger writes /tmp/SB3-DATE/ otherwise
     ov = [
         f"sim.duration={a.duration}",
         f"sim.control_dt={a.control_dt}",

@@ -266,9 +266,10 @@ def test_single_follower_gymnasium_env_passes_both_checkers(plant, action):
         e.step(np.array([1.01, 0.0]))
 
 
-def test_supersuit_sb3_subprocess_training_on_mujoco():
+def test_supersuit_sb3_subprocess_training_on_mujoco(tmp_path, monkeypatch):
     """PettingZoo's tutorial path: SuperSuit's vector environment in 2 worker processes (the environment is
     pickled to them) trains SB3's PPO on the MuJoCo plant for 768 steps."""
+    monkeypatch.setenv("SB3_LOGDIR", str(tmp_path / "sb3"))  # SB3's logger makes /tmp/SB3-DATE/ otherwise
     ss = pytest.importorskip("supersuit")
     sb3 = pytest.importorskip("stable_baselines3")
     import torch
