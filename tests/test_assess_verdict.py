@@ -247,7 +247,7 @@ def test_c_hat_off_names_the_likely_cause():
 def test_slot_accelerations_follow_each_slot():
     """Paper leader x = t, y = 3 + 0.4 sin t: acceleration (0, −0.4 sin t), |a| ≤ 0.4 m/s². World-frame
     offsets: every slot moves as the leader. Leader-frame offsets: the slots swing with the heading."""
-    from bioform_mj.assess.check import slot_accelerations
+    from bioform_mj.assess.feasibility import slot_accelerations
     from bioform_mj.scenario.loader import load
 
     sc = load("paper", overrides=["sim.duration=10"])
@@ -298,7 +298,7 @@ def test_run_warns_about_a_braking_caster_naming_it(tmp_path, capsys):
     text = text.replace('pos="-0.13 0 -0.0745"', 'pos="-0.13 0 -0.0755"')
     text = text.replace('<inertial pos="0 0 0" mass="23.5"', '<inertial pos="-0.03 0 0" mass="23.5"')
     path = _write(tmp_path, "caster", text)
-    from bioform_mj.assess.check import feasibility
+    from bioform_mj.assess.feasibility import feasibility
     from bioform_mj.run.simulate import make_plant
     from bioform_mj.scenario.loader import load
 
@@ -449,7 +449,7 @@ def test_self_contact_at_rest_is_the_named_structural_cause(tmp_path):
     """A fender on its own (limited) hinge 5 mm into the left wheel's tread: not parent and child, so
     MuJoCo collides them (URDF/Gazebo would not): kilonewtons at rest, the wheel braked. Was: 'the
     wheels do not roll' with nothing named."""
-    from bioform_mj.assess.check import feasibility
+    from bioform_mj.assess.feasibility import feasibility
     from bioform_mj.run.simulate import make_plant
     from bioform_mj.scenario.loader import load
 

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bioform_mj.assess.check import G, check, feasibility, run_refusals
+from bioform_mj.assess.check import G, check
+from bioform_mj.assess.feasibility import feasibility, run_refusals
 from bioform_mj.plants.mujoco.plant import MujocoPlant
 from bioform_mj.robots.level_support import statics_loads
 from bioform_mj.robots.refs import models_dir

@@ -413,7 +413,7 @@ def test_heavy_rotor_passes_little_torque_to_the_floor(tmp_path):
 
 
 def test_scenario_robot_table_takes_the_keys_and_a_run_says_the_configuration_changed(tmp_path):
-    from bioform_mj.assess.check import feasibility
+    from bioform_mj.assess.feasibility import feasibility
     from bioform_mj.scenario.loader import load
 
     _write(tmp_path, "arm.xml", _robot(extra=ARM, actuators='<motor name="arm_motor" joint="arm_joint"/>'))
@@ -479,7 +479,7 @@ def test_a_swivel_caster_wheel_rolls_free_and_does_not_brake(tmp_path):
 
 
 def test_a_run_warns_about_a_braking_caster_before_it_starts(tmp_path):
-    from bioform_mj.assess.check import feasibility
+    from bioform_mj.assess.feasibility import feasibility
     from bioform_mj.scenario.loader import load
 
     fr = _write(tmp_path, "fr.xml", _robot(caster='friction="0.8" condim="3"'))

@@ -16,7 +16,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from bioform_mj.assess.check import EXIT_FAIL, check, feasibility
+from bioform_mj.assess.check import EXIT_FAIL, check
+from bioform_mj.assess.feasibility import feasibility
 from bioform_mj.assess.identify import identify
 from bioform_mj.cli import main as cli
 from bioform_mj.plants.mujoco.plant import MujocoPlant

@@ -22,13 +22,13 @@ Verdict: ``fail`` when the robot cannot do the paper's experiment at all (static
 identification more than 10 % off the formula, a dead band at least the motor limit); ``warn``
 when it can, with a caveat (motor limit above the traction limit, full torque tips the chassis,
 identification 3–10 % off, centre of mass more than 1 cm off the axle, damping time constant
-under 5 s); else ``pass``. :func:`feasibility` is the pre-run estimate for a scenario.
+under 5 s); else ``pass``. :func:`bioform_mj.assess.feasibility.feasibility` is the pre-run estimate for a
+scenario.
 """
 
 from __future__ import annotations
 
-import re
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -38,7 +38,6 @@ from bioform_mj.robots.refs import RobotRef
 __all__ = [
     "check",
     "tip_margins",
-    "feasibility",
     "EXIT_FAIL",
     "G",
 ]
@@ -47,12 +46,6 @@ __all__ = [
 EXIT_FAIL = 4
 #: gravity, m/s²
 G = 9.81
-#: a mapped wheel_radius/half_track this far (relative) from what the model's geometry says is a
-#: pre-run warning (scene.layout_of notes every difference over 1 %)
-GIVEN_TOL = 0.05
-_GIVEN = re.compile(
-    r"(?P<what>wheel_radius|half_track) (?P<given>[-+.\deE]+) m given; the [a-z ]+ say (?P<model>[-+.\deE]+) m$"
-)
 #: identification vs formula: above WARN_ID the verdict is warn, above FAIL_ID fail (relative)
 WARN_ID, FAIL_ID = 0.03, 0.10
 #: the yaw inertia of the robot that runs differs from the file's (or changes while driving) by more: a warning
@@ -134,31 +127,66 @@ def cause_of(findings: list[dict[str, Any]]) -> dict[str, Any] | None:
     return None
 
 
-def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) -> dict[str, Any]:
-    """Everything :mod:`bioform_mj.assess.check` reports about one robot, with the verdict.
+@dataclass
+class _Said:
+    """What :func:`check` says so far: the reasons that fail the robot, those that warn, the notes."""
 
-    ``entry``: shipped name, MJCF path or :class:`~bioform_mj.robots.refs.RobotRef`. ``run_step``: the run's
-    ``sim.physics_dt`` (s) where a run asks; the identification is repeated at it and at the model's own step
-    where they differ from the step it measured at (``identification_steps``; design §14.2). Raises
-    :class:`~bioform_mj.core.errors.InputError` (exit 2) for a model that cannot be used at all.
-    """
+    fail: list[str] = field(default_factory=list)
+    warn: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+class _Tracker:
+    """Each still body's largest displacement (m), rotation (rad) from the file's pose, relative to the base."""
+
+    def __init__(self, plant: Any, scratch: Any, base: int, still: Any) -> None:
+        from bioform_mj.robots.contacts import relative_poses
+
+        self.plant, self.base, self.still = plant, base, still
+        self.ref_pose = relative_poses(plant.model, scratch, base, still)
+        self.worst = (np.zeros(len(still)), np.zeros(len(still)))
+
+    def __call__(self) -> None:
+        from bioform_mj.robots.contacts import pose_change, relative_poses
+
+        now = pose_change(self.ref_pose, relative_poses(self.plant.model, self.plant.data, self.base, self.still))
+        np.maximum(self.worst[0], now[0], out=self.worst[0])
+        np.maximum(self.worst[1], now[1], out=self.worst[1])
+
+
+@dataclass
+class _AtRest:
+    """The robot as :func:`check` finds it at rest (design §13, §14)."""
+
+    plant: Any  # the MujocoPlant holding it (scene prefix "f1/")
+    p: Any  # RobotParams of the configuration that runs (after settling)
+    lay: Any  # its RobotLayout
+    scratch: Any  # MjData at the file's configuration (qpos0)
+    tips: dict[str, Any]  # tip_margins as the file stands
+    p_file: Any  # RobotParams at the file's configuration
+    tracker: _Tracker
+    mu: float  # wheel–floor friction
+    settled: int  # steps (1 ms) it took to come to rest
+    floor: list[dict[str, Any]]  # floor contacts at rest
+    moving_at_rest: str  # why it still moves at rest, or ""
+    loads: np.ndarray  # (2,) wheel loads, N (the statics' where the stance is level)
+    level: dict[str, Any] | None  # level_support's reading
+    selfc: list[dict[str, Any]]  # self contacts at rest
+    traction: float  # μ N r / f of the least-loaded wheel, N·m
+    motor: float  # the lower wheel torque limit, N·m
+    motor_accel: float  # υ̇ at full torque on both wheels, m/s²
+
+
+def _at_rest(entry: Any, said: _Said) -> _AtRest:
+    """``entry`` in a plant, settled: what touches the floor, with what load (notes to ``said.notes``)."""
     import mujoco
 
-    from bioform_mj.assess.causes import SELF_CONTACT_LOAD, WHEEL_LOAD_MIN, check_radius, identify_notes
-    from bioform_mj.assess.identify import DRAG_STEP, identify
+    from bioform_mj.assess.causes import WHEEL_LOAD_MIN, check_radius
     from bioform_mj.plants.mujoco.plant import MujocoPlant
-    from bioform_mj.robots.contacts import (
-        braking_casters,
-        moving_parts,
-        pose_change,
-        relative_poses,
-        self_contacts,
-        settle,
-        still_bodies,
-    )
+    from bioform_mj.robots.contacts import self_contacts, settle, still_bodies
     from bioform_mj.robots.level_support import level_support
     from bioform_mj.robots.overlaps import self_contacts_at_rest
-    from bioform_mj.robots.params import implausible_inertias, robot_parameters
+    from bioform_mj.robots.params import robot_parameters
 
     plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
     check_radius(plant)  # exit 2 before any work: a radius nothing can be measured with
@@ -168,18 +196,9 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
     mujoco.mj_kinematics(model, scratch)  # the file's configuration (qpos0)
     tips = tip_margins(model, scratch, "f1/")  # static margins as the file stands (a settled copy may have fallen)
     p_file = robot_parameters(model, "f1/", scratch)
-    base = model.body(lay.base).id
-    still = still_bodies(model, lay)
-    ref_pose = relative_poses(model, scratch, base, still)
-    worst = (np.zeros(len(still)), np.zeros(len(still)))
-
-    def track() -> None:
-        now = pose_change(ref_pose, relative_poses(model, plant.data, base, still))
-        np.maximum(worst[0], now[0], out=worst[0])
-        np.maximum(worst[1], now[1], out=worst[1])
-
+    tracker = _Tracker(plant, scratch, model.body(lay.base).id, still_bodies(model, lay))
     mu = plant._wheel_friction(0)
-    settled, floor, moving_at_rest = settle(plant, lay, track)  # 0.2 s, up to 1 s while it moves
+    settled, floor, moving_at_rest = settle(plant, lay, tracker)  # 0.2 s, up to 1 s while it moves
     loads = plant.wheel_loads()[0]
     level = level_support(model, plant.data, lay, p.mass * G, WHEEL_LOAD_MIN)  # design §14: a level stance
     if level is not None:
@@ -192,27 +211,47 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
     # reaches the floor past the rotor; μ m g r / 2 for an even split and a light rotor)
     traction = p.traction_torque(mu, float(loads.min()))
     motor = float(min(p.tau_max))
-    motor_accel = 2 * motor * p.a_eff  # υ̇ at full torque on both wheels, m/s²
-    notes = list(lay.notes) + self_notes
+    said.notes += list(lay.notes) + self_notes
     from ..robots.realdata.calibrated import calibration_note
 
-    notes += calibration_note(model)  # a calibrated robot (robot fit's) says where its numbers came from
-    reasons_fail, reasons_warn = [], []
+    said.notes += calibration_note(model)  # a calibrated robot (robot fit's) says where its numbers came from
+    return _AtRest(
+        plant, p, lay, scratch, tips, p_file, tracker, mu, settled, floor, moving_at_rest, loads, level, selfc,
+        traction, motor, 2 * motor * p.a_eff,
+    )  # fmt: skip
 
-    # the first ~2 s under gravity and a drive (forward, then a turn): what moves relative to the base
-    t_drive = 0.25 * min(motor, traction)
+
+def _drive(r: _AtRest) -> tuple[Any, list[dict[str, Any]]]:
+    """The first ~2 s under gravity and a drive (forward, a turn): (RobotParams at its end, the moving parts)."""
+    import mujoco
+
+    from bioform_mj.robots.contacts import moving_parts
+    from bioform_mj.robots.params import robot_parameters
+
+    plant, model = r.plant, r.plant.model
+    t_drive = 0.25 * min(r.motor, r.traction)
     for k in range(1800):
         tau = t_drive * (np.array([[1.0, 1.0]]) if k < 900 else np.array([[-1.0, 1.0]]))
-        plant.step(tau, (settled + k) * 0.001)
+        plant.step(tau, (r.settled + k) * 0.001)
         if k % 10 == 9:
-            track()
+            r.tracker()
     end = mujoco.MjData(model)
     end.qpos[:] = plant.data.qpos
     mujoco.mj_kinematics(model, end)
     p_end = robot_parameters(model, "f1/", end)
-    moving = moving_parts(model, still, worst, "f1/")
+    return p_end, moving_parts(model, r.tracker.still, r.tracker.worst, "f1/")
+
+
+def _rest_reasons(r: _AtRest, p_end: Any, moving: list[dict[str, Any]], said: _Said) -> None:
+    """What the robot at rest and in its first 2 s says: moving parts, a yaw inertia that changes, a level stance,
+    braking casters, implausible inertias, a robot that does not come to rest, self contacts."""
+    from bioform_mj.assess.causes import SELF_CONTACT_LOAD
+    from bioform_mj.robots.contacts import braking_casters
+    from bioform_mj.robots.params import implausible_inertias
+
+    p, level, loads, floor = r.p, r.level, r.loads, r.floor
     if moving:
-        reasons_warn.append(
+        said.warn.append(
             f"{len(moving)} part(s) move relative to the base in the first 2 s under gravity and a drive "
             "(moving_parts: "
             + ", ".join(
@@ -221,10 +260,10 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
             + ("…" if len(moving) > 5 else "")
             + "); c_true is for the configuration after settling"
         )
-    for what, other in (("the file's configuration", p_file), ("the end of the 2 s drive", p_end)):
+    for what, other in (("the file's configuration", r.p_file), ("the end of the 2 s drive", p_end)):
         change = other.yaw_inertia / p.yaw_inertia - 1
         if abs(change) > YAW_TOL:
-            reasons_warn.append(
+            said.warn.append(
                 f"the yaw inertia of the robot that runs (after settling) is {p.yaw_inertia:.4g} kg·m², "
                 f"{what} has {other.yaw_inertia:.4g} kg·m² ({100 * change:+.1f} % against the settled one): c_true = "
                 f"({p.a_eff:.4g}, {p.b_eff:.4g}) is the settled one"
@@ -232,32 +271,44 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
             )
     weight = p.mass * G
     wheel_force = float(loads.sum()) if level else sum(c["load_n"] for c in floor if c["role"] == "wheel")
-    drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
+    drive_force = min(2 * r.motor * p.floor_fraction[0] / p.wheel_radius, r.mu * wheel_force)
     if level is not None:
-        reasons_warn.append(f"level stance: {level['detail']}")
+        said.warn.append(f"level stance: {level['detail']}")
     for _, brake, msg in braking_casters(floor, drive_force):
-        (reasons_fail if brake >= drive_force else reasons_warn).append(msg)
-    if settled > 200 and not moving_at_rest:
-        notes.append(f"at rest after {settled * 0.001:g} s (still moving at 0.2 s): floor contacts and loads from then")
-    if odd := implausible_inertias(model, "f1/", scratch):  # at the file's configuration
-        reasons_warn.append(odd)
-    if moving_at_rest:
-        pushed = [f"'{c['body1']}'/'{c['body2']}'" for c in selfc if c["simulated"]]
-        reasons_warn.append(moving_at_rest + (f"; its own bodies push it: {', '.join(pushed)}" if pushed else ""))
-    for sc in selfc:  # a pair the scene does not collide is a note (self_notes), not a warning
+        (said.fail if brake >= drive_force else said.warn).append(msg)
+    if r.settled > 200 and not r.moving_at_rest:
+        said.notes.append(
+            f"at rest after {r.settled * 0.001:g} s (still moving at 0.2 s): floor contacts and loads from then"
+        )
+    if odd := implausible_inertias(r.plant.model, "f1/", r.scratch):  # at the file's configuration
+        said.warn.append(odd)
+    if r.moving_at_rest:
+        pushed = [f"'{c['body1']}'/'{c['body2']}'" for c in r.selfc if c["simulated"]]
+        said.warn.append(r.moving_at_rest + (f"; its own bodies push it: {', '.join(pushed)}" if pushed else ""))
+    for sc in r.selfc:  # a pair the scene does not collide is a note (self_notes), not a warning
         if sc["simulated"] and (sc["depth_m"] > SELF_DEPTH or sc["force_n"] > SELF_CONTACT_LOAD * weight):
-            reasons_warn.append(
+            said.warn.append(
                 f"the robot's own bodies '{sc['body1']}' and '{sc['body2']}' touch at rest "
                 f"({1e3 * sc['depth_m']:.2g} mm deep, {sc['force_n']:.3g} N; self_contacts): MuJoCo collides all but "
                 "parent-child pairs; exclude the pair (<contact><exclude body1=… body2=…/>) if the robot does not"
             )
 
+
+def _identification(
+    entry: Any, r: _AtRest, identify_: bool, run_step: float | None, said: _Said
+) -> tuple[dict[str, Any] | None, Any, list[dict[str, Any]]]:
+    """The identification (design §14) and what it says: (its result or None, its repetition at the simulated steps
+    or None, the findings). InputError (exit 2) for a mapping no test can use."""
+    from bioform_mj.assess.causes import identify_notes
+    from bioform_mj.assess.identify import identify
+
+    p, lay = r.p, r.lay
     ident = identify(entry) if identify_ else None  # InputError (exit 2) for a mapping no test can use
     steps = None
     if ident is not None:  # design §14.2: the robot as simulated, at the model's own step and the run's
         from bioform_mj.assess.identify_steps import identify_at_steps, step_reasons
 
-        steps = identify_at_steps(entry, ident, plant.file_timesteps[0], run_step)
+        steps = identify_at_steps(entry, ident, r.plant.file_timesteps[0], run_step)
         s_fail, s_warn = step_reasons(
             steps,
             max(p.unmodelled(0.0, 0.0)["drag_rate_per_s"]),
@@ -265,10 +316,10 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
             FAIL_ID,
             "run" if run_step is not None else "model",
         )
-        reasons_fail += s_fail
-        reasons_warn += s_warn
+        said.fail += s_fail
+        said.warn += s_warn
     findings = ident["findings"] if ident else []
-    notes += identify_notes(ident)  # design §14.1: what the identification set up, said
+    said.notes += identify_notes(ident)  # design §14.1: what the identification set up, said
     if any("other wheel" in n for n in lay.notes):  # the cause, before what it makes the identification see
         skid = (
             "other fixed wheels touch the floor (see notes): a 4-wheel / skid-steer base, not the paper's "
@@ -276,11 +327,13 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
         )
         findings.insert(0, {"kind": "structural", "detail": skid})
         if not (ident and ident["identifiable"]):  # else said below, as the identification's cause
-            reasons_fail.append(skid)
-    # design §14.3: an identified value whose fit does not hold is not reported as the robot's
-    holds = (ident or {}).get("fit_holds") or {}
-    a_id = ident["identified"]["a"] if ident and holds.get("a", True) else None
-    b_id = ident["identified"]["b"] if ident and holds.get("b", True) else None
+            said.fail.append(skid)
+    return ident, steps, findings
+
+
+def _identification_reasons(ident: dict[str, Any] | None, findings: list[dict[str, Any]], said: _Said) -> None:
+    """Whether the identification agrees with the formula (design §14.2–14.3), and every cause found."""
+    reasons_fail, reasons_warn = said.fail, said.warn  # appended to
     if ident and not ident["identifiable"]:
         c = cause_of(findings)
         reasons_fail.append(
@@ -327,49 +380,55 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
             msg = f"{fd['kind'].replace('_', ' ')}: {fd['detail']}"
             if all(fd["detail"] not in r for r in reasons_fail + reasons_warn):
                 reasons_warn.append(msg)
-    ta = tips["tip_accel_mps2"]
+
+
+def _limit_reasons(r: _AtRest, ident: dict[str, Any] | None, said: _Said) -> None:
+    """What the robot's limits say: static stability, traction, tip-over at full torque, the centre of mass off
+    the axle, the dead band, a drag the model's step integrates coarsely, stiffness, damping (design §13–14)."""
+    from bioform_mj.assess.identify import DRAG_STEP
+
+    p, lay, motor, traction, ta = r.p, r.lay, r.motor, r.traction, r.tips["tip_accel_mps2"]
     for way, acc in ta.items():
         if acc <= 0:
-            reasons_fail.append(f"statically unstable: the centre of mass is outside the support ({way})")
+            said.fail.append(f"statically unstable: the centre of mass is outside the support ({way})")
     if motor > traction:
-        reasons_warn.append(
+        said.warn.append(
             f"motor limit {motor:.3g} N·m exceeds the traction limit μ N r / f = {traction:.3g} N·m: "
             "the wheels can skid at full torque"
         )
-    if motor_accel > min(ta["forward"], ta["backward"]) > 0:
-        reasons_warn.append(
-            f"full torque accelerates the robot at {motor_accel:.3g} m/s², more than tips it "
+    if r.motor_accel > min(ta["forward"], ta["backward"]) > 0:
+        said.warn.append(
+            f"full torque accelerates the robot at {r.motor_accel:.3g} m/s², more than tips it "
             f"(forward {ta['forward']:.3g}, backward {ta['backward']:.3g} m/s²): a start-up transient "
             "at the torque limit can overturn it"
         )
     if p.com_offset > 0.01:
-        reasons_warn.append(
+        said.warn.append(
             f"centre of mass {1e3 * p.com_offset:.0f} mm off the axle midpoint: a_eff, b_eff hold from "
             "rest; moving, an unmodelled υ·ω coupling acts (design §8.1: b̂ biased)"
         )
     um = p.unmodelled(1.0, 1.0)
     if p.wheel_frictionloss and 2 * p.wheel_frictionloss >= motor:
-        reasons_fail.append(
+        said.fail.append(
             f"wheel frictionloss {p.wheel_frictionloss:g} N·m per wheel: the dead band reaches the motor limit"
         )
-    k_drag = max(um["drag_rate_per_s"])
-    step = float(plant.model.opt.timestep)
-    model_step = plant.file_timesteps[0]  # the robot file's own step, read when the plant prepared it
+    k_drag, step = max(um["drag_rate_per_s"]), float(r.plant.model.opt.timestep)
+    model_step = r.plant.file_timesteps[0]  # the robot file's own step, read when the plant prepared it
     if k_drag * model_step > 0.1:
-        reasons_warn.append(
+        said.warn.append(
             f"wheel drag rate {k_drag:.3g} 1/s against the model's own step {model_step:g} s (k dt = "
             f"{k_drag * model_step:.2g}): MuJoCo integrates the wheel damping coarsely there (identified a, b "
             f"off by tens of %); run with sim.physics_dt <= {DRAG_STEP / k_drag:.2g} s (identification used "
             f"{ident['test']['timestep_s'] if ident else step:.2g} s)"
         )
     if any("stiffness" in n for n in lay.notes):
-        reasons_warn.append("wheel joint stiffness: a spring torque that grows with the distance driven (see notes)")
+        said.warn.append("wheel joint stiffness: a spring torque that grows with the distance driven (see notes)")
     tcs = [t for t in um["drag_time_constant_s"] if t is not None]
     if tcs and min(tcs) < 5.0:
         from bioform_mj.scenario.config import LearnerCfg
 
         k_top = LearnerCfg().drag_max  # the opt-in learner.drag's default bound, 1/s (design §14)
-        reasons_warn.append(
+        said.warn.append(
             f"wheel damping: drag time constant {min(tcs):.2g} s (< 5 s), a large unmodelled term"
             + (
                 f"; its drag rate {k_drag:.3g} 1/s is beyond the opt-in learner.drag's range [0, {k_top:g}] 1/s "
@@ -378,11 +437,10 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
                 else "; the opt-in learner.drag can learn it"
             )
         )
-    verdict = "fail" if reasons_fail else "warn" if reasons_warn else "pass"
-    from bioform_mj.robots.limits import limits_of  # design §21: the limits in one place
 
-    ref0 = entry if isinstance(entry, RobotRef) else None
-    limits = limits_of(plant, 0, ref0, loads, ta)
+
+def _parts(lay: Any) -> dict[str, Any]:
+    """The layout as the report gives it: its names without the scene prefix ``f1/``."""
     layout = asdict(lay)
     layout["file"] = lay.file
     named = ("base", "wheel_joints", "motors", "wheel_geoms", "disabled_actuators", "frozen_joints", "locked_joints")
@@ -391,12 +449,46 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
         v = layout[k]
         layout[k] = [x[len("f1/") :] for x in v] if isinstance(v, (list, tuple)) else v[len("f1/") :]
     layout["published_contacts"] = [[g[len("f1/") :], f, c] for g, f, c in layout["published_contacts"]]
+    return layout
+
+
+def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) -> dict[str, Any]:
+    """Everything :mod:`bioform_mj.assess.check` reports about one robot, with the verdict.
+
+    ``entry``: shipped name, MJCF path or :class:`~bioform_mj.robots.refs.RobotRef`. ``run_step``: the run's
+    ``sim.physics_dt`` (s) where a run asks; the identification is repeated at it and at the model's own step
+    where they differ from the step it measured at (``identification_steps``; design §14.2). Raises
+    :class:`~bioform_mj.core.errors.InputError` (exit 2) for a model that cannot be used at all.
+
+    The steps: :func:`_at_rest`, :func:`_drive` (the first 2 s), :func:`_rest_reasons`, :func:`_identification`
+    and :func:`_identification_reasons`, :func:`_limit_reasons`, the verdict and the report.
+    """
+    said = _Said()
+    r = _at_rest(entry, said)
+    p_end, moving = _drive(r)
+    _rest_reasons(r, p_end, moving, said)
+    ident, steps, findings = _identification(entry, r, identify_, run_step, said)
+    # design §14.3: an identified value whose fit does not hold is not reported as the robot's
+    holds = (ident or {}).get("fit_holds") or {}
+    a_id = ident["identified"]["a"] if ident and holds.get("a", True) else None
+    b_id = ident["identified"]["b"] if ident and holds.get("b", True) else None
+    _identification_reasons(ident, findings, said)
+    _limit_reasons(r, ident, said)
+    reasons_fail, reasons_warn = said.fail, said.warn
+    verdict = "fail" if reasons_fail else "warn" if reasons_warn else "pass"
+    from bioform_mj.robots.limits import limits_of  # design §21: the limits in one place
+
+    p, lay, loads, floor, tips, ta = r.p, r.lay, r.loads, r.floor, r.tips, r.tips["tip_accel_mps2"]
+    limits, um = (
+        limits_of(r.plant, 0, entry if isinstance(entry, RobotRef) else None, loads, ta),
+        p.unmodelled(1.0, 1.0),
+    )
     return {
         "verdict": verdict,
         "reasons": reasons_fail + reasons_warn,
         "fail_reasons": reasons_fail,  # what makes the verdict fail (a run warns these: design §14.2)
         "model": lay.file,
-        "parts": layout,
+        "parts": _parts(lay),
         "a_eff": p.a_eff,
         "b_eff": p.b_eff,
         "a_identified": a_id,
@@ -405,15 +497,15 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
         "c_true": {"a": p.a_eff, "b": p.b_eff},
         "c_true_after_drive": {"a": p_end.a_eff, "b": p_end.b_eff},
         "mass_kg": p.mass,
-        "weight_n": weight,
+        "weight_n": p.mass * G,
         "yaw_inertia_kgm2": p.yaw_inertia,
-        "yaw_inertia_file_kgm2": p_file.yaw_inertia,
+        "yaw_inertia_file_kgm2": r.p_file.yaw_inertia,
         "yaw_inertia_after_drive_kgm2": p_end.yaw_inertia,
         "wheel_inertia_kgm2": p.wheel_inertia,
         "floor_fraction": {"drive": p.floor_fraction[0], "turn": p.floor_fraction[1]},
         "floor_contacts": floor,
         "floor_load_n": float(sum(c["load_n"] for c in floor)),
-        "self_contacts": selfc,
+        "self_contacts": r.selfc,
         "moving_parts": moving,
         "joints": {
             k: [x[len("f1/") :] for x in getattr(lay, f"{k}_joints")]
@@ -421,13 +513,13 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
         },
         "wheel_radius_m": p.wheel_radius,
         "half_track_m": p.half_track,
-        "friction_mu": mu,
-        "traction_limit_nm": traction,
-        "motor_limit_nm": motor,
+        "friction_mu": r.mu,
+        "traction_limit_nm": r.traction,
+        "motor_limit_nm": r.motor,
         "wheel_load_n": loads.tolist(),
-        "level_support": level,  # design §14: wheels level with other supports (loads above: the statics')
+        "level_support": r.level,  # design §14: wheels level with other supports (loads above: the statics')
         "weight_on_wheels": float(loads.sum() / (p.mass * G)),
-        "motor_accel_mps2": motor_accel,
+        "motor_accel_mps2": r.motor_accel,
         "tip_accel_mps2": ta,
         "limits": limits,
         "support_m": tips["support_m"],
@@ -472,229 +564,5 @@ def check(entry: Any, *, identify_: bool = True, run_step: float | None = None) 
         "identification_steps": steps,  # design §14.2: at the model's own step and the run's
         "findings": findings,
         "cause": cause_of(findings) if reasons_fail else None,
-        "notes": notes,
+        "notes": said.notes,
     }
-
-
-def feasibility(scenario: Any, plant: Any) -> list[str]:
-    """Pre-run estimate: ``warning`` lines for what the scenario asks beyond a robot's margins.
-
-    ``scenario``: a :class:`~bioform_mj.scenario.config.Scenario`; ``plant``: its built
-    :class:`~bioform_mj.plants.mujoco.plant.MujocoPlant`. Per follower, compares
-
-    - the leader's largest acceleration ``max sqrt(υ̇_r² + (υ_r ω_r)²)`` over the run (with
-      world-frame offsets every follower's slot moves with the leader) against the traction
-      limit ``μ g`` (m/s²), its tangential part against the forward/backward tip margins and its
-      centripetal part ``υ_r ω_r`` against the lateral tip margin;
-    - the start-up transient: followers start at rest off their slots and the torque law meets
-      the jump of the command at the motor limit, so full torque ``2 a_eff τ_max`` (m/s²) is
-      compared with the tip margins, and ``τ_max`` with the traction limit ``μ N r / f`` (``N`` the
-      least-loaded wheel's share of the weight at rest, measured on a settled copy of the scene:
-      casters and gravity-compensated parts take weight off the wheels).
-
-    Each follower's own slot path is used (design §14: in a leader-frame formation a slot off the
-    leader's path turns on a wider or tighter circle than the leader). A loaded caster with friction
-    is a warning naming it. Raises :class:`~bioform_mj.core.errors.InputError` (exit 2, before the run)
-    for what ``robot check`` fails and no run survives (:func:`run_refusals`).
-
-    Returns an empty list when nothing is at risk. The estimate is static (no pitch dynamics).
-    """
-    import mujoco
-
-    from bioform_mj.assess.causes import SELF_CONTACT_LOAD
-    from bioform_mj.core.errors import InputError
-    from bioform_mj.robots.contacts import self_contacts
-
-    t = np.linspace(0.0, scenario.sim.duration, max(200, int(scenario.sim.duration * 200)) + 1)
-    _, vel, _ = scenario.build_leader().states(t)
-    tangential, centripetal, total = slot_accelerations(scenario, t)
-    scratch = mujoco.MjData(plant.model)
-    mujoco.mj_kinematics(plant.model, scratch)
-    out: list[str] = []
-    settled = plant.settled_data()
-    loads = plant.settled_wheel_loads(data=settled)
-    refusals = run_refusals(plant, scratch, loads)
-    level = _levels(plant, settled)  # design §14.4: a level stance's wheel loads are its statics', not MuJoCo's
-    for i in level:
-        loads[i] = level[i]
-    if refusals:
-        from bioform_mj.assess.skip import skipped
-
-        if not skipped():
-            raise InputError("the robots cannot run this scenario (robot check fails them): " + "; ".join(refusals))
-        # design §14.2: a run told to skip the robot check is never refused by it; what it would refuse is said
-        out += [f"robot check skipped (the run goes ahead); it would refuse {r}" for r in refusals]
-    pressed: dict[str, list[int]] = {}
-    for i, p in enumerate(plant.params):  # braking casters: below, with contacts.braking_casters
-        weight = p.mass * G
-        mine = self_contacts(plant.model, settled, plant.layouts[i], f"f{i + 1}/")
-        pressing = [c for c in mine if c["force_n"] > SELF_CONTACT_LOAD * weight]
-        if pressing:
-            note = (
-                "the robot's own bodies press on each other at rest: "
-                + ", ".join(f"'{c['body1']}'/'{c['body2']}' {c['force_n']:.3g} N" for c in pressing)
-                + " (internal forces that brake or lock parts; exclude the pairs)"
-            )
-            pressed.setdefault(note, []).append(i + 1)
-    for note, who in pressed.items():
-        out.append(f"follower{'s' if len(who) > 1 else ''} {', '.join(map(str, who))}: self contact: {note}")
-    given: dict[str, list[int]] = {}  # a mapped size far from the model's geometry (scene.layout_of's notes)
-    for i, lay in enumerate(plant.layouts):
-        for note in lay.notes:
-            m = _GIVEN.match(note)
-            if m and abs(float(m["given"]) / float(m["model"]) - 1) > GIVEN_TOL:
-                given.setdefault(note, []).append(i + 1)
-    for note, who in given.items():
-        m = _GIVEN.match(note)
-        out.append(
-            f"follower{'s' if len(who) > 1 else ''} {', '.join(map(str, who))}: {note} "
-            f"({float(m['given']) / float(m['model']) - 1:+.0%}): the controller and c_true use the given "
-            "value, the physics the model's"
-        )
-    from bioform_mj.robots.contacts import braking_casters, floor_contacts
-    from bioform_mj.robots.params import robot_parameters
-
-    for i, p in enumerate(plant.params):
-        p_file = robot_parameters(plant.model, f"f{i + 1}/", scratch)  # the file's configuration (qpos0)
-        change = p.yaw_inertia / p_file.yaw_inertia - 1
-        if abs(change) > YAW_TOL:  # design §13: c_true is the robot that runs (settled)
-            out.append(
-                f"follower {i + 1}: the robot that runs (settled at rest) has yaw inertia {p.yaw_inertia:.4g} kg·m², "
-                f"the file's configuration {p_file.yaw_inertia:.4g} kg·m² ({100 * change:+.1f} %: parts held by weak "
-                f"servos or left free moved); c_true = ({p.a_eff:.4g}, {p.b_eff:.4g}) is the settled robot's"
-            )
-        tips = tip_margins(plant.model, scratch, f"f{i + 1}/")["tip_accel_mps2"]
-        mu = plant._wheel_friction(i)
-        traction = p.traction_torque(mu, float(loads[i].min()))  # μ N r / f per wheel (design §13)
-        who = f"follower {i + 1}"
-        if total[i] > mu * G:
-            out.append(
-                f"{who}: its slot accelerates at up to {total[i]:.3g} m/s², beyond the traction limit "
-                f"μ g = {mu * G:.3g} m/s²: the wheels will slip"
-            )
-        if tangential[i] > min(tips["forward"], tips["backward"]):
-            out.append(
-                f"{who}: its slot's tangential acceleration {tangential[i]:.3g} m/s² exceeds the tip-over margin "
-                f"(forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²): the scenario overturns it"
-            )
-        if centripetal[i] > tips["lateral"]:
-            out.append(
-                f"{who}: its slot's turns need {centripetal[i]:.3g} m/s² sideways, beyond the lateral tip-over "
-                f"margin {tips['lateral']:.3g} m/s²: the scenario overturns it"
-            )
-        motor = float(min(p.tau_max))
-        # a caster that slides brakes the robot (design §13)
-        floor = floor_contacts(plant.model, settled, plant.layouts[i], f"f{i + 1}/")
-        wheel_force = float(loads[i].sum()) if i in level else sum(c["load_n"] for c in floor if c["role"] == "wheel")
-        drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
-        for _, _, msg in braking_casters(floor, drive_force):
-            out.append(f"{who}: {msg}")
-        # cruising at the leader's top speed against the wheel damping c and frictionloss f takes
-        # c v / r + f per wheel (menagerie Stretch 3: c = 30 N·m·s/rad, 151 N·m at 0.25 m/s); the wheel's own
-        # damper absorbs that torque between motor and tyre, so it is the motor's to give, never the tyre's
-        # traction (design §14: at a steady cruise the tyre pushes nothing)
-        v_top = float(np.max(np.abs(vel[:, 0])))
-        cruise = p.wheel_damping * v_top / p.wheel_radius + p.wheel_frictionloss
-        if p.wheel_damping and cruise > motor:
-            out.append(
-                f"{who}: cruising at the leader's {v_top:.3g} m/s, the wheel's own damper ({p.wheel_damping:g} "
-                f"N·m·s/rad) and frictionloss ({p.wheel_frictionloss:g} N·m) absorb {cruise:.3g} N·m per wheel, "
-                f"beyond the motor limit {motor:.3g} N·m: the robot cannot keep up"
-            )
-        full = 2 * p.a_eff * motor
-        if full > min(tips["forward"], tips["backward"]):
-            out.append(
-                f"{who}: a start-up transient at the torque limit accelerates at {full:.3g} m/s², beyond the "
-                f"tip-over margin (forward {tips['forward']:.3g}, backward {tips['backward']:.3g} m/s²): "
-                "the chassis can tip (scale the scenario, formation.scale, or lower the torque limit)"
-            )
-        if motor > traction:
-            out.append(
-                f"{who}: torque limit {motor:.3g} N·m exceeds the traction limit μ N r / f = "
-                f"{traction:.3g} N·m (N = {loads[i].min():.3g} N on the least-loaded wheel at rest): "
-                "the wheels can skid at full torque"
-            )
-    return out
-
-
-def slot_accelerations(scenario: Any, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per follower (n,) the largest tangential, centripetal and total acceleration (m/s²) of its
-    formation slot over the times ``t`` (s): the slot path ``p_r − R(θ_r) Δ_i`` (leader frame) or
-    ``p_r − Δ_i`` differentiated twice; tangential along the slot's velocity, centripetal across it
-    (where the slot moves slower than 1 mm/s, all of it counts as tangential)."""
-    from bioform_mj.assess.outcomes import slots_of
-
-    pose, _, _ = scenario.build_leader().states(t)
-    slots = np.stack([slots_of(scenario, p) for p in pose])  # (T, n, 2)
-    v = np.gradient(slots, t, axis=0)
-    a = np.gradient(v, t, axis=0)
-    speed = np.linalg.norm(v, axis=-1)
-    moving = speed > 1e-3
-    u = np.where(moving[..., None], v / np.maximum(speed, 1e-12)[..., None], 0.0)
-    tan = np.where(moving, np.abs((a * u).sum(-1)), np.linalg.norm(a, axis=-1))
-    cen = np.where(moving, np.abs(a[..., 0] * u[..., 1] - a[..., 1] * u[..., 0]), 0.0)
-    tot = np.linalg.norm(a, axis=-1)
-    # the ends of np.gradient are one-sided: drop the first and last two samples
-    sl = slice(2, -2) if len(t) > 8 else slice(None)
-    return tan[sl].max(axis=0), cen[sl].max(axis=0), tot[sl].max(axis=0)
-
-
-def run_refusals(plant: Any, scratch: Any, loads: np.ndarray) -> list[str]:
-    """What ``robot check`` fails that no run survives, per robot of a built plant (cheap: the
-    layout, the static tip margins, the settled wheel loads ``loads`` (n, 2) N): a skid-steer base
-    (other fixed wheels on the floor), a robot statically unstable, wheels that carry no weight, a
-    dead band at the motor limit. ``bioform run`` refuses these with exit 2 (design §14)."""
-    from bioform_mj.assess.causes import WHEEL_LOAD_MIN
-
-    found: dict[str, list[int]] = {}
-    for i, (p, lay) in enumerate(zip(plant.params, plant.layouts)):
-        why = []
-        if any("other wheel" in n for n in lay.notes):
-            why.append(
-                "other fixed wheels touch the floor: a 4-wheel / skid-steer base, not a differential drive "
-                "(robot check: map one driven pair and make the others casters)"
-            )
-        try:
-            tips = tip_margins(plant.model, scratch, f"f{i + 1}/")["tip_accel_mps2"]
-            why += [f"statically unstable ({way})" for way, acc in tips.items() if acc <= 0]
-        except ValueError as exc:
-            why.append(str(exc))
-        if float(loads[i].min()) < WHEEL_LOAD_MIN * p.mass * G and not _level(plant, i):
-            why.append(
-                f"the wheels do not stand on the floor ({loads[i, 0]:.3g} N, {loads[i, 1]:.3g} N of "
-                f"{p.mass * G:.3g} N at rest)"
-            )
-        if p.wheel_frictionloss and 2 * p.wheel_frictionloss >= min(p.tau_max):
-            why.append(f"wheel frictionloss {p.wheel_frictionloss:g} N·m: the dead band reaches the motor limit")
-        for w in why:
-            found.setdefault(f"{lay.file}: {w}", []).append(i + 1)
-    return [f"follower{'s' if len(who) > 1 else ''} {', '.join(map(str, who))}: {w}" for w, who in found.items()]
-
-
-def _levels(plant: Any, settled: Any) -> dict[int, np.ndarray]:
-    """Per robot of a built plant whose wheels stand level with other supports on the settled state ``settled``
-    (:func:`~bioform_mj.robots.level_support.level_support`): its wheel loads by the stance's statics, (2,) N."""
-    from bioform_mj.assess.causes import WHEEL_LOAD_MIN
-    from bioform_mj.robots.level_support import level_support
-
-    out = {}
-    for i, (p, lay) in enumerate(zip(plant.params, plant.layouts)):
-        lv = level_support(plant.model, settled, lay, p.mass * G, WHEEL_LOAD_MIN)
-        if lv is not None:
-            out[i] = np.array(lv["statics_n"])
-    return out
-
-
-def _level(plant: Any, i: int) -> bool:
-    """Whether robot ``i``'s wheels stand level with other supports on a settled copy of the scene
-    (:func:`~bioform_mj.robots.level_support.level_support`): unloaded there by MuJoCo's choice, not off the floor."""
-    from bioform_mj.assess.causes import WHEEL_LOAD_MIN
-    from bioform_mj.robots.level_support import level_support
-
-    return (
-        level_support(plant.model, plant.settled_data(), plant.layouts[i], plant.params[i].mass * G, WHEEL_LOAD_MIN)
-        is not None
-    )
-
-
-# ------------------------------------------------------------------ command line

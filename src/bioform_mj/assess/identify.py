@@ -19,8 +19,9 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from functools import partial
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -119,37 +120,53 @@ TURN_SKIP = 0.1
 ID_LEVELS = (1.0, 0.5, 0.0)
 
 
-def identify(
-    model_file,
-    *,
-    torque: float | None = None,
-    duration: float = ID_DURATION,
-    settle: float = 0.2,
-    timestep: float | None = None,
-    payload: tuple[float, float] | None = None,
-) -> dict:
-    """Identify ``(a, b)`` of one robot by constant wheel torques from rest (design §14).
+@dataclass
+class _Rest:
+    """The robot at rest on the floor, what every test of :func:`identify` reads (design §14)."""
 
-    ``model_file``: a shipped name, an MJCF path or a :class:`~bioform_mj.robots.refs.RobotRef` with a
-    mapping. Drive tests ``τ_L = τ_R = T_k`` at the torque levels :data:`ID_LEVELS` (``τ_a = 2 T_k``),
-    then turn tests ``τ_R = −τ_L``, each for ``duration`` s after ``settle`` s at rest on the floor,
-    read through :class:`~bioform_mj.plants.mujoco.plant.MujocoPlant` (υ and ω of the axle
-    midpoint, beside the centre of mass's forward speed and the chassis pitch). The fit skips the
-    start-up transient (:data:`ID_SKIP` s, less when a wheel drag decays faster) and fits all levels
-    at once in integral form, ``υ(t) − υ(t₀) = (a τ_a,k + c₀)(t − t₀) + β ∫υ``: the slope across
-    the levels is ``a``, the intercept a dead band ``−c₀/a`` (frictionloss, a braking caster), ``β =
-    −k`` a viscous drag (joint damping, back-EMF); the integral form averages a rocking chassis out
-    instead of reading it as drag. ``T`` defaults to half the motor limit or a quarter of the
-    traction limit ``μ N r``, whichever is lower. ``payload`` = (mass kg, yaw inertia kg·m²) adds a
-    payload at the axle midpoint first.
+    plant: Any  # the MujocoPlant holding the one robot
+    params: RobotParams
+    lay: Any  # its RobotLayout
+    dt: float  # the step, s
+    weight: float  # N
+    loads: np.ndarray  # (2,) the wheel loads, N (the stance's statics where the wheels stand level with others)
+    contacts: list[dict]  # on_floor at rest
+    level: dict | None  # level_support's reading, or None
+    findings: list[dict]  # every cause found so far (appended to by the later steps)
+    traction: float  # μ N r / f of the least-loaded wheel, N·m
+    f: float  # the wheel frictionloss, N·m
+    motor: float  # the lower wheel torque limit, N·m
+    base: dict  # the result's entries that do not depend on the tests
 
-    Returns a dict with the formula values, the identified values (``None`` when the robot cannot
-    be identified: then ``findings`` says why), their relative differences, the identified drag
-    and dead band beside their formulas, the centre of mass's ``a``, the rocking, the slip, the
-    floor contacts at rest, and ``findings``: every cause found (``kind`` one of ``damping``,
-    ``dead_band``, ``rocking``, ``slip``, ``braking_caster``, ``structural``, with ``detail`` and
-    numbers). Raises :class:`~bioform_mj.core.errors.InputError` (exit 2) for a mapping no test can use.
-    """
+
+@dataclass
+class _Schedule:
+    """How long the tests run and from which step they are fitted (design §14)."""
+
+    duration: float  # s, after the motor's and the drag's limits
+    n_settle: int  # steps at rest before each test
+    n_run: int  # steps of a drive test
+    k0: int  # first fitted step of a drive test
+    rate_form: bool  # fitted on the rates (a drag that settles υ within the test)
+    implicit_damping: bool  # the integrator's scheme (fit_levels)
+    explicit: bool
+
+
+@dataclass
+class _Drive:
+    """One set of drive tests and its fit of ``a`` (design §14.2)."""
+
+    torque: float  # the top level, N·m per wheel
+    levels: list[float]  # N·m per wheel
+    runs: list[dict]  # the tests, one per level (_Rig.run)
+    k0: int  # first fitted step
+    n_run: int  # steps
+    settle_s: float | None  # when the pitch settled, s, or None (not probed)
+
+
+def _bench(model_file, timestep: float | None, duration: float, settle: float, payload) -> tuple[Any, float, float]:
+    """The plant the tests run on: (plant, duration s, the formula's largest wheel drag rate 1/s). At the
+    model's own step unless ``timestep`` s is given or the wheel drag needs a finer one (:data:`DRAG_STEP`)."""
     from bioform_mj.core.errors import InputError
     from bioform_mj.plants.mujoco.plant import MujocoPlant  # a floor up; imported when used
     from bioform_mj.robots.prepare import prepare_robot
@@ -172,18 +189,23 @@ def identify(
         duration = min(duration, max(20.0 / k_drag, 50 * timestep))
     if payload is not None:
         plant.add_payload(0, *payload)
+    return plant, duration, k_drag
+
+
+def _at_rest(plant: Any, model_file, settle: float, duration: float) -> _Rest:
+    """Settle the robot ``settle`` s on the floor and read what touches it, with what load (design §14:
+    structural and braking-geom causes); refuses a step that would take days (``duration`` s per test)."""
+    from bioform_mj.robots.sanity import check_step_budget  # a <option timestep="1e-9"/> would step for days
+
     params, lay = plant.params[0], plant.layouts[0]
     model, data = plant.model, plant.data
     dt = float(model.opt.timestep)
-    from bioform_mj.robots.sanity import check_step_budget  # a <option timestep="1e-9"/> would step for days
-
     check_step_budget(
         settle + 2 * len(ID_LEVELS) * (settle + duration),
         dt,
         f"{getattr(model_file, 'model', model_file)}: identification",
         "give the robot file an <option timestep> of 1e-4 s or more (MuJoCo's default is 0.002 s)",
     )
-    # at rest: what touches the floor, with what load (design §14: structural and braking-geom causes)
     for k in range(max(1, round(settle / dt))):
         plant.step(np.zeros((1, 2)), k * dt)
     weight = params.mass * 9.81
@@ -198,8 +220,6 @@ def identify(
     # μ N r / f: the least-loaded wheel's own load, and only the share f of the torque that passes the
     # wheel's rotor pushes on the floor (design §13; a rotor of 10 m r² passes 5 %)
     traction = params.traction_torque(plant._wheel_friction(0), float(loads.min()))
-    f = params.wheel_frictionloss
-    motor = min(params.tau_max)
     base = {
         "model": str(lay.file),
         "formula": {"a": params.a_eff, "b": params.b_eff},
@@ -212,34 +232,50 @@ def identify(
         # the tests (robot check fails it); the notes that name the other wheels, or None
         "skid_steer": [n for n in lay.notes if "other wheel '" in n] or None,
     }
+    return _Rest(
+        plant, params, lay, dt, weight, loads, contacts, level, findings, traction,
+        params.wheel_frictionloss, min(params.tau_max), base,
+    )  # fmt: skip
 
-    def cannot(why: str) -> dict:
-        if not any(x["kind"] in ("structural", "braking_caster", "dead_band") for x in findings):
-            findings.append(_finding("structural", why))
-        return {
-            **base,
-            "identified": {"a": None, "b": None},
-            "relative_error": {"a": None, "b": None},
-            "identified_com": {"a": None},
-            "drag_rate_per_s": {"formula": params.unmodelled(0.0, 0.0)["drag_rate_per_s"], "identified": None},
-            "deadband_torque_Nm": {"formula": [2 * f, 2 * f], "identified": None},
-            "rocking": None,
-            "slip_ratio": None,
-            "findings": findings,
-            "identifiable": False,
-            "not_identified": why,
-            "test": {"timestep_s": dt, "mujoco_warnings": 0},
-        }
 
+def _not_identified(rest: _Rest, why: str) -> dict:
+    """The result of a robot the tests cannot measure: ``why``, as a ``structural`` finding where no finding
+    already explains it (design §14)."""
+    findings, params, f = rest.findings, rest.params, rest.f
+    if not any(x["kind"] in ("structural", "braking_caster", "dead_band") for x in findings):
+        findings.append(_finding("structural", why))
+    return {
+        **rest.base,
+        "identified": {"a": None, "b": None},
+        "relative_error": {"a": None, "b": None},
+        "identified_com": {"a": None},
+        "drag_rate_per_s": {"formula": params.unmodelled(0.0, 0.0)["drag_rate_per_s"], "identified": None},
+        "deadband_torque_Nm": {"formula": [2 * f, 2 * f], "identified": None},
+        "rocking": None,
+        "slip_ratio": None,
+        "findings": findings,
+        "identifiable": False,
+        "not_identified": why,
+        "test": {"timestep_s": rest.dt, "mujoco_warnings": 0},
+    }
+
+
+def _test_torque(rest: _Rest, torque: float | None) -> tuple[float, str | None]:
+    """The top test torque, N·m per wheel (``torque``, or half the motor limit, at most a quarter of the static
+    traction limit μ N r, raised to clear the dead band), and None; or (nan, why) where no torque can test the
+    robot. Raises InputError for a given torque outside (0, motor limit]."""
+    from bioform_mj.core.errors import InputError
+
+    findings, f, motor, traction = rest.findings, rest.f, rest.motor, rest.traction
     if any(x["kind"] == "structural" and "self_contacts" not in x for x in findings):
-        return cannot(findings[-1]["detail"])
+        return math.nan, findings[-1]["detail"]
     if torque is None:  # half the motor limit, at most a quarter of the static traction limit μ N r
         if not (math.isfinite(motor) and motor > 0):
-            return cannot(f"the motor limit is {motor:g} N·m: no torque to test with")
+            return math.nan, f"the motor limit is {motor:g} N·m: no torque to test with"
         if not traction > 0:
-            return cannot(
-                f"the wheels have no traction: friction μ = {plant._wheel_friction(0):g} on a wheel load of "
-                f"{float(loads.min()):.3g} N"
+            return math.nan, (
+                f"the wheels have no traction: friction μ = {rest.plant._wheel_friction(0):g} on a wheel load of "
+                f"{float(rest.loads.min()):.3g} N"
             )
         torque = min(0.5 * motor, 0.25 * traction)
         if f > 0 and ID_LEVELS[-1] * torque <= 1.2 * f and torque <= 1.3 * f:
@@ -257,17 +293,24 @@ def identify(
                         deadband_torque_Nm=2 * f,
                     )
                 )
-                return cannot(findings[-1]["detail"])
+                return math.nan, findings[-1]["detail"]
             torque = hi
     if not (math.isfinite(torque) and 0 < torque <= motor):
         raise InputError(f"identify: torque must be in (0, {motor:g}] N·m, got {torque}")
+    return torque, None
 
-    # the lowest level: a third of the top one, or halfway between the dead band and it
-    def levels_of(top: float) -> list[float]:
-        lo = top / 3 if top / 3 > 1.2 * f else f + 0.5 * (top - f)
-        return [lo + x * (top - lo) for x in ID_LEVELS]
 
-    levels = levels_of(torque)
+def _levels_of(top: float, f: float) -> list[float]:
+    """The torque levels (N·m per wheel) below ``top``: the lowest a third of it, or halfway between the dead band
+    ``f`` and it."""
+    lo = top / 3 if top / 3 > 1.2 * f else f + 0.5 * (top - f)
+    return [lo + x * (top - lo) for x in ID_LEVELS]
+
+
+def _schedule(rest: _Rest, torque: float, duration: float, settle: float, k_drag: float) -> _Schedule:
+    """The tests' length and fitted window at the top torque ``torque`` N·m (design §14, §8.2: a DC motor stays
+    below its torque–speed line), ``duration`` and ``settle`` s, the wheel drag rate ``k_drag`` 1/s."""
+    params, model, dt = rest.params, rest.plant.model, rest.dt
     if params.motor == "dc":  # design §8.2: stay below the torque–speed line; see the drag's transient
         k_v = params.unmodelled(0.0, 0.0)["drag_rate_per_s"][0]
         w0 = 0.3 * params.motor_no_load_speed * params.wheel_radius  # 30 % of the no-load wheel speed, m/s
@@ -290,19 +333,58 @@ def identify(
     rate_form = k_drag * n_run * dt > STRONG_DRAG
     if rate_form:  # no pitch transient to skip in the first steps of a drag this fast: fit them all
         k0 = 0
-    base_id = model.body(lay.base).id
-    wdof, wsign, r = plant._wheel_dof[0], plant._wheel_sign[0], params.wheel_radius
-    swivels = swivel_casters(model, lay)
-    fit = partial(fit_levels, dt=dt, implicit_damping=implicit_damping, explicit=explicit, rate_form=rate_form)
+    return _Schedule(duration, n_settle, n_run, k0, rate_form, implicit_damping, explicit)
 
-    def run(tau_l: float, tau_r: float, n_run: int) -> dict:
+
+def _turn_plan(rest: _Rest, torque: float, levels: list[float], duration: float) -> tuple[int, list[float]]:
+    """The turn tests: (steps, torque levels N·m per wheel). ω at the end at most OMEGA_ID rad/s, so the υ·ω
+    coupling of a centre of mass off the axle (∝ ω²) stays small; short and fitted from rest: a chassis hardly
+    pitches in a turn, and the soft contact's creep grows with ω (tb3: b 8 % low over 1 s, 0.01 % over 0.2 s)."""
+    params, dt, f = rest.params, rest.dt, rest.f
+    turn_s = min(TURN_DURATION, duration)
+    n_turn = max(round(turn_s / dt), 6)
+    t_turn = min(torque, OMEGA_ID / (2 * params.b_eff * turn_s))
+    if params.motor == "dc":  # wheel rates l ω / r below 30 % of no-load in the turn tests too
+        t_turn = min(
+            t_turn,
+            0.3 * params.motor_no_load_speed * params.wheel_radius / (params.half_track * 2 * params.b_eff * turn_s),
+        )
+    turn_levels = [x * t_turn / torque for x in levels]
+    if f > 0 and min(turn_levels) < 1.1 * f:
+        turn_levels = levels  # the dead band needs the turn tests at the drive torques
+    return n_turn, turn_levels
+
+
+class _Rig:
+    """Runs one test from rest at constant wheel torques and records what the fits read (design §14)."""
+
+    def __init__(self, rest: _Rest, sched: _Schedule) -> None:
+        self.rest, self.sched = rest, sched
+        plant, lay = rest.plant, rest.lay
+        self.base_id = plant.model.body(lay.base).id
+        self.wdof, self.wsign, self.r = plant._wheel_dof[0], plant._wheel_sign[0], rest.params.wheel_radius
+        self.swivels = swivel_casters(plant.model, lay)
+        self.fit = partial(
+            fit_levels,
+            dt=rest.dt,
+            implicit_damping=sched.implicit_damping,
+            explicit=sched.explicit,
+            rate_form=sched.rate_form,
+        )
+
+    def run(self, tau_l: float, tau_r: float, n_run: int) -> dict:
+        """One test of ``n_run`` steps at ``tau_l``, ``tau_r`` N·m after ``n_settle`` steps at rest: the series of
+        υ, ω (``z``), the centre of mass's speed, the pitch, the rim speed and the heading, and what dragged."""
+        plant, lay, dt = self.rest.plant, self.rest.lay, self.rest.dt
+        model, data = plant.model, plant.data
+        base_id, wdof, wsign, r = self.base_id, self.wdof, self.wsign, self.r
         mujoco.mj_resetData(model, data)  # not plant.reset(): that would remove the payload
         # design §14.1: each caster swivel starts trailing the coming motion (driving: behind its axis;
         # turning: tangent to its circle about the axle midpoint), as it runs once it has turned round
-        align_swivels(data, swivels, lay.axle, tau_l + tau_r, tau_r - tau_l)
+        align_swivels(data, self.swivels, lay.axle, tau_l + tau_r, tau_r - tau_l)
         mujoco.mj_forward(model, data)
         zero = np.zeros((1, 2))
-        for k in range(n_settle):
+        for k in range(self.sched.n_settle):
             plant.step(zero, k * dt)
         pose0, _ = plant.observe()
         tau = np.array([[tau_l, tau_r]])
@@ -353,34 +435,18 @@ def identify(
             heading_change_rad=float(np.angle(np.exp(1j * (pose[0, 2] - th0)))),
         )
 
-    # turn torque: ω at the end at most OMEGA_ID rad/s, so the υ·ω coupling of a centre of mass
-    # off the axle (∝ ω²) stays small
-    # the turn tests stay short and are fitted from rest: a chassis hardly pitches in a turn, and the
-    # soft contact's creep grows with ω (tb3: b 8 % low over 1 s, 0.01 % over 0.2 s)
-    turn_s = min(TURN_DURATION, duration)
-    n_turn = max(round(turn_s / dt), 6)
-    t_turn = min(torque, OMEGA_ID / (2 * params.b_eff * turn_s))
-    if params.motor == "dc":  # wheel rates l ω / r below 30 % of no-load in the turn tests too
-        t_turn = min(
-            t_turn,
-            0.3 * params.motor_no_load_speed * params.wheel_radius / (params.half_track * 2 * params.b_eff * turn_s),
-        )
-    turn_levels = [x * t_turn / torque for x in levels]
-    if f > 0 and min(turn_levels) < 1.1 * f:
-        turn_levels = levels  # the dead band needs the turn tests at the drive torques
-    k0_first, n_first = k0, n_run
-
-    def drive_tests(levels_: list[float]) -> tuple[list[dict], int, int, float | None]:
-        """The drive tests at ``levels_``: (runs, first fitted step, steps, when the pitch settled or None)."""
-        k0_, n_run_ = k0_first, n_first
-        if rate_form or n_run_ * dt < ID_DURATION - 1e-9 or duration < ID_DURATION - 1e-9:
-            return [run(T, T, n_run_) for T in levels_], k0_, n_run_, None
+    def drive_tests(self, torque: float, levels: list[float]) -> _Drive:
+        """The drive tests at ``levels`` (top ``torque``), N·m per wheel."""
+        s, dt = self.sched, self.rest.dt
+        k0_, n_run_ = s.k0, s.n_run
+        if s.rate_form or n_run_ * dt < ID_DURATION - 1e-9 or s.duration < ID_DURATION - 1e-9:
+            return _Drive(torque, levels, [self.run(T, T, n_run_) for T in levels], k0_, n_run_, None)
         # a chassis that keeps pitching past ID_SKIP (a tall one bouncing between its casters): the drive
         # tests run ID_MAX_S; where every level's pitch settles (within SETTLED_DEG of its final lean)
         # later than ID_SKIP, the ID_WINDOW after the last of them is fitted, else the first
         # duration s as for any robot (the same numbers: the runs are deterministic) (design §14)
         n_long = round(ID_MAX_S / dt)
-        drive_ = [run(T, T, n_long) for T in levels_]
+        drive_ = [self.run(T, T, n_long) for T in levels]
         settles, upset = [], False
         for r_ in drive_:
             p_ = r_["pitch"]
@@ -391,124 +457,108 @@ def identify(
             upset |= bool(np.abs(r_["heading"][: n_run_ + 1] - r_["heading"][0]).max() > DRIVE_HEADING_MAX)
         settle_ = max(settles)
         if settle_ > ID_SKIP and not upset:
-            return drive_, round(min(settle_ + 0.05, ID_MAX_S - ID_WINDOW) / dt), n_long, settle_
+            k0_long = round(min(settle_ + 0.05, ID_MAX_S - ID_WINDOW) / dt)
+            return _Drive(torque, levels, drive_, k0_long, n_long, settle_)
         for r_ in drive_:
             for key in ("z", "vcom", "pitch", "rim", "heading"):
                 r_[key] = r_[key][: n_run_ + 1]
-        return drive_, k0_, n_run_, settle_
+        return _Drive(torque, levels, drive_, k0_, n_run_, settle_)
 
-    drive, k0, n_run, settle_s = drive_tests(levels)
-    # design §14.1: a drive test is one while the robot drives straight; a centre of mass beside the axle
-    # couples υ into ω (§8.1: PAL TIAGo, 48 mm: 1.4 rad in 1 s at a quarter of the traction limit, a 10 %
-    # low); where the top level turns by more than DRIVE_HEADING_MAX, the tests rerun at a torque scaled
-    # down to turn by about that much (the turn grows with the torque), at most DRIVE_SCALE_MIN down and
-    # every level clear of the dead band
-    turned = float(np.abs(drive[0]["heading"][: n_first + 1] - drive[0]["heading"][0]).max())
-    first_torque = torque
+
+def _straight_drive(rig: _Rig, torque: float) -> tuple[_Drive, float]:
+    """The drive tests at ``torque`` N·m, rerun lower where they do not drive straight: (tests, how far the first
+    top level turned, rad). design §14.1: a drive test is one while the robot drives straight; a centre of mass
+    beside the axle couples υ into ω (§8.1: PAL TIAGo, 48 mm: 1.4 rad in 1 s at a quarter of the traction limit,
+    a 10 % low); where the top level turns by more than DRIVE_HEADING_MAX, the tests rerun at a torque scaled
+    down to turn by about that much (the turn grows with the torque), at most DRIVE_SCALE_MIN down and every
+    level clear of the dead band."""
+    f = rig.rest.f
+    drive = rig.drive_tests(torque, _levels_of(torque, f))
+    turned = float(np.abs(drive.runs[0]["heading"][: rig.sched.n_run + 1] - drive.runs[0]["heading"][0]).max())
     if turned > DRIVE_HEADING_MAX:
         lower = max(torque * max(DRIVE_HEADING_MAX / turned, DRIVE_SCALE_MIN), 3 * f)
         if lower < 0.9 * torque:
-            torque, levels = lower, levels_of(lower)
-            drive, k0, n_run, settle_s = drive_tests(levels)
-    turn = [run(-T, T, n_turn) for T in turn_levels]
-    # design §14.2: a geom that is no wheel and no caster and drags on the floor while the robot drives (a chassis
-    # edge the drive torque pitches onto) brakes it, whether or not it carried load at rest
-    named = frozenset(strip_prefix(g, _prefix(lay)) for g in lay.casters)  # the mapping's casters (design §13)
-    findings += moving_brakes(
-        findings, drive[0]["dragging"], weight, params.wheel_radius, lay.base, 2 * levels[0], named
-    )
-    tau_a = [2 * T for T in levels]  # τ_a = τ_L + τ_R
-    tau_b = [2 * T for T in turn_levels]  # τ_b = τ_R − τ_L (design §5 sign fix)
-    # the drag term only where the model has a drag (wheel damping, back-EMF): free, it reads the
-    # slow pitch settling of a tall chassis as a drag (design §14); without, a drag the formula does
-    # not know shows in the free fit of the centre of mass (drag_rate_per_s.free_fit)
-    k_form = params.unmodelled(0.0, 0.0)["drag_rate_per_s"]
-    a_id, ca, be, res_a = fit(drive, tau_a, "z", 0, k_form[0] > 0, k0, residual=True)
-    heading_torque, fit_rerun = torque, None
-    # design §14.2: a drive fit that does not hold (a chassis edge the torque pitches onto, a chassis bouncing on
-    # it) reruns once at FIT_RERUN_SCALE of the torque, every level clear of the dead band; kept where it holds
+            drive = rig.drive_tests(lower, _levels_of(lower, f))
+    return drive, turned
+
+
+def _fit_drive(rig: _Rig, drive: _Drive, drag: bool) -> tuple[_Drive, tuple[float, ...], dict | None]:
+    """The fit of ``a`` on ``drive`` (``drag``: with the drag term): (the tests kept, (a, c₀, β, residual), the
+    rerun's record or None). design §14.2: a drive fit that does not hold (a chassis edge the torque pitches onto,
+    a chassis bouncing on it) reruns once at FIT_RERUN_SCALE of the torque, every level clear of the dead band;
+    kept where it holds."""
+    f, torque = rig.rest.f, drive.torque
+    a_id, ca, be, res_a = rig.fit(drive.runs, [2 * T for T in drive.levels], "z", 0, drag, drive.k0, residual=True)
+    fit_rerun = None
     if not fit_holds(a_id, ca, res_a, torque) and (lower := max(torque * FIT_RERUN_SCALE, 3 * f)) < 0.9 * torque:
-        levels2 = levels_of(lower)
-        drive2, k02, n_run2, settle2 = drive_tests(levels2)
-        tau_a2 = [2 * T for T in levels2]
-        a2, ca2, be2, res2 = fit(drive2, tau_a2, "z", 0, k_form[0] > 0, k02, residual=True)
+        drive2 = rig.drive_tests(lower, _levels_of(lower, f))
+        fit2 = rig.fit(drive2.runs, [2 * T for T in drive2.levels], "z", 0, drag, drive2.k0, residual=True)
         fit_rerun = {
             "torque_Nm": lower,
             "first_torque_Nm": torque,
             "first_a": a_id,
             "first_fit_residual": res_a,
             "first_intercept_Nm": -ca / a_id if a_id else None,
-            "kept": fit_holds(a2, ca2, res2, lower),
+            "kept": fit_holds(fit2[0], fit2[1], fit2[3], lower),
         }
         if fit_rerun["kept"]:
-            torque, levels, drive, k0, n_run, settle_s, tau_a = lower, levels2, drive2, k02, n_run2, settle2, tau_a2
-            a_id, ca, be, res_a = a2, ca2, be2, res2
-    k0_turn = 0 if rate_form or f == 0 else min(round(TURN_SKIP / dt), n_turn - 4)
-    b_id, cb, ge, res_b = fit(turn, tau_b, "z", 1, k_form[1] > 0, k0_turn, residual=True)
-    a_com, _, be_com = fit(drive, tau_a, "vcom", None, k_form[0] > 0, k0)
-    _, _, be_free = fit(drive, tau_a, "vcom", None, True, k0)
-    _, _, ge_free = fit(turn, tau_b, "z", 1, True, k0_turn)
-    windows = [(n_run - k0) * dt, (n_turn - k0_turn) * dt]
-    truth = params.unmodelled(0.0, 0.0)
-    ok = all(math.isfinite(x) for x in (a_id, b_id)) and a_id > 0 and b_id > 0
-    # design §14.2: a robot with casters whose a or b is off reruns its tests without what the casters resist
-    # with (their joints' damping and frictionloss, their own inertia, their scrub): the share they remove is theirs
-    casters, caster_cf = caster_parts(model, lay), None
-    gaps = (a_id / params.a_eff - 1, b_id / params.b_eff - 1) if ok else (0.0, 0.0)
-    if casters["joints"] and max(abs(g) for g in gaps) > CASTER_CF_DEV:
+            return drive2, fit2, fit_rerun
+    return drive, (a_id, ca, be, res_a), fit_rerun
 
-        def measure() -> tuple[float | None, float | None]:
-            a_ = b_ = None
-            if abs(gaps[0]) > CASTER_CF_DEV:
-                drive_, k0_, _, _ = drive_tests(levels)
-                a_ = fit(drive_, tau_a, "z", 0, k_form[0] > 0, k0_)[0]
-            if abs(gaps[1]) > CASTER_CF_DEV:
-                b_ = fit([run(-T, T, n_turn) for T in turn_levels], tau_b, "z", 1, k_form[1] > 0, k0_turn)[0]
-            return a_, b_
 
-        steps = caster_counterfactual(model, casters, measure)
-        caster_cf = caster_finding(
-            model,
-            casters,
-            (params.a_eff, params.b_eff),
-            (a_id, b_id),
-            steps,
-            lay.base[: lay.base.index("/") + 1] if "/" in lay.base else "",
-            (k_form[0] > 0, k_form[1] > 0),
-        )
-        if caster_cf is not None:
-            caster_cf["steps"] = {k: list(v) for k, v in steps.items()}
-    fitted = fit_findings(
-        findings,
-        params=params,
-        drive=drive,
-        k0=k0,
-        dt=dt,
-        ok=ok,
-        k_form=k_form,
-        fits=dict(
-            a_id=a_id,
-            b_id=b_id,
-            a_com=a_com,
-            ca=ca,
-            cb=cb,
-            be=be,
-            ge=ge,
-            be_free=be_free,
-            ge_free=ge_free,
-            res_a=res_a,
-            res_b=res_b,
-        ),
-        windows=windows,
-        truth=truth,
-        torque=torque,
-        f=f,
-        settle_s=settle_s,
-        id_skip=ID_SKIP,
+def _caster_share(
+    rig: _Rig,
+    drive: _Drive,
+    turn_levels: list[float],
+    n_turn: int,
+    k0_turn: int,
+    k_form: list[float],
+    ab: tuple[float, float],
+) -> dict | None:
+    """The ``caster_resistance`` finding or None (design §14.2): a robot with casters whose identified ``ab`` =
+    (a, b) is off reruns its tests without what the casters resist with (their joints' damping and frictionloss,
+    their own inertia, their scrub): the share they remove is theirs."""
+    params, lay, model = rig.rest.params, rig.rest.lay, rig.rest.plant.model
+    tau_a, tau_b = [2 * T for T in drive.levels], [2 * T for T in turn_levels]
+    casters = caster_parts(model, lay)
+    gaps = (ab[0] / params.a_eff - 1, ab[1] / params.b_eff - 1)
+    if not (casters["joints"] and max(abs(g) for g in gaps) > CASTER_CF_DEV):
+        return None
+
+    def measure() -> tuple[float | None, float | None]:
+        a_ = b_ = None
+        if abs(gaps[0]) > CASTER_CF_DEV:
+            drive_ = rig.drive_tests(drive.torque, drive.levels)
+            a_ = rig.fit(drive_.runs, tau_a, "z", 0, k_form[0] > 0, drive_.k0)[0]
+        if abs(gaps[1]) > CASTER_CF_DEV:
+            turns = [rig.run(-T, T, n_turn) for T in turn_levels]
+            b_ = rig.fit(turns, tau_b, "z", 1, k_form[1] > 0, k0_turn)[0]
+        return a_, b_
+
+    steps = caster_counterfactual(model, casters, measure)
+    caster_cf = caster_finding(
+        model,
+        casters,
+        (params.a_eff, params.b_eff),
+        ab,
+        steps,
+        lay.base[: lay.base.index("/") + 1] if "/" in lay.base else "",
+        (k_form[0] > 0, k_form[1] > 0),
     )
-    rock, transient_deg, slip = fitted["rock"], fitted["transient_deg"], fitted["slip"]
-    drag, db, com_gap = fitted["drag"], fitted["db"], fitted["com_gap"]
-    struck = [c for c in drive[0]["dragging"] if c["peak_n"] > CASTER_LOAD * weight]
+    if caster_cf is not None:
+        caster_cf["steps"] = {k: list(v) for k, v in steps.items()}
+    return caster_cf
+
+
+def _final_findings(
+    rest: _Rest, drive: _Drive, caster_cf: dict | None, k_form: list[float], ok: bool, ab: tuple[float, float]
+) -> None:
+    """Completes ``rest.findings`` after the fits (design §14.2): what a rocking chassis strikes the floor with;
+    the casters' share, whose drag is then not said as damping; a level stance whose drive test does not follow
+    the formula (``ab`` = the identified (a, b), ``ok`` whether they are)."""
+    findings, params, level = rest.findings, rest.params, rest.level
+    a_id, b_id = ab
+    struck = [c for c in drive.runs[0]["dragging"] if c["peak_n"] > CASTER_LOAD * rest.weight]
     for fd in [x for x in findings if x["kind"] == "rocking"][:1] if struck else []:  # design §14.2: on what
         fd["detail"] += "; it strikes the floor with " + ", ".join(
             f"'{c['geom']}' (body '{c['body']}', up to {c['peak_n']:.3g} N, {c['load_n']:.3g} N on average)"
@@ -534,18 +584,118 @@ def identify(
                 wheel_load_n=level["measured_n"],
             ),
         )
+
+
+def identify(
+    model_file,
+    *,
+    torque: float | None = None,
+    duration: float = ID_DURATION,
+    settle: float = 0.2,
+    timestep: float | None = None,
+    payload: tuple[float, float] | None = None,
+) -> dict:
+    """Identify ``(a, b)`` of one robot by constant wheel torques from rest (design §14).
+
+    ``model_file``: a shipped name, an MJCF path or a :class:`~bioform_mj.robots.refs.RobotRef` with a
+    mapping. Drive tests ``τ_L = τ_R = T_k`` at the torque levels :data:`ID_LEVELS` (``τ_a = 2 T_k``),
+    then turn tests ``τ_R = −τ_L``, each for ``duration`` s after ``settle`` s at rest on the floor,
+    read through :class:`~bioform_mj.plants.mujoco.plant.MujocoPlant` (υ and ω of the axle
+    midpoint, beside the centre of mass's forward speed and the chassis pitch). The fit skips the
+    start-up transient (:data:`ID_SKIP` s, less when a wheel drag decays faster) and fits all levels
+    at once in integral form, ``υ(t) − υ(t₀) = (a τ_a,k + c₀)(t − t₀) + β ∫υ``: the slope across
+    the levels is ``a``, the intercept a dead band ``−c₀/a`` (frictionloss, a braking caster), ``β =
+    −k`` a viscous drag (joint damping, back-EMF); the integral form averages a rocking chassis out
+    instead of reading it as drag. ``T`` defaults to half the motor limit or a quarter of the
+    traction limit ``μ N r``, whichever is lower. ``payload`` = (mass kg, yaw inertia kg·m²) adds a
+    payload at the axle midpoint first.
+
+    Returns a dict with the formula values, the identified values (``None`` when the robot cannot
+    be identified: then ``findings`` says why), their relative differences, the identified drag
+    and dead band beside their formulas, the centre of mass's ``a``, the rocking, the slip, the
+    floor contacts at rest, and ``findings``: every cause found (``kind`` one of ``damping``,
+    ``dead_band``, ``rocking``, ``slip``, ``braking_caster``, ``structural``, with ``detail`` and
+    numbers). Raises :class:`~bioform_mj.core.errors.InputError` (exit 2) for a mapping no test can use.
+
+    The steps: :func:`_bench` (the plant), :func:`_at_rest`, :func:`_test_torque`, :func:`_schedule`,
+    :func:`_straight_drive`, the turn tests (:func:`_turn_plan`), :func:`_fit_drive`, the turn fit,
+    :func:`_caster_share`, :func:`_final_findings`, the result.
+    """
+    plant, duration, k_drag = _bench(model_file, timestep, duration, settle, payload)
+    rest = _at_rest(plant, model_file, settle, duration)
+    torque, why = _test_torque(rest, torque)
+    if why is not None:
+        return _not_identified(rest, why)
+    params, lay, dt, f, findings = rest.params, rest.lay, rest.dt, rest.f, rest.findings
+    sched = _schedule(rest, torque, duration, settle, k_drag)
+    n_turn, turn_levels = _turn_plan(rest, torque, _levels_of(torque, f), sched.duration)
+    rig = _Rig(rest, sched)
+    drive, turned = _straight_drive(rig, torque)
+    first_torque, heading_torque = torque, drive.torque
+    turn = [rig.run(-T, T, n_turn) for T in turn_levels]
+    # design §14.2: a geom that is no wheel and no caster and drags on the floor while the robot drives (a chassis
+    # edge the drive torque pitches onto) brakes it, whether or not it carried load at rest
+    named = frozenset(strip_prefix(g, _prefix(lay)) for g in lay.casters)  # the mapping's casters (design §13)
+    findings += moving_brakes(
+        findings, drive.runs[0]["dragging"], rest.weight, params.wheel_radius, lay.base, 2 * drive.levels[0], named
+    )
+    # the drag term only where the model has a drag (wheel damping, back-EMF): free, it reads the
+    # slow pitch settling of a tall chassis as a drag (design §14); without, a drag the formula does
+    # not know shows in the free fit of the centre of mass (drag_rate_per_s.free_fit)
+    k_form = params.unmodelled(0.0, 0.0)["drag_rate_per_s"]
+    drive, (a_id, ca, be, res_a), fit_rerun = _fit_drive(rig, drive, k_form[0] > 0)
+    torque, levels, tau_a = drive.torque, drive.levels, [2 * T for T in drive.levels]  # τ_a = τ_L + τ_R
+    tau_b = [2 * T for T in turn_levels]  # τ_b = τ_R − τ_L (design §5 sign fix)
+    k0_turn = 0 if sched.rate_form or f == 0 else min(round(TURN_SKIP / dt), n_turn - 4)
+    b_id, cb, ge, res_b = rig.fit(turn, tau_b, "z", 1, k_form[1] > 0, k0_turn, residual=True)
+    a_com, _, be_com = rig.fit(drive.runs, tau_a, "vcom", None, k_form[0] > 0, drive.k0)
+    _, _, be_free = rig.fit(drive.runs, tau_a, "vcom", None, True, drive.k0)
+    _, _, ge_free = rig.fit(turn, tau_b, "z", 1, True, k0_turn)
+    windows = [(drive.n_run - drive.k0) * dt, (n_turn - k0_turn) * dt]
+    truth = params.unmodelled(0.0, 0.0)
+    ok = all(math.isfinite(x) for x in (a_id, b_id)) and a_id > 0 and b_id > 0
+    caster_cf = _caster_share(rig, drive, turn_levels, n_turn, k0_turn, k_form, (a_id, b_id)) if ok else None
+    fitted = fit_findings(
+        findings,
+        params=params,
+        drive=drive.runs,
+        k0=drive.k0,
+        dt=dt,
+        ok=ok,
+        k_form=k_form,
+        fits=dict(
+            a_id=a_id,
+            b_id=b_id,
+            a_com=a_com,
+            ca=ca,
+            cb=cb,
+            be=be,
+            ge=ge,
+            be_free=be_free,
+            ge_free=ge_free,
+            res_a=res_a,
+            res_b=res_b,
+        ),
+        windows=windows,
+        truth=truth,
+        torque=torque,
+        f=f,
+        settle_s=drive.settle_s,
+        id_skip=ID_SKIP,
+    )
+    _final_findings(rest, drive, caster_cf, k_form, ok, (a_id, b_id))
     if not ok:
-        return cannot(
-            f"the tests give a = {a_id:.3g}, b = {b_id:.3g}: the robot does not move forward under forward torque"
+        return _not_identified(
+            rest, f"the tests give a = {a_id:.3g}, b = {b_id:.3g}: the robot does not move forward under forward torque"
         )
     return {
-        **base,
+        **rest.base,
         "identified": {"a": a_id, "b": b_id},
         "relative_error": {"a": a_id / params.a_eff - 1, "b": b_id / params.b_eff - 1},
         "identified_com": {"a": a_com, "relative_error": a_com / params.a_eff - 1},
-        "identified_axle_vs_com": com_gap,
-        "drag_rate_per_s": {"formula": truth["drag_rate_per_s"], "identified": drag},
-        "deadband_torque_Nm": {"formula": truth["deadband_torque_Nm"], "identified": db},
+        "identified_axle_vs_com": fitted["com_gap"],
+        "drag_rate_per_s": {"formula": truth["drag_rate_per_s"], "identified": fitted["drag"]},
+        "deadband_torque_Nm": {"formula": truth["deadband_torque_Nm"], "identified": fitted["db"]},
         # design §14.2: the fits' intercepts as torques (a negative one: the linear model does not hold)
         "fit_intercept_Nm": fitted["intercept"],
         "fit_residual": {"a": res_a, "b": res_b},
@@ -553,8 +703,8 @@ def identify(
         # is then a reading of the test, not the robot's)
         "fit_holds": {"a": fitted["holds"][0], "b": fitted["holds"][1]},
         "fit_problem": fitted["why_not"] or None,
-        "rocking": {**rock, "transient_deg": transient_deg, "settled_s": settle_s},
-        "slip_ratio": slip,
+        "rocking": {**fitted["rock"], "transient_deg": fitted["transient_deg"], "settled_s": drive.settle_s},
+        "slip_ratio": fitted["slip"],
         "findings": findings,
         "identifiable": True,
         "test": {
@@ -569,23 +719,23 @@ def identify(
             ),
             # design §14.2: the drive tests rerun at a lower torque where their first fit did not hold
             "fit_rerun": fit_rerun,
-            "caster_swivels": [s_.joint.split("/", 1)[-1] for s_ in swivels],
+            "caster_swivels": [s_.joint.split("/", 1)[-1] for s_ in rig.swivels],
             # what resists turning them round (a start from other angles, a change of direction)
-            "caster_swivel_resistance": [x.resistance() for x in swivels if x.damping or x.frictionloss],
+            "caster_swivel_resistance": [x.resistance() for x in rig.swivels if x.damping or x.frictionloss],
             "turn_torque_Nm": turn_levels[0],
             "turn_torque_levels_Nm": turn_levels,
-            "duration_s": n_run * dt,
+            "duration_s": drive.n_run * dt,
             "turn_duration_s": n_turn * dt,
             "turn_fit_from_s": k0_turn * dt,
-            "fit_from_s": k0 * dt,
-            "pitch_settled_s": settle_s,
-            "fit": "rates" if rate_form else "summed speed",
+            "fit_from_s": drive.k0 * dt,
+            "pitch_settled_s": drive.settle_s,
+            "fit": "rates" if sched.rate_form else "summed speed",
             "settle_s": settle,
             "timestep_s": dt,
-            "integrator": mujoco.mjtIntegrator(model.opt.integrator).name,
-            "drive_lateral_drift_m": drive[0]["lateral_m"],
-            "drive_heading_change_rad": drive[0]["heading_change_rad"],
-            "mujoco_warnings": sum(x["warnings"] for x in drive + turn),
+            "integrator": mujoco.mjtIntegrator(plant.model.opt.integrator).name,
+            "drive_lateral_drift_m": drive.runs[0]["lateral_m"],
+            "drive_heading_change_rad": drive.runs[0]["heading_change_rad"],
+            "mujoco_warnings": sum(x["warnings"] for x in drive.runs + turn),
         },
     }
 

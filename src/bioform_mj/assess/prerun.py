@@ -1,7 +1,7 @@
 """The robot check a run makes before it starts (design §14.2).
 
 ``bioform run`` (and :func:`bioform_mj.run.simulate.simulate`, so a sweep's every run) refuses with exit 2
-what ``robot check`` fails and no run survives (``robot_check.run_refusals``: a skid-steer base,
+what ``robot check`` fails and no run survives (``assess.feasibility.run_refusals``: a skid-steer base,
 a statically unstable chassis, ...). What else ``robot check`` fails (an identification more than
 ``FAIL_ID`` off the formula, with its named cause; a caster that stops the robot) is a ``warning:``
 before the run and an entry in ``summary.json`` (``robot_check``): the user may want to see what
@@ -177,7 +177,7 @@ def before_run(sc: Any, plant: Any) -> dict[str, Any]:
     ``robots``: per distinct robot ``{"model", "followers" (1-based), "verdict", "fail_reasons",
     "cause", "formula", "identified", "relative_error", "seconds" (of the check itself), "from"
     (computed, memory or disk)}``; ``warnings``: one line per reason a robot fails ``robot check``
-    (what :func:`~bioform_mj.assess.check.run_refusals` refuses never gets here: exit 2 before).
+    (what :func:`~bioform_mj.assess.feasibility.run_refusals` refuses never gets here: exit 2 before).
     Warned by the caller before the run. ``plant``: the built scene (only MuJoCo plants are checked)."""
     t0 = time.perf_counter()
     if skipped():

@@ -675,12 +675,12 @@ class BatchRun:
 
 
 def _refuse_what_robot_check_fails(plant: Any) -> None:
-    """``bioform run``'s refusals (``robot_check.run_refusals``, design §14) for the batch's one scene:
+    """``bioform run``'s refusals (``assess.feasibility.run_refusals``, design §14) for the batch's one scene:
     a skid-steer base, a statically unstable chassis, wheels off the floor, a dead band at the motor
     limit are exit 2 before any world runs."""
     import mujoco
 
-    from bioform_mj.assess.check import run_refusals
+    from bioform_mj.assess.feasibility import run_refusals
     from bioform_mj.core.errors import InputError
 
     scratch = mujoco.MjData(plant.model)

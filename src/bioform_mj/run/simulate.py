@@ -419,7 +419,7 @@ def _timeline(sc: Scenario, traj: Any) -> _Timeline:
 
 def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], dict | None, dict | None]:
     """``(imported, feasibility, robot_check, demand)``: the guesses of a URDF import (design §12), what the
-    scenario asks of the MuJoCo robots (``robot_check.feasibility``) and what ``robot check`` fails
+    scenario asks of the MuJoCo robots (``assess.feasibility.feasibility``) and what ``robot check`` fails
     them for (``prerun.before_run``, design §14.2; None for other plants), warned before the run (the
     CLI prints ``warning:`` lines) and kept for summary.json."""
     imported = import_warnings(plant)  # design §12: the guesses of a URDF import, said before the run
@@ -427,7 +427,7 @@ def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], 
         warnings.warn(line, RobotWarning, stacklevel=4)  # simulate's caller, past its api_warnings wrapper
     feasibility: list[str] = []
     if isinstance(plant, RobotModels):  # robots from model files: what the scenario asks of them
-        from bioform_mj.assess.check import feasibility as _feasibility
+        from bioform_mj.assess.feasibility import feasibility as _feasibility
 
         feasibility = _feasibility(sc, plant)  # in summary.json too
         for line in feasibility:

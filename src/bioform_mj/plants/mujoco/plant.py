@@ -259,7 +259,7 @@ class MujocoPlant:
         for i, p in enumerate(self.params):
             limit = p.traction_limit * self._wheel_friction(i)
             if max(p.tau_max) > limit:
-                log.info(  # said as a RobotWarning before a run (robot_check.feasibility)
+                log.info(  # said as a RobotWarning before a run (assess.feasibility)
                     "follower %d: torque limit %.3g N·m exceeds the traction limit μ m g r/2 = %.3g N·m: "
                     "the wheels can skid",
                     i + 1,
