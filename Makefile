@@ -3,7 +3,8 @@
 #   make test   - same set-up plus the test extras (pytest, hypothesis, ray), the gpu extra (mujoco-warp,
 #                 warp-lang: the batch engine's tests run on Warp's CPU device), the docs extra (MkDocs) and the
 #                 ros extra (rosbags: the --rosbag tests),
-#                 run the test suite and build the documentation with warnings as errors
+#                 run the test suite (the tests marked slow excepted) and build the documentation with warnings as errors
+#   make test-slow - the tests marked slow (CI runs them after make test)
 #   make docs   - build the documentation site into site/ (needs the docs extra)
 PYTHON ?= python3
 VENV := .venv
@@ -11,7 +12,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: demo test test-fast lint bench install clean docs
+.PHONY: demo test test-slow lint bench install clean docs
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -49,7 +50,7 @@ test: $(TEST_STAMP)
 	$(PY) -c "import pettingzoo, gymnasium" || { echo "error: the rl extra is missing from $(VENV): rm $(TEST_STAMP) and run make test again" >&2; exit 2; }
 	$(VENV)/bin/ruff check src tests scripts examples docs/tutorials
 	$(VENV)/bin/ruff format --check src tests scripts examples docs/tutorials
-	$(PY) -m pytest -q $(XDIST)
+	$(PY) -m pytest -q -m "not slow" $(XDIST)
 	NPY_DISABLE_CPU_FEATURES="$$($(NPY_AVX512))" $(PY) -m pytest -q -m equivalence -p no:cacheprovider $(XDIST)
 	$(MKDOCS) build --strict
 
@@ -67,8 +68,10 @@ lint: $(TEST_STAMP)
 	$(VENV)/bin/ruff check --fix src tests scripts examples docs/tutorials
 	$(VENV)/bin/ruff format src tests scripts examples docs/tutorials
 
-test-fast: $(TEST_STAMP)
-	$(PY) -m pytest -q -m "not slow" $(XDIST)
+# the checks marked slow (long closed-loop runs, 60 s recordings fitted, a Ray head killed mid-sweep): CI runs
+# them after make test (.ci/run); make test keeps to the fast set (under 10 minutes on the 2-core reference machine)
+test-slow: $(TEST_STAMP)
+	$(PY) -m pytest -q -m slow -p no:cacheprovider $(XDIST)
 
 bench: $(STAMP)
 	$(PY) scripts/bench_control_step.py
