@@ -2,9 +2,10 @@
 """A zoo robot's start at its fair scale against eq. 34 (docs/findings/learner-options.md, TIAGo).
 
 Runs the first ``--duration`` paper-seconds (× σ) of the paper scenario on one robot of ``tests/zoo`` exactly as
-``scripts/learner_options.py --fair`` does, and prints per follower, over 0.015–0.15 s of the run: the measured
-υ̇ and ω̇ (log differences, m/s², rad/s²) against eq. 34's ``a τ_a`` and ``b τ_b`` with the robot's ``c_true``;
-the least ``â / c_true`` and when it first fell to 0.06; the largest wheel torque (N·m); the outcomes.
+``scripts/learner_options.py --fair`` does (σ resolved over the whole run's 20 paper-seconds), and prints per
+follower, over 0.015–0.15 s of the run: the measured υ̇ and ω̇ (log differences, m/s², rad/s²) against eq. 34's
+``a τ_a`` and ``b τ_b`` with the robot's ``c_true``; the least ``â / c_true`` and when it first fell to 0.06; the
+largest wheel torque (N·m); the outcomes.
 ``--map KEY=JSON`` changes one mapping key (e.g. frictionless casters), ``--set KEY=VALUE`` one scenario key.
 
     .venv/bin/python scripts/start_transient.py menagerie_tiago
@@ -54,6 +55,9 @@ def main() -> None:
     ]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
+        # σ of the whole run ("auto" resolved over the paper's 20 s), so this is that run's start
+        sigma = load("paper", [*ov, "sim.duration=20.0", *a.set]).formation.time_scale
+        ov = [f"formation.time_scale={sigma!r}" if o.startswith("formation.time_scale") else o for o in ov]
         sc = load("paper", [*ov, f"sim.duration={a.duration}", *a.set])
         res = simulate(sc)
     log = res.log
