@@ -105,6 +105,7 @@ def measure(r, a, paper_l: float) -> dict:
     row: dict = {
         "robot": r.name,
         "maker": r.maker,
+        "expected_verdict": r.expected_verdict,  # the independent reference's (tests/zoo/reference.py)
         "format": r.format,
         "source": r.source,
         "tau_max_nm": r.tau_max,
@@ -239,10 +240,15 @@ def _set_by(note: str) -> str:
     return f"{m.group(1)} vs {m.group(2)}" if m else (note or "")[:80]
 
 
+def _expected(row: dict) -> str:
+    """``; VERDICT``: the verdict the independent reference expects (``tests/zoo/reference.py``), or ``""``."""
+    return f"; {row['expected_verdict']}" if row.get("expected_verdict") else ""
+
+
 def markdown(rows: list[dict]) -> str:
     lines = [
-        "| robot (maker) | `robot check` | top speed m/s (source) | s | σ (set by) | run s (paper s × σ) "
-        "| worst demand/limit | τ_max/traction | resistance/sliding gain υ, ω | hardware "
+        "| robot (maker) | `robot check` (ours; the reference expects) | top speed m/s (maker's) | s | σ (set by) "
+        "| run s (paper s × σ) | worst demand/limit | τ_max/traction | resistance/sliding gain υ, ω | hardware "
         "| ĉ − c_true, ideal plant (a, b per follower) | outcomes, ideal | ĉ − c_true, MuJoCo | final formation error "
         "mm, MuJoCo | outcomes, MuJoCo |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
@@ -256,7 +262,7 @@ def markdown(rows: list[dict]) -> str:
         cf = row.get("counterfactual") or {}
         what = [f"{k}={json.dumps(v)}" for k, v in (cf.get("map") or {}).items()] + list(cf.get("set") or [])
         name = row["robot"] + (f" [{', '.join(what)}]" if what else "")
-        head = f"| {name} ({row['maker']}) | {row['verdict']}{cause} | {top} | "
+        head = f"| {name} ({row['maker']}) | {row['verdict']}{cause}{_expected(row)} | {top} | "
         if "scale" not in row:
             lines.append(head + f"— | — | — | — | — | — | — | refused: {row.get('run_error', '')[:160]} | | | | |")
             continue
@@ -292,8 +298,9 @@ def _span(cs: list, j: int) -> str:
 def compact(rows: list[dict]) -> str:
     """The README's table: one line per robot, ``ĉ`` over the three followers (mean, or the range)."""
     lines = [
-        "| robot (maker) | `robot check` | top speed m/s | s | σ | worst demand/limit | hardware | ĉ − c_true, ideal "
-        "plant: a, b | ĉ − c_true, MuJoCo: a, b | formation error mm | outcomes, MuJoCo |",
+        "| robot (maker) | `robot check` (ours; the reference expects) | top speed m/s (maker's) | s | σ "
+        "| worst demand/limit | hardware | ĉ − c_true, ideal plant: a, b | ĉ − c_true, MuJoCo: a, b "
+        "| formation error mm | outcomes, MuJoCo |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in rows:
@@ -304,7 +311,7 @@ def compact(rows: list[dict]) -> str:
         cause = f" ({row['cause']})" if row.get("cause") else ""
         top = f"{row['top_speed_mps']:g}" if row.get("top_speed_mps") else "0.015 (URDF)"
         if "scale" not in row:
-            lines.append(f"| {link} | {row['verdict']}{cause} | {top} |" + " — |" * 7 + " refused |")
+            lines.append(f"| {link} | {row['verdict']}{cause}{_expected(row)} | {top} |" + " — |" * 7 + " refused |")
             continue
         ideal, mj = row.get("ideal") or {}, row.get("mujoco") or {}
         w = _worst_of(mj.get("demand") or [])
@@ -313,7 +320,8 @@ def compact(rows: list[dict]) -> str:
         ci, cm = ideal.get("c_hat_rel_error", []), mj.get("c_hat_rel_error", [])
         outs = _outs(mj["outcomes"]).split(" (likely cause")[0] if mj else "refused (robot check)"
         lines.append(
-            f"| {link} | {row['verdict']}{cause} | {top} | {row['scale']:.3g} | {row['time_scale']:.3g} | "
+            f"| {link} | {row['verdict']}{cause}{_expected(row)} | {top} | {row['scale']:.3g} | "
+            f"{row['time_scale']:.3g} | "
             + (f"{w['ratio']:.2f} ({w['name']})" if w else "—")
             + f" | {hwv if mj else '—'} | {_span(ci, 0)}, {_span(ci, 1)} | "
             + (f"{_span(cm, 0)}, {_span(cm, 1)}" if mj else "—")
