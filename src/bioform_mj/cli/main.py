@@ -75,6 +75,9 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
     from bioform_mj.robots.xacro_sandbox import add_flags
 
     add_flags(p, scenario=True)  # design §12: a xacro file is a program, run only when asked
+    from bioform_mj.robots.mjcf_assets import add_flag as add_asset_root
+
+    add_asset_root(p, scenario=True)  # design §12: an MJCF robot's files inside its folder unless granted
     p.add_argument("--quiet", action="store_true", help="no progress bar, no result lines")
     p.add_argument(
         "--no-robot-check",
@@ -305,6 +308,15 @@ def _dispatch(args: argparse.Namespace) -> int:
     from bioform_mj.robots.xacro_sandbox import grant_from_args
 
     grant_from_args(args)  # --xacro / --xacro-arg, or nothing granted (design §12)
+    from bioform_mj.robots.mjcf_assets import grant_roots, roots_from_args
+
+    roots = roots_from_args(getattr(args, "asset_root", None))
+    if roots and args.command == "sweep":  # its runs are other processes, as --xacro
+        raise InputError(
+            'sweep --asset-root: a sweep\'s runs are other processes; write asset_roots = ["DIR"] in the '
+            "robot's table of the scenario instead (design §12)"
+        )
+    grant_roots(roots)  # --asset-root DIR, or only each robot's own folder (design §12)
     if getattr(args, "no_robot_check", False):  # design §14.2; inherited by a sweep's worker processes
         from bioform_mj.assess.skip import SKIP_ENV
 

@@ -70,6 +70,9 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
         help="URDF: keep contacts between the robot's own links (default off, as in Gazebo)",
     )
     add_xacro_flags(p)  # --xacro, --xacro-arg (design §12)
+    from bioform_mj.robots.mjcf_assets import add_flag
+
+    add_flag(p)  # --asset-root DIR (design §12)
 
 
 def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
