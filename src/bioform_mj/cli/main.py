@@ -18,6 +18,7 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
+from bioform_mj.cli.outdir import claim, default_name, out_path, prepare_out
 from bioform_mj.cli.proc import (
     _catch_signals,
     _guard_streams,
@@ -109,7 +110,10 @@ def build_parser() -> argparse.ArgumentParser:
         f"{ENTRY_POINT_GROUP}) (default: the scenario's)",
     )
     run.add_argument(
-        "--out", type=Path, help="output directory (default: runs/<scenario>-<plant>-<method>); one run per folder"
+        "--out",
+        type=Path,
+        help="output directory (default: runs/<scenario>-<plant>-<method>, with -<hash of the configuration> "
+        "when --set/--duration/--seed/--package-path change it); one run per folder",
     )
     run.add_argument(
         "--overwrite",
@@ -151,7 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="all",
         help="comma-separated methods (the paper's or registered controllers'), or 'all': the paper's four (default)",
     )
-    t1.add_argument("--out", type=Path, help="output directory (default: runs/table1-<plant>)")
+    t1.add_argument("--out", type=Path, help="output directory (default: runs/table1-<plant>[-<hash>], as run)")
     t1.add_argument("--overwrite", action="store_true", help="replace the table already in --out (its files only)")
     t1.add_argument("--figures", action="store_true", help="write figures/*.png comparing the methods")
 
@@ -365,34 +369,6 @@ def _load(args: argparse.Namespace):
     return load(args.scenario, overrides, method=getattr(args, "method", None), plant=args.plant)
 
 
-def _out_path(out: Path | None, default: str) -> Path:
-    """``--out``, or ``runs/<default>`` (``default`` is built from a validated plain file name)."""
-    if out is not None:
-        return Path(out)
-    if Path(default).name != default or default in ("", ".", ".."):  # scenario.validate makes this unreachable
-        raise InputError(f"output name '{default}' is not a plain file name")
-    return Path("runs") / default
-
-
-def _prepare_out(out: Path | None, default: str) -> Path:
-    """Check that the output directory can be created or written, without creating it yet.
-
-    Nothing is written before the run has validated its input and built its plant,
-    so bad input leaves no directory behind; call ``.mkdir`` just before writing.
-    """
-    from bioform_mj.outputs.files import check_out_dir
-
-    return check_out_dir(_out_path(out, default))
-
-
-def _claim(out: Path | None, default: str, overwrite: bool):
-    """The run folder, checked now (exit 2 before any work): writable, and empty or holding only
-    an earlier run's files, which ``--overwrite`` allows to replace."""
-    from bioform_mj.outputs.rundir import RunDir
-
-    return RunDir(_out_path(out, default), overwrite=overwrite).check()
-
-
 def _progress(enabled: bool, label: str):
     """A progress callback drawing a bar on a terminal, or None when stderr is not one."""
     if not enabled or not sys.stderr.isatty():
@@ -450,7 +426,7 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
         from bioform_mj.outputs.rerun_log import check_can_spawn
 
         check_can_spawn()
-    rundir = _claim(args.out, f"{sc.name}-{sc.plant.kind}-{sc.method}", args.overwrite)
+    rundir = claim(args.out, default_name(args, sc, f"{sc.name}-{sc.plant.kind}-{sc.method}"), args.overwrite)
     with rundir:  # created and locked from here on (exit 2 if another run holds it); lock released at the end
         try:
             return _run_in(args, sc, mjlog, rundir.path, {"video": video_opts, "rosbag": args.ros_distro}, live_url)
@@ -575,7 +551,7 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, options: dict[str, A
 
 
 def _table1(args: argparse.Namespace, sc, mjlog) -> int:
-    rundir = _claim(args.out, f"table1-{sc.plant.kind}", args.overwrite)
+    rundir = claim(args.out, default_name(args, sc, f"table1-{sc.plant.kind}"), args.overwrite)
     with rundir:
         try:
             return _table1_in(args, sc, rundir.path)
@@ -668,7 +644,7 @@ def _sweep(args: argparse.Namespace) -> int:
         check_ray_address(args.ray_address)
     elif args.ray_address is not None:
         raise InputError("--ray-address applies to --backend ray only")
-    out = _prepare_out(args.out, "sweep")
+    out = prepare_out(args.out, "sweep")
     from bioform_mj.jobs.sweep import check_sweep_dir
 
     check_sweep_dir(out)
@@ -747,7 +723,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     # every input, the budget's estimate and the folder checked before any work (exit 2)
     cal.check_inputs(args.target, args.plant, args.budget, args.scenario, args.overrides, args.workers)
     rundir = RunDir(
-        _out_path(args.out, "calibration"),
+        out_path(args.out, "calibration"),
         overwrite=args.overwrite,
         what="calibration folder",
         files=CALIBRATION_FILES,
