@@ -191,7 +191,7 @@ def _parse(
     path: Path, packages: PackagePath, xacro: bool = False, xacro_args: tuple[tuple[str, str], ...] = ()
 ) -> _Parsed:
     """Read, check and rewrite the URDF (no MuJoCo): raises :class:`UrdfError` naming the element."""
-    from bioform_mj.robots.xacro_sandbox import XACRO_NOTE, Expanded
+    from bioform_mj.robots.xacro_sandbox import XACRO_NOTE, Expanded, sandbox_note
 
     text = _read_text(path, packages, xacro, xacro_args)
     expanded = isinstance(text, Expanded)
@@ -204,7 +204,7 @@ def _parse(
     bad_value = urdf_value_problem(robot)  # NaN, negative, zero where it cannot be: refused naming it
     if bad_value:
         raise UrdfError(f"{path}: {bad_value}")
-    notes: list[str] = [XACRO_NOTE] if expanded else []
+    notes: list[str] = [XACRO_NOTE, sandbox_note(text.sandbox)] if expanded else []
     links = {}
     for link in robot.findall("link"):
         name = link.get("name")
