@@ -132,8 +132,9 @@ def _read_xml(f: Path, model: Path, what: str) -> ET.Element:
         )
     try:
         return ET.parse(f).getroot()
-    except ET.ParseError as exc:
-        raise InputError(f"{model}: {what} '{f}' is not well-formed XML ({exc})") from None
+    except ET.ParseError as exc:  # refused, never handed to MuJoCo's laxer parser unwalked
+        where = "" if what == "model file" else f"{what} '{f}': "
+        raise InputError(f"{model}: does not compile: {where}not well-formed XML ({exc})") from None
     except OSError as exc:
         raise InputError(f"{model}: {what} '{f}' cannot be read ({exc.strerror})") from None
 
