@@ -216,3 +216,25 @@ def test_toml_asset_roots_relative_to_the_file(tmp_path):
     scen.write_text('[plant]\nkind = "mujoco"\nrobots = [{model = "robot/a.xml", asset_roots = ["shared"]}]\n')
     ref = load(str(scen)).plant.robots[0]
     assert ref.asset_roots == (str((tmp_path / "shared").resolve()),)
+
+
+# ------------------------------------------------------------------ a URDF's absolute and file:// meshes
+@pytest.mark.parametrize("form", ["absolute", "file-uri"])
+def test_urdf_absolute_mesh_outside_refused_unless_granted(place, form, capsys):
+    """A URDF collision mesh named ``/…/outside/ok.stl`` (a real mesh) or ``file://`` of it is refused, exit 2,
+    naming it; a visual one is dropped with a note (never read); ``asset_roots`` lets it in."""
+    from bioform_mj.robots.urdf import import_urdf
+    from test_robots_urdf import diff_drive, write
+
+    r, out = place
+    name = str(out / "ok.stl") if form == "absolute" else f"file://{out / 'ok.stl'}"
+    path = write(r / "urdf" / "dd.urdf", diff_drive(chassis_collision=f'<mesh filename="{name}"/>'))
+    code = cli.main(["robot", "check", str(path)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and f"<collision> mesh '{name}' of link 'base_link'" in err[0], err
+    assert f"'{out / 'ok.stl'}' is outside the robot's package '{r}'" in err[0] and HOW in err[0], err
+    vis = write(r / "urdf" / "v.urdf", diff_drive(chassis_visual=f'<mesh filename="{name}"/>'))
+    notes = import_urdf(RobotRef(model=str(vis))).notes
+    assert any("1 visual mesh(es) dropped" in n and "outside the robot's package" in n for n in notes), notes
+    good = write(r / "urdf" / "g.urdf", diff_drive(chassis_visual=f'<mesh filename="{name}"/>'))
+    assert import_urdf(RobotRef(model=str(good), asset_roots=(str(out),))).model.nmesh == 1
