@@ -95,6 +95,14 @@ def _hostile(r: Path, out: Path, case: str) -> tuple[Path, str]:
         return _robot(
             r, "a.xml", head='<include file="inc.xml"/>'
         ), f'<include file="inc.xml"/> → <mesh file="{trap}"/>'
+    if case == "attached-model":  # an <asset><model file> inside the folder whose own mesh is not
+        (r / "sub").mkdir()
+        (r / "sub" / "child.xml").write_text(
+            f'<mujoco><asset><mesh name="e" file="{trap}"/></asset><worldbody><body name="c"/></worldbody></mujoco>'
+        )
+        return _robot(r, "a.xml", '<asset><model name="c" file="sub/child.xml"/></asset>'), (
+            f'<model file="sub/child.xml"/> → <mesh file="{trap}"/>'
+        )
     if case == "cube-face":
         faces = " ".join(f'file{s}="a.png"' for s in ("left", "up", "down", "front", "back"))
         return _robot(r, "a.xml", f'<asset><texture name="t" type="cube" fileright="{trap}" {faces}/></asset>'), (
@@ -120,6 +128,7 @@ CASES = [
     "include-chain",
     "include-fifo-abs",
     "included-mesh-out",
+    "attached-model",
     "cube-face",
     "hfield",
     "flexcomp",

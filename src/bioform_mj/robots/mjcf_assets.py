@@ -145,54 +145,65 @@ def confine_mjcf(model: str | Path, extra: Iterable[str] = ()) -> None:
 
     Resolution as MuJoCo 3–4 does it: ``<include file>`` (at any depth) relative to the main file's folder;
     ``meshdir``/``texturedir``/``assetdir`` relative to it; a mesh, skin, height field or flexcomp file
-    relative to ``meshdir`` (else ``assetdir``), a texture's to ``texturedir`` (else ``assetdir``). Where a
-    file holds several ``<compiler>`` elements, a file is checked against every folder they name."""
+    relative to ``meshdir`` (else ``assetdir``), a texture's to ``texturedir`` (else ``assetdir``); an
+    attached ``<model file>`` relative to the main file's folder, walked in turn with the same roots. To be
+    safe against another resolution, every name is also checked against the folder of the file that holds
+    it, and where a file holds several ``<compiler>`` elements, against every folder they name."""
     model = Path(model)
-    roots = allowed_roots(model, extra)
-    base = os.path.dirname(os.path.abspath(model))
-    elements: list[tuple[str, ET.Element]] = []  # (where, element), the include chain walked in order
+    _confine(model, allowed_roots(model, extra), model, "", ())
+
+
+def _confine(file: Path, roots: tuple[str, ...], model: Path, prefix: str, models: tuple[str, ...]) -> None:
+    """:func:`confine_mjcf` of ``file`` (the robot's ``model``, or a ``<model file>`` it attaches: ``prefix``
+    names the way there, ``models`` the attached files above it)."""
+    base = os.path.dirname(os.path.abspath(file))
+    elements: list[tuple[str, ET.Element, str]] = []  # (where, element, its file's folder), includes inlined
+
+    def check(where: str, element: str, name: str, folders: list[str]) -> None:
+        for d in folders:
+            full = os.path.join(base, d, name)
+            if not _inside(full, roots):
+                raise _refuse(model, where, element, name, full, roots)
 
     def walk(f: Path, where: str, chain: tuple[str, ...]) -> None:
-        if len(chain) > INCLUDE_DEPTH:
+        if len(chain) + len(models) > INCLUDE_DEPTH:
             raise InputError(f"{model}: includes nested deeper than {INCLUDE_DEPTH} ({' -> '.join(chain)})")
-        root = _read_xml(f, model, "included file" if chain[1:] else "model file")
+        root = _read_xml(f, model, "included file" if chain[1:] or models else "model file")
         for el in root.iter():
             if el.tag == "include":
                 name = el.get("file") or ""
+                check(where, "include file", name, ["", os.path.relpath(f.parent, base)])
                 full = os.path.join(base, name)
-                if not _inside(full, roots):
-                    raise _refuse(model, where, "include file", name, full, roots)
                 real = os.path.realpath(full)
                 if real in chain:
                     raise InputError(f"{model}: <include file> '{name}' includes itself ({' -> '.join(chain)})")
                 walk(Path(full), f'{where}<include file="{name}"/> → ', (*chain, real))
             elif isinstance(el.tag, str):
-                elements.append((where, el))
+                elements.append((where, el, os.path.relpath(os.path.dirname(os.path.abspath(f)), base)))
 
-    walk(model, "", (os.path.realpath(model),))
+    walk(file, prefix, (os.path.realpath(file),))
     dirs: dict[str, list[str]] = {"meshdir": [], "texturedir": [], "assetdir": []}
-    for where, el in elements:
+    for where, el, _ in elements:
         if el.tag == "compiler":
             for k in dirs:
                 v = el.get(k)
                 if v is not None:
-                    full = os.path.join(base, v)
-                    if not _inside(full, roots):
-                        raise _refuse(model, where, f"compiler {k}", v, full, roots)
+                    check(where, f"compiler {k}", v, [""])
                     dirs[k].append(v)
-    for where, el in elements:
+    for where, el, own in elements:
         kind = "texturedir" if el.tag == "texture" else "meshdir"
         folders = dirs[kind] or dirs["assetdir"] or [""]
-        if el.tag == "model":  # an attached MJCF: relative to the main file's folder
-            folders = [""]
+        if el.tag == "model":  # an attached MJCF: relative to the main file's folder, walked in turn
+            name = el.get("file") or ""
+            check(where, "model file", name, ["", own])
+            real = os.path.realpath(os.path.join(base, name))
+            if name and real not in models:
+                _confine(Path(base) / name, roots, model, f'{where}<model file="{name}"/> → ', (*models, real))
+            continue
         for attr in _FILE_ATTRS.get(el.tag, ("file",)):
             name = el.get(attr)
-            if not name:
-                continue
-            for d in folders:
-                full = os.path.join(base, d, name)
-                if not _inside(full, roots):
-                    raise _refuse(model, where, f"{el.tag} {attr}", name, full, roots)
+            if name:
+                check(where, f"{el.tag} {attr}", name, [*folders, *(os.path.join(own, d) for d in folders)])
 
 
 def spec_escape(spec: Any, roots: tuple[str, ...]) -> str:
