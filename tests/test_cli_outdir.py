@@ -50,3 +50,27 @@ def test_table1_default_folder_distinct(tmp_path, monkeypatch, capsys):
     assert main(args) == 0 and main([*args, "--set", "kinematic.k1=3"]) == 0, _err(capsys)
     names = sorted(p.name for p in Path("runs").iterdir())
     assert len(names) == 2 and all(re.fullmatch(r"table1-ideal-[0-9a-f]{8}", n) for n in names), names
+
+
+def test_no_doc_page_runs_one_configuration_twice_into_its_default_folder():
+    """Copied one after another, a page's commands never meet their own earlier run: within a page, no two
+    ``bioform run``/``table1`` commands without ``--out`` differ only by output flags (they would share the
+    default folder; the second would be refused)."""
+    root = Path(__file__).resolve().parents[1]
+    outputs = re.compile(r" --(video|rrd|rosbag|figures|quiet|overwrite)\b")
+    for page in [root / "README.md", *sorted((root / "docs").rglob("*.md"))]:
+        seen: dict[str, int] = {}
+        lines = page.read_text().splitlines()
+        for i, line in enumerate(lines):
+            m = re.match(r"^(?:\.venv/bin/)?bioform (run|table1) ([^#]*)", line)
+            if not m:
+                continue
+            cmd, j = m.group(0).rstrip(), i
+            while cmd.endswith("\\") and j + 1 < len(lines):  # a command continued on the next lines
+                j += 1
+                cmd = cmd[:-1] + " " + lines[j].split("#")[0].strip()
+            if "--out" in cmd:
+                continue
+            key = " ".join(outputs.sub("", cmd).replace(".venv/bin/", "").split())
+            assert key not in seen, f"{page.name}:{i + 1} runs the configuration of line {seen[key]} again: {key}"
+            seen[key] = i + 1
