@@ -338,7 +338,12 @@ def _dispatch(args: argparse.Namespace) -> int:
 
             return identify_command(args)
         if args.command == "robot" and getattr(args, "realdata_main", None):
-            return args.realdata_main(args)  # robot fit / replay / drive-program (issue 29)
+            from bioform_mj.cli.robot import cli_terms
+
+            try:
+                return args.realdata_main(args)  # robot fit / replay / drive-program (issue 29)
+            except InputError as exc:  # a robot's mapping in the flags' terms (issue 28)
+                raise InputError(cli_terms(str(exc))) from None
         if args.command == "robot":
             from bioform_mj.cli.robot import main as robot_main
 
