@@ -147,6 +147,7 @@ def test_hostile_mjcf_refused_before_mujoco_reads(place, case, capsys):
         confine_mjcf(path)
 
 
+@pytest.mark.slow  # ~3.5 s: a process of its own (the in-process cases above already read FIFOs that would hang)
 def test_scenario_naming_hostile_robot_writes_nothing(place, tmp_path):
     """``bioform run scenario.toml`` whose robot (relative to the file) reads a FIFO outside: exit 2 in a
     subprocess (a read would hang it past the timeout), no run folder, nothing of the outside copied."""
