@@ -248,3 +248,20 @@ def test_urdf_absolute_mesh_outside_refused_unless_granted(place, form, capsys):
     assert any("1 visual mesh(es) dropped" in n and "outside the robot's package" in n for n in notes), notes
     good = write(r / "urdf" / "g.urdf", diff_drive(chassis_visual=f'<mesh filename="{name}"/>'))
     assert import_urdf(RobotRef(model=str(good), asset_roots=(str(out),))).model.nmesh == 1
+
+
+def test_scenario_naming_hostile_robot_in_process(place, tmp_path, capsys):
+    """The same through ``cli.main`` and ``bioform_mj.load``: exit 2 / a ValueError naming the mesh, no run folder."""
+    import bioform_mj
+
+    r, out = place
+    _hostile(r, out, "symlink-out")
+    scen = tmp_path / "s.toml"
+    scen.write_text('[plant]\nkind = "mujoco"\nrobots = ["robot/a.xml"]\n[sim]\nduration = 0.1\n')
+    run = tmp_path / "run"
+    code = cli.main(["run", str(scen), "--out", str(run), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and f"a symlink to '{out / 'trap.stl'}'" in err[0], err
+    assert not run.exists()
+    with pytest.raises(ValueError, match="outside the robot's folder"):
+        bioform_mj.load(str(scen))
