@@ -507,7 +507,8 @@ def check_same_sweep(out: Path, keys: set[str]) -> None:
     raise InputError(
         f"sweep directory '{out}' holds another sweep's rows: {len(foreign)} of its {len(names)} rows are no run "
         f"of this sweep{desc} (a different configuration, method or seed; its statistics would be overwritten). "
-        f"To resume that sweep, rerun its own command; to run this one, choose another --out (or remove '{out}')"
+        f"To resume that sweep, rerun its own command; to run this one, choose another --out (or remove '{out}'); "
+        "the same command whose resolved configuration changed since (another version's defaults) counts as another"
     )
 
 
