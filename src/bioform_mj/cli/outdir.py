@@ -1,7 +1,8 @@
 """Where a command writes when ``--out`` is not given (design §10; issue 28): one folder per configuration.
 
 ``bioform run PRESET`` writes ``runs/PRESET-PLANT-METHOD`` (``table1``: ``runs/table1-PLANT``); a command whose
-``--set``, ``--duration``, ``--seed`` or ``--package-path`` change the configuration writes
+``--set`` (other than ``--set name=…``, which names the folder), ``--duration``, ``--seed`` or
+``--package-path`` change the configuration writes
 ``runs/PRESET-PLANT-METHOD-<8 hex digits>`` instead, the start of the run's content key (a hash of the resolved
 configuration and seed, :func:`bioform_mj.jobs.sweep.content_key`), so a second run of a different configuration
 never lands on the first one's folder. The same configuration twice lands on the same folder, which then holds
@@ -24,9 +25,11 @@ HASH_DIGITS = 8
 
 
 def changes_configuration(args: argparse.Namespace) -> bool:
-    """True when the command line changes the named scenario's configuration beyond plant and method."""
+    """True when the command line changes the named scenario's configuration beyond plant, method and name
+    (``--set name=…`` names the folder itself)."""
+    sets = [o for o in getattr(args, "overrides", None) or () if o.partition("=")[0].strip() != "name"]
     return bool(
-        getattr(args, "overrides", None)
+        sets
         or getattr(args, "duration", None) is not None
         or getattr(args, "seed", None) is not None
         or getattr(args, "package_path", None)
