@@ -189,6 +189,28 @@ def test_a_second_sweep_into_a_busy_folder_is_refused(tmp_path, capsys):
     assert main(["sweep", "paper", "--plant", "ideal", "--duration", "0.1", "--out", str(out), "--quiet"]) == 0
 
 
+def test_a_sweep_into_another_sweeps_folder_is_refused_unless_the_same(tmp_path, capsys):
+    """Issue 28: a sweep into a folder holding another sweep's rows (here k1 = 1, 2) is refused, exit 2, one line
+    that says how to proceed, its rows and statistics untouched; the same sweep (resume) and the same sweep with
+    one more value (k1 = 1, 2, 3: its 2 rows reused, 1 run) pass."""
+    out = tmp_path / "sw"
+    base = ["sweep", "paper", "--plant", "ideal", "--duration", "0.1", "--out", str(out), "--quiet"]
+    assert main([*base, "--vary", "kinematic.k1=1,2"]) == 0
+    capsys.readouterr()
+    before = {p.name: p.read_bytes() for p in [*out.iterdir(), *(out / "runs").iterdir()] if p.is_file()}
+    code = main([*base, "--vary", "kinematic.k1=5"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert err[0].startswith(f"error: sweep directory '{out}' holds another sweep's rows: 2 of its 2 rows"), err
+    assert "kinematic.k1=1" in err[0] and "rerun its own command" in err[0] and "choose another --out" in err[0]
+    after = {p.name: p.read_bytes() for p in [*out.iterdir(), *(out / "runs").iterdir()] if p.is_file()}
+    assert after == before  # nothing rewritten, the statistics included
+    assert main([*base, "--vary", "kinematic.k1=1,2"]) == 0  # resume: the same sweep
+    assert "0 run now" in capsys.readouterr().err or len(list((out / "runs").iterdir())) == 2
+    assert main([*base, "--vary", "kinematic.k1=1,2,3"]) == 0  # the same sweep, one value more
+    assert len(list((out / "runs").glob("*.json"))) == 3
+
+
 @pytest.mark.parametrize(
     "extra,needle",
     [

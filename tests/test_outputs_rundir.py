@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import pty
+import re
 import select
 import signal
 import subprocess
@@ -185,7 +186,11 @@ def test_scenario_name_must_be_a_plain_file_name(name, needle, tmp_path, capsys,
 def test_default_output_is_under_runs(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert main(["run", "--duration", "0.05", "--quiet", "--set", 'name="my run"']) == 0
-    assert (tmp_path / "runs" / "my run-ideal-bioinspired-learning" / "summary.json").exists()
+    (folder,) = (tmp_path / "runs").iterdir()  # --duration changed the configuration: its hash is in the name
+    assert folder.name.startswith("my run-ideal-bioinspired-learning-") and (folder / "summary.json").exists()
+    assert main(["run", "paper", "--quiet", "--set", 'name="named"', "--set", "sim.duration=0.05"]) == 0
+    names = sorted(p.name for p in (tmp_path / "runs").iterdir())
+    assert len(names) == 2 and re.fullmatch(r"named-ideal-bioinspired-learning-[0-9a-f]{8}", names[1]), names
 
 
 # ---- bad paths, up front -------------------------------------------------------------------------

@@ -152,7 +152,9 @@ def test_no_collision_geom_and_no_radius_and_not_compiling_exit_2(tmp_path, caps
     bare.write_text(src.replace('<geom name="left_tire" class="drive_wheel"/>', ""))
     assert cli.main(["robot", "check", str(bare), *TP_FLAGS]) == 2
     err = capsys.readouterr().err
-    assert "bare.xml" in err and "joint_left_wheel" in err and "wheel_radius" in err
+    assert "bare.xml" in err and "joint_left_wheel" in err and "give --wheel-radius" in err  # the CLI's terms
+    with pytest.raises(ValueError, match="give wheel_radius"):  # the Python API's: the key
+        check(RobotRef(str(bare), "base_link", "joint_left_wheel", "joint_right_wheel"), identify_=False)
     # with a radius given, a proxy is added and the robot works
     rep = check(
         RobotRef(str(bare), "base_link", "joint_left_wheel", "joint_right_wheel", wheel_radius=0.05), identify_=False

@@ -295,3 +295,95 @@ def test_run_with_the_xacro_flag(tmp_path, capsys, monkeypatch):
     assert "expanded by xacro" in err  # said before the run, as a warning: line
     assert cli.main(["sweep", str(sc), "--xacro", "--out", str(tmp_path / "sw")]) == 2
     assert "write xacro = true" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ the OS layers (issue 28, design §12)
+CHILD = Path(xacro_sandbox.__file__).with_name("_xacro_child.py")
+PROBE = """
+import ctypes, json, os, platform, sys
+libc = ctypes.CDLL(None, use_errno=True)
+libc.syscall.restype = ctypes.c_long
+abi = libc.syscall(444, None, ctypes.c_size_t(0), ctypes.c_uint32(1))
+libc.prctl(38, 1, 0, 0, 0)
+flags = 0x40000000 if os.geteuid() == 0 else 0x50000000
+print(json.dumps({"landlock": int(abi), "netns": libc.unshare(flags) == 0, "machine": platform.machine()}))
+"""
+TRY = """
+import importlib.util, json, os, socket, subprocess, sys
+spec = importlib.util.spec_from_file_location("child", sys.argv[1])
+child = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(child)
+inside, outside = sys.argv[2], sys.argv[3]
+layers = child.os_sandbox([inside, *sorted({os.path.realpath(p) for p in sys.path if p and os.path.isdir(p)})])
+got = {}
+def attempt(name, fn):
+    try:
+        fn()
+        got[name] = "done"
+    except OSError as exc:
+        got[name] = f"refused {exc.errno}"
+attempt("read_inside", lambda: open(os.path.join(inside, "in.txt")).read())
+attempt("read_outside", lambda: open(os.path.join(outside, "secret.txt")).read())
+attempt("write_inside", lambda: open(os.path.join(inside, "new.txt"), "w").write("x"))
+attempt("socket", lambda: socket.socket(socket.AF_INET, socket.SOCK_STREAM))
+attempt("process", lambda: subprocess.run(["/bin/true"]))
+print(json.dumps({"layers": layers, "got": got}))
+"""
+
+
+def _available() -> dict:
+    """What this kernel offers, probed in a process of its own, independently of the child's code."""
+    res = subprocess.run([sys.executable, "-I", "-c", PROBE], capture_output=True, text=True, timeout=60)
+    return json.loads(res.stdout)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the OS layers are Linux's")
+def test_os_layers_applied_where_available(tmp_path):
+    """Each layer the kernel offers is on in the child (the probe says which), each one refuses on its own (no
+    audit hook here): Landlock a read outside (EACCES 13) and a write inside, seccomp a socket and a new process
+    (EPERM 1); a read inside still works. A layer the kernel lacks is said with why, never fatal."""
+    avail = _available()
+    inside, outside = tmp_path / "in", tmp_path / "out"
+    inside.mkdir()
+    outside.mkdir()
+    (inside / "in.txt").write_text("ok")
+    (outside / "secret.txt").write_text(SECRET)
+    res = subprocess.run(
+        [sys.executable, "-I", "-c", TRY, str(CHILD), str(inside), str(outside)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    out = json.loads(res.stdout)
+    layers, got = out["layers"], out["got"]
+    assert layers["no_new_privs"] == "on"
+    assert got["read_inside"] == "done"
+    if avail["landlock"] >= 1:
+        assert layers["landlock"].startswith(f"on (ABI {avail['landlock']})"), layers
+        assert got["read_outside"] == "refused 13" and got["write_inside"] == "refused 13", got
+    else:
+        pytest.skip(f"Landlock unavailable here (ABI probe {avail['landlock']}): {layers['landlock']}")
+    if avail["machine"] in ("x86_64", "aarch64"):
+        assert layers["seccomp"].startswith("on: 34 system calls refused"), layers
+        assert got["socket"] == "refused 1" and got["process"] == "refused 1", got
+    assert layers["netns"] == ("on" if avail["netns"] else layers["netns"])
+    assert not (inside / "new.txt").exists()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the OS layers are Linux's")
+def test_expansion_says_its_os_layers(tmp_path):
+    """A real expansion: the child answers which layers it applied, and the import notes say so."""
+    avail = _available()
+    path = write(tmp_path / "r.urdf.xacro", diff_drive().replace('<robot name="dd">', f'<robot name="dd" {NS}>'))
+    out = expand(path, (), ())
+    want = (
+        {"no_new_privs"}
+        | ({"landlock"} if avail["landlock"] >= 1 else set())
+        | ({"netns"} if avail["netns"] else set())
+    )
+    want |= {"seccomp"} if avail["machine"] in ("x86_64", "aarch64") else set()
+    assert {k for k, v in out.sandbox.items() if v.startswith("on")} == want, out.sandbox
+    note = xacro_sandbox.sandbox_note(out.sandbox)
+    assert note.startswith(
+        "xacro's process was also confined by the OS: " + ", ".join(k for k in out.sandbox if k in want)
+    )

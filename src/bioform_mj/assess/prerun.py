@@ -71,7 +71,7 @@ def robot_key(ref: Any) -> str:
         f = Path(asset.file) if getattr(asset, "file", "") else None
         if f is not None and f.is_file():
             h.update(f.read_bytes())
-    mapping = {k: v for k, v in dataclasses.asdict(ref).items() if k not in ("model", "package_path")}
+    mapping = {k: v for k, v in dataclasses.asdict(ref).items() if k not in ("model", "package_path", "asset_roots")}
     h.update(json.dumps(mapping, sort_keys=True, default=str).encode())
     return h.hexdigest()[:32]
 

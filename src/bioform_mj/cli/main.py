@@ -18,6 +18,7 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
+from bioform_mj.cli.outdir import claim, default_name, out_path, prepare_out
 from bioform_mj.cli.proc import (
     _catch_signals,
     _guard_streams,
@@ -75,6 +76,9 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
     from bioform_mj.robots.xacro_sandbox import add_flags
 
     add_flags(p, scenario=True)  # design §12: a xacro file is a program, run only when asked
+    from bioform_mj.robots.mjcf_assets import add_flag as add_asset_root
+
+    add_asset_root(p, scenario=True)  # design §12: an MJCF robot's files inside its folder unless granted
     p.add_argument("--quiet", action="store_true", help="no progress bar, no result lines")
     p.add_argument(
         "--no-robot-check",
@@ -106,7 +110,10 @@ def build_parser() -> argparse.ArgumentParser:
         f"{ENTRY_POINT_GROUP}) (default: the scenario's)",
     )
     run.add_argument(
-        "--out", type=Path, help="output directory (default: runs/<scenario>-<plant>-<method>); one run per folder"
+        "--out",
+        type=Path,
+        help="output directory (default: runs/<scenario>-<plant>-<method>, with -<hash of the configuration> "
+        "when --set/--duration/--seed/--package-path change it); one run per folder",
     )
     run.add_argument(
         "--overwrite",
@@ -148,7 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="all",
         help="comma-separated methods (the paper's or registered controllers'), or 'all': the paper's four (default)",
     )
-    t1.add_argument("--out", type=Path, help="output directory (default: runs/table1-<plant>)")
+    t1.add_argument("--out", type=Path, help="output directory (default: runs/table1-<plant>[-<hash>], as run)")
     t1.add_argument("--overwrite", action="store_true", help="replace the table already in --out (its files only)")
     t1.add_argument("--figures", action="store_true", help="write figures/*.png comparing the methods")
 
@@ -305,6 +312,15 @@ def _dispatch(args: argparse.Namespace) -> int:
     from bioform_mj.robots.xacro_sandbox import grant_from_args
 
     grant_from_args(args)  # --xacro / --xacro-arg, or nothing granted (design §12)
+    from bioform_mj.robots.mjcf_assets import grant_roots, roots_from_args
+
+    roots = roots_from_args(getattr(args, "asset_root", None))
+    if roots and args.command == "sweep":  # its runs are other processes, as --xacro
+        raise InputError(
+            'sweep --asset-root: a sweep\'s runs are other processes; write asset_roots = ["DIR"] in the '
+            "robot's table of the scenario instead (design §12)"
+        )
+    grant_roots(roots)  # --asset-root DIR, or only each robot's own folder (design §12)
     if getattr(args, "no_robot_check", False):  # design §14.2; inherited by a sweep's worker processes
         from bioform_mj.assess.skip import SKIP_ENV
 
@@ -322,7 +338,12 @@ def _dispatch(args: argparse.Namespace) -> int:
 
             return identify_command(args)
         if args.command == "robot" and getattr(args, "realdata_main", None):
-            return args.realdata_main(args)  # robot fit / replay / drive-program (issue 29)
+            from bioform_mj.cli.robot import cli_terms
+
+            try:
+                return args.realdata_main(args)  # robot fit / replay / drive-program (issue 29)
+            except InputError as exc:  # a robot's mapping in the flags' terms (issue 28)
+                raise InputError(cli_terms(str(exc))) from None
         if args.command == "robot":
             from bioform_mj.cli.robot import main as robot_main
 
@@ -351,34 +372,6 @@ def _load(args: argparse.Namespace):
         overrides.append(f"sim.seed={args.seed}")
     overrides += _package_overrides(args)
     return load(args.scenario, overrides, method=getattr(args, "method", None), plant=args.plant)
-
-
-def _out_path(out: Path | None, default: str) -> Path:
-    """``--out``, or ``runs/<default>`` (``default`` is built from a validated plain file name)."""
-    if out is not None:
-        return Path(out)
-    if Path(default).name != default or default in ("", ".", ".."):  # scenario.validate makes this unreachable
-        raise InputError(f"output name '{default}' is not a plain file name")
-    return Path("runs") / default
-
-
-def _prepare_out(out: Path | None, default: str) -> Path:
-    """Check that the output directory can be created or written, without creating it yet.
-
-    Nothing is written before the run has validated its input and built its plant,
-    so bad input leaves no directory behind; call ``.mkdir`` just before writing.
-    """
-    from bioform_mj.outputs.files import check_out_dir
-
-    return check_out_dir(_out_path(out, default))
-
-
-def _claim(out: Path | None, default: str, overwrite: bool):
-    """The run folder, checked now (exit 2 before any work): writable, and empty or holding only
-    an earlier run's files, which ``--overwrite`` allows to replace."""
-    from bioform_mj.outputs.rundir import RunDir
-
-    return RunDir(_out_path(out, default), overwrite=overwrite).check()
 
 
 def _progress(enabled: bool, label: str):
@@ -438,7 +431,7 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
         from bioform_mj.outputs.rerun_log import check_can_spawn
 
         check_can_spawn()
-    rundir = _claim(args.out, f"{sc.name}-{sc.plant.kind}-{sc.method}", args.overwrite)
+    rundir = claim(args.out, default_name(args, sc, f"{sc.name}-{sc.plant.kind}-{sc.method}"), args.overwrite)
     with rundir:  # created and locked from here on (exit 2 if another run holds it); lock released at the end
         try:
             return _run_in(args, sc, mjlog, rundir.path, {"video": video_opts, "rosbag": args.ros_distro}, live_url)
@@ -563,7 +556,7 @@ def _run_in(args: argparse.Namespace, sc, mjlog, out: Path, options: dict[str, A
 
 
 def _table1(args: argparse.Namespace, sc, mjlog) -> int:
-    rundir = _claim(args.out, f"table1-{sc.plant.kind}", args.overwrite)
+    rundir = claim(args.out, default_name(args, sc, f"table1-{sc.plant.kind}"), args.overwrite)
     with rundir:
         try:
             return _table1_in(args, sc, rundir.path)
@@ -656,7 +649,7 @@ def _sweep(args: argparse.Namespace) -> int:
         check_ray_address(args.ray_address)
     elif args.ray_address is not None:
         raise InputError("--ray-address applies to --backend ray only")
-    out = _prepare_out(args.out, "sweep")
+    out = prepare_out(args.out, "sweep")
     from bioform_mj.jobs.sweep import check_sweep_dir
 
     check_sweep_dir(out)
@@ -735,7 +728,7 @@ def _calibrate(args: argparse.Namespace) -> int:
     # every input, the budget's estimate and the folder checked before any work (exit 2)
     cal.check_inputs(args.target, args.plant, args.budget, args.scenario, args.overrides, args.workers)
     rundir = RunDir(
-        _out_path(args.out, "calibration"),
+        out_path(args.out, "calibration"),
         overwrite=args.overwrite,
         what="calibration folder",
         files=CALIBRATION_FILES,

@@ -6,12 +6,57 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 from typing import Any
 
 from bioform_mj.assess.check import EXIT_FAIL, check
 from bioform_mj.robots.refs import RobotRef
 from bioform_mj.robots.xacro_sandbox import add_flags as add_xacro_flags
+
+#: a robot table's key → the ``robot check``/``identify`` flag that sets it (issue 28: errors in the CLI's terms)
+FLAG_OF = {
+    "left_wheel": "--left-wheel",
+    "right_wheel": "--right-wheel",
+    "base": "--base",
+    "tau_max": "--tau-max",
+    "wheel_radius": "--wheel-radius",
+    "half_track": "--half-track",
+    "top_speed": "--top-speed",
+    "caster_friction": "--caster-friction",
+    "casters": "--caster",
+    "keyframe": "--keyframe",
+    "free_joints": "--free-joints",
+    "self_collide": "--self-collide",
+    "balance_inertia": "--balance-inertia",
+}
+#: keys rewritten where they stand alone (``base`` is too common a word: only in ``base = "BODY"``)
+_BARE = re.compile(
+    r"(?<![\w'\"/.-])(left_wheel|right_wheel|tau_max|wheel_radius|half_track|top_speed|caster_friction)"
+    r"(?![\w'\"/]|\.\w)"
+)
+
+
+def cli_terms(text: str) -> str:
+    """A robot error or note written for a mapping table (``map left_wheel and right_wheel``, ``left_wheel =
+    "JOINT"``, ``give tau_max … in the robot's mapping``) in the terms of ``robot check``'s flags
+    (``--left-wheel JOINT --right-wheel JOINT``, ``--tau-max``); quoted names (a joint called
+    ``'left_wheel'``) and paths are left alone. The Python API and scenario files keep the keys."""
+
+    def flag(m: re.Match, fmt: str = "{}") -> str:
+        keys = [g for g in m.groups() if g]
+        return fmt.format(*(FLAG_OF[k] for k in keys)) if all(k in FLAG_OF for k in keys) else m.group(0)
+
+    text = re.sub(r"map (\w+) and (\w+)\b", lambda m: flag(m, "map them: {} JOINT {} JOINT"), text)
+    text = re.sub(
+        r'\b(\w+) = "([A-Z]+)"',
+        lambda m: f"{FLAG_OF[m.group(1)]} {m.group(2)}" if m.group(1) in FLAG_OF else m.group(0),
+        text,
+    )
+    text = text.replace("left_wheel/right_wheel", "--left-wheel/--right-wheel").replace(" in the robot's mapping", "")
+    text = re.sub(r"\b(?:the robot mapping's|the mapping's|mapping) (\w+)\b", flag, text)
+    text = text.replace("leave base unset", "leave --base out").replace("map it with base", "map it with --base")
+    return _BARE.sub(lambda m: FLAG_OF[m.group(1)], text)
 
 
 def mapping_args(p: argparse.ArgumentParser) -> None:
@@ -70,6 +115,9 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
         help="URDF: keep contacts between the robot's own links (default off, as in Gazebo)",
     )
     add_xacro_flags(p)  # --xacro, --xacro-arg (design §12)
+    from bioform_mj.robots.mjcf_assets import add_flag
+
+    add_flag(p)  # --asset-root DIR (design §12)
 
 
 def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
@@ -133,7 +181,12 @@ def main(args: argparse.Namespace) -> int:
 
     if args.json:  # before any work (exit 2): a directory, /proc/x, a read-only folder
         args.json = check_out_file(args.json, "--json")
-    report = check(ref_from_args(args.model, args))
+    from bioform_mj.core.errors import InputError
+
+    try:
+        report = check(ref_from_args(args.model, args))
+    except InputError as exc:  # in the terms of the flags the user gave (issue 28)
+        raise InputError(cli_terms(str(exc))) from None
     if args.json:
         write_json(args.json, report)
     ta = report["tip_accel_mps2"]
@@ -178,14 +231,15 @@ def main(args: argparse.Namespace) -> int:
             else "none"
         )
     )
-    lines += [f"  {r}" for r in report["reasons"]]
-    lines += [f"  note: {n}" for n in report["notes"]]
+    lines += [f"  {cli_terms(r)}" for r in report["reasons"]]
+    lines += [f"  note: {cli_terms(n)}" for n in report["notes"]]
     print("\n".join(lines))
+    reasons = "; ".join(cli_terms(r) for r in report["reasons"])
     if report["verdict"] == "fail":
-        print(f"error: robot check failed: {'; '.join(report['reasons'])}", file=sys.stderr)
+        print(f"error: robot check failed: {reasons}", file=sys.stderr)
         return EXIT_FAIL
     if report["verdict"] == "warn":  # never silent: a warn's reasons on stderr too, not only in the report
-        print(f"warning: robot check warns: {'; '.join(report['reasons'])}", file=sys.stderr)
+        print(f"warning: robot check warns: {reasons}", file=sys.stderr)
     return 0
 
 
@@ -198,7 +252,12 @@ def identify_command(args: argparse.Namespace) -> int:
         from bioform_mj.outputs.files import check_out_file
 
         args.out = check_out_file(args.out, "--out")
-    result = identify_main(ref_from_args(args.model, args))
+    from bioform_mj.core.errors import InputError
+
+    try:
+        result = identify_main(ref_from_args(args.model, args))
+    except InputError as exc:  # in the terms of the flags the user gave (issue 28)
+        raise InputError(cli_terms(str(exc))) from None
     text = json.dumps(result, indent=2)
     if args.out is not None:
         from bioform_mj.outputs.files import write_text

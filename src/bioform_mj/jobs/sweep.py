@@ -484,6 +484,34 @@ def check_sweep_dir(out: Path) -> None:
             )
 
 
+def check_same_sweep(out: Path, keys: set[str]) -> None:
+    """InputError (exit 2) when ``out/runs`` holds rows that are no run of this sweep (``keys``): another
+    sweep's (a different configuration, method or seed), whose statistics this one would overwrite. A
+    resume, or the same sweep with more runs (more seeds, another value), passes (design §16)."""
+    runs_dir = out / "runs"
+    try:
+        names = [n for n in os.listdir(runs_dir) if n.endswith(".json") and not n.startswith(".")]
+    except (FileNotFoundError, NotADirectoryError):
+        return
+    foreign = sorted(n[: -len(".json")] for n in names if n[: -len(".json")] not in keys)
+    if not foreign:
+        return
+    desc = ""
+    try:  # what the first of them was, for the message (a damaged file: said as such)
+        row = json.loads((runs_dir / f"{foreign[0]}.json").read_bytes()[: 1 << 20])
+        labels = {k: v for k, v in row.items() if k not in ("key", "provenance") and not isinstance(v, (dict, list))}
+        shown = ["method", "seed", *(k for k in labels if "." in k)]
+        desc = ", e.g. " + ", ".join(f"{k}={labels[k]}" for k in shown if k in labels)
+    except (OSError, ValueError, AttributeError):
+        desc = f", e.g. '{foreign[0]}.json'"
+    raise InputError(
+        f"sweep directory '{out}' holds another sweep's rows: {len(foreign)} of its {len(names)} rows are no run "
+        f"of this sweep{desc} (a different configuration, method or seed; its statistics would be overwritten). "
+        f"To resume that sweep, rerun its own command; to run this one, choose another --out (or remove '{out}'); "
+        "the same command whose resolved configuration changed since (another version's defaults) counts as another"
+    )
+
+
 #: estimated cost of a run on one core (design §16): µs per follower and control step, and seconds
 #: of setup per run; measured on the development machine (paper / large16 presets, compiled loop:
 #: ideal 0.4-0.9 µs, MuJoCo 8-11 µs, 5 / 70 ms setup). The ETA printed before a sweep uses them.
@@ -539,6 +567,7 @@ def _sweep_locked(
     rows: dict[str, dict[str, Any]] = {}
     todo: list[RunSpec] = []
     keys = list(dict.fromkeys(sp.key for sp in specs))  # identical runs (same content) run once
+    check_same_sweep(out, set(keys))  # another sweep's rows: refused, saying how to proceed (design §16)
     seen: set[str] = set()
     redone: dict[str, int] = {}
     for sp in specs:

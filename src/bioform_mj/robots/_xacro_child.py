@@ -47,6 +47,117 @@ def _limit(mem_bytes: int, cpu_s: int) -> None:
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write fails (EFBIG) instead of killing us silently
 
 
+# ------------------------------------------------------------------ the OS layers (design §12; Linux only)
+#: Landlock (kernel >= 5.13): filesystem access rights by ABI version; network (ABI 4), scopes (ABI 6)
+_LL_FS = {1: (1 << 13) - 1, 2: (1 << 14) - 1, 3: (1 << 15) - 1, 5: (1 << 16) - 1}
+_LL_READ = (1 << 2) | (1 << 3)  # READ_FILE | READ_DIR
+_LL_SYS = (444, 445, 446)  # landlock_create_ruleset, _add_rule, _restrict_self (every architecture)
+#: system calls refused by the seccomp filter (EPERM): new processes and threads, sockets, tracing, mounts,
+#: namespaces, kernel keyrings, bpf, io_uring, modules; per architecture (AUDIT_ARCH, numbers)
+_SECCOMP_DENY = {
+    "x86_64": (
+        0xC000003E,
+        (59, 322, 57, 58, 56, 435, 41, 53, 42, 49, 50, 43, 288, 101, 310, 311, 165, 166, 272, 308, 161, 155)
+        + (250, 248, 249, 321, 298, 323, 425, 175, 313, 246, 304, 303),
+    ),
+    "aarch64": (
+        0xC00000B7,
+        (221, 281, 220, 435, 198, 199, 203, 200, 201, 202, 242, 117, 270, 271, 40, 39, 97, 268, 51, 41)
+        + (219, 217, 218, 280, 241, 282, 425, 105, 273, 104, 265, 264),
+    ),
+}
+
+
+def os_sandbox(read_dirs: list[str]) -> dict[str, str]:
+    """Confine this process with what the kernel offers without root, each layer on its own (a layer that is
+    unavailable is said, never fatal): ``no_new_privs`` (``prctl``), a new network namespace (``unshare``:
+    no interface but a down loopback), Landlock (reads only beneath ``read_dirs``, no write, no TCP) and a
+    seccomp filter (:data:`_SECCOMP_DENY`). Returns ``{layer: "on…" | "unavailable: why"}``. Must run
+    single-threaded, before the audit hook (it refuses ``ctypes``)."""
+    import ctypes
+    import platform
+
+    out: dict[str, str] = {}
+    if not sys.platform.startswith("linux"):
+        return {"os": f"unavailable: {sys.platform} (Linux only)"}
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.syscall.restype = ctypes.c_long
+    libc.prctl.argtypes = [ctypes.c_int, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong]
+
+    def err() -> str:
+        return os.strerror(ctypes.get_errno())
+
+    nnp = libc.prctl(38, 1, 0, 0, 0) == 0  # PR_SET_NO_NEW_PRIVS
+    out["no_new_privs"] = "on" if nnp else f"unavailable: {err()}"
+    newnet, newuser = 0x40000000, 0x10000000
+    flags = newnet if os.geteuid() == 0 else newuser | newnet  # root keeps its file access (no user ns)
+    out["netns"] = "on" if libc.unshare(flags) == 0 else f"unavailable: {err()}"
+    out["landlock"] = _landlock(libc, read_dirs, err) if nnp else "unavailable: needs no_new_privs"
+    out["seccomp"] = _seccomp(libc, platform.machine(), err) if nnp else "unavailable: needs no_new_privs"
+    return out
+
+
+def _landlock(libc, read_dirs: list[str], err) -> str:
+    import ctypes
+
+    abi = libc.syscall(_LL_SYS[0], None, ctypes.c_size_t(0), ctypes.c_uint32(1))  # LANDLOCK_CREATE_RULESET_VERSION
+    if abi < 1:
+        return f"unavailable: {err()} (kernel < 5.13 or Landlock not enabled)"
+    fs = _LL_FS[max(k for k in _LL_FS if k <= abi)]
+    attr = (ctypes.c_uint64 * 3)(fs, 3 if abi >= 4 else 0, 3 if abi >= 6 else 0)  # net: bind/connect TCP; scopes
+    size = 8 * (3 if abi >= 6 else 2 if abi >= 4 else 1)
+    rfd = libc.syscall(_LL_SYS[0], ctypes.byref(attr), ctypes.c_size_t(size), ctypes.c_uint32(0))
+    if rfd < 0:
+        return f"unavailable: {err()}"
+    try:
+        for d in read_dirs:
+            try:
+                fd = os.open(d, os.O_PATH | os.O_CLOEXEC)
+            except OSError:
+                continue
+            rule = (ctypes.c_ubyte * 12)()  # struct landlock_path_beneath_attr, packed: u64 access, s32 fd
+            ctypes.memmove(rule, ctypes.byref(ctypes.c_uint64(_LL_READ if os.path.isdir(d) else 1 << 2)), 8)
+            ctypes.memmove(ctypes.byref(rule, 8), ctypes.byref(ctypes.c_int32(fd)), 4)
+            ok = libc.syscall(_LL_SYS[1], ctypes.c_int(rfd), ctypes.c_int(1), ctypes.byref(rule), ctypes.c_uint32(0))
+            os.close(fd)
+            if ok != 0:
+                return f"unavailable: a rule for {d}: {err()}"
+        if libc.syscall(_LL_SYS[2], ctypes.c_int(rfd), ctypes.c_uint32(0)) != 0:
+            return f"unavailable: {err()}"
+    finally:
+        os.close(rfd)
+    return f"on (ABI {abi}): reads beneath {len(read_dirs)} folders, no write" + (", no TCP" if abi >= 4 else "")
+
+
+def _seccomp(libc, machine: str, err) -> str:
+    import ctypes
+
+    if machine not in _SECCOMP_DENY:
+        return f"unavailable: no filter for {machine}"
+    arch, deny = _SECCOMP_DENY[machine]
+    eperm = 0x00050000 | 1  # SECCOMP_RET_ERRNO | EPERM
+    prog = [(0x20, 0, 0, 4), (0x15, 1, 0, arch), (0x06, 0, 0, eperm), (0x20, 0, 0, 0)]  # arch, else EPERM; nr
+    if machine == "x86_64":
+        prog.append((0x35, 0, 1, 0x40000000))  # the x32 ABI: refused
+        prog.append((0x06, 0, 0, eperm))
+    for nr in deny:
+        prog += [(0x15, 0, 1, nr), (0x06, 0, 0, eperm)]
+    prog.append((0x06, 0, 0, 0x7FFF0000))  # SECCOMP_RET_ALLOW
+
+    class Filter(ctypes.Structure):
+        _fields_ = [("code", ctypes.c_uint16), ("jt", ctypes.c_uint8), ("jf", ctypes.c_uint8), ("k", ctypes.c_uint32)]
+
+    class Prog(ctypes.Structure):
+        _fields_ = [("len", ctypes.c_uint16), ("filter", ctypes.POINTER(Filter))]
+
+    arr = (Filter * len(prog))(*[Filter(*f) for f in prog])
+    fprog = Prog(len(prog), arr)
+    libc.prctl.argtypes = [ctypes.c_int, ctypes.c_ulong, ctypes.c_void_p, ctypes.c_ulong, ctypes.c_ulong]
+    if libc.prctl(22, 2, ctypes.addressof(fprog), 0, 0) != 0:  # PR_SET_SECCOMP, SECCOMP_MODE_FILTER
+        return f"unavailable: {err()}"
+    return f"on: {len(deny)} system calls refused (processes, threads, sockets, ptrace, mounts, namespaces, …)"
+
+
 def _within(path: str, roots: list[str]) -> bool:
     real = os.path.realpath(path)
     return any(real == r or real.startswith(r.rstrip(os.sep) + os.sep) for r in roots)
@@ -279,8 +390,12 @@ def main() -> int:
     if len(xml) > int(req["max_out_bytes"]):
         _answer({"kind": "size", "error": f"its expansion is {len(xml) / 1e6:.0f} MB"})
         return 3
-    _answer({"xml": xml, "includes": includes})
+    _answer({"xml": xml, "includes": includes, "sandbox": _SANDBOX})
     return 0
+
+
+#: what :func:`os_sandbox` applied, for the answer
+_SANDBOX: dict[str, str] = {}
 
 
 class _NoXacro(Exception):
@@ -400,6 +515,8 @@ def _expand(req: dict) -> tuple[str, list[str]]:
     xacro.parse = parse
 
     python_dirs = sorted({os.path.realpath(p) for p in sys.path if p and os.path.isdir(p)})  # lazy imports
+    # the OS layers first (they use ctypes, which the hook refuses); $(find) packages lie under the search dirs
+    _SANDBOX.update(os_sandbox(sorted({*roots, *search, *python_dirs, os.path.realpath(req["package_dir"])})))
     _install_hook(roots, search, python_dirs)
     doc = xacro.process_file(path, mappings=dict(req["args"]))
     return doc.toxml(), sorted({os.path.realpath(f) for f in getattr(xacro, "all_includes", [])})

@@ -193,7 +193,12 @@ def _wheel_joints(model: mujoco.MjModel, path: Path, names: _Mapped, base: int) 
     for side, jname in (("left_wheel", names.left), ("right_wheel", names.right)):
         j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, jname)
         if j < 0:
-            raise ModelError(f"{path}: no joint '{jname}' ({side}; map it with {side} = \"JOINT\")")
+            from bioform_mj.robots.urdf_wheels import hinge_candidates
+
+            raise ModelError(
+                f"{path}: no joint '{jname}' ({side}; map it with {side} = \"JOINT\"; hinge joints found: "
+                f"{hinge_candidates(model)})"
+            )
         if model.jnt_type[j] != _HINGE:
             raise ModelError(
                 f"{path}: joint '{jname}' ({side}) is not a hinge (type {mujoco.mjtJoint(model.jnt_type[j]).name})"

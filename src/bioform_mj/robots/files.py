@@ -30,7 +30,7 @@ def urdf_files(ref: Any, file_hash: Callable[[str | Path], str]) -> dict[str, st
     text = _read_text(Path(ref.model), ref.package_path, ref.xacro, ref.xacro_args)
     for f in getattr(text, "includes", ()):
         out[str(Path(f))] = file_hash(f)
-    parsed = _parse(Path(ref.model), ref.package_path, ref.xacro, ref.xacro_args)
+    parsed = _parse(Path(ref.model), ref.package_path, ref.xacro, ref.xacro_args, ref.asset_roots)
     for m in re.finditer(r'<mesh\b[^>]*\bfilename="([^"]+)"', parsed.text):
         f = Path(m.group(1))
         if f.is_absolute():

@@ -132,7 +132,9 @@ def published_model(entry: Any) -> mujoco.MjModel:
     ref = resolve_robot(entry)
     if is_urdf(Path(ref.model)):
         return import_urdf(replace(ref, self_collide=True)).model
-    return mujoco.MjSpec.from_file(str(ref.model)).compile()
+    from bioform_mj.robots.mjcf_assets import open_mjcf  # design §12: its files inside its folder
+
+    return open_mjcf(ref.model, ref.asset_roots).compile()
 
 
 def _why_not(scene: mujoco.MjModel, b1: int, b2: int, urdf: bool) -> str:

@@ -172,14 +172,17 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
             raise ModelError(str(exc)) from None
         spec, model, ref, imported = imp.spec, imp.model, imp.ref, imp.notes
     else:
+        from bioform_mj.robots.mjcf_assets import open_mjcf  # includes and assets inside its folder (design §12)
         from bioform_mj.robots.sanity import spec_file_problem  # a FIFO or a 10 GB mesh: before the compiler opens it
 
         try:
-            spec = mujoco.MjSpec.from_file(str(path))
+            spec = open_mjcf(path, ref.asset_roots)
             if ref.balance_inertia:  # the mapping's balance_inertia (design §12)
                 spec.compiler.balanceinertia = True
             bad = spec_file_problem(spec)
             model = None if bad else spec.compile()
+        except InputError as exc:  # an asset outside the robot's folder, a FIFO: before MuJoCo read it
+            raise ModelError(str(exc)) from None
         except Exception as exc:  # mujoco raises ValueError; be robust to other types
             from bioform_mj.robots.compile_hints import compile_hint
 

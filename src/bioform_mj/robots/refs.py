@@ -102,6 +102,8 @@ class RobotRef:
     ``xacro``: the file may be expanded by xacro, a program, in a sandboxed process
     (:mod:`bioform_mj.robots.xacro_sandbox`; default: a file that needs xacro is refused); ``xacro_args``:
     its ``$(arg NAME)`` values, written ``{NAME = "VALUE"}``.
+    ``asset_roots``: folders an MJCF robot's includes and asset files may be in beyond the robot file's
+    own folder (:mod:`bioform_mj.robots.mjcf_assets`; default: none; not part of the mapping proper).
     """
 
     model: str
@@ -123,11 +125,17 @@ class RobotRef:
     balance_inertia: bool = False  # MuJoCo's compiler option balanceinertia (an inertia breaking A + B >= C)
     xacro: bool = False  # URDF only (design §12): the file may be expanded by xacro (a program), sandboxed
     xacro_args: tuple[tuple[str, str], ...] = ()  # URDF only: xacro's $(arg NAME) values, ((NAME, VALUE), ...)
+    asset_roots: tuple[str, ...] = ()  # MJCF only: folders its files may be in beyond its own (design §12)
 
     @property
     def mapped(self) -> bool:
-        """True when any key beyond ``model`` (and ``package_path``, a search path) differs from its default."""
-        return any(getattr(self, f.name) != f.default for f in fields(self) if f.name not in ("model", "package_path"))
+        """True when any key beyond ``model`` (and ``package_path``, ``asset_roots``: where files may be) differs
+        from its default."""
+        return any(
+            getattr(self, f.name) != f.default
+            for f in fields(self)
+            if f.name not in ("model", "package_path", "asset_roots")
+        )
 
     def to_table(self) -> dict[str, Any]:
         """The mapping as a TOML table: ``model`` and every key that differs from its default
@@ -144,7 +152,7 @@ class RobotRef:
 
     def to_entry(self) -> str | dict[str, Any]:
         """The entry as a scenario writes it: the model alone, or the table of :meth:`to_table`."""
-        if not self.mapped and not self.package_path:
+        if not self.mapped and not self.package_path and not self.asset_roots:
             return self.model
         return self.to_table()
 
@@ -205,6 +213,14 @@ def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:
                     f"{', '.join(repr(a) for a in allowed if a)}, got {value!r}"
                 )
             kw[name] = value
+        elif name == "asset_roots":
+            if not isinstance(value, (list, tuple)) or not all(
+                isinstance(v, str) and v and "\x00" not in v for v in value
+            ):
+                raise InputError(
+                    f"scenario key '{key}.asset_roots': expected an array of directory paths, got {value!r}"
+                )
+            kw[name] = tuple(value)
         elif name == "casters":
             if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v for v in value):
                 raise InputError(
@@ -317,6 +333,11 @@ def rebase_entries(entries: Any, base_dir: Path) -> Any:
             t = {**e, "model": fix(e["model"])}
             if "package_path" in t:
                 t["package_path"] = rebase_package_path(t["package_path"], base_dir)
+            if isinstance(t.get("asset_roots"), list):  # design §12: relative to the file, as the model
+                t["asset_roots"] = [
+                    str((base_dir / v).resolve()) if isinstance(v, str) and v and not Path(v).is_absolute() else v
+                    for v in t["asset_roots"]
+                ]
             out.append(t)
         else:
             out.append(e)

@@ -50,7 +50,7 @@ import numpy as np
 
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.compile_hints import compile_hint
-from bioform_mj.robots.mesh_paths import symlink_escape
+from bioform_mj.robots.mesh_paths import absolute_escape, symlink_escape
 from bioform_mj.robots.packages import find_package, package_search_path, resolve_uri
 from bioform_mj.robots.refs import PackagePath, RobotRef
 from bioform_mj.robots.sanity import mesh_problem, not_regular, urdf_value_problem
@@ -188,10 +188,14 @@ def _have_trimesh() -> bool:
 
 
 def _parse(
-    path: Path, packages: PackagePath, xacro: bool = False, xacro_args: tuple[tuple[str, str], ...] = ()
+    path: Path,
+    packages: PackagePath,
+    xacro: bool = False,
+    xacro_args: tuple[tuple[str, str], ...] = (),
+    asset_roots: tuple[str, ...] = (),
 ) -> _Parsed:
     """Read, check and rewrite the URDF (no MuJoCo): raises :class:`UrdfError` naming the element."""
-    from bioform_mj.robots.xacro_sandbox import XACRO_NOTE, Expanded
+    from bioform_mj.robots.xacro_sandbox import XACRO_NOTE, Expanded, sandbox_note
 
     text = _read_text(path, packages, xacro, xacro_args)
     expanded = isinstance(text, Expanded)
@@ -204,7 +208,7 @@ def _parse(
     bad_value = urdf_value_problem(robot)  # NaN, negative, zero where it cannot be: refused naming it
     if bad_value:
         raise UrdfError(f"{path}: {bad_value}")
-    notes: list[str] = [XACRO_NOTE] if expanded else []
+    notes: list[str] = [XACRO_NOTE, sandbox_note(text.sandbox)] if expanded else []
     links = {}
     for link in robot.findall("link"):
         name = link.get("name")
@@ -311,6 +315,8 @@ def _parse(
                     why = bad  # never copied into a run's assets/ under the target's name
                 elif file is not None and (bad := mesh_problem(file)):
                     why = f"mesh file {file}: {bad}"  # a FIFO, a device, a zip bomb: never opened or unpacked
+                elif file is not None and (bad := absolute_escape(uri, file, packages, path, asset_roots)):
+                    why = bad  # /etc/… named as a mesh: never read (issue 28)
                 elif file is not None and not file.is_file():
                     why = f"no file {file}"
                 elif file is not None and not os.access(file, os.R_OK):
@@ -424,7 +430,7 @@ def _parse(
 def check_file(ref: RobotRef) -> None:
     """The checks of :func:`import_urdf` that need no MuJoCo: the file reads, has one root link,
     a joint that could be a wheel, and its collision meshes resolve. Raises :class:`UrdfError`."""
-    _parse(Path(ref.model), ref.package_path, ref.xacro, ref.xacro_args)
+    _parse(Path(ref.model), ref.package_path, ref.xacro, ref.xacro_args, ref.asset_roots)
 
 
 # ------------------------------------------------------------------ meshes MuJoCo cannot read
@@ -496,7 +502,7 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
     import mujoco
 
     path = Path(ref.model)
-    pr = _parse(path, ref.package_path, ref.xacro, ref.xacro_args)
+    pr = _parse(path, ref.package_path, ref.xacro, ref.xacro_args, ref.asset_roots)
     notes = list(pr.notes)
     try:
         spec = mujoco.MjSpec.from_string(pr.text)

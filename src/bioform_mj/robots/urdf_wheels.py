@@ -20,6 +20,33 @@ def collision_zmin(model: Any, data: Any, g: int) -> float:
     return float((data.geom_xpos[g] + rot @ c)[2] - np.abs(rot[2]) @ h)
 
 
+#: most candidate joints a message lists
+CANDIDATES_SHOWN = 12
+
+
+def hinge_candidates(model: Any) -> str:
+    """The model's hinge joints (a URDF's continuous and revolute ones) with their body and its parent, for an
+    error that asks for a mapping: ``'j' (link 'b' on 'p'), …`` (``"none"`` when there is none)."""
+    import mujoco
+
+    hinge = int(mujoco.mjtJoint.mjJNT_HINGE)
+
+    def name(obj: Any, i: int) -> str:
+        return mujoco.mj_id2name(model, obj, i) or f"#{i}"
+
+    out = []
+    for j in range(model.njnt):
+        if int(model.jnt_type[j]) != hinge:
+            continue
+        b = int(model.jnt_bodyid[j])
+        out.append(
+            f"'{name(mujoco.mjtObj.mjOBJ_JOINT, j)}' (on '{name(mujoco.mjtObj.mjOBJ_BODY, b)}', child of "
+            f"'{name(mujoco.mjtObj.mjOBJ_BODY, int(model.body_parentid[b]))}')"
+        )
+    more = f" and {len(out) - CANDIDATES_SHOWN} more" if len(out) > CANDIDATES_SHOWN else ""
+    return ", ".join(out[:CANDIDATES_SHOWN]) + more if out else "none"
+
+
 def find_wheels(model: Any, base: int, path: Path) -> tuple[str, str, str]:
     """``(left, right, note)``: the two joints that can be the driven wheels (see the module docstring)."""
     import mujoco
@@ -69,11 +96,13 @@ def find_wheels(model: Any, base: int, path: Path) -> tuple[str, str, str]:
     if not cand:
         raise InputError(
             f"{path}: no continuous or revolute joint can be a driven wheel (an axis along the base's y axis, "
-            "right below the base, on a link that touches the floor); map left_wheel and right_wheel"
+            "right below the base, on a link that touches the floor); map left_wheel and right_wheel "
+            f"(continuous/revolute joints found: {hinge_candidates(model)})"
         )
     raise InputError(
         f"{path}: cannot tell the driven wheels (left: {', '.join(repr(n) for n, _ in sides[1]) or 'none'}; "
-        f"right: {', '.join(repr(n) for n, _ in sides[-1]) or 'none'}); map left_wheel and right_wheel"
+        f"right: {', '.join(repr(n) for n, _ in sides[-1]) or 'none'}); map left_wheel and right_wheel "
+        f"(continuous/revolute joints found: {hinge_candidates(model)})"
     )
 
 

@@ -45,6 +45,7 @@ __all__ = [
     "XACRO_TIME_S",
     "XACRO_OUTPUT_MB",
     "XACRO_NOTE",
+    "sandbox_note",
     "XacroRefused",
     "Expanded",
     "needs_xacro",
@@ -81,6 +82,8 @@ class Expanded(str):
     files it included or loaded (``xacro:include``, ``load_yaml``), real paths, for provenance."""
 
     includes: tuple[str, ...] = ()
+    #: the OS layers the child applied (``{layer: "on…" | "unavailable: why"}``, :func:`sandbox_note`)
+    sandbox: dict[str, str] = {}
 
 
 class XacroRefused(InputError):
@@ -89,6 +92,17 @@ class XacroRefused(InputError):
 
 #: ``(allowed, args)`` the command line granted to every robot of this process (``--xacro``)
 _GRANT: list = [False, ()]
+
+
+def sandbox_note(layers: dict[str, str]) -> str:
+    """The import note of the OS layers around xacro's process: those on, and those unavailable with why."""
+    on = [k for k, v in layers.items() if v.startswith("on")]
+    off = [f"{k} ({v.removeprefix('unavailable: ')})" for k, v in layers.items() if not v.startswith("on")]
+    return (
+        "xacro's process was also confined by the OS: "
+        + (", ".join(on) or "nothing")
+        + (f"; unavailable here: {', '.join(off)} (the audit hook and limits still apply)" if off else "")
+    )
 
 
 def grant(allowed: bool, args: tuple[tuple[str, str], ...] = ()) -> None:
@@ -222,6 +236,8 @@ def expand(path: Path, packages: PackagePath, args: tuple[tuple[str, str], ...] 
     if isinstance(answer.get("xml"), str):
         out = Expanded(answer["xml"])
         out.includes = tuple(str(f) for f in answer.get("includes") or () if isinstance(f, str))
+        box = answer.get("sandbox")
+        out.sandbox = {str(k): str(v) for k, v in box.items()} if isinstance(box, dict) else {}
         _EXPANDED[key] = out
         return out
     kind, why = answer.get("kind"), " ".join(str(answer.get("error", "")).split())

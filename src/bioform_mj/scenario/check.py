@@ -231,6 +231,10 @@ def validate(sc: Scenario) -> None:
             ref = resolve_robot(r)  # raises InputError naming an unknown robot or a missing file
             if is_urdf(ref.model):
                 check_file(ref)  # design §12: root, package://, meshes, wheels: before any work
+            else:  # design §12: its includes and assets inside its folder, before MuJoCo reads anything
+                from bioform_mj.robots.mjcf_assets import confine_mjcf
+
+                confine_mjcf(ref.model, ref.asset_roots)
     _validate_sensing(sc)
 
     d = sc.disturbance

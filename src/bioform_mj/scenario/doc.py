@@ -227,6 +227,11 @@ KEYS: dict[str, tuple[str, str]] = {
         'URDF with `xacro = true`: `{NAME = "VALUE"}`, the values of xacro\'s `$(arg NAME)` '
         "(`--xacro-arg NAME=VALUE`).",
     ),
+    "plant.robots[].asset_roots": (
+        "",
+        'MJCF: `["DIR", …]`, folders its includes, meshes, textures, height fields and skins may be in besides '
+        "the robot file's own (default: none, a file outside is refused; `--asset-root DIR`; design §12).",
+    ),
     "plant.package_path": (
         "",
         'URDF: `{NAME = "DIR"}` where `package://NAME/…` point, before `$BIOFORM_PACKAGE_PATH`, '

@@ -32,7 +32,9 @@ def _source_spec(ref: RobotRef) -> mujoco.MjSpec:
 
     if is_urdf(Path(ref.model)):
         return import_urdf(ref).spec
-    spec = mujoco.MjSpec.from_file(ref.model)
+    from bioform_mj.robots.mjcf_assets import open_mjcf  # design §12: its files inside its folder
+
+    spec = open_mjcf(ref.model, ref.asset_roots)
     absolute_asset_files(spec)
     return spec
 

@@ -1,0 +1,240 @@
+"""Where an MJCF robot's files may be (design §12; issue 28): inside the robot's own folder.
+
+A URDF's meshes stay inside the robot's packages (:mod:`bioform_mj.robots.mesh_paths`); an MJCF robot's
+``<include file>``, its ``<compiler meshdir/texturedir/assetdir>``, and every ``mesh``, ``skin``, ``hfield``,
+``texture`` (``file`` and the cube faces' ``file*``), ``flexcomp`` and ``model`` file stay inside the folder
+of the robot's file, once symlinks are followed. Anything else is refused with one
+:class:`~bioform_mj.core.errors.InputError` line naming the element and the path, **before MuJoCo reads
+anything**: :func:`confine_mjcf` walks the XML (the include chain too) with the standard library's parser;
+:func:`open_mjcf` then lets MuJoCo parse it and checks the spec's asset files again as its compiler will
+resolve them (:func:`spec_escape`), before compiling.
+
+A user who keeps assets elsewhere names the folders: ``asset_roots = ["DIR", …]`` in the robot's table
+(relative to the scenario file), or ``--asset-root DIR`` (repeatable) on the command line
+(:func:`grant_roots`, for every robot of the process). No MuJoCo import at module level.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import xml.etree.ElementTree as ET
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from bioform_mj.core.errors import InputError
+
+__all__ = [
+    "MJCF_MAX_MB",
+    "INCLUDE_DEPTH",
+    "AssetEscape",
+    "grant_roots",
+    "granted_roots",
+    "roots_from_args",
+    "add_flag",
+    "allowed_roots",
+    "confine_mjcf",
+    "spec_escape",
+    "open_mjcf",
+]
+
+#: largest MJCF file (main or included) walked, MB; a published robot's is well under 1 MB
+MJCF_MAX_MB = 64
+#: deepest ``<include>`` chain walked (MuJoCo refuses a recursive one itself; this bounds the walk)
+INCLUDE_DEPTH = 32
+#: element → attributes naming a file MuJoCo reads
+_FILE_ATTRS = {
+    "texture": ("file", "fileright", "fileleft", "fileup", "filedown", "filefront", "fileback"),
+}
+_HOW = 'assets kept elsewhere: --asset-root DIR, or asset_roots = ["DIR"] in the robot\'s table (design §12)'
+
+#: ``--asset-root`` folders of this process (real paths), added to every MJCF robot's own folder
+_GRANT: list[tuple[str, ...]] = [()]
+
+
+class AssetEscape(InputError):
+    """An MJCF robot names a file outside its folder and the granted asset roots (exit 2)."""
+
+
+def grant_roots(dirs: Iterable[str | Path]) -> None:
+    """``--asset-root DIR``: let every MJCF robot of this process read files under ``dirs`` too."""
+    _GRANT[0] = tuple(os.path.realpath(os.path.expanduser(str(d))) for d in dirs)
+
+
+def granted_roots() -> tuple[str, ...]:
+    """The folders :func:`grant_roots` granted (real paths)."""
+    return _GRANT[0]
+
+
+def roots_from_args(values: Iterable[str] | None, flag: str = "--asset-root") -> tuple[str, ...]:
+    """``--asset-root DIR`` flags as real paths; raises :class:`InputError` naming the flag for a missing folder."""
+    out = []
+    for v in values or ():
+        d = Path(v).expanduser()
+        if not d.is_dir():
+            raise InputError(f"{flag} {v}: no such directory")
+        out.append(os.path.realpath(d))
+    return tuple(out)
+
+
+def add_flag(p: argparse.ArgumentParser, scenario: bool = False) -> None:
+    """``--asset-root DIR`` (repeatable)."""
+    whose = "the scenario's MJCF robots" if scenario else "MJCF"
+    p.add_argument(
+        "--asset-root",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help=f"{whose}: also read meshes, textures, height fields, skins and includes under DIR (repeatable; "
+        "default: only the robot file's own folder; asset_roots in a robot's table)",
+    )
+
+
+def allowed_roots(model: str | Path, extra: Iterable[str] = ()) -> tuple[str, ...]:
+    """The folders (real paths) an MJCF robot at ``model`` may read: its own folder, ``extra``, the granted."""
+    own = os.path.realpath(os.path.dirname(os.path.abspath(model)))
+    return (own, *(os.path.realpath(os.path.expanduser(e)) for e in extra), *granted_roots())
+
+
+def _inside(path: str, roots: tuple[str, ...]) -> bool:
+    real = os.path.realpath(path)
+    return any(real == r or real.startswith(r.rstrip(os.sep) + os.sep) for r in roots)
+
+
+def _refuse(model: Path, where: str, element: str, name: str, full: str, roots: tuple[str, ...]) -> AssetEscape:
+    return AssetEscape(f"{model}: {where}{_named(element, name, full, roots)}")
+
+
+def _named(element: str, name: str, full: str, roots: tuple[str, ...]) -> str:
+    """``<mesh file="NAME"/>`` (resolved to …, a symlink to …) outside …: not read (how to allow it)."""
+    tag, _, attr = element.partition(" ")
+    lexical, real = os.path.normpath(full), os.path.realpath(full)
+    at = f" ('{lexical}')" if lexical != name else ""
+    via = f", a symlink to '{real}'," if real != lexical else ""
+    allowed = f"'{roots[0]}'" + (f" or the asset roots {', '.join(repr(r) for r in roots[1:])}" if roots[1:] else "")
+    return f'<{tag} {attr}="{name}"/>{at}{via} is outside the robot\'s folder {allowed}: not read ({_HOW})'
+
+
+def _read_xml(f: Path, model: Path, what: str) -> ET.Element:
+    from bioform_mj.robots.sanity import not_regular
+
+    why = not_regular(f)
+    if why:
+        raise InputError(f"{model}: {what} {why}")
+    try:
+        size = f.stat().st_size
+    except OSError as exc:
+        raise InputError(f"{model}: {what} '{f}' cannot be read ({exc.strerror})") from None
+    if size > MJCF_MAX_MB * 10**6:
+        raise InputError(
+            f"{model}: {what} '{f}' is {size / 1e6:.0f} MB, above the {MJCF_MAX_MB} MB an MJCF file may be"
+        )
+    try:
+        return ET.parse(f).getroot()
+    except ET.ParseError as exc:  # refused, never handed to MuJoCo's laxer parser unwalked
+        where = "" if what == "model file" else f"{what} '{f}': "
+        raise InputError(f"{model}: does not compile: {where}not well-formed XML ({exc})") from None
+    except OSError as exc:
+        raise InputError(f"{model}: {what} '{f}' cannot be read ({exc.strerror})") from None
+
+
+def confine_mjcf(model: str | Path, extra: Iterable[str] = ()) -> None:
+    """Refuse (:class:`AssetEscape`, exit 2) an MJCF file whose includes, compiler folders or asset files
+    resolve outside :func:`allowed_roots`, before MuJoCo reads anything (see the module docstring).
+
+    Resolution as MuJoCo 3–4 does it: ``<include file>`` (at any depth) relative to the main file's folder;
+    ``meshdir``/``texturedir``/``assetdir`` relative to it; a mesh, skin, height field or flexcomp file
+    relative to ``meshdir`` (else ``assetdir``), a texture's to ``texturedir`` (else ``assetdir``); an
+    attached ``<model file>`` relative to the main file's folder, walked in turn with the same roots. To be
+    safe against another resolution, every name is also checked against the folder of the file that holds
+    it, and where a file holds several ``<compiler>`` elements, against every folder they name."""
+    model = Path(model)
+    _confine(model, allowed_roots(model, extra), model, "", ())
+
+
+def _confine(file: Path, roots: tuple[str, ...], model: Path, prefix: str, models: tuple[str, ...]) -> None:
+    """:func:`confine_mjcf` of ``file`` (the robot's ``model``, or a ``<model file>`` it attaches: ``prefix``
+    names the way there, ``models`` the attached files above it)."""
+    base = os.path.dirname(os.path.abspath(file))
+    elements: list[tuple[str, ET.Element, str]] = []  # (where, element, its file's folder), includes inlined
+
+    def check(where: str, element: str, name: str, folders: list[str]) -> None:
+        for d in folders:
+            full = os.path.join(base, d, name)
+            if not _inside(full, roots):
+                raise _refuse(model, where, element, name, full, roots)
+
+    def walk(f: Path, where: str, chain: tuple[str, ...]) -> None:
+        if len(chain) + len(models) > INCLUDE_DEPTH:
+            raise InputError(f"{model}: includes nested deeper than {INCLUDE_DEPTH} ({' -> '.join(chain)})")
+        root = _read_xml(f, model, "included file" if chain[1:] or models else "model file")
+        for el in root.iter():
+            if el.tag == "include":
+                name = el.get("file") or ""
+                check(where, "include file", name, ["", os.path.relpath(f.parent, base)])
+                full = os.path.join(base, name)
+                real = os.path.realpath(full)
+                if real in chain:
+                    raise InputError(f"{model}: <include file> '{name}' includes itself ({' -> '.join(chain)})")
+                walk(Path(full), f'{where}<include file="{name}"/> → ', (*chain, real))
+            elif isinstance(el.tag, str):
+                elements.append((where, el, os.path.relpath(os.path.dirname(os.path.abspath(f)), base)))
+
+    walk(file, prefix, (os.path.realpath(file),))
+    dirs: dict[str, list[str]] = {"meshdir": [], "texturedir": [], "assetdir": []}
+    for where, el, _ in elements:
+        if el.tag == "compiler":
+            for k in dirs:
+                v = el.get(k)
+                if v is not None:
+                    check(where, f"compiler {k}", v, [""])
+                    dirs[k].append(v)
+    for where, el, own in elements:
+        kind = "texturedir" if el.tag == "texture" else "meshdir"
+        folders = dirs[kind] or dirs["assetdir"] or [""]
+        if el.tag == "model":  # an attached MJCF: relative to the main file's folder, walked in turn
+            name = el.get("file") or ""
+            check(where, "model file", name, ["", own])
+            real = os.path.realpath(os.path.join(base, name))
+            if name and real not in models:
+                _confine(Path(base) / name, roots, model, f'{where}<model file="{name}"/> → ', (*models, real))
+            continue
+        for attr in _FILE_ATTRS.get(el.tag, ("file",)):
+            name = el.get(attr)
+            if name:
+                check(where, f"{el.tag} {attr}", name, [*folders, *(os.path.join(own, d) for d in folders)])
+
+
+def spec_escape(spec: Any, roots: tuple[str, ...]) -> str:
+    """Why a parsed ``MjSpec``'s mesh, skin, height-field or texture file is outside ``roots``
+    (``""``: none), resolved as MuJoCo's compiler resolves it (the model's folder, ``meshdir``/``texturedir``)."""
+    top = spec.modelfiledir or "."
+    own = set(spec.assets) if spec.assets else set()
+    items = [(m.file, spec.meshdir, "mesh") for m in spec.meshes]
+    items += [(s.file, spec.meshdir, "skin") for s in spec.skins]
+    items += [(h.file, spec.meshdir, "hfield") for h in spec.hfields]
+    for t in spec.textures:
+        items += [(n, spec.texturedir, "texture") for n in (t.file, *t.cubefiles)]
+    for name, folder, kind in items:
+        if not name or name in own:
+            continue
+        full = os.path.join(os.path.abspath(top), folder or "", name)
+        if not _inside(full, roots):
+            return _named(f"{kind} file", name, full, roots)
+    return ""
+
+
+def open_mjcf(model: str | Path, extra: Iterable[str] = ()) -> Any:
+    """``mujoco.MjSpec.from_file(model)`` once :func:`confine_mjcf` passed, the spec's asset files checked
+    again (:func:`spec_escape`); raises :class:`AssetEscape`/:class:`InputError` (exit 2) otherwise.
+    Errors of MuJoCo's own parser propagate as MuJoCo raises them."""
+    import mujoco
+
+    extra = tuple(extra)
+    confine_mjcf(model, extra)
+    spec = mujoco.MjSpec.from_file(str(model))
+    why = spec_escape(spec, allowed_roots(model, extra))
+    if why:
+        raise AssetEscape(f"{model}: {why}")
+    return spec
