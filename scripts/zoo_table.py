@@ -99,6 +99,7 @@ def measure(r, a, paper_l: float) -> dict:
         right_wheel=r.right,
         tau_max=r.tau_max,
         top_speed=r.top_speed,
+        control_rate=r.control_rate,  # the maker's controller's rate where it publishes one (design §19)
     )
     extra = {k: tuple(v) if isinstance(v, list) else v for k, v in (a.map or {}).items()}
     ref = dataclasses.replace(ref, **extra)  # a counterfactual mapping (--map), said in the row
@@ -123,7 +124,7 @@ def measure(r, a, paper_l: float) -> dict:
         limits=rep.get("limits"),
         lengths_only_scale=rep["half_track_m"] / paper_l,
     )
-    keys = ("model", "base", "left_wheel", "right_wheel", "tau_max", "top_speed", *extra)
+    keys = ("model", "base", "left_wheel", "right_wheel", "tau_max", "top_speed", "control_rate", *extra)
     default = {f.name: f.default for f in dataclasses.fields(RobotRef)}
     table = {  # the keys that differ from RobotRef's defaults (caster_friction = 0 is not its default -1)
         k: list(getattr(ref, k)) if isinstance(getattr(ref, k), tuple) else getattr(ref, k)
