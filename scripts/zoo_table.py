@@ -51,8 +51,9 @@ def _outcomes(f: dict) -> list[dict]:
 
 #: demand items that compare the robot's resistance with the sliding gain (the method), not a demand with a limit
 GAIN_ITEMS = ("sliding_gain_v", "sliding_gain_w")
-#: the mapping's torque limit against traction: a property of the robot, not of the scenario's demand
-MAPPING_ITEMS = ("torque_vs_traction",)
+#: the mapping's torque limit against traction: a property of the robot, not of the scenario's demand; the sign terms
+#: at ĉ's projection bound: the method's worst case, not the scenario's demand (design §21)
+MAPPING_ITEMS = ("torque_vs_traction", "accel_at_c_bound")
 
 
 def _worst_ratio(summary: dict) -> dict | None:
