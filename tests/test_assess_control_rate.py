@@ -39,7 +39,6 @@ def test_the_three_sources_of_a_robots_control_rate(copy):
     rate, preset = preset_control_rate(resolve_robot("paper").model)  # a MuJoCo preset that drives it (as before)
     assert rate == pytest.approx(1000.0) and preset
     assert _rates('["paper"]') == [(rate, f"the '{preset}' preset's rate")]
-    assert _rates(f'[{{model = "{copy}", control_rate = 30}}]') == [(30.0, "the mapping's")]
     assert _rates('[{model = "paper", control_rate = 30}]') == [(30.0, "the mapping's")]  # the mapping first
     assert _rates(f'["{copy}"]') == [(None, "")]
     # two robots: each its own source (the check takes the slowest)
@@ -72,16 +71,20 @@ def test_a_bad_control_rate_flag_is_one_error_line_and_exit_2(argv, tmp_path, ca
     assert "Traceback" not in "".join(err) and not (tmp_path / "run").exists()
 
 
-def test_robot_check_shows_the_mapped_rate(copy, tmp_path, capsys):
-    out = tmp_path / "check.json"
-    code = cli.main(["robot", "check", copy, "--control-rate", "30", "--json", str(out)])
-    assert code in (0, 1)
-    lim = json.loads(out.read_text())["limits"]
+def test_robot_check_shows_the_mapped_rate(copy):
+    """``robot check``'s limits (its JSON ``limits`` and the printed block) carry the mapped rate, or say how to give
+    one (the check's static part: no identification needed for the limits)."""
+    from bioform_mj.assess.check import check
+    from bioform_mj.robots.limits import block
+    from bioform_mj.robots.refs import RobotRef
+
+    lim = check(RobotRef(model=copy, control_rate=30.0), identify_=False)["limits"]
     assert lim["control_rate_hz"] == 30.0 and lim["control_rate_source"] == "mapping"
-    assert "control rate 30 Hz (the mapping's)" in capsys.readouterr().out
+    assert "    control rate 30 Hz (the mapping's)" in block(lim)
+    none = check(RobotRef(model=copy), identify_=False)["limits"]
+    assert none["control_rate_hz"] is None and any("control_rate" in ln and "not given" in ln for ln in block(none))
 
 
-@pytest.mark.slow
 def test_a_run_checks_its_rate_against_the_mapped_one_or_says_how_to_give_it(copy, tmp_path):
     """0.2 s at the paper scenario's 1 kHz: the mapped 500 Hz fails the check (value 1000, limit 500, the mapping's);
     --control-rate 1000 passes it; without a rate the check is not made and the verdict is incomplete, with the how."""
