@@ -168,13 +168,6 @@ def unmodelled_causes(
             + (" while it drives" if x.get("while_driving") else "")
             + f", {x['torque_nm']:.3g} N·m of wheel torque)"
         )
-    if "caster_resistance" in by:
-        cr = by["caster_resistance"]
-        gaps = ", ".join(f"{w} {g:+.0%}" for w, g in (cr.get("gap") or {}).items())
-        out.append(
-            f"the casters' resistance (robot check: {gaps or 'named'}"
-            + (f"; {', '.join(cr['joints'])})" if cr["joints"] else ")")
-        )
     um = params.unmodelled(0.0, 0.0) if params is not None else None
     if "drag" in by:
         model_k = um["drag_rate_per_s"] if um is not None else [0.0, 0.0]
@@ -193,6 +186,14 @@ def unmodelled_causes(
         )
     elif params is not None and params.wheel_frictionloss > 0:
         out.append(f"a dead band of {2 * params.wheel_frictionloss:.3g} N·m (wheel frictionloss)")
+    if "caster_resistance" in by:  # after the wheels' own terms: a share of identification's gap, not a torque
+        cr = by["caster_resistance"]
+        gaps = ", ".join(f"{w} {g:+.0%}" for w, g in (cr.get("gap") or {}).items())
+        n_j = len(cr["joints"])
+        out.append(
+            f"the casters' resistance (robot check: {n_j} caster joint{'s' if n_j != 1 else ''}, identification "
+            f"{gaps or 'off'} from the formula on their account)"
+        )
     if params is not None and params.com_offset > 0.01:
         out.append(f"a centre of mass {1e3 * params.com_offset:.0f} mm off the axle (b̂ biased, design §8.1)")
     if slipping:
