@@ -5,7 +5,9 @@ and the MuJoCo run start alike — the same torques to 3 digits over the first 1
 first step in both), both at rest, no settle in either; the twin's own start-up peak is its peak (1.57 m/s² at
 t = 0.12 s: the 0.29 of the limit the check reported). MuJoCo's robot then turns a third slower (ω 0.31 against 0.46
 rad/s at 0.1 s), the learner follows it down, ĉ reaches its projection bound (â 0.0064 = 0.05 c_true) by t = 0.3 s
-and eq. 38's division by ĉ puts ±100 N·m on the wheels: 172 m/s², 753 rad/s² from log differences. No ideal twin
+and eq. 38's division by ĉ puts ±100 N·m on the wheels: 172 m/s², 753 rad/s² from log differences. The cause, by
+counterfactual: the caster swivels' damping (0.5 N·m·s/rad), turned from the file's angles; at 0 no collapse, a
+1.75 m/s² peak (ideal casters besides: 1.64, the twin's 1.57). No ideal twin
 shows that (its ĉ stays near c_true); the demand now says what the torque law asks with ĉ at its bound
 (``accel_at_c_bound``: ``2 a min(τ_bound, τ_max)`` against the acceleration limit), warned before the run.
 """
