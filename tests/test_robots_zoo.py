@@ -118,6 +118,8 @@ def test_a_zoo_robots_control_rate_is_the_makers_with_the_file_it_is_from():
         "diffbot_urdf",
     }
     for r in ROBOTS.values():
+        assert EXPECT[r.name]["control_rate_hz"] == (r.control_rate or None), r.name
+        assert EXPECT[r.name]["control_rate_source"] == r.control_rate_source, r.name
         if not r.control_rate:
             assert not r.control_rate_source, r.name
             continue

@@ -1161,6 +1161,8 @@ def reference(robot: Robot) -> dict:
         "tau_max_source": robot.tau_max_source,
         "top_speed_mps": robot.top_speed or None,
         "top_speed_source": robot.top_speed_source,
+        "control_rate_hz": robot.control_rate or None,
+        "control_rate_source": robot.control_rate_source,
         "test": ident["test"],
         "published_wheel_shapes": published_wheels,
         "self_contacts_mujoco_rules": self_contacts(robot),
