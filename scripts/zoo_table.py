@@ -51,8 +51,9 @@ def _outcomes(f: dict) -> list[dict]:
 
 #: demand items that compare the robot's resistance with the sliding gain (the method), not a demand with a limit
 GAIN_ITEMS = ("sliding_gain_v", "sliding_gain_w")
-#: the mapping's torque limit against traction: a property of the robot, not of the scenario's demand
-MAPPING_ITEMS = ("torque_vs_traction",)
+#: the mapping's torque limit against traction: a property of the robot, not of the scenario's demand; the sign terms
+#: at ĉ's projection bound: the method's worst case, not the scenario's demand (design §21)
+MAPPING_ITEMS = ("torque_vs_traction", "accel_at_c_bound")
 
 
 def _worst_ratio(summary: dict) -> dict | None:
@@ -99,6 +100,7 @@ def measure(r, a, paper_l: float) -> dict:
         right_wheel=r.right,
         tau_max=r.tau_max,
         top_speed=r.top_speed,
+        control_rate=r.control_rate,  # the maker's controller's rate where it publishes one (design §19)
     )
     extra = {k: tuple(v) if isinstance(v, list) else v for k, v in (a.map or {}).items()}
     ref = dataclasses.replace(ref, **extra)  # a counterfactual mapping (--map), said in the row
@@ -124,7 +126,7 @@ def measure(r, a, paper_l: float) -> dict:
         limits=rep.get("limits"),
         lengths_only_scale=rep["half_track_m"] / paper_l,
     )
-    keys = ("model", "base", "left_wheel", "right_wheel", "tau_max", "top_speed", *extra)
+    keys = ("model", "base", "left_wheel", "right_wheel", "tau_max", "top_speed", "control_rate", *extra)
     default = {f.name: f.default for f in dataclasses.fields(RobotRef)}
     table = {  # the keys that differ from RobotRef's defaults (caster_friction = 0 is not its default -1)
         k: list(getattr(ref, k)) if isinstance(getattr(ref, k), tuple) else getattr(ref, k)

@@ -103,6 +103,30 @@ def test_every_zoo_robot_has_its_makers_top_speed_with_the_source():
     assert sum(r.top_speed > 0 for r in ROBOTS.values()) >= len(ROBOTS) - 1
 
 
+def test_a_zoo_robots_control_rate_is_the_makers_with_the_file_it_is_from():
+    """Issue 27: the hardware verdict's control_rate limit (design §19) is stated only where the maker publishes it:
+    each with a link to the maker's file at a commit and the number as that file writes it; none made up."""
+    import re
+
+    stated = {r.name: r for r in ROBOTS.values() if r.control_rate}
+    assert set(stated) == {
+        "robotis_tb3_burger",
+        "robotis_tb3_waffle_pi",
+        "tb3_burger_urdf",
+        "tb3_waffle_pi_urdf",
+        "pmb2_urdf",
+        "diffbot_urdf",
+    }
+    for r in ROBOTS.values():
+        assert EXPECT[r.name]["control_rate_hz"] == (r.control_rate or None), r.name
+        assert EXPECT[r.name]["control_rate_source"] == r.control_rate_source, r.name
+        if not r.control_rate:
+            assert not r.control_rate_source, r.name
+            continue
+        assert re.search(r"https://github\.com/[\w.-]+/[\w.-]+/blob/[0-9a-f]{40}/\S+\.(yaml|h)", r.control_rate_source)
+        assert re.search(rf"\b{r.control_rate:g}(\.0)?\b", r.control_rate_source), r.name
+
+
 @pytest.mark.parametrize("name", NAMES)
 def test_reference_reproduces_expectations(name, live):
     """The committed expectations are what reference.py computes now (regenerate with --write)."""

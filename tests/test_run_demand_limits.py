@@ -140,7 +140,15 @@ def test_a_run_warns_each_exceeded_limit_with_its_ratio_and_the_verdict_is_never
     err = capsys.readouterr().err
     d = json.loads((out / "summary.json").read_text())
     items = d["demand"]["robots"][0]["demand"]
-    assert set(items) == {"wheel_speed", "accel", "yaw_accel", "lateral_accel", "sign_torque", "torque_vs_traction"}
+    assert set(items) == {
+        "wheel_speed",
+        "accel",
+        "yaw_accel",
+        "lateral_accel",
+        "sign_torque",
+        "torque_vs_traction",
+        "accel_at_c_bound",  # the method learns: the sign terms at ĉ's projection bound (issue 27)
+    }
     ws = items["wheel_speed"]
     assert ws["limit"] == pytest.approx(0.197, abs=0.001) and ws["ratio"] == pytest.approx(ws["value"] / ws["limit"])
     assert ws["ratio"] > 1

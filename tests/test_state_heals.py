@@ -21,6 +21,7 @@ GOOD = {
     "formula": {"a": 1.0, "b": 2.0},
     "identified": {"a": 1.0, "b": None},
     "relative_error": {"a": 0.0, "b": None},
+    "resistances": [],
     "seconds": 0.5,
 }
 

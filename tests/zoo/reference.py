@@ -91,6 +91,10 @@ class Robot:
     tau_max_source: str = ""
     top_speed: float = 0.0  # m/s at the tyre: the maker's datasheet figure (the `top_speed` mapping key, design §21)
     top_speed_source: str = ""
+    # Hz: the rate the maker's controller commands the wheels at (the `control_rate` mapping key, design §19), from the
+    # maker's own controller configuration or firmware (cited); 0 where the maker publishes none we found
+    control_rate: float = 0.0
+    control_rate_source: str = ""
     expected_verdict: str = "pass"
     expected_cause: str = ""
 
@@ -131,6 +135,12 @@ ROBOTS: tuple[Robot, ...] = (
         tau_max=1.4,
         top_speed=0.22,
         top_speed_source="ROBOTIS e-Manual, TurtleBot3 specifications: max. linear velocity 0.22 m/s (Burger)",
+        control_rate=30.0,
+        control_rate_source=(
+            "ROBOTIS OpenCR firmware turtlebot3_core_config.h: CONTROL_MOTOR_SPEED_PERIOD 30 //hz (the wheel "
+            "speed loop; Burger), https://github.com/ROBOTIS-GIT/OpenCR/blob/09bf34f5f9ebc1253e03ac789cf820dcc46eb99d/"
+            "arduino/opencr_arduino/opencr/libraries/turtlebot3/examples/turtlebot3_burger/turtlebot3_core/turtlebot3_core_config.h"
+        ),
         tau_max_source="Dynamixel XL430-W250 stall torque, 11.1 V (ROBOTIS e-Manual); the MJCF has velocity servos",
         expected_verdict="warn",
         expected_cause=(
@@ -148,6 +158,12 @@ ROBOTS: tuple[Robot, ...] = (
         tau_max=3.0,
         top_speed=0.26,
         top_speed_source="ROBOTIS e-Manual, TurtleBot3 specifications: max. linear velocity 0.26 m/s (Waffle Pi)",
+        control_rate=30.0,
+        control_rate_source=(
+            "ROBOTIS OpenCR firmware turtlebot3_core_config.h: CONTROL_MOTOR_SPEED_PERIOD 30 //hz (the wheel "
+            "speed loop; Waffle / Waffle Pi), https://github.com/ROBOTIS-GIT/OpenCR/blob/009a18f7068fe33fe4d35eb18023b463af0d7fd1/"
+            "arduino/opencr_arduino/opencr/libraries/turtlebot3/examples/turtlebot3_waffle/turtlebot3_core/turtlebot3_core_config.h"
+        ),
         tau_max_source="Dynamixel XM430-W210 stall torque, 12 V (ROBOTIS e-Manual); the MJCF has velocity servos only",
         expected_verdict="warn",
         expected_cause=(
@@ -188,6 +204,12 @@ ROBOTS: tuple[Robot, ...] = (
         tau_max=1.4,
         top_speed=0.22,
         top_speed_source="ROBOTIS e-Manual, TurtleBot3 specifications: max. linear velocity 0.22 m/s (Burger)",
+        control_rate=30.0,
+        control_rate_source=(
+            "ROBOTIS OpenCR firmware turtlebot3_core_config.h: CONTROL_MOTOR_SPEED_PERIOD 30 //hz (the wheel "
+            "speed loop; Burger), https://github.com/ROBOTIS-GIT/OpenCR/blob/09bf34f5f9ebc1253e03ac789cf820dcc46eb99d/"
+            "arduino/opencr_arduino/opencr/libraries/turtlebot3/examples/turtlebot3_burger/turtlebot3_core/turtlebot3_core_config.h"
+        ),
         tau_max_source="Dynamixel XL430-W250 stall torque (ROBOTIS e-Manual); the URDF has no effort limit",
         expected_verdict="fail",
         expected_cause=(
@@ -203,6 +225,12 @@ ROBOTS: tuple[Robot, ...] = (
         tau_max=3.0,
         top_speed=0.26,
         top_speed_source="ROBOTIS e-Manual, TurtleBot3 specifications: max. linear velocity 0.26 m/s (Waffle Pi)",
+        control_rate=30.0,
+        control_rate_source=(
+            "ROBOTIS OpenCR firmware turtlebot3_core_config.h: CONTROL_MOTOR_SPEED_PERIOD 30 //hz (the wheel "
+            "speed loop; Waffle / Waffle Pi), https://github.com/ROBOTIS-GIT/OpenCR/blob/009a18f7068fe33fe4d35eb18023b463af0d7fd1/"
+            "arduino/opencr_arduino/opencr/libraries/turtlebot3/examples/turtlebot3_waffle/turtlebot3_core/turtlebot3_core_config.h"
+        ),
         tau_max_source="Dynamixel XM430-W210 stall torque (ROBOTIS e-Manual); the URDF has no effort limit",
         expected_verdict="fail",
         expected_cause=(
@@ -304,6 +332,14 @@ ROBOTS: tuple[Robot, ...] = (
         tau_max=6.0,
         top_speed=1.0,
         top_speed_source="PAL Robotics PMB-2 datasheet: maximum speed 1 m/s",
+        control_rate=50.0,
+        control_rate_source=(
+            "PAL's mobile_base_controller (diff_drive_controller) publish_rate: 50.0 in pmb2_controller_configuration/"
+            "config/default_controllers.yaml, https://github.com/pal-robotics/pmb2_robot/blob/"
+            "c46179832d7a3b6dff5bd20925696521bc5897dc/pmb2_controller_configuration/config/default_controllers.yaml "
+            "(its Gazebo controller manager runs at 100 Hz: "
+            "pmb2_description/ros2_control/gazebo_controller_manager_cfg.yaml)"
+        ),
         tau_max_source="the wheel joints' <limit effort='6.0'> (PAL's wheel_torque)",
         expected_verdict="warn",
         expected_cause=(
@@ -328,6 +364,12 @@ ROBOTS: tuple[Robot, ...] = (
         right="left_wheel_joint",
         tau_max=0.05,
         top_speed_source="none (a ros2_control demo, not a product); the URDF limit 1.0 rad/s × r = 0.015 m/s",
+        control_rate=10.0,
+        control_rate_source=(
+            "ros2_control_demos example_2 controller_manager update_rate: 10 (Hz; the diff_drive_controller's "
+            "publish_rate 50 cannot exceed it), https://github.com/ros-controls/ros2_control_demos/blob/"
+            "6e0719c12645ad5993d7aca71e964a6ce60cd2cb/example_2/bringup/config/diffbot_controllers.yaml"
+        ),
         tau_max_source="our choice (the URDF's effort limit 100 N·m is a placeholder)",
         expected_verdict="fail",
         expected_cause=(
@@ -1119,6 +1161,8 @@ def reference(robot: Robot) -> dict:
         "tau_max_source": robot.tau_max_source,
         "top_speed_mps": robot.top_speed or None,
         "top_speed_source": robot.top_speed_source,
+        "control_rate_hz": robot.control_rate or None,
+        "control_rate_source": robot.control_rate_source,
         "test": ident["test"],
         "published_wheel_shapes": published_wheels,
         "self_contacts_mujoco_rules": self_contacts(robot),

@@ -35,7 +35,7 @@ def entry_problem(entry: Any, fmt: int) -> str:
     Expected: ``{"format": fmt, "verdict": "pass"|"warn"|"fail", "fail_reasons": [str, …],
     "cause": None | {"kind": str, "detail": str}, "formula": {"a", "b"} (numbers),
     "identified": {"a", "b"} (numbers or None), "relative_error": {"a", "b"} (numbers or None),
-    "seconds": number}``.
+    "resistances": [{"kind": str, …}, …], "seconds": number}``.
     """
     if not isinstance(entry, dict):
         return f"not a JSON object ({type(entry).__name__})"
@@ -56,6 +56,9 @@ def entry_problem(entry: Any, fmt: int) -> str:
     for key in ("identified", "relative_error"):
         if not _pair(entry.get(key), optional=True):
             return f"{key} is not {{a, b}} numbers or null"
+    res = entry.get("resistances")
+    if not isinstance(res, list) or not all(isinstance(r, dict) and isinstance(r.get("kind"), str) for r in res):
+        return "resistances is not a list of {kind, …}"
     if not _number(entry.get("seconds")):
         return "seconds is not a number"
     return ""

@@ -14,8 +14,9 @@ robot does not say: a check that cannot be made is skipped, never passed silentl
   (:func:`~bioform_mj.assess.check.tip_margins`), and no follower ``tipped``;
 * ``separation`` m: the least chassis-to-chassis distance (``min_separation_m``) against 0
   (touching) or ``safety.distance`` if set; no contact with a robot or an obstacle;
-* ``control_rate`` Hz: the scenario's control rate against the robot's own (its shipped preset's:
-  ``tb3`` for the TurtleBot3 model …; a robot without a preset: skipped);
+* ``control_rate`` Hz: the scenario's control rate against the robot's own: the mapping's ``control_rate`` (the
+  maker's figure; ``--control-rate``), else its shipped preset's (``tb3`` for the TurtleBot3 model …), else
+  skipped with :data:`NO_CONTROL_RATE`, which says how to give it;
 * ``slip`` s: the time followers spent slipping (outcome ``slipping``) against 0.
 
 The verdict is ``fail`` if any check failed, else ``incomplete`` if one could not be made
@@ -93,6 +94,34 @@ def _preset_rates() -> list[tuple[float, str, str]]:
             dt = float(raw.get("sim", {}).get("control_dt", SimCfg.control_dt))
             out.append((1.0 / dt, name, paths.pop()))
     return sorted(out)
+
+
+#: the ``control_rate`` check's reason where no rate is known: how to give it (design §19)
+NO_CONTROL_RATE = (
+    "the robot's control rate is not known: give the rate its maker's controller commands the wheels at as the "
+    "robot mapping's control_rate (Hz; e.g. plant.robots = [{model = ..., control_rate = 30}]) or --control-rate HZ "
+    "(bioform run, robot check, identify); no shipped preset drives this robot"
+)
+
+
+def robot_control_rates(sc: Any, plant: Any) -> list[tuple[float | None, str]]:
+    """Per distinct robot of a MuJoCo run: ``(Hz, where it comes from)`` — the mapping's ``control_rate`` ("the
+    mapping's"), else :func:`preset_control_rate` ("the 'NAME' preset's rate"), else ``(None, "")``."""
+    from bioform_mj.robots.refs import resolve_robot
+
+    entries = list(sc.plant.robots) * (sc.n if len(sc.plant.robots) == 1 else 1)
+    out: dict[Any, tuple[float | None, str]] = {}
+    for i, path in enumerate(plant.robot_files):
+        ref = resolve_robot(entries[i]) if i < len(entries) else None
+        key = (path, getattr(ref, "control_rate", 0.0))
+        if key in out:
+            continue
+        if ref is not None and ref.control_rate > 0:
+            out[key] = (float(ref.control_rate), "the mapping's")
+        else:
+            r, name = preset_control_rate(path)
+            out[key] = (r, f"the '{name}' preset's rate") if r is not None else (None, "")
+    return list(out.values())
 
 
 def verdict(sc: Any, plant: Any, summary: dict[str, Any], logd: dict[str, np.ndarray]) -> dict[str, Any]:
@@ -209,17 +238,17 @@ def verdict(sc: Any, plant: Any, summary: dict[str, Any], logd: dict[str, np.nda
     elif len(fs) > 1:
         checks["separation"] = _skip("the ideal plant's robots are points")
 
-    # control rate against the robot's own
+    # control rate against the robot's own: the mapping's control_rate, else its shipped preset's (design §19)
     if params is None:
         checks["control_rate"] = _skip("the ideal plant has no robot")
     else:
         rate = 1.0 / sc.sim.control_dt
-        own = [preset_control_rate(path) for path in dict.fromkeys(plant.robot_files)]
+        own = robot_control_rates(sc, plant)
         if any(r is None for r, _ in own):
-            checks["control_rate"] = _skip("no shipped preset states this robot's control rate")
+            checks["control_rate"] = _skip(NO_CONTROL_RATE)
         else:
-            lim_r, name = min(own, key=lambda x: x[0])
-            checks["control_rate"] = _check(rate, lim_r, rate <= lim_r * (1 + 1e-9), f"the '{name}' preset's rate")
+            lim_r, source = min(own, key=lambda x: x[0])
+            checks["control_rate"] = _check(rate, lim_r, rate <= lim_r * (1 + 1e-9), source)
 
     # slip
     if not isinstance(plant, TipSlipWatch) or plant.slip_step is None:

@@ -5,6 +5,7 @@ list of outcomes both engines give a follower (:func:`follower_outcomes` for the
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -74,37 +75,131 @@ def outcome_kinds(follower: dict[str, Any]) -> list[str]:
     return kinds if o in (None, "ok") or o in kinds else [str(o), *kinds]
 
 
+#: s: an identified drag with a longer time constant is not named (``robot check`` warns below 5 s, design §14)
+DRAG_NAMED_S = 5.0
+
+
+def identified_resistances(report: dict[str, Any]) -> list[dict[str, Any]]:
+    """The resistances ``robot check`` identified (design §14.2; ``report``: :func:`bioform_mj.assess.check.check`'s),
+    as a run's ``c_hat_off`` names them: ``{"kind": "braking_caster", "geom", "braking_force_n" (N, μ × load),
+    "torque_nm" (N·m of wheel torque, × r), "while_driving"}``, ``{"kind": "caster_resistance", "joints"}``,
+    ``{"kind": "drag", "drag_rate_per_s": [k_υ, k_ω]}`` (1/s; the identified viscous drag of the ``damping``
+    finding, 0 where its time constant is over :data:`DRAG_NAMED_S`) and ``{"kind": "dead_band",
+    "deadband_torque_Nm": [on τ_a, on τ_b]}`` (N·m, ≥ 0). Only
+    the findings the identification made (each above its own threshold, design §14), with positive numbers."""
+    r = float(report.get("wheel_radius_m") or 0.0)
+    out: list[dict[str, Any]] = []
+    for fd in report.get("findings") or []:
+        kind = fd.get("kind")
+        if kind == "braking_caster" and fd.get("braking_force_n"):
+            force = float(fd["braking_force_n"])
+            out.append(
+                {
+                    "kind": kind,
+                    "geom": str(fd.get("geom", "")),
+                    "braking_force_n": force,
+                    "torque_nm": force * r,
+                    "while_driving": bool(fd.get("while_driving", False)),
+                }
+            )
+        elif kind == "caster_resistance":  # the share of a's and b's gap the casters account for (design §14.3)
+            gaps = {w: float(fd[w]["gap"]) for w in ("a", "b") if isinstance(fd.get(w), dict)}
+            out.append({"kind": kind, "joints": [str(j) for j in fd.get("caster_joints") or []], "gap": gaps})
+        elif kind == "damping":  # a drag slower than DRAG_NAMED_S is no warning of robot check's either
+            k = [
+                float(x) if x is not None and math.isfinite(x) and x * DRAG_NAMED_S > 1 else 0.0
+                for x in fd["drag_rate_per_s"]
+            ]
+            if max(k) > 0:
+                out.append({"kind": "drag", "drag_rate_per_s": k})
+        elif kind == "dead_band":
+            db = [float(x) if x is not None and math.isfinite(x) and x > 0 else 0.0 for x in fd["deadband_torque_Nm"]]
+            if max(db) > 0:
+                out.append({"kind": kind, "deadband_torque_Nm": db})
+    return out
+
+
+def robot_check_resistances(robot_check: dict[str, Any] | None, n: int) -> list[list[dict[str, Any]]]:
+    """Per follower (``n``) the :func:`identified_resistances` of its robot in a run's ``robot_check``
+    (:func:`bioform_mj.assess.prerun.before_run`: its ``robots`` with their 1-based ``followers``); empty lists
+    where the check was skipped, failed or found none."""
+    out: list[list[dict[str, Any]]] = [[] for _ in range(n)]
+    for rob in (robot_check or {}).get("robots") or []:
+        for j in rob.get("followers") or []:
+            if 1 <= int(j) <= n:
+                out[int(j) - 1] = list(rob.get("resistances") or [])
+    return out
+
+
+def _drag_phrase(k: Sequence[float], drag_max: float, whose: str) -> str:
+    """``wheel drag`` with its rates (1/s) and time constants, and whether the opt-in learner.drag reaches it."""
+    rates = ", ".join(f"k_{w} = {x:.3g} 1/s" for x, w in zip(k, ("υ", "ω")) if x > 0)
+    tcs = ", ".join(f"{1 / x:.3g} s" for x in k if x > 0)
+    beyond = max(k) > drag_max
+    return f"wheel drag ({whose}: drag rate {rates}, time constants {tcs}; " + (
+        f"beyond the range of the opt-in learner.drag [0, learner.drag_max = {drag_max:g}] 1/s: it cannot "
+        "estimate this one)"
+        if beyond
+        else "the opt-in learner.drag would estimate it)"
+    )
+
+
 def unmodelled_causes(
-    params: Any, slipping: bool = False, casters: Sequence[str] = (), drag_max: float = 50.0
+    params: Any,
+    slipping: bool = False,
+    casters: Sequence[str] = (),
+    drag_max: float = 50.0,
+    identified: Sequence[dict[str, Any]] = (),
 ) -> list[str]:
     """The terms a plant knows that the paper's model lacks and that bias ĉ (design §8, §14): wheel
     drag (damping, back-EMF; time constant), a dead band (frictionloss), slip, braking casters, a
     centre of mass off the axle (b̂). ``params``: the robot's
     :class:`~bioform_mj.robots.params.RobotParams` or None (ideal plant: none). ``drag_max``: the opt-in
-    ``learner.drag``'s upper bound, 1/s: a drag rate beyond it is said to be beyond its range."""
+    ``learner.drag``'s upper bound, 1/s: a drag rate beyond it is said to be beyond its range.
+    ``identified``: what ``robot check`` identified of this robot (:func:`identified_resistances`, design §14.2):
+    each named with its numbers (a braking caster's drag N and wheel torque N·m, a drag rate 1/s, a dead band
+    N·m) in place of the model's own figure for the same term; ``casters``: those braking at the run's end."""
     out = []
-    if params is not None:
-        um = params.unmodelled(0.0, 0.0)
-        k = um["drag_rate_per_s"]
-        if max(k) > 0:
-            beyond = max(k) > drag_max
-            out.append(
-                "wheel drag (damping/back-EMF: time constants "
-                + ", ".join(f"{1 / x:.3g} s" for x in k if x > 0)
-                + (
-                    f"; drag rates {', '.join(f'{x:.3g}' for x in k)} 1/s, beyond the range of the opt-in learner.drag "
-                    f"[0, learner.drag_max = {drag_max:g}] 1/s: it cannot estimate this one)"
-                    if beyond
-                    else "; the opt-in learner.drag would estimate it)"
-                )
-            )
-        if params.wheel_frictionloss > 0:
-            out.append(f"a dead band of {2 * params.wheel_frictionloss:.3g} N·m (wheel frictionloss)")
-        if params.com_offset > 0.01:
-            out.append(f"a centre of mass {1e3 * params.com_offset:.0f} mm off the axle (b̂ biased, design §8.1)")
+    by = {x["kind"]: x for x in identified}
+    brakes = [x for x in identified if x["kind"] == "braking_caster"]
+    for x in brakes:
+        out.append(
+            f"caster '{x['geom']}' braking (robot check: {x['braking_force_n']:.3g} N of drag"
+            + (" while it drives" if x.get("while_driving") else "")
+            + f", {x['torque_nm']:.3g} N·m of wheel torque)"
+        )
+    um = params.unmodelled(0.0, 0.0) if params is not None else None
+    if "drag" in by:
+        model_k = um["drag_rate_per_s"] if um is not None else [0.0, 0.0]
+        said = _drag_phrase(by["drag"]["drag_rate_per_s"], drag_max, "identified by robot check")
+        if max(model_k) > 0:
+            said = said[:-1] + f"; the wheels' damping/back-EMF: {', '.join(f'{x:.3g}' for x in model_k)} 1/s)"
+        out.append(said)
+    elif um is not None and max(um["drag_rate_per_s"]) > 0:
+        out.append(_drag_phrase(um["drag_rate_per_s"], drag_max, "damping/back-EMF"))
+    if "dead_band" in by:
+        db = by["dead_band"]["deadband_torque_Nm"]
+        f = params.wheel_frictionloss if params is not None else 0.0
+        out.append(
+            f"a dead band of {db[0]:.3g} N·m on τ_a, {db[1]:.3g} N·m on τ_b (robot check"
+            + (f"; wheel frictionloss 2 f = {2 * f:.3g} N·m)" if f > 0 else ")")
+        )
+    elif params is not None and params.wheel_frictionloss > 0:
+        out.append(f"a dead band of {2 * params.wheel_frictionloss:.3g} N·m (wheel frictionloss)")
+    if "caster_resistance" in by:  # after the wheels' own terms: a share of identification's gap, not a torque
+        cr = by["caster_resistance"]
+        gaps = ", ".join(f"{w} {g:+.0%}" for w, g in (cr.get("gap") or {}).items())
+        n_j = len(cr["joints"])
+        out.append(
+            f"the casters' resistance (robot check: {n_j} caster joint{'s' if n_j != 1 else ''}, identification "
+            f"{gaps or 'off'} from the formula on their account)"
+        )
+    if params is not None and params.com_offset > 0.01:
+        out.append(f"a centre of mass {1e3 * params.com_offset:.0f} mm off the axle (b̂ biased, design §8.1)")
     if slipping:
         out.append("wheel slip")
-    out += [f"caster '{c}' braking" for c in casters]
+    named = {x["geom"] for x in brakes}
+    out += [f"caster '{c}' braking" for c in casters if c not in named]
     return out
 
 
@@ -232,6 +327,7 @@ def follower_outcomes(
     final_form: np.ndarray,
     c_hat: np.ndarray,
     dt: float,
+    resistances: Sequence[Sequence[dict[str, Any]]] | None = None,
 ) -> list[list[dict[str, Any]]]:
     """Per follower every outcome (:func:`outcome_list`; the thresholds are ``core/thresholds.py``'s:
     ``tipped`` (tilt beyond ``TIP_ANGLE_DEG``, with the time), ``slipping`` (a wheel's slip ratio beyond
@@ -239,7 +335,8 @@ def follower_outcomes(
     second), ``lost`` (final formation error > :func:`lost_threshold_m` after ``LOST_AFTER_S`` s, or
     grown by half over a shorter run), ``c_hat_at_bound`` (a learned parameter within
     ``C_HAT_BOUND_BAND`` of its projection bound at the end), ``c_hat_off`` (ĉ more than
-    ``C_HAT_OFF`` from c_true, with the likely cause); empty when ok."""
+    ``C_HAT_OFF`` from c_true, with the likely cause); empty when ok. ``resistances``: per follower what ``robot
+    check`` identified (:func:`robot_check_resistances`), named in ``c_hat_off`` with its numbers."""
     n = sc.n
     out: list[list[dict[str, Any]]] = []
     watch = isinstance(plant, TipSlipWatch)
@@ -270,7 +367,11 @@ def follower_outcomes(
                 causes=lambda i=i, s=slipping: (
                     injected_causes(sc, i)
                     + unmodelled_causes(
-                        params[i] if params is not None else None, s, braking_casters(plant, i), sc.learner.drag_max
+                        params[i] if params is not None else None,
+                        s,
+                        braking_casters(plant, i),
+                        sc.learner.drag_max,
+                        resistances[i] if resistances is not None else (),
                     )
                 ),
                 slip_ratio=SLIP_RATIO,

@@ -33,7 +33,7 @@ __all__ = ["before_run", "cache_dir", "robot_key", "skipped", "SKIP_ENV", "CACHE
 #: the cache's parent folder (else ``$NUMBA_CACHE_DIR``, else ``~/.cache/bioform_mj``, as the kernels')
 CACHE_ENV = "BIOFORM_CACHE_DIR"
 #: the shape of a cache entry; an entry of another shape is recomputed
-CACHE_FORMAT = 2
+CACHE_FORMAT = 3
 #: entries of this process, by :func:`robot_key`
 _MEMO: dict[str, dict[str, Any]] = {}
 #: robot checks this process computed (neither remembered nor read from the cache): a counter for tests
@@ -80,6 +80,7 @@ def _check(ref: Any, run_step: float | None = None) -> dict[str, Any]:
     """``robot check``'s verdict of one robot, reduced to what a run says (a cache entry); ``run_step``: the
     run's physics step, s (the identification is repeated there: design §14.2)."""
     from bioform_mj.assess.check import check
+    from bioform_mj.assess.outcomes import identified_resistances
     from bioform_mj.core.errors import InputError
 
     t0 = time.perf_counter()
@@ -103,6 +104,8 @@ def _check(ref: Any, run_step: float | None = None) -> dict[str, Any]:
         "relative_error": res["relative_error"],
         # the identified dead band [on τ_a, on τ_b] N·m (learner_sizing, design §14), or None
         "deadband_torque_Nm": ((res.get("wheel_joints") or {}).get("identified") or {}).get("deadband_torque_Nm"),
+        # what a run's c_hat_off names as its likely cause, with the numbers (design §14.2)
+        "resistances": identified_resistances(res),
         "seconds": time.perf_counter() - t0,
     }
 

@@ -18,6 +18,7 @@ import warp as wp
 
 from bioform_mj.assess.outcomes import lost_threshold_m
 from bioform_mj.assess.prerun import for_summary as _prerun_summary
+from bioform_mj.batch.demand_check import demand_of_worlds
 from bioform_mj.batch.device import (
     CAPACITY_EXCEEDED,
     FAULT_SCALARS,
@@ -41,6 +42,7 @@ from bioform_mj.core.engine import GUARDS
 from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_TIME, SLIP_V_FLOOR, TIP_ANGLE_DEG
 from bioform_mj.formation.disturbance import Harmonic
 from bioform_mj.plants.base import DeliveredTorques
+from bioform_mj.run.demand import for_summary as _demand_summary
 from bioform_mj.run.faults import Faults
 from bioform_mj.scenario.config import Scenario
 
@@ -78,6 +80,7 @@ class BatchRun:
         self.plant = plant
         _refuse_what_robot_check_fails(plant)
         self.robot_check = _warn_what_robot_check_fails(sc0, plant)
+        self.demand = demand_of_worlds(scs, plant, self.robot_check)  # design §21: as a single run, once a scenario
         if probe:
             check_physics(sc0, device, plant)  # the scene's physics is C MuJoCo's on this engine
         # DC motors (design §8.2): the learner is fed the torque delivered over each period (_delivered)
@@ -503,9 +506,9 @@ class BatchRun:
         """``sim.follower_outcomes`` from the device's counters (tilt and slip watched per world as
         ``mujoco_kernels.watch_tilt``/``watch_slip`` do), through the same ``sim.outcome_list``:
         ``(outcome, detail, outcomes)``; ``spinning`` is not checked in a world that diverged (its
-        log would end earlier). ``c_hat_off``'s causes: the CPU plant's robot parameters (no
-        braking-caster check: the device's contacts are not read back)."""
-        from bioform_mj.assess.outcomes import injected_causes, outcome_list, unmodelled_causes
+        log would end earlier). ``c_hat_off``'s causes: the CPU plant's robot parameters and what ``robot check``
+        identified (as a single run; no braking-caster check at the end: the device's contacts are not read back)."""
+        from bioform_mj.assess.outcomes import injected_causes, outcome_list, robot_check_resistances, unmodelled_causes
 
         p = self.plant
         params = getattr(p, "params", None)
@@ -523,7 +526,12 @@ class BatchRun:
             c_true=c_true,
             causes=lambda: (
                 injected_causes(self.scenarios[w], i)
-                + unmodelled_causes(params[i] if params is not None else None, slip >= 0)
+                + unmodelled_causes(
+                    params[i] if params is not None else None,
+                    slip >= 0,
+                    drag_max=self.scenarios[w].learner.drag_max,
+                    identified=robot_check_resistances(self.robot_check, self.n)[i],
+                )
             ),
             slip_ratio=SLIP_RATIO,
             slip_time=SLIP_TIME,
@@ -669,6 +677,8 @@ class BatchRun:
                     "wall_time_s": wall,
                     "followers": fol,
                     "robot_check": _prerun_summary(self.robot_check),  # design §14.2: one scene, one check
+                    # design §21: the scenario's demand against the robots' limits, as a single run's summary
+                    **({"demand": _demand_summary(self.demand[w])} if self.demand[w] is not None else {}),
                 }
             )
         return out

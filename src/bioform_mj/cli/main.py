@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import signal
 import sys
@@ -80,6 +81,13 @@ def _scenario_args(p: argparse.ArgumentParser) -> None:
 
     add_asset_root(p, scenario=True)  # design §12: an MJCF robot's files inside its folder unless granted
     p.add_argument("--quiet", action="store_true", help="no progress bar, no result lines")
+    p.add_argument(
+        "--control-rate",
+        type=float,
+        metavar="HZ",
+        help="MuJoCo robots: the rate each robot's own controller commands its wheels at, Hz, the maker's figure "
+        "(sets every robot's mapping key control_rate; the hardware verdict's control_rate check, design §19)",
+    )
     p.add_argument(
         "--no-robot-check",
         action="store_true",
@@ -371,7 +379,16 @@ def _load(args: argparse.Namespace):
     if args.seed is not None:
         overrides.append(f"sim.seed={args.seed}")
     overrides += _package_overrides(args)
-    return load(args.scenario, overrides, method=getattr(args, "method", None), plant=args.plant)
+    rate = getattr(args, "control_rate", None)
+    if rate is not None and not (math.isfinite(rate) and rate > 0):  # before any work (design §17)
+        raise InputError(f"--control-rate must be a finite number > 0 (Hz), got {rate}")
+    sc = load(args.scenario, overrides, method=getattr(args, "method", None), plant=args.plant)
+    if rate is not None:  # design §19: every robot's mapping key control_rate
+        import dataclasses
+
+        robots = tuple(dataclasses.replace(r, control_rate=float(rate)) for r in sc.plant.robots)
+        sc = dataclasses.replace(sc, plant=dataclasses.replace(sc.plant, robots=robots))
+    return sc
 
 
 def _progress(enabled: bool, label: str):

@@ -74,6 +74,13 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
         "the <dcmotor>'s no-load speed; design §21)",
     )
     p.add_argument(
+        "--control-rate",
+        type=float,
+        metavar="HZ",
+        help="the rate the robot's own controller commands the wheels at, Hz, the maker's figure (e.g. its ROS 2 "
+        "diff_drive_controller's update_rate); the hardware verdict's control_rate check (design §19)",
+    )
+    p.add_argument(
         "--caster",
         action="append",
         metavar="NAME",
@@ -125,7 +132,7 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
     from bioform_mj.core.errors import InputError
     from bioform_mj.robots.refs import package_path_from_args, resolve_robot
 
-    for flag in ("wheel_radius", "half_track", "tau_max", "top_speed"):
+    for flag in ("wheel_radius", "half_track", "tau_max", "top_speed", "control_rate"):
         v = getattr(args, flag, None)
         if v is not None and not (math.isfinite(v) and v > 0):
             raise InputError(f"--{flag.replace('_', '-')} must be a number > 0, got {v}")
@@ -149,6 +156,7 @@ def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
             package_path=package_path_from_args(getattr(args, "package_path", None)),
             keyframe=getattr(args, "keyframe", None) or "",
             top_speed=getattr(args, "top_speed", None) or 0.0,
+            control_rate=getattr(args, "control_rate", None) or 0.0,
         )
     )
 

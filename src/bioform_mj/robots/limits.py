@@ -9,7 +9,8 @@
 - ``torque_nm`` (the motor limit per wheel) and ``traction_torque_nm`` (``μ N r / f``, design §13);
 - ``accel_mps2``: the largest forward acceleration, ``min(2 a τ_max, 2 a τ_traction, tip forward,
   tip backward)`` and which one sets it; ``yaw_accel_radps2``: ``2 b min(τ_max, τ_traction)``;
-- ``tip_accel_mps2`` (forward, backward, lateral; :func:`~bioform_mj.assess.check.tip_margins`).
+- ``tip_accel_mps2`` (forward, backward, lateral; :func:`~bioform_mj.assess.check.tip_margins`);
+- ``control_rate_hz``: the mapping's ``control_rate`` (Hz, the maker's controller's rate; design §19), else None.
 
 ``robot check`` prints them as one block and keeps them in its JSON (``limits``); the demand check
 (:mod:`bioform_mj.run.demand`) and ``formation.time_scale = "auto"`` compare a scenario with them.
@@ -120,6 +121,9 @@ def limits_of(plant: Any, i: int, ref: Any, loads: np.ndarray, tips: dict[str, f
         "yaw_accel_limited_by": yaw_by,
         "tip_accel_mps2": {k: float(v) for k, v in tips.items()},
         "lateral_accel_mps2": float(tips["lateral"]),
+        # design §19: the rate the robot's own controller runs at (the mapping's; else the hardware verdict's preset)
+        "control_rate_hz": float(ref.control_rate) if ref is not None and getattr(ref, "control_rate", 0) > 0 else None,
+        "control_rate_source": "mapping" if ref is not None and getattr(ref, "control_rate", 0) > 0 else None,
         "missing": missing,
     }
 
@@ -137,4 +141,7 @@ def block(lim: dict[str, Any]) -> list[str]:
         f"    acceleration {lim['accel_mps2']:.3g} m/s² (set by {lim['accel_limited_by']}), yaw acceleration "
         f"{lim['yaw_accel_radps2']:.3g} rad/s² (set by {lim['yaw_accel_limited_by']})",
         f"    tip-over forward {ta['forward']:.3g}, backward {ta['backward']:.3g}, lateral {ta['lateral']:.3g} m/s²",
+        f"    control rate {lim['control_rate_hz']:.4g} Hz (the mapping's)"
+        if lim.get("control_rate_hz")
+        else "    control rate: not given (the mapping's control_rate, Hz; a shipped preset's where one drives it)",
     ]

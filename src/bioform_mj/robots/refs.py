@@ -89,6 +89,8 @@ class RobotRef:
     ``half_track`` (m) override what the model tells; ``tau_max`` (N·m): wheel torque limit of
     the motors the plant attaches (default: the model's own drive limit, see
     :func:`bioform_mj.robots.prepare.prepare_robot`). Empty string / 0: the convention / from the model.
+    ``top_speed`` (m/s at the tyre) and ``control_rate`` (Hz, the rate the maker's controller commands the wheels
+    at, e.g. a ROS 2 diff_drive_controller's ``update_rate``): the maker's figures (design §21, §19); 0: not given.
 
     ``casters``: geoms or bodies (every collision geom of a body) that are casters (design §13);
     ``caster_friction``: their sliding friction against the floor (they then win the contact
@@ -122,6 +124,7 @@ class RobotRef:
     package_path: PackagePath = PackagePath()  # URDF only: package:// search path, before the environment
     keyframe: str = ""  # MJCF keyframe to start in (design §13.2); "": 'home' if the file has one; "none": qpos0
     top_speed: float = 0.0  # m/s at the tyre, the maker's datasheet figure (design §21); 0: not given
+    control_rate: float = 0.0  # Hz, the rate the maker's controller commands the wheels at (design §19); 0: not given
     balance_inertia: bool = False  # MuJoCo's compiler option balanceinertia (an inertia breaking A + B >= C)
     xacro: bool = False  # URDF only (design §12): the file may be expanded by xacro (a program), sandboxed
     xacro_args: tuple[tuple[str, str], ...] = ()  # URDF only: xacro's $(arg NAME) values, ((NAME, VALUE), ...)
@@ -231,11 +234,12 @@ def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:
             if not isinstance(value, bool):
                 raise InputError(f"scenario key '{key}.free_joints': expected true or false, got {value!r}")
             kw[name] = value
-        elif name == "top_speed":  # design §21: the maker's figure, m/s at the tyre
+        elif name in ("top_speed", "control_rate"):  # design §21, §19: the maker's figures
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 < value < math.inf):
+                what = "m/s at the tyre" if name == "top_speed" else "Hz, the rate its controller runs at"
                 raise InputError(
-                    f"scenario key '{key}.top_speed': expected a number > 0 (m/s at the tyre, the maker's "
-                    f"figure), got {value!r}"
+                    f"scenario key '{key}.{name}': expected a finite number > 0 ({what}, the maker's figure), "
+                    f"got {value!r}"
                 )
             kw[name] = float(value)
         else:  # finite (design §17: tau_max = inf was taken as "no limit" while robot check refused it)

@@ -12,6 +12,9 @@ no torque limit: what the controller asks of a robot that can give everything. F
 - ``sign_torque`` N·m: the sliding-mode sign terms' torque amplitude per wheel, ``c_a / (2 â) +
   c_b / (2 b̂)`` (eqs. 38–39 with the least ``ĉ`` of the run), against ``min(τ_max, τ_traction)``;
 - ``torque_vs_traction`` N·m: the motor limit against the traction limit (above it the wheels skid).
+- ``accel_at_c_bound`` m/s² (where the method learns): ``2 a min(τ_bound, τ_max)``, the sign terms' torque at the
+  learner's lower projection bound (eq. 38 divides by ĉ) as the motors deliver it, against the acceleration limit:
+  the start-up a plant that drives ĉ to its bound makes (the ideal twin's ĉ stays near c_true and cannot show it);
 - ``sliding_gain_v`` / ``_w`` (where the robot has a wheel dead band or damping): its resistance,
   ``2 a f + k_υ |υ|max`` m/s² (resp. ``2 b f + k_ω |ω|max`` rad/s²), against the sliding gain
   ``torque.c`` that must dominate it (eqs. 38–39); the gain scales × 1/σ², the resistance not.
@@ -144,14 +147,39 @@ def _item(value: float, limit: float | None, unit: str, by: str) -> dict[str, An
     return out
 
 
+def c_lower_bound(sc: Any, c_true: tuple[float, float]) -> tuple[float, float] | None:
+    """The learner's lower projection bound ``(â_lo, b̂_lo)`` for a robot of ``c_true`` (as ``control.params`` sets
+    it: ``learner.projection_band[0] × c_true``, else ``learner.c_bounds[0] × c_hat0_scale × c_true``); None where
+    the method does not learn (or is a user's controller: its bounds are its own)."""
+    from bioform_mj.control.stack import parse_method
+
+    try:
+        if not parse_method(sc.method)[1]:
+            return None
+    except ValueError:
+        return None
+    band = sc.learner.projection_band
+    lo = [band[0], band[0]] if band else [sc.learner.c_bounds[0] * k for k in sc.learner.c_hat0_scale]
+    return (float(lo[0] * c_true[0]), float(lo[1] * c_true[1]))
+
+
 def compare(
-    sc: Any, pk: dict[str, Any], lim: dict[str, Any], resist: dict[str, Any] | None = None
+    sc: Any,
+    pk: dict[str, Any],
+    lim: dict[str, Any],
+    resist: dict[str, Any] | None = None,
+    c_true: tuple[float, float] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """The demand ``pk`` (:func:`peaks`) of ``sc`` against the robot's limits ``lim``
     (:func:`~bioform_mj.robots.limits.limits_of`), one item per quantity (module docstring).
     ``resist``: the robot's unmodelled resistance (:meth:`~bioform_mj.robots.params.RobotParams.unmodelled`:
     ``deadband_accel``, ``drag_rate_per_s``); where it has one, ``sliding_gain_v`` / ``_w`` put it, at
-    the demand's peak speed, against the sliding gain ``torque.c`` that must dominate it (eqs. 38–39)."""
+    the demand's peak speed, against the sliding gain ``torque.c`` that must dominate it (eqs. 38–39).
+    ``c_true``: the robot's ``(a, b)``; with it, where the method learns, ``accel_at_c_bound``: the forward
+    acceleration ``2 a min(τ_bound, τ_max)`` (m/s²) of the sign terms' torque at the learner's lower projection bound
+    (:func:`c_lower_bound`; eq. 38 divides by ĉ) against the acceleration limit — the start-up a plant the paper's
+    model does not fit can drive ĉ to (TIAGo in MuJoCo, design §21), which the ideal twin, whose ĉ stays near
+    c_true, does not show."""
     grip = min(lim["torque_nm"], lim["traction_torque_nm"])
     ca, cb = (float(x) for x in sc.torque.c)
     a_min, b_min = pk["c_hat_min"]
@@ -168,6 +196,14 @@ def compare(
         ),
         "torque_vs_traction": _item(lim["torque_nm"], lim["traction_torque_nm"], "N·m", "traction"),
     }
+    bound = c_lower_bound(sc, c_true) if c_true is not None else None
+    if bound is not None and bound[0] > 0 and bound[1] > 0:
+        tau_bound = ca / (2 * bound[0]) + cb / (2 * bound[1])  # N·m per wheel, eqs. 38–39 with ĉ at its bound
+        given = min(tau_bound, lim["torque_nm"])  # what the motors deliver of it
+        out["accel_at_c_bound"] = _item(2 * c_true[0] * given, lim["accel_mps2"], "m/s²", lim["accel_limited_by"])
+        out["accel_at_c_bound"].update(
+            torque_at_bound_nm=float(tau_bound), c_bound=[float(bound[0]), float(bound[1])], torque_given_nm=given
+        )
     if resist is not None:
         dead, drag = resist["deadband_accel"], resist["drag_rate_per_s"]
         for k, j, speed, gain, unit in (
@@ -189,6 +225,7 @@ _WHAT = {
     "torque_vs_traction": "the torque limit",
     "sliding_gain_v": "the robot's resistance (dead band and drag at peak speed) on υ",
     "sliding_gain_w": "the robot's resistance (dead band and drag at peak yaw rate) on ω",
+    "accel_at_c_bound": "the acceleration of the sign terms at ĉ's projection bound",
 }
 
 
@@ -203,6 +240,17 @@ def warning_lines(who: str, items: dict[str, dict[str, Any]], sigma: float = 1.0
     for k, it in items.items():
         if it["ratio"] is not None and it["ratio"] > 1:
             u = it["unit"]
+            if k == "accel_at_c_bound":  # design §21: what ĉ at its projection bound makes the torque law ask
+                lo = it["c_bound"]
+                out.append(
+                    f"{who}: if the learned ĉ falls to its projection bound (â = {lo[0]:.3g}, b̂ = {lo[1]:.3g}), eq. "
+                    f"38's sign terms ask {it['torque_at_bound_nm']:.3g} N·m per wheel and the motors give "
+                    f"{it['torque_given_nm']:.3g} N·m: an acceleration of {it['value']:.3g} {u}, "
+                    f"{it['ratio']:.2g}x the robot's limit {it['limit']:.3g} {u} ({it['limit_by']}); a plant the "
+                    "paper's model does not fit drives ĉ there at the start (design §21); learner.projection_band "
+                    "narrows the bound (design §14.4)"
+                )
+                continue
             if k.startswith("sliding_gain"):  # the gain must dominate the resistance; slowing makes it worse
                 out.append(
                     f"{who}: {_WHAT[k]} {it['value']:.3g} {u} is {it['ratio']:.2g}x the sliding gain "
@@ -272,7 +320,7 @@ def before_run(sc: Any, plant: Any, run: Any) -> dict[str, Any]:
             lines.append(f"{who}: the scenario's demand could not be computed on the ideal plant ({why})")
             robots.append({"followers": [j + 1 for j in idx], "limits": lims[i], "demand": None, "error": why})
             continue
-        items = compare(sc, pk, lims[i], p.unmodelled(1.0, 1.0))
+        items = compare(sc, pk, lims[i], p.unmodelled(1.0, 1.0), (p.a_eff, p.b_eff))
         sigma = sc.formation.time_scale if isinstance(sc.formation.time_scale, float) else 1.0
         lines += warning_lines(who, items, sigma)
         robots.append(

@@ -563,7 +563,7 @@ def _summarise(sc, plant, controller, step: Stepper, end: LoopEnd, logd, setup_s
         missing=step.missing,
         engine=engine,
     )
-    summary = _summary(sc, plant, controller, run)
+    summary = _summary(sc, plant, controller, run, warned[2])
     summary["feasibility_warnings"] = warned[1]
     summary["import_warnings"] = warned[0]
     if warned[2] is not None:  # design §14.2: what robot check fails the robots for

@@ -10,7 +10,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from bioform_mj._version import __version__
-from bioform_mj.assess.outcomes import follower_outcomes, severity, slots_of
+from bioform_mj.assess.outcomes import follower_outcomes, robot_check_resistances, severity, slots_of
 from bioform_mj.core.engine import CHANNELS, MEAN_CHANNELS
 from bioform_mj.plants.base import ContactWatch, LumpedBodies, RobotModels
 from bioform_mj.scenario.config import Scenario
@@ -35,9 +35,12 @@ class RunEnd(NamedTuple):
     engine: str  # "compiled" or "stepwise"
 
 
-def _summary(sc: Scenario, plant: Any, controller: Any, run: RunEnd) -> dict[str, Any]:
+def _summary(
+    sc: Scenario, plant: Any, controller: Any, run: RunEnd, robot_check: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """summary.json of a run (design §9): per follower the metrics, outcomes and the robot used; the run's
-    scenario, engine, timing, how it ended, the log's channels, versions and resolved configuration."""
+    scenario, engine, timing, how it ended, the log's channels, versions and resolved configuration.
+    ``robot_check``: the run's ``prerun.before_run`` (its identified resistances name ``c_hat_off``'s cause)."""
     state, met, logd, lp_end, pose = run.state, run.met, run.logd, run.lp_end, run.pose
     k_done, dt, missing = run.k_done, run.dt, run.missing
     n = sc.n
@@ -49,7 +52,8 @@ def _summary(sc: Scenario, plant: Any, controller: Any, run: RunEnd) -> dict[str
     c_true = plant.c_true()
     c_hat = state.c_hat if "c_hat" not in missing else np.full((n, 2), np.nan)
     nan_if = lambda name, v: float("nan") if name in missing else float(v)  # noqa: E731
-    outcomes = follower_outcomes(sc, plant, controller, logd, final_form, c_hat, dt)
+    found = robot_check_resistances(robot_check, n)  # design §14.2: what robot check identified, per follower
+    outcomes = follower_outcomes(sc, plant, controller, logd, final_form, c_hat, dt, found)
     contact = contact_outcomes(plant, n, dt)  # design §19: contacts and distances (MuJoCo)
     followers = []
     for i in range(n):

@@ -203,6 +203,12 @@ KEYS: dict[str, tuple[str, str]] = {
         "The robot's top speed at the tyre, the maker's figure (design §21); 0: from the URDF wheel "
         "`<limit velocity>` or the `<dcmotor>` no-load speed.",
     ),
+    "plant.robots[].control_rate": (
+        "Hz",
+        "The rate the robot's own controller commands its wheels at, the maker's figure (a ROS 2 "
+        "diff_drive_controller's `update_rate`, a firmware's loop; design §19): the hardware verdict's "
+        "`control_rate` limit; 0: a shipped preset's rate, else not checked.",
+    ),
     "plant.robots[].self_collide": (
         "",
         "URDF: keep contacts between the robot's own links (default off, as in Gazebo; design §12).",
