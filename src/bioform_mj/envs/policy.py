@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from bioform_mj.control.stack import ControlStack
+from bioform_mj.envs.fast import Compiled, policy_period
 from bioform_mj.envs.parallel import FormationParallelEnv
 
 
@@ -30,11 +32,11 @@ class ControllerPolicy:
         self.env = env
         self.controller = controller
         self.verr = np.zeros(env.n)
+        self._fast: Any = None
 
     def reset(self) -> None:
         """After ``env.reset``: the controller's initial estimates, as ``bioform run`` sets them."""
         from bioform_mj.control.params import stack_params
-        from bioform_mj.control.stack import ControlStack
         from bioform_mj.run.simulate import initial_estimates
 
         env = self.env
@@ -45,10 +47,13 @@ class ControllerPolicy:
             self.controller = ControlStack(env.graph, stack_params(env._sc, c, getattr(p, "tau_max", None)))
         self.controller.reset(initial_estimates(env._sc, env._pose, env.L_pose[0]), env._vel)  # as sim.simulate
         self.verr[:] = 0.0
+        self._fast = None
 
     def __call__(self, obs: Any = None) -> dict[str, np.ndarray]:
         """The actions of every live agent for this control step."""
         env = self.env
+        if env._faults is None and type(self.controller) is ControlStack:  # one compiled call (envs/fast.py)
+            return self._stack_step(env)
         lp, lv = env.leader_state()
         mp, mv = env.measured_state()
         f = env._faults
@@ -74,6 +79,21 @@ class ControllerPolicy:
             u = np.clip(np.asarray(cmd, dtype=float), env._low, env._high)
             return {a: u[env._index[a]].copy() for a in env.agents}
         return {a: tau[env._index[a]].copy() for a in env.agents}
+
+    def _stack_step(self, env: FormationParallelEnv) -> dict[str, np.ndarray]:
+        """:meth:`__call__` for the paper's stack on the perfect network: ``ControlStack.step``'s
+        ``control_step`` and the metric's sum in one compiled call, the same numbers."""
+        st = self.controller
+        tau = np.empty((env.n, 2))
+        g, s = st.kernel
+        args = (g, s, env._lp_rx, env._lv_rx, env._mp, env._mv, st.comm_in(None), env._vel, self.verr, tau)
+        if self._fast is None:
+            self._fast = Compiled(policy_period, args).call
+        self._fast(*args)
+        if env.action_mode == "velocity":
+            tau = np.clip(s.cmd, env._low, env._high)
+        idx = env._index
+        return {a: tau[idx[a]] for a in env.agents}
 
 
 def run_episode(env: FormationParallelEnv, policy: Any, seed: int | None = None) -> dict[str, Any]:

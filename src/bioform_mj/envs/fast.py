@@ -1,0 +1,300 @@
+"""The environment's control period in one compiled call (design §20; issue 30, item 6).
+
+At the preset's 1 ms control period a MuJoCo period is one physics step (~0.1 ms), and the step-by-step
+:meth:`~.parallel.FormationParallelEnv._advance` spent ~6× that around it: seven compiled calls a period,
+each resolving the types of the stack's ~70 arrays again (numba's dispatcher: 30-50 µs a call), and
+numpy's small-array calls. :func:`mujoco_period` runs the same functions in the same order in one call
+(the agents' actions checked, the control phase, the plant's inputs, ``n_sub`` ``mj_step`` with the
+contact watch, the proximity watch, ``observe`` with the tilt and slip watches, the next step's
+sensing, the guards, the formation error, tip-overs, contact events, rewards, observations), and
+:class:`Compiled` calls its specialisation for the argument types of this episode directly, without
+the per-call type resolution. The results are the step-by-step path's bits (``tests/test_envs_fast.py``).
+
+The fast period runs where nothing per step needs Python: the MuJoCo plant with its compiled steps,
+sensing = "truth", no DC-motor feed, a harmonic disturbance (or none), no per-step faults and no
+pushes; an event (a payload) runs its period step by step. Everything else stays on the step-by-step
+path, which is the reference.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from bioform_mj.control.kernel import control_step, estimator_advance
+from bioform_mj.core.engine import check
+from bioform_mj.core.equations import njit
+from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_V_FLOOR
+from bioform_mj.envs.kernels import (
+    actions_within,
+    clip_into,
+    direct_torque,
+    formation_error,
+    observations,
+    sense_errors,
+    step_rewards,
+    track_velocity,
+    velocity_error,
+)
+from bioform_mj.plants.mujoco.contacts import EVENTS, watch_proximity
+from bioform_mj.plants.mujoco.kernels import (
+    apply_inputs,
+    observe,
+    physics_steps,
+    watch_slip,
+    watch_tilt,
+)
+
+#: bits of :func:`mujoco_period`'s status
+BAD_ACTION, WARNED, GUARD, TIPPED = 1, 2, 4, 8
+
+
+@njit
+def mujoco_period(
+    g, s, comm, io, wt, cl, px, mptr, dptr, n_sub, k0_phys, step_count, plant_dt, u, lo, hi, alo, ahi,
+    velocity, verr, tau, tau_max, pose, vel, new_pose, new_vel, k, dt, L_pose, L_vel, lim, diag, off,
+    leader_frame, fe, tipped, newly, events_seen, hits, w, r, O, slots, dst, ew, rp, rv, lacc, bound,
+):  # fmt: skip
+    """One control period ``k → k+1`` of the MuJoCo environment, the step-by-step path's calls in its
+    order (see the module docstring). ``u`` (n, 2): the agents' actions, checked against ``[alo, ahi]``
+    (float32 rounding of the bounds) and clipped onto ``[lo, hi]``; ``pose``, ``vel``: the state at
+    ``k`` (measured = true here); the state at ``k+1`` is written to ``new_pose``, ``new_vel``;
+    ``fe`` (n,) m, ``newly``, ``hits`` (n,), ``r`` (n,) the rewards without the terminal term (weights
+    ``w`` = [formation, effort, tipped, collision]) and, when the guards pass, the observations ``O``
+    (n, obs) (zeroed here). Returns a status: 0, or the bits :data:`BAD_ACTION` (nothing done),
+    :data:`WARNED` (a MuJoCo warning: stopped after the physics, as the plant raises there),
+    :data:`GUARD` (the guards failed, ``diag`` says which), :data:`TIPPED` (a robot has tipped)."""
+    if not actions_within(u, alo, ahi):
+        return BAD_ACTION
+    clip_into(u, lo, hi)
+    # control_phase
+    if velocity:
+        track_velocity(g, s, vel, u)
+    else:
+        direct_torque(g, s, u)
+    velocity_error(verr, s.cmd, vel)
+    n = tau.shape[0]
+    for i in range(n):
+        tau[i, 0] = s.tau[i, 0]
+        tau[i, 1] = s.tau[i, 1]
+    estimator_advance(g, s)
+    # the plant's step (MujocoPlant.step)
+    apply_inputs(tau, k * dt, io.ctrl, io.ctrl_id, io.ctrl_scale, io.xfrc, io.xmat, io.base, io.m_eff, io.i_eff,
+                 io.dist, io.use_dist)  # fmt: skip
+    for i in range(io.dacc.shape[0]):
+        io.dacc[i, 0] = 0.0
+        io.dacc[i, 1] = 0.0
+    ncon, con, meta, owner, ci, cf, f6, hdt = cl
+    physics_steps(mptr, dptr, n_sub, k0_phys, ncon, con, meta, owner, ci, cf, f6, hdt)
+    for j in range(io.warn.shape[0]):
+        if io.warn[j] != 0:
+            return WARNED
+    gstart, glist, ogeom, obst, rad, ranges, rf, ri, box, order = px
+    step_count += 1
+    if step_count % int(ranges[3]) == 0:
+        # MujocoPlant.step looks at the distances before observe(): the same positions (axle midpoints)
+        observe(io.qpos, io.qvel, io.q7, io.v6, io.axle, new_pose, new_vel, io.up)
+        watch_proximity(mptr, dptr, gstart, glist, ogeom, obst, rad, ranges, rf, ri, box, order, new_pose,
+                        step_count * plant_dt)  # fmt: skip
+    # MujocoPlant.observe
+    observe(io.qpos, io.qvel, io.q7, io.v6, io.axle, new_pose, new_vel, io.up)
+    watch_tilt(io.up, wt.tilt_cos, wt.tip_step, step_count)
+    watch_slip(io.qvel, wt.wheel_dof, wt.wheel_sign, wt.radius, wt.half_track, new_vel, wt.slip_ratio, wt.v_floor,
+               wt.slip_need, wt.slip_run, wt.slip_step, step_count)  # fmt: skip
+    k1 = k + 1
+    lp, lv = L_pose[k1], L_vel[k1]
+    sense_errors(g, s, lp, lv, new_pose, new_vel, comm, True)
+    status = 0
+    if not check(s, new_pose, new_vel, lim, diag):
+        status |= GUARD
+    formation_error(new_pose, lp, off, leader_frame, fe)
+    any_tipped = False
+    for i in range(n):
+        newly[i] = 0.0
+        if wt.tip_step[i] >= 0 and not tipped[i]:
+            newly[i] = 1.0
+            tipped[i] = True
+        if tipped[i]:
+            any_tipped = True
+    if any_tipped:
+        status |= TIPPED
+    for i in range(n):
+        ev = float(ci[i, 0, EVENTS] + ci[i, 1, EVENTS])
+        hits[i] = ev - events_seen[i]
+        events_seen[i] = ev
+    step_rewards(fe, tau, tau_max, newly, hits, w[0], w[1], w[2], w[3], dt, r)
+    if status & GUARD == 0:
+        for e in range(dst.shape[0]):
+            for c in range(3):
+                rp[e, c] = s.est_pose[dst[e], c]
+            for c in range(2):
+                rv[e, c] = s.est_vel[dst[e], c]
+        for i in range(O.shape[0]):
+            for j in range(O.shape[1]):
+                O[i, j] = 0.0
+        observations(O, new_pose, new_vel, s.err, s.est_pose, s.est_vel, slots, ew, rp, rv, lacc, lp, lv, bound)
+    return status
+
+
+@njit
+def policy_period(g, s, lp, lv, pose, vel, comm, true_vel, verr, tau):
+    """:class:`~.policy.ControllerPolicy`'s step of the paper's stack in one call: ``control_step`` from the
+    measured ``pose`` (n, 3), ``vel`` (n, 2) and the leader ``lp``, ``lv`` as received, Table I's summand
+    ``verr += |υ_cmd − υ| + |ω_cmd − ω|`` on the true velocities ``true_vel``, the torques copied to ``tau``."""
+    control_step(g, s, lp, lv, pose, vel, comm)
+    for i in range(verr.shape[0]):
+        verr[i] += abs(s.cmd[i, 0] - true_vel[i, 0]) + abs(s.cmd[i, 1] - true_vel[i, 1])
+        tau[i, 0] = s.tau[i, 0]
+        tau[i, 1] = s.tau[i, 1]
+
+
+class Compiled:
+    """``fn`` (a numba dispatcher) specialised for the types of ``args`` and called directly: numba's
+    dispatcher resolves every argument's type on every call (a named tuple of arrays: ~0.5 µs an array),
+    which this skips. The caller passes arguments of the same types each call (the same arrays, or arrays
+    of the same dtype, dimensions and layout); with numba's JIT off it is ``fn`` itself."""
+
+    def __init__(self, fn: Any, args: tuple) -> None:
+        if hasattr(fn, "typeof_pyval") and hasattr(fn, "compile"):
+            sig = tuple(fn.typeof_pyval(a) for a in args)
+            self.call = fn.compile(sig)
+        else:  # pragma: no cover - NUMBA_DISABLE_JIT
+            self.call = fn
+
+
+def fast_plant(env: Any) -> bool:
+    """True when the episode's period can run as :func:`mujoco_period` (see the module docstring)."""
+    p = env._plant
+    return (
+        hasattr(p, "model")
+        and getattr(p, "_compiled_steps", False)
+        and not p.sensors.on
+        and not p.feed_delivered
+        and (p.disturbance is None or p._dist is not None)
+        and env._faults is None
+        and p._push_until is None
+        and hasattr(p, "contacts")
+    )
+
+
+class FastPeriod:
+    """The arguments of :func:`mujoco_period` for the current episode of ``env`` (built after its reset,
+    and again after an event changed the plant), and the scratch arrays it writes."""
+
+    def __init__(self, env: Any) -> None:
+        p, n = env._plant, env.n
+        m, d = p.model, p.data
+        st = env._stack
+        w = env.weights
+        from bioform_mj.plants.mujoco.kernels import MjIO, Watch
+
+        io = MjIO(
+            d.qpos, d.qvel, np.ascontiguousarray(p._q7[:, 0], dtype=np.int64),
+            np.ascontiguousarray(p._v6[:, 0], dtype=np.int64), p._axle, p._up, d.ctrl,
+            np.ascontiguousarray(p._ctrl, dtype=np.int64), p._ctrl_scale, d.xfrc_applied, d.xmat,
+            np.ascontiguousarray(p._base, dtype=np.int64), p._m_eff, p._i_eff,
+            np.zeros((2, 4)) if p._dist is None else p._dist, p.disturbance is not None, p._warn,
+            d.actuator_force, p._to_wheel, p._feed, False, p._dacc,
+        )  # fmt: skip
+        wt = Watch(
+            p.tilt_cos, p.tip_step, p._wdof, p._wheel_sign, p._wheel_radius, p._half_track, SLIP_RATIO,
+            SLIP_V_FLOOR, p._slip_need, p.slip_run, p.slip_step,
+        )  # fmt: skip
+        self.tau = np.empty((n, 2))
+        self.fe = np.empty(n)
+        self.newly = np.zeros(n)
+        self.hits = np.zeros(n)
+        self.r = np.empty(n)
+        ne = len(env.graph.dst)
+        self.rp = np.empty((ne, 3))
+        self.rv = np.empty((ne, 2))
+        self.n_sub = int(p.n_substeps)
+        self.plant = p
+        self.dst = np.ascontiguousarray(env.graph.dst, dtype=np.int64)
+        self.w = np.array([w["formation"], w["effort"], w["tipped"], w["collision"]])
+        self.head = (env._g, env._s, st.comm_in(None), io, wt, p.contacts.contacts, p.contacts.proximity,
+                     m._address, d._address, self.n_sub)  # fmt: skip
+        self.plant_dt = float(p.control_dt)
+        self.call = None
+        self.env = env
+
+    def __call__(self, u: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, np.ndarray | None]:
+        """The period of the actions ``u`` (n, 2) float64 (clipped in place): ``(status, new pose,
+        new velocity, observations (n, obs) float64 or None when the guards failed)``."""
+        env, p = self.env, self.plant
+        n = env.n
+        new_pose, new_vel = np.empty((n, 3)), np.empty((n, 2))
+        O = np.empty((n, env.obs_size))
+        sc = p._step_count
+        args = (
+            *self.head, sc * self.n_sub, sc, self.plant_dt, u, env._low, env._high, env._acc_low, env._acc_high,
+            env.action_mode == "velocity", env._verr, self.tau, env._tau_max, env._pose, env._vel, new_pose,
+            new_vel, env.k, env.dt, env.L_pose, env.L_vel, env._lim, env._diag, env._off, env._leader_frame,
+            self.fe, env._tipped, self.newly, env._events_seen, self.hits, self.w, self.r, O, env._slots,
+            self.dst, env._ones_e, self.rp, self.rv, env._lacc, env.obs_bound,
+        )  # fmt: skip
+        if self.call is None:
+            self.call = Compiled(mujoco_period, args).call
+        status = int(self.call(*args))
+        return status, new_pose, new_vel, O
+
+
+def fast_step(env: Any, actions: Any) -> tuple | None:
+    """``env.step(actions)`` through :class:`FastPeriod`, or None where the step-by-step path must run it:
+    the first period (the event queue is built there), an event's period, actions that are not a plain
+    dict of every agent's two numbers within the space (that path names what is wrong; nothing was done)."""
+    k = env.k
+    if k == 0 or (env._ev_next is not None and k >= env._ev_next):
+        env._fastp = None  # an event may replace the plant's arrays: the arguments are built again
+        return None
+    if type(actions) is not dict or len(actions) != env.n or len(env.agents) != env.n:
+        return None
+    try:
+        u = np.array([actions[a] for a in env.possible_agents], dtype=float)
+    except (KeyError, ValueError, TypeError):
+        return None
+    if u.shape != (env.n, 2):
+        return None
+    fp = env._fastp
+    if fp is None:
+        fp = env._fastp = FastPeriod(env)
+    status, pose, vel, O = fp(u)
+    if status & BAD_ACTION:
+        return None
+    env._log.append(u)
+    p = env._plant
+    p._step_count += 1
+    tau = fp.tau.copy()
+    if status & WARNED:  # as MujocoPlant.step: the warning raised, the state not observed
+        from bioform_mj.core.errors import Diverged
+
+        diverged = None
+        try:
+            for i, w_ in enumerate(p._warnings):
+                if w_.number:
+                    p._raise_warning(i, w_)
+        except Diverged as e:
+            diverged = str(e)
+        return env._outputs(*env._advance_tail(tau, diverged))
+    from bioform_mj.core.engine import describe
+
+    env._pose, env._vel = pose, vel
+    env.k = k = k + 1
+    env._mp, env._mv, env._lp_rx, env._lv_rx = pose, vel, env.L_pose[k], env.L_vel[k]
+    env._comm, env._comm_in = None, fp.head[2]
+    diverged = describe(env._diag, k * env.dt, env._lim) if status & GUARD else None
+    env._stats_sample(k, fp.fe)
+    if status & TIPPED:
+        env._any_tipped = True
+    end = diverged is not None or env._any_tipped
+    r = fp.r.copy()
+    if end:
+        r = r - env.weights["terminal"] * max(0.0, (env.N - k) * env.dt)
+    trunc = k >= env.N and not end
+    agents = env.agents
+    if end or trunc:
+        env._done = True
+        env._diverged = diverged
+        env.agents = []
+    return env._outputs(r, end, trunc, diverged, fp.hits.copy(), agents, None if diverged else O)
