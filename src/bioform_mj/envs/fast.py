@@ -24,7 +24,7 @@ import numpy as np
 
 from bioform_mj.control.kernel import control_step, estimator_advance
 from bioform_mj.core.engine import check
-from bioform_mj.core.equations import njit
+from bioform_mj.core.equations import HAVE_NUMBA, njit
 from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_V_FLOOR
 from bioform_mj.envs.kernels import (
     actions_within,
@@ -47,7 +47,7 @@ from bioform_mj.plants.mujoco.kernels import (
 )
 
 #: bits of :func:`mujoco_period`'s status
-BAD_ACTION, WARNED, GUARD, TIPPED = 1, 2, 4, 8
+BAD_ACTION, WARNED, GUARD, TIPPED, HIT = 1, 2, 4, 8, 16
 
 
 @njit
@@ -64,7 +64,8 @@ def mujoco_period(
     ``w`` = [formation, effort, tipped, collision]) and, when the guards pass, the observations ``O``
     (n, obs) (zeroed here). Returns a status: 0, or the bits :data:`BAD_ACTION` (nothing done),
     :data:`WARNED` (a MuJoCo warning: stopped after the physics, as the plant raises there),
-    :data:`GUARD` (the guards failed, ``diag`` says which), :data:`TIPPED` (a robot has tipped)."""
+    :data:`GUARD` (the guards failed, ``diag`` says which), :data:`TIPPED` (a robot has tipped), :data:`HIT`
+    (a new contact event)."""
     if not actions_within(u, alo, ahi):
         return BAD_ACTION
     clip_into(u, lo, hi)
@@ -123,6 +124,8 @@ def mujoco_period(
         ev = float(ci[i, 0, EVENTS] + ci[i, 1, EVENTS])
         hits[i] = ev - events_seen[i]
         events_seen[i] = ev
+        if hits[i] != 0.0:
+            status |= HIT
     step_rewards(fe, tau, tau_max, newly, hits, w[0], w[1], w[2], w[3], dt, r)
     if status & GUARD == 0:
         for e in range(dst.shape[0]):
@@ -167,7 +170,8 @@ def fast_plant(env: Any) -> bool:
     """True when the episode's period can run as :func:`mujoco_period` (see the module docstring)."""
     p = env._plant
     return (
-        hasattr(p, "model")
+        FAST
+        and hasattr(p, "model")
         and getattr(p, "_compiled_steps", False)
         and not p.sensors.on
         and not p.feed_delivered
@@ -176,6 +180,74 @@ def fast_plant(env: Any) -> bool:
         and p._push_until is None
         and hasattr(p, "contacts")
     )
+
+
+#: the fields of :class:`PeriodArgs`: :func:`mujoco_period`'s arguments that stay the same through an episode
+FIELDS = (
+    "g", "s", "comm", "io", "wt", "cl", "px", "mptr", "dptr", "n_sub", "plant_dt", "lo", "hi", "alo", "ahi",
+    "velocity", "verr", "tau", "tau_max", "dt", "L_pose", "L_vel", "lim", "diag", "off", "leader_frame", "fe",
+    "tipped", "newly", "events_seen", "hits", "w", "r", "slots", "dst", "ew", "rp", "rv", "lacc", "bound",
+)  # fmt: skip
+
+if HAVE_NUMBA:
+    import numba
+
+#: the compiled period is available (numba, its JIT on)
+FAST = HAVE_NUMBA and not numba.config.DISABLE_JIT
+
+if FAST:
+    from numba.core import types as _types
+    from numba.experimental import structref
+
+    @structref.register
+    class PeriodArgsType(_types.StructRef):
+        """numba's type of :class:`PeriodArgs`."""
+
+        def preprocess_fields(self, fields):
+            return tuple((name, _types.unliteral(typ)) for name, typ in fields)
+
+    class PeriodArgs(structref.StructRefProxy):
+        """:data:`FIELDS` held by one compiled object: passed to :func:`period` as one pointer, where
+        ~110 arrays passed one by one cost numba ~0.3 µs each to unbox, every period."""
+
+    structref.define_proxy(PeriodArgs, PeriodArgsType, list(FIELDS))
+
+    @njit
+    def make_args(*fields):
+        """A :class:`PeriodArgs` of ``fields`` (in :data:`FIELDS`' order), built in compiled code (cached)."""
+        return PeriodArgs(*fields)
+
+    @structref.register
+    class PolicyArgsType(_types.StructRef):
+        """numba's type of :class:`PolicyArgs`."""
+
+        def preprocess_fields(self, fields):
+            return tuple((name, _types.unliteral(typ)) for name, typ in fields)
+
+    class PolicyArgs(structref.StructRefProxy):
+        """The paper's stack's ``(g, s, comm, verr)`` for :func:`policy_call` (see :class:`PeriodArgs`)."""
+
+    structref.define_proxy(PolicyArgs, PolicyArgsType, ["g", "s", "comm", "verr"])
+
+    @njit
+    def make_policy_args(g, s, comm, verr):
+        """A :class:`PolicyArgs` (built in compiled code, cached)."""
+        return PolicyArgs(g, s, comm, verr)
+
+    @njit
+    def policy_call(a, lp, lv, pose, vel, true_vel, tau):
+        """:func:`policy_period` with the stack's arguments ``a`` (:class:`PolicyArgs`)."""
+        policy_period(a.g, a.s, lp, lv, pose, vel, a.comm, true_vel, a.verr, tau)
+
+    @njit
+    def period(a, u, pose, vel, new_pose, new_vel, O, k, step_count):
+        """:func:`mujoco_period` with the episode's arguments ``a`` (:class:`PeriodArgs`)."""
+        return mujoco_period(
+            a.g, a.s, a.comm, a.io, a.wt, a.cl, a.px, a.mptr, a.dptr, a.n_sub, a.n_sub * step_count, step_count,
+            a.plant_dt, u, a.lo, a.hi, a.alo, a.ahi, a.velocity, a.verr, a.tau, a.tau_max, pose, vel, new_pose,
+            new_vel, k, a.dt, a.L_pose, a.L_vel, a.lim, a.diag, a.off, a.leader_frame, a.fe, a.tipped, a.newly,
+            a.events_seen, a.hits, a.w, a.r, O, a.slots, a.dst, a.ew, a.rp, a.rv, a.lacc, a.bound,
+        )  # fmt: skip
 
 
 class FastPeriod:
@@ -203,41 +275,21 @@ class FastPeriod:
         )  # fmt: skip
         self.tau = np.empty((n, 2))
         self.fe = np.empty(n)
-        self.newly = np.zeros(n)
         self.hits = np.zeros(n)
         self.r = np.empty(n)
+        self.comm = st.comm_in(None)
         ne = len(env.graph.dst)
-        self.rp = np.empty((ne, 3))
-        self.rv = np.empty((ne, 2))
-        self.n_sub = int(p.n_substeps)
-        self.plant = p
-        self.dst = np.ascontiguousarray(env.graph.dst, dtype=np.int64)
-        self.w = np.array([w["formation"], w["effort"], w["tipped"], w["collision"]])
-        self.head = (env._g, env._s, st.comm_in(None), io, wt, p.contacts.contacts, p.contacts.proximity,
-                     m._address, d._address, self.n_sub)  # fmt: skip
-        self.plant_dt = float(p.control_dt)
-        self.call = None
-        self.env = env
-
-    def __call__(self, u: np.ndarray) -> tuple[int, np.ndarray, np.ndarray, np.ndarray | None]:
-        """The period of the actions ``u`` (n, 2) float64 (clipped in place): ``(status, new pose,
-        new velocity, observations (n, obs) float64 or None when the guards failed)``."""
-        env, p = self.env, self.plant
-        n = env.n
-        new_pose, new_vel = np.empty((n, 3)), np.empty((n, 2))
-        O = np.empty((n, env.obs_size))
-        sc = p._step_count
-        args = (
-            *self.head, sc * self.n_sub, sc, self.plant_dt, u, env._low, env._high, env._acc_low, env._acc_high,
-            env.action_mode == "velocity", env._verr, self.tau, env._tau_max, env._pose, env._vel, new_pose,
-            new_vel, env.k, env.dt, env.L_pose, env.L_vel, env._lim, env._diag, env._off, env._leader_frame,
-            self.fe, env._tipped, self.newly, env._events_seen, self.hits, self.w, self.r, O, env._slots,
-            self.dst, env._ones_e, self.rp, self.rv, env._lacc, env.obs_bound,
+        fields = (
+            env._g, env._s, self.comm, io, wt, p.contacts.contacts, p.contacts.proximity, m._address, d._address,
+            int(p.n_substeps), float(p.control_dt), env._low, env._high, env._acc_low, env._acc_high,
+            env.action_mode == "velocity", env._verr, self.tau, np.ascontiguousarray(env._tau_max), float(env.dt),
+            env.L_pose, env.L_vel, env._lim, env._diag, env._off, bool(env._leader_frame), self.fe, env._tipped,
+            np.zeros(n), env._events_seen, self.hits,
+            np.array([w["formation"], w["effort"], w["tipped"], w["collision"]]), self.r, env._slots,
+            np.ascontiguousarray(env.graph.dst, dtype=np.int64), env._ones_e, np.empty((ne, 3)), np.empty((ne, 2)),
+            env._lacc, float(env.obs_bound),
         )  # fmt: skip
-        if self.call is None:
-            self.call = Compiled(mujoco_period, args).call
-        status = int(self.call(*args))
-        return status, new_pose, new_vel, O
+        self.args = make_args(*fields)  # fast_plant: numba's JIT is on
 
 
 def fast_step(env: Any, actions: Any) -> tuple | None:
@@ -248,53 +300,66 @@ def fast_step(env: Any, actions: Any) -> tuple | None:
     if k == 0 or (env._ev_next is not None and k >= env._ev_next):
         env._fastp = None  # an event may replace the plant's arrays: the arguments are built again
         return None
-    if type(actions) is not dict or len(actions) != env.n or len(env.agents) != env.n:
+    agents = env.agents
+    if type(actions) is not dict or len(actions) != env.n or len(agents) != env.n:
         return None
     try:
-        u = np.array([actions[a] for a in env.possible_agents], dtype=float)
+        u = np.array([actions[a] for a in agents], dtype=float)  # every agent live: possible_agents' order
     except (KeyError, ValueError, TypeError):
         return None
-    if u.shape != (env.n, 2):
+    n = env.n
+    if u.shape != (n, 2):
         return None
     fp = env._fastp
     if fp is None:
         fp = env._fastp = FastPeriod(env)
-    status, pose, vel, O = fp(u)
+    p = env._plant
+    pose, vel, O = np.empty((n, 3)), np.empty((n, 2)), np.empty((n, env.obs_size))
+    status = period(fp.args, u, env._pose, env._vel, pose, vel, O, k, p._step_count)
     if status & BAD_ACTION:
         return None
     env._log.append(u)
-    p = env._plant
     p._step_count += 1
-    tau = fp.tau.copy()
     if status & WARNED:  # as MujocoPlant.step: the warning raised, the state not observed
-        from bioform_mj.core.errors import Diverged
-
-        diverged = None
-        try:
-            for i, w_ in enumerate(p._warnings):
-                if w_.number:
-                    p._raise_warning(i, w_)
-        except Diverged as e:
-            diverged = str(e)
-        return env._outputs(*env._advance_tail(tau, diverged))
-    from bioform_mj.core.engine import describe
-
+        return env._outputs(*env._advance_tail(fp.tau.copy(), _warning(p)))
     env._pose, env._vel = pose, vel
     env.k = k = k + 1
+    dt = env.dt
     env._mp, env._mv, env._lp_rx, env._lv_rx = pose, vel, env.L_pose[k], env.L_vel[k]
-    env._comm, env._comm_in = None, fp.head[2]
-    diverged = describe(env._diag, k * env.dt, env._lim) if status & GUARD else None
-    env._stats_sample(k, fp.fe)
+    env._comm, env._comm_in = None, fp.comm
+    if k % env.stride == 0:
+        env._stats_sample(k, fp.fe)
+    if status == 0 and k < env.N:  # the usual period: no flag to name, nothing ends
+        if env._dtype != O.dtype:
+            O = O.astype(env._dtype)
+        t = k * dt
+        return (dict(zip(agents, O)), dict(zip(agents, fp.r.tolist())), dict.fromkeys(agents, False),
+                dict.fromkeys(agents, False), {a: {"t": t} for a in agents})  # fmt: skip
+    from bioform_mj.core.engine import describe
+
+    diverged = describe(env._diag, k * dt, env._lim) if status & GUARD else None
     if status & TIPPED:
         env._any_tipped = True
     end = diverged is not None or env._any_tipped
     r = fp.r.copy()
     if end:
-        r = r - env.weights["terminal"] * max(0.0, (env.N - k) * env.dt)
+        r = r - env.weights["terminal"] * max(0.0, (env.N - k) * dt)
     trunc = k >= env.N and not end
-    agents = env.agents
     if end or trunc:
         env._done = True
         env._diverged = diverged
         env.agents = []
     return env._outputs(r, end, trunc, diverged, fp.hits.copy(), agents, None if diverged else O)
+
+
+def _warning(p: Any) -> str | None:
+    """The message of the MuJoCo warning that stopped the period (``MujocoPlant.step`` raises it)."""
+    from bioform_mj.core.errors import Diverged
+
+    try:
+        for i, w_ in enumerate(p._warnings):
+            if w_.number:
+                p._raise_warning(i, w_)
+    except Diverged as e:
+        return str(e)
+    return None

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.control.stack import ControlStack
-from bioform_mj.envs.fast import Compiled, policy_period
+from bioform_mj.envs import fast
 from bioform_mj.envs.parallel import FormationParallelEnv
 
 
@@ -52,7 +52,9 @@ class ControllerPolicy:
     def __call__(self, obs: Any = None) -> dict[str, np.ndarray]:
         """The actions of every live agent for this control step."""
         env = self.env
-        if env._faults is None and type(self.controller) is ControlStack:  # one compiled call (envs/fast.py)
+        if (
+            fast.FAST and env._faults is None and type(self.controller) is ControlStack
+        ):  # one compiled call (envs/fast.py)
             return self._stack_step(env)
         lp, lv = env.leader_state()
         mp, mv = env.measured_state()
@@ -84,16 +86,14 @@ class ControllerPolicy:
         """:meth:`__call__` for the paper's stack on the perfect network: ``ControlStack.step``'s
         ``control_step`` and the metric's sum in one compiled call, the same numbers."""
         st = self.controller
-        tau = np.empty((env.n, 2))
-        g, s = st.kernel
-        args = (g, s, env._lp_rx, env._lv_rx, env._mp, env._mv, st.comm_in(None), env._vel, self.verr, tau)
         if self._fast is None:
-            self._fast = Compiled(policy_period, args).call
-        self._fast(*args)
+            g, s = st.kernel
+            self._fast = fast.make_policy_args(g, s, st.comm_in(None), self.verr)
+        tau = np.empty((env.n, 2))
+        fast.policy_call(self._fast, env._lp_rx, env._lv_rx, env._mp, env._mv, env._vel, tau)
         if env.action_mode == "velocity":
-            tau = np.clip(s.cmd, env._low, env._high)
-        idx = env._index
-        return {a: tau[idx[a]] for a in env.agents}
+            tau = np.clip(st.state.cmd, env._low, env._high)
+        return dict(zip(env.agents, tau)) if len(env.agents) == env.n else {a: tau[env._index[a]] for a in env.agents}
 
 
 def run_episode(env: FormationParallelEnv, policy: Any, seed: int | None = None) -> dict[str, Any]:
