@@ -290,6 +290,9 @@ class FastPeriod:
             env._lacc, float(env.obs_bound),
         )  # fmt: skip
         self.args = make_args(*fields)  # fast_plant: numba's JIT is on
+        pose, vel = env._pose, env._vel
+        self.call = Compiled(period, (self.args, np.zeros((n, 2)), pose, vel, pose, vel, np.zeros((n, env.obs_size)),
+                                      0, 0)).call  # fmt: skip
 
 
 def fast_step(env: Any, actions: Any) -> tuple | None:
@@ -315,7 +318,7 @@ def fast_step(env: Any, actions: Any) -> tuple | None:
         fp = env._fastp = FastPeriod(env)
     p = env._plant
     pose, vel, O = np.empty((n, 3)), np.empty((n, 2)), np.empty((n, env.obs_size))
-    status = period(fp.args, u, env._pose, env._vel, pose, vel, O, k, p._step_count)
+    status = fp.call(fp.args, u, env._pose, env._vel, pose, vel, O, k, p._step_count)
     if status & BAD_ACTION:
         return None
     env._log.append(u)

@@ -88,9 +88,12 @@ class ControllerPolicy:
         st = self.controller
         if self._fast is None:
             g, s = st.kernel
-            self._fast = fast.make_policy_args(g, s, st.comm_in(None), self.verr)
+            a = fast.make_policy_args(g, s, st.comm_in(None), self.verr)
+            self._fast = (a, fast.Compiled(fast.policy_call, (a, env._lp_rx, env._lv_rx, env._mp, env._mv, env._vel,
+                                                              np.empty((env.n, 2)))).call)  # fmt: skip
         tau = np.empty((env.n, 2))
-        fast.policy_call(self._fast, env._lp_rx, env._lv_rx, env._mp, env._mv, env._vel, tau)
+        a, call = self._fast
+        call(a, env._lp_rx, env._lv_rx, env._mp, env._mv, env._vel, tau)
         if env.action_mode == "velocity":
             tau = np.clip(st.state.cmd, env._low, env._high)
         return dict(zip(env.agents, tau)) if len(env.agents) == env.n else {a: tau[env._index[a]] for a in env.agents}
