@@ -254,7 +254,9 @@ class FastPeriod:
     """The arguments of :func:`mujoco_period` for the current episode of ``env`` (built after its reset,
     and again after an event changed the plant), and the scratch arrays it writes."""
 
-    def __init__(self, env: Any) -> None:
+    def __init__(self, env: Any, r: Any = None, fe: Any = None, hits: Any = None) -> None:
+        """``r``, ``fe``, ``hits``: (n,) float64 arrays to write the rewards, formation errors and contact
+        events into (views of a batch's arrays, ``envs.vector``); default: arrays of its own."""
         p, n = env._plant, env.n
         m, d = p.model, p.data
         st = env._stack
@@ -274,9 +276,9 @@ class FastPeriod:
             SLIP_V_FLOOR, p._slip_need, p.slip_run, p.slip_step,
         )  # fmt: skip
         self.tau = np.empty((n, 2))
-        self.fe = np.empty(n)
-        self.hits = np.zeros(n)
-        self.r = np.empty(n)
+        self.fe = np.empty(n) if fe is None else fe
+        self.hits = np.zeros(n) if hits is None else hits
+        self.r = np.empty(n) if r is None else r
         self.comm = st.comm_in(None)
         ne = len(env.graph.dst)
         fields = (
