@@ -250,6 +250,10 @@ if FAST:
         )  # fmt: skip
 
 
+if not FAST:  # pragma: no cover - without numba or with its JIT off: the step-by-step path only
+    PeriodArgs = PolicyArgs = make_args = make_policy_args = policy_call = period = None
+
+
 class FastPeriod:
     """The arguments of :func:`mujoco_period` for the current episode of ``env`` (built after its reset,
     and again after an event changed the plant), and the scratch arrays it writes."""
@@ -326,7 +330,7 @@ def fast_step(env: Any, actions: Any) -> tuple | None:
     env._log.append(u)
     p._step_count += 1
     if status & WARNED:  # as MujocoPlant.step: the warning raised, the state not observed
-        return env._outputs(*env._advance_tail(fp.tau.copy(), _warning(p)))
+        return env._outputs(*env._advance_tail(fp.tau.copy(), warning_message(p)))
     env._pose, env._vel = pose, vel
     env.k = k = k + 1
     dt = env.dt
@@ -357,7 +361,7 @@ def fast_step(env: Any, actions: Any) -> tuple | None:
     return env._outputs(r, end, trunc, diverged, fp.hits.copy(), agents, None if diverged else O)
 
 
-def _warning(p: Any) -> str | None:
+def warning_message(p: Any) -> str | None:
     """The message of the MuJoCo warning that stopped the period (``MujocoPlant.step`` raises it)."""
     from bioform_mj.core.errors import Diverged
 

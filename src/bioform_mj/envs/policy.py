@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.control.stack import ControlStack
-from bioform_mj.envs import fast
+from bioform_mj.envs.fast import FAST, Compiled, make_policy_args, policy_call
 from bioform_mj.envs.parallel import FormationParallelEnv
 
 
@@ -52,9 +52,7 @@ class ControllerPolicy:
     def __call__(self, obs: Any = None) -> dict[str, np.ndarray]:
         """The actions of every live agent for this control step."""
         env = self.env
-        if (
-            fast.FAST and env._faults is None and type(self.controller) is ControlStack
-        ):  # one compiled call (envs/fast.py)
+        if FAST and env._faults is None and type(self.controller) is ControlStack:  # one compiled call (envs/fast.py)
             return self._stack_step(env)
         lp, lv = env.leader_state()
         mp, mv = env.measured_state()
@@ -88,8 +86,8 @@ class ControllerPolicy:
         st = self.controller
         if self._fast is None:
             g, s = st.kernel
-            a = fast.make_policy_args(g, s, st.comm_in(None), self.verr)
-            self._fast = (a, fast.Compiled(fast.policy_call, (a, env._lp_rx, env._lv_rx, env._mp, env._mv, env._vel,
+            a = make_policy_args(g, s, st.comm_in(None), self.verr)
+            self._fast = (a, Compiled(policy_call, (a, env._lp_rx, env._lv_rx, env._mp, env._mv, env._vel,
                                                               np.empty((env.n, 2)))).call)  # fmt: skip
         tau = np.empty((env.n, 2))
         a, call = self._fast

@@ -10,7 +10,7 @@ Python threads each run one compiled call over a block of worlds (numba's code r
 environment's episode of the same seed and actions, bit for bit (``tests/test_envs_vector.py``).
 
 The TorchRL-style dict-of-arrays interface for this and the Warp-batched environment is
-:mod:`.tdict`. What it needs of a scenario is what the compiled period needs (``envs.fast.fast_plant``)
+:mod:`.tdict`. What it needs of a scenario is what the compiled period needs (``envs.fast_plant``)
 and no events (a payload's period runs in Python in the single environment).
 """
 
@@ -23,7 +23,17 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.core.equations import njit
-from bioform_mj.envs import fast
+from bioform_mj.envs.fast import (
+    BAD_ACTION,
+    FAST,
+    GUARD,
+    TIPPED,
+    WARNED,
+    FastPeriod,
+    fast_plant,
+    period,
+    warning_message,
+)
 from bioform_mj.envs.parallel import FormationParallelEnv, parallel_env
 from bioform_mj.scenario.config import Scenario
 
@@ -40,12 +50,12 @@ def periods(args, lo, hi, U, pose, vel, new_pose, new_vel, O, k, step_count, sta
     for w in range(lo, hi):
         if not running[w]:
             continue
-        st = fast.period(args[w], U[w], pose[w], vel[w], new_pose[w], new_vel[w], O[w], k[w], step_count[w])
+        st = period(args[w], U[w], pose[w], vel[w], new_pose[w], new_vel[w], O[w], k[w], step_count[w])
         status[w] = st
-        if st & fast.BAD_ACTION:
+        if st & BAD_ACTION:
             continue
         step_count[w] += 1
-        if st & fast.WARNED:
+        if st & WARNED:
             continue
         k[w] += 1
         pose[w, :, :] = new_pose[w]
@@ -92,7 +102,7 @@ class VectorEnv:
         T = min(W, cpus) if threads is None else threads
         if isinstance(T, bool) or not isinstance(T, (int, np.integer)) or T < 1:
             raise ValueError(f"threads must be an integer >= 1, got {threads!r}")
-        if not fast.FAST:
+        if not FAST:
             raise ValueError("the CPU-vectorised environment needs numba with its JIT on")
         env0 = parallel_env(scenario, **options)
         sc = env0.base_scenario
@@ -103,7 +113,7 @@ class VectorEnv:
         if sc.events:
             raise ValueError("the CPU-vectorised environment cannot run scenario events (payloads): use parallel_env")
         env0.reset(seed=0)  # builds the plant: one world, to measure a world's memory before the others
-        if not fast.fast_plant(env0):
+        if not fast_plant(env0):
             raise ValueError(
                 "the CPU-vectorised environment cannot run this scenario (it needs sensing = 'truth', no DC-motor "
                 "feed, a harmonic disturbance, no per-step faults): use parallel_env"
@@ -183,7 +193,7 @@ class VectorEnv:
         self.k[w] = 0
         self._sc[w] = env._plant._step_count
         self.running[w] = True
-        fp = fast.FastPeriod(env, r=self.reward[w], fe=self._fe[w], hits=self._hits[w])
+        fp = FastPeriod(env, r=self.reward[w], fe=self._fe[w], hits=self._hits[w])
         if len(self._args) < self.nworld:
             while len(self._args) <= w:
                 self._args.append(fp.args)
@@ -234,13 +244,13 @@ class VectorEnv:
             futs = [self._pool.submit(periods, a[0], lo, hi, *a[1:]) for lo, hi in self._blocks]
             for f in futs:
                 f.result()
-        term = run & ((st & (fast.GUARD | fast.TIPPED | fast.WARNED)) > 0)
+        term = run & ((st & (GUARD | TIPPED | WARNED)) > 0)
         for w in np.flatnonzero(term):  # the terminal reward; a MuJoCo warning: the period's tail in Python
-            if st[w] & fast.WARNED:
+            if st[w] & WARNED:
                 self._warned(int(w))
             else:
                 self.reward[w] -= self.weights["terminal"] * max(0.0, (self.N - int(self.k[w])) * self.dt)
-        self.obs[run & ((st & (fast.GUARD | fast.WARNED)) > 0)] = 0.0
+        self.obs[run & ((st & (GUARD | WARNED)) > 0)] = 0.0
         trunc = run & ~term & (self.k >= self.N)
         self.running = run & ~(term | trunc)
         return self._out_obs(), self.reward, term, trunc
@@ -252,7 +262,7 @@ class VectorEnv:
         p._step_count = int(self._sc[w])
         env.k, env._pose, env._vel = int(self.k[w]), self.pose[w].copy(), self.vel[w].copy()
         tau = env._fastp.tau.copy()
-        r = env._advance_tail(tau, fast._warning(p))[0]
+        r = env._advance_tail(tau, warning_message(p))[0]
         self.reward[w] = r
         self.k[w] = env.k
 
