@@ -120,3 +120,22 @@ def test_fast_period_collision_and_divergence():
     fast = _episode(env, push, True, seed=0)
     assert "diverged" in fast[0][-1][4]["follower_1"] and len(fast[0]) >= 2  # ended in a compiled period
     _same(fast, _episode(env, push, False, seed=0))
+
+
+def test_fast_period_around_a_payload_event():
+    """The payload preset with its pick-up moved to t = 0.05 s: the event's period runs step by step, the
+    arguments are built again from the plant's new masses after it, and the episode is the same bits."""
+    import dataclasses
+
+    from bioform_mj.scenario.loader import load
+
+    sc = load("payload", ["sim.control_dt=0.01"])
+    sc = dataclasses.replace(sc, events=(dataclasses.replace(sc.events[0], time=0.05),))
+    env = parallel_env(sc, action="torque", max_cycles=15)
+    for a in env.possible_agents:
+        env.action_space(a).seed(3)
+    fast = _episode(env, _random(2), True)
+    assert env._plant._payload_added
+    for a in env.possible_agents:
+        env.action_space(a).seed(3)
+    _same(fast, _episode(env, _random(2), False))

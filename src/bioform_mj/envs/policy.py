@@ -34,6 +34,10 @@ class ControllerPolicy:
         self.verr = np.zeros(env.n)
         self._fast: Any = None
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Everything but the compiled call's arguments (a numba structref: not picklable; built again)."""
+        return {**self.__dict__, "_fast": None}
+
     def reset(self) -> None:
         """After ``env.reset``: the controller's initial estimates, as ``bioform run`` sets them."""
         from bioform_mj.control.params import stack_params
