@@ -61,6 +61,7 @@ def _random(seed: int):
     return act
 
 
+@pytest.mark.slow  # ~5 s with the kernels' first load from numba's cache
 @pytest.mark.parametrize("action", ["velocity", "torque"])
 def test_fast_period_is_the_step_by_step_path(action):
     """Seeded random actions (float32 samples and float64 draws) on the MuJoCo plant at 1 ms: bit for bit."""

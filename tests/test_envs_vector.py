@@ -38,6 +38,7 @@ def _single(seed, acts, action):
     return rows
 
 
+@pytest.mark.slow  # ~5 s with the kernels' first load from numba's cache
 @pytest.mark.parametrize("action", ["velocity", "torque"])
 def test_each_world_is_the_single_environment(action):
     """3 worlds on 2 threads, seeds 4, 5, 6, random actions over a whole episode (50 periods at 1 ms, then
