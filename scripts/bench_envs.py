@@ -8,6 +8,12 @@ the environment (``action = "torque"``, :class:`ControllerPolicy`); ``constant``
 velocity action (the environment alone). Run:
 
     .venv/bin/python scripts/bench_envs.py [--scenario paper] [--duration 20] [--control-dt 0.01] [--policy controller]
+
+``--matrix``: the environment against the compiled loop for both plants at 1 ms and 10 ms, one process
+(issue 30's table in docs/envs.md). ``--vector W --threads T``: the CPU-vectorised environment
+(``envs.vector_env``, W worlds, velocity actions, its torque law and observations) against
+``mujoco.rollout`` stepping the same W models over the same physics steps with T threads, open loop
+(the physics alone: issue 30 asks for >= 0.7).
 """
 
 from __future__ import annotations
@@ -33,17 +39,38 @@ def main() -> None:
     ap.add_argument("--policy", choices=("constant", "controller"), default="constant")
     ap.add_argument("--worlds", type=int, default=0, help="also the batched environment with this many worlds")
     ap.add_argument("--device", default="cpu", help="Warp device of the batched environment")
+    ap.add_argument("--matrix", action="store_true", help="both plants at 1 ms and 10 ms control periods")
+    ap.add_argument("--vector", type=int, default=0, help="the CPU-vectorised environment with this many worlds")
+    ap.add_argument("--threads", type=int, default=1, help="threads of --vector and of mujoco.rollout")
     a = ap.parse_args()
-    ov = [f"sim.duration={a.duration}", f"sim.control_dt={a.control_dt}", f"plant.kind={a.plant}"]
-    env = parallel_env(a.scenario, action="torque" if a.policy == "controller" else "velocity", overrides=ov)
-    sc = load(a.scenario, ov)
+    if a.vector:
+        vector(a)
+        return
+    cases = [(p, dt) for p in ("mujoco", "ideal") for dt in (0.001, 0.01)] if a.matrix else [(a.plant, a.control_dt)]
+    for plant, dt in cases:
+        e, r, n = single(a.scenario, plant, dt, a.duration, a.repeat, a.policy)
+        print(
+            f"scenario {a.scenario}, plant {plant}, n = {n}, control_dt {dt:g} s, {a.duration:g} s, policy {a.policy}: "
+            f"environment {e:,.0f} steps/s ({e * n:,.0f} agent-steps/s); bioform run (compiled) {r:,.0f} steps/s; "
+            f"ratio {e / r:.2f}"
+        )
+    if a.worlds:
+        ov = [f"sim.duration={a.duration}", f"sim.control_dt={a.control_dt}", f"plant.kind={a.plant}"]
+        batch(a, ov, load(a.scenario, ov))
+
+
+def single(scenario: str, plant: str, control_dt: float, duration: float, repeat: int, policy: str):
+    """Medians of ``repeat`` alternating episodes: environment steps/s, ``simulate`` steps/s, followers."""
+    ov = [f"sim.duration={duration}", f"sim.control_dt={control_dt}", f"plant.kind={plant}"]
+    env = parallel_env(scenario, action="torque" if policy == "controller" else "velocity", overrides=ov)
+    sc = load(scenario, ov)
     simulate(sc)  # compile / load kernels outside the timing
     env_rates, run_rates = [], []
-    for _ in range(a.repeat):
+    for _ in range(repeat + 1):
         env.reset(seed=0)
         act = {ag: np.array([0.2, 0.1]) for ag in env.agents}
         pol = None
-        if a.policy == "controller":
+        if policy == "controller":
             pol = ControllerPolicy(env)
             pol.reset()
         t0 = time.perf_counter()
@@ -54,15 +81,60 @@ def main() -> None:
         env_rates.append(steps / (time.perf_counter() - t0))
         r = simulate(sc)
         run_rates.append(r.summary["steps"] / r.summary["wall_time_s"])
-    e, r = statistics.median(env_rates), statistics.median(run_rates)
+    # the first round loads the fast period's kernels: left out
+    return statistics.median(env_rates[1:]), statistics.median(run_rates[1:]), sc.n
+
+
+def vector(a) -> None:
+    """The CPU-vectorised environment against ``mujoco.rollout`` of the same worlds, steps and threads."""
+    import mujoco
+    from mujoco import rollout
+
+    from bioform_mj.envs import vector_env
+
+    ov = [f"sim.duration={a.duration}", f"sim.control_dt={a.control_dt}", "plant.kind=mujoco"]
+    ve = vector_env(a.scenario, a.vector, a.threads, overrides=ov)
+    W, n, N = ve.nworld, ve.n, ve.N
+    act = np.tile(np.array([0.2, 0.1]), (W, n, 1))
+    ve.reset(seed=0)  # builds every world's plant
+    models = [e._plant.model for e in ve.envs]
+    n_sub = int(ve.envs[0]._plant.n_substeps)
+    datas = [mujoco.MjData(models[0]) for _ in range(a.threads)]
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    cspec = mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_XFRC_APPLIED
+    nc = mujoco.mj_stateSize(models[0], cspec)
+    # the environment's inputs of every period, recorded in an untimed episode (the same seed and actions
+    # give the same episode), then replayed by mujoco.rollout: the same physics steps, open loop
+    ve.reset(seed=0)
+    x0 = np.empty((W, mujoco.mj_stateSize(models[0], spec)))
+    for w, e in enumerate(ve.envs):
+        mujoco.mj_getState(e._plant.model, e._plant.data, x0[w], spec)
+    ctrl = np.empty((W, N * n_sub, nc))
+    for k in range(N):
+        ve.step(act)
+        for w, e in enumerate(ve.envs):
+            mujoco.mj_getState(e._plant.model, e._plant.data, ctrl[w, k * n_sub], cspec)
+        ctrl[:, k * n_sub : (k + 1) * n_sub] = ctrl[:, k * n_sub : k * n_sub + 1]
+    env_rates, ro_rates = [], []
+    for _ in range(a.repeat + 1):
+        ve.reset(seed=0)
+        t0 = time.perf_counter()
+        for _k in range(N):
+            ve.step(act)
+        env_rates.append(N * W / (time.perf_counter() - t0))
+        t0 = time.perf_counter()
+        rollout.rollout(models, datas, x0, ctrl, control_spec=cspec, nstep=N * n_sub, persistent_pool=a.threads > 1)
+        ro_rates.append(N * W / (time.perf_counter() - t0))
+    e, r = statistics.median(env_rates[1:]), statistics.median(ro_rates[1:])
     print(
-        f"scenario {a.scenario}, plant {a.plant}, n = {sc.n}, control_dt {a.control_dt:g} s, {a.duration:g} s, "
-        f"policy {a.policy}"
+        f"CPU-vectorised environment, {W} worlds x {n} followers, {a.threads} thread(s), control_dt "
+        f"{a.control_dt:g} s ({n_sub} physics steps a period), {N} periods: {e:,.0f} world-steps/s "
+        f"({e * n:,.0f} agent-steps/s); mujoco.rollout of the same worlds and physics steps, open loop: "
+        f"{r:,.0f} world-steps/s; ratio {e / r:.2f}"
     )
-    print(f"environment: {e:,.0f} steps/s ({e * sc.n:,.0f} agent-steps/s); bioform run (compiled): {r:,.0f} steps/s")
-    print(f"ratio environment / compiled loop: {e / r:.2f}")
-    if a.worlds:
-        batch(a, ov, sc)
+    ve.close()
+    if a.threads > 1:
+        rollout.shutdown_persistent_pool()
 
 
 def batch(a, ov, sc) -> None:

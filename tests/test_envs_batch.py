@@ -102,3 +102,24 @@ def test_batch_env_bad_input(batched):
         batch_env("paper", worlds=2)
     with pytest.raises(ValueError, match="worlds must be >= 1"):
         batch_env("paper", worlds=0, overrides=OV)
+
+
+def test_torchrl_style_keys_on_the_warp_batched_env(batched):
+    """``TorchRLStyle`` over the Warp-batched environment: a ``_reset`` mask restarts only its world (the
+    same first observation as the fixture's reset, the same next one for the same actions), TorchRL's keys
+    and shapes, and a seed at reset refused (the worlds' seeds are fixed by ``batch_env(seeds=...)``)."""
+    from bioform_mj.envs.tdict import TorchRLStyle
+
+    be, obs, rew, *_ = batched
+    td_env = TorchRLStyle(be)
+    mask = np.array([[False], [True], [False]])
+    td = td_env.reset({"_reset": mask})
+    assert td["agents"]["observation"].shape == (W, 3, be.obs_size)
+    assert np.array_equal(td["agents"]["observation"][1], obs[0][1])
+    assert td["done"].shape == (W, 1) and not td["done"][1, 0]
+    out = td_env.step({"agents": {"action": actions(0)}})
+    assert np.array_equal(out["agents"]["observation"][1], obs[1][1])
+    assert np.array_equal(out["agents"]["reward"][1, :, 0], rew[0][1])
+    assert out["agents"]["reward"].shape == (W, 3, 1) and out["terminated"].shape == (W, 1)
+    with pytest.raises(ValueError, match="seeds are fixed"):
+        td_env.reset(seed=1)

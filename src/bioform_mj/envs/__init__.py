@@ -2,7 +2,9 @@
 
 ``parallel_env(scenario, **options)`` builds :class:`~.parallel.FormationParallelEnv`, ``env``
 (the same options) its AEC form (PettingZoo's ``parallel_to_aec``), ``follower_env`` one follower
-as a Gymnasium ``Env`` (:class:`~.single.FollowerEnv`); :class:`~.policy.ControllerPolicy` runs
+as a Gymnasium ``Env`` (:class:`~.single.FollowerEnv`), ``vector_env`` many worlds on the CPU
+(:class:`~.vector.VectorEnv`; :class:`~.tdict.TorchRLStyle`: TorchRL's batched keys for it and
+``batch_env``); :class:`~.policy.ControllerPolicy` runs
 any :class:`~bioform_mj.control.base.Controller` (the paper's four methods or a user's) as a
 policy in it. Design §20; docs/envs.md.
 """
@@ -26,6 +28,13 @@ def env(scenario="paper", **options):
 aec_env = env
 
 
+def vector_env(*args, **kwargs):
+    """Many formations on the CPU in compiled code, threads over worlds (:func:`.vector.vector_env`)."""
+    from bioform_mj.envs.vector import vector_env as _vector_env
+
+    return _vector_env(*args, **kwargs)
+
+
 def batch_env(*args, **kwargs):
     """The batched environment on MuJoCo Warp (:func:`.batch.batch_env`; optional extra ``gpu``)."""
     from bioform_mj.envs.batch import batch_env as _batch_env
@@ -47,4 +56,5 @@ __all__ = [
     "FormationParallelEnv",
     "parallel_env",
     "run_episode",
+    "vector_env",
 ]

@@ -48,6 +48,7 @@ import numpy as np
 
 from bioform_mj.core.engine import Bounds, check, describe
 from bioform_mj.core.errors import Diverged, InputError
+from bioform_mj.envs.fast import fast_plant, fast_step
 from bioform_mj.envs.kernels import (
     actions_within,
     clip_into,
@@ -421,6 +422,7 @@ class FormationParallelEnv(ParallelEnv):
         self._tipped = np.zeros(self.n, dtype=bool)
         self._any_tipped = False
         self._events_seen = np.zeros(self.n)
+        self._fast_ok, self._fastp = fast_plant(self), None  # envs/fast.py: the period as one compiled call
         if self._renderer is not None:
             self._renderer.new_episode(self)
 
@@ -467,14 +469,23 @@ class FormationParallelEnv(ParallelEnv):
         """One control period for every live agent. Returns ``(obs, rewards, terminations, truncations, infos)``."""
         if self._done:
             raise RuntimeError("step() after the episode ended: call reset() first")
+        out = fast_step(self, actions) if self._fast_ok else None  # one compiled call (envs/fast.py)
+        if out is not None:
+            return out
         u = self._actions(actions)
         self._log.append(u)
-        r, end, trunc, diverged, hits, agents = self._advance(u)
-        obs = (
-            self._observations(agents)
-            if diverged is None
-            else {a: np.zeros(self.obs_size, self._dtype) for a in agents}
-        )
+        return self._outputs(*self._advance(u))
+
+    def _outputs(self, r, end, trunc, diverged, hits, agents, O=None):
+        """``step``'s five dicts from :meth:`_advance`'s results (``O``: the observations, computed here if None)."""
+        if diverged is not None:
+            obs = {a: np.zeros(self.obs_size, self._dtype) for a in agents}
+        elif O is None:
+            obs = self._observations(agents)
+        else:
+            if self._dtype != O.dtype:
+                O = O.astype(self._dtype)
+            obs = {a: O[self._index[a]] for a in agents}
         info = {"t": self.k * self.dt}
         if diverged is not None:
             info["diverged"] = diverged
@@ -504,6 +515,11 @@ class FormationParallelEnv(ParallelEnv):
             self._pose, self._vel = self._plant.observe()
         except Diverged as e:
             diverged = str(e)
+        return self._advance_tail(tau, diverged)
+
+    def _advance_tail(self, tau: np.ndarray, diverged: str | None):
+        """:meth:`_advance` after the plant's step (``diverged``: its MuJoCo warning, or None)."""
+        s, k = self._s, self.k
         self.k = k = k + 1
         self._sense_phase(k, learn=True)
         if diverged is None and not check(s, self._pose, self._vel, self._lim, self._diag):

@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from bioform_mj.control.stack import ControlStack
+from bioform_mj.envs.fast import FAST, Compiled, make_policy_args, policy_call
 from bioform_mj.envs.parallel import FormationParallelEnv
 
 
@@ -30,11 +32,15 @@ class ControllerPolicy:
         self.env = env
         self.controller = controller
         self.verr = np.zeros(env.n)
+        self._fast: Any = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Everything but the compiled call's arguments (a numba structref: not picklable; built again)."""
+        return {**self.__dict__, "_fast": None}
 
     def reset(self) -> None:
         """After ``env.reset``: the controller's initial estimates, as ``bioform run`` sets them."""
         from bioform_mj.control.params import stack_params
-        from bioform_mj.control.stack import ControlStack
         from bioform_mj.run.simulate import initial_estimates
 
         env = self.env
@@ -45,10 +51,13 @@ class ControllerPolicy:
             self.controller = ControlStack(env.graph, stack_params(env._sc, c, getattr(p, "tau_max", None)))
         self.controller.reset(initial_estimates(env._sc, env._pose, env.L_pose[0]), env._vel)  # as sim.simulate
         self.verr[:] = 0.0
+        self._fast = None
 
     def __call__(self, obs: Any = None) -> dict[str, np.ndarray]:
         """The actions of every live agent for this control step."""
         env = self.env
+        if FAST and env._faults is None and type(self.controller) is ControlStack:  # one compiled call (envs/fast.py)
+            return self._stack_step(env)
         lp, lv = env.leader_state()
         mp, mv = env.measured_state()
         f = env._faults
@@ -74,6 +83,22 @@ class ControllerPolicy:
             u = np.clip(np.asarray(cmd, dtype=float), env._low, env._high)
             return {a: u[env._index[a]].copy() for a in env.agents}
         return {a: tau[env._index[a]].copy() for a in env.agents}
+
+    def _stack_step(self, env: FormationParallelEnv) -> dict[str, np.ndarray]:
+        """:meth:`__call__` for the paper's stack on the perfect network: ``ControlStack.step``'s
+        ``control_step`` and the metric's sum in one compiled call, the same numbers."""
+        st = self.controller
+        if self._fast is None:
+            g, s = st.kernel
+            a = make_policy_args(g, s, st.comm_in(None), self.verr)
+            self._fast = (a, Compiled(policy_call, (a, env._lp_rx, env._lv_rx, env._mp, env._mv, env._vel,
+                                                              np.empty((env.n, 2)))).call)  # fmt: skip
+        tau = np.empty((env.n, 2))
+        a, call = self._fast
+        call(a, env._lp_rx, env._lv_rx, env._mp, env._mv, env._vel, tau)
+        if env.action_mode == "velocity":
+            tau = np.clip(st.state.cmd, env._low, env._high)
+        return dict(zip(env.agents, tau)) if len(env.agents) == env.n else {a: tau[env._index[a]] for a in env.agents}
 
 
 def run_episode(env: FormationParallelEnv, policy: Any, seed: int | None = None) -> dict[str, Any]:

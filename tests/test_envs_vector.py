@@ -1,0 +1,106 @@
+"""The CPU-vectorised environment (``envs/vector.py``, issue 30 item 5) and the TorchRL-style batched interface
+(``envs/tdict.py``): every world's episode is the single environment's episode of the same seed and actions,
+bit for bit (both run the same compiled period; the single environment's first period runs step by step, the
+tests of ``test_envs_fast`` tie the two), on threads; memory is estimated before the worlds are built;
+per-world resets with seeds and ``_reset`` masks; bad input named."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pettingzoo")
+
+from bioform_mj.envs import parallel_env  # noqa: E402
+from bioform_mj.envs.tdict import TorchRLStyle  # noqa: E402
+from bioform_mj.envs.vector import VectorEnv  # noqa: E402
+
+OV = ["sim.duration=0.05", "sim.control_dt=0.001", "plant.kind=mujoco", "formation.init_jitter=0.05"]
+
+
+def _actions(env, W, T, seed=5):
+    rng = np.random.default_rng(seed)
+    lo, hi = env.low, env.high
+    return rng.uniform(lo, hi, size=(T, W, env.n, 2))
+
+
+def _single(seed, acts, action):
+    env = parallel_env("paper", action=action, overrides=OV)
+    obs, _ = env.reset(seed=seed)
+    rows = [(np.stack([obs[a] for a in env.possible_agents]), None, False, False)]
+    for u in acts:
+        obs, rew, term, trunc, _ = env.step({a: u[i] for i, a in enumerate(env.possible_agents)})
+        if not obs:
+            break
+        a0 = env.possible_agents[0]
+        rows.append((np.stack([obs[a] for a in env.possible_agents]), np.array([rew[a] for a in env.possible_agents]),
+                     term[a0], trunc[a0]))  # fmt: skip
+    return rows
+
+
+@pytest.mark.slow  # ~5 s with the kernels' first load from numba's cache
+@pytest.mark.parametrize("action", ["velocity", "torque"])
+def test_each_world_is_the_single_environment(action):
+    """3 worlds on 2 threads, seeds 4, 5, 6, random actions over a whole episode (50 periods at 1 ms, then
+    truncation): observations, rewards and flags of world w equal the single environment's of seed 4 + w."""
+    W = 3
+    venv = VectorEnv("paper", W, threads=2, action=action, overrides=OV)
+    obs = venv.reset(seed=4).copy()
+    acts = _actions(venv, W, venv.N)
+    got = [[(obs[w].copy(), None, False, False)] for w in range(W)]
+    for t in range(venv.N):
+        obs, rew, term, trunc = venv.step(acts[t])
+        for w in range(W):
+            got[w].append((obs[w].copy(), rew[w].copy(), bool(term[w]), bool(trunc[w])))
+    assert trunc.all() and not venv.running.any()
+    for w in range(W):
+        ref = _single(4 + w, acts[:, w], action)
+        assert len(ref) == len(got[w]) == venv.N + 1
+        for (o1, r1, te1, tr1), (o2, r2, te2, tr2) in zip(got[w], ref):
+            assert np.array_equal(o1, o2)
+            assert (r1 is None and r2 is None) or np.array_equal(r1, r2)
+            assert (te1, tr1) == (te2, tr2)
+    with pytest.raises(RuntimeError, match="reset"):
+        venv.step(acts[0])
+    venv.close()
+
+
+def test_masks_seeds_and_the_torchrl_style_keys():
+    """A ``_reset`` mask resets only its worlds (the others keep their step), per-world seeds repeat an
+    episode, and the keys and shapes are TorchRL's multi-agent ones (("agents", "observation") (W, n, obs),
+    ("agents", "reward") (W, n, 1), "done"/"terminated"/"truncated" (W, 1))."""
+    W = 2
+    td_env = TorchRLStyle(VectorEnv("paper", W, threads=1, overrides=OV))
+    td = td_env.reset(seed=[7, 8])
+    assert td["agents"]["observation"].shape == (W, 3, td_env.env.obs_size)
+    assert td["done"].shape == (W, 1) and not td["done"].any()
+    first = td["agents"]["observation"].copy()
+    act = np.zeros((W, 3, 2))
+    out = td_env.step({"agents": {"action": act}})
+    assert out["agents"]["reward"].shape == (W, 3, 1)
+    assert out["terminated"].shape == out["truncated"].shape == (W, 1)
+    stepped = out["agents"]["observation"].copy()
+    td = td_env.reset({"_reset": np.array([[False], [True]])}, seed=[8])
+    assert np.array_equal(td["agents"]["observation"][1], first[1])  # world 1: seed 8 again, its first obs
+    assert np.array_equal(td["agents"]["observation"][0], stepped[0])  # world 0 untouched
+    assert list(td_env.env.k) == [1, 0]
+    with pytest.raises(ValueError, match="seeds"):
+        td_env.reset(seed=[1, 2, 3])
+    with pytest.raises(ValueError, match=r"world 1: action of follower_2"):
+        bad = np.zeros((W, 3, 2))
+        bad[1, 1, 0] = np.nan
+        td_env.step({"agents": {"action": bad}})
+    with pytest.raises(ValueError, match="shape"):
+        td_env.step({"agents": {"action": np.zeros((W, 2, 2))}})
+
+
+def test_memory_is_estimated_before_the_worlds_are_built():
+    """10**6 worlds: refused from one built world's size, naming the estimate, before the others are built."""
+    with pytest.raises(ValueError, match=r"1000000 worlds need ~\d+\.\d+ GiB"):
+        VectorEnv("paper", 10**6, overrides=OV)
+    with pytest.raises(ValueError, match="bound of 0.00 GiB"):
+        VectorEnv("paper", 2, overrides=OV, max_bytes=1000)
+    with pytest.raises(ValueError, match="worlds must be"):
+        VectorEnv("paper", 0, overrides=OV)
+    with pytest.raises(ValueError, match="MuJoCo plant"):
+        VectorEnv("paper", 2, overrides=["plant.kind=ideal"])
