@@ -46,7 +46,7 @@ import numpy as np
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.layout import CONTACT_PRIORITY
 from bioform_mj.robots.realdata.recording import Recording
-from bioform_mj.robots.realdata.simmodel import SimRobot, initial_state
+from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state
 
 __all__ = [
     "FIT_PARAMETERS",
@@ -110,10 +110,6 @@ def make_chunks(
     TS = sysid.TimeSeries
     mapping = TS.compute_all_sensor_mapping(model)
     ctrl_map = TS.compute_all_control_mapping(model)
-    lay = robot.layout
-    sign = np.asarray(lay.wheel_sign, float)
-    # which motor drives which wheel (gear ±1: ctrl in N·m along the wheel's forward sense)
-    motor_ids = [model.actuator(m).id for m in lay.motors]
     cols = ["left_speed", "right_speed"]
     meas_full = np.zeros((len(rec.t), 8))
     meas_full[:, 0:2] = rec.velocity
@@ -161,10 +157,7 @@ def make_chunks(
         yaw = float(np.interp(t0, rec.odom_t, yaw_pose)) if yaw_pose is not None else 0.0
         states.append(initial_state(robot, model, angle, speed, yaw))
         ct = np.arange(0, int(round(length / dt)) + 2) * dt
-        eff = rec.effort_at(t0 + ct)
-        ctrl = np.zeros((len(ct), model.nu))
-        for i in range(2):
-            ctrl[:, motor_ids[i]] = sign[i] * eff[:, i]
+        ctrl = effort_to_ctrl(robot, model, rec.effort_at(t0 + ct))
         controls.append(TS(ct, ctrl, ctrl_map))
         measured.append(TS(grid.copy(), _interp(t0 + grid, rec.t, meas_full), mapping))
         starts.append(t0)
