@@ -77,7 +77,8 @@ def add_parsers(rsub: Any) -> None:
         "--fit",
         default="mass,yaw_inertia,damping,frictionloss,caster_friction",
         help="comma-separated parameters: mass, yaw_inertia, damping, frictionloss, armature, caster_friction "
-        "(default: all but armature, which the recording cannot tell from mass; caster_friction needs --caster)",
+        "(default: all but armature, which the recording cannot tell from mass; caster_friction where the robot "
+        "has casters: --caster's, else those robot check finds)",
     )
     fit.add_argument("--chunk", type=float, default=2.0, help="seconds simulated from each recorded state (default 2)")
     fit.add_argument("--max-chunks", type=int, default=12, help="chunks used at most, spread evenly (default 12)")
@@ -157,6 +158,15 @@ def _load(args: argparse.Namespace):
         )
     else:
         rec.notes.append(f"efforts taken as the torques applied on the wheel joints (from {why})")
+    if stated.get("disturbance"):
+        d = stated["disturbance"]
+        msg = (
+            f"the recorded run applied disturbance forces (scenario [disturbance] bias {d.get('bias')}, amp "
+            f"{d.get('amp')}) that no robot model holds: the fitted numbers absorb them (record with the "
+            "disturbance off: --set 'disturbance.bias=[0,0]' --set 'disturbance.amp=[0,0]')"
+        )
+        rec.notes.append(msg)
+        print(f"warning: {msg}", file=sys.stderr)
     return ref, robot, rec
 
 
@@ -198,7 +208,7 @@ def _fit_main(args: argparse.Namespace) -> int:
     from bioform_mj.outputs.files import check_out_dir, write_json
     from bioform_mj.robots.params import robot_truth
     from bioform_mj.robots.realdata.calibrated import write_calibrated
-    from bioform_mj.robots.realdata.fit import FIT_PARAMETERS, caster_geoms, fit, make_chunks, simulate_chunks
+    from bioform_mj.robots.realdata.fit import FIT_PARAMETERS, fit, make_chunks, robot_casters, simulate_chunks
     from bioform_mj.robots.realdata.replay import plot_signals
     from bioform_mj.robots.realdata.simmodel import sim_spec
 
@@ -230,7 +240,7 @@ def _fit_main(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     stem = Path(ref.model).stem
     cal_path = out / f"{stem}_calibrated.xml"
-    casters = caster_geoms(robot.spec, model_cal, ref.casters) if ref.casters else []
+    casters = robot_casters(robot, robot.spec, model_cal) if "caster_friction" in result.names else []
     write_calibrated(ref, robot.layout, result.parameters, casters, cal_path, str(args.bag))
     cal_ref = replace(ref, model=str(cal_path.resolve()))
     p_pub, p_cal = robot_truth(ref), robot_truth(cal_ref)
@@ -245,6 +255,8 @@ def _fit_main(args: argparse.Namespace) -> int:
         "published": {"a": p_pub.a_eff, "b": p_pub.b_eff},
         "parameters": result.parameters,
         "unidentified": unidentified,
+        "ci95_method": "the wider of the interval from J'J and the residual variance (mujoco.sysid) and the "
+        "cluster-robust (sandwich) one with the chunks as independent units, Student's t with chunks - 1 dof",
         "correlation": {"names": result.names, "matrix": np.round(result.correlation, 4).tolist()},
         "residual": {
             "published": {"cost": result.cost_published, **_rms(chunks, sim_pub)},

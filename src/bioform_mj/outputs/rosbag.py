@@ -547,7 +547,8 @@ def robots_stated(result: Any) -> list[dict[str, Any]]:
     the mapping's ``driver``: the log's ``tau``; the motor delivers less along its torque–speed line and,
     with the voltage driver, less by its back-EMF; design §8.2); ``effort_interval_s = [a, b]``: each
     effort is the mean torque over ``[stamp + a, stamp + b)`` s (design §9, log rows: the row's control steps,
-    each command held for its period; the fit holds it there)."""
+    each command held for its period; the fit holds it there); ``disturbance``: the scenario's disturbance
+    forces, where the run had them (no robot model holds them)."""
     sc = getattr(result, "scenario", None)
     sim = getattr(sc, "sim", None)
     log = getattr(result, "log", {}) or {}
@@ -562,6 +563,10 @@ def robots_stated(result: Any) -> list[dict[str, Any]]:
             "namespace": f"f{i + 1}",
             "effort": "command" if dc else "applied",
         }
+        dist = getattr(sc, "disturbance", None)
+        if dist is not None and kind == "mujoco" and (np.any(dist.bias) or np.any(dist.amp)):
+            # forces on the body that no robot model has: robot fit says its numbers are biased by them
+            entry["disturbance"] = {"bias": [float(v) for v in dist.bias], "amp": [float(v) for v in dist.amp]}
         if sim is not None:  # a row's torque: the mean of the commands of its control steps, each held one period
             entry["effort_interval_s"] = [float(sim.control_dt - sim.log_dt), float(sim.control_dt)]
         if ref is not None and kind == "mujoco":
