@@ -75,10 +75,10 @@ def add_parsers(rsub: Any) -> None:
     fit.add_argument("--out", required=True, type=Path, help="output directory")
     fit.add_argument(
         "--fit",
-        default="mass,yaw_inertia,damping,frictionloss,caster_friction",
+        default=None,
         help="comma-separated parameters: mass, yaw_inertia, damping, frictionloss, armature, caster_friction "
-        "(default: all but armature, which the recording cannot tell from mass; caster_friction where the robot "
-        "has casters: --caster's, else those robot check finds)",
+        "(default: all but armature, which the recording cannot tell from mass, and caster_friction only of the "
+        "--caster ones; given here, caster_friction fits the casters robot check finds)",
     )
     fit.add_argument("--chunk", type=float, default=2.0, help="seconds simulated from each recorded state (default 2)")
     fit.add_argument("--max-chunks", type=int, default=12, help="chunks used at most, spread evenly (default 12)")
@@ -208,12 +208,19 @@ def _fit_main(args: argparse.Namespace) -> int:
     from bioform_mj.outputs.files import check_out_dir, write_json
     from bioform_mj.robots.params import robot_truth
     from bioform_mj.robots.realdata.calibrated import write_calibrated
-    from bioform_mj.robots.realdata.fit import FIT_PARAMETERS, fit, make_chunks, robot_casters, simulate_chunks
+    from bioform_mj.robots.realdata.fit import (
+        DEFAULT_FIT,
+        FIT_PARAMETERS,
+        fit,
+        make_chunks,
+        robot_casters,
+        simulate_chunks,
+    )
     from bioform_mj.robots.realdata.replay import plot_signals
     from bioform_mj.robots.realdata.simmodel import sim_spec
 
     out = check_out_dir(args.out, "--out")
-    which = tuple(w.strip() for w in args.fit.split(",") if w.strip())
+    which = DEFAULT_FIT if args.fit is None else tuple(w.strip() for w in args.fit.split(",") if w.strip())
     unknown = [w for w in which if w not in FIT_PARAMETERS]
     if unknown:
         raise InputError(f"--fit: unknown parameter '{unknown[0]}' (expected some of: {', '.join(FIT_PARAMETERS)})")
@@ -229,6 +236,7 @@ def _fit_main(args: argparse.Namespace) -> int:
         max_chunks=args.max_chunks,
         max_iters=args.max_iters,
         time_budget_s=args.time_budget,
+        find_casters=args.fit is not None,
     )
     model_pub = published.spec.compile()
     model_cal = sysid.apply_param_modifiers(opt, robot.spec)

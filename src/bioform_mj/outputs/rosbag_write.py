@@ -25,6 +25,33 @@ CHUNK_BYTES = 1 << 20
 MSG_HEAD = 1 + 8 + 2 + 4 + 8 + 8  # opcode, record length, channel id, sequence, log time, publish time
 
 
+def chunk_matrix(
+    topics: list[Any], cids: list[int], cols: list[int], B: int, rows: int, stamps: np.ndarray
+) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+    """The byte matrix of a chunk of ``rows`` samples (``(rows, B)`` uint8: every topic's message record
+    side by side, at ``cols``) with every record's constant bytes (header, template) written once, and its
+    slots: ``(view, values)`` pairs, a strided view of the matrix where one number of every sample goes
+    (log and publish times, each marked field) and that number for all ``K`` samples. A chunk's samples
+    ``j0:j1`` are then ``view[:j1 - j0] = values[j0:j1]`` for each slot, the same matrix reused chunk after
+    chunk (written out before it is refilled): one numpy assignment per number, not per message."""
+    M = np.empty((rows, B), np.uint8)
+    buf = M.reshape(-1)
+    t = np.ascontiguousarray(stamps, dtype="<u8")
+    slots: list[tuple[np.ndarray, np.ndarray]] = []
+
+    def view(off: int, dt: str) -> np.ndarray:
+        return np.ndarray((rows,), dt, buffer=buf, offset=off, strides=(B,))
+
+    for tp, cid, col in zip(topics, cids, cols):
+        L = tp.template.size
+        M[:, col : col + MSG_HEAD] = np.frombuffer(struct.pack("<BQHIQQ", 0x05, 22 + L, cid, 0, 0, 0), np.uint8)
+        M[:, col + MSG_HEAD : col + MSG_HEAD + L] = tp.template
+        slots += [(view(col + 15, "<u8"), t), (view(col + 23, "<u8"), t)]  # log time, publish time
+        for off, dt, vals in tp.fields:
+            slots.append((view(col + MSG_HEAD + off, dt), np.asarray(vals[: len(t)], dtype=dt)))
+    return M, slots
+
+
 def record(cid: int, stamp: int, data: bytes) -> bytes:
     return struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + len(data), cid, 0, stamp, stamp) + data
 
@@ -178,8 +205,8 @@ def writer_classes():
             """``/tf_static`` at the first stamp, then every sample's messages in topic order, in chunks of
             whole samples of about :data:`CHUNK_BYTES`. Every topic has a message at each of the first
             ``K`` samples (the log rows, all of one layout: a chunk is a ``(samples, B)`` byte matrix,
-            filled when it is written: memory stays at one chunk); the last sample (the end of the run)
-            holds the state topics' messages only."""
+            :func:`chunk_matrix`, refilled for each chunk: memory stays at one chunk); the last sample (the
+            end of the run) holds the state topics' messages only."""
             S = len(stamps)
             K = S - 1
             cids = [conns[tp.name].id for tp in topics]
@@ -201,7 +228,8 @@ def writer_classes():
                     tail.append(record(cid, int(stamps[row]), data))
                     tail_idx.append(cid)
             first = record(c_static.id, int(stamps[0]), static)
-            per = max(1, CHUNK_BYTES // max(B, 1))
+            per = max(1, min(K, CHUNK_BYTES // max(B, 1)))
+            M, slots = chunk_matrix(topics, cids, cols, B, per, stamps[:K])
             storage = self.storage
             j0 = 0
             while True:
@@ -214,10 +242,9 @@ def writer_classes():
                 js = np.arange(j0, j1)
                 for cid, col in zip(cids, cols):
                     index[cid] = (stamps[js], at + (js - j0) * B + col)
-                M = np.empty((j1 - j0, B), np.uint8)  # this chunk's samples, every topic's record side by side
-                for tp, cid, col in zip(topics, cids, cols):
-                    tp.fill(M[:, col : col + tp.width], cid, stamps[j0:j1], slice(j0, j1))
-                parts.append(M.reshape(-1))
+                for view, vals in slots:  # this chunk's numbers into the one matrix of every record's bytes
+                    view[: j1 - j0] = vals[j0:j1]
+                parts.append(M[: j1 - j0].reshape(-1))
                 at += (j1 - j0) * B
                 if j1 == K:  # the last chunk: the end of the run's messages too
                     for cid, rec in zip(tail_idx, tail):
