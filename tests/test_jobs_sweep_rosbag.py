@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -99,3 +101,42 @@ def test_sweep_rosbag_bad_input_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["error: --ros-distro only applies to --rosbag"]
     assert not out.exists() or not any(out.iterdir())
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="fork")
+def test_sigterm_mid_sweep_leaves_only_complete_bags_and_resumes(tmp_path):
+    """SIGTERM while two workers run and write bags (paper, ideal plant, 20 s runs): every folder left in
+    ``bags/`` is a complete bag rosbags reads (no temporary folder stays), every finished row has its bag, and
+    the printed command resumes the sweep to a bag per row."""
+    import os
+    import signal
+    import subprocess
+    import time
+
+    from rosbags.rosbag2 import Reader
+
+    out = tmp_path / "s"
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1] / "src")}
+    args = ["--plant", "ideal", "--duration", "20", "--seeds", "12", "--set", "formation.init_jitter=0.2", "--quiet"]
+    cmd = [sys.executable, "-m", "bioform_mj.cli", "sweep", "paper", *args, "--workers", "2", "--rosbag"]
+    proc = subprocess.Popen([*cmd, "--out", str(out)], stderr=subprocess.PIPE, text=True, env=env)
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list((out / "runs").glob("*.json")) if (out / "runs").exists() else []) < 3:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    rows = {p.stem for p in (out / "runs").glob("*.json")}
+    bags = {p.name for p in (out / "bags").iterdir()}
+    assert 3 <= len(rows) < 12 and not [b for b in bags if b.startswith(".")]
+    assert rows <= bags  # a row is written after its bag
+    for b in bags:  # complete: its metadata and every message read back
+        with Reader(out / "bags" / b) as rd:
+            assert rd.message_count == sum(1 for _ in rd.messages()) > 0
+    resume = err.split("Resume with:")[1].strip().splitlines()[0].split()
+    assert "--rosbag" in resume
+    res = subprocess.run([sys.executable, "-m", "bioform_mj.cli", *resume[1:]], capture_output=True, text=True, env=env)
+    assert res.returncode == 0, res.stderr
+    keys = {p.stem for p in (out / "runs").glob("*.json")}
+    assert len(keys) == 12 and keys == {p.name for p in (out / "bags").iterdir()}

@@ -89,3 +89,35 @@ def test_dc_motor_robots_own_bag_fits_without_flags(tmp_path):
     wrong = {p["name"]: p for p in rep2["parameters"]}
     assert wrong["mass"]["fitted"] > 1.2 * 0.943
     assert rep2["residual"]["calibrated"]["cost"] > 100 * rep["residual"]["calibrated"]["cost"]
+
+
+@pytest.mark.slow
+def test_intervals_hold_the_truth_on_most_recordings(tmp_path):
+    """Three 24 s tb3 recordings of the changed robot (torque programs 1, 2, 3, sensor noise seeds 101–103):
+    the truth lies inside the 95 % interval for 16 of the 18 parameter fits measured (89 %; the misses: a
+    mass 1.3 % low with ±1.0 %, a damping 1.8 % high with ±1.7 %); required here: at least 14 (78 %). The
+    independent-residual intervals alone held it far less often (tb3 mass ±0.006 kg against an error of
+    0.011 kg); the cluster-robust ones are about twice as wide (mass ±0.012–0.015 kg)."""
+    truth = {
+        "mass": 0.943 + TRUTH.payload_kg,
+        "yaw_inertia": 0.0020064 + TRUTH.payload_yaw_kgm2,
+        "damping_L": TRUTH.damping[0],
+        "damping_R": TRUTH.damping[1],
+        "frictionloss_L": TRUTH.frictionloss[0],
+        "frictionloss_R": TRUTH.frictionloss[1],
+    }
+    inside, total, mass_hw = 0, 0, []
+    for s in (1, 2, 3):
+        model = rr.true_model(rr.MODELS / "tb3_robot.xml", TRUTH)
+        sim = rr.simulate(model, TRUTH, 24.0, 0.025, s)
+        rr.write_bag(tmp_path / f"bag{s}", sim, TRUTH, seed=s + 100)
+        out = tmp_path / f"fit{s}"
+        argv = ["robot", "fit", "tb3", "--bag", str(tmp_path / f"bag{s}"), "--out", str(out), "--time-budget", "600"]
+        assert cli.main(argv) == 0
+        for p in json.loads((out / "fit.json").read_text())["parameters"]:
+            total += 1
+            inside += p["ci95"] is not None and p["ci95"][0] <= truth[p["name"]] <= p["ci95"][1]
+            if p["name"] == "mass":
+                mass_hw.append(p["ci95_halfwidth"])
+    assert total == 18 and inside >= 14, (inside, total)
+    assert min(mass_hw) > 0.008  # kg: wider than the 0.006 kg the independent-residual interval gave

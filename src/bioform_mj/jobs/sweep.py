@@ -635,6 +635,8 @@ def _sweep_locked(
 
             failure = run_ray(todo, workers, ray_address, sig, done, one, _died_row, failed)
         wall = time.perf_counter() - t0
+        if bags is not None:  # a worker stopped mid-write leaves its temporary folder: no half bag stays
+            clean_bags(bags)
         ran = len(rows) - skipped
         interrupted = sig.signum
         # the tables are written before the handlers are restored: a second signal cannot cut them short
