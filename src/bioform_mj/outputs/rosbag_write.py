@@ -30,25 +30,36 @@ def chunk_matrix(
 ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
     """The byte matrix of a chunk of ``rows`` samples (``(rows, B)`` uint8: every topic's message record
     side by side, at ``cols``) with every record's constant bytes (header, template) written once, and its
-    slots: ``(view, values)`` pairs, a strided view of the matrix where one number of every sample goes
-    (log and publish times, each marked field) and that number for all ``K`` samples. A chunk's samples
-    ``j0:j1`` are then ``view[:j1 - j0] = values[j0:j1]`` for each slot, the same matrix reused chunk after
-    chunk (written out before it is refilled): one numpy assignment per number, not per message."""
+    slots: ``(view, values)`` pairs, a strided ``(rows, k)`` view of the matrix where ``k`` numbers side by
+    side in a record go (log and publish times, the marked fields: a position, a quaternion) and those
+    numbers for all ``K`` samples, ``(K, k)``. A chunk's samples ``j0:j1`` are then
+    ``view[:j1 - j0] = values[j0:j1]`` for each slot, the same matrix reused chunk after chunk (written out
+    before it is refilled): one numpy assignment per run of numbers, not per message."""
     M = np.empty((rows, B), np.uint8)
     buf = M.reshape(-1)
     t = np.ascontiguousarray(stamps, dtype="<u8")
+    K = len(t)
     slots: list[tuple[np.ndarray, np.ndarray]] = []
-
-    def view(off: int, dt: str) -> np.ndarray:
-        return np.ndarray((rows,), dt, buffer=buf, offset=off, strides=(B,))
-
     for tp, cid, col in zip(topics, cids, cols):
         L = tp.template.size
         M[:, col : col + MSG_HEAD] = np.frombuffer(struct.pack("<BQHIQQ", 0x05, 22 + L, cid, 0, 0, 0), np.uint8)
         M[:, col + MSG_HEAD : col + MSG_HEAD + L] = tp.template
-        slots += [(view(col + 15, "<u8"), t), (view(col + 23, "<u8"), t)]  # log time, publish time
-        for off, dt, vals in tp.fields:
-            slots.append((view(col + MSG_HEAD + off, dt), np.asarray(vals[: len(t)], dtype=dt)))
+        numbers = [(col + 15, "<u8", t), (col + 23, "<u8", t)]  # log time, publish time
+        numbers += [(col + MSG_HEAD + off, dt, vals) for off, dt, vals in tp.fields]
+        numbers.sort(key=lambda n: n[0])
+        # numbers side by side in the record (a position's x y z, a quaternion, the two stamps) are one
+        # 2-D slot: (rows, k) with strides (B, itemsize), and their values one (K, k) array
+        i = 0
+        while i < len(numbers):
+            off, dt, _ = numbers[i]
+            w = np.dtype(dt).itemsize
+            j = i + 1
+            while j < len(numbers) and numbers[j][1] == dt and numbers[j][0] == off + (j - i) * w:
+                j += 1
+            vals = np.stack([np.asarray(v[:K], dtype=dt) for _, _, v in numbers[i:j]], axis=1)
+            view = np.ndarray((rows, j - i), dt, buffer=buf, offset=off, strides=(B, w))
+            slots.append((view, vals))
+            i = j
     return M, slots
 
 
