@@ -43,17 +43,42 @@ def test_a_single_robot_namespace_is_found_and_said(tmp_path):
             assert np.array_equal(getattr(rec, k), getattr(found, k)), k
 
 
+def _stand_in_bag(path: Path, n: int) -> None:
+    """This project's exporter on a 3-row stand-in log of ``n`` followers (no simulation: a bag's layout)."""
+    from types import SimpleNamespace
+
+    from bioform_mj.outputs.rosbag import write_bag
+
+    z, K = np.zeros, 3
+    log = {
+        "t": np.arange(K) * 0.01,
+        "t_state": np.arange(K + 1) * 0.01,
+        "pose_3d": z((K + 1, n, 6)),
+        "twist_3d": z((K + 1, n, 6)),
+        "wheel_angle": z((K + 1, n, 2)),
+        "wheel_speed": z((K + 1, n, 2)),
+        "leader_state": z((K + 1, 5)),
+        "wheel_sign": np.ones((n, 2)),
+        "wheel_joints": np.array([["left_wheel", "right_wheel"]] * n),
+        "cmd": z((K, n, 2)),
+        "tau": z((K, n, 2)),
+        "est_pose": z((K, n, 3)),
+        "est_vel": z((K, n, 2)),
+    }
+    write_bag(SimpleNamespace(log=log, summary={}), path)
+
+
 def test_several_robots_in_a_bag_one_error_line_naming_them(tmp_path, capsys):
-    run = tmp_path / "run"
-    assert cli.main(["run", "paper", "--duration", "0.2", "--rosbag", "--out", str(run), "--quiet"]) == 0
-    capsys.readouterr()
+    _stand_in_bag(tmp_path / "bag", 3)
     out = tmp_path / "fit"
-    assert cli.main(["robot", "fit", "paper", "--bag", str(run / "rosbag"), "--out", str(out)]) == 2
+    assert cli.main(["robot", "fit", "paper", "--bag", str(tmp_path / "bag"), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:"), err
     assert "/f1/joint_states, /f2/joint_states, /f3/joint_states" in err[0] and "--robot-ns" in err[0]
     assert not out.exists()
-    assert cli.main(["robot", "fit", "paper", "--bag", str(run / "rosbag"), "--robot-ns", "f4", "--out", str(out)]) == 2
+    assert (
+        cli.main(["robot", "fit", "paper", "--bag", str(tmp_path / "bag"), "--robot-ns", "f4", "--out", str(out)]) == 2
+    )
     assert "'/f4/joint_states'" in capsys.readouterr().err and not out.exists()
 
 
