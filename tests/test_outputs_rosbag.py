@@ -33,6 +33,72 @@ def _read(bag):
     return out, conns, store
 
 
+def _raw(bag, topic) -> list[bytes]:
+    """The serialised messages of ``topic``, as stored."""
+    from rosbags.rosbag2 import Reader
+
+    with Reader(bag) as rd:
+        return [bytes(raw) for _, _, raw in rd.messages(connections=[c for c in rd.connections if c.topic == topic])]
+
+
+def test_metadata_yaml_reads_back_as_written():
+    """The one-pass YAML writer of the bag's metadata (outputs/rosbag_write.py): what a YAML reader (ruamel,
+    as rosbags reads metadata.yaml) makes of it is the data, for the strings YAML treats specially."""
+    from ruamel.yaml import YAML
+
+    from bioform_mj.outputs.rosbag_write import yaml_text
+
+    nasty = [
+        "",
+        "true",
+        "No",
+        "null",
+        "~",
+        "1.0",
+        "0x1F",
+        "-",
+        "- a",
+        "a: b",
+        "#x",
+        "x #y",
+        "'q'",
+        '"dq"',
+        "é ü 中",
+        "line\nbreak",
+        "tab\tx",
+        "\x7f\x85",
+        "\u2028",
+        "[1]",
+        "{a}",
+        "@x",
+        "%x",
+        "*a",
+        "&a",
+        "!t",
+        "|",
+        ">",
+        "/f1/joint_states",
+        "RIHS01_0123abc",
+        "keep_last",
+        "  padded  ",
+    ]
+    data = {
+        "version": 9,
+        "flag": True,
+        "none": None,
+        "x": 1.5,
+        "empty_list": [],
+        "empty_map": {},
+        "strings": nasty,
+        "maps": [{"name": v, "n": i, "sub": {"deep": [v, {"k": v}]}} for i, v in enumerate(nasty)],
+        "custom_data": {"bioform_mj": json.dumps({"a": nasty})},
+        "weird key: x": "v",
+    }
+    back = YAML(typ="safe").load(yaml_text(data))
+    assert back == data
+    assert YAML(typ="safe").load(yaml_text([])) == [] and yaml_text("keep_last") == "keep_last"
+
+
 def _stamp(m) -> int:
     return m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
 
@@ -143,7 +209,15 @@ def test_mujoco_odometry_bag_round_trip_equals_log(tmp_path, capsys):
 
     meta = (out / "rosbag" / "metadata.yaml").read_text()
     assert "version: 9" in meta and "storage_identifier: mcap" in meta and "transient_local" in meta
-    custom = json.loads(meta.split("bioform_mj: ")[1].split("\n  duration")[0].replace("\n      ", " ").strip("'"))
+    from ruamel.yaml import YAML
+
+    info = YAML(typ="safe").load(meta)["rosbag2_bagfile_information"]  # the metadata, read as YAML
+    assert info["message_count"] == sum(len(v) for v in msgs.values())
+    assert {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]} == {
+        k: len(v) for k, v in msgs.items()
+    }
+    custom = json.loads(info["custom_data"]["bioform_mj"])
+    robots = custom.pop("robots")
     assert custom == {
         "followers": 3,
         "method": "bioinspired-learning",
@@ -152,6 +226,18 @@ def test_mujoco_odometry_bag_round_trip_equals_log(tmp_path, capsys):
         "scenario": "paper",
         "sensing": "odometry",
     }
+    # what robot fit reads without flags: each follower's namespace, robot and what its effort is
+    assert [r["namespace"] for r in robots] == ["f1", "f2", "f3"]
+    assert all(r["effort"] == "applied" and r["motor"] == "ideal" and r["robot"]["model"] == "paper" for r in robots)
+    assert robots[0]["effort_interval_s"] == pytest.approx([-0.009, 0.001])  # control_dt 1 ms, log_dt 10 ms
+    # the numbers were written by numpy into copies of one template per topic: every message's bytes are
+    # what rosbags' own serializer makes of the values read back
+    for topic, items in msgs.items():
+        typ = conns[topic].msgtype
+        raws = _raw(out / "rosbag", topic)
+        assert len(raws) == len(items)
+        for (_, m), raw in zip(items, raws):
+            assert bytes(store.serialize_cdr(m, typ)) == raw, topic
 
 
 def test_full_state_leaves_the_log_as_it_was():

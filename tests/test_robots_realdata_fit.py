@@ -307,8 +307,9 @@ def test_round_trip_of_the_projects_own_bag(tmp_path):
     argv = ["run", "paper", "--plant", "mujoco", "--rosbag", "--out", str(run), "--set", "sim.duration=12"]
     assert cli.main(argv) == 0
     out = tmp_path / "fit"
-    argv = ["robot", "fit", "paper", "--bag", str(run / "rosbag"), "--joint-states-topic", "/f1/joint_states"]
-    argv += ["--odom-topic", "/f1/ground_truth/odom", "--out", str(out), "--time-budget", "600"]
+    # no topic flags: --robot-ns f1 reads /f1/joint_states and, there being no /f1/odom, /f1/ground_truth/odom
+    argv = ["robot", "fit", "paper", "--bag", str(run / "rosbag"), "--robot-ns", "f1"]
+    argv += ["--out", str(out), "--time-budget", "600"]
     assert cli.main(argv) == 0
     rep = json.loads((out / "fit.json").read_text())
     got = {p["name"]: p for p in rep["parameters"]}
@@ -321,3 +322,5 @@ def test_round_trip_of_the_projects_own_bag(tmp_path):
     assert rep["b"] == pytest.approx(rep["published"]["b"], rel=0.05)
     assert rep["residual"]["calibrated"]["cost"] <= rep["residual"]["published"]["cost"]
     assert any("without an effort skipped" in n for n in rep["notes"])  # the exporter's state-only t = T
+    assert any("/f1/ground_truth/odom" in n for n in rep["notes"])
+    assert rep["effort"] == {"motor": "ideal", "driver": None}  # the bag says: applied torques

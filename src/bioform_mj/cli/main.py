@@ -215,6 +215,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--workers", type=int, help="parallel workers (default: CPU count)")
     sw.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray)")
     sw.add_argument("--out", type=Path, required=True, help="sweep directory (rerunning resumes it)")
+    sw.add_argument("--rosbag", action="store_true", help="also write each run as a ROS 2 bag, DIR/bags/<key>/")
+    sw.add_argument("--ros-distro", choices=("humble", "iron", "jazzy", "kilted"), help="the bags' (default jazzy)")
 
     cal = sub.add_parser("calibrate", help="search the paper's unstated conditions for the best fit to Table I")
     cal.add_argument("target", help="what to fit: table1")
@@ -670,6 +672,13 @@ def _sweep(args: argparse.Namespace) -> int:
     from bioform_mj.jobs.sweep import check_sweep_dir
 
     check_sweep_dir(out)
+    rosbag = (args.ros_distro or "jazzy") if args.rosbag else None
+    if args.ros_distro and not args.rosbag:
+        raise InputError("--ros-distro only applies to --rosbag")
+    if rosbag is not None:  # the extra, the backend, the disk: before any work
+        from bioform_mj.jobs.sweepbags import check_bags
+
+        check_bags(specs, out, args.backend, rosbag)
     out.mkdir(parents=True, exist_ok=True)
     progress = _progress(not args.quiet, "sweep")
     try:
@@ -684,6 +693,7 @@ def _sweep(args: argparse.Namespace) -> int:
             nconmax=args.nconmax,
             njmax=args.njmax,
             note=None if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True)),
+            rosbag=rosbag,
         )
     except WriteFailed as exc:  # disk full, read-only, ulimit -f: the finished rows are kept, resumable
         runs = out / "runs"
@@ -711,7 +721,8 @@ def _sweep(args: argparse.Namespace) -> int:
         ):
             if val is not None:
                 cmd += [flag, str(val)]
-        cmd += ["--out", str(out)]
+        cmd += ["--out", str(out)] + (["--rosbag"] if args.rosbag else [])
+        cmd += ["--ros-distro", args.ros_distro] if args.ros_distro else []
         if args.quiet:
             cmd.append("--quiet")
         if progress is not None:

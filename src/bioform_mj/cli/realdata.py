@@ -20,35 +20,65 @@ from bioform_mj.core.errors import InputError
 __all__ = ["add_parsers", "main"]
 
 
+def _robot_parser(rsub: Any, name: str, help_: str, model_help: str, recording: bool) -> argparse.ArgumentParser:
+    """One subcommand with what the three share: the robot argument, ``robot check``'s mapping flags and,
+    with ``recording``, the recording's flags (:func:`_recording_args`)."""
+    from bioform_mj.cli.robot import mapping_args
+
+    p = rsub.add_parser(name, help=help_)
+    p.add_argument("model", help=model_help)
+    mapping_args(p)
+    if recording:
+        _recording_args(p)
+    return p
+
+
 def _recording_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bag", required=True, help="the recording: a rosbag2 folder, a .mcap file or a CSV")
     p.add_argument(
-        "--joint-states-topic", default="/joint_states", help="sensor_msgs/JointState topic (default /joint_states)"
+        "--robot-ns",
+        metavar="NS",
+        help="the robot's topic namespace: /NS/joint_states, /NS/odom (else /NS/ground_truth/odom), /NS/imu "
+        "(default: none, or the only one whose joint states the recording has; this project's bags: f1, f2, …)",
     )
-    p.add_argument("--odom-topic", default="/odom", help="nav_msgs/Odometry topic (default /odom; optional)")
-    p.add_argument("--imu-topic", default="/imu", help="sensor_msgs/Imu topic (default /imu; optional)")
+    p.add_argument(
+        "--joint-states-topic", help="sensor_msgs/JointState topic (default /joint_states, under --robot-ns)"
+    )
+    p.add_argument("--odom-topic", help="nav_msgs/Odometry topic (default /odom, under --robot-ns; optional)")
+    p.add_argument("--imu-topic", help="sensor_msgs/Imu topic (default /imu, under --robot-ns; optional)")
     p.add_argument("--left-joint", help="the left wheel's joint name in the recording (default: the robot's)")
     p.add_argument("--right-joint", help="the right wheel's joint name in the recording (default: the robot's)")
+    p.add_argument(
+        "--motor",
+        choices=("ideal", "dc"),
+        help="what the recorded effort is: 'ideal' the torque applied on the wheel joint (the motors are torque "
+        "sources), 'dc' the wheel torque commanded to the robot file's <dcmotor> drives, whose back-EMF and "
+        "torque-speed line are then simulated (design §8.2) (default: what this project's bag states, else ideal)",
+    )
+    p.add_argument(
+        "--driver",
+        choices=("current", "voltage"),
+        help="with --motor dc: the <dcmotor>'s driver (default: the bag's, else the mapping's, else current)",
+    )
 
 
 def add_parsers(rsub: Any) -> None:
     """Add ``fit``, ``replay`` and ``drive-program`` to ``bioform robot``'s subparsers."""
-    from bioform_mj.cli.robot import mapping_args
-
-    fit = rsub.add_parser(
+    fit = _robot_parser(
+        rsub,
         "fit",
-        help="fit a robot's mass, yaw inertia, wheel damping/frictionloss (and armature, caster friction) to a "
+        "fit a robot's mass, yaw inertia, wheel damping/frictionloss (and armature, caster friction) to a "
         "recording with mujoco.sysid; writes DIR/fit.json, a calibrated robot file and a figure (exit 2 bad input)",
+        "shipped robot name or path to an MJCF or URDF file",
+        recording=True,
     )
-    fit.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
-    mapping_args(fit)
-    _recording_args(fit)
     fit.add_argument("--out", required=True, type=Path, help="output directory")
     fit.add_argument(
         "--fit",
-        default="mass,yaw_inertia,damping,frictionloss,caster_friction",
+        default=None,
         help="comma-separated parameters: mass, yaw_inertia, damping, frictionloss, armature, caster_friction "
-        "(default: all but armature, which the recording cannot tell from mass; caster_friction needs --caster)",
+        "(default: all but armature, which the recording cannot tell from mass, and caster_friction only of the "
+        "--caster ones; given here, caster_friction fits the casters robot check finds)",
     )
     fit.add_argument("--chunk", type=float, default=2.0, help="seconds simulated from each recorded state (default 2)")
     fit.add_argument("--max-chunks", type=int, default=12, help="chunks used at most, spread evenly (default 12)")
@@ -61,25 +91,26 @@ def add_parsers(rsub: Any) -> None:
     )
     fit.set_defaults(realdata_main=_fit_main)
 
-    rep = rsub.add_parser(
+    rep = _robot_parser(
+        rsub,
         "replay",
-        help="drive the robot with a recording's torques open loop; report and plot the difference "
+        "drive the robot with a recording's torques open loop; report and plot the difference "
         "(published robot, and --calibrated FILE)",
+        "shipped robot name or path to an MJCF or URDF file (the published one)",
+        recording=True,
     )
-    rep.add_argument("model", help="shipped robot name or path to an MJCF or URDF file (the published one)")
-    mapping_args(rep)
-    _recording_args(rep)
     rep.add_argument("--calibrated", help="a calibrated robot file (robot fit's) to replay beside the published one")
     rep.add_argument("--out", type=Path, help="write replay.json and replay.png into this directory")
     rep.set_defaults(realdata_main=_replay_main)
 
-    prog = rsub.add_parser(
+    prog = _robot_parser(
+        rsub,
         "drive-program",
-        help="print (CSV: time, left, right wheel torque in N·m) the torques to record for robot fit, within "
+        "print (CSV: time, left, right wheel torque in N·m) the torques to record for robot fit, within "
         "the robot's limits",
+        "shipped robot name or path to an MJCF or URDF file",
+        recording=False,
     )
-    prog.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
-    mapping_args(prog)
     prog.add_argument("--seconds", type=float, default=60.0, help="length in s (default 60)")
     prog.add_argument("--rate", type=float, default=100.0, help="samples per second (default 100)")
     prog.add_argument("--accel", type=float, default=1.0, help="the largest forward acceleration, m/s² (default 1)")
@@ -93,16 +124,49 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _load(args: argparse.Namespace):
-    """The robot (as robot check maps it) and the recording, checked against each other."""
+    """The robot (as robot check maps it; with ``--motor dc``, or where the bag states it, its ``<dcmotor>``
+    drives taking the recorded efforts as commands) and the recording, checked against each other; returns
+    ``(ref, robot, rec)`` and records in ``rec.notes`` what the effort was taken to be and why."""
+    from dataclasses import replace
+
     from bioform_mj.cli.robot import ref_from_args
     from bioform_mj.robots.realdata.recording import Topics, read_recording
     from bioform_mj.robots.realdata.simmodel import sim_spec
 
+    if args.driver and args.motor != "dc":
+        raise InputError("--driver only applies to --motor dc")
     ref = ref_from_args(args.model, args)
+    ref = replace(ref, motor="", driver="")  # the effort's meaning decides the motors, below
     robot = sim_spec(ref)
     joints = (args.left_joint or robot.layout.wheel_joints[0], args.right_joint or robot.layout.wheel_joints[1])
-    topics = Topics(args.joint_states_topic, args.odom_topic, args.imu_topic)
+    topics = Topics(args.joint_states_topic, args.odom_topic, args.imu_topic, args.robot_ns)
     rec = read_recording(args.bag, joints, topics)
+    stated = rec.stated
+    if args.motor:
+        motor, why = args.motor, "--motor"
+    elif stated.get("effort") in ("applied", "command"):
+        motor, why = ("dc" if stated["effort"] == "command" else "ideal"), "the bag's metadata (custom_data)"
+    else:
+        motor, why = "ideal", "the default"
+    if motor == "dc":
+        driver = args.driver or str(stated.get("driver") or "") or "current"
+        ref = replace(ref, motor="dc", driver=driver)
+        robot = sim_spec(ref)  # raises (exit 2) where the robot file has no <dcmotor> on its wheels
+        rec.notes.append(
+            f"efforts taken as the wheel torques commanded to the robot's <dcmotor> drives ({driver} driver; "
+            f"from {why}): the motors are simulated"
+        )
+    else:
+        rec.notes.append(f"efforts taken as the torques applied on the wheel joints (from {why})")
+    if stated.get("disturbance"):
+        d = stated["disturbance"]
+        msg = (
+            f"the recorded run applied disturbance forces (scenario [disturbance] bias {d.get('bias')}, amp "
+            f"{d.get('amp')}) that no robot model holds: the fitted numbers absorb them (record with the "
+            "disturbance off: --set 'disturbance.bias=[0,0]' --set 'disturbance.amp=[0,0]')"
+        )
+        rec.notes.append(msg)
+        print(f"warning: {msg}", file=sys.stderr)
     return ref, robot, rec
 
 
@@ -144,12 +208,19 @@ def _fit_main(args: argparse.Namespace) -> int:
     from bioform_mj.outputs.files import check_out_dir, write_json
     from bioform_mj.robots.params import robot_truth
     from bioform_mj.robots.realdata.calibrated import write_calibrated
-    from bioform_mj.robots.realdata.fit import FIT_PARAMETERS, caster_geoms, fit, make_chunks, simulate_chunks
+    from bioform_mj.robots.realdata.fit import (
+        DEFAULT_FIT,
+        FIT_PARAMETERS,
+        fit,
+        make_chunks,
+        robot_casters,
+        simulate_chunks,
+    )
     from bioform_mj.robots.realdata.replay import plot_signals
     from bioform_mj.robots.realdata.simmodel import sim_spec
 
     out = check_out_dir(args.out, "--out")
-    which = tuple(w.strip() for w in args.fit.split(",") if w.strip())
+    which = DEFAULT_FIT if args.fit is None else tuple(w.strip() for w in args.fit.split(",") if w.strip())
     unknown = [w for w in which if w not in FIT_PARAMETERS]
     if unknown:
         raise InputError(f"--fit: unknown parameter '{unknown[0]}' (expected some of: {', '.join(FIT_PARAMETERS)})")
@@ -165,6 +236,7 @@ def _fit_main(args: argparse.Namespace) -> int:
         max_chunks=args.max_chunks,
         max_iters=args.max_iters,
         time_budget_s=args.time_budget,
+        find_casters=args.fit is not None,
     )
     model_pub = published.spec.compile()
     model_cal = sysid.apply_param_modifiers(opt, robot.spec)
@@ -176,7 +248,7 @@ def _fit_main(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     stem = Path(ref.model).stem
     cal_path = out / f"{stem}_calibrated.xml"
-    casters = caster_geoms(robot.spec, model_cal, ref.casters) if ref.casters else []
+    casters = robot_casters(robot, robot.spec, model_cal) if "caster_friction" in result.names else []
     write_calibrated(ref, robot.layout, result.parameters, casters, cal_path, str(args.bag))
     cal_ref = replace(ref, model=str(cal_path.resolve()))
     p_pub, p_cal = robot_truth(ref), robot_truth(cal_ref)
@@ -184,12 +256,15 @@ def _fit_main(args: argparse.Namespace) -> int:
     report = {
         "robot": ref.model,
         "recording": str(args.bag),
+        "effort": {"motor": ref.motor or "ideal", "driver": ref.driver or None},
         "calibrated_robot": str(cal_path),
         "a": p_cal.a_eff,
         "b": p_cal.b_eff,
         "published": {"a": p_pub.a_eff, "b": p_pub.b_eff},
         "parameters": result.parameters,
         "unidentified": unidentified,
+        "ci95_method": "the wider of the interval from J'J and the residual variance (mujoco.sysid) and the "
+        "cluster-robust (sandwich) one with the chunks as independent units, Student's t with chunks - 1 dof",
         "correlation": {"names": result.names, "matrix": np.round(result.correlation, 4).tolist()},
         "residual": {
             "published": {"cost": result.cost_published, **_rms(chunks, sim_pub)},

@@ -8,7 +8,11 @@ its provenance (package version, source hash, MuJoCo version, every robot file i
 :mod:`bioform_mj.jobs.provenance`), so an interrupted sweep resumes by skipping keys already there
 whose provenance still matches; a stale row is redone (``resume: N row(s) redone (why)`` on
 stderr), a row file that cannot be read is reported (``warning:`` on stderr) and its run redone.
-One sweep per folder at a time (a lock); design §16. At the end the rows
+One sweep per folder at a time (a lock); design §16. With ``rosbag`` (``bioform sweep … --rosbag``) each
+run is also written as a ROS 2 bag, ``DIR/bags/<key>/`` (:func:`bioform_mj.outputs.rosbag.write_bag`: built
+under a temporary name and renamed when complete), before its row: a row is reused only where its bag is
+there, and the temporary folders an interrupted or killed run left are removed when the sweep (re)starts, so
+every bag is complete or absent. At the end the rows
 are collected into ``DIR/runs.csv`` (one row per run: settings, seed, status, outcome,
 metrics; the same rows as Parquet in ``DIR/runs.parquet``) and aggregated per group, method ×
 every ``--vary`` value, into ``DIR/stats.json`` and ``DIR/stats.md``.
@@ -30,6 +34,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import hashlib
 import io
 import itertools
@@ -290,8 +295,10 @@ def _base_row(spec: RunSpec) -> dict[str, Any]:
     return row
 
 
-def run_one(spec: RunSpec) -> dict[str, Any]:
-    """Run one spec; never raises: a failure becomes a row with ``status = failed`` and the error."""
+def run_one(spec: RunSpec, bags: Path | None = None, distro: str | None = None) -> dict[str, Any]:
+    """Run one spec; never raises: a failure becomes a row with ``status = failed`` and the error.
+    ``bags``: also write the run as the ROS 2 bag ``bags/<key>`` (``distro``'s messages; row ``rosbag``:
+    its path relative to the sweep folder, ``rosbag_write_s``: seconds)."""
     row = _base_row(spec)
     try:
         from bioform_mj.run.simulate import simulate
@@ -306,7 +313,7 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
 
             row["provenance"] = provenance(sc)
         with quiet_outcomes():  # the row tabulates the outcomes: no warning per run (design §18.1)
-            res = simulate(sc)
+            res = simulate(sc, full_state=bags is not None)
         s = res.summary
         row["plant"] = s["plant"]
         div = s.get("diverged")
@@ -339,6 +346,12 @@ def run_one(spec: RunSpec) -> dict[str, Any]:
         ch = np.array([f["c_hat_rel_error"] for f in s["followers"]], dtype=float)
         row["c_hat_abs_rel_error_max"] = float(np.max(np.abs(ch)))
         _contact_columns(row, s["followers"])
+        if bags is not None:
+            from bioform_mj.outputs.rosbag import DEFAULT_DISTRO, write_bag
+
+            info = write_bag(res, bags / spec.key, distro=distro or DEFAULT_DISTRO, overwrite=True)
+            row["rosbag"] = f"{bags.name}/{spec.key}"
+            row["rosbag_write_s"] = info.write_s
     except Exception as exc:  # noqa: BLE001 - a failed run must not sink the sweep
         row["status"] = "failed"
         row["outcome"] = "failed"
@@ -439,8 +452,11 @@ def sweep(
     nconmax: int | None = None,
     njmax: int | None = None,
     note: Callable[[str], None] | None = None,
+    rosbag: str | None = None,
 ) -> dict[str, Any]:
     """Run ``specs`` (skipping those already in ``out/runs``), then write the table and statistics.
+    ``rosbag``: a ROS 2 distribution (:data:`bioform_mj.outputs.rosbag.DISTROS`): every run is also
+    written as the bag ``out/bags/<key>`` (module docstring); None: no bags.
 
     ``backend="warp"`` runs them as worlds of MuJoCo Warp batches on ``device`` (default: the
     GPU if there is one); every spec is checked first (feature support, device memory); ``nconmax``,
@@ -464,10 +480,16 @@ def sweep(
     if backend == "ray":  # a closed address: exit 2 in seconds, before anything is written
         check_ray_address(ray_address)
     out = Path(out)
+    if rosbag is not None:
+        from bioform_mj.jobs.sweepbags import check_bags
+
+        check_bags(specs, out, backend, rosbag)
     check_sweep_dir(out)
     out.mkdir(parents=True, exist_ok=True)
     with folder_lock(out, "sweep directory", "running a sweep there"):  # one sweep per folder (exit 2)
-        return _sweep_locked(specs, out, backend, workers, ray_address, progress, warn, device, nconmax, njmax, note)
+        return _sweep_locked(
+            specs, out, backend, workers, ray_address, progress, warn, device, nconmax, njmax, note, rosbag
+        )
 
 
 def check_sweep_dir(out: Path) -> None:
@@ -562,8 +584,14 @@ def _sweep_locked(
     nconmax: int | None,
     njmax: int | None,
     note: Callable[[str], None] | None,
+    rosbag: str | None = None,
 ) -> dict[str, Any]:
+    from bioform_mj.jobs.sweepbags import clean_bags
+
     runs_dir = out / "runs"
+    bags = out / "bags" if rosbag is not None else None
+    if bags is not None and (n_left := clean_bags(bags)):
+        print(f"resume: {n_left} half-written bag(s) of an interrupted run removed", file=sys.stderr, flush=True)
     rows: dict[str, dict[str, Any]] = {}
     todo: list[RunSpec] = []
     keys = list(dict.fromkeys(sp.key for sp in specs))  # identical runs (same content) run once
@@ -576,6 +604,8 @@ def _sweep_locked(
         seen.add(sp.key)
         row = _read_row(runs_dir / f"{sp.key}.json", sp, warn)
         why = _stale(row, sp, backend, nconmax, njmax) if row is not None else []
+        if row is not None and bags is not None and not (bags / sp.key / "metadata.yaml").is_file():
+            why.append("its bag is missing (--rosbag)")
         if why:
             reason = "; ".join(why[:3]) + (f"; and {len(why) - 3} more" if len(why) > 3 else "")
             redone[reason] = redone.get(reason, 0) + 1
@@ -618,9 +648,12 @@ def _sweep_locked(
         progress(len(rows), len(keys))
     t0 = time.perf_counter()
     failure: str | None = None
+    if bags is not None:
+        bags.mkdir(parents=True, exist_ok=True)
+    one = functools.partial(run_one, bags=bags, distro=rosbag) if bags is not None else run_one
     with _Signals() as sig:
         if backend == "local":
-            _run_local(todo, workers, sig, done, fn=run_one, died=_died_row)
+            _run_local(todo, workers, sig, done, fn=one, died=_died_row)
         elif backend == "warp":
             _run_warp(todo, groups, device, sig, done, {"nconmax": nconmax, "njmax": njmax})
         else:
@@ -629,8 +662,10 @@ def _sweep_locked(
             def failed(sp: RunSpec, msg: str) -> dict[str, Any]:
                 return {**_base_row(sp), "status": "failed", "outcome": "failed", "error": msg}
 
-            failure = run_ray(todo, workers, ray_address, sig, done, run_one, _died_row, failed)
+            failure = run_ray(todo, workers, ray_address, sig, done, one, _died_row, failed)
         wall = time.perf_counter() - t0
+        if bags is not None:  # a worker stopped mid-write leaves its temporary folder: no half bag stays
+            clean_bags(bags)
         ran = len(rows) - skipped
         interrupted = sig.signum
         # the tables are written before the handlers are restored: a second signal cannot cut them short
@@ -649,6 +684,7 @@ def _sweep_locked(
             "complete": len(got) == len(keys),
             "interrupted": None if interrupted is None else signal.Signals(interrupted).name,
             "workers_died": sum(1 for r in got if r.get("worker_died")),
+            "rosbag": rosbag,
         }
         write_json(out / "sweep.json", timing)
         write_text(out / "runs.csv", to_csv(got))

@@ -43,6 +43,7 @@ import numpy as np
 
 from bioform_mj.core.errors import InputError
 from bioform_mj.outputs.fullstate import quat_of_rpy
+from bioform_mj.outputs.rosbag_write import MSG_HEAD, bulk_writer
 
 __all__ = ["DISTROS", "DEFAULT_DISTRO", "BagInfo", "check_available", "warm_up", "write_bag", "topics_of"]
 
@@ -52,8 +53,6 @@ DISTROS = ("humble", "iron", "jazzy", "kilted")
 DEFAULT_DISTRO = "jazzy"
 #: rosbag2 metadata version written (``rosbags`` writes 8 or 9; 9 = Jazzy's)
 BAG_VERSION = 9
-#: bytes of records per MCAP chunk (as ``rosbags``' own writer: 1 MiB)
-CHUNK_BYTES = 1 << 20
 
 INSTALL_HINT = "pip install 'bioform-mj[ros]' (or: pip install rosbags==0.11.9)"
 
@@ -150,15 +149,15 @@ class _Topic:
     qos: list[Any] = field(default_factory=list)
 
     def fill(self, out: np.ndarray, cid: int, stamps: np.ndarray, rows: slice = slice(None)) -> None:
-        """Write this topic's MCAP message records (:data:`_MSG_HEAD` bytes of record header, then the
-        template with the numbers of its messages ``rows``) into ``out`` (m, :data:`_MSG_HEAD` + L) uint8,
+        """Write this topic's MCAP message records (:data:`MSG_HEAD` bytes of record header, then the
+        template with the numbers of its messages ``rows``) into ``out`` (m, :data:`MSG_HEAD` + L) uint8,
         a view into the samples' byte matrix; ``stamps`` (m,) ns: log and publish time of each."""
         m, L = out.shape[0], self.template.size
-        out[:, :_MSG_HEAD] = np.frombuffer(struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + L, cid, 0, 0, 0), np.uint8)
+        out[:, :MSG_HEAD] = np.frombuffer(struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + L, cid, 0, 0, 0), np.uint8)
         t8 = np.ascontiguousarray(stamps, dtype="<u8").view(np.uint8).reshape(m, 8)
         out[:, 15:23] = t8  # log time
         out[:, 23:31] = t8  # publish time
-        body = out[:, _MSG_HEAD:]
+        body = out[:, MSG_HEAD:]
         body[:] = self.template
         for off, dt, vals in self.fields:
             w = np.dtype(dt).itemsize
@@ -167,7 +166,7 @@ class _Topic:
     @property
     def width(self) -> int:
         """Bytes of one message record of this topic."""
-        return _MSG_HEAD + self.template.size
+        return MSG_HEAD + self.template.size
 
 
 class _Markers:
@@ -519,6 +518,7 @@ def write_bag(
     _need(log, "t_state")  # before anything is written
     summary = getattr(result, "summary", {}) or {}
     sensing = str(summary.get("sensing", "truth"))
+    robots = robots_stated(result)
     path = Path(path)
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists (overwrite=True replaces it)")
@@ -526,7 +526,7 @@ def write_bag(
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
     try:
         inner = tmp / path.name
-        counts = _write(inner, log, summary, sensing, distro, start_ns)
+        counts = _write(inner, log, summary, sensing, distro, start_ns, robots)
         if path.exists():
             shutil.rmtree(path)
         os.replace(inner, path)
@@ -539,14 +539,62 @@ def write_bag(
     return BagInfo(path, sum(counts.values()), counts, distro, time.perf_counter() - t0)
 
 
-def _write(path: Path, log: Mapping[str, Any], summary: Mapping[str, Any], sensing: str, distro: str, start_ns: int):
-    """Write the bag folder ``path`` (must not exist); returns ``{topic: messages}``."""
+def robots_stated(result: Any) -> list[dict[str, Any]]:
+    """What the bag's ``custom_data`` says of each follower ``fI``'s robot, so that ``bioform robot fit``
+    reads the bag without flags: its namespace, robot mapping (``robot``: the scenario's table of it) and
+    what ``/fI/joint_states``' ``effort`` is: ``"applied"`` (the torque on the joint: torque motors, the
+    ideal plant) or ``"command"`` (the torque commanded to the robot file's ``<dcmotor>`` drives through
+    the mapping's ``driver``: the log's ``tau``; the motor delivers less along its torque–speed line and,
+    with the voltage driver, less by its back-EMF; design §8.2); ``effort_interval_s = [a, b]``: each
+    effort is the mean torque over ``[stamp + a, stamp + b)`` s (design §9, log rows: the row's control steps,
+    each command held for its period; the fit holds it there); ``disturbance``: the scenario's disturbance
+    forces, where the run had them (no robot model holds them)."""
+    sc = getattr(result, "scenario", None)
+    sim = getattr(sc, "sim", None)
+    log = getattr(result, "log", {}) or {}
+    n = int(np.asarray(log["pose_3d"]).shape[1]) if "pose_3d" in log else 0
+    refs = tuple(getattr(getattr(sc, "plant", None), "robots", ()) or ())
+    kind = str(getattr(getattr(sc, "plant", None), "kind", ""))
+    out = []
+    for i in range(n):
+        ref = refs[i] if len(refs) == n else (refs[0] if refs else None)
+        dc = ref is not None and kind == "mujoco" and ref.motor == "dc"
+        entry: dict[str, Any] = {
+            "namespace": f"f{i + 1}",
+            "effort": "command" if dc else "applied",
+        }
+        dist = getattr(sc, "disturbance", None)
+        if dist is not None and kind == "mujoco" and (np.any(dist.bias) or np.any(dist.amp)):
+            # forces on the body that no robot model has: robot fit says its numbers are biased by them
+            entry["disturbance"] = {"bias": [float(v) for v in dist.bias], "amp": [float(v) for v in dist.amp]}
+        if sim is not None:  # a row's torque: the mean of the commands of its control steps, each held one period
+            entry["effort_interval_s"] = [float(sim.control_dt - sim.log_dt), float(sim.control_dt)]
+        if ref is not None and kind == "mujoco":
+            entry["robot"] = ref.to_table()
+            entry["motor"] = "dc" if dc else "ideal"
+            if dc:
+                entry["driver"] = ref.driver or "current"
+        out.append(entry)
+    return out
+
+
+def _write(
+    path: Path,
+    log: Mapping[str, Any],
+    summary: Mapping[str, Any],
+    sensing: str,
+    distro: str,
+    start_ns: int,
+    robots: list[dict[str, Any]] | None = None,
+):
+    """Write the bag folder ``path`` (must not exist); returns ``{topic: messages}``. ``robots``:
+    :func:`robots_stated`, written into ``custom_data`` once."""
     from rosbags.rosbag2 import StoragePlugin
 
     msgs = _messages(distro)
     topics = topics_of(log, sensing, msgs, start_ns)
     static = _static_tf(log, msgs, start_ns)
-    with _BulkWriter(path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP) as w:
+    with bulk_writer(path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP) as w:
         w.set_custom_data(
             "bioform_mj",
             json.dumps(
@@ -557,6 +605,7 @@ def _write(path: Path, log: Mapping[str, Any], summary: Mapping[str, Any], sensi
                     "sensing": sensing,
                     "ros_distro": distro,
                     "followers": int(np.asarray(log["pose_3d"]).shape[1]),
+                    "robots": robots or [],
                 },
                 sort_keys=True,
             ),
@@ -573,142 +622,3 @@ def _write(path: Path, log: Mapping[str, Any], summary: Mapping[str, Any], sensi
         w.write_samples(c_static, static, topics, conns, stamps)
         counts = {"/tf_static": 1} | {tp.name: len(tp.rows) + len(tp.extra) for tp in topics}
     return counts
-
-
-# ------------------------------------------------------------------------------ bulk MCAP writing
-_MSG_HEAD = 1 + 8 + 2 + 4 + 8 + 8  # opcode, record length, channel id, sequence, log time, publish time
-
-
-def _record(cid: int, stamp: int, data: bytes) -> bytes:
-    return struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + len(data), cid, 0, stamp, stamp) + data
-
-
-@functools.cache
-def _writer_classes():
-    """``(_BulkWriter, _BulkMcap)``: rosbags' writer with a storage that takes whole chunks at once."""
-    from io import BytesIO
-
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
-
-    class BulkMcap(McapWriter):
-        """``rosbags``' MCAP storage (rosbags 0.11.9) plus :meth:`write_chunk`: one chunk of ready records."""
-
-        def write_chunk(self, pieces: list[Any], index: dict[int, tuple[np.ndarray, np.ndarray]]) -> None:
-            """Write the message records ``pieces`` (bytes or contiguous uint8 arrays, in time order) as
-            one chunk; ``index``: channel id → (log times, offsets of its records in the pieces). The
-            schema and channel records ``rosbags`` keeps pending go first."""
-            from collections import defaultdict
-
-            pending = self.chunk.bio.getvalue()
-            self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
-            if not index:
-                return
-            pieces = [pending, *pieces]
-            size = sum(len(p) if isinstance(p, bytes) else p.nbytes for p in pieces)
-            t_start = min(int(t.min()) for t, _ in index.values())
-            t_end = max(int(t.max()) for t, _ in index.values())
-            if self.compression:
-                pieces = [self.compressor(b"".join(bytes(p) for p in pieces))]
-            comp_size = sum(len(p) if isinstance(p, bytes) else p.nbytes for p in pieces)
-            cname = self.compression.encode()
-            head = struct.pack("<QQQI", t_start, t_end, size, 0) + struct.pack("<I", len(cname)) + cname
-            body = head + struct.pack("<Q", comp_size)
-            chunk_start = self.bio.tell()
-            self.bio.write(struct.pack("<BQ", 0x06, len(body) + comp_size))
-            self.bio.write(body)
-            for p in pieces:
-                self.bio.write(p if isinstance(p, bytes) else memoryview(p))
-            chunk_end = self.bio.tell()
-            offsets = []
-            for cid in sorted(index):
-                t, off = index[cid]
-                offsets.append((cid, self.bio.tell()))
-                pairs = np.empty((len(t), 2), "<u8")
-                pairs[:, 0], pairs[:, 1] = t, off + len(pending)
-                self.bio.write(struct.pack("<BQHI", 0x07, 2 + 4 + pairs.nbytes, cid, pairs.nbytes))
-                self.bio.write(pairs.tobytes())
-                self.channel_stats[cid] += len(t)
-            rec = BytesIO()
-            rec.write(struct.pack("<QQQQ", t_start, t_end, chunk_start, chunk_end - chunk_start))
-            rec.write(struct.pack("<I", len(offsets) * 10))
-            for cid, o in offsets:
-                rec.write(struct.pack("<HQ", cid, o))
-            rec.write(struct.pack("<Q", self.bio.tell() - chunk_end))
-            rec.write(struct.pack("<I", len(cname)) + cname)
-            rec.write(struct.pack("<QQ", comp_size, size))
-            self.chunks.append(rec)
-            self.message_start_time = min(self.message_start_time, t_start)
-            self.message_end_time = max(self.message_end_time, t_end)
-
-    class BulkWriter(Writer):
-        """``rosbags``' rosbag2 writer whose MCAP storage takes a run's messages in whole chunks."""
-
-        STORAGE_PLUGINS = {StoragePlugin.MCAP: BulkMcap}
-
-        def write_samples(self, c_static: Any, static: bytes, topics: list[_Topic], conns: dict, stamps) -> None:
-            """``/tf_static`` at the first stamp, then every sample's messages in topic order, in chunks of
-            whole samples of about :data:`CHUNK_BYTES`. Every topic has a message at each of the first
-            ``K`` samples (the log rows, all of one layout: a chunk is a ``(samples, B)`` byte matrix,
-            filled when it is written: memory stays at one chunk); the last sample (the end of the run)
-            holds the state topics' messages only."""
-            S = len(stamps)
-            K = S - 1
-            cids = [conns[tp.name].id for tp in topics]
-            cols, c = [], 0
-            for tp in topics:
-                cols.append(c)
-                c += tp.width
-            B = c
-            tail, tail_idx = [], []  # the last sample: (cid, record bytes)
-            for tp, cid in zip(topics, cids):
-                full = len(tp.rows) == S
-                if full:  # the state topics: one more message, at the end of the run
-                    last = np.empty((1, tp.width), np.uint8)
-                    tp.fill(last, cid, stamps[K:], slice(K, S))
-                    tail.append(last.tobytes())
-                    tail_idx.append(cid)
-                for row, data in tp.extra:
-                    assert row == K, "only the last sample has messages of another layout"
-                    tail.append(_record(cid, int(stamps[row]), data))
-                    tail_idx.append(cid)
-            first = _record(c_static.id, int(stamps[0]), static)
-            per = max(1, CHUNK_BYTES // max(B, 1))
-            storage = self.storage
-            j0 = 0
-            while True:
-                j1 = min(K, j0 + per)
-                parts = [first] if j0 == 0 else []
-                at = len(first) if j0 == 0 else 0
-                index: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-                if j0 == 0:
-                    index[c_static.id] = (stamps[:1], np.zeros(1, np.int64))
-                js = np.arange(j0, j1)
-                for cid, col in zip(cids, cols):
-                    index[cid] = (stamps[js], at + (js - j0) * B + col)
-                M = np.empty((j1 - j0, B), np.uint8)  # this chunk's samples, every topic's record side by side
-                for tp, cid, col in zip(topics, cids, cols):
-                    tp.fill(M[:, col : col + tp.width], cid, stamps[j0:j1], slice(j0, j1))
-                parts.append(M.reshape(-1))
-                at += (j1 - j0) * B
-                if j1 == K:  # the last chunk: the end of the run's messages too
-                    for cid, rec in zip(tail_idx, tail):
-                        t_old, o_old = index.get(cid, (np.zeros(0, np.int64), np.zeros(0, np.int64)))
-                        index[cid] = (np.append(t_old, stamps[K]), np.append(o_old, at))
-                        parts.append(rec)
-                        at += len(rec)
-                storage.write_chunk(parts, {k: v for k, v in index.items() if len(v[0])})
-                for cid, (t, _) in index.items():
-                    self.counts[cid] += len(t)
-                if j1 == K:
-                    break
-                j0 = j1
-            if S:
-                self.min_timestamp = min(self.min_timestamp, int(stamps.min()))
-                self.max_timestamp = max(self.max_timestamp, int(stamps.max()))
-
-    return BulkWriter, BulkMcap
-
-
-def _BulkWriter(*args: Any, **kwargs: Any) -> Any:  # noqa: N802 - a class, built on first use (rosbags optional)
-    return _writer_classes()[0](*args, **kwargs)

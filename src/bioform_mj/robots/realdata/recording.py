@@ -36,22 +36,67 @@ __all__ = ["Recording", "Topics", "read_recording"]
 
 @dataclass(frozen=True)
 class Topics:
-    """Topic names of a recording (rosbag2/MCAP)."""
+    """Topic names of a recording (rosbag2/MCAP); ``None``: the default, under ``namespace`` if one is given
+    (``/NS/joint_states``, ``/NS/odom`` — else ``/NS/ground_truth/odom``, the truth of this project's own
+    bags —, ``/NS/imu``). Without a namespace and without ``/joint_states`` in the recording, the one robot
+    namespace whose ``…/joint_states`` the recording has is taken (:func:`resolve_topics`)."""
 
-    joint_states: str = "/joint_states"
-    odom: str = "/odom"
-    imu: str = "/imu"
+    joint_states: str | None = None
+    odom: str | None = None
+    imu: str | None = None
+    namespace: str | None = None
+
+
+def resolve_topics(have: dict[str, str], topics: Topics, name: str) -> tuple[Topics, list[str]]:
+    """The topic names to read from a recording whose topics are ``have`` (topic → message type), and notes
+    saying what was chosen. A namespace is the one given, or found: when neither ``--joint-states-topic``
+    nor a namespace is given and the recording has no ``/joint_states``, the single ``/NS/joint_states``
+    (``sensor_msgs/msg/JointState``) is taken; several raise :class:`InputError` listing them."""
+    notes: list[str] = []
+    ns = (topics.namespace or "").strip("/") or None
+    if ns is None and topics.joint_states is None and "/joint_states" not in have:
+        found = sorted(
+            t
+            for t, typ in have.items()
+            if t.endswith("/joint_states") and t.count("/") >= 2 and typ == "sensor_msgs/msg/JointState"
+        )
+        if len(found) > 1:
+            nss = ", ".join(t[1 : -len("/joint_states")] for t in found)
+            raise InputError(
+                f"{name}: no '/joint_states' but the joint states of {len(found)} robots "
+                f"({', '.join(found)}): choose one with --robot-ns (one of: {nss})"
+            )
+        if found:
+            ns = found[0][1 : -len("/joint_states")]
+            notes.append(f"robot namespace '/{ns}' taken: the recording's only joint states are {found[0]}")
+    pre = f"/{ns}" if ns else ""
+    odom = topics.odom
+    if odom is None:
+        odom = f"{pre}/odom"
+        if ns and odom not in have and f"{pre}/ground_truth/odom" in have:
+            odom = f"{pre}/ground_truth/odom"
+            notes.append(f"odometry from {odom} (no {pre}/odom: a simulation's truth, this project's own bag)")
+    out = Topics(
+        topics.joint_states or f"{pre}/joint_states",
+        odom,
+        topics.imu or f"{pre}/imu",
+        ns,
+    )
+    return out, notes
 
 
 @dataclass
 class Recording:
     """The arrays of one recording (SI units; times in s from the first joint state).
 
-    ``t``: joint-state times (n,); ``position``, ``velocity``, ``effort``: (n, 2), the left and right
-    wheel joints in that order (rad, rad/s, N·m). ``odom_t``/``odom_twist``: odometry times (m,) and the
-    body-frame twist (m, 6: vx, vy, vz, wx, wy, wz in m/s and rad/s); ``odom_pose``: (m, 7) x, y, z (m),
-    qw, qx, qy, qz. ``imu_t``/``imu_gyro``: IMU times and angular velocity (k, 3), rad/s. Absent streams
-    are empty arrays. ``source``: the file read; ``notes``: what was assumed.
+        ``t``: joint-state times (n,); ``position``, ``velocity``, ``effort``: (n, 2), the left and right
+        wheel joints in that order (rad, rad/s, N·m). ``odom_t``/``odom_twist``: odometry times (m,) and the
+        body-frame twist (m, 6: vx, vy, vz, wx, wy, wz in m/s and rad/s); ``odom_pose``: (m, 7) x, y, z (m),
+        qw, qx, qy, qz. ``imu_t``/``imu_gyro``: IMU times and angular velocity (k, 3), rad/s. Absent streams
+        are empty arrays. ``source``: the file read; ``notes``: what was assumed; ``stated``: what a bag of this
+    project's export says of the recorded robot (``metadata.yaml``'s ``custom_data.bioform_mj``, its
+    ``robots`` entry of the namespace read: ``effort`` ``"applied"`` or ``"command"``, ``motor``, ``driver``,
+    ``robot``; empty for another bag).
     """
 
     source: str
@@ -66,11 +111,19 @@ class Recording:
     imu_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     imu_gyro: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     notes: list[str] = field(default_factory=list)
+    stated: dict = field(default_factory=dict)  # what the bag says of its robot (this project's export)
 
     def effort_at(self, t: np.ndarray) -> np.ndarray:
         """The wheel torques (N·m, (len(t), 2)) at times ``t`` (s), interpolated linearly between the
         recorded efforts: a real robot's effort is a sample of a continuous torque (on the tb3 test recording
-        a zero-order hold, the torque held until the next sample, biased the yaw inertia by 6 %)."""
+        a zero-order hold, the torque held until the next sample, biased the yaw inertia by 6 %). Where the bag
+        states the interval each effort is the mean torque of (this project's export:
+        ``stated["effort_interval_s"] = [a, b]``, from ``a`` to ``b`` s about its stamp: the log row's mean of the
+        commands held over their control periods), each effort is held over its interval."""
+        span = self.stated.get("effort_interval_s")
+        if span is not None and len(self.t) > 1:
+            k = np.clip(np.searchsorted(self.t + float(span[0]), t, side="right") - 1, 0, len(self.t) - 1)
+            return self.effort[k]
         return np.stack([np.interp(t, self.t, self.effort[:, i]) for i in range(2)], axis=1)
 
     @property
@@ -98,6 +151,7 @@ class Recording:
             self.imu_t[i],
             self.imu_gyro[i],
             list(self.notes),
+            dict(self.stated),
         )
 
 
@@ -139,7 +193,7 @@ def _validate(rec: Recording) -> Recording:
     return rec
 
 
-def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics = Topics()) -> Recording:
+def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics | None = None) -> Recording:
     """Read ``path`` (rosbag2 folder, ``.mcap``/``.db3`` file, or ``.csv``) for the wheel joints ``joints``
     (left, right). Raises :class:`InputError` (exit 2) for anything that cannot be used (module docstring)."""
     p = Path(path)
@@ -147,7 +201,7 @@ def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics = T
         raise InputError(f"--bag {p}: no such file or folder")
     if p.is_file() and p.suffix.lower() == ".csv":
         return _validate(_read_csv(p, joints))
-    return _validate(_read_bag(p, joints, topics))
+    return _validate(_read_bag(p, joints, topics or Topics()))
 
 
 # ------------------------------------------------------------------ rosbag2 / MCAP
@@ -173,12 +227,14 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
     try:
         with AnyReader([p], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
             have = {c.topic: c.msgtype for c in reader.connections}
+            topics, ns_notes = resolve_topics(have, topics, name)
+            custom = _custom_data(reader)
             want = {topics.joint_states: "sensor_msgs/msg/JointState"}
             if topics.joint_states not in have:
                 there = ", ".join(f"{k} ({v})" for k, v in sorted(have.items())) or "no topics"
                 raise InputError(
                     f"{name}: no topic '{topics.joint_states}' with the wheel joint states (it has: {there}); "
-                    "name it with --joint-states-topic"
+                    "name it with --joint-states-topic (or a robot's namespace with --robot-ns)"
                 )
             for topic, typ in ((topics.odom, "nav_msgs/msg/Odometry"), (topics.imu, "sensor_msgs/msg/Imu")):
                 if topic in have:
@@ -248,7 +304,7 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
     if not js["t"]:
         what = f" ({no_effort} without an effort: the fit needs the applied torques)" if no_effort else ""
         raise InputError(f"{name}: '{topics.joint_states}' holds no joint states{what}")
-    notes = [f"{no_effort} joint state(s) without an effort skipped"] if no_effort else []
+    notes = ns_notes + ([f"{no_effort} joint state(s) without an effort skipped"] if no_effort else [])
     # one clock for all topics: the header stamps where every topic has them (a stamp of 0 at sim time 0 is
     # one), else the bag's receive times
     streams = ((topics.joint_states, js), (topics.odom, od), (topics.imu, im))
@@ -285,7 +341,37 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
         np.asarray(im["t"]) - t0 if im["t"] else np.zeros(0),
         np.asarray(im["gyro"], float).reshape(-1, 3),
         notes,
+        _stated(custom, topics),
     )
+
+
+def _custom_data(reader: object) -> dict[str, str]:
+    """``metadata.yaml``'s ``custom_data`` of a rosbag2 folder (empty for a bare MCAP file)."""
+    out: dict[str, str] = {}
+    for r in getattr(reader, "readers", []):
+        inner = getattr(r, "storage", r)  # rosbags 0.11: the rosbag2 reader behind AnyReader's
+        custom = getattr(getattr(inner, "metadata", None), "custom", None)
+        if isinstance(custom, dict):
+            out.update({str(k): str(v) for k, v in custom.items()})
+    return out
+
+
+def _stated(custom: dict[str, str], topics: Topics) -> dict:
+    """The ``robots`` entry of this project's ``custom_data.bioform_mj`` (JSON) for the namespace read
+    (``topics.namespace``; without one, the only entry); empty where the bag has none."""
+    import json
+
+    try:
+        robots = json.loads(custom.get("bioform_mj", "{}")).get("robots") or []
+    except (ValueError, AttributeError):
+        return {}
+    ns = topics.namespace
+    if ns is None:
+        return dict(robots[0]) if len(robots) == 1 and isinstance(robots[0], dict) else {}
+    for r in robots:
+        if isinstance(r, dict) and r.get("namespace") == ns:
+            return dict(r)
+    return {}
 
 
 def _stream(reader, conns, name: str) -> Iterator:

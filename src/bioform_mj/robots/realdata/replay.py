@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from bioform_mj.robots.realdata.recording import Recording
-from bioform_mj.robots.realdata.simmodel import SimRobot, initial_state
+from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state
 
 __all__ = ["replay", "compare", "plot_signals"]
 
@@ -28,15 +28,11 @@ def replay(robot: SimRobot, rec: Recording) -> dict[str, np.ndarray]:
 
     model = robot.spec.compile()
     data = mujoco.MjData(model)
-    lay = robot.layout
     state = initial_state(robot, model, rec.position[0], rec.velocity[:3].mean(axis=0))
     dt = float(model.opt.timestep)
     n = int(rec.duration / dt)
     tt = np.arange(n) * dt
-    sign = np.asarray(lay.wheel_sign, float)
-    ctrl = np.zeros((n, model.nu))
-    for i, m in enumerate(lay.motors):
-        ctrl[:, model.actuator(m).id] = sign[i] * rec.effort_at(tt)[:, i]
+    ctrl = effort_to_ctrl(robot, model, rec.effort_at(tt))
     st, sens = rollout.rollout(model, data, state, ctrl)
     st, sens = st[0], sens[0]
     t = st[:, 0]

@@ -4,8 +4,12 @@
 (:func:`bioform_mj.robots.prepare.prepare_robot`, the same :class:`~bioform_mj.robots.RobotRef` mapping), puts
 it on a plane and replaces its sensors by the ones a recording measures: the two wheel joints' speeds
 (``jointvel``, rad/s), and at the base body's origin (ROS ``base_link``) its body-frame linear velocity
-(``velocimeter``, m/s) and angular velocity (``gyro``, rad/s). The two motors take the wheel torque in N·m
-(``ctrl = wheel_sign · effort``: the recorded effort is about the joint's own axis).
+(``velocimeter``, m/s) and angular velocity (``gyro``, rad/s). The two motors take the recorded effort
+about each joint's own axis, ``ctrl = s · wheel_sign · effort`` (:func:`effort_to_ctrl`): with torque motors
+(the mapping's ``motor = "ideal"``, a recording of applied torques) ``s = 1`` and ``ctrl`` is N·m; with the
+robot file's ``<dcmotor>`` drives (``motor = "dc"``, a recording of the torques *commanded* to them) ``s`` is
+the driver's scale (design §8.2: ``R/(g K)`` V per N·m with the voltage driver, ``1/g`` with the current
+driver), so the motor's back-EMF and torque–speed line are simulated as in a run.
 
 :func:`initial_state` builds the full MuJoCo state a recording implies at one instant: the robot standing
 as it settles on the floor at its recorded heading, its wheels at the recorded angles and speeds and the
@@ -23,7 +27,7 @@ from bioform_mj.robots.layout import RobotLayout
 from bioform_mj.robots.prepare import prepare_robot
 from bioform_mj.robots.refs import RobotRef
 
-__all__ = ["SimRobot", "sim_spec", "initial_state", "SENSOR_COLUMNS"]
+__all__ = ["SimRobot", "sim_spec", "initial_state", "effort_to_ctrl", "SENSOR_COLUMNS"]
 
 #: the sensordata columns: left, right wheel speed (rad/s), velocimeter x y z (m/s), gyro x y z (rad/s)
 SENSOR_COLUMNS = ("left_speed", "right_speed", "vx", "vy", "vz", "wx", "wy", "wz")
@@ -97,6 +101,21 @@ def sim_spec(ref: RobotRef) -> SimRobot:
         tuple(int(model.jnt_dofadr[j]) for j in wj),
         np.asarray(layout.axle, float),
     )
+
+
+def effort_to_ctrl(robot: SimRobot, model: mujoco.MjModel, effort: np.ndarray) -> np.ndarray:
+    """``ctrl`` (len, ``model.nu``) for the recorded efforts ``effort`` (len, 2; N·m about each wheel joint's
+    own axis, left and right): ``wheel_sign`` turns them forward-positive, as the plant's torque ``τ``, and
+    each motor takes ``dc_ctrl_scale · τ`` (1 for a torque motor; design §8.2 for a ``<dcmotor>``)."""
+    from bioform_mj.robots.layout import dc_ctrl_scale
+
+    lay = robot.layout
+    sign = np.asarray(lay.wheel_sign, float)
+    ctrl = np.zeros((effort.shape[0], model.nu))
+    for i, m in enumerate(lay.motors):
+        a = model.actuator(m).id
+        ctrl[:, a] = dc_ctrl_scale(model, a) * sign[i] * effort[:, i]
+    return ctrl
 
 
 def _yaw_quat(yaw: float) -> np.ndarray:

@@ -1,0 +1,352 @@
+"""The bulk rosbag2 writer of :mod:`bioform_mj.outputs.rosbag` (issue 29; a run as a ROS 2 bag).
+
+``rosbags``' own writer takes one message at a time and, at the end, emits its YAML three ways; here a
+run's messages go into the MCAP file in whole chunks (``(samples, bytes)`` matrices, filled with numpy by
+:class:`bioform_mj.outputs.rosbag` topics) and the metadata — each connection's QoS, ``metadata.yaml`` and
+the MCAP's copy of it — is emitted once by :func:`yaml_text`, a block-style YAML writer for the plain data
+it holds. The message definitions and type hashes are made once per process and type store (:func:`msgdef`).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import re
+import struct
+from typing import Any
+
+import numpy as np
+
+__all__ = ["CHUNK_BYTES", "MSG_HEAD", "bulk_writer", "msgdef", "record", "writer_classes", "yaml_text"]
+
+#: bytes of records per MCAP chunk (as ``rosbags``' own writer: 1 MiB)
+CHUNK_BYTES = 1 << 20
+MSG_HEAD = 1 + 8 + 2 + 4 + 8 + 8  # opcode, record length, channel id, sequence, log time, publish time
+
+
+def chunk_matrix(
+    topics: list[Any], cids: list[int], cols: list[int], B: int, rows: int, stamps: np.ndarray
+) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+    """The byte matrix of a chunk of ``rows`` samples (``(rows, B)`` uint8: every topic's message record
+    side by side, at ``cols``) with every record's constant bytes (header, template) written once, and its
+    slots: ``(view, values)`` pairs, a strided ``(rows, k)`` view of the matrix where ``k`` numbers side by
+    side in a record go (log and publish times, the marked fields: a position, a quaternion) and those
+    numbers for all ``K`` samples, ``(K, k)``. A chunk's samples ``j0:j1`` are then
+    ``view[:j1 - j0] = values[j0:j1]`` for each slot, the same matrix reused chunk after chunk (written out
+    before it is refilled): one numpy assignment per run of numbers, not per message."""
+    M = np.empty((rows, B), np.uint8)
+    buf = M.reshape(-1)
+    t = np.ascontiguousarray(stamps, dtype="<u8")
+    K = len(t)
+    slots: list[tuple[np.ndarray, np.ndarray]] = []
+    for tp, cid, col in zip(topics, cids, cols):
+        L = tp.template.size
+        M[:, col : col + MSG_HEAD] = np.frombuffer(struct.pack("<BQHIQQ", 0x05, 22 + L, cid, 0, 0, 0), np.uint8)
+        M[:, col + MSG_HEAD : col + MSG_HEAD + L] = tp.template
+        numbers = [(col + 15, "<u8", t), (col + 23, "<u8", t)]  # log time, publish time
+        numbers += [(col + MSG_HEAD + off, dt, vals) for off, dt, vals in tp.fields]
+        numbers.sort(key=lambda n: n[0])
+        # numbers side by side in the record (a position's x y z, a quaternion, the two stamps) are one
+        # 2-D slot: (rows, k) with strides (B, itemsize), and their values one (K, k) array
+        i = 0
+        while i < len(numbers):
+            off, dt, _ = numbers[i]
+            w = np.dtype(dt).itemsize
+            j = i + 1
+            while j < len(numbers) and numbers[j][1] == dt and numbers[j][0] == off + (j - i) * w:
+                j += 1
+            vals = np.stack([np.asarray(v[:K], dtype=dt) for _, _, v in numbers[i:j]], axis=1)
+            view = np.ndarray((rows, j - i), dt, buffer=buf, offset=off, strides=(B, w))
+            slots.append((view, vals))
+            i = j
+    return M, slots
+
+
+def record(cid: int, stamp: int, data: bytes) -> bytes:
+    return struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + len(data), cid, 0, stamp, stamp) + data
+
+
+@functools.cache
+def writer_classes():
+    """``(_BulkWriter, _BulkMcap)``: rosbags' writer with a storage that takes whole chunks at once."""
+    from io import BytesIO
+
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
+
+    class BulkMcap(McapWriter):
+        """``rosbags``' MCAP storage (rosbags 0.11.9) plus :meth:`write_chunk`: one chunk of ready records."""
+
+        def write_chunk(self, pieces: list[Any], index: dict[int, tuple[np.ndarray, np.ndarray]]) -> None:
+            """Write the message records ``pieces`` (bytes or contiguous uint8 arrays, in time order) as
+            one chunk; ``index``: channel id → (log times, offsets of its records in the pieces). The
+            schema and channel records ``rosbags`` keeps pending go first."""
+            from collections import defaultdict
+
+            pending = self.chunk.bio.getvalue()
+            self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+            if not index:
+                return
+            pieces = [pending, *pieces]
+            size = sum(len(p) if isinstance(p, bytes) else p.nbytes for p in pieces)
+            t_start = min(int(t.min()) for t, _ in index.values())
+            t_end = max(int(t.max()) for t, _ in index.values())
+            if self.compression:
+                pieces = [self.compressor(b"".join(bytes(p) for p in pieces))]
+            comp_size = sum(len(p) if isinstance(p, bytes) else p.nbytes for p in pieces)
+            cname = self.compression.encode()
+            head = struct.pack("<QQQI", t_start, t_end, size, 0) + struct.pack("<I", len(cname)) + cname
+            body = head + struct.pack("<Q", comp_size)
+            chunk_start = self.bio.tell()
+            self.bio.write(struct.pack("<BQ", 0x06, len(body) + comp_size))
+            self.bio.write(body)
+            for p in pieces:
+                self.bio.write(p if isinstance(p, bytes) else memoryview(p))
+            chunk_end = self.bio.tell()
+            offsets = []
+            for cid in sorted(index):
+                t, off = index[cid]
+                offsets.append((cid, self.bio.tell()))
+                pairs = np.empty((len(t), 2), "<u8")
+                pairs[:, 0], pairs[:, 1] = t, off + len(pending)
+                self.bio.write(struct.pack("<BQHI", 0x07, 2 + 4 + pairs.nbytes, cid, pairs.nbytes))
+                self.bio.write(pairs.tobytes())
+                self.channel_stats[cid] += len(t)
+            rec = BytesIO()
+            rec.write(struct.pack("<QQQQ", t_start, t_end, chunk_start, chunk_end - chunk_start))
+            rec.write(struct.pack("<I", len(offsets) * 10))
+            for cid, o in offsets:
+                rec.write(struct.pack("<HQ", cid, o))
+            rec.write(struct.pack("<Q", self.bio.tell() - chunk_end))
+            rec.write(struct.pack("<I", len(cname)) + cname)
+            rec.write(struct.pack("<QQ", comp_size, size))
+            self.chunks.append(rec)
+            self.message_start_time = min(self.message_start_time, t_start)
+            self.message_end_time = max(self.message_end_time, t_end)
+
+    class BulkWriter(Writer):
+        """``rosbags``' rosbag2 writer whose MCAP storage takes a run's messages in whole chunks, and whose
+        metadata (each connection's QoS, ``metadata.yaml`` and the MCAP's copy of it) is written once by
+        :func:`yaml_text`: ``rosbags`` 0.11.9 runs its YAML emitter once per connection and twice at the end,
+        as long as filling all the messages of an ideal-plant run."""
+
+        STORAGE_PLUGINS = {StoragePlugin.MCAP: BulkMcap}
+
+        def add_connection(
+            self, topic: str, msgtype: str, *, typestore: Any, offered_qos_profiles: list[Any] = ()
+        ) -> Any:
+            """``Writer.add_connection`` for a type of ``typestore`` (its definition and hash made once per
+            process: :func:`_msgdef`), the QoS written by :func:`yaml_text`."""
+            from rosbags.interfaces import Connection, ConnectionExtRosbag2, MessageDefinition
+            from rosbags.rosbag2.metadata import dump_qos_v9
+
+            assert self.storage and self.version >= 9
+            fmt, text, rihs01 = msgdef(typestore, msgtype)
+            qos = list(offered_qos_profiles)
+            conn = Connection(
+                id=len(self.connections) + 1,
+                topic=topic,
+                msgtype=msgtype,
+                msgdef=MessageDefinition(fmt, text),
+                digest=rihs01,
+                msgcount=0,
+                ext=ConnectionExtRosbag2(serialization_format="cdr", offered_qos_profiles=qos),
+                owner=self,
+            )
+            if any(c.topic == topic for c in self.connections):
+                raise ValueError(f"rosbag: topic {topic} added twice")
+            if msgtype not in self.added_types:
+                self.storage.add_msgtype(conn)
+                self.added_types.add(msgtype)
+            self.storage.add_connection(conn, yaml_text(dump_qos_v9(qos)))
+            self.connections.append(conn)
+            self.counts[conn.id] = 0
+            return conn
+
+        def close(self) -> None:
+            """``Writer.close`` (no compression): the MCAP's summary, then ``metadata.yaml``, the same
+            fields, each emitted once by :func:`yaml_text`."""
+            from rosbags.rosbag2.metadata import dump_qos_v9
+
+            assert self.storage
+            path = self.storage.path
+            duration = max(0, self.max_timestamp - self.min_timestamp)
+            start, count = self.min_timestamp, sum(self.counts.values())
+            info = {
+                "version": self.version,
+                "storage_identifier": self.storage_plugin.name.lower(),
+                "relative_file_paths": [path.name],
+                "duration": {"nanoseconds": duration},
+                "starting_time": {"nanoseconds_since_epoch": start},
+                "message_count": count,
+                "topics_with_message_count": [
+                    {
+                        "topic_metadata": {
+                            "name": c.topic,
+                            "type": c.msgtype,
+                            "serialization_format": c.ext.serialization_format,
+                            "offered_qos_profiles": dump_qos_v9(c.ext.offered_qos_profiles),
+                            "type_description_hash": c.digest,
+                        },
+                        "message_count": self.counts[c.id],
+                    }
+                    for c in self.connections
+                ],
+                "compression_format": "",
+                "compression_mode": "",
+                "files": [
+                    {
+                        "path": path.name,
+                        "starting_time": {"nanoseconds_since_epoch": start},
+                        "duration": {"nanoseconds": duration},
+                        "message_count": count,
+                    }
+                ],
+                "custom_data": self.custom_data or None,
+                "ros_distro": "rosbags",
+            }
+            inner = yaml_text(info)
+            self.storage.close(self.version, inner)
+            self.storage = None
+            body = "".join(f"  {ln}\n" for ln in inner.splitlines())
+            self.metapath.write_text(f"rosbag2_bagfile_information:\n{body}", "utf8")
+
+        def write_samples(self, c_static: Any, static: bytes, topics: list[Any], conns: dict, stamps) -> None:
+            """``/tf_static`` at the first stamp, then every sample's messages in topic order, in chunks of
+            whole samples of about :data:`CHUNK_BYTES`. Every topic has a message at each of the first
+            ``K`` samples (the log rows, all of one layout: a chunk is a ``(samples, B)`` byte matrix,
+            :func:`chunk_matrix`, refilled for each chunk: memory stays at one chunk); the last sample (the
+            end of the run) holds the state topics' messages only."""
+            S = len(stamps)
+            K = S - 1
+            cids = [conns[tp.name].id for tp in topics]
+            cols, c = [], 0
+            for tp in topics:
+                cols.append(c)
+                c += tp.width
+            B = c
+            tail, tail_idx = [], []  # the last sample: (cid, record bytes)
+            for tp, cid in zip(topics, cids):
+                full = len(tp.rows) == S
+                if full:  # the state topics: one more message, at the end of the run
+                    last = np.empty((1, tp.width), np.uint8)
+                    tp.fill(last, cid, stamps[K:], slice(K, S))
+                    tail.append(last.tobytes())
+                    tail_idx.append(cid)
+                for row, data in tp.extra:
+                    assert row == K, "only the last sample has messages of another layout"
+                    tail.append(record(cid, int(stamps[row]), data))
+                    tail_idx.append(cid)
+            first = record(c_static.id, int(stamps[0]), static)
+            per = max(1, min(K, CHUNK_BYTES // max(B, 1)))
+            M, slots = chunk_matrix(topics, cids, cols, B, per, stamps[:K])
+            storage = self.storage
+            j0 = 0
+            while True:
+                j1 = min(K, j0 + per)
+                parts = [first] if j0 == 0 else []
+                at = len(first) if j0 == 0 else 0
+                index: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+                if j0 == 0:
+                    index[c_static.id] = (stamps[:1], np.zeros(1, np.int64))
+                js = np.arange(j0, j1)
+                for cid, col in zip(cids, cols):
+                    index[cid] = (stamps[js], at + (js - j0) * B + col)
+                for view, vals in slots:  # this chunk's numbers into the one matrix of every record's bytes
+                    view[: j1 - j0] = vals[j0:j1]
+                parts.append(M[: j1 - j0].reshape(-1))
+                at += (j1 - j0) * B
+                if j1 == K:  # the last chunk: the end of the run's messages too
+                    for cid, rec in zip(tail_idx, tail):
+                        t_old, o_old = index.get(cid, (np.zeros(0, np.int64), np.zeros(0, np.int64)))
+                        index[cid] = (np.append(t_old, stamps[K]), np.append(o_old, at))
+                        parts.append(rec)
+                        at += len(rec)
+                storage.write_chunk(parts, {k: v for k, v in index.items() if len(v[0])})
+                for cid, (t, _) in index.items():
+                    self.counts[cid] += len(t)
+                if j1 == K:
+                    break
+                j0 = j1
+            if S:
+                self.min_timestamp = min(self.min_timestamp, int(stamps.min()))
+                self.max_timestamp = max(self.max_timestamp, int(stamps.max()))
+
+    return BulkWriter, BulkMcap
+
+
+MSGDEFS_MADE: dict[tuple[int, str], tuple[Any, str, str]] = {}
+
+
+def msgdef(store: Any, msgtype: str) -> tuple[Any, str, str]:
+    """``(format, definition, RIHS01 hash)`` of ``msgtype`` in the type store ``store`` (made once per
+    process and store: ``rosbags`` generates them from its type tables each time, 4 ms a type)."""
+    key = (id(store), msgtype)
+    if key not in MSGDEFS_MADE:
+        from rosbags.interfaces import MessageDefinitionFormat
+
+        text, _ = store.generate_msgdef(msgtype, ros_version=2)
+        idl = text.startswith("=" * 80 + "\nIDL: ")
+        fmt = MessageDefinitionFormat.IDL if idl else MessageDefinitionFormat.MSG
+        MSGDEFS_MADE[key] = (fmt, text, store.hash_rihs01(msgtype))
+    return MSGDEFS_MADE[key]
+
+
+_YAML_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_YAML_PLAIN = re.compile(r"[A-Za-z_/][A-Za-z0-9_/.\-]*")
+#: plain words a YAML 1.1 reader takes for booleans or null
+_YAML_WORDS = {"y", "n", "yes", "no", "on", "off", "true", "false", "null"}
+_YAML_UNSAFE = re.compile("[\x7f-\x9f\ud800-\udfff\ufeff\ufffe\uffff]")
+
+
+def _yaml_scalar(v: Any) -> str:
+    if v is None:
+        return "null"
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return repr(v) if math.isfinite(v) else {math.inf: ".inf", -math.inf: "-.inf"}.get(v, ".nan")
+    if isinstance(v, dict):
+        return "{}"
+    if isinstance(v, list | tuple):
+        return "[]"
+    if _YAML_PLAIN.fullmatch(v) and v.lower() not in _YAML_WORDS:  # a name: plain, as rosbag2 writes it
+        return v
+    # a JSON string is a YAML double-quoted scalar; the characters YAML wants escaped and JSON leaves, escaped
+    return _YAML_UNSAFE.sub(lambda m: f"\\u{ord(m.group()):04x}", json.dumps(str(v), ensure_ascii=False))
+
+
+def _yaml_lines(obj: Any, ind: int) -> list[str]:
+    pad, out = " " * ind, []
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            key = k if isinstance(k, str) and _YAML_KEY.fullmatch(k) else _yaml_scalar(k)
+            if isinstance(v, dict | list | tuple) and v:
+                out.append(f"{pad}{key}:")
+                out += _yaml_lines(v, ind + 2)
+            else:
+                out.append(f"{pad}{key}: {_yaml_scalar(v)}")
+    else:
+        for v in obj:
+            if isinstance(v, dict | list | tuple) and v:
+                sub = _yaml_lines(v, ind + 2)
+                out += [f"{pad}- {sub[0][ind + 2 :]}", *sub[1:]]
+            else:
+                out.append(f"{pad}- {_yaml_scalar(v)}")
+    return out
+
+
+def yaml_text(obj: Any) -> str:
+    """``obj`` (dicts, lists, strings, numbers, None) as block-style YAML, no trailing newline: the rosbag2
+    metadata and QoS profiles (strings double-quoted; read back by any YAML 1.1/1.2 reader as ``obj``,
+    ``tests/test_outputs_rosbag.py``)."""
+    if isinstance(obj, dict | list | tuple) and obj:
+        return "\n".join(_yaml_lines(obj, 0))
+    return _yaml_scalar(obj)
+
+
+def bulk_writer(*args: Any, **kwargs: Any) -> Any:
+    return writer_classes()[0](*args, **kwargs)
