@@ -40,7 +40,8 @@ from bioform_mj.robots.layout import (
     subtree,
     welded_to,
 )
-from bioform_mj.robots.prepare import absolute_asset_files, load_robot, prepare_robot
+from bioform_mj.robots.mjcf import absolute_asset_files
+from bioform_mj.robots.prepare import load_robot, prepare_robot
 from bioform_mj.robots.surfaces import add_min_friction_pairs
 
 log = logging.getLogger(__name__)
