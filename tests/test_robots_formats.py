@@ -53,6 +53,13 @@ def test_each_format_loads_its_sample(fmt):
     assert layout.wheel_radius == pytest.approx(EXPECT[name]["r_m"], rel=1e-3)
     assert layout.half_track == pytest.approx(EXPECT[name]["l_m"], rel=1e-3)
     assert layout.tau_max == pytest.approx(1.4)
+    if (precheck := format_of(ref.model).precheck) is not None:
+        precheck(ref)  # the published sample passes its format's checks before any work
+    from bioform_mj.jobs.provenance import file_hash, model_files
+
+    read = format_of(ref.model).files
+    files = read(ref, file_hash) if read is not None else model_files(ref.model)
+    assert files[str(Path(ref.model).resolve())] == file_hash(ref.model)  # the provenance holds the file itself
 
 
 def test_a_new_format_is_one_registration(tmp_path):

@@ -13,8 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from bioform_mj.robots.files import urdf_files
 from bioform_mj.robots.mjcf import load_mjcf
-from bioform_mj.robots.urdf import URDF_SUFFIXES, is_urdf, load_urdf
+from bioform_mj.robots.urdf import URDF_SUFFIXES, check_file, is_urdf, load_urdf
 
 __all__ = ["RobotFormat", "format_of", "register_format", "robot_formats"]
 
@@ -39,6 +40,12 @@ class RobotFormat:
         What its loader confines, and how (said in the documentation; design §12).
     xacro : bool
         Whether a xacro file of it may be expanded (``--xacro``, design §12).
+    precheck : callable or None
+        ``precheck(ref)``: the format's checks that need no MuJoCo, run when a scenario is validated (before any
+        work); raises ``InputError`` (exit 2). None: none.
+    files : callable or None
+        ``files(ref, file_hash) -> {path: hash}``: every file the robot reads (a run's provenance, issue 28). None:
+        the MJCF include walk (:func:`bioform_mj.jobs.provenance.model_files`).
     """
 
     name: str
@@ -47,6 +54,8 @@ class RobotFormat:
     load: Callable[[Any, Path], tuple[Any, ...]]
     confines: str
     xacro: bool
+    precheck: Callable[[Any], None] | None = None
+    files: Callable[[Any, Callable[[Any], str]], dict[str, str]] | None = None
 
 
 _FORMATS: dict[str, RobotFormat] = {}
@@ -85,6 +94,8 @@ register_format(
         "package:// paths to the robot's packages (--package-path, $BIOFORM_PACKAGE_PATH, $ROS_PACKAGE_PATH); a "
         "xacro file expands only with --xacro, in a separate process with no environment, 1024 MiB, 30 s",
         True,
+        check_file,
+        urdf_files,
     )
 )
 register_format(
