@@ -38,6 +38,7 @@ def test_every_format_has_a_sample_and_its_suffixes_make_a_path():
         assert set(f.suffixes) <= set(ROBOT_SUFFIXES), f.name
         assert f.confines and isinstance(f.xacro, bool)
     assert [f.name for f in robot_formats() if f.xacro] == ["urdf"]
+    assert [f.name for f in robot_formats() if not f.self_collision] == ["urdf"]  # the Gazebo convention
 
 
 @pytest.mark.parametrize("fmt", [f.name for f in robot_formats()])
@@ -60,6 +61,10 @@ def test_each_format_loads_its_sample(fmt):
     read = format_of(ref.model).files
     files = read(ref, file_hash) if read is not None else model_files(ref.model)
     assert files[str(Path(ref.model).resolve())] == file_hash(ref.model)  # the provenance holds the file itself
+    from bioform_mj.robots.overlaps import published_model
+
+    pub = published_model(ref)  # as published: the base and both wheel joints are there
+    assert pub.body(ref.base).id >= 0 and pub.joint(ref.left_wheel).id >= 0 and pub.joint(ref.right_wheel).id >= 0
 
 
 def test_a_new_format_is_one_registration(tmp_path):

@@ -9,13 +9,13 @@ it; MJCF, the fallback, last), and :func:`bioform_mj.robots.prepare.prepare_robo
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from bioform_mj.robots.files import urdf_files
 from bioform_mj.robots.mjcf import load_mjcf
-from bioform_mj.robots.urdf import URDF_SUFFIXES, check_file, is_urdf, load_urdf
+from bioform_mj.robots.urdf import URDF_SUFFIXES, check_file, import_urdf, is_urdf, load_urdf
 
 __all__ = ["RobotFormat", "format_of", "register_format", "robot_formats"]
 
@@ -46,6 +46,12 @@ class RobotFormat:
     files : callable or None
         ``files(ref, file_hash) -> {path: hash}``: every file the robot reads (a run's provenance, issue 28). None:
         the MJCF include walk (:func:`bioform_mj.jobs.provenance.model_files`).
+    published : callable or None
+        ``published(ref) -> MjModel``: the robot as its file gives it, with MuJoCo's own collision rules (every pair
+        but parent–child), for the overlaps at rest (design §13.1). None: the file compiled as it stands.
+    self_collision : bool
+        Whether the scene collides the robot's own bodies by default (MJCF: as the file says; URDF: off, the
+        Gazebo convention, unless the mapping says ``self_collide``; design §12).
     """
 
     name: str
@@ -56,6 +62,8 @@ class RobotFormat:
     xacro: bool
     precheck: Callable[[Any], None] | None = None
     files: Callable[[Any, Callable[[Any], str]], dict[str, str]] | None = None
+    published: Callable[[Any], Any] | None = None
+    self_collision: bool = True
 
 
 _FORMATS: dict[str, RobotFormat] = {}
@@ -96,6 +104,8 @@ register_format(
         True,
         check_file,
         urdf_files,
+        lambda ref: import_urdf(replace(ref, self_collide=True)).model,
+        False,
     )
 )
 register_format(
