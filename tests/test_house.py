@@ -33,12 +33,9 @@ FLOORS: dict[str, int] = {
 }
 #: the only modules at the package's top level: the lazy public API and the version
 TOP_LEVEL = {"__init__.py", "_version.py"}
-#: imports that go up or sideways, by (importing module, imported module); the list may only shrink.
-#: ``torque.resistance_margin`` / ``learner.kd_deadband`` (opt-in, design §14.4) size the paper's gains to the
-#: resistance robot check identifies: an assessment the controller's parameters read, imported lazily when asked.
-KNOWN_UPWARD: set[tuple[str, str]] = {
-    ("bioform_mj.control.params", "bioform_mj.assess.learner_sizing"),
-}
+#: imports that go up or sideways, by (importing module, imported module); the list may only shrink. Empty: where a
+#: lower floor needs what a higher one computes, the higher one registers it (design §0)
+KNOWN_UPWARD: set[tuple[str, str]] = set()
 
 
 def _modules() -> dict[str, Path]:

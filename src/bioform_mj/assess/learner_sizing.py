@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from bioform_mj.control.params import register_sizing
+
 __all__ = ["DEADBAND_MIN_NM", "resistance", "sizing"]
 
 #: an identified dead band below this (N·m on τ_a or τ_b) is none (the fit's noise on a robot without one)
@@ -96,3 +98,6 @@ def sizing(sc: Any, plant: Any, c_true: np.ndarray) -> dict[str, Any] | None:
     elif kd_db:
         why.append("no dead band identified: learner.kd stays the scenario's")
     return {"c_gain": c_gain.tolist(), "kd": kd.tolist(), "robots": rows, "why": "; ".join(why)}
+
+
+register_sizing(sizing)  # the controller's builder sizes the opt-in gains with it (design §14.4)

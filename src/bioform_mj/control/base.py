@@ -22,9 +22,9 @@ See ``examples/`` for a user-written controller.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -73,3 +73,31 @@ class Controller(Protocol):
 
     def set_tau_max(self, tau_max: np.ndarray) -> None:
         """The wheel torque limits (n,) N·m changed (actuator faults); may ignore."""
+
+
+# ---------------------------------------------------------------------------------------
+# What a controller's builder reads of a plant (design §19, §22): each a protocol checked with ``isinstance``. They
+# are declared here, where they are read, because this floor knows no plant (design §0); a plant offers them by
+# having the attributes.
+# ---------------------------------------------------------------------------------------
+
+
+@runtime_checkable
+class TorqueLimited(Protocol):
+    """Robots with their own wheel torque limits (the MuJoCo plant: each robot's drive limit)."""
+
+    tau_max: np.ndarray  # (n,) N·m
+
+
+@runtime_checkable
+class Footprints(Protocol):
+    """Robots of known size: each one's footprint radius about its axle midpoint (the safety filter's, design §19)."""
+
+    footprint_radius: np.ndarray  # (n,) m
+
+
+@runtime_checkable
+class Obstacles(Protocol):
+    """Holds obstacles (:class:`~bioform_mj.formation.obstacles.Obstacle` rows, design §19)."""
+
+    obstacles: Sequence[Any]

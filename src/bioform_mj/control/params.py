@@ -3,7 +3,10 @@
 :class:`~bioform_mj.control.stack.ControlStack` for one of the paper's four methods, the factory that the
 controller registry holds for them (:mod:`bioform_mj.control.registry`, design §22).
 
-The scenario and the plant are read by attribute (this floor knows neither package, design §0).
+The scenario is read by attribute, the plant by the protocols of :mod:`bioform_mj.control.base` (this floor knows
+neither package, design §0). The opt-in gain sizing (design §14.4) reads robot check's identification, an assessment
+a floor above: :mod:`bioform_mj.assess.learner_sizing` registers it (:func:`register_sizing`) when imported, as the
+run package does.
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from bioform_mj.control.base import Footprints, Obstacles, TorqueLimited
 from bioform_mj.control.stack import ControlStack, StackParams, parse_method
 from bioform_mj.control.tuning import PAPER_C
 
@@ -27,7 +31,25 @@ def paper_stack(sc: Any, plant: Any) -> ControlStack:
         The plant it will drive: its ``c_true()`` (n, 2) sets ``ĉ(0)``, its ``tau_max`` (n,) N·m, if it has
         one, the torque limits, and its footprints and obstacles the safety filter (design §19).
     """
-    return ControlStack(sc.build_graph(), stack_params(sc, plant.c_true(), getattr(plant, "tau_max", None), plant))
+    tau_max = plant.tau_max if isinstance(plant, TorqueLimited) else None
+    return ControlStack(sc.build_graph(), stack_params(sc, plant.c_true(), tau_max, plant))
+
+
+#: the opt-in gain sizing (design §14.4): ``sizer(sc, plant, c_true) -> dict | None``, registered by
+#: :mod:`bioform_mj.assess.learner_sizing` on import (:func:`register_sizing`) instead of this module importing upwards
+_SIZING: list[Any] = []
+
+
+def register_sizing(sizer: Any) -> None:
+    """Set the sizer of the opt-in ``torque.resistance_margin`` / ``learner.kd_deadband`` (design §14.4).
+
+    Parameters
+    ----------
+    sizer
+        ``sizer(sc, plant, c_true) -> dict | None``: ``c_gain`` (2,) and ``kd`` (2,) for scenario ``sc`` on ``plant``
+        whose followers have ``c_true`` (n, 2), with the resistance they were sized to; None where neither is asked.
+    """
+    _SIZING[:] = [sizer]
 
 
 def stack_params(sc: Any, c_true: np.ndarray, tau_max: np.ndarray | None = None, plant: Any = None) -> StackParams:
@@ -51,10 +73,13 @@ def stack_params(sc: Any, c_true: np.ndarray, tau_max: np.ndarray | None = None,
     sized = None
     if sc.torque.resistance_margin > 0 or sc.learner.kd_deadband:
         # opt-in (design §14.4): c and kd sized to the resistance robot check identifies; an assessment of the
-        # robot, a floor above the controller: the one listed upward import of control (tests/test_house.py)
-        from bioform_mj.assess.learner_sizing import sizing
-
-        sized = sizing(sc, plant, np.asarray(c_true, dtype=float))
+        # robot, a floor above the controller, registered by it (register_sizing)
+        if not _SIZING:
+            raise ValueError(
+                "torque.resistance_margin / learner.kd_deadband are sized to robot check's identification: import "
+                "bioform_mj.run (or bioform_mj.assess.learner_sizing) first (bioform_mj.load and bioform do)"
+            )
+        sized = _SIZING[-1](sc, plant, np.asarray(c_true, dtype=float))
     band = sc.learner.projection_band  # opt-in (design §14.4): a band around the prior c_true, not c_bounds × ĉ(0)
     c_lo, c_hi = (band[0] * c_true, band[1] * c_true) if band else (lo * c_hat0, hi * c_hat0)
     return StackParams(
@@ -99,8 +124,8 @@ def _cbf_params(sc: Any, plant: Any) -> dict[str, Any]:
         return {}
     from bioform_mj.formation.obstacles import to_rows
 
-    radius = getattr(plant, "footprint_radius", None)
-    obstacles = getattr(plant, "obstacles", None) or []
+    radius = plant.footprint_radius if isinstance(plant, Footprints) else None
+    obstacles = (plant.obstacles if isinstance(plant, Obstacles) else None) or []
     return dict(
         cbf=True,
         cbf_par=(sf.lookahead, sf.gain, sf.distance, sf.range, sf.pass_right),

@@ -266,11 +266,13 @@ class FormationParallelEnv(ParallelEnv):
         self.L_vel = np.ascontiguousarray(lv, dtype=float)
 
     def _build_stack(self, sc: Scenario, plant_c_true: np.ndarray | None) -> None:
+        import bioform_mj.run  # noqa: F401  (registers the opt-in gain sizing with stack_params, design §14.4)
+        from bioform_mj.control.base import TorqueLimited
         from bioform_mj.control.params import stack_params
         from bioform_mj.control.stack import ControlStack
 
         c = np.array(sc.plant.c_true, dtype=float)[None, :].repeat(sc.n, 0) if plant_c_true is None else plant_c_true
-        tau_max = getattr(self._plant, "tau_max", None) if self._plant is not None else None
+        tau_max = self._plant.tau_max if isinstance(self._plant, TorqueLimited) else None
         self._stack = ControlStack(self.graph, stack_params(sc, c, tau_max))
 
     def _build_plant(self, sc: Scenario) -> None:

@@ -40,15 +40,19 @@ class ControllerPolicy:
 
     def reset(self) -> None:
         """After ``env.reset``: the controller's initial estimates, as ``bioform run`` sets them."""
+        from bioform_mj.control.base import TorqueLimited
         from bioform_mj.control.params import stack_params
-        from bioform_mj.run.simulate import initial_estimates
+        from bioform_mj.control.stack import ControlStack
+        from bioform_mj.run.simulate import initial_estimates  # the run package registers the opt-in sizing
 
         env = self.env
         if self.controller is None or isinstance(self.controller, ControlStack):
             p = env._plant
             c = getattr(env, "nominal_c_true", None)  # the prior of the scenario's robot, not a randomised truth
             c = p.c_true() if c is None else c
-            self.controller = ControlStack(env.graph, stack_params(env._sc, c, getattr(p, "tau_max", None)))
+            self.controller = ControlStack(
+                env.graph, stack_params(env._sc, c, p.tau_max if isinstance(p, TorqueLimited) else None)
+            )
         self.controller.reset(initial_estimates(env._sc, env._pose, env.L_pose[0]), env._vel)  # as sim.simulate
         self.verr[:] = 0.0
         self._fast = None

@@ -158,10 +158,10 @@ def provenance(sc: Any) -> dict[str, Any]:
             with contextlib.suppress(BioformError, OSError):
                 ref = resolve_robot(r)
                 try:  # a URDF: its package:// meshes and xacro includes, as the import finds them (issue 28)
-                    from bioform_mj.robots.files import urdf_files
-                    from bioform_mj.robots.urdf import is_urdf
+                    from bioform_mj.robots.formats import format_of
 
-                    files.update(urdf_files(ref, file_hash) if is_urdf(ref.model) else model_files(ref.model))
+                    read = format_of(ref.model).files  # design §12: the robot's format says what it reads
+                    files.update(read(ref, file_hash) if read is not None else model_files(ref.model))
                 except BioformError:
                     files.update(model_files(ref.model))
     return {"version": __version__, "code": code_hash(), "mujoco": mj, "files": files}

@@ -1,7 +1,7 @@
 """A run's ``scene.xml`` that loads on its own (design §12): the asset files copied beside it.
 
 The composed scene names every robot's mesh, skin, height-field and texture file by its absolute
-path (:func:`bioform_mj.robots.prepare.absolute_asset_files`; URDF meshes likewise). :func:`write_scene`
+path (:func:`bioform_mj.robots.mjcf.absolute_asset_files`; URDF meshes likewise). :func:`write_scene`
 copies each such file into ``assets/`` of the run folder and points the saved XML at the copy, so
 the folder can be moved, shared or opened in a viewer (``python -m mujoco.viewer
 --mjcf=run/scene.xml``) from any working directory, and the XML holds no path of the machine

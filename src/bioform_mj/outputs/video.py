@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -65,6 +65,14 @@ class VideoOptions:
         return self
 
 
+@runtime_checkable
+class _MujocoScene(Protocol):
+    """A plant whose state is a MuJoCo scene (its ``qpos`` is captured as is; this floor knows no plant, design §0)."""
+
+    model: Any
+    data: Any
+
+
 class FrameCapture:
     """Observer that snapshots the robots every ``1/fps`` s of simulated time (no rendering)."""
 
@@ -82,7 +90,7 @@ class FrameCapture:
     def start(self, run: Any) -> None:
         """Note whether the plant is a MuJoCo one (its ``qpos`` is then captured as is)."""
         plant = run.plant
-        self._data = plant.data if hasattr(plant, "data") and hasattr(plant, "model") else None
+        self._data = plant.data if isinstance(plant, _MujocoScene) else None
 
     def sample(self, run: Any) -> None:
         """Copy the state of this instant (a few small arrays)."""

@@ -41,7 +41,8 @@ class Plant(Protocol):
 
 # ---------------------------------------------------------------------------------------
 # Capabilities: what a plant may offer beyond :class:`Plant`, each a protocol checked with ``isinstance``
-# by the loop, the summary, the outcomes and the hardware verdict (design §22), never by the plant's kind.
+# by the loop, the summary, the outcomes and the hardware verdict (design §22), never by the plant's kind. What the
+# controller's builder reads (torque limits, footprints, obstacles) is declared where it is read, control/base.py.
 # ---------------------------------------------------------------------------------------
 
 
@@ -109,13 +110,6 @@ class ContactWatch(Protocol):
 
     def contact_watch(self) -> Any:
         """What the watch recorded (:func:`bioform_mj.formation.safety.follower_fields` reads it)."""
-
-
-@runtime_checkable
-class Obstacles(Protocol):
-    """Holds obstacles (:class:`~bioform_mj.formation.obstacles.Obstacle` rows, design §19)."""
-
-    obstacles: Sequence[Any]
 
 
 @runtime_checkable

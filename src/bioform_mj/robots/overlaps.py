@@ -16,7 +16,6 @@ Imports nothing of the project at module level but :mod:`bioform_mj.robots.conta
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -126,15 +125,13 @@ def published_model(entry: Any) -> mujoco.MjModel:
     """The robot's model as its file gives it, before the scene changes anything: an MJCF compiled as it
     stands; a URDF imported (design §12) with MuJoCo's own collision rules (``self_collide``: every pair
     but parent–child), so that its overlaps are found whatever the scene's convention."""
+    from bioform_mj.robots.formats import format_of
     from bioform_mj.robots.refs import resolve_robot
-    from bioform_mj.robots.urdf import import_urdf, is_urdf
 
     ref = resolve_robot(entry)
-    if is_urdf(Path(ref.model)):
-        return import_urdf(replace(ref, self_collide=True)).model
-    from bioform_mj.robots.mjcf_assets import open_mjcf  # design §12: its files inside its folder
-
-    return open_mjcf(ref.model, ref.asset_roots).compile()
+    if (published := format_of(Path(ref.model)).published) is not None:  # design §12: the format's reading
+        return published(ref)
+    return mujoco.MjSpec.from_file(str(ref.model)).compile()
 
 
 def _why_not(scene: mujoco.MjModel, b1: int, b2: int, urdf: bool) -> str:
@@ -159,11 +156,11 @@ def self_contacts_at_rest(
     overlap and the scene's contact, m), ``force_n``/``points`` (the scene's, 0 where it has none) and
     ``simulated`` (the scene's filter collides the pair: MJCF as the file says, less what frozen joints weld;
     URDF off by convention). Returns ``(pairs, notes)``."""
+    from bioform_mj.robots.formats import format_of
     from bioform_mj.robots.refs import resolve_robot
-    from bioform_mj.robots.urdf import is_urdf
 
     ref = resolve_robot(entry)
-    urdf = is_urdf(Path(ref.model)) and not ref.self_collide
+    urdf = not format_of(Path(ref.model)).self_collision and not ref.self_collide  # the URDF/Gazebo convention
     from bioform_mj.robots.analysis import layout_of
 
     pub = published_model(entry)

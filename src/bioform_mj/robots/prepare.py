@@ -3,7 +3,8 @@
 A robot is an MJCF file plus a mapping (:class:`bioform_mj.robots.refs.RobotRef`); see the README,
 "What a robot needs". A URDF file is imported first (:mod:`bioform_mj.robots.urdf`, design §12: free
 root link, links kept as bodies, meshes found, every guess a note), then treated the same. An
-MJCF robot's asset files are made absolute (:func:`absolute_asset_files`). :func:`prepare_robot`
+MJCF robot's asset files are made absolute (:func:`bioform_mj.robots.mjcf.absolute_asset_files`); each format is
+one entry of :mod:`bioform_mj.robots.formats`. :func:`prepare_robot`
 resolves it once, from the compiled model:
 
 - the base body (``base`` by convention) carrying a free joint (one is added to a top-level
@@ -48,7 +49,7 @@ import numpy as np
 
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.analysis import _analyse
-from bioform_mj.robots.keyframe import apply_keyframe
+from bioform_mj.robots.formats import format_of
 from bioform_mj.robots.layout import (
     _LAYOUT_TEXT,
     CONTACT_PRIORITY,
@@ -56,7 +57,6 @@ from bioform_mj.robots.layout import (
     DC_INPUT_VOLTAGE,
     ModelError,
     RobotLayout,
-    _one_line,
     _spec_actuator,
     _spec_body,
     _spec_geom,
@@ -64,9 +64,8 @@ from bioform_mj.robots.layout import (
     dc_constants,
 )
 from bioform_mj.robots.refs import RobotRef, resolve_robot
-from bioform_mj.robots.urdf import import_urdf, is_urdf
 
-__all__ = ["prepare_robot", "load_robot", "absolute_asset_files"]
+__all__ = ["prepare_robot", "load_robot"]
 
 
 def _wheel_proxy(
@@ -159,38 +158,8 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
     except InputError as exc:
         raise ModelError(str(exc)) from None
     path = Path(ref.model)
-    imported: tuple[str, ...] = ()
-    key, key_q, key_notes = "", (), ()
-    if is_urdf(path):
-        if ref.keyframe and ref.keyframe.lower() != "none":
-            raise ModelError(
-                f"{path}: keyframe '{ref.keyframe}': a URDF has no keyframes (remove the mapping's keyframe)"
-            )  # design §12: a URDF stays a robot (free root, links kept, meshes found)
-        try:
-            imp = import_urdf(ref)
-        except InputError as exc:
-            raise ModelError(str(exc)) from None
-        spec, model, ref, imported = imp.spec, imp.model, imp.ref, imp.notes
-    else:
-        from bioform_mj.robots.mjcf_assets import open_mjcf  # includes and assets inside its folder (design §12)
-        from bioform_mj.robots.sanity import spec_file_problem  # a FIFO or a 10 GB mesh: before the compiler opens it
-
-        try:
-            spec = open_mjcf(path, ref.asset_roots)
-            if ref.balance_inertia:  # the mapping's balance_inertia (design §12)
-                spec.compiler.balanceinertia = True
-            bad = spec_file_problem(spec)
-            model = None if bad else spec.compile()
-        except InputError as exc:  # an asset outside the robot's folder, a FIFO: before MuJoCo read it
-            raise ModelError(str(exc)) from None
-        except Exception as exc:  # mujoco raises ValueError; be robust to other types
-            from bioform_mj.robots.compile_hints import compile_hint
-
-            raise ModelError(f"{path}: does not compile: {_one_line(exc)}{compile_hint(exc)}") from exc
-        if bad:
-            raise ModelError(f"{path}: {bad}")
-        absolute_asset_files(spec)
-        spec, model, key, key_q, key_notes = apply_keyframe(spec, model, path, ref)  # design §13.2
+    # design §12: the file's format (robots/formats.py) loads it: compiled, with what its import guessed
+    spec, model, ref, imported, key, key_q, key_notes = format_of(path).load(ref, path)
     from bioform_mj.robots.sanity import model_value_problem  # NaN or negative masses, axes, friction: refused
 
     if bad := model_value_problem(model):
@@ -293,32 +262,6 @@ def _hold_and_contacts(spec, model, plan, acts, sjoints, sgeoms) -> None:
             data=data,
             solref=[2 * dt, 1.0],  # as stiff as the step allows (MuJoCo: timeconst >= 2 dt)
         )
-
-
-def absolute_asset_files(spec: mujoco.MjSpec) -> None:
-    """Make the spec's mesh, skin, height-field and texture file names absolute (resolved against
-    the model file's folder and its ``meshdir``/``texturedir``), so that a scene composed of robots
-    from many folders names each file once and wholly (design §12: a run's ``scene.xml`` copies
-    them beside it, :func:`bioform_mj.outputs.scenexml.write_scene`). Files in the spec's own
-    asset dictionary are left alone."""
-    top = Path(spec.modelfiledir or ".")
-    own = set(spec.assets) if spec.assets else set()
-
-    def fix(name: str, folder: str) -> str:
-        if not name or name in own or Path(name).is_absolute():
-            return name
-        return str((top / folder / name).resolve())
-
-    for m in spec.meshes:
-        m.file = fix(m.file, spec.meshdir)
-    for sk in spec.skins:
-        sk.file = fix(sk.file, spec.meshdir)
-    for h in spec.hfields:
-        h.file = fix(h.file, spec.meshdir)
-    for t in spec.textures:
-        t.file = fix(t.file, spec.texturedir)
-        if any(t.cubefiles):
-            t.cubefiles = [fix(c, spec.texturedir) for c in t.cubefiles]
 
 
 def load_robot(entry: RobotRef | str | Path) -> mujoco.MjSpec:

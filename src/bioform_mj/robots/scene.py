@@ -40,7 +40,8 @@ from bioform_mj.robots.layout import (
     subtree,
     welded_to,
 )
-from bioform_mj.robots.prepare import absolute_asset_files, load_robot, prepare_robot
+from bioform_mj.robots.mjcf import absolute_asset_files
+from bioform_mj.robots.prepare import load_robot, prepare_robot
 from bioform_mj.robots.surfaces import add_min_friction_pairs
 
 log = logging.getLogger(__name__)
@@ -249,6 +250,9 @@ def build_scene(
         default: prepared here.
 
     The scene's ``<option>`` (integrator, solver, …) is the first robot file's.
+
+    The steps: the arguments checked, the robots prepared, :func:`_new_spec`, :func:`_add_floor`,
+    :func:`_add_obstacles`, :func:`_add_lights`, :func:`_add_markers`, :func:`_attach_robots`, the friction pairs.
     """
     poses = np.asarray(initial_poses, dtype=float)
     n = len(robot_files)
@@ -264,13 +268,27 @@ def build_scene(
     if prepared is not None and len(prepared) != n:
         raise ValueError(f"prepared must have {n} entries, got {len(prepared)}")
     prepared = list(prepared) if prepared is not None else [prepare_robot(f) for f in robot_files]
-    robots = [p[0] for p in prepared]
+    spec = _new_spec(prepared[0][0], timestep)
+    world = spec.worldbody
+    _add_floor(world, floor_friction, friction_patch)
+    _add_obstacles(world, obstacles)
+    _add_lights(world)
+    # the cameras' distances and the markers' sizes are the paper robot's × u, the robots' size relative to it
+    _add_markers(world, poses, robot_unit([p[1].half_track for p in prepared]), slots)
+    _attach_robots(spec, prepared, poses, payloads, sensors)
+    # design §13.3: on the scene's own slippery surfaces a robot's priority geom gets the smaller friction
+    surfaces = (["floor"] if floor_friction is not None else []) + (["friction_patch"] if friction_patch else [])
+    add_min_friction_pairs(spec, surfaces)
+    return spec
 
+
+def _new_spec(first: mujoco.MjSpec, timestep: float | None) -> mujoco.MjSpec:
+    """The empty scene: the first robot's ``<option>`` (step ``timestep`` s where given), the view, the assets."""
     spec = mujoco.MjSpec()
     spec.modelname = "bioform_scene"
     spec.compiler.degree = False
     spec.compiler.autolimits = True
-    spec.option = robots[0].option  # copies the values
+    spec.option = first.option  # copies the values
     if timestep is not None:
         spec.option.timestep = timestep
     spec.visual.global_.offwidth = 1280
@@ -279,8 +297,12 @@ def build_scene(
     spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
     spec.stat.extent = 5.0
     _add_assets(spec)
+    return spec
 
-    world = spec.worldbody
+
+def _add_floor(world: mujoco.MjsBody, floor_friction: float | None, friction_patch: Sequence[float] | None) -> None:
+    """The floor plane (sliding friction ``floor_friction`` with priority 1 where given) and the optional
+    low-friction patch ``(x0, y0, x1, y1, mu)`` (m, m, m, m, -); ValueError for a bad one (design §13.3)."""
     floor = world.add_geom(
         name="floor",
         type=mujoco.mjtGeom.mjGEOM_PLANE,
@@ -311,7 +333,11 @@ def build_scene(
             condim=3,
             rgba=[0.55, 0.8, 1.0, 0.45],
         )
-    for ob in obstacles:  # design §19: static geoms of the world body
+
+
+def _add_obstacles(world: mujoco.MjsBody, obstacles: Sequence) -> None:
+    """The obstacles as static box or cylinder geoms of the world body, standing on the floor (design §19)."""
+    for ob in obstacles:
         half_h = ob.size[2] if ob.shape == "box" else ob.size[1]
         world.add_geom(
             name=ob.name,
@@ -322,6 +348,10 @@ def build_scene(
             condim=3,
             rgba=[0.45, 0.42, 0.38, 1.0],  # outputs.figures.OBSTACLE_RGB
         )
+
+
+def _add_lights(world: mujoco.MjsBody) -> None:
+    """Two directional lights, without shadows."""
     world.add_light(
         name="sun",
         type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
@@ -341,9 +371,11 @@ def build_scene(
         castshadow=False,
     )
 
-    # cameras ride on a mocap body that whoever renders keeps on the formation centroid (Markers); the
-    # cameras' distances and the markers' sizes are the paper robot's × u, the robots' size relative to it
-    u = robot_unit([p[1].half_track for p in prepared])
+
+def _add_markers(world: mujoco.MjsBody, poses: np.ndarray, u: float, slots: bool) -> None:
+    """The mocap bodies: the centroid carrying the cameras (whoever renders keeps it on the formation's centroid,
+    :class:`Markers`), the leader's ghost and, with ``slots``, one marker per follower's slot at ``poses`` (n, 3);
+    sizes and distances scaled by the robot unit ``u`` (:func:`robot_unit`)."""
     centre = poses[:, :2].mean(axis=0)
     centroid = world.add_body(name="centroid", mocap=True, pos=[centre[0], centre[1], 0.0])
     chase = np.array([-6.0, -6.0, 6.0]) * u
@@ -367,7 +399,7 @@ def build_scene(
         **ghost,
     )
     if slots:
-        for i in range(n):
+        for i in range(len(poses)):
             slot = world.add_body(name=f"slot_{i + 1}", mocap=True, pos=[poses[i, 0], poses[i, 1], MARKER_Z])
             slot.add_geom(
                 name=f"slot_{i + 1}_marker",
@@ -381,6 +413,17 @@ def build_scene(
                 density=0,
             )
 
+
+def _attach_robots(
+    spec: mujoco.MjSpec,
+    prepared: Sequence[tuple],
+    poses: np.ndarray,
+    payloads: Sequence[tuple[float, float]] | None,
+    sensors: bool,
+) -> None:
+    """Attaches each prepared robot (with its payload and sensors) as ``f{i+1}/``: its axle midpoint at the pose's
+    (x, y) m, its tyres' lowest point on the floor, heading θ rad."""
+    world = spec.worldbody
     for i, ((robot, layout, axle_world, base_yaw), pose) in enumerate(zip(prepared, poses)):
         if payloads is not None:
             mass_kg, inertia_kgm2 = payloads[i]
@@ -397,10 +440,6 @@ def build_scene(
         r_floor = _tyre_radius(layout)
         frame = world.add_frame(pos=[pose[0] - mx, pose[1] - my, r_floor - axle_world[2]], quat=yaw_quat(yaw))
         spec.attach(robot, prefix=follower_prefix(i), frame=frame)
-    # design §13.3: on the scene's own slippery surfaces a robot's priority geom gets the smaller friction
-    surfaces = (["floor"] if floor_friction is not None else []) + (["friction_patch"] if friction_patch else [])
-    add_min_friction_pairs(spec, surfaces)
-    return spec
 
 
 #: names of the sensors :func:`add_sensors` puts on a robot (the follower prefix is added on attach)

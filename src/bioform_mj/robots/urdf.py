@@ -62,6 +62,7 @@ __all__ = [
     "URDF_SUFFIXES",
     "MESH_NATIVE",
     "is_urdf",
+    "load_urdf",
     "find_package",
     "package_search_path",
     "check_file",
@@ -101,6 +102,22 @@ class UrdfImport:
 
 def _one_line(msg: object) -> str:
     return " ".join(str(msg).split())
+
+
+def load_urdf(ref: RobotRef, path: Path) -> tuple[Any, ...]:
+    """``(spec, model, ref, import notes, keyframe, keyframe qpos, keyframe notes)`` of the URDF (or xacro) file
+    ``path``, imported by :func:`import_urdf` (design §12: a URDF stays a robot: free root, links kept, meshes
+    found); the format's loader in :mod:`bioform_mj.robots.formats`. A URDF has no keyframes: a mapping that names
+    one is refused. Raises :class:`~bioform_mj.robots.layout.ModelError` (exit 2) naming the file."""
+    from bioform_mj.robots.layout import ModelError
+
+    if ref.keyframe and ref.keyframe.lower() != "none":
+        raise ModelError(f"{path}: keyframe '{ref.keyframe}': a URDF has no keyframes (remove the mapping's keyframe)")
+    try:
+        imp = import_urdf(ref)
+    except InputError as exc:
+        raise ModelError(str(exc)) from None
+    return imp.spec, imp.model, imp.ref, imp.notes, "", (), ()
 
 
 def is_urdf(path: str | Path) -> bool:

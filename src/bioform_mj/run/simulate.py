@@ -26,14 +26,16 @@ import numpy as np
 from bioform_mj.assess.outcomes import (
     slots_of,
 )
+from bioform_mj.control.base import Obstacles
 from bioform_mj.control.kernel import new_state
 from bioform_mj.control.registry import build_controller, is_builtin
 from bioform_mj.core.engine import Bounds, Formation, LogArrays, Loop, new_acc, new_log, new_metrics
 from bioform_mj.core.errors import ControllerError, Diverged, OutcomeWarning, RobotWarning
 from bioform_mj.formation.disturbance import Harmonic as HarmonicDisturbance
 from bioform_mj.outputs.mjlog import api_warnings
-from bioform_mj.plants.base import CompiledChunk, Obstacles, Plant, RobotModels, Sensing, Unmodelled
+from bioform_mj.plants.base import CompiledChunk, Plant, RobotModels, Sensing, Unmodelled
 from bioform_mj.plants.ideal import IdealPlant
+from bioform_mj.plants.registry import plant_factory, register_plant
 from bioform_mj.run.hooks import (
     _add_outcome,
     check_controller,
@@ -146,19 +148,35 @@ def import_warnings(plant: Any) -> list[str]:
 
 
 def make_plant(sc: Scenario) -> Plant:
-    """The plant named by ``sc.plant.kind``, at the scenario's initial poses."""
+    """The plant named by ``sc.plant.kind``, at the scenario's initial poses: the factory registered for that kind
+    (:func:`bioform_mj.plants.registry.register_plant`; the shipped ones below, registered when this module is
+    imported)."""
+    return plant_factory(sc.plant.kind)(sc)
+
+
+def _disturbance(sc: Scenario) -> HarmonicDisturbance:
+    """The scenario's harmonic disturbance ``d(t)`` (eq. 34)."""
+    return HarmonicDisturbance(sc.n, sc.disturbance.bias, sc.disturbance.amp, sc.disturbance.freq, sc.disturbance.phase)
+
+
+def ideal_plant(sc: Scenario) -> IdealPlant:
+    """The paper's ideal plant (eq. 34) of ``sc``: ``plant.c_true``, optional lumped mass and inertia."""
+    return IdealPlant(
+        np.array(sc.plant.c_true),
+        sc.initial_poses(),
+        sc.sim.control_dt,
+        sc.sim.physics_dt,
+        _disturbance(sc),
+        mass=sc.plant.mass,
+        inertia=sc.plant.inertia,
+    )
+
+
+def mujoco_plant(sc: Scenario) -> Plant:
+    """The MuJoCo plant of ``sc``'s robots (design §8, §12, §19): sensing, friction patch, obstacles; refuses
+    impossible initial poses (InputError) and warns where contacts are not watched."""
     poses = sc.initial_poses()
-    dist = HarmonicDisturbance(sc.n, sc.disturbance.bias, sc.disturbance.amp, sc.disturbance.freq, sc.disturbance.phase)
-    if sc.plant.kind == "ideal":
-        return IdealPlant(
-            np.array(sc.plant.c_true),
-            poses,
-            sc.sim.control_dt,
-            sc.sim.physics_dt,
-            dist,
-            mass=sc.plant.mass,
-            inertia=sc.plant.inertia,
-        )
+    dist = _disturbance(sc)
     from bioform_mj.plants.mujoco.plant import MujocoPlant  # imported only when asked: the ideal plant needs no MuJoCo
     from bioform_mj.robots.refs import resolve_robot
 
@@ -203,6 +221,10 @@ def make_plant(sc: Scenario) -> Plant:
         )
         raise InputError("impossible initial poses" + jit + ": " + "; ".join(bad))
     return plant
+
+
+register_plant("ideal", ideal_plant)
+register_plant("mujoco", mujoco_plant)
 
 
 def initial_estimates(sc: Scenario, pose0: np.ndarray, leader_pose0: np.ndarray) -> np.ndarray:

@@ -221,20 +221,16 @@ def validate(sc: Scenario) -> None:
     if len(pc.robots) not in (1, n):
         raise ScenarioError("plant.robots", f"expected 1 or {n} robot models, got {len(pc.robots)}")
     if pc.kind == "mujoco":
+        from bioform_mj.robots.formats import format_of
         from bioform_mj.robots.refs import resolve_robot
-        from bioform_mj.robots.urdf import check_file, is_urdf
 
         for name, folder in pc.package_path:
             if not Path(folder).is_dir():
                 raise ScenarioError(f"plant.package_path.{name}", f"directory '{folder}' does not exist")
         for r in pc.robots:
             ref = resolve_robot(r)  # raises InputError naming an unknown robot or a missing file
-            if is_urdf(ref.model):
-                check_file(ref)  # design §12: root, package://, meshes, wheels: before any work
-            else:  # design §12: its includes and assets inside its folder, before MuJoCo reads anything
-                from bioform_mj.robots.mjcf_assets import confine_mjcf
-
-                confine_mjcf(ref.model, ref.asset_roots)
+            if (precheck := format_of(ref.model).precheck) is not None:
+                precheck(ref)  # design §12 (a URDF: root, package://, meshes, wheels): before any work
     _validate_sensing(sc)
 
     d = sc.disturbance

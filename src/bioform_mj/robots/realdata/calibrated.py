@@ -27,7 +27,7 @@ CALIBRATION_TEXT = "bioform_calibration"
 
 
 def _source_spec(ref: RobotRef) -> mujoco.MjSpec:
-    from bioform_mj.robots.prepare import absolute_asset_files
+    from bioform_mj.robots.mjcf import absolute_asset_files
     from bioform_mj.robots.urdf import import_urdf, is_urdf
 
     if is_urdf(Path(ref.model)):

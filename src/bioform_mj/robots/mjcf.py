@@ -1,0 +1,71 @@
+"""The MJCF robot format (design §12, §13.2): a MuJoCo model file read as published, its keyframe baked in.
+
+:func:`load_mjcf` is the format's loader in the robot-format registry (:mod:`bioform_mj.robots.formats`);
+:func:`absolute_asset_files` makes its asset file names absolute.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import mujoco
+
+from bioform_mj.robots.keyframe import apply_keyframe
+from bioform_mj.robots.layout import ModelError, _one_line
+from bioform_mj.robots.refs import RobotRef
+
+__all__ = ["absolute_asset_files", "load_mjcf"]
+
+
+def load_mjcf(ref: RobotRef, path: Path) -> tuple[Any, ...]:
+    """``(spec, model, ref, import notes, keyframe, keyframe qpos, keyframe notes)`` of the MJCF file ``path``
+    (compiled; the mapping's ``balance_inertia`` applied; the keyframe of design §13.2 baked in). Raises
+    :class:`~bioform_mj.robots.layout.ModelError` (exit 2) naming the file."""
+    from bioform_mj.core.errors import InputError
+    from bioform_mj.robots.mjcf_assets import open_mjcf  # includes and assets inside its folder (design §12)
+    from bioform_mj.robots.sanity import spec_file_problem  # a FIFO or a 10 GB mesh: before the compiler opens it
+
+    try:
+        spec = open_mjcf(path, ref.asset_roots)
+        if ref.balance_inertia:  # the mapping's balance_inertia (design §12)
+            spec.compiler.balanceinertia = True
+        bad = spec_file_problem(spec)
+        model = None if bad else spec.compile()
+    except InputError as exc:  # an asset outside the robot's folder, a FIFO: before MuJoCo read it
+        raise ModelError(str(exc)) from None
+    except Exception as exc:  # mujoco raises ValueError; be robust to other types
+        from bioform_mj.robots.compile_hints import compile_hint
+
+        raise ModelError(f"{path}: does not compile: {_one_line(exc)}{compile_hint(exc)}") from exc
+    if bad:
+        raise ModelError(f"{path}: {bad}")
+    absolute_asset_files(spec)
+    spec, model, key, key_q, key_notes = apply_keyframe(spec, model, path, ref)  # design §13.2
+    return spec, model, ref, (), key, key_q, key_notes
+
+
+def absolute_asset_files(spec: mujoco.MjSpec) -> None:
+    """Make the spec's mesh, skin, height-field and texture file names absolute (resolved against
+    the model file's folder and its ``meshdir``/``texturedir``), so that a scene composed of robots
+    from many folders names each file once and wholly (design §12: a run's ``scene.xml`` copies
+    them beside it, :func:`bioform_mj.outputs.scenexml.write_scene`). Files in the spec's own
+    asset dictionary are left alone."""
+    top = Path(spec.modelfiledir or ".")
+    own = set(spec.assets) if spec.assets else set()
+
+    def fix(name: str, folder: str) -> str:
+        if not name or name in own or Path(name).is_absolute():
+            return name
+        return str((top / folder / name).resolve())
+
+    for m in spec.meshes:
+        m.file = fix(m.file, spec.meshdir)
+    for sk in spec.skins:
+        sk.file = fix(sk.file, spec.meshdir)
+    for h in spec.hfields:
+        h.file = fix(h.file, spec.meshdir)
+    for t in spec.textures:
+        t.file = fix(t.file, spec.texturedir)
+        if any(t.cubefiles):
+            t.cubefiles = [fix(c, spec.texturedir) for c in t.cubefiles]
