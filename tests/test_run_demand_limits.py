@@ -148,6 +148,7 @@ def test_a_run_warns_each_exceeded_limit_with_its_ratio_and_the_verdict_is_never
         "sign_torque",
         "torque_vs_traction",
         "accel_at_c_bound",  # the method learns: the sign terms at ĉ's projection bound (issue 27)
+        "wheel_torque",  # the motion and the wheel's own resistance against τ_max (issue 27)
     }
     ws = items["wheel_speed"]
     assert ws["limit"] == pytest.approx(0.197, abs=0.001) and ws["ratio"] == pytest.approx(ws["value"] / ws["limit"])
