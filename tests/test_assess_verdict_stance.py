@@ -226,25 +226,39 @@ def test_a_drag_beyond_learner_drag_range_is_said_and_a_tip_is_the_cause_after_a
     assert "caster 'lidar_link' braking" in upright
 
 
+def _paper_wheel_speed(scale: float, half_track: float) -> float:
+    """The paper leader's (x = t, y = 3 + 0.4 sin t, × ``scale``) largest wheel ground speed |υ| + l|ω| by hand:
+    υ = scale √(1 + 0.16 cos² t), ω = −0.4 sin t / (1 + 0.16 cos² t) (the heading atan(0.4 cos t) differentiated),
+    over 20 s on a 0.1 ms grid (world-frame slots move as the leader)."""
+    t = np.arange(0.0, 20.0, 1e-4)
+    c2 = 0.16 * np.cos(t) ** 2
+    return float(np.max(scale * np.sqrt(1 + c2) + half_track * np.abs(0.4 * np.sin(t) / (1 + c2))))
+
+
 def test_torque_the_wheels_damper_absorbs_is_the_motors_not_the_tyres(tmp_path):
-    """Cruising at the paper leader's top speed (max |υ_r| = sqrt(1 + 0.4²) = 1.077 m/s) against wheel damping c
-    takes c υ / r per wheel. c = 0.3: 3.2 N·m, within the 5 N·m motor though beyond the traction limit of μ = 0.2
+    """Cruising at the paper leader's peak wheel ground speed (max |υ_r| + l|ω_r|, by hand; above the leader's
+    sqrt(1 + 0.4²) = 1.077 m/s: the outer wheel of its turns, issue 27) against wheel damping c takes c υ / r per
+    wheel. c = 0.3: ≈ 3.3 N·m, within the 5 N·m motor though beyond the traction limit of μ = 0.2
     (0.2 · 120 N · 0.1 m ≈ 2.4 N·m): the damper absorbs it before the tyre, no warning (it blamed traction).
-    c = 0.6: 6.5 N·m, beyond the motor: a warning naming the damper and the motor limit."""
+    c = 0.6: ≈ 6.6 N·m, beyond the motor: a warning naming the damper, the motor limit and both speeds."""
     sc = load(
         "paper",
         plant="mujoco",
         overrides=["formation.initial_poses=[[0,0,0]]", "formation.offsets=[[3,0]]", "graph.edges=[]"],
     )
-    v_top = float(np.hypot(1.0, 0.4))
     low = MujocoPlant([str(_damped(tmp_path, 0.3, "0.001", "0.2"))], sc.initial_poses(), 0.001, 0.001)
-    assert 0.3 * v_top / 0.1 > 0.2 * (MASS * G / 2) * 0.1  # beyond the tyre's traction μ N r (N: half the weight)
+    v_wheel = _paper_wheel_speed(1.0, low.params[0].half_track)
+    assert v_wheel > float(np.hypot(1.0, 0.4))
+    assert 0.3 * v_wheel / 0.1 > 0.2 * (MASS * G / 2) * 0.1  # beyond the tyre's traction μ N r (N: half the weight)
     warned = feasibility(sc, low)
     assert not any("cruising" in w for w in warned), warned
     high = MujocoPlant([str(_damped(tmp_path, 0.6, "0.001"))], sc.initial_poses(), 0.001, 0.001)
     said = [w for w in feasibility(sc, high) if "cruising" in w]
     assert len(said) == 1 and "damper (0.6 N·m·s/rad)" in said[0] and "beyond the motor limit 5 N·m" in said[0]
-    assert f"absorb {0.6 * v_top / 0.1:.3g} N·m per wheel" in said[0]
+    assert f"absorb {0.6 * v_wheel / 0.1:.3g} N·m per wheel" in said[0]
+    assert (
+        f"peak wheel ground speed {v_wheel:.3g} m/s" in said[0] and f"leader's speed {np.hypot(1, 0.4):.3g}" in said[0]
+    )
 
 
 def test_a_compile_error_naming_a_compiler_option_names_the_key_that_sets_it(tmp_path, capsys):

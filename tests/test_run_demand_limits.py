@@ -148,6 +148,7 @@ def test_a_run_warns_each_exceeded_limit_with_its_ratio_and_the_verdict_is_never
         "sign_torque",
         "torque_vs_traction",
         "accel_at_c_bound",  # the method learns: the sign terms at ĉ's projection bound (issue 27)
+        "wheel_torque",  # the motion and the wheel's own resistance against τ_max (issue 27)
     }
     ws = items["wheel_speed"]
     assert ws["limit"] == pytest.approx(0.197, abs=0.001) and ws["ratio"] == pytest.approx(ws["value"] / ws["limit"])
@@ -177,6 +178,19 @@ def test_auto_scales_to_the_robot_and_its_demand_then_fits_the_margins():
     items = compare(sc, peaks(sc, (p.a_eff, p.b_eff), p.half_track, run=simulate), lim)
     assert items["wheel_speed"]["ratio"] <= 0.8 + 1e-6
     assert items["accel"]["ratio"] <= 0.5 + 1e-6 and items["yaw_accel"]["ratio"] <= 0.5 + 1e-6
+
+
+@pytest.mark.slow  # ≈ 4 s alone (the σ search's twins); 0.2 s after the test above (cached)
+def test_auto_time_scale_of_a_shortened_run_is_the_full_runs():
+    """σ is a property of the scenario's motion, not of how long a run watches it (design §21, issue 27 gap 5:
+    TIAGo got σ 2.51 for a 0.3 s run, 2.64 for 20 s): a 0.3 s run of the tb3 preset gets the σ of its 20 s run,
+    bit for bit, and only its own duration × σ; the note says over which span σ was set."""
+    full = load("tb3", ['formation.scale="auto"', 'formation.time_scale="auto"'])
+    short = load("tb3", ['formation.scale="auto"', 'formation.time_scale="auto"', "sim.duration=0.3"])
+    assert short.formation.time_scale == full.formation.time_scale > 1
+    assert short.sim.duration == pytest.approx(0.3 * full.formation.time_scale)
+    assert "over the scenario's first 20 s (unscaled), not only the run's 0.3 s" in short.formation.scale_note
+    assert "not only the run's" not in full.formation.scale_note
 
 
 def test_auto_for_a_robot_without_a_top_speed_says_what_is_missing(tmp_path, capsys):

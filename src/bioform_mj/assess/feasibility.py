@@ -13,7 +13,7 @@ import numpy as np
 
 from bioform_mj.assess.check import YAW_TOL, G, tip_margins
 
-__all__ = ["feasibility", "run_refusals", "slot_accelerations", "GIVEN_TOL"]
+__all__ = ["feasibility", "run_refusals", "slot_accelerations", "slot_wheel_speeds", "GIVEN_TOL"]
 
 #: a mapped wheel_radius/half_track this far (relative) from what the model's geometry says is a
 #: pre-run warning (scene.layout_of notes every difference over 1 %)
@@ -101,6 +101,8 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
     from bioform_mj.robots.contacts import braking_casters, floor_contacts
     from bioform_mj.robots.params import robot_parameters
 
+    wheel_v = slot_wheel_speeds(scenario, t, [p.half_track for p in plant.params])
+
     for i, p in enumerate(plant.params):
         p_file = robot_parameters(plant.model, f"f{i + 1}/", scratch)  # the file's configuration (qpos0)
         change = p.yaw_inertia / p_file.yaw_inertia - 1
@@ -136,17 +138,20 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
         drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
         for _, _, msg in braking_casters(floor, drive_force):
             out.append(f"{who}: {msg}")
-        # cruising at the leader's top speed against the wheel damping c and frictionloss f takes
+        # cruising at the peak wheel ground speed against the wheel damping c and frictionloss f takes
         # c v / r + f per wheel (menagerie Stretch 3: c = 30 N·m·s/rad, 151 N·m at 0.25 m/s); the wheel's own
         # damper absorbs that torque between motor and tyre, so it is the motor's to give, never the tyre's
-        # traction (design §14: at a steady cruise the tyre pushes nothing)
-        v_top = float(np.max(np.abs(vel[:, 0])))
-        cruise = p.wheel_damping * v_top / p.wheel_radius + p.wheel_frictionloss
+        # traction (design §14: at a steady cruise the tyre pushes nothing). The outer wheel of a turn runs
+        # at |υ| + l|ω|, faster than the leader (issue 27: the leader's speed missed PMB-2's 1.1x)
+        v_lead = float(np.max(np.abs(vel[:, 0])))
+        v_wheel = max(float(wheel_v[i]), float(np.max(np.abs(vel[:, 0]) + p.half_track * np.abs(vel[:, 1]))))
+        cruise = p.wheel_damping * v_wheel / p.wheel_radius + p.wheel_frictionloss
         if p.wheel_damping and cruise > motor:
             out.append(
-                f"{who}: cruising at the leader's {v_top:.3g} m/s, the wheel's own damper ({p.wheel_damping:g} "
-                f"N·m·s/rad) and frictionloss ({p.wheel_frictionloss:g} N·m) absorb {cruise:.3g} N·m per wheel, "
-                f"beyond the motor limit {motor:.3g} N·m: the robot cannot keep up"
+                f"{who}: cruising at the peak wheel ground speed {v_wheel:.3g} m/s (|υ| + l|ω| of its slot; the "
+                f"leader's speed {v_lead:.3g} m/s), the wheel's own damper ({p.wheel_damping:g} N·m·s/rad) and "
+                f"frictionloss ({p.wheel_frictionloss:g} N·m) absorb {cruise:.3g} N·m per wheel, beyond the motor "
+                f"limit {motor:.3g} N·m: the robot cannot keep up"
             )
         full = 2 * p.a_eff * motor
         if full > min(tips["forward"], tips["backward"]):
@@ -184,6 +189,24 @@ def slot_accelerations(scenario: Any, t: np.ndarray) -> tuple[np.ndarray, np.nda
     # the ends of np.gradient are one-sided: drop the first and last two samples
     sl = slice(2, -2) if len(t) > 8 else slice(None)
     return tan[sl].max(axis=0), cen[sl].max(axis=0), tot[sl].max(axis=0)
+
+
+def slot_wheel_speeds(scenario: Any, t: np.ndarray, half_tracks: Any) -> np.ndarray:
+    """Per follower (n,) the largest wheel ground speed ``|v| + l |ω|`` (m/s) of its formation slot over the
+    times ``t`` (s): ``v`` the slot's speed, ``ω = (v × v̇) / |v|²`` its path's turn rate (0 where the slot moves
+    slower than 1 mm/s), ``l`` the follower's half track (``half_tracks``, m)."""
+    from bioform_mj.assess.outcomes import slots_of
+
+    pose, _, _ = scenario.build_leader().states(t)
+    slots = np.stack([slots_of(scenario, p) for p in pose])  # (T, n, 2)
+    v = np.gradient(slots, t, axis=0)
+    a = np.gradient(v, t, axis=0)
+    speed = np.linalg.norm(v, axis=-1)
+    moving = speed > 1e-3
+    turn = np.where(moving, (v[..., 0] * a[..., 1] - v[..., 1] * a[..., 0]) / np.maximum(speed, 1e-12) ** 2, 0.0)
+    wheel = speed + np.asarray(half_tracks, dtype=float)[None, :] * np.abs(turn)
+    sl = slice(2, -2) if len(t) > 8 else slice(None)  # np.gradient's one-sided ends
+    return wheel[sl].max(axis=0)
 
 
 def run_refusals(plant: Any, scratch: Any, loads: np.ndarray) -> list[str]:

@@ -46,7 +46,7 @@ def demand_of_worlds(scenarios: Sequence[Scenario], plant: Any, robot_check: dic
         groups.setdefault(scenario_key(sc), []).append(w)
     out: list[Any] = [None] * len(scenarios)
     for worlds in groups.values():
-        d = before_run(scenarios[worlds[0]], plant, simulate)
+        d = before_run(scenarios[worlds[0]], plant, simulate, robot_check)
         for w in worlds:
             out[w] = d
         which = "" if len(groups) == 1 else f"world{'s' if len(worlds) > 1 else ''} {_ranges(worlds)}: "

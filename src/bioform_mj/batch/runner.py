@@ -39,7 +39,7 @@ from bioform_mj.batch.support import default_capacity
 from bioform_mj.batch.tables import _check_compatible, _yaw_quat, event_tables, plant_fault_tables
 from bioform_mj.control.stack import ControlStack
 from bioform_mj.core.engine import GUARDS
-from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_TIME, SLIP_V_FLOOR, TIP_ANGLE_DEG
+from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_TIME, TIP_ANGLE_DEG
 from bioform_mj.formation.disturbance import Harmonic
 from bioform_mj.plants.base import DeliveredTorques
 from bioform_mj.run.demand import for_summary as _demand_summary
@@ -131,7 +131,7 @@ class BatchRun:
             row["t_spin"] = ((N - 1) // stride) * stride * dt - 1.0  # sim.follower_outcomes: the last second of rows
             row["tilt_cos"] = math.cos(math.radians(TIP_ANGLE_DEG))
             row["slip_max"] = SLIP_RATIO  # the thresholds of the MuJoCo plant's watch_slip (core/thresholds.py)
-            row["slip_floor"] = SLIP_V_FLOOR
+            row["slip_floor"] = float(plant.slip_floor)  # core.thresholds.slip_v_floor: the plant's robots
             row["slip_need"] = float(plant._slip_need)
             row["odometry"] = 1.0 if sen.on else 0.0
             row["odo_seed"] = float(sc.sim.seed % 2147483647)  # as MujocoPlant: the seed of the gyro noise

@@ -11,6 +11,8 @@ __all__ = [
     "SLIP_RATIO",
     "SLIP_TIME",
     "SLIP_V_FLOOR",
+    "SLIP_V_FLOOR_OF_TOP",
+    "slip_v_floor",
     "SPIN_RAD_S",
     "LOST_FRACTION",
     "LOST_AFTER_S",
@@ -27,6 +29,10 @@ TIP_ANGLE_DEG = 30.0
 SLIP_RATIO = 0.2
 SLIP_TIME = 0.5
 SLIP_V_FLOOR = 0.05
+#: ... and at most this fraction of the slowest robot's top speed (issue 27: DiffBot's top speed 0.015 m/s is below
+#: 0.05 m/s, where every ratio was taken against the floor and no slip could be seen; the paper robot, whose top
+#: speed is not known, and any robot of 1 m/s or more keep 0.05 m/s: their outcomes are unchanged, bit for bit)
+SLIP_V_FLOOR_OF_TOP = 0.05
 #: rad/s: |ω| beyond this over the last second of a run → ``spinning`` (the fault table: at its end)
 SPIN_RAD_S = 6.0
 #: final formation error beyond this fraction of the formation's extent → ``lost`` ...
@@ -39,3 +45,10 @@ LOST_M = 1.0
 C_HAT_BOUND_BAND = 0.01
 #: a learned ĉ farther than this (relative, either component) from c_true at the end: ``c_hat_off``
 C_HAT_OFF = 0.25
+
+
+def slip_v_floor(top_speeds: list[float | None]) -> float:
+    """The slip ratio's speed floor (m/s) for robots of top speeds ``top_speeds`` (m/s at the tyre; None where not
+    known): ``min(SLIP_V_FLOOR, SLIP_V_FLOOR_OF_TOP × the least known top speed)`` (design §21)."""
+    known = [float(v) for v in top_speeds if v is not None and v > 0]
+    return min([SLIP_V_FLOOR, *(SLIP_V_FLOOR_OF_TOP * v for v in known)])

@@ -7,7 +7,9 @@
   its accelerations by 1/σ², so ``σ = max(1, v_wheel / (m_v v_top), √(v̇ / (m_a v̇_lim)),
   √(ω̇ / (m_a ω̇_lim)))`` over the robots, with the margins :data:`SPEED_MARGIN` and
   :data:`ACCEL_MARGIN` (:mod:`bioform_mj.robots.limits` gives ``v_top``, ``v̇_lim``, ``ω̇_lim``).
-  The reason (which limit of which robot set σ) is the summary's ``scale_note``.
+  The reason (which limit of which robot set σ) is the summary's ``scale_note``. The demand is taken over
+  at least :data:`AUTO_HORIZON_S` of the scenario (its own duration where longer): a run shortened by
+  ``sim.duration`` gets the σ of the run it previews (design §21; TIAGo got σ 2.51 for a 0.3 s run, 2.64 for 20 s).
 
 A robot whose limit is unknown (no top speed) is refused (ScenarioError, exit 2) saying what is
 missing and how to give it.
@@ -28,6 +30,9 @@ PAPER_HALF_TRACK = 0.2
 SPEED_MARGIN = 0.8
 #: share of the acceleration and yaw-acceleration limits the scenario may ask (σ from accelerations)
 ACCEL_MARGIN = 0.5
+
+#: s (unscaled): the least span of the scenario whose demand sets σ: the paper's duration (Sec. IV, 20 s)
+AUTO_HORIZON_S = 20.0
 
 _LIMITS: dict[str, tuple[Any, dict[str, Any]]] = {}
 
@@ -88,10 +93,18 @@ def resolve_auto(sc: Any) -> tuple[float, float, str]:
                 f"({lim['top_speed_note']}); or give formation.time_scale a number",
             )
 
+    horizon = max(float(sc.sim.duration), AUTO_HORIZON_S)  # a shortened run previews the full one (design §21)
+
     def need(sigma: float) -> tuple[float, str]:
         """The factor by which the demand at ``sigma`` exceeds the margins (≤ 1: it fits; speeds count
         as ratios, accelerations as their square roots: both then fall as 1/σ under similarity)."""
-        at = apply_scale(dataclasses.replace(sc, formation=dataclasses.replace(f, scale=s, time_scale=sigma)))
+        at = apply_scale(
+            dataclasses.replace(
+                sc,
+                formation=dataclasses.replace(f, scale=s, time_scale=sigma),
+                sim=dataclasses.replace(sc.sim, duration=horizon),
+            )
+        )
         worst, why = 0.0, ""
         for ref, p, lim in robots:
             pk = peaks(at, (p.a_eff, p.b_eff), p.half_track, run=simulate)
@@ -113,6 +126,8 @@ def resolve_auto(sc: Any) -> tuple[float, float, str]:
 
     sigma, fit, why = _solve(need)
     sigma = check_factor("formation.time_scale", sigma)
+    if horizon > float(sc.sim.duration):
+        why += f"; over the scenario's first {horizon:g} s (unscaled), not only the run's {float(sc.sim.duration):g} s"
     if sigma == 1.0:
         notes.append(f"formation.time_scale = 1 (auto: the demand fits the margins as written, {fit:.2f}; {why})")
     else:

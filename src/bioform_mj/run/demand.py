@@ -12,12 +12,19 @@ no torque limit: what the controller asks of a robot that can give everything. F
 - ``sign_torque`` N·m: the sliding-mode sign terms' torque amplitude per wheel, ``c_a / (2 â) +
   c_b / (2 b̂)`` (eqs. 38–39 with the least ``ĉ`` of the run), against ``min(τ_max, τ_traction)``;
 - ``torque_vs_traction`` N·m: the motor limit against the traction limit (above it the wheels skid).
+- ``wheel_torque`` N·m (where the wheel's own resistance is known): the largest torque a wheel needs over the
+  twin's run, ``|(υ̇/a ± ω̇/b)/2 + c φ̇ + f sgn φ̇ + (τ_brake/2) sgn υ|`` with ``φ̇ = (υ ± l ω)/r`` (joint
+  damping ``c`` N·m·s/rad, frictionloss ``f`` N·m, a braking caster's drag ``τ_brake = F r`` N·m on ``τ_a`` as
+  robot check identifies it), against ``τ_max``: the acceleration limits count all of ``τ_max`` as available,
+  this item what the wheel's own resistance leaves of it (design §21);
 - ``accel_at_c_bound`` m/s² (where the method learns): ``2 a min(τ_bound, τ_max)``, the sign terms' torque at the
   learner's lower projection bound (eq. 38 divides by ĉ) as the motors deliver it, against the acceleration limit:
   the start-up a plant that drives ĉ to its bound makes (the ideal twin's ĉ stays near c_true and cannot show it);
 - ``sliding_gain_v`` / ``_w`` (where the robot has a wheel dead band or damping): its resistance,
   ``2 a f + k_υ |υ|max`` m/s² (resp. ``2 b f + k_ω |ω|max`` rad/s²), against the sliding gain
-  ``torque.c`` that must dominate it (eqs. 38–39); the gain scales × 1/σ², the resistance not.
+  ``torque.c`` that must dominate it (eqs. 38–39); the gain scales × 1/σ², the resistance not. A braking
+  caster robot check identifies adds ``a τ_brake`` (its drag force over the mass, m/s²) to ``_v``; its
+  moment on ω needs the caster's lever, which the check does not give, so ``_w`` leaves it out (said in the item).
 
 Each is ``{"value", "limit", "ratio", "unit", "limit_by"}`` (``limit`` None and ``missing`` where the
 robot does not say); a ``warning:`` line per ratio above 1. The ideal run is cached per scenario and
@@ -37,8 +44,10 @@ from typing import Any
 import numpy as np
 
 #: cache entries of another format are recomputed
-CACHE_FORMAT = 3
+CACHE_FORMAT = 4
 _MEMO: dict[str, dict[str, Any]] = {}
+#: the twin's log (t, vel) per key, this process only: a wheel not yet asked about costs no second twin
+_LOGS: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
 
 def ideal_twin(sc: Any, c_true: tuple[float, float]) -> Any:
@@ -89,46 +98,112 @@ def _key(sc: Any, c_true: tuple[float, float], half_track: float) -> str:
     return h.hexdigest()[:32]
 
 
-def peaks(sc: Any, c_true: tuple[float, float], half_track: float, *, run: Any) -> dict[str, Any]:
+def wheel_key(wheel: dict[str, float] | None) -> str:
+    """``wheel``'s numbers as a cache key (9 significant digits)."""
+    if not wheel:
+        return ""
+    return json.dumps({k: float(f"{float(v):.9g}") for k, v in sorted(wheel.items())})
+
+
+def wheel_need(
+    t: np.ndarray, vel: np.ndarray, c_true: tuple[float, float], half_track: float, wheel: dict[str, float]
+) -> dict[str, float]:
+    """The torque per wheel the motion ``vel`` (K, n, 2: υ m/s, ω rad/s at times ``t`` s) needs of a robot of
+    ``c_true = (a, b)``, half track ``half_track`` m and ``wheel`` = ``{"radius_m", "damping_nms",
+    "frictionloss_nm", "brake_torque_nm"}``, its own resistance included (module docstring, ``wheel_torque``):
+    ``{"wheel_torque_nm", "wheel_inertial_nm", "wheel_resistance_nm", "wheel_rate_radps"}``, each the largest
+    absolute value over the log's intervals, both wheels and every robot (N·m, rad/s)."""
+    a, b = float(c_true[0]), float(c_true[1])
+    r, c = float(wheel["radius_m"]), float(wheel["damping_nms"])
+    f, brake = float(wheel["frictionloss_nm"]), float(wheel.get("brake_torque_nm", 0.0))
+    if len(t) < 2:
+        return {"wheel_torque_nm": 0.0, "wheel_inertial_nm": 0.0, "wheel_resistance_nm": 0.0, "wheel_rate_radps": 0.0}
+    dt = np.diff(t)[:, None]
+    vd, wd = np.diff(vel[..., 0], axis=0) / dt, np.diff(vel[..., 1], axis=0) / dt
+    vm, wm = 0.5 * (vel[1:, :, 0] + vel[:-1, :, 0]), 0.5 * (vel[1:, :, 1] + vel[:-1, :, 1])
+    out = dict.fromkeys(("wheel_torque_nm", "wheel_inertial_nm", "wheel_resistance_nm", "wheel_rate_radps"), 0.0)
+    for sgn in (1.0, -1.0):  # right, left
+        inert = 0.5 * (vd / a + sgn * wd / b)
+        phid = (vm + sgn * half_track * wm) / r
+        resist = c * phid + f * np.sign(phid) + 0.5 * brake * np.sign(vm)
+        for k, x in (
+            ("wheel_torque_nm", inert + resist),
+            ("wheel_inertial_nm", inert),
+            ("wheel_resistance_nm", resist),
+            ("wheel_rate_radps", phid),
+        ):
+            out[k] = max(out[k], float(np.max(np.abs(x))))
+    return out
+
+
+def peaks(
+    sc: Any, c_true: tuple[float, float], half_track: float, *, run: Any, wheel: dict[str, float] | None = None
+) -> dict[str, Any]:
     """The demand's peaks (module docstring) of ``sc`` on the ideal plant with ``c_true`` and a robot of
     half track ``half_track`` m, run by ``run`` (:func:`bioform_mj.run.simulate.simulate`, passed in: the
     loop calls this module before a run, so this module does not import the loop); cached.
     ``{"wheel_speed_mps", "accel_mps2", "yaw_accel_radps2",
-    "lateral_accel_mps2", "c_hat_min", "seconds", "from"}``."""
+    "lateral_accel_mps2", "c_hat_min", "seconds", "from"}``; with ``wheel`` (:func:`wheel_need`'s) also its
+    ``wheel_torque_nm``, ``wheel_inertial_nm``, ``wheel_resistance_nm``, ``wheel_rate_radps`` (cached with the
+    entry, one per distinct wheel)."""
     key = _key(sc, c_true, half_track)
-    if key in _MEMO:
-        return {**_MEMO[key], "from": "memory"}
+    wk = wheel_key(wheel)
+
+    def _done(entry: dict[str, Any], where: str) -> dict[str, Any] | None:
+        if wk and wk not in entry.get("wheels", {}):
+            return None
+        return {
+            **{k: v for k, v in entry.items() if k != "wheels"},
+            **entry.get("wheels", {}).get(wk, {}),
+            "from": where,
+        }
+
+    if key in _MEMO and (hit := _done(_MEMO[key], "memory")) is not None:
+        return hit
     from bioform_mj.assess.prerun import cache_dir
 
     path = cache_dir().parent / "demand" / f"{key}.json"
-    try:
-        entry = json.loads(path.read_text())
-        if isinstance(entry, dict) and entry.get("format") == CACHE_FORMAT:
-            _MEMO[key] = entry
-            return {**entry, "from": "disk"}
-    except (OSError, ValueError):
-        pass
+    if key not in _MEMO:
+        try:
+            entry = json.loads(path.read_text())
+            if isinstance(entry, dict) and entry.get("format") == CACHE_FORMAT:
+                _MEMO[key] = entry
+                if (hit := _done(entry, "disk")) is not None:
+                    return hit
+        except (OSError, ValueError):
+            pass
     t0 = time.perf_counter()
-    with warnings.catch_warnings():  # the twin's outcomes are not the run's
-        warnings.simplefilter("ignore")
-        res = run(ideal_twin(sc, c_true), engine="auto")
-    t = np.asarray(res.log["t"])
-    vel = np.asarray(res.log["vel"])  # (K, n, 2) υ m/s, ω rad/s
-    v, w = vel[:, :, 0], vel[:, :, 1]
-    dt = np.diff(t)[:, None] if len(t) > 1 else np.ones((0, 1))
-    ch = np.asarray(res.log.get("c_hat", np.full((1, 1, 2), np.nan)))
-    entry = {
-        "format": CACHE_FORMAT,
-        "wheel_speed_mps": float(np.max(np.abs(v) + half_track * np.abs(w))) if len(t) else 0.0,
-        "accel_mps2": float(np.max(np.abs(np.diff(v, axis=0)) / dt)) if len(t) > 1 else 0.0,
-        "yaw_accel_radps2": float(np.max(np.abs(np.diff(w, axis=0)) / dt)) if len(t) > 1 else 0.0,
-        "lateral_accel_mps2": float(np.max(np.abs(v * w))) if len(t) else 0.0,
-        "speed_mps": float(np.max(np.abs(v))) if len(t) else 0.0,
-        "yaw_rate_radps": float(np.max(np.abs(w))) if len(t) else 0.0,
-        "c_hat_min": [float(np.nanmin(ch[..., 0])), float(np.nanmin(ch[..., 1]))],
-        "duration_s": float(sc.sim.duration),
-        "seconds": time.perf_counter() - t0,
-    }
+    entry = _MEMO.get(key)
+    if entry is None or key not in _LOGS:
+        with warnings.catch_warnings():  # the twin's outcomes are not the run's
+            warnings.simplefilter("ignore")
+            res = run(ideal_twin(sc, c_true), engine="auto")
+        t = np.asarray(res.log["t"])
+        vel = np.asarray(res.log["vel"])  # (K, n, 2) υ m/s, ω rad/s
+        _LOGS.clear()  # one twin's log kept: the wheel asked right after the σ search's last twin
+        _LOGS[key] = (t, vel)
+        if entry is None:
+            v, w = vel[:, :, 0], vel[:, :, 1]
+            dt = np.diff(t)[:, None] if len(t) > 1 else np.ones((0, 1))
+            ch = np.asarray(res.log.get("c_hat", np.full((1, 1, 2), np.nan)))
+            entry = {
+                "format": CACHE_FORMAT,
+                "wheel_speed_mps": float(np.max(np.abs(v) + half_track * np.abs(w))) if len(t) else 0.0,
+                "accel_mps2": float(np.max(np.abs(np.diff(v, axis=0)) / dt)) if len(t) > 1 else 0.0,
+                "yaw_accel_radps2": float(np.max(np.abs(np.diff(w, axis=0)) / dt)) if len(t) > 1 else 0.0,
+                "lateral_accel_mps2": float(np.max(np.abs(v * w))) if len(t) else 0.0,
+                "speed_mps": float(np.max(np.abs(v))) if len(t) else 0.0,
+                "yaw_rate_radps": float(np.max(np.abs(w))) if len(t) else 0.0,
+                "c_hat_min": [float(np.nanmin(ch[..., 0])), float(np.nanmin(ch[..., 1]))],
+                "duration_s": float(sc.sim.duration),
+                "seconds": 0.0,
+                "wheels": {},
+            }
+    t, vel = _LOGS[key]
+    entry = {**entry, "wheels": dict(entry.get("wheels", {}))}
+    if wk:
+        entry["wheels"][wk] = wheel_need(t, vel, c_true, half_track, wheel or {})
+    entry["seconds"] = time.perf_counter() - t0
     _MEMO[key] = entry
     try:
         from bioform_mj.outputs.files import write_json
@@ -137,7 +212,7 @@ def peaks(sc: Any, c_true: tuple[float, float], half_track: float, *, run: Any) 
         write_json(path, entry)
     except Exception:  # noqa: BLE001 - a cache that cannot be written costs time, not the run
         pass
-    return {**entry, "from": "computed"}
+    return _done(entry, "computed") or {}
 
 
 def _item(value: float, limit: float | None, unit: str, by: str) -> dict[str, Any]:
@@ -169,6 +244,7 @@ def compare(
     lim: dict[str, Any],
     resist: dict[str, Any] | None = None,
     c_true: tuple[float, float] | None = None,
+    brake_torque_nm: float = 0.0,
 ) -> dict[str, dict[str, Any]]:
     """The demand ``pk`` (:func:`peaks`) of ``sc`` against the robot's limits ``lim``
     (:func:`~bioform_mj.robots.limits.limits_of`), one item per quantity (module docstring).
@@ -179,7 +255,9 @@ def compare(
     acceleration ``2 a min(τ_bound, τ_max)`` (m/s²) of the sign terms' torque at the learner's lower projection bound
     (:func:`c_lower_bound`; eq. 38 divides by ĉ) against the acceleration limit — the start-up a plant the paper's
     model does not fit can drive ĉ to (TIAGo in MuJoCo, design §21), which the ideal twin, whose ĉ stays near
-    c_true, does not show."""
+    c_true, does not show. ``brake_torque_nm``: the braking casters' drag ``F r`` (N·m on ``τ_a``) robot check
+    identified, added as ``a F r`` (m/s², with ``c_true``) to ``sliding_gain_v``. Where ``pk`` has
+    ``wheel_torque_nm`` (:func:`peaks` with a ``wheel``): ``wheel_torque`` against ``τ_max``."""
     grip = min(lim["torque_nm"], lim["traction_torque_nm"])
     ca, cb = (float(x) for x in sc.torque.c)
     a_min, b_min = pk["c_hat_min"]
@@ -196,6 +274,13 @@ def compare(
         ),
         "torque_vs_traction": _item(lim["torque_nm"], lim["traction_torque_nm"], "N·m", "traction"),
     }
+    if "wheel_torque_nm" in pk:  # design §21: the motion's torque and the wheel's own resistance, against τ_max
+        out["wheel_torque"] = _item(pk["wheel_torque_nm"], lim["torque_nm"], "N·m", "torque limit τ_max")
+        out["wheel_torque"].update(
+            inertial_nm=float(pk["wheel_inertial_nm"]),
+            resistance_nm=float(pk["wheel_resistance_nm"]),
+            wheel_rate_radps=float(pk["wheel_rate_radps"]),
+        )
     bound = c_lower_bound(sc, c_true) if c_true is not None else None
     if bound is not None and bound[0] > 0 and bound[1] > 0:
         tau_bound = ca / (2 * bound[0]) + cb / (2 * bound[1])  # N·m per wheel, eqs. 38–39 with ĉ at its bound
@@ -204,15 +289,21 @@ def compare(
         out["accel_at_c_bound"].update(
             torque_at_bound_nm=float(tau_bound), c_bound=[float(bound[0]), float(bound[1])], torque_given_nm=given
         )
-    if resist is not None:
-        dead, drag = resist["deadband_accel"], resist["drag_rate_per_s"]
+    brake_acc = float(c_true[0]) * float(brake_torque_nm) if c_true is not None and brake_torque_nm > 0 else 0.0
+    if resist is not None or brake_acc > 0:
+        dead = resist["deadband_accel"] if resist is not None else (0.0, 0.0)
+        drag = resist["drag_rate_per_s"] if resist is not None else (0.0, 0.0)
         for k, j, speed, gain, unit in (
             ("sliding_gain_v", 0, pk.get("speed_mps", 0.0), ca, "m/s²"),
             ("sliding_gain_w", 1, pk.get("yaw_rate_radps", 0.0), cb, "rad/s²"),
         ):
-            r = float(dead[j]) + float(drag[j]) * float(speed)
+            brk = brake_acc if j == 0 else 0.0  # a caster's moment on ω needs its lever, which the check does not give
+            r = float(dead[j]) + float(drag[j]) * float(speed) + brk
             if r > 0:
                 out[k] = _item(r, gain, unit, f"torque.c[{j}], the sliding gain")
+                out[k].update(deadband=float(dead[j]), drag=float(drag[j]) * float(speed), braking_caster=brk)
+                if j == 1 and brake_acc > 0:
+                    out[k]["braking_caster_note"] = "a braking caster's moment on ω is not included (lever unknown)"
     return out
 
 
@@ -223,9 +314,10 @@ _WHAT = {
     "lateral_accel": "peak centripetal acceleration",
     "sign_torque": "sliding-mode sign terms' torque amplitude",
     "torque_vs_traction": "the torque limit",
-    "sliding_gain_v": "the robot's resistance (dead band and drag at peak speed) on υ",
+    "sliding_gain_v": "the robot's resistance (dead band, drag at peak speed, braking caster) on υ",
     "sliding_gain_w": "the robot's resistance (dead band and drag at peak yaw rate) on ω",
     "accel_at_c_bound": "the acceleration of the sign terms at ĉ's projection bound",
+    "wheel_torque": "peak wheel torque (the motion's and the wheel's own resistance)",
 }
 
 
@@ -249,6 +341,15 @@ def warning_lines(who: str, items: dict[str, dict[str, Any]], sigma: float = 1.0
                     f"{it['ratio']:.2g}x the robot's limit {it['limit']:.3g} {u} ({it['limit_by']}); a plant the "
                     "paper's model does not fit drives ĉ there at the start (design §21); learner.projection_band "
                     "narrows the bound (design §14.4)"
+                )
+                continue
+            if k == "wheel_torque":  # design §21: the wheel's own resistance is the motor's to give
+                out.append(
+                    f"{who}: {_WHAT[k]} {it['value']:.3g} {u} is {it['ratio']:.2g}x the robot's limit "
+                    f"{it['limit']:.3g} {u} (the torque limit τ_max): the motion needs {it['inertial_nm']:.3g} {u}, "
+                    "the wheel's own damping, frictionloss and braking casters take up to "
+                    f"{it['resistance_nm']:.3g} {u} (at "
+                    f"{it['wheel_rate_radps']:.3g} rad/s); the robot cannot follow the scenario's motion (design §21)"
                 )
                 continue
             if k.startswith("sliding_gain"):  # the gain must dominate the resistance; slowing makes it worse
@@ -298,15 +399,29 @@ def run_limits(sc: Any, plant: Any) -> list[dict[str, Any]]:
     return out
 
 
-def before_run(sc: Any, plant: Any, run: Any) -> dict[str, Any]:
+def brake_torques(robot_check: dict[str, Any] | None, n: int) -> list[float]:
+    """Per follower (``n``) the braking casters' drag ``Σ F r`` (N·m on ``τ_a``) that ``robot check`` identified
+    (``robot_check``: :func:`bioform_mj.assess.prerun.before_run`'s; 0 where it found none or was skipped)."""
+    from bioform_mj.assess.outcomes import robot_check_resistances
+
+    return [
+        float(sum(float(x.get("torque_nm") or 0.0) for x in found if x.get("kind") == "braking_caster"))
+        for found in robot_check_resistances(robot_check, n)
+    ]
+
+
+def before_run(sc: Any, plant: Any, run: Any, robot_check: dict[str, Any] | None = None) -> dict[str, Any]:
     """summary.json's ``demand`` for a MuJoCo run (the ideal twin run by ``run``, :func:`peaks`):
     ``{"robots": [{"followers", "model", "c_true",
-    "limits", "demand", "ideal_run"}], "warnings", "seconds"}`` (one entry per distinct robot)."""
+    "limits", "demand", "ideal_run"}], "warnings", "seconds"}`` (one entry per distinct robot).
+    ``robot_check``: the run's robot check (:func:`bioform_mj.assess.prerun.before_run`): its braking casters
+    count in ``wheel_torque`` and ``sliding_gain_v`` (:func:`brake_torques`)."""
     t0 = time.perf_counter()
     lims = run_limits(sc, plant)
+    brakes = brake_torques(robot_check, plant.n)
     groups: dict[str, list[int]] = {}
     for i, p in enumerate(plant.params):
-        k = json.dumps(_rounded([p.a_eff, p.b_eff, p.half_track, lims[i]]), sort_keys=True, default=str)
+        k = json.dumps(_rounded([p.a_eff, p.b_eff, p.half_track, lims[i], brakes[i]]), sort_keys=True, default=str)
         groups.setdefault(k, []).append(i)
     robots, lines = [], []
     for idx in groups.values():
@@ -314,13 +429,19 @@ def before_run(sc: Any, plant: Any, run: Any) -> dict[str, Any]:
         p = plant.params[i]
         who = f"follower{'s' if len(idx) > 1 else ''} {', '.join(str(j + 1) for j in idx)}"
         try:
-            pk = peaks(sc, (p.a_eff, p.b_eff), p.half_track, run=run)
+            wheel = {
+                "radius_m": p.wheel_radius,
+                "damping_nms": p.wheel_damping + p.motor_damping,
+                "frictionloss_nm": p.wheel_frictionloss,
+                "brake_torque_nm": brakes[i],
+            }
+            pk = peaks(sc, (p.a_eff, p.b_eff), p.half_track, run=run, wheel=wheel)
         except Exception as exc:  # noqa: BLE001 - a demand that cannot be computed is said, the run goes ahead
             why = f"{type(exc).__name__}: {exc}"
             lines.append(f"{who}: the scenario's demand could not be computed on the ideal plant ({why})")
             robots.append({"followers": [j + 1 for j in idx], "limits": lims[i], "demand": None, "error": why})
             continue
-        items = compare(sc, pk, lims[i], p.unmodelled(1.0, 1.0), (p.a_eff, p.b_eff))
+        items = compare(sc, pk, lims[i], p.unmodelled(1.0, 1.0), (p.a_eff, p.b_eff), brakes[i])
         sigma = sc.formation.time_scale if isinstance(sc.formation.time_scale, float) else 1.0
         lines += warning_lines(who, items, sigma)
         robots.append(

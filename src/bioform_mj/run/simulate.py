@@ -465,7 +465,7 @@ def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], 
     if checked is not None and not checked.get("skipped"):  # design §21: the scenario's demand vs the limits
         from bioform_mj.run.demand import before_run as _demand
 
-        demand = _demand(sc, plant, simulate)
+        demand = _demand(sc, plant, simulate, checked)
         for line in demand["warnings"]:
             warnings.warn(line, RobotWarning, stacklevel=4)
     return imported, feasibility, checked, demand

@@ -24,7 +24,7 @@ import numpy as np
 
 from bioform_mj.core.equations import slip_ratio
 from bioform_mj.core.errors import Diverged
-from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_TIME, SLIP_V_FLOOR, TIP_ANGLE_DEG
+from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_TIME, TIP_ANGLE_DEG, slip_v_floor
 from bioform_mj.formation.disturbance import harmonic_rows
 from bioform_mj.plants.mujoco.contacts import ContactReader, robot_geoms, watch_contacts, watch_proximity
 from bioform_mj.plants.mujoco.kernels import (
@@ -266,6 +266,10 @@ class MujocoPlant:
                     max(p.tau_max),
                     limit,
                 )
+        from bioform_mj.robots.limits import top_speed
+
+        #: m/s: the slip ratio's speed floor, scaled to the slowest robot's top speed (core.thresholds.slip_v_floor)
+        self.slip_floor = slip_v_floor([top_speed(f, self, i)[0] for i, f in enumerate(robot_files)])
         self._step_count = 0
         self._contacts_setup(float(safety_distance))
         self.reset()
@@ -428,7 +432,7 @@ class MujocoPlant:
             self._half_track,
             vel,
             SLIP_RATIO,
-            SLIP_V_FLOOR,
+            self.slip_floor,
             self._slip_need,
             self.slip_run,
             self.slip_step,
@@ -450,7 +454,7 @@ class MujocoPlant:
         )
 
     def wheel_slip(self) -> np.ndarray:
-        """(n, 2) slip ratio of the [left, right] wheels: ``|r φ̇ − v_c| / max(|r φ̇|, |v_c|, SLIP_V_FLOOR)``
+        """(n, 2) slip ratio of the [left, right] wheels: ``|r φ̇ − v_c| / max(|r φ̇|, |v_c|, slip_floor)``
         with ``φ̇ = sign · qvel`` the forward wheel rate and ``v_c = υ ∓ l ω`` the forward speed of
         the wheel's contact point if it rolled (left: −, right: +). 0 when rolling; compare with
         ``core.thresholds.SLIP_RATIO`` held for ``SLIP_TIME`` s."""
@@ -465,7 +469,7 @@ class MujocoPlant:
                         float(vel[i, 0]),
                         float(vel[i, 1]),
                         (2 * w - 1) * float(self._half_track[i]),
-                        SLIP_V_FLOOR,
+                        self.slip_floor,
                     )
                     for w in range(2)
                 ]
@@ -678,7 +682,7 @@ class MujocoPlant:
             self._wheel_radius,
             self._half_track,
             SLIP_RATIO,
-            SLIP_V_FLOOR,
+            self.slip_floor,
             self._slip_need,
             self.slip_run,
             self.slip_step,

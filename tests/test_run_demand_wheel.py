@@ -1,0 +1,122 @@
+"""The wheel's own resistance in the demand (issue 27 gaps 1 and 3, design §21).
+
+Ground truth by hand: a synthetic motion ``υ = V sin Ωt`` (no turning) on a robot of ``c_true = (a, b)``, wheel
+radius ``r``, joint damping ``c`` and frictionloss ``f`` and a braking caster of drag ``τ_brake`` needs per wheel
+``υ̇/(2a) + c υ/r + (f + τ_brake/2) sgn υ = A cos Ωt + B sin Ωt + F sgn(sin Ωt)`` with ``A = VΩ/(2a)``,
+``B = cV/r``, ``F = f + τ_brake/2``; its largest absolute value is ``√(A² + B²) + F`` (the peak of ``A cos + B sin``
+lies where ``sin > 0``). Turning in place at ``ω = W sin Ωt`` a wheel needs ``√((WΩ/(2b))² + (c l W/r)²) + f``.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from bioform_mj.run import demand
+from bioform_mj.run.demand import brake_torques, compare, peaks, warning_lines, wheel_need
+from bioform_mj.scenario.loader import load
+
+A, B = 0.4, 10.0  # the paper robot's c_true
+R, C, F, BRAKE, L = 0.05, 0.5, 0.1, 0.3, 0.2
+V, W, OM = 1.0, 2.0, 2 * math.pi
+T = np.arange(0.0, 2.0 + 1e-12, 1e-3)
+
+
+def _lim(tau_max: float) -> dict:
+    return {
+        "top_speed_mps": 2.0,
+        "top_speed_source": "mapping",
+        "torque_nm": tau_max,
+        "traction_torque_nm": 100.0,
+        "accel_mps2": 100.0,
+        "accel_limited_by": "torque",
+        "yaw_accel_radps2": 1000.0,
+        "yaw_accel_limited_by": "torque",
+        "lateral_accel_mps2": 100.0,
+    }
+
+
+def _wheel(brake: float = BRAKE) -> dict:
+    return {"radius_m": R, "damping_nms": C, "frictionloss_nm": F, "brake_torque_nm": brake}
+
+
+def test_the_wheel_torque_is_the_motion_plus_the_wheels_own_resistance_by_hand(monkeypatch):
+    """The fake twin's log is the synthetic motion: peak √(A² + B²) + F against τ_max, cached per wheel (a second
+    wheel costs no second twin), and warned with its ratio and both parts."""
+    monkeypatch.setattr(demand, "_MEMO", {})
+    monkeypatch.setattr(demand, "_LOGS", {})
+    runs = []
+
+    def fake_run(sc, engine="auto"):
+        runs.append(sc)
+        vel = np.zeros((len(T), 1, 2))
+        vel[:, 0, 0] = V * np.sin(OM * T)
+        return SimpleNamespace(log={"t": T, "vel": vel, "c_hat": np.full((len(T), 1, 2), [A, B])})
+
+    sc = load("paper", ["sim.duration=0.37", "sim.seed=912731"])  # a key of its own (no real twin shares it)
+    pk = peaks(sc, (A, B), L, run=fake_run, wheel=_wheel())
+    a_, b_ = V * OM / (2 * A), C * V / R
+    want = math.hypot(a_, b_) + F + BRAKE / 2
+    assert pk["wheel_torque_nm"] == pytest.approx(want, rel=1e-5)
+    assert pk["wheel_inertial_nm"] == pytest.approx(a_, rel=1e-5)
+    assert pk["wheel_resistance_nm"] == pytest.approx(b_ + F + BRAKE / 2, rel=1e-5)
+    assert pk["wheel_rate_radps"] == pytest.approx(V / R, rel=1e-5)
+    assert len(runs) == 1
+    none = peaks(sc, (A, B), L, run=fake_run, wheel=_wheel(0.0))  # another wheel: the same log, no second twin
+    assert none["wheel_torque_nm"] == pytest.approx(math.hypot(a_, b_) + F, rel=1e-5) and len(runs) == 1
+    assert peaks(sc, (A, B), L, run=fake_run, wheel=_wheel())["from"] == "memory"
+    tau_max = 0.8 * want
+    items = compare(sc, pk, _lim(tau_max), c_true=(A, B))
+    it = items["wheel_torque"]
+    assert it["ratio"] == pytest.approx(want / tau_max, rel=1e-5) and it["limit"] == tau_max
+    lines = [ln for ln in warning_lines("follower 1", items) if "peak wheel torque" in ln]
+    assert len(lines) == 1 and f"{want / tau_max:.2g}x the robot's limit" in lines[0]
+    assert f"{b_ + F + BRAKE / 2:.3g} N·m" in lines[0]  # the resistance's share, named
+    ok = compare(sc, pk, _lim(1.01 * want), c_true=(A, B))
+    assert ok["wheel_torque"]["ratio"] < 1 and not any("peak wheel torque" in ln for ln in warning_lines("f", ok))
+
+
+def test_turning_in_place_needs_the_yaw_inertia_and_the_damping_at_the_wheel_rate():
+    """ω = W sin Ωt, υ = 0: √((WΩ/(2b))² + (c l W/r)²) + f per wheel; a caster's drag (sgn υ) adds nothing."""
+    vel = np.zeros((len(T), 2, 2))
+    vel[:, 1, 1] = W * np.sin(OM * T)  # the second robot turns, the first stands
+    got = wheel_need(T, vel, (A, B), L, _wheel())
+    want = math.hypot(W * OM / (2 * B), C * L * W / R) + F
+    assert got["wheel_torque_nm"] == pytest.approx(want, rel=1e-5)
+    assert got["wheel_rate_radps"] == pytest.approx(L * W / R, rel=1e-5)
+
+
+def test_a_braking_caster_counts_in_the_sliding_gain_on_v():
+    """robot check's braking casters (Σ F r on τ_a) are a deceleration a F r the sign terms must dominate: added to
+    the dead band and drag on υ; on ω (its lever unknown) said to be left out."""
+    sc = load("paper", ["formation.scale=0.4", "formation.time_scale=4"])
+    ca, cb = sc.torque.c
+    pk = {"wheel_speed_mps": 0.1, "accel_mps2": 0.1, "yaw_accel_radps2": 0.1, "lateral_accel_mps2": 0.0}
+    pk |= {"c_hat_min": [A, B], "speed_mps": 0.2, "yaw_rate_radps": 1.0}
+    check = {
+        "robots": [
+            {
+                "followers": [1, 3],
+                "resistances": [
+                    {"kind": "braking_caster", "geom": "c1", "braking_force_n": 4.0, "torque_nm": 0.2},
+                    {"kind": "braking_caster", "geom": "c2", "braking_force_n": 2.0, "torque_nm": 0.1},
+                    {"kind": "drag", "drag_rate_per_s": [1.0, 1.0]},
+                ],
+            }
+        ]
+    }
+    brakes = brake_torques(check, 3)
+    assert brakes == pytest.approx([0.3, 0.0, 0.3])
+    only = compare(sc, pk, _lim(1.0), None, (A, B), brakes[0])
+    assert only["sliding_gain_v"]["value"] == pytest.approx(A * 0.3) and only["sliding_gain_v"]["limit"] == ca
+    assert only["sliding_gain_v"]["ratio"] == pytest.approx(A * 0.3 / ca) and "sliding_gain_w" not in only
+    both = compare(sc, pk, _lim(1.0), {"deadband_accel": [0.3, 2.0], "drag_rate_per_s": [1.0, 0.5]}, (A, B), 0.3)
+    assert both["sliding_gain_v"]["value"] == pytest.approx(0.3 + 1.0 * 0.2 + A * 0.3)
+    assert both["sliding_gain_w"]["value"] == pytest.approx(2.0 + 0.5 * 1.0)  # no caster moment on ω
+    assert "lever unknown" in both["sliding_gain_w"]["braking_caster_note"]
+    assert "sliding_gain_v" not in compare(sc, pk, _lim(1.0), None, (A, B), 0.0)
+    line = [ln for ln in warning_lines("follower 1", only) if "on υ" in ln]
+    assert len(line) == 1 and "braking caster" in line[0] and f"{A * 0.3 / ca:.2g}x" in line[0]
