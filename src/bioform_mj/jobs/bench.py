@@ -13,10 +13,11 @@ physics step and substeps), then times
 Reported: steps per second, the ratio bare time / loop time (1.0 = the loop costs
 nothing beyond physics), microseconds per robot-step, and the real-time factor
 (simulated s per wall s). Absolute times drift on shared machines; the ratio is
-measured back to back in one process and is the number to compare. Each time is taken twice:
-wall (``time.perf_counter``) and CPU time of this process (``time.process_time``: what the work
-costs one core, whatever else the machine runs); ``*_cpu`` columns and ``load_avg`` (``os.getloadavg``
-at the start and end of each case) in the JSON say which to believe on a shared machine.
+measured in one process, bare and closed loop alternating (``reps`` each), and is the number to
+compare. Each time is taken twice: wall (``time.perf_counter``) and CPU time of this process
+(``time.process_time``: what the work costs one core, whatever else the machine runs); ``*_cpu``
+columns and ``load_avg`` (``os.getloadavg`` at the start and end of each case) in the JSON say which
+to believe on a shared machine.
 """
 
 from __future__ import annotations
@@ -45,9 +46,10 @@ CASES: dict[int, tuple[str, float]] = {
 }
 
 
-def _bare(sc: Any, reps: int, plant: Any) -> dict[str, float]:
+def _bare(sc: Any, reps: int, plant: Any, between: Any = None) -> dict[str, float]:
     """Bare ``mj_step`` replaying the closed loop's own inputs: best seconds of ``reps``, and the
-    solver's iterations per physics step, also under constant torques for comparison.
+    solver's iterations per physics step, also under constant torques for comparison. ``between()``,
+    if given, runs after each replay (the closed loop's turn: interleaved, both see the machine's load alike).
 
     The closed loop runs once recording every step's ``ctrl`` and chassis forces; then a
     compiled loop replays them into ``mj_step`` on the same scene from the same initial
@@ -75,6 +77,8 @@ def _bare(sc: Any, reps: int, plant: Any) -> dict[str, float]:
         iters = replay(*args, rec[0], rec[1], d.solver_niter)
         best = min(best, time.perf_counter() - t0)
         best_cpu = min(best_cpu, time.process_time() - c0_)
+        if between is not None:
+            between()
     c0 = np.zeros(m.nu)
     c0[plant._ctrl] = 0.1 * plant.tau_max[:, None]
     const = (np.tile(c0, (steps, 1)), np.zeros_like(rec[1]))
@@ -109,9 +113,10 @@ def bench_case(n: int, duration: float | None = None, reps: int = 2, numpy_too: 
     t0 = time.perf_counter()
     plant = make_plant(sc)  # one scene per case: recorded, replayed bare and run in closed loop (reset each time)
     build_s = time.perf_counter() - t0
-    bare_d = _bare(sc, reps, plant)
+    loops: list[tuple[float, float, dict]] = []
+    bare_d = _bare(sc, reps, plant, between=lambda: loops.append(_loop(sc, 1, plant=plant)))
     bare, bare_cpu = bare_d["bare_s"], bare_d["bare_cpu_s"]
-    loop, loop_cpu, summ = _loop(sc, reps, plant=plant)
+    loop, loop_cpu, summ = min(t[0] for t in loops), min(t[1] for t in loops), loops[-1][2]
     ideal, ideal_cpu, _ = _loop(load(preset, overrides=[f"sim.duration={dur}"], plant="ideal"), reps)
     row: dict[str, Any] = {
         "n": n,
