@@ -277,6 +277,10 @@ def test_observe_matches_mujoco_sensors():
     rng = np.random.default_rng(3)
     for k in range(300):
         plant.step(rng.uniform(-0.5, 1, (3, 2)) * plant.tau_max[:, None], k * DT)
+    # the robot files' own sensors are the ground truth here: with sensing = "truth" the plant skips them
+    # (mjDSBL_SENSOR, design §8.3), so they are turned on for this one forward pass
+    assert not plant.sensors_computed and not plant.data.sensordata.any()
+    plant.model.opt.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
     mujoco.mj_forward(plant.model, plant.data)  # sensors at the current state
     pose, vel = plant.observe()
     d = plant.data

@@ -154,3 +154,32 @@ def test_rerun_recording_holds_the_odometry_beside_the_truth(tmp_path):
     for i in range(1, res.scenario.n + 1):
         assert rows[f"/follower/{i}/odometry_drift"] == len(res.log["t"])
         assert rows[f"/world/follower/{i}/odometry_path"] > 0
+
+
+def test_truth_sensing_skips_mujoco_sensors_bit_identical():
+    """With sensing = "truth" nothing reads ``sensordata``: the plant sets ``mjDSBL_SENSOR`` (a cost of
+    ``mj_step`` at scale, docs/findings/performance.md) and the trajectory is bit-identical to the same
+    plant computing its sensors; with "odometry" they are computed, and the encoder reads the wheel angle."""
+    import mujoco
+
+    off = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
+    poses = np.array([[0.0, 0.0, 0.0], [0.0, 1.5, 0.3]])
+    a = MujocoPlant(["paper", "paper"], poses, 0.004, 0.002, None, slots=False)
+    b = MujocoPlant(["paper", "paper"], poses, 0.004, 0.002, None, slots=False)
+    assert not a.sensors_computed and a.model.opt.disableflags & off
+    assert a.model.nsensor == 20  # the paper robot file's own 10 sensors each: kept in the model
+    b.model.opt.disableflags &= ~off  # as before: every sensor computed each step
+    for k in range(150):
+        tau = np.array([[2.0 * np.sin(k / 7), 1.5 * np.cos(k / 5)], [1.0, -0.5 + 0.01 * k]])
+        a.step(tau, k * 0.004)
+        b.step(tau, k * 0.004)
+    assert np.array_equal(a.data.qpos, b.data.qpos) and np.array_equal(a.data.qvel, b.data.qvel)
+    assert not a.data.sensordata.any() and b.data.sensordata.any()
+    # ground truth of a computed sensor: the left encoder (jointpos) is the wheel joint's angle, one step behind
+    # at most (sensors are evaluated in the forward pass at the start of mj_step)
+    m = b.model
+    enc = m.sensor_adr[m.sensor("f1/left_encoder").id]
+    jq = m.jnt_qposadr[m.joint("f1/left_wheel").id]
+    assert abs(b.data.sensordata[enc] - b.data.qpos[jq]) < 0.004 * 40  # rad: |φ̇| dt, φ̇ < 40 rad/s
+    c = MujocoPlant(["paper"], poses[:1], 0.004, 0.002, None, slots=False, sensing="odometry")
+    assert c.sensors_computed and not c.model.opt.disableflags & off

@@ -243,7 +243,7 @@ def test_divergence_is_caught_at_the_first_bad_step_by_both_loops():
 
 @pytest.mark.parametrize("preset", ["large16", "large64", "large256"])
 def test_large_presets_compile_and_step_without_warnings(preset):
-    sc = load(preset, overrides=["sim.duration=0.4"])
+    sc = load(preset, overrides=["sim.duration=0.2"])  # written s: × formation.time_scale 2.31 = 0.46 s
     assert sc.n == {"large16": 16, "large64": 64, "large256": 256}[preset]
     g = sc.build_graph()
     assert len(g.src) <= 4 * sc.n  # sparse: O(n) edges
@@ -254,12 +254,61 @@ def test_large_presets_compile_and_step_without_warnings(preset):
 
 
 def test_large64_converges_in_mujoco():
-    r = simulate(load("large64"))
+    r = simulate(load("large64", overrides=["sim.duration=10"]))  # written s: 23.1 s at its time_scale 2.31
     assert r.diverged is None
     fe = [f["final_formation_error_m"] for f in r.summary["followers"]]
     assert max(fe) < 0.1
     ch = np.array([f["c_hat_rel_error"] for f in r.summary["followers"]])
     assert np.abs(ch).max() < 0.1
+
+
+LARGE = {"large16": 4, "large64": 8, "large256": 16, "large1024": 32}
+
+
+@pytest.mark.parametrize("preset", list(LARGE))
+def test_large_presets_are_feasible_and_regenerated(preset):
+    """Issue 28 item 6: a preset that measures scale is a run the robot could do. Each large preset is
+    scripts/make_large_presets.py's text at its written time_scale (regenerated, not hand-edited); its
+    σ is "auto"'s on the 4 x 4 grid (the demand is each robot's: the same grid, the same σ) within the
+    script's rounding up to 0.01; the paper robot carries its file's DC drive's no-load speed as top speed."""
+    import importlib.util
+    from pathlib import Path
+
+    from bioform_mj import load as bf_load
+
+    root = Path(__file__).resolve().parent.parent
+    spec = importlib.util.spec_from_file_location("make_large_presets", root / "scripts" / "make_large_presets.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    path = root / "src" / "bioform_mj" / "scenario" / "presets" / f"{preset}.toml"
+    text = path.read_text()
+    sc = load(preset)
+    sigma = sc.formation.time_scale
+    note = text.splitlines()[5].removeprefix('# time_scale as "auto" resolves it (').removesuffix(").")
+    assert text == mod.preset(LARGE[preset], time_scale=sigma, note=note)
+    assert sc.n == LARGE[preset] ** 2 and sigma == 2.31
+    assert sc.sim.duration == pytest.approx(20.0 * sigma)  # the experiment slowed, not shortened
+    assert sc.sim.physics_dt == 0.004 and sc.sim.control_dt == 0.004  # steps are not scaled (design §21)
+    (ref,) = set(sc.plant.robots)
+    assert ref.top_speed == 4.0  # 40 rad/s no-load × r = 0.1 m (models/paper_robot.xml)
+    if preset == "large16":  # the resolver itself (ideal runs: ~1 s here), not the number copied
+        auto = bf_load(str(path), overrides=["formation.time_scale=auto"]).formation.time_scale
+        assert sigma - 0.01 < auto <= sigma
+
+
+@pytest.mark.slow
+def test_large16_passes_its_hardware_verdict_without_demand_warnings(recwarn):
+    """At its written time_scale the large16 preset asks nothing beyond the robot's limits: no demand
+    warning before the run, hardware verdict "pass" (every check made), torque at the limit < 25 %
+    of the steps (as written, σ = 1: the demand check warned 2.7x the acceleration limit)."""
+    r = simulate(load("large16"))
+    assert r.diverged is None
+    hw = r.summary["hardware"]
+    assert hw["verdict"] == "pass" and not hw["not_checked"], hw
+    assert hw["checks"]["torque_saturation"]["value"] < 0.25
+    assert hw["checks"]["wheel_speed"]["value"] < 0.8 * 40.0  # rad/s, the margin of "auto" on speed
+    assert not [w for w in recwarn if "limit" in str(w.message)]
+    assert max(f["final_formation_error_m"] for f in r.summary["followers"]) < 0.05
 
 
 def test_large256_converges_on_the_ideal_plant():

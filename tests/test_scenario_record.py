@@ -67,7 +67,8 @@ def test_the_record_loads_back_to_the_same_scenario(tmp_path):
     (tmp_path / "r.toml").write_text(text)
     back = load(str(tmp_path / "r.toml"))
     assert back.formation.scale == 1.0
-    assert back == dataclasses.replace(sc, formation=dataclasses.replace(sc.formation, scale=1.0))
+    # the record carries the scaled values with scale = time_scale = 1 (large16: time_scale 2.31, issue 28)
+    assert back == dataclasses.replace(sc, formation=dataclasses.replace(sc.formation, scale=1.0, time_scale=1.0))
     assert np.array_equal(back.initial_poses(), sc.initial_poses())
 
 
@@ -106,4 +107,5 @@ def test_every_kind_of_preset_round_trips_through_its_record(tmp_path, preset):
     sc = load(preset)
     (tmp_path / "r.toml").write_text(to_toml(resolved_config(sc)))
     back = load(str(tmp_path / "r.toml"))
-    assert back == dataclasses.replace(sc, formation=dataclasses.replace(sc.formation, scale=1.0))
+    # the record carries the scaled values with scale = time_scale = 1 (large16: time_scale 2.31, issue 28)
+    assert back == dataclasses.replace(sc, formation=dataclasses.replace(sc.formation, scale=1.0, time_scale=1.0))

@@ -243,8 +243,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     sub.add_parser("presets", help="list the shipped scenario presets, each with its description")
 
-    bn = sub.add_parser("bench", help="closed-loop throughput against bare mj_step, n = 3, 16, 64, 256")
-    bn.add_argument("--sizes", default="3,16,64,256", help="comma-separated team sizes (of 3, 16, 64, 256)")
+    bn = sub.add_parser(
+        "bench", help="closed-loop throughput against bare mj_step, n = 3, 16, 64, 256 (1024 on request)"
+    )
+    bn.add_argument("--sizes", default="3,16,64,256", help="comma-separated team sizes (of 3, 16, 64, 256, 1024)")
     bn.add_argument("--duration", type=float, help="simulated seconds per case (default: per size)")
     bn.add_argument("--reps", type=int, default=2, help="repetitions; the best time counts (default 2)")
     bn.add_argument("--numpy", action="store_true", help="also time the numpy reference stack")

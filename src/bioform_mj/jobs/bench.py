@@ -13,7 +13,11 @@ physics step and substeps), then times
 Reported: steps per second, the ratio bare time / loop time (1.0 = the loop costs
 nothing beyond physics), microseconds per robot-step, and the real-time factor
 (simulated s per wall s). Absolute times drift on shared machines; the ratio is
-measured back to back in one process and is the number to compare.
+measured in one process, bare and closed loop alternating (``reps`` each), and is the number to
+compare. Each time is taken twice: wall (``time.perf_counter``) and CPU time of this process
+(``time.process_time``: what the work costs one core, whatever else the machine runs); ``*_cpu``
+columns and ``load_avg`` (``os.getloadavg`` at the start and end of each case) in the JSON say which
+to believe on a shared machine.
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.outputs.files import write_json
-from bioform_mj.run.looptime import loop_time as _loop
+from bioform_mj.run.looptime import loop_times as _loop
 from bioform_mj.run.looptime import stop_if_interrupted
 
 #: team size → (preset, default simulated seconds)
@@ -38,12 +42,14 @@ CASES: dict[int, tuple[str, float]] = {
     16: ("large16", 5.0),
     64: ("large64", 4.0),
     256: ("large256", 2.0),
+    1024: ("large1024", 1.0),
 }
 
 
-def _bare(sc: Any, reps: int) -> dict[str, float]:
+def _bare(sc: Any, reps: int, plant: Any, between: Any = None) -> dict[str, float]:
     """Bare ``mj_step`` replaying the closed loop's own inputs: best seconds of ``reps``, and the
-    solver's iterations per physics step, also under constant torques for comparison.
+    solver's iterations per physics step, also under constant torques for comparison. ``between()``,
+    if given, runs after each replay (the closed loop's turn: interleaved, both see the machine's load alike).
 
     The closed loop runs once recording every step's ``ctrl`` and chassis forces; then a
     compiled loop replays them into ``mj_step`` on the same scene from the same initial
@@ -53,24 +59,26 @@ def _bare(sc: Any, reps: int) -> dict[str, float]:
     """
     from bioform_mj.core.errors import quiet_outcomes
     from bioform_mj.plants.mujoco.kernels import replay as mujoco_replay
-    from bioform_mj.run.simulate import make_plant, simulate
+    from bioform_mj.run.simulate import simulate
 
-    plant = make_plant(sc)
     m, d = plant.model, plant.data
     steps = int(round(sc.sim.duration / sc.sim.control_dt))
     rec = (np.zeros((steps, m.nu)), np.zeros((steps, plant.n, 6)))
     with quiet_outcomes():  # the run that records the inputs to replay: timed, not reported
-        stop_if_interrupted(simulate(sc, record_inputs=rec))
+        stop_if_interrupted(simulate(sc, record_inputs=rec, plant=plant))
     replay = mujoco_replay
     base = np.ascontiguousarray(plant._base, dtype=np.int64)
     args = (m._address, d._address, plant.n_substeps, d.ctrl, d.xfrc_applied, base)
     replay(*args, rec[0][:0], rec[1][:0], d.solver_niter)  # compile
-    best, iters = float("inf"), 0
+    best, best_cpu, iters = float("inf"), float("inf"), 0
     for _ in range(reps):
         plant.reset()
-        t0 = time.perf_counter()
+        t0, c0_ = time.perf_counter(), time.process_time()
         iters = replay(*args, rec[0], rec[1], d.solver_niter)
         best = min(best, time.perf_counter() - t0)
+        best_cpu = min(best_cpu, time.process_time() - c0_)
+        if between is not None:
+            between()
     c0 = np.zeros(m.nu)
     c0[plant._ctrl] = 0.1 * plant.tau_max[:, None]
     const = (np.tile(c0, (steps, 1)), np.zeros_like(rec[1]))
@@ -81,6 +89,7 @@ def _bare(sc: Any, reps: int) -> dict[str, float]:
     physics_steps = steps * plant.n_substeps
     return {
         "bare_s": best,
+        "bare_cpu_s": best_cpu,
         "solver_iters_per_step": iters / physics_steps,
         "constant_torque_bare_s": c_time,
         "constant_torque_solver_iters_per_step": c_iters / physics_steps,
@@ -96,11 +105,19 @@ def bench_case(n: int, duration: float | None = None, reps: int = 2, numpy_too: 
     sc = load(preset, overrides=[f"sim.duration={dur}"], plant="mujoco")
     steps = int(round(dur / sc.sim.control_dt))
     n_sub = int(round(sc.sim.control_dt / sc.sim.physics_dt))
-    _loop(load(preset, overrides=["sim.duration=0.05"], plant="mujoco"), 1)  # compile the kernels
-    bare_d = _bare(sc, reps)
-    bare = bare_d["bare_s"]
-    loop, summ = _loop(sc, reps)
-    ideal, _ = _loop(load(preset, overrides=[f"sim.duration={dur}"], plant="ideal"), reps)
+    from bioform_mj.run.simulate import make_plant
+
+    load0 = os.getloadavg()[0]
+    # compile the kernels (on the smallest grid preset: they do not depend on n, a 1024-robot scene takes minutes)
+    _loop(load(CASES[16][0] if n >= 16 else preset, overrides=["sim.duration=0.05"], plant="mujoco"), 1)
+    t0 = time.perf_counter()
+    plant = make_plant(sc)  # one scene per case: recorded, replayed bare and run in closed loop (reset each time)
+    build_s = time.perf_counter() - t0
+    loops: list[tuple[float, float, dict]] = []
+    bare_d = _bare(sc, reps, plant, between=lambda: loops.append(_loop(sc, 1, plant=plant)))
+    bare, bare_cpu = bare_d["bare_s"], bare_d["bare_cpu_s"]
+    loop, loop_cpu, summ = min(t[0] for t in loops), min(t[1] for t in loops), loops[-1][2]
+    ideal, ideal_cpu, _ = _loop(load(preset, overrides=[f"sim.duration={dur}"], plant="ideal"), reps)
     row: dict[str, Any] = {
         "n": n,
         "preset": preset,
@@ -111,20 +128,28 @@ def bench_case(n: int, duration: float | None = None, reps: int = 2, numpy_too: 
         "control_steps": steps,
         **bare_d,
         "loop_s": loop,
+        "loop_cpu_s": loop_cpu,
         "ratio": bare / loop,
+        "ratio_cpu": bare_cpu / loop_cpu,
         "bare_steps_per_s": steps / bare,
         "loop_steps_per_s": steps / loop,
         "us_per_robot_step": loop / (steps * n) * 1e6,
         "bare_us_per_robot_step": bare / (steps * n) * 1e6,
+        "us_per_robot_step_cpu": loop_cpu / (steps * n) * 1e6,
         "realtime_factor": dur / loop,
+        "realtime_factor_cpu": dur / loop_cpu,
         "bare_realtime_factor": dur / bare,
+        "bare_realtime_factor_cpu": dur / bare_cpu,
         "ideal_s": ideal,
         "ideal_us_per_robot_step": ideal / (steps * n) * 1e6,
+        "ideal_cpu_s": ideal_cpu,
         "ideal_realtime_factor": dur / ideal,
+        "load_avg": [load0, os.getloadavg()[0]],
+        "scene_build_s": build_s,
         "max_final_formation_error_m": max(f["final_formation_error_m"] for f in summ["followers"]),
     }
     if numpy_too:
-        t_np, _ = _loop(sc, 1, engine="stepwise")
+        t_np, _cpu, _ = _loop(sc, 1, engine="stepwise", plant=plant)
         row["stepwise_loop_s"] = t_np
         row["stepwise_ratio"] = bare / t_np
     return row
@@ -133,13 +158,14 @@ def bench_case(n: int, duration: float | None = None, reps: int = 2, numpy_too: 
 def format_table(rows: Sequence[dict[str, Any]]) -> str:
     """The rows as a Markdown table."""
     head = (
-        "| n | physics dt | bare steps/s | loop steps/s | ratio (bare/loop) | µs per robot-step "
-        "| real-time factor | ideal µs per robot-step |\n|---|---|---|---|---|---|---|---|\n"
+        "| n | physics dt | bare steps/s | loop steps/s | ratio (bare/loop) | ratio, CPU time | µs per robot-step "
+        "(CPU) | real-time factor (CPU) | ideal µs per robot-step | load |\n|---|---|---|---|---|---|---|---|---|---|\n"
     )
     body = "".join(
         f"| {r['n']} | {r['physics_dt_s'] * 1e3:g} ms | {r['bare_steps_per_s']:.0f} | {r['loop_steps_per_s']:.0f} "
-        f"| **{r['ratio']:.2f}** | {r['us_per_robot_step']:.2f} | {r['realtime_factor']:.2f} "
-        f"| {r['ideal_us_per_robot_step']:.2f} |\n"
+        f"| **{r['ratio']:.2f}** | **{r['ratio_cpu']:.2f}** | {r['us_per_robot_step']:.2f} "
+        f"({r['us_per_robot_step_cpu']:.2f}) | {r['realtime_factor']:.2f} ({r['realtime_factor_cpu']:.2f}) "
+        f"| {r['ideal_us_per_robot_step']:.2f} | {r['load_avg'][0]:.1f} |\n"
         for r in rows
     )
     return head + body
@@ -148,7 +174,9 @@ def format_table(rows: Sequence[dict[str, Any]]) -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the benchmark; print the table; write JSON (default ``runs/bench.json``)."""
     ap = argparse.ArgumentParser(prog="bioform bench", description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", default="3,16,64,256", help="comma-separated team sizes (of 3, 16, 64, 256)")
+    ap.add_argument(
+        "--sizes", default="3,16,64,256", help=f"comma-separated team sizes (of {', '.join(map(str, CASES))})"
+    )
     ap.add_argument("--duration", type=float, help="simulated seconds per case (default: per size)")
     ap.add_argument("--reps", type=int, default=2, help="repetitions; the best time counts (default 2)")
     ap.add_argument(
@@ -189,8 +217,9 @@ def run(args: argparse.Namespace) -> int:
         rows.append(bench_case(n, args.duration, args.reps, numpy_too=getattr(args, "numpy", False)))
         r = rows[-1]
         print(
-            f"n={n:4d}: ratio {r['ratio']:.2f}, {r['us_per_robot_step']:.2f} µs/robot-step, "
-            f"real-time factor {r['realtime_factor']:.2f}; solver iterations per physics step "
+            f"n={n:4d}: ratio {r['ratio']:.2f} (CPU time {r['ratio_cpu']:.2f}), {r['us_per_robot_step']:.2f} "
+            f"µs/robot-step (CPU {r['us_per_robot_step_cpu']:.2f}), real-time factor {r['realtime_factor']:.2f} "
+            f"(CPU {r['realtime_factor_cpu']:.2f}), load {r['load_avg'][0]:.1f}; solver iterations per physics step "
             f"{r['solver_iters_per_step']:.2f} (constant torques: {r['constant_torque_solver_iters_per_step']:.2f})",
             flush=True,
         )

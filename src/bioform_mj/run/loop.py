@@ -250,7 +250,8 @@ def start_observers(observers: Sequence[Any], state_obs: Any, raised: Exception 
 
 class LoopEnd(NamedTuple):
     """How the loop ended: steps done, log rows, the final true state, the loop's wall time (s),
-    and what stopped it early (a divergence, an interrupt, an exception to re-raise)."""
+    its CPU time (s, ``time.process_time``) and what stopped it early (a divergence, an interrupt, an
+    exception to re-raise)."""
 
     k_done: int
     j: int
@@ -260,6 +261,7 @@ class LoopEnd(NamedTuple):
     diverged: Diverged | None
     interrupted: KeyboardInterrupt | None
     raised: Exception | None
+    cpu: float
 
 
 def run_loop(
@@ -281,7 +283,7 @@ def run_loop(
     j, status, diverged = warm.j, warm.status, warm.diverged
     obs = ObserverClock(observers, state_obs)
     evq = EventQueue(sc.events, dt)
-    wall0 = time.perf_counter()
+    wall0, cpu0 = time.perf_counter(), time.process_time()
     interrupted: KeyboardInterrupt | None = None
     k = 0
     if status != OK and diverged is None:
@@ -317,7 +319,7 @@ def run_loop(
         interrupted = exc
     except Exception as exc:  # noqa: BLE001 - an observer's sample raised: re-raised by simulate
         raised = exc
-    wall = time.perf_counter() - wall0
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     pose, vel = ctx.pose.copy(), ctx.vel.copy()
     k_done = min(k, N)
     if (
@@ -329,7 +331,7 @@ def run_loop(
         diverged = Diverged(f"non-finite robot state at the end of the run (t = {N * dt:g} s)", step=N, time=N * dt)
     if progress is not None and diverged is None and not interrupted and raised is None:
         progress(N, N)
-    return LoopEnd(k_done, j, pose, vel, wall, diverged, interrupted, raised)
+    return LoopEnd(k_done, j, pose, vel, wall, diverged, interrupted, raised, cpu)
 
 
 def _chunk_end(k: int, N: int, max_chunk: int, evq: EventQueue, obs: ObserverClock, dt: float) -> int:

@@ -95,6 +95,10 @@ class RunResult:
     plant: Plant
     diverged: Diverged | None = None
     interrupted: KeyboardInterrupt | None = None  # what stopped the loop (SIGINT/SIGTERM): log and summary so far
+    #: CPU seconds this process spent in the loop (``time.process_time``; the summary's ``wall_time_s`` is wall
+    #: time): the loop's own cost on a shared machine, read by ``bioform bench``; kept out of the summary, which
+    #: is the same for the same seed apart from its wall times
+    loop_cpu_s: float = float("nan")
 
     def table(self) -> Any:
         """The log as a tidy ``pyarrow.Table``: one row per log sample and follower (``K × n`` rows,
@@ -363,7 +367,7 @@ def simulate(
     if named:  # a registered controller is named by its method (a given one by its class)
         summary["method"] = sc.method
     _add_run_notes(summary, sc, plant, step, end, logd, raised)
-    result = RunResult(sc, logd, summary, plant, end.diverged, end.interrupted)
+    result = RunResult(sc, logd, summary, plant, end.diverged, end.interrupted, end.cpu)
     if raised is not None:  # the exception says the run failed (its summary holds the outcomes so far)
         raise _with_result(raised, result)
     for w in outcome_warnings(summary):  # never silent (design §18.1): the CLI prints its own lines instead

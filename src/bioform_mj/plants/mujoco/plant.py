@@ -94,6 +94,7 @@ class MujocoPlant:
     Attributes
     ----------
     model, data, spec : the compiled ``MjModel``, its ``MjData`` and the scene ``MjSpec``.
+    sensors_computed : bool, whether MuJoCo computes ``sensordata`` (only with ``sensing="odometry"``).
     n_substeps : int, physics steps per control period.
     tau_max : array (n,), torque limit of each follower's motors, N·m.
     params : list of :class:`~bioform_mj.robots.params.RobotParams`, current per follower.
@@ -181,6 +182,14 @@ class MujocoPlant:
         self.obstacles = list(obstacles)  # bioform_mj.formation.obstacles.Obstacle rows (design §19)
         self.model, self.data = compile_scene(self.spec)
         m = self.model
+        #: whether MuJoCo computes the scene's sensors each step (design §8.3): only with sensing =
+        #: "odometry", the one reader of ``sensordata`` in a run (the plant's dead reckoning, the full-state
+        #: log's IMU columns). With "truth" the robot files' own sensors (10 per paper robot) are skipped by
+        #: ``mjDSBL_SENSOR`` on the compiled model (``sensordata`` stays 0; the physics is bit-identical, the
+        #: written ``scene.xml`` keeps them): 2-9 % of ``mj_step`` at 256 robots (docs/findings/performance.md)
+        self.sensors_computed = sensing == "odometry"
+        if not self.sensors_computed:
+            m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
         n = self.n
         prefixes = [follower_prefix(i) for i in range(n)]
 
