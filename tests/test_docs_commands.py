@@ -1,0 +1,514 @@
+"""Every command the README and the documentation show runs as written from a fresh clone (issue 28, item 5).
+
+The shell blocks (```` ```bash ````, ```` ```sh ````, ```` ```console ````: in a console block the ``$`` lines) of
+README.md and docs/**/*.md are read here. A block whose fence carries a title starting with ``Not run by the docs
+test`` (```` ```bash title="Not run by the docs test: needs a GPU" ````, shown as the block's title on the site;
+docs/index.md states the convention) is checked for its programs only.
+
+Fast, for every command: the program exists (``bioform``, ``.venv/bin/bioform``, ``python``, ``make`` with its
+target, ...); every ``bioform`` invocation parses with the CLI's own argparse (``cli.main.build_parser``); every
+preset, robot file, scenario file, bag and example script it names exists (or is made by an earlier command of
+its block); and a scenario's ``--set`` overrides load (``scenario.loader.load``: the keys exist, the values fit).
+
+Slow (``test_docs_commands_run_as_written``): every runnable block is run as written, one ``bash`` per block, in a
+temporary copy of the repository whose ``.venv`` is this interpreter's environment (the README's set-up, done),
+with that ``.venv/bin`` first on ``PATH`` (what ``source .venv/bin/activate`` does) and a per-command time limit.
+It runs for many minutes, so beyond ``slow`` it runs only when ``BIOFORM_DOCS_COMMANDS=1`` (``make docs-commands``).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCS = ROOT / "docs"
+SHELL = ("bash", "sh", "console")
+NOT_RUN = "Not run by the docs test"  # the title that marks a block not runnable here, with its reason
+PAGES = [ROOT / "README.md", *sorted(p for p in DOCS.rglob("*.md"))]
+PER_COMMAND_S = 900.0  # a command of the docs that runs longer than this is a failure (a shipped sweep: ~4 min)
+# programs a docs command may start, besides bioform/python/make/pip (checked below) and these standard tools
+TOOLS = {"cat", "echo", "cd", "ls", "head", "tail", "mkdir", "export", "source", "git", "ros2", "rerun", "cp"}
+# `make test` is this test suite: running it from inside the suite would run this test again
+NEVER_RUN = {"make test": "make test runs this test suite (and this test): not run from inside it"}
+
+
+@dataclass
+class Command:
+    """One command of a block: its text (continuation lines joined, a heredoc's body kept), where it starts."""
+
+    text: str
+    line: int  # 1-based line in the page
+    shown: list[str] = field(default_factory=list)  # a console block: the output shown under it
+
+
+@dataclass
+class Block:
+    page: Path
+    line: int  # the fence's line
+    lang: str
+    title: str
+    body: list[str]
+    commands: list[Command]
+
+    @property
+    def where(self) -> str:
+        return f"{self.page.relative_to(ROOT)}:{self.line}"
+
+    @property
+    def runnable(self) -> bool:
+        return not self.title.startswith(NOT_RUN)
+
+
+def _commands(lines: list[str], first: int, console: bool) -> list[Command]:
+    """The commands of a block's lines (``first``: the page line of ``lines[0]``)."""
+    out: list[Command] = []
+    i = 0
+    while i < len(lines):
+        raw = lines[i]
+        if console:
+            if not raw.startswith("$ "):
+                if out:
+                    out[-1].shown.append(raw)
+                i += 1
+                continue
+            raw = raw[2:]
+        if not raw.strip() or raw.lstrip().startswith("#"):
+            i += 1
+            continue
+        start = i
+        text = raw
+        while text.rstrip().endswith("\\") and i + 1 < len(lines):  # continuation lines
+            i += 1
+            text = text.rstrip()[:-1] + " " + lines[i].strip()
+        here = re.search(r"<<-?\s*'?\"?(\w+)'?\"?", text)
+        if here:  # a heredoc: its body, up to the delimiter, belongs to the command
+            end = i + 1
+            while end < len(lines) and lines[end].strip() != here.group(1):
+                end += 1
+            text = "\n".join([text, *lines[i + 1 : end + 1]])
+            i = end
+        out.append(Command(text, first + start))
+        i += 1
+    return out
+
+
+def blocks(pages: list[Path] = PAGES) -> list[Block]:
+    """Every shell block of ``pages``."""
+    found = []
+    for page in pages:
+        lines = page.read_text().splitlines()
+        i = 0
+        while i < len(lines):
+            m = re.match(r"^(\s*)```(\w*)(.*)$", lines[i])
+            if not m:
+                i += 1
+                continue
+            indent, lang, info = m.groups()
+            j = i + 1
+            while j < len(lines) and lines[j].strip() != "```":
+                j += 1
+            if lang in SHELL:
+                body = [ln[len(indent) :] if ln.startswith(indent) else ln for ln in lines[i + 1 : j]]
+                title = re.search(r'title="([^"]*)"', info)
+                cmds = _commands(body, i + 2, console=lang == "console")
+                found.append(Block(page, i + 1, lang, title.group(1) if title else "", body, cmds))
+            i = j + 1
+    return found
+
+
+def _simple_commands(text: str) -> list[list[str]]:
+    """The simple commands of a command line (split at ``|``, ``;``, ``&&``, ``||``), each as words, with
+    redirections and leading ``VAR=value`` assignments left out; a heredoc's body is not a command."""
+    first = text.split("\n", 1)[0]
+    lex = shlex.shlex(first, posix=True, punctuation_chars=True)
+    lex.whitespace_split = True
+    lex.commenters = "#"
+    words = list(lex)
+    out, cur, skip = [], [], False
+    for w in words:
+        if w in ("|", ";", "&&", "||", "&"):
+            out.append(cur)
+            cur = []
+        elif w in (">", ">>", "<", "<<", "<<-", "2>", "&>", ">&"):
+            skip = True
+        elif skip:
+            skip = False
+        else:
+            cur.append(w)
+    out.append(cur)
+    simple = []
+    for c in out:
+        while c and re.match(r"^[A-Za-z_]\w*=", c[0]):
+            c = c[1:]
+        if c:
+            simple.append(c)
+    return simple
+
+
+def _assignments(block: Block) -> dict[str, str]:
+    """``NAME=value`` lines of a block (``URDF=~/src/...``), for the fast check's expansion of ``$NAME``."""
+    env = {}
+    for c in block.commands:
+        m = re.match(r"^([A-Za-z_]\w*)=(\S+)$", c.text.strip())
+        if m:
+            env[m.group(1)] = os.path.expanduser(m.group(2))
+    return env
+
+
+def _made_by_block(block: Block) -> list[str]:
+    """What the block's own commands create (the fast check takes these as existing): ``--out`` folders and the
+    files ``--json``/``--out`` name, a heredoc's file, a ``git clone``'s folder, a run's default ``runs/`` folder."""
+    made = ["runs/"]
+    for c in block.commands:
+        for words in _simple_commands(c.text):
+            for flag in ("--out", "--json"):
+                if flag in words and words.index(flag) + 1 < len(words):
+                    made.append(words[words.index(flag) + 1].rstrip("/"))
+            if words[:2] == ["git", "clone"] and len(words) >= 4:
+                made.append(os.path.expanduser(words[3]))
+            if words[0] == "cp" and len(words) >= 3:
+                made.append(words[-1])
+        m = re.search(r"cat\s*>\s*(\S+)\s*<<", c.text)
+        if m:
+            made.append(m.group(1))
+    return made
+
+
+def _exists(path: str, made: list[str]) -> bool:
+    p = os.path.expanduser(path)
+    return (ROOT / p).exists() or any(p == m or p.startswith(m.rstrip("/") + "/") or p == m + "/" for m in made)
+
+
+def _check_bioform(argv: list[str], made: list[str], names: bool = True) -> list[str]:
+    """Problems with one ``bioform`` invocation: it parses, and (``names``) what it names exists and loads
+    (a value ``"auto"`` resolves by a run of the scenario's demand, minutes: its key is checked, not loaded)."""
+    from bioform_mj import load
+    from bioform_mj.cli.main import build_parser
+    from bioform_mj.core.errors import InputError
+    from bioform_mj.robots.refs import robot_names
+    from bioform_mj.scenario.loader import preset_names
+
+    try:
+        args = build_parser().parse_args(argv)
+    except InputError as exc:
+        return [f"does not parse: {exc}"]
+    except SystemExit:  # --help
+        return []
+    if not names:
+        return []
+    bad = []
+    scenario = getattr(args, "scenario", None)
+    if args.command == "calibrate":
+        scenario = args.scenario
+    if scenario is not None and scenario not in preset_names() and not _exists(scenario, made):
+        bad.append(f"scenario {scenario!r} is neither a preset nor a file")
+    model = getattr(args, "model", None)
+    if model is not None and model not in robot_names() and not _exists(model, made):
+        bad.append(f"robot {model!r} is neither a shipped robot nor a file")
+    for attr in ("bag", "calibrated"):
+        v = getattr(args, attr, None)
+        if v is not None and not _exists(str(v), made):
+            bad.append(f"--{attr} {v} does not exist")
+    for spec in getattr(args, "package_path", None) or []:
+        d = spec.split("=", 1)[-1]
+        if not _exists(d, made):
+            bad.append(f"--package-path {spec}: {d} does not exist")
+    if (
+        args.command in ("run", "table1", "sweep")
+        and scenario in preset_names()
+        or (args.command in ("run", "table1", "sweep") and scenario and (ROOT / scenario).is_file())
+    ):
+        from bioform_mj.scenario.doc import scenario_keys
+
+        auto = [o for o in args.overrides if o.split("=", 1)[-1].strip("'\"") == "auto"]
+        bad += [f"--set {o}: no such key" for o in auto if o.split("=", 1)[0] not in scenario_keys()]
+        overrides = [o for o in args.overrides if o not in auto]
+        if args.duration is not None:
+            overrides.append(f"sim.duration={args.duration!r}")
+        if args.seed is not None:
+            overrides.append(f"sim.seed={args.seed}")
+        cwd = os.getcwd()
+        try:
+            os.chdir(ROOT)  # the docs' relative paths are the clone's
+            load(scenario, overrides, plant=args.plant)
+        except InputError as exc:
+            bad.append(f"does not load: {exc}")
+        finally:
+            os.chdir(cwd)
+    return bad
+
+
+def _check_command(words: list[str], block: Block, made: list[str], env: dict[str, str]) -> list[str]:
+    """Problems with one simple command: the program, and what it names."""
+    words = [re.sub(r"\$\{?(\w+)\}?", lambda m: env.get(m.group(1), m.group(0)), w) for w in words]
+    prog, rest = words[0], words[1:]
+    venv_bin = Path(sys.prefix) / "bin"
+    if prog.startswith(".venv/bin/"):
+        name = prog.removeprefix(".venv/bin/")
+        if not (venv_bin / name).exists():
+            return [f"{prog}: {name} is not installed in the environment make test sets up"]
+        prog = name
+    if prog == "bioform":
+        return _check_bioform(rest, made, names=block.runnable)
+    if not block.runnable and prog.startswith("..."):  # an elided step of a block that is not run
+        return []
+    if prog in ("python", "python3"):
+        if rest[:1] == ["-m"]:
+            import importlib.util
+
+            return [] if importlib.util.find_spec(rest[1]) else [f"python -m {rest[1]}: no such module"]
+        if rest and rest[0].endswith(".py") and not _exists(rest[0], made):
+            return [f"python {rest[0]}: no such script"]
+        return []
+    if prog == "make":
+        targets = re.findall(r"^([\w-]+):", (ROOT / "Makefile").read_text(), flags=re.M)
+        return [
+            f"make {t}: no such target" for t in rest if not t.startswith("-") and "=" not in t and t not in targets
+        ]
+    if prog in ("pip", "pip3"):
+        return [] if rest[:1] == ["install"] else [f"pip {' '.join(rest)}: not an install"]
+    if prog in TOOLS or (venv_bin / prog).exists():
+        return []
+    return [f"{prog}: not a program the docs' set-up provides"]
+
+
+def _ids(bs: list[Block]) -> list[str]:
+    return [b.where for b in bs]
+
+
+ALL = blocks()
+
+
+def test_the_docs_have_shell_blocks_and_the_convention_is_stated():
+    assert len(ALL) >= 15, _ids(ALL)
+    assert sum(len(b.commands) for b in ALL) >= 40
+    index = (DOCS / "index.md").read_text()
+    assert NOT_RUN in index and "tests/test_docs_commands.py" in index  # the convention, said where a reader starts
+    for b in ALL:
+        if not b.runnable:
+            reason = b.title.removeprefix(NOT_RUN).strip(" :")
+            assert reason, f"{b.where}: a block marked not runnable says why"
+
+
+def test_command_blocks_carry_a_shell_language():
+    """A fence holding ``bioform ...`` lines without a language would escape this test: label it."""
+    bad = []
+    for page in PAGES:
+        lines = page.read_text().splitlines()
+        i = 0
+        while i < len(lines):
+            m = re.match(r"^\s*```(\S*)", lines[i])
+            if not m:
+                i += 1
+                continue
+            j = i + 1
+            while j < len(lines) and lines[j].strip() != "```":
+                j += 1
+            if not m.group(1) and any(re.match(r"^\s*(\$ )?(\.venv/bin/)?bioform ", ln) for ln in lines[i + 1 : j]):
+                bad.append(f"{page.relative_to(ROOT)}:{i + 1}")
+            i = j + 1
+    assert not bad, f"fences holding commands without bash/sh/console: {bad}"
+
+
+@pytest.mark.parametrize("block", ALL, ids=_ids(ALL))
+def test_every_command_names_what_exists(block):
+    """The program exists; ``bioform`` invocations parse and name presets, robots and files that exist."""
+    made = _made_by_block(block)
+    env = _assignments(block)
+    bad = []
+    for c in block.commands:
+        for words in _simple_commands(c.text):
+            bad += [f"line {c.line}: {c.text.splitlines()[0]!r}: {p}" for p in _check_command(words, block, made, env)]
+        if block.runnable and re.search(r"\[--|\|cpu\]|<[A-Z]+>|\bROBOT\b|\bBAG\b", c.text.split("\n", 1)[0]):
+            bad.append(f"line {c.line}: a placeholder in a block marked runnable: {c.text.splitlines()[0]!r}")
+    assert not bad, "\n".join(bad)
+
+
+def test_bare_bioform_and_python_are_preceded_by_the_venv_line():
+    """The docs write bare ``bioform``/``python``: the README's quick start and the getting-started page say once
+    to activate .venv (issue 28: the tutorial's own command failed with "No module named 'bioform_mj'")."""
+    for page in (ROOT / "README.md", DOCS / "guide" / "getting-started.md", DOCS / "index.md"):
+        assert "source .venv/bin/activate" in page.read_text(), page.name
+
+
+# ---------------------------------------------------------------------------------------------------- the slow run
+
+
+def _clone(dst: Path) -> None:
+    """A fresh clone's files (the tracked and untracked-not-ignored ones) and a ``.venv`` that is this
+    interpreter's environment, set up (make's stamps present)."""
+    files = subprocess.run(
+        ["git", "ls-files", "-co", "--exclude-standard", "-z"], cwd=ROOT, capture_output=True, check=True
+    ).stdout.split(b"\0")
+    for f in filter(None, files):
+        src = ROOT / f.decode()
+        if src.is_file():
+            (dst / f.decode()).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, dst / f.decode())
+    venv = dst / ".venv"
+    venv.mkdir()
+    for entry in ("bin", "lib", "include", "pyvenv.cfg"):
+        if (Path(sys.prefix) / entry).exists():
+            (venv / entry).symlink_to(Path(sys.prefix) / entry)
+    for stamp in (".installed", ".installed-test"):  # make's set-up done: make demo does not reinstall
+        (venv / stamp).touch()
+
+
+def _run_block(block: Block, cwd: Path, env: dict[str, str]) -> list[str]:
+    """Run one block as written in ``cwd``; problems, each naming the command's line."""
+    if block.lang == "console":
+        problems = []
+        for c in block.commands:
+            t0 = time.monotonic()
+            out = subprocess.run(
+                ["bash", "-c", c.text], cwd=cwd, env=env, capture_output=True, text=True, timeout=PER_COMMAND_S
+            )
+            want_error = bool(c.shown) and c.shown[0].startswith("error:")
+            took = f"{time.monotonic() - t0:.0f} s"
+            if want_error and (out.returncode != 2 or "error:" not in out.stderr):
+                problems.append(f"line {c.line}: expected exit 2 with an error: line, got {out.returncode} ({took})")
+            if not want_error and out.returncode != 0:
+                tail = out.stderr.strip().splitlines()[-1:] or [""]
+                problems.append(f"line {c.line}: exit {out.returncode} ({took}): {tail[0]}")
+        return problems
+    script = ["set -a", "trap 'echo \"__line $LINENO\" >&3' DEBUG", "trap 'echo \"__fail $LINENO $?\" >&3' ERR"]
+    lines_of_script = {}
+    for c in block.commands:
+        if c.text.split("\n", 1)[0].strip() in NEVER_RUN or re.match(r"^make test\b", c.text):
+            continue
+        lines_of_script[len(script) + 1] = c
+        script.append(c.text)
+    r, w = os.pipe()
+    proc = subprocess.Popen(
+        ["bash", "-c", "\n".join(script) + "\n", "docs-block"],
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        pass_fds=(w,),
+        text=True,
+        start_new_session=True,
+        preexec_fn=lambda: os.dup2(w, 3),
+    )
+    os.close(w)
+    state = {"line": 0, "since": time.monotonic(), "fails": [], "starts": {}}
+
+    def watch():
+        with os.fdopen(r) as fh:
+            for msg in fh:
+                kind, *rest = msg.split()
+                if kind == "__line" and int(rest[0]) != state["line"]:
+                    state["line"], state["since"] = int(rest[0]), time.monotonic()
+                    state["starts"].setdefault(int(rest[0]), time.monotonic())
+                elif kind == "__fail":
+                    state["fails"].append((int(rest[0]), int(rest[1]), time.monotonic()))
+
+    th = threading.Thread(target=watch, daemon=True)
+    th.start()
+    chunks: list[str] = []
+    reader = threading.Thread(target=lambda: chunks.append(proc.stdout.read()), daemon=True)
+    reader.start()
+    problems = []
+    while proc.poll() is None:
+        if time.monotonic() - state["since"] > PER_COMMAND_S:
+            os.killpg(proc.pid, 9)
+            c = _at(lines_of_script, state["line"])
+            problems.append(f"line {c.line if c else '?'}: still running after {PER_COMMAND_S:.0f} s: killed")
+            break
+        time.sleep(0.5)
+    proc.wait()
+    reader.join(10)
+    th.join(10)
+    output = "".join(chunks)
+    for line, rc, _t in state["fails"]:
+        c = _at(lines_of_script, line)
+        where = f"line {c.line}: {c.text.splitlines()[0]!r}" if c else f"script line {line}"
+        problems.append(f"{where}: exit {rc}; {_error_lines(output)}")
+    return problems
+
+
+def _at(lines_of_script: dict[int, Command], line: int) -> Command | None:
+    """The command of the script that holds script line ``line`` (a heredoc spans several)."""
+    starts = [s for s in sorted(lines_of_script) if s <= line]
+    return lines_of_script[starts[-1]] if starts else None
+
+
+def _error_lines(output: str) -> str:
+    errs = [ln for ln in output.splitlines() if ln.startswith(("error:", "Traceback", "bash:", "make:"))]
+    return "; ".join(errs[-3:]) or output.strip().splitlines()[-1:][0] if output.strip() else "no output"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    os.environ.get("BIOFORM_DOCS_COMMANDS") != "1",
+    reason="runs every docs command for many minutes: BIOFORM_DOCS_COMMANDS=1 (make docs-commands)",
+)
+def test_docs_commands_run_as_written(tmp_path):
+    """Every runnable block, run as written in a copy of the repository, exits 0 (a console block: as shown)."""
+    clone = tmp_path / "clone"
+    clone.mkdir()
+    _clone(clone)
+    venv_bin = clone / ".venv" / "bin"
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTEST", "BIOFORM_"))}
+    env.update(
+        PATH=f"{venv_bin}{os.pathsep}{os.environ.get('PATH', '')}",
+        VIRTUAL_ENV=str(clone / ".venv"),
+        HOME=str(tmp_path / "home"),  # the numba cache and ~/src of a fresh user
+        PYTHONPATH=str(clone / "src"),  # this checkout's code, whatever the environment's editable install points at
+    )
+    (tmp_path / "home").mkdir()
+    cache = Path.home() / ".cache" / "bioform_mj"
+    if cache.is_dir():  # compiled kernels are not what this test measures
+        shutil.copytree(cache, tmp_path / "home" / ".cache" / "bioform_mj", symlinks=True)
+    failed = []
+    for b in ALL:
+        if b.runnable:
+            t0 = time.monotonic()
+            problems = _run_block(b, clone, env)
+            print(f"{b.where}: {len(b.commands)} commands, {time.monotonic() - t0:.0f} s, {len(problems)} problems")
+            failed += [f"{b.where} {p}" for p in problems]
+    assert not failed, "\n".join(failed)
+
+
+def test_the_fast_check_finds_each_kind_of_broken_command(tmp_path):
+    """A page of broken commands: each is reported, naming its line; the one good command is not."""
+    page = tmp_path / "broken.md"
+    page.write_text(
+        "```bash\n"
+        "bioform run paper --duration 1 --out runs/ok\n"  # good: line 2
+        "bioform run paper --no-such-flag\n"
+        "bioform run no-such-preset\n"
+        "bioform robot check no/such/robot.xml\n"
+        "bioform run paper --set no.such_key=1\n"
+        "make no-such-target\n"
+        "python no/such/script.py\n"
+        "no-such-program --help\n"
+        "bioform sweep paper --backend warp [--device cuda|cpu] --out runs/x\n"
+        "```\n"
+        "```console\n$ bioform run paper --set 'sim.duration=-1'\nerror: ...\n```\n"
+    )
+    (bash, console) = blocks([page])
+    assert [c.line for c in bash.commands] == list(range(2, 11)) and console.commands[0].shown == ["error: ..."]
+    made, env = _made_by_block(bash), _assignments(bash)
+    found = {c.line: _check_command(_simple_commands(c.text)[0], bash, made, env) for c in bash.commands}
+    assert found[2] == []
+    assert "does not parse" in found[3][0] and "--no-such-flag" in found[3][0]
+    assert "neither a preset nor a file" in found[4][0]
+    assert "neither a shipped robot nor a file" in found[5][0]
+    assert "does not load" in found[6][0] and "no.such_key" in found[6][0]
+    assert found[7] == ["make no-such-target: no such target"]
+    assert found[8] == ["python no/such/script.py: no such script"]
+    assert "not a program" in found[9][0]
+    assert found[10]  # the [--device cuda|cpu] placeholder does not parse
+    assert "does not load" in _check_command(_simple_commands(console.commands[0].text)[0], console, [], {})[0]
