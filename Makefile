@@ -5,13 +5,15 @@
 #                 ros extra (rosbags: the --rosbag tests),
 #                 run the test suite and build the documentation with warnings as errors
 #   make docs   - build the documentation site into site/ (needs the docs extra)
+#   make docs-commands - run every shell block of README.md and docs/ as written, each page in a fresh copy of
+#                 the repository (tests/test_docs_commands.py; tens of minutes, not part of make test)
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: demo test test-fast lint bench install clean docs
+.PHONY: demo test test-fast lint bench install clean docs docs-commands
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -62,6 +64,9 @@ docs: $(STAMP)
 		{ echo "error: the docs extra is missing from $(VENV): install it with $(PY) -m pip install -e '.[docs]'" >&2; exit 2; }
 	$(MKDOCS) build --strict
 	@echo "documentation: site/index.html"
+
+docs-commands: $(TEST_STAMP)
+	BIOFORM_DOCS_COMMANDS=1 $(PY) -m pytest -q -p no:cacheprovider tests/test_docs_commands.py -k "run_as_written or reading_order"
 
 lint: $(TEST_STAMP)
 	$(VENV)/bin/ruff check --fix src tests scripts examples docs/tutorials

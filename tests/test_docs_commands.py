@@ -365,11 +365,16 @@ def _clone(dst: Path) -> None:
         (venv / stamp).touch()
 
 
-def _run_block(block: Block, cwd: Path, env: dict[str, str]) -> list[str]:
-    """Run one block as written in ``cwd``; problems, each naming the command's line."""
+def _run_block(block: Block, cwd: Path, env: dict[str, str], done: set[str] | None = None) -> list[str]:
+    """Run one block as written in ``cwd``; problems, each naming the command's line. ``done``: the commands
+    already run in this copy (an identical command is not run twice; this block's are added)."""
+    done = set() if done is None else done
     if block.lang == "console":
         problems = []
         for c in block.commands:
+            if c.text in done:
+                continue
+            done.add(c.text)
             t0 = time.monotonic()
             out = subprocess.run(
                 ["bash", "-c", c.text], cwd=cwd, env=env, capture_output=True, text=True, timeout=PER_COMMAND_S
@@ -385,8 +390,9 @@ def _run_block(block: Block, cwd: Path, env: dict[str, str]) -> list[str]:
     script = ["set -a", "trap 'echo \"__line $LINENO\" >&3' DEBUG", "trap 'echo \"__fail $LINENO $?\" >&3' ERR"]
     lines_of_script = {}
     for c in block.commands:
-        if c.text.split("\n", 1)[0].strip() in NEVER_RUN or re.match(r"^make test\b", c.text):
+        if c.text.split("\n", 1)[0].strip() in NEVER_RUN or re.match(r"^make test\b", c.text) or c.text in done:
             continue
+        done.add(c.text)
         lines_of_script[len(script) + 1] = c
         script.append(c.text)
     r, w = os.pipe()
@@ -449,31 +455,42 @@ def _error_lines(output: str) -> str:
     return "; ".join(errs[-3:]) or output.strip().splitlines()[-1:][0] if output.strip() else "no output"
 
 
+RUN_PAGES = sorted({b.page for b in ALL if b.runnable})
+
+
+def _reading_order() -> list[Path]:
+    """README, then the site's pages in mkdocs.yml's nav order: the path a newcomer reads."""
+    nav = re.findall(r":\s*([\w/.-]+\.md)\s*$", (ROOT / "mkdocs.yml").read_text(), flags=re.M)
+    return [ROOT / "README.md", *(DOCS / n for n in nav if (DOCS / n).exists())]
+
+
+def _clone_env(clone: Path) -> dict[str, str]:
+    """The environment of a shell in ``clone`` with its ``.venv`` activated."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTEST", "BIOFORM_"))}
+    env.update(
+        PATH=f"{clone / '.venv' / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}",
+        VIRTUAL_ENV=str(clone / ".venv"),
+        PYTHONPATH=str(clone / "src"),  # this checkout's code, whatever the environment's editable install points at
+    )
+    return env
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(
     os.environ.get("BIOFORM_DOCS_COMMANDS") != "1",
-    reason="runs every docs command for many minutes: BIOFORM_DOCS_COMMANDS=1 (make docs-commands)",
+    reason="runs every docs command, for many minutes: BIOFORM_DOCS_COMMANDS=1 (make docs-commands)",
 )
-def test_docs_commands_run_as_written(tmp_path):
-    """Every runnable block, run as written in a copy of the repository, exits 0 (a console block: as shown)."""
+@pytest.mark.parametrize("page", RUN_PAGES, ids=[str(p.relative_to(ROOT)) for p in RUN_PAGES])
+def test_docs_commands_run_as_written(page, tmp_path):
+    """Every runnable block of ``page``, in order, run as written in a fresh copy of the repository, exits 0 (a
+    console block: as shown). One copy per page: a reader follows one page from a fresh clone."""
     clone = tmp_path / "clone"
     clone.mkdir()
     _clone(clone)
-    venv_bin = clone / ".venv" / "bin"
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTEST", "BIOFORM_"))}
-    env.update(
-        PATH=f"{venv_bin}{os.pathsep}{os.environ.get('PATH', '')}",
-        VIRTUAL_ENV=str(clone / ".venv"),
-        HOME=str(tmp_path / "home"),  # the numba cache and ~/src of a fresh user
-        PYTHONPATH=str(clone / "src"),  # this checkout's code, whatever the environment's editable install points at
-    )
-    (tmp_path / "home").mkdir()
-    cache = Path.home() / ".cache" / "bioform_mj"
-    if cache.is_dir():  # compiled kernels are not what this test measures
-        shutil.copytree(cache, tmp_path / "home" / ".cache" / "bioform_mj", symlinks=True)
+    env = _clone_env(clone)
     failed = []
     for b in ALL:
-        if b.runnable:
+        if b.page == page and b.runnable:
             t0 = time.monotonic()
             problems = _run_block(b, clone, env)
             print(f"{b.where}: {len(b.commands)} commands, {time.monotonic() - t0:.0f} s, {len(problems)} problems")
@@ -512,3 +529,24 @@ def test_the_fast_check_finds_each_kind_of_broken_command(tmp_path):
     assert "not a program" in found[9][0]
     assert found[10]  # the [--device cuda|cpu] placeholder does not parse
     assert "does not load" in _check_command(_simple_commands(console.commands[0].text)[0], console, [], {})[0]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    os.environ.get("BIOFORM_DOCS_COMMANDS") != "1",
+    reason="runs every docs command, for many minutes: BIOFORM_DOCS_COMMANDS=1 (make docs-commands)",
+)
+def test_docs_commands_run_in_one_clone_in_reading_order(tmp_path):
+    """The newcomer's whole path: README, then every page in the nav's order, in ONE copy of the repository (an
+    identical command is run once). A command that fails here and not on its own page collides with an earlier
+    page's outputs (issue 28: a default output folder that ignores --set)."""
+    clone = tmp_path / "clone"
+    clone.mkdir()
+    _clone(clone)
+    env = _clone_env(clone)
+    failed, done = [], set()
+    for page in _reading_order():
+        for b in ALL:
+            if b.page == page and b.runnable:
+                failed += [f"{b.where} {p}" for p in _run_block(b, clone, env, done)]
+    assert not failed, "\n".join(failed)
