@@ -63,7 +63,7 @@ docs: $(STAMP)
 	@$(PY) -c "import mkdocs, material, mkdocstrings, mkdocstrings_handlers.python, mkdocs_gen_files" 2>/dev/null || \
 		{ echo "error: the docs extra is missing from $(VENV): install it with $(PY) -m pip install -e '.[docs]'" >&2; exit 2; }
 	$(MKDOCS) build --strict
-	@echo "documentation: site/index.html"
+	@echo "documentation: site/index.html (open it from disk; without a network for search: python -m http.server -d site)"
 
 docs-commands: $(TEST_STAMP)
 	BIOFORM_DOCS_COMMANDS=1 $(PY) -m pytest -q -p no:cacheprovider tests/test_docs_commands.py -k "run_as_written or reading_order"

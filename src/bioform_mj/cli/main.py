@@ -316,6 +316,17 @@ def _dispatch(args: argparse.Namespace) -> int:
         width = max(map(len, desc))
         print("\n".join(f"{name:<{width}}  {text}" for name, text in desc.items()))
         return EXIT_OK
+    from bioform_mj.core.jitwatch import watch
+
+    # a compile said before it happens, terminal or not (numba's cache index missed; issue 28, design §2)
+    stop_watch = watch(lambda burst: print(burst.line(), file=sys.stderr, flush=True))
+    try:
+        return _dispatch_work(args)
+    finally:
+        stop_watch()
+
+
+def _dispatch_work(args: argparse.Namespace) -> int:
     with _mujoco_log() as mjlog:
         if args.command == "identify":
             from bioform_mj.cli.robot import identify_command

@@ -1,0 +1,73 @@
+"""A compile is said before it happens, from numba's cache index (core/jitwatch.py; issue 28, item 5).
+
+A tiny cached kernel in a temporary module and a temporary ``NUMBA_CACHE_DIR``: the watch sees a burst exactly
+when numba's index has no entry for the call's signature (a first call; a new signature), and none when the
+index has it (a second call; a new process loading it from disk)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+KERNEL = """
+import numba
+
+@numba.njit(cache=True)
+def twice(x):
+    return 2 * x
+"""
+
+DRIVER = """
+import json, sys
+sys.path.insert(0, sys.argv[1])
+from bioform_mj.core.jitwatch import watch
+seen = []
+stop = watch(lambda b: seen.append(b.line()), gap_s=0.0)
+import tinykernel
+out = [tinykernel.twice(int(a)) if a.isdigit() else tinykernel.twice(float(a)) for a in sys.argv[2:]]
+bursts = stop()
+print(json.dumps({"out": out, "lines": seen, "kernels": [b.kernels for b in bursts],
+                  "seconds": [b.seconds for b in bursts]}))
+"""
+
+
+def _run(tmp_path: Path, *args: str) -> dict:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT / "src"))
+    cmd = [sys.executable, "-c", DRIVER, str(tmp_path / "mod"), *args]
+    p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
+    assert p.returncode == 0, p.stderr[-2000:]
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow  # three processes importing numba: ~5 s of CPU
+def test_a_burst_exactly_where_the_cache_index_misses(tmp_path):
+    (tmp_path / "mod").mkdir()
+    (tmp_path / "mod" / "tinykernel.py").write_text(KERNEL)
+    first = _run(tmp_path, "3", "4")  # one compile (int64), the second call finds it compiled
+    assert first["out"] == [6, 8]
+    assert first["kernels"] == [["tinykernel.twice"]]
+    assert 0 < first["seconds"][0] < 60
+    (line,) = first["lines"]
+    assert line.startswith("compiling ") and "about " in line and str(tmp_path / "cache") in line
+    again = _run(tmp_path, "5")  # a new process: numba's index has int64, loaded from disk, nothing said
+    assert again["out"] == [10] and again["kernels"] == [] and again["lines"] == []
+    other = _run(tmp_path, "5", "2.5")  # float64 is not in the index: one burst, for that signature only
+    assert other["out"] == [10, 5.0] and other["kernels"] == [["tinykernel.twice"]] and len(other["lines"]) == 1
+    nbi = list((tmp_path / "cache").rglob("*.nbi"))
+    assert len(nbi) == 1  # one index, two signatures in it: what the watch read its answer from
+
+
+def test_the_line_says_first_run_or_option_and_the_estimate():
+    from bioform_mj.core.jitwatch import COMPILE_S, CompileBurst
+
+    first = CompileBurst("m.k", "/c/numba-x", True, COMPILE_S["first"]).line()
+    assert first == f"compiling the loop once (about {COMPILE_S['first']:.0f} s; cached in /c/numba-x)"
+    later = CompileBurst("m.k", "/c/numba-x", False, COMPILE_S["variant"]).line()
+    assert later.startswith("compiling the kernels of an option") and f"about {COMPILE_S['variant']:.0f} s" in later
