@@ -5,8 +5,10 @@ numba looks each kernel up in its on-disk cache (``numba.config.CACHE_DIR``, set
 signature it is called with: its ``"numba:compile"`` event starts exactly then, after the index lookup failed
 and before any machine code is generated. :func:`watch` listens for that event and tells its callback once per
 burst of compiles (the first top-level compile after ``gap_s`` without one), with an estimate of how long the
-burst takes: what was measured for a first run (an empty cache folder) or for a variant (a kernel of an option
-that the cache folder does not hold yet). Nothing is guessed from a terminal or a flag: no lookup miss, no call.
+burst takes: what ``scripts/compile_time.py`` measured for the kernel that starts it (:data:`COMPILE_S`).
+Nothing is guessed from a terminal or a flag: no lookup miss, no call. :func:`precompile` compiles (or loads)
+a kernel for given arguments without calling it: what a first run compiles ahead for an option a later run
+would otherwise compile on its own (design §2).
 """
 
 from __future__ import annotations
@@ -17,13 +19,46 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-__all__ = ["COMPILE_S", "CompileBurst", "cache_dir", "cached_kernels", "watch"]
+__all__ = [
+    "COMPILE_S",
+    "FIRST_RUN_S",
+    "CompileBurst",
+    "cache_dir",
+    "cached_kernels",
+    "estimate_s",
+    "precompile",
+    "watch",
+]
 
-#: Seconds measured for a burst of compiles on the project's 2-core reference machine (shared, load 6-11;
-#: numba 0.68, Python 3.11): ``"first"`` a whole first run of ``bioform run paper`` into an empty cache folder
-#: (the ideal and the MuJoCo plant's loop and the controller's kernels), ``"variant"`` one option's kernels
-#: compiled into a folder that holds the rest. Measured with ``scripts/compile_time.py``.
-COMPILE_S: dict[str, float] = {"first": 90.0, "variant": 30.0}
+#: Seconds of compiling, measured by ``scripts/compile_time.py`` on the project's 2-core machine shared at load
+#: 11-12 (numba 0.68.1, Python 3.11; a quieter machine takes less). A first run into an empty cache folder
+#: (:data:`FIRST_RUN_S`): ``run paper --plant ideal`` 160 s (equations, controller, engine, the ideal plant's
+#: chunk), ``--plant mujoco`` 226 s (all of that and the MuJoCo plant's kernels; a later ideal or odometry run
+#: then compiles nothing). After an ideal first run, by the kernel that starts a burst (the longest matching
+#: prefix of its ``module.qualname``): a MuJoCo run's step-by-step kernels 25 s, its chunk 76 s; the odometry
+#: reset 2.3 s (now compiled with the MuJoCo chunk, :func:`precompile`).
+FIRST_RUN_S: tuple[float, float] = (160.0, 226.0)
+COMPILE_S: dict[str, float] = {
+    "bioform_mj": 160.0,
+    "bioform_mj.plants.mujoco": 25.0,
+    "bioform_mj.plants.mujoco.kernels.run_chunk": 76.0,
+    "bioform_mj.plants.mujoco.kernels.odometry_reset": 2.3,
+}
+
+
+def estimate_s(kernel: str) -> float:
+    """:data:`COMPILE_S` of the longest prefix of ``kernel`` (``module.qualname``) it holds; 30 s for another
+    package's kernel."""
+    keys = [k for k in COMPILE_S if kernel == k or kernel.startswith(k + ".")]
+    return COMPILE_S[max(keys, key=len)] if keys else 30.0
+
+
+def precompile(dispatcher: Callable, *args: object) -> None:
+    """Compile numba ``dispatcher`` for the types of ``args`` without calling it (loaded from the cache where
+    its index has them; nothing without numba or with ``NUMBA_DISABLE_JIT``)."""
+    compile_ = getattr(dispatcher, "compile", None)
+    if compile_ is not None and hasattr(dispatcher, "typeof_pyval"):
+        compile_(tuple(dispatcher.typeof_pyval(a) for a in args))
 
 
 def cache_dir() -> str:
@@ -70,10 +105,19 @@ class CompileBurst:
     seconds: float = math.nan  # wall time from the first compile's start to the last one's end
     kernels: list[str] = field(default_factory=list)  # every top-level kernel compiled in the burst
 
+    continued: bool = False  # a later burst of a process whose first burst was a first run's
+
     def line(self) -> str:
         """The one line the CLI prints on stderr."""
-        what = "the loop once" if self.first else "the kernels of an option not compiled before"
-        return f"compiling {what} (about {self.estimate_s:.0f} s; cached in {self.cache_dir})"
+        if self.first:
+            lo, hi = FIRST_RUN_S
+            return f"compiling the loop once (about {lo:.0f}-{hi:.0f} s; cached in {self.cache_dir})"
+        if self.continued:
+            return "compiling, continued (within the first run's estimate)"
+        return (
+            f"compiling the kernels of an option not compiled before (about {self.estimate_s:.0f} s; "
+            f"cached in {self.cache_dir})"
+        )
 
 
 def watch(notify: Callable[[CompileBurst], None], gap_s: float = 2.0) -> Callable[[], list[CompileBurst]]:
@@ -100,7 +144,9 @@ def watch(notify: Callable[[CompileBurst], None], gap_s: float = 2.0) -> Callabl
                 if not bursts or time.monotonic() - self.last_end > gap_s:
                     folder = cache_dir()
                     first = cached_kernels(folder) == 0
-                    bursts.append(CompileBurst(name, folder, first, COMPILE_S["first" if first else "variant"]))
+                    continued = bool(bursts) and (bursts[0].first or bursts[0].continued)
+                    est = sum(FIRST_RUN_S) / 2 if first else estimate_s(name)
+                    bursts.append(CompileBurst(name, folder, first and not continued, est, continued=continued))
                     notify(bursts[-1])
                 bursts[-1].kernels.append(name)
             self.depth += 1
