@@ -318,8 +318,9 @@ def _dispatch(args: argparse.Namespace) -> int:
         return EXIT_OK
     from bioform_mj.core.jitwatch import watch
 
-    # a compile said before it happens, terminal or not (numba's cache index missed; issue 28, design §2)
-    stop_watch = watch(lambda burst: print(burst.line(), file=sys.stderr, flush=True))
+    # a compile said before it happens, terminal or not (numba's cache index missed; design §2); --quiet: not said
+    say = not getattr(args, "quiet", False)
+    stop_watch = watch(lambda burst: say and print(burst.line(), file=sys.stderr, flush=True))
     try:
         return _dispatch_work(args)
     finally:
