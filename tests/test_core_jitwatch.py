@@ -31,7 +31,13 @@ from bioform_mj.core.jitwatch import watch
 seen = []
 stop = watch(lambda b: seen.append(b.line()), gap_s=0.0)
 import tinykernel
-out = [tinykernel.twice(int(a)) if a.isdigit() else tinykernel.twice(float(a)) for a in sys.argv[2:]]
+from bioform_mj.core.jitwatch import precompile
+out = []
+for a in sys.argv[2:]:
+    if a.startswith("pre:"):  # compiled for the type of the number, not called
+        precompile(tinykernel.twice, complex(a[4:]))
+    else:
+        out.append(tinykernel.twice(int(a)) if a.isdigit() else tinykernel.twice(float(a)))
 bursts = stop()
 print(json.dumps({"out": out, "lines": seen, "kernels": [b.kernels for b in bursts],
                   "seconds": [b.seconds for b in bursts]}))
@@ -62,8 +68,10 @@ def test_a_burst_exactly_where_the_cache_index_misses(tmp_path):
     assert other["out"] == [10, 5.0] and other["kernels"] == [["tinykernel.twice"]] and len(other["lines"]) == 1
     # this cache holds none of the package's own kernels: the line is a first run's, whatever compiles
     assert other["lines"][0].startswith("compiling the loop once (about ")
+    pre = _run(tmp_path, "pre:1")  # precompile: a burst for complex128, nothing called
+    assert pre["out"] == [] and pre["kernels"] == [["tinykernel.twice"]]
     nbi = list((tmp_path / "cache").rglob("*.nbi"))
-    assert len(nbi) == 1  # one index, two signatures in it: what the watch read its answer from
+    assert len(nbi) == 1  # one index, three signatures in it: what the watch read its answer from
 
 
 def test_the_line_says_first_run_or_option_and_the_estimate():
