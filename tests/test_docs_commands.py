@@ -387,7 +387,8 @@ def _run_block(block: Block, cwd: Path, env: dict[str, str], done: set[str] | No
                 tail = out.stderr.strip().splitlines()[-1:] or [""]
                 problems.append(f"line {c.line}: exit {out.returncode} ({took}): {tail[0]}")
         return problems
-    script = ["set -a", "trap 'echo \"__line $LINENO\" >&3' DEBUG", "trap 'echo \"__fail $LINENO $?\" >&3' ERR"]
+    r, w = os.pipe()  # the traps report each command's start and each failure on fd w (kept in the child)
+    script = ["set -a", f"trap 'echo \"__line $LINENO\" >&{w}' DEBUG", f"trap 'echo \"__fail $LINENO $?\" >&{w}' ERR"]
     lines_of_script = {}
     for c in block.commands:
         if c.text.split("\n", 1)[0].strip() in NEVER_RUN or re.match(r"^make test\b", c.text) or c.text in done:
@@ -395,7 +396,6 @@ def _run_block(block: Block, cwd: Path, env: dict[str, str], done: set[str] | No
         done.add(c.text)
         lines_of_script[len(script) + 1] = c
         script.append(c.text)
-    r, w = os.pipe()
     proc = subprocess.Popen(
         ["bash", "-c", "\n".join(script) + "\n", "docs-block"],
         cwd=cwd,
@@ -405,7 +405,6 @@ def _run_block(block: Block, cwd: Path, env: dict[str, str], done: set[str] | No
         pass_fds=(w,),
         text=True,
         start_new_session=True,
-        preexec_fn=lambda: os.dup2(w, 3),
     )
     os.close(w)
     state = {"line": 0, "since": time.monotonic(), "fails": [], "starts": {}}
@@ -481,10 +480,14 @@ def _clone_env(clone: Path) -> dict[str, str]:
     reason="runs every docs command, for many minutes: BIOFORM_DOCS_COMMANDS=1 (make docs-commands)",
 )
 @pytest.mark.parametrize("page", RUN_PAGES, ids=[str(p.relative_to(ROOT)) for p in RUN_PAGES])
-def test_docs_commands_run_as_written(page, tmp_path):
+def test_docs_commands_run_as_written(page, tmp_path_factory):
     """Every runnable block of ``page``, in order, run as written in a fresh copy of the repository, exits 0 (a
-    console block: as shown). One copy per page: a reader follows one page from a fresh clone."""
-    clone = tmp_path / "clone"
+    console block: as shown). One copy per page: a reader follows one page from a fresh clone. Each page's copy
+    is made at the same path, after the last one is removed: numba keys its cache by the source's folder, so
+    the loop compiles once for all pages (minutes each otherwise), as it would for one user's clone."""
+    clone = tmp_path_factory.getbasetemp() / "clone"
+    if clone.exists():
+        shutil.rmtree(clone)
     clone.mkdir()
     _clone(clone)
     env = _clone_env(clone)
@@ -550,3 +553,31 @@ def test_docs_commands_run_in_one_clone_in_reading_order(tmp_path):
             if b.page == page and b.runnable:
                 failed += [f"{b.where} {p}" for p in _run_block(b, clone, env, done)]
     assert not failed, "\n".join(failed)
+
+
+def test_the_runner_reports_a_failing_command_its_line_and_a_hung_one(tmp_path, monkeypatch):
+    """The slow test's runner: a failing command is reported with its page line and exit status, the commands
+    after it still run, a variable set earlier reaches a later command, a command past the per-command limit is
+    killed, and a console command is held to what its block shows (an error: line, exit 2)."""
+    page = tmp_path / "p.md"
+    page.write_text(
+        "```bash\n"
+        "X=7\n"  # line 2
+        'test "$X" = 7 && echo ok > first.txt\n'
+        "sh -c 'exit 3'   # fails\n"  # line 4
+        "echo after > second.txt\n"
+        "```\n"
+        "```bash\nsleep 5\n```\n"
+        "```console\n$ sh -c 'echo \"error: bad\" >&2; exit 2'\nerror: bad\n$ sh -c 'exit 0'\nerror: shown\n```\n"
+    )
+    bash, hung, console = blocks([page])
+    env = dict(os.environ)
+    problems = _run_block(bash, tmp_path, env)
+    assert len(problems) == 1 and problems[0].startswith("line 4: \"sh -c 'exit 3'") and "exit 3" in problems[0]
+    assert (tmp_path / "first.txt").read_text() == "ok\n" and (tmp_path / "second.txt").exists()
+    monkeypatch.setattr(sys.modules[__name__], "PER_COMMAND_S", 1.0)
+    t0 = time.monotonic()
+    (killed,) = _run_block(hung, tmp_path, env)
+    assert "still running after 1 s: killed" in killed and time.monotonic() - t0 < 4.5
+    (shown,) = _run_block(console, tmp_path, env)  # the first is as shown; the second should have failed
+    assert shown.startswith(f"line {console.commands[1].line}: expected exit 2")
