@@ -278,6 +278,8 @@ def _check_command(words: list[str], block: Block, made: list[str], env: dict[st
         ]
     if prog in ("pip", "pip3"):
         return [] if rest[:1] == ["install"] else [f"pip {' '.join(rest)}: not an install"]
+    if prog == "cp":  # what it copies is there (the top-level scenarios link pointed nowhere: issue 28)
+        return [f"cp: {s} does not exist" for s in rest[:-1] if not s.startswith("-") and not _exists(s, made)]
     if prog in TOOLS or (venv_bin / prog).exists():
         return []
     return [f"{prog}: not a program the docs' set-up provides"]
@@ -299,6 +301,17 @@ def test_the_docs_have_shell_blocks_and_the_convention_is_stated():
         if not b.runnable:
             reason = b.title.removeprefix(NOT_RUN).strip(" :")
             assert reason, f"{b.where}: a block marked not runnable says why"
+
+
+def test_the_top_level_links_lead_somewhere():
+    """``scenarios/`` and ``models/`` at the top (README's layout, the scenarios page's ``cp scenarios/paper.toml``)
+    are links into the package: they resolve to the shipped presets and robots."""
+    from bioform_mj.robots.refs import robot_names
+    from bioform_mj.scenario.loader import preset_names
+
+    assert {p.stem for p in (ROOT / "scenarios").glob("*.toml")} == set(preset_names())
+    assert (ROOT / "scenarios" / "paper.toml").is_file() and "tb3" in robot_names()
+    assert any((ROOT / "models").glob("*.xml"))
 
 
 def test_command_blocks_carry_a_shell_language():
@@ -581,3 +594,22 @@ def test_the_runner_reports_a_failing_command_its_line_and_a_hung_one(tmp_path, 
     assert "still running after 1 s: killed" in killed and time.monotonic() - t0 < 4.5
     (shown,) = _run_block(console, tmp_path, env)  # the first is as shown; the second should have failed
     assert shown.startswith(f"line {console.commands[1].line}: expected exit 2")
+
+
+def test_the_cli_resolves_auto_scale_in_a_fresh_process():
+    """The robots page's ``bioform run tb3 --set 'formation.scale="auto"'`` exited 2 ("import bioform_mj.run
+    first"): the CLI loaded the scenario without the run package that registers the resolver. In a fresh process
+    (this one has imported it), the CLI's own loading resolves it: tb3's half track / the paper robot's 0.2 m."""
+    code = (
+        "from bioform_mj.cli import main as m\n"
+        "a = m.build_parser().parse_args(['run', 'tb3', '--set', 'formation.scale=\"auto\"'])\n"
+        "print(m._load(a).formation.scale)"
+    )
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    from bioform_mj.robots.params import robot_truth
+    from bioform_mj.robots.refs import resolve_robot
+
+    s = float(out.stdout.strip().splitlines()[-1])
+    assert s == pytest.approx(robot_truth(resolve_robot("tb3")).half_track / 0.2, rel=1e-6)

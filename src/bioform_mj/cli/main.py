@@ -354,6 +354,7 @@ def _dispatch_work(args: argparse.Namespace) -> int:
 
 
 def _load(args: argparse.Namespace):
+    import bioform_mj.run  # noqa: F401 - registers the resolver of formation.scale/time_scale = "auto" (design §0)
     from bioform_mj.scenario.loader import load
 
     overrides = list(args.overrides)
