@@ -366,7 +366,10 @@ def _clone(dst: Path) -> None:
     ).stdout.split(b"\0")
     for f in filter(None, files):
         src = ROOT / f.decode()
-        if src.is_file():
+        if src.is_symlink():  # as git checks a link out: a link (scenarios/, models/ at the top)
+            (dst / f.decode()).parent.mkdir(parents=True, exist_ok=True)
+            (dst / f.decode()).symlink_to(os.readlink(src))
+        elif src.is_file():
             (dst / f.decode()).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(src, dst / f.decode())
     venv = dst / ".venv"
