@@ -388,9 +388,9 @@ def _run_block(block: Block, cwd: Path, env: dict[str, str], done: set[str] | No
     if block.lang == "console":
         problems = []
         for c in block.commands:
-            if c.text in done:
+            if _same(c.text) in done:
                 continue
-            done.add(c.text)
+            done.add(_same(c.text))
             t0 = time.monotonic()
             out = subprocess.run(
                 ["bash", "-c", c.text], cwd=cwd, env=env, capture_output=True, text=True, timeout=PER_COMMAND_S
@@ -407,9 +407,9 @@ def _run_block(block: Block, cwd: Path, env: dict[str, str], done: set[str] | No
     script = ["set -a", f"trap 'echo \"__line $LINENO\" >&{w}' DEBUG", f"trap 'echo \"__fail $LINENO $?\" >&{w}' ERR"]
     lines_of_script = {}
     for c in block.commands:
-        if c.text.split("\n", 1)[0].strip() in NEVER_RUN or re.match(r"^make test\b", c.text) or c.text in done:
+        if c.text.split("\n", 1)[0].strip() in NEVER_RUN or re.match(r"^make test\b", c.text) or _same(c.text) in done:
             continue
-        done.add(c.text)
+        done.add(_same(c.text))
         lines_of_script[len(script) + 1] = c
         script.append(c.text)
     proc = subprocess.Popen(
@@ -457,6 +457,15 @@ def _run_block(block: Block, cwd: Path, env: dict[str, str], done: set[str] | No
         where = f"line {c.line}: {c.text.splitlines()[0]!r}" if c else f"script line {line}"
         problems.append(f"{where}: exit {rc}; {_error_lines(output)}")
     return problems
+
+
+def _same(text: str) -> str:
+    """A command as the shell runs it: comments and ``.venv/bin/`` left out (README's ``.venv/bin/bioform run paper
+    --plant ideal`` and the getting-started page's ``bioform run paper --plant ideal`` are one command)."""
+    try:
+        return " ".join(w.removeprefix(".venv/bin/") for w in shlex.split(text.split("\n", 1)[0], comments=True))
+    except ValueError:
+        return text
 
 
 def _at(lines_of_script: dict[int, Command], line: int) -> Command | None:
