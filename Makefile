@@ -6,13 +6,15 @@
 #                 run the test suite (the tests marked slow excepted) and build the documentation with warnings as errors
 #   make test-slow - the tests marked slow (CI runs them after make test)
 #   make docs   - build the documentation site into site/ (needs the docs extra)
+#   make docs-commands - run every shell block of README.md and docs/ as written, each page in a fresh copy of
+#                 the repository (tests/test_docs_commands.py; tens of minutes, not part of make test)
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: demo test test-slow lint bench install clean docs
+.PHONY: demo test test-slow lint bench install clean docs docs-commands
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -62,7 +64,10 @@ docs: $(STAMP)
 	@$(PY) -c "import mkdocs, material, mkdocstrings, mkdocstrings_handlers.python, mkdocs_gen_files" 2>/dev/null || \
 		{ echo "error: the docs extra is missing from $(VENV): install it with $(PY) -m pip install -e '.[docs]'" >&2; exit 2; }
 	$(MKDOCS) build --strict
-	@echo "documentation: site/index.html"
+	@echo "documentation: site/index.html (open it from disk; without a network for search: python -m http.server -d site)"
+
+docs-commands: $(TEST_STAMP)
+	BIOFORM_DOCS_COMMANDS=1 $(PY) -m pytest -q -p no:cacheprovider tests/test_docs_commands.py -k "run_as_written or reading_order"
 
 lint: $(TEST_STAMP)
 	$(VENV)/bin/ruff check --fix src tests scripts examples docs/tutorials

@@ -177,14 +177,53 @@ def test_docs_build_strictly(tmp_path):
     out = _mkdocs_strict(ROOT, tmp_path / "site")
     assert out.returncode == 0, out.stderr[-3000:]
     assert "WARNING" not in out.stderr, out.stderr[-3000:]
-    scen = (tmp_path / "site" / "reference" / "scenario" / "index.html").read_text()
+    site = tmp_path / "site"
+    scen = (site / "reference" / "scenario.html").read_text()  # use_directory_urls: false, browsable from disk
     assert "formation.init_jitter" in scen and "faults.friction_patch" in scen
-    api = (tmp_path / "site" / "reference" / "api" / "index.html").read_text()
+    api = (site / "reference" / "api.html").read_text()
     for name in ("bioform_mj.assess.check.check", "bioform_mj.robots.prepare.prepare_robot", "RobotLayout"):
         assert name in api, name  # the robot modules' public names (after the split of scene.py)
     assert not re.search(r":(func|class|mod|meth|data):", api)  # Sphinx roles rendered as code, not as typed
-    tut = (tmp_path / "site" / "tutorials" / "own-controller" / "index.html").read_text()
+    tut = (site / "tutorials" / "own-controller.html").read_text()
     assert "SlotTracker" in tut and "--8&lt;--" not in tut and "8 &lt; --" not in tut  # the script itself, included
+    # opened from disk (file://): every internal link and asset names a file, never a folder (a browser shows a
+    # folder as a directory listing); search's index is a script a page loads without a server (offline plugin)
+    assert len(list(site.rglob("*.html"))) >= 30
+    broken = _links_not_files(site)
+    assert not broken, broken[:10]
+    assert (site / "search" / "search_index.js").read_text().startswith("var __index = {")
+    bundle = next((site / "assets" / "javascripts").glob("bundle.*.min.js")).read_text()
+    assert "search_index.js" in bundle  # which the theme loads when the page is a file:// one
+
+
+def _links_not_files(site: Path) -> list[str]:
+    """``page: link`` for every relative ``href``/``src`` of the built site that is not an existing file."""
+    from urllib.parse import unquote, urlsplit
+
+    bad, pages = [], sorted(site.rglob("*.html"))
+    for page in pages:
+        if page.name == "404.html" and page.parent == site:  # a server's error page: its links are site-absolute
+            continue
+        for link in re.findall(r'(?:href|src)="([^"]*)"', page.read_text()):
+            parts = urlsplit(link)
+            if parts.scheme or link.startswith(("#", "//")) or not parts.path:
+                continue
+            target = (page.parent / unquote(parts.path)).resolve()
+            if not target.is_file():
+                bad.append(f"{page.relative_to(site)}: {link}")
+    return bad
+
+
+def test_the_link_check_finds_a_folder_link_and_a_missing_file(tmp_path):
+    """What a directory-URL build writes (``guide/x/``: a folder, a directory listing from disk) is found, as is a
+    missing file; files, anchors, external and the 404 page's site-absolute links are not."""
+    site = tmp_path / "site"
+    (site / "guide" / "x").mkdir(parents=True)
+    (site / "guide" / "x" / "index.html").write_text("")
+    (site / "a.html").write_text('<a href="a.html#top"></a><a href="https://x.org/"></a><img src="guide/x/index.html">')
+    (site / "b.html").write_text('<a href="guide/x/"></a><a href="nope.html"></a><link href="#s">')
+    (site / "404.html").write_text('<a href="/index.html"></a>')
+    assert _links_not_files(site) == ["b.html: guide/x/", "b.html: nope.html"]
 
 
 @pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="the docs extra is not installed")

@@ -344,6 +344,18 @@ def _dispatch(args: argparse.Namespace) -> int:
         width = max(map(len, desc))
         print("\n".join(f"{name:<{width}}  {text}" for name, text in desc.items()))
         return EXIT_OK
+    from bioform_mj.core.jitwatch import watch
+
+    # a compile said before it happens, terminal or not (numba's cache index missed; design §2); --quiet: not said
+    say = not getattr(args, "quiet", False)
+    stop_watch = watch(lambda burst: say and print(burst.line(), file=sys.stderr, flush=True))
+    try:
+        return _dispatch_work(args)
+    finally:
+        stop_watch()
+
+
+def _dispatch_work(args: argparse.Namespace) -> int:
     with _mujoco_log() as mjlog:
         if args.command == "identify":
             from bioform_mj.cli.robot import identify_command
@@ -375,6 +387,7 @@ def _dispatch(args: argparse.Namespace) -> int:
 
 
 def _load(args: argparse.Namespace):
+    import bioform_mj.run  # noqa: F401 - registers the resolver of formation.scale/time_scale = "auto" (design §0)
     from bioform_mj.scenario.loader import load
 
     overrides = list(args.overrides)
