@@ -28,6 +28,7 @@ from bioform_mj.cli.proc import (
     _mujoco_log,
     _silence,
     check_mujoco_distributions,
+    progress_bar,
 )
 from bioform_mj.cli.report import _print_summary, _record_toml, _show_robot_warnings, _warn_outcomes
 from bioform_mj.control.registry import ENTRY_POINT_GROUP, parse_methods
@@ -408,31 +409,6 @@ def _load(args: argparse.Namespace):
     return sc
 
 
-def _progress(enabled: bool, label: str):
-    """A progress callback drawing a bar on a terminal, or None when stderr is not one."""
-    if not enabled or not sys.stderr.isatty():
-        return None
-    state = {"last": -1}
-
-    def phase(text: str | None) -> None:  # what happens before the steps (a compile): one line
-        if text:
-            sys.stderr.write(f"\r{label}: {text}\n")
-            sys.stderr.flush()
-
-    def cb(k: int, n: int) -> None:
-        pct = int(100 * k / max(1, n))
-        if pct != state["last"]:
-            state["last"] = pct
-            bar = "#" * (pct // 4)
-            sys.stderr.write(f"\r{label} [{bar:<25}] {pct:3d}%")
-            if k >= n:
-                sys.stderr.write("\n")
-            sys.stderr.flush()
-
-    cb.phase = phase  # type: ignore[attr-defined]
-    return cb
-
-
 def _run(args: argparse.Namespace, sc, mjlog) -> int:
     video_opts = None
     if args.video:
@@ -695,7 +671,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
         check_bags(specs, out, args.backend, rosbag)
     out.mkdir(parents=True, exist_ok=True)
-    progress = _progress(not args.quiet, "sweep")
+    progress = progress_bar(not args.quiet, "sweep")
     try:
         res = sweep(
             specs,
@@ -788,7 +764,7 @@ def _calibrate(args: argparse.Namespace) -> int:
                 overrides=args.overrides,
                 workers=args.workers,
                 seed=args.seed,
-                progress=_progress(not args.quiet, "calibrate"),
+                progress=progress_bar(not args.quiet, "calibrate"),
                 out=out,
                 note=None if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True)),
             )

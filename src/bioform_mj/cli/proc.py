@@ -155,3 +155,28 @@ def _mujoco_log():
     from bioform_mj.outputs.mjlog import capture
 
     return capture()
+
+
+def progress_bar(enabled: bool, label: str):
+    """A progress callback drawing a bar on a terminal, or None when stderr is not one."""
+    if not enabled or not sys.stderr.isatty():
+        return None
+    state = {"last": -1}
+
+    def phase(text: str | None) -> None:  # what happens before the steps (a compile): one line
+        if text:
+            sys.stderr.write(f"\r{label}: {text}\n")
+            sys.stderr.flush()
+
+    def cb(k: int, n: int) -> None:
+        pct = int(100 * k / max(1, n))
+        if pct != state["last"]:
+            state["last"] = pct
+            bar = "#" * (pct // 4)
+            sys.stderr.write(f"\r{label} [{bar:<25}] {pct:3d}%")
+            if k >= n:
+                sys.stderr.write("\n")
+            sys.stderr.flush()
+
+    cb.phase = phase  # type: ignore[attr-defined]
+    return cb
