@@ -225,3 +225,27 @@ def test_mujoco_plugin_config_names_no_file(tmp_path):
     )
     p = _compiles_within(xml)
     assert p.returncode == 1 and "invalid attribute value for 'radius1'" in p.stderr, p.stderr
+
+
+def test_mesh_resolver_reads_a_sibling_buffer_and_refuses_the_rest(tmp_path):
+    """:func:`~bioform_mj.robots.sanity.mesh_resolver`: a glTF's regular sibling ``.bin`` is read (its
+    triangle's vertices come back exactly), a FIFO beside it and a file outside its folder are refused
+    before any read."""
+    trimesh = pytest.importorskip("trimesh")
+    import numpy as np
+
+    from bioform_mj.robots.sanity import mesh_resolver
+
+    v = [0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.0, 0.25, 0.0]
+    (tmp_path / "ok.bin").write_bytes(struct.pack("<9f", *v) + struct.pack("<3H", 0, 1, 2) + b"\0\0")
+    gltf = _gltf(tmp_path, "ok.bin")
+    mesh = trimesh.load(gltf, force="mesh", resolver=mesh_resolver(gltf))
+    assert np.array_equal(np.asarray(mesh.vertices), np.reshape(v, (3, 3)))
+    os.mkfifo(tmp_path / "fifo.bin")
+    (tmp_path.parent / "outside.bin").write_bytes(b"\0" * 44)
+    res = mesh_resolver(gltf)
+    with pytest.raises(ValueError, match="is a FIFO"):
+        res.get("fifo.bin")
+    with pytest.raises(ValueError, match="escapes resolver root"):
+        res.get("../outside.bin")
+    assert res.get("ok.bin")[:36] == struct.pack("<9f", *v)
