@@ -4,7 +4,8 @@ Each case runs ``bioform`` in-process and must end in exactly one ``error:`` lin
 exit 2, before any work (nothing written), or, where the input is legitimate, a correct answer. The
 FIFO cases would block a read: a regression hangs (the test times out), it never passes. Cases measured
 before the fixes (``/tmp`` harness under ``ulimit -v 4000000``, ``timeout 60``): a FIFO beside a glTF
-mesh hung ``robot check``; a URDF of 10^5 links ran 538 s, deaf to SIGTERM; a name too long for the file
+mesh hung ``robot check``; a URDF of 10^5 links ran 538 s and an MJCF of 10^5 bodies over 590 s,
+deaf to SIGTERM; a name too long for the file
 system and a TOML nested 10^5 deep were ``internal error`` lines with exit 1."""
 
 from __future__ import annotations
@@ -87,6 +88,10 @@ def _case(name: str, t: Path) -> tuple[list[str], str]:
         )
         (t / "r.urdf").write_text(diff_drive(tail=tail))
         return ["robot", "check", str(t / "r.urdf")], "200009 <link> and <joint> elements, above the 10000"
+    if name == "mjcf-1e5-bodies":
+        bodies = "".join(f'<body name="b{i}" pos="{i} 0 -5"><geom size=".01"/></body>' for i in range(100000))
+        xml = _robot(t, head=f"<worldbody>{bodies}</worldbody>")
+        return ["identify", str(xml)], "100003 <body> elements, above the 5000 a robot may have"
     if name == "robot-name-too-long":
         return ["robot", "check", str(t / ("x" * 256 + ".xml"))], "cannot be looked up (File name too long)"
     if name == "robot-path-over-PATH_MAX":
@@ -149,6 +154,7 @@ def _case(name: str, t: Path) -> tuple[list[str], str]:
 CASES = [
     "gltf-buffer-fifo",
     "urdf-1e5-links",
+    "mjcf-1e5-bodies",
     "robot-name-too-long",
     "robot-path-over-PATH_MAX",
     "scenario-name-too-long",
