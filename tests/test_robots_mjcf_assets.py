@@ -265,3 +265,20 @@ def test_scenario_naming_hostile_robot_in_process(place, tmp_path, capsys):
     assert not run.exists()
     with pytest.raises(ValueError, match="outside the robot's folder"):
         bioform_mj.load(str(scen))
+
+
+@pytest.mark.slow  # a robot check: ~3 s
+def test_urdf_top_speed_read_with_the_asset_roots(place):
+    """A URDF whose collision mesh is let in only through ``asset_roots`` still reports its wheels'
+    ``<limit velocity>`` 10 rad/s × r as the top speed (issue 28: it was re-read without the roots and
+    silently reported none)."""
+    from bioform_mj.assess.check import check
+    from bioform_mj.robots.refs import resolve_robot
+    from test_robots_urdf import R_WHEEL, diff_drive, write
+
+    r, out = place
+    path = write(r / "urdf" / "dd.urdf", diff_drive(chassis_collision=f'<mesh filename="{out / "ok.stl"}"/>'))
+    ref = resolve_robot(RobotRef(model=str(path), asset_roots=(str(out),)))
+    lim = check(ref, identify_=False)["limits"]
+    assert lim["top_speed_source"] == "urdf", lim
+    assert lim["top_speed_mps"] == pytest.approx(10.0 * R_WHEEL, rel=1e-9)

@@ -28,22 +28,35 @@ import numpy as np
 PLACEHOLDER_RADPS = 50.0
 
 
-def urdf_wheel_velocity(model_file: str, wheel_joints: list[str], packages: Any = None) -> float | None:
-    """The least ``<limit velocity>`` (rad/s) of the named wheel joints of a URDF file, None if the
-    file is no URDF or a wheel has none."""
+def urdf_wheel_velocity(
+    model_file: str, wheel_joints: list[str], packages: Any = None, ref: Any = None
+) -> tuple[float | None, str]:
+    """``(the least <limit velocity> (rad/s) of the named wheel joints of a URDF file, why none)``: None
+    with ``""`` if the file is no URDF or a wheel has none, None with the reason if the file cannot be read
+    again. The file is read as the import read it: ``ref``'s package path, xacro flag and arguments and
+    ``asset_roots`` (a mesh let in only through ``asset_roots`` must not hide the top speed; issue 28)."""
     from bioform_mj.robots.refs import PackagePath
     from bioform_mj.robots.urdf import _parse, is_urdf
 
+    if ref is not None and packages is None:
+        packages = getattr(ref, "package_path", None)
     try:
         if not is_urdf(model_file):
-            return None
-        pr = _parse(Path(model_file), packages if packages is not None else PackagePath())
-    except Exception:  # noqa: BLE001 - an unreadable file says no limit; the import said why already
-        return None
+            return None, ""
+        pr = _parse(
+            Path(model_file),
+            packages if packages is not None else PackagePath(),
+            bool(getattr(ref, "xacro", False)),
+            tuple(getattr(ref, "xacro_args", ()) or ()),
+            tuple(getattr(ref, "asset_roots", ()) or ()),
+        )
+    except Exception as exc:  # noqa: BLE001 - said in the top speed's note, never silently dropped
+        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        return None, f"the URDF's wheel <limit velocity> not read ({why})"
     vel = [pr.limits.get(j, ("", None, None, None, None))[4] for j in wheel_joints]
     if not vel or any(v is None or v <= 0 for v in vel):
-        return None
-    return float(min(vel))
+        return None, ""
+    return float(min(vel)), ""
 
 
 def dc_no_load_speed(plant: Any, i: int) -> float | None:
@@ -75,7 +88,9 @@ def top_speed(ref: Any, plant: Any, i: int) -> tuple[float | None, str, str]:
     lay = plant.layouts[i]
     wheels = [j.split("/", 1)[1] if "/" in j else j for j in lay.wheel_joints]
     model_file = str(getattr(ref, "model", "") or lay.file)
-    w = urdf_wheel_velocity(model_file, wheels, getattr(ref, "package_path", None))
+    w, unread = urdf_wheel_velocity(model_file, wheels, ref=ref)
+    if unread:
+        notes.append(unread)
     if w is not None:
         if w < PLACEHOLDER_RADPS:
             return w * r, "urdf", f"the URDF's wheel <limit velocity> {w:g} rad/s × r (the file's, not a datasheet's)"

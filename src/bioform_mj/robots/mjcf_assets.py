@@ -28,6 +28,8 @@ from bioform_mj.core.errors import InputError
 __all__ = [
     "MJCF_MAX_MB",
     "INCLUDE_DEPTH",
+    "MJCF_MAX_BODIES",
+    "MJCF_MAX_GEOMS",
     "AssetEscape",
     "grant_roots",
     "granted_roots",
@@ -41,6 +43,9 @@ __all__ = [
 
 #: largest MJCF file (main or included) walked, MB; a published robot's is well under 1 MB
 MJCF_MAX_MB = 64
+#: most ``<body>`` and ``<geom>`` elements an MJCF robot (includes and attached models together) may have: a
+#: published robot has a few hundred; 10^5 bodies ran ``robot check`` past 590 s, deaf to SIGTERM (issue 28)
+MJCF_MAX_BODIES, MJCF_MAX_GEOMS = 5000, 20000
 #: deepest ``<include>`` chain walked (MuJoCo refuses a recursive one itself; this bounds the walk)
 INCLUDE_DEPTH = 32
 #: element → attributes naming a file MuJoCo reads
@@ -182,6 +187,10 @@ def _confine(file: Path, roots: tuple[str, ...], model: Path, prefix: str, model
                 elements.append((where, el, os.path.relpath(os.path.dirname(os.path.abspath(f)), base)))
 
     walk(file, prefix, (os.path.realpath(file),))
+    for tag, most in (("body", MJCF_MAX_BODIES), ("geom", MJCF_MAX_GEOMS)):
+        n = sum(1 for _, el, _ in elements if el.tag == tag)
+        if n > most:
+            raise InputError(f"{model}: {prefix}{n} <{tag}> elements, above the {most} a robot may have (not compiled)")
     dirs: dict[str, list[str]] = {"meshdir": [], "texturedir": [], "assetdir": []}
     for where, el, _ in elements:
         if el.tag == "compiler":

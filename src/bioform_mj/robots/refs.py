@@ -301,9 +301,11 @@ def resolve_robot(entry: Any) -> RobotRef:
         return replace(ref, model=str(models_dir() / f"{stem}_robot.xml"))
     path = Path(name)
     if _is_path(name):
-        if not path.is_file():
-            from bioform_mj.robots.sanity import not_regular  # a FIFO or a device: said as such, never opened
+        from bioform_mj.robots.sanity import not_regular, unstatable  # a FIFO or a device: said, never opened
 
+        if unstatable(path):  # a name too long, a symlink loop: one line, not an OSError (issue 28)
+            raise InputError(f"model file {unstatable(path)}")
+        if not path.is_file():
             raise InputError(
                 f"model file {not_regular(path)}" if not_regular(path) else f"model file '{path}' does not exist"
             )

@@ -34,6 +34,8 @@ from typing import Any
 from bioform_mj.core.errors import InputError
 
 __all__ = [
+    "unstatable",
+    "mesh_resolver",
     "MESH_MAX_MB",
     "ZIP_MAX_ENTRIES",
     "ZIP_MAX_RATIO",
@@ -84,6 +86,21 @@ def not_regular(path: str | Path) -> str:
     return f"'{path}' is {kind}, not a regular file: not read (reading it could block)"
 
 
+def unstatable(path: str | Path) -> str:
+    """Why ``path`` cannot even be looked up (``""``: it can, or it is simply missing): a name too long
+    for the file system, a symlink loop, a permission error on a folder above it (issue 28)."""
+    try:
+        os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return ""
+    except OSError as exc:
+        shown = str(path) if len(str(path)) <= 120 else f"{str(path)[:60]}…{str(path)[-40:]}"
+        return f"'{shown}' cannot be looked up ({exc.strerror or exc})"
+    except ValueError as exc:  # an embedded NUL
+        return f"'{path!r}' is no file name ({exc})"
+    return ""
+
+
 def regular_file(path: str | Path, what: str = "file") -> None:
     """Raise :class:`InputError` unless ``path`` is a regular file (or missing: the reader says so)."""
     why = not_regular(path)
@@ -129,6 +146,25 @@ def mesh_problem(file: str | Path) -> str:
     if unpacked > 10**6 and unpacked / packed > ZIP_MAX_RATIO:
         return f"a zip archive compressed {unpacked / packed:.0f}× (at most {ZIP_MAX_RATIO}×): not unpacked"
     return ""
+
+
+def mesh_resolver(file: str | Path) -> Any:
+    """trimesh's resolver for the files a mesh ``file`` names (a glTF's buffers, a COLLADA's images): only
+    its own folder, as trimesh ≥ 5 confines it, and only a regular file of at most :data:`MESH_MAX_MB` MB
+    (issue 28: a FIFO ``x.bin`` beside an ``x.gltf`` hung the import). A refused file raises ValueError."""
+    from trimesh.resolvers import FilePathResolver
+
+    class _Resolver(FilePathResolver):
+        def get(self, name: str) -> bytes:
+            full = self.absolute(name)  # ValueError for a name outside the mesh's folder
+            why = not_regular(full)
+            if not why and full.is_file() and full.stat().st_size > MESH_MAX_MB * 10**6:
+                why = f"'{full}' is above the {MESH_MAX_MB} MB a mesh's file may be"
+            if why:
+                raise ValueError(why)
+            return super().get(name)
+
+    return _Resolver(str(file))
 
 
 def _num(text: str | None) -> float | None:

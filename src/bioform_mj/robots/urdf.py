@@ -79,6 +79,8 @@ FLOOR_MU = 1.0
 URDF_SUFFIXES = (".urdf", ".xacro")
 #: mesh files MuJoCo reads itself; others are converted with trimesh (design §12)
 MESH_NATIVE = (".stl", ".obj", ".msh")
+#: most links (and joints) a URDF may have: a published robot has a few hundred
+URDF_MAX_LINKS = 5000
 #: the compiler settings that keep a URDF robot a robot (design §12)
 _COMPILER = {"discardvisual": "false", "fusestatic": "false", "strippath": "false"}
 _INSTALL_HINT = "pip install 'bioform-mj[urdf]' (trimesh + pycollada)"
@@ -222,6 +224,12 @@ def _parse(
         raise UrdfError(f"{path}: not valid XML ({exc})") from None
     if robot.tag != "robot":
         raise UrdfError(f"{path}: the root element is <{robot.tag}>, not <robot> (is it a URDF?)")
+    n_el = sum(1 for el in robot if el.tag in ("link", "joint"))
+    if n_el > 2 * URDF_MAX_LINKS:  # 10^5 links compiled for 9 minutes, deaf to SIGTERM (issue 28)
+        raise UrdfError(
+            f"{path}: {n_el} <link> and <joint> elements, above the {2 * URDF_MAX_LINKS} a robot may have "
+            f"(at most {URDF_MAX_LINKS} links; a published robot has a few hundred)"
+        )
     bad_value = urdf_value_problem(robot)  # NaN, negative, zero where it cannot be: refused naming it
     if bad_value:
         raise UrdfError(f"{path}: {bad_value}")
@@ -471,8 +479,10 @@ def _trimesh_read(file: str, mtime_ns: int, size: int) -> tuple[np.ndarray, np.n
     times (a published COLLADA visual takes ~0.2 s)."""
     import trimesh
 
+    from bioform_mj.robots.sanity import mesh_resolver
+
     try:
-        mesh = trimesh.load(file, force="mesh")
+        mesh = trimesh.load(file, force="mesh", resolver=mesh_resolver(file))
         v = np.asarray(mesh.vertices, float)
         f = np.asarray(mesh.faces, int)
     except Exception as exc:  # a broken file, a missing pycollada

@@ -79,6 +79,10 @@ def load(
     src = str(source)
     if "\x00" in src:
         raise InputError(f"scenario {src!r} contains a NUL character")
+    from bioform_mj.robots.sanity import unstatable
+
+    if unstatable(src):  # a name too long for the file system: one line, not an OSError (issue 28)
+        raise InputError(f"scenario file {unstatable(src)}")
     if src.endswith(".toml") or "/" in src or Path(src).is_file():
         path = Path(src)
         if path.is_dir():
@@ -177,6 +181,8 @@ def _read_record(raw: bytes, where: str) -> dict[str, Any]:
         data = json.loads(raw.decode("utf-8"))
     except (ValueError, UnicodeDecodeError) as exc:
         raise InputError(f"{where} is not valid JSON: {exc}") from None
+    except RecursionError:  # [[[[…]]]] 10^5 deep (issue 28)
+        raise InputError(f"{where}: arrays or objects nested too deeply to read (not a run's summary.json)") from None
     if not isinstance(data, dict) or not isinstance(data.get("config"), dict):
         raise InputError(f"{where} is not a run's summary.json (no 'config' table); give a scenario TOML file")
     return data["config"]
@@ -187,6 +193,8 @@ def _read_toml(raw: bytes, where: str) -> dict[str, Any]:
         return tomllib.loads(raw.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{where} is not valid TOML: {exc}") from None
+    except RecursionError:  # [[[[…]]]] 10^5 deep: Python's parser recurses (issue 28)
+        raise InputError(f"{where}: arrays or tables nested too deeply to read (not a scenario)") from None
 
 
 def parse_override(text: str) -> tuple[str, Any]:
@@ -200,6 +208,8 @@ def parse_override(text: str) -> tuple[str, Any]:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
         value = raw
+    except RecursionError:  # --set k=[[[[…]]]] (issue 28)
+        raise InputError(f"--set '{key}': the value is nested too deeply to read") from None
     return key, value
 
 
