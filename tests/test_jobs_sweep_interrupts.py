@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from bioform_mj.cli.main import main
+from bioform_mj.core.errors import InputError
 from bioform_mj.jobs import sweep as sweep_mod
 from bioform_mj.jobs.sweep import RunSpec, expand, randomness, run_one, sweep
 from bioform_mj.scenario.loader import load
@@ -256,9 +257,12 @@ def test_resume_keys_on_content_not_path(tmp_path):
     moved = tmp_path / "elsewhere.toml"
     _write_scenario(moved, 1.0)
     assert sweep(expand(str(moved), 1, ["bioinspired"], [], plant="ideal"), out, workers=1)["ran"] == 0
-    # edited file at the same path: reruns, and the result reflects the edit
+    # edited file at the same path: another sweep (its key changed): refused in the old folder, whose rows it
+    # would not resume, and run in a new one, where the result reflects the edit
     _write_scenario(scen, 2.0)
-    edited = sweep(expand(str(scen), 1, ["bioinspired"], [], plant="ideal"), out, workers=1)
+    with pytest.raises(InputError, match="holds another sweep's rows"):
+        sweep(expand(str(scen), 1, ["bioinspired"], [], plant="ideal"), out, workers=1)
+    edited = sweep(expand(str(scen), 1, ["bioinspired"], [], plant="ideal"), tmp_path / "sw2", workers=1)
     assert edited["ran"] == 1 and edited["skipped"] == 0
     assert edited["rows"][0]["total_velocity_error_mean"] != first["rows"][0]["total_velocity_error_mean"]
     # an override that changes the resolved content also changes the key; a method too

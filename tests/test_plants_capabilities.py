@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import bioform_mj as bf
+from bioform_mj.control import base as control_base
 from bioform_mj.plants import base
 from bioform_mj.run.simulate import make_plant
 from bioform_mj.scenario.config import PLANTS
@@ -19,7 +20,7 @@ CAPABILITIES = (
     base.LumpedBodies,
     base.TipSlipWatch,
     base.ContactWatch,
-    base.Obstacles,
+    control_base.Obstacles,
     base.Unmodelled,
     base.DeliveredTorques,
 )
