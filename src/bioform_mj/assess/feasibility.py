@@ -174,6 +174,18 @@ def slot_accelerations(scenario: Any, t: np.ndarray) -> tuple[np.ndarray, np.nda
     formation slot over the times ``t`` (s): the slot path ``p_r − R(θ_r) Δ_i`` (leader frame) or
     ``p_r − Δ_i`` differentiated twice; tangential along the slot's velocity, centripetal across it
     (where the slot moves slower than 1 mm/s, all of it counts as tangential)."""
+    v, a, speed, moving, sl = _slot_motion(scenario, t)
+    u = np.where(moving[..., None], v / np.maximum(speed, 1e-12)[..., None], 0.0)
+    tan = np.where(moving, np.abs((a * u).sum(-1)), np.linalg.norm(a, axis=-1))
+    cen = np.where(moving, np.abs(a[..., 0] * u[..., 1] - a[..., 1] * u[..., 0]), 0.0)
+    tot = np.linalg.norm(a, axis=-1)
+    return tan[sl].max(axis=0), cen[sl].max(axis=0), tot[sl].max(axis=0)
+
+
+def _slot_motion(scenario: Any, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, slice]:
+    """Every follower's formation slot over the times ``t`` (s), differentiated twice: velocity ``v`` and
+    acceleration ``a`` (T, n, 2; m/s, m/s²), speed (T, n), where it moves faster than 1 mm/s (T, n), and the
+    samples to use (``np.gradient``'s one-sided ends dropped: the first and last two)."""
     from bioform_mj.assess.outcomes import slots_of
 
     pose, _, _ = scenario.build_leader().states(t)
@@ -181,31 +193,16 @@ def slot_accelerations(scenario: Any, t: np.ndarray) -> tuple[np.ndarray, np.nda
     v = np.gradient(slots, t, axis=0)
     a = np.gradient(v, t, axis=0)
     speed = np.linalg.norm(v, axis=-1)
-    moving = speed > 1e-3
-    u = np.where(moving[..., None], v / np.maximum(speed, 1e-12)[..., None], 0.0)
-    tan = np.where(moving, np.abs((a * u).sum(-1)), np.linalg.norm(a, axis=-1))
-    cen = np.where(moving, np.abs(a[..., 0] * u[..., 1] - a[..., 1] * u[..., 0]), 0.0)
-    tot = np.linalg.norm(a, axis=-1)
-    # the ends of np.gradient are one-sided: drop the first and last two samples
-    sl = slice(2, -2) if len(t) > 8 else slice(None)
-    return tan[sl].max(axis=0), cen[sl].max(axis=0), tot[sl].max(axis=0)
+    return v, a, speed, speed > 1e-3, slice(2, -2) if len(t) > 8 else slice(None)
 
 
 def slot_wheel_speeds(scenario: Any, t: np.ndarray, half_tracks: Any) -> np.ndarray:
     """Per follower (n,) the largest wheel ground speed ``|v| + l |ω|`` (m/s) of its formation slot over the
     times ``t`` (s): ``v`` the slot's speed, ``ω = (v × v̇) / |v|²`` its path's turn rate (0 where the slot moves
     slower than 1 mm/s), ``l`` the follower's half track (``half_tracks``, m)."""
-    from bioform_mj.assess.outcomes import slots_of
-
-    pose, _, _ = scenario.build_leader().states(t)
-    slots = np.stack([slots_of(scenario, p) for p in pose])  # (T, n, 2)
-    v = np.gradient(slots, t, axis=0)
-    a = np.gradient(v, t, axis=0)
-    speed = np.linalg.norm(v, axis=-1)
-    moving = speed > 1e-3
+    v, a, speed, moving, sl = _slot_motion(scenario, t)
     turn = np.where(moving, (v[..., 0] * a[..., 1] - v[..., 1] * a[..., 0]) / np.maximum(speed, 1e-12) ** 2, 0.0)
     wheel = speed + np.asarray(half_tracks, dtype=float)[None, :] * np.abs(turn)
-    sl = slice(2, -2) if len(t) > 8 else slice(None)  # np.gradient's one-sided ends
     return wheel[sl].max(axis=0)
 
 
