@@ -279,7 +279,13 @@ class MujocoPlant:
         from bioform_mj.robots.limits import top_speed
 
         #: m/s: the slip ratio's speed floor, scaled to the slowest robot's top speed (core.thresholds.slip_v_floor)
-        self.slip_floor = slip_v_floor([top_speed(f, self, i)[0] for i, f in enumerate(robot_files)])
+        # once per distinct robot (a URDF is read again for its <limit velocity>, a xacro one expanded again)
+        speeds: dict[tuple, float | None] = {}
+        for i, f in enumerate(robot_files):
+            key = (f, tuple(self.layouts[i].wheel_joints), float(self.params[i].wheel_radius))
+            if key not in speeds:
+                speeds[key] = top_speed(f, self, i)[0]
+        self.slip_floor = slip_v_floor(list(speeds.values()))
         self._step_count = 0
         self._contacts_setup(float(safety_distance))
         self.reset()
