@@ -94,3 +94,29 @@ def test_a_new_format_is_one_registration(tmp_path):
 
         formats._FORMATS.pop("probe")
     assert [x.name for x in robot_formats()] == ["urdf", "mjcf"]
+
+
+def test_mjcf_published_model_reads_the_mapping_as_its_loader_does(tmp_path):
+    """The MJCF format's published model (robot check's overlaps) applies ``balance_inertia`` as the loader
+    does: a chassis inertia 0.3 > 0.0832 + 0.137 breaks the triangle inequality, MuJoCo refuses it unbalanced
+    (a ModelError naming the option, exit 2; it was a bare ValueError there), and with the mapping's
+    balance_inertia both the loader and the published model compile it."""
+    from dataclasses import replace
+
+    from bioform_mj.robots.formats import format_of
+    from bioform_mj.robots.layout import ModelError
+    from bioform_mj.robots.refs import models_dir, resolve_robot
+
+    text = (models_dir() / "paper_robot.xml").read_text()
+    old = 'diaginertia="0.0832 0.0832 0.137366667"'
+    assert text.count(old) == 1
+    path = tmp_path / "odd.xml"
+    path.write_text(text.replace(old, 'diaginertia="0.3 0.0832 0.137366667"'))
+    ref = resolve_robot(str(path))
+    fmt = format_of(path)
+    with pytest.raises(ModelError, match="does not compile"):
+        fmt.published(ref)
+    ok = replace(ref, balance_inertia=True)
+    model = fmt.published(ok)
+    assert model.nbody == fmt.load(ok, path)[1].nbody
+    assert model.body_inertia[1:].min() > 0

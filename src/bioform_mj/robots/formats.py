@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from bioform_mj.robots.files import urdf_files
-from bioform_mj.robots.mjcf import load_mjcf
-from bioform_mj.robots.mjcf_assets import confine_mjcf, open_mjcf
+from bioform_mj.robots.mjcf import load_mjcf, published_mjcf
+from bioform_mj.robots.mjcf_assets import confine_mjcf
 from bioform_mj.robots.urdf import URDF_SUFFIXES, check_file, import_urdf, is_urdf, load_urdf
 
 __all__ = ["RobotFormat", "format_of", "register_format", "robot_formats"]
@@ -121,7 +121,7 @@ register_format(
         False,
         lambda ref: confine_mjcf(ref.model, ref.asset_roots),
         None,
-        lambda ref: open_mjcf(ref.model, ref.asset_roots).compile(),
+        published_mjcf,
     ),
     fallback=True,
 )

@@ -15,13 +15,23 @@ from bioform_mj.robots.keyframe import apply_keyframe
 from bioform_mj.robots.layout import ModelError, _one_line
 from bioform_mj.robots.refs import RobotRef
 
-__all__ = ["absolute_asset_files", "load_mjcf"]
+__all__ = ["absolute_asset_files", "load_mjcf", "open_compiled", "published_mjcf"]
 
 
 def load_mjcf(ref: RobotRef, path: Path) -> tuple[Any, ...]:
     """``(spec, model, ref, import notes, keyframe, keyframe qpos, keyframe notes)`` of the MJCF file ``path``
     (compiled; the mapping's ``balance_inertia`` applied; the keyframe of design §13.2 baked in). Raises
     :class:`~bioform_mj.robots.layout.ModelError` (exit 2) naming the file."""
+    spec, model = open_compiled(ref, path)
+    absolute_asset_files(spec)
+    spec, model, key, key_q, key_notes = apply_keyframe(spec, model, path, ref)  # design §13.2
+    return spec, model, ref, (), key, key_q, key_notes
+
+
+def open_compiled(ref: RobotRef, path: Path) -> tuple[mujoco.MjSpec, mujoco.MjModel]:
+    """``(spec, model)`` of the MJCF file ``path`` as the robot's mapping reads it: its includes and assets
+    inside its folder or ``asset_roots`` (design §12), ``balance_inertia`` applied, no special file, compiled.
+    Raises :class:`~bioform_mj.robots.layout.ModelError` (exit 2) naming the file."""
     from bioform_mj.core.errors import InputError
     from bioform_mj.robots.mjcf_assets import open_mjcf  # includes and assets inside its folder (design §12)
     from bioform_mj.robots.sanity import spec_file_problem  # a FIFO or a 10 GB mesh: before the compiler opens it
@@ -40,9 +50,13 @@ def load_mjcf(ref: RobotRef, path: Path) -> tuple[Any, ...]:
         raise ModelError(f"{path}: does not compile: {_one_line(exc)}{compile_hint(exc)}") from exc
     if bad:
         raise ModelError(f"{path}: {bad}")
-    absolute_asset_files(spec)
-    spec, model, key, key_q, key_notes = apply_keyframe(spec, model, path, ref)  # design §13.2
-    return spec, model, ref, (), key, key_q, key_notes
+    return spec, model
+
+
+def published_mjcf(ref: RobotRef) -> mujoco.MjModel:
+    """The robot's MJCF as it stands (no keyframe baked in): the format's published model
+    (:mod:`bioform_mj.robots.formats`), read as :func:`open_compiled` reads it."""
+    return open_compiled(ref, Path(ref.model))[1]
 
 
 def absolute_asset_files(spec: mujoco.MjSpec) -> None:

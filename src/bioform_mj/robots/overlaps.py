@@ -129,9 +129,10 @@ def published_model(entry: Any) -> mujoco.MjModel:
     from bioform_mj.robots.refs import resolve_robot
 
     ref = resolve_robot(entry)
-    if (published := format_of(Path(ref.model)).published) is not None:  # design §12: the format's reading
-        return published(ref)
-    return mujoco.MjSpec.from_file(str(ref.model)).compile()
+    fmt = format_of(Path(ref.model))
+    if fmt.published is not None:  # design §12: the format's reading
+        return fmt.published(ref)
+    return fmt.load(ref, Path(ref.model))[1]  # a format without one: its own (confined) loader's model
 
 
 def _why_not(scene: mujoco.MjModel, b1: int, b2: int, urdf: bool) -> str:
