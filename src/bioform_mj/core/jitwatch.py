@@ -152,6 +152,8 @@ def watch(notify: Callable[[CompileBurst], None], gap_s: float = 2.0) -> Callabl
             self.depth += 1
 
         def on_end(self, ev: event.Event) -> None:
+            if self.depth <= 0:  # a compile that started before the watch (another thread): not ours to time
+                return
             self.depth -= 1
             if self.depth == 0:
                 self.last_end = time.monotonic()

@@ -212,7 +212,9 @@ def peaks(
         write_json(path, entry)
     except Exception:  # noqa: BLE001 - a cache that cannot be written costs time, not the run
         pass
-    return _done(entry, "computed") or {}
+    done = _done(entry, "computed")
+    assert done is not None  # the wheel's entry was just added
+    return done
 
 
 def _item(value: float, limit: float | None, unit: str, by: str) -> dict[str, Any]:
