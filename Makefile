@@ -5,6 +5,7 @@
 #                 ros extra (rosbags: the --rosbag tests),
 #                 run the test suite (the tests marked slow excepted) and build the documentation with warnings as errors
 #   make test-slow - the tests marked slow (CI runs them after make test)
+#   make test-train - the train extra (torch, SB3, SuperSuit) and the tests that train with it (CI runs them too)
 #   make docs   - build the documentation site into site/ (needs the docs extra)
 #   make docs-commands - run every shell block of README.md and docs/ as written, each page in a fresh copy of
 #                 the repository (tests/test_docs_commands.py; tens of minutes, not part of make test)
@@ -13,8 +14,9 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
+TRAIN_STAMP := $(VENV)/.installed-train
 
-.PHONY: demo test test-slow lint bench install clean docs docs-commands
+.PHONY: demo test test-slow test-train lint bench install clean docs docs-commands
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -52,7 +54,7 @@ test: $(TEST_STAMP)
 	$(PY) -c "import pettingzoo, gymnasium" || { echo "error: the rl extra is missing from $(VENV): rm $(TEST_STAMP) and run make test again" >&2; exit 2; }
 	$(VENV)/bin/ruff check src tests scripts examples docs/tutorials
 	$(VENV)/bin/ruff format --check src tests scripts examples docs/tutorials
-	$(PY) -m pytest -q -m "not slow" $(XDIST)
+	$(PY) -m pytest -q -m "not slow and not train" $(XDIST)
 	NPY_DISABLE_CPU_FEATURES="$$($(NPY_AVX512))" $(PY) -m pytest -q -m equivalence -p no:cacheprovider $(XDIST)
 	$(MKDOCS) build --strict
 
@@ -77,6 +79,16 @@ lint: $(TEST_STAMP)
 # them after make test (.ci/run); make test keeps to the fast set (under 10 minutes on the 2-core reference machine)
 test-slow: $(TEST_STAMP)
 	$(PY) -m pytest -q -m slow -p no:cacheprovider $(XDIST)
+
+# the train extra on top (torch 2.13.0, Stable-Baselines3, SuperSuit: about 2 minutes to install from a wheel on
+# disk, much longer where torch is downloaded), then the tests that train (SuperSuit + SB3 SubprocVecEnv on the
+# MuJoCo plant); CI runs them after make test-slow (.ci/run)
+$(TRAIN_STAMP): $(TEST_STAMP) pyproject.toml
+	$(PY) -m pip install --quiet -e '.[test,gpu,rl,urdf,docs,ros,train]'
+	touch $(TRAIN_STAMP)
+
+test-train: $(TRAIN_STAMP)
+	$(PY) -m pytest -q -m train -p no:cacheprovider -n 0
 
 bench: $(STAMP)
 	$(PY) scripts/bench_control_step.py

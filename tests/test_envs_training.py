@@ -266,6 +266,7 @@ def test_single_follower_gymnasium_env_passes_both_checkers(plant, action):
         e.step(np.array([1.01, 0.0]))
 
 
+@pytest.mark.train
 def test_supersuit_sb3_subprocess_training_on_mujoco(tmp_path, monkeypatch):
     """PettingZoo's tutorial path: SuperSuit's vector environment in 2 worker processes (the environment is
     pickled to them) trains SB3's PPO on the MuJoCo plant for 768 steps."""
