@@ -17,7 +17,8 @@ import pytest
 from bioform_mj.assess.check import check
 from bioform_mj.cli.main import main
 from bioform_mj.core.errors import InputError, ScenarioError
-from bioform_mj.robots.refs import RobotRef, resolve_robot
+from bioform_mj.robots.entries import resolve_robot
+from bioform_mj.robots.refs import RobotRef
 from bioform_mj.run.simulate import simulate
 from bioform_mj.scenario.loader import load
 

@@ -37,7 +37,7 @@ def resistance(sc: Any, plant: Any) -> list[dict[str, Any]]:
     frictionloss ``2 f`` where the check is skipped or identified none (``"frictionloss"``)."""
     from bioform_mj.assess.prerun import cached_check, robot_key
     from bioform_mj.assess.skip import skipped
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
 
     out: list[dict[str, Any]] = []
     entries = list(sc.plant.robots) * (sc.n if len(sc.plant.robots) == 1 else 1)

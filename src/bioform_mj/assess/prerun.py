@@ -185,7 +185,7 @@ def before_run(sc: Any, plant: Any) -> dict[str, Any]:
     t0 = time.perf_counter()
     if skipped():
         return {"skipped": True, "seconds": 0.0, "robots": [], "warnings": [], "how": f"{SKIP_ENV}=1"}
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
 
     entries = list(sc.plant.robots) * (sc.n if len(sc.plant.robots) == 1 else 1)
     by_ref: dict[Any, list[int]] = {}  # a robot's key once per distinct entry (256 followers: one prepare)

@@ -63,7 +63,7 @@ def resolve_auto(sc: Any) -> tuple[float, float, str]:
     """``(s, σ, note)`` for a scenario whose ``formation.scale`` or ``time_scale`` is ``"auto"``
     (the other one as given); raises ScenarioError for a robot whose limits are unknown."""
     from bioform_mj.core.errors import ScenarioError
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
     from bioform_mj.scenario.loader import apply_scale
     from bioform_mj.scenario.similarity import check_factor
 

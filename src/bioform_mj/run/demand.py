@@ -387,8 +387,8 @@ def run_limits(sc: Any, plant: Any) -> list[dict[str, Any]]:
     import mujoco
 
     from bioform_mj.assess.check import tip_margins
+    from bioform_mj.robots.entries import resolve_robot
     from bioform_mj.robots.limits import limits_of
-    from bioform_mj.robots.refs import resolve_robot
 
     scratch = mujoco.MjData(plant.model)
     mujoco.mj_kinematics(plant.model, scratch)

@@ -182,7 +182,7 @@ def mujoco_plant(sc: Scenario) -> Plant:
     poses = sc.initial_poses()
     dist = _disturbance(sc)
     from bioform_mj.plants.mujoco.plant import MujocoPlant  # imported only when asked: the ideal plant needs no MuJoCo
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
 
     robots = list(sc.plant.robots) * (sc.n if len(sc.plant.robots) == 1 else 1)
     refs = [resolve_robot(r) for r in robots]

@@ -221,8 +221,8 @@ def validate(sc: Scenario) -> None:
     if len(pc.robots) not in (1, n):
         raise ScenarioError("plant.robots", f"expected 1 or {n} robot models, got {len(pc.robots)}")
     if pc.kind == "mujoco":
+        from bioform_mj.robots.entries import resolve_robot
         from bioform_mj.robots.formats import format_of
-        from bioform_mj.robots.refs import resolve_robot
 
         for name, folder in pc.package_path:
             if not Path(folder).is_dir():
@@ -310,7 +310,7 @@ def _validate_sensing(sc: Scenario) -> None:
         )
     if pc.encoder_cpr > 0:
         return
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
 
     for r in pc.robots:
         ref = resolve_robot(r)
