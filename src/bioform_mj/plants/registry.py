@@ -3,11 +3,14 @@
 A plant kind is one line here, :func:`register_plant`; what a plant offers beyond the :class:`~bioform_mj.plants.base.
 Plant` interface is declared by the runtime-checkable protocols of :mod:`bioform_mj.plants.base`, never by its kind.
 The shipped kinds (``ideal``, ``mujoco``) read the whole scenario, a floor above this one, so the run package registers
-their factories when imported (:mod:`bioform_mj.run.simulate`), as it registers the ``"auto"`` scale.
+their factories when imported (:mod:`bioform_mj.run.simulate`), as it registers the ``"auto"`` scale, and registers
+:func:`plant_kinds` with the scenario's validation (``scenario.check.register_plant_kinds``), so that ``plant.kind``
+and ``--plant`` accept every registered kind.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from typing import Any
 
@@ -15,6 +18,9 @@ __all__ = ["PlantFactory", "plant_factory", "plant_kinds", "register_plant"]
 
 #: ``factory(scenario) -> plant``: the plant of a checked scenario at its initial poses
 PlantFactory = Callable[[Any], Any]
+
+#: what a kind may be: it becomes part of a run folder's name (``runs/<scenario>-<plant>-<method>``)
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}")
 
 _FACTORIES: dict[str, PlantFactory] = {}
 
@@ -25,12 +31,16 @@ def register_plant(kind: str, factory: PlantFactory) -> None:
     Parameters
     ----------
     kind : str
-        The name a scenario's ``plant.kind`` gives.
+        The name a scenario's ``plant.kind`` (and ``--plant``) gives: 1-64 letters, digits, ``_ . + -`` (it becomes
+        part of a run folder's name). Once registered, a scenario may name it (its validation asks this registry).
     factory : callable
         ``factory(scenario) -> plant``: builds the plant of a checked scenario at its initial poses.
     """
-    if not (isinstance(kind, str) and kind.strip()):
-        raise ValueError(f"a plant kind is a non-empty name, got {kind!r}")
+    if not isinstance(kind, str) or NAME_PATTERN.fullmatch(kind) is None:
+        raise ValueError(
+            f"plant kind {kind!r}: must be 1-64 characters, letters, digits and _ . + - (starting with a letter or "
+            "digit): it becomes part of a run folder's name"
+        )
     if not callable(factory):
         raise ValueError(f"plant kind {kind!r}: the factory must be callable, got {type(factory).__name__}")
     _FACTORIES[kind] = factory

@@ -7,6 +7,7 @@ first problem found; :func:`run_size` estimates a run's steps and memory, which 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -65,12 +66,35 @@ def _length(key: str, values: tuple, n: int) -> None:
         raise ScenarioError(key, f"expected {n} values, got {len(values)}")
 
 
+#: what lists the plant kinds a scenario may name: the plant registry (``plants.registry.plant_kinds``, a package on
+#: this floor) is registered here by the run package when imported (design §0, as it registers the shipped plants);
+#: until then the shipped kinds (``PLANTS``)
+_PLANT_KINDS: list[Callable[[], tuple[str, ...]]] = []
+
+
+def register_plant_kinds(kinds: Callable[[], tuple[str, ...]]) -> None:
+    """Register what lists the plant kinds ``plant.kind`` (and ``--plant``) may name: the shipped ones and those
+    registered with :func:`bioform_mj.plants.registry.register_plant`.
+
+    Parameters
+    ----------
+    kinds : callable
+        ``kinds() -> tuple of str``, asked at each validation (a kind registered later is known then).
+    """
+    _PLANT_KINDS[:] = [kinds]
+
+
+def plant_kinds() -> tuple[str, ...]:
+    """The plant kinds a scenario may name now: the registry's (:func:`register_plant_kinds`), else the shipped."""
+    return tuple(_PLANT_KINDS[-1]()) if _PLANT_KINDS else PLANTS
+
+
 def validate(sc: Scenario) -> None:
     """Check every value the algorithm's assumptions need; raise on the first problem found."""
     if not is_registered(sc.method):  # the paper's four, or a registered controller (design §22)
         raise ScenarioError("method", unknown_method(sc.method))
-    if sc.plant.kind not in PLANTS:
-        raise ScenarioError("plant.kind", f"unknown plant '{sc.plant.kind}' (expected one of: {', '.join(PLANTS)})")
+    if sc.plant.kind not in (kinds := plant_kinds()):  # the shipped kinds, or a registered plant (design §22)
+        raise ScenarioError("plant.kind", f"unknown plant '{sc.plant.kind}' (expected one of: {', '.join(kinds)})")
     _validate_text(sc)
     s = sc.sim
     _positive("sim.duration", s.duration)
