@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.control.params import register_sizing
+from bioform_mj.plants.base import RobotModels
 
 __all__ = ["DEADBAND_MIN_NM", "resistance", "sizing"]
 
@@ -69,7 +70,7 @@ def sizing(sc: Any, plant: Any, c_true: np.ndarray) -> dict[str, Any] | None:
     kd_db = tuple(sc.learner.kd_deadband)
     if margin <= 0 and not kd_db:
         return None
-    if not hasattr(plant, "params") or not hasattr(plant, "model"):  # said, never silently the paper's gains
+    if not isinstance(plant, RobotModels):  # no robot models (design §22): said, never silently the paper's gains
         return {
             "c_gain": list(map(float, sc.torque.c)),
             "kd": list(map(float, sc.learner.kd)),

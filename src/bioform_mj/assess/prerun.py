@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from bioform_mj.assess.skip import SKIP_ENV, skipped
+from bioform_mj.plants.base import RobotModels
 
 log = logging.getLogger(__name__)
 
@@ -196,7 +197,7 @@ def before_run(sc: Any, plant: Any) -> dict[str, Any]:
         groups.setdefault(robot_key(ref), (ref, []))[1].extend(who)
     robots, lines = [], []
     for key, (ref, who) in groups.items():
-        step = float(plant.model.opt.timestep) if hasattr(plant, "model") else None  # the run's physics step
+        step = float(plant.model.opt.timestep) if isinstance(plant, RobotModels) else None  # the run's physics step
         entry = {"model": ref.model, "followers": who, **cached_check(ref, key, step)}
         entry.pop("format", None)
         robots.append(entry)
