@@ -3,9 +3,9 @@
 A plant kind is one line here, :func:`register_plant`; what a plant offers beyond the :class:`~bioform_mj.plants.base.
 Plant` interface is declared by the runtime-checkable protocols of :mod:`bioform_mj.plants.base`, never by its kind.
 The shipped kinds (``ideal``, ``mujoco``) read the whole scenario, a floor above this one, so the run package registers
-their factories when imported (:mod:`bioform_mj.run.simulate`), as it registers the ``"auto"`` scale, and registers
-:func:`plant_kinds` with the scenario's validation (``scenario.check.register_plant_kinds``), so that ``plant.kind``
-and ``--plant`` accept every registered kind.
+their factories when imported (:mod:`bioform_mj.run.simulate`), as it registers the ``"auto"`` scale; importing the
+run package registers :func:`plant_kinds` with the scenario's validation (``scenario.check.register_plant_kinds``), so
+that ``plant.kind`` and ``--plant`` accept every registered kind.
 """
 
 from __future__ import annotations

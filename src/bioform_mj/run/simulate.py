@@ -35,7 +35,7 @@ from bioform_mj.formation.disturbance import Harmonic as HarmonicDisturbance
 from bioform_mj.outputs.mjlog import api_warnings
 from bioform_mj.plants.base import CompiledChunk, Plant, RobotModels, Sensing, Unmodelled
 from bioform_mj.plants.ideal import IdealPlant
-from bioform_mj.plants.registry import plant_factory, plant_kinds, register_plant
+from bioform_mj.plants.registry import plant_factory, register_plant
 from bioform_mj.run.hooks import (
     _add_outcome,
     check_controller,
@@ -50,7 +50,6 @@ from bioform_mj.run.loop import (
     warm_up,
 )
 from bioform_mj.run.summary import RunEnd, _summary
-from bioform_mj.scenario.check import register_plant_kinds
 from bioform_mj.scenario.config import Scenario
 from bioform_mj.scenario.loader import checked
 
@@ -230,7 +229,6 @@ def mujoco_plant(sc: Scenario) -> Plant:
 
 register_plant("ideal", ideal_plant)
 register_plant("mujoco", mujoco_plant)
-register_plant_kinds(plant_kinds)  # plant.kind accepts every registered kind (scenario/check.py asks the registry)
 
 
 def initial_estimates(sc: Scenario, pose0: np.ndarray, leader_pose0: np.ndarray) -> np.ndarray:

@@ -66,9 +66,9 @@ def _length(key: str, values: tuple, n: int) -> None:
         raise ScenarioError(key, f"expected {n} values, got {len(values)}")
 
 
-#: what lists the plant kinds a scenario may name: the plant registry (``plants.registry.plant_kinds``, a package on
-#: this floor) is registered here by the run package when imported (design §0, as it registers the shipped plants);
-#: until then the shipped kinds (``PLANTS``)
+#: what lists the plant kinds a scenario may name beyond the shipped ones (``PLANTS``): the plant registry
+#: (``plants.registry.plant_kinds``, a package on this floor), registered here when the run package is imported
+#: (``bioform_mj.load`` and the CLI import it; design §0)
 _PLANT_KINDS: list[Callable[[], tuple[str, ...]]] = []
 
 
@@ -85,8 +85,9 @@ def register_plant_kinds(kinds: Callable[[], tuple[str, ...]]) -> None:
 
 
 def plant_kinds() -> tuple[str, ...]:
-    """The plant kinds a scenario may name now: the registry's (:func:`register_plant_kinds`), else the shipped."""
-    return tuple(_PLANT_KINDS[-1]()) if _PLANT_KINDS else PLANTS
+    """The plant kinds a scenario may name now: the shipped ones (``PLANTS``), then the registry's
+    (:func:`register_plant_kinds`) in registration order, each once."""
+    return tuple(dict.fromkeys((*PLANTS, *(_PLANT_KINDS[-1]() if _PLANT_KINDS else ()))))
 
 
 def validate(sc: Scenario) -> None:
