@@ -158,3 +158,40 @@ def test_a_registered_kind_is_known_to_load_before_any_run():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["toy", "True"]
+
+
+def test_an_installed_packages_plant_is_found_by_the_cli(tmp_path, monkeypatch):
+    """A package declaring ``[project.entry-points."bioform_mj.plants"]`` is found without registering: listed by
+    ``plant_kinds`` (its module not imported yet), and ``bioform run --plant toy-ep`` builds its plant (the ideal
+    plant here) and logs the ideal plant's run bit for bit."""
+    import json
+    import sys
+
+    from bioform_mj.cli import main as cli
+    from bioform_mj.plants import registry
+
+    monkeypatch.setattr(registry, "_FACTORIES", dict(registry._FACTORIES))
+    monkeypatch.setattr(registry, "_ENTRY_POINTS", {})
+    monkeypatch.setattr(registry, "_SCANNED", False)
+    site = tmp_path / "site"
+    (site / "bioform_userplant").mkdir(parents=True)
+    (site / "bioform_userplant" / "__init__.py").write_text(
+        "from bioform_mj.run.simulate import ideal_plant\n\n\ndef make(sc):\n    return ideal_plant(sc)\n"
+    )
+    info = site / "bioform_userplant-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: bioform-userplant\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[bioform_mj.plants]\ntoy-ep = bioform_userplant:make\n")
+    monkeypatch.syspath_prepend(str(site))
+    assert plant_kinds()[-1] == "toy-ep" and "bioform_userplant" not in sys.modules
+    runs = {}
+    for kind in ("toy-ep", "ideal"):
+        out = tmp_path / kind
+        argv = ["run", "paper", "--plant", kind, "--set", "sim.duration=0.3", "--out", str(out), "--quiet"]
+        assert cli.main(argv) == 0
+        assert json.loads((out / "summary.json").read_text())["plant"] == kind
+        runs[kind] = np.load(out / "log.npz")
+    assert "bioform_userplant" in sys.modules and registry._FACTORIES["toy-ep"] is sys.modules["bioform_userplant"].make
+    assert set(runs["toy-ep"]) == set(runs["ideal"])
+    for k in runs["ideal"]:
+        np.testing.assert_array_equal(runs["toy-ep"][k], runs["ideal"][k], err_msg=k)

@@ -5,7 +5,12 @@ Plant` interface is declared by the runtime-checkable protocols of :mod:`bioform
 The shipped kinds (``ideal``, ``mujoco``) read the whole scenario, a floor above this one, so the run package registers
 their factories when imported (:mod:`bioform_mj.run.simulate`), as it registers the ``"auto"`` scale; importing the
 run package registers :func:`plant_kinds` with the scenario's validation (``scenario.check.register_plant_kinds``), so
-that ``plant.kind`` and ``--plant`` accept every registered kind.
+that ``plant.kind`` and ``--plant`` accept every registered kind. An installed package declares its plants in the
+entry-point group :data:`ENTRY_POINT_GROUP`, which the CLI reads too (read once per process, only when a kind is not
+registered already; its module imported only when the kind is built)::
+
+    [project.entry-points."bioform_mj.plants"]
+    my-plant = "my_package.plant:make_plant"
 """
 
 from __future__ import annotations
@@ -14,7 +19,10 @@ import re
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["PlantFactory", "plant_factory", "plant_kinds", "register_plant"]
+__all__ = ["ENTRY_POINT_GROUP", "PlantFactory", "plant_factory", "plant_kinds", "register_plant"]
+
+#: the entry-point group an installed package declares its plant kinds in
+ENTRY_POINT_GROUP = "bioform_mj.plants"
 
 #: ``factory(scenario) -> plant``: the plant of a checked scenario at its initial poses
 PlantFactory = Callable[[Any], Any]
@@ -23,6 +31,22 @@ PlantFactory = Callable[[Any], Any]
 NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}")
 
 _FACTORIES: dict[str, PlantFactory] = {}
+#: kinds installed packages declare (:data:`ENTRY_POINT_GROUP`), not loaded yet: ``kind -> EntryPoint``
+_ENTRY_POINTS: dict[str, Any] = {}
+_SCANNED = False
+
+
+def _scan_entry_points() -> None:
+    """Add the kinds installed packages declare (once per process; a kind registered already wins)."""
+    global _SCANNED
+    if _SCANNED:
+        return
+    _SCANNED = True
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name not in _FACTORIES and NAME_PATTERN.fullmatch(ep.name) is not None:
+            _ENTRY_POINTS.setdefault(ep.name, ep)
 
 
 def register_plant(kind: str, factory: PlantFactory) -> None:
@@ -47,14 +71,20 @@ def register_plant(kind: str, factory: PlantFactory) -> None:
 
 
 def plant_kinds() -> tuple[str, ...]:
-    """The registered plant kinds, in registration order."""
-    return tuple(_FACTORIES)
+    """The registered plant kinds, in registration order, then those installed packages declare (entry points)."""
+    _scan_entry_points()
+    return (*_FACTORIES, *(k for k in _ENTRY_POINTS if k not in _FACTORIES))
 
 
 def plant_factory(kind: str) -> PlantFactory:
     """The factory of plant kind ``kind``; ValueError naming the registered kinds for an unknown one."""
+    if kind not in _FACTORIES:
+        _scan_entry_points()
+        if kind in _ENTRY_POINTS:  # an installed package's: its module imported now, once
+            factory = _ENTRY_POINTS.pop(kind).load()
+            register_plant(kind, factory)
     try:
         return _FACTORIES[kind]
     except KeyError:
-        known = ", ".join(_FACTORIES) or "none (import bioform_mj.run: it registers the shipped plants)"
+        known = ", ".join(plant_kinds()) or "none (import bioform_mj.run: it registers the shipped plants)"
         raise ValueError(f"unknown plant kind {kind!r}; registered: {known}") from None

@@ -94,7 +94,7 @@ def validate(sc: Scenario) -> None:
     """Check every value the algorithm's assumptions need; raise on the first problem found."""
     if not is_registered(sc.method):  # the paper's four, or a registered controller (design §22)
         raise ScenarioError("method", unknown_method(sc.method))
-    if sc.plant.kind not in (kinds := plant_kinds()):  # the shipped kinds, or a registered plant (design §22)
+    if sc.plant.kind not in PLANTS and sc.plant.kind not in (kinds := plant_kinds()):  # or a registered plant (§22)
         raise ScenarioError("plant.kind", f"unknown plant '{sc.plant.kind}' (expected one of: {', '.join(kinds)})")
     _validate_text(sc)
     s = sc.sim
