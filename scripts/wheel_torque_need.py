@@ -24,8 +24,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import learner_options as lo  # noqa: E402  (the fair-scale mapping, one definition)
 
+from bioform_mj.robots.entries import resolve_robot  # noqa: E402
 from bioform_mj.robots.params import robot_truth  # noqa: E402
-from bioform_mj.robots.refs import resolve_robot  # noqa: E402
 from bioform_mj.run.demand import ideal_twin  # noqa: E402
 from bioform_mj.run.simulate import simulate  # noqa: E402
 from bioform_mj.scenario.loader import load  # noqa: E402

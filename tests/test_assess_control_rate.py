@@ -34,7 +34,7 @@ def _rates(robots: str) -> list:
 
 def test_the_three_sources_of_a_robots_control_rate(copy):
     from bioform_mj.assess.hardware import preset_control_rate
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
 
     rate, preset = preset_control_rate(resolve_robot("paper").model)  # a MuJoCo preset that drives it (as before)
     assert rate == pytest.approx(1000.0) and preset

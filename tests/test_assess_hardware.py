@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bioform_mj.assess.hardware import line, preset_control_rate
-from bioform_mj.robots.refs import resolve_robot
+from bioform_mj.robots.entries import resolve_robot
 from bioform_mj.run.simulate import simulate
 from bioform_mj.scenario.loader import load
 from crossing import CROSSING

@@ -210,7 +210,8 @@ def test_simulate_and_a_sweep_row_say_it(tmp_path, fresh_cache):
 def test_an_identification_off_the_formula_is_warned_with_its_size_and_cause(fresh_cache):
     """The paper robot mapped with wheel_radius 0.14 m (its wheels are 0.1 m): the formula takes the
     mapped radius, the physics the wheels': robot check fails it, cause ``mapping``."""
-    from bioform_mj.robots.refs import RobotRef, resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
+    from bioform_mj.robots.refs import RobotRef
     from bioform_mj.run.simulate import make_plant
 
     sc = load("paper", overrides=["plant.kind=mujoco", 'plant.robots=[{model="paper", wheel_radius=0.14}]'])

@@ -85,7 +85,7 @@ def test_presets_lists_paper(capsys):
     [
         (["run", "nosuchpreset"], "unknown preset 'nosuchpreset'"),
         (["run", "--method", "pid"], "unknown method 'pid' (expected one of: backstepping,"),
-        (["run", "--plant", "gazebo"], "invalid choice: 'gazebo'"),
+        (["run", "--plant", "gazebo"], "unknown plant 'gazebo' (expected one of: ideal, mujoco"),
         (["run", "--set", "kinematic.k1=-1"], "kinematic.k1"),
         (["run", "--set", "kinematic.k9=1"], "kinematic.k9"),
         (["run", "--set", "graph.edges=[[1,2]]"], "follower(s) 3 cannot reach the leader"),

@@ -370,7 +370,7 @@ def test_pyproject_pins_the_mujoco_metapackage_not_mujoco_core():
 
 
 def _composed(robots: list[str]):
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
     from bioform_mj.robots.scene import build_scene, compile_scene
 
     n = len(robots)

@@ -620,8 +620,8 @@ def test_the_cli_resolves_auto_scale_in_a_fresh_process():
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
+    from bioform_mj.robots.entries import resolve_robot
     from bioform_mj.robots.params import robot_truth
-    from bioform_mj.robots.refs import resolve_robot
 
     s = float(out.stdout.strip().splitlines()[-1])
     assert s == pytest.approx(robot_truth(resolve_robot("tb3")).half_track / 0.2, rel=1e-6)

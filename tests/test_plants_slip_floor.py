@@ -14,7 +14,8 @@ import pytest
 
 from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_V_FLOOR, slip_v_floor
 from bioform_mj.plants.mujoco.plant import MujocoPlant
-from bioform_mj.robots.refs import RobotRef, resolve_robot
+from bioform_mj.robots.entries import resolve_robot
+from bioform_mj.robots.refs import RobotRef
 
 
 def _plant(**over) -> MujocoPlant:

@@ -273,7 +273,7 @@ def test_urdf_top_speed_read_with_the_asset_roots(place):
     ``<limit velocity>`` 10 rad/s × r as the top speed (issue 28: it was re-read without the roots and
     silently reported none)."""
     from bioform_mj.assess.check import check
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
     from test_robots_urdf import R_WHEEL, diff_drive, write
 
     r, out = place

@@ -11,7 +11,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from bioform_mj.robots.refs import models_dir, resolve_robot
+from bioform_mj.robots.entries import resolve_robot
+from bioform_mj.robots.refs import models_dir
 from bioform_mj.robots.scene import build_scene
 from bioform_mj.robots.surfaces import min_friction_candidates
 

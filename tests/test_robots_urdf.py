@@ -22,9 +22,10 @@ from bioform_mj.assess.check import EXIT_FAIL
 from bioform_mj.cli import main as cli
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.analysis import layout_of
+from bioform_mj.robots.entries import resolve_robot
 from bioform_mj.robots.packages import find_package
 from bioform_mj.robots.prepare import prepare_robot
-from bioform_mj.robots.refs import PackagePath, RobotRef, resolve_robot
+from bioform_mj.robots.refs import PackagePath, RobotRef
 from bioform_mj.robots.urdf import check_file
 
 HALF_PI = repr(math.pi / 2)

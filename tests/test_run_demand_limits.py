@@ -17,8 +17,8 @@ import pytest
 from bioform_mj.assess.check import check
 from bioform_mj.cli.main import main
 from bioform_mj.core.errors import InputError, ScenarioError
-from bioform_mj.robots.refs import RobotRef, resolve_robot
-from bioform_mj.run.simulate import simulate
+from bioform_mj.robots.entries import resolve_robot
+from bioform_mj.robots.refs import RobotRef
 from bioform_mj.scenario.loader import load
 
 ZOO = Path(__file__).resolve().parent / "zoo"
@@ -122,14 +122,14 @@ def test_the_demand_of_a_similar_scenario_scales_by_its_units():
     s, sig = 0.5, 2.0
     ref, c_ref = _paper_similar(1.0, 1.0)
     sim, c_sim = _paper_similar(s, sig, steps=1.0)  # the twin steps a scenario slowed by σ × σ itself
-    p0 = peaks(ref, c_ref, 0.2, run=simulate)
-    p1 = peaks(sim, c_sim, 0.2 * s, run=simulate)
+    p0 = peaks(ref, c_ref, 0.2)
+    p1 = peaks(sim, c_sim, 0.2 * s)
     assert p0["wheel_speed_mps"] > 1.0 and p0["yaw_accel_radps2"] > 5.0  # the paper asks this much
     assert p1["wheel_speed_mps"] == pytest.approx(p0["wheel_speed_mps"] * s / sig, rel=1e-9)
     assert p1["accel_mps2"] == pytest.approx(p0["accel_mps2"] * s / sig**2, rel=1e-9)
     assert p1["yaw_accel_radps2"] == pytest.approx(p0["yaw_accel_radps2"] / sig**2, rel=1e-9)
     assert p1["c_hat_min"][1] / c_sim[1] == pytest.approx(p0["c_hat_min"][1] / c_ref[1], rel=1e-9)
-    assert peaks(sim, c_sim, 0.2 * s, run=simulate)["from"] == "memory"  # cached
+    assert peaks(sim, c_sim, 0.2 * s)["from"] == "memory"  # cached
 
 
 def test_a_run_warns_each_exceeded_limit_with_its_ratio_and_the_verdict_is_never_a_silent_pass(tmp_path, capsys):
@@ -175,7 +175,7 @@ def test_auto_scales_to_the_robot_and_its_demand_then_fits_the_margins():
     assert 2.0 < sc.formation.time_scale < 30.0 and "set by" in sc.formation.scale_note
     assert sc.sim.duration == pytest.approx(20.0 * sc.formation.time_scale)
     p, lim = robot_limits(resolve_robot(sc.plant.robots[0]))
-    items = compare(sc, peaks(sc, (p.a_eff, p.b_eff), p.half_track, run=simulate), lim)
+    items = compare(sc, peaks(sc, (p.a_eff, p.b_eff), p.half_track), lim)
     assert items["wheel_speed"]["ratio"] <= 0.8 + 1e-6
     assert items["accel"]["ratio"] <= 0.5 + 1e-6 and items["yaw_accel"]["ratio"] <= 0.5 + 1e-6
 

@@ -56,8 +56,9 @@ def test_the_wheel_torque_is_the_motion_plus_the_wheels_own_resistance_by_hand(m
         vel[:, 0, 0] = V * np.sin(OM * T)
         return SimpleNamespace(log={"t": T, "vel": vel, "c_hat": np.full((len(T), 1, 2), [A, B])})
 
+    monkeypatch.setattr(demand, "_LOOP", [fake_run])  # the twin runs on the registered loop: this fake one
     sc = load("paper", ["sim.duration=0.37", "sim.seed=912731"])  # a key of its own (no real twin shares it)
-    pk = peaks(sc, (A, B), L, run=fake_run, wheel=_wheel())
+    pk = peaks(sc, (A, B), L, wheel=_wheel())
     a_, b_ = V * OM / (2 * A), C * V / R
     want = math.hypot(a_, b_) + F + BRAKE / 2
     assert pk["wheel_torque_nm"] == pytest.approx(want, rel=1e-5)
@@ -65,9 +66,9 @@ def test_the_wheel_torque_is_the_motion_plus_the_wheels_own_resistance_by_hand(m
     assert pk["wheel_resistance_nm"] == pytest.approx(b_ + F + BRAKE / 2, rel=1e-5)
     assert pk["wheel_rate_radps"] == pytest.approx(V / R, rel=1e-5)
     assert len(runs) == 1
-    none = peaks(sc, (A, B), L, run=fake_run, wheel=_wheel(0.0))  # another wheel: the same log, no second twin
+    none = peaks(sc, (A, B), L, wheel=_wheel(0.0))  # another wheel: the same log, no second twin
     assert none["wheel_torque_nm"] == pytest.approx(math.hypot(a_, b_) + F, rel=1e-5) and len(runs) == 1
-    assert peaks(sc, (A, B), L, run=fake_run, wheel=_wheel())["from"] == "memory"
+    assert peaks(sc, (A, B), L, wheel=_wheel())["from"] == "memory"
     tau_max = 0.8 * want
     items = compare(sc, pk, _lim(tau_max), c_true=(A, B))
     it = items["wheel_torque"]

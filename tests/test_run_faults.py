@@ -180,7 +180,7 @@ def test_ideal_plant_push_acts_along_the_heading_only():
 
 def test_mujoco_push_and_friction_patch():
     from bioform_mj.plants.mujoco.plant import MujocoPlant
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
 
     poses = np.array([[0.0, 0.0, 0.0], [0.0, 3.0, 0.0]])
     p = MujocoPlant([resolve_robot("paper")] * 2, poses, 0.001, 0.001, friction_patch=(-1.0, 2.0, 1.0, 4.0, 0.05))

@@ -76,7 +76,8 @@ def _preset_rates() -> list[tuple[float, str, str]]:
     from importlib import resources
     from pathlib import Path
 
-    from bioform_mj.robots.refs import as_ref, resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
+    from bioform_mj.robots.refs import as_ref
     from bioform_mj.scenario.config import SimCfg
     from bioform_mj.scenario.loader import preset_names
 
@@ -107,7 +108,7 @@ NO_CONTROL_RATE = (
 def robot_control_rates(sc: Any, plant: Any) -> list[tuple[float | None, str]]:
     """Per distinct robot of a MuJoCo run: ``(Hz, where it comes from)`` — the mapping's ``control_rate`` ("the
     mapping's"), else :func:`preset_control_rate` ("the 'NAME' preset's rate"), else ``(None, "")``."""
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
 
     entries = list(sc.plant.robots) * (sc.n if len(sc.plant.robots) == 1 else 1)
     out: dict[Any, tuple[float | None, str]] = {}

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.control.params import register_sizing
+from bioform_mj.plants.base import RobotModels
 
 __all__ = ["DEADBAND_MIN_NM", "resistance", "sizing"]
 
@@ -37,7 +38,7 @@ def resistance(sc: Any, plant: Any) -> list[dict[str, Any]]:
     frictionloss ``2 f`` where the check is skipped or identified none (``"frictionloss"``)."""
     from bioform_mj.assess.prerun import cached_check, robot_key
     from bioform_mj.assess.skip import skipped
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
 
     out: list[dict[str, Any]] = []
     entries = list(sc.plant.robots) * (sc.n if len(sc.plant.robots) == 1 else 1)
@@ -69,7 +70,7 @@ def sizing(sc: Any, plant: Any, c_true: np.ndarray) -> dict[str, Any] | None:
     kd_db = tuple(sc.learner.kd_deadband)
     if margin <= 0 and not kd_db:
         return None
-    if not hasattr(plant, "params") or not hasattr(plant, "model"):  # said, never silently the paper's gains
+    if not isinstance(plant, RobotModels):  # no robot models (design §22): said, never silently the paper's gains
         return {
             "c_gain": list(map(float, sc.torque.c)),
             "kd": list(map(float, sc.learner.kd)),

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from bioform_mj.assess.skip import SKIP_ENV, skipped
+from bioform_mj.plants.base import RobotModels
 
 log = logging.getLogger(__name__)
 
@@ -185,7 +186,7 @@ def before_run(sc: Any, plant: Any) -> dict[str, Any]:
     t0 = time.perf_counter()
     if skipped():
         return {"skipped": True, "seconds": 0.0, "robots": [], "warnings": [], "how": f"{SKIP_ENV}=1"}
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
 
     entries = list(sc.plant.robots) * (sc.n if len(sc.plant.robots) == 1 else 1)
     by_ref: dict[Any, list[int]] = {}  # a robot's key once per distinct entry (256 followers: one prepare)
@@ -196,7 +197,7 @@ def before_run(sc: Any, plant: Any) -> dict[str, Any]:
         groups.setdefault(robot_key(ref), (ref, []))[1].extend(who)
     robots, lines = [], []
     for key, (ref, who) in groups.items():
-        step = float(plant.model.opt.timestep) if hasattr(plant, "model") else None  # the run's physics step
+        step = float(plant.model.opt.timestep) if isinstance(plant, RobotModels) else None  # the run's physics step
         entry = {"model": ref.model, "followers": who, **cached_check(ref, key, step)}
         entry.pop("format", None)
         robots.append(entry)

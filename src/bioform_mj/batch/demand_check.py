@@ -39,14 +39,13 @@ def demand_of_worlds(scenarios: Sequence[Scenario], plant: Any, robot_check: dic
     if robot_check is None or robot_check.get("skipped"):
         return [None] * len(scenarios)
     from bioform_mj.run.demand import before_run
-    from bioform_mj.run.simulate import simulate
 
     groups: dict[str, list[int]] = {}
     for w, sc in enumerate(scenarios):
         groups.setdefault(scenario_key(sc), []).append(w)
     out: list[Any] = [None] * len(scenarios)
     for worlds in groups.values():
-        d = before_run(scenarios[worlds[0]], plant, simulate, robot_check)
+        d = before_run(scenarios[worlds[0]], plant, robot_check)
         for w in worlds:
             out[w] = d
         which = "" if len(groups) == 1 else f"world{'s' if len(worlds) > 1 else ''} {_ranges(worlds)}: "

@@ -57,7 +57,7 @@ def _backend_args(p: argparse.ArgumentParser, choices: tuple[str, ...], help: st
 
 def _scenario_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", nargs="?", default="paper", help="preset name or path to a TOML file (default: paper)")
-    p.add_argument("--plant", choices=PLANTS, help="plant to drive (default: the scenario's)")
+    p.add_argument("--plant", metavar="KIND", help=f"plant: {'/'.join(PLANTS)} or registered (default: the scenario's)")
     p.add_argument("--duration", type=float, help="simulated time in s (overrides sim.duration)")
     p.add_argument("--seed", type=int, help="random seed (overrides sim.seed)")
     p.add_argument(

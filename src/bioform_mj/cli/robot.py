@@ -130,7 +130,8 @@ def mapping_args(p: argparse.ArgumentParser) -> None:
 def ref_from_args(model: str, args: argparse.Namespace) -> RobotRef:
     """A :class:`RobotRef` from a model argument and the :func:`mapping_args` flags."""
     from bioform_mj.core.errors import InputError
-    from bioform_mj.robots.refs import package_path_from_args, resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
+    from bioform_mj.robots.refs import package_path_from_args
 
     for flag in ("wheel_radius", "half_track", "tau_max", "top_speed", "control_rate"):
         v = getattr(args, flag, None)

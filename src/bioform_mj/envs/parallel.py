@@ -59,7 +59,7 @@ from bioform_mj.envs.kernels import (
 )
 from bioform_mj.envs.kernels import observations as obs_kernel
 from bioform_mj.envs.randomize import MAX_REDRAWS, Randomization, scale_friction, set_start
-from bioform_mj.plants.base import Sensing
+from bioform_mj.plants.base import RobotModels, Sensing, TipSlipWatch
 from bioform_mj.plants.mujoco.contacts import EVENTS as _EVENTS
 from bioform_mj.scenario.config import Scenario
 from bioform_mj.scenario.loader import load as load_scenario
@@ -194,6 +194,7 @@ class FormationParallelEnv(ParallelEnv):
         self._off = np.asarray(sc.formation.offsets, dtype=float).reshape(sc.n, 2)
         self._leader_frame = sc.formation.frame == "leader"
         self._plant = None
+        self._models = self._tip_watch = False  # its capabilities (set when it is built)
         self._built_sc: Scenario | None = None  # the scenario the plant was built from (its start poses)
         self._sc = sc
         self._build_time_axis(sc)
@@ -288,7 +289,11 @@ class FormationParallelEnv(ParallelEnv):
         self._built_sc = sc
         self._built_poses = np.array(sc.initial_poses(), dtype=float)
         self.nominal_c_true = np.ascontiguousarray(self._plant.c_true(), dtype=float)
-        if hasattr(self._plant, "model"):
+        # what the plant offers, by its capabilities (plants/base.py), never by its kind: robots from model files
+        # (a MuJoCo scene, compiled once and moved to each start), a tilt watch (design §22)
+        self._models = isinstance(self._plant, RobotModels)
+        self._tip_watch = isinstance(self._plant, TipSlipWatch)
+        if self._models:
             m = self._plant.model
             self._built_qpos0 = m.qpos0.copy()
             self._nominal_friction = (m.geom_friction[:, 0].copy(), m.pair_friction[:, :2].copy())
@@ -310,7 +315,7 @@ class FormationParallelEnv(ParallelEnv):
                     b, formation=dataclasses.replace(b.formation, init_jitter=0.0, init_jitter_heading=-1.0)
                 )
             )
-        if self._plant_kind() == "ideal":
+        if not self._models:  # a plant without robot models (the ideal plant): built anew for the episode
             self._plant = make_plant(sc)
             if "c_true" in draws:
                 self._plant._c *= draws["c_true"]
@@ -324,9 +329,6 @@ class FormationParallelEnv(ParallelEnv):
                 seed=float(sc.sim.seed % 2147483647), sigma=float(sc.plant.gyro_noise), bias=float(sc.plant.gyro_bias)
             )
         return p
-
-    def _plant_kind(self) -> str:
-        return "ideal" if not hasattr(self._plant, "model") else "mujoco"
 
     @property
     def np_random(self) -> np.random.Generator:
@@ -385,7 +387,7 @@ class FormationParallelEnv(ParallelEnv):
                 poses = Randomization.start_poses(sc, draws)
                 sc_ep = rz.scenario(sc, draws, poses)
             plant = self._plant_for(sc_ep, poses, draws)
-            if not (rz and ("position" in draws or "heading" in draws)) or self._plant_kind() == "ideal":
+            if not (rz and ("position" in draws or "heading" in draws)) or not self._models:
                 break
             if not plant.start_overlaps():
                 break
@@ -528,7 +530,7 @@ class FormationParallelEnv(ParallelEnv):
             diverged = describe(self._diag, k * self.dt, self._lim)
         fe = self._formation_error(k)
         self._stats_sample(k, fe)
-        tip = getattr(self._plant, "tip_step", None)
+        tip = self._plant.tip_step if self._tip_watch else None
         newly = self._zeros_n
         if tip is not None and tip.max() >= 0:
             newly = ((tip >= 0) & ~self._tipped).astype(float)

@@ -152,7 +152,7 @@ def provenance(sc: Any) -> dict[str, Any]:
     if sc.plant.kind == "mujoco":
         mj = _mujoco_version()
         from bioform_mj.core.errors import BioformError
-        from bioform_mj.robots.refs import resolve_robot
+        from bioform_mj.robots.entries import resolve_robot
 
         for r in sc.plant.robots:
             with contextlib.suppress(BioformError, OSError):

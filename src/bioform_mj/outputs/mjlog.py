@@ -92,8 +92,8 @@ def api_warnings(fn: Callable[..., Any]) -> Callable[..., Any]:
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         sc = args[0] if args else next(iter(kwargs.values()), None)
-        if getattr(getattr(sc, "plant", None), "kind", "mujoco") != "mujoco" and "mujoco" not in sys.modules:
-            return fn(*args, **kwargs)  # the ideal plant: MuJoCo is not even imported
+        if getattr(getattr(sc, "plant", None), "kind", "") == "ideal" and "mujoco" not in sys.modules:
+            return fn(*args, **kwargs)  # the ideal plant: MuJoCo is not even imported (a registered kind may use it)
         import mujoco
 
         if mujoco.get_mju_user_warning() is not None:

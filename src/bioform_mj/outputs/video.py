@@ -142,7 +142,7 @@ class Replay:
         if self.live_qpos:
             self.model = plant.model
         else:  # ideal plant: compose a scene with the scenario's robot for the looks
-            from bioform_mj.robots.refs import resolve_robot
+            from bioform_mj.robots.entries import resolve_robot
 
             robots = list(sc.plant.robots) * (n if len(sc.plant.robots) == 1 else 1)
             spec = build_scene([resolve_robot(r) for r in robots], np.asarray(sc.initial_poses(), float))

@@ -2,8 +2,12 @@
 
 A format is one module that reads it (a loader to a compiled ``MjSpec``) and one line here, :func:`register_format`:
 its name, the file suffixes that make a robot entry a path of it, a detector, the loader, what the loader confines,
-and whether xacro applies. :func:`format_of` picks the format of a file (the first registered whose detector accepts
-it; MJCF, the fallback, last), and :func:`bioform_mj.robots.prepare.prepare_robot` loads every robot through it.
+and whether xacro applies; optionally its checks before any work, its files, its published model, the top wheel
+speed its file states and the spec a calibrated copy is written from. :func:`format_of` picks the format of a file
+(the first registered whose detector accepts it; MJCF, the fallback, last), and
+:func:`bioform_mj.robots.prepare.prepare_robot` loads every robot through it; :func:`robot_suffixes` (every
+registered format's suffixes) decides whether a scenario's robot entry is a path (:func:`looks_like_path`,
+:mod:`bioform_mj.robots.entries`). Importing it imports no MuJoCo.
 """
 
 from __future__ import annotations
@@ -14,11 +18,11 @@ from pathlib import Path
 from typing import Any
 
 from bioform_mj.robots.files import urdf_files
-from bioform_mj.robots.mjcf import load_mjcf, published_mjcf
+from bioform_mj.robots.mjcf import editable_mjcf, load_mjcf, published_mjcf
 from bioform_mj.robots.mjcf_assets import confine_mjcf
-from bioform_mj.robots.urdf import URDF_SUFFIXES, check_file, import_urdf, is_urdf, load_urdf
+from bioform_mj.robots.urdf import URDF_SUFFIXES, check_file, import_urdf, is_urdf, load_urdf, wheel_velocity_limit
 
-__all__ = ["RobotFormat", "format_of", "register_format", "robot_formats"]
+__all__ = ["RobotFormat", "format_of", "looks_like_path", "register_format", "robot_formats", "robot_suffixes"]
 
 
 @dataclass(frozen=True)
@@ -30,8 +34,8 @@ class RobotFormat:
     name : str
         The format's name (``"mjcf"``, ``"urdf"``).
     suffixes : tuple of str
-        Lower-case file suffixes that make a robot entry a path of this format (``robots.refs.ROBOT_SUFFIXES``
-        holds them all).
+        Lower-case file suffixes that make a robot entry a path of this format (:func:`robot_suffixes` holds
+        them all).
     detect : callable
         ``detect(path) -> bool``: whether the file is of this format.
     load : callable
@@ -53,6 +57,16 @@ class RobotFormat:
     self_collision : bool
         Whether the scene collides the robot's own bodies by default (MJCF: as the file says; URDF: off, the
         Gazebo convention, unless the mapping says ``self_collide``; design §12).
+    wheel_speed : callable or None
+        ``wheel_speed(ref, path, wheel_joints) -> float or None``: the least top speed (rad/s) the file states for
+        the named wheel joints (a robot's limits, design §21), None when a wheel has none; raises when the file
+        cannot be read again. None: the format states none.
+    wheel_speed_what : str
+        What ``wheel_speed`` reads, as the top speed's note names it (``"the URDF's wheel <limit velocity>"``).
+    editable : callable or None
+        ``editable(ref) -> MjSpec``: the robot as published, uncompiled, asset file names absolute: the spec
+        ``bioform robot fit`` writes its calibrated copy (an MJCF file) from. None: a calibrated copy of it
+        cannot be written.
     """
 
     name: str
@@ -65,6 +79,9 @@ class RobotFormat:
     files: Callable[[Any, Callable[[Any], str]], dict[str, str]] | None = None
     published: Callable[[Any], Any] | None = None
     self_collision: bool = True
+    wheel_speed: Callable[[Any, Path, list[str]], float | None] | None = None
+    wheel_speed_what: str = "the file's wheel speed limit"
+    editable: Callable[[Any], Any] | None = None
 
 
 _FORMATS: dict[str, RobotFormat] = {}
@@ -94,6 +111,17 @@ def format_of(path: str | Path) -> RobotFormat:
     raise ValueError(f"{path}: no robot format reads it (registered: {', '.join(_FORMATS)})")
 
 
+def robot_suffixes() -> tuple[str, ...]:
+    """The file suffixes of every registered format (lower case, each once, in registration order): a robot entry
+    ending in one is a path (:func:`looks_like_path`)."""
+    return tuple(dict.fromkeys(s.lower() for f in robot_formats() for s in f.suffixes))
+
+
+def looks_like_path(model: str) -> bool:
+    """A robot entry with a registered format's suffix or a path separator is a path, never a shipped name."""
+    return model.lower().endswith(robot_suffixes()) or "/" in model or "\\" in model
+
+
 register_format(
     RobotFormat(
         "urdf",
@@ -107,6 +135,9 @@ register_format(
         urdf_files,
         lambda ref: import_urdf(replace(ref, self_collide=True)).model,
         False,
+        wheel_velocity_limit,
+        "the URDF's wheel <limit velocity>",
+        lambda ref: import_urdf(ref).spec,
     )
 )
 register_format(
@@ -122,6 +153,7 @@ register_format(
         lambda ref: confine_mjcf(ref.model, ref.asset_roots),
         None,
         published_mjcf,
+        editable=editable_mjcf,
     ),
     fallback=True,
 )

@@ -3,8 +3,9 @@
 :func:`limits_of` gathers, for one robot of a built :class:`~bioform_mj.plants.mujoco.plant.MujocoPlant`:
 
 - ``top_speed_mps`` (m/s at the tyre) and where it came from, first found of: the mapping's
-  ``top_speed`` (the maker's datasheet figure); the wheel joints' URDF ``<limit velocity>`` × r (the
-  file's; a value ≥ :data:`PLACEHOLDER_RADPS` rad/s is named a placeholder and not used); a
+  ``top_speed`` (the maker's datasheet figure); the top wheel speed the robot file states × r (its
+  format's ``wheel_speed``; URDF: the wheel joints' ``<limit velocity>``; the source is the format's
+  name; a value ≥ :data:`PLACEHOLDER_RADPS` rad/s is named a placeholder and not used); a
   ``<dcmotor>``'s no-load wheel speed ``V_max / (K g)`` × r. None (``missing`` says so) otherwise;
 - ``torque_nm`` (the motor limit per wheel) and ``traction_torque_nm`` (``μ N r / f``, design §13);
 - ``accel_mps2``: the largest forward acceleration, ``min(2 a τ_max, 2 a τ_traction, tip forward,
@@ -18,45 +19,42 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from bioform_mj.robots.refs import RobotRef
 
 #: a wheel joint's URDF ``<limit velocity>`` at or above this (rad/s) is a placeholder, not a motor's
 #: figure (50 rad/s on a 0.1 m wheel is 5 m/s; files copy 100 or 1000 from templates)
 PLACEHOLDER_RADPS = 50.0
 
 
-def urdf_wheel_velocity(
-    model_file: str, wheel_joints: list[str], packages: Any = None, ref: Any = None
-) -> tuple[float | None, str]:
-    """``(the least <limit velocity> (rad/s) of the named wheel joints of a URDF file, why none)``: None
-    with ``""`` if the file is no URDF or a wheel has none, None with the reason if the file cannot be read
-    again. The file is read as the import read it: ``ref``'s package path, xacro flag and arguments and
-    ``asset_roots`` (a mesh let in only through ``asset_roots`` must not hide the top speed; issue 28)."""
-    from bioform_mj.robots.refs import PackagePath
-    from bioform_mj.robots.urdf import _parse, is_urdf
+def file_wheel_speed(model_file: str, wheel_joints: list[str], ref: Any = None) -> tuple[float | None, str, Any]:
+    """``(the least top speed (rad/s) the robot file states for the named wheel joints, why none, its format)``,
+    asked of the file's format (its ``wheel_speed``, :mod:`bioform_mj.robots.formats`; URDF: the wheel joints'
+    ``<limit velocity>``): None with ``""`` if the format states none or a wheel has none, None with the reason if
+    the file cannot be read again. The file is read as the robot's import read it: ``ref``'s package path, xacro flag
+    and arguments and ``asset_roots`` (a mesh let in only through ``asset_roots`` must not hide the top speed;
+    issue 28). The format is None where none reads the file."""
+    from bioform_mj.robots.formats import format_of
 
-    if ref is not None and packages is None:
-        packages = getattr(ref, "package_path", None)
+    fmt = None
     try:
-        if not is_urdf(model_file):
-            return None, ""
-        pr = _parse(
-            Path(model_file),
-            packages if packages is not None else PackagePath(),
-            bool(getattr(ref, "xacro", False)),
-            tuple(getattr(ref, "xacro_args", ()) or ()),
-            tuple(getattr(ref, "asset_roots", ()) or ()),
-        )
+        fmt = format_of(model_file)
+        if fmt.wheel_speed is None:
+            return None, "", fmt
+        r = replace(ref, model=model_file) if isinstance(ref, RobotRef) else RobotRef(model_file)
+        w = fmt.wheel_speed(r, Path(model_file), wheel_joints)
     except Exception as exc:  # noqa: BLE001 - said in the top speed's note, never silently dropped
         why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        return None, f"the URDF's wheel <limit velocity> not read ({why})"
-    vel = [pr.limits.get(j, ("", None, None, None, None))[4] for j in wheel_joints]
-    if not vel or any(v is None or v <= 0 for v in vel):
-        return None, ""
-    return float(min(vel)), ""
+        what = fmt.wheel_speed_what if fmt is not None else "the file's wheel speed limit"
+        return None, f"{what} not read ({why})", fmt
+    if w is None or not w > 0:
+        return None, "", fmt
+    return float(w), "", fmt
 
 
 def dc_no_load_speed(plant: Any, i: int) -> float | None:
@@ -78,7 +76,7 @@ def dc_no_load_speed(plant: Any, i: int) -> float | None:
 
 def top_speed(ref: Any, plant: Any, i: int) -> tuple[float | None, str, str]:
     """``(m/s at the tyre, source, note)`` of follower ``i``: the mapping's ``top_speed``, else the
-    URDF wheel joints' ``<limit velocity>`` × r (a placeholder ≥ 50 rad/s is said and not used), else
+    top wheel speed its file states × r (:func:`file_wheel_speed`; a placeholder ≥ 50 rad/s is said and not used), else
     the ``<dcmotor>`` no-load speed × r; ``(None, "", why)`` when none is known."""
     p = plant.params[i]
     r = float(p.wheel_radius)
@@ -88,13 +86,14 @@ def top_speed(ref: Any, plant: Any, i: int) -> tuple[float | None, str, str]:
     lay = plant.layouts[i]
     wheels = [j.split("/", 1)[1] if "/" in j else j for j in lay.wheel_joints]
     model_file = str(getattr(ref, "model", "") or lay.file)
-    w, unread = urdf_wheel_velocity(model_file, wheels, ref=ref)
+    w, unread, fmt = file_wheel_speed(model_file, wheels, ref=ref)
     if unread:
         notes.append(unread)
     if w is not None:
+        what = fmt.wheel_speed_what
         if w < PLACEHOLDER_RADPS:
-            return w * r, "urdf", f"the URDF's wheel <limit velocity> {w:g} rad/s × r (the file's, not a datasheet's)"
-        notes.append(f"the URDF's wheel <limit velocity> {w:g} rad/s ({w * r:.3g} m/s) looks like a placeholder")
+            return w * r, fmt.name, f"{what} {w:g} rad/s × r (the file's, not a datasheet's)"
+        notes.append(f"{what} {w:g} rad/s ({w * r:.3g} m/s) looks like a placeholder")
     nl = dc_no_load_speed(plant, i)
     if nl is not None:
         return nl * r, "dcmotor", "; ".join([*notes, f"the <dcmotor> no-load speed {nl:.4g} rad/s × r"])

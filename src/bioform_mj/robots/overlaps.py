@@ -125,8 +125,8 @@ def published_model(entry: Any) -> mujoco.MjModel:
     """The robot's model as its file gives it, before the scene changes anything: an MJCF compiled as it
     stands; a URDF imported (design §12) with MuJoCo's own collision rules (``self_collide``: every pair
     but parent–child), so that its overlaps are found whatever the scene's convention."""
+    from bioform_mj.robots.entries import resolve_robot
     from bioform_mj.robots.formats import format_of
-    from bioform_mj.robots.refs import resolve_robot
 
     ref = resolve_robot(entry)
     fmt = format_of(Path(ref.model))
@@ -157,8 +157,8 @@ def self_contacts_at_rest(
     overlap and the scene's contact, m), ``force_n``/``points`` (the scene's, 0 where it has none) and
     ``simulated`` (the scene's filter collides the pair: MJCF as the file says, less what frozen joints weld;
     URDF off by convention). Returns ``(pairs, notes)``."""
+    from bioform_mj.robots.entries import resolve_robot
     from bioform_mj.robots.formats import format_of
-    from bioform_mj.robots.refs import resolve_robot
 
     ref = resolve_robot(entry)
     urdf = not format_of(Path(ref.model)).self_collision and not ref.self_collide  # the URDF/Gazebo convention

@@ -49,6 +49,7 @@ import numpy as np
 
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.analysis import _analyse
+from bioform_mj.robots.entries import resolve_robot
 from bioform_mj.robots.formats import format_of
 from bioform_mj.robots.layout import (
     _LAYOUT_TEXT,
@@ -63,7 +64,7 @@ from bioform_mj.robots.layout import (
     _spec_joint,
     dc_constants,
 )
-from bioform_mj.robots.refs import RobotRef, resolve_robot
+from bioform_mj.robots.refs import RobotRef
 
 __all__ = ["prepare_robot", "load_robot"]
 

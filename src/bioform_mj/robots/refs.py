@@ -13,10 +13,9 @@ An entry of ``plant.robots`` is
   ``base``, joints ``left_wheel``/``right_wheel``; a URDF: its root link, and the two wheels it
   finds) resp. "read it from the model".
 
-A name with a ``.xml``/``.urdf``/``.xacro`` suffix or a path separator is a path. Relative paths
-inside a TOML file (models and package directories) resolve against the directory of that file
-(:func:`rebase_entries`, called when the file is read); on the command line against the
-working directory. What the project then reads from the model is :mod:`bioform_mj.robots.scene`'s
+How an entry resolves to a file (a name with a registered format's suffix or a path separator is a path) is
+:mod:`bioform_mj.robots.entries`' job, below the format registry (:mod:`bioform_mj.robots.formats`) that this
+module's types sit under. What the project then reads from the model is :mod:`bioform_mj.robots.scene`'s
 job (:func:`bioform_mj.robots.prepare.prepare_robot`). This module imports nothing of MuJoCo.
 """
 
@@ -24,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -34,19 +33,13 @@ from bioform_mj.core.errors import InputError
 __all__ = [
     "RobotRef",
     "PackagePath",
-    "ROBOT_SUFFIXES",
     "models_dir",
     "robot_names",
-    "resolve_robot",
     "as_ref",
     "as_package_path",
-    "rebase_entries",
     "rebase_package_path",
     "package_path_from_args",
 ]
-
-#: file suffixes that make a robot entry a path (MJCF; URDF and xacro, design §12)
-ROBOT_SUFFIXES = (".xml", ".urdf", ".xacro")
 
 
 class PackagePath(tuple):
@@ -274,80 +267,10 @@ def _xacro_args(value: Any, key: str) -> tuple[tuple[str, str], ...]:
     return tuple(out)
 
 
-def _is_path(model: str) -> bool:
-    """A name with a robot file suffix or a path separator is a path, never a shipped name."""
-    return model.lower().endswith(ROBOT_SUFFIXES) or "/" in model or "\\" in model
-
-
 def is_shipped(model: str) -> bool:
     stem = model[: -len(".xml")] if model.endswith(".xml") else model
     stem = stem[: -len("_robot")] if stem.endswith("_robot") else stem
     return "/" not in model and "\\" not in model and stem in robot_names()
-
-
-def resolve_robot(entry: Any) -> RobotRef:
-    """A ``plant.robots`` entry → a :class:`RobotRef` whose ``model`` is an existing file.
-
-    Shipped names (``paper``, ``paper_robot``, ``paper_robot.xml``) map to the package's
-    ``models/``; anything else must be a path to a file (``.xml`` MJCF, ``.urdf``/``.xacro`` URDF;
-    relative: to the working directory).
-    Raises :class:`InputError` naming an unknown robot or a missing file.
-    """
-    ref = as_ref(entry)
-    name = ref.model
-    if is_shipped(name) and not Path(name).is_file():
-        stem = name[: -len(".xml")] if name.endswith(".xml") else name
-        stem = stem[: -len("_robot")] if stem.endswith("_robot") else stem
-        return replace(ref, model=str(models_dir() / f"{stem}_robot.xml"))
-    path = Path(name)
-    if _is_path(name):
-        from bioform_mj.robots.sanity import not_regular, unstatable  # a FIFO or a device: said, never opened
-
-        if unstatable(path):  # a name too long, a symlink loop: one line, not an OSError (issue 28)
-            raise InputError(f"model file {unstatable(path)}")
-        if not path.is_file():
-            raise InputError(
-                f"model file {not_regular(path)}" if not_regular(path) else f"model file '{path}' does not exist"
-            )
-        return replace(ref, model=str(path))
-    raise InputError(f"unknown robot '{name}' (expected one of: {', '.join(robot_names())}, or an MJCF or URDF path)")
-
-
-def rebase_entries(entries: Any, base_dir: Path) -> Any:
-    """``plant.robots`` as read from a TOML file in ``base_dir``: relative MJCF/URDF paths (and a
-    table's ``package_path`` directories) made relative to that directory (design §10: paths
-    inside a TOML file are relative to the file; a bare ``robot.urdf`` is a path, §12).
-
-    Shipped names and absolute paths are kept; anything that is not a list is returned as is
-    (validation reports it).
-    """
-    if not isinstance(entries, list):
-        return entries
-
-    def fix(model: Any) -> Any:
-        if not isinstance(model, str) or is_shipped(model) or Path(model).is_absolute():
-            return model
-        if _is_path(model):
-            return str((base_dir / model).resolve())
-        return model
-
-    out = []
-    for e in entries:
-        if isinstance(e, str):
-            out.append(fix(e))
-        elif isinstance(e, Mapping) and "model" in e:
-            t = {**e, "model": fix(e["model"])}
-            if "package_path" in t:
-                t["package_path"] = rebase_package_path(t["package_path"], base_dir)
-            if isinstance(t.get("asset_roots"), list):  # design §12: relative to the file, as the model
-                t["asset_roots"] = [
-                    str((base_dir / v).resolve()) if isinstance(v, str) and v and not Path(v).is_absolute() else v
-                    for v in t["asset_roots"]
-                ]
-            out.append(t)
-        else:
-            out.append(e)
-    return out
 
 
 def package_path_from_args(values: list[str] | None, flag: str = "--package-path") -> PackagePath:

@@ -62,6 +62,7 @@ __all__ = [
     "URDF_SUFFIXES",
     "MESH_NATIVE",
     "is_urdf",
+    "wheel_velocity_limit",
     "load_urdf",
     "find_package",
     "package_search_path",
@@ -135,6 +136,19 @@ def is_urdf(path: str | Path) -> bool:
     except (OSError, ET.ParseError):
         return False
     return False
+
+
+def wheel_velocity_limit(ref: RobotRef, path: Path, wheel_joints: list[str]) -> float | None:
+    """The least ``<limit velocity>`` (rad/s) of the named wheel joints of the URDF ``path`` (the format's
+    ``wheel_speed``, :mod:`bioform_mj.robots.formats`), the file read as the import reads it: ``ref``'s package path,
+    xacro flag and arguments and ``asset_roots`` (a mesh let in only through ``asset_roots`` must not hide the top
+    speed; issue 28). None when a wheel has none; raises (:class:`UrdfError`, :class:`InputError`) when the file
+    cannot be read again."""
+    pr = _parse(Path(path), ref.package_path, ref.xacro, ref.xacro_args, ref.asset_roots)
+    vel = [pr.limits.get(j, ("", None, None, None, None))[4] for j in wheel_joints]
+    if not vel or any(v is None or v <= 0 for v in vel):
+        return None
+    return float(min(vel))
 
 
 # ------------------------------------------------------------------ reading the file

@@ -63,7 +63,7 @@ def resolve_auto(sc: Any) -> tuple[float, float, str]:
     """``(s, σ, note)`` for a scenario whose ``formation.scale`` or ``time_scale`` is ``"auto"``
     (the other one as given); raises ScenarioError for a robot whose limits are unknown."""
     from bioform_mj.core.errors import ScenarioError
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
     from bioform_mj.scenario.loader import apply_scale
     from bioform_mj.scenario.similarity import check_factor
 
@@ -82,8 +82,7 @@ def resolve_auto(sc: Any) -> tuple[float, float, str]:
         s = check_factor("formation.scale", f.scale)
     if f.time_scale != "auto":
         return s, check_factor("formation.time_scale", f.time_scale), "; ".join(notes)
-    from bioform_mj.run.demand import peaks
-    from bioform_mj.run.simulate import simulate
+    from bioform_mj.run.demand import peaks  # its twin runs on the loop registered with it (run/simulate.py)
 
     for ref, _p, lim in robots:
         if lim["top_speed_mps"] is None:
@@ -107,7 +106,7 @@ def resolve_auto(sc: Any) -> tuple[float, float, str]:
         )
         worst, why = 0.0, ""
         for ref, p, lim in robots:
-            pk = peaks(at, (p.a_eff, p.b_eff), p.half_track, run=simulate)
+            pk = peaks(at, (p.a_eff, p.b_eff), p.half_track)
             cand = {
                 f"wheel speed {pk['wheel_speed_mps']:.3g} m/s against {SPEED_MARGIN:g} x top speed "
                 f"{lim['top_speed_mps']:.3g} m/s ({lim['top_speed_source']})": pk["wheel_speed_mps"]

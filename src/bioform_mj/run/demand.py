@@ -38,6 +38,7 @@ import hashlib
 import json
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +49,27 @@ CACHE_FORMAT = 4
 _MEMO: dict[str, dict[str, Any]] = {}
 #: the twin's log (t, vel) per key, this process only: a wheel not yet asked about costs no second twin
 _LOGS: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+#: the loop that runs the ideal twin, :func:`bioform_mj.run.simulate.simulate`: it registers itself when imported
+#: (it calls this module before a run, so this module cannot import it: design §0), and importing the run package
+#: imports it; every caller of the demand (a run's check, the batch engine's, the "auto" time scale) asks this one
+_LOOP: list[Callable[..., Any]] = []
+
+
+def register_loop(run: Callable[..., Any]) -> None:
+    """Register the loop that runs the demand's ideal twin (``run(scenario, engine="auto") -> RunResult``).
+
+    Parameters
+    ----------
+    run : callable
+        :func:`bioform_mj.run.simulate.simulate`, registered by its module when imported.
+    """
+    _LOOP[:] = [run]
+
+
+def _loop() -> Callable[..., Any]:
+    if not _LOOP:
+        raise RuntimeError("the demand's ideal twin needs the loop: import bioform_mj.run (it registers simulate)")
+    return _LOOP[-1]
 
 
 def ideal_twin(sc: Any, c_true: tuple[float, float]) -> Any:
@@ -137,11 +159,10 @@ def wheel_need(
 
 
 def peaks(
-    sc: Any, c_true: tuple[float, float], half_track: float, *, run: Any, wheel: dict[str, float] | None = None
+    sc: Any, c_true: tuple[float, float], half_track: float, *, wheel: dict[str, float] | None = None
 ) -> dict[str, Any]:
     """The demand's peaks (module docstring) of ``sc`` on the ideal plant with ``c_true`` and a robot of
-    half track ``half_track`` m, run by ``run`` (:func:`bioform_mj.run.simulate.simulate`, passed in: the
-    loop calls this module before a run, so this module does not import the loop); cached.
+    half track ``half_track`` m, run by the registered loop (:func:`register_loop`); cached.
     ``{"wheel_speed_mps", "accel_mps2", "yaw_accel_radps2",
     "lateral_accel_mps2", "c_hat_min", "seconds", "from"}``; with ``wheel`` (:func:`wheel_need`'s) also its
     ``wheel_torque_nm``, ``wheel_inertial_nm``, ``wheel_resistance_nm``, ``wheel_rate_radps`` (cached with the
@@ -177,7 +198,7 @@ def peaks(
     if entry is None or key not in _LOGS:
         with warnings.catch_warnings():  # the twin's outcomes are not the run's
             warnings.simplefilter("ignore")
-            res = run(ideal_twin(sc, c_true), engine="auto")
+            res = _loop()(ideal_twin(sc, c_true), engine="auto")
         t = np.asarray(res.log["t"])
         vel = np.asarray(res.log["vel"])  # (K, n, 2) υ m/s, ω rad/s
         _LOGS.clear()  # one twin's log kept: the wheel asked right after the σ search's last twin
@@ -387,8 +408,8 @@ def run_limits(sc: Any, plant: Any) -> list[dict[str, Any]]:
     import mujoco
 
     from bioform_mj.assess.check import tip_margins
+    from bioform_mj.robots.entries import resolve_robot
     from bioform_mj.robots.limits import limits_of
-    from bioform_mj.robots.refs import resolve_robot
 
     scratch = mujoco.MjData(plant.model)
     mujoco.mj_kinematics(plant.model, scratch)
@@ -412,8 +433,8 @@ def brake_torques(robot_check: dict[str, Any] | None, n: int) -> list[float]:
     ]
 
 
-def before_run(sc: Any, plant: Any, run: Any, robot_check: dict[str, Any] | None = None) -> dict[str, Any]:
-    """summary.json's ``demand`` for a MuJoCo run (the ideal twin run by ``run``, :func:`peaks`):
+def before_run(sc: Any, plant: Any, robot_check: dict[str, Any] | None = None) -> dict[str, Any]:
+    """summary.json's ``demand`` for a MuJoCo run (the ideal twin run by the registered loop, :func:`peaks`):
     ``{"robots": [{"followers", "model", "c_true",
     "limits", "demand", "ideal_run"}], "warnings", "seconds"}`` (one entry per distinct robot).
     ``robot_check``: the run's robot check (:func:`bioform_mj.assess.prerun.before_run`): its braking casters
@@ -437,7 +458,7 @@ def before_run(sc: Any, plant: Any, run: Any, robot_check: dict[str, Any] | None
                 "frictionloss_nm": p.wheel_frictionloss,
                 "brake_torque_nm": brakes[i],
             }
-            pk = peaks(sc, (p.a_eff, p.b_eff), p.half_track, run=run, wheel=wheel)
+            pk = peaks(sc, (p.a_eff, p.b_eff), p.half_track, wheel=wheel)
         except Exception as exc:  # noqa: BLE001 - a demand that cannot be computed is said, the run goes ahead
             why = f"{type(exc).__name__}: {exc}"
             lines.append(f"{who}: the scenario's demand could not be computed on the ideal plant ({why})")

@@ -36,6 +36,7 @@ from bioform_mj.outputs.mjlog import api_warnings
 from bioform_mj.plants.base import CompiledChunk, Plant, RobotModels, Sensing, Unmodelled
 from bioform_mj.plants.ideal import IdealPlant
 from bioform_mj.plants.registry import plant_factory, register_plant
+from bioform_mj.run.demand import register_loop
 from bioform_mj.run.hooks import (
     _add_outcome,
     check_controller,
@@ -182,7 +183,7 @@ def mujoco_plant(sc: Scenario) -> Plant:
     poses = sc.initial_poses()
     dist = _disturbance(sc)
     from bioform_mj.plants.mujoco.plant import MujocoPlant  # imported only when asked: the ideal plant needs no MuJoCo
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
 
     robots = list(sc.plant.robots) * (sc.n if len(sc.plant.robots) == 1 else 1)
     refs = [resolve_robot(r) for r in robots]
@@ -375,6 +376,9 @@ def simulate(
     return result
 
 
+register_loop(simulate)  # the demand's ideal twin runs on this loop (run/demand.py cannot import it)
+
+
 def outcome_warnings(summary: dict[str, Any]) -> list[OutcomeWarning]:
     """What :func:`simulate` warns of a run's ``summary``: per follower with outcomes one
     :class:`OutcomeWarning` ``"SCENARIO / METHOD: follower I: KIND (DETAIL); KIND (DETAIL)"``, the
@@ -469,7 +473,7 @@ def _warn_before_run(sc: Scenario, plant: Plant) -> tuple[list[str], list[str], 
     if checked is not None and not checked.get("skipped"):  # design §21: the scenario's demand vs the limits
         from bioform_mj.run.demand import before_run as _demand
 
-        demand = _demand(sc, plant, simulate, checked)
+        demand = _demand(sc, plant, checked)
         for line in demand["warnings"]:
             warnings.warn(line, RobotWarning, stacklevel=4)
     return imported, feasibility, checked, demand

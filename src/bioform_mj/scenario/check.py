@@ -7,6 +7,7 @@ first problem found; :func:`run_size` estimates a run's steps and memory, which 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -65,12 +66,36 @@ def _length(key: str, values: tuple, n: int) -> None:
         raise ScenarioError(key, f"expected {n} values, got {len(values)}")
 
 
+#: what lists the plant kinds a scenario may name beyond the shipped ones (``PLANTS``): the plant registry
+#: (``plants.registry.plant_kinds``, a package on this floor), registered here when the run package is imported
+#: (``bioform_mj.load`` and the CLI import it; design §0)
+_PLANT_KINDS: list[Callable[[], tuple[str, ...]]] = []
+
+
+def register_plant_kinds(kinds: Callable[[], tuple[str, ...]]) -> None:
+    """Register what lists the plant kinds ``plant.kind`` (and ``--plant``) may name: the shipped ones and those
+    registered with :func:`bioform_mj.plants.registry.register_plant`.
+
+    Parameters
+    ----------
+    kinds : callable
+        ``kinds() -> tuple of str``, asked at each validation (a kind registered later is known then).
+    """
+    _PLANT_KINDS[:] = [kinds]
+
+
+def plant_kinds() -> tuple[str, ...]:
+    """The plant kinds a scenario may name now: the shipped ones (``PLANTS``), then the registry's
+    (:func:`register_plant_kinds`) in registration order, each once."""
+    return tuple(dict.fromkeys((*PLANTS, *(_PLANT_KINDS[-1]() if _PLANT_KINDS else ()))))
+
+
 def validate(sc: Scenario) -> None:
     """Check every value the algorithm's assumptions need; raise on the first problem found."""
     if not is_registered(sc.method):  # the paper's four, or a registered controller (design §22)
         raise ScenarioError("method", unknown_method(sc.method))
-    if sc.plant.kind not in PLANTS:
-        raise ScenarioError("plant.kind", f"unknown plant '{sc.plant.kind}' (expected one of: {', '.join(PLANTS)})")
+    if sc.plant.kind not in PLANTS and sc.plant.kind not in (kinds := plant_kinds()):  # or a registered plant (§22)
+        raise ScenarioError("plant.kind", f"unknown plant '{sc.plant.kind}' (expected one of: {', '.join(kinds)})")
     _validate_text(sc)
     s = sc.sim
     _positive("sim.duration", s.duration)
@@ -221,8 +246,8 @@ def validate(sc: Scenario) -> None:
     if len(pc.robots) not in (1, n):
         raise ScenarioError("plant.robots", f"expected 1 or {n} robot models, got {len(pc.robots)}")
     if pc.kind == "mujoco":
+        from bioform_mj.robots.entries import resolve_robot
         from bioform_mj.robots.formats import format_of
-        from bioform_mj.robots.refs import resolve_robot
 
         for name, folder in pc.package_path:
             if not Path(folder).is_dir():
@@ -310,7 +335,7 @@ def _validate_sensing(sc: Scenario) -> None:
         )
     if pc.encoder_cpr > 0:
         return
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
 
     for r in pc.robots:
         ref = resolve_robot(r)

@@ -45,7 +45,7 @@ _EQ37 = "eq. 37: k4 is S's integral gain (1/s) and the adaptation gain; × σ² 
 
 #: the kinds of the string keys, as ``Literal`` types (the annotation of each key) and their allowed values
 #: (``typing.get_args`` of the same type: one source)
-PlantKind = Literal["ideal", "mujoco"]
+PlantKind = Literal["ideal", "mujoco"]  # the shipped kinds; plant.kind takes any registered kind (check.plant_kinds)
 LeaderKind = Literal["paper", "line", "circle", "figure8", "harmonic"]
 GraphKind = Literal["explicit", "chain", "ring", "star", "complete"]
 EstimatorInit = Literal["zero", "self", "leader"]

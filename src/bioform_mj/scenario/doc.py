@@ -168,7 +168,11 @@ KEYS: dict[str, tuple[str, str]] = {
     "learner.drag_gain": ("", "Adaptation gains of the learned drag `[υ, ω]` (the `υ` one ÷ scale²)."),
     "learner.drag_max": ("1/s", "Upper projection bound of the learned drag rate."),
     # plant
-    "plant.kind": ("", "`ideal`: the paper's unicycle model (RK4); `mujoco`: MJCF robots simulated by MuJoCo."),
+    "plant.kind": (
+        "",
+        "`ideal`: the paper's unicycle model (RK4); `mujoco`: MJCF robots simulated by MuJoCo; or a kind registered "
+        "with `bioform_mj.plants.registry.register_plant` (also as `--plant`).",
+    ),
     "plant.c_true": ("1/(kg·m), 1/(kg·m²)", "Ideal plant's `(a, b) = (1/(m r), l/(I r))`; MuJoCo: from the models."),
     "plant.mass": ("kg", "Ideal plant's mass consistent with `a` (used by payload events)."),
     "plant.inertia": ("kg·m²", "Ideal plant's yaw inertia consistent with `b` (used by payload events)."),

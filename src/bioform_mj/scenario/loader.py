@@ -21,7 +21,8 @@ import numpy as np
 
 from bioform_mj.control.tuning import PAPER_C
 from bioform_mj.core.errors import InputError, ScenarioError
-from bioform_mj.robots.refs import PackagePath, RobotRef, as_package_path, as_ref, rebase_entries, rebase_package_path
+from bioform_mj.robots.entries import rebase_entries
+from bioform_mj.robots.refs import PackagePath, RobotRef, as_package_path, as_ref, rebase_package_path
 from bioform_mj.scenario.check import validate
 from bioform_mj.scenario.config import MAX_INT, Scenario, keys_of
 
@@ -319,7 +320,7 @@ def apply_robots_to_ideal(sc: Scenario) -> Scenario:
     pc = sc.plant
     if pc.kind != "ideal":
         return sc
-    from bioform_mj.robots.refs import resolve_robot
+    from bioform_mj.robots.entries import resolve_robot
 
     refs = [resolve_robot(r) for r in pc.robots]
     paper = resolve_robot("paper")

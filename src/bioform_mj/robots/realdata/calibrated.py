@@ -1,11 +1,12 @@
 """The calibrated robot file ``bioform robot fit`` writes, and what ``robot check`` says of one (issue 29).
 
-:func:`write_calibrated` loads the robot file as published (an MJCF as is; a URDF as the project imports
-it, design §12), writes the fitted values into it by name (the chassis body's mass and yaw inertia, the
-wheel joints' damping, frictionloss and armature, the casters' friction) and saves it as MJCF. The file
-carries where its numbers came from as the custom text ``bioform_calibration`` (one line: the recording,
-the date, each value and whether the recording identified it); :func:`calibration_note` reads it back
-from a compiled scene, for ``robot check``'s notes.
+:func:`write_calibrated` loads the robot file as published, its format's ``editable`` spec
+(:mod:`bioform_mj.robots.formats`: an MJCF as is; a URDF as the project imports it, design §12), writes the
+fitted values into it by name (the chassis body's mass and yaw inertia, the wheel joints' damping,
+frictionloss and armature, the casters' friction) and saves it as MJCF. The file carries where its numbers
+came from as the custom text ``bioform_calibration`` (one line: the recording, the date, each value and
+whether the recording identified it); :func:`calibration_note` reads it back from a compiled scene, for
+``robot check``'s notes.
 """
 
 from __future__ import annotations
@@ -27,16 +28,18 @@ CALIBRATION_TEXT = "bioform_calibration"
 
 
 def _source_spec(ref: RobotRef) -> mujoco.MjSpec:
-    from bioform_mj.robots.mjcf import absolute_asset_files
-    from bioform_mj.robots.urdf import import_urdf, is_urdf
+    """The robot as published, uncompiled, from its format's ``editable`` (:mod:`bioform_mj.robots.formats`; an
+    MJCF as is, a URDF as the project imports it). Raises :class:`~bioform_mj.robots.layout.ModelError` (exit 2)
+    for a format that cannot give one."""
+    from bioform_mj.robots.formats import format_of
+    from bioform_mj.robots.layout import ModelError
 
-    if is_urdf(Path(ref.model)):
-        return import_urdf(ref).spec
-    from bioform_mj.robots.mjcf_assets import open_mjcf  # design §12: its files inside its folder
-
-    spec = open_mjcf(ref.model, ref.asset_roots)
-    absolute_asset_files(spec)
-    return spec
+    fmt = format_of(ref.model)
+    if fmt.editable is None:
+        raise ModelError(
+            f"{ref.model}: the robot format '{fmt.name}' cannot give a spec to write a calibrated copy from"
+        )
+    return fmt.editable(ref)
 
 
 def write_calibrated(
