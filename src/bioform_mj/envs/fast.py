@@ -336,9 +336,11 @@ class FastPeriod:
     """The arguments of :func:`mujoco_period` for the current episode of ``env`` (built after its reset,
     and again after an event changed the plant), and the scratch arrays it writes."""
 
-    def __init__(self, env: Any, r: Any = None, fe: Any = None, hits: Any = None) -> None:
+    def __init__(self, env: Any, r: Any = None, fe: Any = None, hits: Any = None, model: Any = None) -> None:
         """``r``, ``fe``, ``hits``: (n,) float64 arrays to write the rewards, formation errors and contact
-        events into (views of a batch's arrays, ``envs.vector``); default: arrays of its own."""
+        events into (views of a batch's arrays, ``envs.vector``); default: arrays of its own. ``model``: the
+        ``MjModel`` the physics steps with (default: the plant's own; ``envs.vector`` passes one model that
+        its worlds share where their physics is the same)."""
         p, n = env._plant, env.n
         st = env._stack
         w = env.weights
@@ -381,7 +383,8 @@ class FastPeriod:
             SLIP_V_FLOOR, p._slip_need, p.slip_run, p.slip_step,
         )  # fmt: skip
         fields = (
-            env._g, env._s, self.comm, io, wt, p.contacts.contacts, p.contacts.proximity, m._address, d._address,
+            env._g, env._s, self.comm, io, wt, p.contacts.contacts, p.contacts.proximity,
+            (m if model is None else model)._address, d._address,
             int(p.n_substeps), float(p.control_dt), env._low, env._high, env._acc_low, env._acc_high,
             env.action_mode == "velocity", env._verr, self.tau, np.ascontiguousarray(env._tau_max), float(env.dt),
             env.L_pose, env.L_vel, env._lim, env._diag, env._off, bool(env._leader_frame), self.fe, env._tipped,
