@@ -128,20 +128,26 @@ def test_fast_period_collision_and_divergence():
     _same(fast, _episode(env, push, False, seed=0))
 
 
-def test_fast_period_around_a_payload_event():
+@pytest.mark.parametrize("plant", ["mujoco", "ideal"])
+def test_fast_period_around_a_payload_event(plant):
     """The payload preset with its pick-up moved to t = 0.05 s: the event's period runs step by step, the
-    arguments are built again from the plant's new masses after it, and the episode is the same bits."""
+    arguments are built again from the plant's new masses (the ideal plant: its ``c``) after it, and the
+    episode is the same bits."""
     import dataclasses
 
     from bioform_mj.scenario.loader import load
 
-    sc = load("payload", ["sim.control_dt=0.01"])
+    sc = load("payload", ["sim.control_dt=0.01", f"plant.kind={plant}"])
     sc = dataclasses.replace(sc, events=(dataclasses.replace(sc.events[0], time=0.05),))
     env = parallel_env(sc, action="torque", max_cycles=15)
     for a in env.possible_agents:
         env.action_space(a).seed(3)
     fast = _episode(env, _random(2), True)
-    assert env._plant._payload_added
+    if plant == "mujoco":
+        assert env._plant._payload_added
+    else:
+        i = sc.events[0].follower - 1
+        assert not np.array_equal(env._plant.c_true()[i], env.nominal_c_true[i])  # the payload changed c_i
     for a in env.possible_agents:
         env.action_space(a).seed(3)
     _same(fast, _episode(env, _random(2), False))
