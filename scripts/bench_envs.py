@@ -12,8 +12,10 @@ velocity action (the environment alone). Run:
 ``--matrix``: the environment against the compiled loop for both plants at 1 ms and 10 ms, one process
 (issue 30's table in docs/envs.md). ``--vector W --threads T``: the CPU-vectorised environment
 (``envs.vector_env``, W worlds, velocity actions, its torque law and observations) against
-``mujoco.rollout`` stepping the same W models over the same physics steps with T threads, open loop
-(the physics alone: issue 30 asks for >= 0.7).
+``mujoco.rollout`` stepping the same W worlds (the models the environment steps with: its shared one)
+over the same physics steps with T threads, open loop (the physics alone: issue 30 asks for >= 0.7);
+also against ``mujoco.rollout`` of the worlds' own W models, and of the same worlds called once per
+period (the state carried: what any closed loop must do).
 """
 
 from __future__ import annotations
@@ -97,7 +99,8 @@ def vector(a) -> None:
     W, n, N = ve.nworld, ve.n, ve.N
     act = np.tile(np.array([0.2, 0.1]), (W, n, 1))
     ve.reset(seed=0)  # builds every world's plant
-    models = [e._plant.model for e in ve.envs]
+    own = [e._plant.model for e in ve.envs]
+    models = [ve._model if ve.shared[w] else own[w] for w in range(W)]  # what the environment steps with
     n_sub = int(ve.envs[0]._plant.n_substeps)
     datas = [mujoco.MjData(models[0]) for _ in range(a.threads)]
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -115,22 +118,37 @@ def vector(a) -> None:
         for w, e in enumerate(ve.envs):
             mujoco.mj_getState(e._plant.model, e._plant.data, ctrl[w, k * n_sub], cspec)
         ctrl[:, k * n_sub : (k + 1) * n_sub] = ctrl[:, k * n_sub : k * n_sub + 1]
-    env_rates, ro_rates = [], []
+    state = np.empty((W, n_sub, x0.shape[1]))
+    pool = a.threads > 1
+
+    def per_period() -> None:  # mujoco.rollout called once per period, the state carried (a closed loop's visits)
+        x = x0.copy()
+        for k in range(N):
+            rollout.rollout(models, datas, x, ctrl[:, k * n_sub : (k + 1) * n_sub], control_spec=cspec, nstep=n_sub,
+                            persistent_pool=pool, state=state)  # fmt: skip
+            x[:] = state[:, -1]
+
+    rates: dict[str, list[float]] = {"env": [], "rollout": [], "own": [], "period": []}
     for _ in range(a.repeat + 1):
         ve.reset(seed=0)
         t0 = time.perf_counter()
         for _k in range(N):
             ve.step(act)
-        env_rates.append(N * W / (time.perf_counter() - t0))
+        rates["env"].append(N * W / (time.perf_counter() - t0))
+        for key, ms in (("rollout", models), ("own", own)):
+            t0 = time.perf_counter()
+            rollout.rollout(ms, datas, x0, ctrl, control_spec=cspec, nstep=N * n_sub, persistent_pool=pool)
+            rates[key].append(N * W / (time.perf_counter() - t0))
         t0 = time.perf_counter()
-        rollout.rollout(models, datas, x0, ctrl, control_spec=cspec, nstep=N * n_sub, persistent_pool=a.threads > 1)
-        ro_rates.append(N * W / (time.perf_counter() - t0))
-    e, r = statistics.median(env_rates[1:]), statistics.median(ro_rates[1:])
+        per_period()
+        rates["period"].append(N * W / (time.perf_counter() - t0))
+    e, r, o, p = (statistics.median(rates[k][1:]) for k in ("env", "rollout", "own", "period"))
     print(
-        f"CPU-vectorised environment, {W} worlds x {n} followers, {a.threads} thread(s), control_dt "
-        f"{a.control_dt:g} s ({n_sub} physics steps a period), {N} periods: {e:,.0f} world-steps/s "
-        f"({e * n:,.0f} agent-steps/s); mujoco.rollout of the same worlds and physics steps, open loop: "
-        f"{r:,.0f} world-steps/s; ratio {e / r:.2f}"
+        f"CPU-vectorised environment, {W} worlds x {n} followers ({int(ve.shared.sum())} on the shared model), "
+        f"{a.threads} thread(s), control_dt {a.control_dt:g} s ({n_sub} physics steps a period), {N} periods: "
+        f"{e:,.0f} world-steps/s ({e * n:,.0f} agent-steps/s); mujoco.rollout of the same worlds and physics "
+        f"steps, open loop: {r:,.0f} world-steps/s; ratio {e / r:.2f} (rollout of the worlds' own models: "
+        f"{o:,.0f}, ratio {e / o:.2f}; rollout called once per period: {p:,.0f}, ratio {e / p:.2f})"
     )
     ve.close()
     if a.threads > 1:

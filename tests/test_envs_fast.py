@@ -1,6 +1,6 @@
 """The environment's period as one compiled call (``envs/fast.py``, issue 30 item 6) gives the bits of the
 step-by-step path it replaces: observations, rewards, flags, infos, the plant's watches (contacts, proximity,
-tilt, slip), the episode's summary and the random stream, on the MuJoCo plant, for a seeded random
+tilt, slip), the episode's summary and the random stream, on the MuJoCo and the ideal plant, for a seeded random
 policy, the paper's controller (through :class:`ControllerPolicy`'s own one-call path), a collision
 and a divergence."""
 
@@ -31,9 +31,12 @@ def _episode(env, act, fast: bool, seed: int = 3):
         obs = step[0]
         out.append(step)
     p = env._plant
-    c = p.contacts
-    watch = [x.copy() for x in (c.contacts.ci, c.contacts.cf, c.proximity.rf, c.proximity.ri, p.tip_step,
-                                p.slip_step, p.slip_run, p.data.qpos, p.data.qvel)]  # fmt: skip
+    if hasattr(p, "contacts"):
+        c = p.contacts
+        watch = [x.copy() for x in (c.contacts.ci, c.contacts.cf, c.proximity.rf, c.proximity.ri, p.tip_step,
+                                    p.slip_step, p.slip_run, p.data.qpos, p.data.qvel)]  # fmt: skip
+    else:  # the ideal plant: its state [x, y, θ, υ, ω]
+        watch = [p.x.copy()]
     return out, watch, env.episode_summary(), env._fastp is not None
 
 
@@ -62,10 +65,11 @@ def _random(seed: int):
 
 
 @pytest.mark.slow  # ~5 s with the kernels' first load from numba's cache
+@pytest.mark.parametrize("plant", ["mujoco", "ideal"])
 @pytest.mark.parametrize("action", ["velocity", "torque"])
-def test_fast_period_is_the_step_by_step_path(action):
-    """Seeded random actions (float32 samples and float64 draws) on the MuJoCo plant at 1 ms: bit for bit."""
-    ov = ["sim.duration=0.15", "sim.control_dt=0.001", "plant.kind=mujoco", "formation.init_jitter=0.05"]
+def test_fast_period_is_the_step_by_step_path(action, plant):
+    """Seeded random actions (float32 samples and float64 draws) on both plants at 1 ms: bit for bit."""
+    ov = ["sim.duration=0.15", "sim.control_dt=0.001", f"plant.kind={plant}", "formation.init_jitter=0.05"]
     env = parallel_env("paper", action=action, overrides=ov)
     for a in env.possible_agents:
         env.action_space(a).seed(7)
@@ -75,10 +79,11 @@ def test_fast_period_is_the_step_by_step_path(action):
     _same(fast, _episode(env, _random(1), False))
 
 
-def test_controller_policy_one_call_is_control_stack_step():
+@pytest.mark.parametrize("plant", ["mujoco", "ideal"])
+def test_controller_policy_one_call_is_control_stack_step(plant):
     """The paper's controller through the environment (the benchmark's episode): ControllerPolicy's
     compiled call and ``ControlStack.step`` give the same torques, metric and episode."""
-    ov = ["sim.duration=0.2", "sim.control_dt=0.001", "plant.kind=mujoco"]
+    ov = ["sim.duration=0.2", "sim.control_dt=0.001", f"plant.kind={plant}"]
     env = parallel_env("paper", action="torque", overrides=ov)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -123,20 +128,26 @@ def test_fast_period_collision_and_divergence():
     _same(fast, _episode(env, push, False, seed=0))
 
 
-def test_fast_period_around_a_payload_event():
+@pytest.mark.parametrize("plant", ["mujoco", "ideal"])
+def test_fast_period_around_a_payload_event(plant):
     """The payload preset with its pick-up moved to t = 0.05 s: the event's period runs step by step, the
-    arguments are built again from the plant's new masses after it, and the episode is the same bits."""
+    arguments are built again from the plant's new masses (the ideal plant: its ``c``) after it, and the
+    episode is the same bits."""
     import dataclasses
 
     from bioform_mj.scenario.loader import load
 
-    sc = load("payload", ["sim.control_dt=0.01"])
+    sc = load("payload", ["sim.control_dt=0.01", f"plant.kind={plant}"])
     sc = dataclasses.replace(sc, events=(dataclasses.replace(sc.events[0], time=0.05),))
     env = parallel_env(sc, action="torque", max_cycles=15)
     for a in env.possible_agents:
         env.action_space(a).seed(3)
     fast = _episode(env, _random(2), True)
-    assert env._plant._payload_added
+    if plant == "mujoco":
+        assert env._plant._payload_added
+    else:
+        i = sc.events[0].follower - 1
+        assert not np.array_equal(env._plant.c_true()[i], env.nominal_c_true[i])  # the payload changed c_i
     for a in env.possible_agents:
         env.action_space(a).seed(3)
     _same(fast, _episode(env, _random(2), False))

@@ -24,8 +24,8 @@ def _actions(env, W, T, seed=5):
     return rng.uniform(lo, hi, size=(T, W, env.n, 2))
 
 
-def _single(seed, acts, action):
-    env = parallel_env("paper", action=action, overrides=OV)
+def _single(seed, acts, action, overrides=OV, **options):
+    env = parallel_env("paper", action=action, overrides=overrides, **options)
     obs, _ = env.reset(seed=seed)
     rows = [(np.stack([obs[a] for a in env.possible_agents]), None, False, False)]
     for u in acts:
@@ -35,6 +35,8 @@ def _single(seed, acts, action):
         a0 = env.possible_agents[0]
         rows.append((np.stack([obs[a] for a in env.possible_agents]), np.array([rew[a] for a in env.possible_agents]),
                      term[a0], trunc[a0]))  # fmt: skip
+        if not env.agents:
+            break
     return rows
 
 
@@ -53,6 +55,7 @@ def test_each_world_is_the_single_environment(action):
         for w in range(W):
             got[w].append((obs[w].copy(), rew[w].copy(), bool(term[w]), bool(trunc[w])))
     assert trunc.all() and not venv.running.any()
+    assert venv.shared.all()  # one model for every world's physics
     for w in range(W):
         ref = _single(4 + w, acts[:, w], action)
         assert len(ref) == len(got[w]) == venv.N + 1
@@ -108,3 +111,54 @@ def test_memory_is_estimated_before_the_worlds_are_built(monkeypatch):
         VectorEnv("paper", 0, overrides=OV)
     with pytest.raises(ValueError, match="MuJoCo plant"):
         VectorEnv("paper", 2, overrides=["plant.kind=ideal"])
+
+
+def _compare(venv, acts, action, seed, overrides, **options):
+    """Every world's rows of ``venv``'s episode under ``acts`` (T, W, n, 2) against the single environment's
+    episode of seed ``seed + w`` (the same ``overrides`` and ``options``): observations, rewards, flags,
+    bit for bit, and a world stays ended (its rows unchanged) once it ended."""
+    W = venv.nworld
+    obs = venv.reset(seed=seed)
+    got = [[(obs[w].copy(), None, False, False)] for w in range(W)]
+    done = np.zeros(W, dtype=bool)
+    for t in range(len(acts)):
+        if not venv.running.any():
+            break
+        obs, rew, term, trunc = venv.step(acts[t])
+        for w in range(W):
+            if done[w]:
+                assert not term[w] and not trunc[w] and np.array_equal(obs[w], got[w][-1][0])
+                continue
+            got[w].append((obs[w].copy(), rew[w].copy(), bool(term[w]), bool(trunc[w])))
+            done[w] = term[w] or trunc[w]
+    for w in range(W):
+        ref = _single(seed + w, acts[:, w], action, overrides, **options)
+        assert len(ref) == len(got[w])
+        for (o1, r1, te1, tr1), (o2, r2, te2, tr2) in zip(got[w], ref):
+            assert np.array_equal(o1, o2)
+            assert (r1 is None and r2 is None) or np.array_equal(r1, r2)
+            assert (te1, tr1) == (te2, tr2)
+    return got
+
+
+def test_ends_and_own_models_are_the_single_environment():
+    """A speed limit that ends worlds at different periods (the guards: zero observations, the terminal
+    reward, compiled in ``periods``), and a randomised friction: a world whose friction was drawn steps with
+    its own model, not the shared one; both the single environment's episodes bit for bit."""
+    ov = ["sim.duration=1", "sim.control_dt=0.01", "limits.speed=0.9", "plant.kind=mujoco"]
+    W = 3
+    venv = VectorEnv("paper", W, threads=1, action="velocity", v_max=1.0, overrides=ov)
+    ramp = np.array([0.02, 0.03, 0.04])[:, None, None] * np.array([1.0, 0.0])  # world w: +0.01 (w + 2) m/s a period
+    acts = np.stack([np.broadcast_to(np.minimum(ramp * (t + 1), 1.0), (W, venv.n, 2)) for t in range(venv.N)])
+    got = _compare(venv, acts, "velocity", 0, ov, v_max=1.0)
+    ends = [len(g) - 1 for g in got]
+    assert all(g[-1][2] for g in got) and len(set(ends)) == W  # every world terminated, at different periods
+    assert all(not g[-1][0].any() for g in got)  # the guards failed: zero observations
+    venv.close()
+    rz = {"friction": (0.7, 1.3)}
+    venv = VectorEnv("paper", 2, threads=2, randomize=rz, overrides=OV)
+    _compare(venv, _actions(venv, 2, venv.N), "velocity", 11, OV, randomize=rz)
+    assert not venv.shared.any()
+    venv.close()
+    with pytest.raises(ValueError, match="payload"):
+        VectorEnv("paper", 2, randomize={"payload": (0.0, 0.5)}, overrides=OV)

@@ -10,10 +10,14 @@ sensing, the guards, the formation error, tip-overs, contact events, rewards, ob
 :class:`Compiled` calls its specialisation for the argument types of this episode directly, without
 the per-call type resolution. The results are the step-by-step path's bits (``tests/test_envs_fast.py``).
 
+On the ideal plant (eq. 34) :func:`ideal_period` does the same around ``IdealPlant.step``'s RK4
+(``ideal_step``); both share the period's start (:func:`control_head`) and end (:func:`period_tail`).
+
 The fast period runs where nothing per step needs Python: the MuJoCo plant with its compiled steps,
 sensing = "truth", no DC-motor feed, a harmonic disturbance (or none), no per-step faults and no
-pushes; an event (a payload) runs its period step by step. Everything else stays on the step-by-step
-path, which is the reference.
+pushes; the ideal plant with a harmonic disturbance (or none), no per-step faults and no pushes; an
+event (a payload) runs its period step by step. Everything else stays on the step-by-step path, which
+is the reference.
 """
 
 from __future__ import annotations
@@ -22,21 +26,20 @@ from typing import Any
 
 import numpy as np
 
-from bioform_mj.control.kernel import control_step, estimator_advance
+from bioform_mj.control.kernel import control_step
 from bioform_mj.core.engine import check
 from bioform_mj.core.equations import HAVE_NUMBA, njit
 from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_V_FLOOR
 from bioform_mj.envs.kernels import (
     actions_within,
     clip_into,
-    direct_torque,
+    control_phase,
     formation_error,
     observations,
     sense_errors,
     step_rewards,
-    track_velocity,
-    velocity_error,
 )
+from bioform_mj.plants.ideal import IdealPlant, ideal_step
 from bioform_mj.plants.mujoco.contacts import EVENTS, watch_proximity
 from bioform_mj.plants.mujoco.kernels import (
     apply_inputs,
@@ -66,20 +69,8 @@ def mujoco_period(
     :data:`WARNED` (a MuJoCo warning: stopped after the physics, as the plant raises there),
     :data:`GUARD` (the guards failed, ``diag`` says which), :data:`TIPPED` (a robot has tipped), :data:`HIT`
     (a new contact event)."""
-    if not actions_within(u, alo, ahi):
+    if not control_head(g, s, u, lo, hi, alo, ahi, velocity, verr, vel, tau):
         return BAD_ACTION
-    clip_into(u, lo, hi)
-    # control_phase
-    if velocity:
-        track_velocity(g, s, vel, u)
-    else:
-        direct_torque(g, s, u)
-    velocity_error(verr, s.cmd, vel)
-    n = tau.shape[0]
-    for i in range(n):
-        tau[i, 0] = s.tau[i, 0]
-        tau[i, 1] = s.tau[i, 1]
-    estimator_advance(g, s)
     # the plant's step (MujocoPlant.step)
     apply_inputs(tau, k * dt, io.ctrl, io.ctrl_id, io.ctrl_scale, io.xfrc, io.xmat, io.base, io.m_eff, io.i_eff,
                  io.dist, io.use_dist)  # fmt: skip
@@ -103,13 +94,9 @@ def mujoco_period(
     watch_tilt(io.up, wt.tilt_cos, wt.tip_step, step_count)
     watch_slip(io.qvel, wt.wheel_dof, wt.wheel_sign, wt.radius, wt.half_track, new_vel, wt.slip_ratio, wt.v_floor,
                wt.slip_need, wt.slip_run, wt.slip_step, step_count)  # fmt: skip
-    k1 = k + 1
-    lp, lv = L_pose[k1], L_vel[k1]
-    sense_errors(g, s, lp, lv, new_pose, new_vel, comm, True)
+    # tip-overs and contact events first: they read the watches alone, the tail does not touch them
     status = 0
-    if not check(s, new_pose, new_vel, lim, diag):
-        status |= GUARD
-    formation_error(new_pose, lp, off, leader_frame, fe)
+    n = tau.shape[0]
     any_tipped = False
     for i in range(n):
         newly[i] = 0.0
@@ -126,6 +113,37 @@ def mujoco_period(
         events_seen[i] = ev
         if hits[i] != 0.0:
             status |= HIT
+    return period_tail(g, s, comm, new_pose, new_vel, k + 1, dt, L_pose, L_vel, lim, diag, off, leader_frame, fe,
+                       newly, hits, tau, tau_max, w, r, O, slots, dst, ew, rp, rv, lacc, bound, status)  # fmt: skip
+
+
+@njit
+def control_head(g, s, u, lo, hi, alo, ahi, velocity, verr, vel, tau):
+    """A period's start, the step-by-step path's ``_actions`` and ``control_phase``: ``u`` (n, 2) checked
+    against ``[alo, ahi]`` (False: outside, nothing done) and clipped onto ``[lo, hi]``; the control
+    phase (the torque law or the agents' torques, Table I's summand on the true ``vel``, the torques
+    copied to ``tau`` (n, 2) N·m, the estimator's advance). Returns True when it ran."""
+    if not actions_within(u, alo, ahi):
+        return False
+    clip_into(u, lo, hi)
+    control_phase(g, s, vel, u, velocity, verr, vel, tau)
+    return True
+
+
+@njit
+def period_tail(
+    g, s, comm, new_pose, new_vel, k1, dt, L_pose, L_vel, lim, diag, off, leader_frame, fe, newly, hits, tau,
+    tau_max, w, r, O, slots, dst, ew, rp, rv, lacc, bound, status,
+):  # fmt: skip
+    """A period's end after the plant, the step-by-step path's ``_advance_tail``: at step ``k1`` the
+    sensing of the new state ``new_pose``, ``new_vel`` (truth), the guards (``status |=`` :data:`GUARD`),
+    the formation error ``fe``, the rewards ``r`` of the tip-overs ``newly`` and contact events ``hits``,
+    and, when the guards pass, the observations ``O``. Returns ``status``."""
+    lp, lv = L_pose[k1], L_vel[k1]
+    sense_errors(g, s, lp, lv, new_pose, new_vel, comm, True)
+    if not check(s, new_pose, new_vel, lim, diag):
+        status |= GUARD
+    formation_error(new_pose, lp, off, leader_frame, fe)
     step_rewards(fe, tau, tau_max, newly, hits, w[0], w[1], w[2], w[3], dt, r)
     if status & GUARD == 0:
         for e in range(dst.shape[0]):
@@ -138,6 +156,27 @@ def mujoco_period(
                 O[i, j] = 0.0
         observations(O, new_pose, new_vel, s.err, s.est_pose, s.est_vel, slots, ew, rp, rv, lacc, lp, lv, bound)
     return status
+
+
+@njit
+def ideal_period(
+    g, s, comm, x, c, extra, dist, plant_dt, n_sub, u, lo, hi, alo, ahi, velocity, verr, tau, tau_max, pose, vel,
+    new_pose, new_vel, k, dt, L_pose, L_vel, lim, diag, off, leader_frame, fe, zeros, w, r, O, slots, dst, ew, rp, rv,
+    lacc, bound,
+):  # fmt: skip
+    """One control period ``k → k+1`` of the environment on the ideal plant (eq. 34), the step-by-step
+    path's calls in its order: :func:`control_head`, ``IdealPlant.step`` (``x`` (n, 5) the plant's state,
+    ``c`` (n, 2) its true ``[a, b]``, ``extra`` (n, 2) zeros, ``dist`` (2, 4) the harmonic rows, ``n_sub``
+    RK4 steps over ``plant_dt`` s), its ``observe`` into ``new_pose``, ``new_vel`` and :func:`period_tail`
+    (no tip-overs, no contacts: ``zeros`` (n,)). Returns :func:`mujoco_period`'s status bits."""
+    if not control_head(g, s, u, lo, hi, alo, ahi, velocity, verr, vel, tau):
+        return BAD_ACTION
+    ideal_step(x, tau, c, extra, dist, k * dt, plant_dt, n_sub)
+    for i in range(x.shape[0]):
+        new_pose[i, 0], new_pose[i, 1], new_pose[i, 2] = x[i, 0], x[i, 1], x[i, 2]
+        new_vel[i, 0], new_vel[i, 1] = x[i, 3], x[i, 4]
+    return period_tail(g, s, comm, new_pose, new_vel, k + 1, dt, L_pose, L_vel, lim, diag, off, leader_frame, fe,
+                       zeros, zeros, tau, tau_max, w, r, O, slots, dst, ew, rp, rv, lacc, bound, 0)  # fmt: skip
 
 
 @njit
@@ -167,8 +206,11 @@ class Compiled:
 
 
 def fast_plant(env: Any) -> bool:
-    """True when the episode's period can run as :func:`mujoco_period` (see the module docstring)."""
+    """True when the episode's period can run as :func:`mujoco_period` or :func:`ideal_period` (see the
+    module docstring)."""
     p = env._plant
+    if type(p) is IdealPlant:
+        return FAST and p._dist is not None and env._faults is None and p._push_until is None
     return (
         FAST
         and hasattr(p, "model")
@@ -181,6 +223,13 @@ def fast_plant(env: Any) -> bool:
         and hasattr(p, "contacts")
     )
 
+
+#: the fields of :class:`IdealArgs`: :func:`ideal_period`'s arguments that stay the same through an episode
+IDEAL_FIELDS = (
+    "g", "s", "comm", "x", "c", "extra", "dist", "plant_dt", "n_sub", "lo", "hi", "alo", "ahi", "velocity", "verr",
+    "tau", "tau_max", "dt", "L_pose", "L_vel", "lim", "diag", "off", "leader_frame", "fe", "zeros", "w", "r",
+    "slots", "dst", "ew", "rp", "rv", "lacc", "bound",
+)  # fmt: skip
 
 #: the fields of :class:`PeriodArgs`: :func:`mujoco_period`'s arguments that stay the same through an episode
 FIELDS = (
@@ -249,22 +298,76 @@ if FAST:
             a.events_seen, a.hits, a.w, a.r, O, a.slots, a.dst, a.ew, a.rp, a.rv, a.lacc, a.bound,
         )  # fmt: skip
 
+    @structref.register
+    class IdealArgsType(_types.StructRef):
+        """numba's type of :class:`IdealArgs`."""
+
+        def preprocess_fields(self, fields):
+            return tuple((name, _types.unliteral(typ)) for name, typ in fields)
+
+    class IdealArgs(structref.StructRefProxy):
+        """:data:`IDEAL_FIELDS` held by one compiled object (see :class:`PeriodArgs`)."""
+
+    structref.define_proxy(IdealArgs, IdealArgsType, list(IDEAL_FIELDS))
+
+    @njit
+    def make_ideal_args(*fields):
+        """An :class:`IdealArgs` of ``fields`` (in :data:`IDEAL_FIELDS`' order), built in compiled code (cached)."""
+        return IdealArgs(*fields)
+
+    @njit
+    def ideal_call(a, u, pose, vel, new_pose, new_vel, O, k, step_count):
+        """:func:`ideal_period` with the episode's arguments ``a`` (:class:`IdealArgs`); ``step_count``
+        unused (:func:`period`'s signature)."""
+        return ideal_period(
+            a.g, a.s, a.comm, a.x, a.c, a.extra, a.dist, a.plant_dt, a.n_sub, u, a.lo, a.hi, a.alo, a.ahi,
+            a.velocity, a.verr, a.tau, a.tau_max, pose, vel, new_pose, new_vel, k, a.dt, a.L_pose, a.L_vel, a.lim,
+            a.diag, a.off, a.leader_frame, a.fe, a.zeros, a.w, a.r, O, a.slots, a.dst, a.ew, a.rp, a.rv, a.lacc,
+            a.bound,
+        )  # fmt: skip
+
 
 if not FAST:  # pragma: no cover - without numba or with its JIT off: the step-by-step path only
     PeriodArgs = PolicyArgs = make_args = make_policy_args = policy_call = period = None
+    IdealArgs = make_ideal_args = ideal_call = None
 
 
 class FastPeriod:
     """The arguments of :func:`mujoco_period` for the current episode of ``env`` (built after its reset,
     and again after an event changed the plant), and the scratch arrays it writes."""
 
-    def __init__(self, env: Any, r: Any = None, fe: Any = None, hits: Any = None) -> None:
+    def __init__(self, env: Any, r: Any = None, fe: Any = None, hits: Any = None, model: Any = None) -> None:
         """``r``, ``fe``, ``hits``: (n,) float64 arrays to write the rewards, formation errors and contact
-        events into (views of a batch's arrays, ``envs.vector``); default: arrays of its own."""
+        events into (views of a batch's arrays, ``envs.vector``); default: arrays of its own. ``model``: the
+        ``MjModel`` the physics steps with (default: the plant's own; ``envs.vector`` passes one model that
+        its worlds share where their physics is the same)."""
         p, n = env._plant, env.n
-        m, d = p.model, p.data
         st = env._stack
         w = env.weights
+        self.tau = np.empty((n, 2))
+        self.fe = np.empty(n) if fe is None else fe
+        self.hits = np.zeros(n) if hits is None else hits
+        self.r = np.empty(n) if r is None else r
+        self.comm = st.comm_in(None)
+        #: the MuJoCo plant (its step counter, warnings); False: the ideal plant
+        self.mujoco = type(p) is not IdealPlant
+        ne = len(env.graph.dst)
+        pose, vel = env._pose, env._vel
+        if not self.mujoco:
+            fields = (
+                env._g, env._s, self.comm, p.x, p._c, p._zero_acc, p._dist, float(p.control_dt), int(p.n_substeps),
+                env._low, env._high, env._acc_low, env._acc_high, env.action_mode == "velocity", env._verr, self.tau,
+                np.ascontiguousarray(env._tau_max), float(env.dt), env.L_pose, env.L_vel, env._lim, env._diag,
+                env._off, bool(env._leader_frame), self.fe, self.hits,
+                np.array([w["formation"], w["effort"], w["tipped"], w["collision"]]), self.r, env._slots,
+                np.ascontiguousarray(env.graph.dst, dtype=np.int64), env._ones_e, np.empty((ne, 3)),
+                np.empty((ne, 2)), env._lacc, float(env.obs_bound),
+            )  # fmt: skip
+            self.args = make_ideal_args(*fields)
+            self.call = Compiled(ideal_call, (self.args, np.zeros((n, 2)), pose, vel, pose, vel,
+                                              np.zeros((n, env.obs_size)), 0, 0)).call  # fmt: skip
+            return
+        m, d = p.model, p.data
         from bioform_mj.plants.mujoco.kernels import MjIO, Watch
 
         io = MjIO(
@@ -279,14 +382,9 @@ class FastPeriod:
             p.tilt_cos, p.tip_step, p._wdof, p._wheel_sign, p._wheel_radius, p._half_track, SLIP_RATIO,
             SLIP_V_FLOOR, p._slip_need, p.slip_run, p.slip_step,
         )  # fmt: skip
-        self.tau = np.empty((n, 2))
-        self.fe = np.empty(n) if fe is None else fe
-        self.hits = np.zeros(n) if hits is None else hits
-        self.r = np.empty(n) if r is None else r
-        self.comm = st.comm_in(None)
-        ne = len(env.graph.dst)
         fields = (
-            env._g, env._s, self.comm, io, wt, p.contacts.contacts, p.contacts.proximity, m._address, d._address,
+            env._g, env._s, self.comm, io, wt, p.contacts.contacts, p.contacts.proximity,
+            (m if model is None else model)._address, d._address,
             int(p.n_substeps), float(p.control_dt), env._low, env._high, env._acc_low, env._acc_high,
             env.action_mode == "velocity", env._verr, self.tau, np.ascontiguousarray(env._tau_max), float(env.dt),
             env.L_pose, env.L_vel, env._lim, env._diag, env._off, bool(env._leader_frame), self.fe, env._tipped,
@@ -296,7 +394,6 @@ class FastPeriod:
             env._lacc, float(env.obs_bound),
         )  # fmt: skip
         self.args = make_args(*fields)  # fast_plant: numba's JIT is on
-        pose, vel = env._pose, env._vel
         self.call = Compiled(period, (self.args, np.zeros((n, 2)), pose, vel, pose, vel, np.zeros((n, env.obs_size)),
                                       0, 0)).call  # fmt: skip
 
@@ -324,11 +421,12 @@ def fast_step(env: Any, actions: Any) -> tuple | None:
         fp = env._fastp = FastPeriod(env)
     p = env._plant
     pose, vel, O = np.empty((n, 3)), np.empty((n, 2)), np.empty((n, env.obs_size))
-    status = fp.call(fp.args, u, env._pose, env._vel, pose, vel, O, k, p._step_count)
+    status = fp.call(fp.args, u, env._pose, env._vel, pose, vel, O, k, p._step_count if fp.mujoco else 0)
     if status & BAD_ACTION:
         return None
     env._log.append(u)
-    p._step_count += 1
+    if fp.mujoco:
+        p._step_count += 1
     if status & WARNED:  # as MujocoPlant.step: the warning raised, the state not observed
         return env._outputs(*env._advance_tail(fp.tau.copy(), warning_message(p)))
     env._pose, env._vel = pose, vel

@@ -9,9 +9,16 @@ Python threads each run one compiled call over a block of worlds (numba's code r
 ``mujoco.rollout`` splits its batch over a thread pool. World ``w``'s episode is the single
 environment's episode of the same seed and actions, bit for bit (``tests/test_envs_vector.py``).
 
+The worlds' physics steps with one shared ``MjModel`` wherever a world's physics is the built scene's
+(:meth:`VectorEnv._share_init`): at a 1 ms control period each world is visited for one physics step,
+and W copies of the model's hot arrays did not stay in the cache (32 worlds: 1.2-1.5x the steps/s).
+A period's Python is a few calls for all worlds together: the ends of the period (terminal rewards,
+zeroed observations, truncation, the observations' dtype) are computed in the compiled call.
+
 The TorchRL-style dict-of-arrays interface for this and the Warp-batched environment is
 :mod:`.tdict`. What it needs of a scenario is what the compiled period needs (``envs.fast_plant``)
-and no events (a payload's period runs in Python in the single environment).
+and no events (a payload's period runs in Python in the single environment; a drawn ``payload`` is
+refused too).
 """
 
 from __future__ import annotations
@@ -29,11 +36,13 @@ from bioform_mj.envs.fast import (
     GUARD,
     TIPPED,
     WARNED,
+    Compiled,
     FastPeriod,
     fast_plant,
     period,
     warning_message,
 )
+from bioform_mj.envs.kernels import actions_within
 from bioform_mj.envs.parallel import FormationParallelEnv, parallel_env
 from bioform_mj.scenario.config import Scenario
 
@@ -42,12 +51,33 @@ MEMORY_SHARE = 0.5
 
 
 @njit
-def periods(args, lo, hi, U, pose, vel, new_pose, new_vel, O, k, step_count, status, running):
+def first_bad(U, running, lo, hi):
+    """The first ``running`` world whose actions ``U[w]`` (n, 2) are not all finite within ``[lo, hi]``
+    (the float32-rounded bounds), or −1."""
+    for w in range(U.shape[0]):
+        if running[w] and not actions_within(U[w], lo, hi):
+            return w
+    return -1
+
+
+@njit
+def periods(args, lo, hi, U, pose, vel, new_pose, new_vel, O, O_out, R, k, step_count, status, running, term,
+            trunc, N, dt, w_terminal):  # fmt: skip
     """Worlds ``lo … hi−1`` that are ``running``: one :func:`~.fast.mujoco_period` each (``args`` a typed
     list of the worlds' :class:`~.fast.PeriodArgs`, ``U`` (W, n, 2) their actions); a world's new state is
     copied into ``pose``, ``vel`` (unless MuJoCo warned: the plant is not observed then) and its step
-    counters ``k`` (control) and ``step_count`` (the plant's) advance. ``status`` (W,): the period's bits."""
+    counters ``k`` (control) and ``step_count`` (the plant's) advance. ``status`` (W,): the period's bits;
+    then the step's ends, as the single environment's step sets them: ``term`` (W,) (the guards, a
+    tip-over, a MuJoCo warning), the terminal reward ``w_terminal·max(0, (N − k)·dt)`` taken from the
+    rewards ``R`` (W, n) (not for a warning: its tail runs in Python), the observations ``O`` zeroed
+    where the guards failed or MuJoCo warned, ``trunc`` (W,) at step ``N``, ``running`` cleared where
+    either; ``O_out`` (the observations in the environment's dtype) written from ``O``. Returns the
+    number of worlds that warned."""
+    warned = 0
     for w in range(lo, hi):
+        term[w] = False
+        trunc[w] = False
+        status[w] = 0
         if not running[w]:
             continue
         st = period(args[w], U[w], pose[w], vel[w], new_pose[w], new_vel[w], O[w], k[w], step_count[w])
@@ -56,10 +86,26 @@ def periods(args, lo, hi, U, pose, vel, new_pose, new_vel, O, k, step_count, sta
             continue
         step_count[w] += 1
         if st & WARNED:
-            continue
-        k[w] += 1
-        pose[w, :, :] = new_pose[w]
-        vel[w, :, :] = new_vel[w]
+            warned += 1
+        else:
+            k[w] += 1
+            pose[w, :, :] = new_pose[w]
+            vel[w, :, :] = new_vel[w]
+        if st & (GUARD | TIPPED | WARNED):
+            term[w] = True
+            if not st & WARNED:
+                c = w_terminal * max(0.0, (N - k[w]) * dt)
+                for i in range(R.shape[1]):
+                    R[w, i] = R[w, i] - c
+            if st & (GUARD | WARNED):
+                O[w, :, :] = 0.0
+        elif k[w] >= N:
+            trunc[w] = True
+        running[w] = not (term[w] or trunc[w])
+        for i in range(O.shape[1]):
+            for j in range(O.shape[2]):
+                O_out[w, i, j] = O[w, i, j]
+    return warned
 
 
 def _world_bytes(env: FormationParallelEnv) -> int:
@@ -112,6 +158,9 @@ class VectorEnv:
             )
         if sc.events:
             raise ValueError("the CPU-vectorised environment cannot run scenario events (payloads): use parallel_env")
+        if env0._rand and "payload" in env0._rand.ranges:  # drawn payloads are events at t = 0
+            raise ValueError("the CPU-vectorised environment cannot run payload events: randomize 'payload' needs "
+                             "parallel_env")  # fmt: skip
         env0.reset(seed=0)  # builds the plant: one world, to measure a world's memory before the others
         if not fast_plant(env0):
             raise ValueError(
@@ -150,6 +199,17 @@ class VectorEnv:
         self._sc = np.zeros(W, dtype=np.int64)
         self._status = np.zeros(W, dtype=np.int64)
         self.running = np.zeros(W, dtype=np.bool_)
+        self._obs_out = np.zeros((W, n, self.obs_size), dtype=self.dtype)
+        self._term = np.zeros(W, dtype=np.bool_)
+        self._trunc = np.zeros(W, dtype=np.bool_)
+        self._acc_low = np.ascontiguousarray(env0._acc_low, dtype=float)
+        self._acc_high = np.ascontiguousarray(env0._acc_high, dtype=float)
+        self._w_terminal = float(env0.weights["terminal"])
+        self._call: Any = None
+        self._check: Any = None
+        #: (W,) whether world w's physics steps with the shared model (:meth:`_share_init`) this episode
+        self.shared = np.zeros(W, dtype=np.bool_)
+        self._share_init(env0)
         self.seeds = np.zeros(W, dtype=np.int64)
         from numba.typed import List
 
@@ -193,12 +253,64 @@ class VectorEnv:
         self.k[w] = 0
         self._sc[w] = env._plant._step_count
         self.running[w] = True
-        fp = FastPeriod(env, r=self.reward[w], fe=self._fe[w], hits=self._hits[w])
+        self.shared[w] = self._shares(env)
+        model = self._model if self.shared[w] else None
+        fp = FastPeriod(env, r=self.reward[w], fe=self._fe[w], hits=self._hits[w], model=model)
         if len(self._args) < self.nworld:
             while len(self._args) <= w:
                 self._args.append(fp.args)
         self._args[w] = fp.args
         env._fastp = fp
+
+    def _share_init(self, env0: FormationParallelEnv) -> None:
+        """The one ``MjModel`` the worlds' physics steps with (:attr:`_model`): a copy of world 0's as built
+        (its start ``qpos0``, nominal friction). ``mj_step`` only reads a model, and the worlds' models are
+        compilations of the same scene, which an episode changes in two places only: the free joints' ``qpos0``
+        (the start, :func:`~.randomize.set_start`; ``mj_resetData`` reads it, with the world's own model, and
+        the free joints' kinematics do not) and the friction (:func:`~.randomize.scale_friction`). One model
+        read by every world stays in the cache, where W copies of it did not (issue 30: W = 32 at 1 ms)."""
+        import copy
+
+        import mujoco
+
+        p = env0._plant
+        m = self._model = copy.copy(p.model)
+        m.qpos0[:] = env0._built_qpos0
+        m.geom_friction[:, 0] = env0._nominal_friction[0]
+        if m.npair:
+            m.pair_friction[:, :2] = env0._nominal_friction[1]
+        free = np.zeros(m.nq, dtype=bool)
+        for j in np.flatnonzero(m.jnt_type == mujoco.mjtJoint.mjJNT_FREE):
+            free[m.jnt_qposadr[j] : m.jnt_qposadr[j] + 7] = True
+        self._fixed_q = ~free  # qpos0 entries an episode does not move
+        self._model_bytes: np.ndarray | None = None
+        self._same_build: dict[int, bool] = {}
+
+    def _shares(self, env: FormationParallelEnv) -> bool:
+        """True when world ``env``'s physics is :attr:`_model`'s: its friction and its ``qpos0`` but the free
+        joints' equal, and (checked once per world, at its first episode) its model, those fields aside,
+        byte for byte the same (``mj_saveModel``). Otherwise the world steps with its own model."""
+        import mujoco
+
+        m, s = env._plant.model, self._model
+        if not (
+            np.array_equal(m.geom_friction, s.geom_friction)
+            and np.array_equal(m.pair_friction, s.pair_friction)
+            and np.array_equal(m.qpos0[self._fixed_q], s.qpos0[self._fixed_q])
+        ):
+            return False
+        key = id(env)
+        if key not in self._same_build:
+            if self._model_bytes is None:
+                self._model_bytes = np.empty(mujoco.mj_sizeModel(s), dtype=np.uint8)
+                mujoco.mj_saveModel(s, None, self._model_bytes)
+            q = m.qpos0.copy()
+            m.qpos0[:] = s.qpos0
+            mine = np.empty(mujoco.mj_sizeModel(m), dtype=np.uint8)
+            mujoco.mj_saveModel(m, None, mine)
+            m.qpos0[:] = q
+            self._same_build[key] = bool(np.array_equal(mine, self._model_bytes))
+        return self._same_build[key]
 
     def _worlds(self, mask: Any) -> np.ndarray:
         W = self.nworld
@@ -217,43 +329,48 @@ class VectorEnv:
     # ------------------------------------------------------------------ step
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """One control period of every running world; returns ``(obs (W, n, obs_size), reward (W, n),
-        terminated (W,), truncated (W,))``. ``actions`` (W, n, 2), float32 or float64, in the action space
-        of every world's agents (rows of worlds not running are ignored). A world that ended stays ended
-        (its rows keep their last values) until :meth:`reset` names it."""
+        terminated (W,), truncated (W,))``, new arrays each step. ``actions`` (W, n, 2), float32 or float64,
+        in the action space of every world's agents (rows of worlds not running are ignored). A world that
+        ended stays ended (its rows keep their last values) until :meth:`reset` names it.
+
+        The period's Python is one copy of the actions, one compiled check of them and one compiled call per
+        thread (:func:`periods`: the worlds' periods and their ends), called through their specialisations
+        (:class:`~.fast.Compiled`): no per-world Python and no numpy reductions unless a world warned."""
         if not self._started or not self.running.any():
             raise RuntimeError("step() with no world running: call reset() first")
-        U = np.array(actions, dtype=float)
+        U = np.array(actions, dtype=float)  # a copy: the period clips it in place
         if U.shape != (self.nworld, self.n, 2):
             raise ValueError(f"actions must have shape ({self.nworld}, {self.n}, 2), got {U.shape}")
-        run = self.running
-        e0 = self.envs[0]
-        ok = np.isfinite(U) & (U >= e0._acc_low) & (U <= e0._acc_high)
-        bad = run & ~ok.all(axis=(1, 2))
-        if bad.any():  # before any world steps: the single environment's message for the first bad world
-            w = int(np.flatnonzero(bad)[0])
+        if self._call is None:
+            self._compile(U)
+        bad = self._check(U, self.running, self._acc_low, self._acc_high)
+        if bad >= 0:  # before any world steps: the single environment's message for the first bad world
             try:
-                self.envs[w]._actions({ag: U[w, i] for i, ag in enumerate(self.possible_agents)})
+                self.envs[bad]._actions({ag: U[bad, i] for i, ag in enumerate(self.possible_agents)})
             except ValueError as exc:
-                raise ValueError(f"world {w}: {exc}") from exc
-        st = self._status
-        st[:] = 0
-        a = (self._args, U, self.pose, self.vel, self._new_pose, self._new_vel, self.obs, self.k, self._sc, st, run)
+                raise ValueError(f"world {bad}: {exc}") from exc
+        a = self._step_args(U)
+        call = self._call
         if self._pool is None:
-            periods(a[0], 0, self.nworld, *a[1:])
+            warned = call(self._args, 0, self.nworld, *a)
         else:
-            futs = [self._pool.submit(periods, a[0], lo, hi, *a[1:]) for lo, hi in self._blocks]
-            for f in futs:
-                f.result()
-        term = run & ((st & (GUARD | TIPPED | WARNED)) > 0)
-        for w in np.flatnonzero(term):  # the terminal reward; a MuJoCo warning: the period's tail in Python
-            if st[w] & WARNED:
+            futs = [self._pool.submit(call, self._args, lo, hi, *a) for lo, hi in self._blocks]
+            warned = sum(f.result() for f in futs)
+        if warned:  # a MuJoCo warning: the single environment's period tail in Python (the state not observed)
+            for w in np.flatnonzero(self._status & WARNED):
                 self._warned(int(w))
-            else:
-                self.reward[w] -= self.weights["terminal"] * max(0.0, (self.N - int(self.k[w])) * self.dt)
-        self.obs[run & ((st & (GUARD | WARNED)) > 0)] = 0.0
-        trunc = run & ~term & (self.k >= self.N)
-        self.running = run & ~(term | trunc)
-        return self._out_obs(), self.reward, term, trunc
+        return self._obs_out.copy(), self.reward.copy(), self._term.copy(), self._trunc.copy()
+
+    def _step_args(self, U: np.ndarray) -> tuple:
+        """:func:`periods`' arguments after ``lo, hi`` for the actions ``U``."""
+        return (U, self.pose, self.vel, self._new_pose, self._new_vel, self.obs, self._obs_out, self.reward,
+                self.k, self._sc, self._status, self.running, self._term, self._trunc, self.N, self.dt,
+                self._w_terminal)  # fmt: skip
+
+    def _compile(self, U: np.ndarray) -> None:
+        """The specialisations of :func:`periods` and :func:`first_bad` for this environment's argument types."""
+        self._call = Compiled(periods, (self._args, 0, self.nworld, *self._step_args(U))).call
+        self._check = Compiled(first_bad, (U, self.running, self._acc_low, self._acc_high)).call
 
     def _warned(self, w: int) -> None:
         """World ``w``'s MuJoCo warning: the single environment's step-by-step tail (the state not observed)."""
@@ -267,7 +384,9 @@ class VectorEnv:
         self.k[w] = env.k
 
     def _out_obs(self) -> np.ndarray:
-        return self.obs if self.dtype == self.obs.dtype else self.obs.astype(self.dtype)
+        """The observations in the environment's dtype (a new array)."""
+        self._obs_out[...] = self.obs
+        return self._obs_out.copy()
 
     def close(self) -> None:
         """Stop the threads (the worlds stay: :meth:`reset` may start them again)."""
