@@ -148,6 +148,7 @@ def _braking_finding(c: dict[str, Any], base: str, detail: str, while_driving: b
         "load_n": c["load_n"],
         "friction": c["friction"],
         "braking_force_n": c["friction"] * c["load_n"],
+        "lever_m": c.get("lever_m"),  # m from the axle midpoint: its drag's moment on ω (run.demand, design §21)
     }
     if while_driving:
         numbers["peak_load_n"] = c["peak_n"]

@@ -82,7 +82,8 @@ DRAG_NAMED_S = 5.0
 def identified_resistances(report: dict[str, Any]) -> list[dict[str, Any]]:
     """The resistances ``robot check`` identified (design §14.2; ``report``: :func:`bioform_mj.assess.check.check`'s),
     as a run's ``c_hat_off`` names them: ``{"kind": "braking_caster", "geom", "braking_force_n" (N, μ × load),
-    "torque_nm" (N·m of wheel torque, × r), "while_driving"}``, ``{"kind": "caster_resistance", "joints"}``,
+    "torque_nm" (N·m of wheel torque, × r), "while_driving", "lever_m" (m from the axle midpoint; None: not
+    known)}``, ``{"kind": "caster_resistance", "joints"}``,
     ``{"kind": "drag", "drag_rate_per_s": [k_υ, k_ω]}`` (1/s; the identified viscous drag of the ``damping``
     finding, 0 where its time constant is over :data:`DRAG_NAMED_S`) and ``{"kind": "dead_band",
     "deadband_torque_Nm": [on τ_a, on τ_b]}`` (N·m, ≥ 0). Only
@@ -100,6 +101,7 @@ def identified_resistances(report: dict[str, Any]) -> list[dict[str, Any]]:
                     "braking_force_n": force,
                     "torque_nm": force * r,
                     "while_driving": bool(fd.get("while_driving", False)),
+                    "lever_m": None if fd.get("lever_m") is None else float(fd["lever_m"]),
                 }
             )
         elif kind == "caster_resistance":  # the share of a's and b's gap the casters account for (design §14.3)
