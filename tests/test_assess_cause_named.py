@@ -125,7 +125,8 @@ def test_a_run_names_the_braking_caster_robot_check_found(tmp_path, fresh_cache)
     for s in summaries:
         for d in _c_hat_off(s):
             assert "none the plant knows" not in d
-            f = _number(r"caster 'back_caster' braking \(robot check: ([0-9.]+) N of drag", d)
+            # a geom of the base body: robot check's "the chassis 'base' drags on the floor (geom 'back_caster')"
+            f = _number(r"'back_caster' of the chassis braking \(robot check: ([0-9.]+) N of drag", d)
             tau = _number(r"N of drag, ([0-9.]+) N·m of wheel torque", d)
             assert f == pytest.approx(drag, rel=0.02) and tau == pytest.approx(drag * 0.1, rel=0.02), d
 
@@ -182,3 +183,24 @@ def test_a_braking_casters_lever_is_measured_and_its_moment_counts_on_omega(tmp_
     assert "braking_caster_note" not in items["sliding_gain_w"]
     unknown = compare(sc, pk, lim, None, (0.4, 10.0), brake["torque_nm"], None)
     assert "sliding_gain_w" not in unknown  # no lever, no other resistance on ω: nothing to say there
+
+
+def test_a_link_welded_to_the_base_that_carries_the_mass_is_the_chassis_not_a_caster():
+    """A URDF's ``base_link`` below a massless ``base_footprint`` (the iRobot Create 2's description): its dragging
+    collision cylinder is the chassis (robot check) and the run says so, where it said "caster 'base_link#1'"; a
+    light link welded to the base (Clearpath Dingo-D's 0.1 kg rear ball caster, 1 % of the mass) stays a caster."""
+    from bioform_mj.assess.causes import _contact_kind
+
+    chassis = {"body": "base_link", "welded_to_base": True, "mass_share": 0.96}
+    ball = {"body": "rear_caster", "welded_to_base": True, "mass_share": 0.0097}
+    assert _contact_kind(chassis, "base_footprint") == "chassis" and _contact_kind(ball, "base_link") == "caster"
+    assert _contact_kind({**chassis, "welded_to_base": False}, "base_footprint") == "caster"  # on a joint of its own
+    found = [
+        {"kind": "braking_caster", "geom": "base_link#1", "braking_force_n": 1.98, "torque_nm": 0.0712}
+        | {"while_driving": True, "contact": "chassis"},
+        {"kind": "braking_caster", "geom": "rear_caster#1", "braking_force_n": 5.86, "torque_nm": 0.287},
+    ]
+    said = unmodelled_causes(None, identified=found)
+    drag = "(robot check: 1.98 N of drag while it drives, 0.0712 N·m of wheel torque)"
+    assert said[0] == f"'base_link#1' of the chassis braking {drag}"
+    assert said[1] == "caster 'rear_caster#1' braking (robot check: 5.86 N of drag, 0.287 N·m of wheel torque)"

@@ -133,7 +133,8 @@ def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout,
     ``condim`` (the pair's), ``friction_published``, ``condim_published`` (the geom's own, as the file
     says), ``priority``, ``points`` (number of contacts), ``welded_to_base`` (no joint between its
     body and the base: a caster that cannot roll slides), ``rolls`` (below a free caster joint that
-    rolls: :func:`rolling_bodies`; a swivel alone does not) and ``lever_m`` (m: the horizontal distance of its
+    rolls: :func:`rolling_bodies`; a swivel alone does not), ``mass_share`` (its body's share of the robot's mass:
+    a link welded to the base that carries most of it is the chassis) and ``lever_m`` (m: the horizontal distance of its
     contacts' load-weighted mean point from the axle midpoint, the lever of its drag about the turning centre).
     Call it on a robot at rest (settled) for the load at rest.
     """
@@ -171,6 +172,7 @@ def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout,
                 "points": 0,
                 "welded_to_base": b in welded,
                 "rolls": b in rolling,
+                "mass_share": float(model.body_mass[b]) * float(np.linalg.norm(model.opt.gravity)) / max(weight, 1e-12),
                 "_named": name in casters,
                 "_wheel": b in wheels,
             }
