@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 
 #: cache entries of another format are recomputed
-CACHE_FORMAT = 4
+CACHE_FORMAT = 5
 _MEMO: dict[str, dict[str, Any]] = {}
 #: the twin's log (t, vel) per key, this process only: a wheel not yet asked about costs no second twin
 _LOGS: dict[str, tuple[np.ndarray, np.ndarray]] = {}
@@ -197,6 +197,10 @@ def peaks(
                 "speed_mps": float(np.max(np.abs(v))) if len(t) else 0.0,
                 "yaw_rate_radps": float(np.max(np.abs(w))) if len(t) else 0.0,
                 "c_hat_min": [float(np.nanmin(ch[..., 0])), float(np.nanmin(ch[..., 1]))],
+                # per follower, the twin's ĉ at its end against c_true: the method's own share (twin_share)
+                "c_hat_end_rel": [
+                    [float(x / c - 1.0) if np.isfinite(x) else None for x, c in zip(row, c_true)] for row in ch[-1]
+                ],
                 "duration_s": float(sc.sim.duration),
                 "seconds": 0.0,
                 "wheels": {},
@@ -470,6 +474,7 @@ def before_run(sc: Any, plant: Any, run: Any, robot_check: dict[str, Any] | None
             robots.append({"followers": [j + 1 for j in idx], "limits": lims[i], "demand": None, "error": why})
             continue
         items = compare(sc, pk, lims[i], p.unmodelled(1.0, 1.0), (p.a_eff, p.b_eff), brakes[i], yaws[i])
+        twin_end = pk.get("c_hat_end_rel") or []
         sigma = sc.formation.time_scale if isinstance(sc.formation.time_scale, float) else 1.0
         lines += warning_lines(who, items, sigma)
         robots.append(
@@ -479,10 +484,51 @@ def before_run(sc: Any, plant: Any, run: Any, robot_check: dict[str, Any] | None
                 "c_true": [p.a_eff, p.b_eff],
                 "limits": lims[i],
                 "demand": items,
+                # the ideal twin's ĉ error at its end for these followers (a, b; twin_share)
+                "twin_c_hat_rel_error": [twin_end[j] if j < len(twin_end) else None for j in idx],
                 "ideal_run": {k: pk[k] for k in ("seconds", "from") if k in pk},
             }
         )
     return {"robots": robots, "warnings": lines, "seconds": time.perf_counter() - t0}
+
+
+def twin_share(summary: dict[str, Any]) -> None:
+    """In ``summary`` (a run's, with its ``demand``): each follower's ``c_hat_off`` whose ideal twin (the same
+    scenario on the paper's plant with the robot's c_true, :func:`before_run`) ended as far off, the same way, on a
+    component (within ±:data:`~bioform_mj.core.thresholds.C_HAT_OFF` of the run's error, itself beyond it) says so:
+    that share is the method's at this scale (too little excitation, the learner's gains), not the plant's physics,
+    whatever else the cause list names (design §21)."""
+    from bioform_mj.core.thresholds import C_HAT_OFF
+
+    twin: dict[int, list[float]] = {}
+    for r in (summary.get("demand") or {}).get("robots", []):
+        for fid, rel in zip(r.get("followers", []), r.get("twin_c_hat_rel_error") or []):
+            if rel is not None and None not in rel:
+                twin[int(fid)] = [float(x) for x in rel]
+    for f in summary.get("followers", []):
+        t, run = twin.get(int(f["id"])), f.get("c_hat_rel_error")
+        if t is None or run is None:
+            continue
+        same = [
+            k
+            for k in range(2)
+            if abs(run[k]) > C_HAT_OFF
+            and abs(t[k]) > C_HAT_OFF
+            and t[k] * run[k] > 0
+            and abs(t[k] - run[k]) <= C_HAT_OFF
+        ]
+        if not same:
+            continue
+        add = (
+            "; the ideal twin (the paper's plant, the same scenario, c_true) learned "
+            + ", ".join(f"{'ab'[k]} {t[k]:+.0%}" for k in same)
+            + " too: the method's share at this scale (excitation, learner gains), not the plant's"
+        )
+        for o in f.get("outcomes", []):
+            if o.get("kind") == "c_hat_off":
+                if f.get("outcome_detail") == o["detail"]:
+                    f["outcome_detail"] = o["detail"] + add
+                o["detail"] += add
 
 
 #: what :func:`before_run` measures of itself: said on a run's log, not kept in its summary (same bits per seed)
