@@ -125,7 +125,8 @@ def test_a_run_names_the_braking_caster_robot_check_found(tmp_path, fresh_cache)
     for s in summaries:
         for d in _c_hat_off(s):
             assert "none the plant knows" not in d
-            f = _number(r"caster 'back_caster' braking \(robot check: ([0-9.]+) N of drag", d)
+            # a geom of the base body: robot check's "the chassis 'base' drags on the floor (geom 'back_caster')"
+            f = _number(r"'back_caster' of the chassis braking \(robot check: ([0-9.]+) N of drag", d)
             tau = _number(r"N of drag, ([0-9.]+) N·m of wheel torque", d)
             assert f == pytest.approx(drag, rel=0.02) and tau == pytest.approx(drag * 0.1, rel=0.02), d
 
@@ -151,3 +152,55 @@ def test_a_run_names_the_wheel_damping_as_drag_rates(tmp_path, fresh_cache):
         assert _number(r"k_υ = ([0-9.]+) 1/s", d) == pytest.approx(k_v, rel=0.03), d
         assert _number(r"k_ω = ([0-9.]+) 1/s", d) == pytest.approx(k_w, rel=0.03), d
         assert "the wheels' damping/back-EMF: 0.8, 4 1/s" in d  # the model's own figure beside it
+
+
+def test_a_braking_casters_lever_is_measured_and_its_moment_counts_on_omega(tmp_path):
+    """The braking caster of :func:`_braking` touches the floor 0.13 m behind the axle midpoint, on the centre line:
+    robot check reports that lever (from its contact point, within 1 mm), and the demand puts the caster's moment
+    ``F d`` on ω as ``b F r d / l`` rad/s² (b = 10, l = 0.2 m of the paper robot) in ``sliding_gain_w``."""
+    from bioform_mj.assess.check import check
+    from bioform_mj.assess.outcomes import identified_resistances
+    from bioform_mj.run.demand import brake_yaw_torques, compare
+
+    rep = check(str(_braking(tmp_path)))
+    (brake,) = [x for x in identified_resistances(rep) if x["kind"] == "braking_caster"]
+    assert brake["lever_m"] == pytest.approx(0.13, abs=1e-3)
+    rc = {"robots": [{"followers": [1], "resistances": [brake]}]}
+    (yaw,) = brake_yaw_torques(rc, [0.2])
+    assert yaw == pytest.approx(brake["torque_nm"] * brake["lever_m"] / 0.2, rel=1e-12)
+    assert brake_yaw_torques({"robots": [{"followers": [1], "resistances": [{**brake, "lever_m": None}]}]}, [0.2]) == [
+        None
+    ]
+    sc = load("paper", ["formation.scale=0.4", "formation.time_scale=4"])
+    pk = {"wheel_speed_mps": 0.1, "accel_mps2": 0.1, "yaw_accel_radps2": 0.1, "lateral_accel_mps2": 0.0}
+    pk |= {"c_hat_min": [0.4, 10.0], "speed_mps": 0.2, "yaw_rate_radps": 1.0}
+    lim = {"top_speed_mps": 1.0, "top_speed_source": "mapping", "accel_mps2": 1.0, "accel_limited_by": "torque"}
+    lim |= {"yaw_accel_radps2": 10.0, "yaw_accel_limited_by": "torque", "lateral_accel_mps2": 5.0}
+    lim |= {"torque_nm": 5.0, "traction_torque_nm": 10.0}
+    items = compare(sc, pk, lim, None, (0.4, 10.0), brake["torque_nm"], yaw)
+    want = 10.0 * brake["braking_force_n"] * 0.1 * 0.13 / 0.2  # b F r d / l, by hand (r = 0.1 m)
+    assert items["sliding_gain_w"]["value"] == pytest.approx(want, rel=1e-2)
+    assert "braking_caster_note" not in items["sliding_gain_w"]
+    unknown = compare(sc, pk, lim, None, (0.4, 10.0), brake["torque_nm"], None)
+    assert "sliding_gain_w" not in unknown  # no lever, no other resistance on ω: nothing to say there
+
+
+def test_a_link_welded_to_the_base_that_carries_the_mass_is_the_chassis_not_a_caster():
+    """A URDF's ``base_link`` below a massless ``base_footprint`` (the iRobot Create 2's description): its dragging
+    collision cylinder is the chassis (robot check) and the run says so, where it said "caster 'base_link#1'"; a
+    light link welded to the base (Clearpath Dingo-D's 0.1 kg rear ball caster, 1 % of the mass) stays a caster."""
+    from bioform_mj.assess.causes import _contact_kind
+
+    chassis = {"body": "base_link", "welded_to_base": True, "mass_share": 0.96}
+    ball = {"body": "rear_caster", "welded_to_base": True, "mass_share": 0.0097}
+    assert _contact_kind(chassis, "base_footprint") == "chassis" and _contact_kind(ball, "base_link") == "caster"
+    assert _contact_kind({**chassis, "welded_to_base": False}, "base_footprint") == "caster"  # on a joint of its own
+    found = [
+        {"kind": "braking_caster", "geom": "base_link#1", "braking_force_n": 1.98, "torque_nm": 0.0712}
+        | {"while_driving": True, "contact": "chassis"},
+        {"kind": "braking_caster", "geom": "rear_caster#1", "braking_force_n": 5.86, "torque_nm": 0.287},
+    ]
+    said = unmodelled_causes(None, identified=found)
+    drag = "(robot check: 1.98 N of drag while it drives, 0.0712 N·m of wheel torque)"
+    assert said[0] == f"'base_link#1' of the chassis braking {drag}"
+    assert said[1] == "caster 'rear_caster#1' braking (robot check: 5.86 N of drag, 0.287 N·m of wheel torque)"

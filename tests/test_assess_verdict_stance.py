@@ -279,6 +279,10 @@ def test_a_compile_error_naming_a_compiler_option_names_the_key_that_sets_it(tmp
     assert cli.main(["robot", "check", str(path), "--balance-inertia"]) in (0, 4)  # checked: pass, warn or fail
     out = capsys.readouterr()
     assert "does not compile" not in out.err and "a_eff = " in out.out
+    # never silent: what balancing did, by the numbers (MuJoCo sets the three moments to their mean, 0.044 kg·m²)
+    mean = (0.1 + 0.012 + 0.02) / 3
+    assert "balance_inertia: MuJoCo balanced the inertia of '" in out.out
+    assert f"(principal moments 0.012 0.02 0.1 -> {mean:.4g} {mean:.4g} {mean:.4g} kg·m²)" in out.out
 
 
 def test_identify_names_a_skid_steer_base(tmp_path, capsys):

@@ -45,3 +45,23 @@ def test_a_scaled_down_robot_sees_a_slip_the_fixed_floor_hid():
     paper = _plant()
     hidden = _spun(paper, 0.008)[1]
     assert hidden == pytest.approx(0.008 / 0.05, abs=1e-9) and hidden < SLIP_RATIO
+
+
+def test_the_summary_says_the_floor_with_its_unit_and_source(monkeypatch):
+    """summary.json's ``slip_floor``: the value the watch used (m/s) and what set it — 0.05 × the 0.02 m/s top speed
+    given in the mapping (1 mm/s), or the fixed 0.05 m/s for the paper robot, whose top speed is not known."""
+    from bioform_mj.core.thresholds import slip_floor_entry
+    from bioform_mj.run.simulate import simulate
+    from bioform_mj.scenario.loader import load
+
+    monkeypatch.setenv("BIOFORM_NO_ROBOT_CHECK", "1")  # the watch's floor, not the robot check, is tested here
+    ov = ["plant.kind=mujoco", "sim.duration=0.02", 'plant.robots=[{model="paper", top_speed=0.02}]']
+    with pytest.warns(Warning):
+        got = simulate(load("paper", overrides=ov), engine="stepwise").summary["slip_floor"]
+    assert got["value"] == pytest.approx(0.05 * 0.02) and got["unit"] == "m/s"
+    assert "0.05 x the least top speed" in got["source"] and "0.02 m/s" in got["source"]
+    assert got["top_speeds_mps"] == [0.02]
+    paper = slip_floor_entry([None])
+    assert paper["value"] == SLIP_V_FLOOR and "no robot's top speed is known" in paper["source"]
+    fast = slip_floor_entry([2.0, 1.5])
+    assert fast["value"] == SLIP_V_FLOOR and "1.5 m/s" in fast["source"] and "not above" in fast["source"]

@@ -387,3 +387,20 @@ def test_expansion_says_its_os_layers(tmp_path):
     assert note.startswith(
         "xacro's process was also confined by the OS: " + ", ".join(k for k in out.sandbox if k in want)
     )
+
+
+def test_find_of_a_package_whose_folder_has_another_name(hostile, tmp_path):
+    """``$(find NAME)`` of the robot's own package kept in a folder of another name (a download renamed,
+    ``dingo_description`` kept as ``dingo_edit``): found by its ``package.xml``, whose reading imported a module
+    after the child's audit hook and was refused ("reading …/sanity.py" or "marshal.loads")."""
+    folder, _ = hostile
+    write(folder / "package.xml", "<package><name>my_description</name></package>")
+    write(folder / "urdf" / "part.xacro", f'<robot {NS}><link name="b"/></robot>')
+    path = write(
+        folder / "urdf" / "ok.urdf.xacro",
+        f'<robot name="h" {NS}><link name="a"/>'
+        '<xacro:include filename="$(find my_description)/urdf/part.xacro"/></robot>',
+    )
+    assert folder.name != "my_description"
+    out = expand(path, PackagePath())
+    assert '<link name="b"/>' in out, out

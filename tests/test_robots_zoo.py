@@ -116,6 +116,7 @@ def test_a_zoo_robots_control_rate_is_the_makers_with_the_file_it_is_from():
         "tb3_waffle_pi_urdf",
         "pmb2_urdf",
         "diffbot_urdf",
+        "husky_urdf",
     }
     for r in ROBOTS.values():
         assert EXPECT[r.name]["control_rate_hz"] == (r.control_rate or None), r.name
@@ -123,7 +124,8 @@ def test_a_zoo_robots_control_rate_is_the_makers_with_the_file_it_is_from():
         if not r.control_rate:
             assert not r.control_rate_source, r.name
             continue
-        assert re.search(r"https://github\.com/[\w.-]+/[\w.-]+/blob/[0-9a-f]{40}/\S+\.(yaml|h)", r.control_rate_source)
+        url = r"https://github\.com/[\w.-]+/[\w.-]+/blob/[0-9a-f]{40}/\S+\.(yaml|h|launch)"
+        assert re.search(url, r.control_rate_source), r.name
         assert re.search(rf"\b{r.control_rate:g}(\.0)?\b", r.control_rate_source), r.name
 
 

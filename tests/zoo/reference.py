@@ -309,6 +309,11 @@ ROBOTS: tuple[Robot, ...] = (
         top_speed=1.0,
         top_speed_source="Clearpath Robotics Husky UGV datasheet: maximum speed 1.0 m/s",
         tau_max_source="our choice (the URDF's transmissions give none)",
+        control_rate=10.0,
+        control_rate_source=(
+            "Clearpath's husky_base driver (husky_node) control_frequency: 10.0 in husky_base/launch/base.launch, "
+            "https://github.com/husky/husky/blob/0fef78742105a1dd35ea9aedffbc775388a29628/husky_base/launch/base.launch"
+        ),
         expected_verdict="fail",
         expected_cause=(
             "skid-steer: four fixed wheels on the floor, turning needs lateral wheel slip (it does not turn at the "

@@ -118,8 +118,11 @@ def _rocking(pitch: np.ndarray, dt: float) -> dict[str, float]:
 
 
 def _contact_kind(c: dict[str, Any], base: str) -> str:
-    """``chassis`` for a floor contact of the base body itself, else ``caster`` (a link of its own)."""
-    return "chassis" if c["body"] == base.split("/", 1)[-1] else "caster"
+    """``chassis`` for a floor contact of the base body itself or of a link welded to it that carries most of the
+    robot's mass (a URDF's ``base_link`` below a massless ``base_footprint``), else ``caster`` (a link of its own)."""
+    if c["body"] == base.split("/", 1)[-1]:
+        return "chassis"
+    return "chassis" if c.get("welded_to_base") and float(c.get("mass_share") or 0.0) >= 0.5 else "caster"
 
 
 def _brake_what(c: dict[str, Any], base: str) -> str:
@@ -148,6 +151,7 @@ def _braking_finding(c: dict[str, Any], base: str, detail: str, while_driving: b
         "load_n": c["load_n"],
         "friction": c["friction"],
         "braking_force_n": c["friction"] * c["load_n"],
+        "lever_m": c.get("lever_m"),  # m from the axle midpoint: its drag's moment on ω (run.demand, design §21)
     }
     if while_driving:
         numbers["peak_load_n"] = c["peak_n"]

@@ -82,7 +82,9 @@ DRAG_NAMED_S = 5.0
 def identified_resistances(report: dict[str, Any]) -> list[dict[str, Any]]:
     """The resistances ``robot check`` identified (design §14.2; ``report``: :func:`bioform_mj.assess.check.check`'s),
     as a run's ``c_hat_off`` names them: ``{"kind": "braking_caster", "geom", "braking_force_n" (N, μ × load),
-    "torque_nm" (N·m of wheel torque, × r), "while_driving"}``, ``{"kind": "caster_resistance", "joints"}``,
+    "torque_nm" (N·m of wheel torque, × r), "while_driving", "lever_m" (m from the axle midpoint; None: not
+    known), "contact" ("chassis": the chassis itself drags, else "caster")}``,
+    ``{"kind": "caster_resistance", "joints"}``,
     ``{"kind": "drag", "drag_rate_per_s": [k_υ, k_ω]}`` (1/s; the identified viscous drag of the ``damping``
     finding, 0 where its time constant is over :data:`DRAG_NAMED_S`) and ``{"kind": "dead_band",
     "deadband_torque_Nm": [on τ_a, on τ_b]}`` (N·m, ≥ 0). Only
@@ -100,6 +102,8 @@ def identified_resistances(report: dict[str, Any]) -> list[dict[str, Any]]:
                     "braking_force_n": force,
                     "torque_nm": force * r,
                     "while_driving": bool(fd.get("while_driving", False)),
+                    "lever_m": None if fd.get("lever_m") is None else float(fd["lever_m"]),
+                    "contact": str(fd.get("contact") or "caster"),  # "chassis": the chassis itself drags
                 }
             )
         elif kind == "caster_resistance":  # the share of a's and b's gap the casters account for (design §14.3)
@@ -163,8 +167,10 @@ def unmodelled_causes(
     by = {x["kind"]: x for x in identified}
     brakes = [x for x in identified if x["kind"] == "braking_caster"]
     for x in brakes:
+        chassis = x.get("contact") == "chassis"  # robot check's "the chassis drags" (assess.causes._contact_kind)
+        what = f"'{x['geom']}' of the chassis braking" if chassis else f"caster '{x['geom']}' braking"
         out.append(
-            f"caster '{x['geom']}' braking (robot check: {x['braking_force_n']:.3g} N of drag"
+            f"{what} (robot check: {x['braking_force_n']:.3g} N of drag"
             + (" while it drives" if x.get("while_driving") else "")
             + f", {x['torque_nm']:.3g} N·m of wheel torque)"
         )

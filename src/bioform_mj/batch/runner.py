@@ -677,6 +677,7 @@ class BatchRun:
                     "wall_time_s": wall,
                     "followers": fol,
                     "robot_check": _prerun_summary(self.robot_check),  # design §14.2: one scene, one check
+                    "slip_floor": dict(self.plant.slip_floor_entry),  # design §21: as a single run's summary
                     # design §21: the scenario's demand against the robots' limits, as a single run's summary
                     **({"demand": _demand_summary(self.demand[w])} if self.demand[w] is not None else {}),
                 }

@@ -13,6 +13,7 @@ __all__ = [
     "SLIP_V_FLOOR",
     "SLIP_V_FLOOR_OF_TOP",
     "slip_v_floor",
+    "slip_floor_entry",
     "SPIN_RAD_S",
     "LOST_FRACTION",
     "LOST_AFTER_S",
@@ -52,3 +53,26 @@ def slip_v_floor(top_speeds: list[float | None]) -> float:
     known): ``min(SLIP_V_FLOOR, SLIP_V_FLOOR_OF_TOP × the least known top speed)`` (design §21)."""
     known = [float(v) for v in top_speeds if v is not None and v > 0]
     return min([SLIP_V_FLOOR, *(SLIP_V_FLOOR_OF_TOP * v for v in known)])
+
+
+def slip_floor_entry(top_speeds: list[float | None]) -> dict[str, object]:
+    """summary.json's ``slip_floor``: the slip ratio's speed floor :func:`slip_v_floor` of robots of top speeds
+    ``top_speeds`` (m/s; None where not known) with its unit, where it came from and the distinct known top speeds
+    (``top_speeds_mps``, m/s) (design §21)."""
+    known = sorted({float(v) for v in top_speeds if v is not None and v > 0})  # the distinct top speeds
+    value = slip_v_floor(top_speeds)
+    if not known:
+        source = f"SLIP_V_FLOOR {SLIP_V_FLOOR:g} m/s: no robot's top speed is known"
+    elif value < SLIP_V_FLOOR:
+        source = f"{SLIP_V_FLOOR_OF_TOP:g} x the least top speed of the plant's robots, {known[0]:.6g} m/s"
+    else:
+        source = (
+            f"SLIP_V_FLOOR {SLIP_V_FLOOR:g} m/s, not above {SLIP_V_FLOOR_OF_TOP:g} x the least top speed of the "
+            f"plant's robots, {known[0]:.6g} m/s"
+        )
+    return {
+        "value": value,
+        "unit": "m/s",
+        "source": source + " (core.thresholds.slip_v_floor, design §21)",
+        "top_speeds_mps": known,
+    }

@@ -100,6 +100,10 @@ class TipSlipWatch(Protocol):
 
     tip_step: np.ndarray
     slip_step: np.ndarray
+    #: m/s: the slip ratio's speed floor, and ``{"value", "unit", "source", "top_speeds_mps"}`` saying where it
+    #: came from (``core.thresholds.slip_floor_entry``; summary.json's ``slip_floor``, design §21)
+    slip_floor: float
+    slip_floor_entry: dict[str, Any]
 
 
 @runtime_checkable

@@ -132,8 +132,10 @@ def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout,
     the normal forces of its contacts, N), ``friction`` (sliding friction MuJoCo uses for the pair),
     ``condim`` (the pair's), ``friction_published``, ``condim_published`` (the geom's own, as the file
     says), ``priority``, ``points`` (number of contacts), ``welded_to_base`` (no joint between its
-    body and the base: a caster that cannot roll slides) and ``rolls`` (below a free caster joint that
-    rolls: :func:`rolling_bodies`; a swivel alone does not).
+    body and the base: a caster that cannot roll slides), ``rolls`` (below a free caster joint that
+    rolls: :func:`rolling_bodies`; a swivel alone does not), ``mass_share`` (its body's share of the robot's mass:
+    a link welded to the base that carries most of it is the chassis) and ``lever_m`` (m: the horizontal distance of its
+    contacts' load-weighted mean point from the axle midpoint, the lever of its drag about the turning centre).
     Call it on a robot at rest (settled) for the load at rest.
     """
     base = model.body(lay.base).id
@@ -170,13 +172,18 @@ def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout,
                 "points": 0,
                 "welded_to_base": b in welded,
                 "rolls": b in rolling,
+                "mass_share": float(model.body_mass[b]) * float(np.linalg.norm(model.opt.gravity)) / max(weight, 1e-12),
                 "_named": name in casters,
                 "_wheel": b in wheels,
             }
         row["load_n"] += float(f6[0])
         row["points"] += 1
+        row["_at"] = row.get("_at", np.zeros(4)) + np.append(np.asarray(con.pos) * max(float(f6[0]), 1e-12), f6[0])
+    axle = data.xpos[base] + data.xmat[base].reshape(3, 3) @ np.asarray(lay.axle, dtype=float)
     out = []
     for row in per.values():
+        at = row.pop("_at")
+        row["lever_m"] = float(np.hypot(*(at[:2] / max(float(at[3]), 1e-12 * row["points"]) - axle[:2])))
         named, wheel = row.pop("_named"), row.pop("_wheel")
         if wheel:
             row["role"] = "wheel"

@@ -17,6 +17,10 @@ from pathlib import Path
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.refs import PackagePath
 
+# at the top, not in _package_name: the xacro child (design §12) imports this module before its audit hook, and a
+# later import (reading a .py or .pyc) is refused there
+from bioform_mj.robots.sanity import not_regular
+
 __all__ = ["find_package", "package_search_path", "resolve_uri"]
 
 #: how deep a directory of ``ROS_PACKAGE_PATH`` is searched for a package (ROS crawls without end)
@@ -26,8 +30,6 @@ _NO_PACKAGES = PackagePath()
 
 def _package_name(d: Path) -> str | None:
     """The ``<name>`` in ``d/package.xml``, None without one (or when it is no regular file: a FIFO would block)."""
-    from bioform_mj.robots.sanity import not_regular
-
     if not_regular(d / "package.xml"):
         return None
     try:

@@ -466,6 +466,23 @@ def _parse(
     )
 
 
+def _unbalanced(spec: Any) -> dict[str, tuple[float, float, float]]:
+    """The bodies of ``spec`` whose given inertia breaks the triangle inequality ``A + B >= C`` of its principal
+    moments (which MuJoCo's ``balanceinertia`` replaces), with those moments (kg·m², ascending)."""
+    out = {}
+    for b in spec.bodies:
+        if b.name == "world" or not b.explicitinertial:
+            continue
+        fi = np.asarray(b.fullinertia, float)
+        if np.all(np.isfinite(fi)):
+            eig = np.linalg.eigvalsh(np.array([[fi[0], fi[3], fi[4]], [fi[3], fi[1], fi[5]], [fi[4], fi[5], fi[2]]]))
+        else:
+            eig = np.sort(np.asarray(b.inertia, float))
+        if eig[0] + eig[1] < eig[2] * (1 - 1e-9):
+            out[b.name] = (float(eig[0]), float(eig[1]), float(eig[2]))
+    return out
+
+
 def check_file(ref: RobotRef) -> None:
     """The checks of :func:`import_urdf` that need no MuJoCo: the file reads, has one root link,
     a joint that could be a wheel, and its collision meshes resolve. Raises :class:`UrdfError`."""
@@ -632,6 +649,7 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
             "inertia tensors that are not positive definite (MuJoCo refuses them): products of inertia dropped "
             "for " + ", ".join(f"'{n}'" for n in bad)
         )
+    unbalanced = _unbalanced(spec) if ref.balance_inertia else {}
     if ref.balance_inertia:  # the mapping's balance_inertia (design §12)
         spec.compiler.balanceinertia = True
     try:
@@ -639,6 +657,17 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
     except Exception as exc:
         raise UrdfError(f"{path}: does not compile: {_one_line(exc)}{compile_hint(exc)}") from None
     body_id = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b): b for b in range(1, model.nbody)}
+    if unbalanced:  # never silent: balancing changes the robot's inertia, and with it b_eff (design §12)
+        notes.append(
+            "balance_inertia: MuJoCo balanced the inertia of "
+            + ", ".join(
+                f"'{n}' (principal moments {' '.join(f'{x:.4g}' for x in eig)} -> "
+                f"{' '.join(f'{x:.4g}' for x in model.body_inertia[body_id[n]])} kg·m²)"
+                for n, eig in unbalanced.items()
+                if n in body_id
+            )
+            + ": the robot simulated (its yaw inertia, b_eff) is the balanced one, not the file's"
+        )
     inferred = []
     for lname in pr.no_inertial:
         b = body_id.get(lname)

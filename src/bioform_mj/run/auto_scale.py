@@ -5,8 +5,10 @@
 - ``σ`` (``time_scale = "auto"``): the scenario at ``s`` (σ = 1) is run on the ideal plant with each
   robot's ``c_true`` (:func:`bioform_mj.run.demand.peaks`); under similarity its speeds scale by 1/σ and
   its accelerations by 1/σ², so ``σ = max(1, v_wheel / (m_v v_top), √(v̇ / (m_a v̇_lim)),
-  √(ω̇ / (m_a ω̇_lim)))`` over the robots, with the margins :data:`SPEED_MARGIN` and
-  :data:`ACCEL_MARGIN` (:mod:`bioform_mj.robots.limits` gives ``v_top``, ``v̇_lim``, ``ω̇_lim``).
+  √(ω̇ / (m_a ω̇_lim)), (τ_w − f) / (m_τ τ_max − f))`` over the robots, with the margins :data:`SPEED_MARGIN`,
+  :data:`ACCEL_MARGIN` and :data:`TORQUE_MARGIN` (:mod:`bioform_mj.robots.limits` gives ``v_top``, ``v̇_lim``,
+  ``ω̇_lim``, ``τ_max``; ``τ_w`` the peak wheel torque with the wheel's own damping and frictionloss ``f``,
+  :func:`_torque_need` says why it counts so).
   The reason (which limit of which robot set σ) is the summary's ``scale_note``. The demand is taken over
   at least :data:`AUTO_HORIZON_S` of the scenario (its own duration where longer): a run shortened by
   ``sim.duration`` gets the σ of the run it previews (design §21; TIAGo got σ 2.51 for a 0.3 s run, 2.64 for 20 s).
@@ -30,6 +32,10 @@ PAPER_HALF_TRACK = 0.2
 SPEED_MARGIN = 0.8
 #: share of the acceleration and yaw-acceleration limits the scenario may ask (σ from accelerations)
 ACCEL_MARGIN = 0.5
+#: share of the torque limit τ_max the peak wheel torque (the motion's and the wheel's own damping and
+#: frictionloss) may ask (σ from ``wheel_torque``, design §21): the resistance takes its share first, so the
+#: margin is the speed's, not the accelerations' (which already count all of τ_max as available)
+TORQUE_MARGIN = 0.8
 
 #: s (unscaled): the least span of the scenario whose demand sets σ: the paper's duration (Sec. IV, 20 s)
 AUTO_HORIZON_S = 20.0
@@ -106,7 +112,7 @@ def resolve_auto(sc: Any) -> tuple[float, float, str]:
         )
         worst, why = 0.0, ""
         for ref, p, lim in robots:
-            pk = peaks(at, (p.a_eff, p.b_eff), p.half_track)
+            pk = peaks(at, (p.a_eff, p.b_eff), p.half_track, wheel=_wheel(p))
             cand = {
                 f"wheel speed {pk['wheel_speed_mps']:.3g} m/s against {SPEED_MARGIN:g} x top speed "
                 f"{lim['top_speed_mps']:.3g} m/s ({lim['top_speed_source']})": pk["wheel_speed_mps"]
@@ -118,12 +124,23 @@ def resolve_auto(sc: Any) -> tuple[float, float, str]:
                     pk["yaw_accel_radps2"] / (ACCEL_MARGIN * lim["yaw_accel_radps2"])
                 ),
             }
+            torque = _torque_need(pk, p, lim)
+            if torque is not None:
+                cand[torque[1]] = torque[0]
             k = max(cand, key=lambda c: cand[c])
             if cand[k] > worst:
                 worst, why = cand[k], f"'{Path(ref.model).name}' {k}"
         return worst, why
 
     sigma, fit, why = _solve(need)
+    stuck = []
+    for ref, p, lim in robots:  # a frictionloss that alone takes the torque margin: no σ makes room (_torque_need)
+        if float(p.wheel_frictionloss) >= TORQUE_MARGIN * float(lim["torque_nm"]):
+            stuck.append(
+                f"wheel torque of '{Path(ref.model).name}' not counted in σ: its wheels' frictionloss "
+                f"{float(p.wheel_frictionloss):.3g} N·m alone is at least {TORQUE_MARGIN:g} x τ_max "
+                f"{float(lim['torque_nm']):.3g} N·m and does not fall with σ (the demand check warns, design §21)"
+            )
     sigma = check_factor("formation.time_scale", sigma)
     if horizon > float(sc.sim.duration):
         why += f"; over the scenario's first {horizon:g} s (unscaled), not only the run's {float(sc.sim.duration):g} s"
@@ -132,9 +149,42 @@ def resolve_auto(sc: Any) -> tuple[float, float, str]:
     else:
         notes.append(
             f"formation.time_scale = {sigma:.4g} (auto: set by the {why} at σ = {sigma:.4g}, {fit:.2f} of the "
-            f"margin {SPEED_MARGIN:g} on speed, {ACCEL_MARGIN:g} on accelerations)"
+            f"margin {SPEED_MARGIN:g} on speed, {ACCEL_MARGIN:g} on accelerations, {TORQUE_MARGIN:g} on wheel torque)"
         )
-    return s, sigma, "; ".join(notes)
+    return s, sigma, "; ".join(notes + stuck)
+
+
+def _wheel(p: Any) -> dict[str, float]:
+    """The wheel :func:`bioform_mj.run.demand.wheel_need` takes of robot parameters ``p``: radius m, joint plus
+    back-EMF damping N·m·s/rad, frictionloss N·m (a braking caster, which only robot check finds, is not counted
+    here: the demand check before the run counts it, design §21)."""
+    return {
+        "radius_m": float(p.wheel_radius),
+        "damping_nms": float(p.wheel_damping + p.motor_damping),
+        "frictionloss_nm": float(p.wheel_frictionloss),
+    }
+
+
+def _torque_need(pk: dict[str, Any], p: Any, lim: dict[str, Any]) -> tuple[float, str] | None:
+    """σ's candidate from the peak wheel torque ``pk["wheel_torque_nm"]`` against :data:`TORQUE_MARGIN` × τ_max,
+    with its reason; None where no σ can bring it under the margin.
+
+    The torque does not scale as one power of σ: per wheel it is the motion's inertial part (× σ⁻² under
+    similarity), the damping ``c φ̇`` (× σ⁻¹) and the frictionloss ``f`` (× σ⁰). So the factor counted is
+    ``(τ − f) / (m τ_max − f)``: ≤ 1 exactly where ``τ ≤ m τ_max``, and, as ``τ − f ≤ I σ⁻² + D σ⁻¹``, it falls at
+    least as 1/σ — as fast as the other candidates, whose accelerations count by their square roots. Where
+    ``f ≥ m τ_max`` slowing the scenario cannot make room (the frictionloss alone takes the margin): not a
+    candidate; the demand check before the run warns about ``wheel_torque`` (design §21)."""
+    f = float(p.wheel_frictionloss)
+    room = TORQUE_MARGIN * float(lim["torque_nm"]) - f
+    if "wheel_torque_nm" not in pk or room <= 0:
+        return None
+    tau = float(pk["wheel_torque_nm"])
+    return (
+        max(tau - f, 0.0) / room,
+        f"wheel torque {tau:.3g} N·m (motion {pk['wheel_inertial_nm']:.3g}, the wheel's damping and frictionloss up "
+        f"to {pk['wheel_resistance_nm']:.3g}) against {TORQUE_MARGIN:g} x τ_max {float(lim['torque_nm']):.3g} N·m",
+    )
 
 
 def _solve(need: Any, tries: int = 4) -> tuple[float, float, str]:

@@ -23,8 +23,10 @@ no torque limit: what the controller asks of a robot that can give everything. F
 - ``sliding_gain_v`` / ``_w`` (where the robot has a wheel dead band or damping): its resistance,
   ``2 a f + k_υ |υ|max`` m/s² (resp. ``2 b f + k_ω |ω|max`` rad/s²), against the sliding gain
   ``torque.c`` that must dominate it (eqs. 38–39); the gain scales × 1/σ², the resistance not. A braking
-  caster robot check identifies adds ``a τ_brake`` (its drag force over the mass, m/s²) to ``_v``; its
-  moment on ω needs the caster's lever, which the check does not give, so ``_w`` leaves it out (said in the item).
+  caster robot check identifies adds ``a τ_brake`` (its drag force over the mass, m/s²) to ``_v`` and, with its
+  lever ``d`` (its contact's distance from the axle midpoint, the turning centre), ``b Σ F r d / l`` to ``_w``
+  (its moment ``F d`` as the wheel-torque difference ``F d r / l`` it takes, rad/s²; the most it can be: turning
+  in place the drag is across the lever, otherwise less); without a lever ``_w`` leaves it out (said in the item).
 
 Each is ``{"value", "limit", "ratio", "unit", "limit_by"}`` (``limit`` None and ``missing`` where the
 robot does not say); a ``warning:`` line per ratio above 1. The ideal run is cached per scenario and
@@ -45,7 +47,7 @@ from typing import Any
 import numpy as np
 
 #: cache entries of another format are recomputed
-CACHE_FORMAT = 4
+CACHE_FORMAT = 5
 _MEMO: dict[str, dict[str, Any]] = {}
 #: the twin's log (t, vel) per key, this process only: a wheel not yet asked about costs no second twin
 _LOGS: dict[str, tuple[np.ndarray, np.ndarray]] = {}
@@ -216,6 +218,10 @@ def peaks(
                 "speed_mps": float(np.max(np.abs(v))) if len(t) else 0.0,
                 "yaw_rate_radps": float(np.max(np.abs(w))) if len(t) else 0.0,
                 "c_hat_min": [float(np.nanmin(ch[..., 0])), float(np.nanmin(ch[..., 1]))],
+                # per follower, the twin's ĉ at its end against c_true: the method's own share (twin_share)
+                "c_hat_end_rel": [
+                    [float(x / c - 1.0) if np.isfinite(x) else None for x, c in zip(row, c_true)] for row in ch[-1]
+                ],
                 "duration_s": float(sc.sim.duration),
                 "seconds": 0.0,
                 "wheels": {},
@@ -268,6 +274,7 @@ def compare(
     resist: dict[str, Any] | None = None,
     c_true: tuple[float, float] | None = None,
     brake_torque_nm: float = 0.0,
+    brake_yaw_nm: float | None = None,
 ) -> dict[str, dict[str, Any]]:
     """The demand ``pk`` (:func:`peaks`) of ``sc`` against the robot's limits ``lim``
     (:func:`~bioform_mj.robots.limits.limits_of`), one item per quantity (module docstring).
@@ -279,7 +286,9 @@ def compare(
     (:func:`c_lower_bound`; eq. 38 divides by ĉ) against the acceleration limit — the start-up a plant the paper's
     model does not fit can drive ĉ to (TIAGo in MuJoCo, design §21), which the ideal twin, whose ĉ stays near
     c_true, does not show. ``brake_torque_nm``: the braking casters' drag ``F r`` (N·m on ``τ_a``) robot check
-    identified, added as ``a F r`` (m/s², with ``c_true``) to ``sliding_gain_v``. Where ``pk`` has
+    identified, added as ``a F r`` (m/s², with ``c_true``) to ``sliding_gain_v``; ``brake_yaw_nm``: their moment
+    on ω as a wheel-torque difference ``Σ F r d / l`` (N·m, :func:`brake_yaw_torques`), added as ``b Σ F r d / l``
+    (rad/s²) to ``sliding_gain_w`` (None: the lever is not known, said in the item). Where ``pk`` has
     ``wheel_torque_nm`` (:func:`peaks` with a ``wheel``): ``wheel_torque`` against ``τ_max``."""
     grip = min(lim["torque_nm"], lim["traction_torque_nm"])
     ca, cb = (float(x) for x in sc.torque.c)
@@ -313,6 +322,7 @@ def compare(
             torque_at_bound_nm=float(tau_bound), c_bound=[float(bound[0]), float(bound[1])], torque_given_nm=given
         )
     brake_acc = float(c_true[0]) * float(brake_torque_nm) if c_true is not None and brake_torque_nm > 0 else 0.0
+    brake_yaw = float(c_true[1]) * float(brake_yaw_nm or 0.0) if c_true is not None and brake_acc > 0 else 0.0
     if resist is not None or brake_acc > 0:
         dead = resist["deadband_accel"] if resist is not None else (0.0, 0.0)
         drag = resist["drag_rate_per_s"] if resist is not None else (0.0, 0.0)
@@ -320,12 +330,12 @@ def compare(
             ("sliding_gain_v", 0, pk.get("speed_mps", 0.0), ca, "m/s²"),
             ("sliding_gain_w", 1, pk.get("yaw_rate_radps", 0.0), cb, "rad/s²"),
         ):
-            brk = brake_acc if j == 0 else 0.0  # a caster's moment on ω needs its lever, which the check does not give
+            brk = brake_acc if j == 0 else brake_yaw  # on ω: the caster's moment F d, the most it can be
             r = float(dead[j]) + float(drag[j]) * float(speed) + brk
             if r > 0:
                 out[k] = _item(r, gain, unit, f"torque.c[{j}], the sliding gain")
                 out[k].update(deadband=float(dead[j]), drag=float(drag[j]) * float(speed), braking_caster=brk)
-                if j == 1 and brake_acc > 0:
+                if j == 1 and brake_acc > 0 and brake_yaw_nm is None:
                     out[k]["braking_caster_note"] = "a braking caster's moment on ω is not included (lever unknown)"
     return out
 
@@ -338,7 +348,7 @@ _WHAT = {
     "sign_torque": "sliding-mode sign terms' torque amplitude",
     "torque_vs_traction": "the torque limit",
     "sliding_gain_v": "the robot's resistance (dead band, drag at peak speed, braking caster) on υ",
-    "sliding_gain_w": "the robot's resistance (dead band and drag at peak yaw rate) on ω",
+    "sliding_gain_w": "the robot's resistance (dead band, drag at peak yaw rate, braking caster's moment) on ω",
     "accel_at_c_bound": "the acceleration of the sign terms at ĉ's projection bound",
     "wheel_torque": "peak wheel torque (the motion's and the wheel's own resistance)",
 }
@@ -433,18 +443,38 @@ def brake_torques(robot_check: dict[str, Any] | None, n: int) -> list[float]:
     ]
 
 
+def brake_yaw_torques(robot_check: dict[str, Any] | None, half_tracks: list[float]) -> list[float | None]:
+    """Per follower (half track ``half_tracks[i]`` m) the braking casters' moment on ω that ``robot check``
+    identified, as the wheel-torque difference it takes: ``Σ F r d / l`` (N·m on ``τ_b``; ``F r`` the caster's
+    ``torque_nm``, ``d`` its ``lever_m``); None where a braking caster's lever is not known (an older check)."""
+    from bioform_mj.assess.outcomes import robot_check_resistances
+
+    out: list[float | None] = []
+    for found, l_half in zip(robot_check_resistances(robot_check, len(half_tracks)), half_tracks):
+        brakes = [x for x in found if x.get("kind") == "braking_caster"]
+        if any(x.get("lever_m") is None for x in brakes):
+            out.append(None)
+            continue
+        out.append(float(sum(float(x.get("torque_nm") or 0.0) * float(x["lever_m"]) for x in brakes)) / l_half)
+    return out
+
+
 def before_run(sc: Any, plant: Any, robot_check: dict[str, Any] | None = None) -> dict[str, Any]:
     """summary.json's ``demand`` for a MuJoCo run (the ideal twin run by the registered loop, :func:`peaks`):
     ``{"robots": [{"followers", "model", "c_true",
     "limits", "demand", "ideal_run"}], "warnings", "seconds"}`` (one entry per distinct robot).
     ``robot_check``: the run's robot check (:func:`bioform_mj.assess.prerun.before_run`): its braking casters
-    count in ``wheel_torque`` and ``sliding_gain_v`` (:func:`brake_torques`)."""
+    count in ``wheel_torque`` and ``sliding_gain_v`` (:func:`brake_torques`), and with their lever in
+    ``sliding_gain_w`` (:func:`brake_yaw_torques`)."""
     t0 = time.perf_counter()
     lims = run_limits(sc, plant)
     brakes = brake_torques(robot_check, plant.n)
+    yaws = brake_yaw_torques(robot_check, [float(p.half_track) for p in plant.params])
     groups: dict[str, list[int]] = {}
     for i, p in enumerate(plant.params):
-        k = json.dumps(_rounded([p.a_eff, p.b_eff, p.half_track, lims[i], brakes[i]]), sort_keys=True, default=str)
+        k = json.dumps(
+            _rounded([p.a_eff, p.b_eff, p.half_track, lims[i], brakes[i], yaws[i]]), sort_keys=True, default=str
+        )
         groups.setdefault(k, []).append(i)
     robots, lines = [], []
     for idx in groups.values():
@@ -464,7 +494,8 @@ def before_run(sc: Any, plant: Any, robot_check: dict[str, Any] | None = None) -
             lines.append(f"{who}: the scenario's demand could not be computed on the ideal plant ({why})")
             robots.append({"followers": [j + 1 for j in idx], "limits": lims[i], "demand": None, "error": why})
             continue
-        items = compare(sc, pk, lims[i], p.unmodelled(1.0, 1.0), (p.a_eff, p.b_eff), brakes[i])
+        items = compare(sc, pk, lims[i], p.unmodelled(1.0, 1.0), (p.a_eff, p.b_eff), brakes[i], yaws[i])
+        twin_end = pk.get("c_hat_end_rel") or []
         sigma = sc.formation.time_scale if isinstance(sc.formation.time_scale, float) else 1.0
         lines += warning_lines(who, items, sigma)
         robots.append(
@@ -474,10 +505,51 @@ def before_run(sc: Any, plant: Any, robot_check: dict[str, Any] | None = None) -
                 "c_true": [p.a_eff, p.b_eff],
                 "limits": lims[i],
                 "demand": items,
+                # the ideal twin's ĉ error at its end for these followers (a, b; twin_share)
+                "twin_c_hat_rel_error": [twin_end[j] if j < len(twin_end) else None for j in idx],
                 "ideal_run": {k: pk[k] for k in ("seconds", "from") if k in pk},
             }
         )
     return {"robots": robots, "warnings": lines, "seconds": time.perf_counter() - t0}
+
+
+def twin_share(summary: dict[str, Any]) -> None:
+    """In ``summary`` (a run's, with its ``demand``): each follower's ``c_hat_off`` whose ideal twin (the same
+    scenario on the paper's plant with the robot's c_true, :func:`before_run`) ended as far off, the same way, on a
+    component (within ±:data:`~bioform_mj.core.thresholds.C_HAT_OFF` of the run's error, itself beyond it) says so:
+    that share is the method's at this scale (too little excitation, the learner's gains), not the plant's physics,
+    whatever else the cause list names (design §21)."""
+    from bioform_mj.core.thresholds import C_HAT_OFF
+
+    twin: dict[int, list[float]] = {}
+    for r in (summary.get("demand") or {}).get("robots", []):
+        for fid, rel in zip(r.get("followers", []), r.get("twin_c_hat_rel_error") or []):
+            if rel is not None and None not in rel:
+                twin[int(fid)] = [float(x) for x in rel]
+    for f in summary.get("followers", []):
+        t, run = twin.get(int(f["id"])), f.get("c_hat_rel_error")
+        if t is None or run is None:
+            continue
+        same = [
+            k
+            for k in range(2)
+            if abs(run[k]) > C_HAT_OFF
+            and abs(t[k]) > C_HAT_OFF
+            and t[k] * run[k] > 0
+            and abs(t[k] - run[k]) <= C_HAT_OFF
+        ]
+        if not same:
+            continue
+        add = (
+            "; the ideal twin (the paper's plant, the same scenario, c_true) learned "
+            + ", ".join(f"{'ab'[k]} {t[k]:+.0%}" for k in same)
+            + " too: the method's share at this scale (excitation, learner gains), not the plant's"
+        )
+        for o in f.get("outcomes", []):
+            if o.get("kind") == "c_hat_off":
+                if f.get("outcome_detail") == o["detail"]:
+                    f["outcome_detail"] = o["detail"] + add
+                o["detail"] += add
 
 
 #: what :func:`before_run` measures of itself: said on a run's log, not kept in its summary (same bits per seed)

@@ -604,6 +604,9 @@ def _summarise(sc, plant, controller, step: Stepper, end: LoopEnd, logd, setup_s
         from bioform_mj.run.demand import for_summary as _demand_summary
 
         summary["demand"] = _demand_summary(warned[3])
+        from bioform_mj.run.demand import twin_share
+
+        twin_share(summary)  # a c_hat_off its ideal twin shares is the method's (design §21)
     return summary
 
 

@@ -12,7 +12,7 @@ import numpy as np
 from bioform_mj._version import __version__
 from bioform_mj.assess.outcomes import follower_outcomes, robot_check_resistances, severity, slots_of
 from bioform_mj.core.engine import CHANNELS, MEAN_CHANNELS
-from bioform_mj.plants.base import ContactWatch, LumpedBodies, RobotModels
+from bioform_mj.plants.base import ContactWatch, LumpedBodies, RobotModels, TipSlipWatch
 from bioform_mj.scenario.config import Scenario
 from bioform_mj.scenario.record import resolved_config
 
@@ -107,6 +107,8 @@ def _summary(
         "formation_scale": sc.formation.scale,  # applied: config holds the scaled values with scale = 1
         "time_scale": sc.formation.time_scale,  # design §21: applied likewise (config: time_scale = 1)
         "scale_note": sc.formation.scale_note,  # why ("auto": from what, which limit set σ)
+        # design §21: the slip ratio's speed floor (m/s) and where it came from; None: the plant watches no slip
+        "slip_floor": dict(plant.slip_floor_entry) if isinstance(plant, TipSlipWatch) else None,
         "config": resolved_config(sc),  # the run's own record: load() takes it back unchanged
         # opt-in (design §14, learner_sizing): the c and kd sized to the identified resistance; None: off
         "learner_sizing": getattr(getattr(controller, "p", None), "sizing", None),

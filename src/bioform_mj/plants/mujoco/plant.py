@@ -25,7 +25,7 @@ import numpy as np
 from bioform_mj.core.equations import slip_ratio
 from bioform_mj.core.errors import Diverged
 from bioform_mj.core.jitwatch import precompile
-from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_TIME, TIP_ANGLE_DEG, slip_v_floor
+from bioform_mj.core.thresholds import SLIP_RATIO, SLIP_TIME, TIP_ANGLE_DEG, slip_floor_entry
 from bioform_mj.formation.disturbance import harmonic_rows
 from bioform_mj.plants.mujoco.contacts import ContactReader, robot_geoms, watch_contacts, watch_proximity
 from bioform_mj.plants.mujoco.kernels import (
@@ -285,7 +285,8 @@ class MujocoPlant:
             key = (f, tuple(self.layouts[i].wheel_joints), float(self.params[i].wheel_radius))
             if key not in speeds:
                 speeds[key] = top_speed(f, self, i)[0]
-        self.slip_floor = slip_v_floor(list(speeds.values()))
+        self.slip_floor_entry = slip_floor_entry(list(speeds.values()))  # summary.json's slip_floor (design §21)
+        self.slip_floor = float(self.slip_floor_entry["value"])
         self._step_count = 0
         self._contacts_setup(float(safety_distance))
         self.reset()
