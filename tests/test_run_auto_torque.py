@@ -49,10 +49,10 @@ def _tb3(tmp_path: Path, damping: float, frictionloss: float) -> list[str]:
 
 @pytest.mark.slow  # ≈ 50 s at load 7 with an empty demand cache (the σ searches' twins), ≈ 8 s cached
 def test_damped_wheels_slow_the_scenario_down_and_a_frictionloss_beyond_the_margin_is_said(tmp_path):
+    import bioform_mj.run.simulate  # noqa: F401  (registers the loop the twin runs on)
     from bioform_mj.robots.entries import resolve_robot
     from bioform_mj.run.auto_scale import robot_limits
     from bioform_mj.run.demand import peaks
-    import bioform_mj.run.simulate  # noqa: F401  (registers the loop the twin runs on)
 
     free = load("tb3", _tb3(tmp_path, 0, 0))
     assert "wheel speed" in free.formation.scale_note and free.formation.time_scale > 1
