@@ -276,6 +276,8 @@ def test_bench_in_a_folder_without_runs_writes_its_json(tmp_path, capsys, monkey
         "loop_steps_per_s": 1.0,
         "ideal_us_per_robot_step": 1.0,
         "ratio_cpu": 1.0,
+        "ratio_pairs": [1.0],
+        "replay_max_abs_dqpos": 0.0,
         "us_per_robot_step_cpu": 1.0,
         "realtime_factor_cpu": 1.0,
         "load_avg": [1.0, 1.0],

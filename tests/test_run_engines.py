@@ -195,6 +195,31 @@ def test_same_seed_same_engine_same_bits_in_mujoco():
         assert np.array_equal(a.log[k], b.log[k]), k
 
 
+def test_chunks_lengthen_only_where_they_ran_fast_and_change_no_bit(monkeypatch):
+    """A chunk that ran in under MIN_CHUNK_WALL_S is followed by one taking about that long at its pace
+    (never fewer steps than MAX_CHUNK_S); where chunks end changes nothing in the run (the ideal plant's
+    0.1 s chunks, 100 steps of ~1 µs, cost more in visits to Python than in steps)."""
+    from bioform_mj.run import loop
+
+    assert loop._next_chunk(100, 100, 0.002) == 1000  # 100 steps in 2 ms: 1000 take 20 ms
+    assert loop._next_chunk(100, 1000, 0.02) == 1000  # at the target: kept
+    assert loop._next_chunk(100, 25, 0.5) == 100  # slow (1024 robots): MAX_CHUNK_S's steps
+    assert loop._next_chunk(100, 0, 0.0) == 100
+    sc = load("paper", plant="ideal", overrides=["sim.duration=4"])
+    calls: dict[float, int] = {}
+    runs = {}
+    for wall in (0.0, loop.MIN_CHUNK_WALL_S):  # 0: the fixed 0.1 s chunks
+        monkeypatch.setattr(loop, "MIN_CHUNK_WALL_S", wall)
+        ks: list[int] = []
+        runs[wall] = simulate(sc, progress=lambda k, N, ks=ks: ks.append(k))  # called once per chunk
+        calls[wall] = len(ks)
+    a, b = runs.values()
+    for k in a.log:
+        assert np.array_equal(a.log[k], b.log[k]), k
+    assert calls[0.0] == 4 / 0.1 + 1  # 40 chunks and the final call
+    assert calls[loop.MIN_CHUNK_WALL_S] < calls[0.0] / 2
+
+
 def test_loops_apply_events_and_sample_observers_alike():
     sc = load("paper", overrides=["sim.duration=2"])
     sc = dataclasses.replace(sc, events=(EventCfg(time=0.505, follower=2, mass=5.0, inertia=0.1),))
@@ -344,8 +369,32 @@ def test_bench_cli_writes_ratios(tmp_path):
     (row,) = data["rows"]
     assert row["n"] == 3 and row["control_steps"] == 300
     assert 0.2 < row["ratio"] < 5.0  # bare / loop; the target is checked by the benchmark, not here
+    assert row["replay_max_abs_dqpos"] == 0.0  # the bare replay did the loop's physics bit for bit
+    assert len(row["ratio_pairs"]) == 1 and row["ratio"] == row["ratio_pairs"][0]
     assert row["realtime_factor"] > 1.0
     assert data["machine"]["mujoco"] == mujoco.__version__
+
+
+def test_bench_counts_the_steps_the_time_scale_adds():
+    """large16 carries σ = 2.31 (its file's formation.time_scale): --duration 0.1 simulates 0.231 s, 58 control
+    steps of 4 ms, and every per-step number and real-time factor is over those (they were over 25: 2.31x off);
+    the ratio is the median of the alternated pairs, the replay ends in the loop's state bit for bit."""
+    import tomllib
+    from importlib.resources import files
+
+    from bioform_mj.jobs.bench import bench_case
+
+    sigma = tomllib.loads(files("bioform_mj.scenario.presets").joinpath("large16.toml").read_text())["formation"][
+        "time_scale"
+    ]
+    r = bench_case(16, 0.1, reps=3)
+    steps = round(0.1 * sigma / 0.004)
+    assert sigma == 2.31 and r["control_steps"] == steps == 58
+    assert r["sim_s"] == pytest.approx(0.1 * sigma, rel=1e-12) and r["time_scale"] == pytest.approx(sigma)
+    assert r["us_per_robot_step"] == pytest.approx(r["loop_s"] / (steps * 16) * 1e6, rel=1e-12)
+    assert r["realtime_factor"] == pytest.approx(0.1 * sigma / r["loop_s"], rel=1e-12)
+    assert len(r["ratio_pairs"]) == 3 and r["ratio"] == sorted(r["ratio_pairs"])[1]
+    assert r["replay_max_abs_dqpos"] == 0.0
 
 
 def test_bench_cli_rejects_unknown_size(tmp_path):

@@ -248,8 +248,12 @@ def build_parser() -> argparse.ArgumentParser:
         "bench", help="closed-loop throughput against bare mj_step, n = 3, 16, 64, 256 (1024 on request)"
     )
     bn.add_argument("--sizes", default="3,16,64,256", help="comma-separated team sizes (of 3, 16, 64, 256, 1024)")
-    bn.add_argument("--duration", type=float, help="simulated seconds per case (default: per size)")
-    bn.add_argument("--reps", type=int, default=2, help="repetitions; the best time counts (default 2)")
+    bn.add_argument(
+        "--duration", type=float, help="sim.duration per case, s, before the preset's time scale (default: per size)"
+    )
+    bn.add_argument(
+        "--reps", type=int, default=3, help="alternated bare/loop pairs; the median pair ratio counts (default 3)"
+    )
     bn.add_argument("--numpy", action="store_true", help="also time the numpy reference stack")
     bn.add_argument("--json", type=Path, default=Path("runs/bench.json"), help="output JSON (default runs/bench.json)")
     _backend_args(

@@ -1,23 +1,26 @@
 """``bioform bench``: our closed loop against bare ``mujoco.mj_step`` on the same scene, in one process.
 
 For each team size the benchmark builds the very scene a run uses (same robots, same
-physics step and substeps), then times
+physics step and substeps), runs the closed loop once recording its inputs, then times
 
 * **bare**: ``mj_step`` alone on that scene, replaying the closed loop's recorded wheel
   torques and chassis forces (a compiled loop calling libmujoco, no Python per step), so
-  that the physics does the same work;
+  that the physics does the same work (the JSON's ``replay_max_abs_dqpos``: 0.0 when the
+  replay ended in the loop's final state bit for bit);
 * **closed loop**: :func:`bioform_mj.run.simulate.simulate` on that scenario, loop time only
   (``summary.wall_time_s``: control, plant, metrics, logging, divergence guard);
 * **ideal**: the same scenario on the ideal plant.
 
 Reported: steps per second, the ratio bare time / loop time (1.0 = the loop costs
 nothing beyond physics), microseconds per robot-step, and the real-time factor
-(simulated s per wall s). Absolute times drift on shared machines; the ratio is
-measured in one process, bare and closed loop alternating (``reps`` each), and is the number to
-compare. Each time is taken twice: wall (``time.perf_counter``) and CPU time of this process
-(``time.process_time``: what the work costs one core, whatever else the machine runs); ``*_cpu``
-columns and ``load_avg`` (``os.getloadavg`` at the start and end of each case) in the JSON say which
-to believe on a shared machine.
+(simulated s per wall s), all over the steps the run simulates (the large presets' time scale
+σ = 2.31 makes ``--duration 2`` a 4.62 s run). Absolute times drift on shared machines; the ratio is
+measured in one process on one ``MjModel``/``MjData``, both from ``plant.reset()``, in ``reps`` pairs of
+neighbouring runs alternating in both orders (bare, loop | loop, bare | …), and is the median of the
+pairs' ratios (docs/findings/performance.md, "Method"). Each time is taken twice: wall
+(``time.perf_counter``) and CPU time of this process (``time.process_time``: what the work costs one
+core, whatever else the machine runs); ``*_cpu`` columns, each pair's ratio and ``load_avg``
+(``os.getloadavg`` at the start and end of each case) in the JSON say which to believe on a shared machine.
 """
 
 from __future__ import annotations
@@ -46,104 +49,142 @@ CASES: dict[int, tuple[str, float]] = {
 }
 
 
-def _bare(sc: Any, reps: int, plant: Any, between: Any = None) -> dict[str, float]:
-    """Bare ``mj_step`` replaying the closed loop's own inputs: best seconds of ``reps``, and the
-    solver's iterations per physics step, also under constant torques for comparison. ``between()``,
-    if given, runs after each replay (the closed loop's turn: interleaved, both see the machine's load alike).
-
-    The closed loop runs once recording every step's ``ctrl`` and chassis forces; then a
-    compiled loop replays them into ``mj_step`` on the same scene from the same initial
-    state. Constant torques (0.1 of the limit, no disturbance) are not a fair baseline: the
-    contact solver iterates less when the torques do not change (``solver_iters_*`` in the
-    JSON), so physics itself costs more in closed loop.
-    """
+def _record(sc: Any, plant: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One closed loop on ``plant`` recording every control step's ``ctrl`` and chassis forces (untimed):
+    ``(ctrl (steps, nu), xfrc (steps, n, 6), final qpos)``; ``steps`` the run's own (``sc.sim.duration``, which
+    carries the preset's time scale)."""
     from bioform_mj.core.errors import quiet_outcomes
-    from bioform_mj.plants.mujoco.kernels import replay as mujoco_replay
     from bioform_mj.run.simulate import simulate
 
-    m, d = plant.model, plant.data
+    m = plant.model
     steps = int(round(sc.sim.duration / sc.sim.control_dt))
     rec = (np.zeros((steps, m.nu)), np.zeros((steps, plant.n, 6)))
-    with quiet_outcomes():  # the run that records the inputs to replay: timed, not reported
+    with quiet_outcomes():  # the run that records the inputs to replay: not reported
         stop_if_interrupted(simulate(sc, record_inputs=rec, plant=plant))
-    replay = mujoco_replay
+    return rec[0], rec[1], plant.data.qpos.copy()
+
+
+def _replayer(plant: Any, rec_ctrl: np.ndarray, rec_xfrc: np.ndarray):
+    """``replay()`` → ``(wall s, CPU s, solver iterations)``: bare ``mj_step`` on ``plant``'s own
+    ``MjModel``/``MjData`` from ``plant.reset()`` (the state and the solver's warm start a run starts
+    from), fed ``rec_ctrl``/``rec_xfrc`` by a compiled loop (no Python per step). Compiled here."""
+    from bioform_mj.plants.mujoco.kernels import replay as mujoco_replay
+
+    m, d = plant.model, plant.data
     base = np.ascontiguousarray(plant._base, dtype=np.int64)
     args = (m._address, d._address, plant.n_substeps, d.ctrl, d.xfrc_applied, base)
-    replay(*args, rec[0][:0], rec[1][:0], d.solver_niter)  # compile
-    best, best_cpu, iters = float("inf"), float("inf"), 0
-    for _ in range(reps):
+    mujoco_replay(*args, rec_ctrl[:0], rec_xfrc[:0], d.solver_niter)  # compile / load
+
+    def replay(ctrl: np.ndarray = rec_ctrl, xfrc: np.ndarray = rec_xfrc) -> tuple[float, float, int]:
         plant.reset()
-        t0, c0_ = time.perf_counter(), time.process_time()
-        iters = replay(*args, rec[0], rec[1], d.solver_niter)
-        best = min(best, time.perf_counter() - t0)
-        best_cpu = min(best_cpu, time.process_time() - c0_)
-        if between is not None:
-            between()
-    c0 = np.zeros(m.nu)
+        t0, c0 = time.perf_counter(), time.process_time()
+        iters = mujoco_replay(*args, ctrl, xfrc, d.solver_niter)
+        return time.perf_counter() - t0, time.process_time() - c0, int(iters)
+
+    return replay
+
+
+def _paired(sc: Any, plant: Any, reps: int) -> dict[str, Any]:
+    """Bare replay and closed loop on the one ``plant``, ``reps`` pairs, alternating in both orders
+    (bare, loop, loop, bare, bare, loop, …: a drift of the machine's load falls on both alike).
+
+    Each pair's ratio is bare / loop of its two neighbouring runs; the benchmark's ratio is the median
+    of those (``ratio_pairs`` lists them), and each time the median of its runs (``*_best``: the least).
+    Both start from ``plant.reset()`` (same state, the solver's warm start zeroed); the replay's final
+    ``qpos`` is compared with the recording loop's (``replay_max_abs_dqpos``: 0.0 when the replay did the
+    loop's physics bit for bit). Constant torques (0.1 of the limit, no disturbance), once, for comparison:
+    the contact solver iterates less when the torques do not change, so that is not a fair baseline.
+    """
+    rec_ctrl, rec_xfrc, q_loop = _record(sc, plant)
+    replay = _replayer(plant, rec_ctrl, rec_xfrc)
+    bare: list[tuple[float, float]] = []
+    loop: list[tuple[float, float]] = []
+    summ: dict = {}
+    iters, dq = 0, float("nan")
+    for i in range(reps):
+        for what in ("bare", "loop") if i % 2 == 0 else ("loop", "bare"):
+            if what == "bare":
+                w, c, iters = replay()
+                bare.append((w, c))
+                dq = float(np.abs(plant.data.qpos - q_loop).max())
+            else:
+                w, c, summ = _loop(sc, 1, plant=plant)
+                loop.append((w, c))
+    c0 = np.zeros(plant.model.nu)
     c0[plant._ctrl] = 0.1 * plant.tau_max[:, None]
-    const = (np.tile(c0, (steps, 1)), np.zeros_like(rec[1]))
-    plant.reset()
-    t0 = time.perf_counter()
-    c_iters = replay(*args, const[0], const[1], d.solver_niter)
-    c_time = time.perf_counter() - t0
-    physics_steps = steps * plant.n_substeps
+    _w, _c, c_iters = replay(np.tile(c0, (len(rec_ctrl), 1)), np.zeros_like(rec_xfrc))
+    c_time = _w
+    b, lp = np.array(bare), np.array(loop)
+    pairs, pairs_cpu = b[:, 0] / lp[:, 0], b[:, 1] / lp[:, 1]
+    physics_steps = len(rec_ctrl) * plant.n_substeps
     return {
-        "bare_s": best,
-        "bare_cpu_s": best_cpu,
+        "bare_s": float(np.median(b[:, 0])),
+        "bare_cpu_s": float(np.median(b[:, 1])),
+        "bare_best_s": float(b[:, 0].min()),
+        "loop_s": float(np.median(lp[:, 0])),
+        "loop_cpu_s": float(np.median(lp[:, 1])),
+        "loop_best_s": float(lp[:, 0].min()),
+        "ratio": float(np.median(pairs)),
+        "ratio_cpu": float(np.median(pairs_cpu)),
+        "ratio_pairs": [float(x) for x in pairs],
+        "ratio_cpu_pairs": [float(x) for x in pairs_cpu],
+        "replay_max_abs_dqpos": dq,
         "solver_iters_per_step": iters / physics_steps,
         "constant_torque_bare_s": c_time,
         "constant_torque_solver_iters_per_step": c_iters / physics_steps,
+        "summary": summ,
     }
 
 
-def bench_case(n: int, duration: float | None = None, reps: int = 2, numpy_too: bool = False) -> dict[str, Any]:
-    """Measure one team size; returns one row of the table."""
+def bench_case(n: int, duration: float | None = None, reps: int = 3, numpy_too: bool = False) -> dict[str, Any]:
+    """Measure one team size; returns one row of the table. ``duration``: the scenario's ``sim.duration``
+    (s, before the preset's time scale; the row's ``sim_s`` is what was simulated)."""
+    from bioform_mj.run.simulate import make_plant
     from bioform_mj.scenario.loader import load
 
     preset, dur = CASES[n]
     dur = duration if duration is not None else dur
     sc = load(preset, overrides=[f"sim.duration={dur}"], plant="mujoco")
-    steps = int(round(dur / sc.sim.control_dt))
+    sim_s = float(sc.sim.duration)  # the large presets' time scale (σ = 2.31) lengthens the run
+    steps = int(round(sim_s / sc.sim.control_dt))
     n_sub = int(round(sc.sim.control_dt / sc.sim.physics_dt))
-    from bioform_mj.run.simulate import make_plant
-
     load0 = os.getloadavg()[0]
     # compile the kernels (on the smallest grid preset: they do not depend on n, a 1024-robot scene takes minutes)
     _loop(load(CASES[16][0] if n >= 16 else preset, overrides=["sim.duration=0.05"], plant="mujoco"), 1)
     t0 = time.perf_counter()
     plant = make_plant(sc)  # one scene per case: recorded, replayed bare and run in closed loop (reset each time)
     build_s = time.perf_counter() - t0
-    loops: list[tuple[float, float, dict]] = []
-    bare_d = _bare(sc, reps, plant, between=lambda: loops.append(_loop(sc, 1, plant=plant)))
-    bare, bare_cpu = bare_d["bare_s"], bare_d["bare_cpu_s"]
-    loop, loop_cpu, summ = min(t[0] for t in loops), min(t[1] for t in loops), loops[-1][2]
+    pr = _paired(sc, plant, reps)
+    summ = pr.pop("summary")
+    bare, bare_cpu, loop, loop_cpu = pr["bare_s"], pr["bare_cpu_s"], pr["loop_s"], pr["loop_cpu_s"]
     ideal, ideal_cpu, _ = _loop(load(preset, overrides=[f"sim.duration={dur}"], plant="ideal"), reps)
+    rs = steps * n  # robot-steps of one run
     row: dict[str, Any] = {
         "n": n,
         "preset": preset,
-        "sim_s": dur,
+        "sim_s": sim_s,
+        "duration_s": dur,
+        "time_scale": sim_s / dur,
         "control_dt_s": sc.sim.control_dt,
         "physics_dt_s": sc.sim.physics_dt,
         "substeps": n_sub,
         "control_steps": steps,
-        **bare_d,
-        "loop_s": loop,
-        "loop_cpu_s": loop_cpu,
-        "ratio": bare / loop,
-        "ratio_cpu": bare_cpu / loop_cpu,
+        "reps": reps,
+        **pr,
         "bare_steps_per_s": steps / bare,
         "loop_steps_per_s": steps / loop,
-        "us_per_robot_step": loop / (steps * n) * 1e6,
-        "bare_us_per_robot_step": bare / (steps * n) * 1e6,
-        "us_per_robot_step_cpu": loop_cpu / (steps * n) * 1e6,
-        "realtime_factor": dur / loop,
-        "realtime_factor_cpu": dur / loop_cpu,
-        "bare_realtime_factor": dur / bare,
-        "bare_realtime_factor_cpu": dur / bare_cpu,
+        "us_per_robot_step": loop / rs * 1e6,
+        "bare_us_per_robot_step": bare / rs * 1e6,
+        "us_per_robot_step_cpu": loop_cpu / rs * 1e6,
+        "bare_us_per_robot_step_cpu": bare_cpu / rs * 1e6,
+        "realtime_factor": sim_s / loop,
+        "realtime_factor_cpu": sim_s / loop_cpu,
+        "bare_realtime_factor": sim_s / bare,
+        "bare_realtime_factor_cpu": sim_s / bare_cpu,
         "ideal_s": ideal,
-        "ideal_us_per_robot_step": ideal / (steps * n) * 1e6,
+        "ideal_us_per_robot_step": ideal / rs * 1e6,
         "ideal_cpu_s": ideal_cpu,
-        "ideal_realtime_factor": dur / ideal,
+        "ideal_realtime_factor": sim_s / ideal,
         "load_avg": [load0, os.getloadavg()[0]],
         "scene_build_s": build_s,
         "max_final_formation_error_m": max(f["final_formation_error_m"] for f in summ["followers"]),
@@ -177,8 +218,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument(
         "--sizes", default="3,16,64,256", help=f"comma-separated team sizes (of {', '.join(map(str, CASES))})"
     )
-    ap.add_argument("--duration", type=float, help="simulated seconds per case (default: per size)")
-    ap.add_argument("--reps", type=int, default=2, help="repetitions; the best time counts (default 2)")
+    ap.add_argument(
+        "--duration", type=float, help="sim.duration per case, s, before the preset's time scale (default: per size)"
+    )
+    ap.add_argument(
+        "--reps", type=int, default=3, help="alternated bare/loop pairs; the median pair ratio counts (default 3)"
+    )
     ap.add_argument(
         "--numpy",
         "--stepwise",
@@ -217,10 +262,12 @@ def run(args: argparse.Namespace) -> int:
         rows.append(bench_case(n, args.duration, args.reps, numpy_too=getattr(args, "numpy", False)))
         r = rows[-1]
         print(
-            f"n={n:4d}: ratio {r['ratio']:.2f} (CPU time {r['ratio_cpu']:.2f}), {r['us_per_robot_step']:.2f} "
+            f"n={n:4d}: ratio {r['ratio']:.2f} (CPU time {r['ratio_cpu']:.2f}; pairs "
+            f"{', '.join(f'{x:.2f}' for x in r['ratio_pairs'])}), {r['us_per_robot_step']:.2f} "
             f"µs/robot-step (CPU {r['us_per_robot_step_cpu']:.2f}), real-time factor {r['realtime_factor']:.2f} "
             f"(CPU {r['realtime_factor_cpu']:.2f}), load {r['load_avg'][0]:.1f}; solver iterations per physics step "
-            f"{r['solver_iters_per_step']:.2f} (constant torques: {r['constant_torque_solver_iters_per_step']:.2f})",
+            f"{r['solver_iters_per_step']:.2f} (constant torques: {r['constant_torque_solver_iters_per_step']:.2f}); "
+            f"replay vs loop final qpos {r['replay_max_abs_dqpos']:.1e}",
             flush=True,
         )
     import mujoco
