@@ -376,3 +376,109 @@ def test_mujoco_3d_state_same_from_the_compiled_chunk_and_step_by_step():
         assert np.array_equal(a.log[k], c.log[k]), k
     assert not np.isnan(a.log["pose_3d"]).any() and not np.isnan(a.log["wheel_speed"]).any()
     assert a.plant.row_state.shape == (0, 0)  # the plant copies no rows after the run
+
+
+def _mcap_records(data: bytes, at: int, stop: int):
+    """(offset, opcode, body) of the MCAP records in ``data[at:stop]``, read by the MCAP specification's
+    framing (opcode u8, length u64, body), nothing of this project's writer."""
+    import struct
+
+    while at < stop:
+        op, n = struct.unpack_from("<BQ", data, at)
+        yield at, op, data[at + 9 : at + 9 + n]
+        at += 9 + n
+
+
+def _mcap_string(body: bytes, at: int) -> tuple[str, int]:
+    import struct
+
+    (n,) = struct.unpack_from("<I", body, at)
+    return body[at + 4 : at + 4 + n].decode(), at + 4 + n
+
+
+@needs_rosbags
+def test_many_chunk_bag_is_a_consistent_mcap(tmp_path):
+    """A bag of many chunks (ideal plant, 10 s: 7 chunks, the 5 between the first and the last each written
+    from one buffer by outputs/rosbag_write.py's FullChunk), read record by record as the MCAP
+    specification frames it: every message index entry points at a message of its channel and log time in
+    its chunk and every message is indexed once; each chunk's time range and size are its messages'; the
+    summary's chunk indexes point at those chunks and their message indexes; the statistics count what is
+    there; and the messages, in file order, are those rosbags' reader returns, each topic stamped at the
+    log's samples."""
+    import struct
+
+    from rosbags.rosbag2 import Reader
+
+    from bioform_mj.outputs.rosbag import write_bag
+
+    sc = load("paper", plant="ideal", overrides={"sim.duration": 10.0})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = simulate(sc, full_state=True)
+    write_bag(r, tmp_path / "bag")
+    data = (tmp_path / "bag" / "bag.mcap").read_bytes()
+    magic = b"\x89MCAP0\r\n"
+    assert data[:8] == magic and data[-8:] == magic
+    summary_start, summary_offsets, _ = struct.unpack_from("<QQI", data, len(data) - 8 - 20)
+
+    chunks, messages, counts = {}, [], {}
+    at_index: dict[int, tuple[int, int]] = {}  # offset of a message index record -> (its channel, its chunk)
+    last_chunk = None
+    for off, op, body in _mcap_records(data, 8, summary_start):
+        if op == 0x06:  # a chunk: its records, uncompressed
+            t0, t1, size, crc = struct.unpack_from("<QQQI", body, 0)
+            comp, p = _mcap_string(body, 28)
+            (n,) = struct.unpack_from("<Q", body, p)
+            recs = body[p + 8 : p + 8 + n]
+            assert comp == "" and crc == 0 and size == n == len(recs)
+            inside = {}
+            for roff, rop, rbody in _mcap_records(recs, 0, len(recs)):
+                if rop == 0x05:
+                    ch, _, log_t, pub_t = struct.unpack_from("<HIQQ", rbody, 0)
+                    assert pub_t == log_t
+                    inside[roff] = (ch, log_t)
+                    messages.append((ch, log_t, bytes(rbody[22:])))
+                    counts[ch] = counts.get(ch, 0) + 1
+            times = [t for _, t in inside.values()]
+            assert (t0, t1) == (min(times), max(times))
+            chunks[off] = {"length": 9 + len(body), "inside": inside, "indexed": set(), "times": (t0, t1)}
+            last_chunk = off
+        elif op == 0x07:  # a message index of the chunk before it
+            ch, n = struct.unpack_from("<HI", body, 0)
+            pairs = np.frombuffer(body[6 : 6 + n], "<u8").reshape(-1, 2)
+            c = chunks[last_chunk]
+            for log_t, roff in pairs.tolist():
+                assert c["inside"][roff] == (ch, log_t)
+                assert roff not in c["indexed"]
+                c["indexed"].add(roff)
+            at_index[off] = (ch, last_chunk)
+    for c in chunks.values():
+        assert c["indexed"] == set(c["inside"])
+    assert len(chunks) == 7
+
+    seen, stats = set(), None
+    for _, op, body in _mcap_records(data, summary_start, summary_offsets):
+        if op == 0x08:
+            t0, t1, start, length, n = struct.unpack_from("<QQQQI", body, 0)
+            assert chunks[start]["length"] == length and chunks[start]["times"] == (t0, t1)
+            for i in range(n // 10):
+                ch, ioff = struct.unpack_from("<HQ", body, 36 + 10 * i)
+                assert at_index[ioff] == (ch, start)
+            seen.add(start)
+        elif op == 0x0B:
+            stats = body
+    assert seen == set(chunks)
+    total, _, _, _, _, n_chunks, t_first, t_last, n = struct.unpack_from("<QHIIIIQQI", stats, 0)
+    assert total == len(messages) and n_chunks == len(chunks)
+    assert dict(struct.iter_unpack("<HQ", stats[46 : 46 + n])) == counts
+    assert (t_first, t_last) == (min(t for _, t, _ in messages), max(t for _, t, _ in messages))
+
+    with Reader(tmp_path / "bag") as rd:
+        topic = {c.id: c.topic for c in rd.connections}
+        read = [(c.topic, t, bytes(raw)) for c, t, raw in rd.messages()]
+    assert read == [(topic[ch], t, raw) for ch, t, raw in messages]
+    ns = np.rint(r.log["t_state"] * 1e9).astype(np.int64).tolist()
+    K = r.log["t"].shape[0]
+    assert K == 1000
+    for name in ("/clock", "/f2/ground_truth/odom", "/f3/cmd_vel"):
+        assert [t for tp, t, _ in read if tp == name] == (ns if name != "/f3/cmd_vel" else ns[:K])

@@ -317,7 +317,7 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
     S = K + 1  # state samples: the log rows and the end
     ns = start_ns + np.rint(ts * 1e9).astype(np.int64)
     sec, nsec = ns // 1_000_000_000, ns % 1_000_000_000
-    all_rows, log_rows = np.arange(S), np.arange(K)
+    all_rows, log_rows = slice(0, S), slice(0, K)  # the rows a topic's numbers come from (views, not copies)
     pose3, twist3 = np.asarray(log["pose_3d"], float), np.asarray(log["twist_3d"], float)
     q = quat_of_rpy(pose3[..., 3:6])  # (S, n, 4) w x y z
     leader = np.asarray(log["leader_state"], float)  # (S, 5)
@@ -331,21 +331,23 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
     ep, ev = np.asarray(log["est_pose"], float), np.asarray(log["est_vel"], float)
     topics: list[_Topic] = []
 
-    def build(name: str, msgtype: str, rows: np.ndarray, make) -> _Topic:
+    def build(name: str, msgtype: str, rows: slice, make) -> _Topic:
         mk = _Markers()
         stamp = msgs.time(mk.int32(sec[rows], "<i4"), mk.int32(nsec[rows], "<u4"))
         msg = make(mk, stamp, rows)
         raw = msgs.store.serialize_cdr(msg, msgtype)
-        tp = _Topic(name, msgtype, rows, np.frombuffer(bytes(raw), np.uint8).copy(), mk.locate(bytes(raw)))
+        tp = _Topic(
+            name, msgtype, np.arange(rows.stop), np.frombuffer(bytes(raw), np.uint8).copy(), mk.locate(bytes(raw))
+        )
         topics.append(tp)
         return tp
 
-    def stamp_of(mk: _Markers, rows: np.ndarray) -> Any:
+    def stamp_of(mk: _Markers, rows: slice) -> Any:
         return msgs.time(mk.int32(sec[rows], "<i4"), mk.int32(nsec[rows], "<u4"))
 
     build("/clock", "rosgraph_msgs/msg/Clock", all_rows, lambda mk, st, r: msgs.clock(st))
 
-    def tf(mk: _Markers, st: Any, r: np.ndarray) -> Any:
+    def tf(mk: _Markers, st: Any, r: slice) -> Any:
         out = []
         for i in range(n):
             f = f"f{i + 1}"
@@ -414,7 +416,7 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
             _Topic(
                 f"/{f}/cmd_vel",
                 "geometry_msgs/msg/Twist",
-                log_rows,
+                np.arange(K),
                 np.frombuffer(bytes(raw), np.uint8).copy(),
                 mk_cmd.locate(bytes(raw)),
             )
@@ -523,20 +525,35 @@ def write_bag(
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists (overwrite=True replaces it)")
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    tmp = _fresh_tmp(path)
     try:
-        inner = tmp / path.name
-        counts = _write(inner, log, summary, sensing, distro, start_ns, robots)
+        counts = _write(tmp, log, summary, sensing, distro, start_ns, robots, name=path.name)
         if path.exists():
             shutil.rmtree(path)
-        os.replace(inner, path)
+        os.replace(tmp, path)
     except OSError as exc:
         from bioform_mj.core.errors import WriteFailed
 
         raise WriteFailed(str(path), exc) from exc
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if os.path.lexists(tmp):
+            shutil.rmtree(tmp, ignore_errors=True)
     return BagInfo(path, sum(counts.values()), counts, distro, time.perf_counter() - t0)
+
+
+def _fresh_tmp(path: Path) -> Path:
+    """A name beside ``path`` that does not exist, ``.NAME.XXXXXXXXXXXX.tmp`` (the pattern of
+    :func:`bioform_mj.outputs.files.atomic_path`'s temporaries, which an interrupted run's clean-up
+    removes): the bag's folder is written there, its MCAP file already under its final name, and renamed
+    to ``path`` when complete (one folder created and renamed; no folder around it to remove: on ext4
+    that ``rmdir`` waited for the journal, 0.3-8 ms a bag)."""
+    import secrets
+
+    for _ in range(100):
+        tmp = path.parent / f".{path.name}.{secrets.token_hex(6)}.tmp"
+        if not os.path.lexists(tmp):
+            return tmp
+    raise FileExistsError(f"no free temporary name beside {path}")
 
 
 def robots_stated(result: Any) -> list[dict[str, Any]]:
@@ -586,15 +603,17 @@ def _write(
     distro: str,
     start_ns: int,
     robots: list[dict[str, Any]] | None = None,
+    name: str | None = None,
 ):
     """Write the bag folder ``path`` (must not exist); returns ``{topic: messages}``. ``robots``:
-    :func:`robots_stated`, written into ``custom_data`` once."""
+    :func:`robots_stated`, written into ``custom_data`` once; ``name``: the bag's name (its MCAP file
+    ``NAME.mcap``; default: the folder's)."""
     from rosbags.rosbag2 import StoragePlugin
 
     msgs = _messages(distro)
     topics = topics_of(log, sensing, msgs, start_ns)
     static = _static_tf(log, msgs, start_ns)
-    with bulk_writer(path, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP) as w:
+    with bulk_writer(path, name=name, version=BAG_VERSION, storage_plugin=StoragePlugin.MCAP) as w:
         w.set_custom_data(
             "bioform_mj",
             json.dumps(

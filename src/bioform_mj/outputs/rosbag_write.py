@@ -18,7 +18,17 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["CHUNK_BYTES", "MSG_HEAD", "bulk_writer", "msgdef", "record", "writer_classes", "yaml_text"]
+__all__ = [
+    "CHUNK_BYTES",
+    "MSG_HEAD",
+    "FullChunk",
+    "bulk_writer",
+    "mcap_head",
+    "msgdef",
+    "record",
+    "writer_classes",
+    "yaml_text",
+]
 
 #: bytes of records per MCAP chunk (as ``rosbags``' own writer: 1 MiB)
 CHUNK_BYTES = 1 << 20
@@ -26,20 +36,29 @@ MSG_HEAD = 1 + 8 + 2 + 4 + 8 + 8  # opcode, record length, channel id, sequence,
 
 
 def chunk_matrix(
-    topics: list[Any], cids: list[int], cols: list[int], B: int, rows: int, stamps: np.ndarray
+    topics: list[Any],
+    cids: list[int],
+    cols: list[int],
+    B: int,
+    rows: int,
+    stamps: np.ndarray,
+    out: np.ndarray | None = None,
 ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
     """The byte matrix of a chunk of ``rows`` samples (``(rows, B)`` uint8: every topic's message record
-    side by side, at ``cols``) with every record's constant bytes (header, template) written once, and its
+    side by side, at ``cols``; ``out``: a C-contiguous ``(rows, B)`` uint8 array to use, else a new one)
+    with every record's constant bytes (header, template) written once, and its
     slots: ``(view, values)`` pairs, a strided ``(rows, k)`` view of the matrix where ``k`` numbers side by
     side in a record go (log and publish times, the marked fields: a position, a quaternion) and those
     numbers for all ``K`` samples, ``(K, k)``. A chunk's samples ``j0:j1`` are then
     ``view[:j1 - j0] = values[j0:j1]`` for each slot, the same matrix reused chunk after chunk (written out
-    before it is refilled): one numpy assignment per run of numbers, not per message."""
-    M = np.empty((rows, B), np.uint8)
+    before it is refilled): one numpy assignment per run of numbers, not per message. The values of all
+    slots of one dtype are one ``(K, columns)`` array made by one ``np.stack`` (a slot's values: its
+    columns)."""
+    M = np.empty((rows, B), np.uint8) if out is None else out
     buf = M.reshape(-1)
     t = np.ascontiguousarray(stamps, dtype="<u8")
     K = len(t)
-    slots: list[tuple[np.ndarray, np.ndarray]] = []
+    runs: list[tuple[int, str, list[np.ndarray]]] = []  # (byte offset in a sample's row, dtype, values)
     for tp, cid, col in zip(topics, cids, cols):
         L = tp.template.size
         M[:, col : col + MSG_HEAD] = np.frombuffer(struct.pack("<BQHIQQ", 0x05, 22 + L, cid, 0, 0, 0), np.uint8)
@@ -48,7 +67,7 @@ def chunk_matrix(
         numbers += [(col + MSG_HEAD + off, dt, vals) for off, dt, vals in tp.fields]
         numbers.sort(key=lambda n: n[0])
         # numbers side by side in the record (a position's x y z, a quaternion, the two stamps) are one
-        # 2-D slot: (rows, k) with strides (B, itemsize), and their values one (K, k) array
+        # 2-D slot: (rows, k) with strides (B, itemsize), and their values k columns of a (K, k) array
         i = 0
         while i < len(numbers):
             off, dt, _ = numbers[i]
@@ -56,11 +75,94 @@ def chunk_matrix(
             j = i + 1
             while j < len(numbers) and numbers[j][1] == dt and numbers[j][0] == off + (j - i) * w:
                 j += 1
-            vals = np.stack([np.asarray(v[:K], dtype=dt) for _, _, v in numbers[i:j]], axis=1)
-            view = np.ndarray((rows, j - i), dt, buffer=buf, offset=off, strides=(B, w))
-            slots.append((view, vals))
+            runs.append((off, dt, [v[:K] for _, _, v in numbers[i:j]]))
             i = j
+    columns: dict[str, list[np.ndarray]] = {}
+    for _, dt, vs in runs:
+        columns.setdefault(dt, []).extend(vs)
+    table = {dt: np.stack([np.asarray(v, dtype=dt) for v in vs], axis=1) for dt, vs in columns.items()}
+    at = dict.fromkeys(table, 0)
+    slots: list[tuple[np.ndarray, np.ndarray]] = []
+    for off, dt, vs in runs:
+        k, w = len(vs), np.dtype(dt).itemsize
+        view = np.ndarray((rows, k), dt, buffer=buf, offset=off, strides=(B, w))
+        slots.append((view, table[dt][:, at[dt] : at[dt] + k]))
+        at[dt] += k
     return M, slots
+
+
+class FullChunk:
+    """An MCAP chunk of ``rows`` whole samples (``B`` bytes each: every topic's message record side by side,
+    topic ``cids[k]`` at ``cols[k]``) with nothing before or after them in it, and its message index
+    records: all in one byte buffer, written with one ``write`` call. Everything but the samples' numbers
+    and the chunk's times is the same for every such chunk and is written once: the chunk record's header,
+    the records' constant bytes (:func:`chunk_matrix` fills :attr:`M`, the samples' ``(rows, B)`` matrix,
+    a view into the buffer) and each message index's offsets (``sample * B + col``, the chunk's records
+    start at 0). The bytes are those ``write_chunk`` writes for the same records."""
+
+    HEAD = 1 + 8 + 8 + 8 + 8 + 4 + 4 + 8  # opcode, length, start/end time, size, CRC (0), "" (no compression), size
+
+    def __init__(self, rows: int, B: int, cids: list[int], cols: list[int]) -> None:
+        self.rows, self.size = rows, rows * B
+        order = sorted(range(len(cids)), key=lambda k: cids[k])
+        self.cids = [cids[k] for k in order]
+        self.index_len = 1 + 8 + 2 + 4 + 16 * rows  # one message index record: (log time, offset) pairs
+        H, C = self.HEAD, len(cids)
+        self.buf = np.zeros(H + self.size + C * self.index_len, np.uint8)
+        struct.pack_into("<BQQQQIIQ", self.buf, 0, 0x06, H - 9 + self.size, 0, 0, self.size, 0, 0, self.size)
+        #: the samples' byte matrix, (rows, B) uint8
+        self.M = self.buf[H : H + self.size].reshape(rows, B)
+        self.index_at = [H + self.size + k * self.index_len for k in range(C)]
+        for at, k in zip(self.index_at, order):
+            struct.pack_into("<BQHI", self.buf, at, 0x07, 2 + 4 + 16 * rows, cids[k], 16 * rows)
+            pairs = np.ndarray((rows, 2), "<u8", buffer=self.buf, offset=at + 15)
+            pairs[:, 1] = np.arange(rows, dtype=np.uint64) * B + cols[k]
+        #: every message index's log times, (topics, rows) u8 (the same stamps in each)
+        self.times = np.ndarray(
+            (C, rows), "<u8", buffer=self.buf, offset=H + self.size + 15, strides=(self.index_len, 16)
+        )
+        self.summary = struct.Struct("<QQQQI" + "HQ" * C + "QIQQ")  # the chunk index record (summary section)
+
+    def write(self, storage: Any, stamps: np.ndarray) -> None:
+        """Write the chunk (:attr:`M` filled) stamped ``stamps`` (rows,) ns to ``storage`` (``BulkMcap``),
+        with its chunk index and message counts as ``write_chunk`` keeps them."""
+        from io import BytesIO
+
+        t_start, t_end = int(stamps.min()), int(stamps.max())
+        struct.pack_into("<QQ", self.buf, 9, t_start, t_end)
+        self.times[:] = stamps
+        start = storage.bio.tell()
+        storage.bio.write(self.buf)
+        where = [v for cid, at in zip(self.cids, self.index_at) for v in (cid, start + at)]
+        n = len(self.cids) * self.index_len
+        rec = BytesIO()
+        rec.write(
+            self.summary.pack(
+                t_start, t_end, start, self.HEAD + self.size, len(self.cids) * 10, *where, n, 0, self.size, self.size
+            )
+        )
+        storage.chunks.append(rec)
+        for cid in self.cids:
+            storage.channel_stats[cid] += self.rows
+        storage.message_start_time = min(storage.message_start_time, t_start)
+        storage.message_end_time = max(storage.message_end_time, t_end)
+
+
+@functools.cache
+def mcap_head() -> bytes:
+    """The MCAP file's magic and header record as ``rosbags``' ``McapWriter`` writes them (its profile
+    ``ros2``, library ``rosbags-<version>``)."""
+    from importlib.metadata import version
+    from io import BytesIO
+
+    from rosbags.rosbag2.storage_mcap import write_record, write_string
+
+    out, rec = BytesIO(), BytesIO()
+    out.write(b"\x89MCAP\x30\r\n")
+    write_string(rec, "ros2")
+    write_string(rec, f"rosbags-{version('rosbags')}")
+    write_record(out, 0x01, rec)
+    return out.getvalue()
 
 
 def record(cid: int, stamp: int, data: bytes) -> bytes:
@@ -70,20 +172,41 @@ def record(cid: int, stamp: int, data: bytes) -> bytes:
 @functools.cache
 def writer_classes():
     """``(_BulkWriter, _BulkMcap)``: rosbags' writer with a storage that takes whole chunks at once."""
+    from collections import defaultdict
     from io import BytesIO
+    from pathlib import Path
 
-    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
     from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk
 
     class BulkMcap(McapWriter):
-        """``rosbags``' MCAP storage (rosbags 0.11.9) plus :meth:`write_chunk`: one chunk of ready records."""
+        """``rosbags``' MCAP storage (rosbags 0.11.9) plus :meth:`write_chunk`: one chunk of ready records.
+        ``name``: the MCAP file's name without ``.mcap`` (default: the folder's, as ``rosbags``), so that a
+        bag is written in a temporary folder under its final file name."""
+
+        def __init__(self, path: Path, compression: Any, name: str | None = None) -> None:
+            """``McapWriter.__init__`` without compression (the bulk writer's metadata states none) and
+            with the file's magic and header record made once per process (:func:`mcap_head`: ``rosbags``
+            reads its own version from the package metadata for every file, a few ms)."""
+            from rosbags.rosbag2 import CompressionMode
+
+            if compression != CompressionMode.NONE:
+                raise ValueError("rosbag: the bulk writer writes uncompressed bags only")
+            self.path = path / f"{name or path.name}.mcap"
+            self.bio = self.path.open("xb")
+            self.bio.write(mcap_head())
+            self.schemas, self.channels, self.chunks = [], [], []
+            self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+            self.compression = ""
+            self.compressor = lambda x: x
+            self.message_start_time = 2**63 - 1
+            self.message_end_time = 0
+            self.channel_stats = {}
 
         def write_chunk(self, pieces: list[Any], index: dict[int, tuple[np.ndarray, np.ndarray]]) -> None:
             """Write the message records ``pieces`` (bytes or contiguous uint8 arrays, in time order) as
             one chunk; ``index``: channel id → (log times, offsets of its records in the pieces). The
             schema and channel records ``rosbags`` keeps pending go first."""
-            from collections import defaultdict
-
             pending = self.chunk.bio.getvalue()
             self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
             if not index:
@@ -132,6 +255,20 @@ def writer_classes():
         as long as filling all the messages of an ideal-plant run."""
 
         STORAGE_PLUGINS = {StoragePlugin.MCAP: BulkMcap}
+
+        def __init__(self, path: Any, *, name: str | None = None, **kwargs: Any) -> None:
+            """``Writer(path, **kwargs)``; ``name``: the MCAP file's name without ``.mcap`` (default: the
+            folder's name, as ``rosbags``)."""
+            super().__init__(path, **kwargs)
+            self.mcap_name = name
+
+        def open(self) -> None:
+            """``Writer.open``: the folder (it must not exist), then the MCAP storage named ``name``."""
+            try:
+                self.path.mkdir(mode=0o755, parents=True)
+            except FileExistsError:
+                raise WriterError(f"{self.path} exists already, not overwriting.") from None
+            self.storage = BulkMcap(self.path, self.compression_mode, self.mcap_name)
 
         def add_connection(
             self, topic: str, msgtype: str, *, typestore: Any, offered_qos_profiles: list[Any] = ()
@@ -240,11 +377,20 @@ def writer_classes():
                     tail_idx.append(cid)
             first = record(c_static.id, int(stamps[0]), static)
             per = max(1, min(K, CHUNK_BYTES // max(B, 1)))
-            M, slots = chunk_matrix(topics, cids, cols, B, per, stamps[:K])
+            bounds = [(j0, min(K, j0 + per)) for j0 in range(0, max(K, 1), per)]
+            # the chunks between the first (schemas, channels, /tf_static) and the last (the end of the run):
+            # all of ``per`` samples, written from one buffer whose matrix the slots fill
+            full = FullChunk(per, B, cids, cols) if any(0 < j0 and j1 < K for j0, j1 in bounds) else None
+            M, slots = chunk_matrix(topics, cids, cols, B, per, stamps[:K], None if full is None else full.M)
             storage = self.storage
-            j0 = 0
-            while True:
-                j1 = min(K, j0 + per)
+            for j0, j1 in bounds:
+                for view, vals in slots:  # this chunk's numbers into the one matrix of every record's bytes
+                    view[: j1 - j0] = vals[j0:j1]
+                if full is not None and 0 < j0 and j1 < K:
+                    full.write(storage, stamps[j0:j1])
+                    for cid in cids:
+                        self.counts[cid] += per
+                    continue
                 parts = [first] if j0 == 0 else []
                 at = len(first) if j0 == 0 else 0
                 index: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -253,8 +399,6 @@ def writer_classes():
                 js = np.arange(j0, j1)
                 for cid, col in zip(cids, cols):
                     index[cid] = (stamps[js], at + (js - j0) * B + col)
-                for view, vals in slots:  # this chunk's numbers into the one matrix of every record's bytes
-                    view[: j1 - j0] = vals[j0:j1]
                 parts.append(M[: j1 - j0].reshape(-1))
                 at += (j1 - j0) * B
                 if j1 == K:  # the last chunk: the end of the run's messages too
@@ -266,9 +410,6 @@ def writer_classes():
                 storage.write_chunk(parts, {k: v for k, v in index.items() if len(v[0])})
                 for cid, (t, _) in index.items():
                     self.counts[cid] += len(t)
-                if j1 == K:
-                    break
-                j0 = j1
             if S:
                 self.min_timestamp = min(self.min_timestamp, int(stamps.min()))
                 self.max_timestamp = max(self.max_timestamp, int(stamps.max()))
