@@ -152,3 +152,40 @@ def test_plant_lookups_against_brute_force():
     got = plant.start_overlaps()
     assert want == [(2, 3)]
     assert got == [f"followers 2 and 3 overlap by {-d23 * 100:.3g} cm"]
+
+
+def test_team_checks_see_each_robot_as_alone():
+    """The pre-run checks that look at one robot of a team (tip margins, floor contacts, the level-stance check, which
+    now look only at that robot's geoms, contacts and rolling joints) give for each robot of a 6-robot team what
+    they give for the same robot alone in its own scene (support geoms, contact roles and counts exactly;
+    margins, heights and loads to 1e-6)."""
+    from bioform_mj.assess.check import tip_margins
+    from bioform_mj.robots.contacts import floor_contacts
+    from bioform_mj.robots.level_support import level_support
+
+    files, poses = _team(6)
+    team = MujocoPlant(files, poses, 0.004, 0.004)
+    scratch, settled = mujoco.MjData(team.model), team.settled_data()
+    mujoco.mj_kinematics(team.model, scratch)
+    for i, f in enumerate(files):
+        alone = MujocoPlant([f], poses[i : i + 1], 0.004, 0.004)
+        s1, d1 = mujoco.MjData(alone.model), alone.settled_data()
+        mujoco.mj_kinematics(alone.model, s1)
+        got, want = tip_margins(team.model, scratch, f"f{i + 1}/"), tip_margins(alone.model, s1, "f1/")
+        assert [n.split("/", 1)[1] for n in got["support_geoms"]] == [n.split("/", 1)[1] for n in want["support_geoms"]]
+        assert len(got["support_geoms"]) >= 3
+        for k in ("forward", "backward", "lateral"):
+            assert got["tip_accel_mps2"][k] == pytest.approx(want["tip_accel_mps2"][k], rel=1e-6)
+        assert got["com_height_m"] == pytest.approx(want["com_height_m"], rel=1e-6)
+        fc, fc1 = (
+            floor_contacts(team.model, settled, team.layouts[i], f"f{i + 1}/"),
+            floor_contacts(alone.model, d1, alone.layouts[0], "f1/"),
+        )
+        key = ("body", "geom", "role", "points", "rolls", "welded_to_base", "condim")
+        assert [tuple(r[k] for k in key) for r in fc] == [tuple(r[k] for k in key) for r in fc1]
+        assert [r["role"] for r in fc].count("wheel") == 2
+        assert [r["load_n"] for r in fc] == pytest.approx([r["load_n"] for r in fc1], rel=1e-6, abs=1e-9)
+        w = team.params[i].mass * 9.81
+        assert (level_support(team.model, settled, team.layouts[i], w, 0.99) is None) == (
+            level_support(alone.model, d1, alone.layouts[0], w, 0.99) is None
+        )
