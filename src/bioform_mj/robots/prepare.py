@@ -270,8 +270,9 @@ def prepare_robots(
 ) -> list[tuple[mujoco.MjSpec, RobotLayout, np.ndarray, float]]:
     """:func:`prepare_robot` of each entry, each distinct entry prepared once: a repeat gets a copy of the first's
     spec (``MjSpec.copy``) and its own copy of the axle midpoint; the layout (frozen) is shared. A team of n copies of
-    one robot reads, checks and analyses its file once, not n times (at n = 1024, 24 s of a 30 s build; the scene
-    is the same byte for byte, tests/test_scene_build.py). An entry that cannot be hashed is prepared each time."""
+    one robot reads, checks and analyses its file once, not n times (at n = 1024: 34 s of the build under cProfile;
+    the scene is the same byte for byte, tests/test_scene_build.py). An entry that cannot be hashed is prepared each
+    time."""
     done: dict = {}
     out = []
     for e in entries:
