@@ -93,6 +93,8 @@ def rolling_bodies(model: mujoco.MjModel, lay: RobotLayout) -> set[int]:
     joint or a hinge that is not a swivel (its axis more than :data:`SWIVEL_TILT_DEG` from the base's
     vertical at ``qpos0``). A geom on a swivel alone turns about the vertical but slides on the floor
     (design §14.1): it brakes like a fixed caster."""
+    if not lay.rolling_joints:  # nothing to roll: no kinematics of the whole scene (once per robot: n² in a team)
+        return set()
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
     up = data.xmat[model.body(lay.base).id].reshape(3, 3)[:, 2]

@@ -41,6 +41,7 @@ What was found is stored in the robot's spec as the custom text ``bioform_layout
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -66,7 +67,7 @@ from bioform_mj.robots.layout import (
 )
 from bioform_mj.robots.refs import RobotRef
 
-__all__ = ["prepare_robot", "load_robot"]
+__all__ = ["prepare_robot", "prepare_robots", "load_robot"]
 
 
 def _wheel_proxy(
@@ -263,6 +264,30 @@ def _hold_and_contacts(spec, model, plan, acts, sjoints, sgeoms) -> None:
             data=data,
             solref=[2 * dt, 1.0],  # as stiff as the step allows (MuJoCo: timeconst >= 2 dt)
         )
+
+
+def prepare_robots(
+    entries: Sequence[RobotRef | str | Path],
+) -> list[tuple[mujoco.MjSpec, RobotLayout, np.ndarray, float]]:
+    """:func:`prepare_robot` of each entry, each distinct entry prepared once: a repeat gets a copy of the first's
+    spec (``MjSpec.copy``) and its own copy of the axle midpoint; the layout (frozen) is shared. A team of n copies of
+    one robot reads, checks and analyses its file once, not n times (at n = 1024: 34 s of the build under cProfile;
+    the scene is the same byte for byte, tests/test_scene_build.py). An entry that cannot be hashed is prepared each
+    time."""
+    done: dict = {}
+    out = []
+    for e in entries:
+        try:
+            first = done.get(e)
+        except TypeError:  # not hashable: no reuse
+            out.append(prepare_robot(e))
+            continue
+        if first is None:
+            first = done[e] = prepare_robot(e)
+            out.append(first)
+        else:
+            out.append((first[0].copy(), first[1], first[2].copy(), first[3]))
+    return out
 
 
 def load_robot(entry: RobotRef | str | Path) -> mujoco.MjSpec:

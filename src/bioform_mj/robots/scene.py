@@ -15,8 +15,11 @@ pose and its wheels touch the floor. Nothing here edits XML strings.
 
 from __future__ import annotations
 
+import contextlib
 import logging
-from collections.abc import Sequence
+import math
+import warnings
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import mujoco
@@ -41,7 +44,7 @@ from bioform_mj.robots.layout import (
     welded_to,
 )
 from bioform_mj.robots.mjcf import absolute_asset_files
-from bioform_mj.robots.prepare import load_robot, prepare_robot
+from bioform_mj.robots.prepare import load_robot, prepare_robot, prepare_robots
 from bioform_mj.robots.surfaces import add_min_friction_pairs
 
 log = logging.getLogger(__name__)
@@ -267,7 +270,7 @@ def build_scene(
 
     if prepared is not None and len(prepared) != n:
         raise ValueError(f"prepared must have {n} entries, got {len(prepared)}")
-    prepared = list(prepared) if prepared is not None else [prepare_robot(f) for f in robot_files]
+    prepared = list(prepared) if prepared is not None else prepare_robots(robot_files)
     spec = _new_spec(prepared[0][0], timestep)
     world = spec.worldbody
     _add_floor(world, floor_friction, friction_patch)
@@ -275,7 +278,7 @@ def build_scene(
     _add_lights(world)
     # the cameras' distances and the markers' sizes are the paper robot's × u, the robots' size relative to it
     _add_markers(world, poses, robot_unit([p[1].half_track for p in prepared]), slots)
-    _attach_robots(spec, prepared, poses, payloads, sensors)
+    spec = _attach_robots(spec, prepared, poses, payloads, sensors)
     # design §13.3: on the scene's own slippery surfaces a robot's priority geom gets the smaller friction
     surfaces = (["floor"] if floor_friction is not None else []) + (["friction_patch"] if friction_patch else [])
     add_min_friction_pairs(spec, surfaces)
@@ -414,32 +417,117 @@ def _add_markers(world: mujoco.MjsBody, poses: np.ndarray, u: float, slots: bool
             )
 
 
+#: robots attached one by one to a spec up to this many; above it, in groups (:func:`_attach_robots`)
+GROUP_FROM = 16
+
+#: at most this many groups per spec (:func:`_attach_tree`)
+GROUP_FAN = 8
+
+#: MuJoCo's warning for the group's attach with an empty prefix (the names already carry theirs: nothing is lost)
+_EMPTY_PREFIX = "Attaching a spec with an empty prefix may prevent the model from being saved correctly."
+
+
 def _attach_robots(
     spec: mujoco.MjSpec,
     prepared: Sequence[tuple],
     poses: np.ndarray,
     payloads: Sequence[tuple[float, float]] | None,
     sensors: bool,
-) -> None:
+) -> mujoco.MjSpec:
     """Attaches each prepared robot (with its payload and sensors) as ``f{i+1}/``: its axle midpoint at the pose's
-    (x, y) m, its tyres' lowest point on the floor, heading θ rad."""
-    world = spec.worldbody
-    for i, ((robot, layout, axle_world, base_yaw), pose) in enumerate(zip(prepared, poses)):
-        if payloads is not None:
-            mass_kg, inertia_kgm2 = payloads[i]
-            _add_payload_to_body(robot.body(layout.base), float(mass_kg), float(inertia_kgm2), np.array(layout.axle))
-        if sensors:
-            add_sensors(robot, layout)
-        robot.option = spec.option  # avoid MuJoCo 4 attach-conflict warnings: the scene decides
-        # the file's axle midpoint goes to (x, y), its wheels' lowest point to the floor, heading θ
-        yaw = pose[2] - base_yaw
-        c, s_ = np.cos(yaw), np.sin(yaw)
-        mx, my = c * axle_world[0] - s_ * axle_world[1], s_ * axle_world[0] + c * axle_world[1]
-        # the tyre's own radius where a mapped wheel_radius differs from it (the physics is the tyre's: design §14.4;
-        # at the mapped one a smaller radius starts the robot inside the floor and it jumps)
-        r_floor = _tyre_radius(layout)
-        frame = world.add_frame(pos=[pose[0] - mx, pose[1] - my, r_floor - axle_world[2]], quat=yaw_quat(yaw))
-        spec.attach(robot, prefix=follower_prefix(i), frame=frame)
+    (x, y) m, its tyres' lowest point on the floor, heading θ rad. Returns the scene: ``spec`` itself, or above
+    :data:`GROUP_FROM` robots a copy of it.
+
+    Each ``MjSpec.attach`` rebuilds the whole parent's name lists (MuJoCo's ``ProcessLists``), so attaching n robots
+    one by one to the scene costs n² (235 of 360 s at n = 1024, docs/findings/performance.md, "Building the scene").
+    Above :data:`GROUP_FROM` robots they are attached in a tree (:func:`_attach_tree`): each robot to a small group
+    spec under its own prefix, each group to its parent with an empty prefix; every attach then meets a parent of
+    a bounded size but the last few. The scene is the same as one built robot by robot: the same bodies, names,
+    classes and order, ``to_xml`` and the compiled model equal byte for byte (tests/test_scene_build.py). MuJoCo
+    keeps a warning about the empty prefix and says it again at every compile and ``to_xml``; the copy returned
+    (``MjSpec.copy``) does not carry it."""
+    items = list(range(len(prepared)))
+    if len(items) <= GROUP_FROM:
+        for i in items:
+            _attach_one(spec, prepared[i], poses[i], i, payloads, sensors)
+        return spec
+    _attach_tree(spec, items, prepared, poses, payloads, sensors)
+    return spec.copy()
+
+
+def _attach_tree(
+    spec: mujoco.MjSpec,
+    items: list[int],
+    prepared: Sequence[tuple],
+    poses: np.ndarray,
+    payloads: Sequence[tuple[float, float]] | None,
+    sensors: bool,
+) -> None:
+    """Attach robots ``items`` (indices, in order) to ``spec``: one by one up to :data:`GROUP_FROM`, else split in
+    order into at most :data:`GROUP_FAN` groups, each built by this function in its own spec (the scene's
+    ``<option>`` and compiler angle and limit settings: no attach conflict) and attached with an empty prefix."""
+    if len(items) <= GROUP_FROM:
+        for i in items:
+            _attach_one(spec, prepared[i], poses[i], i, payloads, sensors)
+        return
+    size = max(GROUP_FROM, math.ceil(len(items) / GROUP_FAN))
+    for start in range(0, len(items), size):
+        group = mujoco.MjSpec()
+        group.option = spec.option
+        group.compiler.degree = spec.compiler.degree
+        group.compiler.autolimits = spec.compiler.autolimits
+        _attach_tree(group, items[start : start + size], prepared, poses, payloads, sensors)
+        with _without_warning(_EMPTY_PREFIX):
+            spec.attach(group, prefix="", frame=spec.worldbody.add_frame())
+
+
+def _attach_one(
+    spec: mujoco.MjSpec,
+    entry: tuple,
+    pose: np.ndarray,
+    i: int,
+    payloads: Sequence[tuple[float, float]] | None,
+    sensors: bool,
+) -> None:
+    """Attach prepared robot ``i`` (``entry``: a :func:`prepare_robot` result) to ``spec`` at ``pose`` (x m, y m, θ rad)
+    with its payload and sensors (see :func:`_attach_robots`)."""
+    robot, layout, axle_world, base_yaw = entry
+    if payloads is not None:
+        mass_kg, inertia_kgm2 = payloads[i]
+        _add_payload_to_body(robot.body(layout.base), float(mass_kg), float(inertia_kgm2), np.array(layout.axle))
+    if sensors:
+        add_sensors(robot, layout)
+    robot.option = spec.option  # avoid MuJoCo 4 attach-conflict warnings: the scene decides
+    # the file's axle midpoint goes to (x, y), its wheels' lowest point to the floor, heading θ
+    yaw = pose[2] - base_yaw
+    c, s_ = np.cos(yaw), np.sin(yaw)
+    mx, my = c * axle_world[0] - s_ * axle_world[1], s_ * axle_world[0] + c * axle_world[1]
+    # the tyre's own radius where a mapped wheel_radius differs from it (the physics is the tyre's: design §14.4;
+    # at the mapped one a smaller radius starts the robot inside the floor and it jumps)
+    r_floor = _tyre_radius(layout)
+    frame = spec.worldbody.add_frame(pos=[pose[0] - mx, pose[1] - my, r_floor - axle_world[2]], quat=yaw_quat(yaw))
+    spec.attach(robot, prefix=follower_prefix(i), frame=frame)
+
+
+@contextlib.contextmanager
+def _without_warning(text: str) -> Iterator[None]:
+    """MuJoCo's warning ``text`` dropped while the block runs; any other goes where it went (the handler installed,
+    else a Python ``RuntimeWarning`` ``"MuJoCo: …"`` as :func:`bioform_mj.outputs.mjlog.api_warnings` says them)."""
+    prev = mujoco.get_mju_user_warning()
+
+    def handler(msg: str) -> None:
+        if msg.strip() == text:
+            return
+        if prev is not None:
+            prev(msg)
+        else:
+            warnings.warn(f"MuJoCo: {msg}", RuntimeWarning, stacklevel=2)
+
+    mujoco.set_mju_user_warning(handler)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(prev)
 
 
 #: names of the sensors :func:`add_sensors` puts on a robot (the follower prefix is added on attach)

@@ -49,7 +49,7 @@ from bioform_mj.plants.mujoco.kernels import (
 from bioform_mj.robots.analysis import layout_of
 from bioform_mj.robots.layout import RobotLayout, dc_ctrl_scale
 from bioform_mj.robots.params import RobotParams, robot_parameters, running_data
-from bioform_mj.robots.prepare import prepare_robot
+from bioform_mj.robots.prepare import prepare_robots
 from bioform_mj.robots.scene import Markers, build_scene, compile_scene, follower_prefix, payload_inertial
 
 log = logging.getLogger(__name__)
@@ -166,7 +166,7 @@ class MujocoPlant:
                 f"that divides control_dt {control_dt} s"
             )
 
-        prepared = [prepare_robot(f) for f in robot_files]
+        prepared = prepare_robots(robot_files)  # each distinct robot read and analysed once
         #: each robot file's own ``<option timestep>``, s (the scene runs at ``physics_dt``)
         self.file_timesteps: tuple[float, ...] = tuple(float(p[0].option.timestep) for p in prepared)
         self.spec = build_scene(
@@ -331,9 +331,9 @@ class MujocoPlant:
         r = self.footprint_radius
         out = []
         for i in range(self.n):
-            for j in range(i + 1, self.n):
-                if np.hypot(*(xy[i] - xy[j])) > r[i] + r[j]:
-                    continue
+            # the pairs whose bounding circles meet, found for all j > i at once (a Python test per pair was n²)
+            near = np.hypot(xy[i + 1 :, 0] - xy[i, 0], xy[i + 1 :, 1] - xy[i, 1]) <= r[i] + r[i + 1 :]
+            for j in (i + 1 + np.flatnonzero(near)).tolist():
                 dist = min(
                     mujoco.mj_geomDistance(m, d, a, b, 1.0, None)
                     for a in self.contact_geoms[i]
