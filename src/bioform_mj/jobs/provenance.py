@@ -32,9 +32,10 @@ from typing import Any
 
 from bioform_mj._version import __version__
 from bioform_mj.core.codehash import code_hash
+from bioform_mj.robots.spec_files import CUBE_FACES
 
 #: attributes that name a file MuJoCo loads (MJCF and URDF)
-_FILE_ATTRS = ("file", "filename", "fileright", "fileleft", "fileup", "filedown", "filefront", "fileback")
+_FILE_ATTRS = ("file", "filename", *CUBE_FACES)
 #: element tag → which compiler folder its file is relative to
 _DIR_OF = {"mesh": "meshdir", "skin": "meshdir", "hfield": "meshdir", "texture": "texturedir"}
 

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from bioform_mj.core.errors import InputError
+from bioform_mj.robots.spec_files import CUBE_FACES, spec_files
 
 __all__ = [
     "MJCF_MAX_MB",
@@ -49,9 +50,7 @@ MJCF_MAX_BODIES, MJCF_MAX_GEOMS = 5000, 20000
 #: deepest ``<include>`` chain walked (MuJoCo refuses a recursive one itself; this bounds the walk)
 INCLUDE_DEPTH = 32
 #: element → attributes naming a file MuJoCo reads
-_FILE_ATTRS = {
-    "texture": ("file", "fileright", "fileleft", "fileup", "filedown", "filefront", "fileback"),
-}
+_FILE_ATTRS = {"texture": ("file", *CUBE_FACES)}
 _HOW = 'assets kept elsewhere: --asset-root DIR, or asset_roots = ["DIR"] in the robot\'s table (design §12)'
 
 #: ``--asset-root`` folders of this process (real paths), added to every MJCF robot's own folder
@@ -216,21 +215,14 @@ def _confine(file: Path, roots: tuple[str, ...], model: Path, prefix: str, model
 
 
 def spec_escape(spec: Any, roots: tuple[str, ...]) -> str:
-    """Why a parsed ``MjSpec``'s mesh, skin, height-field or texture file is outside ``roots``
-    (``""``: none), resolved as MuJoCo's compiler resolves it (the model's folder, ``meshdir``/``texturedir``)."""
+    """Why a parsed ``MjSpec``'s mesh, skin, height-field or texture file (:func:`spec_files`) is outside
+    ``roots`` (``""``: none), resolved as MuJoCo's compiler resolves it (the model's folder,
+    ``meshdir``/``texturedir``)."""
     top = spec.modelfiledir or "."
-    own = set(spec.assets) if spec.assets else set()
-    items = [(m.file, spec.meshdir, "mesh") for m in spec.meshes]
-    items += [(s.file, spec.meshdir, "skin") for s in spec.skins]
-    items += [(h.file, spec.meshdir, "hfield") for h in spec.hfields]
-    for t in spec.textures:
-        items += [(n, spec.texturedir, "texture") for n in (t.file, *t.cubefiles)]
-    for name, folder, kind in items:
-        if not name or name in own:
-            continue
-        full = os.path.join(os.path.abspath(top), folder or "", name)
+    for f in spec_files(spec):
+        full = f.path(top)
         if not _inside(full, roots):
-            return _named(f"{kind} file", name, full, roots)
+            return _named(f"{f.kind} {f.attr}", f.name, full, roots)
     return ""
 
 

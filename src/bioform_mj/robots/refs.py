@@ -40,6 +40,7 @@ __all__ = [
     "resolve_robot",
     "as_ref",
     "as_package_path",
+    "asset_root_problem",
     "rebase_entries",
     "rebase_package_path",
     "package_path_from_args",
@@ -285,15 +286,38 @@ def is_shipped(model: str) -> bool:
     return "/" not in model and "\\" not in model and stem in robot_names()
 
 
+def asset_root_problem(folder: str) -> str:
+    """Why an ``asset_roots`` entry cannot be an MJCF robot's asset folder (``""``: it can): it must be an
+    existing, readable directory (``~`` expanded). A typo was taken in silently and surfaced only as an
+    "outside the robot's folder" refusal naming the roots (issue 28)."""
+    import os
+
+    from bioform_mj.robots.sanity import unstatable
+
+    d = os.path.expanduser(folder)
+    if unstatable(d):
+        return unstatable(d)
+    if not os.path.exists(d):
+        return f"'{folder}' does not exist (a typo? relative paths in a scenario file are relative to the file)"
+    if not os.path.isdir(d):
+        return f"'{folder}' is not a directory"
+    if not os.access(d, os.R_OK | os.X_OK):
+        return f"'{folder}' cannot be read (permission denied)"
+    return ""
+
+
 def resolve_robot(entry: Any) -> RobotRef:
     """A ``plant.robots`` entry → a :class:`RobotRef` whose ``model`` is an existing file.
 
     Shipped names (``paper``, ``paper_robot``, ``paper_robot.xml``) map to the package's
     ``models/``; anything else must be a path to a file (``.xml`` MJCF, ``.urdf``/``.xacro`` URDF;
     relative: to the working directory).
-    Raises :class:`InputError` naming an unknown robot or a missing file.
+    Raises :class:`InputError` naming an unknown robot, a missing file or a missing ``asset_roots`` folder.
     """
     ref = as_ref(entry)
+    for folder in ref.asset_roots:
+        if why := asset_root_problem(folder):
+            raise InputError(f"asset_roots: {why}")
     name = ref.model
     if is_shipped(name) and not Path(name).is_file():
         stem = name[: -len(".xml")] if name.endswith(".xml") else name

@@ -336,21 +336,18 @@ def check_step_budget(sim_seconds: float, dt: float, what: str, hint: str, robot
 
 
 def spec_file_problem(spec: Any) -> str:
-    """Why an MJCF ``MjSpec``'s mesh, skin, height-field or texture file is not loaded (``""``: none):
-    checked by :func:`mesh_problem` before MuJoCo's compiler opens it (a FIFO blocks it, a 10 GB STL
-    exhausts memory). Names resolve as the compiler resolves them (the model's folder and its
+    """Why an MJCF ``MjSpec``'s mesh, skin, height-field or texture file (a cube face too:
+    :func:`~bioform_mj.robots.mjcf_assets.spec_files`) is not loaded (``""``: none): checked by
+    :func:`mesh_problem` before MuJoCo's compiler opens it (a FIFO blocks it, a 10 GB STL exhausts
+    memory). Names resolve as the compiler resolves them (the model's folder and its
     ``meshdir``/``texturedir``); files of the spec's own asset dictionary are not files."""
-    top = Path(spec.modelfiledir or ".")
-    own = set(spec.assets) if spec.assets else set()
-    items = [(m.file, spec.meshdir, "mesh") for m in spec.meshes]
-    items += [(s.file, spec.meshdir, "skin") for s in spec.skins]
-    items += [(h.file, spec.meshdir, "hfield") for h in spec.hfields]
-    items += [(t.file, spec.texturedir, "texture") for t in spec.textures]
-    for name, folder, kind in items:
-        if not name or name in own:
-            continue
-        f = Path(name) if Path(name).is_absolute() else top / (folder or "") / name
-        why = mesh_problem(f)
+    from bioform_mj.robots.spec_files import spec_files
+
+    top = spec.modelfiledir or "."
+    for f in spec_files(spec):
+        full = f.path(top)
+        why = mesh_problem(full)
         if why:
-            return f"{kind} file {f}: {why}"
+            what = f"{f.kind} file" if f.attr == "file" else f"{f.kind} {f.attr}"
+            return f"{what} {full}: {why}"
     return ""

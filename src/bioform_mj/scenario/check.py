@@ -220,6 +220,12 @@ def validate(sc: Scenario) -> None:
     _positive("plant.inertia", pc.inertia)
     if len(pc.robots) not in (1, n):
         raise ScenarioError("plant.robots", f"expected 1 or {n} robot models, got {len(pc.robots)}")
+    from bioform_mj.robots.refs import as_ref, asset_root_problem
+
+    for i, r in enumerate(pc.robots):  # a typo names the key, not an "outside" refusal later (issue 28)
+        for folder in as_ref(r, f"plant.robots[{i}]").asset_roots:
+            if why := asset_root_problem(folder):
+                raise ScenarioError(f"plant.robots[{i}].asset_roots", why)
     if pc.kind == "mujoco":
         from bioform_mj.robots.formats import format_of
         from bioform_mj.robots.refs import resolve_robot
