@@ -356,8 +356,9 @@ def test_spec_files_lists_every_cube_face_for_every_user(tmp_path):
 
 def test_fifo_cube_face_inside_the_folder_is_a_bounded_refusal(tmp_path):
     """A FIFO inside the robot's folder as a cube texture's face passes the escape check (it is inside) and
-    was handed to MuJoCo's compiler, whose read blocks: now ``robot check`` refuses it before compiling, one
-    ``error:`` line naming the face, exit 2 (in a process of its own: a regression times out, never passes)."""
+    was handed to MuJoCo's compiler, whose read blocks: now ``robot check`` refuses it before MuJoCo reads the
+    file (the XML walk checks every file it names), one ``error:`` line naming the face, exit 2 (in a process
+    of its own: a regression times out, never passes)."""
     r = tmp_path / "r"
     r.mkdir()
     os.mkfifo(r / "face.png")
@@ -372,4 +373,5 @@ def test_fifo_cube_face_inside_the_folder_is_a_bounded_refusal(tmp_path):
     )
     err = res.stderr.strip().splitlines()
     assert res.returncode == 2 and len(err) == 1, err
-    assert err[0].startswith("error: ") and f"texture fileright {r / 'face.png'}" in err[0] and "FIFO" in err[0], err
+    assert err[0].startswith("error: ") and f"<texture fileright=\"face.png\"/> ('{r / 'face.png'}')" in err[0], err
+    assert f"'{r / 'face.png'}' is a FIFO" in err[0], err

@@ -17,6 +17,7 @@ A user who keeps assets elsewhere names the folders: ``asset_roots = ["DIR", …
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable
@@ -31,6 +32,11 @@ __all__ = [
     "INCLUDE_DEPTH",
     "MJCF_MAX_BODIES",
     "MJCF_MAX_GEOMS",
+    "MJCF_MAX_ELEMENTS",
+    "MJCF_MAX_KEYS",
+    "MJCF_MAX_USER",
+    "MJCF_MAX_HFIELD",
+    "MJCF_MAX_TEXTURE",
     "AssetEscape",
     "grant_roots",
     "granted_roots",
@@ -47,6 +53,16 @@ MJCF_MAX_MB = 64
 #: most ``<body>`` and ``<geom>`` elements an MJCF robot (includes and attached models together) may have: a
 #: published robot has a few hundred; 10^5 bodies ran ``robot check`` past 590 s, deaf to SIGTERM (issue 28)
 MJCF_MAX_BODIES, MJCF_MAX_GEOMS = 5000, 20000
+#: most elements an MJCF robot may have in all (sites, sensors, keys, … too), each counted as many times as
+#: the ``<replicate count>`` elements around it repeat it: 10^6 sites, or one geom in ``<replicate
+#: count="1000000">``, ran ``robot check`` past 45 s (issue 28)
+MJCF_MAX_ELEMENTS = 100_000
+#: most keyframes (``<size nkey>``) and user numbers per element (``<size nuser_*>``) a robot may ask for:
+#: ``nkey="100000000"`` allocated for minutes (MuJoCo sizes them before reading anything else)
+MJCF_MAX_KEYS, MJCF_MAX_USER = 10_000, 1000
+#: most samples of a height field (``nrow`` × ``ncol``) and pixels of a texture (``width`` × ``height``, × 6
+#: for a cube) a robot may declare: 10^5 × 10^5 samples allocated gigabytes before failing (issue 28)
+MJCF_MAX_HFIELD, MJCF_MAX_TEXTURE = 10**7, 2**26
 #: deepest ``<include>`` chain walked (MuJoCo refuses a recursive one itself; this bounds the walk)
 INCLUDE_DEPTH = 32
 #: element → attributes naming a file MuJoCo reads
@@ -121,7 +137,7 @@ def _named(element: str, name: str, full: str, roots: tuple[str, ...]) -> str:
 
 
 def _read_xml(f: Path, model: Path, what: str) -> ET.Element:
-    from bioform_mj.robots.sanity import not_regular
+    from bioform_mj.robots.sanity import not_regular, parse_xml
 
     why = not_regular(f)
     if why:
@@ -135,7 +151,7 @@ def _read_xml(f: Path, model: Path, what: str) -> ET.Element:
             f"{model}: {what} '{f}' is {size / 1e6:.0f} MB, above the {MJCF_MAX_MB} MB an MJCF file may be"
         )
     try:
-        return ET.parse(f).getroot()
+        return parse_xml(f)
     except ET.ParseError as exc:  # refused, never handed to MuJoCo's laxer parser unwalked
         where = "" if what == "model file" else f"{what} '{f}': "
         raise InputError(f"{model}: does not compile: {where}not well-formed XML ({exc})") from None
@@ -160,20 +176,29 @@ def confine_mjcf(model: str | Path, extra: Iterable[str] = ()) -> None:
 def _confine(file: Path, roots: tuple[str, ...], model: Path, prefix: str, models: tuple[str, ...]) -> None:
     """:func:`confine_mjcf` of ``file`` (the robot's ``model``, or a ``<model file>`` it attaches: ``prefix``
     names the way there, ``models`` the attached files above it)."""
-    base = os.path.dirname(os.path.abspath(file))
-    elements: list[tuple[str, ET.Element, str]] = []  # (where, element, its file's folder), includes inlined
+    from bioform_mj.robots.sanity import mesh_problem
 
-    def check(where: str, element: str, name: str, folders: list[str]) -> None:
+    base = os.path.dirname(os.path.abspath(file))
+    # (where, element, its file's folder, how many times <replicate> repeats it), includes inlined
+    elements: list[tuple[str, ET.Element, str, int]] = []
+
+    def check(where: str, element: str, name: str, folders: list[str], read: bool = False) -> None:
         for d in folders:
             full = os.path.join(base, d, name)
             if not _inside(full, roots):
                 raise _refuse(model, where, element, name, full, roots)
+            if read and (why := mesh_problem(full)):  # a FIFO blocks MuJoCo's parser (a flexcomp's file) or compiler
+                tag, _, attr = element.partition(" ")
+                raise InputError(f"{model}: {where}<{tag} {attr}=\"{name}\"/> ('{os.path.normpath(full)}'): {why}")
 
-    def walk(f: Path, where: str, chain: tuple[str, ...]) -> None:
+    def walk(f: Path, where: str, chain: tuple[str, ...], times: int) -> None:
         if len(chain) + len(models) > INCLUDE_DEPTH:
             raise InputError(f"{model}: includes nested deeper than {INCLUDE_DEPTH} ({' -> '.join(chain)})")
         root = _read_xml(f, model, "included file" if chain[1:] or models else "model file")
-        for el in root.iter():
+        own = os.path.relpath(os.path.dirname(os.path.abspath(f)), base)
+        stack = [(root, times)]
+        while stack:  # document order, as root.iter(); each element with the product of its replicate counts
+            el, n = stack.pop()
             if el.tag == "include":
                 name = el.get("file") or ""
                 check(where, "include file", name, ["", os.path.relpath(f.parent, base)])
@@ -181,24 +206,36 @@ def _confine(file: Path, roots: tuple[str, ...], model: Path, prefix: str, model
                 real = os.path.realpath(full)
                 if real in chain:
                     raise InputError(f"{model}: <include file> '{name}' includes itself ({' -> '.join(chain)})")
-                walk(Path(full), f'{where}<include file="{name}"/> → ', (*chain, real))
-            elif isinstance(el.tag, str):
-                elements.append((where, el, os.path.relpath(os.path.dirname(os.path.abspath(f)), base)))
+                walk(Path(full), f'{where}<include file="{name}"/> → ', (*chain, real), n)
+                continue
+            if isinstance(el.tag, str):
+                elements.append((where, el, own, n))
+                if el.tag == "replicate":
+                    n *= max(1, _int(el.get("count")))
+            stack.extend((c, n) for c in reversed(el))
 
-    walk(file, prefix, (os.path.realpath(file),))
+    walk(file, prefix, (os.path.realpath(file),), 1)
     for tag, most in (("body", MJCF_MAX_BODIES), ("geom", MJCF_MAX_GEOMS)):
-        n = sum(1 for _, el, _ in elements if el.tag == tag)
+        n = sum(k for _, el, _, k in elements if el.tag == tag)
         if n > most:
             raise InputError(f"{model}: {prefix}{n} <{tag}> elements, above the {most} a robot may have (not compiled)")
+    if (n := sum(k for *_, k in elements)) > MJCF_MAX_ELEMENTS:
+        raise InputError(
+            f"{model}: {prefix}{n} elements (<replicate> repeats counted), above the {MJCF_MAX_ELEMENTS} a robot "
+            "may have (not compiled)"
+        )
+    for where, el, _, _ in elements:
+        if bad := _declared_size(el):
+            raise InputError(f"{model}: {where}{bad} (not compiled)")
     dirs: dict[str, list[str]] = {"meshdir": [], "texturedir": [], "assetdir": []}
-    for where, el, _ in elements:
+    for where, el, _, _ in elements:
         if el.tag == "compiler":
             for k in dirs:
                 v = el.get(k)
                 if v is not None:
                     check(where, f"compiler {k}", v, [""])
                     dirs[k].append(v)
-    for where, el, own in elements:
+    for where, el, own, _ in elements:
         kind = "texturedir" if el.tag == "texture" else "meshdir"
         folders = dirs[kind] or dirs["assetdir"] or [""]
         if el.tag == "model":  # an attached MJCF: relative to the main file's folder, walked in turn
@@ -211,7 +248,43 @@ def _confine(file: Path, roots: tuple[str, ...], model: Path, prefix: str, model
         for attr in _FILE_ATTRS.get(el.tag, ("file",)):
             name = el.get(attr)
             if name:
-                check(where, f"{el.tag} {attr}", name, [*folders, *(os.path.join(own, d) for d in folders)])
+                check(where, f"{el.tag} {attr}", name, [*folders, *(os.path.join(own, d) for d in folders)], True)
+
+
+def _int(text: str | None) -> int:
+    """An integer attribute (``""``, a malformed or a non-integer one: 0; MuJoCo's parser says why)."""
+    try:
+        return int(float(text or "0"))
+    except (ValueError, OverflowError):
+        return 0
+
+
+def _declared_size(el: ET.Element) -> str:
+    """Why an element's declared size would allocate without bound (``""``: it would not): ``<size nkey>``
+    and ``nuser_*``, a height field's ``nrow`` × ``ncol``, a flexcomp's ``count``, a texture's ``width`` ×
+    ``height``."""
+    if el.tag == "size":
+        for k, v in el.attrib.items():
+            most = MJCF_MAX_KEYS if k == "nkey" else MJCF_MAX_USER if k.startswith("nuser_") else None
+            if most is not None and _int(v) > most:
+                return f"<size {k}='{v}'>: at most {most}"
+    elif el.tag == "hfield" and _int(el.get("nrow")) * _int(el.get("ncol")) > MJCF_MAX_HFIELD:
+        return (
+            f"<hfield nrow='{el.get('nrow')}' ncol='{el.get('ncol')}'>: above the {MJCF_MAX_HFIELD:.0e} samples a "
+            "height field may have"
+        )
+    elif el.tag == "flexcomp" and math.prod(max(1, _int(c)) for c in (el.get("count") or "1").split()[:3]) > (
+        MJCF_MAX_ELEMENTS
+    ):
+        return f"<flexcomp count='{el.get('count')}'>: above the {MJCF_MAX_ELEMENTS} points a flexcomp may have"
+    elif el.tag == "texture":
+        faces = 6 if el.get("type") in ("cube", "skybox") else 1
+        if faces * _int(el.get("width")) * _int(el.get("height")) > MJCF_MAX_TEXTURE:
+            return (
+                f"<texture width='{el.get('width')}' height='{el.get('height')}'>: above the {MJCF_MAX_TEXTURE} "
+                "pixels a texture may have"
+            )
+    return ""
 
 
 def spec_escape(spec: Any, roots: tuple[str, ...]) -> str:

@@ -13,7 +13,8 @@ naming the file and the element:
 - :func:`urdf_value_problem`: masses, inertias, joint axes, dynamics, limits, Gazebo friction and
   mesh scales of a URDF: finite, non-negative where negative means nothing, non-zero where zero
   cannot be (a moving link's mass, an axis, a scale);
-- :func:`model_value_problem`: the same on a compiled ``MjModel`` (an MJCF robot);
+- :func:`model_value_problem`: the same on a compiled ``MjModel`` (an MJCF robot), its ``<option>`` too
+  (:func:`option_problem`: a timestep > 0, finite gravity, bounded solver iterations);
 - names (URDF and MJCF) that hold a control character are refused (:func:`one_line` escapes them in
   output that names what a user wrote);
 - :func:`check_step_budget`: a timestep that would make automatic work (robot check, identification)
@@ -46,9 +47,12 @@ __all__ = [
     "mesh_problem",
     "urdf_value_problem",
     "model_value_problem",
+    "option_problem",
+    "MAX_SOLVER_ITERATIONS",
     "check_step_budget",
     "one_line",
     "spec_file_problem",
+    "parse_xml",
 ]
 
 #: largest mesh file, and largest unpacked archive, taken (MB); a published robot's meshes are a few MB
@@ -62,6 +66,14 @@ CHECK_BOUND_S = 300.0
 #: wall time of one physics step of one robot through the plant, s (measured ~50 µs on the 2-core
 #: development machine; the estimate is a lower bound on a slower one)
 STEP_WALL_S = 2e-5
+
+
+def parse_xml(path: str | Path) -> ET.Element:
+    """``ET.parse(path).getroot()``, the file fed to expat whole: ``ET.parse`` feeds it in 64 kB chunks, and
+    expat 2.5 parses a token that spans chunks again for each chunk, so a 60 MB attribute took 114 s (6 MB:
+    1.8 s; whole: 1.9 s and 0.14 s; issue 28). Raises ``OSError``/``ET.ParseError`` as ``ET.parse``."""
+    with open(path, "rb") as fh:
+        return ET.fromstring(fh.read())
 
 
 def not_regular(path: str | Path) -> str:
@@ -284,6 +296,8 @@ def model_value_problem(model: Any) -> str:
     def name(obj: Any, i: int) -> str:
         return mujoco.mj_id2name(model, obj, i) or f"#{i}"
 
+    if bad := option_problem(model.opt):
+        return bad
     for raw in bytes(model.names).split(b"\0"):  # every element name of the model
         text = raw.decode("utf-8", "replace")
         if _CONTROL.search(text):
@@ -308,6 +322,43 @@ def model_value_problem(model: Any) -> str:
         sc = model.mesh_scale[m] if hasattr(model, "mesh_scale") else np.ones(3)
         if not np.all(np.isfinite(sc)) or not np.all(np.isfinite(model.mesh_vert)):
             return f"mesh '{name(mujoco.mjtObj.mjOBJ_MESH, m)}': scale {np.asarray(sc).tolist()} (finite numbers)"
+    return ""
+
+
+#: most iterations a robot file's ``<option>`` may ask of one physics step's solvers (MuJoCo's defaults: 100
+#: solver, 50 line search, 0 noslip, 35 CCD, 10 SDF); with a tolerance of 0, 10^9 of them made one step of
+#: ``robot check`` run past 45 s (issue 28)
+MAX_SOLVER_ITERATIONS = 1000
+
+
+def option_problem(opt: Any) -> str:
+    """The first bad number of a compiled model's ``<option>`` (``""``: none): a timestep finite and > 0
+    (0, a negative or NaN one was an internal error); gravity, wind and the magnetic field finite; density,
+    viscosity, the tolerances finite and >= 0, impratio finite and > 0; the solvers' iteration counts at most
+    :data:`MAX_SOLVER_ITERATIONS` (each step could otherwise run for minutes)."""
+    import numpy as np
+
+    def shown(v: Any) -> str:
+        return " ".join(f"{x:g}" for x in np.atleast_1d(v))
+
+    if not (math.isfinite(opt.timestep) and opt.timestep > 0):
+        return f"<option timestep='{opt.timestep:g}'>: a timestep must be a finite number > 0 s"
+    for k in ("gravity", "wind", "magnetic"):
+        if not np.all(np.isfinite(getattr(opt, k))):
+            return f"<option {k}='{shown(getattr(opt, k))}'>: must be finite numbers"
+    for k in ("density", "viscosity", "tolerance", "ls_tolerance", "noslip_tolerance", "ccd_tolerance"):
+        v = float(getattr(opt, k, 0.0))
+        if not (math.isfinite(v) and v >= 0):
+            return f"<option {k}='{v:g}'>: must be a finite number >= 0"
+    if not (math.isfinite(opt.impratio) and opt.impratio > 0):
+        return f"<option impratio='{opt.impratio:g}'>: must be a finite number > 0"
+    for k in ("iterations", "ls_iterations", "noslip_iterations", "ccd_iterations", "sdf_iterations"):
+        n = int(getattr(opt, k, 0))
+        if n > MAX_SOLVER_ITERATIONS:
+            return (
+                f"<option {k}='{n}'>: at most {MAX_SOLVER_ITERATIONS} (MuJoCo's default is far lower; so many "
+                "could make one physics step run for minutes)"
+            )
     return ""
 
 

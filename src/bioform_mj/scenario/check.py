@@ -41,8 +41,10 @@ def robot_encoder_cpr(model: str) -> float | None:
     ElementTree: no MuJoCo needed to validate a scenario."""
     import xml.etree.ElementTree as ET
 
+    from bioform_mj.robots.sanity import parse_xml  # fed whole (a huge attribute: quadratic in chunks)
+
     try:
-        root = ET.parse(model).getroot()
+        root = parse_xml(model)
     except (OSError, ET.ParseError):
         return None  # the scene reports an unreadable file
     for num in root.iter("numeric"):

@@ -1,0 +1,174 @@
+"""Red team, round three, second pass (issue 28): hostile MJCF robot files the other tests do not cover.
+
+Each case runs ``bioform robot check`` in a process of its own with a time limit (a regression hangs or
+allocates for minutes: the test fails by its timeout, it never passes) and must end in exactly one ``error:``
+line naming the element, exit 2, nothing written. Measured before the fixes (``robot check`` under a 45 s
+limit and an 8 GB address-space limit): one geom in ``<replicate count="1000000">``, two nested replicates of
+1000, 10^6 ``<site>`` elements, ``<size nkey="100000000">``, ``<size nuser_body="100000000">``,
+``<option iterations="1000000000" tolerance="0">`` and ``noslip_iterations`` ran past the limit; a FIFO inside
+the robot's folder as a ``<flexcomp file>`` hung MuJoCo's parser; ``<hfield nrow="100000" ncol="100000">`` took
+38 s to fail; ``<option timestep>`` 0, negative or NaN was an ``internal error`` (exit 1); NaN or infinite
+gravity or density ended in exit 1 after the check had run; a NaN wind ran (exit 0)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from bioform_mj.robots.refs import models_dir
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+PAPER = (models_dir() / "paper_robot.xml").read_text()
+
+
+def _robot(d: Path, assets: str = "", head: str = "", option: str = "") -> str:
+    """The shipped paper robot with ``assets`` and ``option`` before its worldbody, ``head`` before ``</mujoco>``."""
+    text = PAPER.replace("<worldbody>", f"{assets}{option}<worldbody>", 1).replace("</mujoco>", f"{head}</mujoco>")
+    (d / "r.xml").write_text(text)
+    return str(d / "r.xml")
+
+
+def _case(name: str, d: Path) -> tuple[str, str]:
+    """``(robot file, a substring of the one error: line)`` of case ``name`` built in ``d``."""
+    geom = '<geom size=".001" pos="5 5 -1"/>'
+    if name == "replicate-1e6":
+        body = f'<worldbody><replicate count="1000000" offset="0 0 .01">{geom}</replicate></worldbody>'
+        return _robot(d, head=body), "1000019 <geom> elements, above the 20000"
+    if name == "replicate-nested":
+        inner = f'<replicate count="1000" offset=".01 0 0"><body pos="5 5 -1">{geom}</body></replicate>'
+        body = f'<worldbody><replicate count="1000" offset="0 0 .01">{inner}</replicate></worldbody>'
+        return _robot(d, head=body), "1000003 <body> elements, above the 5000"
+    if name == "sensors-2e5":
+        return _robot(d, head="<sensor>" + '<jointpos joint="left_wheel"/>' * 200000 + "</sensor>"), (
+            "200063 elements (<replicate> repeats counted), above the 100000"
+        )
+    if name == "flexcomp-fifo-inside":
+        os.mkfifo(d / "f.obj")
+        return _robot(d, head='<worldbody><flexcomp name="f" type="mesh" file="f.obj"/></worldbody>'), (
+            f"<flexcomp file=\"f.obj\"/> ('{d / 'f.obj'}'): '{d / 'f.obj'}' is a FIFO"
+        )
+    if name == "flexcomp-count":
+        flex = '<worldbody><flexcomp name="f" type="grid" count="200 200 200" spacing=".01 .01 .01"/></worldbody>'
+        return _robot(d, head=flex), "<flexcomp count='200 200 200'>: above the 100000 points"
+    if name == "hfield-1e10":
+        return _robot(d, assets='<asset><hfield name="h" nrow="100000" ncol="100000" size="1 1 1 1"/></asset>'), (
+            "<hfield nrow='100000' ncol='100000'>: above the 1e+07 samples"
+        )
+    if name == "texture-4e10":
+        tex = '<asset><texture name="t" type="2d" builtin="checker" width="200000" height="200000"/></asset>'
+        return _robot(d, assets=tex), "<texture width='200000' height='200000'>: above the 67108864 pixels"
+    if name == "cube-texture-6x":  # 3500² × 6 = 7.4e7 pixels: the six faces count
+        tex = '<asset><texture name="t" type="cube" builtin="gradient" width="3500" height="3500"/></asset>'
+        return _robot(d, assets=tex), "<texture width='3500' height='3500'>: above the 67108864 pixels"
+    if name == "size-nkey":
+        return _robot(d, head='<size nkey="100000000"/>'), "<size nkey='100000000'>: at most 10000"
+    if name == "size-nuser":
+        return _robot(d, head='<size nuser_geom="100000000"/>'), "<size nuser_geom='100000000'>: at most 1000"
+    options = {
+        "timestep-0": ('timestep="0"', "<option timestep='0'>: a timestep must be a finite number > 0 s"),
+        "timestep-negative": ('timestep="-0.001"', "<option timestep='-0.001'>: a timestep must be"),
+        "timestep-nan": ('timestep="nan"', "<option timestep='nan'>: a timestep must be"),
+        "gravity-nan": ('gravity="0 0 nan"', "<option gravity='0 0 nan'>: must be finite numbers"),
+        "gravity-inf": ('gravity="0 0 -inf"', "<option gravity='0 0 -inf'>: must be finite numbers"),
+        "wind-nan": ('wind="nan 0 0"', "<option wind='nan 0 0'>: must be finite numbers"),
+        "density-inf": ('density="inf"', "<option density='inf'>: must be a finite number >= 0"),
+        "viscosity-negative": ('viscosity="-1"', "<option viscosity='-1'>: must be a finite number >= 0"),
+        "iterations-1e9": ('iterations="1000000000" tolerance="0"', "<option iterations='1000000000'>: at most 1000"),
+        "noslip-1e9": ('noslip_iterations="1000000000" noslip_tolerance="0"', "<option noslip_iterations="),
+        "ls-iterations-1e9": ('ls_iterations="1000000000" ls_tolerance="0"', "<option ls_iterations="),
+        "ccd-iterations-1e9": ('ccd_iterations="1000000000" ccd_tolerance="0"', "<option ccd_iterations="),
+    }
+    if name in options:
+        attrs, want = options[name]
+        return _robot(d, option=f"<option {attrs}/>"), want
+    raise AssertionError(name)
+
+
+CASES = [
+    "replicate-1e6",
+    "replicate-nested",
+    "sensors-2e5",
+    "flexcomp-fifo-inside",
+    "flexcomp-count",
+    "hfield-1e10",
+    "texture-4e10",
+    "cube-texture-6x",
+    "size-nkey",
+    "size-nuser",
+    "timestep-0",
+    "timestep-negative",
+    "timestep-nan",
+    "gravity-nan",
+    "gravity-inf",
+    "wind-nan",
+    "density-inf",
+    "viscosity-negative",
+    "iterations-1e9",
+    "noslip-1e9",
+    "ls-iterations-1e9",
+    "ccd-iterations-1e9",
+]
+
+
+def _check(path: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    """``bioform robot check PATH`` in a process of its own, under a time limit."""
+    return subprocess.run(
+        [sys.executable, "-m", "bioform_mj.cli", "robot", "check", path],
+        env={**os.environ, "PYTHONPATH": SRC},
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=os.path.dirname(path),
+    )
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_hostile_mjcf_is_one_error_line_and_exit_2(name, tmp_path):
+    path, want = _case(name, tmp_path)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    res = _check(path)
+    err = res.stderr.strip().splitlines()
+    errors = [e for e in err if e.startswith("error:")]
+    assert res.returncode == 2 and len(errors) == 1, (res.returncode, err)
+    assert want in errors[0], errors[0]
+    assert not any("Traceback" in e or "internal error" in e for e in err), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_the_bounds_refuse_no_published_robot():
+    """No false refusal: every shipped robot and every zoo MJCF passes the element, size and option bounds."""
+    import mujoco
+
+    from bioform_mj.robots.mjcf_assets import confine_mjcf
+    from bioform_mj.robots.sanity import option_problem
+
+    files = sorted(models_dir().glob("*.xml")) + sorted((Path(__file__).parent / "zoo").rglob("*.xml"))
+    checked = 0
+    for f in files:
+        try:
+            model = mujoco.MjModel.from_xml_path(str(f))
+        except ValueError:
+            continue  # an include fragment or a URDF, not a robot of its own
+        confine_mjcf(f)
+        assert option_problem(model.opt) == "", f
+        checked += 1
+    assert checked >= 6
+
+
+def test_a_huge_attribute_is_parsed_in_linear_time(tmp_path):
+    """``ET.parse`` feeds expat 64 kB chunks, and expat 2.5 re-parses a token spanning them for each chunk: a
+    60 MB attribute took 114 s to walk (6 MB: 1.8 s). :func:`~bioform_mj.robots.sanity.parse_xml` feeds the file
+    whole: a 40 MB attribute (about 80 s the old way) is walked in a few seconds, its value intact."""
+    from bioform_mj.robots.mjcf_assets import confine_mjcf
+    from bioform_mj.robots.sanity import parse_xml
+
+    path = _robot(tmp_path, head='<custom><text name="x" data="' + "a" * 40_000_000 + '"/></custom>')
+    t0 = time.perf_counter()
+    confine_mjcf(path)
+    assert time.perf_counter() - t0 < 20
+    assert len(parse_xml(path).find("custom/text").get("data")) == 40_000_000
