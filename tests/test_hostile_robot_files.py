@@ -8,7 +8,11 @@ limit and an 8 GB address-space limit): one geom in ``<replicate count="1000000"
 ``<option iterations="1000000000" tolerance="0">`` and ``noslip_iterations`` ran past the limit; a FIFO inside
 the robot's folder as a ``<flexcomp file>`` hung MuJoCo's parser; ``<hfield nrow="100000" ncol="100000">`` took
 38 s to fail; ``<option timestep>`` 0, negative or NaN was an ``internal error`` (exit 1); NaN or infinite
-gravity or density ended in exit 1 after the check had run; a NaN wind ran (exit 0)."""
+gravity or density ended in exit 1 after the check had run; a NaN wind ran (exit 0); a ``<model file>`` that
+attaches itself (or a model that attaches it) crashed the process (SIGSEGV); 20 files each attaching or including
+the next twice ran past 60 s. URDF: 3·10^5 ``<material>`` elements ran past 60 s, and a ``.xml`` URDF with a
+50 MB root attribute took longer than 60 s just to be recognised as a URDF; a 1.1 MB PNG texture of 20000 ×
+20000 pixels grew ``robot check`` to 3.7 GB and ran past 120 s."""
 
 from __future__ import annotations
 
@@ -31,6 +35,22 @@ def _robot(d: Path, assets: str = "", head: str = "", option: str = "") -> str:
     text = PAPER.replace("<worldbody>", f"{assets}{option}<worldbody>", 1).replace("</mujoco>", f"{head}</mujoco>")
     (d / "r.xml").write_text(text)
     return str(d / "r.xml")
+
+
+def _png(path: Path, w: int, h: int) -> Path:
+    """A valid all-black RGB PNG of ``w`` × ``h`` pixels (its zlib stream about 1/1000 of the decoded size)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+    z = zlib.compressobj(9)
+    row = b"\0" * (3 * w + 1)
+    data = b"".join(z.compress(row) for _ in range(h)) + z.flush()
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", data) + chunk(b"IEND", b""))
+    return path
 
 
 def _case(name: str, d: Path) -> tuple[str, str]:
@@ -65,10 +85,49 @@ def _case(name: str, d: Path) -> tuple[str, str]:
     if name == "cube-texture-6x":  # 3500² × 6 = 7.4e7 pixels: the six faces count
         tex = '<asset><texture name="t" type="cube" builtin="gradient" width="3500" height="3500"/></asset>'
         return _robot(d, assets=tex), "<texture width='3500' height='3500'>: above the 67108864 pixels"
+    if name in ("png-bomb-texture", "png-bomb-hfield"):  # 1.1 MB of 20000² pixels: 3.7 GB, past 120 s before
+        _png(d / "t.png", 9000, 9000)
+        el = '<texture name="t" type="2d" file="t.png"/>' if "texture" in name else '<hfield name="h" file="t.png" '
+        el += "" if "texture" in name else 'size="1 1 1 1"/>'
+        return _robot(d, assets=f"<asset>{el}</asset>"), "a PNG image of 9000 × 9000 pixels, above the 67108864"
     if name == "size-nkey":
         return _robot(d, head='<size nkey="100000000"/>'), "<size nkey='100000000'>: at most 10000"
     if name == "size-nuser":
         return _robot(d, head='<size nuser_geom="100000000"/>'), "<size nuser_geom='100000000'>: at most 1000"
+    if name == "attach-self":  # MuJoCo attached it again and again until it crashed (SIGSEGV)
+        attach = '<worldbody><body name="x" pos="5 5 5"><attach model="c" prefix="c_"/></body></worldbody>'
+        return _robot(d, assets='<asset><model name="c" file="r.xml"/></asset>', head=attach), (
+            '<model file="r.xml"/> attaches a model that attaches it'
+        )
+    if name == "attach-mutual":
+        (d / "b.xml").write_text(
+            '<mujoco><asset><model name="a" file="r.xml"/></asset>'
+            '<worldbody><body name="y"><attach model="a" prefix="a_"/></body></worldbody></mujoco>'
+        )
+        attach = '<worldbody><body name="x" pos="5 5 5"><attach model="b" prefix="b_"/></body></worldbody>'
+        return _robot(d, assets='<asset><model name="b" file="b.xml"/></asset>', head=attach), (
+            "attaches a model that attaches it"
+        )
+    if name == "attach-fanout":  # each file attaches the next twice: 2^20 copies of one body from 20 small files
+        for i in range(20):
+            inner = (
+                '<geom size=".001"/>'
+                if i == 19
+                else '<body name="p"><attach model="m" prefix="a_"/></body><body name="q"><attach model="m" '
+                'prefix="b_"/></body>'
+            )
+            asset = "" if i == 19 else f'<asset><model name="m" file="l{i + 1}.xml"/></asset>'
+            body = f'<worldbody><body name="r{i}">{inner}</body></worldbody>'
+            (d / f"l{i}.xml").write_text(f"<mujoco>{asset}{body}</mujoco>")
+        attach = '<worldbody><body name="x" pos="5 5 5"><attach model="top" prefix="t_"/></body></worldbody>'
+        return _robot(d, assets='<asset><model name="top" file="l1.xml"/></asset>', head=attach), (
+            "<body> elements with the attached models' copies, above the 5000"
+        )
+    if name == "include-fanout":  # each file includes the next twice: 2^20 reads
+        for i in range(20):
+            inner = '<body pos="5 5 5"><geom size=".001"/></body>' if i == 19 else f'<include file="i{i + 1}.xml"/>' * 2
+            (d / f"i{i}.xml").write_text(f"<mujoco>{inner}</mujoco>")
+        return _robot(d, head='<worldbody><include file="i1.xml"/></worldbody>'), "more than 1000 <include> reads"
     options = {
         "timestep-0": ('timestep="0"', "<option timestep='0'>: a timestep must be a finite number > 0 s"),
         "timestep-negative": ('timestep="-0.001"', "<option timestep='-0.001'>: a timestep must be"),
@@ -98,6 +157,12 @@ CASES = [
     "hfield-1e10",
     "texture-4e10",
     "cube-texture-6x",
+    "attach-self",
+    "attach-mutual",
+    "attach-fanout",
+    "include-fanout",
+    "png-bomb-texture",
+    "png-bomb-hfield",
     "size-nkey",
     "size-nuser",
     "timestep-0",
@@ -172,3 +237,27 @@ def test_a_huge_attribute_is_parsed_in_linear_time(tmp_path):
     confine_mjcf(path)
     assert time.perf_counter() - t0 < 20
     assert len(parse_xml(path).find("custom/text").get("data")) == 40_000_000
+
+
+def test_urdf_with_too_many_elements_refused(tmp_path):
+    """3·10^5 ``<material>`` elements (under the link bound) ran ``robot check`` past 60 s: now one line."""
+    from test_robots_urdf import diff_drive
+
+    (tmp_path / "r.urdf").write_text(diff_drive(tail='<material name="m"><color rgba="1 1 1 1"/></material>' * 60000))
+    res = _check(str(tmp_path / "r.urdf"))
+    err = res.stderr.strip().splitlines()
+    assert res.returncode == 2 and len(err) == 1, err
+    assert "120067 elements, above the 100000 a robot may have" in err[0], err
+
+
+def test_is_urdf_reads_a_huge_root_tag_in_linear_time(tmp_path):
+    """An ``.xml`` whose ``<robot>`` tag holds a 40 MB attribute is recognised as a URDF in seconds (``iterparse``
+    fed expat 64 kB chunks and took minutes), and an MJCF is still no URDF."""
+    from bioform_mj.robots.urdf import is_urdf
+    from test_robots_urdf import diff_drive
+
+    (tmp_path / "r.xml").write_text(diff_drive().replace("<robot ", '<robot x="' + "a" * 40_000_000 + '" ', 1))
+    t0 = time.perf_counter()
+    assert is_urdf(tmp_path / "r.xml")
+    assert time.perf_counter() - t0 < 20
+    assert not is_urdf(_robot(tmp_path))

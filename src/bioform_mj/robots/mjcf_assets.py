@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from bioform_mj.core.errors import InputError
+from bioform_mj.robots.sanity import IMAGE_MAX_PIXELS
 from bioform_mj.robots.spec_files import CUBE_FACES, spec_files
 
 __all__ = [
@@ -33,6 +34,7 @@ __all__ = [
     "MJCF_MAX_BODIES",
     "MJCF_MAX_GEOMS",
     "MJCF_MAX_ELEMENTS",
+    "MJCF_MAX_INCLUDES",
     "MJCF_MAX_KEYS",
     "MJCF_MAX_USER",
     "MJCF_MAX_HFIELD",
@@ -62,7 +64,9 @@ MJCF_MAX_ELEMENTS = 100_000
 MJCF_MAX_KEYS, MJCF_MAX_USER = 10_000, 1000
 #: most samples of a height field (``nrow`` × ``ncol``) and pixels of a texture (``width`` × ``height``, × 6
 #: for a cube) a robot may declare: 10^5 × 10^5 samples allocated gigabytes before failing (issue 28)
-MJCF_MAX_HFIELD, MJCF_MAX_TEXTURE = 10**7, 2**26
+MJCF_MAX_HFIELD, MJCF_MAX_TEXTURE = 10**7, IMAGE_MAX_PIXELS
+#: most ``<include>`` files read for one robot, the same file counted each time it is included
+MJCF_MAX_INCLUDES = 1000
 #: deepest ``<include>`` chain walked (MuJoCo refuses a recursive one itself; this bounds the walk)
 INCLUDE_DEPTH = 32
 #: element → attributes naming a file MuJoCo reads
@@ -173,9 +177,12 @@ def confine_mjcf(model: str | Path, extra: Iterable[str] = ()) -> None:
     _confine(model, allowed_roots(model, extra), model, "", ())
 
 
-def _confine(file: Path, roots: tuple[str, ...], model: Path, prefix: str, models: tuple[str, ...]) -> None:
+def _confine(
+    file: Path, roots: tuple[str, ...], model: Path, prefix: str, models: tuple[str, ...]
+) -> tuple[int, int, int]:
     """:func:`confine_mjcf` of ``file`` (the robot's ``model``, or a ``<model file>`` it attaches: ``prefix``
-    names the way there, ``models`` the attached files above it)."""
+    names the way there, ``models`` the attached files above it, real paths). Returns its ``(elements, bodies,
+    geoms)``, each ``<attach>`` of an attached model counting that model's once more."""
     from bioform_mj.robots.sanity import mesh_problem
 
     base = os.path.dirname(os.path.abspath(file))
@@ -191,9 +198,14 @@ def _confine(file: Path, roots: tuple[str, ...], model: Path, prefix: str, model
                 tag, _, attr = element.partition(" ")
                 raise InputError(f"{model}: {where}<{tag} {attr}=\"{name}\"/> ('{os.path.normpath(full)}'): {why}")
 
+    reads = [0]
+
     def walk(f: Path, where: str, chain: tuple[str, ...], times: int) -> None:
         if len(chain) + len(models) > INCLUDE_DEPTH:
             raise InputError(f"{model}: includes nested deeper than {INCLUDE_DEPTH} ({' -> '.join(chain)})")
+        reads[0] += 1
+        if reads[0] > MJCF_MAX_INCLUDES:  # two includes of the next file at each of 20 levels: 2^20 reads
+            raise InputError(f"{model}: {where}more than {MJCF_MAX_INCLUDES} <include> reads (not compiled)")
         root = _read_xml(f, model, "included file" if chain[1:] or models else "model file")
         own = os.path.relpath(os.path.dirname(os.path.abspath(f)), base)
         stack = [(root, times)]
@@ -235,6 +247,7 @@ def _confine(file: Path, roots: tuple[str, ...], model: Path, prefix: str, model
                 if v is not None:
                     check(where, f"compiler {k}", v, [""])
                     dirs[k].append(v)
+    sizes: dict[str, tuple[int, int, int]] = {}  # an attached model's name → its (elements, bodies, geoms)
     for where, el, own, _ in elements:
         kind = "texturedir" if el.tag == "texture" else "meshdir"
         folders = dirs[kind] or dirs["assetdir"] or [""]
@@ -242,13 +255,27 @@ def _confine(file: Path, roots: tuple[str, ...], model: Path, prefix: str, model
             name = el.get("file") or ""
             check(where, "model file", name, ["", own])
             real = os.path.realpath(os.path.join(base, name))
-            if name and real not in models:
-                _confine(Path(base) / name, roots, model, f'{where}<model file="{name}"/> → ', (*models, real))
+            if name and (real in models or real == os.path.realpath(file)):  # MuJoCo recursed until it crashed
+                raise InputError(f'{model}: {where}<model file="{name}"/> attaches a model that attaches it')
+            if name:
+                way = f'{where}<model file="{name}"/> → '
+                sizes[el.get("name") or ""] = _confine(Path(base) / name, roots, model, way, (*models, real))
             continue
         for attr in _FILE_ATTRS.get(el.tag, ("file",)):
             name = el.get(attr)
             if name:
                 check(where, f"{el.tag} {attr}", name, [*folders, *(os.path.join(own, d) for d in folders)], True)
+    total = [sum(k for *_, k in elements), *(sum(k for _, e, _, k in elements if e.tag == t) for t in ("body", "geom"))]
+    for _, el, _, k in elements:  # each <attach> copies the model it names (2 of the next file at each of 20 levels)
+        if el.tag == "attach":
+            total = [a + k * b for a, b in zip(total, sizes.get(el.get("model") or "", (0, 0, 0)), strict=True)]
+    for n, most, what in zip(total, (MJCF_MAX_ELEMENTS, MJCF_MAX_BODIES, MJCF_MAX_GEOMS), ("", " <body>", " <geom>")):
+        if n > most:
+            raise InputError(
+                f"{model}: {prefix}{n}{what} elements with the attached models' copies, above the {most} a robot may "
+                "have (not compiled)"
+            )
+    return total[0], total[1], total[2]
 
 
 def _int(text: str | None) -> int:

@@ -6,7 +6,8 @@ naming the file and the element:
 - :func:`regular_file`: a file that is read must be a regular file (a FIFO named ``package.xml`` on
   ``ROS_PACKAGE_PATH``, or a device, would block the reader forever); checked with ``os.stat``
   (``stat.S_ISREG``) before it is opened;
-- :func:`mesh_problem`: a mesh file's size (at most :data:`MESH_MAX_MB` MB), and for a zip archive
+- :func:`mesh_problem`: a mesh file's size (at most :data:`MESH_MAX_MB` MB), a PNG's declared pixels (at most
+  :data:`IMAGE_MAX_PIXELS`), and for a zip archive
   (COLLADA ``.zae``, or a ``.dae`` that is a zip) the sizes its directory declares, before anything
   is decompressed (at most :data:`MESH_MAX_MB` MB unpacked, :data:`ZIP_MAX_ENTRIES` entries, a
   compression ratio of :data:`ZIP_MAX_RATIO`);
@@ -40,6 +41,7 @@ __all__ = [
     "MESH_MAX_MB",
     "ZIP_MAX_ENTRIES",
     "ZIP_MAX_RATIO",
+    "IMAGE_MAX_PIXELS",
     "CHECK_BOUND_S",
     "STEP_WALL_S",
     "regular_file",
@@ -59,6 +61,9 @@ __all__ = [
 MESH_MAX_MB = 256
 #: most entries of a mesh archive
 ZIP_MAX_ENTRIES = 1000
+#: most pixels of a texture or height-field image (a PNG's declared width × height; an MJCF texture's
+#: width × height, ×6 for a cube): 2^26, an 8192 × 8192 image, 192 MB as RGB
+IMAGE_MAX_PIXELS = 2**26
 #: largest unpacked/packed size ratio of a mesh archive (a mesh compresses 3–10×; a zip bomb 1000×+)
 ZIP_MAX_RATIO = 200
 #: bound on the automatic work a robot file's timestep can ask (robot check, identification): s of wall time
@@ -139,6 +144,16 @@ def mesh_problem(file: str | Path) -> str:
             magic = fh.read(4)
     except OSError as exc:
         return f"cannot be read ({exc.strerror})"
+    if magic == b"\x89PNG":  # a PNG declares its size in IHDR: a 3 MB file can decode to gigabytes
+        try:
+            with open(file, "rb") as fh:
+                head = fh.read(24)
+        except OSError as exc:
+            return f"cannot be read ({exc.strerror})"
+        w, h = (int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")) if len(head) == 24 else (0, 0)
+        if w * h > IMAGE_MAX_PIXELS:
+            return f"a PNG image of {w} × {h} pixels, above the {IMAGE_MAX_PIXELS} an image may have: not decoded"
+        return ""
     if magic != b"PK\x03\x04":
         return ""
     try:

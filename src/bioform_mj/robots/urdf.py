@@ -81,6 +81,8 @@ URDF_SUFFIXES = (".urdf", ".xacro")
 MESH_NATIVE = (".stl", ".obj", ".msh")
 #: most links (and joints) a URDF may have: a published robot has a few hundred
 URDF_MAX_LINKS = 5000
+#: most elements of any kind a URDF may have (its materials, visuals, Gazebo tags, … together)
+URDF_MAX_ELEMENTS = 100_000
 #: the compiler settings that keep a URDF robot a robot (design §12)
 _COMPILER = {"discardvisual": "false", "fusestatic": "false", "strippath": "false"}
 _INSTALL_HINT = "pip install 'bioform-mj[urdf]' (trimesh + pycollada)"
@@ -129,9 +131,13 @@ def is_urdf(path: str | Path) -> bool:
         return True
     if not p.endswith(".xml") or not_regular(path):
         return False
-    try:
-        for _event, elem in ET.iterparse(str(path), events=("start",)):
-            return elem.tag == "robot"
+    try:  # the root's start tag: the first 64 kB, else the rest in one piece (expat 2.5 parses a token fed in
+        with open(path, "rb") as fh:  # chunks again for each chunk: a 50 MB root attribute ran past 60 s, issue 28)
+            parser = ET.XMLPullParser(events=("start",))
+            for data in (fh.read(1 << 16), fh.read(64 * 10**6)):
+                parser.feed(data)
+                for _event, elem in parser.read_events():
+                    return elem.tag == "robot"
     except (OSError, ET.ParseError):
         return False
     return False
@@ -229,6 +235,12 @@ def _parse(
         raise UrdfError(
             f"{path}: {n_el} <link> and <joint> elements, above the {2 * URDF_MAX_LINKS} a robot may have "
             f"(at most {URDF_MAX_LINKS} links; a published robot has a few hundred)"
+        )
+    n_all = sum(1 for _ in robot.iter())
+    if n_all > URDF_MAX_ELEMENTS:  # 3·10^5 <material> elements ran robot check past 60 s (issue 28)
+        raise UrdfError(
+            f"{path}: {n_all} elements, above the {URDF_MAX_ELEMENTS} a robot may have (a published robot has a few "
+            "thousand)"
         )
     bad_value = urdf_value_problem(robot)  # NaN, negative, zero where it cannot be: refused naming it
     if bad_value:
