@@ -90,6 +90,10 @@ def _case(name: str, d: Path) -> tuple[str, str]:
         el = '<texture name="t" type="2d" file="t.png"/>' if "texture" in name else '<hfield name="h" file="t.png" '
         el += "" if "texture" in name else 'size="1 1 1 1"/>'
         return _robot(d, assets=f"<asset>{el}</asset>"), "a PNG image of 9000 × 9000 pixels, above the 67108864"
+    if name == "one-mesh-600x":  # 300 meshes of one 7.5 MB STL: 75 s and gigabytes before failing
+        (d / "m.stl").write_bytes(b"\0" * 1_000_000)
+        meshes = "".join(f'<mesh name="m{i}" file="m.stl"/>' for i in range(600))
+        return _robot(d, assets=f"<asset>{meshes}</asset>"), "the files the robot loads come to more than 512 MB"
     if name == "size-nkey":
         return _robot(d, head='<size nkey="100000000"/>'), "<size nkey='100000000'>: at most 10000"
     if name == "size-nuser":
@@ -162,6 +166,7 @@ CASES = [
     "attach-fanout",
     "include-fanout",
     "png-bomb-texture",
+    "one-mesh-600x",
     "png-bomb-hfield",
     "size-nkey",
     "size-nuser",
@@ -261,3 +266,17 @@ def test_is_urdf_reads_a_huge_root_tag_in_linear_time(tmp_path):
     assert is_urdf(tmp_path / "r.xml")
     assert time.perf_counter() - t0 < 20
     assert not is_urdf(_robot(tmp_path))
+
+
+def test_urdf_meshes_named_many_times_are_bounded(tmp_path):
+    """A URDF naming one 1 MB mesh 600 times (MuJoCo loads it for each) is refused at 512 MB, naming the mesh."""
+    from test_robots_urdf import diff_drive
+
+    (tmp_path / "m.stl").write_bytes(b"\0" * 1_000_000)
+    visuals = '<visual><geometry><mesh filename="m.stl"/></geometry></visual>' * 600
+    joint = '<joint name="deco_joint" type="fixed"><parent link="base_link"/><child link="deco"/></joint>'
+    (tmp_path / "r.urdf").write_text(diff_drive(tail=f'<link name="deco">{visuals}</link>{joint}'))
+    res = _check(str(tmp_path / "r.urdf"))
+    err = res.stderr.strip().splitlines()
+    assert res.returncode == 2 and len(err) == 1, err
+    assert "<visual> mesh 'm.stl' of link 'deco': the meshes the robot loads come to more than 512 MB" in err[0], err

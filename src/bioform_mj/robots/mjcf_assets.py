@@ -35,6 +35,7 @@ __all__ = [
     "MJCF_MAX_GEOMS",
     "MJCF_MAX_ELEMENTS",
     "MJCF_MAX_INCLUDES",
+    "MJCF_MAX_FILES_MB",
     "MJCF_MAX_KEYS",
     "MJCF_MAX_USER",
     "MJCF_MAX_HFIELD",
@@ -65,6 +66,9 @@ MJCF_MAX_KEYS, MJCF_MAX_USER = 10_000, 1000
 #: most samples of a height field (``nrow`` × ``ncol``) and pixels of a texture (``width`` × ``height``, × 6
 #: for a cube) a robot may declare: 10^5 × 10^5 samples allocated gigabytes before failing (issue 28)
 MJCF_MAX_HFIELD, MJCF_MAX_TEXTURE = 10**7, IMAGE_MAX_PIXELS
+#: most bytes of asset files (meshes, textures, height fields, …) one robot file may load, MB, a file named by
+#: several elements counted each time: MuJoCo loads it for each
+MJCF_MAX_FILES_MB = 512
 #: most ``<include>`` files read for one robot, the same file counted each time it is included
 MJCF_MAX_INCLUDES = 1000
 #: deepest ``<include>`` chain walked (MuJoCo refuses a recursive one itself; this bounds the walk)
@@ -248,6 +252,7 @@ def _confine(
                     check(where, f"compiler {k}", v, [""])
                     dirs[k].append(v)
     sizes: dict[str, tuple[int, int, int]] = {}  # an attached model's name → its (elements, bodies, geoms)
+    loaded = 0  # bytes of the asset files named, each as often as it is named
     for where, el, own, _ in elements:
         kind = "texturedir" if el.tag == "texture" else "meshdir"
         folders = dirs[kind] or dirs["assetdir"] or [""]
@@ -264,7 +269,16 @@ def _confine(
         for attr in _FILE_ATTRS.get(el.tag, ("file",)):
             name = el.get(attr)
             if name:
-                check(where, f"{el.tag} {attr}", name, [*folders, *(os.path.join(own, d) for d in folders)], True)
+                candidates = [*folders, *(os.path.join(own, d) for d in folders)]
+                check(where, f"{el.tag} {attr}", name, candidates, True)
+                loaded += next(
+                    (os.path.getsize(f) for d in candidates if os.path.isfile(f := os.path.join(base, d, name))), 0
+                )
+                if loaded > MJCF_MAX_FILES_MB * 10**6:  # 300 meshes of one 7.5 MB STL: 75 s, gigabytes (issue 28)
+                    raise InputError(
+                        f'{model}: {where}<{el.tag} {attr}="{name}"/>: the files the robot loads come to more than '
+                        f"{MJCF_MAX_FILES_MB} MB (a file named by several elements counted each time; not compiled)"
+                    )
     total = [sum(k for *_, k in elements), *(sum(k for _, e, _, k in elements if e.tag == t) for t in ("body", "geom"))]
     for _, el, _, k in elements:  # each <attach> copies the model it names (2 of the next file at each of 20 levels)
         if el.tag == "attach":

@@ -51,6 +51,7 @@ import numpy as np
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.compile_hints import compile_hint
 from bioform_mj.robots.mesh_paths import absolute_escape, symlink_escape
+from bioform_mj.robots.mjcf_assets import MJCF_MAX_FILES_MB
 from bioform_mj.robots.packages import find_package, package_search_path, resolve_uri
 from bioform_mj.robots.refs import PackagePath, RobotRef
 from bioform_mj.robots.sanity import mesh_problem, not_regular, urdf_value_problem
@@ -338,6 +339,7 @@ def _parse(
     found_by: set[str] = set()
     dropped: list[str] = []
     trimesh_ok: bool | None = None
+    loaded = 0  # bytes of the mesh files kept, each as often as it is named
     for lname, link in links.items():
         for role in ("visual", "collision"):
             for el in link.findall(role):
@@ -378,6 +380,12 @@ def _parse(
                     dropped.append(f"'{uri}' of link '{lname}' ({why})")
                     continue
                 mesh.set("filename", str(file))
+                loaded += file.stat().st_size  # MuJoCo loads a mesh for each element naming it (issue 28)
+                if loaded > MJCF_MAX_FILES_MB * 10**6:
+                    raise UrdfError(
+                        f"{path}: <{role}> mesh '{uri}' of link '{lname}': the meshes the robot loads come to more "
+                        f"than {MJCF_MAX_FILES_MB} MB (a file named by several links counted each time)"
+                    )
     if dropped:
         notes.append(
             f"{len(dropped)} visual mesh(es) dropped (looks only; contacts and inertia unchanged; paths from the "
