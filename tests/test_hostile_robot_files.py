@@ -280,3 +280,15 @@ def test_urdf_meshes_named_many_times_are_bounded(tmp_path):
     err = res.stderr.strip().splitlines()
     assert res.returncode == 2 and len(err) == 1, err
     assert "<visual> mesh 'm.stl' of link 'deco': the meshes the robot loads come to more than 512 MB" in err[0], err
+
+
+def test_a_huge_urdf_file_is_refused_unread(tmp_path):
+    """A 10 GB (sparse) ``.urdf`` was read whole (a MemoryError under an 8 GB limit, an internal error): now its
+    size is refused before any read."""
+    with open(tmp_path / "r.urdf", "wb") as fh:
+        fh.write(b"<robot name='x'>")
+        fh.truncate(10 * 10**9)
+    res = _check(str(tmp_path / "r.urdf"))
+    err = res.stderr.strip().splitlines()
+    assert res.returncode == 2 and len(err) == 1, err
+    assert f"model file '{tmp_path / 'r.urdf'}' is 10000 MB, above the 64 MB a robot file may be" in err[0], err

@@ -51,7 +51,7 @@ import numpy as np
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.compile_hints import compile_hint
 from bioform_mj.robots.mesh_paths import absolute_escape, symlink_escape
-from bioform_mj.robots.mjcf_assets import MJCF_MAX_FILES_MB
+from bioform_mj.robots.mjcf_assets import MJCF_MAX_FILES_MB, MJCF_MAX_MB
 from bioform_mj.robots.packages import find_package, package_search_path, resolve_uri
 from bioform_mj.robots.refs import PackagePath, RobotRef
 from bioform_mj.robots.sanity import mesh_problem, not_regular, urdf_value_problem
@@ -173,6 +173,8 @@ def _read_text(
         raise UrdfError(f"model file {not_regular(path)}")
     if not path.is_file():
         raise UrdfError(f"model file '{path}' does not exist")
+    if (size := path.stat().st_size) > MJCF_MAX_MB * 10**6:  # a 10 GB (sparse) file was read whole (issue 28)
+        raise UrdfError(f"model file '{path}' is {size / 1e6:.0f} MB, above the {MJCF_MAX_MB} MB a robot file may be")
     text = None
     if not str(path).lower().endswith(".xacro"):
         try:
