@@ -196,9 +196,15 @@ def _validate(rec: Recording) -> Recording:
 def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics | None = None) -> Recording:
     """Read ``path`` (rosbag2 folder, ``.mcap``/``.db3`` file, or ``.csv``) for the wheel joints ``joints``
     (left, right). Raises :class:`InputError` (exit 2) for anything that cannot be used (module docstring)."""
+    from bioform_mj.robots.sanity import not_regular
+
     p = Path(path)
     if not p.exists():
         raise InputError(f"--bag {p}: no such file or folder")
+    # a FIFO as the recording, or as a rosbag2 folder's metadata.yaml or storage file, blocked the reader forever
+    for f in sorted(p.iterdir()) if p.is_dir() else [p]:  # (issue 28); a device is never read either
+        if not f.is_dir() and (why := not_regular(f)):
+            raise InputError(f"--bag {p}: {why}")
     if p.is_file() and p.suffix.lower() == ".csv":
         return _validate(_read_csv(p, joints))
     return _validate(_read_bag(p, joints, topics or Topics()))
