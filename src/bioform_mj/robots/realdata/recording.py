@@ -386,8 +386,18 @@ def _stream(reader, conns, name: str) -> Iterator:
 
 
 # ------------------------------------------------------------------ CSV
+#: largest CSV recording read, MB (2.5 million rows of 7 columns: 42 min at 1 kHz; read as Python rows first, it
+#: takes about 8× its size in memory); a longer one: an MCAP, or a window of it
+CSV_MAX_MB = 256
+
+
 def _read_csv(p: Path, joints: tuple[str, str]) -> Recording:
     name = str(p)
+    if (size := p.stat().st_size) > CSV_MAX_MB * 10**6:  # a 10 GB sparse CSV was read line by line, whole
+        raise InputError(
+            f"{name}: a CSV recording of {size / 1e6:.0f} MB, above the {CSV_MAX_MB} MB read (record an MCAP, or "
+            "export a shorter window)"
+        )
     try:
         with open(p, newline="") as fh:
             reader = csv.reader(fh)
@@ -418,6 +428,8 @@ def _read_csv(p: Path, joints: tuple[str, str]) -> Recording:
         raise InputError(f"{name}: cannot read: {exc.strerror or exc}") from None
     except UnicodeDecodeError:
         raise InputError(f"{name}: not a text CSV file") from None
+    except csv.Error as exc:  # a field above csv's limit (128 kB), a NUL byte: was an internal error (issue 28)
+        raise InputError(f"{name}: not a CSV recording ({exc})") from None
     a = np.asarray(rows, float).reshape(-1, len(header))
     t = a[:, col["time"]]
 
