@@ -90,6 +90,11 @@ def _case(name: str, d: Path) -> tuple[str, str]:
         el = '<texture name="t" type="2d" file="t.png"/>' if "texture" in name else '<hfield name="h" file="t.png" '
         el += "" if "texture" in name else 'size="1 1 1 1"/>'
         return _robot(d, assets=f"<asset>{el}</asset>"), "a PNG image of 9000 × 9000 pixels, above the 67108864"
+    if name == "include-big-twice":  # a 40 MB file included twice: 80 MB of XML parsed
+        (d / "big.xml").write_text('<mujoco><custom><text name="x" data="' + "a" * 40_000_000 + '"/></custom></mujoco>')
+        return _robot(d, head='<include file="big.xml"/><include file="big.xml"/>'), (
+            "the XML read comes to more than 64 MB (each include counted each time)"
+        )
     if name == "one-mesh-600x":  # 300 meshes of one 7.5 MB STL: 75 s and gigabytes before failing
         (d / "m.stl").write_bytes(b"\0" * 1_000_000)
         meshes = "".join(f'<mesh name="m{i}" file="m.stl"/>' for i in range(600))
@@ -167,6 +172,7 @@ CASES = [
     "include-fanout",
     "png-bomb-texture",
     "one-mesh-600x",
+    "include-big-twice",
     "png-bomb-hfield",
     "size-nkey",
     "size-nuser",

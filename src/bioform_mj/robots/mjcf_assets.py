@@ -17,6 +17,7 @@ A user who keeps assets elsewhere names the folders: ``asset_roots = ["DIR", …
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import xml.etree.ElementTree as ET
@@ -202,7 +203,7 @@ def _confine(
                 tag, _, attr = element.partition(" ")
                 raise InputError(f"{model}: {where}<{tag} {attr}=\"{name}\"/> ('{os.path.normpath(full)}'): {why}")
 
-    reads = [0]
+    reads = [0, 0]  # <include> reads, and the bytes of XML they read
 
     def walk(f: Path, where: str, chain: tuple[str, ...], times: int) -> None:
         if len(chain) + len(models) > INCLUDE_DEPTH:
@@ -210,6 +211,12 @@ def _confine(
         reads[0] += 1
         if reads[0] > MJCF_MAX_INCLUDES:  # two includes of the next file at each of 20 levels: 2^20 reads
             raise InputError(f"{model}: {where}more than {MJCF_MAX_INCLUDES} <include> reads (not compiled)")
+        with contextlib.suppress(OSError):  # (unreadable: _read_xml says why)
+            reads[1] += os.stat(f).st_size
+        if reads[1] > MJCF_MAX_MB * 10**6:  # a 60 MB file included 1000 times would be parsed 1000 times
+            raise InputError(
+                f"{model}: {where}the XML read comes to more than {MJCF_MAX_MB} MB (each include counted each time)"
+            )
         root = _read_xml(f, model, "included file" if chain[1:] or models else "model file")
         own = os.path.relpath(os.path.dirname(os.path.abspath(f)), base)
         stack = [(root, times)]
