@@ -53,8 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     import mujoco
 
     from bioform_mj.robots import scene
+    from bioform_mj.robots.entries import resolve_robot
     from bioform_mj.robots.prepare import prepare_robot
-    from bioform_mj.robots.refs import resolve_robot
     from bioform_mj.run.simulate import make_plant
     from bioform_mj.scenario.loader import load
 

@@ -145,6 +145,10 @@ def _case(name: str, t: Path) -> tuple[list[str], str]:
         return ["run", str(scen), "--out", str(t / "f" / "sub")], "f"
     if name == "sweep-seeds-1e12":
         return ["sweep", str(scen), "--seeds", str(10**12), "--out", out], "estimated"
+    if name == "out-newline":  # "outputs in o\nerror: forged/" forged a line on stdout (a second pass, issue 28)
+        return ["run", str(scen), "--out", str(t / "o\nerror: forged")], "holds a control character"
+    if name == "sweep-out-newline":
+        return ["sweep", str(scen), "--seeds", "2", "--out", str(t / "s\rerror: x")], "'" + str(t / "s\\rerror: x")
     if name == "scenario-fifo":
         os.mkfifo(t / "f.toml")
         return ["run", str(t / "f.toml"), "--out", out], "is a FIFO"
@@ -177,6 +181,8 @@ CASES = [
     "out-under-a-file",
     "sweep-seeds-1e12",
     "scenario-fifo",
+    "out-newline",
+    "sweep-out-newline",
 ]
 
 

@@ -644,3 +644,30 @@ def test_evaluations_file_skips_a_cut_line_and_refuses_another_calibration(tmp_p
     other = load("paper", plant="ideal", overrides=["kinematic.k1=3"])
     with pytest.raises(InputError, match="scenario"):
         cal.load_evaluations(path, cal._context(other, "table1", "ideal", 0))
+
+
+def test_fifo_row_files_are_never_read(tmp_path):
+    """A FIFO named like a row in ``runs/`` (a foreign one, whose description the refusal quotes, or this
+    sweep's own, read on resume) blocked the sweep forever (issue 28): the refusal names the file unread, and a
+    resume redoes the row it cannot read. In a process of its own with a timeout: a regression hangs, never passes."""
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    (tmp_path / "runs").mkdir()
+    os.mkfifo(tmp_path / "runs" / "x0.json")
+    code = (
+        "import sys, types; from pathlib import Path\n"
+        "from bioform_mj.core.errors import InputError\n"
+        "from bioform_mj.jobs import sweep\n"
+        f"out = Path({str(tmp_path)!r})\n"
+        "try:\n    sweep.check_same_sweep(out, {'k'})\nexcept InputError as exc:\n    print(exc)\n"
+        "said = []\n"
+        "row = sweep._read_row(out / 'runs' / 'x0.json', types.SimpleNamespace(key='x0'), said.append)\n"
+        "print(row, said)\n"
+    )
+    res = subprocess.run(
+        [sys.executable, "-c", code], env={**os.environ, "PYTHONPATH": src}, capture_output=True, text=True, timeout=60
+    )
+    lines = res.stdout.strip().splitlines()
+    assert res.returncode == 0 and len(lines) == 2, res.stderr
+    assert "holds another sweep's rows: 1 of its 1 rows" in lines[0] and "e.g. 'x0.json'" in lines[0], lines
+    said = f"row file '{tmp_path / 'runs' / 'x0.json'}' cannot be read (not a regular file); its run is redone"
+    assert lines[1] == f'None ["{said}"]', lines

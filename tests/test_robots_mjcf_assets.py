@@ -282,3 +282,96 @@ def test_urdf_top_speed_read_with_the_asset_roots(place):
     lim = check(ref, identify_=False)["limits"]
     assert lim["top_speed_source"] == "urdf", lim
     assert lim["top_speed_mps"] == pytest.approx(10.0 * R_WHEEL, rel=1e-9)
+
+
+# ------------------------------------------------------------------ asset_roots that do not exist (issue 28)
+@pytest.mark.parametrize("what", ["missing", "a-file", "unreadable"])
+def test_asset_roots_entry_must_be_a_readable_directory(what, tmp_path, capsys, monkeypatch):
+    """A typo in ``asset_roots`` is one ``error:`` line naming the key and the path, exit 2, before any work
+    (it was taken in and surfaced only as an "outside the robot's folder" refusal naming the roots)."""
+    (tmp_path / "robot").mkdir()
+    (tmp_path / "robot" / "a.xml").write_text(PAPER)
+    root = tmp_path / "shraed"
+    if what == "a-file":
+        root.write_text("x")
+    elif what == "unreadable":  # root reads every folder: the permission is simulated
+        root.mkdir()
+        real = os.access
+        monkeypatch.setattr(os, "access", lambda p, m, **k: False if str(p) == str(root) else real(p, m, **k))
+    scen = tmp_path / "s.toml"
+    scen.write_text(
+        '[plant]\nkind = "ideal"\nrobots = [{model = "robot/a.xml", asset_roots = ["shraed"]}]\n'
+        "[sim]\nduration = 0.05\n"
+    )
+    code = cli.main(["run", str(scen), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    why = {"missing": "does not exist", "a-file": "is not a directory", "unreadable": "cannot be read"}[what]
+    assert code == 2 and len(err) == 1, err
+    assert err[0].startswith("error: scenario key 'plant.robots[0].asset_roots': ") and why in err[0], err
+    assert str(root) in err[0] and not (tmp_path / "out").exists()
+    from bioform_mj.robots.prepare import prepare_robot
+
+    with pytest.raises(ValueError, match=f"asset_roots: '{root}' {why}"):  # the Python API too
+        prepare_robot(RobotRef(model=str(tmp_path / "robot" / "a.xml"), asset_roots=(str(root),)))
+
+
+# ------------------------------------------------------------------ one list of a spec's files (issue 28)
+def test_spec_files_lists_every_cube_face_for_every_user(tmp_path):
+    """:func:`spec_files` is the one list: the escape check, the special-file check and the absolute names
+    each see all six cube faces, a mesh, a skin-less hfield; the spec's own assets and empty names are left out."""
+    import mujoco
+
+    from bioform_mj.robots.mjcf import absolute_asset_files
+    from bioform_mj.robots.mjcf_assets import spec_escape
+    from bioform_mj.robots.sanity import spec_file_problem
+    from bioform_mj.robots.spec_files import CUBE_FACES, spec_files
+
+    faces = " ".join(f'{a}="t/{a}.png"' for a in CUBE_FACES)
+    xml = _robot(
+        tmp_path / "r",
+        "a.xml",
+        f'<asset><texture name="c" type="cube" {faces}/><mesh name="m" file="m.stl"/>'
+        '<hfield name="h" file="h.png" size="1 1 1 1"/><texture name="g" type="2d" builtin="checker" '
+        'width="8" height="8"/></asset>',
+    )
+    spec = mujoco.MjSpec.from_file(str(xml))
+    got = [(f.kind, f.attr, f.name) for f in spec_files(spec)]
+    assert got == [
+        ("mesh", "file", "m.stl"),
+        ("hfield", "file", "h.png"),
+        *(("texture", a, f"t/{a}.png") for a in CUBE_FACES),
+    ]
+    assert spec_escape(spec, (str(tmp_path / "elsewhere"),)).startswith('<mesh file="m.stl"/>')
+    (tmp_path / "r" / "t").mkdir()
+    os.mkfifo(tmp_path / "r" / "t" / "filedown.png")  # the fourth face: a read would block
+    assert spec_file_problem(spec) == (
+        f"texture filedown {tmp_path / 'r' / 't' / 'filedown.png'}: "
+        f"'{tmp_path / 'r' / 't' / 'filedown.png'}' is a FIFO (named pipe), not a regular file: not read "
+        "(reading it could block)"
+    )
+    absolute_asset_files(spec)
+    assert list(spec.textures[0].cubefiles) == [str(tmp_path / "r" / "t" / f"{a}.png") for a in CUBE_FACES]
+    assert [f.name for f in spec_files(spec)][:2] == [str(tmp_path / "r" / "m.stl"), str(tmp_path / "r" / "h.png")]
+
+
+def test_fifo_cube_face_inside_the_folder_is_a_bounded_refusal(tmp_path):
+    """A FIFO inside the robot's folder as a cube texture's face passes the escape check (it is inside) and
+    was handed to MuJoCo's compiler, whose read blocks: now ``robot check`` refuses it before MuJoCo reads the
+    file (the XML walk checks every file it names), one ``error:`` line naming the face, exit 2 (in a process
+    of its own: a regression times out, never passes)."""
+    r = tmp_path / "r"
+    r.mkdir()
+    os.mkfifo(r / "face.png")
+    faces = " ".join(f'{a}="face.png"' for a in ("fileright", "fileleft", "fileup", "filedown", "filefront"))
+    xml = _robot(r, "a.xml", f'<asset><texture name="c" type="cube" {faces} fileback="face.png"/></asset>')
+    res = subprocess.run(
+        [sys.executable, "-m", "bioform_mj.cli", "robot", "check", str(xml)],
+        env={**os.environ, "PYTHONPATH": SRC},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    err = res.stderr.strip().splitlines()
+    assert res.returncode == 2 and len(err) == 1, err
+    assert err[0].startswith("error: ") and f"<texture fileright=\"face.png\"/> ('{r / 'face.png'}')" in err[0], err
+    assert f"'{r / 'face.png'}' is a FIFO" in err[0], err

@@ -324,3 +324,71 @@ def test_round_trip_of_the_projects_own_bag(tmp_path):
     assert any("without an effort skipped" in n for n in rep["notes"])  # the exporter's state-only t = T
     assert any("/f1/ground_truth/odom" in n for n in rep["notes"])
     assert rep["effort"] == {"motor": "ideal", "driver": None}  # the bag says: applied torques
+
+
+@pytest.mark.parametrize("where", ["file", "metadata", "storage"])
+def test_a_fifo_recording_is_refused_unread(where, tmp_path):
+    """A FIFO as the ``--bag`` file, or as a rosbag2 folder's ``metadata.yaml`` or storage file, blocked the
+    reader forever (issue 28): one InputError naming it. In a process of its own with a timeout (a regression
+    hangs, never passes)."""
+    import os
+    import subprocess
+    import sys
+
+    bag = tmp_path / "bag"
+    if where == "file":
+        bag = tmp_path / "b.mcap"
+        os.mkfifo(bag)
+        fifo = bag
+    else:
+        bag.mkdir()
+        fifo = bag / ("metadata.yaml" if where == "metadata" else "b_0.mcap")
+        if where == "storage":
+            (bag / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  version: 5\n")
+        os.mkfifo(fifo)
+    code = (
+        "from bioform_mj.robots.realdata.recording import read_recording\n"
+        "from bioform_mj.core.errors import InputError\n"
+        f"try:\n    read_recording({str(bag)!r}, ('l', 'r'))\nexcept InputError as exc:\n    print(exc)\n"
+    )
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    res = subprocess.run(
+        [sys.executable, "-c", code], env={**os.environ, "PYTHONPATH": src}, capture_output=True, text=True, timeout=60
+    )
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == f"--bag {bag}: '{fifo}' is a FIFO (named pipe), not a regular file: not read " + (
+        "(reading it could block)"
+    ), res.stdout
+
+
+def test_a_hostile_csv_recording_is_one_input_error(tmp_path):
+    """A 50 MB field was an internal error (csv's field limit), and a 10 GB (sparse) CSV was read whole: now one
+    InputError each, the size refused before any read (in a process of its own with a timeout)."""
+    import os
+    import subprocess
+
+    cols = "time," + ",".join(f"{j}.{f}" for j in ("l", "r") for f in ("position", "velocity", "effort"))
+    (tmp_path / "long.csv").write_text(cols + "\n1," + "x" * 50_000_000 + "\n")
+    with open(tmp_path / "huge.csv", "wb") as fh:
+        fh.write(cols.encode() + b"\n")
+        fh.truncate(10 * 10**9)
+    code = (
+        "from bioform_mj.robots.realdata.recording import read_recording\n"
+        "from bioform_mj.core.errors import InputError\n"
+        "for f in ('long.csv', 'huge.csv'):\n"
+        "    try:\n        read_recording(f, ('l', 'r'))\n    except InputError as exc:\n        print(exc)\n"
+    )
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    res = subprocess.run(
+        [sys.executable, "-c", code],
+        env={**os.environ, "PYTHONPATH": src},
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+    )
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip().splitlines() == [
+        "long.csv: not a CSV recording (field larger than field limit (131072))",
+        "huge.csv: a CSV recording of 10000 MB, above the 256 MB read (record an MCAP, or export a shorter window)",
+    ]

@@ -63,14 +63,15 @@ def robot_key(ref: Any) -> str:
     (``prepare_robot``: the file with its mapping applied, a URDF imported; not its path), the bytes of every asset
     file it names (meshes), the mapping, and :func:`code_digest`. Hex, 32 characters."""
     from bioform_mj.robots.prepare import prepare_robot
+    from bioform_mj.robots.spec_files import spec_files
 
     spec, lay = prepare_robot(ref)[:2]
     h = hashlib.sha256(code_digest())
     # the layout stored in the spec names the file: the same content elsewhere is the same robot
     h.update(spec.to_xml().replace(f'"file": {json.dumps(str(lay.file))}', '"file": ""').encode())
-    for asset in [*spec.meshes, *spec.hfields, *spec.textures]:
-        f = Path(asset.file) if getattr(asset, "file", "") else None
-        if f is not None and f.is_file():
+    for asset in spec_files(spec):  # skins and cube faces too (issue 28: a changed face kept the old verdict)
+        f = Path(asset.path(spec.modelfiledir or "."))
+        if f.is_file():
             h.update(f.read_bytes())
     mapping = {k: v for k, v in dataclasses.asdict(ref).items() if k not in ("model", "package_path", "asset_roots")}
     h.update(json.dumps(mapping, sort_keys=True, default=str).encode())

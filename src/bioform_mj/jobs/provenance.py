@@ -32,9 +32,11 @@ from typing import Any
 
 from bioform_mj._version import __version__
 from bioform_mj.core.codehash import code_hash
+from bioform_mj.robots.sanity import parse_xml
+from bioform_mj.robots.spec_files import CUBE_FACES
 
 #: attributes that name a file MuJoCo loads (MJCF and URDF)
-_FILE_ATTRS = ("file", "filename", "fileright", "fileleft", "fileup", "filedown", "filefront", "fileback")
+_FILE_ATTRS = ("file", "filename", *CUBE_FACES)
 #: element tag → which compiler folder its file is relative to
 _DIR_OF = {"mesh": "meshdir", "skin": "meshdir", "hfield": "meshdir", "texture": "texturedir"}
 
@@ -110,7 +112,7 @@ def model_files(path: str | Path) -> dict[str, str]:
             continue
         out[str(f)] = file_hash(f)
         try:
-            root = ET.parse(f).getroot()
+            root = parse_xml(f)  # fed whole (a huge attribute: quadratic in chunks)
         except (ET.ParseError, OSError):
             continue
         for comp in root.iter("compiler"):  # MuJoCo: the last compiler element wins; assetdir sets both

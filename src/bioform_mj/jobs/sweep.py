@@ -387,7 +387,11 @@ def _read_row(
 ) -> dict[str, Any] | None:
     """A finished row from an earlier invocation, or None when the run must be done (again):
     missing, unreadable or damaged, its worker died, or ``redo(row)`` gives a reason (said on stderr)."""
+    from bioform_mj.robots.sanity import not_regular  # a FIFO named like a row hung the resume (issue 28)
+
     try:
+        if not_regular(path):
+            raise OSError(0, "not a regular file")
         text = path.read_bytes()
     except FileNotFoundError:
         return None
@@ -519,8 +523,14 @@ def check_same_sweep(out: Path, keys: set[str]) -> None:
     if not foreign:
         return
     desc = ""
-    try:  # what the first of them was, for the message (a damaged file: said as such)
-        row = json.loads((runs_dir / f"{foreign[0]}.json").read_bytes()[: 1 << 20])
+    from bioform_mj.robots.sanity import not_regular
+
+    try:  # what the first of them was, for the message (a damaged file, a FIFO: said as such, never read)
+        first = runs_dir / f"{foreign[0]}.json"
+        if not_regular(first):
+            raise OSError(0, "not a regular file")
+        with open(first, "rb") as fh:
+            row = json.loads(fh.read(1 << 20))
         labels = {k: v for k, v in row.items() if k not in ("key", "provenance") and not isinstance(v, (dict, list))}
         shown = ["method", "seed", *(k for k in labels if "." in k)]
         desc = ", e.g. " + ", ".join(f"{k}={labels[k]}" for k in shown if k in labels)

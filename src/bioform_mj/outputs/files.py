@@ -130,6 +130,9 @@ def _plain_checks(path: str | Path, what: str) -> Path:
         raise _bad(what, s, "is empty")
     if "\x00" in s:
         raise _bad(what, s.replace("\x00", "\\0"), "contains a NUL character")
+    if any(c < " " or c == "\x7f" for c in s):  # "outputs in o\nerror: …/" forged a line (issue 28)
+        shown = "".join(repr(c)[1:-1] if c < " " or c == "\x7f" else c for c in s)
+        raise _bad(what, shown, "holds a control character (a newline would forge lines of bioform's output)")
     p = Path(s)
     try:
         resolved = p.resolve()

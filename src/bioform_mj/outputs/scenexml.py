@@ -15,6 +15,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from bioform_mj.outputs.files import atomic_path, write_text
+from bioform_mj.robots.spec_files import CUBE_FACES
 
 __all__ = ["ASSETS_DIR", "ASSET_SUFFIXES", "write_scene", "portable_xml"]
 
@@ -27,7 +28,7 @@ _FILE_ATTRS = {
     "mesh": ("file",),
     "skin": ("file",),
     "hfield": ("file",),
-    "texture": ("file", "fileright", "fileleft", "fileup", "filedown", "filefront", "fileback"),
+    "texture": ("file", *CUBE_FACES),
 }
 
 

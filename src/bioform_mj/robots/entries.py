@@ -17,7 +17,15 @@ from typing import Any
 
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.formats import looks_like_path
-from bioform_mj.robots.refs import RobotRef, as_ref, is_shipped, models_dir, rebase_package_path, robot_names
+from bioform_mj.robots.refs import (
+    RobotRef,
+    as_ref,
+    asset_root_problem,
+    is_shipped,
+    models_dir,
+    rebase_package_path,
+    robot_names,
+)
 
 __all__ = ["rebase_entries", "resolve_robot"]
 
@@ -28,9 +36,12 @@ def resolve_robot(entry: Any) -> RobotRef:
     Shipped names (``paper``, ``paper_robot``, ``paper_robot.xml``) map to the package's
     ``models/``; anything else must be a path to a file (``.xml`` MJCF, ``.urdf``/``.xacro`` URDF;
     relative: to the working directory).
-    Raises :class:`InputError` naming an unknown robot or a missing file.
+    Raises :class:`InputError` naming an unknown robot, a missing file or a missing ``asset_roots`` folder.
     """
     ref = as_ref(entry)
+    for folder in ref.asset_roots:
+        if why := asset_root_problem(folder):
+            raise InputError(f"asset_roots: {why}")
     name = ref.model
     if is_shipped(name) and not Path(name).is_file():
         stem = name[: -len(".xml")] if name.endswith(".xml") else name

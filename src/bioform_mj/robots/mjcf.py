@@ -80,21 +80,9 @@ def absolute_asset_files(spec: mujoco.MjSpec) -> None:
     from many folders names each file once and wholly (design §12: a run's ``scene.xml`` copies
     them beside it, :func:`bioform_mj.outputs.scenexml.write_scene`). Files in the spec's own
     asset dictionary are left alone."""
+    from bioform_mj.robots.spec_files import spec_files
+
     top = Path(spec.modelfiledir or ".")
-    own = set(spec.assets) if spec.assets else set()
-
-    def fix(name: str, folder: str) -> str:
-        if not name or name in own or Path(name).is_absolute():
-            return name
-        return str((top / folder / name).resolve())
-
-    for m in spec.meshes:
-        m.file = fix(m.file, spec.meshdir)
-    for sk in spec.skins:
-        sk.file = fix(sk.file, spec.meshdir)
-    for h in spec.hfields:
-        h.file = fix(h.file, spec.meshdir)
-    for t in spec.textures:
-        t.file = fix(t.file, spec.texturedir)
-        if any(t.cubefiles):
-            t.cubefiles = [fix(c, spec.texturedir) for c in t.cubefiles]
+    for f in list(spec_files(spec)):
+        if not Path(f.name).is_absolute():
+            f.rename(str((top / f.folder / f.name).resolve()))

@@ -19,7 +19,7 @@ from bioform_mj.robots.refs import PackagePath
 
 # at the top, not in _package_name: the xacro child (design §12) imports this module before its audit hook, and a
 # later import (reading a .py or .pyc) is refused there
-from bioform_mj.robots.sanity import not_regular
+from bioform_mj.robots.sanity import not_regular, parse_xml
 
 __all__ = ["find_package", "package_search_path", "resolve_uri"]
 
@@ -29,11 +29,14 @@ _NO_PACKAGES = PackagePath()
 
 
 def _package_name(d: Path) -> str | None:
-    """The ``<name>`` in ``d/package.xml``, None without one (or when it is no regular file: a FIFO would block)."""
+    """The ``<name>`` in ``d/package.xml``, None without one (or when it is no regular file: a FIFO would block;
+    or above 1 MB: a manifest is a few kB, and a huge one on ``ROS_PACKAGE_PATH`` would be parsed whole)."""
     if not_regular(d / "package.xml"):
         return None
     try:
-        return (ET.parse(d / "package.xml").getroot().findtext("name") or "").strip() or None
+        if (d / "package.xml").stat().st_size > 10**6:
+            return None
+        return (parse_xml(d / "package.xml").findtext("name") or "").strip() or None
     except (OSError, ET.ParseError):
         return None
 

@@ -37,6 +37,7 @@ __all__ = [
     "robot_names",
     "as_ref",
     "as_package_path",
+    "asset_root_problem",
     "rebase_package_path",
     "package_path_from_args",
 ]
@@ -271,6 +272,26 @@ def is_shipped(model: str) -> bool:
     stem = model[: -len(".xml")] if model.endswith(".xml") else model
     stem = stem[: -len("_robot")] if stem.endswith("_robot") else stem
     return "/" not in model and "\\" not in model and stem in robot_names()
+
+
+def asset_root_problem(folder: str) -> str:
+    """Why an ``asset_roots`` entry cannot be an MJCF robot's asset folder (``""``: it can): it must be an
+    existing, readable directory (``~`` expanded). A typo was taken in silently and surfaced only as an
+    "outside the robot's folder" refusal naming the roots (issue 28)."""
+    import os
+
+    from bioform_mj.robots.sanity import unstatable
+
+    d = os.path.expanduser(folder)
+    if unstatable(d):
+        return unstatable(d)
+    if not os.path.exists(d):
+        return f"'{folder}' does not exist (a typo? relative paths in a scenario file are relative to the file)"
+    if not os.path.isdir(d):
+        return f"'{folder}' is not a directory"
+    if not os.access(d, os.R_OK | os.X_OK):
+        return f"'{folder}' cannot be read (permission denied)"
+    return ""
 
 
 def package_path_from_args(values: list[str] | None, flag: str = "--package-path") -> PackagePath:

@@ -6,14 +6,16 @@ naming the file and the element:
 - :func:`regular_file`: a file that is read must be a regular file (a FIFO named ``package.xml`` on
   ``ROS_PACKAGE_PATH``, or a device, would block the reader forever); checked with ``os.stat``
   (``stat.S_ISREG``) before it is opened;
-- :func:`mesh_problem`: a mesh file's size (at most :data:`MESH_MAX_MB` MB), and for a zip archive
+- :func:`mesh_problem`: a mesh file's size (at most :data:`MESH_MAX_MB` MB), a PNG's declared pixels (at most
+  :data:`IMAGE_MAX_PIXELS`), and for a zip archive
   (COLLADA ``.zae``, or a ``.dae`` that is a zip) the sizes its directory declares, before anything
   is decompressed (at most :data:`MESH_MAX_MB` MB unpacked, :data:`ZIP_MAX_ENTRIES` entries, a
   compression ratio of :data:`ZIP_MAX_RATIO`);
 - :func:`urdf_value_problem`: masses, inertias, joint axes, dynamics, limits, Gazebo friction and
   mesh scales of a URDF: finite, non-negative where negative means nothing, non-zero where zero
   cannot be (a moving link's mass, an axis, a scale);
-- :func:`model_value_problem`: the same on a compiled ``MjModel`` (an MJCF robot);
+- :func:`model_value_problem`: the same on a compiled ``MjModel`` (an MJCF robot), its ``<option>`` too
+  (:func:`option_problem`: a timestep > 0, finite gravity, bounded solver iterations);
 - names (URDF and MJCF) that hold a control character are refused (:func:`one_line` escapes them in
   output that names what a user wrote);
 - :func:`check_step_budget`: a timestep that would make automatic work (robot check, identification)
@@ -39,6 +41,7 @@ __all__ = [
     "MESH_MAX_MB",
     "ZIP_MAX_ENTRIES",
     "ZIP_MAX_RATIO",
+    "IMAGE_MAX_PIXELS",
     "CHECK_BOUND_S",
     "STEP_WALL_S",
     "regular_file",
@@ -46,15 +49,21 @@ __all__ = [
     "mesh_problem",
     "urdf_value_problem",
     "model_value_problem",
+    "option_problem",
+    "MAX_SOLVER_ITERATIONS",
     "check_step_budget",
     "one_line",
     "spec_file_problem",
+    "parse_xml",
 ]
 
 #: largest mesh file, and largest unpacked archive, taken (MB); a published robot's meshes are a few MB
 MESH_MAX_MB = 256
 #: most entries of a mesh archive
 ZIP_MAX_ENTRIES = 1000
+#: most pixels of a texture or height-field image (a PNG's declared width × height; an MJCF texture's
+#: width × height, ×6 for a cube): 2^26, an 8192 × 8192 image, 192 MB as RGB
+IMAGE_MAX_PIXELS = 2**26
 #: largest unpacked/packed size ratio of a mesh archive (a mesh compresses 3–10×; a zip bomb 1000×+)
 ZIP_MAX_RATIO = 200
 #: bound on the automatic work a robot file's timestep can ask (robot check, identification): s of wall time
@@ -62,6 +71,14 @@ CHECK_BOUND_S = 300.0
 #: wall time of one physics step of one robot through the plant, s (measured ~50 µs on the 2-core
 #: development machine; the estimate is a lower bound on a slower one)
 STEP_WALL_S = 2e-5
+
+
+def parse_xml(path: str | Path) -> ET.Element:
+    """``ET.parse(path).getroot()``, the file fed to expat whole: ``ET.parse`` feeds it in 64 kB chunks, and
+    expat 2.5 parses a token that spans chunks again for each chunk, so a 60 MB attribute took 114 s (6 MB:
+    1.8 s; whole: 1.9 s and 0.14 s; issue 28). Raises ``OSError``/``ET.ParseError`` as ``ET.parse``."""
+    with open(path, "rb") as fh:
+        return ET.fromstring(fh.read())
 
 
 def not_regular(path: str | Path) -> str:
@@ -127,6 +144,16 @@ def mesh_problem(file: str | Path) -> str:
             magic = fh.read(4)
     except OSError as exc:
         return f"cannot be read ({exc.strerror})"
+    if magic == b"\x89PNG":  # a PNG declares its size in IHDR: a 3 MB file can decode to gigabytes
+        try:
+            with open(file, "rb") as fh:
+                head = fh.read(24)
+        except OSError as exc:
+            return f"cannot be read ({exc.strerror})"
+        w, h = (int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")) if len(head) == 24 else (0, 0)
+        if w * h > IMAGE_MAX_PIXELS:
+            return f"a PNG image of {w} × {h} pixels, above the {IMAGE_MAX_PIXELS} an image may have: not decoded"
+        return ""
     if magic != b"PK\x03\x04":
         return ""
     try:
@@ -284,6 +311,8 @@ def model_value_problem(model: Any) -> str:
     def name(obj: Any, i: int) -> str:
         return mujoco.mj_id2name(model, obj, i) or f"#{i}"
 
+    if bad := option_problem(model.opt):
+        return bad
     for raw in bytes(model.names).split(b"\0"):  # every element name of the model
         text = raw.decode("utf-8", "replace")
         if _CONTROL.search(text):
@@ -308,6 +337,43 @@ def model_value_problem(model: Any) -> str:
         sc = model.mesh_scale[m] if hasattr(model, "mesh_scale") else np.ones(3)
         if not np.all(np.isfinite(sc)) or not np.all(np.isfinite(model.mesh_vert)):
             return f"mesh '{name(mujoco.mjtObj.mjOBJ_MESH, m)}': scale {np.asarray(sc).tolist()} (finite numbers)"
+    return ""
+
+
+#: most iterations a robot file's ``<option>`` may ask of one physics step's solvers (MuJoCo's defaults: 100
+#: solver, 50 line search, 0 noslip, 35 CCD, 10 SDF); with a tolerance of 0, 10^9 of them made one step of
+#: ``robot check`` run past 45 s (issue 28)
+MAX_SOLVER_ITERATIONS = 1000
+
+
+def option_problem(opt: Any) -> str:
+    """The first bad number of a compiled model's ``<option>`` (``""``: none): a timestep finite and > 0
+    (0, a negative or NaN one was an internal error); gravity, wind and the magnetic field finite; density,
+    viscosity, the tolerances finite and >= 0, impratio finite and > 0; the solvers' iteration counts at most
+    :data:`MAX_SOLVER_ITERATIONS` (each step could otherwise run for minutes)."""
+    import numpy as np
+
+    def shown(v: Any) -> str:
+        return " ".join(f"{x:g}" for x in np.atleast_1d(v))
+
+    if not (math.isfinite(opt.timestep) and opt.timestep > 0):
+        return f"<option timestep='{opt.timestep:g}'>: a timestep must be a finite number > 0 s"
+    for k in ("gravity", "wind", "magnetic"):
+        if not np.all(np.isfinite(getattr(opt, k))):
+            return f"<option {k}='{shown(getattr(opt, k))}'>: must be finite numbers"
+    for k in ("density", "viscosity", "tolerance", "ls_tolerance", "noslip_tolerance", "ccd_tolerance"):
+        v = float(getattr(opt, k, 0.0))
+        if not (math.isfinite(v) and v >= 0):
+            return f"<option {k}='{v:g}'>: must be a finite number >= 0"
+    if not (math.isfinite(opt.impratio) and opt.impratio > 0):
+        return f"<option impratio='{opt.impratio:g}'>: must be a finite number > 0"
+    for k in ("iterations", "ls_iterations", "noslip_iterations", "ccd_iterations", "sdf_iterations"):
+        n = int(getattr(opt, k, 0))
+        if n > MAX_SOLVER_ITERATIONS:
+            return (
+                f"<option {k}='{n}'>: at most {MAX_SOLVER_ITERATIONS} (MuJoCo's default is far lower; so many "
+                "could make one physics step run for minutes)"
+            )
     return ""
 
 
@@ -336,21 +402,18 @@ def check_step_budget(sim_seconds: float, dt: float, what: str, hint: str, robot
 
 
 def spec_file_problem(spec: Any) -> str:
-    """Why an MJCF ``MjSpec``'s mesh, skin, height-field or texture file is not loaded (``""``: none):
-    checked by :func:`mesh_problem` before MuJoCo's compiler opens it (a FIFO blocks it, a 10 GB STL
-    exhausts memory). Names resolve as the compiler resolves them (the model's folder and its
+    """Why an MJCF ``MjSpec``'s mesh, skin, height-field or texture file (a cube face too:
+    :func:`~bioform_mj.robots.mjcf_assets.spec_files`) is not loaded (``""``: none): checked by
+    :func:`mesh_problem` before MuJoCo's compiler opens it (a FIFO blocks it, a 10 GB STL exhausts
+    memory). Names resolve as the compiler resolves them (the model's folder and its
     ``meshdir``/``texturedir``); files of the spec's own asset dictionary are not files."""
-    top = Path(spec.modelfiledir or ".")
-    own = set(spec.assets) if spec.assets else set()
-    items = [(m.file, spec.meshdir, "mesh") for m in spec.meshes]
-    items += [(s.file, spec.meshdir, "skin") for s in spec.skins]
-    items += [(h.file, spec.meshdir, "hfield") for h in spec.hfields]
-    items += [(t.file, spec.texturedir, "texture") for t in spec.textures]
-    for name, folder, kind in items:
-        if not name or name in own:
-            continue
-        f = Path(name) if Path(name).is_absolute() else top / (folder or "") / name
-        why = mesh_problem(f)
+    from bioform_mj.robots.spec_files import spec_files
+
+    top = spec.modelfiledir or "."
+    for f in spec_files(spec):
+        full = f.path(top)
+        why = mesh_problem(full)
         if why:
-            return f"{kind} file {f}: {why}"
+            what = f"{f.kind} file" if f.attr == "file" else f"{f.kind} {f.attr}"
+            return f"{what} {full}: {why}"
     return ""

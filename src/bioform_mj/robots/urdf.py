@@ -51,6 +51,7 @@ import numpy as np
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.compile_hints import compile_hint
 from bioform_mj.robots.mesh_paths import absolute_escape, symlink_escape
+from bioform_mj.robots.mjcf_assets import MJCF_MAX_FILES_MB, MJCF_MAX_MB
 from bioform_mj.robots.packages import find_package, package_search_path, resolve_uri
 from bioform_mj.robots.refs import PackagePath, RobotRef
 from bioform_mj.robots.sanity import mesh_problem, not_regular, urdf_value_problem
@@ -82,6 +83,8 @@ URDF_SUFFIXES = (".urdf", ".xacro")
 MESH_NATIVE = (".stl", ".obj", ".msh")
 #: most links (and joints) a URDF may have: a published robot has a few hundred
 URDF_MAX_LINKS = 5000
+#: most elements of any kind a URDF may have (its materials, visuals, Gazebo tags, … together)
+URDF_MAX_ELEMENTS = 100_000
 #: the compiler settings that keep a URDF robot a robot (design §12)
 _COMPILER = {"discardvisual": "false", "fusestatic": "false", "strippath": "false"}
 _INSTALL_HINT = "pip install 'bioform-mj[urdf]' (trimesh + pycollada)"
@@ -130,9 +133,13 @@ def is_urdf(path: str | Path) -> bool:
         return True
     if not p.endswith(".xml") or not_regular(path):
         return False
-    try:
-        for _event, elem in ET.iterparse(str(path), events=("start",)):
-            return elem.tag == "robot"
+    try:  # the root's start tag: the first 64 kB, else the rest in one piece (expat 2.5 parses a token fed in
+        with open(path, "rb") as fh:  # chunks again for each chunk: a 50 MB root attribute ran past 60 s, issue 28)
+            parser = ET.XMLPullParser(events=("start",))
+            for data in (fh.read(1 << 16), fh.read(64 * 10**6)):
+                parser.feed(data)
+                for _event, elem in parser.read_events():
+                    return elem.tag == "robot"
     except (OSError, ET.ParseError):
         return False
     return False
@@ -180,6 +187,8 @@ def _read_text(
         raise UrdfError(f"model file {not_regular(path)}")
     if not path.is_file():
         raise UrdfError(f"model file '{path}' does not exist")
+    if (size := path.stat().st_size) > MJCF_MAX_MB * 10**6:  # a 10 GB (sparse) file was read whole (issue 28)
+        raise UrdfError(f"model file '{path}' is {size / 1e6:.0f} MB, above the {MJCF_MAX_MB} MB a robot file may be")
     text = None
     if not str(path).lower().endswith(".xacro"):
         try:
@@ -243,6 +252,12 @@ def _parse(
         raise UrdfError(
             f"{path}: {n_el} <link> and <joint> elements, above the {2 * URDF_MAX_LINKS} a robot may have "
             f"(at most {URDF_MAX_LINKS} links; a published robot has a few hundred)"
+        )
+    n_all = sum(1 for _ in robot.iter())
+    if n_all > URDF_MAX_ELEMENTS:  # 3·10^5 <material> elements ran robot check past 60 s (issue 28)
+        raise UrdfError(
+            f"{path}: {n_all} elements, above the {URDF_MAX_ELEMENTS} a robot may have (a published robot has a few "
+            "thousand)"
         )
     bad_value = urdf_value_problem(robot)  # NaN, negative, zero where it cannot be: refused naming it
     if bad_value:
@@ -340,6 +355,7 @@ def _parse(
     found_by: set[str] = set()
     dropped: list[str] = []
     trimesh_ok: bool | None = None
+    loaded = 0  # bytes of the mesh files kept, each as often as it is named
     for lname, link in links.items():
         for role in ("visual", "collision"):
             for el in link.findall(role):
@@ -380,6 +396,12 @@ def _parse(
                     dropped.append(f"'{uri}' of link '{lname}' ({why})")
                     continue
                 mesh.set("filename", str(file))
+                loaded += file.stat().st_size  # MuJoCo loads a mesh for each element naming it (issue 28)
+                if loaded > MJCF_MAX_FILES_MB * 10**6:
+                    raise UrdfError(
+                        f"{path}: <{role}> mesh '{uri}' of link '{lname}': the meshes the robot loads come to more "
+                        f"than {MJCF_MAX_FILES_MB} MB (a file named by several links counted each time)"
+                    )
     if dropped:
         notes.append(
             f"{len(dropped)} visual mesh(es) dropped (looks only; contacts and inertia unchanged; paths from the "

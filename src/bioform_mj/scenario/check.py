@@ -42,8 +42,10 @@ def robot_encoder_cpr(model: str) -> float | None:
     ElementTree: no MuJoCo needed to validate a scenario."""
     import xml.etree.ElementTree as ET
 
+    from bioform_mj.robots.sanity import parse_xml  # fed whole (a huge attribute: quadratic in chunks)
+
     try:
-        root = ET.parse(model).getroot()
+        root = parse_xml(model)
     except (OSError, ET.ParseError):
         return None  # the scene reports an unreadable file
     for num in root.iter("numeric"):
@@ -245,6 +247,12 @@ def validate(sc: Scenario) -> None:
     _positive("plant.inertia", pc.inertia)
     if len(pc.robots) not in (1, n):
         raise ScenarioError("plant.robots", f"expected 1 or {n} robot models, got {len(pc.robots)}")
+    from bioform_mj.robots.refs import as_ref, asset_root_problem
+
+    for i, r in enumerate(pc.robots):  # a typo names the key, not an "outside" refusal later (issue 28)
+        for folder in as_ref(r, f"plant.robots[{i}]").asset_roots:
+            if why := asset_root_problem(folder):
+                raise ScenarioError(f"plant.robots[{i}].asset_roots", why)
     if pc.kind == "mujoco":
         from bioform_mj.robots.entries import resolve_robot
         from bioform_mj.robots.formats import format_of

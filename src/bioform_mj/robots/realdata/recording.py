@@ -196,9 +196,15 @@ def _validate(rec: Recording) -> Recording:
 def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics | None = None) -> Recording:
     """Read ``path`` (rosbag2 folder, ``.mcap``/``.db3`` file, or ``.csv``) for the wheel joints ``joints``
     (left, right). Raises :class:`InputError` (exit 2) for anything that cannot be used (module docstring)."""
+    from bioform_mj.robots.sanity import not_regular
+
     p = Path(path)
     if not p.exists():
         raise InputError(f"--bag {p}: no such file or folder")
+    # a FIFO as the recording, or as a rosbag2 folder's metadata.yaml or storage file, blocked the reader forever
+    for f in sorted(p.iterdir()) if p.is_dir() else [p]:  # (issue 28); a device is never read either
+        if not f.is_dir() and (why := not_regular(f)):
+            raise InputError(f"--bag {p}: {why}")
     if p.is_file() and p.suffix.lower() == ".csv":
         return _validate(_read_csv(p, joints))
     return _validate(_read_bag(p, joints, topics or Topics()))
@@ -380,8 +386,18 @@ def _stream(reader, conns, name: str) -> Iterator:
 
 
 # ------------------------------------------------------------------ CSV
+#: largest CSV recording read, MB (2.5 million rows of 7 columns: 42 min at 1 kHz; read as Python rows first, it
+#: takes about 8× its size in memory); a longer one: an MCAP, or a window of it
+CSV_MAX_MB = 256
+
+
 def _read_csv(p: Path, joints: tuple[str, str]) -> Recording:
     name = str(p)
+    if (size := p.stat().st_size) > CSV_MAX_MB * 10**6:  # a 10 GB sparse CSV was read line by line, whole
+        raise InputError(
+            f"{name}: a CSV recording of {size / 1e6:.0f} MB, above the {CSV_MAX_MB} MB read (record an MCAP, or "
+            "export a shorter window)"
+        )
     try:
         with open(p, newline="") as fh:
             reader = csv.reader(fh)
@@ -412,6 +428,8 @@ def _read_csv(p: Path, joints: tuple[str, str]) -> Recording:
         raise InputError(f"{name}: cannot read: {exc.strerror or exc}") from None
     except UnicodeDecodeError:
         raise InputError(f"{name}: not a text CSV file") from None
+    except csv.Error as exc:  # a field above csv's limit (128 kB), a NUL byte: was an internal error (issue 28)
+        raise InputError(f"{name}: not a CSV recording ({exc})") from None
     a = np.asarray(rows, float).reshape(-1, len(header))
     t = a[:, col["time"]]
 
