@@ -39,7 +39,6 @@ scenario is refused before any work.
 
 from __future__ import annotations
 
-import functools
 import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field, replace
@@ -50,6 +49,7 @@ import numpy as np
 
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.compile_hints import compile_hint
+from bioform_mj.robots.mesh_convert import INSTALL_HINT, have_trimesh, one_line, trimesh_read
 from bioform_mj.robots.mesh_paths import absolute_escape, symlink_escape
 from bioform_mj.robots.mjcf_assets import MJCF_MAX_FILES_MB, MJCF_MAX_MB
 from bioform_mj.robots.packages import find_package, package_search_path, resolve_uri
@@ -87,7 +87,6 @@ URDF_MAX_LINKS = 5000
 URDF_MAX_ELEMENTS = 100_000
 #: the compiler settings that keep a URDF robot a robot (design §12)
 _COMPILER = {"discardvisual": "false", "fusestatic": "false", "strippath": "false"}
-_INSTALL_HINT = "pip install 'bioform-mj[urdf]' (trimesh + pycollada)"
 
 
 class UrdfError(InputError):
@@ -104,10 +103,6 @@ class UrdfImport:
     ref: RobotRef
     root: str
     notes: tuple[str, ...]
-
-
-def _one_line(msg: object) -> str:
-    return " ".join(str(msg).split())
 
 
 def load_urdf(ref: RobotRef, path: Path) -> tuple[Any, ...]:
@@ -194,7 +189,7 @@ def _read_text(
         try:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
-            raise UrdfError(f"model file '{path}' cannot be read: {_one_line(exc)}") from None
+            raise UrdfError(f"model file '{path}' cannot be read: {one_line(exc)}") from None
     if not needs_xacro(path, text):
         return text
     allowed, args = granted()
@@ -219,14 +214,6 @@ def _gz_value(parent: ET.Element, path: str) -> str | None:
 
 def _gz_names(plugin: ET.Element, tags: tuple[str, ...]) -> list[str]:
     return [v.strip() for t in plugin if t.tag in tags and (v := t.get("value", t.text)) and v.strip()]
-
-
-def _have_trimesh() -> bool:
-    try:
-        import trimesh  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 def _parse(
@@ -378,13 +365,13 @@ def _parse(
                     why = f"file {file} cannot be read"
                 if not why and file.suffix.lower() not in MESH_NATIVE:
                     if trimesh_ok is None:
-                        trimesh_ok = _have_trimesh()
+                        trimesh_ok = have_trimesh()
                     if trimesh_ok:
                         was = convert.get(str(file), ("visual", []))
                         convert[str(file)] = ("collision" if "collision" in (role, was[0]) else role, [*was[1], lname])
                     else:
                         why = (
-                            f"MuJoCo cannot read {file.suffix} meshes: {_INSTALL_HINT} to convert it on import, "
+                            f"MuJoCo cannot read {file.suffix} meshes: {INSTALL_HINT} to convert it on import, "
                             f"or convert it to STL yourself (e.g. `meshlab`/`assimp export {file.name} "
                             f"{file.stem}.stl`) and point the URDF at the STL"
                         )
@@ -512,54 +499,17 @@ def check_file(ref: RobotRef) -> None:
 
 
 # ------------------------------------------------------------------ meshes MuJoCo cannot read
-def _collada_unit(file: str) -> float:
-    """``<asset><unit meter=…>`` of a COLLADA file (1 without one): Gazebo and RViz apply it."""
-    try:
-        for _ev, el in ET.iterparse(file, events=("start",)):
-            if el.tag.endswith("}unit") or el.tag == "unit":
-                return float(el.get("meter", "1"))
-            if el.tag.endswith("library_geometries"):
-                break
-    except (OSError, ET.ParseError, ValueError):
-        pass
-    return 1.0
-
-
-@functools.lru_cache(maxsize=64)
-def _trimesh_read(file: str, mtime_ns: int, size: int) -> tuple[np.ndarray, np.ndarray, float] | str:
-    """``(vertices (V, 3) m, faces (F, 3), COLLADA unit)`` of a mesh trimesh reads (all its parts,
-    placed), or why not; cached by file and its ``(mtime, size)``: a scene builds a robot several
-    times (a published COLLADA visual takes ~0.2 s)."""
-    import trimesh
-
-    from bioform_mj.robots.sanity import mesh_resolver
-
-    try:
-        mesh = trimesh.load(file, force="mesh", resolver=mesh_resolver(file))
-        v = np.asarray(mesh.vertices, float)
-        f = np.asarray(mesh.faces, int)
-    except Exception as exc:  # a broken file, a missing pycollada
-        return _one_line(exc) or type(exc).__name__
-    if len(v) < 4 or len(f) < 1:
-        return "it has no triangles"
-    unit = _collada_unit(file) if file.lower().endswith(".dae") else 1.0
-    v = v * unit
-    v.flags.writeable = False
-    f.flags.writeable = False
-    return v, f, unit
-
-
 def _load_mesh(file: str, role: str, links: list[str], path: Path) -> tuple[np.ndarray, np.ndarray, str]:
     """``(vertices, faces, note)`` of a mesh MuJoCo cannot read; a visual one that trimesh cannot
     read either comes back empty (dropped, said), a collision one is an error."""
     st = os.stat(file)
-    got = _trimesh_read(file, st.st_mtime_ns, st.st_size)
+    got = trimesh_read(file, st.st_mtime_ns, st.st_size)
     where = f"of link{'s' if len(links) > 1 else ''} {', '.join(repr(n) for n in links)}"
     if isinstance(got, str):
         if role == "collision":
             raise UrdfError(
                 f"{path}: <collision> mesh '{file}' {where} cannot be converted ({got}); "
-                f"convert it to STL and point the URDF at it ({_INSTALL_HINT} reads COLLADA)"
+                f"convert it to STL and point the URDF at it ({INSTALL_HINT} reads COLLADA)"
             )
         rel = os.path.relpath(file, path.parent)  # a run's scene.xml keeps the notes: no machine path
         return np.zeros((0, 3)), np.zeros((0, 3), int), f"visual mesh '{rel}' {where} dropped: {got}"
@@ -587,7 +537,7 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
     try:
         spec = mujoco.MjSpec.from_string(pr.text)
     except Exception as exc:
-        raise UrdfError(f"{path}: MuJoCo cannot read the URDF: {_one_line(exc)}") from None
+        raise UrdfError(f"{path}: MuJoCo cannot read the URDF: {one_line(exc)}") from None
 
     for m in list(spec.meshes):
         if m.file in pr.convert:
@@ -677,7 +627,7 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
     try:
         model = spec.compile()
     except Exception as exc:
-        raise UrdfError(f"{path}: does not compile: {_one_line(exc)}{compile_hint(exc)}") from None
+        raise UrdfError(f"{path}: does not compile: {one_line(exc)}{compile_hint(exc)}") from None
     body_id = {mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b): b for b in range(1, model.nbody)}
     if unbalanced:  # never silent: balancing changes the robot's inertia, and with it b_eff (design §12)
         notes.append(
@@ -809,5 +759,5 @@ def import_urdf(ref: RobotRef) -> UrdfImport:
     try:
         model = spec.compile()
     except Exception as exc:
-        raise UrdfError(f"{path}: does not compile: {_one_line(exc)}{compile_hint(exc)}") from None
+        raise UrdfError(f"{path}: does not compile: {one_line(exc)}{compile_hint(exc)}") from None
     return UrdfImport(spec=spec, model=model, ref=ref, root=pr.root, notes=tuple(notes))
