@@ -50,7 +50,10 @@ def _cache_dir() -> str:
 
 
 if HAVE_NUMBA:
+    from bioform_mj.core.jitcache import install as _install_locator
+
     numba.config.CACHE_DIR = _cache_dir()
+    _install_locator()  # the same source anywhere (a second clone) reuses the cache (core/jitcache.py)
 
 
 def njit(fn: Callable) -> Callable:
