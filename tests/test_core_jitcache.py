@@ -131,3 +131,62 @@ def test_the_locator_files_the_package_by_relative_path_and_leaves_others_to_num
         return 1
 
     assert PackageLocator.from_function(f, str(tmp_path / "elsewhere.py")) is None  # numba's own locators
+
+
+GUARDED = """
+from bioform_mj.core.equations import njit
+
+@njit
+def plus_one(x):
+    return x + 1
+"""
+
+GUARD_DRIVER = """
+import json, sys
+sys.path.insert(0, sys.argv[1])
+from bioform_mj.core.jitwatch import watch
+stop = watch(lambda b: None, gap_s=0.0)
+import guardk
+out = [guardk.plus_one(int(a)) if a.isdigit() else guardk.plus_one(float(a)) for a in sys.argv[2:]]
+print(json.dumps({"out": out, "kernels": [b.kernels for b in stop()]}))
+"""
+
+
+def _guard_run(tmp_path: Path, *args: str) -> dict:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"), PYTHONPATH=str(ROOT / "src"))
+    p = subprocess.run(
+        [sys.executable, "-c", GUARD_DRIVER, str(tmp_path / "mod"), *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+    assert p.returncode == 0, p.stderr[-2000:]
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow  # two processes importing numba
+def test_an_index_entry_naming_another_signatures_code_compiles_instead(tmp_path):
+    """What two processes saving two signatures of one kernel at once could leave without the lock: the index
+    maps int64 to float64's machine code and back. Loading it would run one signature's code on the other's
+    arguments; the guarded cache compiles both again and answers right."""
+    import pickle
+
+    (tmp_path / "mod").mkdir()
+    (tmp_path / "mod" / "guardk.py").write_text(GUARDED)
+    first = _guard_run(tmp_path, "1", "2.5")
+    assert first["out"] == [2, 3.5] and len(first["kernels"]) == 2
+    (index,) = (tmp_path / "cache").rglob("guardk.plus_one-*.nbi")
+    assert len(list(index.parent.glob("guardk.plus_one-*.lock"))) == 1  # saved under the kernel's lock
+    with open(index, "rb") as fh:
+        version = pickle.load(fh)
+        stamp, overloads = pickle.loads(fh.read())
+    (k1, d1), (k2, d2) = overloads.items()
+    with open(index, "wb") as fh:  # the two data files swapped
+        pickle.dump(version, fh, protocol=-1)
+        fh.write(pickle.dumps((stamp, {k1: d2, k2: d1}), protocol=-1))
+    again = _guard_run(tmp_path, "2.5", "1")
+    assert again["out"] == [3.5, 2]
+    assert [k for b in again["kernels"] for k in b] == ["guardk.plus_one", "guardk.plus_one"]
+    fixed = _guard_run(tmp_path, "2.5", "1")  # both saved again: loaded, right
+    assert fixed == {"out": [3.5, 2], "kernels": []}

@@ -13,7 +13,12 @@ and stamps each index with the SHA-256 of the source file's bytes:
   empty, so every kernel of that file compiles again and its index is rewritten; numba's index key also holds
   the SHA-256 of the function's bytecode;
 * two processes writing at once: numba writes every index and data file to a temporary name and renames it
-  over the old one (``os.replace``, atomic), so a reader sees an old or a new file, never a part of one.
+  over the old one (``os.replace``, atomic), so a reader sees an old or a new file, never a part of one. What
+  atomic files leave open is the index's read-modify-write: two processes saving *different* signatures of one
+  kernel at once both read the index before either wrote it, both number their data file 1, and the index
+  left can name the other signature's machine code. :class:`GuardedCache` (set on every kernel by
+  :func:`guard`) saves under an exclusive lock on the kernel's index (``fcntl.flock``; where there is none, as
+  numba) and refuses a loaded entry whose signature is not the one asked for (it then compiles, and saves).
 
 Kernels of other packages keep numba's own locators.
 """
@@ -27,7 +32,7 @@ from pathlib import Path
 
 from bioform_mj.core.codehash import PACKAGE_ROOT
 
-__all__ = ["PackageLocator", "cache_subpath", "install"]
+__all__ = ["GuardedCache", "PackageLocator", "cache_subpath", "guard", "install"]
 
 
 def cache_subpath(py_file: str) -> str | None:
@@ -51,10 +56,16 @@ def _file_sha256(path: str, mtime_ns: int, size: int) -> str:
 
 try:  # numba is a dependency; without it nothing is cached and install() does nothing
     from numba.core import config as _config
+    from numba.core.caching import FunctionCache as _FunctionCache
     from numba.core.caching import _CacheLocator
 except ImportError:  # pragma: no cover
-    _CacheLocator = object  # type: ignore[assignment,misc]
+    _CacheLocator = _FunctionCache = object  # type: ignore[assignment,misc]
     _config = None
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX: numba's own behaviour
+    fcntl = None  # type: ignore[assignment]
 
 
 class PackageLocator(_CacheLocator):  # type: ignore[misc,valid-type]
@@ -101,3 +112,42 @@ def install() -> bool:
     if PackageLocator not in CacheImpl._locator_classes:
         CacheImpl._locator_classes.insert(0, PackageLocator)
     return True
+
+
+class GuardedCache(_FunctionCache):  # type: ignore[misc,valid-type]
+    """numba's per-kernel disk cache, with its saves serialised and its loads checked (see the module's text)."""
+
+    def load_overload(self, sig, target_context):  # noqa: ANN201 - numba's CompileResult or None
+        """numba's load, or None (compile) where the entry's signature is not ``sig``'s."""
+        cres = super().load_overload(sig, target_context)
+        if cres is None:
+            return None
+        from numba.core import sigutils
+
+        args, _ = sigutils.normalize_signature(sig)
+        return cres if tuple(cres.signature.args) == tuple(args) else None
+
+    def save_overload(self, sig, data) -> None:
+        """numba's save (index read, data file numbered, both written), under an exclusive lock on the index."""
+        if fcntl is None:  # pragma: no cover
+            return super().save_overload(sig, data)
+        lock_path = os.path.join(self.cache_path, self._impl.filename_base + ".lock")
+        try:
+            self._impl.locator.ensure_cache_path()
+            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError:  # a folder that cannot be written: numba's save fails alike and is ignored by numba
+            return super().save_overload(sig, data)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            super().save_overload(sig, data)
+        finally:
+            os.close(fd)  # releases the lock
+
+
+def guard(dispatcher):  # noqa: ANN001, ANN201 - a numba dispatcher, returned
+    """``dispatcher`` (``numba.njit(cache=True)``) with its disk cache a :class:`GuardedCache` (same state: the
+    class is swapped, the cache is not built twice); unchanged where it caches nothing or numba is absent."""
+    cache = getattr(dispatcher, "_cache", None)
+    if _config is not None and type(cache) is _FunctionCache:
+        cache.__class__ = GuardedCache
+    return dispatcher
