@@ -70,6 +70,8 @@ def _edit_wrap(src: Path) -> None:
 
 @pytest.mark.slow  # five processes importing numba, each compiling or loading one kernel: ~15 s of CPU
 def test_a_second_clone_loads_the_first_ones_kernels_and_a_changed_one_compiles(tmp_path):
+    import numba
+
     cache = tmp_path / "cache"
     a, b, c = _clone(tmp_path, "a"), _clone(tmp_path, "b"), _clone(tmp_path, "c")
     first = _run(a, cache)
@@ -77,7 +79,8 @@ def test_a_second_clone_loads_the_first_ones_kernels_and_a_changed_one_compiles(
     second = _run(b, cache)  # another path, the same text: loaded, nothing compiled
     assert second == {**first, "kernels": [], "file": second["file"]}
     folders = sorted(p.name for p in next(cache.iterdir()).iterdir())
-    assert folders == ["bioform_mj.core"]  # one folder for both copies, named by the path inside the package
+    # one folder for both copies, named by the path inside the package (and numba's version)
+    assert folders == [f"bioform_mj.core-numba{numba.__version__}"]
     # a changed file in the same folder (the folder's key forced equal): the stamp misses, it compiles its own
     _edit_wrap(c)
     base = _run(a, cache, "same-key")
@@ -120,10 +123,13 @@ def test_every_module_with_a_cached_kernel_is_in_the_cache_key():
 
 
 def test_the_locator_files_the_package_by_relative_path_and_leaves_others_to_numba(tmp_path):
+    import numba
+
     from bioform_mj.core.jitcache import PackageLocator, cache_subpath
 
-    assert cache_subpath(str(PKG / "plants" / "mujoco" / "kernels.py")) == "bioform_mj.plants.mujoco"
-    assert cache_subpath(str(PKG / "core" / "equations.py")) == "bioform_mj.core"
+    v = numba.__version__
+    assert cache_subpath(str(PKG / "plants" / "mujoco" / "kernels.py")) == f"bioform_mj.plants.mujoco-numba{v}"
+    assert cache_subpath(str(PKG / "core" / "equations.py")) == f"bioform_mj.core-numba{v}"
     assert cache_subpath(str(tmp_path / "elsewhere.py")) is None
     (tmp_path / "elsewhere.py").write_text("def f():\n    return 1\n")
 

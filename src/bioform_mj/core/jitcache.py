@@ -37,13 +37,15 @@ __all__ = ["GuardedCache", "PackageLocator", "cache_subpath", "guard", "install"
 
 def cache_subpath(py_file: str) -> str | None:
     """The folder (inside ``numba.config.CACHE_DIR``) of the kernels of source file ``py_file``: its folder's
-    path relative to the package, ``/`` as ``.`` (``plants.mujoco``; ``bioform_mj`` for the package folder
-    itself), or None for a file outside the package."""
+    path relative to the package, ``/`` as ``.``, and numba's version (``bioform_mj.plants.mujoco-numba0.68.1``),
+    or None for a file outside the package. numba treats an index written by another version as empty and
+    overwrites it: without the version, two clones with two numba versions would compile over each other's
+    cache on every run (Python's version is in numba's own file names)."""
     try:
         rel = Path(py_file).resolve().parent.relative_to(PACKAGE_ROOT)
     except (ValueError, OSError):
         return None
-    return ".".join(("bioform_mj", *rel.parts))
+    return ".".join(("bioform_mj", *rel.parts)) + f"-numba{_NUMBA_VERSION}"
 
 
 @functools.cache
@@ -55,12 +57,14 @@ def _file_sha256(path: str, mtime_ns: int, size: int) -> str:
 
 
 try:  # numba is a dependency; without it nothing is cached and install() does nothing
+    from numba import __version__ as _NUMBA_VERSION
     from numba.core import config as _config
     from numba.core.caching import FunctionCache as _FunctionCache
     from numba.core.caching import _CacheLocator
 except ImportError:  # pragma: no cover
     _CacheLocator = _FunctionCache = object  # type: ignore[assignment,misc]
     _config = None
+    _NUMBA_VERSION = ""
 
 try:
     import fcntl
