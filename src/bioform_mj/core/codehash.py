@@ -14,8 +14,19 @@ from pathlib import Path
 PACKAGE_ROOT = Path(__file__).resolve().parent.parent
 
 #: the modules that hold numba kernels, or source that numba inlines into them: the numba cache is keyed
-#: by their text (numba invalidates a cached function only when its own file changes)
-KERNEL_SOURCES = ("control/*.py", "core/engine.py", "core/equations.py", "plants/*.py", "plants/**/*.py")
+#: by their text (numba invalidates a cached function only when its own file changes); every module with an
+#: ``@njit`` is here (tests/test_core_jitcache.py): the vector environments' kernels call each other's across
+#: files, and the fault kernels call the equations
+KERNEL_SOURCES = (
+    "control/*.py",
+    "core/engine.py",
+    "core/equations.py",
+    "core/jitcache.py",
+    "plants/*.py",
+    "plants/**/*.py",
+    "run/faults.py",
+    "envs/*.py",
+)
 
 
 @functools.cache

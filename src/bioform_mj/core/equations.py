@@ -50,14 +50,18 @@ def _cache_dir() -> str:
 
 
 if HAVE_NUMBA:
+    from bioform_mj.core.jitcache import guard as _guard_cache
+    from bioform_mj.core.jitcache import install as _install_locator
+
     numba.config.CACHE_DIR = _cache_dir()
+    _install_locator()  # the same source anywhere (a second clone) reuses the cache (core/jitcache.py)
 
 
 def njit(fn: Callable) -> Callable:
     """numba-compile ``fn`` (cached on disk, no fastmath: IEEE results); identity without numba."""
     if not HAVE_NUMBA:  # pragma: no cover
         return fn
-    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+    return _guard_cache(numba.njit(cache=True, nogil=True, error_model="numpy")(fn))
 
 
 def equation(fn: Callable) -> Callable:

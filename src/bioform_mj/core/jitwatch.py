@@ -73,21 +73,20 @@ def cache_dir() -> str:
 
 
 def cached_kernels(folder: str | None = None) -> int:
-    """How many cache index files (``*.nbi``, one per compiled kernel) ``folder`` holds for THIS copy of the
-    package: numba keeps each source folder's kernels in a subfolder named after that folder's absolute path
-    (``numba.core.caching._CacheLocator.get_suitable_cache_subpath``), so a second checkout or a copy of the
-    package compiles its own even where the content hash, and so ``folder``, is the same. 0 if none."""
+    """How many cache index files (``*.nbi``, one per compiled kernel) ``folder`` holds for the package's kernels:
+    numba keeps each source folder's kernels in a subfolder named after that folder's path relative to the
+    package (:func:`bioform_mj.core.jitcache.cache_subpath`), so every copy of the same source shares them. 0 if
+    none."""
     folder = cache_dir() if folder is None else folder
     if not folder:
         return 0
-    from numba.core.caching import _CacheLocator
-
     from bioform_mj.core.codehash import KERNEL_SOURCES, PACKAGE_ROOT
+    from bioform_mj.core.jitcache import cache_subpath
 
     dirs = {f.parent for pat in KERNEL_SOURCES for f in PACKAGE_ROOT.glob(pat) if "__pycache__" not in f.parts}
     n = 0
     for d in dirs:
-        sub = os.path.join(folder, _CacheLocator.get_suitable_cache_subpath(str(d / "x.py")))
+        sub = os.path.join(folder, cache_subpath(str(d / "x.py")) or "")
         if os.path.isdir(sub):
             n += sum(f.endswith(".nbi") for f in os.listdir(sub))
     return n

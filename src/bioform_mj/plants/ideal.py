@@ -110,7 +110,9 @@ class IdealPlant:
         self.control_dt = control_dt
         self.n_substeps = max(1, round(control_dt / physics_dt))
         self.h = control_dt / self.n_substeps
-        self._c = np.array(np.broadcast_to(c, (self.n, 2)), dtype=float)
+        # C order: a broadcast (2,) would copy into Fortran order, and the compiled chunk would compile
+        # engine.after_control for a second layout of c_true (8 s of a first run; issue 28)
+        self._c = np.array(np.broadcast_to(c, (self.n, 2)), dtype=float, order="C")
         self.initial_poses = np.array(initial_poses, dtype=float)
         self.disturbance = disturbance
         self.mass = None if mass is None else np.array(np.broadcast_to(mass, (self.n,)), dtype=float)

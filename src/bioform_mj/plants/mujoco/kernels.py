@@ -384,13 +384,10 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
     gstart, glist, ogeom, obst, rad, ranges, rf, ri, box, order = px
     px_every = int(ranges[3])
     j = j0
-    n = pose.shape[0]
     for k in range(k0, k1):
         apply_inputs(s.tau, k * dt, ctrl, ctrl_id, ctrl_scale, xfrc, xmat, base, m_eff, i_eff, dist, use_dist)
         if rec_ctrl.shape[0] > k:
-            rec_ctrl[k, :] = ctrl
-            for i in range(n):
-                rec_xfrc[k, i, :] = xfrc[base[i], :]
+            record_inputs(rec_ctrl, rec_xfrc, k, ctrl, xfrc, base)
         for sub in range(n_sub):
             _mj_step(mp, dp)
             if _warned(warn):
@@ -437,6 +434,18 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
             if status != OK:
                 return k + 1 - k0, j, status
     return k1 - k0, j, OK
+
+
+@njit
+def record_inputs(rec_ctrl, rec_xfrc, k, ctrl, xfrc, base):
+    """``rec_ctrl[k]`` = ``ctrl``, ``rec_xfrc[k, i]`` = ``xfrc[base[i]]`` (for a bare-physics replay). Element by
+    element: a slice assignment (``rec_ctrl[k, :] = ctrl``) compiles numba's shape-mismatch message formatting
+    (string kernels, ~6 s of a first run's compile; issue 28) for a copy of fixed shapes."""
+    for c in range(ctrl.shape[0]):
+        rec_ctrl[k, c] = ctrl[c]
+    for i in range(base.shape[0]):
+        for c in range(xfrc.shape[1]):
+            rec_xfrc[k, i, c] = xfrc[base[i], c]
 
 
 @njit

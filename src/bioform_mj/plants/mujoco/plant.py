@@ -202,6 +202,8 @@ class MujocoPlant:
         dadr = m.jnt_dofadr[roots]
         self._q7 = qadr[:, None] + np.arange(7)  # (n, 7) into qpos: x y z, quaternion w x y z
         self._v6 = dadr[:, None] + np.arange(6)  # (n, 6) into qvel: world-frame linear, body-frame angular
+        # each base's first address, contiguous: observe compiles for one layout, the chunk's (issue 28)
+        self._q0, self._v0 = (np.ascontiguousarray(a[:, 0], dtype=np.int64) for a in (self._q7, self._v6))
         lays = self.layouts
         self._ctrl = np.array([[m.actuator(a).id for a in lay.motors] for lay in lays])  # (n, 2)
         # ctrl per N·m of wheel torque: 1 for torque motors, the DC driver's input otherwise (§8.2)
@@ -317,7 +319,7 @@ class MujocoPlant:
         """(n, 2) world position of each robot's axle midpoint now, m."""
         pose = np.empty((self.n, 3))
         vel = np.empty((self.n, 2))
-        observe(d.qpos, d.qvel, self._q7[:, 0], self._v6[:, 0], self._axle, pose, vel, np.ones(self.n))
+        observe(d.qpos, d.qvel, self._q0, self._v0, self._axle, pose, vel, np.ones(self.n))
         return pose[:, :2]
 
     def start_overlaps(self, tol: float = 1e-4) -> list[str]:
@@ -405,7 +407,7 @@ class MujocoPlant:
         if self.sensors.on:  # dead reckoning starts at the true initial pose (sensordata of mj_forward)
             pose = np.empty((self.n, 3))
             vel = np.empty((self.n, 2))
-            observe(d.qpos, d.qvel, self._q7[:, 0], self._v6[:, 0], self._axle, pose, vel, self._up)
+            observe(d.qpos, d.qvel, self._q0, self._v0, self._axle, pose, vel, self._up)
             odometry_reset(d.sensordata, self.sensors, self.odo, pose)
         self.tip_step[:] = -1
         self.slip_run[:] = 0
@@ -439,7 +441,7 @@ class MujocoPlant:
         pose = np.empty((self.n, 3))
         vel = np.empty((self.n, 2))
         d = self.data
-        observe(d.qpos, d.qvel, self._q7[:, 0], self._v6[:, 0], self._axle, pose, vel, self._up)
+        observe(d.qpos, d.qvel, self._q0, self._v0, self._axle, pose, vel, self._up)
         watch_tilt(self._up, self.tilt_cos, self.tip_step, self._step_count)
         watch_slip(
             d.qvel,
@@ -684,8 +686,7 @@ class MujocoPlant:
         if not HAVE_MJ_STEP or self._dist is None or numba.config.DISABLE_JIT:
             return None
         m, d = self.model, self.data
-        q7 = np.ascontiguousarray(self._q7[:, 0], dtype=np.int64)
-        v6 = np.ascontiguousarray(self._v6[:, 0], dtype=np.int64)
+        q7, v6 = self._q0, self._v0
         ctrl_id = np.ascontiguousarray(self._ctrl, dtype=np.int64)
         base = np.ascontiguousarray(self._base, dtype=np.int64)
         rec = record_inputs if record_inputs is not None else (np.zeros((0, m.nu)), np.zeros((0, self.n, 6)))
