@@ -155,6 +155,7 @@ def test_misaligned_swivel_casters_identify_as_the_rigid_body_formula(tmp_path, 
     assert abs(unaligned["relative_error"][off]) > 0.10, unaligned["relative_error"]
 
 
+@pytest.mark.slow  # ≥ 7 s warm here (make test keeps to the fast set; make test-slow runs it)
 def test_a_sphere_on_a_swivel_alone_slides_and_is_named_a_braking_caster(tmp_path):
     """No roller: the swivel turns the sphere about the vertical, but it cannot roll; it slides with μ 1
     (each carries 2.8 N): identify names both as braking casters and robot check fails with that cause."""
@@ -170,6 +171,7 @@ def test_a_sphere_on_a_swivel_alone_slides_and_is_named_a_braking_caster(tmp_pat
     assert rows and all(not c["rolls"] and c["role"] == "caster" for c in rows)
 
 
+@pytest.mark.slow  # ≥ 7 s warm here (make test keeps to the fast set; make test-slow runs it)
 def test_a_robot_that_turns_while_driving_straight_is_tested_at_a_lower_torque(tmp_path, monkeypatch):
     """The chassis's centre of mass 20 mm beside the axle (17 mm for the robot): equal wheel torques turn it
     (the υ·ω coupling of design §8.1). At the first torque the drive test turns 0.78 rad; rerun at a torque

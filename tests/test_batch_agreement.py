@@ -68,6 +68,7 @@ def test_differences_are_per_follower():
 @pytest.mark.parametrize(
     "extra", [(), ("estimator.phi=[0.02,0.02]", "torque.phi=0.02")], ids=["paper-sgn", "boundary-layer"]
 )
+@pytest.mark.slow  # ≥ 7 s warm here (make test keeps to the fast set; make test-slow runs it)
 def test_every_world_agrees_within_tolerance_or_its_own_float32_spread(extra):
     wp = pytest.importorskip("warp")
     pytest.importorskip("mujoco_warp")

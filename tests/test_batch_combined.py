@@ -60,6 +60,7 @@ WORLDS = [
 ]
 
 
+@pytest.mark.slow  # ≥ 7 s warm here (make test keeps to the fast set; make test-slow runs it)
 def test_all_device_features_in_one_batch_agree_per_world():
     from bioform_mj.batch.runner import run_batch
     from bioform_mj.batch.support import unsupported

@@ -77,6 +77,7 @@ def test_odometry_with_gyro_noise_and_bias_matches_cpu_engine():
         _compare(r, simulate(sc).summary)
 
 
+@pytest.mark.slow  # ≥ 7 s warm here (make test keeps to the fast set; make test-slow runs it)
 def test_device_feeds_the_odometry_not_the_truth():
     """A large gyro bias (0.5 rad/s: the odometry's heading is 0.25 rad off after 0.5 s) changes the
     closed loop: on the CPU engine the odometry run's ĉ ends 95 % and its velocity error up to 23 %
@@ -133,6 +134,7 @@ def test_sensing_separates_sweep_groups_and_truth_worlds_report_no_drift():
 # the criterion is design §11's: each follower within the tolerance or 2 × that spread. Measured
 # (3 worlds × 3 followers, 0.5 s): final formation error ≤ 0.62 mm, ĉ ≤ 6.3e-2 (4 of 9 followers
 # beyond 0.5 %, each within 2 × its spread), velocity error ≤ 2.3e-3, odometry drift ≤ 0.71 mm.
+@pytest.mark.slow  # ≥ 7 s warm here (make test keeps to the fast set; make test-slow runs it)
 def test_odometry_at_1khz_agrees_within_tolerance_or_float32_spread():
     from bioform_mj.batch.agreement import differences, float32_spread, judge
     from bioform_mj.batch.runner import run_batch

@@ -25,6 +25,7 @@ wp.config.quiet = True
 SLIPPERY = ["plant.kind=mujoco", "sim.duration=1.0", 'plant.robots=[{model="paper", wheel_radius=0.14}]']
 
 
+@pytest.mark.slow  # ≥ 7 s warm here (make test keeps to the fast set; make test-slow runs it)
 def test_slipping_robot_is_reported_by_both_engines():
     from bioform_mj.batch.runner import run_batch
 

@@ -274,6 +274,7 @@ def test_fit_recovers_a_heavy_robots_payload_and_friction(tmp_path):
         assert abs(got[name]["fitted"] - true) <= tol * true, (name, got[name]["fitted"], true)
 
 
+@pytest.mark.slow  # ≥ 7 s warm here (make test keeps to the fast set; make test-slow runs it)
 def test_armature_fitted_with_mass_is_reported_with_its_correlations(bag, tmp_path):
     """Armature, mass and yaw inertia act through the same two effective inertias (design §8): fitted
     together on the tb3 recording, the report says so (a member of the three not identified, or an
