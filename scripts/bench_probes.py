@@ -27,7 +27,7 @@ import numpy as np
 def replay_effect(preset: str, duration: float, rounds: int) -> None:
     import mujoco
 
-    from bioform_mj.jobs.bench import _record
+    from bioform_mj.jobs.bench import record_run
     from bioform_mj.plants.mujoco.kernels import replay
     from bioform_mj.run.simulate import make_plant
     from bioform_mj.scenario.loader import load
@@ -35,7 +35,7 @@ def replay_effect(preset: str, duration: float, rounds: int) -> None:
     sc = load(preset, plant="mujoco", overrides=[f"sim.duration={duration}"])
     steps = int(round(sc.sim.duration / sc.sim.control_dt))
     a, b = make_plant(sc), make_plant(sc)
-    rc, rx, _q = _record(sc, a)  # simulate ran on a
+    rc, rx, _q = record_run(sc, a)  # simulate ran on a
     base = np.ascontiguousarray(a._base, dtype=np.int64)
     c = mujoco.MjData(a.model)
 
@@ -74,7 +74,7 @@ def replay_effect(preset: str, duration: float, rounds: int) -> None:
 
 
 def chunks(sizes: list[int], rounds: int) -> None:
-    from bioform_mj.jobs.bench import CASES, _record, _replayer
+    from bioform_mj.jobs.bench import CASES, record_run, replayer
     from bioform_mj.run import loop as lp
     from bioform_mj.run.looptime import loop_times
     from bioform_mj.run.simulate import make_plant
@@ -87,7 +87,7 @@ def chunks(sizes: list[int], rounds: int) -> None:
         sc = load(preset, overrides=[f"sim.duration={dur}"], plant="mujoco")
         steps = int(round(sc.sim.duration / sc.sim.control_dt))
         plant = make_plant(sc)
-        rep = _replayer(plant, *_record(sc, plant)[:2])
+        rep = replayer(plant, *record_run(sc, plant)[:2])
         t: dict[str, list[tuple[float, float]]] = {"bare": [], "before": [], "after": []}
         load0 = os.getloadavg()[0]
         for r in range(rounds):

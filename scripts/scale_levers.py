@@ -35,19 +35,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--variants", default="sensor,base,noisland,sleep,nomid")
     a = ap.parse_args(argv)
-    from bioform_mj.core.errors import quiet_outcomes
+    from bioform_mj.jobs.bench import record_run
     from bioform_mj.plants.mujoco.kernels import replay
-    from bioform_mj.run.simulate import make_plant, simulate
+    from bioform_mj.run.simulate import make_plant
     from bioform_mj.scenario.loader import load
 
     sc = load(a.preset, overrides=[f"sim.duration={a.duration}"], plant="mujoco")
     plant = make_plant(sc)
     m, d = plant.model, plant.data
-    steps = int(round(sc.sim.duration / sc.sim.control_dt))
-    rec = (np.zeros((steps, m.nu)), np.zeros((steps, plant.n, 6)))
-    with quiet_outcomes(), warnings.catch_warnings():
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        simulate(sc, record_inputs=rec, plant=plant)
+        rec = record_run(sc, plant)[:2]  # the closed loop's ctrl and chassis forces, every control step
+    steps = len(rec[0])
     opt = m.opt
     base = (opt.disableflags, opt.enableflags, opt.solver, opt.tolerance)
     setters = {

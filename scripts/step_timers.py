@@ -21,7 +21,6 @@ import warnings
 from collections import Counter
 
 import mujoco
-import numpy as np
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -32,18 +31,17 @@ def main(argv: list[str] | None = None) -> int:
     if not a.duration > 0:
         print(f"error: --duration must be > 0 s, got {a.duration}", file=sys.stderr)
         return 2
-    from bioform_mj.core.errors import quiet_outcomes
-    from bioform_mj.run.simulate import make_plant, simulate
+    from bioform_mj.jobs.bench import record_run
+    from bioform_mj.run.simulate import make_plant
     from bioform_mj.scenario.loader import load
 
     sc = load(a.preset, overrides=[f"sim.duration={a.duration}"], plant="mujoco")
     plant = make_plant(sc)
     m, d = plant.model, plant.data
-    steps = int(round(sc.sim.duration / sc.sim.control_dt))
-    rec = (np.zeros((steps, m.nu)), np.zeros((steps, plant.n, 6)))
-    with quiet_outcomes(), warnings.catch_warnings():
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        simulate(sc, record_inputs=rec, plant=plant)
+        rec = record_run(sc, plant)[:2]  # the closed loop's ctrl and chassis forces, every control step
+    steps = len(rec[0])
     plant.reset()
 
     def name(g: int) -> str:  # the geom's name without the follower prefix

@@ -49,7 +49,7 @@ CASES: dict[int, tuple[str, float]] = {
 }
 
 
-def _record(sc: Any, plant: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def record_run(sc: Any, plant: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One closed loop on ``plant`` recording every control step's ``ctrl`` and chassis forces (untimed):
     ``(ctrl (steps, nu), xfrc (steps, n, 6), final qpos)``; ``steps`` the run's own (``sc.sim.duration``, which
     carries the preset's time scale)."""
@@ -64,7 +64,7 @@ def _record(sc: Any, plant: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return rec[0], rec[1], plant.data.qpos.copy()
 
 
-def _replayer(plant: Any, rec_ctrl: np.ndarray, rec_xfrc: np.ndarray):
+def replayer(plant: Any, rec_ctrl: np.ndarray, rec_xfrc: np.ndarray):
     """``replay()`` → ``(wall s, CPU s, solver iterations)``: bare ``mj_step`` on ``plant``'s own
     ``MjModel``/``MjData`` from ``plant.reset()`` (the state and the solver's warm start a run starts
     from), fed ``rec_ctrl``/``rec_xfrc`` by a compiled loop (no Python per step). Compiled here."""
@@ -95,8 +95,8 @@ def _paired(sc: Any, plant: Any, reps: int) -> dict[str, Any]:
     loop's physics bit for bit). Constant torques (0.1 of the limit, no disturbance), once, for comparison:
     the contact solver iterates less when the torques do not change, so that is not a fair baseline.
     """
-    rec_ctrl, rec_xfrc, q_loop = _record(sc, plant)
-    replay = _replayer(plant, rec_ctrl, rec_xfrc)
+    rec_ctrl, rec_xfrc, q_loop = record_run(sc, plant)
+    replay = replayer(plant, rec_ctrl, rec_xfrc)
     bare: list[tuple[float, float]] = []
     loop: list[tuple[float, float]] = []
     summ: dict = {}
