@@ -18,10 +18,26 @@ import pytest
 from bioform_mj.cli import main as cli
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots import xacro_sandbox
+from bioform_mj.robots.params import robot_parameters
 from bioform_mj.robots.refs import PackagePath, RobotRef, as_ref
 from bioform_mj.robots.urdf import check_file
 from bioform_mj.robots.xacro_sandbox import XacroRefused, expand
-from test_robots_urdf import diff_drive, write
+from test_robots_urdf import (
+    I_CASTER,
+    I_CHASSIS,
+    I_WHEEL_AXIS,
+    I_WHEEL_DIAM,
+    L_HALF,
+    M_CASTER,
+    M_CHASSIS,
+    M_WHEEL,
+    R_WHEEL,
+    X_CASTER,
+    Z_AXLE,
+    compiled,
+    diff_drive,
+    write,
+)
 
 pytest.importorskip("xacro")
 
@@ -52,7 +68,6 @@ def _escapes(marker: Path) -> list[tuple[str, str]]:
         ("str-format", '<x v="${str.format(t, xacro.load_yaml)}"/>'),
         ("dunder-in-string", "<x v=\"${xacro.dotify(dict(a='{0.__globals__'))}\"/>"),
         ("env", '<x v="$(env HOME)"/>'),
-        ("optenv", f'<x v="$(optenv BIOFORM_TEST_SECRET {SECRET[:3]})"/>'),
         ("load_yaml-etc", "<x v=\"${xacro.load_yaml('/etc/passwd')}\"/>"),
         ("include-etc", '<xacro:include filename="/etc/hostname"/>'),
         ("include-up", '<xacro:include filename="../../../../../../../../etc/hostname"/>'),
@@ -70,7 +85,7 @@ def hostile(tmp_path, monkeypatch):
     return folder, tmp_path / "MARKER"
 
 
-@pytest.mark.parametrize("case", range(16), ids=[c[0] for c in _escapes(Path("m"))])
+@pytest.mark.parametrize("case", range(15), ids=[c[0] for c in _escapes(Path("m"))])
 def test_escape_refused_nothing_runs_nothing_leaks(case, hostile):
     folder, marker = hostile
     name, body = _escapes(marker)[case]
@@ -81,6 +96,74 @@ def test_escape_refused_nothing_runs_nothing_leaks(case, hostile):
     assert "\n" not in msg and str(path) in msg, msg
     assert "root:" not in msg and SECRET not in msg and "uid=" not in msg, msg
     assert not marker.exists()
+
+
+# ------------------------------------------------------------------ $(optenv)/$(env): never the environment
+ENV_R = "BIOFORM_TEST_WHEEL_R"
+
+
+def _optenv_robot(folder: Path, default: str = "0.05") -> Path:
+    """:func:`diff_drive` whose wheel radius (and axle height) is ``$(optenv BIOFORM_TEST_WHEEL_R default)``."""
+    text = diff_drive().replace(
+        '<robot name="dd">', f'<robot name="dd" {NS}><xacro:property name="r" value="$(optenv {ENV_R} {default})"/>'
+    )
+    text = text.replace(f'radius="{R_WHEEL!r}" length', 'radius="${r}" length')
+    return write(folder / "dd.urdf.xacro", text.replace(f'xyz="0 0 {Z_AXLE!r}"', 'xyz="0 0 ${r}"'))
+
+
+def _ab_by_hand(r: float) -> tuple[float, float]:
+    """``(a_eff, b_eff)`` of :func:`diff_drive` with wheel radius ``r`` (m), from its inertials (design §8)."""
+    m = M_CHASSIS + 2 * M_WHEEL + 2 * M_CASTER
+    yaw = I_CHASSIS[2] + 2 * (I_WHEEL_DIAM + M_WHEEL * L_HALF**2) + 2 * (I_CASTER + M_CASTER * X_CASTER**2)
+    return 1 / (m * r + 2 * I_WHEEL_AXIS / r), L_HALF / (yaw * r + 2 * I_WHEEL_AXIS * L_HALF**2 / r)
+
+
+@pytest.mark.parametrize(
+    "env,args,r",
+    [(None, (), 0.05), ("0.09", (), 0.05), ("0.09", ((ENV_R, "0.07"),), 0.07)],
+    ids=["default", "environment-ignored", "xacro-arg"],
+)
+def test_optenv_is_its_default_or_the_xacro_arg_never_the_environment(env, args, r, hostile, monkeypatch):
+    """A Clearpath-style ``$(optenv NAME default)`` sizing the wheels: the robot's a, b are those of the default
+    radius (0.05 m) by hand, with NAME set in this process's environment too; ``--xacro-arg NAME=0.07`` gives the
+    other radius. The import notes say once which value was taken and why."""
+    folder, _ = hostile
+    if env is None:
+        monkeypatch.delenv(ENV_R, raising=False)
+    else:
+        monkeypatch.setenv(ENV_R, env)
+    model, layout = compiled(RobotRef(str(_optenv_robot(folder)), xacro=True, xacro_args=args))
+    p = robot_parameters(model)
+    a, b = _ab_by_hand(r)
+    assert p.wheel_radius == pytest.approx(r, abs=1e-12)
+    assert p.a_eff == pytest.approx(a, rel=1e-9) and p.b_eff == pytest.approx(b, rel=1e-9), (p.a_eff, p.b_eff, a, b)
+    assert abs(a / _ab_by_hand(0.09)[0] - 1) > 0.2  # the environment's radius would be visibly different
+    said = [n for n in layout.import_notes if n.startswith("$(optenv")]
+    if args:
+        assert said == [f"$(optenv)/$(env) set by --xacro-arg: {ENV_R}='0.07'"], layout.import_notes
+    else:
+        assert len(said) == 1 and said[0].startswith(
+            f"$(optenv) resolved to the file's default, never the environment's value: {ENV_R}='0.05'"
+        ), said
+        assert "--xacro-arg NAME=VALUE" in said[0]
+
+
+def test_optenv_and_env_read_nothing_of_the_environment(hostile):
+    """``$(optenv)`` without a default is empty, in ``$(eval …)`` too; ``$(env NAME)`` is refused naming the flag
+    that sets it, and set by it (the secret is in this process's environment throughout)."""
+    folder, _ = hostile
+    body = (
+        f'<x a="[$(optenv BIOFORM_TEST_SECRET)]" b="$(optenv BIOFORM_TEST_SECRET {SECRET[:3]})" '
+        f"c=\"$(eval optenv('BIOFORM_TEST_SECRET', 'dflt'${{r}} + 'X')\"/>"
+    )
+    out = expand(write(folder / "o.urdf.xacro", robot(body)), PackagePath())
+    assert 'a="[]"' in out and f'b="{SECRET[:3]}"' in out and 'c="dfltX"' in out and SECRET not in out, out
+    assert out.env == (("BIOFORM_TEST_SECRET", "", "default"),)
+    path = write(folder / "e.urdf.xacro", robot('<x v="$(env BIOFORM_TEST_SECRET)"/>'))
+    with pytest.raises(XacroRefused, match=r"reads no environment variable.*--xacro-arg BIOFORM_TEST_SECRET=VALUE"):
+        expand(path, PackagePath())
+    out = expand(path, PackagePath(), (("BIOFORM_TEST_SECRET", "given"),))
+    assert 'v="given"' in out and out.env == (("BIOFORM_TEST_SECRET", "given", "arg"),)
 
 
 def test_symlink_out_of_the_package_is_not_read(hostile):

@@ -8,8 +8,9 @@ stdin and writes one JSON answer on stdout (``{"xml": …}`` or ``{"error": …,
 Before it reads the robot file it limits itself: address space (``RLIMIT_AS``, bytes), CPU time
 (``RLIMIT_CPU``, s), no file written (``RLIMIT_FSIZE`` 0), no core file. Then it narrows xacro:
 
-- ``$(env NAME)`` and ``$(optenv NAME)`` are refused (a robot file reads no environment; values come
-  from ``--xacro-arg NAME=VALUE`` as ``$(arg NAME)``);
+- a robot file reads no environment variable: ``$(optenv NAME default)`` is ``default`` (empty when
+  none) and ``$(env NAME)`` is refused, unless ``--xacro-arg NAME=VALUE`` gives ``NAME`` (the same values
+  as ``$(arg NAME)``); the answer lists each ``(NAME, value, source)`` taken;
 - ``$(eval …)`` runs without Python's builtins (xacro's own gives it ``open``, ``exec``, ``__import__``);
 - a ``${…}`` expression naming a dunder, holding a string with ``__`` or naming ``format``,
   ``format_map``, ``vars``, ``type``, ``getattr``, ``globals``, ``locals``, ``eval``, ``exec``,
@@ -390,12 +391,15 @@ def main() -> int:
     if len(xml) > int(req["max_out_bytes"]):
         _answer({"kind": "size", "error": f"its expansion is {len(xml) / 1e6:.0f} MB"})
         return 3
-    _answer({"xml": xml, "includes": includes, "sandbox": _SANDBOX})
+    env_used = [[n, v, src] for n, (v, src) in _ENV_USED.items()]
+    _answer({"xml": xml, "includes": includes, "sandbox": _SANDBOX, "env": env_used})
     return 0
 
 
 #: what :func:`os_sandbox` applied, for the answer
 _SANDBOX: dict[str, str] = {}
+#: ``$(optenv)``/``$(env)`` names the file read, in order: ``{NAME: (value, "default" | "arg")}``
+_ENV_USED: dict[str, tuple[str, str]] = {}
 
 
 class _NoXacro(Exception):
@@ -449,17 +453,27 @@ def _expand(req: dict) -> tuple[str, list[str]]:
             roots.append(real)
         return str(found)
 
-    def no_env(name: str, *_a: object, **_k: object) -> str:
+    given = {str(n): str(v) for n, v in req["args"]}  # --xacro-arg / xacro_args: the only "environment"
+
+    def env(name: str, *_a: object, **_k: object) -> str:
+        if name in given:
+            _ENV_USED.setdefault(name, (given[name], "arg"))
+            return given[name]
         raise _Refused(
-            f"$(env {name}) / $(optenv {name}): refused: a robot file reads no environment variable "
-            f"(design §12); give the value with --xacro-arg {name}=VALUE and write $(arg {name})"
+            f"$(env {name}): refused: a robot file reads no environment variable (design §12); set it with "
+            f'--xacro-arg {name}=VALUE (or xacro_args = {{{name} = "VALUE"}} in the robot\'s table)'
         )
 
+    def optenv(name: str, default: str = "", *_a: object, **_k: object) -> str:
+        value, source = (given[name], "arg") if name in given else (str(default), "default")
+        _ENV_USED.setdefault(name, (value, source))
+        return value
+
     subst._eval_find = find
-    subst._eval_env = no_env
-    subst._eval_optenv = no_env
-    subst._eval_dict["env"] = no_env
-    subst._eval_dict["optenv"] = no_env
+    subst._eval_env = env
+    subst._eval_optenv = optenv
+    subst._eval_dict["env"] = env
+    subst._eval_dict["optenv"] = optenv
     subst._eval_dict["find"] = find
 
     # the original's eval(s, {}, ...) gets the real builtins from its empty globals: replaced

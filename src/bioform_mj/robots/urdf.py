@@ -224,7 +224,7 @@ def _parse(
     asset_roots: tuple[str, ...] = (),
 ) -> _Parsed:
     """Read, check and rewrite the URDF (no MuJoCo): raises :class:`UrdfError` naming the element."""
-    from bioform_mj.robots.xacro_sandbox import XACRO_NOTE, Expanded, sandbox_note
+    from bioform_mj.robots.xacro_sandbox import XACRO_NOTE, Expanded, env_note, sandbox_note
 
     text = _read_text(path, packages, xacro, xacro_args)
     expanded = isinstance(text, Expanded)
@@ -250,6 +250,8 @@ def _parse(
     if bad_value:
         raise UrdfError(f"{path}: {bad_value}")
     notes: list[str] = [XACRO_NOTE, sandbox_note(text.sandbox)] if expanded else []
+    if expanded and (env_said := env_note(text.env)):
+        notes.append(env_said)
     links = {}
     for link in robot.findall("link"):
         name = link.get("name")

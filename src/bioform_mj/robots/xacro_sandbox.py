@@ -14,10 +14,12 @@ line saying how to ask (:func:`refusal`), unless the user asked: ``--xacro`` (``
   its working folder the robot file's folder;
 - is limited to :data:`XACRO_MEMORY_MB` MiB of address space and :data:`XACRO_TIME_S` s (CPU and
   wall clock), writes no file, and answers at most :data:`XACRO_OUTPUT_MB` MB;
-- refuses ``$(env)``/``$(optenv)``, evaluates ``$(eval)`` without builtins, refuses the expressions
-  that leave xacro's sandbox (dunders, ``format``, ``vars``, ``type``, …), reads only the robot's
-  packages (``xacro:include``, ``xacro.load_yaml``) and, through an audit hook, starts no process,
-  opens no socket and reads no file outside them.
+- reads no environment variable: ``$(optenv NAME default)`` is its default and ``$(env NAME)`` is
+  refused, unless ``--xacro-arg NAME=VALUE`` gives ``NAME`` (:func:`env_note` says which it took);
+- evaluates ``$(eval)`` without builtins, refuses the expressions that leave xacro's sandbox (dunders,
+  ``format``, ``vars``, ``type``, …), reads only the robot's packages (``xacro:include``,
+  ``xacro.load_yaml``) and, through an audit hook, starts no process, opens no socket and reads no file
+  outside them.
 
 Every failure is one :class:`~bioform_mj.robots.urdf.UrdfError` line (exit 2) naming the file. Expansions are
 remembered in the process by file, its ``(mtime, size)``, the search path and the arguments.
@@ -46,6 +48,7 @@ __all__ = [
     "XACRO_OUTPUT_MB",
     "XACRO_NOTE",
     "sandbox_note",
+    "env_note",
     "XacroRefused",
     "Expanded",
     "needs_xacro",
@@ -68,7 +71,8 @@ XACRO_OUTPUT_MB = 64
 XACRO_NOTE = (
     "expanded by xacro, which runs the file as a program: in a separate process with no environment, "
     f"at most {XACRO_MEMORY_MB} MiB and {XACRO_TIME_S} s, reading only the robot's packages "
-    "($(env)/$(optenv) refused); expand only files you trust"
+    "(no environment variable: $(optenv) takes its default, $(env) is refused, unless --xacro-arg sets them); "
+    "expand only files you trust"
 )
 
 #: what marks xacro in a file: a xacro element, a ``${…}`` expression, ``$(find …)``/``$(arg …)``/…
@@ -84,6 +88,8 @@ class Expanded(str):
     includes: tuple[str, ...] = ()
     #: the OS layers the child applied (``{layer: "on…" | "unavailable: why"}``, :func:`sandbox_note`)
     sandbox: dict[str, str] = {}
+    #: ``((NAME, value, "default" | "arg"), …)``: the ``$(optenv)``/``$(env)`` names it read (:func:`env_note`)
+    env: tuple[tuple[str, str, str], ...] = ()
 
 
 class XacroRefused(InputError):
@@ -103,6 +109,24 @@ def sandbox_note(layers: dict[str, str]) -> str:
         + (", ".join(on) or "nothing")
         + (f"; unavailable here: {', '.join(off)} (the audit hook and limits still apply)" if off else "")
     )
+
+
+def env_note(env: tuple[tuple[str, str, str], ...]) -> str | None:
+    """The import note of the environment variables a xacro file read (``Expanded.env``), or None: each
+    ``$(optenv NAME)`` resolved to its default (the environment is never read) or to ``--xacro-arg``'s value."""
+    if not env:
+        return None
+    defaults = [f"{n}={v!r}" for n, v, src in env if src == "default"]
+    given = [f"{n}={v!r}" for n, v, src in env if src != "default"]
+    parts = []
+    if defaults:
+        parts.append(
+            f"$(optenv) resolved to the file's default, never the environment's value: {', '.join(defaults)} "
+            "(set one with --xacro-arg NAME=VALUE)"
+        )
+    if given:
+        parts.append(f"$(optenv)/$(env) set by --xacro-arg: {', '.join(given)}")
+    return "; ".join(parts)
 
 
 def grant(allowed: bool, args: tuple[tuple[str, str], ...] = ()) -> None:
@@ -142,7 +166,8 @@ def add_flags(p: argparse.ArgumentParser, scenario: bool = False) -> None:
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="with --xacro: the value of xacro's $(arg NAME) (repeatable)",
+        help="with --xacro: the value of xacro's $(arg NAME), and of $(optenv NAME)/$(env NAME), which never "
+        "read the environment ($(optenv) takes the file's default; repeatable)",
     )
 
 
@@ -238,6 +263,10 @@ def expand(path: Path, packages: PackagePath, args: tuple[tuple[str, str], ...] 
         out.includes = tuple(str(f) for f in answer.get("includes") or () if isinstance(f, str))
         box = answer.get("sandbox")
         out.sandbox = {str(k): str(v) for k, v in box.items()} if isinstance(box, dict) else {}
+        env = answer.get("env")
+        out.env = tuple(
+            (str(e[0]), str(e[1]), str(e[2])) for e in (env if isinstance(env, list) else ()) if len(e) == 3
+        )
         _EXPANDED[key] = out
         return out
     kind, why = answer.get("kind"), " ".join(str(answer.get("error", "")).split())
