@@ -117,6 +117,9 @@ def test_a_zoo_robots_control_rate_is_the_makers_with_the_file_it_is_from():
         "pmb2_urdf",
         "diffbot_urdf",
         "husky_urdf",
+        "kobuki_urdf",
+        "create3_urdf",
+        "menagerie_tiago",
     }
     for r in ROBOTS.values():
         assert EXPECT[r.name]["control_rate_hz"] == (r.control_rate or None), r.name
@@ -124,7 +127,7 @@ def test_a_zoo_robots_control_rate_is_the_makers_with_the_file_it_is_from():
         if not r.control_rate:
             assert not r.control_rate_source, r.name
             continue
-        url = r"https://github\.com/[\w.-]+/[\w.-]+/blob/[0-9a-f]{40}/\S+\.(yaml|h|launch)"
+        url = r"https://github\.com/[\w.-]+/[\w.-]+/blob/[0-9a-f]{40}/\S+\.(yaml|h|launch|dox|md)\b"
         assert re.search(url, r.control_rate_source), r.name
         assert re.search(rf"\b{r.control_rate:g}(\.0)?\b", r.control_rate_source), r.name
 

@@ -188,6 +188,13 @@ ROBOTS: tuple[Robot, ...] = (
         tau_max=100.0,
         top_speed=1.0,
         top_speed_source="PAL Robotics TIAGo datasheet: maximum speed 1 m/s",
+        control_rate=50.0,
+        control_rate_source=(
+            "PAL's TIAGo mobile_base_controller (diff_drive_controller) publish_rate: 50.0 in "
+            "tiago_controller_configuration/config/mobile_base_controller.yaml, https://github.com/pal-robotics/"
+            "tiago_robot/blob/041dc7552f9d54e14c0528a726f83276cd827a5b/tiago_controller_configuration/config/"
+            "mobile_base_controller.yaml (the PMB-2 base's own file says the same)"
+        ),
         tau_max_source="the wheel joints' actuatorfrcrange (-100, 100) in the published MJCF",
         expected_verdict="warn",
         expected_cause=(
@@ -253,6 +260,14 @@ ROBOTS: tuple[Robot, ...] = (
         tau_max=1.0,
         top_speed=0.7,
         top_speed_source="Kobuki specifications (kobuki.yujinrobot.com): max. translational velocity 70 cm/s",
+        control_rate=50.0,
+        control_rate_source=(
+            "Yujin's Kobuki protocol: 'Kobuki sends below default feedbacks periodically in 50 Hz', "
+            "https://github.com/yujinrobot/kobuki_core/blob/3e3c2d7f78e82ac17d648f08653f9083db4f438b/kobuki_driver/"
+            "doxygen/english/en_appendix_protocol.dox; its driver sends one Base Control (wheel) command per "
+            "feedback packet (sendBaseControlCommand() in Kobuki::spin), https://github.com/kobuki-base/kobuki_core/"
+            "blob/e2f0feac0f7a9964d021ac3241b7663f7728d5b9/src/driver/kobuki.cpp"
+        ),
         tau_max_source="<torque>1.0</torque> of the gazebo_ros_kobuki plugin in the published URDF (as expanded)",
         expected_verdict="warn",
         expected_cause=(
@@ -279,6 +294,15 @@ ROBOTS: tuple[Robot, ...] = (
         tau_max=0.05,
         top_speed=0.306,
         top_speed_source="iRobot Create 3 docs (iroboteducation.github.io/create3_docs): max. speed 0.306 m/s",
+        control_rate=62.5,
+        control_rate_source=(
+            "iRobot Create 3 docs, odometry: the wheel_status, wheel_ticks and wheel_vels topics publish at 62.5 Hz "
+            "(the robot's wheel loop as it reports it), https://github.com/iRobotEducation/create3_docs/blob/"
+            "53f188ffce498133d589f980fc18d38493d0ca84/docs/api/odometry.md; its simulator's diffdrive_controller "
+            "publish_rate 62.0 (controller_manager update_rate 1000 in simulation), https://github.com/"
+            "iRobotEducation/create3_sim/blob/7df657e1c0dbc7a618e7f12d382dc1676040855a/irobot_create_common/"
+            "irobot_create_control/config/control.yaml"
+        ),
         tau_max_source=(
             "our choice (the description publishes none): full torque accelerates at 0.86 m/s², below the margin "
             "1.1 m/s² at which accelerating lifts the front caster (centre of mass 7 mm ahead of the axle)"
