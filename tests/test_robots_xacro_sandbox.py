@@ -164,6 +164,25 @@ def test_optenv_and_env_read_nothing_of_the_environment(hostile):
         expand(path, PackagePath())
     out = expand(path, PackagePath(), (("BIOFORM_TEST_SECRET", "given"),))
     assert 'v="given"' in out and out.env == (("BIOFORM_TEST_SECRET", "given", "arg"),)
+    assert out.unused_args == ()
+
+
+def test_a_xacro_arg_the_file_never_reads_is_said(hostile):
+    """A misspelt ``--xacro-arg`` changes nothing and is named; a declared ``<xacro:arg>`` (even unread), a read
+    ``$(arg)`` and a read ``$(optenv)`` count as used. Forty defaults: the note names twelve and counts the rest."""
+    folder, _ = hostile
+    body = '<xacro:arg name="declared" default="d"/><x a="$(arg read)" b="$(optenv ENV_READ 1)"/>'
+    given = (("declared", "1"), ("read", "2"), ("ENV_READ", "3"), ("TYPO_NAME", "4"))
+    out = expand(write(folder / "u.urdf.xacro", robot(body)), PackagePath(), given)
+    assert out.unused_args == ("TYPO_NAME",) and 'a="2"' in out and 'b="3"' in out, out
+    note = xacro_sandbox.env_note(out.env, out.unused_args)
+    assert note.endswith(
+        "--xacro-arg TYPO_NAME: the file declares and reads no $(arg), $(optenv) or $(env) of that name (misspelt?)"
+    ), note
+    many = tuple((f"V{i}", "0", "default") for i in range(40))
+    note = xacro_sandbox.env_note(many)
+    assert note.count("='0'") == xacro_sandbox.ENV_NOTE_DEFAULTS == 12 and "V11='0' and 28 more" in note, note
+    assert xacro_sandbox.env_note(()) is None
 
 
 def test_symlink_out_of_the_package_is_not_read(hostile):

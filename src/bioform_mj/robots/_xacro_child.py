@@ -392,7 +392,7 @@ def main() -> int:
         _answer({"kind": "size", "error": f"its expansion is {len(xml) / 1e6:.0f} MB"})
         return 3
     env_used = [[n, v, src] for n, (v, src) in _ENV_USED.items()]
-    _answer({"xml": xml, "includes": includes, "sandbox": _SANDBOX, "env": env_used})
+    _answer({"xml": xml, "includes": includes, "sandbox": _SANDBOX, "env": env_used, "unused_args": _UNUSED})
     return 0
 
 
@@ -400,6 +400,29 @@ def main() -> int:
 _SANDBOX: dict[str, str] = {}
 #: ``$(optenv)``/``$(env)`` names the file read, in order: ``{NAME: (value, "default" | "arg")}``
 _ENV_USED: dict[str, tuple[str, str]] = {}
+#: given ``--xacro-arg`` names the file never asked about
+_UNUSED: list[str] = []
+
+
+class _SeenArgs(dict):
+    """xacro's ``$(arg)`` mapping, remembering every name the file asked about: read (``$(arg NAME)``,
+    ``xacro.arg``) or declared (``<xacro:arg name=NAME>`` tests whether it is given)."""
+
+    def __init__(self, *args: object) -> None:
+        super().__init__(*args)
+        self.seen: set[str] = set()
+
+    def __getitem__(self, key: str) -> str:
+        self.seen.add(key)
+        return super().__getitem__(key)
+
+    def __contains__(self, key: object) -> bool:
+        self.seen.add(str(key))
+        return super().__contains__(key)
+
+    def get(self, key: str, default: object = None) -> object:
+        self.seen.add(key)
+        return super().get(key, default)
 
 
 class _NoXacro(Exception):
@@ -532,7 +555,10 @@ def _expand(req: dict) -> tuple[str, list[str]]:
     # the OS layers first (they use ctypes, which the hook refuses); $(find) packages lie under the search dirs
     _SANDBOX.update(os_sandbox(sorted({*roots, *search, *python_dirs, os.path.realpath(req["package_dir"])})))
     _install_hook(roots, search, python_dirs)
-    doc = xacro.process_file(path, mappings=dict(req["args"]))
+    mappings = _SeenArgs((str(n), str(v)) for n, v in req["args"])
+    doc = xacro.process_file(path, mappings=mappings)
+    # a given NAME the file never declared nor read ($(arg), <xacro:arg>, $(optenv), $(env)): a misspelt flag?
+    _UNUSED.extend(n for n in dict(req["args"]) if n not in mappings.seen and n not in _ENV_USED)
     return doc.toxml(), sorted({os.path.realpath(f) for f in getattr(xacro, "all_includes", [])})
 
 

@@ -250,7 +250,7 @@ def _parse(
     if bad_value:
         raise UrdfError(f"{path}: {bad_value}")
     notes: list[str] = [XACRO_NOTE, sandbox_note(text.sandbox)] if expanded else []
-    if expanded and (env_said := env_note(text.env)):
+    if expanded and (env_said := env_note(text.env, text.unused_args)):
         notes.append(env_said)
     links = {}
     for link in robot.findall("link"):

@@ -90,6 +90,8 @@ class Expanded(str):
     sandbox: dict[str, str] = {}
     #: ``((NAME, value, "default" | "arg"), …)``: the ``$(optenv)``/``$(env)`` names it read (:func:`env_note`)
     env: tuple[tuple[str, str, str], ...] = ()
+    #: the ``--xacro-arg`` names the file never declared nor read (:func:`env_note`)
+    unused_args: tuple[str, ...] = ()
 
 
 class XacroRefused(InputError):
@@ -111,22 +113,33 @@ def sandbox_note(layers: dict[str, str]) -> str:
     )
 
 
-def env_note(env: tuple[tuple[str, str, str], ...]) -> str | None:
+#: how many ``$(optenv)`` defaults :func:`env_note` names (a Husky reads 91; each is in the file)
+ENV_NOTE_DEFAULTS = 12
+
+
+def env_note(env: tuple[tuple[str, str, str], ...], unused: tuple[str, ...] = ()) -> str | None:
     """The import note of the environment variables a xacro file read (``Expanded.env``), or None: each
-    ``$(optenv NAME)`` resolved to its default (the environment is never read) or to ``--xacro-arg``'s value."""
-    if not env:
-        return None
+    ``$(optenv NAME)`` resolved to its default (the environment is never read; the first
+    :data:`ENV_NOTE_DEFAULTS` named), every value ``--xacro-arg`` set, and the ``--xacro-arg`` names the file
+    never declared nor read (``unused``: a misspelt name?)."""
     defaults = [f"{n}={v!r}" for n, v, src in env if src == "default"]
     given = [f"{n}={v!r}" for n, v, src in env if src != "default"]
     parts = []
     if defaults:
+        more = len(defaults) - ENV_NOTE_DEFAULTS
+        shown = ", ".join(defaults[:ENV_NOTE_DEFAULTS]) + (f" and {more} more" if more > 0 else "")
         parts.append(
-            f"$(optenv) resolved to the file's default, never the environment's value: {', '.join(defaults)} "
+            f"$(optenv) resolved to the file's default, never the environment's value: {shown} "
             "(set one with --xacro-arg NAME=VALUE)"
         )
     if given:
         parts.append(f"$(optenv)/$(env) set by --xacro-arg: {', '.join(given)}")
-    return "; ".join(parts)
+    if unused:
+        parts.append(
+            f"--xacro-arg {', '.join(unused)}: the file declares and reads no $(arg), $(optenv) or $(env) of "
+            f"{'that name' if len(unused) == 1 else 'those names'} (misspelt?)"
+        )
+    return "; ".join(parts) or None
 
 
 def grant(allowed: bool, args: tuple[tuple[str, str], ...] = ()) -> None:
@@ -267,6 +280,8 @@ def expand(path: Path, packages: PackagePath, args: tuple[tuple[str, str], ...] 
         out.env = tuple(
             (str(e[0]), str(e[1]), str(e[2])) for e in (env if isinstance(env, list) else ()) if len(e) == 3
         )
+        unused = answer.get("unused_args")
+        out.unused_args = tuple(str(n) for n in (unused if isinstance(unused, list) else ()))
         _EXPANDED[key] = out
         return out
     kind, why = answer.get("kind"), " ".join(str(answer.get("error", "")).split())
