@@ -395,6 +395,12 @@ def test_run_with_the_xacro_flag(tmp_path, capsys, monkeypatch):
     summary = json.loads((out / "summary.json").read_text())
     assert any("expanded by xacro" in w for w in summary["import_warnings"]), summary["import_warnings"]
     assert "expanded by xacro" in err  # said before the run, as a warning: line
+    # the flags are written into the robot's table: resolved.toml is granted xacro and its args by itself
+    xacro_sandbox.grant(False)
+    import bioform_mj
+
+    again = bioform_mj.load(str(out / "resolved.toml"))
+    assert again.plant.robots[0].xacro and again.plant.robots[0].xacro_args == (("m", "0.2"),)
     assert cli.main(["sweep", str(sc), "--xacro", "--out", str(tmp_path / "sw")]) == 2
     assert "write xacro = true" in capsys.readouterr().err
 

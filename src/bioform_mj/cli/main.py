@@ -405,10 +405,14 @@ def _load(args: argparse.Namespace):
     if rate is not None and not (math.isfinite(rate) and rate > 0):  # before any work (design §17)
         raise InputError(f"--control-rate must be a finite number > 0 (Hz), got {rate}")
     sc = load(args.scenario, overrides, method=getattr(args, "method", None), plant=args.plant)
-    if rate is not None:  # design §19: every robot's mapping key control_rate
-        import dataclasses
+    import dataclasses
 
-        robots = tuple(dataclasses.replace(r, control_rate=float(rate)) for r in sc.plant.robots)
+    from bioform_mj.robots.xacro_sandbox import fold_grant
+
+    robots = fold_grant(sc.plant.robots)  # --xacro/--xacro-arg into the tables: resolved.toml reproduces (§12)
+    if rate is not None:  # design §19: every robot's mapping key control_rate
+        robots = tuple(dataclasses.replace(r, control_rate=float(rate)) for r in robots)
+    if robots != tuple(sc.plant.robots):
         sc = dataclasses.replace(sc, plant=dataclasses.replace(sc.plant, robots=robots))
     return sc
 

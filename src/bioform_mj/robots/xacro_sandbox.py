@@ -40,7 +40,7 @@ from pathlib import Path
 
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.packages import find_package, package_search_path
-from bioform_mj.robots.refs import PackagePath
+from bioform_mj.robots.refs import PackagePath, RobotRef
 
 __all__ = [
     "XACRO_MEMORY_MB",
@@ -56,6 +56,7 @@ __all__ = [
     "expand",
     "grant",
     "granted",
+    "fold_grant",
     "xacro_args_from_flags",
     "add_flags",
     "grant_from_args",
@@ -150,6 +151,43 @@ def grant(allowed: bool, args: tuple[tuple[str, str], ...] = ()) -> None:
 def granted() -> tuple[bool, tuple[tuple[str, str], ...]]:
     """What :func:`grant` said: ``(allowed, args)``."""
     return bool(_GRANT[0]), tuple(_GRANT[1])
+
+
+def fold_grant(robots: tuple) -> tuple:
+    """The robots (:class:`~bioform_mj.robots.refs.RobotRef`) with what :func:`grant` said written into the table of
+    each that xacro expands: ``xacro = true`` and the ``--xacro-arg`` values under its own ``xacro_args`` (the
+    table's win, as at expansion). The expansion is the same; a run's ``resolved.toml`` then records it, so the
+    run reproduces without the flags (a flag's ``$(optenv)`` value is not lost to the default). A robot that is
+    not a URDF file needing xacro is left as it is."""
+    import dataclasses
+
+    allowed, args = granted()
+    if not allowed:
+        return tuple(robots)
+    out = []
+    for r in robots:
+        if not isinstance(r, RobotRef) or not (r.xacro or _file_needs_xacro(Path(r.model))):
+            out.append(r)
+            continue
+        own = dict(r.xacro_args)
+        out.append(
+            dataclasses.replace(r, xacro=True, xacro_args=(*r.xacro_args, *((n, v) for n, v in args if n not in own)))
+        )
+    return tuple(out)
+
+
+def _file_needs_xacro(path: Path) -> bool:
+    """:func:`needs_xacro` of a robot file; False for what is not a readable URDF file (its import says why)."""
+    if path.suffix.lower() not in (".urdf", ".xacro", ".xml") or not path.is_file():
+        return False
+    if path.name.lower().endswith(".xacro"):
+        return True
+    try:
+        if path.stat().st_size > XACRO_OUTPUT_MB * 10**6:
+            return False
+        return needs_xacro(path, path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError):
+        return False
 
 
 def xacro_args_from_flags(values: list[str] | None, flag: str = "--xacro-arg") -> tuple[tuple[str, str], ...]:
