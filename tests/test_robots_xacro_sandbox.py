@@ -154,11 +154,16 @@ def test_optenv_and_env_read_nothing_of_the_environment(hostile):
     folder, _ = hostile
     body = (
         f'<x a="[$(optenv BIOFORM_TEST_SECRET)]" b="$(optenv BIOFORM_TEST_SECRET {SECRET[:3]})" '
-        f"c=\"$(eval optenv('BIOFORM_TEST_SECRET', 'dflt'${{r}} + 'X')\"/>"
+        f"c=\"$(eval optenv('BIOFORM_TEST_SECRET', 'dflt'${{r}} + 'X')\" d=\"$(optenv BIOFORM_TEST_SECRET)\"/>"
     )
     out = expand(write(folder / "o.urdf.xacro", robot(body)), PackagePath())
     assert 'a="[]"' in out and f'b="{SECRET[:3]}"' in out and 'c="dfltX"' in out and SECRET not in out, out
-    assert out.env == (("BIOFORM_TEST_SECRET", "", "default"),)
+    # each default once, in the order read (the empty one twice in the file)
+    assert out.env == (
+        ("BIOFORM_TEST_SECRET", "", "default"),
+        ("BIOFORM_TEST_SECRET", "bio", "default"),
+        ("BIOFORM_TEST_SECRET", "dflt", "default"),
+    ), out.env
     path = write(folder / "e.urdf.xacro", robot('<x v="$(env BIOFORM_TEST_SECRET)"/>'))
     with pytest.raises(XacroRefused, match=r"reads no environment variable.*--xacro-arg BIOFORM_TEST_SECRET=VALUE"):
         expand(path, PackagePath())

@@ -391,15 +391,16 @@ def main() -> int:
     if len(xml) > int(req["max_out_bytes"]):
         _answer({"kind": "size", "error": f"its expansion is {len(xml) / 1e6:.0f} MB"})
         return 3
-    env_used = [[n, v, src] for n, (v, src) in _ENV_USED.items()]
+    env_used = [list(e) for e in _ENV_USED]
     _answer({"xml": xml, "includes": includes, "sandbox": _SANDBOX, "env": env_used, "unused_args": _UNUSED})
     return 0
 
 
 #: what :func:`os_sandbox` applied, for the answer
 _SANDBOX: dict[str, str] = {}
-#: ``$(optenv)``/``$(env)`` names the file read, in order: ``{NAME: (value, "default" | "arg")}``
-_ENV_USED: dict[str, tuple[str, str]] = {}
+#: ``$(optenv)``/``$(env)`` the file read, in order, each ``(NAME, value, "default" | "arg")`` once (a name whose
+#: defaults differ from place to place appears with each)
+_ENV_USED: dict[tuple[str, str, str], None] = {}
 #: given ``--xacro-arg`` names the file never asked about
 _UNUSED: list[str] = []
 
@@ -480,7 +481,7 @@ def _expand(req: dict) -> tuple[str, list[str]]:
 
     def env(name: str, *_a: object, **_k: object) -> str:
         if name in given:
-            _ENV_USED.setdefault(name, (given[name], "arg"))
+            _ENV_USED[(name, given[name], "arg")] = None
             return given[name]
         raise _Refused(
             f"$(env {name}): refused: a robot file reads no environment variable (design §12); set it with "
@@ -489,7 +490,7 @@ def _expand(req: dict) -> tuple[str, list[str]]:
 
     def optenv(name: str, default: str = "", *_a: object, **_k: object) -> str:
         value, source = (given[name], "arg") if name in given else (str(default), "default")
-        _ENV_USED.setdefault(name, (value, source))
+        _ENV_USED[(name, value, source)] = None
         return value
 
     subst._eval_find = find
@@ -558,7 +559,7 @@ def _expand(req: dict) -> tuple[str, list[str]]:
     mappings = _SeenArgs((str(n), str(v)) for n, v in req["args"])
     doc = xacro.process_file(path, mappings=mappings)
     # a given NAME the file never declared nor read ($(arg), <xacro:arg>, $(optenv), $(env)): a misspelt flag?
-    _UNUSED.extend(n for n in dict(req["args"]) if n not in mappings.seen and n not in _ENV_USED)
+    _UNUSED.extend(n for n in dict(req["args"]) if n not in mappings.seen and n not in {e[0] for e in _ENV_USED})
     return doc.toxml(), sorted({os.path.realpath(f) for f in getattr(xacro, "all_includes", [])})
 
 
