@@ -74,3 +74,16 @@ def test_no_doc_page_runs_one_configuration_twice_into_its_default_folder():
             key = " ".join(outputs.sub("", cmd).replace(".venv/bin/", "").split())
             assert key not in seen, f"{page.name}:{i + 1} runs the configuration of line {seen[key]} again: {key}"
             seen[key] = i + 1
+
+
+def test_xacro_args_and_control_rate_change_the_default_folder():
+    """Two runs that differ only in ``--xacro-arg`` (or ``--control-rate``) are different configurations: the
+    hash is added, so the second does not meet the first's folder (issue 28)."""
+    import argparse
+
+    from bioform_mj.cli.outdir import changes_configuration
+
+    plain = argparse.Namespace(overrides=[], duration=None, seed=None, package_path=[], xacro_arg=[], control_rate=None)
+    assert not changes_configuration(plain)
+    assert changes_configuration(argparse.Namespace(**{**vars(plain), "xacro_arg": ["WHEEL_R=0.07"]}))
+    assert changes_configuration(argparse.Namespace(**{**vars(plain), "control_rate": 50.0}))

@@ -1,8 +1,8 @@
 """Where a command writes when ``--out`` is not given (design §10; issue 28): one folder per configuration.
 
 ``bioform run PRESET`` writes ``runs/PRESET-PLANT-METHOD`` (``table1``: ``runs/table1-PLANT``); a command whose
-``--set`` (other than ``--set name=…``, which names the folder), ``--duration``, ``--seed`` or
-``--package-path`` change the configuration writes
+``--set`` (other than ``--set name=…``, which names the folder), ``--duration``, ``--seed``,
+``--package-path``, ``--xacro-arg`` or ``--control-rate`` change the configuration writes
 ``runs/PRESET-PLANT-METHOD-<8 hex digits>`` instead, the start of the run's content key (a hash of the resolved
 configuration and seed, :func:`bioform_mj.jobs.sweep.content_key`), so a second run of a different configuration
 never lands on the first one's folder. The same configuration twice lands on the same folder, which then holds
@@ -33,6 +33,8 @@ def changes_configuration(args: argparse.Namespace) -> bool:
         or getattr(args, "duration", None) is not None
         or getattr(args, "seed", None) is not None
         or getattr(args, "package_path", None)
+        or getattr(args, "xacro_arg", None)
+        or getattr(args, "control_rate", None) is not None
     )
 
 
