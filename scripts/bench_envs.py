@@ -17,6 +17,8 @@ over the same physics steps with T threads, open loop (the physics alone: issue 
 also against ``mujoco.rollout`` of the worlds' own W models, and of the same worlds called once per
 period (the state carried: what any closed loop must do); and the environment with ``warm=False`` (every
 world stepping its own ``MjData``, the layout before issue 30's warm data), all alternating in one process.
+With one thread the ratios of CPU time (``time.thread_time``: what the other processes of a loaded machine
+take is left out) are printed too.
 """
 
 from __future__ import annotations
@@ -131,21 +133,28 @@ def vector(a) -> None:
             x[:] = state[:, -1]
 
     rates: dict[str, list[float]] = {"env": [], "cold": [], "rollout": [], "own": [], "period": []}
+    cpu: dict[str, list[float]] = {k: [] for k in rates}  # thread CPU s of each (one thread: all the work)
+
+    def timed(key: str, fn) -> None:
+        t0, c0 = time.perf_counter(), time.thread_time()
+        fn()
+        rates[key].append(N * W / (time.perf_counter() - t0))
+        cpu[key].append(time.thread_time() - c0)
+
+    def episode(env) -> None:
+        for _k in range(N):
+            env.step(act)
+
     for _ in range(a.repeat + 1):
         for key, env in (("env", ve), ("cold", cold)):
             env.reset(seed=0)
-            t0 = time.perf_counter()
-            for _k in range(N):
-                env.step(act)
-            rates[key].append(N * W / (time.perf_counter() - t0))
+            timed(key, lambda env=env: episode(env))
         for key, ms in (("rollout", models), ("own", own)):
-            t0 = time.perf_counter()
-            rollout.rollout(ms, datas, x0, ctrl, control_spec=cspec, nstep=N * n_sub, persistent_pool=pool)
-            rates[key].append(N * W / (time.perf_counter() - t0))
-        t0 = time.perf_counter()
-        per_period()
-        rates["period"].append(N * W / (time.perf_counter() - t0))
+            timed(key, lambda ms=ms: rollout.rollout(ms, datas, x0, ctrl, control_spec=cspec, nstep=N * n_sub,
+                                                     persistent_pool=pool))  # fmt: skip
+        timed("period", per_period)
     e, c, r, o, p = (statistics.median(rates[k][1:]) for k in ("env", "cold", "rollout", "own", "period"))
+    us = {k: 1e6 * statistics.median(v[1:]) / (N * W) for k, v in cpu.items()}
     print(
         f"CPU-vectorised environment, {W} worlds x {n} followers ({int(ve.shared.sum())} on the shared model), "
         f"{a.threads} thread(s), control_dt {a.control_dt:g} s ({n_sub} physics steps a period), {N} periods: "
@@ -154,6 +163,12 @@ def vector(a) -> None:
         f"{o:,.0f}, ratio {e / o:.2f}; rollout called once per period: {p:,.0f}, ratio {e / p:.2f}); "
         f"warm=False (each world its own MjData): {c:,.0f} world-steps/s, ratio {c / r:.2f} (warm/cold {e / c:.2f})"
     )
+    if a.threads == 1:
+        print(
+            f"  thread CPU time a world-step: environment {us['env']:.1f} us, warm=False {us['cold']:.1f} us, "
+            f"mujoco.rollout {us['rollout']:.1f} us (own models {us['own']:.1f}, once per period "
+            f"{us['period']:.1f}); ratio {us['rollout'] / us['env']:.2f}, warm=False {us['rollout'] / us['cold']:.2f}"
+        )
     ve.close()
     cold.close()
     if a.threads > 1:

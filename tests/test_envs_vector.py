@@ -156,8 +156,8 @@ def test_ends_and_own_models_are_the_single_environment():
     assert all(not g[-1][0].any() for g in got)  # the guards failed: zero observations
     venv.close()
     rz = {"friction": (0.7, 1.3)}
-    venv = VectorEnv("paper", 3, threads=2, randomize=rz, overrides=OV)
-    _compare(venv, _actions(venv, 3, venv.N), "velocity", 11, OV, randomize=rz)
+    venv = VectorEnv("paper", 2, threads=2, randomize=rz, overrides=OV)
+    _compare(venv, _actions(venv, 2, venv.N), "velocity", 11, OV, randomize=rz)
     assert not venv.shared.any()
     venv.close()
 
