@@ -354,14 +354,14 @@ class VectorEnv:
     def _warm_init(self, env0: FormationParallelEnv, on: bool) -> None:
         """One ``MjData`` of :attr:`_model` per thread (:attr:`_wdata`), and each world's MuJoCo state between
         periods (:attr:`_X` (W, ``mj_stateSize(mjSTATE_INTEGRATION)``), the chassis' ``xmat`` rows :attr:`_xmat`).
-        At a 1 ms control period a world is visited for one physics step; stepping its own ``MjData`` (~0.5 MB
-        of buffers, read and written by ``mj_step``) brought it from memory each visit, where one ``MjData``
-        per thread stays in the cache and a world's state is ~1 KB (issue 30: W = 32). What the period reads of
-        an ``MjData`` after the step (the contact list, ``mj_contactForce``, ``mj_geomDistance``, qpos/qvel,
-        the warning counters) it reads from the thread's while that holds the world; ``xmat`` (the
-        disturbance's heading, from the previous step) from the world's own rows. A world whose ``MjData``
-        has other sizes, or a scene that sleeps or has flexes (their state is not in that state), steps
-        its own (:meth:`_warmable`)."""
+        At a 1 ms control period a world is visited for one physics step; stepping its own ``MjData`` (the paper's
+        scene: 33 KB of buffers and the part of its arena a step uses, read and written by ``mj_step``) brought it
+        from memory each visit, where one ``MjData`` per thread stays in the cache and a world's state is 1.8 KB
+        (issue 30: W = 32). What the period reads of an ``MjData`` after the step (the contact list,
+        ``mj_contactForce``, ``mj_geomDistance``, qpos/qvel, the warning counters) it reads from the thread's
+        while that holds the world; ``xmat`` (the disturbance's heading, from the previous step) from the
+        world's own rows. A world whose ``MjData`` has other sizes, or a scene that sleeps or has flexes (their
+        state is not in that state), steps its own (:meth:`_warmable`)."""
         import mujoco
 
         from bioform_mj.plants.mujoco.contacts import ContactReader
