@@ -15,7 +15,10 @@ velocity action (the environment alone). Run:
 ``mujoco.rollout`` stepping the same W worlds (the models the environment steps with: its shared one)
 over the same physics steps with T threads, open loop (the physics alone: issue 30 asks for >= 0.7);
 also against ``mujoco.rollout`` of the worlds' own W models, and of the same worlds called once per
-period (the state carried: what any closed loop must do).
+period (the state carried: what any closed loop must do); and the environment with ``warm=False`` (every
+world stepping its own ``MjData``, the layout before issue 30's warm data), all alternating in one process.
+With one thread the ratios of CPU time (``time.thread_time``: what the other processes of a loaded machine
+take is left out) are printed too.
 """
 
 from __future__ import annotations
@@ -96,6 +99,7 @@ def vector(a) -> None:
 
     ov = [f"sim.duration={a.duration}", f"sim.control_dt={a.control_dt}", "plant.kind=mujoco"]
     ve = vector_env(a.scenario, a.vector, a.threads, overrides=ov)
+    cold = vector_env(a.scenario, a.vector, a.threads, overrides=ov, warm=False)
     W, n, N = ve.nworld, ve.n, ve.N
     act = np.tile(np.array([0.2, 0.1]), (W, n, 1))
     ve.reset(seed=0)  # builds every world's plant
@@ -115,8 +119,8 @@ def vector(a) -> None:
     ctrl = np.empty((W, N * n_sub, nc))
     for k in range(N):
         ve.step(act)
-        for w, e in enumerate(ve.envs):
-            mujoco.mj_getState(e._plant.model, e._plant.data, ctrl[w, k * n_sub], cspec)
+        for w in range(W):
+            ctrl[w, k * n_sub] = ve.world_state(w, cspec)
         ctrl[:, k * n_sub : (k + 1) * n_sub] = ctrl[:, k * n_sub : k * n_sub + 1]
     state = np.empty((W, n_sub, x0.shape[1]))
     pool = a.threads > 1
@@ -128,29 +132,45 @@ def vector(a) -> None:
                             persistent_pool=pool, state=state)  # fmt: skip
             x[:] = state[:, -1]
 
-    rates: dict[str, list[float]] = {"env": [], "rollout": [], "own": [], "period": []}
-    for _ in range(a.repeat + 1):
-        ve.reset(seed=0)
-        t0 = time.perf_counter()
+    rates: dict[str, list[float]] = {"env": [], "cold": [], "rollout": [], "own": [], "period": []}
+    cpu: dict[str, list[float]] = {k: [] for k in rates}  # thread CPU s of each (one thread: all the work)
+
+    def timed(key: str, fn) -> None:
+        t0, c0 = time.perf_counter(), time.thread_time()
+        fn()
+        rates[key].append(N * W / (time.perf_counter() - t0))
+        cpu[key].append(time.thread_time() - c0)
+
+    def episode(env) -> None:
         for _k in range(N):
-            ve.step(act)
-        rates["env"].append(N * W / (time.perf_counter() - t0))
+            env.step(act)
+
+    for _ in range(a.repeat + 1):
+        for key, env in (("env", ve), ("cold", cold)):
+            env.reset(seed=0)
+            timed(key, lambda env=env: episode(env))
         for key, ms in (("rollout", models), ("own", own)):
-            t0 = time.perf_counter()
-            rollout.rollout(ms, datas, x0, ctrl, control_spec=cspec, nstep=N * n_sub, persistent_pool=pool)
-            rates[key].append(N * W / (time.perf_counter() - t0))
-        t0 = time.perf_counter()
-        per_period()
-        rates["period"].append(N * W / (time.perf_counter() - t0))
-    e, r, o, p = (statistics.median(rates[k][1:]) for k in ("env", "rollout", "own", "period"))
+            timed(key, lambda ms=ms: rollout.rollout(ms, datas, x0, ctrl, control_spec=cspec, nstep=N * n_sub,
+                                                     persistent_pool=pool))  # fmt: skip
+        timed("period", per_period)
+    e, c, r, o, p = (statistics.median(rates[k][1:]) for k in ("env", "cold", "rollout", "own", "period"))
+    us = {k: 1e6 * statistics.median(v[1:]) / (N * W) for k, v in cpu.items()}
     print(
         f"CPU-vectorised environment, {W} worlds x {n} followers ({int(ve.shared.sum())} on the shared model), "
         f"{a.threads} thread(s), control_dt {a.control_dt:g} s ({n_sub} physics steps a period), {N} periods: "
         f"{e:,.0f} world-steps/s ({e * n:,.0f} agent-steps/s); mujoco.rollout of the same worlds and physics "
         f"steps, open loop: {r:,.0f} world-steps/s; ratio {e / r:.2f} (rollout of the worlds' own models: "
-        f"{o:,.0f}, ratio {e / o:.2f}; rollout called once per period: {p:,.0f}, ratio {e / p:.2f})"
+        f"{o:,.0f}, ratio {e / o:.2f}; rollout called once per period: {p:,.0f}, ratio {e / p:.2f}); "
+        f"warm=False (each world its own MjData): {c:,.0f} world-steps/s, ratio {c / r:.2f} (warm/cold {e / c:.2f})"
     )
+    if a.threads == 1:
+        print(
+            f"  thread CPU time a world-step: environment {us['env']:.1f} us, warm=False {us['cold']:.1f} us, "
+            f"mujoco.rollout {us['rollout']:.1f} us (own models {us['own']:.1f}, once per period "
+            f"{us['period']:.1f}); ratio {us['rollout'] / us['env']:.2f}, warm=False {us['rollout'] / us['cold']:.2f}"
+        )
     ve.close()
+    cold.close()
     if a.threads > 1:
         rollout.shutdown_persistent_pool()
 

@@ -160,5 +160,33 @@ def test_ends_and_own_models_are_the_single_environment():
     _compare(venv, _actions(venv, 2, venv.N), "velocity", 11, OV, randomize=rz)
     assert not venv.shared.any()
     venv.close()
+
+
+def test_worlds_sharing_a_warm_mjdata_do_not_leak():
+    """Three worlds of different seeds and drawn frictions (their own models) on two threads: thread 1 steps
+    worlds 1 and 2 on one ``MjData``, each world's state copied in and out every period. Each world is the
+    single environment's episode of its seed (a state left behind by the other world would change it), and
+    at the episode's end each world's own ``MjData`` holds what stepping it directly (``warm=False``) left:
+    state, warm start, time, contacts."""
+    rz = {"friction": (0.7, 1.3)}
+    W = 3
+    venv = VectorEnv("paper", W, threads=2, randomize=rz, overrides=OV)
+    acts = _actions(venv, W, venv.N, seed=3)
+    _compare(venv, acts, "velocity", 21, OV, randomize=rz)
+    assert venv.warm.all() and not venv.shared.any() and venv._blocks == [(0, 1), (1, 3)]
+    frictions = {float(e._plant.model.geom_friction[0, 0]) for e in venv.envs}
+    assert len(frictions) == W  # three different models
+    cold = VectorEnv("paper", W, threads=2, randomize=rz, overrides=OV, warm=False)
+    cold.reset(seed=21)
+    for t in range(cold.N):
+        cold.step(acts[t])
+    assert not cold.warm.any() and not cold.running.any()
+    for e1, e2 in zip(venv.envs, cold.envs):
+        d1, d2 = e1._plant.data, e2._plant.data
+        assert d1.time == d2.time > 0 and d1.ncon == d2.ncon > 0
+        for f in ("qpos", "qvel", "qacc_warmstart", "ctrl", "xpos", "efc_force"):
+            assert np.array_equal(getattr(d1, f), getattr(d2, f)), f
+    venv.close()
+    cold.close()
     with pytest.raises(ValueError, match="payload"):
         VectorEnv("paper", 2, randomize={"payload": (0.0, 0.5)}, overrides=OV)

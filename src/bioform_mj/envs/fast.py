@@ -336,11 +336,17 @@ class FastPeriod:
     """The arguments of :func:`mujoco_period` for the current episode of ``env`` (built after its reset,
     and again after an event changed the plant), and the scratch arrays it writes."""
 
-    def __init__(self, env: Any, r: Any = None, fe: Any = None, hits: Any = None, model: Any = None) -> None:
+    def __init__(
+        self, env: Any, r: Any = None, fe: Any = None, hits: Any = None, model: Any = None, warm: Any = None
+    ) -> None:
         """``r``, ``fe``, ``hits``: (n,) float64 arrays to write the rewards, formation errors and contact
         events into (views of a batch's arrays, ``envs.vector``); default: arrays of its own. ``model``: the
         ``MjModel`` the physics steps with (default: the plant's own; ``envs.vector`` passes one model that
-        its worlds share where their physics is the same)."""
+        its worlds share where their physics is the same). ``warm``: ``(data, ncon, con, xmat)``, an
+        ``MjData`` of the same sizes to step instead of the plant's own, its contact list's views (the
+        :class:`~bioform_mj.plants.mujoco.contacts.ContactList` fields ``ncon``, ``con``) and the (nbody, 9)
+        array the disturbance reads the chassis' orientation from (``envs.vector``: one ``MjData`` per
+        thread, each world's state copied in and out; default: the plant's ``MjData``)."""
         p, n = env._plant, env.n
         st = env._stack
         w = env.weights
@@ -368,14 +374,19 @@ class FastPeriod:
                                               np.zeros((n, env.obs_size)), 0, 0)).call  # fmt: skip
             return
         m, d = p.model, p.data
+        cl = p.contacts.contacts
+        xmat = d.xmat
+        if warm is not None:
+            d, ncon, con, xmat = warm
+            cl = cl._replace(ncon=ncon, con=con)
         from bioform_mj.plants.mujoco.kernels import MjIO, Watch
 
         io = MjIO(
             d.qpos, d.qvel, np.ascontiguousarray(p._q7[:, 0], dtype=np.int64),
             np.ascontiguousarray(p._v6[:, 0], dtype=np.int64), p._axle, p._up, d.ctrl,
-            np.ascontiguousarray(p._ctrl, dtype=np.int64), p._ctrl_scale, d.xfrc_applied, d.xmat,
+            np.ascontiguousarray(p._ctrl, dtype=np.int64), p._ctrl_scale, d.xfrc_applied, xmat,
             np.ascontiguousarray(p._base, dtype=np.int64), p._m_eff, p._i_eff,
-            np.zeros((2, 4)) if p._dist is None else p._dist, p.disturbance is not None, p._warn,
+            np.zeros((2, 4)) if p._dist is None else p._dist, p.disturbance is not None, d.warning.number,
             d.actuator_force, p._to_wheel, p._feed, False, p._dacc,
         )  # fmt: skip
         wt = Watch(
@@ -383,7 +394,7 @@ class FastPeriod:
             SLIP_V_FLOOR, p._slip_need, p.slip_run, p.slip_step,
         )  # fmt: skip
         fields = (
-            env._g, env._s, self.comm, io, wt, p.contacts.contacts, p.contacts.proximity,
+            env._g, env._s, self.comm, io, wt, cl, p.contacts.proximity,
             (m if model is None else model)._address, d._address,
             int(p.n_substeps), float(p.control_dt), env._low, env._high, env._acc_low, env._acc_high,
             env.action_mode == "velocity", env._verr, self.tau, np.ascontiguousarray(env._tau_max), float(env.dt),

@@ -12,6 +12,8 @@ environment's episode of the same seed and actions, bit for bit (``tests/test_en
 The worlds' physics steps with one shared ``MjModel`` wherever a world's physics is the built scene's
 (:meth:`VectorEnv._share_init`): at a 1 ms control period each world is visited for one physics step,
 and W copies of the model's hot arrays did not stay in the cache (32 worlds: 1.2-1.5x the steps/s).
+Likewise each thread steps its worlds on one warm ``MjData``, each world's MuJoCo state copied in and out
+every period, as ``mujoco.rollout`` does (:meth:`VectorEnv._warm_init`; 32 worlds, 1 ms: 1.2-1.4x).
 A period's Python is a few calls for all worlds together: the ends of the period (terminal rewards,
 zeroed observations, truncation, the observations' dtype) are computed in the compiled call.
 
@@ -44,6 +46,7 @@ from bioform_mj.envs.fast import (
 )
 from bioform_mj.envs.kernels import actions_within
 from bioform_mj.envs.parallel import FormationParallelEnv, parallel_env
+from bioform_mj.plants.mujoco.kernels import copy_data, state_in, state_out
 from bioform_mj.scenario.config import Scenario
 
 #: at most this share of the memory available now may be taken by the worlds (estimated before building them)
@@ -61,8 +64,8 @@ def first_bad(U, running, lo, hi):
 
 
 @njit
-def periods(args, lo, hi, U, pose, vel, new_pose, new_vel, O, O_out, R, k, step_count, status, running, term,
-            trunc, N, dt, w_terminal):  # fmt: skip
+def periods(args, lo, hi, wd, wx, ww, own, warm, X, sig, U, pose, vel, new_pose, new_vel, O, O_out, R, k, step_count,
+            status, running, term, trunc, N, dt, w_terminal):  # fmt: skip
     """Worlds ``lo … hi−1`` that are ``running``: one :func:`~.fast.mujoco_period` each (``args`` a typed
     list of the worlds' :class:`~.fast.PeriodArgs`, ``U`` (W, n, 2) their actions); a world's new state is
     copied into ``pose``, ``vel`` (unless MuJoCo warned: the plant is not observed then) and its step
@@ -72,7 +75,14 @@ def periods(args, lo, hi, U, pose, vel, new_pose, new_vel, O, O_out, R, k, step_
     rewards ``R`` (W, n) (not for a warning: its tail runs in Python), the observations ``O`` zeroed
     where the guards failed or MuJoCo warned, ``trunc`` (W,) at step ``N``, ``running`` cleared where
     either; ``O_out`` (the observations in the environment's dtype) written from ``O``. Returns the
-    number of worlds that warned."""
+    number of worlds that warned.
+
+    A world with ``warm[w]`` steps this block's ``MjData`` (address ``wd``; its ``xmat`` view ``wx`` and
+    warning counters ``ww``; ``args[w]`` point there): its MuJoCo state ``X[w]`` (``mj_getState``'s
+    layout for ``sig``, ``mjSTATE_INTEGRATION``) is copied in before the period and out after it, with the
+    chassis' rows of ``xmat`` (the disturbance's heading of the next period) into the world's own
+    array; where its episode ends or MuJoCo warns, the whole ``MjData`` is copied into the world's own
+    (address ``own[w]``), which then holds what stepping it would have left, and the counters are cleared."""
     warned = 0
     for w in range(lo, hi):
         term[w] = False
@@ -80,10 +90,19 @@ def periods(args, lo, hi, U, pose, vel, new_pose, new_vel, O, O_out, R, k, step_
         status[w] = 0
         if not running[w]:
             continue
-        st = period(args[w], U[w], pose[w], vel[w], new_pose[w], new_vel[w], O[w], k[w], step_count[w])
+        a = args[w]
+        if warm[w]:
+            state_in(a.mptr, wd, X[w], sig)
+        st = period(a, U[w], pose[w], vel[w], new_pose[w], new_vel[w], O[w], k[w], step_count[w])
         status[w] = st
         if st & BAD_ACTION:
             continue
+        if warm[w]:
+            state_out(a.mptr, wd, X[w], sig)
+            xm, base = a.io.xmat, a.io.base
+            for i in range(base.shape[0]):
+                for c in range(9):
+                    xm[base[i], c] = wx[base[i], c]
         step_count[w] += 1
         if st & WARNED:
             warned += 1
@@ -102,6 +121,10 @@ def periods(args, lo, hi, U, pose, vel, new_pose, new_vel, O, O_out, R, k, step_
         elif k[w] >= N:
             trunc[w] = True
         running[w] = not (term[w] or trunc[w])
+        if warm[w] and not running[w]:  # ended or warned
+            copy_data(own[w], a.mptr, wd)
+            for j in range(ww.shape[0]):
+                ww[j] = 0
         for i in range(O.shape[1]):
             for j in range(O.shape[2]):
                 O_out[w, i, j] = O[w, i, j]
@@ -126,6 +149,9 @@ class VectorEnv:
     threads : threads stepping them (default: the machine's CPUs, at most ``W``).
     max_bytes : refuse (``ValueError``) when the worlds' estimated memory exceeds this (default:
         :data:`MEMORY_SHARE` of the memory available now).
+    warm : step each thread's worlds on one ``MjData`` of that thread, each world's MuJoCo state
+        (``mjSTATE_INTEGRATION``) copied in and out of it every period, as ``mujoco.rollout`` does (default); False:
+        every world steps its own ``MjData`` (the same bits, slower: see :meth:`_warm_init`).
     options : :class:`~.parallel.FormationParallelEnv`'s (``action``, ``reward``, ``v_max``, ``w_max``,
         ``overrides``, ``dtype``, ``randomize``, ``max_cycles``).
     """
@@ -137,6 +163,7 @@ class VectorEnv:
         threads: int | None = None,
         *,
         max_bytes: float | None = None,
+        warm: bool = True,
         **options: Any,
     ) -> None:
         if isinstance(worlds, bool) or not isinstance(worlds, (int, np.integer)) or worlds < 1:
@@ -216,6 +243,7 @@ class VectorEnv:
         self._args: Any = List()
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         self._blocks = [(W * t // self.threads, W * (t + 1) // self.threads) for t in range(self.threads)]
+        self._warm_init(env0, bool(warm))
         self._started = False
 
     # ------------------------------------------------------------------ reset
@@ -255,7 +283,18 @@ class VectorEnv:
         self.running[w] = True
         self.shared[w] = self._shares(env)
         model = self._model if self.shared[w] else None
-        fp = FastPeriod(env, r=self.reward[w], fe=self._fe[w], hits=self._hits[w], model=model)
+        p = env._plant
+        self.warm[w] = self._warmable(env)
+        self._own[w] = p.data._address
+        self._xmat[w] = p.data.xmat
+        warm = None
+        if self.warm[w]:
+            import mujoco
+
+            mujoco.mj_getState(p.model, p.data, self._X[w], self._sig)
+            t = self._thread_of[w]
+            warm = (self._wdata[t], self._wviews[t][0], self._wviews[t][1], self._xmat[w])
+        fp = FastPeriod(env, r=self.reward[w], fe=self._fe[w], hits=self._hits[w], model=model, warm=warm)
         if len(self._args) < self.nworld:
             while len(self._args) <= w:
                 self._args.append(fp.args)
@@ -312,6 +351,70 @@ class VectorEnv:
             self._same_build[key] = bool(np.array_equal(mine, self._model_bytes))
         return self._same_build[key]
 
+    def _warm_init(self, env0: FormationParallelEnv, on: bool) -> None:
+        """One ``MjData`` of :attr:`_model` per thread (:attr:`_wdata`), and each world's MuJoCo state between
+        periods (:attr:`_X` (W, ``mj_stateSize(mjSTATE_INTEGRATION)``), the chassis' ``xmat`` rows :attr:`_xmat`).
+        At a 1 ms control period a world is visited for one physics step; stepping its own ``MjData`` (the paper's
+        scene: 33 KB of buffers and the part of its arena a step uses, read and written by ``mj_step``) brought it
+        from memory each visit, where one ``MjData`` per thread stays in the cache and a world's state is 1.8 KB
+        (issue 30: W = 32). What the period reads of an ``MjData`` after the step (the contact list,
+        ``mj_contactForce``, ``mj_geomDistance``, qpos/qvel, the warning counters) it reads from the thread's
+        while that holds the world; ``xmat`` (the disturbance's heading, from the previous step) from the
+        world's own rows. A world whose ``MjData`` has other sizes, or a scene that sleeps or has flexes (their
+        state is not in that state), steps its own (:meth:`_warmable`)."""
+        import mujoco
+
+        from bioform_mj.plants.mujoco.contacts import ContactReader
+
+        W, p, m = self.nworld, env0._plant, self._model
+        #: the MuJoCo state a world carries between periods: ``mjSTATE_INTEGRATION`` (time, qpos, qvel, act,
+        #: history, plastic and plugin state, the inputs, the solver's warm start: what ``mj_step`` reads of an
+        #: ``MjData``, as ``mujoco.rollout`` carries it)
+        self._sig = sig = int(mujoco.mjtState.mjSTATE_INTEGRATION)
+        self._warm_on = on and not (m.opt.enableflags & int(mujoco.mjtEnableBit.mjENBL_SLEEP)) and m.nflex == 0
+        #: (W,) whether world w steps its thread's warm ``MjData`` this episode
+        self.warm = np.zeros(W, dtype=np.bool_)
+        self._own = np.zeros(W, dtype=np.int64)
+        self._X = np.zeros((W, mujoco.mj_stateSize(m, sig)))
+        self._xmat = np.zeros((W, m.nbody, 9))
+        self._thread_of = np.zeros(W, dtype=np.int64)
+        for t, (lo, hi) in enumerate(self._blocks):
+            self._thread_of[lo:hi] = t
+        self._wdata, self._wviews = [], []
+        c = p.contacts
+        for _ in range(self.threads):
+            d = mujoco.MjData(m)
+            r = ContactReader(m, d, c.contacts.owner, p.contact_geoms, p._obstacle_geoms, c.proximity.rad,
+                              float(c.proximity.ranges[2]), p.control_dt, p._q7[:, 2])  # fmt: skip
+            if not np.array_equal(r.contacts.meta, c.contacts.meta):
+                self._warm_on = False  # the contact list is not where the worlds' is: each steps its own
+            self._wdata.append(d)
+            self._wviews.append((r.contacts.ncon, r.contacts.con, d.xmat, d.warning.number))
+        self._sizes = (d.nbuffer, d.narena, mujoco.mj_stateSize(m, sig))
+
+    def _warmable(self, env: FormationParallelEnv) -> bool:
+        """True when world ``env`` can step its thread's warm ``MjData`` (see :meth:`_warm_init`): warm data on,
+        and the world's ``MjData`` and state of the same sizes."""
+        import mujoco
+
+        if not self._warm_on:
+            return False
+        p = env._plant
+        return (p.data.nbuffer, p.data.narena, mujoco.mj_stateSize(p.model, self._sig)) == self._sizes
+
+    def world_state(self, w: int, sig: int) -> np.ndarray:
+        """World ``w``'s MuJoCo state after its last period, the components ``sig`` in ``mj_getState``'s
+        layout (from :attr:`_X` where it steps warm, else from its own ``MjData``)."""
+        import mujoco
+
+        p = self.envs[w]._plant
+        out = np.empty(mujoco.mj_stateSize(p.model, sig))
+        if self.warm[w]:
+            mujoco.mj_extractState(p.model, self._X[w], self._sig, out, sig)
+        else:
+            mujoco.mj_getState(p.model, p.data, out, sig)
+        return out
+
     def _worlds(self, mask: Any) -> np.ndarray:
         W = self.nworld
         if mask is None:
@@ -350,11 +453,12 @@ class VectorEnv:
             except ValueError as exc:
                 raise ValueError(f"world {bad}: {exc}") from exc
         a = self._step_args(U)
-        call = self._call
+        call, wd, wv = self._call, self._wdata, self._wviews
         if self._pool is None:
-            warned = call(self._args, 0, self.nworld, *a)
+            warned = call(self._args, 0, self.nworld, wd[0]._address, wv[0][2], wv[0][3], *a)
         else:
-            futs = [self._pool.submit(call, self._args, lo, hi, *a) for lo, hi in self._blocks]
+            futs = [self._pool.submit(call, self._args, lo, hi, wd[t]._address, wv[t][2], wv[t][3], *a)
+                    for t, (lo, hi) in enumerate(self._blocks)]  # fmt: skip
             warned = sum(f.result() for f in futs)
         if warned:  # a MuJoCo warning: the single environment's period tail in Python (the state not observed)
             for w in np.flatnonzero(self._status & WARNED):
@@ -362,14 +466,16 @@ class VectorEnv:
         return self._obs_out.copy(), self.reward.copy(), self._term.copy(), self._trunc.copy()
 
     def _step_args(self, U: np.ndarray) -> tuple:
-        """:func:`periods`' arguments after ``lo, hi`` for the actions ``U``."""
-        return (U, self.pose, self.vel, self._new_pose, self._new_vel, self.obs, self._obs_out, self.reward,
-                self.k, self._sc, self._status, self.running, self._term, self._trunc, self.N, self.dt,
-                self._w_terminal)  # fmt: skip
+        """:func:`periods`' arguments after ``lo, hi`` and the thread's warm ``MjData`` for the actions ``U``."""
+        return (self._own, self.warm, self._X, self._sig, U, self.pose, self.vel, self._new_pose, self._new_vel,
+                self.obs, self._obs_out, self.reward, self.k, self._sc, self._status, self.running, self._term,
+                self._trunc, self.N, self.dt, self._w_terminal)  # fmt: skip
 
     def _compile(self, U: np.ndarray) -> None:
         """The specialisations of :func:`periods` and :func:`first_bad` for this environment's argument types."""
-        self._call = Compiled(periods, (self._args, 0, self.nworld, *self._step_args(U))).call
+        wd, wv = self._wdata, self._wviews
+        self._call = Compiled(periods, (self._args, 0, self.nworld, wd[0]._address, wv[0][2], wv[0][3],
+                                        *self._step_args(U))).call  # fmt: skip
         self._check = Compiled(first_bad, (U, self.running, self._acc_low, self._acc_high)).call
 
     def _warned(self, w: int) -> None:

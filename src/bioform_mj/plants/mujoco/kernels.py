@@ -47,6 +47,17 @@ if HAVE_NUMBA:
             HAVE_MJ_STEP = True
     except (OSError, RuntimeError, ImportError):  # pragma: no cover - the step-by-step loop still works
         HAVE_MJ_STEP = False
+    # ``mj_getState``/``mj_setState(const mjModel*, mjData*, mjtNum* state, int sig)`` and
+    # ``mj_copyData(mjData* dest, const mjModel*, const mjData* src)``, by symbol as ``mj_step``
+    _mj_get_state = numba.types.ExternalFunction(
+        "mj_getState", numba.types.void(numba.types.intp, numba.types.intp, numba.types.intp, numba.types.int32)
+    )
+    _mj_set_state = numba.types.ExternalFunction(
+        "mj_setState", numba.types.void(numba.types.intp, numba.types.intp, numba.types.intp, numba.types.int32)
+    )
+    _mj_copy_data = numba.types.ExternalFunction(
+        "mj_copyData", numba.types.intp(numba.types.intp, numba.types.intp, numba.types.intp)
+    )
 
 
 class Sensors(NamedTuple):
@@ -483,3 +494,21 @@ def replay(mp, dp, n_sub, ctrl, xfrc, base, rec_ctrl, rec_xfrc, solver_niter):
             _mj_step(mp, dp)
             iters += solver_niter[0]
     return iters
+
+
+@njit
+def state_in(mp, dp, x, sig):
+    """``mj_setState(m, d, x, sig)``: the state ``x`` (the layout of ``mj_getState`` with ``sig``) into ``d``."""
+    _mj_set_state(mp, dp, x.ctypes.data, numba.int32(sig))
+
+
+@njit
+def state_out(mp, dp, x, sig):
+    """``mj_getState(m, d, x, sig)``: ``d``'s state (the components ``sig``) into ``x``."""
+    _mj_get_state(mp, dp, x.ctypes.data, numba.int32(sig))
+
+
+@njit
+def copy_data(dst, mp, src):
+    """``mj_copyData(dst, m, src)``: all of ``src`` (state, the last step's results, warnings) into ``dst``."""
+    _mj_copy_data(dst, mp, src)
