@@ -571,14 +571,13 @@ def test_number_pool_and_the_compiled_pass_write_numpys_bytes():
     ]
     values = [(dt, a[idx] if idx else a, (a, idx)) for dt, a, idx in fields]
     K = 40
-    pool, where = number_pool(values, K)
-    assert where[0][1] == 18 and where[1][0] - where[0][0] == 6 + 3  # pose's own words, in place
-    assert where[2] == (where[0][0] - 8 + 36, 18)  # [2:, 0, 0]: element (2, 0, 0) of pose
+    pool, src, step = number_pool([v[0] for v in values], [v[1] for v in values], [v[2] for v in values], K)
+    assert step[0] == 18 and src[1] - src[0] == 6 + 3  # pose's own words, in place
+    assert (src[2], step[2]) == (src[0] - 8 + 36, 18)  # [2:, 0, 0]: element (2, 0, 0) of pose
     B, rows, j0 = 1 + 8 * len(fields) + 13, 7, 30
     dst = [1 + 9 * k for k in range(len(fields))]  # every offset odd: unaligned
-    numbers = Numbers(
-        pool, [(s, ss, d, B, np.dtype(dt).itemsize == 8) for (s, ss), d, (dt, _, _) in zip(where, dst, values)]
-    )
+    wide = [np.dtype(dt).itemsize == 8 for dt, _, _ in values]
+    numbers = Numbers(pool, src, step, dst, np.full(len(dst), B), wide)
     buf = np.full(rows * B + 5, 0xA5, np.uint8)
     numbers.fill(buf, j0, rows - 1)
     want = np.full(rows * B + 5, 0xA5, np.uint8)

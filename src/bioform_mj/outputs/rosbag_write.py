@@ -40,27 +40,36 @@ class Numbers:
     """Where a chunk's numbers come from and go (the tables of :func:`~bioform_mj.outputs.rosbag_kernel.place`):
     ``pool`` (P,) int64, every source array's 64-bit words once; per field ``src`` (its sample 0's word in
     the pool) and ``src_step`` (words per sample), ``dst`` and ``dst_step`` (bytes in the buffer, and per
-    sample), ``wide`` (8 bytes, else 4). :meth:`fill` writes samples ``j0 … j0 + n − 1`` of every field."""
+    sample), ``wide`` (8 bytes, else 4), each an (F,) array; ``stamp``: ``(src, src_step)`` of the samples'
+    stamps (ns). :meth:`fill` writes samples ``j0 … j0 + n − 1`` of every field, in the order their bytes
+    lie in a sample."""
 
-    def __init__(
-        self, pool: np.ndarray, fields: list[tuple[int, int, int, int, bool]], stamp: tuple[int, int] = (0, 0)
-    ) -> None:
-        self.pool = pool
-        #: ``(src, src_step)`` of the samples' stamps (ns) in the pool
-        self.stamp = stamp
-        fields = sorted(fields, key=lambda f: (f[3], f[2]))  # in the order their bytes lie in a sample
-        cols = list(zip(*fields)) if fields else [(), (), (), (), ()]
-        self.src, self.src_step, self.dst, self.dst_step = (np.array(c, np.uint64) for c in cols[:4])
-        self.wide = np.array(cols[4], np.bool_)
-        self.fields = fields
+    def __init__(self, pool: np.ndarray, src, src_step, dst, dst_step, wide, stamp: tuple[int, int] = (0, 0)) -> None:
+        self.pool, self.stamp = pool, stamp
+        order = np.lexsort((np.asarray(dst), np.asarray(dst_step)))
+        self.src, self.src_step, self.dst, self.dst_step = (
+            np.asarray(c, np.uint64)[order] for c in (src, src_step, dst, dst_step)
+        )
+        self.wide = np.asarray(wide, np.bool_)[order]
 
     def shifted(self, by: int) -> Numbers:
         """The same numbers written ``by`` bytes further into the buffer."""
-        return Numbers(self.pool, [(s, ss, d + by, ds, w) for s, ss, d, ds, w in self.fields], self.stamp)
+        return Numbers(
+            self.pool, self.src, self.src_step, self.dst + np.uint64(by), self.dst_step, self.wide, self.stamp
+        )
 
-    def plus(self, fields: list[tuple[int, int, int, int, bool]]) -> Numbers:
-        """These numbers and ``fields`` (words of the same pool)."""
-        return Numbers(self.pool, self.fields + fields, self.stamp)
+    def plus(self, src, src_step, dst, dst_step, wide) -> Numbers:
+        """These numbers and those of the fields ``src … wide`` (words of the same pool)."""
+        cat = np.concatenate
+        return Numbers(
+            self.pool,
+            cat([self.src, np.asarray(src, np.uint64)]),
+            cat([self.src_step, np.asarray(src_step, np.uint64)]),
+            cat([self.dst, np.asarray(dst, np.uint64)]),
+            cat([self.dst_step, np.asarray(dst_step, np.uint64)]),
+            cat([self.wide, np.asarray(wide, np.bool_)]),
+            self.stamp,
+        )
 
     def fill(self, buf: np.ndarray, j0: int, n: int) -> None:
         """Write samples ``j0 … j0 + n − 1`` into ``buf`` (uint8, C-contiguous, large enough)."""
@@ -70,20 +79,22 @@ class Numbers:
 
 
 def number_pool(
-    values: list[tuple[str, np.ndarray, tuple[np.ndarray, tuple]]], K: int
-) -> tuple[np.ndarray, list[tuple[int, int]]]:
-    """The numbers of ``values`` (``(dtype, (≥ K,) values, (a, idx))``: ``<f8``, ``<u8``, ``<i4`` or ``<u4``
-    values ``a[idx]``, or ``a`` without ``idx``) as 64-bit words of one int64 pool, and each one's
-    ``(word of sample 0, words per sample)`` in it. Values selected by integers and one slice from an
-    array of 8-byte numbers of their kind (float64 for ``<f8``, 64-bit integers for the others: a log
-    channel, the stamps) are read from that array's words in the pool, put there once for all its
-    selections; any other is converted to its dtype and widened to 64 bits (4-byte integers: the low 4
-    bytes are the dtype's), as ``np.asarray(values, dtype)`` gives them."""
+    dtypes: list[str], values: list[np.ndarray], sources: list[tuple[np.ndarray, tuple]], K: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The numbers of fields ``k`` (``dtypes[k]``: ``<f8``, ``<u8``, ``<i4`` or ``<u4``; ``values[k]``
+    (≥ K,), the selection ``a[idx]`` of ``sources[k] = (a, idx)``, or ``a`` without ``idx``) as 64-bit
+    words of one int64 pool, and each one's word of sample 0 and words per sample in it ((F,) int64 each).
+    Values selected by integers and one slice from an array of 8-byte numbers of their kind (float64 for
+    ``<f8``, 64-bit integers for the others: a log channel, the stamps) are read from that array's words in
+    the pool, put there once for all its selections; any other is converted to its dtype and widened to
+    64 bits (4-byte integers: the low 4 bytes are the dtype's), as ``np.asarray(values, dtype)`` gives
+    them."""
     arrays: dict[int, tuple[int, np.ndarray]] = {}  # id(a) → (its first word in the pool, a C-contiguous)
     parts: list[np.ndarray] = []
     at = 0
-    where: list[tuple[int, int]] = []
-    for dt, vals, (a, idx) in values:
+    first_word: list[int] = []
+    step_words: list[int] = []
+    for dt, vals, (a, idx) in zip(dtypes, values, sources):
         word = None
         kind = a.dtype.kind if isinstance(a, np.ndarray) and a.dtype.itemsize == 8 else ""
         if (kind == "f") if dt == "<f8" else (kind in ("i", "u")):
@@ -99,16 +110,17 @@ def number_pool(
             first, c = arrays[id(a)]
             word = _selection(c, idx or (slice(None),), K)
             if word is not None:
-                word = (first + word[0], word[1])
+                first_word.append(first + word[0])
+                step_words.append(word[1])
         if word is None:  # a copy, widened to 64 bits
             w = np.ascontiguousarray(vals[:K], dtype=dt)
             w = w.view(np.int64) if w.dtype.itemsize == 8 else w.astype(np.int64)
             parts.append(w)
-            word = (at, 1)
+            first_word.append(at)
+            step_words.append(1)
             at += w.size
-        where.append(word)
     pool = np.concatenate(parts) if parts else np.zeros(1, np.int64)
-    return pool, where
+    return pool, np.array(first_word, np.int64), np.array(step_words, np.int64)
 
 
 def _selection(c: np.ndarray, idx: tuple, K: int) -> tuple[int, int] | None:
@@ -153,23 +165,29 @@ def chunk_matrix(
     M = np.empty((rows, B), np.uint8) if out is None else out
     K = len(stamps)
     row = np.empty(B, np.uint8)  # one sample's bytes, numbers aside
-    values: list[tuple[str, np.ndarray, tuple]] = [("<u8", stamps, (stamps, ()))]  # the stamps, for the indexes
-    dst: list[int] = [-1]
+    dts, values, sources, dst = ["<u8"], [stamps], [(stamps, ())], [0]  # the stamps first: the indexes' times
     for tp, cid, col in zip(topics, cids, cols):
         L = tp.template.size
         row[col : col + MSG_HEAD] = np.frombuffer(struct.pack("<BQHIQQ", 0x05, 22 + L, cid, 0, 0, 0), np.uint8)
         row[col + MSG_HEAD : col + MSG_HEAD + L] = tp.template
-        for off, dt, vals, src in [(col + 15, "<u8", stamps, (stamps, ())), (col + 23, "<u8", stamps, (stamps, ()))] + [
-            (col + MSG_HEAD + off, dt, vals, src) for off, dt, vals, src in tp.fields
-        ]:
-            values.append((dt, vals, src))
-            dst.append(off)
+        for at in (col + 15, col + 23):  # log time, publish time
+            dts.append("<u8")
+            values.append(stamps)
+            sources.append(sources[0])
+            dst.append(at)
+        for off, dt, vals, src in tp.fields:
+            dts.append(dt)
+            values.append(vals)
+            sources.append(src)
+            dst.append(col + MSG_HEAD + off)
     M[:] = row
-    pool, where = number_pool(values, K)
-    wide = [np.dtype(dt).itemsize == 8 for dt, _, _ in values]
-    assert all(np.dtype(dt).itemsize in (4, 8) for dt, _, _ in values)
-    fields = [(s, ss, d, B, w) for (s, ss), d, w in zip(where[1:], dst[1:], wide[1:])]
-    return M, Numbers(pool, fields, where[0])
+    assert all(dt in ("<f8", "<u8", "<i4", "<u4") for dt in dts)
+    pool, src, src_step = number_pool(dts, values, sources, K)
+    wide = [dt in ("<f8", "<u8") for dt in dts[1:]]
+    numbers = Numbers(
+        pool, src[1:], src_step[1:], dst[1:], np.full(len(wide), B), wide, (int(src[0]), int(src_step[0]))
+    )
+    return M, numbers
 
 
 class FullChunk:
@@ -205,7 +223,9 @@ class FullChunk:
         """The :class:`Numbers` of a chunk in :attr:`buf`: ``matrix``'s (those of :attr:`M`) and each message
         index's log times (the samples' stamps, one ``(time, offset)`` pair of 16 bytes per sample)."""
         s, ss = matrix.stamp
-        return matrix.shifted(self.HEAD).plus([(s, ss, at + 15, 16, True) for at in self.index_at])
+        C = len(self.index_at)
+        times = np.array(self.index_at, np.int64) + 15
+        return matrix.shifted(self.HEAD).plus(np.full(C, s), np.full(C, ss), times, np.full(C, 16), np.ones(C, bool))
 
     def write(self, storage: Any, t_start: int, t_end: int) -> None:
         """Write the chunk (:attr:`buf` filled by :meth:`numbers`) of samples from ``t_start`` to ``t_end``
