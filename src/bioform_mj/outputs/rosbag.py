@@ -327,7 +327,6 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
     pose3, twist3 = np.asarray(log["pose_3d"], float), np.asarray(log["twist_3d"], float)
     q = quat_of_rpy(pose3[..., 3:6])  # (S, n, 4) w x y z
     leader = np.asarray(log["leader_state"], float)  # (S, 5)
-    lq = quat_of_rpy(np.stack([np.zeros(S), np.zeros(S), leader[:, 2]], axis=-1))
     sign = np.asarray(log["wheel_sign"], float)
     names = np.asarray(log["wheel_joints"]).astype(str)
     wa, ws = np.asarray(log["wheel_angle"], float), np.asarray(log["wheel_speed"], float)
@@ -335,6 +334,17 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
     imu = "imu_gyro" in log
     cmd, tau = np.asarray(log["cmd"], float), np.asarray(log["tau"], float)
     ep, ev = np.asarray(log["est_pose"], float), np.asarray(log["est_vel"], float)
+    odo = sensing == "odometry"
+    op, ov = (np.asarray(log["odom_pose"], float), np.asarray(log["odom_vel"], float)) if odo else (None, None)
+    # the headings' quaternions (the leader's; each follower's estimate of it and, with odometry, its own
+    # dead reckoning): one call of quat_of_rpy for all, each a row block of its result
+    yaws = [leader[:, 2]] + [ep[:, i, 2] for i in range(n)] + ([op[:, i, 2] for i in range(n)] if odo else [])
+    rpy = np.zeros((sum(len(y) for y in yaws), 3))
+    rpy[:, 2] = np.concatenate(yaws)
+    heads = quat_of_rpy(rpy)
+    lq = heads[:S]
+    eqs = [heads[S + i * K : S + (i + 1) * K] for i in range(n)]
+    oqs = [heads[S + (n + i) * K : S + (n + i + 1) * K] for i in range(n)] if odo else []
     topics: list[_Topic] = []
 
     def build(name: str, msgtype: str, rows: slice, make) -> _Topic:
@@ -396,9 +406,8 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
                 tuple(mk.f64(twist3, r, i, c) for c in range(3, 6)),
             ),
         )
-        if sensing == "odometry":
-            op, ov = np.asarray(log["odom_pose"], float), np.asarray(log["odom_vel"], float)
-            oq = quat_of_rpy(np.stack([np.zeros(K), np.zeros(K), op[:, i, 2]], axis=-1))
+        if odo:
+            oq = oqs[i]
             build(
                 f"/{f}/odom",
                 "nav_msgs/msg/Odometry",
@@ -467,7 +476,7 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
                     tuple(mk.f64(a, r, i, c) for c in range(3)),
                 ),
             )
-        eq = quat_of_rpy(np.stack([np.zeros(K), np.zeros(K), ep[:, i, 2]], axis=-1))
+        eq = eqs[i]
         build(
             f"/{f}/leader_estimate",
             "nav_msgs/msg/Odometry",

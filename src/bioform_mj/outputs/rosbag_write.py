@@ -627,17 +627,34 @@ def _yaml_scalar(v: Any) -> str:
         return "{}"
     if isinstance(v, list | tuple):
         return "[]"
+    if type(v) is str:
+        return _yaml_str(v)
+    return _yaml_text_scalar(v)
+
+
+def _yaml_text_scalar(v: Any) -> str:
     if _YAML_PLAIN.fullmatch(v) and v.lower() not in _YAML_WORDS:  # a name: plain, as rosbag2 writes it
         return v
     # a JSON string is a YAML double-quoted scalar; the characters YAML wants escaped and JSON leaves, escaped
     return _YAML_UNSAFE.sub(lambda m: f"\\u{ord(m.group()):04x}", json.dumps(str(v), ensure_ascii=False))
 
 
+@functools.lru_cache(maxsize=1024)
+def _yaml_str(v: str) -> str:
+    """A string scalar, memoised (a bag's names, types and hashes recur in every bag of a process)."""
+    return _yaml_text_scalar(v)
+
+
+@functools.lru_cache(maxsize=256)
+def _yaml_key(k: str) -> str:
+    return k if _YAML_KEY.fullmatch(k) else _yaml_scalar(k)
+
+
 def _yaml_lines(obj: Any, ind: int) -> list[str]:
     pad, out = " " * ind, []
     if isinstance(obj, dict):
         for k, v in obj.items():
-            key = k if isinstance(k, str) and _YAML_KEY.fullmatch(k) else _yaml_scalar(k)
+            key = _yaml_key(k) if isinstance(k, str) else _yaml_scalar(k)
             if isinstance(v, dict | list | tuple) and v:
                 out.append(f"{pad}{key}:")
                 out += _yaml_lines(v, ind + 2)
