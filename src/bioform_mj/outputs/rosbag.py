@@ -20,8 +20,9 @@ from ``rosbags`` (the ``ros`` extra), which writes the folder; no ROS install is
 
 Speed (design §9, a run as a ROS 2 bag: a fraction of the run's stepping time): each topic's message has
 one fixed layout, so one message is serialised by ``rosbags`` with marker values, the markers'
-byte offsets are found, and every row's numbers are written into a copy of it with numpy; the
-MCAP chunks and their message indexes are built the same way (:func:`_writer_classes`). ``rosbags``'
+byte offsets are found, and every row's numbers are written into a copy of it by one compiled pass per
+MCAP chunk (:mod:`bioform_mj.outputs.rosbag_kernel`, the log's arrays read in place), which also writes the
+chunk's message index times (:mod:`bioform_mj.outputs.rosbag_write`). ``rosbags``'
 reader reads the result back (``tests/test_outputs_rosbag.py`` compares it with ``log.npz``).
 """
 
