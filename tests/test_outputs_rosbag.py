@@ -482,3 +482,107 @@ def test_many_chunk_bag_is_a_consistent_mcap(tmp_path):
     assert K == 1000
     for name in ("/clock", "/f2/ground_truth/odom", "/f3/cmd_vel"):
         assert [t for tp, t, _ in read if tp == name] == (ns if name != "/f3/cmd_vel" else ns[:K])
+
+
+def test_planar_quaternions_have_the_general_formulas_bits():
+    """quat_of_rpy with every roll and pitch +0.0 computes only the yaw's cosine and sine (the ideal plant, the
+    leader, the estimates: outputs/rosbag.py's templates): its bits, signed zeros included, are those of the
+    four products of cr, sr, cp, sp, cy, sy computed here from scratch; -0.0 or a nonzero roll or pitch takes
+    the general products."""
+    rng = np.random.default_rng(7)
+    special = [
+        0.0,
+        -0.0,
+        np.pi,
+        -np.pi,
+        2 * np.pi,
+        -2 * np.pi,
+        3 * np.pi,
+        1e300,
+        -1e300,
+        5e-324,
+        -5e-324,
+        np.nan,
+        np.inf,
+    ]
+    yaw = np.concatenate([rng.normal(size=4000) * 4.0, special])
+
+    def general(rpy):
+        h = np.asarray(rpy, dtype=float) * 0.5
+        r, p, y = h[..., 0], h[..., 1], h[..., 2]
+        cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+        return np.stack(
+            [
+                cr * cp * cy + sr * sp * sy,
+                sr * cp * cy - cr * sp * sy,
+                cr * sp * cy + sr * cp * sy,
+                cr * cp * sy - sr * sp * cy,
+            ],
+            axis=-1,
+        )
+
+    with np.errstate(invalid="ignore"):
+        for rpy in (
+            np.stack([np.zeros_like(yaw), np.zeros_like(yaw), yaw], axis=-1),
+            np.stack([np.zeros_like(yaw), np.zeros_like(yaw), yaw], axis=-1).reshape(-1, 1, 3)[:, [0, 0, 0]],
+            np.stack([np.full_like(yaw, -0.0), np.zeros_like(yaw), yaw], axis=-1),
+            np.stack([np.zeros_like(yaw), rng.normal(size=yaw.size) * 0.1, yaw], axis=-1),
+        ):
+            got, want = quat_of_rpy(rpy), general(rpy)
+            assert got.shape == want.shape == (*rpy.shape[:-1], 4)
+            assert np.array_equal(got.view(np.uint64), want.view(np.uint64))
+    # yaw/2 = 0.05, 2, -2, -0, 3.5: cos(yaw/2) > 0, < 0, < 0, > 0, < 0; sin's sign bit clear, clear, set, set, set
+    q = quat_of_rpy(np.stack([np.zeros(5), np.zeros(5), [0.1, 4.0, -4.0, -0.0, 7.0]], axis=-1))
+    assert np.signbit(q[:, 1]).tolist() == [False, True, False, False, False]  # x = (+0·cy) − (+0·sy)
+    assert np.signbit(q[:, 2]).tolist() == [False, False, True, False, True]  # y = (+0·cy) + (+0·sy)
+    assert np.signbit(q[:, 3]).tolist() == [False, False, True, True, True]  # z = sy − (+0·cy)
+
+
+def test_number_pool_and_the_compiled_pass_write_numpys_bytes():
+    """The bulk writer's numbers (outputs/rosbag_write.py: number_pool, Numbers, and the compiled pass
+    outputs/rosbag_kernel.py: place): each field's values land at its (unaligned) byte offset in each
+    sample's row as np.asarray(values, dtype).tobytes() gives them, for <f8, <u8, <i4 (wrapping) and <u4,
+    from selections of C-contiguous arrays (read in place: no copy), a Fortran-ordered and a big-endian
+    array, float32 and int32 values, a reversed slice; nothing else in the buffer changes."""
+    from bioform_mj.outputs.rosbag_write import Numbers, number_pool
+
+    rng = np.random.default_rng(3)
+    S = 50
+    pose = rng.normal(size=(S, 3, 6))
+    ints = rng.integers(-(2**40), 2**40, size=(S, 2))
+    stamps = np.arange(S, dtype=np.int64) * 1_000_000_007 + 2**35
+    fort = np.asfortranarray(rng.normal(size=(S, 4)))
+    big = rng.normal(size=S).astype(">f8")
+    f32 = rng.normal(size=S).astype(np.float32)
+    i32 = rng.integers(-(2**31), 2**31, size=S).astype(np.int32)
+    rev = rng.normal(size=S + 5)
+    fields = [  # (dtype, array, idx)
+        ("<f8", pose, (slice(None), 1, 2)),
+        ("<f8", pose, (slice(None), 2, 5)),
+        ("<f8", pose, (slice(2, None), 0, 0)),
+        ("<u8", stamps, ()),
+        ("<i4", ints, (slice(None), 0)),
+        ("<u4", ints, (slice(None), 1)),
+        ("<f8", fort, (slice(None), 3)),
+        ("<f8", big, ()),
+        ("<f8", f32, ()),
+        ("<i4", i32, ()),
+        ("<f8", rev, (slice(None, None, -1),)),
+    ]
+    values = [(dt, a[idx] if idx else a, (a, idx)) for dt, a, idx in fields]
+    K = 40
+    pool, src, step = number_pool([v[0] for v in values], [v[1] for v in values], [v[2] for v in values], K)
+    assert step[0] == 18 and src[1] - src[0] == 6 + 3  # pose's own words, in place
+    assert (src[2], step[2]) == (src[0] - 8 + 36, 18)  # [2:, 0, 0]: element (2, 0, 0) of pose
+    B, rows, j0 = 1 + 8 * len(fields) + 13, 7, 30
+    dst = [1 + 9 * k for k in range(len(fields))]  # every offset odd: unaligned
+    wide = [np.dtype(dt).itemsize == 8 for dt, _, _ in values]
+    numbers = Numbers(pool, src, step, dst, np.full(len(dst), B), wide)
+    buf = np.full(rows * B + 5, 0xA5, np.uint8)
+    numbers.fill(buf, j0, rows - 1)
+    want = np.full(rows * B + 5, 0xA5, np.uint8)
+    for r in range(rows - 1):
+        for d, (dt, vals, _) in zip(dst, values):
+            b = np.frombuffer(np.asarray(vals[j0 + r : j0 + r + 1], dtype=dt).tobytes(), np.uint8)
+            want[r * B + d : r * B + d + b.size] = b
+    assert np.array_equal(buf, want)

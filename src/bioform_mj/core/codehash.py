@@ -22,6 +22,7 @@ KERNEL_SOURCES = (
     "core/engine.py",
     "core/equations.py",
     "core/jitcache.py",
+    "outputs/rosbag_kernel.py",
     "plants/*.py",
     "plants/**/*.py",
     "run/faults.py",

@@ -58,8 +58,17 @@ def rpy_of_quat(q: np.ndarray) -> np.ndarray:
 
 
 def quat_of_rpy(rpy: np.ndarray) -> np.ndarray:
-    """Unit quaternions (..., 4) ``[w, x, y, z]`` of ZYX Euler angles ``[roll, pitch, yaw]`` (rad)."""
-    r, p, y = np.moveaxis(np.asarray(rpy, dtype=float) * 0.5, -1, 0)
+    """Unit quaternions (..., 4) ``[w, x, y, z]`` of ZYX Euler angles ``[roll, pitch, yaw]`` (rad).
+
+    Where every roll and pitch is +0.0 (a planar robot, a heading) only the yaw's
+    cosine and sine are computed: the products below with ``cos(+0) = 1`` and ``sin(+0) = +0`` put in, the
+    same operations on the same numbers (the same bits, signed zeros included), a third of the time."""
+    h = np.asarray(rpy, dtype=float) * 0.5
+    r, p, y = np.moveaxis(h, -1, 0)
+    if h.size and not (r.any() or p.any() or np.signbit(r).any() or np.signbit(p).any()):
+        cy, sy = np.cos(y), np.sin(y)  # the same strided arrays as below: the same values
+        z0c, z0s = 0.0 * cy, 0.0 * sy  # sr·cp·cy = cr·sp·cy = (+0)·cy; sr·sp·sy = cr·sp·sy = (+0)·sy
+        return np.stack([1.0 * cy + z0s, z0c - z0s, z0c + z0s, 1.0 * sy - z0c], axis=-1)
     cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
     return np.stack(
         [

@@ -20,8 +20,9 @@ from ``rosbags`` (the ``ros`` extra), which writes the folder; no ROS install is
 
 Speed (design §9, a run as a ROS 2 bag: a fraction of the run's stepping time): each topic's message has
 one fixed layout, so one message is serialised by ``rosbags`` with marker values, the markers'
-byte offsets are found, and every row's numbers are written into a copy of it with numpy; the
-MCAP chunks and their message indexes are built the same way (:func:`_writer_classes`). ``rosbags``'
+byte offsets are found, and every row's numbers are written into a copy of it by one compiled pass per
+MCAP chunk (:mod:`bioform_mj.outputs.rosbag_kernel`, the log's arrays read in place), which also writes the
+chunk's message index times (:mod:`bioform_mj.outputs.rosbag_write`). ``rosbags``'
 reader reads the result back (``tests/test_outputs_rosbag.py`` compares it with ``log.npz``).
 """
 
@@ -144,7 +145,8 @@ class _Topic:
     msgtype: str
     rows: np.ndarray  # (m,) int: the state samples it is published at
     template: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8))  # (L,) uint8, CDR
-    fields: list[tuple[int, str, np.ndarray]] = field(default_factory=list)  # (offset, dtype, (m,) values)
+    #: (offset, dtype, (m,) values, their source ``(a, idx)``: values = ``a[idx]``)
+    fields: list[tuple[int, str, np.ndarray, tuple[np.ndarray, tuple]]] = field(default_factory=list)
     extra: list[tuple[int, bytes]] = field(default_factory=list)  # (row, CDR bytes): messages of another layout
     qos: list[Any] = field(default_factory=list)
 
@@ -159,7 +161,7 @@ class _Topic:
         out[:, 23:31] = t8  # publish time
         body = out[:, MSG_HEAD:]
         body[:] = self.template
-        for off, dt, vals in self.fields:
+        for off, dt, vals, _ in self.fields:
             w = np.dtype(dt).itemsize
             body[:, off : off + w] = np.ascontiguousarray(vals[rows], dtype=dt).view(np.uint8).reshape(m, w)
 
@@ -170,31 +172,36 @@ class _Topic:
 
 
 class _Markers:
-    """Marker values for the fields of a template message, and the rows' values they stand for."""
+    """Marker values for the fields of a template message, and the rows' values they stand for: each a
+    1-D selection ``a[idx]`` of an array ``a`` (kept with it: the writer reads the numbers from ``a``
+    itself, :func:`bioform_mj.outputs.rosbag_write.number_pool`)."""
 
     def __init__(self) -> None:
-        self.items: list[tuple[bytes, str, np.ndarray]] = []
+        self.items: list[tuple[bytes, str, np.ndarray, tuple[np.ndarray, tuple]]] = []
 
-    def f64(self, values: np.ndarray) -> float:
-        """A marker float64 for ``values`` (m,)."""
+    def f64(self, a: np.ndarray, *idx: Any) -> float:
+        """A marker float64 for the values ``a[idx]`` (m,) (``a`` itself without ``idx``)."""
         v = 1.2345678901234567e250 * (1.0 + len(self.items) * 2.0**-30)
-        self.items.append((struct.pack("<d", v), "<f8", np.asarray(values, dtype=float)))
+        a = np.asarray(a, dtype=float)
+        self.items.append((struct.pack("<d", v), "<f8", a[idx] if idx else a, (a, idx)))
         return v
 
-    def int32(self, values: np.ndarray, dt: str) -> int:
-        """A marker 32-bit integer (``dt`` ``<i4`` or ``<u4``) for ``values`` (m,)."""
+    def int32(self, dt: str, a: np.ndarray, *idx: Any) -> int:
+        """A marker 32-bit integer (``dt`` ``<i4`` or ``<u4``) for the values ``a[idx]`` (m,)."""
         v = 0x3A5B0000 + 2 * len(self.items) + 1
-        self.items.append((struct.pack("<I", v), dt, np.asarray(values)))
+        a = np.asarray(a)
+        self.items.append((struct.pack("<I", v), dt, a[idx] if idx else a, (a, idx)))
         return v
 
-    def locate(self, raw: bytes) -> list[tuple[int, str, np.ndarray]]:
-        """Each marker's byte offset in the serialised template (exactly one match each)."""
+    def locate(self, raw: bytes) -> list[tuple[int, str, np.ndarray, tuple[np.ndarray, tuple]]]:
+        """Each marker's byte offset in the serialised template (exactly one match each), with its dtype,
+        values and their source ``(a, idx)``."""
         out = []
-        for pat, dt, vals in self.items:
+        for pat, dt, vals, src in self.items:
             off = raw.find(pat)
             if off < 0 or raw.find(pat, off + 1) >= 0:
                 raise RuntimeError(f"rosbag template: marker {pat.hex()} found {raw.count(pat)} times")
-            out.append((off, dt, vals))
+            out.append((off, dt, vals, src))
         return out
 
 
@@ -321,7 +328,6 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
     pose3, twist3 = np.asarray(log["pose_3d"], float), np.asarray(log["twist_3d"], float)
     q = quat_of_rpy(pose3[..., 3:6])  # (S, n, 4) w x y z
     leader = np.asarray(log["leader_state"], float)  # (S, 5)
-    lq = quat_of_rpy(np.stack([np.zeros(S), np.zeros(S), leader[:, 2]], axis=-1))
     sign = np.asarray(log["wheel_sign"], float)
     names = np.asarray(log["wheel_joints"]).astype(str)
     wa, ws = np.asarray(log["wheel_angle"], float), np.asarray(log["wheel_speed"], float)
@@ -329,11 +335,22 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
     imu = "imu_gyro" in log
     cmd, tau = np.asarray(log["cmd"], float), np.asarray(log["tau"], float)
     ep, ev = np.asarray(log["est_pose"], float), np.asarray(log["est_vel"], float)
+    odo = sensing == "odometry"
+    op, ov = (np.asarray(log["odom_pose"], float), np.asarray(log["odom_vel"], float)) if odo else (None, None)
+    # the headings' quaternions (the leader's; each follower's estimate of it and, with odometry, its own
+    # dead reckoning): one call of quat_of_rpy for all, each a row block of its result
+    yaws = [leader[:, 2]] + [ep[:, i, 2] for i in range(n)] + ([op[:, i, 2] for i in range(n)] if odo else [])
+    rpy = np.zeros((sum(len(y) for y in yaws), 3))
+    rpy[:, 2] = np.concatenate(yaws)
+    heads = quat_of_rpy(rpy)
+    lq = heads[:S]
+    eqs = [heads[S + i * K : S + (i + 1) * K] for i in range(n)]
+    oqs = [heads[S + (n + i) * K : S + (n + i + 1) * K] for i in range(n)] if odo else []
     topics: list[_Topic] = []
 
     def build(name: str, msgtype: str, rows: slice, make) -> _Topic:
         mk = _Markers()
-        stamp = msgs.time(mk.int32(sec[rows], "<i4"), mk.int32(nsec[rows], "<u4"))
+        stamp = msgs.time(mk.int32("<i4", sec, rows), mk.int32("<u4", nsec, rows))
         msg = make(mk, stamp, rows)
         raw = msgs.store.serialize_cdr(msg, msgtype)
         tp = _Topic(
@@ -343,7 +360,7 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
         return tp
 
     def stamp_of(mk: _Markers, rows: slice) -> Any:
-        return msgs.time(mk.int32(sec[rows], "<i4"), mk.int32(nsec[rows], "<u4"))
+        return msgs.time(mk.int32("<i4", sec, rows), mk.int32("<u4", nsec, rows))
 
     build("/clock", "rosgraph_msgs/msg/Clock", all_rows, lambda mk, st, r: msgs.clock(st))
 
@@ -351,11 +368,11 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
         out = []
         for i in range(n):
             f = f"f{i + 1}"
-            xyz = tuple(mk.f64(pose3[r, i, c]) for c in range(3))
-            wxyz = tuple(mk.f64(q[r, i, c]) for c in range(4))
+            xyz = tuple(mk.f64(pose3, r, i, c) for c in range(3))
+            wxyz = tuple(mk.f64(q, r, i, c) for c in range(4))
             out.append(msgs.transform(st if i == 0 else stamp_of(mk, r), f"{f}/odom", f"{f}/base_link", xyz, wxyz))
-        xyz = (mk.f64(leader[r, 0]), mk.f64(leader[r, 1]), 0.0)
-        wxyz = tuple(mk.f64(lq[r, c]) for c in range(4))
+        xyz = (mk.f64(leader, r, 0), mk.f64(leader, r, 1), 0.0)
+        wxyz = tuple(mk.f64(lq, r, c) for c in range(4))
         out.append(msgs.transform(stamp_of(mk, r), "leader/odom", "leader/base_link", xyz, wxyz))
         return msgs.tf(out)
 
@@ -368,10 +385,10 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
             st,
             "leader/odom",
             "leader/base_link",
-            (mk.f64(leader[r, 0]), mk.f64(leader[r, 1]), 0.0),
-            tuple(mk.f64(lq[r, c]) for c in range(4)),
-            (mk.f64(leader[r, 3]), 0.0, 0.0),
-            (0.0, 0.0, mk.f64(leader[r, 4])),
+            (mk.f64(leader, r, 0), mk.f64(leader, r, 1), 0.0),
+            tuple(mk.f64(lq, r, c) for c in range(4)),
+            (mk.f64(leader, r, 3), 0.0, 0.0),
+            (0.0, 0.0, mk.f64(leader, r, 4)),
         ),
     )
     for i in range(n):
@@ -384,15 +401,14 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
                 st,
                 f"{f}/odom",
                 f"{f}/base_link",
-                tuple(mk.f64(pose3[r, i, c]) for c in range(3)),
-                tuple(mk.f64(q[r, i, c]) for c in range(4)),
-                tuple(mk.f64(twist3[r, i, c]) for c in range(3)),
-                tuple(mk.f64(twist3[r, i, c]) for c in range(3, 6)),
+                tuple(mk.f64(pose3, r, i, c) for c in range(3)),
+                tuple(mk.f64(q, r, i, c) for c in range(4)),
+                tuple(mk.f64(twist3, r, i, c) for c in range(3)),
+                tuple(mk.f64(twist3, r, i, c) for c in range(3, 6)),
             ),
         )
-        if sensing == "odometry":
-            op, ov = np.asarray(log["odom_pose"], float), np.asarray(log["odom_vel"], float)
-            oq = quat_of_rpy(np.stack([np.zeros(K), np.zeros(K), op[:, i, 2]], axis=-1))
+        if odo:
+            oq = oqs[i]
             build(
                 f"/{f}/odom",
                 "nav_msgs/msg/Odometry",
@@ -401,15 +417,15 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
                     st,
                     f"{f}/odom",
                     f"{f}/base_link",
-                    (mk.f64(op[r, i, 0]), mk.f64(op[r, i, 1]), 0.0),
-                    tuple(mk.f64(oq[r, c]) for c in range(4)),
-                    (mk.f64(ov[r, i, 0]), 0.0, 0.0),
-                    (0.0, 0.0, mk.f64(ov[r, i, 1])),
+                    (mk.f64(op, r, i, 0), mk.f64(op, r, i, 1), 0.0),
+                    tuple(mk.f64(oq, r, c) for c in range(4)),
+                    (mk.f64(ov, r, i, 0), 0.0, 0.0),
+                    (0.0, 0.0, mk.f64(ov, r, i, 1)),
                 ),
             )
         mk_cmd = _Markers()
         raw = msgs.store.serialize_cdr(
-            msgs.twist((mk_cmd.f64(cmd[:, i, 0]), 0.0, 0.0), (0.0, 0.0, mk_cmd.f64(cmd[:, i, 1]))),
+            msgs.twist((mk_cmd.f64(cmd, slice(None), i, 0), 0.0, 0.0), (0.0, 0.0, mk_cmd.f64(cmd, slice(None), i, 1))),
             "geometry_msgs/msg/Twist",
         )
         topics.append(
@@ -445,7 +461,7 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
                 "sensor_msgs/msg/JointState",
                 log_rows,
                 lambda mk, st, r, i=i, jn=jn: msgs.joint_state(
-                    st, jn, [], [], [mk.f64(tau[r, i, c]) for c in range(2)]
+                    st, jn, [], [], [mk.f64(tau, r, i, c) for c in range(2)]
                 ),
             )
         if imu:
@@ -457,11 +473,11 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
                 lambda mk, st, r, i=i, f=f, g=g, a=a: msgs.imu(
                     st,
                     f"{f}/imu_link",
-                    tuple(mk.f64(g[r, i, c]) for c in range(3)),
-                    tuple(mk.f64(a[r, i, c]) for c in range(3)),
+                    tuple(mk.f64(g, r, i, c) for c in range(3)),
+                    tuple(mk.f64(a, r, i, c) for c in range(3)),
                 ),
             )
-        eq = quat_of_rpy(np.stack([np.zeros(K), np.zeros(K), ep[:, i, 2]], axis=-1))
+        eq = eqs[i]
         build(
             f"/{f}/leader_estimate",
             "nav_msgs/msg/Odometry",
@@ -470,10 +486,10 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
                 st,
                 "world",
                 f"{f}/leader_estimate",
-                (mk.f64(ep[r, i, 0]), mk.f64(ep[r, i, 1]), 0.0),
-                tuple(mk.f64(eq[r, c]) for c in range(4)),
-                (mk.f64(ev[r, i, 0]), 0.0, 0.0),
-                (0.0, 0.0, mk.f64(ev[r, i, 1])),
+                (mk.f64(ep, r, i, 0), mk.f64(ep, r, i, 1), 0.0),
+                tuple(mk.f64(eq, r, c) for c in range(4)),
+                (mk.f64(ev, r, i, 0), 0.0, 0.0),
+                (0.0, 0.0, mk.f64(ev, r, i, 1)),
             ),
         )
     return topics

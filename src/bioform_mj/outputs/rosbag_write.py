@@ -22,6 +22,7 @@ __all__ = [
     "CHUNK_BYTES",
     "MSG_HEAD",
     "FullChunk",
+    "Numbers",
     "bulk_writer",
     "mcap_head",
     "msgdef",
@@ -35,6 +36,116 @@ CHUNK_BYTES = 1 << 20
 MSG_HEAD = 1 + 8 + 2 + 4 + 8 + 8  # opcode, record length, channel id, sequence, log time, publish time
 
 
+class Numbers:
+    """Where a chunk's numbers come from and go (the tables of :func:`~bioform_mj.outputs.rosbag_kernel.place`):
+    ``pool`` (P,) int64, every source array's 64-bit words once; per field ``src`` (its sample 0's word in
+    the pool) and ``src_step`` (words per sample), ``dst`` and ``dst_step`` (bytes in the buffer, and per
+    sample), ``wide`` (8 bytes, else 4), each an (F,) array; ``stamp``: ``(src, src_step)`` of the samples'
+    stamps (ns). :meth:`fill` writes samples ``j0 … j0 + n − 1`` of every field, in the order their bytes
+    lie in a sample."""
+
+    def __init__(self, pool: np.ndarray, src, src_step, dst, dst_step, wide, stamp: tuple[int, int] = (0, 0)) -> None:
+        self.pool, self.stamp = pool, stamp
+        order = np.lexsort((np.asarray(dst), np.asarray(dst_step)))
+        self.src, self.src_step, self.dst, self.dst_step = (
+            np.asarray(c, np.uint64)[order] for c in (src, src_step, dst, dst_step)
+        )
+        self.wide = np.asarray(wide, np.bool_)[order]
+
+    def shifted(self, by: int) -> Numbers:
+        """The same numbers written ``by`` bytes further into the buffer."""
+        return Numbers(
+            self.pool, self.src, self.src_step, self.dst + np.uint64(by), self.dst_step, self.wide, self.stamp
+        )
+
+    def plus(self, src, src_step, dst, dst_step, wide) -> Numbers:
+        """These numbers and those of the fields ``src … wide`` (words of the same pool)."""
+        cat = np.concatenate
+        return Numbers(
+            self.pool,
+            cat([self.src, np.asarray(src, np.uint64)]),
+            cat([self.src_step, np.asarray(src_step, np.uint64)]),
+            cat([self.dst, np.asarray(dst, np.uint64)]),
+            cat([self.dst_step, np.asarray(dst_step, np.uint64)]),
+            cat([self.wide, np.asarray(wide, np.bool_)]),
+            self.stamp,
+        )
+
+    def fill(self, buf: np.ndarray, j0: int, n: int) -> None:
+        """Write samples ``j0 … j0 + n − 1`` into ``buf`` (uint8, C-contiguous, large enough)."""
+        from bioform_mj.outputs.rosbag_kernel import place
+
+        place(buf, self.pool, self.src, self.src_step, self.dst, self.dst_step, self.wide, j0, n)
+
+
+def number_pool(
+    dtypes: list[str], values: list[np.ndarray], sources: list[tuple[np.ndarray, tuple]], K: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The numbers of fields ``k`` (``dtypes[k]``: ``<f8``, ``<u8``, ``<i4`` or ``<u4``; ``values[k]``
+    (≥ K,), the selection ``a[idx]`` of ``sources[k] = (a, idx)``, or ``a`` without ``idx``) as 64-bit
+    words of one int64 pool, and each one's word of sample 0 and words per sample in it ((F,) int64 each).
+    Values selected by integers and one slice from an array of 8-byte numbers of their kind (float64 for
+    ``<f8``, 64-bit integers for the others: a log channel, the stamps) are read from that array's words in
+    the pool, put there once for all its selections; any other is converted to its dtype and widened to
+    64 bits (4-byte integers: the low 4 bytes are the dtype's), as ``np.asarray(values, dtype)`` gives
+    them."""
+    arrays: dict[int, tuple[int, np.ndarray]] = {}  # id(a) → (its first word in the pool, a C-contiguous)
+    parts: list[np.ndarray] = []
+    at = 0
+    first_word: list[int] = []
+    step_words: list[int] = []
+    for dt, vals, (a, idx) in zip(dtypes, values, sources):
+        word = None
+        kind = a.dtype.kind if isinstance(a, np.ndarray) and a.dtype.itemsize == 8 else ""
+        if (kind == "f") if dt == "<f8" else (kind in ("i", "u")):
+            if id(a) not in arrays:
+                c = (
+                    a
+                    if a.flags.c_contiguous and a.dtype.isnative
+                    else np.ascontiguousarray(a, a.dtype.newbyteorder("="))
+                )
+                arrays[id(a)] = (at, c)
+                parts.append(c.reshape(-1).view(np.int64))
+                at += c.size
+            first, c = arrays[id(a)]
+            word = _selection(c, idx or (slice(None),), K)
+            if word is not None:
+                first_word.append(first + word[0])
+                step_words.append(word[1])
+        if word is None:  # a copy, widened to 64 bits
+            w = np.ascontiguousarray(vals[:K], dtype=dt)
+            w = w.view(np.int64) if w.dtype.itemsize == 8 else w.astype(np.int64)
+            parts.append(w)
+            first_word.append(at)
+            step_words.append(1)
+            at += w.size
+    pool = np.concatenate(parts) if parts else np.zeros(1, np.int64)
+    return pool, np.array(first_word, np.int64), np.array(step_words, np.int64)
+
+
+def _selection(c: np.ndarray, idx: tuple, K: int) -> tuple[int, int] | None:
+    """``(word of element 0, words per element)`` of ``c[idx]`` in the words of ``c`` (C-contiguous, 8-byte
+    items), for ``idx`` of integers and one slice (a 1-D selection of at least ``K`` elements), else None."""
+    shape, strides = c.shape, c.strides
+    if len(idx) != len(shape):
+        return None
+    off, step = 0, None
+    for ix, n, st in zip(idx, shape, strides):
+        if type(ix) is slice:
+            if step is not None:
+                return None
+            start, stop, by = ix.indices(n)
+            if by <= 0 or len(range(start, stop, by)) < K:
+                return None
+            off += start * st
+            step = by * st
+        elif (type(ix) is int or isinstance(ix, np.integer)) and -n <= ix < n:
+            off += (int(ix) % n) * st
+        else:
+            return None
+    return None if step is None else (off // 8, step // 8)
+
+
 def chunk_matrix(
     topics: list[Any],
     cids: list[int],
@@ -43,52 +154,40 @@ def chunk_matrix(
     rows: int,
     stamps: np.ndarray,
     out: np.ndarray | None = None,
-) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]:
+) -> tuple[np.ndarray, Numbers]:
     """The byte matrix of a chunk of ``rows`` samples (``(rows, B)`` uint8: every topic's message record
     side by side, at ``cols``; ``out``: a C-contiguous ``(rows, B)`` uint8 array to use, else a new one)
-    with every record's constant bytes (header, template) written once, and its
-    slots: ``(view, values)`` pairs, a strided ``(rows, k)`` view of the matrix where ``k`` numbers side by
-    side in a record go (log and publish times, the marked fields: a position, a quaternion) and those
-    numbers for all ``K`` samples, ``(K, k)``. A chunk's samples ``j0:j1`` are then
-    ``view[:j1 - j0] = values[j0:j1]`` for each slot, the same matrix reused chunk after chunk (written out
-    before it is refilled): one numpy assignment per run of numbers, not per message. The values of all
-    slots of one dtype are one ``(K, columns)`` array made by one ``np.stack`` (a slot's values: its
-    columns)."""
+    with every record's constant bytes (header, template) written once, and the :class:`Numbers` of all
+    ``K`` samples (``stamps`` (K,) ns): each record's log and publish time and its marked fields, their
+    ``dst`` bytes from the matrix's start. A chunk's samples ``j0:j1`` are then
+    ``numbers.fill(M.reshape(-1), j0, j1 - j0)``: one compiled pass, the same matrix reused chunk after
+    chunk (written out before it is refilled)."""
     M = np.empty((rows, B), np.uint8) if out is None else out
-    buf = M.reshape(-1)
-    t = np.ascontiguousarray(stamps, dtype="<u8")
-    K = len(t)
-    runs: list[tuple[int, str, list[np.ndarray]]] = []  # (byte offset in a sample's row, dtype, values)
+    K = len(stamps)
+    row = np.empty(B, np.uint8)  # one sample's bytes, numbers aside
+    dts, values, sources, dst = ["<u8"], [stamps], [(stamps, ())], [0]  # the stamps first: the indexes' times
     for tp, cid, col in zip(topics, cids, cols):
         L = tp.template.size
-        M[:, col : col + MSG_HEAD] = np.frombuffer(struct.pack("<BQHIQQ", 0x05, 22 + L, cid, 0, 0, 0), np.uint8)
-        M[:, col + MSG_HEAD : col + MSG_HEAD + L] = tp.template
-        numbers = [(col + 15, "<u8", t), (col + 23, "<u8", t)]  # log time, publish time
-        numbers += [(col + MSG_HEAD + off, dt, vals) for off, dt, vals in tp.fields]
-        numbers.sort(key=lambda n: n[0])
-        # numbers side by side in the record (a position's x y z, a quaternion, the two stamps) are one
-        # 2-D slot: (rows, k) with strides (B, itemsize), and their values k columns of a (K, k) array
-        i = 0
-        while i < len(numbers):
-            off, dt, _ = numbers[i]
-            w = np.dtype(dt).itemsize
-            j = i + 1
-            while j < len(numbers) and numbers[j][1] == dt and numbers[j][0] == off + (j - i) * w:
-                j += 1
-            runs.append((off, dt, [v[:K] for _, _, v in numbers[i:j]]))
-            i = j
-    columns: dict[str, list[np.ndarray]] = {}
-    for _, dt, vs in runs:
-        columns.setdefault(dt, []).extend(vs)
-    table = {dt: np.stack([np.asarray(v, dtype=dt) for v in vs], axis=1) for dt, vs in columns.items()}
-    at = dict.fromkeys(table, 0)
-    slots: list[tuple[np.ndarray, np.ndarray]] = []
-    for off, dt, vs in runs:
-        k, w = len(vs), np.dtype(dt).itemsize
-        view = np.ndarray((rows, k), dt, buffer=buf, offset=off, strides=(B, w))
-        slots.append((view, table[dt][:, at[dt] : at[dt] + k]))
-        at[dt] += k
-    return M, slots
+        row[col : col + MSG_HEAD] = np.frombuffer(struct.pack("<BQHIQQ", 0x05, 22 + L, cid, 0, 0, 0), np.uint8)
+        row[col + MSG_HEAD : col + MSG_HEAD + L] = tp.template
+        for at in (col + 15, col + 23):  # log time, publish time
+            dts.append("<u8")
+            values.append(stamps)
+            sources.append(sources[0])
+            dst.append(at)
+        for off, dt, vals, src in tp.fields:
+            dts.append(dt)
+            values.append(vals)
+            sources.append(src)
+            dst.append(col + MSG_HEAD + off)
+    M[:] = row
+    assert all(dt in ("<f8", "<u8", "<i4", "<u4") for dt in dts)
+    pool, src, src_step = number_pool(dts, values, sources, K)
+    wide = [dt in ("<f8", "<u8") for dt in dts[1:]]
+    numbers = Numbers(
+        pool, src[1:], src_step[1:], dst[1:], np.full(len(wide), B), wide, (int(src[0]), int(src_step[0]))
+    )
+    return M, numbers
 
 
 class FullChunk:
@@ -98,7 +197,8 @@ class FullChunk:
     and the chunk's times is the same for every such chunk and is written once: the chunk record's header,
     the records' constant bytes (:func:`chunk_matrix` fills :attr:`M`, the samples' ``(rows, B)`` matrix,
     a view into the buffer) and each message index's offsets (``sample * B + col``, the chunk's records
-    start at 0). The bytes are those ``write_chunk`` writes for the same records."""
+    start at 0). The bytes are those ``write_chunk`` writes for the same records. :meth:`numbers` says where
+    the numbers of a chunk go in :attr:`buf`: the matrix's and every message index's log times."""
 
     HEAD = 1 + 8 + 8 + 8 + 8 + 4 + 4 + 8  # opcode, length, start/end time, size, CRC (0), "" (no compression), size
 
@@ -117,20 +217,23 @@ class FullChunk:
             struct.pack_into("<BQHI", self.buf, at, 0x07, 2 + 4 + 16 * rows, cids[k], 16 * rows)
             pairs = np.ndarray((rows, 2), "<u8", buffer=self.buf, offset=at + 15)
             pairs[:, 1] = np.arange(rows, dtype=np.uint64) * B + cols[k]
-        #: every message index's log times, (topics, rows) u8 (the same stamps in each)
-        self.times = np.ndarray(
-            (C, rows), "<u8", buffer=self.buf, offset=H + self.size + 15, strides=(self.index_len, 16)
-        )
         self.summary = struct.Struct("<QQQQI" + "HQ" * C + "QIQQ")  # the chunk index record (summary section)
 
-    def write(self, storage: Any, stamps: np.ndarray) -> None:
-        """Write the chunk (:attr:`M` filled) stamped ``stamps`` (rows,) ns to ``storage`` (``BulkMcap``),
-        with its chunk index and message counts as ``write_chunk`` keeps them."""
+    def numbers(self, matrix: Numbers) -> Numbers:
+        """The :class:`Numbers` of a chunk in :attr:`buf`: ``matrix``'s (those of :attr:`M`) and each message
+        index's log times (the samples' stamps, one ``(time, offset)`` pair of 16 bytes per sample)."""
+        s, ss = matrix.stamp
+        C = len(self.index_at)
+        times = np.array(self.index_at, np.int64) + 15
+        return matrix.shifted(self.HEAD).plus(np.full(C, s), np.full(C, ss), times, np.full(C, 16), np.ones(C, bool))
+
+    def write(self, storage: Any, t_start: int, t_end: int) -> None:
+        """Write the chunk (:attr:`buf` filled by :meth:`numbers`) of samples from ``t_start`` to ``t_end``
+        ns to ``storage`` (``BulkMcap``), with its chunk index and message counts as ``write_chunk`` keeps
+        them."""
         from io import BytesIO
 
-        t_start, t_end = int(stamps.min()), int(stamps.max())
         struct.pack_into("<QQ", self.buf, 9, t_start, t_end)
-        self.times[:] = stamps
         start = storage.bio.tell()
         storage.bio.write(self.buf)
         where = [v for cid, at in zip(self.cids, self.index_at) for v in (cid, start + at)]
@@ -202,6 +305,75 @@ def writer_classes():
             self.message_start_time = 2**63 - 1
             self.message_end_time = 0
             self.channel_stats = {}
+
+        def close(self, version: int, metadata: str) -> None:
+            """``McapWriter.close`` (rosbags 0.11.9): the metadata record, data end, then the summary (schemas,
+            channels, chunk indexes, metadata index, statistics, summary offsets, footer, magic) — the same
+            records, built in memory and written with one ``write`` (``rosbags`` writes each field of each
+            record to the file, a few hundred calls)."""
+            if self.chunk.bio.tell():
+                self.close_chunk()
+            out = BytesIO()
+            base = self.bio.tell()
+
+            def put(op: int, body: bytes) -> None:
+                out.write(struct.pack("<BQ", op, len(body)))
+                out.write(body)
+
+            def text(x: str) -> bytes:
+                b = x.encode()
+                return struct.pack("<I", len(b)) + b
+
+            sub = text("serialized_metadata") + text(metadata)
+            put(0x0C, text("rosbag2") + struct.pack("<I", len(sub)) + sub)
+            metadata_end = base + out.tell()
+            put(0x0F, struct.pack("<I", 0))
+            schema_start = base + out.tell()
+            ids = {}
+            for sc in self.schemas:
+                ids.setdefault(sc.name, sc.id)
+                put(0x03, struct.pack("<H", sc.id) + text(sc.name) + text(sc.encoding) + text(sc.data))
+            channel_start = base + out.tell()
+            for ch in self.channels:
+                head = struct.pack("<HH", ch.id, ids[ch.schema]) + text(ch.topic) + text(ch.message_encoding)
+                put(0x04, head + struct.pack("<I", len(ch.metadata)) + ch.metadata)
+            chunk_start = base + out.tell()
+            for chunk in self.chunks:
+                put(0x08, chunk.getvalue())
+            index_start = base + out.tell()
+            put(0x0D, struct.pack("<QQ", base, metadata_end - base) + text("rosbag2"))
+            stats_start = base + out.tell()
+            stats = sorted(self.channel_stats.items())
+            put(
+                0x0B,
+                struct.pack(
+                    "<QHIIIIQQI" + "HQ" * len(stats),
+                    sum(self.channel_stats.values()),
+                    len(self.schemas),
+                    len(self.channels),
+                    0,  # attachments
+                    1,  # metadata
+                    len(self.chunks),
+                    self.message_start_time,
+                    self.message_end_time,
+                    len(stats) * 10,
+                    *(v for kv in stats for v in kv),
+                ),
+            )
+            offsets_start = base + out.tell()
+            for op, a, b in (
+                (0x03, schema_start, channel_start),
+                (0x04, channel_start, chunk_start),
+                (0x08, chunk_start, index_start),
+            ):
+                if a != b:
+                    put(0x0E, struct.pack("<BQQ", op, a, b - a))
+            put(0x0E, struct.pack("<BQQ", 0x0D, index_start, stats_start - index_start))
+            put(0x0E, struct.pack("<BQQ", 0x0B, stats_start, offsets_start - stats_start))
+            put(0x02, struct.pack("<QQI", schema_start, offsets_start, 0))
+            out.write(b"\x89MCAP\x30\r\n")
+            self.bio.write(out.getbuffer())
+            self.bio.close()
 
         def write_chunk(self, pieces: list[Any], index: dict[int, tuple[np.ndarray, np.ndarray]]) -> None:
             """Write the message records ``pieces`` (bytes or contiguous uint8 arrays, in time order) as
@@ -381,16 +553,17 @@ def writer_classes():
             # the chunks between the first (schemas, channels, /tf_static) and the last (the end of the run):
             # all of ``per`` samples, written from one buffer whose matrix the slots fill
             full = FullChunk(per, B, cids, cols) if any(0 < j0 and j1 < K for j0, j1 in bounds) else None
-            M, slots = chunk_matrix(topics, cids, cols, B, per, stamps[:K], None if full is None else full.M)
+            M, numbers = chunk_matrix(topics, cids, cols, B, per, stamps[:K], None if full is None else full.M)
+            in_full = None if full is None else full.numbers(numbers)
             storage = self.storage
             for j0, j1 in bounds:
-                for view, vals in slots:  # this chunk's numbers into the one matrix of every record's bytes
-                    view[: j1 - j0] = vals[j0:j1]
-                if full is not None and 0 < j0 and j1 < K:
-                    full.write(storage, stamps[j0:j1])
+                if full is not None and 0 < j0 and j1 < K:  # this chunk's numbers into its one buffer, then out
+                    in_full.fill(full.buf, j0, j1 - j0)
+                    full.write(storage, int(stamps[j0:j1].min()), int(stamps[j0:j1].max()))
                     for cid in cids:
                         self.counts[cid] += per
                     continue
+                numbers.fill(M.reshape(-1), j0, j1 - j0)
                 parts = [first] if j0 == 0 else []
                 at = len(first) if j0 == 0 else 0
                 index: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -454,17 +627,34 @@ def _yaml_scalar(v: Any) -> str:
         return "{}"
     if isinstance(v, list | tuple):
         return "[]"
+    if type(v) is str:
+        return _yaml_str(v)
+    return _yaml_text_scalar(v)
+
+
+def _yaml_text_scalar(v: Any) -> str:
     if _YAML_PLAIN.fullmatch(v) and v.lower() not in _YAML_WORDS:  # a name: plain, as rosbag2 writes it
         return v
     # a JSON string is a YAML double-quoted scalar; the characters YAML wants escaped and JSON leaves, escaped
     return _YAML_UNSAFE.sub(lambda m: f"\\u{ord(m.group()):04x}", json.dumps(str(v), ensure_ascii=False))
 
 
+@functools.lru_cache(maxsize=1024)
+def _yaml_str(v: str) -> str:
+    """A string scalar, memoised (a bag's names, types and hashes recur in every bag of a process)."""
+    return _yaml_text_scalar(v)
+
+
+@functools.lru_cache(maxsize=256)
+def _yaml_key(k: str) -> str:
+    return k if _YAML_KEY.fullmatch(k) else _yaml_scalar(k)
+
+
 def _yaml_lines(obj: Any, ind: int) -> list[str]:
     pad, out = " " * ind, []
     if isinstance(obj, dict):
         for k, v in obj.items():
-            key = k if isinstance(k, str) and _YAML_KEY.fullmatch(k) else _yaml_scalar(k)
+            key = _yaml_key(k) if isinstance(k, str) else _yaml_scalar(k)
             if isinstance(v, dict | list | tuple) and v:
                 out.append(f"{pad}{key}:")
                 out += _yaml_lines(v, ind + 2)
