@@ -25,7 +25,16 @@ import bioform_mj.assess.identify as identify_module
 from bioform_mj.assess.check import check
 from bioform_mj.assess.identify import identify
 from bioform_mj.plants.mujoco.plant import MujocoPlant
-from bioform_mj.robots.contacts import align_swivels, swivel_casters
+from bioform_mj.robots.contacts import (
+    SWIVEL_TILT_DEG,
+    align_swivels,
+    floor_contacts,
+    robot_contacts,
+    rolling_bodies,
+    self_contacts,
+    swivel_casters,
+)
+from bioform_mj.robots.layout import subtree
 from bioform_mj.robots.refs import RobotRef
 
 R, L, R_CASTER, X_CASTER = 0.05, 0.15, 0.02, 0.2
@@ -137,6 +146,68 @@ def test_swivels_are_found_and_turned_to_their_steady_state_for_the_coming_motio
             else:
                 ua = _velocity(p, axle, v, w)
                 assert ua[0] * roll[1] - ua[1] * roll[0] == pytest.approx(0.0, abs=1e-12), (name, v, w)
+
+
+def _rolling_by_scene_kinematics(model: mujoco.MjModel, lay) -> set[int]:
+    """Ground truth for ``rolling_bodies``: the whole scene's ``mj_kinematics`` at qpos0 (the joint's world axis
+    against the base's world vertical), as the code did before it looked at the robot's own bodies only."""
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    up = data.xmat[model.body(lay.base).id].reshape(3, 3)[:, 2]
+    out: set[int] = set()
+    for j in lay.rolling_joints:
+        jid = model.joint(j).id
+        swivel = abs(float(data.xaxis[jid] @ up)) >= math.cos(math.radians(SWIVEL_TILT_DEG))
+        if model.jnt_type[jid] == mujoco.mjtJoint.mjJNT_BALL or not swivel:
+            out |= set(subtree(model, int(model.jnt_bodyid[jid])).tolist())
+    return out
+
+
+def test_a_team_s_rolling_bodies_and_contacts_are_each_robot_s_own(tmp_path):
+    """A team of four swivel-caster robots (turned 90° and 180°, one with its swivels tilted 30° off the
+    vertical, headings 0 to 2.5 rad), the second pushed into the first: ``rolling_bodies`` from the robot's own
+    bodies equals the whole scene's kinematics (the rollers roll; the swivels only where tilted); the one-pass
+    ``robot_contacts`` equals a per-robot scan of every contact (the robots' shared contacts in both lists), and
+    ``floor_contacts``/``self_contacts`` given them equal the ones that scan (docs/findings/performance.md)."""
+    tilted = _robot(90.0)
+    for name in ("front", "back"):
+        b = tilted.body(f"{name}_swivel")
+        tilt = np.array([math.cos(math.radians(15)), math.sin(math.radians(15)), 0.0, 0.0])
+        q = np.zeros(4)
+        mujoco.mju_mulQuat(q, tilt, np.array(b.quat))
+        b.quat = q.tolist()
+    files = []
+    for k, spec in enumerate((_robot(90.0), _robot(180.0), tilted, _robot(45.0, roller=False))):
+        d = tmp_path / f"r{k}"
+        d.mkdir()
+        files.append(_write(d, spec))
+    poses = np.array([[0.0, 0.0, 0.0], [0.0, 1.0, 1.0], [1.0, 0.0, 2.5], [1.0, 1.0, -0.7]])
+    plant = MujocoPlant(files, poses, 0.001, 0.001, None, slots=False)
+    model = plant.model
+    rolls = [rolling_bodies(model, lay) for lay in plant.layouts]
+    assert rolls == [_rolling_by_scene_kinematics(model, lay) for lay in plant.layouts]
+    names = [{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b).split("/")[1] for b in r} for r in rolls]
+    wheels = {"front_wheel", "back_wheel"}
+    assert names == [wheels, wheels, wheels | {"front_swivel", "back_swivel"}, set()]
+    data = mujoco.MjData(model)
+    mujoco.mj_resetData(model, data)
+    root = model.joint("f2/root").qposadr[0]
+    data.qpos[root : root + 2] = [0.1, 0.28]  # robot 2's left tyre into robot 1's
+    mujoco.mj_forward(model, data)
+    found = robot_contacts(model, data, plant.layouts)
+    g = data.contact.geom1[: data.ncon], data.contact.geom2[: data.ncon]
+    scan = []
+    for lay in plant.layouts:
+        mine = set(subtree(model, model.body(lay.base).id).tolist())
+        scan.append([k for k in range(data.ncon) if {model.geom_bodyid[g[0][k]], model.geom_bodyid[g[1][k]]} & mine])
+    assert [list(f) for f in found] == scan
+    shared = set(scan[0]) & set(scan[1])
+    assert shared and all(set(s).isdisjoint(scan[0]) for s in scan[2:])  # robots 1 and 2 touch, no other pair
+    for i, lay in enumerate(plant.layouts):
+        prefix = f"f{i + 1}/"
+        assert floor_contacts(model, data, lay, prefix, found[i]) == floor_contacts(model, data, lay, prefix)
+        assert self_contacts(model, data, lay, prefix, found[i]) == self_contacts(model, data, lay, prefix)
+    assert {c["geom"] for c in floor_contacts(model, data, plant.layouts[2], "f3/", found[2])} >= {"front_tire"}
 
 
 @pytest.mark.parametrize("turn_deg,off", [(90.0, "a"), (180.0, "b")])

@@ -8,6 +8,7 @@ body's chain of parents, every pair of robots)."""
 
 from __future__ import annotations
 
+import threading
 import warnings
 
 import mujoco
@@ -189,3 +190,64 @@ def test_team_checks_see_each_robot_as_alone():
         assert (level_support(team.model, settled, team.layouts[i], w, 0.99) is None) == (
             level_support(alone.model, d1, alone.layouts[0], w, 0.99) is None
         )
+
+
+def test_the_empty_prefix_filter_is_per_thread_and_puts_the_handler_back():
+    """Two scene builds' filters of the empty-prefix warning open in two threads at once (A opens, B opens, A
+    closes, B closes: the order in which swapping the process's handler per block left A's filter installed):
+    MuJoCo's own warning from a real empty-prefix attach is dropped in each thread inside its block, the same text
+    from a thread outside any block and any other text reach the handler installed before, and that handler is
+    installed again at the end."""
+    text = scene._EMPTY_PREFIX
+    seen: list[str] = []
+
+    def mine(msg: str) -> None:
+        seen.append(msg)
+
+    def attach_empty() -> None:  # MuJoCo warns `text` in the calling thread
+        group = mujoco.MjSpec()
+        group.worldbody.add_body(name="b").add_geom(size=[0.1, 0, 0])
+        parent = mujoco.MjSpec()
+        parent.attach(group, prefix="", frame=parent.worldbody.add_frame())
+
+    a_open, b_open, main_done, a_closed = (threading.Event() for _ in range(4))
+    errors: list[BaseException] = []
+
+    def a() -> None:
+        try:
+            with scene._without_warning(text):
+                a_open.set()
+                assert b_open.wait(30) and main_done.wait(30)
+                attach_empty()
+        except BaseException as exc:  # noqa: BLE001 - reported by the main thread
+            errors.append(exc)
+        finally:
+            a_closed.set()
+
+    def b() -> None:
+        try:
+            assert a_open.wait(30)
+            with scene._without_warning(text):
+                b_open.set()
+                assert a_closed.wait(30)
+                attach_empty()
+                mujoco.get_mju_user_warning()("another warning")
+        except BaseException as exc:  # noqa: BLE001
+            errors.append(exc)
+
+    before = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(mine)
+    try:
+        threads = [threading.Thread(target=a), threading.Thread(target=b)]
+        for t in threads:
+            t.start()
+        assert b_open.wait(30)
+        attach_empty()  # both blocks open, none in this thread: passed on
+        main_done.set()
+        for t in threads:
+            t.join(30)
+        assert not errors, errors
+        assert seen == [text, "another warning"]
+        assert mujoco.get_mju_user_warning() is mine
+    finally:
+        mujoco.set_mju_user_warning(before)

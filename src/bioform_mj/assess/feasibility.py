@@ -50,7 +50,7 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
 
     from bioform_mj.assess.causes import SELF_CONTACT_LOAD
     from bioform_mj.core.errors import InputError
-    from bioform_mj.robots.contacts import self_contacts
+    from bioform_mj.robots.contacts import robot_contacts, self_contacts
 
     t = np.linspace(0.0, scenario.sim.duration, max(200, int(scenario.sim.duration * 200)) + 1)
     _, vel, _ = scenario.build_leader().states(t)
@@ -72,9 +72,10 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
         # design §14.2: a run told to skip the robot check is never refused by it; what it would refuse is said
         out += [f"robot check skipped (the run goes ahead); it would refuse {r}" for r in refusals]
     pressed: dict[str, list[int]] = {}
+    contacts = robot_contacts(plant.model, settled, plant.layouts)  # each robot's, in one pass over the team's
     for i, p in enumerate(plant.params):  # braking casters: below, with contacts.braking_casters
         weight = p.mass * G
-        mine = self_contacts(plant.model, settled, plant.layouts[i], f"f{i + 1}/")
+        mine = self_contacts(plant.model, settled, plant.layouts[i], f"f{i + 1}/", contacts[i])
         pressing = [c for c in mine if c["force_n"] > SELF_CONTACT_LOAD * weight]
         if pressing:
             note = (
@@ -133,7 +134,7 @@ def feasibility(scenario: Any, plant: Any) -> list[str]:
             )
         motor = float(min(p.tau_max))
         # a caster that slides brakes the robot (design §13)
-        floor = floor_contacts(plant.model, settled, plant.layouts[i], f"f{i + 1}/")
+        floor = floor_contacts(plant.model, settled, plant.layouts[i], f"f{i + 1}/", contacts[i])
         wheel_force = float(loads[i].sum()) if i in level else sum(c["load_n"] for c in floor if c["role"] == "wheel")
         drive_force = min(2 * motor * p.floor_fraction[0] / p.wheel_radius, mu * wheel_force)
         for _, _, msg in braking_casters(floor, drive_force):

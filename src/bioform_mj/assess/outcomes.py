@@ -310,16 +310,22 @@ def outcome_list(
     return out
 
 
-def braking_casters(plant: Any, i: int) -> list[str]:
+def braking_casters(plant: Any, i: int, found: dict[str, Any] | None = None) -> list[str]:
     """Follower ``i``'s casters that brake on the floor now, labelled as ``robot check`` labels them
     (``contacts.floor_contacts``: a geom's name, or ``BODY#K``), by ``robot check``'s test
-    (``contacts.brakes``: loaded, cannot roll, with friction; design §14.2)."""
+    (``contacts.brakes``: loaded, cannot roll, with friction; design §14.2). ``found``: a dict kept across the
+    followers of one state, where every robot's contacts are sorted once (``contacts.robot_contacts``)."""
     if not isinstance(plant, RobotModels):
         return []
     try:
-        from bioform_mj.robots.contacts import brakes, floor_contacts
+        from bioform_mj.robots.contacts import brakes, floor_contacts, robot_contacts
 
-        floor = floor_contacts(plant.model, plant.data, plant.layouts[i], f"f{i + 1}/")
+        mine = None
+        if found is not None:
+            if "contacts" not in found:
+                found["contacts"] = robot_contacts(plant.model, plant.data, plant.layouts)
+            mine = found["contacts"][i]
+        floor = floor_contacts(plant.model, plant.data, plant.layouts[i], f"f{i + 1}/", mine)
         return [c["geom"] for c in floor if brakes(c)]
     except Exception:  # noqa: BLE001 - a cause is a hint; never fail a run's summary for it
         return []
@@ -354,6 +360,7 @@ def follower_outcomes(
     c_true = plant.c_true() if plant is not None else np.full((n, 2), np.nan)
     params = plant.params if isinstance(plant, RobotModels) else None
     lost_m = lost_threshold_m(sc)
+    found: dict[str, Any] = {}  # the robots' contacts, sorted once if a cause is asked for (braking_casters)
     for i in range(n):
         slipping = slip is not None and slip[i] >= 0
         learning = p is not None and p.learning
@@ -375,7 +382,7 @@ def follower_outcomes(
                     + unmodelled_causes(
                         params[i] if params is not None else None,
                         s,
-                        braking_casters(plant, i),
+                        braking_casters(plant, i, found),
                         sc.learner.drag_max,
                         resistances[i] if resistances is not None else (),
                     )

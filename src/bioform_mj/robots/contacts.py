@@ -19,6 +19,7 @@ Imports nothing of the project above :mod:`bioform_mj.robots.layout`.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -43,6 +44,7 @@ __all__ = [
     "Swivel",
     "swivel_casters",
     "rolling_bodies",
+    "robot_contacts",
     "align_swivels",
 ]
 
@@ -93,23 +95,53 @@ def rolling_bodies(model: mujoco.MjModel, lay: RobotLayout) -> set[int]:
     joint or a hinge that is not a swivel (its axis more than :data:`SWIVEL_TILT_DEG` from the base's
     vertical at ``qpos0``). A geom on a swivel alone turns about the vertical but slides on the floor
     (design §14.1): it brakes like a fixed caster."""
-    if not lay.rolling_joints:  # nothing to roll: no kinematics of the whole scene (once per robot: n² in a team)
+    if not lay.rolling_joints:  # nothing to roll
         return set()
-    data = mujoco.MjData(model)
-    mujoco.mj_kinematics(model, data)
-    up = data.xmat[model.body(lay.base).id].reshape(3, 3)[:, 2]
+    base = model.body(lay.base).id
     ball, hinge = int(mujoco.mjtJoint.mjJNT_BALL), int(mujoco.mjtJoint.mjJNT_HINGE)
+    cos_tilt = math.cos(math.radians(SWIVEL_TILT_DEG))
     out: set[int] = set()
     for j in lay.rolling_joints:
         jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j)
         if jid < 0:
             continue
         kind = int(model.jnt_type[jid])
-        if kind == ball or (
-            kind == hinge and abs(float(data.xaxis[jid] @ up)) < math.cos(math.radians(SWIVEL_TILT_DEG))
-        ):
+        if kind == ball or (kind == hinge and abs(_axis_up(model, base, jid)) < cos_tilt):
             out |= set(subtree(model, int(model.jnt_bodyid[jid])).tolist())
     return out
+
+
+def _axis_up(model: mujoco.MjModel, base: int, jid: int) -> float:
+    """The cosine between joint ``jid``'s axis and body ``base``'s vertical at ``qpos0``, m/m.
+
+    From the robot's own bodies between ``base`` and the joint (``body_quat``, and the joints before ``jid`` at
+    ``qpos0``: hinges and slides turn nothing there, a ball joint by its ``qpos0`` quaternion), as
+    ``mj_kinematics`` composes them; the whole scene's kinematics per robot was n² in a team
+    (docs/findings/performance.md). A joint outside ``base``'s tree: the scene's kinematics."""
+    chain, b = [], int(model.jnt_bodyid[jid])
+    while b not in (base, 0):
+        chain.append(b)
+        b = int(model.body_parentid[b])
+    if b != base:  # not below the base: the world's frame and the base's from the kinematics of the scene
+        data = mujoco.MjData(model)
+        mujoco.mj_kinematics(model, data)
+        return float(data.xaxis[jid] @ data.xmat[base].reshape(3, 3)[:, 2])
+    ball = int(mujoco.mjtJoint.mjJNT_BALL)
+    q, tmp = np.array([1.0, 0.0, 0.0, 0.0]), np.zeros(4)
+    for b in reversed(chain):
+        mujoco.mju_mulQuat(tmp, q, model.body_quat[b])
+        q[:] = tmp
+        for k in range(int(model.body_jntadr[b]), int(model.body_jntadr[b] + model.body_jntnum[b])):
+            if k == jid:
+                break
+            if int(model.jnt_type[k]) == ball:
+                adr = int(model.jnt_qposadr[k])
+                mujoco.mju_mulQuat(tmp, q, model.qpos0[adr : adr + 4])
+                q[:] = tmp
+        mujoco.mju_normalize4(q)
+    axis = np.zeros(3)
+    mujoco.mju_rotVecQuat(axis, model.jnt_axis[jid], q)
+    return float(axis[2])
 
 
 def _contact_bodies(model: mujoco.MjModel, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
@@ -120,6 +152,35 @@ def _contact_bodies(model: mujoco.MjModel, data: mujoco.MjData) -> tuple[np.ndar
     return model.geom_bodyid[g1], model.geom_bodyid[g2]
 
 
+def robot_contacts(model: mujoco.MjModel, data: mujoco.MjData, layouts: Sequence[RobotLayout]) -> list[np.ndarray]:
+    """Per robot (``layouts[i]``: its base and every body below it) the indices of its contacts in ``data.contact``
+    now, ascending: a contact with a geom on one of its bodies (one between two robots is in both lists). One pass
+    over the contacts for a whole team, for :func:`floor_contacts` and :func:`self_contacts`' ``contacts`` (each
+    looking through every contact for its own robot was n² in a team: docs/findings/performance.md)."""
+    owner = np.full(model.nbody, -1, dtype=np.int64)
+    for i, lay in enumerate(layouts):
+        owner[subtree(model, model.body(lay.base).id)] = i
+    b1s, b2s = _contact_bodies(model, data)
+    o1, o2 = owner[b1s], owner[b2s]
+    k = np.arange(len(b1s))
+    other = o2 != o1
+    ks, who = np.concatenate([k, k[other]]), np.concatenate([o1, o2[other]])
+    keep = who >= 0
+    ks, who = ks[keep], who[keep]
+    order = np.lexsort((ks, who))  # by robot, then contact
+    ks, who = ks[order], who[order]
+    cut = np.searchsorted(who, np.arange(len(layouts) + 1))
+    return [ks[cut[i] : cut[i + 1]] for i in range(len(layouts))]
+
+
+def _mine(b1s: np.ndarray, b2s: np.ndarray, bodies: list[int], contacts: np.ndarray | None) -> np.ndarray:
+    """Indices of the contacts with a body of ``bodies`` (ascending): ``contacts`` (:func:`robot_contacts`'s)
+    when given, else found among all."""
+    if contacts is not None:
+        return np.asarray(contacts, dtype=np.int64)
+    return np.flatnonzero(np.isin(b1s, bodies) | np.isin(b2s, bodies))
+
+
 def is_caster(load_n: float, weight: float, named: bool = False) -> bool:
     """Whether a non-wheel geom on the floor is a caster: the mapping ``named`` it, or it carries more than
     :data:`CASTER_LOAD` of the robot's ``weight`` (``load_n``, N: at rest, or a drive test's mean). The one
@@ -127,7 +188,9 @@ def is_caster(load_n: float, weight: float, named: bool = False) -> bool:
     return named or load_n > CASTER_LOAD * weight
 
 
-def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout, prefix: str = "") -> list[dict]:
+def floor_contacts(
+    model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout, prefix: str = "", contacts: np.ndarray | None = None
+) -> list[dict]:
     """Every geom of the robot (layout ``lay``, names with ``prefix``) that touches the floor now.
 
     One dict per geom: ``body``, ``geom`` (names without ``prefix``), ``role``, ``load_n`` (sum of
@@ -138,7 +201,8 @@ def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout,
     rolls: :func:`rolling_bodies`; a swivel alone does not), ``mass_share`` (its body's share of the robot's mass:
     a link welded to the base that carries most of it is the chassis) and ``lever_m`` (m: the horizontal distance of its
     contacts' load-weighted mean point from the axle midpoint, the lever of its drag about the turning centre).
-    Call it on a robot at rest (settled) for the load at rest.
+    Call it on a robot at rest (settled) for the load at rest. ``contacts``: the robot's contacts
+    (:func:`robot_contacts`, for a team), else found here.
     """
     base = model.body(lay.base).id
     bodies = set(subtree(model, base).tolist())
@@ -151,8 +215,8 @@ def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout,
     per: dict[int, dict[str, Any]] = {}
     f6 = np.zeros(6)
     b1s, b2s = _contact_bodies(model, data)
-    mine = np.isin(b1s, list(bodies)) | np.isin(b2s, list(bodies))
-    for k in np.flatnonzero(mine & ((b1s == 0) | (b2s == 0))):
+    mine = _mine(b1s, b2s, list(bodies), contacts)
+    for k in mine[(b1s[mine] == 0) | (b2s[mine] == 0)]:
         con = data.contact[int(k)]
         g = int(con.geom2) if b1s[k] == 0 else int(con.geom1)
         mujoco.mj_contactForce(model, data, int(k), f6)
@@ -198,15 +262,19 @@ def floor_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout,
     return sorted(out, key=lambda r: (order[r["role"]], r["body"], r["geom"]))
 
 
-def self_contacts(model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout, prefix: str = "") -> list[dict]:
+def self_contacts(
+    model: mujoco.MjModel, data: mujoco.MjData, lay: RobotLayout, prefix: str = "", contacts: np.ndarray | None = None
+) -> list[dict]:
     """Pairs of the robot's own bodies in contact now: ``body1``, ``body2``, ``geoms`` (pairs of geom
     names), ``depth_m`` (deepest penetration, m, ≥ 0), ``force_n`` (sum of normal forces, N),
-    ``points``. Names without ``prefix``."""
+    ``points``. Names without ``prefix``. ``contacts``: the robot's contacts (:func:`robot_contacts`), else found
+    here."""
     bodies = set(subtree(model, model.body(lay.base).id).tolist())
     per: dict[tuple[int, int], dict[str, Any]] = {}
     f6 = np.zeros(6)
     b1s, b2s = _contact_bodies(model, data)
-    for k in np.flatnonzero(np.isin(b1s, list(bodies)) & np.isin(b2s, list(bodies))):
+    mine = _mine(b1s, b2s, list(bodies), contacts)
+    for k in mine[np.isin(b1s[mine], list(bodies)) & np.isin(b2s[mine], list(bodies))]:
         k = int(k)
         con = data.contact[k]
         g1, g2 = int(con.geom1), int(con.geom2)

@@ -21,6 +21,7 @@ job (:func:`bioform_mj.robots.prepare.prepare_robot`). This module imports nothi
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -160,14 +161,22 @@ class RobotRef:
 _KEYS = tuple(f.name for f in fields(RobotRef))
 
 
+@functools.cache
 def models_dir() -> Path:
-    """Directory of the MJCF files installed with the package."""
+    """Directory of the MJCF files installed with the package (looked up once per process: every robot of a team
+    resolves its entry, 3 × 1024 times at n = 1024, docs/findings/performance.md)."""
     return Path(str(resources.files("bioform_mj.robots") / "models"))
 
 
+@functools.cache
+def _shipped() -> tuple[str, ...]:
+    return tuple(sorted(p.name[: -len("_robot.xml")] for p in models_dir().glob("*_robot.xml")))
+
+
 def robot_names() -> list[str]:
-    """Names of the shipped robots: ``paper`` → ``models/paper_robot.xml``, ``lab`` → ``lab_robot.xml`` …"""
-    return sorted(p.name[: -len("_robot.xml")] for p in models_dir().glob("*_robot.xml"))
+    """Names of the shipped robots: ``paper`` → ``models/paper_robot.xml``, ``lab`` → ``lab_robot.xml`` … (the
+    package's folder listed once per process)."""
+    return list(_shipped())
 
 
 def as_ref(entry: Any, key: str = "plant.robots") -> RobotRef:

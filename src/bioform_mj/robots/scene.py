@@ -18,9 +18,11 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import threading
 import warnings
 from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -509,25 +511,62 @@ def _attach_one(
     spec.attach(robot, prefix=follower_prefix(i), frame=frame)
 
 
-@contextlib.contextmanager
-def _without_warning(text: str) -> Iterator[None]:
-    """MuJoCo's warning ``text`` dropped while the block runs; any other goes where it went (the handler installed,
-    else a Python ``RuntimeWarning`` ``"MuJoCo: …"`` as :func:`bioform_mj.outputs.mjlog.api_warnings` says them)."""
-    prev = mujoco.get_mju_user_warning()
+class _Dropped(threading.local):
+    """The MuJoCo warnings this thread drops now (:func:`_without_warning`'s ``text``s)."""
 
-    def handler(msg: str) -> None:
-        if msg.strip() == text:
+    def __init__(self) -> None:
+        self.texts: list[str] = []
+
+
+_DROPPED = _Dropped()
+_FILTER_LOCK = threading.Lock()
+#: the filter's installation, shared by every thread: how many blocks are open, and the handler it replaced
+_FILTER: dict[str, Any] = {"open": 0, "prev": None}
+
+
+def _filtered(msg: str) -> None:
+    """MuJoCo's warning handler while a :func:`_without_warning` block is open (in any thread): the text of a block
+    open in the calling thread (MuJoCo calls its handler in the thread that warns) is dropped, any other goes where it
+    went before (the handler replaced, else a Python ``RuntimeWarning`` ``"MuJoCo: …"`` as
+    :func:`bioform_mj.outputs.mjlog.api_warnings` says them). Never raises: it is called from C."""
+    try:
+        if msg.strip() in _DROPPED.texts:
             return
+        prev = _FILTER["prev"]
         if prev is not None:
             prev(msg)
         else:
             warnings.warn(f"MuJoCo: {msg}", RuntimeWarning, stacklevel=2)
+    except Exception:  # noqa: BLE001
+        pass
 
-    mujoco.set_mju_user_warning(handler)
+
+@contextlib.contextmanager
+def _without_warning(text: str) -> Iterator[None]:
+    """MuJoCo's warning ``text`` dropped while the block runs, in this thread only; any other warning, and this one
+    from another thread, goes where it went (:func:`_filtered`).
+
+    MuJoCo has one warning handler per process: the first block to open installs :func:`_filtered` and the last
+    to close puts back the handler it found, under a lock, so that blocks overlapping in several threads (two
+    scenes built at once) leave the handler as it was (swapping it per block left a closed block's filter
+    installed when two overlapped). A handler someone installs while a block is open is theirs: it is kept, and it
+    sees ``text`` in that time."""
+    _DROPPED.texts.append(text)
+    with _FILTER_LOCK:
+        if _FILTER["open"] == 0:
+            _FILTER["prev"] = mujoco.get_mju_user_warning()
+            mujoco.set_mju_user_warning(_filtered)
+        _FILTER["open"] += 1
     try:
         yield
     finally:
-        mujoco.set_mju_user_warning(prev)
+        _DROPPED.texts.pop()
+        with _FILTER_LOCK:
+            _FILTER["open"] -= 1
+            if _FILTER["open"] == 0:
+                if mujoco.get_mju_user_warning() is _filtered:
+                    mujoco.set_mju_user_warning(_FILTER["prev"])
+                _FILTER["prev"] = None
 
 
 #: names of the sensors :func:`add_sensors` puts on a robot (the follower prefix is added on attach)
