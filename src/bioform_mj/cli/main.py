@@ -664,7 +664,7 @@ def _sweep(args: argparse.Namespace) -> int:
     elif args.ray_address is not None:
         raise InputError("--ray-address applies to --backend ray only")
     out = prepare_out(args.out, "sweep")
-    from bioform_mj.jobs.sweep import check_sweep_dir
+    from bioform_mj.outputs.rundir import check_sweep_dir
 
     check_sweep_dir(out)
     rosbag = (args.ros_distro or "jazzy") if args.rosbag else None
