@@ -182,3 +182,28 @@ def test_robot_check_refuses_a_robot_that_steps_too_slowly(tmp_path):
     errors = [e for e in p.stderr.splitlines() if e.startswith("error:")]
     assert p.returncode == 2 and len(errors) == 1, p.stderr
     assert "robot check: one physics step takes" in errors[0] and "contacts" in errors[0], errors[0]
+
+
+def test_sweep_forks_no_more_workers_than_runs(monkeypatch):
+    """``bioform sweep --workers 100000`` of 2 runs forked workers until it had 100000 (each idle, holding the
+    sweep; a fork bomb, killed at 120 s): now as many as there are runs. ``os.fork`` counted, the rows exact."""
+    import bioform_mj.jobs.runner as runner
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the forked runner is Linux-only")
+    monkeypatch.setattr(runner, "load_kernels", lambda: None)  # the rows need no kernels
+    forks = []
+    real_fork = os.fork
+
+    def counting_fork() -> int:
+        pid = real_fork()
+        if pid:
+            forks.append(pid)
+        return pid
+
+    monkeypatch.setattr(runner.os, "fork", counting_fork)
+    rows: list[dict] = []
+    with runner.Signals() as sig:
+        runner.run_local([3, 4], 50, sig, rows.append, lambda x: {"x": x * x}, lambda x, why: {"x": None})
+    assert sorted(r["x"] for r in rows) == [9, 16]
+    assert len(forks) == 2, len(forks)
