@@ -81,6 +81,13 @@ def _case(name: str, t: Path) -> tuple[list[str], str]:
         tail += '<child link="x"/></joint>'
         (t / "r.urdf").write_text(diff_drive(tail=tail))
         return ["robot", "check", str(t / "r.urdf")], "<joint name='base_joint'> is defined twice"
+    if name == "mesh-refpos-nan":  # refused, but as "scale [1.0, 1.0, 1.0] (finite numbers)"
+        (t / "m.obj").write_text("v 0 0 0\nv .01 0 0\nv 0 .01 0\nv 0 0 .01\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+        paper = (models_dir() / "paper_robot.xml").read_text()
+        asset = '<asset><mesh name="m" file="m.obj" refpos="nan 0 0"/></asset><worldbody>'
+        geom = '<geom type="mesh" mesh="m" class="visual"/><site name="imu"'
+        (t / "r.xml").write_text(paper.replace("<worldbody>", asset, 1).replace('<site name="imu"', geom, 1))
+        return ["robot", "check", str(t / "r.xml")], "mesh 'm': vertices not finite once placed"
     raise AssertionError(name)
 
 
@@ -102,6 +109,7 @@ CASES = [
     "sweep-out-a-folder-of-files",
     "urdf-package-empty-name",
     "urdf-joint-name-twice",
+    "mesh-refpos-nan",
 ]
 
 

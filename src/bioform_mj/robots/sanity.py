@@ -339,8 +339,14 @@ def model_value_problem(model: Any) -> str:
             return f"geom '{name(mujoco.mjtObj.mjOBJ_GEOM, g)}': friction {fr.tolist()} (finite numbers >= 0)"
     for m in range(model.nmesh):
         sc = model.mesh_scale[m] if hasattr(model, "mesh_scale") else np.ones(3)
-        if not np.all(np.isfinite(sc)) or not np.all(np.isfinite(model.mesh_vert)):
+        if not np.all(np.isfinite(sc)):
             return f"mesh '{name(mujoco.mjtObj.mjOBJ_MESH, m)}': scale {np.asarray(sc).tolist()} (finite numbers)"
+        a, n = model.mesh_vertadr[m], model.mesh_vertnum[m]
+        if not np.all(np.isfinite(model.mesh_vert[a : a + n])):  # a NaN refpos/refquat: the scale was blamed
+            return (
+                f"mesh '{name(mujoco.mjtObj.mjOBJ_MESH, m)}': vertices not finite once placed (its file, refpos, "
+                "refquat and scale must be finite numbers)"
+            )
     return ""
 
 
