@@ -91,6 +91,8 @@ def _case(name: str, t: Path) -> tuple[list[str], str]:
     if name == "urdf-effort-1e308":  # taken: "full torque accelerates the robot at inf m/s²" (exit 0)
         (t / "r.urdf").write_text(diff_drive().replace('effort="2"', 'effort="1e308"'))
         return ["robot", "check", str(t / "r.urdf")], "wheel torque limit is 1e+308 N·m, above the 1e+06 N·m"
+    if name == "out-empty":  # Path("") is '.': a sweep in an empty current folder swept into it
+        return ["sweep", str(scen), "--seeds", "2", "--out", ""], "argument --out: an empty path"
     raise AssertionError(name)
 
 
@@ -114,6 +116,7 @@ CASES = [
     "urdf-joint-name-twice",
     "mesh-refpos-nan",
     "urdf-effort-1e308",
+    "out-empty",
 ]
 
 
