@@ -229,3 +229,25 @@ def test_sweep_forks_no_more_workers_than_runs(monkeypatch):
         runner.run_local([3, 4], 50, sig, rows.append, lambda x: {"x": x * x}, lambda x, why: {"x": None})
     assert sorted(r["x"] for r in rows) == [9, 16]
     assert len(forks) == 2, len(forks)
+
+
+def test_a_signal_in_the_teardown_keeps_the_commands_exit_code(tmp_path):
+    """A SIGTERM after the command is done (here from an ``atexit`` hook, in the interpreter's teardown) killed
+    a finished run or sweep (exit 143 or -15, no line; 2 of 15 interrupts): now the exit code stays 0."""
+    code = (
+        "import atexit, os, runpy, signal, sys\n"
+        "atexit.register(lambda: os.kill(os.getpid(), signal.SIGTERM))\n"
+        "sys.argv = ['bioform', 'presets']\n"
+        "runpy.run_module('bioform_mj.cli', run_name='__main__')\n"
+    )
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    p = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": src},
+    )
+    assert p.returncode == 0, (p.returncode, p.stderr)
+    assert "paper" in p.stdout

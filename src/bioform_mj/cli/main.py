@@ -327,6 +327,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             os.environ[SKIP_ENV] = skip_before
 
 
+def entry() -> None:
+    """``bioform``: :func:`main`, then exit deaf to SIGINT/SIGTERM (a signal in the interpreter's teardown killed a
+    finished run or sweep: exit -15, no line; issue 28)."""
+    try:
+        code = main()
+    finally:  # --help ends in argparse's SystemExit
+        _ignore_signals()
+    raise SystemExit(code)
+
+
 def _dispatch(args: argparse.Namespace) -> int:
     from bioform_mj.robots.xacro_sandbox import grant_from_args
 
