@@ -179,11 +179,13 @@ def _at_rest(entry: Any, said: _Said) -> _AtRest:
     import mujoco
 
     from bioform_mj.assess.causes import WHEEL_LOAD_MIN, check_radius
+    from bioform_mj.assess.identify import ID_DURATION, ID_LEVELS
     from bioform_mj.plants.mujoco.plant import MujocoPlant
     from bioform_mj.robots.contacts import self_contacts, settle, still_bodies
     from bioform_mj.robots.level_support import level_support
     from bioform_mj.robots.overlaps import self_contacts_at_rest
     from bioform_mj.robots.params import robot_parameters
+    from bioform_mj.robots.sanity import StepPace
 
     plant = MujocoPlant([entry], np.zeros((1, 3)), 0.001, 0.001, None, slots=False)
     check_radius(plant)  # exit 2 before any work: a radius nothing can be measured with
@@ -195,7 +197,14 @@ def _at_rest(entry: Any, said: _Said) -> _AtRest:
     p_file = robot_parameters(model, "f1/", scratch)
     tracker = _Tracker(plant, scratch, model.body(lay.base).id, still_bodies(model, lay))
     mu = plant._wheel_friction(0)
-    settled, floor, moving_at_rest = settle(plant, lay, tracker)  # 0.2 s, up to 1 s while it moves
+    pace = StepPace(  # the check's steps at 1 ms: settle (<= 1 s), the 2 s drive, the identification's tests
+        1000 + 2000 + (0.2 + 2 * len(ID_LEVELS) * (0.2 + ID_DURATION)) / 0.001,
+        f"{getattr(entry, 'model', entry)}: robot check",
+        "a robot whose geoms touch each other in many pairs steps slowly: exclude the pairs "
+        "(<contact><exclude>) or give fewer collision geoms",
+        plant.data,
+    )
+    settled, floor, moving_at_rest = settle(plant, lay, tracker, pace=pace)  # 0.2 s, up to 1 s while it moves
     loads = plant.wheel_loads()[0]
     level = level_support(model, plant.data, lay, p.mass * G, WHEEL_LOAD_MIN)  # design §14: a level stance
     if level is not None:

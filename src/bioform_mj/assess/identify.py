@@ -195,19 +195,20 @@ def _bench(model_file, timestep: float | None, duration: float, settle: float, p
 def _at_rest(plant: Any, model_file, settle: float, duration: float) -> _Rest:
     """Settle the robot ``settle`` s on the floor and read what touches it, with what load (design §14:
     structural and braking-geom causes); refuses a step that would take days (``duration`` s per test)."""
-    from bioform_mj.robots.sanity import check_step_budget  # a <option timestep="1e-9"/> would step for days
+    from bioform_mj.robots.sanity import StepPace, check_step_budget  # <option timestep="1e-9"/>: days
 
     params, lay = plant.params[0], plant.layouts[0]
     model, data = plant.model, plant.data
     dt = float(model.opt.timestep)
+    what = f"{getattr(model_file, 'model', model_file)}: identification"
+    seconds = settle + 2 * len(ID_LEVELS) * (settle + duration)
     check_step_budget(
-        settle + 2 * len(ID_LEVELS) * (settle + duration),
-        dt,
-        f"{getattr(model_file, 'model', model_file)}: identification",
-        "give the robot file an <option timestep> of 1e-4 s or more (MuJoCo's default is 0.002 s)",
+        seconds, dt, what, "give the robot file an <option timestep> of 1e-4 s or more (MuJoCo's default is 0.002 s)"
     )
+    pace = StepPace(seconds / dt, what, "a robot whose geoms touch each other in many pairs steps slowly", data)
     for k in range(max(1, round(settle / dt))):
         plant.step(np.zeros((1, 2)), k * dt)
+        pace(k + 1)
     weight = params.mass * 9.81
     loads = plant.wheel_loads()[0]
     contacts = on_floor(plant)

@@ -1,5 +1,5 @@
 """``python -m bioform_mj.cli``: the ``bioform`` command."""
 
-from bioform_mj.cli.main import main
+from bioform_mj.cli.main import entry
 
-raise SystemExit(main())
+entry()

@@ -19,7 +19,7 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
-from bioform_mj.cli.outdir import claim, default_name, out_path, prepare_out
+from bioform_mj.cli.outdir import claim, default_name, out_path, path_arg, prepare_out
 from bioform_mj.cli.proc import (
     _catch_signals,
     _guard_streams,
@@ -120,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--out",
-        type=Path,
+        type=path_arg,
         help="output directory (default: runs/<scenario>-<plant>-<method>, with -<hash of the configuration> "
         "when --set/--duration/--seed/--package-path change it); one run per folder",
     )
@@ -164,13 +164,13 @@ def build_parser() -> argparse.ArgumentParser:
         default="all",
         help="comma-separated methods (the paper's or registered controllers'), or 'all': the paper's four (default)",
     )
-    t1.add_argument("--out", type=Path, help="output directory (default: runs/table1-<plant>[-<hash>], as run)")
+    t1.add_argument("--out", type=path_arg, help="output directory (default: runs/table1-<plant>[-<hash>], as run)")
     t1.add_argument("--overwrite", action="store_true", help="replace the table already in --out (its files only)")
     t1.add_argument("--figures", action="store_true", help="write figures/*.png comparing the methods")
 
     ident = sub.add_parser("identify", help="system identification of a robot MJCF: formula vs measured a, b")
     ident.add_argument("model", help="shipped robot name or path to an MJCF or URDF file")
-    ident.add_argument("--out", type=Path, help="write the result as JSON to this file")
+    ident.add_argument("--out", type=path_arg, help="write the result as JSON to this file")
     from bioform_mj.cli.robot import add_parser as _robot_parser
     from bioform_mj.cli.robot import mapping_args
 
@@ -215,7 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sw.add_argument("--workers", type=int, help="parallel workers (default: CPU count)")
     sw.add_argument("--ray-address", help="Ray cluster address (default: start a local Ray)")
-    sw.add_argument("--out", type=Path, required=True, help="sweep directory (rerunning resumes it)")
+    sw.add_argument("--out", type=path_arg, required=True, help="sweep directory (rerunning resumes it)")
     sw.add_argument("--rosbag", action="store_true", help="also write each run as a ROS 2 bag, DIR/bags/<key>/")
     sw.add_argument("--ros-distro", choices=("humble", "iron", "jazzy", "kilted"), help="the bags' (default jazzy)")
 
@@ -234,7 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     cal.add_argument(
         "--out",
-        type=Path,
+        type=path_arg,
         required=True,
         help="writes calibration.json, calibration.md and evaluations.jsonl here; one calibration per folder, "
         "rerunning the same command resumes an unfinished one",
@@ -255,7 +255,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--reps", type=int, default=3, help="alternated bare/loop pairs; the median pair ratio counts (default 3)"
     )
     bn.add_argument("--numpy", action="store_true", help="also time the numpy reference stack")
-    bn.add_argument("--json", type=Path, default=Path("runs/bench.json"), help="output JSON (default runs/bench.json)")
+    bn.add_argument(
+        "--json", type=path_arg, default=Path("runs/bench.json"), help="output JSON (default runs/bench.json)"
+    )
     _backend_args(
         bn,
         ("cpu", "warp"),
@@ -323,6 +325,16 @@ def main(argv: Sequence[str] | None = None) -> int:
             os.environ.pop(SKIP_ENV, None)
         else:
             os.environ[SKIP_ENV] = skip_before
+
+
+def entry() -> None:
+    """``bioform``: :func:`main`, then exit deaf to SIGINT/SIGTERM (a signal in the interpreter's teardown killed a
+    finished run or sweep: exit -15, no line; issue 28)."""
+    try:
+        code = main()
+    finally:  # --help ends in argparse's SystemExit
+        _ignore_signals()
+    raise SystemExit(code)
 
 
 def _dispatch(args: argparse.Namespace) -> int:
@@ -668,7 +680,7 @@ def _sweep(args: argparse.Namespace) -> int:
     elif args.ray_address is not None:
         raise InputError("--ray-address applies to --backend ray only")
     out = prepare_out(args.out, "sweep")
-    from bioform_mj.jobs.sweep import check_sweep_dir
+    from bioform_mj.outputs.rundir import check_sweep_dir
 
     check_sweep_dir(out)
     rosbag = (args.ros_distro or "jazzy") if args.rosbag else None

@@ -17,11 +17,19 @@ from typing import Any
 
 from bioform_mj.core.errors import InputError
 
-__all__ = ["HASH_DIGITS", "default_name", "out_path", "prepare_out", "claim"]
+__all__ = ["HASH_DIGITS", "default_name", "out_path", "prepare_out", "claim", "path_arg"]
 
 #: hex digits of the configuration hash in a default folder's name (32 bits: two configurations of one
 #: preset share a name with probability ~2e-10)
 HASH_DIGITS = 8
+
+
+def path_arg(text: str) -> Path:
+    """``type=`` of the path options (``--out``, ``--json``): ``Path(text)``, an empty one refused (``Path("")`` is
+    the current folder: ``--out ""`` wrote, or was refused, as '.')."""
+    if not text:
+        raise argparse.ArgumentTypeError("an empty path (give a folder or file name)")
+    return Path(text)
 
 
 def changes_configuration(args: argparse.Namespace) -> bool:

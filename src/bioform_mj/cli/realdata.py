@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from bioform_mj.cli.outdir import path_arg
 from bioform_mj.core.errors import InputError
 
 __all__ = ["add_parsers", "main"]
@@ -72,7 +73,7 @@ def add_parsers(rsub: Any) -> None:
         "shipped robot name or path to an MJCF or URDF file",
         recording=True,
     )
-    fit.add_argument("--out", required=True, type=Path, help="output directory")
+    fit.add_argument("--out", required=True, type=path_arg, help="output directory")
     fit.add_argument(
         "--fit",
         default=None,
@@ -100,7 +101,7 @@ def add_parsers(rsub: Any) -> None:
         recording=True,
     )
     rep.add_argument("--calibrated", help="a calibrated robot file (robot fit's) to replay beside the published one")
-    rep.add_argument("--out", type=Path, help="write replay.json and replay.png into this directory")
+    rep.add_argument("--out", type=path_arg, help="write replay.json and replay.png into this directory")
     rep.set_defaults(realdata_main=_replay_main)
 
     prog = _robot_parser(

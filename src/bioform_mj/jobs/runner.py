@@ -229,8 +229,9 @@ def _run_forked(
 
     try:
         while sig.signum is None and (queue or any(p.current is not None for p in procs.values())):
-            while queue and len(procs) < workers and sig.signum is None:
-                start()
+            busy = sum(p.current is not None for p in procs.values())
+            while queue and len(procs) < min(workers, len(queue) + busy) and sig.signum is None:
+                start()  # never more workers than runs to do (--workers 100000 forked 100000 for 2 runs)
             for p in list(procs.values()):
                 if p.current is None and p.task_w >= 0:
                     assign(p)

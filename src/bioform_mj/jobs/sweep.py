@@ -479,7 +479,7 @@ def sweep(
 
         require_warp()
         device = resolve_device(device)
-    from bioform_mj.outputs.rundir import folder_lock
+    from bioform_mj.outputs.rundir import check_sweep_dir, folder_lock
 
     if backend == "ray":  # a closed address: exit 2 in seconds, before anything is written
         check_ray_address(ray_address)
@@ -494,20 +494,6 @@ def sweep(
         return _sweep_locked(
             specs, out, backend, workers, ray_address, progress, warn, device, nconmax, njmax, note, rosbag
         )
-
-
-def check_sweep_dir(out: Path) -> None:
-    """InputError (exit 2) when ``out`` holds another kind of run (a run's ``summary.json``, a calibration):
-    a sweep folder holds a sweep (design §16)."""
-    from bioform_mj.outputs.rundir import KNOWN_FILES
-
-    if out.is_dir():
-        other = sorted(n for n in os.listdir(out) if n in KNOWN_FILES)
-        if other:
-            raise InputError(
-                f"sweep directory '{out}' holds another kind of run ({', '.join(other[:4])}); choose an empty, "
-                "new or sweep folder"
-            )
 
 
 def check_same_sweep(out: Path, keys: set[str]) -> None:

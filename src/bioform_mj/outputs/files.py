@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import tempfile
@@ -138,6 +139,13 @@ def _plain_checks(path: str | Path, what: str) -> Path:
         resolved = p.resolve()
     except (OSError, RuntimeError) as exc:  # a symlink loop
         raise _bad(what, s, f"cannot be resolved: {exc}") from None
+    try:  # a name over NAME_MAX (255 bytes) or PATH_MAX: Path.is_symlink() raised it (internal error, exit 1)
+        os.lstat(p)
+    except FileNotFoundError:
+        pass
+    except OSError as exc:
+        if exc.errno in (errno.ENAMETOOLONG, errno.ELOOP, errno.EACCES):
+            raise _bad(what, s, f"cannot be looked up ({exc.strerror or exc})") from None
     for root in _SPECIAL_ROOTS:
         if resolved == Path(root) or Path(root) in resolved.parents:
             raise _bad(what, s, f"is under {root}, a special file system, not a place for output files")

@@ -101,6 +101,12 @@ def folder_lock(path: Path, what: str = "output directory", doing: str = "writin
         release_lock(path, fd)
 
 
+def is_ours_transient(name: str) -> bool:
+    """Whether the folder entry ``name`` is one of ours that comes and goes: the lock, a writability probe, or a
+    temporary ``.NAME.XXXX.tmp`` of :func:`~bioform_mj.outputs.files.atomic_path`."""
+    return name == LOCK_NAME or name.startswith(".bioform-probe-") or bool(_TMP.match(name))
+
+
 def _is_tmp(name: str, allowed: frozenset[str] | tuple[str, ...]) -> bool:
     m = _TMP.match(name)
     if not m:
@@ -255,3 +261,30 @@ class RunDir:
     def written(self) -> bool:
         """True when the folder holds any file of a run."""
         return bool(survey(self.path, self.files)[0])
+
+
+#: what a sweep writes into its folder (design §16), beside the lock and the temporary ``.NAME.XXXX.tmp`` names
+SWEEP_ENTRIES = frozenset(
+    {"runs", "bags", "sweep.json", "runs.csv", "runs.parquet", "stats.json", "stats.md", "MUJOCO_LOG.TXT"}
+)
+
+
+def check_sweep_dir(out: Path) -> None:
+    """InputError (exit 2) when ``out`` holds another kind of run (a run's ``summary.json``, a calibration)
+    or anything a sweep does not write (:data:`SWEEP_ENTRIES`): a sweep folder holds a sweep (design §16).
+    ``--out`` a symlink to ``/`` wrote the sweep's tables into the root folder (issue 28)."""
+    if out.is_dir():
+        names = sorted(os.listdir(out))
+        other = [n for n in names if n in KNOWN_FILES]
+        if other:
+            raise InputError(
+                f"sweep directory '{out}' holds another kind of run ({', '.join(other[:4])}); choose an empty, "
+                "new or sweep folder"
+            )
+        foreign = [n for n in names if n not in SWEEP_ENTRIES and not is_ours_transient(n)]
+        if foreign:
+            shown = ", ".join(foreign[:4]) + (f" and {len(foreign) - 4} more" if len(foreign) > 4 else "")
+            raise InputError(
+                f"sweep directory '{out}' holds files that are not a sweep's ({shown}); choose an empty, new or "
+                "sweep folder (nothing there is deleted)"
+            )

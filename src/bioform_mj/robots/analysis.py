@@ -42,6 +42,10 @@ from bioform_mj.robots.refs import RobotRef
 __all__ = ["layout_of"]
 
 
+#: largest wheel torque limit a robot file may give, N·m (a 1e308 URDF effort overflowed the check's numbers)
+MAX_WHEEL_TORQUE = 1e6
+
+
 def layout_of(model: mujoco.MjModel, prefix: str = "") -> RobotLayout:
     """The :class:`RobotLayout` of the robot named with ``prefix`` in a compiled model.
 
@@ -413,6 +417,11 @@ def _torque_limit(model, path: Path, ref: RobotRef, names: _Mapped, joints, driv
                 tau_max = lim
     if not tau_max > 0:
         raise ModelError(f"{path}: wheel torque limit is {tau_max:g} N·m; give tau_max in the robot's mapping")
+    if tau_max > MAX_WHEEL_TORQUE:  # effort="1e308": the check then said "accelerates the robot at inf m/s²"
+        raise ModelError(
+            f"{path}: wheel torque limit is {tau_max:g} N·m, above the {MAX_WHEEL_TORQUE:g} N·m of any wheel motor; "
+            "give tau_max in the robot's mapping"
+        )
     return tau_max
 
 

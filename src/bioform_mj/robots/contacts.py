@@ -397,9 +397,12 @@ def not_at_rest(model: Any, data: Any, base: int, floor: list[dict], settle_s: f
     )
 
 
-def settle(plant: Any, lay: RobotLayout, track: Any, prefix: str = "f1/", cap: int = 1000) -> tuple[int, list, str]:
+def settle(
+    plant: Any, lay: RobotLayout, track: Any, prefix: str = "f1/", cap: int = 1000, pace: Any = None
+) -> tuple[int, list, str]:
     """Step a one-robot ``plant`` (time step 1 ms) at zero torque for 0.2 s, then 0.1 s at a time while
-    :func:`not_at_rest` says it still moves, up to ``cap`` steps; ``track()`` every 10 steps. Returns the
+    :func:`not_at_rest` says it still moves, up to ``cap`` steps; ``track()`` and ``pace(steps)`` (a
+    :class:`~bioform_mj.robots.sanity.StepPace`, which may raise) every 10 steps. Returns the
     steps taken, the :func:`floor_contacts` then, and :func:`not_at_rest`'s text ('' at rest)."""
     base = plant.model.body(lay.base).id
     k, why, floor = 0, "", []
@@ -409,6 +412,8 @@ def settle(plant: Any, lay: RobotLayout, track: Any, prefix: str = "f1/", cap: i
             k += 1
             if k % 10 == 0:
                 track()
+                if pace is not None:
+                    pace(k)
         floor = floor_contacts(plant.model, plant.data, lay, prefix)
         why = not_at_rest(plant.model, plant.data, base, floor, k * 0.001)
     return k, floor, why

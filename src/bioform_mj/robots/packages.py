@@ -96,8 +96,11 @@ def find_package(name: str, packages: PackagePath = _NO_PACKAGES, near: Path | N
     ``ROS_PACKAGE_PATH``), ``ROS_PACKAGE_PATH`` (``:``-separated directories, each the package
     itself or a folder holding packages), ``AMENT_PREFIX_PATH`` (``PREFIX/share/NAME``, ROS 2), and
     last the parent folders of ``near`` (the URDF file: ``NAME/urdf/robot.urdf``) — a guess,
-    said by the caller.
+    said by the caller. An empty name (``package:///etc/passwd``) resolves to nothing: the root folder's name is
+    empty, so the parent-folder guess took ``/`` as the package and a robot file read any file (issue 28).
     """
+    if not name or name in (".", ".."):
+        return None, ""
     for n, d in packages:
         if n == name:
             p = Path(d).expanduser()
@@ -139,6 +142,8 @@ def resolve_uri(uri: str, packages: PackagePath, urdf: Path, meshdir: Path) -> t
         return Path(rest if rest.startswith("/") else "/" + rest).resolve(), "", ""
     if scheme in ("package", "model"):  # model:// (Gazebo) is searched like a package
         name, _, sub = rest.partition("/")
+        if not name or name in (".", ".."):
+            return None, f"{scheme}://{name}/ names no package ({scheme}://NAME/PATH)", ""
         found, how = find_package(name, packages, urdf)
         if found is None:
             return (

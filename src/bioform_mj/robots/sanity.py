@@ -19,7 +19,9 @@ naming the file and the element:
 - names (URDF and MJCF) that hold a control character are refused (:func:`one_line` escapes them in
   output that names what a user wrote);
 - :func:`check_step_budget`: a timestep that would make automatic work (robot check, identification)
-  take longer than :data:`CHECK_BOUND_S` s, refused with the estimate.
+  take longer than :data:`CHECK_BOUND_S` s, refused with the estimate;
+- :class:`StepPace`: the same bound on the measured wall time of the steps taken so far (a robot whose
+  geoms overlap in a thousand contacts steps 1000x slower than the estimate assumes).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import math
 import os
 import re
 import stat
+import time
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -52,6 +55,7 @@ __all__ = [
     "option_problem",
     "MAX_SOLVER_ITERATIONS",
     "check_step_budget",
+    "StepPace",
     "one_line",
     "spec_file_problem",
     "parse_xml",
@@ -335,8 +339,14 @@ def model_value_problem(model: Any) -> str:
             return f"geom '{name(mujoco.mjtObj.mjOBJ_GEOM, g)}': friction {fr.tolist()} (finite numbers >= 0)"
     for m in range(model.nmesh):
         sc = model.mesh_scale[m] if hasattr(model, "mesh_scale") else np.ones(3)
-        if not np.all(np.isfinite(sc)) or not np.all(np.isfinite(model.mesh_vert)):
+        if not np.all(np.isfinite(sc)):
             return f"mesh '{name(mujoco.mjtObj.mjOBJ_MESH, m)}': scale {np.asarray(sc).tolist()} (finite numbers)"
+        a, n = model.mesh_vertadr[m], model.mesh_vertnum[m]
+        if not np.all(np.isfinite(model.mesh_vert[a : a + n])):  # a NaN refpos/refquat: the scale was blamed
+            return (
+                f"mesh '{name(mujoco.mjtObj.mjOBJ_MESH, m)}': vertices not finite once placed (its file, refpos, "
+                "refquat and scale must be finite numbers)"
+            )
     return ""
 
 
@@ -399,6 +409,44 @@ def check_step_budget(sim_seconds: float, dt: float, what: str, hint: str, robot
             f"{what}: timestep {dt:g} s makes {steps:.3g} physics steps for {sim_seconds:.3g} s of simulated time, "
             f"about {_human(est)} (at {STEP_WALL_S * 1e6:g} µs a step; the bound is {CHECK_BOUND_S:g} s); {hint}"
         )
+
+
+class StepPace:
+    """Refuses automatic work whose physics steps, timed as they run, put ``steps`` of them above
+    :data:`CHECK_BOUND_S` s (``InputError``). :func:`check_step_budget` assumes :data:`STEP_WALL_S` a step; a
+    robot whose 50 wheels overlap in 1176 contacts stepped at 45 ms and ``robot check`` ran for many minutes
+    (issue 28). Call it with the steps done so far: the clock starts at the first call (the steps before it
+    hold the compiled kernels' first load or compile, seconds on a cold cache) and it decides once
+    :data:`PACE_MIN_STEPS` more steps are timed (the first steps of a robot dropped onto the floor have no
+    contacts)."""
+
+    def __init__(self, steps: float, what: str, hint: str, data: Any = None) -> None:
+        """``steps``: the physics steps the work will take; ``what``: who asks (named first in the line);
+        ``hint``: what to change; ``data``: the ``MjData`` stepped (its contact count is said)."""
+        self.steps, self.what, self.hint, self.data = float(steps), what, hint, data
+        self.start: tuple[float, int] | None = None  # (clock, steps done) at the first call
+
+    def __call__(self, done: int) -> None:
+        """Raise ``InputError`` when the steps timed since the first call put ``steps`` above the bound."""
+        now = time.perf_counter()
+        if self.start is None:
+            self.start = (now, done)
+            return
+        timed = done - self.start[1]
+        if timed < PACE_MIN_STEPS:
+            return
+        per = (now - self.start[0]) / timed
+        est = per * self.steps
+        if est > CHECK_BOUND_S:
+            ncon = f", {int(self.data.ncon)} contacts" if self.data is not None else ""
+            raise InputError(
+                f"{self.what}: one physics step takes {per * 1e3:.3g} ms here{ncon}: its {self.steps:.3g} steps "
+                f"would take about {_human(est)} (the bound is {CHECK_BOUND_S:g} s); {self.hint}"
+            )
+
+
+#: steps :class:`StepPace` times before it decides
+PACE_MIN_STEPS = 20
 
 
 def spec_file_problem(spec: Any) -> str:

@@ -264,8 +264,12 @@ def _parse(
         raise UrdfError(f"{path}: no <link>: the URDF has no root link")
     joints = robot.findall("joint")
     parent_of: dict[str, str] = {}
+    seen: set[str] = set()
     for j in joints:
         jn = j.get("name") or "?"
+        if j.get("name") and jn in seen:  # was taken silently
+            raise UrdfError(f"{path}: <joint name='{jn}'> is defined twice")
+        seen.add(jn)
         par, chi = j.find("parent"), j.find("child")
         pl, cl = (par.get("link") if par is not None else None), (chi.get("link") if chi is not None else None)
         if not pl or not cl:

@@ -25,10 +25,10 @@ from importlib import import_module
 from typing import Any
 
 _CONFIG = (
-    "DERIVATIVES ESTIMATOR_INITS EVENT_KINDS GAIN_SCALINGS GRAPH_KINDS LEADER_KINDS MAX_CONTROL_STEPS MAX_INT "
-    "MAX_NAME MAX_PHYSICS_STEPS MAX_RUN_BYTES MIN_PHYSICS_DT PAPER_C PLANTS SATURATIONS SENSINGS DisturbanceCfg "
-    "EstimatorCfg EventCfg FaultsCfg FormationCfg GraphCfg KinematicCfg LeaderCfg LearnerCfg LimitsCfg PlantCfg "
-    "Scenario SimCfg TorqueCfg"
+    "DERIVATIVES ESTIMATOR_INITS EVENT_KINDS GAIN_SCALINGS GRAPH_KINDS LEADER_KINDS MAX_ARRAY MAX_CONTROL_STEPS "
+    "MAX_FLOAT MAX_INT MAX_NAME MAX_PHYSICS_STEPS MAX_RUN_BYTES MIN_PHYSICS_DT PAPER_C PLANTS SATURATIONS SENSINGS "
+    "DisturbanceCfg EstimatorCfg EventCfg FaultsCfg FormationCfg GraphCfg KinematicCfg LeaderCfg LearnerCfg LimitsCfg "
+    "PlantCfg Scenario SimCfg TorqueCfg"
 ).split()
 _CHECK = ["robot_encoder_cpr", "run_size", "validate"]
 _LOADER = [

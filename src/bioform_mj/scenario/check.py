@@ -104,6 +104,8 @@ def validate(sc: Scenario) -> None:
     _positive("sim.control_dt", s.control_dt)
     _positive("sim.physics_dt", s.physics_dt)
     _positive("sim.log_dt", s.log_dt)
+    if s.physics_dt < MIN_PHYSICS_DT:  # before the ratios: control_dt / 5e-324 is inf
+        raise ScenarioError("sim.physics_dt", f"must be >= {MIN_PHYSICS_DT:g} s, got {s.physics_dt:g}")
     if s.physics_dt > s.control_dt * (1 + 1e-9):
         raise ScenarioError(
             "sim.physics_dt", f"must not exceed sim.control_dt = {s.control_dt:g} s, got {s.physics_dt:g}"

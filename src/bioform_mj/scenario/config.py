@@ -79,6 +79,12 @@ MAX_PHYSICS_STEPS = 1e9
 MAX_RUN_BYTES = 4e9
 #: integers anywhere in a scenario
 MAX_INT = 2**62
+#: largest magnitude of a number anywhere in a scenario (SI units): beyond it ratios of times overflow
+#: (``--set sim.log_dt=1e30`` was a numba typing error, ``sim.control_dt=1e308`` an OverflowError)
+MAX_FLOAT = 1e12
+#: most values of one array of a scenario (followers, edges, events, ...; the largest preset has 1024 robots):
+#: ``bioform_mj.load(overrides={"formation.offsets": [[1, 0]] * 10**6})`` took minutes to be refused
+MAX_ARRAY = 2**16
 #: longest scenario name (it becomes a folder name, with plant and method appended)
 MAX_NAME = 120
 

@@ -24,7 +24,7 @@ from bioform_mj.core.errors import InputError, ScenarioError
 from bioform_mj.robots.entries import rebase_entries
 from bioform_mj.robots.refs import PackagePath, RobotRef, as_package_path, as_ref, rebase_package_path
 from bioform_mj.scenario.check import validate
-from bioform_mj.scenario.config import MAX_INT, Scenario, keys_of
+from bioform_mj.scenario.config import MAX_ARRAY, MAX_FLOAT, MAX_INT, Scenario, keys_of
 
 
 def preset_names() -> list[str]:
@@ -196,12 +196,16 @@ def _read_toml(raw: bytes, where: str) -> dict[str, Any]:
         return tomllib.loads(raw.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{where} is not valid TOML: {exc}") from None
+    except ValueError as exc:  # an integer of more than 4300 digits (Python's int limit): was an internal error
+        raise InputError(f"{where}: {str(exc).split(';')[0]} (not a scenario)") from None
     except RecursionError:  # [[[[…]]]] 10^5 deep: Python's parser recurses (issue 28)
         raise InputError(f"{where}: arrays or tables nested too deeply to read (not a scenario)") from None
 
 
 def parse_override(text: str) -> tuple[str, Any]:
     """``'kinematic.k1=3'`` → ``('kinematic.k1', 3)``; values are TOML literals, bare words are strings."""
+    if not isinstance(text, str):  # bioform_mj.load(overrides=[3]) was an AttributeError
+        raise InputError(f"override {text!r}: expected a string KEY=VALUE, e.g. 'kinematic.k1=3'")
     key, sep, raw = text.partition("=")
     key = key.strip()
     if not sep or not key:
@@ -211,12 +215,16 @@ def parse_override(text: str) -> tuple[str, Any]:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
         value = raw
+    except ValueError as exc:  # an integer of more than 4300 digits (Python's int limit): was an internal error
+        raise InputError(f"--set '{key}': {str(exc).split(';')[0]}") from None
     except RecursionError:  # --set k=[[[[…]]]] (issue 28)
         raise InputError(f"--set '{key}': the value is nested too deeply to read") from None
     return key, value
 
 
 def _set_path(data: dict[str, Any], key: str, value: Any) -> None:
+    if not isinstance(key, str):  # bioform_mj.load(overrides={3: 1}) was an AttributeError
+        raise InputError(f"override key {key!r}: expected a dotted key string, e.g. 'kinematic.k1'")
     parts = key.split(".")
     cls: Any = Scenario
     node = data
@@ -267,6 +275,8 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
         (inner, *_rest) = typing.get_args(tp)
         if not isinstance(value, (list, tuple)):
             raise ScenarioError(key, f"expected an array, got {type(value).__name__} {value!r}")
+        if len(value) > MAX_ARRAY:
+            raise ScenarioError(key, f"{len(value)} values, above the {MAX_ARRAY} an array of a scenario may have")
         if dataclasses.is_dataclass(inner) and inner is not RobotRef:
             return tuple(_build(inner, v, f"{key}[{i}].") for i, v in enumerate(value))
         return tuple(_convert(v, inner, f"{key}[{i}]") for i, v in enumerate(value))
@@ -281,8 +291,13 @@ def _convert(value: Any, tp: Any, key: str) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ScenarioError(key, f"expected a number, got {type(value).__name__} {value!r}")
+        if isinstance(value, int) and abs(value) > MAX_FLOAT:  # 10**400: math.isfinite raised OverflowError
+            digits = int(abs(value).bit_length() * 0.30103)
+            raise ScenarioError(key, f"number out of range (|value| <= {MAX_FLOAT:g}), got ~1e{digits}")
         if not math.isfinite(value):
             raise ScenarioError(key, f"expected a finite number, got {value}")
+        if abs(value) > MAX_FLOAT:  # no quantity of a scenario comes near it; ratios of such times overflow
+            raise ScenarioError(key, f"number out of range (|value| <= {MAX_FLOAT:g}), got {value:g}")
         return float(value)
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
