@@ -394,6 +394,9 @@ def test_bench_counts_the_steps_the_time_scale_adds():
     assert r["us_per_robot_step"] == pytest.approx(r["loop_s"] / (steps * 16) * 1e6, rel=1e-12)
     assert r["realtime_factor"] == pytest.approx(0.1 * sigma / r["loop_s"], rel=1e-12)
     assert len(r["ratio_pairs"]) == 3 and r["ratio"] == sorted(r["ratio_pairs"])[1]
+    lo, hi = r["ratio_middle_half"]  # the pairs' 25th-75th percentiles: halfway between neighbours of 3 sorted
+    a, b, c = sorted(r["ratio_pairs"])
+    assert lo == pytest.approx((a + b) / 2, rel=1e-12) and hi == pytest.approx((b + c) / 2, rel=1e-12)
     assert r["replay_max_abs_dqpos"] == 0.0
 
 

@@ -39,9 +39,10 @@ from bioform_mj.outputs.files import write_json
 from bioform_mj.run.looptime import loop_times as _loop
 from bioform_mj.run.looptime import stop_if_interrupted
 
-#: team size → (preset, default simulated seconds)
+#: team size → (preset, default simulated seconds): each timed run ≥ ~0.5 s of CPU, so that a pair's ratio is not
+#: a few scheduler quanta's luck (paper: 20 s = 20000 steps; 5 s scattered its pairs by ±15 % on a quiet machine)
 CASES: dict[int, tuple[str, float]] = {
-    3: ("paper", 5.0),
+    3: ("paper", 20.0),
     16: ("large16", 5.0),
     64: ("large64", 4.0),
     256: ("large256", 2.0),
@@ -89,7 +90,8 @@ def _paired(sc: Any, plant: Any, reps: int) -> dict[str, Any]:
     (bare, loop, loop, bare, bare, loop, …: a drift of the machine's load falls on both alike).
 
     Each pair's ratio is bare / loop of its two neighbouring runs; the benchmark's ratio is the median
-    of those (``ratio_pairs`` lists them), and each time the median of its runs (``*_best``: the least).
+    of those (``ratio_pairs`` lists them; ``ratio_middle_half``: their 25th and 75th percentiles), and each time
+    the median of its runs (``*_best``: the least).
     Both start from ``plant.reset()`` (same state, the solver's warm start zeroed); the replay's final
     ``qpos`` is compared with the recording loop's (``replay_max_abs_dqpos``: 0.0 when the replay did the
     loop's physics bit for bit). Constant torques (0.1 of the limit, no disturbance), once, for comparison:
@@ -128,6 +130,8 @@ def _paired(sc: Any, plant: Any, reps: int) -> dict[str, Any]:
         "ratio_cpu": float(np.median(pairs_cpu)),
         "ratio_pairs": [float(x) for x in pairs],
         "ratio_cpu_pairs": [float(x) for x in pairs_cpu],
+        "ratio_middle_half": [float(x) for x in np.percentile(pairs, [25.0, 75.0])],
+        "ratio_cpu_middle_half": [float(x) for x in np.percentile(pairs_cpu, [25.0, 75.0])],
         "replay_max_abs_dqpos": dq,
         "solver_iters_per_step": iters / physics_steps,
         "constant_torque_bare_s": c_time,
@@ -194,6 +198,12 @@ def bench_case(n: int, duration: float | None = None, reps: int = 3, numpy_too: 
         row["stepwise_loop_s"] = t_np
         row["stepwise_ratio"] = bare / t_np
     return row
+
+
+def _middle_half(pairs: Sequence[float]) -> str:
+    """The spread of the pairs' ratios: their 25th–75th percentiles, ``"a–b"``."""
+    lo, hi = np.percentile(np.asarray(pairs, dtype=float), [25.0, 75.0])
+    return f"{lo:.2f}–{hi:.2f}"
 
 
 def format_table(rows: Sequence[dict[str, Any]]) -> str:
@@ -263,7 +273,8 @@ def run(args: argparse.Namespace) -> int:
         r = rows[-1]
         print(
             f"n={n:4d}: ratio {r['ratio']:.2f} (CPU time {r['ratio_cpu']:.2f}; pairs "
-            f"{', '.join(f'{x:.2f}' for x in r['ratio_pairs'])}), {r['us_per_robot_step']:.2f} "
+            f"{', '.join(f'{x:.2f}' for x in r['ratio_pairs'])}; middle half {_middle_half(r['ratio_pairs'])}), "
+            f"{r['us_per_robot_step']:.2f} "
             f"µs/robot-step (CPU {r['us_per_robot_step_cpu']:.2f}), real-time factor {r['realtime_factor']:.2f} "
             f"(CPU {r['realtime_factor_cpu']:.2f}), load {r['load_avg'][0]:.1f}; solver iterations per physics step "
             f"{r['solver_iters_per_step']:.2f} (constant torques: {r['constant_torque_solver_iters_per_step']:.2f}); "
