@@ -9,6 +9,8 @@ and of each run's totals. Variants (a copy of ``plants/mujoco/kernels.run_chunk`
 the recording so that the physics is the loop's bit for bit in every variant; checked at the end of every run):
 
 * ``loop``: the plant's own ``run_chunk``; ``replay``: the bare replay kernel on plant B (the method's control: 1.00);
+* ``flat``: the replay's loop in a kernel of its own (flat arguments); ``call``: the same loop in a kernel that takes
+  ``run_chunk``'s arguments (nested named tuples) and uses three of them: what the call itself costs;
 * ``skeleton``: the copy with everything switched off (the recorded inputs written, ``mj_step``);
 * ``+watch``: and the warning check and the contact watch after each physics step;
 * ``+observe``: and the pose/velocity read-back, proximity, tilt and slip watches;
@@ -53,6 +55,8 @@ from bioform_mj.run import loop as run_loop
 VARIANTS: dict[str, tuple[int, int, int, int] | str | None] = {
     "loop": None,
     "replay": "replay",
+    "flat": "flat",
+    "call": "call",
     "skeleton": (0, 0, 0, 0),
     "+watch": (1, 0, 0, 0),
     "+observe": (1, 1, 0, 0),
@@ -119,6 +123,26 @@ def parts_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc
     return k1 - k0, j, OK
 
 
+@njit
+def flat_chunk(k0, k1, n_sub, mp, dp, ctrl, xfrc, base, rec_ctrl, rec_xfrc):
+    """The recorded inputs of steps ``k0 … k1−1`` written as :func:`parts_chunk` writes them, and ``mj_step``."""
+    for k in range(k0, k1):
+        for c in range(ctrl.shape[0]):
+            ctrl[c] = rec_ctrl[k, c]
+        for i in range(base.shape[0]):
+            for c in range(6):
+                xfrc[base[i], c] = rec_xfrc[k, i, c]
+        for _ in range(n_sub):
+            _mj_step(mp, dp)
+    return k1 - k0
+
+
+@njit
+def call_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, sd, sen, odo, cl, px, rows):
+    """:func:`flat_chunk` with ``run_chunk``'s arguments."""
+    return flat_chunk(k0, k1, n_sub, mp, dp, io[6], io[9], io[11], rec_ctrl, rec_xfrc), j0, OK
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--preset", default="paper")
@@ -149,9 +173,14 @@ def main(argv: list[str] | None = None) -> int:
             t1 = time.thread_time()
             if v is None:
                 out = own_chunk(*args)
-            elif isinstance(v, str):
+            elif v == "replay":
                 replay(*rb, rc[k0:k1], rx[k0:k1], pb.data.solver_niter)
                 out = (k1 - k0, args[9], OK)
+            elif v == "flat":
+                io = args[6]
+                out = (flat_chunk(k0, k1, pb.n_substeps, rb[0], rb[1], io[6], io[9], io[11], rc, rx), args[9], OK)
+            elif v == "call":
+                out = call_chunk(*args[:10], rc, rx, *args[12:])
             else:
                 out = parts_chunk(*args[:10], rc, rx, *args[12:], np.array(v, dtype=np.int64))
             t2 = time.thread_time()

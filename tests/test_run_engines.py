@@ -201,8 +201,10 @@ def test_chunks_lengthen_only_where_they_ran_fast_and_change_no_bit(monkeypatch)
     0.1 s chunks, 100 steps of ~1 µs, cost more in visits to Python than in steps)."""
     from bioform_mj.run import loop
 
-    assert loop._next_chunk(100, 100, 0.002) == 1000  # 100 steps in 2 ms: 1000 take 20 ms
-    assert loop._next_chunk(100, 1000, 0.02) == 1000  # at the target: kept
+    target = loop.MIN_CHUNK_WALL_S
+    assert target == 0.1
+    assert loop._next_chunk(100, 100, 0.002) == 5000  # 100 steps in 2 ms: 5000 take 0.1 s
+    assert loop._next_chunk(100, 1000, target) == 1000  # at the target: kept
     assert loop._next_chunk(100, 25, 0.5) == 100  # slow (1024 robots): MAX_CHUNK_S's steps
     assert loop._next_chunk(100, 0, 0.0) == 100
     sc = load("paper", plant="ideal", overrides=["sim.duration=4"])
