@@ -400,6 +400,11 @@ def test_bench_counts_the_steps_the_time_scale_adds():
     a, b, c = sorted(r["ratio_pairs"])
     assert lo == pytest.approx((a + b) / 2, rel=1e-12) and hi == pytest.approx((b + c) / 2, rel=1e-12)
     assert r["replay_max_abs_dqpos"] == 0.0
+    # and in blocks: after each chunk but a run's first, a twin plant replays the chunk's steps (ending in the
+    # loop's state bit for bit, or the bench raises); 58 steps are 2-3 chunks of >= 25 (MAX_CHUNK_S 0.1 s of 4 ms)
+    assert 3 <= r["blocks"] <= 6 and 0.2 < r["ratio_blocks"] < 5.0
+    blo, bhi = r["ratio_blocks_middle_half"]
+    assert blo <= r["ratio_blocks"] <= bhi
 
 
 def test_bench_cli_rejects_unknown_size(tmp_path):
