@@ -201,8 +201,10 @@ def test_chunks_lengthen_only_where_they_ran_fast_and_change_no_bit(monkeypatch)
     0.1 s chunks, 100 steps of ~1 µs, cost more in visits to Python than in steps)."""
     from bioform_mj.run import loop
 
-    assert loop._next_chunk(100, 100, 0.002) == 1000  # 100 steps in 2 ms: 1000 take 20 ms
-    assert loop._next_chunk(100, 1000, 0.02) == 1000  # at the target: kept
+    target = loop.MIN_CHUNK_WALL_S
+    assert target == 0.1
+    assert loop._next_chunk(100, 100, 0.002) == 5000  # 100 steps in 2 ms: 5000 take 0.1 s
+    assert loop._next_chunk(100, 1000, target) == 1000  # at the target: kept
     assert loop._next_chunk(100, 25, 0.5) == 100  # slow (1024 robots): MAX_CHUNK_S's steps
     assert loop._next_chunk(100, 0, 0.0) == 100
     sc = load("paper", plant="ideal", overrides=["sim.duration=4"])
@@ -394,7 +396,15 @@ def test_bench_counts_the_steps_the_time_scale_adds():
     assert r["us_per_robot_step"] == pytest.approx(r["loop_s"] / (steps * 16) * 1e6, rel=1e-12)
     assert r["realtime_factor"] == pytest.approx(0.1 * sigma / r["loop_s"], rel=1e-12)
     assert len(r["ratio_pairs"]) == 3 and r["ratio"] == sorted(r["ratio_pairs"])[1]
+    lo, hi = r["ratio_middle_half"]  # the pairs' 25th-75th percentiles: halfway between neighbours of 3 sorted
+    a, b, c = sorted(r["ratio_pairs"])
+    assert lo == pytest.approx((a + b) / 2, rel=1e-12) and hi == pytest.approx((b + c) / 2, rel=1e-12)
     assert r["replay_max_abs_dqpos"] == 0.0
+    # and in blocks: after each chunk but a run's first, a twin plant replays the chunk's steps (ending in the
+    # loop's state bit for bit, or the bench raises); 58 steps are 2-3 chunks of >= 25 (MAX_CHUNK_S 0.1 s of 4 ms)
+    assert 3 <= r["blocks"] <= 6 and 0.2 < r["ratio_blocks"] < 5.0
+    blo, bhi = r["ratio_blocks_middle_half"]
+    assert blo <= r["ratio_blocks"] <= bhi
 
 
 def test_bench_cli_rejects_unknown_size(tmp_path):

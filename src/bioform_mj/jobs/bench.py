@@ -39,9 +39,10 @@ from bioform_mj.outputs.files import write_json
 from bioform_mj.run.looptime import loop_times as _loop
 from bioform_mj.run.looptime import stop_if_interrupted
 
-#: team size → (preset, default simulated seconds)
+#: team size → (preset, default simulated seconds): each timed run ≥ ~0.5 s of CPU, so that a pair's ratio is not
+#: a few scheduler quanta's luck (paper: 20 s = 20000 steps; 5 s scattered its pairs by ±15 % on a quiet machine)
 CASES: dict[int, tuple[str, float]] = {
-    3: ("paper", 5.0),
+    3: ("paper", 20.0),
     16: ("large16", 5.0),
     64: ("large64", 4.0),
     256: ("large256", 2.0),
@@ -84,13 +85,53 @@ def replayer(plant: Any, rec_ctrl: np.ndarray, rec_xfrc: np.ndarray):
     return replay
 
 
+def _blocks(
+    sc: Any, plant: Any, rec_ctrl: np.ndarray, rec_xfrc: np.ndarray, q_loop: np.ndarray, reps: int
+) -> np.ndarray:
+    """The loop and the bare replay in neighbouring blocks: ``reps`` closed loops on ``plant``; after each of their
+    chunks (``simulate``'s progress call) a second plant of the scene replays the chunk's recorded steps bare, so the
+    two times of a block are a few ms apart and a drift of the machine's load falls on both (docs/findings/
+    performance.md, "The gap at n = 3"). Rows ``(bare CPU s, loop CPU s)`` per block (thread CPU time; the loop's
+    includes its Python between chunks), the first chunk of each run left out (it holds the loop's start)."""
+    from bioform_mj.core.errors import quiet_outcomes
+    from bioform_mj.plants.mujoco.kernels import replay as mujoco_replay
+    from bioform_mj.run.simulate import make_plant, simulate
+
+    twin = make_plant(sc)
+    m, d = twin.model, twin.data
+    args = (m._address, d._address, twin.n_substeps, d.ctrl, d.xfrc_applied, np.ascontiguousarray(twin._base, np.int64))
+    rows: list[tuple[float, float]] = []
+    for _ in range(reps):
+        twin.reset()
+        at = {"k": 0, "t": time.thread_time()}
+
+        def progress(k: int, _n: int, at: dict = at) -> None:
+            t_loop = time.thread_time() - at["t"]
+            if k > at["k"]:
+                t0 = time.thread_time()
+                mujoco_replay(*args, rec_ctrl[at["k"] : k], rec_xfrc[at["k"] : k], d.solver_niter)
+                if at["k"] > 0:
+                    rows.append((time.thread_time() - t0, t_loop))
+                at["k"] = k
+            at["t"] = time.thread_time()
+
+        with quiet_outcomes():
+            stop_if_interrupted(simulate(sc, plant=plant, progress=progress))
+        if not np.array_equal(d.qpos, q_loop):  # the blocks replayed the loop's physics bit for bit
+            raise RuntimeError("bench: the block replay did not end in the loop's state")
+    return np.array(rows).reshape(-1, 2)
+
+
 def _paired(sc: Any, plant: Any, reps: int) -> dict[str, Any]:
     """Bare replay and closed loop on the one ``plant``, ``reps`` pairs, alternating in both orders
     (bare, loop, loop, bare, bare, loop, …: a drift of the machine's load falls on both alike).
 
     Each pair's ratio is bare / loop of its two neighbouring runs; the benchmark's ratio is the median
-    of those (``ratio_pairs`` lists them), and each time the median of its runs (``*_best``: the least).
-    Both start from ``plant.reset()`` (same state, the solver's warm start zeroed); the replay's final
+    of those (``ratio_pairs`` lists them; ``ratio_middle_half``: their 25th and 75th percentiles), and each time
+    the median of its runs (``*_best``: the least).
+    Then the same in blocks (:func:`_blocks`): ``ratio_blocks``, the median of the blocks' CPU ratios, scatters far
+    less than a whole run's on a loaded machine. Both start from ``plant.reset()`` (same state, the solver's warm
+    start zeroed); the replay's final
     ``qpos`` is compared with the recording loop's (``replay_max_abs_dqpos``: 0.0 when the replay did the
     loop's physics bit for bit). Constant torques (0.1 of the limit, no disturbance), once, for comparison:
     the contact solver iterates less when the torques do not change, so that is not a fair baseline.
@@ -116,6 +157,8 @@ def _paired(sc: Any, plant: Any, reps: int) -> dict[str, Any]:
     c_time = _w
     b, lp = np.array(bare), np.array(loop)
     pairs, pairs_cpu = b[:, 0] / lp[:, 0], b[:, 1] / lp[:, 1]
+    blocks = _blocks(sc, plant, rec_ctrl, rec_xfrc, q_loop, reps)
+    per_block = blocks[:, 0] / blocks[:, 1]  # none where every run was one chunk or two (a short --duration)
     physics_steps = len(rec_ctrl) * plant.n_substeps
     return {
         "bare_s": float(np.median(b[:, 0])),
@@ -128,6 +171,13 @@ def _paired(sc: Any, plant: Any, reps: int) -> dict[str, Any]:
         "ratio_cpu": float(np.median(pairs_cpu)),
         "ratio_pairs": [float(x) for x in pairs],
         "ratio_cpu_pairs": [float(x) for x in pairs_cpu],
+        "ratio_middle_half": [float(x) for x in np.percentile(pairs, [25.0, 75.0])],
+        "ratio_cpu_middle_half": [float(x) for x in np.percentile(pairs_cpu, [25.0, 75.0])],
+        "ratio_blocks": float(np.median(per_block)) if len(per_block) else None,
+        "ratio_blocks_middle_half": [float(x) for x in np.percentile(per_block, [25.0, 75.0])]
+        if len(per_block)
+        else [],
+        "blocks": int(len(blocks)),
         "replay_max_abs_dqpos": dq,
         "solver_iters_per_step": iters / physics_steps,
         "constant_torque_bare_s": c_time,
@@ -194,6 +244,21 @@ def bench_case(n: int, duration: float | None = None, reps: int = 3, numpy_too: 
         row["stepwise_loop_s"] = t_np
         row["stepwise_ratio"] = bare / t_np
     return row
+
+
+def _middle_half(pairs: Sequence[float]) -> str:
+    """The spread of the pairs' ratios: their 25th–75th percentiles, ``"a–b"``."""
+    lo, hi = np.percentile(np.asarray(pairs, dtype=float), [25.0, 75.0])
+    return f"{lo:.2f}–{hi:.2f}"
+
+
+def _blocks_text(row: dict[str, Any]) -> str:
+    """``ratio_blocks`` and its middle half, or ``n/a`` (no blocks: a run of one or two chunks)."""
+    x = row.get("ratio_blocks")
+    if x is None:
+        return "n/a"
+    lo, hi = row["ratio_blocks_middle_half"]
+    return f"{x:.3f}, middle half {lo:.2f}–{hi:.2f}, {row['blocks']} blocks"
 
 
 def format_table(rows: Sequence[dict[str, Any]]) -> str:
@@ -263,7 +328,9 @@ def run(args: argparse.Namespace) -> int:
         r = rows[-1]
         print(
             f"n={n:4d}: ratio {r['ratio']:.2f} (CPU time {r['ratio_cpu']:.2f}; pairs "
-            f"{', '.join(f'{x:.2f}' for x in r['ratio_pairs'])}), {r['us_per_robot_step']:.2f} "
+            f"{', '.join(f'{x:.2f}' for x in r['ratio_pairs'])}; middle half {_middle_half(r['ratio_pairs'])}; "
+            f"in blocks {_blocks_text(r)}), "
+            f"{r['us_per_robot_step']:.2f} "
             f"µs/robot-step (CPU {r['us_per_robot_step_cpu']:.2f}), real-time factor {r['realtime_factor']:.2f} "
             f"(CPU {r['realtime_factor_cpu']:.2f}), load {r['load_avg'][0]:.1f}; solver iterations per physics step "
             f"{r['solver_iters_per_step']:.2f} (constant torques: {r['constant_torque_solver_iters_per_step']:.2f}); "

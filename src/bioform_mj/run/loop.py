@@ -45,8 +45,11 @@ MAX_CHUNK_S = 0.1
 #: a chunk whose steps ran in less wall time than this (s) is lengthened for the next one to take about
 #: this long: each visit to Python costs ~0.1 ms (the kernel's dispatch over its ~20 arguments, the plant's
 #: contact-list check, this loop), which was 5 % of the paper scene's 0.1 s chunk (2 ms) and more of the
-#: ideal plant's; the results do not depend on where chunks end (the step-by-step loop is bit-identical)
-MIN_CHUNK_WALL_S = 0.02
+#: ideal plant's, and the physics after each call runs slower for a while (paper scene, kernel time only:
+#: the compiled chunk costs 7 % more than the bare replay in 5 ms chunks, 3 % in 20 ms, 0 % in 80 ms;
+#: docs/findings/performance.md, "The gap at n = 3"); the results do not depend on where chunks end (the
+#: step-by-step loop is bit-identical). 0.1 s also bounds the delay of progress reports and interrupts.
+MIN_CHUNK_WALL_S = 0.1
 
 
 class Stepper:
