@@ -28,6 +28,7 @@ from bioform_mj.cli.proc import (
     _mujoco_log,
     _silence,
     check_mujoco_distributions,
+    exit_deaf,
     progress_bar,
 )
 from bioform_mj.cli.report import _print_summary, _record_toml, _show_robot_warnings, _warn_outcomes
@@ -255,9 +256,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--reps", type=int, default=3, help="alternated bare/loop pairs; the median pair ratio counts (default 3)"
     )
     bn.add_argument("--numpy", action="store_true", help="also time the numpy reference stack")
-    bn.add_argument(
-        "--json", type=path_arg, default=Path("runs/bench.json"), help="output JSON (default runs/bench.json)"
-    )
+    bn.add_argument("--json", type=path_arg, default=Path("runs/bench.json"), help="output JSON (runs/bench.json)")
     _backend_args(
         bn,
         ("cpu", "warp"),
@@ -328,13 +327,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def entry() -> None:
-    """``bioform``: :func:`main`, then exit deaf to SIGINT/SIGTERM (a signal in the interpreter's teardown killed a
-    finished run or sweep: exit -15, no line; issue 28)."""
-    try:
-        code = main()
-    finally:  # --help ends in argparse's SystemExit
-        _ignore_signals()
-    raise SystemExit(code)
+    """``bioform``: :func:`main`, then exit deaf to SIGINT/SIGTERM (:func:`bioform_mj.cli.proc.exit_deaf`)."""
+    exit_deaf(main)
 
 
 def _dispatch(args: argparse.Namespace) -> int:

@@ -7,8 +7,9 @@ from __future__ import annotations
 import os
 import signal
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from bioform_mj.core.errors import InputError, Interrupted
 
@@ -140,6 +141,16 @@ def _catch_signals():
             signal.signal(s, h)
 
     return restore
+
+
+def exit_deaf(main: Callable[[], int]) -> NoReturn:
+    """Run ``main()`` and exit with its code, ignoring SIGINT/SIGTERM from its return on: a signal in the
+    interpreter's teardown killed a finished run or sweep (exit -15, no line; issue 28)."""
+    try:
+        code = main()
+    finally:  # --help ends in argparse's SystemExit
+        _ignore_signals()
+    raise SystemExit(code)
 
 
 def _ignore_signals() -> None:
