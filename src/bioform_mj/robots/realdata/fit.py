@@ -93,8 +93,8 @@ ROUGH_JACOBIAN = 0.3
 #: on a tb3 held by a dragging caster (0.025 N·m, program 5), 355 mm/s without the drag
 STILL_RIM_SPEED = 0.02
 #: caster frictions the staged start tries (the wheels regressed around each, the inertias regressed or
-#: published; the best by simulation). On the tb3 recording with a dragging caster (0.3): costs 284 (0.2),
-#: 355 (0.1), 448 (0.02) with the published inertias, 748-4257 with the regressed ones (mass 0.33 kg)
+#: published; the best by simulation). On the tb3 recording with a dragging caster (0.3), weighted costs with
+#: the published inertias 355 (0.1), 284 (0.2), 343 (0.4); with the regressed ones (mass 0.33 kg) 1054-3359
 CASTER_STARTS = (0.05, 0.1, 0.2, 0.3, 0.5)
 
 
@@ -665,8 +665,9 @@ def fit(
             "the residual is not smooth in "
             + ", ".join(n for n, q in zip(names, rough) if q > ROUGH_JACOBIAN)
             + f" (Jacobian columns at finite-difference steps 1x and 10x differ by > {ROUGH_JACOBIAN:.0%}): the "
-            "open-loop rollouts are chaotic there (e.g. a dragging caster's stick-slip), the optimiser cannot "
-            "follow a gradient and the intervals do not hold; those parameters are not reported identified"
+            "open-loop rollouts are chaotic there (a dragging caster's stick-slip, wheels that slip or lift, or a "
+            "point far from the optimum), the optimiser cannot follow a gradient and the intervals do not hold; "
+            "those parameters are not reported identified"
         )
     notes += caster_notes(robot, which, names, corr, find_casters)
     if len(chunks.states) < len(names) + 2:
