@@ -251,6 +251,27 @@ def test_drive_program_within_the_robots_limits(capsys):
     assert math.isclose(prog[-1, 0], 20.0) and not prog[-1, 1:].any()
 
 
+def test_drive_program_holds_the_motions_that_tell_a_caster_from_wheel_friction():
+    """Straight and on the spot, a caster trailing the axle by the half track brakes the wheels as their own dry
+    friction would; pivots about one wheel and arcs, of both signs, set them apart (docs/real-robot.md). Every
+    round of the program drives each pattern once in each sign: a 20 s program holds them all."""
+    from bioform_mj.robots.realdata.program import drive_program
+
+    tau = 0.02
+    prog = drive_program(tau, 20.0, 100.0, seed=3)
+    u = prog[:, 1:] / tau
+    on = np.abs(u).max(axis=1) > 0
+    starts = np.flatnonzero(on & ~np.r_[False, on[:-1]])  # first sample of each pulse pair
+    seen = set()
+    for k in starts:
+        a, b = u[k] / np.abs(u[k]).max()  # the pattern, its larger wheel at ±1
+        seen.add((round(float(a), 3), round(float(b), 3)))
+    want = {(1, 1), (1, -1), (1, 0), (0, 1), (1, 0.5), (0.5, 1)}
+    want |= {(-a, -b) for a, b in want}
+    assert want <= seen, want - seen
+    assert seen <= want, seen - want
+
+
 @pytest.mark.slow
 def test_fit_recovers_a_heavy_robots_payload_and_friction(tmp_path):
     """The paper robot (24.5 kg, CoM on the axle): +5 kg and +0.02 kg·m² payload, damping 0.05/0.04 N·m·s/rad,
