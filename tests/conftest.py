@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import atexit
+import functools
 import os
+import re
 import shutil
 import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -28,17 +31,55 @@ if "RAY_TMPDIR" not in os.environ:
 #: test modules whose sweeps may start Ray or stop every Ray cluster: one worker runs them one after another
 _JOB_MODULES = {"test_jobs_sweep.py", "test_jobs_resume.py", "test_jobs_sweep_interrupts.py", "test_jobs_calibrate.py"}
 
+#: what a test module builds once for all its tests: a module-, class- or package-scoped fixture, a cached helper
+_BUILT_ONCE = re.compile(r"""scope=["'](?:module|class|package)["']|functools\.(?:cache|lru_cache)\b""")
 
-def pytest_collection_modifyitems(config, items):
-    """Under pytest-xdist (``make test`` runs two workers, ``--dist loadgroup``), the tests that start a Ray
-    cluster run one after another on one worker: two local clusters on one machine share Ray's fixed ports
-    (the dashboard agent's, the client server's). Without xdist the mark does nothing."""
-    for item in items:
-        # the long-job test modules too: two Ray clusters started 1 s apart from both workers were seen, and
-        # `ray stop --force` (the head-lost test) ends every cluster on the machine
-        jobs = item.nodeid.split("::")[0].rsplit("/", 1)[-1] in _JOB_MODULES
-        if jobs or "ray" in item.nodeid.lower().replace("array", ""):
-            item.add_marker(pytest.mark.xdist_group("ray"))
+
+@functools.cache
+def _builds_once(path: Path) -> bool:
+    """Whether the test module at ``path`` builds something once for its tests (:data:`_BUILT_ONCE`)."""
+    try:
+        return _BUILT_ONCE.search(path.read_text(encoding="utf-8")) is not None
+    except OSError:
+        return False
+
+
+def xdist_unit(nodeid: str, root: Path) -> str:
+    """The work unit of the test ``nodeid`` under ``make test``'s pytest-xdist (``-n 2 --dist loadgroup``): a
+    worker runs a unit's tests one after another.
+
+    - ``"ray"``: every test that starts a Ray cluster, and the long-job modules (two Ray clusters started 1 s apart
+      from both workers were seen: local clusters on one machine share Ray's fixed ports; ``ray stop --force`` in
+      the head-lost test ends every cluster on the machine);
+    - the module's path, for a module that builds something once for its tests (a module fixture of 10-30 s, e.g.
+      the Warp batch runs or the realdata fit): on one worker it is built once, not once per worker;
+    - else the test itself (plain load balancing).
+    """
+    path = nodeid.split("::", 1)[0].split("@", 1)[0]
+    if path.rsplit("/", 1)[-1] in _JOB_MODULES or "ray" in nodeid.lower().replace("array", ""):
+        return "ray"
+    if _builds_once(root / path):
+        return path
+    return nodeid
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadgroup`` with the work units of :func:`xdist_unit`. pytest-xdist's own loadgroup reads a group
+    from a suffix it writes onto each test's node id, which pytest >= 9.2 no longer takes (pytest-xdist issue
+    1386): its ``xdist_group`` marks are ignored and every test is a unit of its own. This scheduler asks nothing of
+    the node ids. xdist sends the units with most tests first, then the single tests in collection order."""
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    root = Path(str(config.rootpath))
+
+    class _UnitScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return xdist_unit(nodeid, root)
+
+    return _UnitScheduling(config, log)
 
 
 @pytest.fixture(scope="session")

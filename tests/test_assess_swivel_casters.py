@@ -210,7 +210,16 @@ def test_a_team_s_rolling_bodies_and_contacts_are_each_robot_s_own(tmp_path):
     assert {c["geom"] for c in floor_contacts(model, data, plant.layouts[2], "f3/", found[2])} >= {"front_tire"}
 
 
-@pytest.mark.parametrize("turn_deg,off", [(90.0, "a"), (180.0, "b")])
+@pytest.mark.parametrize(
+    "turn_deg,off",
+    [
+        # slow: the 90° case (a) is what test_a_urdf_base_with_a_rear_swivel_caster_turned_sideways checks in half
+        # the time (casters 90° off, found and aligned, a and b within 3 %, unaligned a off); it took 63 s beside
+        # that test's 31 s and the 180° case's 60 s in one make-test run at load 5-8; make test-slow runs it
+        pytest.param(90.0, "a", marks=pytest.mark.slow),
+        (180.0, "b"),
+    ],
+)
 def test_misaligned_swivel_casters_identify_as_the_rigid_body_formula(tmp_path, monkeypatch, turn_deg, off):
     """Casters 90° / 180° off at qpos0: identify within 2 % of the formula (measured a −0.08 %, b −0.49 %:
     the caster rollers' spin inertia, which the formula leaves out) and robot check passes; the same

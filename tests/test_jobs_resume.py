@@ -505,9 +505,11 @@ def test_calibrate_refuses_an_absurd_budget_with_an_estimate(tmp_path, capsys):
 def test_calibrate_prints_count_and_eta_without_a_terminal(tmp_path):
     pytest.importorskip("scipy")
     out = tmp_path / "c"
+    # 2 s simulated per method, not the preset's 20 s: the line and the refusal are what is checked, and the
+    # search's ~25 evaluations (3 + the sensitivity's) took 8.5 s of CPU at 20 s, 3.7 s at 2 s
     res = subprocess.run(
         [sys.executable, "-m", "bioform_mj.cli", "calibrate", "table1", "--budget", "3", "--workers", "1"]
-        + ["--out", str(out)],
+        + ["--set", "sim.duration=2", "--out", str(out)],
         capture_output=True,
         text=True,
         timeout=300,
@@ -517,7 +519,7 @@ def test_calibrate_prints_count_and_eta_without_a_terminal(tmp_path):
     line = next(ln for ln in res.stderr.splitlines() if ln.startswith("calibrate:"))
     assert "3 evaluations" in line and "estimated" in line
     # a complete calibration is another run: refused without --overwrite, replaced with it
-    again = _cli(["calibrate", "table1", "--budget", "3", "--out", str(out)], ulimit_kb=None)
+    again = _cli(["calibrate", "table1", "--budget", "3", "--set", "sim.duration=2", "--out", str(out)], ulimit_kb=None)
     assert again.returncode == 2 and "--overwrite" in _error_lines(again.stderr)[0]
 
 
