@@ -57,11 +57,16 @@ if HAVE_NUMBA:
     _install_locator()  # the same source anywhere (a second clone) reuses the cache (core/jitcache.py)
 
 
-def njit(fn: Callable) -> Callable:
-    """numba-compile ``fn`` (cached on disk, no fastmath: IEEE results); identity without numba."""
+def njit(fn: Callable | None = None, *, inline: bool = False) -> Callable:
+    """numba-compile ``fn`` (cached on disk, no fastmath: IEEE results); identity without numba.
+    ``@njit(inline=True)``: numba inlines ``fn`` into the compiled functions that call it (its arguments are
+    then not passed: no reference counts taken on its arrays at each call, see ``envs/fast.py``)."""
+    if fn is None:
+        return lambda f: njit(f, inline=inline)
     if not HAVE_NUMBA:  # pragma: no cover
         return fn
-    return _guard_cache(numba.njit(cache=True, nogil=True, error_model="numpy")(fn))
+    opts = {"inline": "always"} if inline else {}
+    return _guard_cache(numba.njit(cache=True, nogil=True, error_model="numpy", **opts)(fn))
 
 
 def equation(fn: Callable) -> Callable:

@@ -54,12 +54,11 @@ BAD_ACTION, WARNED, GUARD, TIPPED, HIT = 1, 2, 4, 8, 16
 
 
 @njit
-def mujoco_period(
-    g, s, comm, io, wt, cl, px, mptr, dptr, n_sub, k0_phys, step_count, plant_dt, u, lo, hi, alo, ahi,
-    velocity, verr, tau, tau_max, pose, vel, new_pose, new_vel, k, dt, L_pose, L_vel, lim, diag, off,
-    leader_frame, fe, tipped, newly, events_seen, hits, w, r, O, slots, dst, ew, rp, rv, lacc, bound,
-):  # fmt: skip
-    """One control period ``k → k+1`` of the MuJoCo environment, the step-by-step path's calls in its
+def mujoco_period(a, u, pose, vel, new_pose, new_vel, O, k, step_count):
+    """One control period ``k → k+1`` of the MuJoCo environment, the episode's arguments ``a``
+    (:class:`PeriodArgs`: :data:`FIELDS`) read here, not passed on (numba takes a reference count on each
+    array of a compiled function's arguments at every call: with ~110 arrays that was ~15 % of the vector
+    environment's step at 1 ms, design §20), the step-by-step path's calls in its
     order (see the module docstring). ``u`` (n, 2): the agents' actions, checked against ``[alo, ahi]``
     (float32 rounding of the bounds) and clipped onto ``[lo, hi]``; ``pose``, ``vel``: the state at
     ``k`` (measured = true here); the state at ``k+1`` is written to ``new_pose``, ``new_vel``;
@@ -69,6 +68,12 @@ def mujoco_period(
     :data:`WARNED` (a MuJoCo warning: stopped after the physics, as the plant raises there),
     :data:`GUARD` (the guards failed, ``diag`` says which), :data:`TIPPED` (a robot has tipped), :data:`HIT`
     (a new contact event)."""
+    g, s, comm, io, wt, cl, px, mptr, dptr, n_sub = a.g, a.s, a.comm, a.io, a.wt, a.cl, a.px, a.mptr, a.dptr, a.n_sub
+    k0_phys, plant_dt, lo, hi, alo, ahi = n_sub * step_count, a.plant_dt, a.lo, a.hi, a.alo, a.ahi
+    velocity, verr, tau, tau_max, dt, L_pose, L_vel = a.velocity, a.verr, a.tau, a.tau_max, a.dt, a.L_pose, a.L_vel
+    lim, diag, off, leader_frame, fe, tipped, newly = a.lim, a.diag, a.off, a.leader_frame, a.fe, a.tipped, a.newly
+    events_seen, hits, w, r, slots, dst, ew = a.events_seen, a.hits, a.w, a.r, a.slots, a.dst, a.ew
+    rp, rv, lacc, bound = a.rp, a.rv, a.lacc, a.bound
     if not control_head(g, s, u, lo, hi, alo, ahi, velocity, verr, vel, tau):
         return BAD_ACTION
     # the plant's step (MujocoPlant.step)
@@ -117,7 +122,7 @@ def mujoco_period(
                        newly, hits, tau, tau_max, w, r, O, slots, dst, ew, rp, rv, lacc, bound, status)  # fmt: skip
 
 
-@njit
+@njit(inline=True)
 def control_head(g, s, u, lo, hi, alo, ahi, velocity, verr, vel, tau):
     """A period's start, the step-by-step path's ``_actions`` and ``control_phase``: ``u`` (n, 2) checked
     against ``[alo, ahi]`` (False: outside, nothing done) and clipped onto ``[lo, hi]``; the control
@@ -130,7 +135,7 @@ def control_head(g, s, u, lo, hi, alo, ahi, velocity, verr, vel, tau):
     return True
 
 
-@njit
+@njit(inline=True)
 def period_tail(
     g, s, comm, new_pose, new_vel, k1, dt, L_pose, L_vel, lim, diag, off, leader_frame, fe, newly, hits, tau,
     tau_max, w, r, O, slots, dst, ew, rp, rv, lacc, bound, status,
@@ -288,15 +293,8 @@ if FAST:
         """:func:`policy_period` with the stack's arguments ``a`` (:class:`PolicyArgs`)."""
         policy_period(a.g, a.s, lp, lv, pose, vel, a.comm, true_vel, a.verr, tau)
 
-    @njit
-    def period(a, u, pose, vel, new_pose, new_vel, O, k, step_count):
-        """:func:`mujoco_period` with the episode's arguments ``a`` (:class:`PeriodArgs`)."""
-        return mujoco_period(
-            a.g, a.s, a.comm, a.io, a.wt, a.cl, a.px, a.mptr, a.dptr, a.n_sub, a.n_sub * step_count, step_count,
-            a.plant_dt, u, a.lo, a.hi, a.alo, a.ahi, a.velocity, a.verr, a.tau, a.tau_max, pose, vel, new_pose,
-            new_vel, k, a.dt, a.L_pose, a.L_vel, a.lim, a.diag, a.off, a.leader_frame, a.fe, a.tipped, a.newly,
-            a.events_seen, a.hits, a.w, a.r, O, a.slots, a.dst, a.ew, a.rp, a.rv, a.lacc, a.bound,
-        )  # fmt: skip
+    #: :func:`mujoco_period` (its arguments ``a`` a :class:`PeriodArgs`)
+    period = mujoco_period
 
     @structref.register
     class IdealArgsType(_types.StructRef):
