@@ -6,6 +6,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 import resource
 import subprocess
 import sys
@@ -578,3 +579,26 @@ def test_a_controller_without_set_tau_max_under_known_actuator_faults_is_refused
     ok = load("paper", ["sim.duration=0.5", "faults.actuator=[[1, 0.1, 0.3, 0.5]]", "faults.actuator_known=false"])
     r = simulate(ok, controller=NoLimit("none"))  # not told: set_tau_max is never called
     assert r.diverged is None and r.summary["steps"] == 500
+
+
+def test_a_sweep_of_many_configurations_says_how_long_checking_them_takes(capsys, monkeypatch):
+    """Each configuration of a sweep is loaded and checked before any run (~15 ms each): from
+    10 x ``CHECK_SAMPLE`` configurations on, one note says how many and how long the rest take, measured on the
+    first ``CHECK_SAMPLE`` (trust4: 15,000 values were checked for minutes in silence); below that, no note."""
+    import time
+
+    from bioform_mj.jobs import sweep as sweep_module
+
+    monkeypatch.setattr(sweep_module, "CHECK_SAMPLE", 2)
+    vary = ["kinematic.k1=" + ",".join(str(1 + i / 100) for i in range(20))]
+    t0 = time.monotonic()
+    specs = sweep_module.expand("paper", 1, ["bioinspired"], vary, plant="ideal")
+    spent = time.monotonic() - t0
+    notes = [line for line in capsys.readouterr().err.splitlines() if line.startswith("note: checking")]
+    assert len(specs) == 20 and len(notes) == 1, notes
+    m = re.fullmatch(
+        r"note: checking 20 configurations before any run: about ([0-9.]+) s more \(measured on the first 2\)", notes[0]
+    )
+    assert m and 0.0 < float(m.group(1)) < 10 * spent, (notes, spent)
+    sweep_module.expand("paper", 1, ["bioinspired"], [vary[0].rsplit(",", 1)[0]], plant="ideal")  # 19: silent
+    assert "note: checking" not in capsys.readouterr().err
