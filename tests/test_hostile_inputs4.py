@@ -231,6 +231,27 @@ def test_sweep_forks_no_more_workers_than_runs(monkeypatch):
     assert len(forks) == 2, len(forks)
 
 
+def test_sweep_workers_beyond_eight_per_cpu_refused_before_any_work(tmp_path, monkeypatch, capsys):
+    """The runs-left cap above does not stop ``--workers 100000`` of a sweep of 100000 runs: forked workers on this
+    machine are bounded by 8 per CPU (at least 16), refused with one line before anything is written; the bound is
+    the machine's (4 CPUs: 32 allowed, 33 refused); a Ray cluster's (``--ray-address``) are not bounded here."""
+    from bioform_mj.cli.main import main
+    from bioform_mj.jobs import runner
+
+    monkeypatch.setattr(runner.os, "cpu_count", lambda: 4)
+    runner.check_workers(32, local=True)
+    runner.check_workers(100000, local=False)
+    with pytest.raises(InputError, match=r"1 to 32 on this machine \(4 CPUs"):
+        runner.check_workers(33, local=True)
+    monkeypatch.setattr(runner.os, "cpu_count", lambda: 1)  # the floor: 16
+    runner.check_workers(16, local=True)
+    out = tmp_path / "sw"
+    assert main(["sweep", "paper", "--plant", "ideal", "--workers", "100000", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --workers must be 1 to 16"), err
+    assert not out.exists()
+
+
 def test_a_signal_in_the_teardown_keeps_the_commands_exit_code(tmp_path):
     """A SIGTERM after the command is done (here from an ``atexit`` hook, in the interpreter's teardown) killed
     a finished run or sweep (exit 143 or -15, no line; 2 of 15 interrupts): now the exit code stays 0."""

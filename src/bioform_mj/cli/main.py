@@ -642,11 +642,11 @@ def _table1_in(args: argparse.Namespace, sc, out: Path) -> int:
 def _sweep(args: argparse.Namespace) -> int:
     import shlex
 
+    from bioform_mj.jobs.runner import check_workers
     from bioform_mj.jobs.sweep import SweepInterrupted, expand, sweep
 
     methods = parse_methods(args.methods, "--methods")
-    if args.workers is not None and args.workers < 1:
-        raise InputError(f"--workers must be >= 1, got {args.workers}")
+    check_workers(args.workers, args.backend == "local" or not args.ray_address)  # this machine: 8 per CPU
     for flag, val in (("--device", args.device), ("--nconmax", args.nconmax), ("--njmax", args.njmax)):
         if val is not None and args.backend != "warp":
             raise InputError(f"{flag} applies to --backend warp only")

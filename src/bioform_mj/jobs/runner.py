@@ -26,6 +26,23 @@ from typing import Any
 
 #: Seconds a terminated worker gets to exit before it is killed.
 GRACE_S = 2.0
+#: forked workers per CPU of this machine at most (a run is CPU-bound: more only queue; each is a process, and
+#: ``--workers 100000`` was taken and forked until the machine stalled)
+WORKERS_PER_CPU = 8
+
+
+def check_workers(workers: int | None, local: bool) -> None:
+    """``workers`` at least 1 and, for forked workers on this machine (``local``), at most :data:`WORKERS_PER_CPU`
+    per CPU (at least 16): else :class:`~bioform_mj.core.errors.InputError`, before any work."""
+    from bioform_mj.core.errors import InputError
+
+    if workers is None:
+        return
+    cap = max(16, WORKERS_PER_CPU * (os.cpu_count() or 1))
+    if workers < 1 or (local and workers > cap):
+        raise InputError(
+            f"--workers must be 1 to {cap} on this machine ({os.cpu_count()} CPUs; runs are CPU-bound), got {workers}"
+        )
 
 
 def exit_reason(status: int) -> str:

@@ -54,6 +54,7 @@ from bioform_mj.core.errors import BioformError, InputError, quiet_outcomes
 from bioform_mj.jobs.ray_backend import check_ray_address
 from bioform_mj.jobs.runner import Signals as _Signals
 from bioform_mj.jobs.runner import Stop as _Stop
+from bioform_mj.jobs.runner import check_workers
 from bioform_mj.jobs.runner import raising as _raising
 from bioform_mj.jobs.runner import run_local as _run_local
 from bioform_mj.outputs.files import rows_to_arrow, write_json, write_parquet, write_text
@@ -485,6 +486,7 @@ def sweep(
     """
     if backend not in ("local", "ray", "warp"):
         raise InputError(f"unknown backend '{backend}' (expected local, ray or warp)")
+    check_workers(workers, backend == "local" or not ray_address)  # forked, or a local Ray of `workers` CPUs
     if backend == "warp":
         from bioform_mj.batch.backend import require_warp, resolve_device
 
