@@ -250,6 +250,10 @@ def test_sweep_workers_beyond_eight_per_cpu_refused_before_any_work(tmp_path, mo
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: --workers must be 1 to 16"), err
     assert not out.exists()
+    assert main(["calibrate", "table1", "--budget", "3", "--workers", "17", "--out", str(out)]) == 2  # the same
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: --workers must be 1 to 16"), err
+    assert not out.exists()
 
 
 def test_a_signal_in_the_teardown_keeps_the_commands_exit_code(tmp_path):

@@ -333,8 +333,9 @@ def check_inputs(
     budget = DEFAULT_BUDGET[plant] if budget is None else int(budget)
     if budget < 1:
         raise InputError(f"--budget must be >= 1 evaluation, got {budget}")
-    if workers is not None and workers < 1:
-        raise InputError(f"--workers must be >= 1, got {workers}")
+    from bioform_mj.jobs.runner import check_workers
+
+    check_workers(workers, local=True)  # forked on this machine: 1 to 8 per CPU
     workers = min(os.cpu_count() or 1, 2) if workers is None else int(workers)
     base = load(source, list(overrides), plant=plant)  # validates the scenario (exit 2 before any work)
     if base.n != 3:
