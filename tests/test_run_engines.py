@@ -375,6 +375,11 @@ def test_bench_cli_writes_ratios(tmp_path):
     assert len(row["ratio_pairs"]) == 1 and row["ratio"] == row["ratio_pairs"][0]
     assert row["realtime_factor"] > 1.0
     assert data["machine"]["mujoco"] == mujoco.__version__
+    warned = [ln for ln in proc.stderr.splitlines() if ln.startswith("warning:")]
+    assert warned, proc.stderr  # the paper scenario asks the paper robot for more than its limits (design §21)
+    assert len(warned) == len(set(warned))  # the case runs its scene 5 times: each warning once
+    # one demand, the measured run's: the 0.05 s compile warm-up's (another peak) is not said
+    assert sum("peak acceleration" in ln for ln in warned) == 1
 
 
 def test_bench_counts_the_steps_the_time_scale_adds():
