@@ -388,6 +388,33 @@ def _stream(reader, conns, name: str) -> Iterator:
 # ------------------------------------------------------------------ CSV
 #: largest CSV recording read, MB (2.5 million rows of 7 columns: 42 min at 1 kHz; read as Python rows first, it
 #: takes about 8× its size in memory); a longer one: an MCAP, or a window of it
+#: a body tilted more than this (deg) in the recorded odometry has lifted off its wheels or casters or tipped
+#: over: the fit's and the replay's robot stands on a flat floor, so that part of a recording is not used.
+#: Measured on test-recorder bags (60 s): 0.03° (Stretch at its drive program's 0.4 N·m), 0.8° (the lab robot);
+#: the Stretch at 3 N·m passed 10° at 2.45 s (a wheelie) and lay on its back (180°) from 8.2 s
+TIP_DEG = 10.0
+
+
+def tipped_at(rec: Recording) -> tuple[float, float] | None:
+    """``(t, tilt)``: the time (s) of the first odometry pose whose body z axis is tilted more than
+    :data:`TIP_DEG` from the vertical, and the largest tilt in the recording (deg); None where the recording
+    has no odometry orientation or never tilts that far. A pose's tilt is ``acos(1 - 2 (qx² + qy²))`` of
+    its unit quaternion (the body z axis's vertical component)."""
+    if not len(rec.odom_t):
+        return None
+    q = rec.odom_pose[:, 3:7]
+    norm = np.linalg.norm(q, axis=1)
+    ok = norm > 0.5  # a zero quaternion: a driver that does not publish orientation
+    if not ok.any():
+        return None
+    qx, qy = q[ok, 1] / norm[ok], q[ok, 2] / norm[ok]
+    tilt = np.degrees(np.arccos(np.clip(1.0 - 2.0 * (qx**2 + qy**2), -1.0, 1.0)))
+    over = np.flatnonzero(tilt > TIP_DEG)
+    if not len(over):
+        return None
+    return float(rec.odom_t[ok][over[0]]), float(tilt.max())
+
+
 CSV_MAX_MB = 256
 
 
