@@ -252,6 +252,34 @@ class FullChunk:
 
 
 @functools.cache
+def _fallocate() -> Any:
+    """libc's ``fallocate`` (Linux), else None."""
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+    except OSError:  # pragma: no cover - no C library to load by name (Windows)
+        return None
+    fn = getattr(libc, "fallocate64", None) or getattr(libc, "fallocate", None)
+    if fn is not None:
+        fn.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int64, ctypes.c_int64]
+        fn.restype = ctypes.c_int
+    return fn
+
+
+def reserve(bio: Any, nbytes: int) -> None:
+    """Allocate the disk blocks of the ``nbytes`` bytes to be written from ``bio``'s position (a binary
+    file) in one call, its size unchanged (``fallocate`` with ``FALLOC_FL_KEEP_SIZE``, Linux; nothing
+    elsewhere, or where the file system refuses: the writes then allocate as they go, and report any
+    error themselves). The writes that follow then find their blocks: writing the 13 MB of the
+    paper scenario's ideal-plant bag into the page cache took about 0.75 ms less CPU (3.0 → 2.3 ms of
+    13 MiB in 1 MiB writes on ext4, 30 alternated trials; docs/guide/rosbag.md)."""
+    fn = _fallocate()
+    if fn is not None and nbytes > 0:
+        fn(bio.fileno(), 1, bio.tell(), nbytes)  # 1: FALLOC_FL_KEEP_SIZE; a refusal (-1) changes nothing
+
+
+@functools.cache
 def mcap_head() -> bytes:
     """The MCAP file's magic and header record as ``rosbags``' ``McapWriter`` writes them (its profile
     ``ros2``, library ``rosbags-<version>``)."""
@@ -556,8 +584,11 @@ def writer_classes():
             M, numbers = chunk_matrix(topics, cids, cols, B, per, stamps[:K], None if full is None else full.M)
             in_full = None if full is None else full.numbers(numbers)
             storage = self.storage
+            n_full = sum(full is not None and 0 < j0 and j1 < K for j0, j1 in bounds)
             for j0, j1 in bounds:
                 if full is not None and 0 < j0 and j1 < K:  # this chunk's numbers into its one buffer, then out
+                    if j0 == per:  # the first of them: their bytes' disk blocks in one call
+                        reserve(storage.bio, n_full * full.buf.nbytes)
                     in_full.fill(full.buf, j0, j1 - j0)
                     full.write(storage, int(stamps[j0:j1].min()), int(stamps[j0:j1].max()))
                     for cid in cids:
