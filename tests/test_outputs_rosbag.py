@@ -538,13 +538,14 @@ def test_planar_quaternions_have_the_general_formulas_bits():
     assert np.signbit(q[:, 3]).tolist() == [False, False, True, True, True]  # z = sy − (+0·cy)
 
 
-def test_number_pool_and_the_compiled_pass_write_numpys_bytes():
-    """The bulk writer's numbers (outputs/rosbag_write.py: number_pool, Numbers, and the compiled pass
+def test_number_sources_and_the_compiled_pass_write_numpys_bytes():
+    """The bulk writer's numbers (outputs/rosbag_write.py: number_sources, Numbers, and the compiled pass
     outputs/rosbag_kernel.py: place): each field's values land at its (unaligned) byte offset in each
     sample's row as np.asarray(values, dtype).tobytes() gives them, for <f8, <u8, <i4 (wrapping) and <u4,
-    from selections of C-contiguous arrays (read in place: no copy), a Fortran-ordered and a big-endian
-    array, float32 and int32 values, a reversed slice; nothing else in the buffer changes."""
-    from bioform_mj.outputs.rosbag_write import Numbers, number_pool
+    from selections of C-contiguous arrays (read in place, at their elements' addresses: no copy), a
+    Fortran-ordered and a big-endian array, float32 and int32 values, a reversed slice (copies); nothing
+    else in the buffer changes."""
+    from bioform_mj.outputs.rosbag_write import Numbers, number_sources
 
     rng = np.random.default_rng(3)
     S = 50
@@ -571,13 +572,20 @@ def test_number_pool_and_the_compiled_pass_write_numpys_bytes():
     ]
     values = [(dt, a[idx] if idx else a, (a, idx)) for dt, a, idx in fields]
     K = 40
-    pool, src, step = number_pool([v[0] for v in values], [v[1] for v in values], [v[2] for v in values], K)
-    assert step[0] == 18 and src[1] - src[0] == 6 + 3  # pose's own words, in place
-    assert (src[2], step[2]) == (src[0] - 8 + 36, 18)  # [2:, 0, 0]: element (2, 0, 0) of pose
+    keep, addr, step = number_sources([v[0] for v in values], [v[1] for v in values], [v[2] for v in values], K)
+    at = pose.ctypes.data
+    assert (addr[0], step[0]) == (at + 8 * (6 + 2), 8 * 18)  # pose's own words, in place: [:, 1, 2]
+    assert (addr[2], step[2]) == (at + 8 * 36, 8 * 18)  # [2:, 0, 0]: element (2, 0, 0) of pose
+    assert (addr[3], step[3]) == (stamps.ctypes.data, 8)
+    assert any(a is pose for a in keep) and any(a is stamps for a in keep)
+    lies_in = [[a for a in keep if a.ctypes.data <= x < a.ctypes.data + a.nbytes] for x in addr]
+    assert all(len(k) == 1 for k in lies_in)  # every address in one array the numbers hold
+    copied = [k for k, (dt, a, idx) in enumerate(fields) if not any(b is a for b in lies_in[k])]
+    assert copied == [6, 7, 8, 9, 10]  # Fortran, big-endian, float32, int32, reversed: converted copies
     B, rows, j0 = 1 + 8 * len(fields) + 13, 7, 30
     dst = [1 + 9 * k for k in range(len(fields))]  # every offset odd: unaligned
     wide = [np.dtype(dt).itemsize == 8 for dt, _, _ in values]
-    numbers = Numbers(pool, src, step, dst, np.full(len(dst), B), wide)
+    numbers = Numbers(keep, addr, step, dst, np.full(len(dst), B), wide)
     buf = np.full(rows * B + 5, 0xA5, np.uint8)
     numbers.fill(buf, j0, rows - 1)
     want = np.full(rows * B + 5, 0xA5, np.uint8)

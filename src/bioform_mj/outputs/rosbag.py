@@ -174,7 +174,7 @@ class _Topic:
 class _Markers:
     """Marker values for the fields of a template message, and the rows' values they stand for: each a
     1-D selection ``a[idx]`` of an array ``a`` (kept with it: the writer reads the numbers from ``a``
-    itself, :func:`bioform_mj.outputs.rosbag_write.number_pool`)."""
+    itself, :func:`bioform_mj.outputs.rosbag_write.number_sources`)."""
 
     def __init__(self) -> None:
         self.items: list[tuple[bytes, str, np.ndarray, tuple[np.ndarray, tuple]]] = []
