@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from bioform_mj.cli.main import main
-from bioform_mj.outputs.fullstate import quat_of_rpy, rpy_of_quat
+from bioform_mj.outputs.fullstate import quat_of_rpy, quat_of_yaw, rpy_of_quat
 from bioform_mj.run.simulate import simulate
 from bioform_mj.scenario.loader import load
 
@@ -486,9 +486,9 @@ def test_many_chunk_bag_is_a_consistent_mcap(tmp_path):
 
 def test_planar_quaternions_have_the_general_formulas_bits():
     """quat_of_rpy with every roll and pitch +0.0 computes only the yaw's cosine and sine (the ideal plant, the
-    leader, the estimates: outputs/rosbag.py's templates): its bits, signed zeros included, are those of the
-    four products of cr, sr, cp, sp, cy, sy computed here from scratch; -0.0 or a nonzero roll or pitch takes
-    the general products."""
+    leader, the estimates: outputs/rosbag.py's templates; quat_of_yaw): its bits, signed zeros included, are
+    those of the four products of cr, sr, cp, sp, cy, sy computed here from scratch; -0.0 or a nonzero roll or
+    pitch takes the general products."""
     rng = np.random.default_rng(7)
     special = [
         0.0,
@@ -531,6 +531,13 @@ def test_planar_quaternions_have_the_general_formulas_bits():
             got, want = quat_of_rpy(rpy), general(rpy)
             assert got.shape == want.shape == (*rpy.shape[:-1], 4)
             assert np.array_equal(got.view(np.uint64), want.view(np.uint64))
+        planar = np.stack([np.zeros_like(yaw), np.zeros_like(yaw), yaw], axis=-1)
+        for one in (yaw, yaw.reshape(-1, 1)[:, [0, 0]], yaw[3]):  # quat_of_yaw (the headings), one yaw too
+            want = general(np.stack([np.zeros_like(one), np.zeros_like(one), one], axis=-1))
+            assert np.array_equal(quat_of_yaw(one).view(np.uint64), want.view(np.uint64))
+        tiny = planar.copy()
+        tiny[:, 0] = 5e-324  # its half is +0.0: the general products, the same bits as the planar ones
+        assert np.array_equal(quat_of_rpy(tiny).view(np.uint64), general(planar).view(np.uint64))
     # yaw/2 = 0.05, 2, -2, -0, 3.5: cos(yaw/2) > 0, < 0, < 0, > 0, < 0; sin's sign bit clear, clear, set, set, set
     q = quat_of_rpy(np.stack([np.zeros(5), np.zeros(5), [0.1, 4.0, -4.0, -0.0, 7.0]], axis=-1))
     assert np.signbit(q[:, 1]).tolist() == [False, True, False, False, False]  # x = (+0·cy) − (+0·sy)
