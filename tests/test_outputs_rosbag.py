@@ -601,3 +601,30 @@ def test_number_sources_and_the_compiled_pass_write_numpys_bytes():
             b = np.frombuffer(np.asarray(vals[j0 + r : j0 + r + 1], dtype=dt).tobytes(), np.uint8)
             want[r * B + d : r * B + d + b.size] = b
     assert np.array_equal(buf, want)
+
+
+def test_reserve_allocates_the_blocks_and_leaves_the_size(tmp_path):
+    """outputs/rosbag_write.reserve: the blocks of the bytes to come are allocated (Linux, where the file
+    system supports fallocate) and the file's size is what was written, before and after the writes."""
+    import os
+    import sys
+
+    from bioform_mj.outputs.rosbag_write import _fallocate, reserve
+
+    fn = _fallocate()
+    assert (fn is not None) == sys.platform.startswith("linux")
+    supported = False
+    if fn is not None:  # does this file system allocate? (ext4, xfs, btrfs, tmpfs do)
+        with open(tmp_path / "probe", "xb") as g:
+            supported = fn(g.fileno(), 1, 0, 4096) == 0
+    data = bytes(range(256)) * 4096  # 1 MiB
+    with open(tmp_path / "f", "xb") as f:
+        f.write(b"head")
+        reserve(f, len(data))
+        f.flush()
+        st = os.fstat(f.fileno())
+        assert st.st_size == 4
+        if supported:
+            assert st.st_blocks * 512 >= len(data)  # the MiB's blocks, before a byte of it is written
+        f.write(data)
+    assert (tmp_path / "f").read_bytes() == b"head" + data

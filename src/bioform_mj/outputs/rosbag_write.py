@@ -253,10 +253,13 @@ class FullChunk:
 def _fallocate() -> Any:
     """libc's ``fallocate`` (Linux), else None."""
     import ctypes
+    import sys
 
+    if not sys.platform.startswith("linux"):  # its mode flags are Linux's
+        return None
     try:
         libc = ctypes.CDLL(None, use_errno=True)
-    except OSError:  # pragma: no cover - no C library to load by name (Windows)
+    except (OSError, TypeError):  # pragma: no cover - no C library to load by name (Windows: TypeError)
         return None
     fn = getattr(libc, "fallocate64", None) or getattr(libc, "fallocate", None)
     if fn is not None:
