@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from bioform_mj.cli.main import main
-from bioform_mj.outputs.fullstate import quat_of_rpy, rpy_of_quat
+from bioform_mj.outputs.fullstate import quat_of_rpy, quat_of_yaw, rpy_of_quat
 from bioform_mj.run.simulate import simulate
 from bioform_mj.scenario.loader import load
 
@@ -486,9 +486,9 @@ def test_many_chunk_bag_is_a_consistent_mcap(tmp_path):
 
 def test_planar_quaternions_have_the_general_formulas_bits():
     """quat_of_rpy with every roll and pitch +0.0 computes only the yaw's cosine and sine (the ideal plant, the
-    leader, the estimates: outputs/rosbag.py's templates): its bits, signed zeros included, are those of the
-    four products of cr, sr, cp, sp, cy, sy computed here from scratch; -0.0 or a nonzero roll or pitch takes
-    the general products."""
+    leader, the estimates: outputs/rosbag.py's templates; quat_of_yaw): its bits, signed zeros included, are
+    those of the four products of cr, sr, cp, sp, cy, sy computed here from scratch; -0.0 or a nonzero roll or
+    pitch takes the general products."""
     rng = np.random.default_rng(7)
     special = [
         0.0,
@@ -531,6 +531,13 @@ def test_planar_quaternions_have_the_general_formulas_bits():
             got, want = quat_of_rpy(rpy), general(rpy)
             assert got.shape == want.shape == (*rpy.shape[:-1], 4)
             assert np.array_equal(got.view(np.uint64), want.view(np.uint64))
+        planar = np.stack([np.zeros_like(yaw), np.zeros_like(yaw), yaw], axis=-1)
+        for one in (yaw, yaw.reshape(-1, 1)[:, [0, 0]], yaw[3]):  # quat_of_yaw (the headings), one yaw too
+            want = general(np.stack([np.zeros_like(one), np.zeros_like(one), one], axis=-1))
+            assert np.array_equal(quat_of_yaw(one).view(np.uint64), want.view(np.uint64))
+        tiny = planar.copy()
+        tiny[:, 0] = 5e-324  # its half is +0.0: the general products, the same bits as the planar ones
+        assert np.array_equal(quat_of_rpy(tiny).view(np.uint64), general(planar).view(np.uint64))
     # yaw/2 = 0.05, 2, -2, -0, 3.5: cos(yaw/2) > 0, < 0, < 0, > 0, < 0; sin's sign bit clear, clear, set, set, set
     q = quat_of_rpy(np.stack([np.zeros(5), np.zeros(5), [0.1, 4.0, -4.0, -0.0, 7.0]], axis=-1))
     assert np.signbit(q[:, 1]).tolist() == [False, True, False, False, False]  # x = (+0·cy) − (+0·sy)
@@ -538,13 +545,14 @@ def test_planar_quaternions_have_the_general_formulas_bits():
     assert np.signbit(q[:, 3]).tolist() == [False, False, True, True, True]  # z = sy − (+0·cy)
 
 
-def test_number_pool_and_the_compiled_pass_write_numpys_bytes():
-    """The bulk writer's numbers (outputs/rosbag_write.py: number_pool, Numbers, and the compiled pass
+def test_number_sources_and_the_compiled_pass_write_numpys_bytes():
+    """The bulk writer's numbers (outputs/rosbag_write.py: number_sources, Numbers, and the compiled pass
     outputs/rosbag_kernel.py: place): each field's values land at its (unaligned) byte offset in each
     sample's row as np.asarray(values, dtype).tobytes() gives them, for <f8, <u8, <i4 (wrapping) and <u4,
-    from selections of C-contiguous arrays (read in place: no copy), a Fortran-ordered and a big-endian
-    array, float32 and int32 values, a reversed slice; nothing else in the buffer changes."""
-    from bioform_mj.outputs.rosbag_write import Numbers, number_pool
+    from selections of C-contiguous arrays (read in place, at their elements' addresses: no copy), a
+    Fortran-ordered and a big-endian array, float32 and int32 values, a reversed slice (copies); nothing
+    else in the buffer changes."""
+    from bioform_mj.outputs.rosbag_write import Numbers, number_sources
 
     rng = np.random.default_rng(3)
     S = 50
@@ -571,13 +579,20 @@ def test_number_pool_and_the_compiled_pass_write_numpys_bytes():
     ]
     values = [(dt, a[idx] if idx else a, (a, idx)) for dt, a, idx in fields]
     K = 40
-    pool, src, step = number_pool([v[0] for v in values], [v[1] for v in values], [v[2] for v in values], K)
-    assert step[0] == 18 and src[1] - src[0] == 6 + 3  # pose's own words, in place
-    assert (src[2], step[2]) == (src[0] - 8 + 36, 18)  # [2:, 0, 0]: element (2, 0, 0) of pose
+    keep, addr, step = number_sources([v[0] for v in values], [v[1] for v in values], [v[2] for v in values], K)
+    at = pose.ctypes.data
+    assert (addr[0], step[0]) == (at + 8 * (6 + 2), 8 * 18)  # pose's own words, in place: [:, 1, 2]
+    assert (addr[2], step[2]) == (at + 8 * 36, 8 * 18)  # [2:, 0, 0]: element (2, 0, 0) of pose
+    assert (addr[3], step[3]) == (stamps.ctypes.data, 8)
+    assert any(a is pose for a in keep) and any(a is stamps for a in keep)
+    lies_in = [[a for a in keep if a.ctypes.data <= x < a.ctypes.data + a.nbytes] for x in addr]
+    assert all(len(k) == 1 for k in lies_in)  # every address in one array the numbers hold
+    copied = [k for k, (dt, a, idx) in enumerate(fields) if not any(b is a for b in lies_in[k])]
+    assert copied == [6, 7, 8, 9, 10]  # Fortran, big-endian, float32, int32, reversed: converted copies
     B, rows, j0 = 1 + 8 * len(fields) + 13, 7, 30
     dst = [1 + 9 * k for k in range(len(fields))]  # every offset odd: unaligned
     wide = [np.dtype(dt).itemsize == 8 for dt, _, _ in values]
-    numbers = Numbers(pool, src, step, dst, np.full(len(dst), B), wide)
+    numbers = Numbers(keep, addr, step, dst, np.full(len(dst), B), wide)
     buf = np.full(rows * B + 5, 0xA5, np.uint8)
     numbers.fill(buf, j0, rows - 1)
     want = np.full(rows * B + 5, 0xA5, np.uint8)
@@ -586,3 +601,30 @@ def test_number_pool_and_the_compiled_pass_write_numpys_bytes():
             b = np.frombuffer(np.asarray(vals[j0 + r : j0 + r + 1], dtype=dt).tobytes(), np.uint8)
             want[r * B + d : r * B + d + b.size] = b
     assert np.array_equal(buf, want)
+
+
+def test_reserve_allocates_the_blocks_and_leaves_the_size(tmp_path):
+    """outputs/rosbag_write.reserve: the blocks of the bytes to come are allocated (Linux, where the file
+    system supports fallocate) and the file's size is what was written, before and after the writes."""
+    import os
+    import sys
+
+    from bioform_mj.outputs.rosbag_write import _fallocate, reserve
+
+    fn = _fallocate()
+    assert (fn is not None) == sys.platform.startswith("linux")
+    supported = False
+    if fn is not None:  # does this file system allocate? (ext4, xfs, btrfs, tmpfs do)
+        with open(tmp_path / "probe", "xb") as g:
+            supported = fn(g.fileno(), 1, 0, 4096) == 0
+    data = bytes(range(256)) * 4096  # 1 MiB
+    with open(tmp_path / "f", "xb") as f:
+        f.write(b"head")
+        reserve(f, len(data))
+        f.flush()
+        st = os.fstat(f.fileno())
+        assert st.st_size == 4
+        if supported:
+            assert st.st_blocks * 512 >= len(data)  # the MiB's blocks, before a byte of it is written
+        f.write(data)
+    assert (tmp_path / "f").read_bytes() == b"head" + data

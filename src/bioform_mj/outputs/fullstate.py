@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["STATE_CHANNELS", "STATE_STATICS", "StateSampler", "rpy_of_quat", "quat_of_rpy"]
+__all__ = ["STATE_CHANNELS", "STATE_STATICS", "StateSampler", "rpy_of_quat", "quat_of_rpy", "quat_of_yaw"]
 
 #: The channels :class:`StateSampler` adds to the log: name → (trailing shape, meaning). Rows are the
 #: log rows' times and then the end of the run (``K + 1`` rows; ``n`` = followers).
@@ -63,12 +63,11 @@ def quat_of_rpy(rpy: np.ndarray) -> np.ndarray:
     Where every roll and pitch is +0.0 (a planar robot, a heading) only the yaw's
     cosine and sine are computed: the products below with ``cos(+0) = 1`` and ``sin(+0) = +0`` put in, the
     same operations on the same numbers (the same bits, signed zeros included), a third of the time."""
-    h = np.asarray(rpy, dtype=float) * 0.5
-    r, p, y = np.moveaxis(h, -1, 0)
-    if h.size and not (r.any() or p.any() or np.signbit(r).any() or np.signbit(p).any()):
-        cy, sy = np.cos(y), np.sin(y)  # the same strided arrays as below: the same values
-        z0c, z0s = 0.0 * cy, 0.0 * sy  # sr·cp·cy = cr·sp·cy = (+0)·cy; sr·sp·sy = cr·sp·sy = (+0)·sy
-        return np.stack([1.0 * cy + z0s, z0c - z0s, z0c + z0s, 1.0 * sy - z0c], axis=-1)
+    a = np.asarray(rpy, dtype=float)
+    r, p = a[..., 0], a[..., 1]  # +0.0 exactly where their halves are (or both halves are +0.0: the same bits)
+    if a.size and not (r.any() or p.any() or np.signbit(r).any() or np.signbit(p).any()):
+        return quat_of_yaw(a[..., 2])
+    r, p, y = np.moveaxis(a * 0.5, -1, 0)
     cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
     return np.stack(
         [
@@ -79,6 +78,25 @@ def quat_of_rpy(rpy: np.ndarray) -> np.ndarray:
         ],
         axis=-1,
     )
+
+
+def quat_of_yaw(yaw: np.ndarray) -> np.ndarray:
+    """:func:`quat_of_rpy` of ``[+0.0, +0.0, yaw]`` (yaw (...,) rad; quaternions (..., 4) ``[w, x, y, z]``),
+    the same bits: the general formulas' products with ``cos(+0) = 1`` and ``sin(+0) = +0`` put in, the same
+    operations on the same numbers (signed zeros included), written into the result (the half yaw in its
+    last column, a strided array as in the general formulas): no temporaries beyond the cosine and sine."""
+    q = np.empty((*np.shape(yaw), 4))
+    w, x, y, z = (q[..., k] for k in range(4))
+    np.multiply(np.asarray(yaw, dtype=float), 0.5, out=z)
+    cy, sy = np.cos(z, out=np.empty(z.shape)), np.sin(z, out=np.empty(z.shape))  # arrays, also for one yaw
+    np.multiply(1.0, cy, out=w)
+    np.multiply(1.0, sy, out=z)
+    z0c, z0s = np.multiply(0.0, cy, out=cy), np.multiply(0.0, sy, out=sy)  # sr·cp·cy = cr·sp·cy = (+0)·cy; …
+    np.add(w, z0s, out=w)  # cr·cp·cy + sr·sp·sy
+    np.subtract(z0c, z0s, out=x)  # sr·cp·cy − cr·sp·sy
+    np.add(z0c, z0s, out=y)  # cr·sp·cy + sr·cp·sy
+    np.subtract(z, z0c, out=z)  # cr·cp·sy − sr·sp·cy
+    return q
 
 
 class StateSampler:

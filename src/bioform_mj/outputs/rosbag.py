@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.core.errors import InputError
-from bioform_mj.outputs.fullstate import quat_of_rpy
+from bioform_mj.outputs.fullstate import quat_of_rpy, quat_of_yaw
 from bioform_mj.outputs.rosbag_write import MSG_HEAD, bulk_writer
 
 __all__ = ["DISTROS", "DEFAULT_DISTRO", "BagInfo", "check_available", "warm_up", "write_bag", "topics_of"]
@@ -174,7 +174,7 @@ class _Topic:
 class _Markers:
     """Marker values for the fields of a template message, and the rows' values they stand for: each a
     1-D selection ``a[idx]`` of an array ``a`` (kept with it: the writer reads the numbers from ``a``
-    itself, :func:`bioform_mj.outputs.rosbag_write.number_pool`)."""
+    itself, :func:`bioform_mj.outputs.rosbag_write.number_sources`)."""
 
     def __init__(self) -> None:
         self.items: list[tuple[bytes, str, np.ndarray, tuple[np.ndarray, tuple]]] = []
@@ -338,11 +338,9 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
     odo = sensing == "odometry"
     op, ov = (np.asarray(log["odom_pose"], float), np.asarray(log["odom_vel"], float)) if odo else (None, None)
     # the headings' quaternions (the leader's; each follower's estimate of it and, with odometry, its own
-    # dead reckoning): one call of quat_of_rpy for all, each a row block of its result
+    # dead reckoning): one call of quat_of_yaw for all, each a row block of its result
     yaws = [leader[:, 2]] + [ep[:, i, 2] for i in range(n)] + ([op[:, i, 2] for i in range(n)] if odo else [])
-    rpy = np.zeros((sum(len(y) for y in yaws), 3))
-    rpy[:, 2] = np.concatenate(yaws)
-    heads = quat_of_rpy(rpy)
+    heads = quat_of_yaw(np.concatenate(yaws))
     lq = heads[:S]
     eqs = [heads[S + i * K : S + (i + 1) * K] for i in range(n)]
     oqs = [heads[S + (n + i) * K : S + (n + i + 1) * K] for i in range(n)] if odo else []
