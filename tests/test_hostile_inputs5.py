@@ -13,6 +13,8 @@ wheels do not stand on the floor"."""
 from __future__ import annotations
 
 import io
+import math
+import os
 import tomllib
 from pathlib import Path
 
@@ -208,3 +210,158 @@ def test_init_jitter_bound_follows_from_the_scene():
     with pytest.raises(InputError, match="formation.init_jitter"):
         bioform_mj.load("paper", overrides=[f"formation.init_jitter={lim - far!r}"])
     bioform_mj.load("paper", overrides=[f"formation.init_jitter={lim - far!r}", f"limits.position={2 * lim!r}"])
+
+
+# ------------------------------------------------------------------ part B: the newest surfaces (trust5)
+HDR = ",".join(["time"] + [f"{j}_wheel.{f}" for j in ("left", "right") for f in ("position", "velocity", "effort")])
+
+
+def _rows(n: int, t=lambda k: 0.01 * k, effort: str = "0.01", extra: str = "") -> str:
+    return "".join(f"{t(k)!r},{0.001 * k!r},0.1,{effort},{0.001 * k!r},0.1,{effort}{extra}\n" for k in range(n))
+
+
+def _js_bag(path: Path, names: list[str], n: int = 20) -> Path:
+    """A rosbag2 folder (MCAP) of ``n`` JointState messages naming ``names``, 10 ms apart."""
+    pytest.importorskip("rosbags")
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    T = ts.types
+    js_t, header, stamp = T["sensor_msgs/msg/JointState"], T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        c = w.add_connection("/joint_states", js_t.__msgtype__, typestore=ts)
+        for k in range(n):
+            ns = 10**18 + k * 10**7
+            m = len(names)
+            msg = js_t(
+                header=header(stamp=stamp(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=""),
+                name=names,
+                position=np.full(m, 0.001 * k),
+                velocity=np.full(m, 0.1),
+                effort=np.full(m, 0.01),
+            )
+            w.write(c, ns, ts.serialize_cdr(msg, js_t.__msgtype__))
+    return path
+
+
+def _recording_case(name: str, t: Path) -> tuple[list[str], str]:
+    out = ["--out", str(t / "out")]
+    if name == "bag-joint-named-twice":  # the first entry was taken silently (exit 0)
+        bag = _js_bag(t / "bag", ["left_wheel", "left_wheel", "right_wheel"])
+        return ["robot", "replay", "tb3", "--bag", str(bag), *out], "names joint 'left_wheel' 2 times"
+    if name == "bag-100000-joint-names":  # the error line listed every name (989 kB)
+        bag = _js_bag(t / "bag", [f"j{i}" for i in range(100_000)], n=2)
+        return ["robot", "replay", "tb3", "--bag", str(bag), *out], "'j19' and 99980 more)"
+    if name == "csv-column-twice":  # the last one was taken silently
+        (t / "r.csv").write_text(HDR + ",left_wheel.effort\n" + _rows(300, extra=",5"))
+        return ["robot", "replay", "tb3", "--bag", str(t / "r.csv"), *out], "column 'left_wheel.effort' appears 2 times"
+    if name == "csv-time-nan":  # an internal error (ValueError: cannot convert float NaN to integer)
+        (t / "r.csv").write_text(HDR + "\n" + _rows(300, t=lambda k: math.nan if k == 5 else 0.01 * k))
+        return ["robot", "replay", "tb3", "--bag", str(t / "r.csv"), *out], "the joint states at message 6 is nan"
+    if name == "csv-100000-columns":  # every column was listed (10^7: a line of 119 MB, 26 s)
+        (t / "r.csv").write_text(",".join(f"c{i}" for i in range(100_000)) + "\n1\n")
+        return ["robot", "replay", "tb3", "--bag", str(t / "r.csv"), *out], "'c19' and 99980 more)"
+    if name == "csv-replay-of-3e5-s":  # MemoryError: 2.23 GiB for the replay's times (an internal error)
+        (t / "r.csv").write_text(HDR + "\n" + _rows(300, t=lambda k: 1000.0 * k))
+        return ["robot", "replay", "tb3", "--bag", str(t / "r.csv"), *out], "replay a shorter window"
+    if name == "xacro-arg-of-100000-characters":  # echoed whole in the error line
+        from test_robots_urdf import diff_drive
+
+        ns = 'xmlns:xacro="http://www.ros.org/wiki/xacro"'
+        text = diff_drive().replace('<robot name="dd">', f'<robot name="dd" {ns}><xacro:arg name="m" default="x"/>')
+        (t / "dd.urdf.xacro").write_text(text.replace('"0.2"', '"$(arg m)"', 1))
+        argv = ["robot", "check", str(t / "dd.urdf.xacro"), "--xacro", "--xacro-arg", "m=" + "1" * 100_000]
+        return argv, "more characters not shown]"
+    if name == "sweep-bags-a-symlink":  # to /: the sweep's bag was written into / (here a folder beside it)
+        (t / "sw").mkdir()
+        (t / "elsewhere").mkdir()
+        os.symlink(t / "elsewhere", t / "sw" / "bags")
+        (t / "s.toml").write_text(IDEAL)
+        return ["sweep", str(t / "s.toml"), "--seeds", "1", "--rosbag", "--out", str(t / "sw")], (
+            f"its 'bags' is a symlink (to '{t / 'elsewhere'}')"
+        )
+    raise AssertionError(name)
+
+
+RECORDING_CASES = [  # robot replay reads a recording as robot fit does, without importing mujoco.sysid (10 s cold)
+    "bag-joint-named-twice",
+    "bag-100000-joint-names",
+    "csv-column-twice",
+    "csv-time-nan",
+    "csv-100000-columns",
+    "csv-replay-of-3e5-s",
+    "xacro-arg-of-100000-characters",
+    "sweep-bags-a-symlink",
+]
+
+
+@pytest.mark.parametrize("name", RECORDING_CASES)
+def test_newest_surfaces_one_bounded_error_line(name, tmp_path, capsys):
+    argv, want = _recording_case(name, tmp_path)
+    before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    code = cli.main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    errors = [e for e in err if e.startswith("error:")]
+    assert code == 2 and len(errors) == 1, (code, err)
+    assert want in errors[0] and len(errors[0]) <= 4100, errors[0][:300]
+    assert not any("Traceback" in e or "internal error" in e for e in err), err
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == before  # nothing written
+
+
+def test_csv_keeps_only_the_columns_it_uses(tmp_path):
+    """10^5 extra columns beside the needed ones: the recording holds the 7 it reads, equal to the file's numbers,
+    and the read's peak memory stays below 30 MB (each row was kept whole as Python floats: 12 rows of 10^7 columns
+    took 3.8 GB)."""
+    import tracemalloc
+
+    from bioform_mj.robots.realdata.recording import read_recording
+
+    pad = "," * 100_000
+    (tmp_path / "r.csv").write_text(HDR + pad + "\n" + _rows(20, extra=pad))
+    tracemalloc.start()
+    try:
+        rec = read_recording(tmp_path / "r.csv", ("left_wheel", "right_wheel"))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 30e6, peak  # 2 million floats kept were ~64 MB; a row's strings in flight are ~6 MB
+    assert np.allclose(rec.t, 0.01 * np.arange(20), atol=1e-12)
+    assert np.allclose(rec.position[:, 1], 0.001 * np.arange(20)) and np.all(rec.effort == 0.01)
+
+
+def test_randomize_refuses_starts_beyond_the_limit_and_non_numbers():
+    """``randomize["position"]`` of ±1e12 m reset into episodes that ended at their first step; strings and
+    booleans were taken as numbers; ``10**400`` was an ``OverflowError``. The bound: ``limits.position`` less the
+    farthest nominal start coordinate (the paper's, computed here)."""
+    from bioform_mj.envs.randomize import Randomization
+    from bioform_mj.scenario.loader import load
+
+    base = load("paper")
+    far = float(np.max(np.abs(np.array(base.formation.initial_poses)[:, :2])))
+    room = base.limits.position - far
+    Randomization({"position": (-0.999 * room, 0.999 * room)}, base, 1.0)
+    for bad, want in [
+        ((-room, 0.0), "beyond limits.position = 10000 m"),
+        (("0", "1"), "a range (low, high) of two numbers, got ('0', '1')"),
+        ((False, True), "two numbers, got (False, True)"),
+        ((0, 10**400), "two numbers, got (0, 1000"),
+        ((0, 10**5000), "got a number too large to write"),
+    ]:
+        with pytest.raises(ValueError, match=None) as exc:
+            Randomization({"position": bad}, base, 1.0)
+        assert want in str(exc.value), str(exc.value)
+
+
+@pytest.mark.slow
+def test_fit_of_efforts_far_beyond_the_robot_is_one_error_line(tmp_path, capsys):
+    """Efforts of 1e308 N·m in a CSV: the simulated chunks went NaN and mujoco.sysid's "times must be strictly
+    increasing" was an internal error (exit 1). Slow: ``robot fit`` imports mujoco.sysid (10 s cold here)."""
+    pytest.importorskip("tabulate")  # mujoco.sysid's dependency (the 'fit' extra)
+    (tmp_path / "r.csv").write_text(HDR + "\n" + _rows(300, effort="1e308"))
+    out = tmp_path / "out"
+    assert cli.main(["robot", "fit", "tb3", "--bag", str(tmp_path / "r.csv"), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    errors = [e for e in err if e.startswith("error:")]
+    assert len(errors) == 1 and "gives no usable trajectory" in errors[0] and "1e+308" in errors[0], err
+    assert not out.exists()

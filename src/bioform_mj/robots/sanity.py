@@ -302,9 +302,16 @@ _UNSAFE_WHY = (
 )
 
 
+#: longest line :func:`one_line` gives, characters: a 100,000-character ``--xacro-arg`` value was echoed whole in
+#: its error line, a CSV header of 10^7 columns made a line of 119 MB (trust5)
+LINE_MAX = 4000
+
+
 def one_line(text: str) -> str:
     """``text`` with its control and bidirectional-format characters escaped (``\\n``, ``\\u202e``): one line of
-    output that reads as stored, whatever a name holds."""
+    output that reads as stored, whatever a name holds; at most :data:`LINE_MAX` characters (the rest counted)."""
+    if len(text) > LINE_MAX:
+        text = f"{text[: LINE_MAX - 60]} … [{len(text) - LINE_MAX + 60} more characters not shown]"
     return escape_unsafe(text)
 
 
