@@ -245,6 +245,28 @@ def _js_bag(path: Path, names: list[str], n: int = 20) -> Path:
     return path
 
 
+def _custom_data(bag: Path, text: str) -> None:
+    """Put ``text`` (indented YAML lines) as the ``custom_data`` of ``bag``'s ``metadata.yaml``."""
+    meta = (bag / "metadata.yaml").read_text()
+    assert "  custom_data: null\n" in meta
+    (bag / "metadata.yaml").write_text(meta.replace("  custom_data: null\n", "  custom_data:\n" + text))
+
+
+def test_bag_metadata_alias_bomb_refused_unexpanded(tmp_path):
+    """Ten lines of YAML aliases in ``custom_data`` stand for 9^10 strings: ``robot fit`` hung past 120 s (the
+    bioform CLI in a subprocess, killed). The metadata is scanned as tokens before the reader parses it: refused.
+    (Called on the check itself: on code without it, the reader would hang this test.)"""
+    from bioform_mj.robots.realdata.recording import _check_metadata
+
+    bag = _js_bag(tmp_path / "bag", ["left_wheel", "right_wheel"])
+    _check_metadata(bag / "metadata.yaml")  # rosbag2's own file passes
+    bomb = "    b0: &a0 [" + ",".join(['"xxxxxxxxxx"'] * 9) + "]\n"
+    bomb += "".join(f"    b{i}: &a{i} [" + ",".join([f"*a{i - 1}"] * 9) + "]\n" for i in range(1, 10))
+    _custom_data(bag, bomb)
+    with pytest.raises(InputError, match=r"YAML anchors/aliases \(&name, \*name\), which rosbag2 never writes"):
+        _check_metadata(bag / "metadata.yaml")
+
+
 def _recording_case(name: str, t: Path) -> tuple[list[str], str]:
     out = ["--out", str(t / "out")]
     if name == "bag-joint-named-twice":  # the first entry was taken silently (exit 0)
@@ -253,6 +275,10 @@ def _recording_case(name: str, t: Path) -> tuple[list[str], str]:
     if name == "bag-100000-joint-names":  # the error line listed every name (989 kB)
         bag = _js_bag(t / "bag", [f"j{i}" for i in range(100_000)], n=2)
         return ["robot", "replay", "tb3", "--bag", str(bag), *out], "'j19' and 99980 more)"
+    if name == "bag-metadata-of-17-mb":  # parsed whole (300 MB: 12 s); the alias bomb below hung
+        bag = _js_bag(t / "bag", ["left_wheel", "right_wheel"])
+        _custom_data(bag, "    x: '" + "y" * 17_000_000 + "'\n")
+        return ["robot", "replay", "tb3", "--bag", str(bag), *out], "above the 16 MB a rosbag2 metadata file may be"
     if name == "csv-column-twice":  # the last one was taken silently
         (t / "r.csv").write_text(HDR + ",left_wheel.effort\n" + _rows(300, extra=",5"))
         return ["robot", "replay", "tb3", "--bag", str(t / "r.csv"), *out], "column 'left_wheel.effort' appears 2 times"
@@ -287,6 +313,7 @@ def _recording_case(name: str, t: Path) -> tuple[list[str], str]:
 RECORDING_CASES = [  # robot replay reads a recording as robot fit does, without importing mujoco.sysid (10 s cold)
     "bag-joint-named-twice",
     "bag-100000-joint-names",
+    "bag-metadata-of-17-mb",
     "csv-column-twice",
     "csv-time-nan",
     "csv-100000-columns",

@@ -232,7 +232,41 @@ def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics | N
             raise InputError(f"--bag {p}: {why}")
     if p.is_file() and p.suffix.lower() == ".csv":
         return _validate(_read_csv(p, joints))
+    if p.is_dir():
+        _check_metadata(p / "metadata.yaml")
     return _validate(_read_bag(p, joints, topics or Topics()))
+
+
+#: largest rosbag2 ``metadata.yaml`` read, MB (rosbag2 writes a few kB; the YAML is parsed whole)
+METADATA_MAX_MB = 16
+
+
+def _check_metadata(meta: Path) -> None:
+    """Refuse a rosbag2 folder's ``metadata.yaml`` above :data:`METADATA_MAX_MB` MB or holding YAML aliases
+    (``*name``): rosbag2 writes none, and nine lines of them in ``custom_data`` expand to 9^10 strings (the read
+    hung past 120 s, trust5). Scanned as tokens, nothing built."""
+    if not meta.is_file():
+        return  # the reader says what is missing
+    if (size := meta.stat().st_size) > METADATA_MAX_MB * 10**6:
+        raise InputError(f"{meta}: {size / 1e6:.0f} MB, above the {METADATA_MAX_MB} MB a rosbag2 metadata file may be")
+    try:  # ruamel.yaml: rosbags' own YAML library (the ros extra)
+        from ruamel.yaml import YAML
+        from ruamel.yaml.error import YAMLError
+        from ruamel.yaml.tokens import AliasToken, AnchorToken
+    except ImportError:  # pragma: no cover - without the extra the reader says what to install
+        return
+    try:
+        with open(meta, encoding="utf-8") as fh:
+            for tok in YAML(typ="safe", pure=True).scan(fh):
+                if isinstance(tok, (AliasToken, AnchorToken)):
+                    raise InputError(
+                        f"{meta}: YAML anchors/aliases (&name, *name), which rosbag2 never writes: a few lines of them "
+                        "can expand to gigabytes; not read"
+                    )
+    except YAMLError as exc:
+        raise InputError(f"{meta}: not YAML ({' '.join(str(exc).split())[:200]})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{meta}: cannot read ({exc})") from None
 
 
 # ------------------------------------------------------------------ rosbag2 / MCAP
@@ -388,8 +422,8 @@ def _custom_data(reader: object) -> dict[str, str]:
     for r in getattr(reader, "readers", []):
         inner = getattr(r, "storage", r)  # rosbags 0.11: the rosbag2 reader behind AnyReader's
         custom = getattr(getattr(inner, "metadata", None), "custom", None)
-        if isinstance(custom, dict):
-            out.update({str(k): str(v) for k, v in custom.items()})
+        if isinstance(custom, dict):  # rosbag2's custom_data is string to string: anything else is ignored
+            out.update({k: v for k, v in custom.items() if isinstance(k, str) and isinstance(v, str)})
     return out
 
 
