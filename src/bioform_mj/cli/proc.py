@@ -11,7 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
 
-from bioform_mj.core.errors import InputError, Interrupted
+from bioform_mj.core.errors import UNSAFE_TEXT, InputError, Interrupted, escape_unsafe
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
@@ -22,6 +22,8 @@ class _PipeSafe:
     to None): on the first ``OSError`` of a write the stream's descriptor is pointed at
     ``/dev/null`` (as Python's documentation of SIGPIPE recommends) and every later write is
     dropped, so the command goes on writing its files and exits with its own code (design §17).
+    A control or bidirectional-format character other than tab, newline and carriage return
+    (:data:`~bioform_mj.core.errors.UNSAFE_TEXT`: U+202E, ESC) is written escaped (``\\u202e``).
     A closed pipe is silence, as Unix tools do; any other error (``error``) is said on stderr at
     the end, if stderr still works. Everything else is the wrapped stream's."""
 
@@ -33,8 +35,8 @@ class _PipeSafe:
 
     def write(self, text: str) -> int:
         if not self.broken:
-            try:
-                return self._stream.write(text)
+            try:  # bidi/format and control characters of names escaped, as one_line does (issue 28)
+                return self._stream.write(escape_unsafe(text, keep="\t\n\r") if UNSAFE_TEXT.search(text) else text)
             except OSError as exc:
                 self._break(exc)
         return len(text)

@@ -1,14 +1,31 @@
 """Exception types shared by the library and the CLI.
 
 Each maps to one exit code of the ``bioform`` command (design §10): input errors
-exit 2 with a single ``error:`` line, a diverging simulation exits 3.
+exit 2 with a single ``error:`` line, a diverging simulation exits 3. :data:`UNSAFE_TEXT` and
+:func:`escape_unsafe`: the characters of a name that would change how a line of output reads.
 """
 
 from __future__ import annotations
 
 import contextlib
+import re
 import warnings
 from collections.abc import Iterator
+
+#: characters of a user's text (a joint, body or robot name, a scenario string) that change how a line of output
+#: reads: the C0 and C1 control characters and DEL (a newline in a joint name forged ``error:`` lines, issue 28),
+#: and Unicode's bidirectional and invisible format characters (U+202E, the right-to-left override, shows
+#: ``wheel_left`` as ``tfel_leehw``; U+2028 is a line break; U+200B is invisible). Refused in names a robot file
+#: or a scenario gives, escaped (``\\u202e``) wherever such text is printed or written into a text file.
+UNSAFE_TEXT = re.compile(
+    "[\x00-\x1f\x7f-\x9f\u061c\u200b-\u200f\u2028-\u202e\u2060-\u2064\u2066-\u206f\ufeff\ufff9-\ufffb]"
+)
+
+
+def escape_unsafe(text: str, keep: str = "") -> str:
+    """``text`` with each :data:`UNSAFE_TEXT` character not in ``keep`` escaped as Python writes it (``\\n``,
+    ``\\x85``, ``\\u202e``): one line that reads as it is stored."""
+    return UNSAFE_TEXT.sub(lambda m: m.group() if m.group() in keep else repr(m.group())[1:-1], text)
 
 
 class BioformError(Exception):

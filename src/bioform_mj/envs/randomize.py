@@ -100,11 +100,19 @@ class Randomization:
         for key, rng in spec.items():
             if key not in KEYS:
                 raise ValueError(f"unknown randomisation key {key!r} (expected one of: {', '.join(KEYS)})")
-            try:
+            try:  # strings and booleans were taken as numbers, 10**400 an OverflowError (issue 28)
+                if isinstance(rng, (str, bytes)) or any(isinstance(v, (bool, str, bytes)) for v in rng):
+                    raise TypeError
                 lo, hi = (float(v) for v in rng)
-            except (TypeError, ValueError):
-                msg = f"randomize[{key!r}] must be a range (low, high) of two numbers, got {rng!r}"
-                raise ValueError(msg) from None
+            except (TypeError, ValueError, OverflowError):
+                try:
+                    shown = repr(rng)
+                    shown = shown if len(shown) <= 80 else shown[:60] + "…"
+                except ValueError:  # an int of more than 4300 digits has no repr
+                    shown = "a number too large to write"
+                raise ValueError(
+                    f"randomize[{key!r}] must be a range (low, high) of two numbers, got {shown}"
+                ) from None
             if not (math.isfinite(lo) and math.isfinite(hi)):
                 raise ValueError(f"randomize[{key!r}] must be finite, got ({lo!r}, {hi!r})")
             if lo > hi:
@@ -118,6 +126,14 @@ class Randomization:
                 raise ValueError("randomize['friction'] needs plant.kind = mujoco (the ideal plant has no friction)")
             if key == "friction" and lo < 0:
                 raise ValueError(f"randomize['friction'] must be >= 0, got low {lo:g}")
+            if key == "position":  # a start beyond the divergence guard ended every episode at its first step
+                far = float(np.max(np.abs(np.array(base.formation.initial_poses, float).reshape(-1, 3)[:, :2])))
+                far += base.formation.init_jitter + max(abs(lo), abs(hi))
+                if far >= base.limits.position:
+                    raise ValueError(
+                        f"randomize['position'] ({lo:g}, {hi:g}) m can put a start at |x| or |y| = {far:g} m, beyond "
+                        f"limits.position = {base.limits.position:g} m (every episode would end at its first step)"
+                    )
             for v in (lo, hi):  # each bound as the scenario's checks (load's) see it
                 try:
                     if key in SCENARIO_KEYS:

@@ -272,7 +272,8 @@ SWEEP_ENTRIES = frozenset(
 def check_sweep_dir(out: Path) -> None:
     """InputError (exit 2) when ``out`` holds another kind of run (a run's ``summary.json``, a calibration)
     or anything a sweep does not write (:data:`SWEEP_ENTRIES`): a sweep folder holds a sweep (design §16).
-    ``--out`` a symlink to ``/`` wrote the sweep's tables into the root folder (issue 28)."""
+    ``--out`` a symlink to ``/`` wrote the sweep's tables into the root folder (issue 28), and its ``bags`` a
+    symlink to ``/`` the sweep's bags: a sweep's own entries must not be symlinks (``runs``, ``bags``: folders)."""
     if out.is_dir():
         names = sorted(os.listdir(out))
         other = [n for n in names if n in KNOWN_FILES]
@@ -288,3 +289,11 @@ def check_sweep_dir(out: Path) -> None:
                 f"sweep directory '{out}' holds files that are not a sweep's ({shown}); choose an empty, new or "
                 "sweep folder (nothing there is deleted)"
             )
+        for n in sorted(set(names) & SWEEP_ENTRIES):  # bags -> / wrote a sweep's bag into the root folder (trust5)
+            p = out / n
+            if p.is_symlink() or (n in ("runs", "bags") and not p.is_dir()):
+                what = f"a symlink (to '{os.readlink(p)}')" if p.is_symlink() else "not a folder"
+                raise InputError(
+                    f"sweep directory '{out}': its '{n}' is {what}; a sweep writes only into its own folders "
+                    "(choose an empty or new folder; nothing there is deleted)"
+                )

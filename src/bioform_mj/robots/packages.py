@@ -95,8 +95,9 @@ def find_package(name: str, packages: PackagePath = _NO_PACKAGES, near: Path | N
     ``BIOFORM_PACKAGE_PATH`` (``:``-separated ``NAME=DIR`` or ``DIR`` entries, a ``DIR`` read as in
     ``ROS_PACKAGE_PATH``), ``ROS_PACKAGE_PATH`` (``:``-separated directories, each the package
     itself or a folder holding packages), ``AMENT_PREFIX_PATH`` (``PREFIX/share/NAME``, ROS 2), and
-    last the parent folders of ``near`` (the URDF file: ``NAME/urdf/robot.urdf``) — a guess,
-    said by the caller. An empty name (``package:///etc/passwd``) resolves to nothing: the root folder's name is
+    last the parent folders of ``near`` (the URDF file: one whose ``package.xml`` names ``name``, or the file's own
+    package folder by its name, ``NAME/urdf/robot.urdf``: :func:`_parent_package`) — a guess, said by the caller.
+    An empty name (``package:///etc/passwd``) resolves to nothing: the root folder's name is
     empty, so the parent-folder guess took ``/`` as the package and a robot file read any file (issue 28).
     """
     if not name or name in (".", ".."):
@@ -121,11 +122,25 @@ def find_package(name: str, packages: PackagePath = _NO_PACKAGES, near: Path | N
         hit = Path(entry).expanduser() / "share" / name
         if hit.is_dir():
             return hit.resolve(), f"AMENT_PREFIX_PATH {entry}"
-    if near is not None:
-        for d in Path(near).resolve().parents:
-            if d.name == name or ((d / "package.xml").is_file() and _package_name(d) == name):
-                return d, "a parent folder of the URDF file"
+    if near is not None and (d := _parent_package(Path(near).resolve(), name)) is not None:
+        return d, "a parent folder of the URDF file"
     return None, ""
+
+
+def _parent_package(urdf: Path, name: str) -> Path | None:
+    """The parent folder of ``urdf`` that is package ``name`` (None: none is): a parent folder whose
+    ``package.xml`` names ``name``, or the robot's own package folder named ``name`` — the nearest parent
+    holding a ``package.xml``, or without one the ROS layout ``NAME/urdf/robot.urdf`` (the file's folder
+    ``urdf``, or the file's folder itself). Any parent folder named ``name`` had matched: a URDF anywhere
+    under ``/root`` resolved ``package://root/…`` in ``/root`` (issue 28)."""
+    parents = list(urdf.parents)
+    own = next((d for d in parents if (d / "package.xml").exists()), None)
+    for d in parents:
+        if (d / "package.xml").is_file() and _package_name(d) == name:
+            return d
+    if own is None:  # no package.xml above the file: NAME/urdf/robot.urdf or NAME/robot.urdf
+        own = parents[1] if len(parents) > 1 and parents[0].name == "urdf" else parents[0]
+    return own if own.name == name else None
 
 
 _URI = re.compile(r"^(?P<scheme>[A-Za-z][A-Za-z0-9+.-]*)://(?P<rest>.*)$")

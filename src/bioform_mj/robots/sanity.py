@@ -16,8 +16,9 @@ naming the file and the element:
   cannot be (a moving link's mass, an axis, a scale);
 - :func:`model_value_problem`: the same on a compiled ``MjModel`` (an MJCF robot), its ``<option>`` too
   (:func:`option_problem`: a timestep > 0, finite gravity, bounded solver iterations);
-- names (URDF and MJCF) that hold a control character are refused (:func:`one_line` escapes them in
-  output that names what a user wrote);
+- names (URDF and MJCF) that hold a control character or a bidirectional/invisible format character
+  (:data:`~bioform_mj.core.errors.UNSAFE_TEXT`: a newline, U+202E) are refused (:func:`one_line` escapes them
+  in output that names what a user wrote);
 - :func:`check_step_budget`: a timestep that would make automatic work (robot check, identification)
   take longer than :data:`CHECK_BOUND_S` s, refused with the estimate;
 - :class:`StepPace`: the same bound on the measured wall time of the steps taken so far (a robot whose
@@ -28,7 +29,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
 import stat
 import time
 import xml.etree.ElementTree as ET
@@ -36,7 +36,7 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
-from bioform_mj.core.errors import InputError
+from bioform_mj.core.errors import UNSAFE_TEXT, InputError, escape_unsafe
 
 __all__ = [
     "unstatable",
@@ -225,10 +225,7 @@ def urdf_value_problem(robot: ET.Element) -> str:
     for el in robot.iter():
         name = el.get("name")
         if name is not None and _CONTROL.search(name):
-            return (
-                f"<{el.tag} name={name!r}>: a name holds a control character (a newline would forge lines of "
-                "bioform's output); rename it"
-            )
+            return f"<{el.tag} name={escape_unsafe(repr(name))}>: {_UNSAFE_WHY}; rename it"
     moving = {
         (j.find("child").get("link") if j.find("child") is not None else None)
         for j in robot.findall("joint")
@@ -296,19 +293,32 @@ def urdf_value_problem(robot: ET.Element) -> str:
     return ""
 
 
-#: control characters (a newline in a name forged ``error:`` lines of a run that exits 0, issue 28)
-_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+#: control and bidirectional/format characters (a newline in a name forged ``error:`` lines of a run that exits 0;
+#: U+202E shows a name reversed; issue 28): the one definition is :data:`bioform_mj.core.errors.UNSAFE_TEXT`
+_CONTROL = UNSAFE_TEXT
+_UNSAFE_WHY = (
+    "a name holds a control character or a bidirectional-format one (a newline would forge lines of bioform's output, "
+    "U+202E shows it reversed)"
+)
+
+
+#: longest line :func:`one_line` gives, characters: a 100,000-character ``--xacro-arg`` value was echoed whole in
+#: its error line, a CSV header of 10^7 columns made a line of 119 MB (trust5)
+LINE_MAX = 4000
 
 
 def one_line(text: str) -> str:
-    """``text`` with its control characters escaped (``\\n``): one line of output, whatever a name holds."""
-    return _CONTROL.sub(lambda m: repr(m.group())[1:-1], text)
+    """``text`` with its control and bidirectional-format characters escaped (``\\n``, ``\\u202e``): one line of
+    output that reads as stored, whatever a name holds; at most :data:`LINE_MAX` characters (the rest counted)."""
+    if len(text) > LINE_MAX:
+        text = f"{text[: LINE_MAX - 60]} … [{len(text) - LINE_MAX + 60} more characters not shown]"
+    return escape_unsafe(text)
 
 
 def model_value_problem(model: Any) -> str:
     """The first bad number of a compiled ``MjModel`` (an MJCF robot), naming the body, joint or geom
     (``""``: none): masses and inertias finite and >= 0, joint axes finite and not zero, friction
-    finite and >= 0, mesh scales finite."""
+    finite and >= 0, mesh scales finite, every keyframe's numbers finite (named; an unnamed one by its index)."""
     import mujoco
     import numpy as np
 
@@ -320,9 +330,7 @@ def model_value_problem(model: Any) -> str:
     for raw in bytes(model.names).split(b"\0"):  # every element name of the model
         text = raw.decode("utf-8", "replace")
         if _CONTROL.search(text):
-            return (
-                f"name {text!r} holds a control character (a newline would forge lines of bioform's output); rename it"
-            )
+            return f"name {escape_unsafe(repr(text))}: {_UNSAFE_WHY}; rename it"
 
     for b in range(1, model.nbody):
         if not (np.isfinite(model.body_mass[b]) and model.body_mass[b] >= 0):
@@ -337,6 +345,12 @@ def model_value_problem(model: Any) -> str:
         fr = model.geom_friction[g]
         if not (np.all(np.isfinite(fr)) and np.all(fr >= 0)):
             return f"geom '{name(mujoco.mjtObj.mjOBJ_GEOM, g)}': friction {fr.tolist()} (finite numbers >= 0)"
+    for k in range(model.nkey):  # a NaN keyframe passed with MuJoCo's warning only (issue 28)
+        for field in ("time", "qpos", "qvel", "act", "ctrl", "mpos", "mquat"):
+            v = np.atleast_1d(getattr(model, f"key_{field}")[k])
+            if not np.all(np.isfinite(v)):
+                shown = " ".join(f"{x:g}" for x in v[:12]) + (" …" if v.size > 12 else "")
+                return f"keyframe '{name(mujoco.mjtObj.mjOBJ_KEY, k)}': {field} '{shown}' (finite numbers)"
     for m in range(model.nmesh):
         sc = model.mesh_scale[m] if hasattr(model, "mesh_scale") else np.ones(3)
         if not np.all(np.isfinite(sc)):
@@ -350,6 +364,15 @@ def model_value_problem(model: Any) -> str:
     return ""
 
 
+#: least downward gravity of a robot file's ``<option>``, m/s² (a thousandth of the Earth's): a differential-drive
+#: robot moves by its wheels' friction, which its weight presses on the floor; without gravity (0, pointing up,
+#: disabled) the robot check quoted a weight of 240 N it did not have, and the wheels could not drive (issue 28)
+MIN_GRAVITY = 9.81e-3
+_NO_WEIGHT = (
+    "the robot has no weight here: its wheels drive by friction, which needs gravity pressing them on the floor "
+    "(MuJoCo's default is 0 0 -9.81)"
+)
+
 #: most iterations a robot file's ``<option>`` may ask of one physics step's solvers (MuJoCo's defaults: 100
 #: solver, 50 line search, 0 noslip, 35 CCD, 10 SDF); with a tolerance of 0, 10^9 of them made one step of
 #: ``robot check`` run past 45 s (issue 28)
@@ -360,7 +383,8 @@ def option_problem(opt: Any) -> str:
     """The first bad number of a compiled model's ``<option>`` (``""``: none): a timestep finite and > 0
     (0, a negative or NaN one was an internal error); gravity, wind and the magnetic field finite; density,
     viscosity, the tolerances finite and >= 0, impratio finite and > 0; the solvers' iteration counts at most
-    :data:`MAX_SOLVER_ITERATIONS` (each step could otherwise run for minutes)."""
+    :data:`MAX_SOLVER_ITERATIONS` (each step could otherwise run for minutes); gravity enabled and pulling down
+    by at least :data:`MIN_GRAVITY` (the wheels drive by friction)."""
     import numpy as np
 
     def shown(v: Any) -> str:
@@ -371,6 +395,12 @@ def option_problem(opt: Any) -> str:
     for k in ("gravity", "wind", "magnetic"):
         if not np.all(np.isfinite(getattr(opt, k))):
             return f"<option {k}='{shown(getattr(opt, k))}'>: must be finite numbers"
+    import mujoco
+
+    if opt.disableflags & int(mujoco.mjtDisableBit.mjDSBL_GRAVITY):
+        return f"<option><flag gravity='disable'>: gravity must act: {_NO_WEIGHT}"
+    if not -opt.gravity[2] >= MIN_GRAVITY:
+        return f"<option gravity='{shown(opt.gravity)}'>: must pull down (z <= -{MIN_GRAVITY:g} m/s²): {_NO_WEIGHT}"
     for k in ("density", "viscosity", "tolerance", "ls_tolerance", "noslip_tolerance", "ccd_tolerance"):
         v = float(getattr(opt, k, 0.0))
         if not (math.isfinite(v) and v >= 0):

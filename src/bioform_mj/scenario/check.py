@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from bioform_mj.control.registry import is_registered, unknown_method
-from bioform_mj.core.errors import GraphError, ScenarioError
+from bioform_mj.core.errors import UNSAFE_TEXT, GraphError, ScenarioError, escape_unsafe
 from bioform_mj.formation.obstacles import validate as _validate_obstacles
 from bioform_mj.formation.safety import validate as _validate_safety
 from bioform_mj.scenario.config import (
@@ -275,6 +275,7 @@ def validate(sc: Scenario) -> None:
     lim = sc.limits
     for key in ("speed", "position", "torque"):
         _positive(f"limits.{key}", getattr(lim, key))
+    _validate_start(sc)
 
     for i, ev in enumerate(sc.events):
         key = f"events[{i}]"
@@ -364,6 +365,25 @@ def _validate_sensing(sc: Scenario) -> None:
             )
 
 
+def _validate_start(sc: Scenario) -> None:
+    """The followers' starts, jitter included, within ``limits.position`` (the divergence guard's bound on ``|x|``
+    and ``|y|``, m): ``formation.init_jitter = 1e12`` was a run diverged at t = 0 (exit 3, issue 28). The bound
+    is the worst draw's: the farthest nominal start coordinate plus the jitter, whatever the seed."""
+    f, lim = sc.formation, float(sc.limits.position)
+    p = np.array(f.initial_poses, dtype=float).reshape(-1, 3)
+    far = float(np.max(np.abs(p[:, :2]))) if p.size else 0.0
+    if not far < lim:
+        raise ScenarioError(
+            "formation.initial_poses", f"a start at |x| or |y| = {far:g} m is beyond limits.position = {lim:g} m"
+        )
+    if far + f.init_jitter >= lim:
+        raise ScenarioError(
+            "formation.init_jitter",
+            f"{f.init_jitter:g} m can put a start at |x| or |y| = {far + f.init_jitter:g} m, beyond limits.position = "
+            f"{lim:g} m (the run would stop as diverged at t = 0); here it must be below {lim - far:g} m",
+        )
+
+
 def _validate_text(sc: Scenario) -> None:
     """``name`` becomes the default output folder ``runs/<name>-<plant>-<method>``: a plain file name."""
     name = sc.name
@@ -374,12 +394,12 @@ def _validate_text(sc: Scenario) -> None:
         bad = "contains a path separator or NUL; it names the output folder under runs/ and must be a plain file name"
     elif name.startswith("."):
         bad = "starts with '.'; it names the output folder under runs/ and must be a plain, visible file name"
-    elif any(ord(c) < 32 or ord(c) == 127 for c in name):
-        bad = "contains a control character"
+    elif UNSAFE_TEXT.search(name):  # a newline, or U+202E showing the name reversed (issue 28)
+        bad = "contains a control character or a bidirectional-format one"
     elif len(name) > MAX_NAME:
         bad = f"is longer than {MAX_NAME} characters"
     if bad:
-        raise ScenarioError("name", f"{bad}, got {name!r}")
+        raise ScenarioError("name", f"{bad}, got {escape_unsafe(repr(name))}")
     if "\x00" in sc.description:
         raise ScenarioError("description", "contains a NUL character")
 

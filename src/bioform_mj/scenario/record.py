@@ -15,6 +15,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from bioform_mj.core.errors import UNSAFE_TEXT
 from bioform_mj.robots.refs import is_shipped
 from bioform_mj.scenario.config import Scenario
 
@@ -57,7 +58,8 @@ def _value(v: Any) -> str:
             return "inf" if v > 0 else "-inf"
         return repr(v)  # the shortest text that reads back to the same float
     if isinstance(v, str):
-        return json.dumps(v, ensure_ascii=False)  # JSON's escapes are TOML basic-string escapes
+        # JSON's escapes are TOML basic-string escapes; bidi/format characters escaped too (\u202e, issue 28)
+        return UNSAFE_TEXT.sub(lambda m: f"\\u{ord(m.group()):04x}", json.dumps(v, ensure_ascii=False))
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_value(x) for x in v) + "]"
     if isinstance(v, dict):

@@ -461,7 +461,17 @@ def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int):
         return sysid.apply_param_modifiers(p, robot.spec)
 
     def one(x: np.ndarray, params) -> np.ndarray:
-        res, _, _ = sysid.model_residual(x, params, build, trajs, modify_residual=modify_residual, n_threads=n_threads)
+        try:
+            res, _, _ = sysid.model_residual(
+                x, params, build, trajs, modify_residual=modify_residual, n_threads=n_threads
+            )
+        except ValueError as exc:  # a rollout gone NaN under efforts far beyond the robot: an internal error before
+            ctl = [np.asarray(getattr(c, "data", c), float) for c in chunks.controls]
+            emax = max((float(np.max(np.abs(c))) for c in ctl if c.size), default=0.0)
+            raise InputError(
+                f"the robot simulated under the recording's efforts (up to {emax:.3g} in the motors' units) gives "
+                f"no usable trajectory ({exc}): do the efforts fit this robot file (N·m at the wheel, its motors)?"
+            ) from None
         return np.asarray(res).ravel()
 
     def fn(x, params, **_):

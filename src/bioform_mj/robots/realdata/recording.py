@@ -155,6 +155,27 @@ class Recording:
         )
 
 
+#: most names an error line lists (a JointState of 100,000 names, a CSV header of 10^7 columns: a line of 1 MB and of
+#: 119 MB before, issue 28)
+LIST_MAX = 20
+
+
+def _listed(names: list[str]) -> str:
+    """``names`` quoted and comma-separated, at most :data:`LIST_MAX` of them and how many more."""
+    shown = ", ".join(repr(n) for n in names[:LIST_MAX])
+    return shown + (f" and {len(names) - LIST_MAX} more" if len(names) > LIST_MAX else "")
+
+
+def _twice(names: list[str]) -> str | None:
+    """The first name that ``names`` holds more than once (None: none does)."""
+    seen: set[str] = set()
+    for n in names:
+        if n in seen:
+            return n
+        seen.add(n)
+    return None
+
+
 def _check_stream(name: str, t: np.ndarray, what: str) -> None:
     """Time must not go backwards; raise naming the first place it does."""
     if len(t) > 1:
@@ -178,6 +199,10 @@ def _validate(rec: Recording) -> Recording:
     name = rec.source
     if len(rec.t) < 10:
         raise InputError(f"{name}: only {len(rec.t)} joint states of {rec.joints[0]}/{rec.joints[1]}: too short to fit")
+    for t, what in ((rec.t, "the joint states"), (rec.odom_t, "the odometry"), (rec.imu_t, "the IMU")):
+        if len(t) and not np.all(np.isfinite(t)):  # a NaN time passed the order check: an internal error later
+            k = int(np.flatnonzero(~np.isfinite(t))[0])
+            raise InputError(f"{name}: the time of {what} at message {k + 1} is {t[k]}: NaN or infinite")
     _check_stream(name, rec.t, "the joint states")
     _check_stream(name, rec.odom_t, "the odometry")
     _check_stream(name, rec.imu_t, "the IMU")
@@ -207,7 +232,41 @@ def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics | N
             raise InputError(f"--bag {p}: {why}")
     if p.is_file() and p.suffix.lower() == ".csv":
         return _validate(_read_csv(p, joints))
+    if p.is_dir():
+        _check_metadata(p / "metadata.yaml")
     return _validate(_read_bag(p, joints, topics or Topics()))
+
+
+#: largest rosbag2 ``metadata.yaml`` read, MB (rosbag2 writes a few kB; the YAML is parsed whole)
+METADATA_MAX_MB = 16
+
+
+def _check_metadata(meta: Path) -> None:
+    """Refuse a rosbag2 folder's ``metadata.yaml`` above :data:`METADATA_MAX_MB` MB or holding YAML aliases
+    (``*name``): rosbag2 writes none, and nine lines of them in ``custom_data`` expand to 9^10 strings (the read
+    hung past 120 s, trust5). Scanned as tokens, nothing built."""
+    if not meta.is_file():
+        return  # the reader says what is missing
+    if (size := meta.stat().st_size) > METADATA_MAX_MB * 10**6:
+        raise InputError(f"{meta}: {size / 1e6:.0f} MB, above the {METADATA_MAX_MB} MB a rosbag2 metadata file may be")
+    try:  # ruamel.yaml: rosbags' own YAML library (the ros extra)
+        from ruamel.yaml import YAML
+        from ruamel.yaml.error import YAMLError
+        from ruamel.yaml.tokens import AliasToken, AnchorToken
+    except ImportError:  # pragma: no cover - without the extra the reader says what to install
+        return
+    try:
+        with open(meta, encoding="utf-8") as fh:
+            for tok in YAML(typ="safe", pure=True).scan(fh):
+                if isinstance(tok, (AliasToken, AnchorToken)):
+                    raise InputError(
+                        f"{meta}: YAML anchors/aliases (&name, *name), which rosbag2 never writes: a few lines of them "
+                        "can expand to gigabytes; not read"
+                    )
+    except YAMLError as exc:
+        raise InputError(f"{meta}: not YAML ({' '.join(str(exc).split())[:200]})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{meta}: cannot read ({exc})") from None
 
 
 # ------------------------------------------------------------------ rosbag2 / MCAP
@@ -270,10 +329,16 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
                             if not names:
                                 continue
                             raise InputError(
-                                f"{name}: '{topics.joint_states}' has no joint {', '.join(repr(m) for m in missing)} "
-                                f"(it has: {', '.join(repr(n) for n in names)}); map the robot's wheels with "
+                                f"{name}: '{topics.joint_states}' has no joint {_listed(missing)} "
+                                f"(it has: {_listed(names)}); map the robot's wheels with "
                                 "--left-wheel/--right-wheel or name the recorded joints with --left-joint/--right-joint"
                             )
+                        for j in joints:  # two entries of one wheel: which is the wheel's? (taken silently before)
+                            if names.count(j) > 1:
+                                raise InputError(
+                                    f"{name}: '{topics.joint_states}' at t = {t:.6g} s names joint {j!r} "
+                                    f"{names.count(j)} times: which values are the wheel's is not known"
+                                )
                         idx = (names.index(joints[0]), names.index(joints[1]))
                     if len(msg.effort) == 0:  # a state-only message (an exporter's last sample at t = T)
                         no_effort += 1
@@ -357,8 +422,8 @@ def _custom_data(reader: object) -> dict[str, str]:
     for r in getattr(reader, "readers", []):
         inner = getattr(r, "storage", r)  # rosbags 0.11: the rosbag2 reader behind AnyReader's
         custom = getattr(getattr(inner, "metadata", None), "custom", None)
-        if isinstance(custom, dict):
-            out.update({str(k): str(v) for k, v in custom.items()})
+        if isinstance(custom, dict):  # rosbag2's custom_data is string to string: anything else is ignored
+            out.update({k: v for k, v in custom.items() if isinstance(k, str) and isinstance(v, str)})
     return out
 
 
@@ -436,11 +501,14 @@ def _read_csv(p: Path, joints: tuple[str, str]) -> Recording:
             missing = [c for c in need if c not in header]
             if missing:
                 raise InputError(
-                    f"{name}: no column {', '.join(repr(m) for m in missing)} (it has: "
-                    f"{', '.join(repr(h) for h in header)}); expected time, <joint>.position, <joint>.velocity, "
-                    "<joint>.effort for both wheel joints"
+                    f"{name}: no column {_listed(missing)} (it has: {_listed(header)}); expected time, "
+                    "<joint>.position, <joint>.velocity, <joint>.effort for both wheel joints"
                 )
-            col = {h: i for i, h in enumerate(header)}
+            used = [h for h in [*need, "odom.vx", "odom.wz", "imu.wz"] if h in header]
+            if (twice := _twice([h for h in header if h in used])) is not None:  # the last one was taken silently
+                raise InputError(f"{name}: column {twice!r} appears {header.count(twice)} times in the header")
+            keep = [header.index(h) for h in used]  # only these are converted and kept (10^7 columns: gigabytes)
+            col = {h: i for i, h in enumerate(used)}
             rows = []
             for k, row in enumerate(reader):
                 if not row:
@@ -448,7 +516,7 @@ def _read_csv(p: Path, joints: tuple[str, str]) -> Recording:
                 if len(row) != len(header):
                     raise InputError(f"{name}: line {k + 2} has {len(row)} fields, the header {len(header)}")
                 try:
-                    rows.append([float(x) if x.strip() else math.nan for x in row])
+                    rows.append([float(row[i]) if row[i].strip() else math.nan for i in keep])
                 except ValueError as exc:
                     raise InputError(f"{name}: line {k + 2}: {exc}") from None
     except OSError as exc:
@@ -457,7 +525,7 @@ def _read_csv(p: Path, joints: tuple[str, str]) -> Recording:
         raise InputError(f"{name}: not a text CSV file") from None
     except csv.Error as exc:  # a field above csv's limit (128 kB), a NUL byte: was an internal error (issue 28)
         raise InputError(f"{name}: not a CSV recording ({exc})") from None
-    a = np.asarray(rows, float).reshape(-1, len(header))
+    a = np.asarray(rows, float).reshape(-1, len(col))
     t = a[:, col["time"]]
 
     def pair(f: str) -> np.ndarray:

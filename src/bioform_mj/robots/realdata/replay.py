@@ -15,10 +15,34 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from bioform_mj.core.errors import InputError
 from bioform_mj.robots.realdata.recording import Recording
 from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state
 
-__all__ = ["replay", "compare", "plot_signals"]
+__all__ = ["replay", "check_replay", "compare", "plot_signals", "REPLAY_MAX_BYTES"]
+
+
+#: largest open-loop replay's arrays (the rolled-out states, sensors and controls of every physics step), bytes: a
+#: CSV spanning 3e5 s asked 2.2 GB for its times alone and ended in an internal MemoryError (issue 28)
+REPLAY_MAX_BYTES = 2**30
+
+
+def check_replay(model: mujoco.MjModel, rec: Recording) -> None:
+    """Refuse (:class:`InputError`) a replay of ``rec`` whose physics steps would take longer than the automatic
+    work's bound (:func:`~bioform_mj.robots.sanity.check_step_budget`) or whose arrays pass
+    :data:`REPLAY_MAX_BYTES`, before anything is allocated."""
+    from bioform_mj.robots.sanity import check_step_budget
+
+    dt = float(model.opt.timestep)
+    hint = "replay a shorter window of the recording"
+    check_step_budget(rec.duration, dt, f"{rec.source}: replaying {rec.duration:.3g} s", hint)
+    per_step = mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS) + model.nsensordata + model.nu + 4
+    need = rec.duration / dt * per_step * 8
+    if need > REPLAY_MAX_BYTES:
+        raise InputError(
+            f"{rec.source}: replaying {rec.duration:.3g} s at {dt:g} s a step needs about {need / 2**30:.3g} GiB, "
+            f"above the {REPLAY_MAX_BYTES / 2**30:g} GiB allowed; {hint}"
+        )
 
 
 def replay(robot: SimRobot, rec: Recording) -> dict[str, np.ndarray]:
@@ -30,6 +54,7 @@ def replay(robot: SimRobot, rec: Recording) -> dict[str, np.ndarray]:
     data = mujoco.MjData(model)
     state = initial_state(robot, model, rec.position[0], rec.velocity[:3].mean(axis=0))
     dt = float(model.opt.timestep)
+    check_replay(model, rec)
     n = int(rec.duration / dt)
     tt = np.arange(n) * dt
     ctrl = effort_to_ctrl(robot, model, rec.effort_at(tt))
