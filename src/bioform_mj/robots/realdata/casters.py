@@ -17,6 +17,7 @@ import mujoco
 import numpy as np
 
 from bioform_mj.core.errors import InputError
+from bioform_mj.robots.realdata.recording import Recording
 from bioform_mj.robots.realdata.simmodel import SimRobot
 
 __all__ = [
@@ -175,7 +176,7 @@ def frictionless_casters(model: mujoco.MjModel, geoms: list[str]) -> list[str]:
 
 def caster_start(
     robot: SimRobot,
-    rec,
+    rec: Recording,
     info: list,
     x0: np.ndarray,
     bounds: tuple[np.ndarray, np.ndarray],
@@ -212,7 +213,8 @@ def caster_start(
         f"weighted cost of {CASTER_WINDOW_S:g} s means: "
         + ", ".join(f"{mu:g}: {c:.3g}" for mu, c in profile)
         + f"), the fit started from {best[k] * info[k].scale:.3g}, then all parameters together with a "
-        f"finite-difference step of {CASTER_FD_STEP:g} (scaled) over the caster's chatter"
+        f"finite-difference step of {CASTER_FD_STEP:g} (scaled) over the caster's chatter; the costs in "
+        "fit.json's residual are of these means"
     )
     return best, best_cost, [note]
 
