@@ -180,13 +180,14 @@ def _caster_fit(tmp_path: Path, truth: rr.Truth, seed: int) -> dict:
 
 
 def _check_caster_fit(rep: dict, truth: rr.Truth) -> dict:
-    """Caster friction recovered within 10 % and its interval holding the truth; the mass within 5 %; no
-    parameter reported identified outside its tolerance (yaw inertia 5 %, wheels 10 %)."""
+    """Caster friction recovered within 10 % and its interval holding the truth; the mass within 5 %; every
+    parameter reported identified within its tolerance (yaw inertia and wheels 10 %: the chatter leaves the
+    yaw inertia's profile interval at ±22 %) and its 95 % interval holding the truth."""
     assert any("back_caster" in n and "condim 3" in n for n in rep["notes"])
     assert any(n.startswith("caster friction searched first on a grid") for n in rep["notes"])
     true = {
         "mass": (0.943 + truth.payload_kg, 0.05),
-        "yaw_inertia": (0.0020064 + truth.payload_yaw_kgm2, 0.05),
+        "yaw_inertia": (0.0020064 + truth.payload_yaw_kgm2, 0.10),
         "damping_L": (truth.damping[0], 0.10),
         "damping_R": (truth.damping[1], 0.10),
         "frictionloss_L": (truth.frictionloss[0], 0.10),
@@ -198,12 +199,13 @@ def _check_caster_fit(rep: dict, truth: rr.Truth) -> dict:
     for name, (value, tol) in true.items():
         p = got[name]
         assert p["status"] == "not identified" or abs(p["fitted"] - value) <= tol * value, (name, p)
+        assert p["status"] == "not identified" or p["ci95"][0] <= value <= p["ci95"][1], (name, p)
         assert p["status"] == "identified" or p["why"], p
+        assert p["ci95_method"].startswith("profile"), p
     caster = got["caster_friction"]
     assert caster["status"] == "identified", caster
     assert abs(caster["fitted"] - truth.caster_friction) <= 0.10 * truth.caster_friction, caster
     assert caster["ci95"][0] <= truth.caster_friction <= caster["ci95"][1], caster
-    assert caster["ci95_method"].startswith("profile")
     assert abs(got["mass"]["fitted"] - true["mass"][0]) <= 0.05 * true["mass"][0], got["mass"]
     return got
 

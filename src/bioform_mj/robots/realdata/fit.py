@@ -37,7 +37,8 @@ so with their correlation. A caster the file makes frictionless (``condim 1``) i
 friction acts (a note says so), and the optimiser starts from the best, by simulation, of the linear estimate
 and of a 1-D search over the caster's friction (:func:`~.casters.caster_start`: the rest regressed around each
 value). A sliding caster chatters, so where its friction is fitted the signals are compared as means over
-:data:`~.casters.CASTER_WINDOW_S` windows and the finite-difference step is :data:`~.casters.CASTER_FD_STEP`.
+:data:`~.casters.CASTER_WINDOW_S` windows, the finite-difference step is :data:`~.casters.CASTER_FD_STEP` and
+every interval and status comes from the cost's profile (:func:`~.casters.cost_profile`), not the Jacobian.
 
 The intervals come from a Jacobian, which means something only where the residual is smooth: the Jacobian is
 taken at two finite-difference steps (1× and 10×), and a parameter whose column differs by more than
@@ -63,12 +64,13 @@ from bioform_mj.robots.realdata.casters import (
     CASTER_FD_STEP,
     CASTER_WINDOW_S,
     caster_notes,
-    caster_profile,
     caster_regressor,
     caster_start,
+    cost_profile,
     frictionless_casters,
     profile_row,
     robot_casters,
+    window_means,
 )
 from bioform_mj.robots.realdata.intervals import autocorrelation_inflation, cluster_halfwidths
 from bioform_mj.robots.realdata.recording import Recording
@@ -213,20 +215,6 @@ def make_chunks(
             measured.append(TS(grid.copy(), _interp(t0 + grid, rec.t, meas_full), mapping))
         starts.append(t0)
     return Chunks(starts, states, controls, measured, weights, cols, length, window)
-
-
-def window_means(t: np.ndarray, y: np.ndarray, ends: np.ndarray, window: float) -> np.ndarray:
-    """Means of the rows of ``y`` (sampled at times ``t``, s) over the windows ``(end - window, end]``; a window
-    holding no sample takes the value interpolated at its middle."""
-    k = np.ceil((t - ends[0]) / window - 1e-9).astype(int)  # the window each sample falls in
-    ok = (k >= 0) & (k < len(ends)) & (t > ends[0] - window + 1e-12)
-    n = np.bincount(k[ok], minlength=len(ends)).astype(float)
-    out = np.stack([np.bincount(k[ok], y[ok, c], minlength=len(ends)) for c in range(y.shape[1])], 1).astype(float)
-    empty = n == 0
-    out[~empty] /= n[~empty, None]
-    if empty.any():
-        out[empty] = _interp(ends[empty] - 0.5 * window, t, y)
-    return out
 
 
 # ------------------------------------------------------------------ parameters
@@ -708,12 +696,18 @@ def fit(
                 "why": "; ".join(why),
             }
         )
-    if caster:  # its interval and status from the cost's profile, not the Jacobian (casters.caster_profile)
-        k = names.index("caster_friction")
+    if caster:  # the chatter: intervals and statuses from the cost's profiles, not the Jacobian (casters.py)
         cost = lambda z: float(np.sum(_flat(fn, z, opt) ** 2))  # noqa: E731
-        profile_row(rows[k], caster_profile(cost, x, k, info[k].scale, len(chunks.states), corr), misfit)
-        rough[k] = 0.0
+        for k, p in enumerate(info):
+            bounds = (float(lo[k]) * p.scale, float(hi[k]) * p.scale)
+            prof = cost_profile(cost, x, k, p.scale, len(chunks.states), corr, bounds)
+            profile_row(rows[k], prof, misfit)
+        rough[:] = 0.0
         opt.update_from_vector(x)
+        notes.append(
+            "every interval is from the profile of the cost of the 0.1 s means (ci95_method, profile), not the "
+            "Jacobian: a sliding caster's chatter makes the residual rough at a finite-difference step"
+        )
     if np.any(rough > ROUGH_JACOBIAN) and not misfit:
         notes.append(
             "the residual is not smooth in "
