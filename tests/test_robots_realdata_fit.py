@@ -272,6 +272,60 @@ def test_drive_program_holds_the_motions_that_tell_a_caster_from_wheel_friction(
     assert seen <= want, seen - want
 
 
+def test_window_means_average_the_samples_of_each_window():
+    """The caster fit compares 0.1 s means (a sliding caster chatters at ~50 Hz): per window ``(end - w, end]``
+    the mean of the samples in it; a window without a sample takes the value interpolated at its middle."""
+    from bioform_mj.robots.realdata.casters import window_means
+
+    t = np.arange(1, 21) * 0.01  # 0.01 ... 0.20 s
+    y = np.stack([t**2, -t], axis=1)
+    got = window_means(t, y, np.array([0.1, 0.2]), 0.1)
+    assert got[0] == pytest.approx([np.mean(t[:10] ** 2), -np.mean(t[:10])], abs=1e-15)
+    assert got[1] == pytest.approx([np.mean(t[10:] ** 2), -np.mean(t[10:])], abs=1e-15)
+    sparse = window_means(np.array([0.0, 1.0]), np.array([[0.0], [4.0]]), np.array([0.1, 0.2]), 0.1)
+    assert sparse[:, 0] == pytest.approx([0.2, 0.6])  # interpolated at 0.05 and 0.15 s
+
+
+def test_caster_profile_bounds_a_curved_cost_and_calls_a_flat_one_not_identified():
+    """Caster friction's interval comes from the cost's profile, the others held: stepped outwards until the
+    cost exceeds c* (1 + 3.84/(chunks - parameters)). Cost 1 + 100 (μ - 0.3)², 12 chunks, 2 parameters: the
+    threshold 1.384 is crossed at |μ - 0.3| = 0.062 (between the 0.05 and 0.1 steps, linear there: 0.0589);
+    correlated with the other parameter (ρ = 0.8) the interval widens by 1/sqrt(1 - ρ²). A cost flat on a side
+    gives no interval: not identified, said so."""
+    from bioform_mj.robots.realdata.casters import cost_profile, profile_row
+
+    def curved(z):
+        return 1.0 + 100.0 * (z[1] * 0.1 - 0.3) ** 2
+
+    x = np.array([1.0, 3.0])  # scaled: caster friction 0.3 at scale 0.1
+    prof = cost_profile(curved, x, 1, 0.1, 12, np.eye(2))
+    assert prof["threshold"] == pytest.approx(1.384)
+    assert prof["ci95"] == pytest.approx([0.3 - 0.0589333, 0.3 + 0.0589333], abs=1e-6)
+    assert abs(prof["ci95"][1] - 0.3 - 0.062) < 0.004  # the linear crossing against the exact one
+    wide = cost_profile(curved, x, 1, 0.1, 12, np.array([[1.0, 0.8], [0.8, 1.0]]))
+    assert wide["halfwidth"] == pytest.approx(0.0589333 / 0.6, abs=1e-6)
+    row = {"fitted": 0.3, "why": "the residual is not smooth in it (...)", "status": "not identified"}
+    profile_row(row, prof, misfit=False)
+    assert row["status"] == "identified" and row["why"] == "" and row["ci95_halfwidth"] == pytest.approx(0.0589333)
+    flat = cost_profile(lambda z: 1.0 + (z[1] * 0.1 < 0.25), x, 1, 0.1, 12, np.eye(2))  # flat above 0.25
+    assert flat["flat"] and flat["ci95"] is None
+    profile_row(row, flat, misfit=False)
+    assert row["status"] == "not identified" and row["why"].startswith("the cost is flat in it")
+    assert row["ci95"] is None and row["ci95_halfwidth"] is None
+    near0 = cost_profile(lambda z: 1.0 + 100.0 * (z[1] * 0.1) ** 2, np.array([1.0, 0.0]), 1, 0.1, 12, np.eye(2))
+    assert near0["ci95"][0] == 0.0 and near0["ci95"][1] == pytest.approx(0.0589333, abs=1e-6)  # bounded by μ = 0
+    lifted = cost_profile(lambda z: 1.0 + 100.0 * max(0.0, z[1] * 0.1 - 0.3) ** 2, x, 1, 0.1, 12, np.eye(2), (0.25, 1))
+    assert lifted["flat"]  # flat down to a search bound that is not 0 (a mass's quarter): no interval
+    # the 5 %-of-range rule holds only for a value whose interval reaches the range's lower bound (found near 0)
+    dry = {"fitted": 0.0027, "search_range": [0.0, 0.081], "why": ""}
+    profile_row(dry, {**prof, "ci95": [0.00046, 0.0055], "halfwidth": 0.0028}, misfit=False)
+    assert dry["status"] == "not identified" and "from its profile is wide" in dry["why"]
+    profile_row(dry, {**prof, "ci95": [0.0, 0.0055], "halfwidth": 0.0028}, misfit=False)
+    assert dry["status"] == "identified"
+    profile_row(row, prof, misfit=True)  # a model that misses the recording identifies nothing
+    assert row["status"] == "not identified"
+
+
 @pytest.mark.slow
 def test_fit_recovers_a_heavy_robots_payload_and_friction(tmp_path):
     """The paper robot (24.5 kg, CoM on the axle): +5 kg and +0.02 kg·m² payload, damping 0.05/0.04 N·m·s/rad,

@@ -168,35 +168,71 @@ def test_a_dragging_caster_is_named_and_nothing_is_reported_found(tmp_path):
     assert rep["unidentified"] == [p["name"] for p in rep["parameters"]]
 
 
-@pytest.mark.slow
-def test_a_dragging_caster_fitted_is_never_reported_found_off_the_truth(tmp_path):
-    """The same robot driven hard enough to move (0.08 N·m: pulses of 0.024–0.08 N·m), 24 s, with
-    ``--fit ...,caster_friction``. The file's caster is frictionless (condim 1): the notes say it is given
-    condim 3. With the caster dragging, the open-loop rollouts are chaotic (measured: a change of 1e-4 in its
-    friction moves the cost by 10 %; the Jacobian columns at 1x and 10x steps differ by 94-97 %; without that
-    check: every parameter identified at ±0.05 %, mass 0.943 against 1.243 kg, caster friction 0.2 against
-    0.3). Required: no parameter reported identified outside its tolerance (mass, yaw inertia 5 %, caster
-    friction 15 %, wheels 10 %); measured: all seven not identified, each for the roughness."""
-    truth = rr.Truth(**{**TRUTH.__dict__, "caster_friction": 0.3})
-    rr.record(tmp_path / "bag", "tb3", truth, duration=24.0, tau=0.08, seed=0)
+def _caster_fit(tmp_path: Path, truth: rr.Truth, seed: int) -> dict:
+    """``robot fit tb3 --fit ...,caster_friction`` of a 24 s recording at 0.08 N·m (pulses of 0.024-0.08 N·m)
+    of ``truth`` (program ``seed``); the optimiser's time budget lifted (a loaded machine must not change it)."""
+    rr.record(tmp_path / "bag", "tb3", truth, duration=24.0, tau=0.08, seed=seed)
     out = tmp_path / "fit"
     fit = "mass,yaw_inertia,damping,frictionloss,caster_friction"
     argv = ["robot", "fit", "tb3", "--bag", str(tmp_path / "bag"), "--out", str(out), "--fit", fit]
     assert cli.main([*argv, "--time-budget", "600"]) == 0
-    rep = json.loads((out / "fit.json").read_text())
+    return json.loads((out / "fit.json").read_text())
+
+
+def _check_caster_fit(rep: dict, truth: rr.Truth) -> dict:
+    """Caster friction recovered within 10 % and its interval holding the truth; the mass within 5 %; every
+    parameter reported identified within its tolerance (yaw inertia and wheels 10 %: the chatter leaves the
+    yaw inertia's profile interval at ±22 %) and its 95 % interval holding the truth."""
     assert any("back_caster" in n and "condim 3" in n for n in rep["notes"])
+    assert any(n.startswith("caster friction searched first on a grid") for n in rep["notes"])
     true = {
-        "mass": (0.943 + TRUTH.payload_kg, 0.05),
-        "yaw_inertia": (0.0020064 + TRUTH.payload_yaw_kgm2, 0.05),
-        "damping_L": (TRUTH.damping[0], 0.10),
-        "damping_R": (TRUTH.damping[1], 0.10),
-        "frictionloss_L": (TRUTH.frictionloss[0], 0.10),
-        "frictionloss_R": (TRUTH.frictionloss[1], 0.10),
-        "caster_friction": (0.3, 0.15),
+        "mass": (0.943 + truth.payload_kg, 0.05),
+        "yaw_inertia": (0.0020064 + truth.payload_yaw_kgm2, 0.10),
+        "damping_L": (truth.damping[0], 0.10),
+        "damping_R": (truth.damping[1], 0.10),
+        "frictionloss_L": (truth.frictionloss[0], 0.10),
+        "frictionloss_R": (truth.frictionloss[1], 0.10),
+        "caster_friction": (truth.caster_friction, 0.10),
     }
     got = {p["name"]: p for p in rep["parameters"]}
     assert set(got) == set(true)
     for name, (value, tol) in true.items():
         p = got[name]
         assert p["status"] == "not identified" or abs(p["fitted"] - value) <= tol * value, (name, p)
+        assert p["status"] == "not identified" or p["ci95"][0] <= value <= p["ci95"][1], (name, p)
         assert p["status"] == "identified" or p["why"], p
+        assert p["ci95_method"].startswith("profile"), p
+    caster = got["caster_friction"]
+    assert caster["status"] == "identified", caster
+    assert abs(caster["fitted"] - truth.caster_friction) <= 0.10 * truth.caster_friction, caster
+    assert caster["ci95"][0] <= truth.caster_friction <= caster["ci95"][1], caster
+    assert abs(got["mass"]["fitted"] - true["mass"][0]) <= 0.05 * true["mass"][0], got["mass"]
+    return got
+
+
+@pytest.mark.slow  # ~70 s CPU
+def test_a_dragging_caster_is_recovered(tmp_path):
+    """tb3 whose ball caster drags (sliding friction 0.3; the file's is frictionless, condim 1: the notes say it
+    is given condim 3), payload 0.3 kg. The sliding caster chatters (its contact opens 20-45 % of the time at
+    ~50 Hz), so samples of the wheel speeds are chaotic: before, the fit compared them, stalled at caster 0.2
+    and reported nothing found. Now it compares 0.1 s means and searches the caster's friction on a grid first:
+    measured caster 0.3048 (profile interval 0.280-0.324), mass 1.222 kg (1.147-1.293; truth 1.243), yaw
+    inertia +5.2 % (interval ±22 %), wheel damping within 6 %; the wheels' dry friction (traded against the
+    caster's, ±32 %) not identified."""
+    truth = rr.Truth(**{**TRUTH.__dict__, "caster_friction": 0.3})
+    _check_caster_fit(_caster_fit(tmp_path, truth, 0), truth)
+
+
+@pytest.mark.slow  # ~70 s CPU
+def test_a_dragging_caster_of_another_friction_and_mass_is_recovered(tmp_path):
+    """Caster friction 0.15, payload 0.5 kg and 0.0015 kg·m², other wheel damping and dry friction, another
+    program. Measured: caster 0.1509 (0.129-0.177; the grid's start was 0.05), mass 1.463 kg (1.338-1.597;
+    truth 1.443); frictionloss_R 0.0052 (0.0020-0.0084) not identified."""
+    truth = rr.Truth(
+        payload_kg=0.5,
+        payload_yaw_kgm2=0.0015,
+        damping=(0.003, 0.002),
+        frictionloss=(0.003, 0.005),
+        caster_friction=0.15,
+    )
+    _check_caster_fit(_caster_fit(tmp_path, truth, 3), truth)

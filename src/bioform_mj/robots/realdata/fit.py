@@ -35,7 +35,10 @@ carrying a share of the weight at rest, design §0); where the recording cannot 
 friction (both brake the robot alike when it drives straight; only turning sets them apart), the report says
 so with their correlation. A caster the file makes frictionless (``condim 1``) is given ``condim 3`` so that its
 friction acts (a note says so), and the optimiser starts from the best, by simulation, of the linear estimate
-and of :data:`CASTER_STARTS` (the caster's friction held, the rest regressed around it).
+and of a 1-D search over the caster's friction (:func:`~.casters.caster_start`: the rest regressed around each
+value). A sliding caster chatters, so where its friction is fitted the signals are compared as means over
+:data:`~.casters.CASTER_WINDOW_S` windows, the finite-difference step is :data:`~.casters.CASTER_FD_STEP` and
+every interval and status comes from the cost's profile (:func:`~.casters.cost_profile`), not the Jacobian.
 
 The intervals come from a Jacobian, which means something only where the residual is smooth: the Jacobian is
 taken at two finite-difference steps (1× and 10×), and a parameter whose column differs by more than
@@ -57,7 +60,18 @@ import numpy as np
 
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.layout import CONTACT_PRIORITY
-from bioform_mj.robots.realdata.casters import caster_notes, caster_regressor, frictionless_casters, robot_casters
+from bioform_mj.robots.realdata.casters import (
+    CASTER_FD_STEP,
+    CASTER_WINDOW_S,
+    caster_notes,
+    caster_regressor,
+    caster_start,
+    cost_profile,
+    frictionless_casters,
+    profile_row,
+    robot_casters,
+    window_means,
+)
 from bioform_mj.robots.realdata.intervals import autocorrelation_inflation, cluster_halfwidths
 from bioform_mj.robots.realdata.recording import Recording
 from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state
@@ -94,10 +108,6 @@ ROUGH_JACOBIAN = 0.8
 #: a recording whose largest wheel rim speed is below this (m/s) hardly moved the robot: measured 12.5 mm/s
 #: on a tb3 held by a dragging caster (0.025 N·m, program 5), 355 mm/s without the drag
 STILL_RIM_SPEED = 0.02
-#: caster frictions the staged start tries (the wheels regressed around each, the inertias regressed or
-#: published; the best by simulation). On the tb3 recording with a dragging caster (0.3), weighted costs with
-#: the published inertias 355 (0.1), 284 (0.2), 343 (0.4); with the regressed ones (mass 0.33 kg) 1054-3359
-CASTER_STARTS = (0.05, 0.1, 0.2, 0.3, 0.5)
 
 
 def _sysid():
@@ -126,6 +136,7 @@ class Chunks:
     weights: np.ndarray
     measured_cols: list[str]
     length: float
+    window: float = 0.0  # > 0: ``measured`` holds means over windows of this length (s), at each window's end
 
 
 def _interp(t: np.ndarray, tt: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -133,10 +144,17 @@ def _interp(t: np.ndarray, tt: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def make_chunks(
-    robot: SimRobot, model: mujoco.MjModel, rec: Recording, length: float = 2.0, max_chunks: int = 12
+    robot: SimRobot,
+    model: mujoco.MjModel,
+    rec: Recording,
+    length: float = 2.0,
+    max_chunks: int = 12,
+    window: float = 0.0,
 ) -> Chunks:
     """Cut ``rec`` into chunks of ``length`` s, at most ``max_chunks`` of them spread evenly (each starts from
-    the recorded state, so the open-loop drift of a long replay does not decide the fit)."""
+    the recorded state, so the open-loop drift of a long replay does not decide the fit). ``window`` > 0 (s):
+    the measured signals are the means of the recorded samples over consecutive windows of that length
+    (:func:`window_means`), not samples on the 50 Hz grid."""
     sysid = _sysid()
     TS = sysid.TimeSeries
     mapping = TS.compute_all_sensor_mapping(model)
@@ -190,9 +208,13 @@ def make_chunks(
         ct = np.arange(0, int(round(length / dt)) + 2) * dt
         ctrl = effort_to_ctrl(robot, model, rec.effort_at(t0 + ct))
         controls.append(TS(ct, ctrl, ctrl_map))
-        measured.append(TS(grid.copy(), _interp(t0 + grid, rec.t, meas_full), mapping))
+        if window > 0:
+            ends = np.arange(1, int(round(length / window)) + 1) * window
+            measured.append(TS(ends, window_means(rec.t - t0, meas_full, ends, window), mapping))
+        else:
+            measured.append(TS(grid.copy(), _interp(t0 + grid, rec.t, meas_full), mapping))
         starts.append(t0)
-    return Chunks(starts, states, controls, measured, weights, cols, length)
+    return Chunks(starts, states, controls, measured, weights, cols, length, window)
 
 
 # ------------------------------------------------------------------ parameters
@@ -341,7 +363,12 @@ def parameters(
 
 # ------------------------------------------------------------------ a starting point
 def initial_guess(
-    robot: SimRobot, rec: Recording, info: list[ParamInfo], pd, caster_mu: float | None = None
+    robot: SimRobot,
+    rec: Recording,
+    info: list[ParamInfo],
+    pd,
+    caster_mu: float | None = None,
+    smooth_s: float = 0.1,
 ) -> np.ndarray:
     """A starting point for the optimiser, from a linear regression on the recording (design §8, rolling
     without slip): per wheel ``τ_i = A u̇_i + B u̇_j + d_i u_i + f_i sign(u_i)`` with ``u`` the forward wheel
@@ -360,7 +387,7 @@ def initial_guess(
     lay = robot.layout
     sign = np.asarray(lay.wheel_sign, float)
     dt = float(np.median(np.diff(rec.t)))
-    win = max(5, int(round(0.1 / dt)) | 1)
+    win = max(5, int(round(smooth_s / dt)) | 1)  # Savitzky-Golay window: samples
     if len(rec.t) <= win + 2:
         return x
     u = savgol_filter(rec.velocity, win, 2, axis=0) * sign
@@ -453,7 +480,10 @@ def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int):
     w = chunks.weights
 
     def modify_residual(params, pred, meas, model, return_pred_all, state=None, **_):
-        p = pred.interpolate(meas.times)
+        if chunks.window > 0:  # the simulated signals' means over the measured windows
+            p = window_means(np.asarray(pred.times, float), np.asarray(pred.data, float), meas.times, chunks.window)
+        else:
+            p = pred.interpolate(meas.times)
         res = (meas.data - p) * w
         return res[:, w > 0], sysid.TimeSeries(meas.times, p, meas.signal_mapping), meas
 
@@ -504,7 +534,9 @@ def fit(
     progress = sys.stderr.isatty() if progress is None else progress
     pd, info = parameters(robot, rec, which, find_casters)
     model = robot.spec.compile()
-    chunks = make_chunks(robot, model, rec, chunk_s, max_chunks)
+    caster = "caster_friction" in pd.keys()  # its chatter: windowed means and a secant step (casters.py)
+    chunks = make_chunks(robot, model, rec, chunk_s, max_chunks, CASTER_WINDOW_S if caster else 0.0)
+    eps = CASTER_FD_STEP if caster else FD_STEP
     n_threads = max(1, min(len(chunks.states), __import__("os").cpu_count() or 1))
     fn = _residual_fn(robot, chunks, n_threads)
     x0 = pd.as_vector()
@@ -517,24 +549,26 @@ def fit(
     guess = initial_guess(robot, rec, info, pd)
     r_guess = _flat(fn, guess, pd)
     cost_guess = float(r_guess @ r_guess)
-    if "caster_friction" in pd.keys():  # staged: the caster's friction by simulation, the rest regressed around it
+    if caster:  # staged: a 1-D search over the caster's friction, the rest regressed around each value
+
+        def reset() -> None:
+            pd.update_from_vector(x0)
+            sysid.apply_param_modifiers(pd, robot.spec)
+
         notes += _caster_start_notes(robot, info, model)
-        inertias = [i for i, p in enumerate(info) if p.name in ("mass", "yaw_inertia")]
-        for mu in CASTER_STARTS:
-            g = initial_guess(robot, rec, info, pd, caster_mu=mu)
-            g_pub = g.copy()  # the regressed inertias are biased low where a dragging caster makes the robot chatter
-            g_pub[inertias] = np.clip(
-                x0[inertias], (lo + 1e-3 * (hi - lo))[inertias], (hi - 1e-3 * (hi - lo))[inertias]
-            )
-            for cand in (g, g_pub):
-                rg = _flat(fn, cand, pd)
-                if float(rg @ rg) < cost_guess:
-                    guess, cost_guess = cand, float(rg @ rg)
-        k = [p.name for p in info].index("caster_friction")
-        notes.append(
-            f"the fit started from caster friction {guess[k] * info[k].scale:.3g} (the best by simulation of the "
-            f"linear estimate and {', '.join(map(str, CASTER_STARTS))}, the wheels regressed around each)"
+        g, c, more = caster_start(
+            robot,
+            rec,
+            info,
+            x0,
+            (lo, hi),
+            lambda **kw: initial_guess(robot, rec, info, pd, **kw),
+            lambda x: float(np.sum(_flat(fn, x, pd) ** 2)),
+            reset,
         )
+        notes += more
+        if c < cost_guess:
+            guess, cost_guess = g, c
     if cost_guess <= cost_pub:
         start.update_from_vector(guess)
     else:  # the regression's model (no casters, no slip) was further off than the maker's numbers
@@ -572,7 +606,7 @@ def fit(
             verbose=False,
             max_iters=max_iters,
             iter_callback=report,
-            eps=FD_STEP,
+            eps=eps,
             xtol=X_TOL,
             output=io.StringIO(),  # the optimiser's own table: progress is report()'s one line on a terminal
         )
@@ -598,14 +632,14 @@ def fit(
             "excite the robot, or the model lacks what the robot does: slip, backlash, a motor's dynamics)"
         )
     # the Jacobian at the optimum by forward differences, all columns in one parallel rollout
-    h = FD_STEP * np.maximum(1.0, np.abs(x))
+    h = eps * np.maximum(1.0, np.abs(x))
     h = np.where(x + h > hi, -h, h)
     X = x[:, None] + np.diag(h)
     RX = _flat(fn, X, opt)
     J = (RX - r[:, None]) / h[None, :]
     # the same columns at a 10x step: where they differ, the residual is not smooth at this scale (open-loop
     # rollouts that are chaotic: stick-slip of a dragging caster) and J, hence every interval, means nothing
-    h2 = 10.0 * FD_STEP * np.maximum(1.0, np.abs(x))
+    h2 = 10.0 * eps * np.maximum(1.0, np.abs(x))
     h2 = np.where(x + h2 > hi, -h2, h2)
     J2 = (_flat(fn, x[:, None] + np.diag(h2), opt) - r[:, None]) / h2[None, :]
     big = np.maximum(np.linalg.norm(J, axis=0), np.linalg.norm(J2, axis=0))
@@ -671,6 +705,18 @@ def fit(
                 "correlated_with": partners,
                 "why": "; ".join(why),
             }
+        )
+    if caster:  # the chatter: intervals and statuses from the cost's profiles, not the Jacobian (casters.py)
+        cost = lambda z: float(np.sum(_flat(fn, z, opt) ** 2))  # noqa: E731
+        for k, p in enumerate(info):
+            bounds = (float(lo[k]) * p.scale, float(hi[k]) * p.scale)
+            prof = cost_profile(cost, x, k, p.scale, len(chunks.states), corr, bounds)
+            profile_row(rows[k], prof, misfit)
+        rough[:] = 0.0
+        opt.update_from_vector(x)
+        notes.append(
+            "every interval is from the profile of the cost of the 0.1 s means (ci95_method, profile), not the "
+            "Jacobian: a sliding caster's chatter makes the residual rough at a finite-difference step"
         )
     if np.any(rough > ROUGH_JACOBIAN) and not misfit:
         notes.append(
