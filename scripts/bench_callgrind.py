@@ -44,6 +44,7 @@ _EV = ("Ir", "I1mr", "D1mr", "Bcm")
 def inside(lib_path: str, preset: str, duration: float) -> None:
     """Under callgrind: record, then one bare replay and one closed loop, each between a zero and a dump."""
     import numpy as np
+    from numba.core.runtime import nrt
 
     from bioform_mj.core.errors import quiet_outcomes
     from bioform_mj.jobs.bench import record_run, replayer
@@ -61,6 +62,8 @@ def inside(lib_path: str, preset: str, duration: float) -> None:
         replay = replayer(plant, rc, rx)
         replay()  # both once untimed: kernels loaded, caches of the process warm
         loop_times(sc, 1, plant=plant)
+        addrs = [nrt.rtsys.library.get_pointer_to_function(f) for f in ("NRT_incref", "NRT_decref")]
+        Path(f"{lib_path}.nrt").write_text(" ".join(hex(a) for a in addrs))
         for tag in ("bare", "loop"):
             lib.cg_start()
             lib.cg_zero()
@@ -112,8 +115,9 @@ def parse(path: Path) -> tuple[dict[str, str], dict[str, list[int]], dict[tuple[
     return names, own, arcs
 
 
-def report(path: Path, tag: str) -> None:
-    """Per control step: the kernel that calls ``mj_step`` most, split into ``mj_step`` and the rest."""
+def report(path: Path, tag: str, nrt: tuple[int, int]) -> None:
+    """Per control step: the kernel that calls ``mj_step`` most, split into ``mj_step`` and the rest; and the calls
+    of numba's reference counting (``nrt``: the addresses of ``NRT_incref``, ``NRT_decref``) in the whole dump."""
     names, own, arcs = parse(path)
     step_ids = {i for i, n in names.items() if n == "mj_step"}
     callers = [(c, fn) for (fn, cf), (c, _) in arcs.items() if cf in step_ids]
@@ -133,12 +137,28 @@ def report(path: Path, tag: str) -> None:
     for cf, (c, cost) in sorted(out.items(), key=lambda kv: -kv[1][1][0]):
         if cf not in step_ids and cost[0] > steps * 50:
             print(row(f"  {names.get(cf, '?')[:26]}", cost, f"{c / steps:.1f}/st"))
+    # numba's NRT_incref/NRT_decref: JIT code (no symbol: callgrind names it by address), one copy in the process;
+    # their calls from the kernel and the unnamed (JIT) functions it reaches, and from anywhere in the dump
+    reach, todo = {kern}, [kern]
+    while todo:
+        f = todo.pop()
+        for fn, cf in arcs:
+            if fn == f and cf not in reach and names.get(cf, "").startswith("0x"):
+                reach.add(cf)
+                todo.append(cf)
+    for label, addr in zip(("NRT_incref", "NRT_decref"), nrt):
+        ids = {i for i, nm in names.items() if nm == f"0x{addr:016x}"}
+        c = sum(v[0] for (fn, cf), v in arcs.items() if cf in ids and fn in reach)
+        c_all = sum(v[0] for (fn, cf), v in arcs.items() if cf in ids)
+        cost = [sum(v[1][k] for (fn, cf), v in arcs.items() if cf in ids and fn in reach) for k in range(len(_EV))]
+        print(row(f"  {label}", cost, f"{c / steps:.1f}/st") + f"  (whole dump {c_all / steps:.1f}/st)")
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--preset", default="paper")
     ap.add_argument("--duration", type=float, default=1.0, help="sim.duration, s (default 1)")
+    ap.add_argument("--keep", help="copy the two callgrind dumps into this folder (callgrind_annotate reads them)")
     ap.add_argument("--inside", help=argparse.SUPPRESS)  # the run under valgrind: the helper library's path
     a = ap.parse_args(argv)
     if a.inside:
@@ -161,8 +181,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: the run under valgrind failed (exit {proc.returncode})", file=sys.stderr)
             return 1
         print(f"{a.preset}, {a.duration:g} s; simulated caches: I1 and D1 32 KiB 8-way, LL 1 MiB 8-way, 64 B lines")
-        report(Path(f"{out}.1"), "bare replay")
-        report(Path(f"{out}.2"), "closed loop")
+        nrt = tuple(int(x, 16) for x in Path(f"{lib}.nrt").read_text().split())
+        report(Path(f"{out}.1"), "bare replay", nrt)
+        report(Path(f"{out}.2"), "closed loop", nrt)
+        if a.keep:
+            Path(a.keep).mkdir(parents=True, exist_ok=True)
+            for i, tag in ((1, "bare"), (2, "loop")):
+                shutil.copy(f"{out}.{i}", Path(a.keep, f"callgrind.{tag}"))
     return 0
 
 

@@ -165,7 +165,7 @@ def _acc_reset(a):
             a.tau_max[i, c] = -math.inf
 
 
-@njit
+@njit(inline=True)
 def accumulate(s, vel, met, a):
     """After a control step: the run metrics ``met`` and the log accumulators ``a`` from the
     stack state ``s`` and the measured velocities ``vel`` (n, 2)."""
@@ -259,7 +259,7 @@ GUARDS: tuple[tuple[str, str, str | None], ...] = (
 )
 
 
-@njit
+@njit(inline=True)
 def _finite_rows(x, i):
     for c in range(x.shape[1]):
         if not math.isfinite(x[i, c]):
@@ -267,7 +267,7 @@ def _finite_rows(x, i):
     return True
 
 
-@njit
+@njit(inline=True)
 def check(s, pose, vel, lim, diag):
     """Check the state after a control step against :data:`GUARDS`; True if all pass.
 

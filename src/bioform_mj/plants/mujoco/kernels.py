@@ -429,11 +429,11 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
             k + 1,
         )
         if k + 1 < N:
+            mpose, mvel = pose, vel  # what the controllers are given: the truth, or the odometry
             if sen.on:
                 odometry_read(odo, dt)
-                control_step(g, s, L_pose[k + 1], L_vel[k + 1], odo.mpose, odo.mvel, comm)
-            else:
-                control_step(g, s, L_pose[k + 1], L_vel[k + 1], pose, vel, comm)
+                mpose, mvel = odo.mpose, odo.mvel
+            control_step(g, s, L_pose[k + 1], L_vel[k + 1], mpose, mvel, comm)
             j1, status = after_control(
                 k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c_true, form, lim, diag
             )
