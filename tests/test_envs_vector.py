@@ -190,3 +190,56 @@ def test_worlds_sharing_a_warm_mjdata_do_not_leak():
     cold.close()
     with pytest.raises(ValueError, match="payload"):
         VectorEnv("paper", 2, randomize={"payload": (0.0, 0.5)}, overrides=OV)
+
+
+def _team_threads() -> int:
+    import threading
+
+    return sum(th.name == "bioform-vector" for th in threading.enumerate())
+
+
+def test_the_threads_are_released():
+    """Two threads: the calling thread steps one block, one worker (``envs.team``) the other; the worker starts
+    at the first step, ``close()`` joins it, the next step starts it again (the episode goes on bit for bit as
+    in an environment never closed), and an environment dropped without ``close()`` joins it at collection."""
+    import gc
+
+    assert _team_threads() == 0
+    acts = _actions(VectorEnv("paper", 2, threads=1, overrides=OV), 2, 10)
+    ref = VectorEnv("paper", 2, threads=2, overrides=OV)
+    venv = VectorEnv("paper", 2, threads=2, overrides=OV)
+    ref.reset(seed=3)
+    venv.reset(seed=3)
+    assert _team_threads() == 0  # nothing before the first step
+    for t in range(10):
+        out = venv.step(acts[t])
+        want = ref.step(acts[t])
+        assert _team_threads() == 2
+        if t == 4:
+            venv.close()
+            venv.close()  # twice: nothing left to stop
+            assert _team_threads() == 1
+    assert all(np.array_equal(a, b) for a, b in zip(out, want))
+    ref.close()
+    assert _team_threads() == 1
+    del venv
+    gc.collect()
+    assert _team_threads() == 0
+
+
+@pytest.mark.slow  # a fresh interpreter: ~10 s to import and build
+def test_no_thread_outlives_the_interpreter(tmp_path):
+    """A script that steps a 2-thread environment and exits without ``close()`` ends (exit status 0): its
+    worker is stopped and joined at exit (a ``weakref.finalize`` of the environment, run at exit)."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "run.py"
+    script.write_text(
+        "import numpy as np\nfrom bioform_mj.envs import vector_env\n"
+        f"v = vector_env('paper', 2, 2, overrides={OV!r})\nv.reset(seed=0)\nv.step(np.zeros((2, 3, 2)))\n"
+        "print(v._stopper.alive, v._stopper.atexit)\n"
+    )
+    p = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == "True True"  # its finalizer runs at exit
