@@ -47,6 +47,7 @@ def main() -> None:
     ap.add_argument("--matrix", action="store_true", help="both plants at 1 ms and 10 ms control periods")
     ap.add_argument("--vector", type=int, default=0, help="the CPU-vectorised environment with this many worlds")
     ap.add_argument("--threads", type=int, default=1, help="threads of --vector and of mujoco.rollout")
+    ap.add_argument("--pin", action="store_true", help="--vector: each thread pinned to a CPU (vector_env's pin)")
     a = ap.parse_args()
     if a.vector:
         vector(a)
@@ -98,8 +99,8 @@ def vector(a) -> None:
     from bioform_mj.envs import vector_env
 
     ov = [f"sim.duration={a.duration}", f"sim.control_dt={a.control_dt}", "plant.kind=mujoco"]
-    ve = vector_env(a.scenario, a.vector, a.threads, overrides=ov)
-    cold = vector_env(a.scenario, a.vector, a.threads, overrides=ov, warm=False)
+    ve = vector_env(a.scenario, a.vector, a.threads, overrides=ov, pin=a.pin)
+    cold = vector_env(a.scenario, a.vector, a.threads, overrides=ov, warm=False, pin=a.pin)
     W, n, N = ve.nworld, ve.n, ve.N
     act = np.tile(np.array([0.2, 0.1]), (W, n, 1))
     ve.reset(seed=0)  # builds every world's plant
@@ -157,7 +158,8 @@ def vector(a) -> None:
     us = {k: 1e6 * statistics.median(v[1:]) / (N * W) for k, v in cpu.items()}
     print(
         f"CPU-vectorised environment, {W} worlds x {n} followers ({int(ve.shared.sum())} on the shared model), "
-        f"{a.threads} thread(s), control_dt {a.control_dt:g} s ({n_sub} physics steps a period), {N} periods: "
+        f"{a.threads} thread(s){' pinned' if a.pin else ''}, "
+        f"control_dt {a.control_dt:g} s ({n_sub} physics steps a period), {N} periods: "
         f"{e:,.0f} world-steps/s ({e * n:,.0f} agent-steps/s); mujoco.rollout of the same worlds and physics "
         f"steps, open loop: {r:,.0f} world-steps/s; ratio {e / r:.2f} (rollout of the worlds' own models: "
         f"{o:,.0f}, ratio {e / o:.2f}; rollout called once per period: {p:,.0f}, ratio {e / p:.2f}); "

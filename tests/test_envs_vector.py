@@ -6,6 +6,8 @@ per-world resets with seeds and ``_reset`` masks; bad input named."""
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -243,3 +245,29 @@ def test_no_thread_outlives_the_interpreter(tmp_path):
     p = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     assert p.stdout.strip() == "True True"  # its finalizer runs at exit
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2, reason="2 CPUs")
+def test_pinned_threads():
+    """``pin=True``: the calling thread on the first CPU it may use, the worker on the second, from the first
+    step to ``close()``, which gives the calling thread its CPUs back; the same bits as unpinned. A thread per
+    CPU at most, and ``pin`` a bool, refused before any world is built."""
+    cpus = sorted(os.sched_getaffinity(0))
+    acts = _actions(VectorEnv("paper", 2, threads=1, overrides=OV), 2, 5)
+    ref = VectorEnv("paper", 2, threads=2, overrides=OV)
+    venv = VectorEnv("paper", 2, threads=2, overrides=OV, pin=True)
+    ref.reset(seed=1)
+    venv.reset(seed=1)
+    for t in range(5):
+        out, want = venv.step(acts[t]), ref.step(acts[t])
+        assert all(np.array_equal(a, b) for a, b in zip(out, want))
+        assert os.sched_getaffinity(0) == {cpus[0]}
+        (worker,) = venv._team[1]
+        assert os.sched_getaffinity(worker.native_id) == {cpus[1]}
+    venv.close()
+    ref.close()
+    assert sorted(os.sched_getaffinity(0)) == cpus
+    with pytest.raises(ValueError, match="a CPU per thread"):
+        VectorEnv("paper", 2, threads=len(cpus) + 1, overrides=OV, pin=True)
+    with pytest.raises(ValueError, match="pin must be"):
+        VectorEnv("paper", 2, overrides=OV, pin="yes")

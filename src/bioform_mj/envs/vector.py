@@ -226,9 +226,22 @@ def serve(v, ctl, t, gen, spin_ns):
         publish(ctl, SLOT * t, gen)
 
 
-def _stop_team(ctl: np.ndarray, workers: list) -> None:
+def _pinned(cpu: int | None, fn: Any, *args: Any) -> None:
+    """A worker thread's life: pinned to ``cpu`` (None: not pinned), then ``fn(*args)`` (:func:`serve`)."""
+    if cpu is not None:
+        os.sched_setaffinity(0, {cpu})
+    fn(*args)
+
+
+def _stop_team(ctl: np.ndarray, workers: list, caller: tuple | None) -> None:
     """Stop and join a team's workers (:meth:`VectorEnv.close`, or the environment's collection or the
-    interpreter's exit through ``weakref.finalize``)."""
+    interpreter's exit through ``weakref.finalize``); ``caller``: the pinned calling thread's ``(native id,
+    CPUs it had)``, given back."""
+    if caller is not None:
+        try:
+            os.sched_setaffinity(caller[0], caller[1])
+        except OSError:  # that thread has ended
+            pass
     team_stop(ctl)
     for th in workers:
         th.join()
@@ -255,6 +268,11 @@ class VectorEnv:
     warm : step each thread's worlds on one ``MjData`` of that thread, each world's MuJoCo state
         (``mjSTATE_INTEGRATION``) copied in and out of it every period, as ``mujoco.rollout`` does (default); False:
         every world steps its own ``MjData`` (the same bits, slower: see :meth:`_warm_init`).
+    pin : pin each thread to one CPU (Linux: ``sched_setaffinity``): the calling thread, from its first
+        :meth:`step` to :meth:`close` (which gives it back the CPUs it had when the environment was made), to
+        the first of those CPUs, thread ``t`` to the ``t``-th; a thread's worlds then stay in its CPU's cache
+        (2 threads, 1 ms: 1.3x the world-steps/s in one run). For a machine given to the training; default
+        False. ``threads`` at most those CPUs.
     options : :class:`~.parallel.FormationParallelEnv`'s (``action``, ``reward``, ``v_max``, ``w_max``,
         ``overrides``, ``dtype``, ``randomize``, ``max_cycles``).
     """
@@ -267,6 +285,7 @@ class VectorEnv:
         *,
         max_bytes: float | None = None,
         warm: bool = True,
+        pin: bool = False,
         **options: Any,
     ) -> None:
         if isinstance(worlds, bool) or not isinstance(worlds, (int, np.integer)) or worlds < 1:
@@ -278,6 +297,10 @@ class VectorEnv:
             raise ValueError(f"threads must be an integer >= 1, got {threads!r}")
         if not FAST:
             raise ValueError("the CPU-vectorised environment needs numba with its JIT on")
+        if not isinstance(pin, bool):
+            raise ValueError(f"pin must be True or False, got {pin!r}")
+        if pin and (not HAVE_TEAM or T > _usable_cpus()):
+            raise ValueError(f"pin=True needs Linux and a CPU per thread: {T} threads, {_usable_cpus()} CPUs usable")
         env0 = parallel_env(scenario, **options)
         sc = env0.base_scenario
         if sc.plant.kind != "mujoco":
@@ -354,6 +377,8 @@ class VectorEnv:
         self._stopper: Any = None
         self._pool: ThreadPoolExecutor | None = None  # where envs.team is not available
         self._spin_ns = SPIN_NS if self.threads <= _usable_cpus() else 0
+        self._pin = pin
+        self._cpus = sorted(os.sched_getaffinity(0)) if pin else []  # the calling thread's CPUs, before pinning
 
     # ------------------------------------------------------------------ reset
     def reset(self, seed: Any = None, mask: Any = None) -> np.ndarray:
@@ -559,7 +584,7 @@ class VectorEnv:
         if self._v is None:
             self._compile()
         if HAVE_TEAM:
-            if self.threads > 1 and (self._team is None or self._team[2] != os.getpid()):
+            if (self.threads > 1 or self._pin) and (self._team is None or self._team[2] != os.getpid()):
                 self._start_team()
             ctl = self._team[0] if self._team is not None else self._ctl1
             warned = self._dispatch(self._v[0], ctl, self.threads > 1, self._spin_ns)
@@ -623,12 +648,17 @@ class VectorEnv:
         if self._stopper is not None:
             self._stopper()
         ctl = team_control(self.threads)
-        args = [(self._v[t], ctl, t, np.int32(0), self._spin_ns) for t in range(1, self.threads)]
-        workers = [threading.Thread(target=self._serve, args=a, daemon=True, name="bioform-vector") for a in args]
+        cpus: list = self._cpus if self._pin else [None] * self.threads
+        caller = None
+        if self._pin:
+            caller = (threading.get_native_id(), set(cpus))
+            os.sched_setaffinity(0, {cpus[0]})
+        args = [(cpus[t], self._serve, self._v[t], ctl, t, np.int32(0), self._spin_ns) for t in range(1, self.threads)]
+        workers = [threading.Thread(target=_pinned, args=a, daemon=True, name="bioform-vector") for a in args]
         for th in workers:
             th.start()
         self._team = (ctl, workers, os.getpid())
-        self._stopper = weakref.finalize(self, _stop_team, ctl, workers)
+        self._stopper = weakref.finalize(self, _stop_team, ctl, workers, caller)
 
     def _warned(self, w: int) -> None:
         """World ``w``'s MuJoCo warning: the single environment's step-by-step tail (the state not observed)."""
