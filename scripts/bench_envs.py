@@ -108,6 +108,7 @@ def vector(a) -> None:
     models = [ve._model if ve.shared[w] else own[w] for w in range(W)]  # what the environment steps with
     n_sub = int(ve.envs[0]._plant.n_substeps)
     datas = [mujoco.MjData(models[0]) for _ in range(a.threads)]
+    pool = a.threads > 1
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     cspec = mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_XFRC_APPLIED
     nc = mujoco.mj_stateSize(models[0], cspec)
@@ -117,6 +118,8 @@ def vector(a) -> None:
     x0 = np.empty((W, mujoco.mj_stateSize(models[0], spec)))
     for w, e in enumerate(ve.envs):
         mujoco.mj_getState(e._plant.model, e._plant.data, x0[w], spec)
+    if pool:  # rollout's threads started before --pin pins this thread (a new thread takes its creator's CPUs)
+        rollout.rollout(models, datas, x0, nstep=1, persistent_pool=True)
     ctrl = np.empty((W, N * n_sub, nc))
     for k in range(N):
         ve.step(act)
@@ -124,7 +127,6 @@ def vector(a) -> None:
             ctrl[w, k * n_sub] = ve.world_state(w, cspec)
         ctrl[:, k * n_sub : (k + 1) * n_sub] = ctrl[:, k * n_sub : k * n_sub + 1]
     state = np.empty((W, n_sub, x0.shape[1]))
-    pool = a.threads > 1
 
     def per_period() -> None:  # mujoco.rollout called once per period, the state carried (a closed loop's visits)
         x = x0.copy()

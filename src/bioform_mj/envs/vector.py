@@ -4,10 +4,12 @@
 :class:`~.parallel.FormationParallelEnv` (its own ``MjModel``/``MjData`` and control stack), and steps
 them with the layout of the Warp-batched environment (``envs.batched``: arrays with a leading world axis,
 observations (W, n, obs_size), rewards (W, n), flags (W,)). A period of every world is
-:func:`~.fast.mujoco_period` (the single environment's compiled period, the same bits); ``threads``
-Python threads each run one compiled call over a block of worlds (numba's code releases the GIL), as
-``mujoco.rollout`` splits its batch over a thread pool. World ``w``'s episode is the single
-environment's episode of the same seed and actions, bit for bit (``tests/test_envs_vector.py``).
+:func:`~.fast.mujoco_period` (the single environment's compiled period, the same bits); the worlds are
+split into ``threads`` blocks, as ``mujoco.rollout`` splits its batch over a thread pool: a step is one
+compiled call (:func:`dispatch`) in which the calling thread releases the other threads, steps the first
+block and waits for theirs; the others stay in compiled code between periods (:func:`serve`, ``envs.team``).
+World ``w``'s episode is the single environment's episode of the same seed and actions, bit for bit
+(``tests/test_envs_vector.py``).
 
 The worlds' physics steps with one shared ``MjModel`` wherever a world's physics is the built scene's
 (:meth:`VectorEnv._share_init`): at a 1 ms control period each world is visited for one physics step,
