@@ -271,3 +271,29 @@ def test_pinned_threads():
         VectorEnv("paper", 2, threads=len(cpus) + 1, overrides=OV, pin=True)
     with pytest.raises(ValueError, match="pin must be"):
         VectorEnv("paper", 2, overrides=OV, pin="yes")
+
+
+def test_without_futexes_a_thread_pool_steps_the_same_bits(monkeypatch):
+    """Where ``envs.team`` is not available (not Linux): the check and the blocks as separate compiled calls
+    on a ``ThreadPoolExecutor`` (the calling thread steps block 0), the same bits as the team's."""
+    from bioform_mj.envs import vector
+
+    acts = _actions(VectorEnv("paper", 3, threads=1, overrides=OV), 3, 6)
+    ref = VectorEnv("paper", 3, threads=2, overrides=OV)
+    ref.reset(seed=2)
+    want = [ref.step(acts[t]) for t in range(6)]
+    assert ref._team is not None and _team_threads() == 1
+    monkeypatch.setattr(vector, "HAVE_TEAM", False)
+    venv = VectorEnv("paper", 3, threads=2, overrides=OV)
+    venv.reset(seed=2)
+    for t in range(6):
+        out = venv.step(acts[t])
+        assert all(np.array_equal(a, b) for a, b in zip(out, want[t]))
+    assert venv._team is None and venv._pool is not None and _team_threads() == 1
+    bad = acts[0].copy()
+    bad[2, 1, 0] = np.nan
+    with pytest.raises(ValueError, match="world 2"):
+        venv.step(bad)
+    venv.close()
+    ref.close()
+    assert venv._pool is None

@@ -590,7 +590,7 @@ class VectorEnv:
                 self._start_team()
             ctl = self._team[0] if self._team is not None else self._ctl1
             warned = self._dispatch(self._v[0], ctl, self.threads > 1, self._spin_ns)
-        else:  # pragma: no cover - a thread pool where there are no futexes (envs.team)
+        else:  # a thread pool where there are no futexes (envs.team)
             bad = self._check(self._v[0])
             if bad >= 0:
                 warned = -(bad + 1)
@@ -639,7 +639,7 @@ class VectorEnv:
             self._dispatch = Compiled(dispatch, (v, ctl, True, 0)).call
             if self.threads > 1:
                 self._serve = Compiled(serve, (v, ctl, 1, np.int32(0), 0)).call
-        else:  # pragma: no cover - a thread pool where there are no futexes (envs.team)
+        else:  # a thread pool where there are no futexes (envs.team)
             self._check = Compiled(check, (v,)).call
             self._block = Compiled(block, (v, 0)).call
 
