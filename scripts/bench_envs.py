@@ -47,6 +47,7 @@ def main() -> None:
     ap.add_argument("--matrix", action="store_true", help="both plants at 1 ms and 10 ms control periods")
     ap.add_argument("--vector", type=int, default=0, help="the CPU-vectorised environment with this many worlds")
     ap.add_argument("--threads", type=int, default=1, help="threads of --vector and of mujoco.rollout")
+    ap.add_argument("--pin", action="store_true", help="--vector: each thread pinned to a CPU (vector_env's pin)")
     a = ap.parse_args()
     if a.vector:
         vector(a)
@@ -98,8 +99,8 @@ def vector(a) -> None:
     from bioform_mj.envs import vector_env
 
     ov = [f"sim.duration={a.duration}", f"sim.control_dt={a.control_dt}", "plant.kind=mujoco"]
-    ve = vector_env(a.scenario, a.vector, a.threads, overrides=ov)
-    cold = vector_env(a.scenario, a.vector, a.threads, overrides=ov, warm=False)
+    ve = vector_env(a.scenario, a.vector, a.threads, overrides=ov, pin=a.pin)
+    cold = vector_env(a.scenario, a.vector, a.threads, overrides=ov, warm=False, pin=a.pin)
     W, n, N = ve.nworld, ve.n, ve.N
     act = np.tile(np.array([0.2, 0.1]), (W, n, 1))
     ve.reset(seed=0)  # builds every world's plant
@@ -107,6 +108,7 @@ def vector(a) -> None:
     models = [ve._model if ve.shared[w] else own[w] for w in range(W)]  # what the environment steps with
     n_sub = int(ve.envs[0]._plant.n_substeps)
     datas = [mujoco.MjData(models[0]) for _ in range(a.threads)]
+    pool = a.threads > 1
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     cspec = mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_XFRC_APPLIED
     nc = mujoco.mj_stateSize(models[0], cspec)
@@ -116,6 +118,8 @@ def vector(a) -> None:
     x0 = np.empty((W, mujoco.mj_stateSize(models[0], spec)))
     for w, e in enumerate(ve.envs):
         mujoco.mj_getState(e._plant.model, e._plant.data, x0[w], spec)
+    if pool:  # rollout's threads started before --pin pins this thread (a new thread takes its creator's CPUs)
+        rollout.rollout(models, datas, x0, nstep=1, persistent_pool=True)
     ctrl = np.empty((W, N * n_sub, nc))
     for k in range(N):
         ve.step(act)
@@ -123,7 +127,6 @@ def vector(a) -> None:
             ctrl[w, k * n_sub] = ve.world_state(w, cspec)
         ctrl[:, k * n_sub : (k + 1) * n_sub] = ctrl[:, k * n_sub : k * n_sub + 1]
     state = np.empty((W, n_sub, x0.shape[1]))
-    pool = a.threads > 1
 
     def per_period() -> None:  # mujoco.rollout called once per period, the state carried (a closed loop's visits)
         x = x0.copy()
@@ -157,7 +160,8 @@ def vector(a) -> None:
     us = {k: 1e6 * statistics.median(v[1:]) / (N * W) for k, v in cpu.items()}
     print(
         f"CPU-vectorised environment, {W} worlds x {n} followers ({int(ve.shared.sum())} on the shared model), "
-        f"{a.threads} thread(s), control_dt {a.control_dt:g} s ({n_sub} physics steps a period), {N} periods: "
+        f"{a.threads} thread(s){' pinned' if a.pin else ''}, "
+        f"control_dt {a.control_dt:g} s ({n_sub} physics steps a period), {N} periods: "
         f"{e:,.0f} world-steps/s ({e * n:,.0f} agent-steps/s); mujoco.rollout of the same worlds and physics "
         f"steps, open loop: {r:,.0f} world-steps/s; ratio {e / r:.2f} (rollout of the worlds' own models: "
         f"{o:,.0f}, ratio {e / o:.2f}; rollout called once per period: {p:,.0f}, ratio {e / p:.2f}); "

@@ -6,6 +6,8 @@ per-world resets with seeds and ``_reset`` masks; bad input named."""
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -190,3 +192,108 @@ def test_worlds_sharing_a_warm_mjdata_do_not_leak():
     cold.close()
     with pytest.raises(ValueError, match="payload"):
         VectorEnv("paper", 2, randomize={"payload": (0.0, 0.5)}, overrides=OV)
+
+
+def _team_threads() -> int:
+    import threading
+
+    return sum(th.name == "bioform-vector" for th in threading.enumerate())
+
+
+def test_the_threads_are_released():
+    """Two threads: the calling thread steps one block, one worker (``envs.team``) the other; the worker starts
+    at the first step, ``close()`` joins it, the next step starts it again (the episode goes on bit for bit as
+    in an environment never closed), and an environment dropped without ``close()`` joins it at collection."""
+    import gc
+
+    assert _team_threads() == 0
+    acts = _actions(VectorEnv("paper", 2, threads=1, overrides=OV), 2, 10)
+    ref = VectorEnv("paper", 2, threads=2, overrides=OV)
+    venv = VectorEnv("paper", 2, threads=2, overrides=OV)
+    ref.reset(seed=3)
+    venv.reset(seed=3)
+    assert _team_threads() == 0  # nothing before the first step
+    for t in range(10):
+        out = venv.step(acts[t])
+        want = ref.step(acts[t])
+        assert _team_threads() == 2
+        if t == 4:
+            venv.close()
+            venv.close()  # twice: nothing left to stop
+            assert _team_threads() == 1
+    assert all(np.array_equal(a, b) for a, b in zip(out, want))
+    ref.close()
+    assert _team_threads() == 1
+    del venv
+    gc.collect()
+    assert _team_threads() == 0
+
+
+@pytest.mark.slow  # a fresh interpreter: ~10 s to import and build
+def test_no_thread_outlives_the_interpreter(tmp_path):
+    """A script that steps a 2-thread environment and exits without ``close()`` ends (exit status 0): its
+    worker is stopped and joined at exit (a ``weakref.finalize`` of the environment, run at exit)."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "run.py"
+    script.write_text(
+        "import numpy as np\nfrom bioform_mj.envs import vector_env\n"
+        f"v = vector_env('paper', 2, 2, overrides={OV!r})\nv.reset(seed=0)\nv.step(np.zeros((2, 3, 2)))\n"
+        "print(v._stopper.alive, v._stopper.atexit)\n"
+    )
+    p = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == "True True"  # its finalizer runs at exit
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2, reason="2 CPUs")
+def test_pinned_threads():
+    """``pin=True``: the calling thread on the first CPU it may use, the worker on the second, from the first
+    step to ``close()``, which gives the calling thread its CPUs back; the same bits as unpinned. A thread per
+    CPU at most, and ``pin`` a bool, refused before any world is built."""
+    cpus = sorted(os.sched_getaffinity(0))
+    acts = _actions(VectorEnv("paper", 2, threads=1, overrides=OV), 2, 5)
+    ref = VectorEnv("paper", 2, threads=2, overrides=OV)
+    venv = VectorEnv("paper", 2, threads=2, overrides=OV, pin=True)
+    ref.reset(seed=1)
+    venv.reset(seed=1)
+    for t in range(5):
+        out, want = venv.step(acts[t]), ref.step(acts[t])
+        assert all(np.array_equal(a, b) for a, b in zip(out, want))
+        assert os.sched_getaffinity(0) == {cpus[0]}
+        (worker,) = venv._team[1]
+        assert os.sched_getaffinity(worker.native_id) == {cpus[1]}
+    venv.close()
+    ref.close()
+    assert sorted(os.sched_getaffinity(0)) == cpus
+    with pytest.raises(ValueError, match="a CPU per thread"):
+        VectorEnv("paper", 2, threads=len(cpus) + 1, overrides=OV, pin=True)
+    with pytest.raises(ValueError, match="pin must be"):
+        VectorEnv("paper", 2, overrides=OV, pin="yes")
+
+
+def test_without_futexes_a_thread_pool_steps_the_same_bits(monkeypatch):
+    """Where ``envs.team`` is not available (not Linux): the check and the blocks as separate compiled calls
+    on a ``ThreadPoolExecutor`` (the calling thread steps block 0), the same bits as the team's."""
+    from bioform_mj.envs import vector
+
+    acts = _actions(VectorEnv("paper", 3, threads=1, overrides=OV), 3, 6)
+    ref = VectorEnv("paper", 3, threads=2, overrides=OV)
+    ref.reset(seed=2)
+    want = [ref.step(acts[t]) for t in range(6)]
+    assert ref._team is not None and _team_threads() == 1
+    monkeypatch.setattr(vector, "HAVE_TEAM", False)
+    venv = VectorEnv("paper", 3, threads=2, overrides=OV)
+    venv.reset(seed=2)
+    for t in range(6):
+        out = venv.step(acts[t])
+        assert all(np.array_equal(a, b) for a, b in zip(out, want[t]))
+    assert venv._team is None and venv._pool is not None and _team_threads() == 1
+    bad = acts[0].copy()
+    bad[2, 1, 0] = np.nan
+    with pytest.raises(ValueError, match="world 2"):
+        venv.step(bad)
+    venv.close()
+    ref.close()
+    assert venv._pool is None
