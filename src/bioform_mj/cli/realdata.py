@@ -173,31 +173,14 @@ def _load(args: argparse.Namespace):
 
 
 def _before_tipping(args: argparse.Namespace, rec):
-    """The part of ``rec`` before the robot lifted or tipped (its odometry tilted more than ``TIP_DEG``), said in a
-    ``warning:`` line and a note; refused (exit 2) where less than one chunk (``--chunk``, 2 s for the replay)
-    comes before it. A recording whose robot stays upright is returned as it is."""
-    from bioform_mj.robots.realdata.recording import TIP_DEG, tipped_at
+    """:func:`~bioform_mj.robots.realdata.recording.upright_part` of ``rec`` (one chunk, ``--chunk``, 2 s for the
+    replay, needed before a tilt), its note said in a ``warning:`` line."""
+    from bioform_mj.robots.realdata.recording import upright_part
 
-    tip = tipped_at(rec)
-    if tip is None:
-        return rec
-    t_tip, worst = tip
-    need = float(getattr(args, "chunk", 2.0) or 2.0)
-    what = (
-        f"the robot's body tilted more than {TIP_DEG:g}° in the recording at t = {t_tip:.3g} s ({worst:.0f}° at "
-        "most: it lifted off its wheels or casters, or tipped over; the model stands on a flat floor)"
-    )
-    t_end = t_tip - 0.1  # the lift starts before the tilt passes the threshold
-    if t_end - float(rec.t[0]) < need:
-        raise InputError(
-            f"{args.bag}: {what}, and less than one {need:g} s chunk comes before it: record again with "
-            "smaller torques (bioform robot drive-program prints a program within the robot's limits)"
-        )
-    msg = f"{what}: only the {t_end - float(rec.t[0]):.3g} s before it are used"
-    print(f"warning: {msg}", file=sys.stderr)
-    out = rec.window(float(rec.t[0]), t_end)
-    out.notes.append(msg)
-    return out
+    rec, note = upright_part(rec, float(getattr(args, "chunk", 2.0) or 2.0), str(args.bag))
+    if note:
+        print(f"warning: {note}", file=sys.stderr)
+    return rec
 
 
 def _signals_of_chunks(chunks, sims: list[np.ndarray] | None) -> dict[str, np.ndarray]:

@@ -10,7 +10,7 @@ by spinning (atomic loads, ``pause``) for up to ``spin_ns`` nanoseconds, then sl
 taken either way), as OpenMP's and ``mujoco.rollout``'s thread pools spin before they sleep.
 
 The control array's layout (int32, one 64-byte line per slot): slot 0 the "go" generation (:data:`GO`), its
-sleepers' count (``GO + 1``) and the stop flag (:data:`STOP`); slot ``t ≥ 1`` (:func:`done_at`) worker ``t``'s
+sleepers' count (``GO + 1``) and the stop flag (:data:`STOP`); slot ``t ≥ 1`` (index ``SLOT * t``) worker ``t``'s
 "done" generation, the caller's sleeping flag and the worker's result. Generations wrap at 2³¹ (compared
 for inequality only). Loads and stores of the counters are sequentially consistent (LLVM atomics); what a
 thread wrote before a ``publish`` is seen by the thread whose ``wait_change`` returned its value.
@@ -159,12 +159,6 @@ def stop(ctl):
     """Tell the workers to return (:data:`STOP`) and wake them."""
     atomic_store(ctl, STOP, np.int32(1))
     publish(ctl, GO, next_gen(atomic_load(ctl, GO)))
-
-
-def done_at(t: int) -> int:
-    """Index of worker ``t``'s "done" generation in the control array (``+ 1``: the caller sleeps on it,
-    ``+ 2``: the worker's result)."""
-    return SLOT * t
 
 
 def control(threads: int) -> np.ndarray:

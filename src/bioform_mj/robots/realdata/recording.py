@@ -480,6 +480,30 @@ def tipped_at(rec: Recording) -> tuple[float, float] | None:
     return float(rec.odom_t[ok][over[0]]), float(tilt.max())
 
 
+def upright_part(rec: Recording, need_s: float, name: str) -> tuple[Recording, str | None]:
+    """``(rec, None)`` where the robot stays upright (:func:`tipped_at`); else the part of ``rec`` up to 0.1 s
+    before its odometry tilted more than :data:`TIP_DEG` and the note saying so (also in the part's
+    ``notes``). Raises :class:`InputError` (naming ``name``) where less than ``need_s`` s comes before it."""
+    tip = tipped_at(rec)
+    if tip is None:
+        return rec, None
+    t_tip, worst = tip
+    what = (
+        f"the robot's body tilted more than {TIP_DEG:g}° in the recording at t = {t_tip:.3g} s ({worst:.0f}° at "
+        "most: it lifted off its wheels or casters, or tipped over; the model stands on a flat floor)"
+    )
+    t_end = t_tip - 0.1  # the lift starts before the tilt passes the threshold
+    if t_end - float(rec.t[0]) < need_s:
+        raise InputError(
+            f"{name}: {what}, and less than one {need_s:g} s chunk comes before it: record again with "
+            "smaller torques (bioform robot drive-program prints a program within the robot's limits)"
+        )
+    note = f"{what}: only the {t_end - float(rec.t[0]):.3g} s before it are used"
+    out = rec.window(float(rec.t[0]), t_end)
+    out.notes.append(note)
+    return out, note
+
+
 CSV_MAX_MB = 256
 
 
