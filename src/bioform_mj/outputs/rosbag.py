@@ -149,6 +149,9 @@ class _Topic:
     fields: list[tuple[int, str, np.ndarray, tuple[np.ndarray, tuple]]] = field(default_factory=list)
     extra: list[tuple[int, bytes]] = field(default_factory=list)  # (row, CDR bytes): messages of another layout
     qos: list[Any] = field(default_factory=list)
+    #: the layout it belongs to (topics_of's cache key; None: not cached), by which the writer keeps its
+    #: chunk buffers (:class:`~bioform_mj.outputs.rosbag_write.ChunkPlan`)
+    layout: Any = None
 
     def fill(self, out: np.ndarray, cid: int, stamps: np.ndarray, rows: slice = slice(None)) -> None:
         """Write this topic's MCAP message records (:data:`MSG_HEAD` bytes of record header, then the
@@ -174,16 +177,20 @@ class _Topic:
 class _Markers:
     """Marker values for the fields of a template message, and the rows' values they stand for: each a
     1-D selection ``a[idx]`` of an array ``a`` (kept with it: the writer reads the numbers from ``a``
-    itself, :func:`bioform_mj.outputs.rosbag_write.number_sources`)."""
+    itself, :func:`bioform_mj.outputs.rosbag_write.number_sources`). ``names``: ``{id(a): name}`` of the
+    arrays a bag's numbers come from (:func:`topics_of`), so that a layout's fields can be cached by name."""
 
-    def __init__(self) -> None:
+    def __init__(self, names: Mapping[int, str] | None = None) -> None:
         self.items: list[tuple[bytes, str, np.ndarray, tuple[np.ndarray, tuple]]] = []
+        self.names = names or {}
+        self.named: list[str | None] = []  # each item's array's name (None: an array not named)
 
     def f64(self, a: np.ndarray, *idx: Any) -> float:
         """A marker float64 for the values ``a[idx]`` (m,) (``a`` itself without ``idx``)."""
         v = 1.2345678901234567e250 * (1.0 + len(self.items) * 2.0**-30)
         a = np.asarray(a, dtype=float)
         self.items.append((struct.pack("<d", v), "<f8", a[idx] if idx else a, (a, idx)))
+        self.named.append(self.names.get(id(a)))
         return v
 
     def int32(self, dt: str, a: np.ndarray, *idx: Any) -> int:
@@ -191,6 +198,7 @@ class _Markers:
         v = 0x3A5B0000 + 2 * len(self.items) + 1
         a = np.asarray(a)
         self.items.append((struct.pack("<I", v), dt, a[idx] if idx else a, (a, idx)))
+        self.named.append(self.names.get(id(a)))
         return v
 
     def locate(self, raw: bytes) -> list[tuple[int, str, np.ndarray, tuple[np.ndarray, tuple]]]:
@@ -324,7 +332,6 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
     S = K + 1  # state samples: the log rows and the end
     ns = start_ns + np.rint(ts * 1e9).astype(np.int64)
     sec, nsec = ns // 1_000_000_000, ns % 1_000_000_000
-    all_rows, log_rows = slice(0, S), slice(0, K)  # the rows a topic's numbers come from (views, not copies)
     pose3, twist3 = np.asarray(log["pose_3d"], float), np.asarray(log["twist_3d"], float)
     q = quat_of_rpy(pose3[..., 3:6])  # (S, n, 4) w x y z
     leader = np.asarray(log["leader_state"], float)  # (S, 5)
@@ -344,10 +351,91 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
     lq = heads[:S]
     eqs = [heads[S + i * K : S + (i + 1) * K] for i in range(n)]
     oqs = [heads[S + (n + i) * K : S + (n + i + 1) * K] for i in range(n)] if odo else []
+    g, a = (np.asarray(log["imu_gyro"], float), np.asarray(log["imu_accel"], float)) if imu else (None, None)
+    # the wheels' numbers as the joints state them (each joint's sign applied; sign · x, numpy's product)
+    jp, jv, jt = (wa * sign, ws * sign, tau * sign) if wheels else (None, None, None)
+    # every array the numbers are read from, by name: a layout's templates and field offsets are cached by
+    # those names (the same topics, frames and joints, and K: _LAYOUTS) and bound to this log's arrays
+    named = {"sec": sec, "nsec": nsec, "pose3": pose3, "q": q, "twist3": twist3, "leader": leader, "lq": lq}
+    named |= {"cmd": cmd, "tau": tau, "ep": ep, "ev": ev, "op": op, "ov": ov, "g": g, "a": a}
+    named |= {"jp": jp, "jv": jv, "jt": jt} | {f"eq{i}": x for i, x in enumerate(eqs)}
+    named |= {f"oq{i}": x for i, x in enumerate(oqs)}
+    key = (id(msgs.store), K, n, odo, wheels, imu, names.shape, tuple(names.ravel().tolist()))
+    layout = _LAYOUTS.get(key)
+    if layout is None:
+        topics = _build_topics(msgs, named, K, n, odo, wheels, imu, names, sign)
+        layout = _layout_of(topics, named)
+        if layout is not None:
+            _LAYOUTS[key] = layout
+            while len(_LAYOUTS) > _LAYOUTS_KEPT:
+                _LAYOUTS.pop(next(iter(_LAYOUTS)), None)
+    else:
+        topics = []
+        for name, msgtype, m, template, fields in layout:
+            bound = [(off, dt, named[nm][idx] if idx else named[nm], (named[nm], idx)) for off, dt, nm, idx in fields]
+            topics.append(_Topic(name, msgtype, np.arange(m), template, bound))
+    for tp in topics if layout is not None else ():
+        tp.layout = key
+    if wheels:  # at T no torque interval ends: the last joint state has positions and rates only
+        for tp in topics:
+            if tp.name.endswith("/joint_states"):  # /fI/joint_states
+                i = int(tp.name.split("/")[1][1:]) - 1
+                sg, jn = sign[i], [str(x) for x in names[i]]
+                last = msgs.joint_state(msgs.time(int(sec[K]), int(nsec[K])), jn, sg * wa[K, i], sg * ws[K, i], [])
+                tp.extra.append((K, bytes(msgs.store.serialize_cdr(last, tp.msgtype))))
+    return topics
+
+
+#: the templates and field offsets of the layouts built lately (:func:`topics_of`), most recent last
+_LAYOUTS: dict[tuple, list[tuple[str, str, int, np.ndarray, list[tuple[int, str, str, tuple]]]]] = {}
+_LAYOUTS_KEPT = 8
+
+
+def _layout_of(topics: list[_Topic], named: Mapping[str, Any]) -> list[tuple] | None:
+    """``topics`` as :data:`_LAYOUTS` keeps them: per topic its name, type, message count, template and
+    fields ``(offset, dtype, array name, idx)``; None where a field's array is not one of ``named`` or two
+    names are one array (the next log's may be two)."""
+    ids = {id(v): k for k, v in named.items() if v is not None}
+    if len(ids) != sum(v is not None for v in named.values()):
+        return None
+    out = []
+    for tp in topics:
+        fields = []
+        for off, dt, _, (arr, idx) in tp.fields:
+            if id(arr) not in ids:
+                return None
+            fields.append((off, dt, ids[id(arr)], idx))
+        out.append((tp.name, tp.msgtype, tp.rows.size, tp.template, fields))
+    return out
+
+
+def _build_topics(
+    msgs: _Messages,
+    named: Mapping[str, Any],
+    K: int,
+    n: int,
+    odo: bool,
+    wheels: bool,
+    imu: bool,
+    names: np.ndarray,
+    sign: np.ndarray,
+) -> list[_Topic]:
+    """The topics of :func:`topics_of` built by ``rosbags`` (one message serialised per topic, with
+    marker values located in it), their numbers bound to the arrays ``named``."""
+    S = K + 1
+    all_rows, log_rows = slice(0, S), slice(0, K)  # the rows a topic's numbers come from (views, not copies)
+    sec, nsec, pose3, q, twist3, leader, lq = (
+        named[k] for k in ("sec", "nsec", "pose3", "q", "twist3", "leader", "lq")
+    )
+    cmd, tau, ep, ev, op, ov, g, a = (named[k] for k in ("cmd", "tau", "ep", "ev", "op", "ov", "g", "a"))
+    jp, jv, jt = named["jp"], named["jv"], named["jt"]
+    eqs = [named[f"eq{i}"] for i in range(n)]
+    oqs = [named[f"oq{i}"] for i in range(n)] if odo else []
+    ids = {id(v): k for k, v in named.items() if v is not None}
     topics: list[_Topic] = []
 
     def build(name: str, msgtype: str, rows: slice, make) -> _Topic:
-        mk = _Markers()
+        mk = _Markers(ids)
         stamp = msgs.time(mk.int32("<i4", sec, rows), mk.int32("<u4", nsec, rows))
         msg = make(mk, stamp, rows)
         raw = msgs.store.serialize_cdr(msg, msgtype)
@@ -421,7 +509,7 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
                     (0.0, 0.0, mk.f64(ov, r, i, 1)),
                 ),
             )
-        mk_cmd = _Markers()
+        mk_cmd = _Markers(ids)
         raw = msgs.store.serialize_cdr(
             msgs.twist((mk_cmd.f64(cmd, slice(None), i, 0), 0.0, 0.0), (0.0, 0.0, mk_cmd.f64(cmd, slice(None), i, 1))),
             "geometry_msgs/msg/Twist",
@@ -436,23 +524,19 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
             )
         )
         jn = [str(x) for x in names[i]]
-        sg = sign[i]
-        if wheels:
-            js = build(
+        if wheels:  # its last message (at T): topics_of
+            build(
                 f"/{f}/joint_states",
                 "sensor_msgs/msg/JointState",
                 log_rows,
-                lambda mk, st, r, i=i, sg=sg, jn=jn: msgs.joint_state(
+                lambda mk, st, r, i=i, jn=jn: msgs.joint_state(
                     st,
                     jn,
-                    [mk.f64(sg[c] * wa[r, i, c]) for c in range(2)],
-                    [mk.f64(sg[c] * ws[r, i, c]) for c in range(2)],
-                    [mk.f64(sg[c] * tau[r, i, c]) for c in range(2)],
+                    [mk.f64(jp, r, i, c) for c in range(2)],
+                    [mk.f64(jv, r, i, c) for c in range(2)],
+                    [mk.f64(jt, r, i, c) for c in range(2)],
                 ),
             )
-            # at T no torque interval ends: the last message has positions and rates only
-            last = msgs.joint_state(msgs.time(int(sec[K]), int(nsec[K])), jn, sg * wa[K, i], sg * ws[K, i], [])
-            js.extra.append((K, bytes(msgs.store.serialize_cdr(last, js.msgtype))))
         else:  # no wheels (the ideal plant): the applied torques only
             build(
                 f"/{f}/joint_states",
@@ -463,7 +547,6 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
                 ),
             )
         if imu:
-            g, a = np.asarray(log["imu_gyro"], float), np.asarray(log["imu_accel"], float)
             build(
                 f"/{f}/imu",
                 "sensor_msgs/msg/Imu",

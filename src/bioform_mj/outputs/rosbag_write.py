@@ -20,6 +20,7 @@ import numpy as np
 
 __all__ = [
     "CHUNK_BYTES",
+    "ChunkPlan",
     "MSG_HEAD",
     "FullChunk",
     "Numbers",
@@ -146,24 +147,11 @@ def _selection(c: np.ndarray, idx: tuple, K: int) -> tuple[int, int] | None:
     return None if step is None else (off // 8, step // 8)
 
 
-def chunk_matrix(
-    topics: list[Any],
-    cids: list[int],
-    cols: list[int],
-    B: int,
-    rows: int,
-    stamps: np.ndarray,
-    out: np.ndarray | None = None,
-) -> tuple[np.ndarray, Numbers]:
-    """The byte matrix of a chunk of ``rows`` samples (``(rows, B)`` uint8: every topic's message record
-    side by side, at ``cols``; ``out``: a C-contiguous ``(rows, B)`` uint8 array to use, else a new one)
-    with every record's constant bytes (header, template) written once, and the :class:`Numbers` of all
-    ``K`` samples (``stamps`` (K,) ns): each record's log and publish time and its marked fields, their
-    ``dst`` bytes from the matrix's start. A chunk's samples ``j0:j1`` are then
-    ``numbers.fill(M.reshape(-1), j0, j1 - j0)``: one compiled pass, the same matrix reused chunk after
-    chunk (written out before it is refilled)."""
-    M = np.empty((rows, B), np.uint8) if out is None else out
-    K = len(stamps)
+def _chunk_row(topics: list[Any], cids: list[int], cols: list[int], B: int, stamps: np.ndarray) -> tuple:
+    """One sample's bytes, numbers aside ((B,) uint8: every topic's message record side by side, at
+    ``cols``, header and template), and its numbers' ``dtypes``, ``values``, ``sources`` and ``dst``
+    (bytes from the row's start): the stamps ``stamps`` (K,) ns first, then each record's log and publish
+    time and its marked fields (:class:`ChunkPlan`)."""
     row = np.empty(B, np.uint8)  # one sample's bytes, numbers aside
     dts, values, sources, dst = ["<u8"], [stamps], [(stamps, ())], [0]  # the stamps first: the indexes' times
     for tp, cid, col in zip(topics, cids, cols):
@@ -180,12 +168,89 @@ def chunk_matrix(
             values.append(vals)
             sources.append(src)
             dst.append(col + MSG_HEAD + off)
-    M[:] = row
     assert all(dt in ("<f8", "<u8", "<i4", "<u4") for dt in dts)
-    keep, addr, step = number_sources(dts, values, sources, K)
-    wide = [dt in ("<f8", "<u8") for dt in dts[1:]]
-    numbers = Numbers(keep, addr[1:], step[1:], dst[1:], np.full(len(wide), B), wide, (int(addr[0]), int(step[0])))
-    return M, numbers
+    return row, dts, values, sources, dst
+
+
+class ChunkPlan:
+    """What :meth:`BulkWriter.write_samples` makes of one layout of samples (the same topics, templates,
+    field sources and ``K``: a sweep's bags, a process's later runs), kept for the next bag of it
+    (:data:`PLANS`): the chunk buffer (:class:`FullChunk`, or a matrix of its own) with every record's
+    constant bytes written, and where the numbers lie relative to their arrays. A bag then writes only
+    its numbers into it (no fresh pages, no template copies, no address searches).
+
+    :meth:`numbers` gives a bag's :class:`Numbers`: from the cached relative addresses where the bag's
+    arrays are laid out as the first bag's were (same shape, strides, dtype), else by
+    :func:`number_sources` afresh."""
+
+    def __init__(self, topics: list[Any], cids: list[int], cols: list[int], B: int, per: int, K: int, full: bool):
+        self.B, self.K = B, K
+        self.full = FullChunk(per, B, cids, cols) if full else None
+        self.M = np.empty((per, B), np.uint8) if self.full is None else self.full.M
+        row, dts, values, sources, dst = _chunk_row(topics, cids, cols, B, np.zeros(K, np.int64))
+        self.M[:] = row
+        self.dts, self.dst = dts, dst
+        self.wide = [dt in ("<f8", "<u8") for dt in dts[1:]]
+        self.rel: tuple | None = None  # (slots, byte offsets, steps, each array's form)
+
+    def numbers(self, topics: list[Any], cids: list[int], cols: list[int], stamps: np.ndarray) -> Numbers:
+        """The :class:`Numbers` of a bag's samples ``stamps`` (K,) in :attr:`M`."""
+        arrays: list[np.ndarray] = []
+        seen: dict[int, int] = {}
+        slots = [seen.setdefault(id(stamps), 0)]
+        arrays.append(stamps)
+        for tp in topics:
+            slots += (0, 0)  # log and publish time
+            for _, _, _, (a, _) in tp.fields:
+                j = seen.setdefault(id(a), len(seen))
+                if j == len(arrays):
+                    arrays.append(a)
+                slots.append(j)
+        forms = [_form(a) for a in arrays]
+        if self.rel is not None and self.rel[0] == slots and self.rel[3] == forms:
+            base = np.array([a.ctypes.data for a in arrays], np.uint64)
+            keep, addr, step = arrays, base[self.rel[0]] + self.rel[1], self.rel[2]
+        else:
+            _, _, values, sources, _ = _chunk_row(topics, cids, cols, self.B, stamps)
+            keep, addr, step = number_sources(self.dts, values, sources, self.K)
+            self.rel = _relative(keep, addr, step, arrays, slots, forms)
+        B = self.B
+        wide = self.wide
+        return Numbers(
+            keep, addr[1:], step[1:], self.dst[1:], np.full(len(wide), B), wide, (int(addr[0]), int(step[0]))
+        )
+
+
+def _form(a: np.ndarray) -> tuple:
+    """What :func:`number_sources` makes of an array: its shape, strides, dtype, C order (where its
+    words lie relative to its start)."""
+    return (a.shape, a.strides, a.dtype.str, a.flags.c_contiguous)
+
+
+def _relative(
+    keep: list[np.ndarray],
+    addr: np.ndarray,
+    step: np.ndarray,
+    arrays: list[np.ndarray],
+    slots: list[int],
+    forms: list[tuple],
+) -> tuple | None:
+    """``addr`` relative to the arrays (``arrays[slots[k]]``: field ``k``'s) where every field is read
+    in place (:func:`number_sources` made no copy), else None."""
+    held = {id(a) for a in keep}
+    if any(id(a) not in held for a in arrays):
+        return None
+    base = np.array([a.ctypes.data for a in arrays], np.uint64)[slots]
+    ends = base + np.array([a.nbytes for a in arrays], np.uint64)[slots]
+    if not (np.all(addr >= base) and np.all(addr < ends)):
+        return None
+    return (slots, addr - base, step, forms)
+
+
+#: :class:`ChunkPlan` of the layouts written lately, by layout; taken out while a bag is written with it
+#: (a writer in another thread then makes its own), most recent last
+PLANS: dict[tuple, ChunkPlan] = {}
+PLANS_KEPT = 4
 
 
 class FullChunk:
@@ -193,7 +258,7 @@ class FullChunk:
     topic ``cids[k]`` at ``cols[k]``) with nothing before or after them in it, and its message index
     records: all in one byte buffer, written with one ``write`` call. Everything but the samples' numbers
     and the chunk's times is the same for every such chunk and is written once: the chunk record's header,
-    the records' constant bytes (:func:`chunk_matrix` fills :attr:`M`, the samples' ``(rows, B)`` matrix,
+    the records' constant bytes (:class:`ChunkPlan` fills :attr:`M`, the samples' ``(rows, B)`` matrix,
     a view into the buffer) and each message index's offsets (``sample * B + col``, the chunk's records
     start at 0). The bytes are those ``write_chunk`` writes for the same records. :meth:`numbers` says where
     the numbers of a chunk go in :attr:`buf`: the matrix's and every message index's log times."""
@@ -554,7 +619,7 @@ def writer_classes():
             """``/tf_static`` at the first stamp, then every sample's messages in topic order, in chunks of
             whole samples of about :data:`CHUNK_BYTES`. Every topic has a message at each of the first
             ``K`` samples (the log rows, all of one layout: a chunk is a ``(samples, B)`` byte matrix,
-            :func:`chunk_matrix`, refilled for each chunk: memory stays at one chunk); the last sample (the
+            :class:`ChunkPlan`, refilled for each chunk: memory stays at one chunk); the last sample (the
             end of the run) holds the state topics' messages only."""
             S = len(stamps)
             K = S - 1
@@ -581,8 +646,14 @@ def writer_classes():
             bounds = [(j0, min(K, j0 + per)) for j0 in range(0, max(K, 1), per)]
             # the chunks between the first (schemas, channels, /tf_static) and the last (the end of the run):
             # all of ``per`` samples, written from one buffer whose matrix the slots fill
-            full = FullChunk(per, B, cids, cols) if any(0 < j0 and j1 < K for j0, j1 in bounds) else None
-            M, numbers = chunk_matrix(topics, cids, cols, B, per, stamps[:K], None if full is None else full.M)
+            has_full = any(0 < j0 and j1 < K for j0, j1 in bounds)
+            layout = getattr(topics[0], "layout", None) if topics else None
+            key = None if layout is None else (layout, B, per, K, has_full, tuple(cids), tuple(cols))
+            plan = None if key is None else PLANS.pop(key, None)
+            if plan is None:
+                plan = ChunkPlan(topics, cids, cols, B, per, K, has_full)
+            full, M = plan.full, plan.M
+            numbers = plan.numbers(topics, cids, cols, stamps[:K])
             in_full = None if full is None else full.numbers(numbers)
             storage = self.storage
             # the disk blocks of the samples' records, in one call (fewer bytes than follow: the index records)
@@ -614,6 +685,10 @@ def writer_classes():
                 storage.write_chunk(parts, {k: v for k, v in index.items() if len(v[0])})
                 for cid, (t, _) in index.items():
                     self.counts[cid] += len(t)
+            if key is not None:  # kept for the next bag of this layout
+                PLANS[key] = plan
+                while len(PLANS) > PLANS_KEPT:
+                    PLANS.pop(next(iter(PLANS)), None)
             if S:
                 self.min_timestamp = min(self.min_timestamp, int(stamps.min()))
                 self.max_timestamp = max(self.max_timestamp, int(stamps.max()))
