@@ -305,6 +305,47 @@ def test_ideal_bag_humble(tmp_path):
     assert not (tmp_path / "bag2").exists() and not list(tmp_path.glob(".*tmp"))
 
 
+@needs_rosbags
+def test_a_layouts_later_bags_equal_a_first_bag(tmp_path):
+    """The layout caches (outputs/rosbag.py _LAYOUTS: templates and field offsets; outputs/rosbag_write.py
+    PLANS: the chunk buffer with its constant bytes, the numbers' addresses relative to their arrays) change
+    no byte: run B's bag written right after run A's (the same layout, other numbers: every cache used)
+    equals B's bag written with the caches emptied, and so does B's log with an array laid out otherwise
+    (Fortran order: its numbers then found afresh, as converted copies)."""
+    import types
+
+    import bioform_mj.outputs.rosbag as rosbag
+    import bioform_mj.outputs.rosbag_write as rw
+
+    over = {"sim.duration": 4.0}  # 400 rows: three chunks, the middle one from the full-chunk buffer
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ra = simulate(load("paper", plant="ideal", overrides=over), full_state=True)
+        jitter = {**over, "formation.init_jitter": 0.2, "sim.seed": 5}
+        rb = simulate(load("paper", plant="ideal", overrides=jitter), full_state=True)
+    assert not np.array_equal(ra.log["pose_3d"], rb.log["pose_3d"])
+
+    def bag(r, name: str, fresh: bool) -> tuple[bytes, bytes]:
+        if fresh:
+            rosbag._LAYOUTS.clear()
+            rw.PLANS.clear()
+        rosbag.write_bag(r, tmp_path / name / "bag")
+        return (tmp_path / name / "bag" / "bag.mcap").read_bytes(), (
+            tmp_path / name / "bag" / "metadata.yaml"
+        ).read_bytes()
+
+    a = bag(ra, "a", True)
+    b_later = bag(rb, "b_later", False)
+    assert len(rosbag._LAYOUTS) == 1 and len(rw.PLANS) == 1
+    assert all(p.full is not None and p.rel is not None for p in rw.PLANS.values())  # read in place, by offsets
+    b_first = bag(rb, "b_first", True)
+    assert b_later == b_first and a[0] != b_first[0] and len(a[0]) == len(b_first[0])
+    fortran = {**rb.log, "pose_3d": np.asfortranarray(rb.log["pose_3d"])}
+    other = types.SimpleNamespace(log=fortran, summary=rb.summary, scenario=rb.scenario)
+    assert bag(other, "b_fortran", False) == b_first
+    assert all(p.rel is None for p in rw.PLANS.values())  # pose_3d's numbers were copies this time
+
+
 def test_rosbag_without_the_extra_says_how_to_install(tmp_path, capsys, monkeypatch):
     """--rosbag with rosbags missing: exit 2 before any work, one error: line naming the extra."""
     real = importlib.util.find_spec

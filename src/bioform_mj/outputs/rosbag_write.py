@@ -180,25 +180,59 @@ class ChunkPlan:
     its numbers into it (no fresh pages, no template copies, no address searches).
 
     :meth:`numbers` gives a bag's :class:`Numbers`: from the cached relative addresses where the bag's
-    arrays are laid out as the first bag's were (same shape, strides, dtype), else by
-    :func:`number_sources` afresh."""
+    arrays are laid out as the first bag's were (same shape, strides, dtype, C order: where
+    :func:`number_sources` reads a number relative to its array's start), else by it afresh."""
 
-    def __init__(self, topics: list[Any], cids: list[int], cols: list[int], B: int, per: int, K: int, full: bool):
-        self.B, self.K = B, K
+    def __init__(
+        self, topics: list[Any], cids: list[int], cols: list[int], B: int, per: int, full: bool, stamps: np.ndarray
+    ) -> None:
+        """The plan of ``topics`` (at ``cids``, ``cols``; ``B`` bytes a sample) in chunks of ``per`` samples
+        (``full``: in a :class:`FullChunk`), made with the first bag's samples ``stamps`` (K,) ns:
+        :attr:`first` holds its :class:`Numbers`."""
+        self.B, self.K = B, len(stamps)
         self.full = FullChunk(per, B, cids, cols) if full else None
         self.M = np.empty((per, B), np.uint8) if self.full is None else self.full.M
-        row, dts, values, sources, dst = _chunk_row(topics, cids, cols, B, np.zeros(K, np.int64))
+        row, self.dts, values, sources, self.dst = _chunk_row(topics, cids, cols, B, stamps)
         self.M[:] = row
-        self.dts, self.dst = dts, dst
-        self.wide = [dt in ("<f8", "<u8") for dt in dts[1:]]
-        self.rel: tuple | None = None  # (slots, byte offsets, steps, each array's form)
+        self.wide = [dt in ("<f8", "<u8") for dt in self.dts[1:]]
+        #: (slots, byte offsets, steps, each array's form) where every number is read in place, else None
+        self.rel: tuple | None = None
+        self.first: Numbers | None = self._found(number_sources(self.dts, values, sources, self.K), topics, stamps)
+
+    def _found(self, found: tuple, topics: list[Any], stamps: np.ndarray) -> Numbers:
+        """The :class:`Numbers` of ``found = number_sources(…)``, its addresses kept relative to their
+        arrays where every number is read in place (no copy)."""
+        keep, addr, step = found
+        arrays, slots, forms = self._arrays(topics, stamps)
+        held = {id(a) for a in keep}
+        base = np.array([a.ctypes.data for a in arrays], np.uint64)[slots]
+        ends = base + np.array([a.nbytes for a in arrays], np.uint64)[slots]
+        inside = all(id(a) in held for a in arrays) and bool(np.all(addr >= base) and np.all(addr < ends))
+        self.rel = (slots, addr - base, step, forms) if inside else None
+        return self._numbers(keep, addr, step)
+
+    def _numbers(self, keep: list[np.ndarray], addr: np.ndarray, step: np.ndarray) -> Numbers:
+        wide, stamp = self.wide, (int(addr[0]), int(step[0]))
+        return Numbers(keep, addr[1:], step[1:], self.dst[1:], np.full(len(wide), self.B), wide, stamp)
 
     def numbers(self, topics: list[Any], cids: list[int], cols: list[int], stamps: np.ndarray) -> Numbers:
-        """The :class:`Numbers` of a bag's samples ``stamps`` (K,) in :attr:`M`."""
-        arrays: list[np.ndarray] = []
-        seen: dict[int, int] = {}
-        slots = [seen.setdefault(id(stamps), 0)]
-        arrays.append(stamps)
+        """The :class:`Numbers` of a bag's samples ``stamps`` (K,) in :attr:`M` (the first bag's: made
+        with the plan)."""
+        if self.first is not None:
+            first, self.first = self.first, None
+            return first
+        arrays, slots, forms = self._arrays(topics, stamps)
+        if self.rel is not None and self.rel[0] == slots and self.rel[3] == forms:
+            base = np.array([a.ctypes.data for a in arrays], np.uint64)
+            return self._numbers(arrays, base[self.rel[0]] + self.rel[1], self.rel[2])
+        _, _, values, sources, _ = _chunk_row(topics, cids, cols, self.B, stamps)
+        return self._found(number_sources(self.dts, values, sources, self.K), topics, stamps)
+
+    @staticmethod
+    def _arrays(topics: list[Any], stamps: np.ndarray) -> tuple[list[np.ndarray], list[int], list[tuple]]:
+        """The distinct arrays the numbers come from (the stamps first), each number's (its index) and
+        each array's form (shape, strides, dtype, C order)."""
+        arrays, seen, slots = [stamps], {id(stamps): 0}, [0]
         for tp in topics:
             slots += (0, 0)  # log and publish time
             for _, _, _, (a, _) in tp.fields:
@@ -206,45 +240,7 @@ class ChunkPlan:
                 if j == len(arrays):
                     arrays.append(a)
                 slots.append(j)
-        forms = [_form(a) for a in arrays]
-        if self.rel is not None and self.rel[0] == slots and self.rel[3] == forms:
-            base = np.array([a.ctypes.data for a in arrays], np.uint64)
-            keep, addr, step = arrays, base[self.rel[0]] + self.rel[1], self.rel[2]
-        else:
-            _, _, values, sources, _ = _chunk_row(topics, cids, cols, self.B, stamps)
-            keep, addr, step = number_sources(self.dts, values, sources, self.K)
-            self.rel = _relative(keep, addr, step, arrays, slots, forms)
-        B = self.B
-        wide = self.wide
-        return Numbers(
-            keep, addr[1:], step[1:], self.dst[1:], np.full(len(wide), B), wide, (int(addr[0]), int(step[0]))
-        )
-
-
-def _form(a: np.ndarray) -> tuple:
-    """What :func:`number_sources` makes of an array: its shape, strides, dtype, C order (where its
-    words lie relative to its start)."""
-    return (a.shape, a.strides, a.dtype.str, a.flags.c_contiguous)
-
-
-def _relative(
-    keep: list[np.ndarray],
-    addr: np.ndarray,
-    step: np.ndarray,
-    arrays: list[np.ndarray],
-    slots: list[int],
-    forms: list[tuple],
-) -> tuple | None:
-    """``addr`` relative to the arrays (``arrays[slots[k]]``: field ``k``'s) where every field is read
-    in place (:func:`number_sources` made no copy), else None."""
-    held = {id(a) for a in keep}
-    if any(id(a) not in held for a in arrays):
-        return None
-    base = np.array([a.ctypes.data for a in arrays], np.uint64)[slots]
-    ends = base + np.array([a.nbytes for a in arrays], np.uint64)[slots]
-    if not (np.all(addr >= base) and np.all(addr < ends)):
-        return None
-    return (slots, addr - base, step, forms)
+        return arrays, slots, [(a.shape, a.strides, a.dtype.str, a.flags.c_contiguous) for a in arrays]
 
 
 #: :class:`ChunkPlan` of the layouts written lately, by layout; taken out while a bag is written with it
@@ -271,7 +267,8 @@ class FullChunk:
         self.cids = [cids[k] for k in order]
         self.index_len = 1 + 8 + 2 + 4 + 16 * rows  # one message index record: (log time, offset) pairs
         H, C = self.HEAD, len(cids)
-        self.buf = np.zeros(H + self.size + C * self.index_len, np.uint8)
+        # every byte is written below, by ChunkPlan (the matrix) or by the numbers: no zeroed pages
+        self.buf = np.empty(H + self.size + C * self.index_len, np.uint8)
         struct.pack_into("<BQQQQIIQ", self.buf, 0, 0x06, H - 9 + self.size, 0, 0, self.size, 0, 0, self.size)
         #: the samples' byte matrix, (rows, B) uint8
         self.M = self.buf[H : H + self.size].reshape(rows, B)
@@ -651,7 +648,7 @@ def writer_classes():
             key = None if layout is None else (layout, B, per, K, has_full, tuple(cids), tuple(cols))
             plan = None if key is None else PLANS.pop(key, None)
             if plan is None:
-                plan = ChunkPlan(topics, cids, cols, B, per, K, has_full)
+                plan = ChunkPlan(topics, cids, cols, B, per, has_full, stamps[:K])
             full, M = plan.full, plan.M
             numbers = plan.numbers(topics, cids, cols, stamps[:K])
             in_full = None if full is None else full.numbers(numbers)
