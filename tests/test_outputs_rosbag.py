@@ -644,6 +644,39 @@ def test_number_sources_and_the_compiled_pass_write_numpys_bytes():
     assert np.array_equal(buf, want)
 
 
+def test_a_topics_last_record_has_numpys_bytes():
+    """The end of the run's record of a topic (outputs/rosbag.py: _Topic.record_at, written with struct): the
+    header, then the template with each field's value at sample j as np.asarray(values, dtype).tobytes()
+    gives it: a NaN's payload and -0.0 kept, integers wrapped to 4 or 8 bytes, float32 widened, floats cast
+    to <i4 by numpy."""
+    import struct
+
+    from bioform_mj.outputs.rosbag import _Topic
+    from bioform_mj.outputs.rosbag_write import MSG_HEAD
+
+    nan = np.frombuffer(struct.pack("<Q", 0x7FF8_0000_DEAD_BEEF), np.float64)
+    cols = {
+        "<f8": [np.array([1.5, -0.0]), np.concatenate([nan, nan]), np.array([0.1, 2.5], np.float32)],
+        "<i4": [np.array([-(2**40) - 3, 5]), np.array([3.7, -2.2])],
+        "<u4": [np.array([2**33 + 7, -1])],
+        "<u8": [np.array([-5, 2**62], np.int64)],
+    }
+    fields, off = [], 3
+    for dt, arrays in cols.items():
+        for a in arrays:
+            fields.append((off, dt, a, (a, ())))
+            off += np.dtype(dt).itemsize + 1
+    tp = _Topic("/x", "std_msgs/msg/Empty", np.arange(2), np.full(off + 2, 0x5A, np.uint8), fields)
+    stamp = 1_700_000_000_123_456_789
+    for j in (0, 1):
+        got = tp.record_at(7, stamp, j)
+        want = bytearray(struct.pack("<BQHIQQ", 0x05, 22 + off + 2, 7, 0, stamp, stamp)) + bytes([0x5A]) * (off + 2)
+        for o, dt, a, _ in fields:
+            b = np.asarray(a[j : j + 1], dtype=dt).tobytes()
+            want[MSG_HEAD + o : MSG_HEAD + o + len(b)] = b
+        assert got == bytes(want), j
+
+
 def test_reserve_allocates_the_blocks_and_leaves_the_size(tmp_path):
     """outputs/rosbag_write.reserve: the blocks of the bytes to come are allocated (Linux, where the file
     system supports fallocate) and the file's size is what was written, before and after the writes."""

@@ -153,20 +153,25 @@ class _Topic:
     #: chunk buffers (:class:`~bioform_mj.outputs.rosbag_write.ChunkPlan`)
     layout: Any = None
 
-    def fill(self, out: np.ndarray, cid: int, stamps: np.ndarray, rows: slice = slice(None)) -> None:
-        """Write this topic's MCAP message records (:data:`MSG_HEAD` bytes of record header, then the
-        template with the numbers of its messages ``rows``) into ``out`` (m, :data:`MSG_HEAD` + L) uint8,
-        a view into the samples' byte matrix; ``stamps`` (m,) ns: log and publish time of each."""
-        m, L = out.shape[0], self.template.size
-        out[:, :MSG_HEAD] = np.frombuffer(struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + L, cid, 0, 0, 0), np.uint8)
-        t8 = np.ascontiguousarray(stamps, dtype="<u8").view(np.uint8).reshape(m, 8)
-        out[:, 15:23] = t8  # log time
-        out[:, 23:31] = t8  # publish time
-        body = out[:, MSG_HEAD:]
-        body[:] = self.template
+    def record_at(self, cid: int, stamp: int, j: int) -> bytes:
+        """This topic's MCAP message record (:data:`MSG_HEAD` bytes of record header, then the template
+        with the numbers of sample ``j``), log and publish time ``stamp`` ns: the bytes the bulk writer
+        places for a row (``np.asarray(values, dtype)``'s: float64 bits as they are, integers modulo 2⁶⁴
+        or 2³²), written with :mod:`struct` (the end of the run's one message per topic)."""
+        out = bytearray(MSG_HEAD) + self.template.tobytes()
+        struct.pack_into("<BQHIQQ", out, 0, 0x05, 2 + 4 + 8 + 8 + self.template.size, cid, 0, stamp, stamp)
         for off, dt, vals, _ in self.fields:
-            w = np.dtype(dt).itemsize
-            body[:, off : off + w] = np.ascontiguousarray(vals[rows], dtype=dt).view(np.uint8).reshape(m, w)
+            v, at = vals[j], MSG_HEAD + off
+            kind = getattr(v, "dtype", np.dtype(object)).kind
+            if dt == "<f8" and kind == "f" and v.dtype.itemsize == 8:
+                struct.pack_into("<d", out, at, float(v))
+            elif dt != "<f8" and kind in "iu":
+                wide = dt == "<u8"
+                struct.pack_into("<Q" if wide else "<I", out, at, int(v) & (2**64 - 1 if wide else 2**32 - 1))
+            else:  # any other kind: numpy's conversion
+                b = np.asarray(vals[j : j + 1], dtype=dt).tobytes()
+                out[at : at + len(b)] = b
+        return bytes(out)
 
     @property
     def width(self) -> int:

@@ -539,7 +539,6 @@ def writer_classes():
             """``Writer.add_connection`` for a type of ``typestore`` (its definition and hash made once per
             process: :func:`_msgdef`), the QoS written by :func:`yaml_text`."""
             from rosbags.interfaces import Connection, ConnectionExtRosbag2, MessageDefinition
-            from rosbags.rosbag2.metadata import dump_qos_v9
 
             assert self.storage and self.version >= 9
             fmt, text, rihs01 = msgdef(typestore, msgtype)
@@ -559,7 +558,7 @@ def writer_classes():
             if msgtype not in self.added_types:
                 self.storage.add_msgtype(conn)
                 self.added_types.add(msgtype)
-            self.storage.add_connection(conn, yaml_text(dump_qos_v9(qos)))
+            self.storage.add_connection(conn, _qos_text(tuple(qos)))
             self.connections.append(conn)
             self.counts[conn.id] = 0
             return conn
@@ -630,9 +629,7 @@ def writer_classes():
             for tp, cid in zip(topics, cids):
                 full = len(tp.rows) == S
                 if full:  # the state topics: one more message, at the end of the run
-                    last = np.empty((1, tp.width), np.uint8)
-                    tp.fill(last, cid, stamps[K:], slice(K, S))
-                    tail.append(last.tobytes())
+                    tail.append(tp.record_at(cid, int(stamps[K]), K))
                     tail_idx.append(cid)
                 for row, data in tp.extra:
                     assert row == K, "only the last sample has messages of another layout"
@@ -780,6 +777,14 @@ def yaml_text(obj: Any) -> str:
     if isinstance(obj, dict | list | tuple) and obj:
         return "\n".join(_yaml_lines(obj, 0))
     return _yaml_scalar(obj)
+
+
+@functools.lru_cache(maxsize=64)
+def _qos_text(qos: tuple) -> str:
+    """The YAML of QoS profiles ``qos`` as rosbag2 v9 metadata states them, made once per process."""
+    from rosbags.rosbag2.metadata import dump_qos_v9
+
+    return yaml_text(dump_qos_v9(list(qos)))
 
 
 def bulk_writer(*args: Any, **kwargs: Any) -> Any:
