@@ -586,13 +586,22 @@ def _static_tf(log: Mapping[str, Any], msgs: _Messages, start_ns: int) -> bytes:
     are the world's), ``fI/base_link → fI/imu_link`` (the IMU site at the axle midpoint) with an IMU."""
     n = int(np.asarray(log["pose_3d"]).shape[1])
     t0 = start_ns + int(np.rint(float(np.asarray(log["t_state"])[0]) * 1e9))
+    axle = None
+    if "imu_gyro" in log:
+        axle = tuple(tuple(float(v) for v in row) for row in np.asarray(log.get("axle", np.zeros((n, 3))), float))
+    return _static_tf_of(msgs, n, t0, axle)
+
+
+@functools.lru_cache(maxsize=64)
+def _static_tf_of(msgs: _Messages, n: int, t0: int, axle: tuple | None) -> bytes:
+    """:func:`_static_tf` of ``n`` followers at ``t0`` ns (``axle``: each IMU's place, None: no IMU), made
+    once per process (a sweep's bags state the same)."""
     st = msgs.time(t0 // 1_000_000_000, t0 % 1_000_000_000)
     one = (1.0, 0.0, 0.0, 0.0)
     out = [msgs.transform(st, "world", f"f{i + 1}/odom", (0.0, 0.0, 0.0), one) for i in range(n)]
     out.append(msgs.transform(st, "world", "leader/odom", (0.0, 0.0, 0.0), one))
-    if "imu_gyro" in log:
-        axle = np.asarray(log.get("axle", np.zeros((n, 3))), float)
-        out += [msgs.transform(st, f"f{i + 1}/base_link", f"f{i + 1}/imu_link", tuple(axle[i]), one) for i in range(n)]
+    if axle is not None:
+        out += [msgs.transform(st, f"f{i + 1}/base_link", f"f{i + 1}/imu_link", axle[i], one) for i in range(n)]
     return bytes(msgs.store.serialize_cdr(msgs.tf(out), "tf2_msgs/msg/TFMessage"))
 
 

@@ -3,20 +3,21 @@
 ``rosbags``' own writer takes one message at a time and, at the end, emits its YAML three ways; here a
 run's messages go into the MCAP file in whole chunks (``(samples, bytes)`` matrices, filled with numpy by
 :class:`bioform_mj.outputs.rosbag` topics) and the metadata — each connection's QoS, ``metadata.yaml`` and
-the MCAP's copy of it — is emitted once by :func:`yaml_text`, a block-style YAML writer for the plain data
-it holds. The message definitions and type hashes are made once per process and type store (:func:`msgdef`).
+the MCAP's copy of it — is emitted once by :mod:`bioform_mj.outputs.rosbag_yaml`, a block-style YAML writer
+for the plain data it holds. The message definitions and type hashes are made once per process and type store
+(:func:`msgdef`); what a layout's bags share (templates, the chunk buffer, connection records) once per layout
+(:class:`ChunkPlan`).
 """
 
 from __future__ import annotations
 
 import functools
-import json
-import math
-import re
 import struct
 from typing import Any
 
 import numpy as np
+
+from bioform_mj.outputs.rosbag_yaml import metadata_text, qos_text, yaml_text
 
 __all__ = [
     "CHUNK_BYTES",
@@ -555,43 +556,52 @@ def writer_classes():
             )
             if any(c.topic == topic for c in self.connections):
                 raise ValueError(f"rosbag: topic {topic} added twice")
-            if msgtype not in self.added_types:
-                self.storage.add_msgtype(conn)
-                self.added_types.add(msgtype)
-            self.storage.add_connection(conn, _qos_text(tuple(qos)))
+            st, new = self.storage, msgtype not in self.added_types
+            # its schema (where new) and channel records, made once per process: the same for the same
+            # topic, type, QoS, channel id and schema id
+            sid = len(st.schemas) + 1 if new else next(x.id for x in st.schemas if x.name == msgtype)
+            key = (id(typestore), topic, msgtype, tuple(qos), conn.id, new, sid)
+            made = CONNECTION_RECORDS.get(key)
+            if made is None:
+                at, before = st.chunk.bio.tell(), len(st.schemas)
+                if new:
+                    st.add_msgtype(conn)
+                st.add_connection(conn, qos_text(tuple(qos)))
+                made = (st.schemas[before:], st.channels[-1], bytes(st.chunk.bio.getbuffer()[at:]), typestore)
+                if len(CONNECTION_RECORDS) >= 512:
+                    CONNECTION_RECORDS.clear()
+                CONNECTION_RECORDS[key] = made
+            else:
+                st.schemas += made[0]
+                st.channels.append(made[1])
+                st.channel_stats[conn.id] = 0
+                st.chunk.bio.write(made[2])
+            self.added_types.add(msgtype)
             self.connections.append(conn)
             self.counts[conn.id] = 0
             return conn
 
         def close(self) -> None:
             """``Writer.close`` (no compression): the MCAP's summary, then ``metadata.yaml``, the same
-            fields, each emitted once by :func:`yaml_text`."""
-            from rosbags.rosbag2.metadata import dump_qos_v9
-
+            fields, each emitted once by :func:`~bioform_mj.outputs.rosbag_yaml.metadata_text`."""
             assert self.storage
             path = self.storage.path
             duration = max(0, self.max_timestamp - self.min_timestamp)
             start, count = self.min_timestamp, sum(self.counts.values())
-            info = {
+            head = {
                 "version": self.version,
                 "storage_identifier": self.storage_plugin.name.lower(),
                 "relative_file_paths": [path.name],
                 "duration": {"nanoseconds": duration},
                 "starting_time": {"nanoseconds_since_epoch": start},
                 "message_count": count,
-                "topics_with_message_count": [
-                    {
-                        "topic_metadata": {
-                            "name": c.topic,
-                            "type": c.msgtype,
-                            "serialization_format": c.ext.serialization_format,
-                            "offered_qos_profiles": dump_qos_v9(c.ext.offered_qos_profiles),
-                            "type_description_hash": c.digest,
-                        },
-                        "message_count": self.counts[c.id],
-                    }
-                    for c in self.connections
-                ],
+            }
+            topics = [
+                (c.topic, c.msgtype, c.ext.serialization_format, tuple(c.ext.offered_qos_profiles), c.digest)
+                + (self.counts[c.id],)
+                for c in self.connections
+            ]
+            tail = {
                 "compression_format": "",
                 "compression_mode": "",
                 "files": [
@@ -605,7 +615,7 @@ def writer_classes():
                 "custom_data": self.custom_data or None,
                 "ros_distro": "rosbags",
             }
-            inner = yaml_text(info)
+            inner = metadata_text(head, topics, tail)
             self.storage.close(self.version, inner)
             self.storage = None
             body = "".join(f"  {ln}\n" for ln in inner.splitlines())
@@ -691,6 +701,9 @@ def writer_classes():
 
 
 MSGDEFS_MADE: dict[tuple[int, str], tuple[Any, str, str]] = {}
+#: the schema and channel records of a connection (BulkWriter.add_connection), with its type store (held:
+#: its id is in the key)
+CONNECTION_RECORDS: dict[tuple, tuple[list[Any], Any, bytes, Any]] = {}
 
 
 def msgdef(store: Any, msgtype: str) -> tuple[Any, str, str]:
@@ -705,86 +718,6 @@ def msgdef(store: Any, msgtype: str) -> tuple[Any, str, str]:
         fmt = MessageDefinitionFormat.IDL if idl else MessageDefinitionFormat.MSG
         MSGDEFS_MADE[key] = (fmt, text, store.hash_rihs01(msgtype))
     return MSGDEFS_MADE[key]
-
-
-_YAML_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
-_YAML_PLAIN = re.compile(r"[A-Za-z_/][A-Za-z0-9_/.\-]*")
-#: plain words a YAML 1.1 reader takes for booleans or null
-_YAML_WORDS = {"y", "n", "yes", "no", "on", "off", "true", "false", "null"}
-_YAML_UNSAFE = re.compile("[\x7f-\x9f\ud800-\udfff\ufeff\ufffe\uffff]")
-
-
-def _yaml_scalar(v: Any) -> str:
-    if v is None:
-        return "null"
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        return repr(v) if math.isfinite(v) else {math.inf: ".inf", -math.inf: "-.inf"}.get(v, ".nan")
-    if isinstance(v, dict):
-        return "{}"
-    if isinstance(v, list | tuple):
-        return "[]"
-    if type(v) is str:
-        return _yaml_str(v)
-    return _yaml_text_scalar(v)
-
-
-def _yaml_text_scalar(v: Any) -> str:
-    if _YAML_PLAIN.fullmatch(v) and v.lower() not in _YAML_WORDS:  # a name: plain, as rosbag2 writes it
-        return v
-    # a JSON string is a YAML double-quoted scalar; the characters YAML wants escaped and JSON leaves, escaped
-    return _YAML_UNSAFE.sub(lambda m: f"\\u{ord(m.group()):04x}", json.dumps(str(v), ensure_ascii=False))
-
-
-@functools.lru_cache(maxsize=1024)
-def _yaml_str(v: str) -> str:
-    """A string scalar, memoised (a bag's names, types and hashes recur in every bag of a process)."""
-    return _yaml_text_scalar(v)
-
-
-@functools.lru_cache(maxsize=256)
-def _yaml_key(k: str) -> str:
-    return k if _YAML_KEY.fullmatch(k) else _yaml_scalar(k)
-
-
-def _yaml_lines(obj: Any, ind: int) -> list[str]:
-    pad, out = " " * ind, []
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            key = _yaml_key(k) if isinstance(k, str) else _yaml_scalar(k)
-            if isinstance(v, dict | list | tuple) and v:
-                out.append(f"{pad}{key}:")
-                out += _yaml_lines(v, ind + 2)
-            else:
-                out.append(f"{pad}{key}: {_yaml_scalar(v)}")
-    else:
-        for v in obj:
-            if isinstance(v, dict | list | tuple) and v:
-                sub = _yaml_lines(v, ind + 2)
-                out += [f"{pad}- {sub[0][ind + 2 :]}", *sub[1:]]
-            else:
-                out.append(f"{pad}- {_yaml_scalar(v)}")
-    return out
-
-
-def yaml_text(obj: Any) -> str:
-    """``obj`` (dicts, lists, strings, numbers, None) as block-style YAML, no trailing newline: the rosbag2
-    metadata and QoS profiles (strings double-quoted; read back by any YAML 1.1/1.2 reader as ``obj``,
-    ``tests/test_outputs_rosbag.py``)."""
-    if isinstance(obj, dict | list | tuple) and obj:
-        return "\n".join(_yaml_lines(obj, 0))
-    return _yaml_scalar(obj)
-
-
-@functools.lru_cache(maxsize=64)
-def _qos_text(qos: tuple) -> str:
-    """The YAML of QoS profiles ``qos`` as rosbag2 v9 metadata states them, made once per process."""
-    from rosbags.rosbag2.metadata import dump_qos_v9
-
-    return yaml_text(dump_qos_v9(list(qos)))
 
 
 def bulk_writer(*args: Any, **kwargs: Any) -> Any:
