@@ -467,18 +467,23 @@ def writer_classes():
             self.bio.write(out.getbuffer())
             self.bio.close()
 
-        def write_chunk(self, pieces: list[Any], index: dict[int, tuple[np.ndarray, np.ndarray]]) -> None:
+        def write_chunk(
+            self, pieces: list[Any], index: dict[int, tuple[np.ndarray, np.ndarray]], times: tuple | None = None
+        ) -> None:
             """Write the message records ``pieces`` (bytes or contiguous uint8 arrays, in time order) as
-            one chunk; ``index``: channel id → (log times, offsets of its records in the pieces). The
-            schema and channel records ``rosbags`` keeps pending go first."""
+            one chunk; ``index``: channel id → (log times, offsets of its records in the pieces); ``times``:
+            the least and greatest of those log times, where the caller knows them. The schema and channel
+            records ``rosbags`` keeps pending go first."""
             pending = self.chunk.bio.getvalue()
             self.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
             if not index:
                 return
             pieces = [pending, *pieces]
             size = sum(len(p) if isinstance(p, bytes) else p.nbytes for p in pieces)
-            t_start = min(int(t.min()) for t, _ in index.values())
-            t_end = max(int(t.max()) for t, _ in index.values())
+            t_start, t_end = times or (
+                min(int(t.min()) for t, _ in index.values()),
+                max(int(t.max()) for t, _ in index.values()),
+            )
             if self.compression:
                 pieces = [self.compressor(b"".join(bytes(p) for p in pieces))]
             comp_size = sum(len(p) if isinstance(p, bytes) else p.nbytes for p in pieces)
@@ -491,15 +496,19 @@ def writer_classes():
             for p in pieces:
                 self.bio.write(p if isinstance(p, bytes) else memoryview(p))
             chunk_end = self.bio.tell()
-            offsets = []
-            for cid in sorted(index):
+            # the message index records, one buffer: per channel its header and (log time, offset) pairs
+            order = sorted(index)
+            recs = np.empty(sum(15 + 16 * len(index[cid][0]) for cid in order), np.uint8)
+            offsets, at = [], 0
+            for cid in order:
                 t, off = index[cid]
-                offsets.append((cid, self.bio.tell()))
-                pairs = np.empty((len(t), 2), "<u8")
+                offsets.append((cid, chunk_end + at))
+                struct.pack_into("<BQHI", recs, at, 0x07, 2 + 4 + 16 * len(t), cid, 16 * len(t))
+                pairs = np.ndarray((len(t), 2), "<u8", buffer=recs, offset=at + 15)
                 pairs[:, 0], pairs[:, 1] = t, off + len(pending)
-                self.bio.write(struct.pack("<BQHI", 0x07, 2 + 4 + pairs.nbytes, cid, pairs.nbytes))
-                self.bio.write(pairs.tobytes())
+                at += 15 + 16 * len(t)
                 self.channel_stats[cid] += len(t)
+            self.bio.write(memoryview(recs))
             rec = BytesIO()
             rec.write(struct.pack("<QQQQ", t_start, t_end, chunk_start, chunk_end - chunk_start))
             rec.write(struct.pack("<I", len(offsets) * 10))
@@ -675,9 +684,9 @@ def writer_classes():
                 index: dict[int, tuple[np.ndarray, np.ndarray]] = {}
                 if j0 == 0:
                     index[c_static.id] = (stamps[:1], np.zeros(1, np.int64))
-                js = np.arange(j0, j1)
+                seg, rel = stamps[j0:j1], at + np.arange(j1 - j0) * B  # every topic's times, offsets less col
                 for cid, col in zip(cids, cols):
-                    index[cid] = (stamps[js], at + (js - j0) * B + col)
+                    index[cid] = (seg, rel + col)
                 parts.append(M[: j1 - j0].reshape(-1))
                 at += (j1 - j0) * B
                 if j1 == K:  # the last chunk: the end of the run's messages too
@@ -686,7 +695,11 @@ def writer_classes():
                         index[cid] = (np.append(t_old, stamps[K]), np.append(o_old, at))
                         parts.append(rec)
                         at += len(rec)
-                storage.write_chunk(parts, {k: v for k, v in index.items() if len(v[0])})
+                ts = [stamps[:1]] if j0 == 0 else []  # the chunk's times: /tf_static's, the samples', the end's
+                ts += [seg] if j1 > j0 else []
+                ts += [stamps[K:S]] if j1 == K and tail else []
+                times = (min(int(t.min()) for t in ts), max(int(t.max()) for t in ts)) if ts else None
+                storage.write_chunk(parts, {k: v for k, v in index.items() if len(v[0])}, times)
                 for cid, (t, _) in index.items():
                     self.counts[cid] += len(t)
             if key is not None:  # kept for the next bag of this layout
