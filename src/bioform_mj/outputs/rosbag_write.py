@@ -671,10 +671,13 @@ def writer_classes():
             storage = self.storage
             # the disk blocks of the samples' records, in one call (fewer bytes than follow: the index records)
             reserve(storage.bio, K * B)
-            for j0, j1 in bounds:
+            if full is not None:  # each chunk's least and greatest stamp, two passes in all
+                starts = np.array([j0 for j0, _ in bounds], np.intp)
+                lows, highs = np.minimum.reduceat(stamps[:K], starts), np.maximum.reduceat(stamps[:K], starts)
+            for c, (j0, j1) in enumerate(bounds):
                 if full is not None and 0 < j0 and j1 < K:  # this chunk's numbers into its one buffer, then out
                     in_full.fill(full.buf, j0, j1 - j0)
-                    full.write(storage, int(stamps[j0:j1].min()), int(stamps[j0:j1].max()))
+                    full.write(storage, int(lows[c]), int(highs[c]))
                     for cid in cids:
                         self.counts[cid] += per
                     continue
