@@ -311,7 +311,8 @@ def test_a_layouts_later_bags_equal_a_first_bag(tmp_path):
     PLANS: the chunk buffer with its constant bytes, the numbers' addresses relative to their arrays) change
     no byte: run B's bag written right after run A's (the same layout, other numbers: every cache used)
     equals B's bag written with the caches emptied, and so does B's log with an array laid out otherwise
-    (Fortran order: its numbers then found afresh, as converted copies)."""
+    (Fortran order: its numbers then found afresh, as converted copies); so does A's after warm_up(like=its
+    scenario), with its layout found made."""
     import types
 
     import bioform_mj.outputs.rosbag as rosbag
@@ -344,6 +345,14 @@ def test_a_layouts_later_bags_equal_a_first_bag(tmp_path):
     other = types.SimpleNamespace(log=fortran, summary=rb.summary, scenario=rb.scenario)
     assert bag(other, "b_fortran", False) == b_first
     assert all(p.rel is None for p in rw.PLANS.values())  # pose_3d's numbers were copies this time
+    # warm_up of the run's scenario (bioform run --rosbag): the run's bag then finds its layout's templates
+    # and chunk buffer made (no new entry in either cache), and is the same bag
+    rosbag._LAYOUTS.clear()
+    rw.PLANS.clear()
+    rosbag.warm_up(like=load("paper", plant="ideal", overrides=over))
+    layouts, plans = set(rosbag._LAYOUTS), set(rw.PLANS)
+    assert bag(ra, "a_warm", False) == a
+    assert set(rosbag._LAYOUTS) == layouts and set(rw.PLANS) == plans
 
 
 def test_rosbag_without_the_extra_says_how_to_install(tmp_path, capsys, monkeypatch):

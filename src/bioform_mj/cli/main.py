@@ -443,7 +443,7 @@ def _run(args: argparse.Namespace, sc, mjlog) -> int:
     if args.rosbag or args.ros_distro:  # before any work: the ros extra is installed (else: how to install it)
         from bioform_mj.outputs.rosbag import check_args
 
-        check_args(args.rosbag, args.ros_distro)
+        check_args(args.rosbag, args.ros_distro, sc)
     live_url = None
     if args.rerun_spawn and args.rerun_connect:
         raise InputError("--rerun-spawn and --rerun-connect exclude each other")

@@ -66,14 +66,15 @@ def check_available() -> None:
         raise InputError(f"--rosbag needs the ros extra (the rosbags package), which is not installed: {INSTALL_HINT}")
 
 
-def check_args(rosbag: bool, distro: str | None) -> None:
+def check_args(rosbag: bool, distro: str | None, like: Any = None) -> None:
     """``bioform run``'s ``--rosbag`` and ``--ros-distro``, before any work: the extra is installed
-    (else :func:`check_available`'s error), ``--ros-distro`` only with ``--rosbag``."""
+    (else :func:`check_available`'s error), ``--ros-distro`` only with ``--rosbag``; ``like``: the run's
+    scenario (:func:`warm_up`)."""
     if not rosbag:
         raise InputError("--ros-distro only applies to --rosbag")
     check_available()
     try:
-        warm_up(distro or DEFAULT_DISTRO)
+        warm_up(distro or DEFAULT_DISTRO, like)
     except OSError as exc:  # the temporary folder, not the package
         raise InputError(f"--rosbag: could not write a trial bag in the temporary folder: {exc}") from exc
     except Exception as exc:  # noqa: BLE001 - a broken install: one error: line, before the run
@@ -82,13 +83,20 @@ def check_args(rosbag: bool, distro: str | None) -> None:
         ) from exc
 
 
-def warm_up(distro: str = DEFAULT_DISTRO) -> float:
+def warm_up(distro: str = DEFAULT_DISTRO, like: Any = None) -> float:
     """Import ``rosbags``, build ``distro``'s type store and every serialiser a bag uses, once per
     process (about 0.3 s, the first time), by writing a one-row stand-in log's bag into a temporary
     folder; returns the seconds it took.
     ``bioform run --rosbag`` does it before the run, with its other start-up work: a broken install
-    fails there, and the bag's own write time is then what the run's numbers cost."""
+    fails there, and the bag's own write time is then what the run's numbers cost.
+
+    ``like``: the run's scenario. Where its plant is planar (the ideal plant, a user's: the layout of
+    its bag is known before the run: its followers, no wheels, no IMU), a stand-in bag of that layout
+    is written too (of zeros, about 3 chunks), so that the run's bag finds its templates, chunk buffer
+    and connection records made, as a sweep's later bags do."""
     t0 = time.perf_counter()
+    if like is not None and getattr(getattr(like, "plant", None), "kind", "mujoco") != "mujoco":
+        _warm_layout(distro, int(like.n), str(getattr(like.plant, "sensing", "truth")))
     z = np.zeros
     log = {
         "t": z(1),
@@ -112,6 +120,34 @@ def warm_up(distro: str = DEFAULT_DISTRO) -> float:
     with tempfile.TemporaryDirectory(prefix="bioform-rosbag-") as tmp:  # every path once: YAML, MCAP, files
         _write(Path(tmp) / "bag", log, {}, "odometry", distro, 0)
     return time.perf_counter() - t0
+
+
+def _planar_log(n: int, K: int) -> dict[str, np.ndarray]:
+    """A planar plant's ``K``-row log of ``n`` followers as ``simulate(sc, full_state=True)`` gives it
+    (zeros; the wheels' angles and rates NaN, as a plant without wheels has them; no IMU)."""
+    z, S = np.zeros, K + 1
+    nan = np.full((S, n, 2), np.nan)
+    log = {"t": z(K), "t_state": np.arange(S) * 0.01, "pose_3d": z((S, n, 6)), "twist_3d": z((S, n, 6))}
+    log |= {"wheel_angle": nan, "wheel_speed": nan.copy(), "leader_state": z((S, 5)), "wheel_sign": np.ones((n, 2))}
+    log |= {"wheel_joints": np.array([["left_wheel", "right_wheel"]] * n), "cmd": z((K, n, 2)), "tau": z((K, n, 2))}
+    return log | {
+        "est_pose": z((K, n, 3)),
+        "est_vel": z((K, n, 2)),
+        "odom_pose": z((K, n, 3)),
+        "odom_vel": z((K, n, 2)),
+    }
+
+
+def _warm_layout(distro: str, n: int, sensing: str) -> None:
+    """Write a stand-in bag of a planar run's layout (:func:`warm_up` ``like``): enough rows for a chunk
+    between the first and the last (the chunk buffer), into a temporary folder."""
+    topics = topics_of(_planar_log(n, 1), sensing, _messages(distro))
+    B = sum(tp.width for tp in topics)
+    from bioform_mj.outputs.rosbag_write import CHUNK_BYTES
+
+    K = 2 * max(1, CHUNK_BYTES // B) + 2
+    with tempfile.TemporaryDirectory(prefix="bioform-rosbag-") as tmp:
+        _write(Path(tmp) / "bag", _planar_log(n, K), {}, sensing, distro, 0)
 
 
 def write_run_bag(result: Any, out: Path, distro: str | None) -> str:
@@ -365,20 +401,25 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
     named |= {"cmd": cmd, "tau": tau, "ep": ep, "ev": ev, "op": op, "ov": ov, "g": g, "a": a}
     named |= {"jp": jp, "jv": jv, "jt": jt} | {f"eq{i}": x for i, x in enumerate(eqs)}
     named |= {f"oq{i}": x for i, x in enumerate(oqs)}
-    key = (id(msgs.store), K, n, odo, wheels, imu, names.shape, tuple(names.ravel().tolist()))
+    # the layout (not K: the rows' slices are kept as "S" and "K", bound to this log's)
+    key = (id(msgs.store), n, odo, wheels, imu, names.shape, tuple(names.ravel().tolist()))
     layout = _LAYOUTS.get(key)
     if layout is None:
         topics = _build_topics(msgs, named, K, n, odo, wheels, imu, names, sign)
-        layout = _layout_of(topics, named)
+        layout = _layout_of(topics, named, K)
         if layout is not None:
             _LAYOUTS[key] = layout
             while len(_LAYOUTS) > _LAYOUTS_KEPT:
                 _LAYOUTS.pop(next(iter(_LAYOUTS)), None)
     else:
         topics = []
+        rows = {"S": slice(0, S), "K": slice(0, K)}
         for name, msgtype, m, template, fields in layout:
-            bound = [(off, dt, named[nm][idx] if idx else named[nm], (named[nm], idx)) for off, dt, nm, idx in fields]
-            topics.append(_Topic(name, msgtype, np.arange(m), template, bound))
+            bound = []
+            for off, dt, nm, kept in fields:
+                idx = tuple(rows[x] if type(x) is str else x for x in kept)
+                bound.append((off, dt, named[nm][idx] if idx else named[nm], (named[nm], idx)))
+            topics.append(_Topic(name, msgtype, np.arange(S if m == "S" else K), template, bound))
     for tp in topics if layout is not None else ():
         tp.layout = key
     if wheels:  # at T no torque interval ends: the last joint state has positions and rates only
@@ -392,14 +433,16 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
 
 
 #: the templates and field offsets of the layouts built lately (:func:`topics_of`), most recent last
-_LAYOUTS: dict[tuple, list[tuple[str, str, int, np.ndarray, list[tuple[int, str, str, tuple]]]]] = {}
+_LAYOUTS: dict[tuple, list[tuple[str, str, str, np.ndarray, list[tuple[int, str, str, tuple]]]]] = {}
 _LAYOUTS_KEPT = 8
 
 
-def _layout_of(topics: list[_Topic], named: Mapping[str, Any]) -> list[tuple] | None:
-    """``topics`` as :data:`_LAYOUTS` keeps them: per topic its name, type, message count, template and
-    fields ``(offset, dtype, array name, idx)``; None where a field's array is not one of ``named`` or two
-    names are one array (the next log's may be two)."""
+def _layout_of(topics: list[_Topic], named: Mapping[str, Any], K: int) -> list[tuple] | None:
+    """``topics`` as :data:`_LAYOUTS` keeps them: per topic its name, type, message count (``"S"``: the
+    ``K + 1`` samples, ``"K"``: the log rows), template and fields ``(offset, dtype, array name, idx)``, the
+    slices of the rows in ``idx`` kept as ``"S"`` and ``"K"``; None where a field's array is not one of
+    ``named`` or two names are one array (the next log's may be two)."""
+    rows = {(0, K + 1, None): "S", (0, K, None): "K"}
     ids = {id(v): k for k, v in named.items() if v is not None}
     if len(ids) != sum(v is not None for v in named.values()):
         return None
@@ -409,8 +452,9 @@ def _layout_of(topics: list[_Topic], named: Mapping[str, Any]) -> list[tuple] | 
         for off, dt, _, (arr, idx) in tp.fields:
             if id(arr) not in ids:
                 return None
-            fields.append((off, dt, ids[id(arr)], idx))
-        out.append((tp.name, tp.msgtype, tp.rows.size, tp.template, fields))
+            kept = tuple(rows.get((x.start, x.stop, x.step), x) if type(x) is slice else x for x in idx)
+            fields.append((off, dt, ids[id(arr)], kept))
+        out.append((tp.name, tp.msgtype, "S" if tp.rows.size == K + 1 else "K", tp.template, fields))
     return out
 
 

@@ -175,7 +175,8 @@ def _chunk_row(topics: list[Any], cids: list[int], cols: list[int], B: int, stam
 
 class ChunkPlan:
     """What :meth:`BulkWriter.write_samples` makes of one layout of samples (the same topics, templates,
-    field sources and ``K``: a sweep's bags, a process's later runs), kept for the next bag of it
+    field sources and chunk size: a sweep's bags, a process's later runs, a run after
+    :func:`~bioform_mj.outputs.rosbag.warm_up` of its scenario), kept for the next bag of it
     (:data:`PLANS`): the chunk buffer (:class:`FullChunk`, or a matrix of its own) with every record's
     constant bytes written, and where the numbers lie relative to their arrays. A bag then writes only
     its numbers into it (no fresh pages, no template copies, no address searches).
@@ -190,7 +191,7 @@ class ChunkPlan:
         """The plan of ``topics`` (at ``cids``, ``cols``; ``B`` bytes a sample) in chunks of ``per`` samples
         (``full``: in a :class:`FullChunk`), made with the first bag's samples ``stamps`` (K,) ns:
         :attr:`first` holds its :class:`Numbers`."""
-        self.B, self.K = B, len(stamps)
+        self.B = B
         self.full = FullChunk(per, B, cids, cols) if full else None
         self.M = np.empty((per, B), np.uint8) if self.full is None else self.full.M
         row, self.dts, values, sources, self.dst = _chunk_row(topics, cids, cols, B, stamps)
@@ -198,7 +199,7 @@ class ChunkPlan:
         self.wide = [dt in ("<f8", "<u8") for dt in self.dts[1:]]
         #: (slots, byte offsets, steps, each array's form) where every number is read in place, else None
         self.rel: tuple | None = None
-        self.first: Numbers | None = self._found(number_sources(self.dts, values, sources, self.K), topics, stamps)
+        self.first: Numbers | None = self._found(number_sources(self.dts, values, sources, len(stamps)), topics, stamps)
 
     def _found(self, found: tuple, topics: list[Any], stamps: np.ndarray) -> Numbers:
         """The :class:`Numbers` of ``found = number_sources(…)``, its addresses kept relative to their
@@ -227,7 +228,7 @@ class ChunkPlan:
             base = np.array([a.ctypes.data for a in arrays], np.uint64)
             return self._numbers(arrays, base[self.rel[0]] + self.rel[1], self.rel[2])
         _, _, values, sources, _ = _chunk_row(topics, cids, cols, self.B, stamps)
-        return self._found(number_sources(self.dts, values, sources, self.K), topics, stamps)
+        return self._found(number_sources(self.dts, values, sources, len(stamps)), topics, stamps)
 
     @staticmethod
     def _arrays(topics: list[Any], stamps: np.ndarray) -> tuple[list[np.ndarray], list[int], list[tuple]]:
@@ -661,7 +662,7 @@ def writer_classes():
             # all of ``per`` samples, written from one buffer whose matrix the slots fill
             has_full = any(0 < j0 and j1 < K for j0, j1 in bounds)
             layout = getattr(topics[0], "layout", None) if topics else None
-            key = None if layout is None else (layout, B, per, K, has_full, tuple(cids), tuple(cols))
+            key = None if layout is None else (layout, B, per, has_full, tuple(cids), tuple(cols))
             plan = None if key is None else PLANS.pop(key, None)
             if plan is None:
                 plan = ChunkPlan(topics, cids, cols, B, per, has_full, stamps[:K])
