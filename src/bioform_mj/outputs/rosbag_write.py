@@ -182,8 +182,9 @@ class ChunkPlan:
     its numbers into it (no fresh pages, no template copies, no address searches).
 
     :meth:`numbers` gives a bag's :class:`Numbers`: from the cached relative addresses where the bag's
-    arrays are laid out as the first bag's were (same shape, strides, dtype, C order: where
-    :func:`number_sources` reads a number relative to its array's start), else by it afresh."""
+    arrays are laid out as the first bag's were (same shape but the rows, strides, dtype, C order: where
+    :func:`number_sources` reads a number relative to its array's start; as many rows beyond the ``K``
+    read, where each number is read row after row, else the same rows), else by it afresh."""
 
     def __init__(
         self, topics: list[Any], cids: list[int], cols: list[int], B: int, per: int, full: bool, stamps: np.ndarray
@@ -210,7 +211,11 @@ class ChunkPlan:
         base = np.array([a.ctypes.data for a in arrays], np.uint64)[slots]
         ends = base + np.array([a.nbytes for a in arrays], np.uint64)[slots]
         inside = all(id(a) in held for a in arrays) and bool(np.all(addr >= base) and np.all(addr < ends))
-        self.rel = (slots, addr - base, step, forms) if inside else None
+        # rows read one after another from each array's row 0 on (every step one row): another K reads the
+        # same words of its rows where each array has as many rows beyond K; else only arrays of one shape
+        ahead = all(s == arrays[j].strides[0] for j, s in zip(slots, step.tolist())) and bool(np.all(addr >= base))
+        spare = tuple(a.shape[0] - len(stamps) for a in arrays) if ahead else None
+        self.rel = (slots, addr - base, step, forms, spare, [a.shape for a in arrays]) if inside else None
         return self._numbers(keep, addr, step)
 
     def _numbers(self, keep: list[np.ndarray], addr: np.ndarray, step: np.ndarray) -> Numbers:
@@ -224,7 +229,13 @@ class ChunkPlan:
             first, self.first = self.first, None
             return first
         arrays, slots, forms = self._arrays(topics, stamps)
-        if self.rel is not None and self.rel[0] == slots and self.rel[3] == forms:
+        rel = self.rel
+        if (
+            rel is not None
+            and rel[0] == slots
+            and rel[3] == forms
+            and (tuple(a.shape[0] - len(stamps) for a in arrays) == rel[4] or [a.shape for a in arrays] == rel[5])
+        ):
             base = np.array([a.ctypes.data for a in arrays], np.uint64)
             return self._numbers(arrays, base[self.rel[0]] + self.rel[1], self.rel[2])
         _, _, values, sources, _ = _chunk_row(topics, cids, cols, self.B, stamps)
@@ -233,7 +244,8 @@ class ChunkPlan:
     @staticmethod
     def _arrays(topics: list[Any], stamps: np.ndarray) -> tuple[list[np.ndarray], list[int], list[tuple]]:
         """The distinct arrays the numbers come from (the stamps first), each number's (its index) and
-        each array's form (shape, strides, dtype, C order)."""
+        each array's form (its shape but the rows, strides, dtype, C order: where a word of a row lies
+        relative to the array's start; its rows: :meth:`numbers`)."""
         arrays, seen, slots = [stamps], {id(stamps): 0}, [0]
         for tp in topics:
             slots += (0, 0)  # log and publish time
@@ -242,7 +254,7 @@ class ChunkPlan:
                 if j == len(arrays):
                     arrays.append(a)
                 slots.append(j)
-        return arrays, slots, [(a.shape, a.strides, a.dtype.str, a.flags.c_contiguous) for a in arrays]
+        return arrays, slots, [(a.shape[1:], a.strides, a.dtype.str, a.flags.c_contiguous) for a in arrays]
 
 
 #: :class:`ChunkPlan` of the layouts written lately, by layout; taken out while a bag is written with it

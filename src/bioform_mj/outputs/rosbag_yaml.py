@@ -95,13 +95,16 @@ def qos_text(qos: tuple) -> str:
 
 
 @functools.lru_cache(maxsize=512)
-def _topic_entry(name: str, msgtype: str, fmt: str, qos: tuple, digest: str, count: int) -> str:
-    """One entry of ``topics_with_message_count`` as :func:`yaml_text` writes it in the metadata (indent 2)."""
+def _topic_entry(name: str, msgtype: str, fmt: str, qos: tuple, digest: str) -> str:
+    """One entry of ``topics_with_message_count`` as :func:`yaml_text` writes it in the metadata (indent 2),
+    but its last line, ``message_count`` (:func:`metadata_text`)."""
     from rosbags.rosbag2.metadata import dump_qos_v9
 
     meta = {"name": name, "type": msgtype, "serialization_format": fmt}
     meta |= {"offered_qos_profiles": dump_qos_v9(list(qos)), "type_description_hash": digest}
-    return "\n".join(_yaml_lines([{"topic_metadata": meta, "message_count": count}], 2))
+    lines = _yaml_lines([{"topic_metadata": meta, "message_count": 0}], 2)
+    assert lines[-1] == "    message_count: 0"
+    return "\n".join(lines[:-1])
 
 
 def metadata_text(head: dict[str, Any], topics: list[tuple], tail: dict[str, Any]) -> str:
@@ -110,5 +113,5 @@ def metadata_text(head: dict[str, Any], topics: list[tuple], tail: dict[str, Any
     made once per process (a sweep's bags, a process's later runs, state the same topics)."""
     if not (head and topics and tail):
         raise ValueError("metadata_text: head, topics and tail must not be empty")
-    entries = "\n".join(_topic_entry(*t) for t in topics)
+    entries = "\n".join(f"{_topic_entry(*t[:5])}\n    message_count: {_yaml_scalar(t[5])}" for t in topics)
     return f"{yaml_text(head)}\ntopics_with_message_count:\n{entries}\n{yaml_text(tail)}"
