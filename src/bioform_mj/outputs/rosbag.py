@@ -44,7 +44,7 @@ import numpy as np
 
 from bioform_mj.core.errors import InputError
 from bioform_mj.outputs.fullstate import quat_of_rpy, quat_of_yaw
-from bioform_mj.outputs.rosbag_write import MSG_HEAD, bulk_writer
+from bioform_mj.outputs.rosbag_write import CHUNK_BYTES, MSG_HEAD, bulk_writer
 
 __all__ = ["DISTROS", "DEFAULT_DISTRO", "BagInfo", "check_available", "warm_up", "write_bag", "topics_of"]
 
@@ -95,8 +95,6 @@ def warm_up(distro: str = DEFAULT_DISTRO, like: Any = None) -> float:
     is written too (of zeros, about 3 chunks), so that the run's bag finds its templates, chunk buffer
     and connection records made, as a sweep's later bags do."""
     t0 = time.perf_counter()
-    if like is not None and getattr(getattr(like, "plant", None), "kind", "mujoco") != "mujoco":
-        _warm_layout(distro, int(like.n), str(getattr(like.plant, "sensing", "truth")))
     z = np.zeros
     log = {
         "t": z(1),
@@ -119,6 +117,11 @@ def warm_up(distro: str = DEFAULT_DISTRO, like: Any = None) -> float:
     }
     with tempfile.TemporaryDirectory(prefix="bioform-rosbag-") as tmp:  # every path once: YAML, MCAP, files
         _write(Path(tmp) / "bag", log, {}, "odometry", distro, 0)
+    if like is not None and getattr(getattr(like, "plant", None), "kind", "mujoco") != "mujoco":
+        try:  # a speed-up only: where it fails, the run's bag makes its layout
+            _warm_layout(distro, int(like.n), str(getattr(like.plant, "sensing", "truth")))
+        except (ValueError, TypeError, AttributeError):
+            pass
     return time.perf_counter() - t0
 
 
@@ -142,10 +145,7 @@ def _warm_layout(distro: str, n: int, sensing: str) -> None:
     """Write a stand-in bag of a planar run's layout (:func:`warm_up` ``like``): enough rows for a chunk
     between the first and the last (the chunk buffer), into a temporary folder."""
     topics = topics_of(_planar_log(n, 1), sensing, _messages(distro))
-    B = sum(tp.width for tp in topics)
-    from bioform_mj.outputs.rosbag_write import CHUNK_BYTES
-
-    K = 2 * max(1, CHUNK_BYTES // B) + 2
+    K = 2 * max(1, CHUNK_BYTES // sum(tp.width for tp in topics)) + 2
     with tempfile.TemporaryDirectory(prefix="bioform-rosbag-") as tmp:
         _write(Path(tmp) / "bag", _planar_log(n, K), {}, sensing, distro, 0)
 
