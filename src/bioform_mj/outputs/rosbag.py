@@ -218,20 +218,16 @@ class _Topic:
 class _Markers:
     """Marker values for the fields of a template message, and the rows' values they stand for: each a
     1-D selection ``a[idx]`` of an array ``a`` (kept with it: the writer reads the numbers from ``a``
-    itself, :func:`bioform_mj.outputs.rosbag_write.number_sources`). ``names``: ``{id(a): name}`` of the
-    arrays a bag's numbers come from (:func:`topics_of`), so that a layout's fields can be cached by name."""
+    itself, :func:`bioform_mj.outputs.rosbag_write.number_sources`)."""
 
-    def __init__(self, names: Mapping[int, str] | None = None) -> None:
+    def __init__(self) -> None:
         self.items: list[tuple[bytes, str, np.ndarray, tuple[np.ndarray, tuple]]] = []
-        self.names = names or {}
-        self.named: list[str | None] = []  # each item's array's name (None: an array not named)
 
     def f64(self, a: np.ndarray, *idx: Any) -> float:
         """A marker float64 for the values ``a[idx]`` (m,) (``a`` itself without ``idx``)."""
         v = 1.2345678901234567e250 * (1.0 + len(self.items) * 2.0**-30)
         a = np.asarray(a, dtype=float)
         self.items.append((struct.pack("<d", v), "<f8", a[idx] if idx else a, (a, idx)))
-        self.named.append(self.names.get(id(a)))
         return v
 
     def int32(self, dt: str, a: np.ndarray, *idx: Any) -> int:
@@ -239,7 +235,6 @@ class _Markers:
         v = 0x3A5B0000 + 2 * len(self.items) + 1
         a = np.asarray(a)
         self.items.append((struct.pack("<I", v), dt, a[idx] if idx else a, (a, idx)))
-        self.named.append(self.names.get(id(a)))
         return v
 
     def locate(self, raw: bytes) -> list[tuple[int, str, np.ndarray, tuple[np.ndarray, tuple]]]:
@@ -395,8 +390,8 @@ def topics_of(log: Mapping[str, Any], sensing: str, msgs: _Messages, start_ns: i
     g, a = (np.asarray(log["imu_gyro"], float), np.asarray(log["imu_accel"], float)) if imu else (None, None)
     # the wheels' numbers as the joints state them (each joint's sign applied; sign · x, numpy's product)
     jp, jv, jt = (wa * sign, ws * sign, tau * sign) if wheels else (None, None, None)
-    # every array the numbers are read from, by name: a layout's templates and field offsets are cached by
-    # those names (the same topics, frames and joints, and K: _LAYOUTS) and bound to this log's arrays
+    # every array the numbers are read from, by name: a layout's templates and field offsets are kept with
+    # those names (_LAYOUTS: the same topics, frames and joints) and bound to this log's arrays
     named = {"sec": sec, "nsec": nsec, "pose3": pose3, "q": q, "twist3": twist3, "leader": leader, "lq": lq}
     named |= {"cmd": cmd, "tau": tau, "ep": ep, "ev": ev, "op": op, "ov": ov, "g": g, "a": a}
     named |= {"jp": jp, "jv": jv, "jt": jt} | {f"eq{i}": x for i, x in enumerate(eqs)}
@@ -480,11 +475,10 @@ def _build_topics(
     jp, jv, jt = named["jp"], named["jv"], named["jt"]
     eqs = [named[f"eq{i}"] for i in range(n)]
     oqs = [named[f"oq{i}"] for i in range(n)] if odo else []
-    ids = {id(v): k for k, v in named.items() if v is not None}
     topics: list[_Topic] = []
 
     def build(name: str, msgtype: str, rows: slice, make) -> _Topic:
-        mk = _Markers(ids)
+        mk = _Markers()
         stamp = msgs.time(mk.int32("<i4", sec, rows), mk.int32("<u4", nsec, rows))
         msg = make(mk, stamp, rows)
         raw = msgs.store.serialize_cdr(msg, msgtype)
@@ -558,7 +552,7 @@ def _build_topics(
                     (0.0, 0.0, mk.f64(ov, r, i, 1)),
                 ),
             )
-        mk_cmd = _Markers(ids)
+        mk_cmd = _Markers()
         raw = msgs.store.serialize_cdr(
             msgs.twist((mk_cmd.f64(cmd, slice(None), i, 0), 0.0, 0.0), (0.0, 0.0, mk_cmd.f64(cmd, slice(None), i, 1))),
             "geometry_msgs/msg/Twist",
