@@ -143,6 +143,7 @@ def _load(args: argparse.Namespace):
     topics = Topics(args.joint_states_topic, args.odom_topic, args.imu_topic, args.robot_ns)
     rec = read_recording(args.bag, joints, topics)
     rec = _before_tipping(args, rec)
+    rec.notes.extend(robot.notes)
     stated = rec.stated
     if args.motor:
         motor, why = args.motor, "--motor"

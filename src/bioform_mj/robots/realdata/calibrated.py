@@ -2,9 +2,9 @@
 
 :func:`write_calibrated` loads the robot file as published, its format's ``editable`` spec
 (:mod:`bioform_mj.robots.formats`: an MJCF as is; a URDF as the project imports it, design §12), writes the
-fitted values into it by name (the chassis body's mass and yaw inertia, the wheel joints' damping,
-frictionloss and armature, the casters' friction) and saves it as MJCF. The file carries where its numbers
-came from as the custom text ``bioform_calibration`` (one line: the recording, the date, each value and
+fitted values into it by name (the chassis body's mass and yaw inertia, :func:`~.chassis.chassis_body`; the wheel
+joints' damping, frictionloss and armature, the casters' friction) and saves it as MJCF. The file carries where its
+numbers came from as the custom text ``bioform_calibration`` (one line: the recording, the date, each value and
 whether the recording identified it); :func:`calibration_note` reads it back from a compiled scene, for
 ``robot check``'s notes.
 """
@@ -46,12 +46,15 @@ def write_calibrated(
     ref: RobotRef, layout: Any, rows: list[dict[str, Any]], caster_geoms: list[str], path: Path, source: str
 ) -> None:
     """Write ``ref``'s robot with the fitted values of ``rows`` (fit.json's ``parameters``) to ``path``."""
-    from bioform_mj.robots.realdata.fit import explicit_base, set_yaw_inertia
+    from bioform_mj.robots.realdata.chassis import chassis_body, explicit_base, set_yaw_inertia
+    from bioform_mj.robots.realdata.simmodel import frictionless_condim1
 
     spec = _source_spec(ref)
+    frictionless_condim1(spec)  # as the fit simulated them: condim 3 at friction 0 blew up with wheel damping
     val = {r["name"]: r["fitted"] for r in rows}
-    axis, _ = explicit_base(spec, layout.base)
-    body = spec.body(layout.base)
+    chassis = chassis_body(spec.compile(), layout.base)  # as the fit chose it
+    axis, _ = explicit_base(spec, chassis)
+    body = spec.body(chassis)
     if "mass" in val:
         body.mass = float(val["mass"])
     if "yaw_inertia" in val:
