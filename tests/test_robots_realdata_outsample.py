@@ -101,3 +101,59 @@ def test_sensor_times_put_the_rollouts_speeds_where_they_were():
     # a constant torque from rest: the speed is tau / I * t exactly (Euler is exact for a constant acceleration)
     np.testing.assert_allclose(sens[0, :, 0], tau / inertia * sensor_times(t_state, model), rtol=0, atol=1e-12)
     assert np.abs(sens[0, :, 0] - tau / inertia * t_state).max() == pytest.approx(tau / inertia * dt)
+
+
+TIAGO = RobotRef(
+    model="tests/zoo/menagerie_tiago/tiago.xml",
+    base="base_link",
+    left_wheel="wheel_left_joint",
+    right_wheel="wheel_right_joint",
+)
+
+
+def test_the_fits_floor_carries_casters_whose_file_defaults_say_contype_0():
+    """The menagerie TIAGo's default class gives every geom contype 0 / conaffinity 1; the fit's floor took
+    that class too, its four casters found no floor and the robot fell over backwards in every chunk."""
+    from mujoco import rollout
+
+    robot = sim_spec(TIAGO)
+    model = robot.spec.compile()
+    data = mujoco.MjData(model)
+    st = initial_state(robot, model, np.zeros(2), np.zeros(2))
+    state = rollout.rollout(model, data, st, np.zeros((500, model.nu)))[0][0]
+    q = state[:, 1 + robot.free_qpos + 3 : 1 + robot.free_qpos + 7]  # w, x, y, z
+    tilt = np.degrees(np.arccos(np.clip(1 - 2 * (q[:, 1] ** 2 + q[:, 2] ** 2), -1, 1)))
+    assert tilt.max() < 1.0  # it tipped 7° within the settling and lay on its back after 1 s
+    mujoco.mj_setState(model, data, state[-1], mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    mujoco.mj_forward(model, data)
+    on_floor = {
+        model.geom(c.geom2).name for c in data.contact[: data.ncon] if model.geom(c.geom1).name == "bioform_floor"
+    }
+    assert {"caster_front_left", "caster_front_right", "caster_back_left", "caster_back_right"} <= on_floor
+
+
+def test_a_calibrated_robot_with_meshes_carries_copies_of_them(tmp_path):
+    """A calibrated TIAGo named its mesh by the published file's absolute path, which the loader refuses (outside
+    the robot's folder): the fit ended on that error after its work. Now the meshes are copied beside it."""
+    from bioform_mj.robots.params import robot_truth
+    from bioform_mj.robots.realdata.calibrated import write_calibrated
+
+    robot = sim_spec(TIAGO)
+    rows = [{"name": "mass", "fitted": 55.0, "unit": "kg", "status": "identified"}]
+    out = tmp_path / "fit"
+    out.mkdir()
+    path = out / "tiago_calibrated.xml"
+    write_calibrated(TIAGO, robot.layout, rows, [], path, "bag")
+    text = path.read_text()
+    assert 'file="tiago_calibrated_assets/pmb2_base_collision.stl"' in text and "/tests/zoo/" not in text
+    src = "tests/zoo/menagerie_tiago/assets/pmb2_base_collision.stl"
+    assert (out / "tiago_calibrated_assets" / "pmb2_base_collision.stl").read_bytes() == open(src, "rb").read()
+    moved = tmp_path / "elsewhere"
+    out.rename(moved)  # the folder moves as a whole
+    ref = RobotRef(
+        model=str(moved / "tiago_calibrated.xml"),
+        base="base_link",
+        left_wheel="wheel_left_joint",
+        right_wheel="wheel_right_joint",
+    )
+    assert robot_truth(ref).mass == pytest.approx(73.3149 - 47.112 + 55.0, abs=1e-3)  # the chassis: 47.112 kg

@@ -9,6 +9,7 @@ going backwards, NaN efforts, an unreadable bag, wheels that are not in the reco
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 from pathlib import Path
 from typing import Any
@@ -221,7 +222,7 @@ def _fit_main(args: argparse.Namespace) -> int:
 
     from bioform_mj.outputs.files import check_out_dir, write_json
     from bioform_mj.robots.params import robot_truth
-    from bioform_mj.robots.realdata.calibrated import write_calibrated
+    from bioform_mj.robots.realdata.calibrated import assets_folder, write_calibrated
     from bioform_mj.robots.realdata.fit import (
         DEFAULT_FIT,
         FIT_PARAMETERS,
@@ -263,41 +264,50 @@ def _fit_main(args: argparse.Namespace) -> int:
     stem = Path(ref.model).stem
     cal_path = out / f"{stem}_calibrated.xml"
     casters = robot_casters(robot, robot.spec, model_cal) if "caster_friction" in result.names else []
-    write_calibrated(ref, robot.layout, result.parameters, casters, cal_path, str(args.bag))
-    cal_ref = replace(ref, model=str(cal_path.resolve()))
-    p_pub, p_cal = robot_truth(ref), robot_truth(cal_ref)
-    unidentified = [r["name"] for r in result.parameters if r["status"] != "identified"]
-    report = {
-        "robot": ref.model,
-        "recording": str(args.bag),
-        "effort": {"motor": ref.motor or "ideal", "driver": ref.driver or None},
-        "calibrated_robot": str(cal_path),
-        "a": p_cal.a_eff,
-        "b": p_cal.b_eff,
-        "published": {"a": p_pub.a_eff, "b": p_pub.b_eff},
-        "parameters": result.parameters,
-        "unidentified": unidentified,
-        "ci95_method": "the wider of the interval from J'J and the residual variance (mujoco.sysid) and the "
-        "cluster-robust (sandwich) one with the chunks as independent units, Student's t with chunks - 1 dof",
-        "correlation": {"names": result.names, "matrix": np.round(result.correlation, 4).tolist()},
-        "residual": {
-            "published": {"cost": result.cost_published, **_rms(chunks, sim_pub)},
-            "calibrated": {"cost": result.cost_calibrated, **_rms(chunks_cal, sim_cal)},
-            "units": "cost: sum of squares of the residuals weighted by 1/RMS of each signal; *_rms: rad/s, m/s",
-        },
-        "seconds": result.seconds,
-        "iterations": result.evaluations,
-        "notes": result.notes + rec.notes,
-        "mapping_flags": "the calibrated file keeps the published names: map it with the same flags",
-    }
-    write_json(out / "fit.json", report)
-    meas = _signals_of_chunks(chunks, None)
-    plot_signals(
-        out / "fit.png",
-        meas,
-        {"published": _signals_of_chunks(chunks, sim_pub), "calibrated": _signals_of_chunks(chunks_cal, sim_cal)},
-        f"{stem}: recorded vs simulated from each chunk's recorded start ({args.bag})",
-    )
+    made = [p for p in (cal_path, assets_folder(cal_path), out / "fit.json", out / "fit.png") if not p.exists()]
+    try:
+        write_calibrated(ref, robot.layout, result.parameters, casters, cal_path, str(args.bag))
+        cal_ref = replace(ref, model=str(cal_path.resolve()))
+        p_pub, p_cal = robot_truth(ref), robot_truth(cal_ref)
+        unidentified = [r["name"] for r in result.parameters if r["status"] != "identified"]
+        report = {
+            "robot": ref.model,
+            "recording": str(args.bag),
+            "effort": {"motor": ref.motor or "ideal", "driver": ref.driver or None},
+            "calibrated_robot": str(cal_path),
+            "a": p_cal.a_eff,
+            "b": p_cal.b_eff,
+            "published": {"a": p_pub.a_eff, "b": p_pub.b_eff},
+            "parameters": result.parameters,
+            "unidentified": unidentified,
+            "ci95_method": "the wider of the interval from J'J and the residual variance (mujoco.sysid) and the "
+            "cluster-robust (sandwich) one with the chunks as independent units, Student's t with chunks - 1 dof",
+            "correlation": {"names": result.names, "matrix": np.round(result.correlation, 4).tolist()},
+            "residual": {
+                "published": {"cost": result.cost_published, **_rms(chunks, sim_pub)},
+                "calibrated": {"cost": result.cost_calibrated, **_rms(chunks_cal, sim_cal)},
+                "units": "cost: sum of squares of the residuals weighted by 1/RMS of each signal; *_rms: rad/s, m/s",
+            },
+            "seconds": result.seconds,
+            "iterations": result.evaluations,
+            "notes": result.notes + rec.notes,
+            "mapping_flags": "the calibrated file keeps the published names: map it with the same flags",
+        }
+        write_json(out / "fit.json", report)
+        meas = _signals_of_chunks(chunks, None)
+        plot_signals(
+            out / "fit.png",
+            meas,
+            {"published": _signals_of_chunks(chunks, sim_pub), "calibrated": _signals_of_chunks(chunks_cal, sim_cal)},
+            f"{stem}: recorded vs simulated from each chunk's recorded start ({args.bag})",
+        )
+    except BaseException:  # output files complete or absent: what this run wrote goes
+        for p in made:
+            if p.is_dir():
+                shutil.rmtree(p, ignore_errors=True)
+            else:
+                p.unlink(missing_ok=True)
+        raise
     lines = [f"fit: {stem} to {args.bag} ({rec.duration:.3g} s) in {result.seconds:.0f} s"]
     for r in result.parameters:
         ci = f"± {r['ci95_halfwidth']:.2g}" if r["ci95_halfwidth"] is not None else "± inf"

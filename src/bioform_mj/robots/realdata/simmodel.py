@@ -64,7 +64,23 @@ def sim_spec(ref: RobotRef) -> SimRobot:
     changed = frictionless_condim1(spec)
     for s in list(spec.sensors):
         spec.delete(s)
-    spec.worldbody.add_geom(name="bioform_floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    # the floor as the scene's (robots/scene.py): MuJoCo's own contact defaults, whatever the robot file's default
+    # class says. It inherited the file's: the menagerie TIAGo's (contype 0, conaffinity 1) left its four casters
+    # (contype 0) without a floor, and the robot fell over backwards at rest in every chunk (residual RMS 7.2)
+    spec.worldbody.add_geom(
+        name="bioform_floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0, 0, 1],
+        contype=1,
+        conaffinity=1,
+        condim=3,
+        priority=0,
+        friction=[1.0, 0.005, 0.0001],
+        solref=[0.02, 1.0],
+        solimp=[0.9, 0.95, 0.001, 0.5, 2.0],
+        margin=0.0,
+        gap=0.0,
+    )
     base = spec.body(layout.base)
     base.add_site(name="bioform_base_link", pos=[0, 0, 0], size=[0.005, 0, 0], group=5)
     for side, j in zip(("left", "right"), layout.wheel_joints):
