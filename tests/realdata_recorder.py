@@ -112,9 +112,11 @@ def simulate(model: mujoco.MjModel, truth: Truth, duration: float, tau: float, s
         data.qfrc_applied[:] = 0
         data.qfrc_applied[dofs] = u
         mujoco.mj_forward(model, data)
-        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, base, vel6, 1)  # body frame: ang, lin
+        # at the body's origin (ROS base_link) in its frame: ang, lin. (mjOBJ_BODY gives them at the centre of mass
+        # in the principal-axes frame: the menagerie TIAGo's, turned 90° about z, recorded its forward speed as vy)
+        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_XBODY, base, vel6, 1)
         mujoco.mj_rnePostConstraint(model, data)
-        mujoco.mj_objectAcceleration(model, data, mujoco.mjtObj.mjOBJ_BODY, base, acc6, 1)
+        mujoco.mj_objectAcceleration(model, data, mujoco.mjtObj.mjOBJ_XBODY, base, acc6, 1)
         out["t"].append(data.time)
         out["q"].append(data.qpos[qadr].copy())
         out["qd"].append(data.qvel[dofs].copy())
@@ -145,10 +147,12 @@ def write_bag(
     joint_names: tuple[str, str] | None = None,
     seed: int = 1,
     velocities: bool = True,
+    other_joint_states: tuple[str, ...] = (),
 ) -> None:
     """Write the simulation as a rosbag2 folder (MCAP) at ``rate_hz``; ``noise``: standard deviation of the
     speed noise (rad/s on wheels, m/s and rad/s on the body); angles get 1e-3 rad, torques 2 % of their scale;
-    ``velocities=False``: the joint states carry no velocity (as some drivers publish)."""
+    ``velocities=False``: the joint states carry no velocity (as some drivers publish); ``other_joint_states``:
+    a second publisher on the joint-state topic, one message naming only these joints (zeros) before each."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -173,6 +177,17 @@ def write_bag(
         for k in range(0, len(sim["t"]), step):
             t_ns = start_ns + int(round(sim["t"][k] * 1e9))
             st = _stamp(ts, t_ns)
+            if other_joint_states:
+                n = len(other_joint_states)
+                z = np.zeros(n)
+                arm = JointState(
+                    header=Header(stamp=st, frame_id=""),
+                    name=list(other_joint_states),
+                    position=z,
+                    velocity=z,
+                    effort=z,
+                )
+                w.write(cj, t_ns, ts.serialize_cdr(arm, JointState.__msgtype__))
             js = JointState(
                 header=Header(stamp=st, frame_id=""),
                 name=names,

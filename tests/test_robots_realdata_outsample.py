@@ -11,6 +11,9 @@ have not seen"). Each test pins a failure found by fitting a published zoo robot
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import mujoco
 import numpy as np
 import pytest
@@ -19,8 +22,9 @@ from bioform_mj.robots.realdata.chassis import chassis_body
 from bioform_mj.robots.realdata.simmodel import initial_state, sensor_times, sim_spec
 from bioform_mj.robots.refs import RobotRef
 
+HERE = Path(__file__).resolve().parent
 KOBUKI = RobotRef(
-    model="tests/zoo/kobuki_urdf/kobuki_standalone.urdf",
+    model=str(HERE / "zoo/kobuki_urdf/kobuki_standalone.urdf"),
     base="base_footprint",
     left_wheel="wheel_left_joint",
     right_wheel="wheel_right_joint",
@@ -104,7 +108,7 @@ def test_sensor_times_put_the_rollouts_speeds_where_they_were():
 
 
 TIAGO = RobotRef(
-    model="tests/zoo/menagerie_tiago/tiago.xml",
+    model=str(HERE / "zoo/menagerie_tiago/tiago.xml"),
     base="base_link",
     left_wheel="wheel_left_joint",
     right_wheel="wheel_right_joint",
@@ -146,7 +150,7 @@ def test_a_calibrated_robot_with_meshes_carries_copies_of_them(tmp_path):
     write_calibrated(TIAGO, robot.layout, rows, [], path, "bag")
     text = path.read_text()
     assert 'file="tiago_calibrated_assets/pmb2_base_collision.stl"' in text and "/tests/zoo/" not in text
-    src = "tests/zoo/menagerie_tiago/assets/pmb2_base_collision.stl"
+    src = HERE / "zoo/menagerie_tiago/assets/pmb2_base_collision.stl"
     assert (out / "tiago_calibrated_assets" / "pmb2_base_collision.stl").read_bytes() == open(src, "rb").read()
     moved = tmp_path / "elsewhere"
     out.rename(moved)  # the folder moves as a whole
@@ -157,3 +161,61 @@ def test_a_calibrated_robot_with_meshes_carries_copies_of_them(tmp_path):
         right_wheel="wheel_right_joint",
     )
     assert robot_truth(ref).mass == pytest.approx(73.3149 - 47.112 + 55.0, abs=1e-3)  # the chassis: 47.112 kg
+
+
+def test_joint_states_of_another_publisher_on_the_same_topic_are_skipped(tmp_path):
+    """A robot whose arm (or casters) publishes its own JointState messages on /joint_states: each message
+    without the wheels was refused ('has no joint ...'). They are skipped; a topic that never names the wheels
+    is still refused, naming what it has."""
+    pytest.importorskip("rosbags")
+    sys.path.insert(0, str(HERE))
+    import realdata_recorder as rr
+    from bioform_mj.core.errors import InputError
+    from bioform_mj.robots.realdata.recording import read_recording
+
+    truth = rr.Truth(payload_kg=0.3, damping=(0.002, 0.0025), frictionloss=(0.004, 0.003))
+    sim = rr.simulate(rr.true_model(rr.MODELS / "tb3_robot.xml", truth), truth, 1.0, 0.025)
+    plain, mixed = tmp_path / "plain", tmp_path / "mixed"
+    rr.write_bag(plain, sim, truth)
+    rr.write_bag(mixed, sim, truth, other_joint_states=("arm_1_joint", "arm_2_joint"))
+    a = read_recording(plain, truth.joints)
+    b = read_recording(mixed, truth.joints)
+    for f in ("t", "position", "velocity", "effort", "odom_t", "imu_gyro"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+    assert len(b.t) == 101 and any("'arm_1_joint', 'arm_2_joint'" in n for n in b.notes)
+    with pytest.raises(
+        InputError, match=r"has no joint 'lw', 'rw' \(it has: 'arm_1_joint', 'arm_2_joint', 'left_wheel'"
+    ):
+        read_recording(mixed, ("lw", "rw"))
+
+
+def test_effort_scale_takes_a_recording_of_motor_current(tmp_path, capsys):
+    """A driver that records motor current (A) instead of wheel torque: --effort-scale K (N·m per A at the wheel,
+    torque constant × gear ratio) turns it into the recording of torques; the replay is then the same."""
+    import csv
+
+    sys.path.insert(0, str(HERE))
+    import realdata_recorder as rr
+    from bioform_mj.cli import main as cli
+
+    truth = rr.Truth(payload_kg=0.3, damping=(0.002, 0.0025), frictionloss=(0.004, 0.003))
+    torque = tmp_path / "torque.csv"
+    rr.record(torque, "tb3", truth, duration=1.5, tau=0.025, fmt="csv")
+    rows = list(csv.reader(torque.open()))
+    eff = [i for i, c in enumerate(rows[0]) if c.endswith(".effort")]
+    kt = 0.04  # N·m at the wheel per A
+    current = tmp_path / "current.csv"
+    with current.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(rows[0])
+        for r in rows[1:]:
+            w.writerow([f"{float(v) / kt:.12g}" if i in eff else v for i, v in enumerate(r)])
+    got = {}
+    for name, bag, extra in (("torque", torque, []), ("current", current, ["--effort-scale", str(kt)])):
+        capsys.readouterr()
+        assert cli.main(["robot", "replay", "tb3", "--bag", str(bag), *extra]) == 0  # no --out: no figure
+        got[name] = [ln for ln in capsys.readouterr().out.splitlines() if "RMS difference" in ln]
+    assert len(got["torque"]) == 1 and got["current"] == got["torque"]  # 3 significant digits each
+    capsys.readouterr()
+    assert cli.main(["robot", "replay", "tb3", "--bag", str(current), "--effort-scale", "0"]) == 2
+    assert capsys.readouterr().err.strip() == "error: --effort-scale must be a number > 0, got 0.0"

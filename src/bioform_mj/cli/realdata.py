@@ -9,6 +9,7 @@ going backwards, NaN efforts, an unreadable bag, wheels that are not in the reco
 from __future__ import annotations
 
 import argparse
+import math
 import shutil
 import sys
 from pathlib import Path
@@ -50,6 +51,13 @@ def _recording_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--imu-topic", help="sensor_msgs/Imu topic (default /imu, under --robot-ns; optional)")
     p.add_argument("--left-joint", help="the left wheel's joint name in the recording (default: the robot's)")
     p.add_argument("--right-joint", help="the right wheel's joint name in the recording (default: the robot's)")
+    p.add_argument(
+        "--effort-scale",
+        type=float,
+        metavar="K",
+        help="N·m at the wheel per recorded effort unit: a driver that records motor current (A) needs its torque "
+        "constant × gear ratio (× the gearbox efficiency), K = Kt·N (default 1: efforts are N·m at the wheel)",
+    )
     p.add_argument(
         "--motor",
         choices=("ideal", "dc"),
@@ -137,6 +145,9 @@ def _load(args: argparse.Namespace):
 
     if args.driver and args.motor != "dc":
         raise InputError("--driver only applies to --motor dc")
+    k = args.effort_scale
+    if k is not None and not (math.isfinite(k) and k > 0):
+        raise InputError(f"--effort-scale must be a number > 0, got {k}")
     ref = ref_from_args(args.model, args)
     ref = replace(ref, motor="", driver="")  # the effort's meaning decides the motors, below
     robot = sim_spec(ref)
@@ -145,6 +156,9 @@ def _load(args: argparse.Namespace):
     rec = read_recording(args.bag, joints, topics)
     rec = _before_tipping(args, rec)
     rec.notes.extend(robot.notes)
+    if k is not None and k != 1.0:
+        rec.effort = rec.effort * k
+        rec.notes.append(f"efforts multiplied by {k:g} (--effort-scale): taken as N·m at the wheel")
     stated = rec.stated
     if args.motor:
         motor, why = args.motor, "--motor"
@@ -253,6 +267,17 @@ def _fit_main(args: argparse.Namespace) -> int:
         time_budget_s=args.time_budget,
         find_casters=args.fit is not None,
     )
+    inert = [
+        r["name"] for r in result.parameters if r["name"] in ("mass", "yaw_inertia") and "at the bound" in r["why"]
+    ]
+    if inert and args.effort_scale is None:
+        hint = (
+            f"{' and '.join(inert)} reached the bound of the search range: are the efforts N·m at the wheel? A "
+            "recording of motor current (A) needs --effort-scale Kt·N (torque constant × gear ratio); a recording "
+            "of the torques commanded to the robot file's <dcmotor>s needs --motor dc"
+        )
+        result.notes.append(hint)
+        print(f"warning: {hint}", file=sys.stderr)
     model_pub = published.spec.compile()
     model_cal = sysid.apply_param_modifiers(opt, robot.spec)
     chunks = make_chunks(published, model_pub, rec, args.chunk, args.max_chunks)

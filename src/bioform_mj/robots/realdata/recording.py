@@ -310,11 +310,12 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
             conns = [c for c in reader.connections if c.topic in want]
             bag_t: dict[str, list[float]] = {t: [] for t in want}
             no_effort = 0
+            others: set[str] = set()  # joints of joint states without the wheels (skipped; named if no others)
             idx: tuple[int, int] | None = None
             for conn, bag_ns, raw in _stream(reader, conns, name):
                 msg = reader.deserialize(raw, conn.msgtype)
                 t = _stamp_s(msg)
-                if conn.topic != topics.joint_states or len(getattr(msg, "effort", ())) or not msg.name:
+                if conn.topic != topics.joint_states:
                     bag_t[conn.topic].append(1e-9 * bag_ns)
                 if conn.topic == topics.joint_states:
                     names = list(msg.name)
@@ -327,6 +328,9 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
                         missing = [j for j in joints if j not in names]
                         if missing:
                             if not names:
+                                continue
+                            if len(missing) == len(joints):  # another publisher's joints (an arm, casters)
+                                others.update(names[:LIST_MAX])
                                 continue
                             raise InputError(
                                 f"{name}: '{topics.joint_states}' has no joint {_listed(missing)} "
@@ -344,6 +348,7 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
                         no_effort += 1
                         continue
                     js["t"].append(t)
+                    bag_t[conn.topic].append(1e-9 * bag_ns)  # only for the joint states kept: one clock
                     for key, arr in (("pos", msg.position), ("vel", msg.velocity), ("eff", msg.effort)):
                         if len(arr) == 0 and key != "eff":  # a driver that publishes no speeds (or angles)
                             js[key].append((math.nan, math.nan))
@@ -372,10 +377,18 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
         raise
     except Exception as exc:  # noqa: BLE001 - rosbags raises many types for a bad file: one line
         raise InputError(f"{name}: cannot read the recording: {type(exc).__name__}: {exc}") from None
+    if not js["t"] and others:
+        raise InputError(
+            f"{name}: '{topics.joint_states}' has no joint {_listed(list(joints))} "
+            f"(it has: {_listed(sorted(others))}); map the robot's wheels with --left-wheel/--right-wheel or name "
+            "the recorded joints with --left-joint/--right-joint"
+        )
     if not js["t"]:
         what = f" ({no_effort} without an effort: the fit needs the applied torques)" if no_effort else ""
         raise InputError(f"{name}: '{topics.joint_states}' holds no joint states{what}")
     notes = ns_notes + ([f"{no_effort} joint state(s) without an effort skipped"] if no_effort else [])
+    if others:  # several publishers on one topic (ROS 2 merges none): those without the wheels are not theirs
+        notes.append(f"joint states without the wheels skipped (another publisher's: {_listed(sorted(others))})")
     # one clock for all topics: the header stamps where every topic has them (a stamp of 0 at sim time 0 is
     # one), else the bag's receive times
     streams = ((topics.joint_states, js), (topics.odom, od), (topics.imu, im))
