@@ -219,3 +219,24 @@ def test_effort_scale_takes_a_recording_of_motor_current(tmp_path, capsys):
     capsys.readouterr()
     assert cli.main(["robot", "replay", "tb3", "--bag", str(current), "--effort-scale", "0"]) == 2
     assert capsys.readouterr().err.strip() == "error: --effort-scale must be a number > 0, got 0.0"
+
+
+def test_a_smaller_yaw_inertia_keeps_the_chassis_inertia_physical():
+    """The Husky's inertial_link (0.615, 1.759, 2.0 kg·m²): the fit's yaw inertia at the lower quarter of its
+    range broke A + B >= C the other way and MuJoCo refused to compile ('no usable trajectory')."""
+    from bioform_mj.robots.realdata.chassis import set_yaw_inertia
+
+    for izz in (0.51, 2.0, 8.0):
+        spec = mujoco.MjSpec.from_string(
+            '<mujoco><worldbody><body name="c"><freejoint/><geom size="0.1"/></body></worldbody></mujoco>'
+        )
+        body = spec.body("c")
+        body.explicitinertial = True
+        body.mass = 46.0
+        body.inertia = [0.615, 1.759, 2.0]
+        set_yaw_inertia(body, 2, izz)
+        model = spec.compile()  # raised "inertia must satisfy A + B >= C" for 0.51
+        a, b, c = model.body("c").inertia
+        assert c == pytest.approx(izz, rel=1e-12)
+        assert a + b >= c and a + c >= b and b + c >= a
+        assert b == pytest.approx(1.759 + max(0.0, izz - 2.374) / 2, rel=0.01)  # pitch kept, or both grown evenly

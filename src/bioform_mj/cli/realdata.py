@@ -274,7 +274,9 @@ def _fit_main(args: argparse.Namespace) -> int:
         hint = (
             f"{' and '.join(inert)} reached the bound of the search range: are the efforts N·m at the wheel? A "
             "recording of motor current (A) needs --effort-scale Kt·N (torque constant × gear ratio); a recording "
-            "of the torques commanded to the robot file's <dcmotor>s needs --motor dc"
+            "of the torques commanded to the robot file's <dcmotor>s needs --motor dc; a skid-steer robot whose "
+            "other wheels are driven too is not what the fit simulates (only the mapped pair is driven, the "
+            "others roll free: a Husky recorded so fitted 20 kg against 56.6 kg)"
         )
         result.notes.append(hint)
         print(f"warning: {hint}", file=sys.stderr)

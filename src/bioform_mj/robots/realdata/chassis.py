@@ -51,11 +51,17 @@ def explicit_base(spec: mujoco.MjSpec, base: str) -> tuple[int, float]:
 def set_yaw_inertia(body: mujoco.MjsBody, axis: int, value: float) -> None:
     """Set the principal inertia ``axis`` of ``body`` to ``value`` (kg·m²); where that breaks the triangle
     inequality (a yaw inertia above the sum of roll and pitch ones), the other two grow evenly to meet it
-    (a payload spread in the plane adds to both; a planar robot's roll and pitch barely matter)."""
+    (a payload spread in the plane adds to both; a planar robot's roll and pitch barely matter). Where a
+    smaller yaw inertia breaks it the other way (roll or pitch above the sum of the other two: the Husky's
+    inertial_link, 0.615 / 1.759 / 2.0 kg·m², at the search range's lower quarter), the smaller of roll and
+    pitch grows to meet it (MuJoCo refused to compile: the fit ended on 'no usable trajectory')."""
     inertia = np.array(body.inertia, float)
     inertia[axis] = value
     others = [k for k in range(3) if k != axis]
     short = value - inertia[others].sum()
     if short > 0:
         inertia[others] += 0.5 * short * 1.001 + 1e-12
+    small, big = sorted(others, key=lambda k: inertia[k])
+    if inertia[big] > inertia[small] + value:
+        inertia[small] = (inertia[big] - value) * 1.001 + 1e-12
     body.inertia = inertia
