@@ -148,11 +148,14 @@ def write_bag(
     seed: int = 1,
     velocities: bool = True,
     other_joint_states: tuple[str, ...] = (),
+    extra_joints: tuple[str, ...] = (),
 ) -> None:
     """Write the simulation as a rosbag2 folder (MCAP) at ``rate_hz``; ``noise``: standard deviation of the
     speed noise (rad/s on wheels, m/s and rad/s on the body); angles get 1e-3 rad, torques 2 % of their scale;
     ``velocities=False``: the joint states carry no velocity (as some drivers publish); ``other_joint_states``:
-    a second publisher on the joint-state topic, one message naming only these joints (zeros) before each."""
+    a second publisher on the joint-state topic, one message naming only these joints (zeros) before each;
+    ``extra_joints``: more joints in each wheel message, after the wheels (joint ``i`` at angle ``0.01 (i + 1) t``
+    rad, speed ``0.01 (i + 1)`` rad/s, effort 0)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -188,12 +191,13 @@ def write_bag(
                     effort=z,
                 )
                 w.write(cj, t_ns, ts.serialize_cdr(arm, JointState.__msgtype__))
+            rate = 0.01 * np.arange(1, len(extra_joints) + 1)
             js = JointState(
                 header=Header(stamp=st, frame_id=""),
-                name=names,
-                position=sim["q"][k] + rng.normal(0, 1e-3, 2),
-                velocity=sim["qd"][k] + rng.normal(0, noise, 2) if velocities else np.zeros(0),
-                effort=sim["tau"][k] + rng.normal(0, 0.02 * tau_scale, 2),
+                name=names + list(extra_joints),
+                position=np.r_[sim["q"][k] + rng.normal(0, 1e-3, 2), rate * sim["t"][k]],
+                velocity=np.r_[sim["qd"][k] + rng.normal(0, noise, 2), rate] if velocities else np.zeros(0),
+                effort=np.r_[sim["tau"][k] + rng.normal(0, 0.02 * tau_scale, 2), 0 * rate],
             )
             w.write(cj, t_ns, ts.serialize_cdr(js, JointState.__msgtype__))
             p, q = sim["pos"][k], sim["quat"][k]

@@ -141,7 +141,7 @@ def _load(args: argparse.Namespace):
 
     from bioform_mj.cli.robot import ref_from_args
     from bioform_mj.robots.realdata.recording import Topics, read_recording
-    from bioform_mj.robots.realdata.simmodel import sim_spec
+    from bioform_mj.robots.realdata.simmodel import other_joints, sim_spec
 
     if args.driver and args.motor != "dc":
         raise InputError("--driver only applies to --motor dc")
@@ -153,7 +153,9 @@ def _load(args: argparse.Namespace):
     robot = sim_spec(ref)
     joints = (args.left_joint or robot.layout.wheel_joints[0], args.right_joint or robot.layout.wheel_joints[1])
     topics = Topics(args.joint_states_topic, args.odom_topic, args.imu_topic, args.robot_ns)
-    rec = read_recording(args.bag, joints, topics)
+    rec = read_recording(args.bag, joints, topics, other_joints(robot))
+    if rec.others:
+        rec.notes.append(f"the angles and speeds of {', '.join(rec.others)} from the recording start each chunk")
     rec = _before_tipping(args, rec)
     rec.notes.extend(robot.notes)
     if k is not None and k != 1.0:

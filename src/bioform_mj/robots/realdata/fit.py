@@ -140,6 +140,12 @@ class Chunks:
     window: float = 0.0  # > 0: ``measured`` holds means over windows of this length (s), at each window's end
 
 
+def _at(t: float, tt: np.ndarray, y: np.ndarray) -> float:
+    """``y`` at ``t`` from its finite samples (NaN where it has none)."""
+    ok = np.isfinite(y)
+    return float(np.interp(t, tt[ok], y[ok])) if ok.any() else math.nan
+
+
 def _interp(t: np.ndarray, tt: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(t, tt, y[:, k]) for k in range(y.shape[1])], axis=1)
 
@@ -205,7 +211,8 @@ def make_chunks(
         speed = rec.velocity[lo:hi].mean(axis=0)  # a 5-sample mean: the noise of one sample would kick the start
         angle = np.array([np.interp(t0, rec.t, rec.position[:, i]) for i in range(2)])
         yaw = float(np.interp(t0, rec.odom_t, yaw_pose)) if yaw_pose is not None else 0.0
-        states.append(initial_state(robot, model, angle, speed, yaw))
+        others = {n: tuple(_at(t0, rec.t, v[:, i]) for i in range(2)) for n, v in rec.others.items()}
+        states.append(initial_state(robot, model, angle, speed, yaw, others))
         ct = np.arange(0, int(round(length / dt)) + 2) * dt
         ctrl = effort_to_ctrl(robot, model, rec.effort_at(t0 + ct))
         controls.append(TS(ct, ctrl, ctrl_map))

@@ -112,6 +112,7 @@ class Recording:
     imu_gyro: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     notes: list[str] = field(default_factory=list)
     stated: dict = field(default_factory=dict)  # what the bag says of its robot (this project's export)
+    others: dict = field(default_factory=dict)  # other joints asked for: name -> (n, 2) position, velocity (NaN: none)
 
     def effort_at(self, t: np.ndarray) -> np.ndarray:
         """The wheel torques (N·m, (len(t), 2)) at times ``t`` (s), interpolated linearly between the
@@ -152,6 +153,7 @@ class Recording:
             self.imu_gyro[i],
             list(self.notes),
             dict(self.stated),
+            {k: v[j] for k, v in self.others.items()},
         )
 
 
@@ -218,9 +220,13 @@ def _validate(rec: Recording) -> Recording:
     return rec
 
 
-def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics | None = None) -> Recording:
+def read_recording(
+    path: str | Path, joints: tuple[str, str], topics: Topics | None = None, others: tuple[str, ...] = ()
+) -> Recording:
     """Read ``path`` (rosbag2 folder, ``.mcap``/``.db3`` file, or ``.csv``) for the wheel joints ``joints``
-    (left, right). Raises :class:`InputError` (exit 2) for anything that cannot be used (module docstring)."""
+    (left, right), and of a bag's joint states also the joints ``others`` where they are there (``Recording.
+    others``: the robot's caster swivels, whose angles set a chunk's start). Raises :class:`InputError` (exit 2)
+    for anything that cannot be used (module docstring)."""
     from bioform_mj.robots.sanity import not_regular
 
     p = Path(path)
@@ -234,7 +240,7 @@ def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics | N
         return _validate(_read_csv(p, joints))
     if p.is_dir():
         _check_metadata(p / "metadata.yaml")
-    return _validate(_read_bag(p, joints, topics or Topics()))
+    return _validate(_read_bag(p, joints, topics or Topics(), tuple(others)))
 
 
 #: largest rosbag2 ``metadata.yaml`` read, MB (rosbag2 writes a few kB; the YAML is parsed whole)
@@ -276,7 +282,7 @@ def _stamp_s(msg: object) -> float:
     return st.sec + 1e-9 * st.nanosec if st is not None else 0.0
 
 
-def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
+def _read_bag(p: Path, joints: tuple[str, str], topics: Topics, extra_joints: tuple[str, ...] = ()) -> Recording:
     try:
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
@@ -289,6 +295,7 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
     js: dict[str, list] = {"t": [], "pos": [], "vel": [], "eff": []}
     od: dict[str, list] = {"t": [], "twist": [], "pose": []}
     im: dict[str, list] = {"t": [], "gyro": []}
+    extra: dict[str, list] = {n: [] for n in extra_joints}
     try:
         with AnyReader([p], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
             have = {c.topic: c.msgtype for c in reader.connections}
@@ -349,6 +356,12 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
                         continue
                     js["t"].append(t)
                     bag_t[conn.topic].append(1e-9 * bag_ns)  # only for the joint states kept: one clock
+                    if extra_joints:
+                        at = {n: i for i, n in enumerate(names) if n in extra}
+                        pv = (msg.position, msg.velocity)
+                        for n in extra_joints:
+                            i = at.get(n)
+                            extra[n].append([float(a[i]) if i is not None and len(a) > i else math.nan for a in pv])
                     for key, arr in (("pos", msg.position), ("vel", msg.velocity), ("eff", msg.effort)):
                         if len(arr) == 0 and key != "eff":  # a driver that publishes no speeds (or angles)
                             js[key].append((math.nan, math.nan))
@@ -426,6 +439,7 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
         np.asarray(im["gyro"], float).reshape(-1, 3),
         notes,
         _stated(custom, topics),
+        {n: np.asarray(v, float).reshape(-1, 2) for n, v in extra.items() if np.isfinite(np.asarray(v, float)).any()},
     )
 
 

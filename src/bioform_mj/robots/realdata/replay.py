@@ -52,7 +52,8 @@ def replay(robot: SimRobot, rec: Recording) -> dict[str, np.ndarray]:
 
     model = robot.spec.compile()
     data = mujoco.MjData(model)
-    state = initial_state(robot, model, rec.position[0], rec.velocity[:3].mean(axis=0))
+    others = {n: (float(v[0, 0]), float(v[0, 1])) for n, v in rec.others.items()}
+    state = initial_state(robot, model, rec.position[0], rec.velocity[:3].mean(axis=0), others=others)
     dt = float(model.opt.timestep)
     check_replay(model, rec)
     n = int(rec.duration / dt)

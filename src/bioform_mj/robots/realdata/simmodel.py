@@ -18,6 +18,7 @@ body moving as the wheels roll it (design §8: no slip at the start).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import mujoco
@@ -34,6 +35,7 @@ __all__ = [
     "effort_to_ctrl",
     "frictionless_condim1",
     "sensor_times",
+    "other_joints",
     "SENSOR_COLUMNS",
 ]
 
@@ -174,10 +176,18 @@ def _yaw_quat(yaw: float) -> np.ndarray:
 
 
 def initial_state(
-    robot: SimRobot, model: mujoco.MjModel, angle: np.ndarray, speed: np.ndarray, yaw: float = 0.0
+    robot: SimRobot,
+    model: mujoco.MjModel,
+    angle: np.ndarray,
+    speed: np.ndarray,
+    yaw: float = 0.0,
+    others: dict[str, tuple[float, float]] | None = None,
 ) -> np.ndarray:
     """The full-physics state (``mjSTATE_FULLPHYSICS``) at wheel angles ``angle`` (rad) and speeds ``speed``
-    (rad/s, the joints' own sense), heading ``yaw`` (rad); the body velocity that rolling implies."""
+    (rad/s, the joints' own sense), heading ``yaw`` (rad); the body velocity that rolling implies. ``others``:
+    recorded angle (rad) and speed (rad/s) of other 1-dof joints (caster swivels and rollers; NaN: as at rest):
+    the TIAGo's casters, started pointing ahead in every chunk, turned round against their swivel damping
+    where the robot drove otherwise, a drag no parameter of the fit holds."""
     lay = robot.layout
     data = mujoco.MjData(model)
     q = robot.rest_qpos.copy()
@@ -185,6 +195,13 @@ def initial_state(
     mujoco.mju_mulQuat(q[a + 3 : a + 7], _yaw_quat(yaw), robot.rest_qpos[a + 3 : a + 7].copy())
     for k in range(2):
         q[robot.wheel_qpos[k]] = angle[k]
+    qv = np.zeros(model.nv)
+    for name, (a_j, w_j) in (others or {}).items():
+        j = model.joint(name)
+        if math.isfinite(a_j):
+            q[int(j.qposadr[0])] = a_j
+        if math.isfinite(w_j):
+            qv[int(j.dofadr[0])] = w_j
     data.qpos[:] = q
     mujoco.mj_kinematics(model, data)
     r, l = lay.wheel_radius, lay.half_track
@@ -197,7 +214,6 @@ def initial_state(
     omega = np.array([0.0, 0.0, w])
     axle_world = data.xpos[base] + R @ robot.axle_base
     v_origin = v * heading + np.cross(omega, data.xpos[base] - axle_world)
-    qv = np.zeros(model.nv)
     d = robot.free_dof
     qv[d : d + 3] = v_origin  # free joint: linear velocity in the world frame
     qv[d + 3 : d + 6] = R.T @ omega  # angular velocity in the body frame
@@ -219,3 +235,16 @@ def sensor_times(state_times: np.ndarray, model: mujoco.MjModel) -> np.ndarray:
     (2.973 kg ± 0.016 against 3.0) and a wheel's dry friction by +4 % (0.00625 ± 0.00022 N·m against 0.006),
     both outside their intervals."""
     return np.asarray(state_times, float) - float(model.opt.timestep)
+
+
+def other_joints(robot: SimRobot) -> tuple[str, ...]:
+    """The robot's 1-dof joints that move in the fit's model besides the two wheels (caster swivels and
+    rollers, free joints the mapping leaves free): a recording that holds them gives each chunk its start."""
+    model = robot.spec.compile()
+    wheels = set(robot.layout.wheel_joints)
+    one_dof = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+    return tuple(
+        model.joint(j).name
+        for j in range(model.njnt)
+        if int(model.jnt_type[j]) in one_dof and model.joint(j).name not in wheels
+    )
