@@ -322,6 +322,7 @@ def parameters(
         robot_casters(robot, spec, model) if "caster_friction" in which and (find_casters or robot.ref.casters) else []
     )
     if geoms:
+        model = spec.compile()  # with the names robot_casters gave unnamed caster geoms
         pub = float(max(model.geom(g).friction[0] for g in geoms)) if geoms else 0.0
         pub = pub if all(model.geom(g).condim[0] > 1 for g in geoms) else 0.0
 
