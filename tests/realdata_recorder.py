@@ -34,23 +34,56 @@ class Truth:
     caster_friction: float | None = None  # sliding friction of the caster geoms (None: as published)
     casters: tuple[str, ...] = ("back_caster",)
     joints: tuple[str, str] = ("left_wheel", "right_wheel")
-    base: str = "base"
+    base: str = "base"  # the chassis body: the payload goes on it
+    odom_body: str | None = None  # the body whose pose and twist /odom reports (None: ``base``)
+
+
+def _urdf_spec(robot_file: Path) -> mujoco.MjSpec:
+    """A URDF through MuJoCo's own URDF parser (not the project's import): ``<gazebo>``, ``<transmission>`` and
+    ``<visual>`` dropped, static links kept as bodies, links without ``<inertial>`` massless (the URDF rule), the
+    root on a free joint, no self-collision (the URDF/Gazebo convention) and the wheels' collision cylinders as
+    spheres of their radius (one rolling contact). Collision meshes are not supported (none in the Kobuki)."""
+    import re
+
+    text = Path(robot_file).read_text()
+    for tag in ("gazebo", "transmission", "visual"):
+        text = re.sub(rf"<{tag}\b.*?</{tag}>", "", text, flags=re.S)
+    compiler = '<mujoco><compiler discardvisual="true" fusestatic="false" inertiafromgeom="false"/></mujoco>'
+    text = re.sub(r"(<robot[^>]*>)", r"\1" + compiler, text, count=1)
+    spec = mujoco.MjSpec.from_string(text)
+    spec.worldbody.first_body().add_freejoint()
+    for g in spec.geoms:  # robot geoms 2/1, the floor 1/2: the robot touches the floor, never itself
+        g.contype, g.conaffinity = 2, 1
+    return spec
 
 
 def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
     """The published file with the truth's changes and a floor, compiled."""
-    spec = mujoco.MjSpec.from_file(str(robot_file))
+    urdf = Path(robot_file).suffix == ".urdf"
+    spec = _urdf_spec(robot_file) if urdf else mujoco.MjSpec.from_file(str(robot_file))
     for k in list(spec.keys):
         spec.delete(k)
     for a in list(spec.actuators):  # torques go in as qfrc_applied; a DC motor at 0 V would brake (back-EMF)
         spec.delete(a)
     for s in list(spec.sensors):  # some name the actuators; the recording is written from the state
         spec.delete(s)
-    base = spec.body(truth.base)
-    base.mass = base.mass + truth.payload_kg
-    inertia = np.array(base.inertia, float)
-    inertia[2] += truth.payload_yaw_kgm2
-    base.inertia = inertia
+    if urdf:  # its inertials are full matrices: the payload as a body welded at the chassis' centre of mass
+        model0 = spec.compile()
+        load = spec.body(truth.base).add_body(name="test_payload", pos=model0.body(truth.base).ipos)
+        load.explicitinertial = True
+        load.mass = truth.payload_kg
+        y = truth.payload_yaw_kgm2
+        load.inertia = [y / 2 + 1e-9, y / 2 + 1e-9, y + 1e-9]
+        for j in truth.joints:  # wheels roll on one contact point
+            for g in spec.body(model0.body(model0.joint(j).bodyid[0]).name).geoms:
+                if g.type == mujoco.mjtGeom.mjGEOM_CYLINDER:
+                    g.type, g.size = mujoco.mjtGeom.mjGEOM_SPHERE, [g.size[0], 0, 0]
+    else:
+        base = spec.body(truth.base)
+        base.mass = base.mass + truth.payload_kg
+        inertia = np.array(base.inertia, float)
+        inertia[2] += truth.payload_yaw_kgm2
+        base.inertia = inertia
     for name, d, f in zip(truth.joints, truth.damping, truth.frictionloss):
         j = spec.joint(name)
         damping = np.array(j.damping, float)  # MuJoCo 4: [linear, ...]; the linear coefficient
@@ -62,11 +95,13 @@ def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
             spec.joint(name).armature = a
     if truth.caster_friction is not None:
         for g in truth.casters:
-            geom = spec.geom(g)
+            geom = spec.geom(g) or next(iter(spec.body(g).geoms))  # a URDF's unnamed geom: by its link
             geom.friction = [truth.caster_friction, 0.005, 0.0001]
-            geom.condim = 3
+            geom.condim = 3 if truth.caster_friction > 0 else 1
             geom.priority = 2  # its own friction wins against the floor's
-    spec.worldbody.add_geom(name="test_floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    floor = spec.worldbody.add_geom(name="test_floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    if urdf:
+        floor.contype, floor.conaffinity = 1, 2
     return spec.compile()
 
 
@@ -102,7 +137,7 @@ def simulate(model: mujoco.MjModel, truth: Truth, duration: float, tau: float, s
     program = torque_program(duration, tau, seed)
     dofs = [int(model.joint(j).dofadr[0]) for j in truth.joints]
     qadr = [int(model.joint(j).qposadr[0]) for j in truth.joints]
-    base = model.body(truth.base).id
+    base = model.body(truth.odom_body or truth.base).id
     n = int(round(duration / model.opt.timestep))
     out = {k: [] for k in ("t", "q", "qd", "tau", "pos", "quat", "vbody", "wbody", "acc")}
     vel6 = np.zeros(6)
@@ -112,9 +147,11 @@ def simulate(model: mujoco.MjModel, truth: Truth, duration: float, tau: float, s
         data.qfrc_applied[:] = 0
         data.qfrc_applied[dofs] = u
         mujoco.mj_forward(model, data)
-        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, base, vel6, 1)  # body frame: ang, lin
+        # at the body's origin (ROS base_link) in its frame: ang, lin. (mjOBJ_BODY gives them at the centre of mass
+        # in the principal-axes frame: the menagerie TIAGo's, turned 90° about z, recorded its forward speed as vy)
+        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_XBODY, base, vel6, 1)
         mujoco.mj_rnePostConstraint(model, data)
-        mujoco.mj_objectAcceleration(model, data, mujoco.mjtObj.mjOBJ_BODY, base, acc6, 1)
+        mujoco.mj_objectAcceleration(model, data, mujoco.mjtObj.mjOBJ_XBODY, base, acc6, 1)
         out["t"].append(data.time)
         out["q"].append(data.qpos[qadr].copy())
         out["qd"].append(data.qvel[dofs].copy())
@@ -145,10 +182,15 @@ def write_bag(
     joint_names: tuple[str, str] | None = None,
     seed: int = 1,
     velocities: bool = True,
+    other_joint_states: tuple[str, ...] = (),
+    extra_joints: tuple[str, ...] = (),
 ) -> None:
     """Write the simulation as a rosbag2 folder (MCAP) at ``rate_hz``; ``noise``: standard deviation of the
     speed noise (rad/s on wheels, m/s and rad/s on the body); angles get 1e-3 rad, torques 2 % of their scale;
-    ``velocities=False``: the joint states carry no velocity (as some drivers publish)."""
+    ``velocities=False``: the joint states carry no velocity (as some drivers publish); ``other_joint_states``:
+    a second publisher on the joint-state topic, one message naming only these joints (zeros) before each;
+    ``extra_joints``: more joints in each wheel message, after the wheels (joint ``i`` at angle ``0.01 (i + 1) t``
+    rad, speed ``0.01 (i + 1)`` rad/s, effort 0)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -173,12 +215,24 @@ def write_bag(
         for k in range(0, len(sim["t"]), step):
             t_ns = start_ns + int(round(sim["t"][k] * 1e9))
             st = _stamp(ts, t_ns)
+            if other_joint_states:
+                n = len(other_joint_states)
+                z = np.zeros(n)
+                arm = JointState(
+                    header=Header(stamp=st, frame_id=""),
+                    name=list(other_joint_states),
+                    position=z,
+                    velocity=z,
+                    effort=z,
+                )
+                w.write(cj, t_ns, ts.serialize_cdr(arm, JointState.__msgtype__))
+            rate = 0.01 * np.arange(1, len(extra_joints) + 1)
             js = JointState(
                 header=Header(stamp=st, frame_id=""),
-                name=names,
-                position=sim["q"][k] + rng.normal(0, 1e-3, 2),
-                velocity=sim["qd"][k] + rng.normal(0, noise, 2) if velocities else np.zeros(0),
-                effort=sim["tau"][k] + rng.normal(0, 0.02 * tau_scale, 2),
+                name=names + list(extra_joints),
+                position=np.r_[sim["q"][k] + rng.normal(0, 1e-3, 2), rate * sim["t"][k]],
+                velocity=np.r_[sim["qd"][k] + rng.normal(0, noise, 2), rate] if velocities else np.zeros(0),
+                effort=np.r_[sim["tau"][k] + rng.normal(0, 0.02 * tau_scale, 2), 0 * rate],
             )
             w.write(cj, t_ns, ts.serialize_cdr(js, JointState.__msgtype__))
             p, q = sim["pos"][k], sim["quat"][k]
@@ -239,9 +293,10 @@ def record(
     seed: int = 0,
     **kw,
 ) -> Truth:
-    """Simulate the shipped robot ``robot`` changed by ``truth`` and write ``out`` (a bag folder or a CSV)."""
+    """Simulate the shipped robot ``robot`` (or a robot file's path: MJCF, or a URDF through MuJoCo's parser)
+    changed by ``truth`` and write ``out`` (a bag folder or a CSV)."""
     truth = truth or Truth()
-    model = true_model(MODELS / f"{robot}_robot.xml", truth)
+    model = true_model(Path(robot) if robot.endswith((".urdf", ".xml")) else MODELS / f"{robot}_robot.xml", truth)
     sim = simulate(model, truth, duration, tau, seed)
     if fmt == "csv":
         write_csv(out, sim, truth)

@@ -9,6 +9,8 @@ going backwards, NaN efforts, an unreadable bag, wheels that are not in the reco
 from __future__ import annotations
 
 import argparse
+import math
+import shutil
 import sys
 from pathlib import Path
 from typing import Any
@@ -49,6 +51,13 @@ def _recording_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--imu-topic", help="sensor_msgs/Imu topic (default /imu, under --robot-ns; optional)")
     p.add_argument("--left-joint", help="the left wheel's joint name in the recording (default: the robot's)")
     p.add_argument("--right-joint", help="the right wheel's joint name in the recording (default: the robot's)")
+    p.add_argument(
+        "--effort-scale",
+        type=float,
+        metavar="K",
+        help="N·m at the wheel per recorded effort unit: a driver that records motor current (A) needs its torque "
+        "constant × gear ratio (× the gearbox efficiency), K = Kt·N (default 1: efforts are N·m at the wheel)",
+    )
     p.add_argument(
         "--motor",
         choices=("ideal", "dc"),
@@ -132,17 +141,26 @@ def _load(args: argparse.Namespace):
 
     from bioform_mj.cli.robot import ref_from_args
     from bioform_mj.robots.realdata.recording import Topics, read_recording
-    from bioform_mj.robots.realdata.simmodel import sim_spec
+    from bioform_mj.robots.realdata.simmodel import other_joints, sim_spec
 
     if args.driver and args.motor != "dc":
         raise InputError("--driver only applies to --motor dc")
+    k = args.effort_scale
+    if k is not None and not (math.isfinite(k) and k > 0):
+        raise InputError(f"--effort-scale must be a number > 0, got {k}")
     ref = ref_from_args(args.model, args)
     ref = replace(ref, motor="", driver="")  # the effort's meaning decides the motors, below
     robot = sim_spec(ref)
     joints = (args.left_joint or robot.layout.wheel_joints[0], args.right_joint or robot.layout.wheel_joints[1])
     topics = Topics(args.joint_states_topic, args.odom_topic, args.imu_topic, args.robot_ns)
-    rec = read_recording(args.bag, joints, topics)
+    rec = read_recording(args.bag, joints, topics, other_joints(robot))
+    if rec.others:
+        rec.notes.append(f"the angles and speeds of {', '.join(rec.others)} from the recording start each chunk")
     rec = _before_tipping(args, rec)
+    rec.notes.extend(robot.notes)
+    if k is not None and k != 1.0:
+        rec.effort = rec.effort * k
+        rec.notes.append(f"efforts multiplied by {k:g} (--effort-scale): taken as N·m at the wheel")
     stated = rec.stated
     if args.motor:
         motor, why = args.motor, "--motor"
@@ -220,7 +238,7 @@ def _fit_main(args: argparse.Namespace) -> int:
 
     from bioform_mj.outputs.files import check_out_dir, write_json
     from bioform_mj.robots.params import robot_truth
-    from bioform_mj.robots.realdata.calibrated import write_calibrated
+    from bioform_mj.robots.realdata.calibrated import assets_folder, write_calibrated
     from bioform_mj.robots.realdata.fit import (
         DEFAULT_FIT,
         FIT_PARAMETERS,
@@ -251,6 +269,19 @@ def _fit_main(args: argparse.Namespace) -> int:
         time_budget_s=args.time_budget,
         find_casters=args.fit is not None,
     )
+    inert = [
+        r["name"] for r in result.parameters if r["name"] in ("mass", "yaw_inertia") and "at the bound" in r["why"]
+    ]
+    if inert and args.effort_scale is None:
+        hint = (
+            f"{' and '.join(inert)} reached the bound of the search range: are the efforts N·m at the wheel? A "
+            "recording of motor current (A) needs --effort-scale Kt·N (torque constant × gear ratio); a recording "
+            "of the torques commanded to the robot file's <dcmotor>s needs --motor dc; a skid-steer robot whose "
+            "other wheels are driven too is not what the fit simulates (only the mapped pair is driven, the "
+            "others roll free: a Husky recorded so fitted 20 kg against 56.6 kg)"
+        )
+        result.notes.append(hint)
+        print(f"warning: {hint}", file=sys.stderr)
     model_pub = published.spec.compile()
     model_cal = sysid.apply_param_modifiers(opt, robot.spec)
     chunks = make_chunks(published, model_pub, rec, args.chunk, args.max_chunks)
@@ -262,41 +293,50 @@ def _fit_main(args: argparse.Namespace) -> int:
     stem = Path(ref.model).stem
     cal_path = out / f"{stem}_calibrated.xml"
     casters = robot_casters(robot, robot.spec, model_cal) if "caster_friction" in result.names else []
-    write_calibrated(ref, robot.layout, result.parameters, casters, cal_path, str(args.bag))
-    cal_ref = replace(ref, model=str(cal_path.resolve()))
-    p_pub, p_cal = robot_truth(ref), robot_truth(cal_ref)
-    unidentified = [r["name"] for r in result.parameters if r["status"] != "identified"]
-    report = {
-        "robot": ref.model,
-        "recording": str(args.bag),
-        "effort": {"motor": ref.motor or "ideal", "driver": ref.driver or None},
-        "calibrated_robot": str(cal_path),
-        "a": p_cal.a_eff,
-        "b": p_cal.b_eff,
-        "published": {"a": p_pub.a_eff, "b": p_pub.b_eff},
-        "parameters": result.parameters,
-        "unidentified": unidentified,
-        "ci95_method": "the wider of the interval from J'J and the residual variance (mujoco.sysid) and the "
-        "cluster-robust (sandwich) one with the chunks as independent units, Student's t with chunks - 1 dof",
-        "correlation": {"names": result.names, "matrix": np.round(result.correlation, 4).tolist()},
-        "residual": {
-            "published": {"cost": result.cost_published, **_rms(chunks, sim_pub)},
-            "calibrated": {"cost": result.cost_calibrated, **_rms(chunks_cal, sim_cal)},
-            "units": "cost: sum of squares of the residuals weighted by 1/RMS of each signal; *_rms: rad/s, m/s",
-        },
-        "seconds": result.seconds,
-        "iterations": result.evaluations,
-        "notes": result.notes + rec.notes,
-        "mapping_flags": "the calibrated file keeps the published names: map it with the same flags",
-    }
-    write_json(out / "fit.json", report)
-    meas = _signals_of_chunks(chunks, None)
-    plot_signals(
-        out / "fit.png",
-        meas,
-        {"published": _signals_of_chunks(chunks, sim_pub), "calibrated": _signals_of_chunks(chunks_cal, sim_cal)},
-        f"{stem}: recorded vs simulated from each chunk's recorded start ({args.bag})",
-    )
+    made = [p for p in (cal_path, assets_folder(cal_path), out / "fit.json", out / "fit.png") if not p.exists()]
+    try:
+        write_calibrated(ref, robot.layout, result.parameters, casters, cal_path, str(args.bag))
+        cal_ref = replace(ref, model=str(cal_path.resolve()))
+        p_pub, p_cal = robot_truth(ref), robot_truth(cal_ref)
+        unidentified = [r["name"] for r in result.parameters if r["status"] != "identified"]
+        report = {
+            "robot": ref.model,
+            "recording": str(args.bag),
+            "effort": {"motor": ref.motor or "ideal", "driver": ref.driver or None},
+            "calibrated_robot": str(cal_path),
+            "a": p_cal.a_eff,
+            "b": p_cal.b_eff,
+            "published": {"a": p_pub.a_eff, "b": p_pub.b_eff},
+            "parameters": result.parameters,
+            "unidentified": unidentified,
+            "ci95_method": "the wider of the interval from J'J and the residual variance (mujoco.sysid) and the "
+            "cluster-robust (sandwich) one with the chunks as independent units, Student's t with chunks - 1 dof",
+            "correlation": {"names": result.names, "matrix": np.round(result.correlation, 4).tolist()},
+            "residual": {
+                "published": {"cost": result.cost_published, **_rms(chunks, sim_pub)},
+                "calibrated": {"cost": result.cost_calibrated, **_rms(chunks_cal, sim_cal)},
+                "units": "cost: sum of squares of the residuals weighted by 1/RMS of each signal; *_rms: rad/s, m/s",
+            },
+            "seconds": result.seconds,
+            "iterations": result.evaluations,
+            "notes": result.notes + rec.notes,
+            "mapping_flags": "the calibrated file keeps the published names: map it with the same flags",
+        }
+        write_json(out / "fit.json", report)
+        meas = _signals_of_chunks(chunks, None)
+        plot_signals(
+            out / "fit.png",
+            meas,
+            {"published": _signals_of_chunks(chunks, sim_pub), "calibrated": _signals_of_chunks(chunks_cal, sim_cal)},
+            f"{stem}: recorded vs simulated from each chunk's recorded start ({args.bag})",
+        )
+    except BaseException:  # output files complete or absent: what this run wrote goes
+        for p in made:
+            if p.is_dir():
+                shutil.rmtree(p, ignore_errors=True)
+            else:
+                p.unlink(missing_ok=True)
+        raise
     lines = [f"fit: {stem} to {args.bag} ({rec.duration:.3g} s) in {result.seconds:.0f} s"]
     for r in result.parameters:
         ci = f"± {r['ci95_halfwidth']:.2g}" if r["ci95_halfwidth"] is not None else "± inf"

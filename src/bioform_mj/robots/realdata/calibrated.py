@@ -2,9 +2,9 @@
 
 :func:`write_calibrated` loads the robot file as published, its format's ``editable`` spec
 (:mod:`bioform_mj.robots.formats`: an MJCF as is; a URDF as the project imports it, design §12), writes the
-fitted values into it by name (the chassis body's mass and yaw inertia, the wheel joints' damping,
-frictionloss and armature, the casters' friction) and saves it as MJCF. The file carries where its numbers
-came from as the custom text ``bioform_calibration`` (one line: the recording, the date, each value and
+fitted values into it by name (the chassis body's mass and yaw inertia, :func:`~.chassis.chassis_body`; the wheel
+joints' damping, frictionloss and armature, the casters' friction) and saves it as MJCF. The file carries where its
+numbers came from as the custom text ``bioform_calibration`` (one line: the recording, the date, each value and
 whether the recording identified it); :func:`calibration_note` reads it back from a compiled scene, for
 ``robot check``'s notes.
 """
@@ -21,7 +21,7 @@ import numpy as np
 from bioform_mj.robots.layout import CONTACT_PRIORITY
 from bioform_mj.robots.refs import RobotRef
 
-__all__ = ["CALIBRATION_TEXT", "write_calibrated", "calibration_note"]
+__all__ = ["CALIBRATION_TEXT", "write_calibrated", "calibration_note", "assets_folder"]
 
 #: name of the custom text a calibrated robot file carries
 CALIBRATION_TEXT = "bioform_calibration"
@@ -46,12 +46,15 @@ def write_calibrated(
     ref: RobotRef, layout: Any, rows: list[dict[str, Any]], caster_geoms: list[str], path: Path, source: str
 ) -> None:
     """Write ``ref``'s robot with the fitted values of ``rows`` (fit.json's ``parameters``) to ``path``."""
-    from bioform_mj.robots.realdata.fit import explicit_base, set_yaw_inertia
+    from bioform_mj.robots.realdata.chassis import chassis_body, explicit_base, set_yaw_inertia
+    from bioform_mj.robots.realdata.simmodel import frictionless_condim1
 
     spec = _source_spec(ref)
+    frictionless_condim1(spec)  # as the fit simulated them: condim 3 at friction 0 blew up with wheel damping
     val = {r["name"]: r["fitted"] for r in rows}
-    axis, _ = explicit_base(spec, layout.base)
-    body = spec.body(layout.base)
+    chassis = chassis_body(spec.compile(), layout.base)  # as the fit chose it
+    axis, _ = explicit_base(spec, chassis)
+    body = spec.body(chassis)
     if "mass" in val:
         body.mass = float(val["mass"])
     if "yaw_inertia" in val:
@@ -87,8 +90,58 @@ def write_calibrated(
         if t.name == CALIBRATION_TEXT:
             spec.delete(t)
     spec.add_text(name=CALIBRATION_TEXT, data=note)
+    folder, copied = _bundle_assets(spec, ref, path)
     spec.compile()  # refuse to write a file that would not load
-    path.write_text(spec.to_xml())
+    text = spec.to_xml()
+    if copied:  # the copies by their path relative to the calibrated file: the folder can move as a whole
+        text = text.replace(f'file="{folder}/', f'file="{folder.name}/')
+    path.write_text(text)
+
+
+def assets_folder(path: Path) -> Path:
+    """The folder beside the calibrated file ``path`` that holds copies of the robot's asset files."""
+    return path.with_name(path.stem + "_assets")
+
+
+def _bundle_assets(spec: mujoco.MjSpec, ref: RobotRef, path: Path) -> tuple[Path, list[Path]]:
+    """Copy every file the robot's meshes, textures, height fields and skins read into
+    :func:`assets_folder` and point the spec at the copies (absolute here; :func:`write_calibrated` writes them
+    relative). A calibrated TIAGo (menagerie MJCF, one STL) named its mesh by the published file's absolute
+    path, which the loader refuses as outside the robot's folder (design §12): the fit ended on that error
+    after its work, its calibrated file left behind. Returns the folder and the copies made."""
+    import shutil
+
+    folder = assets_folder(path).resolve()
+    root = Path(spec.modelfiledir or Path(ref.model).parent)
+    copied: list[Path] = []
+    names: dict[Path, Path] = {}
+    groups = [
+        (spec.meshes, spec.meshdir),
+        (spec.skins, spec.meshdir),
+        (spec.hfields, ""),
+        (spec.textures, spec.texturedir),
+    ]
+    for elements, sub in groups:
+        for el in elements:
+            if not el.file:
+                continue
+            src = Path(el.file) if Path(el.file).is_absolute() else root / (sub or "") / el.file
+            src = src.resolve()
+            if src not in names:
+                dst = folder / src.name
+                k = 1
+                while dst in names.values():  # two files of one name from different folders
+                    dst = folder / f"{src.stem}_{k}{src.suffix}"
+                    k += 1
+                folder.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(src, dst)
+                names[src] = dst
+                copied.append(dst)
+            el.file = str(names[src])
+    if copied:
+        spec.meshdir = ""
+        spec.texturedir = ""
+    return folder, copied
 
 
 def calibration_note(model: mujoco.MjModel, prefix: str = "f1/") -> list[str]:

@@ -69,9 +69,11 @@ def caster_geoms(spec: mujoco.MjSpec, model: mujoco.MjModel, names: tuple[str, .
         for g in range(model.ngeom):
             if model.geom_bodyid[g] == b and (model.geom_contype[g] or model.geom_conaffinity[g]):
                 gname = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
-                if not gname:
+                if not gname:  # named in the spec, by its place among its body's geoms (spec.geoms[g] was
+                    # another geom: the Create 3's front caster, and an internal error 'Invalid name')
                     gname = f"bioform_caster_{g}"
-                    spec.geoms[g].name = gname
+                    own = list(spec.body(model.body(b).name).geoms)
+                    own[g - int(model.body_geomadr[b])].name = gname
                 out.append(gname)
     return out
 

@@ -72,9 +72,10 @@ from bioform_mj.robots.realdata.casters import (
     robot_casters,
     window_means,
 )
+from bioform_mj.robots.realdata.chassis import chassis_body, explicit_base, set_yaw_inertia
 from bioform_mj.robots.realdata.intervals import autocorrelation_inflation, cluster_halfwidths
 from bioform_mj.robots.realdata.recording import Recording
-from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state
+from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state, sensor_times
 
 __all__ = [
     "FIT_PARAMETERS",
@@ -137,6 +138,12 @@ class Chunks:
     measured_cols: list[str]
     length: float
     window: float = 0.0  # > 0: ``measured`` holds means over windows of this length (s), at each window's end
+
+
+def _at(t: float, tt: np.ndarray, y: np.ndarray) -> float:
+    """``y`` at ``t`` from its finite samples (NaN where it has none)."""
+    ok = np.isfinite(y)
+    return float(np.interp(t, tt[ok], y[ok])) if ok.any() else math.nan
 
 
 def _interp(t: np.ndarray, tt: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -204,7 +211,8 @@ def make_chunks(
         speed = rec.velocity[lo:hi].mean(axis=0)  # a 5-sample mean: the noise of one sample would kick the start
         angle = np.array([np.interp(t0, rec.t, rec.position[:, i]) for i in range(2)])
         yaw = float(np.interp(t0, rec.odom_t, yaw_pose)) if yaw_pose is not None else 0.0
-        states.append(initial_state(robot, model, angle, speed, yaw))
+        others = {n: tuple(_at(t0, rec.t, v[:, i]) for i in range(2)) for n, v in rec.others.items()}
+        states.append(initial_state(robot, model, angle, speed, yaw, others))
         ct = np.arange(0, int(round(length / dt)) + 2) * dt
         ctrl = effort_to_ctrl(robot, model, rec.effort_at(t0 + ct))
         controls.append(TS(ct, ctrl, ctrl_map))
@@ -218,37 +226,6 @@ def make_chunks(
 
 
 # ------------------------------------------------------------------ parameters
-def explicit_base(spec: mujoco.MjSpec, base: str) -> tuple[int, float]:
-    """Make the chassis body's inertial explicit (as compiled) and return the principal axis nearest the
-    vertical and its inertia (kg·m²)."""
-    model = spec.compile()
-    b = model.body(base)
-    body = spec.body(base)
-    body.explicitinertial = True
-    body.fullinertia = np.full(6, np.nan)
-    body.mass = float(b.mass[0])
-    body.inertia = np.array(b.inertia, float)
-    body.ipos = np.array(b.ipos, float)
-    body.iquat = np.array(b.iquat, float)
-    R = np.zeros(9)
-    mujoco.mju_quat2Mat(R, np.array(b.iquat, float))
-    k = int(np.argmax(np.abs(R.reshape(3, 3)[2, :])))  # the principal axis (column) most along the body's z
-    return k, float(b.inertia[k])
-
-
-def set_yaw_inertia(body: mujoco.MjsBody, axis: int, value: float) -> None:
-    """Set the principal inertia ``axis`` of ``body`` to ``value`` (kg·m²); where that breaks the triangle
-    inequality (a yaw inertia above the sum of roll and pitch ones), the other two grow evenly to meet it
-    (a payload spread in the plane adds to both; a planar robot's roll and pitch barely matter)."""
-    inertia = np.array(body.inertia, float)
-    inertia[axis] = value
-    others = [k for k in range(3) if k != axis]
-    short = value - inertia[others].sum()
-    if short > 0:
-        inertia[others] += 0.5 * short * 1.001 + 1e-12
-    body.inertia = inertia
-
-
 @dataclass
 class ParamInfo:
     """One fitted quantity: its name, unit, what it is, its published value."""
@@ -276,9 +253,13 @@ def parameters(
     (:func:`robot_casters`)."""
     sysid = _sysid()
     spec, lay = robot.spec, robot.layout
-    axis, izz = explicit_base(spec, lay.base)
+    chassis = chassis_body(spec.compile(), lay.base)  # the base, or the heaviest body welded to it
+    axis, izz = explicit_base(spec, chassis)
     model = spec.compile()
-    m0 = float(spec.body(lay.base).mass)
+    m0 = float(spec.body(chassis).mass)
+    of = f"the chassis body '{chassis}'"
+    if chassis != lay.base:
+        of += f" (the heaviest welded to the base '{lay.base}')"
     tau = float(np.abs(rec.effort).max()) or 1e-3
     wmax = float(np.abs(rec.velocity).max()) or 1.0
     pd = sysid.ParameterDict()
@@ -300,17 +281,15 @@ def parameters(
     if "mass" in which:
 
         def set_mass(s, p):
-            s.body(lay.base).mass = float(p.value[0])
+            s.body(chassis).mass = float(p.value[0])
 
-        add("mass", m0, 0.25 * m0, 4.0 * m0, set_mass, "kg", f"mass of the chassis body '{lay.base}'")
+        add("mass", m0, 0.25 * m0, 4.0 * m0, set_mass, "kg", f"mass of {of}")
     if "yaw_inertia" in which:
 
         def set_izz(s, p):
-            set_yaw_inertia(s.body(lay.base), axis, float(p.value[0]))
+            set_yaw_inertia(s.body(chassis), axis, float(p.value[0]))
 
-        add(
-            "yaw_inertia", izz, 0.25 * izz, 4.0 * izz, set_izz, "kg·m²", f"yaw inertia of the chassis body '{lay.base}'"
-        )
+        add("yaw_inertia", izz, 0.25 * izz, 4.0 * izz, set_izz, "kg·m²", f"yaw inertia of {of}")
     for kind, unit, hi, what in (
         ("damping", "N·m·s/rad", 2.0 * tau / wmax, "viscous damping"),
         ("frictionloss", "N·m", tau, "dry friction"),
@@ -343,6 +322,7 @@ def parameters(
         robot_casters(robot, spec, model) if "caster_friction" in which and (find_casters or robot.ref.casters) else []
     )
     if geoms:
+        model = spec.compile()  # with the names robot_casters gave unnamed caster geoms
         pub = float(max(model.geom(g).friction[0] for g in geoms)) if geoms else 0.0
         pub = pub if all(model.geom(g).condim[0] > 1 for g in geoms) else 0.0
 
@@ -480,10 +460,11 @@ def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int):
     w = chunks.weights
 
     def modify_residual(params, pred, meas, model, return_pred_all, state=None, **_):
+        times = sensor_times(pred.times, model)  # sysid stamps them one step late
         if chunks.window > 0:  # the simulated signals' means over the measured windows
-            p = window_means(np.asarray(pred.times, float), np.asarray(pred.data, float), meas.times, chunks.window)
+            p = window_means(times, np.asarray(pred.data, float), meas.times, chunks.window)
         else:
-            p = pred.interpolate(meas.times)
+            p = _interp(meas.times, times, np.asarray(pred.data, float))
         res = (meas.data - p) * w
         return res[:, w > 0], sysid.TimeSeries(meas.times, p, meas.signal_mapping), meas
 
@@ -787,6 +768,5 @@ def simulate_chunks(robot: SimRobot, chunks: Chunks, model: mujoco.MjModel) -> l
     data = mujoco.MjData(model)
     for st, ctrl, meas in zip(chunks.states, chunks.controls, chunks.measured):
         state, sens = rollout.rollout(model, data, st, ctrl.data[:-1])
-        t = state[0, :, 0]
-        out.append(_interp(meas.times, t, sens[0]))
+        out.append(_interp(meas.times, sensor_times(state[0, :, 0], model), sens[0]))
     return out

@@ -112,6 +112,7 @@ class Recording:
     imu_gyro: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     notes: list[str] = field(default_factory=list)
     stated: dict = field(default_factory=dict)  # what the bag says of its robot (this project's export)
+    others: dict = field(default_factory=dict)  # other joints asked for: name -> (n, 2) position, velocity (NaN: none)
 
     def effort_at(self, t: np.ndarray) -> np.ndarray:
         """The wheel torques (N·m, (len(t), 2)) at times ``t`` (s), interpolated linearly between the
@@ -152,6 +153,7 @@ class Recording:
             self.imu_gyro[i],
             list(self.notes),
             dict(self.stated),
+            {k: v[j] for k, v in self.others.items()},
         )
 
 
@@ -218,9 +220,13 @@ def _validate(rec: Recording) -> Recording:
     return rec
 
 
-def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics | None = None) -> Recording:
+def read_recording(
+    path: str | Path, joints: tuple[str, str], topics: Topics | None = None, others: tuple[str, ...] = ()
+) -> Recording:
     """Read ``path`` (rosbag2 folder, ``.mcap``/``.db3`` file, or ``.csv``) for the wheel joints ``joints``
-    (left, right). Raises :class:`InputError` (exit 2) for anything that cannot be used (module docstring)."""
+    (left, right), and of a bag's joint states also the joints ``others`` where they are there (``Recording.
+    others``: the robot's caster swivels, whose angles set a chunk's start). Raises :class:`InputError` (exit 2)
+    for anything that cannot be used (module docstring)."""
     from bioform_mj.robots.sanity import not_regular
 
     p = Path(path)
@@ -234,7 +240,7 @@ def read_recording(path: str | Path, joints: tuple[str, str], topics: Topics | N
         return _validate(_read_csv(p, joints))
     if p.is_dir():
         _check_metadata(p / "metadata.yaml")
-    return _validate(_read_bag(p, joints, topics or Topics()))
+    return _validate(_read_bag(p, joints, topics or Topics(), tuple(others)))
 
 
 #: largest rosbag2 ``metadata.yaml`` read, MB (rosbag2 writes a few kB; the YAML is parsed whole)
@@ -276,7 +282,7 @@ def _stamp_s(msg: object) -> float:
     return st.sec + 1e-9 * st.nanosec if st is not None else 0.0
 
 
-def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
+def _read_bag(p: Path, joints: tuple[str, str], topics: Topics, extra_joints: tuple[str, ...] = ()) -> Recording:
     try:
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
@@ -289,6 +295,7 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
     js: dict[str, list] = {"t": [], "pos": [], "vel": [], "eff": []}
     od: dict[str, list] = {"t": [], "twist": [], "pose": []}
     im: dict[str, list] = {"t": [], "gyro": []}
+    extra: dict[str, list] = {n: [] for n in extra_joints}
     try:
         with AnyReader([p], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
             have = {c.topic: c.msgtype for c in reader.connections}
@@ -310,11 +317,12 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
             conns = [c for c in reader.connections if c.topic in want]
             bag_t: dict[str, list[float]] = {t: [] for t in want}
             no_effort = 0
+            others: set[str] = set()  # joints of joint states without the wheels (skipped; named if no others)
             idx: tuple[int, int] | None = None
             for conn, bag_ns, raw in _stream(reader, conns, name):
                 msg = reader.deserialize(raw, conn.msgtype)
                 t = _stamp_s(msg)
-                if conn.topic != topics.joint_states or len(getattr(msg, "effort", ())) or not msg.name:
+                if conn.topic != topics.joint_states:
                     bag_t[conn.topic].append(1e-9 * bag_ns)
                 if conn.topic == topics.joint_states:
                     names = list(msg.name)
@@ -327,6 +335,9 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
                         missing = [j for j in joints if j not in names]
                         if missing:
                             if not names:
+                                continue
+                            if len(missing) == len(joints):  # another publisher's joints (an arm, casters)
+                                others.update(names[:LIST_MAX])
                                 continue
                             raise InputError(
                                 f"{name}: '{topics.joint_states}' has no joint {_listed(missing)} "
@@ -344,6 +355,13 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
                         no_effort += 1
                         continue
                     js["t"].append(t)
+                    bag_t[conn.topic].append(1e-9 * bag_ns)  # only for the joint states kept: one clock
+                    if extra_joints:
+                        at = {n: i for i, n in enumerate(names) if n in extra}
+                        pv = (msg.position, msg.velocity)
+                        for n in extra_joints:
+                            i = at.get(n)
+                            extra[n].append([float(a[i]) if i is not None and len(a) > i else math.nan for a in pv])
                     for key, arr in (("pos", msg.position), ("vel", msg.velocity), ("eff", msg.effort)):
                         if len(arr) == 0 and key != "eff":  # a driver that publishes no speeds (or angles)
                             js[key].append((math.nan, math.nan))
@@ -372,10 +390,18 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
         raise
     except Exception as exc:  # noqa: BLE001 - rosbags raises many types for a bad file: one line
         raise InputError(f"{name}: cannot read the recording: {type(exc).__name__}: {exc}") from None
+    if not js["t"] and others:
+        raise InputError(
+            f"{name}: '{topics.joint_states}' has no joint {_listed(list(joints))} "
+            f"(it has: {_listed(sorted(others))}); map the robot's wheels with --left-wheel/--right-wheel or name "
+            "the recorded joints with --left-joint/--right-joint"
+        )
     if not js["t"]:
         what = f" ({no_effort} without an effort: the fit needs the applied torques)" if no_effort else ""
         raise InputError(f"{name}: '{topics.joint_states}' holds no joint states{what}")
     notes = ns_notes + ([f"{no_effort} joint state(s) without an effort skipped"] if no_effort else [])
+    if others:  # several publishers on one topic (ROS 2 merges none): those without the wheels are not theirs
+        notes.append(f"joint states without the wheels skipped (another publisher's: {_listed(sorted(others))})")
     # one clock for all topics: the header stamps where every topic has them (a stamp of 0 at sim time 0 is
     # one), else the bag's receive times
     streams = ((topics.joint_states, js), (topics.odom, od), (topics.imu, im))
@@ -413,6 +439,7 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics) -> Recording:
         np.asarray(im["gyro"], float).reshape(-1, 3),
         notes,
         _stated(custom, topics),
+        {n: np.asarray(v, float).reshape(-1, 2) for n, v in extra.items() if np.isfinite(np.asarray(v, float)).any()},
     )
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from bioform_mj.core.errors import InputError
 from bioform_mj.robots.realdata.recording import Recording
-from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state
+from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state, sensor_times
 
 __all__ = ["replay", "check_replay", "compare", "plot_signals", "REPLAY_MAX_BYTES"]
 
@@ -52,7 +52,8 @@ def replay(robot: SimRobot, rec: Recording) -> dict[str, np.ndarray]:
 
     model = robot.spec.compile()
     data = mujoco.MjData(model)
-    state = initial_state(robot, model, rec.position[0], rec.velocity[:3].mean(axis=0))
+    others = {n: (float(v[0, 0]), float(v[0, 1])) for n, v in rec.others.items()}
+    state = initial_state(robot, model, rec.position[0], rec.velocity[:3].mean(axis=0), others=others)
     dt = float(model.opt.timestep)
     check_replay(model, rec)
     n = int(rec.duration / dt)
@@ -61,10 +62,11 @@ def replay(robot: SimRobot, rec: Recording) -> dict[str, np.ndarray]:
     st, sens = rollout.rollout(model, data, state, ctrl)
     st, sens = st[0], sens[0]
     t = st[:, 0]
+    ts = sensor_times(t, model)  # the sensordata rows are one step behind the state rows
     a = robot.free_qpos
     out = {"t": rec.t.copy()}
     for k, name in ((0, "left_speed"), (1, "right_speed"), (2, "vx"), (7, "wz")):
-        out[name] = np.interp(rec.t, t, sens[:, k])
+        out[name] = np.interp(rec.t, ts, sens[:, k])
     xy = np.stack([np.interp(rec.t, t, st[:, 1 + a]), np.interp(rec.t, t, st[:, 2 + a])], axis=1)
     out["xy"] = xy - xy[0]
     return out

@@ -18,7 +18,8 @@ body moving as the wheels roll it (design §8: no slip at the start).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -27,7 +28,16 @@ from bioform_mj.robots.layout import RobotLayout
 from bioform_mj.robots.prepare import prepare_robot
 from bioform_mj.robots.refs import RobotRef
 
-__all__ = ["SimRobot", "sim_spec", "initial_state", "effort_to_ctrl", "SENSOR_COLUMNS"]
+__all__ = [
+    "SimRobot",
+    "sim_spec",
+    "initial_state",
+    "effort_to_ctrl",
+    "frictionless_condim1",
+    "sensor_times",
+    "other_joints",
+    "SENSOR_COLUMNS",
+]
 
 #: the sensordata columns: left, right wheel speed (rad/s), velocimeter x y z (m/s), gyro x y z (rad/s)
 SENSOR_COLUMNS = ("left_speed", "right_speed", "vx", "vy", "vz", "wx", "wy", "wz")
@@ -46,15 +56,33 @@ class SimRobot:
     wheel_qpos: tuple[int, int]
     wheel_dof: tuple[int, int]
     axle_base: np.ndarray  # axle midpoint in the base frame, m
+    notes: list[str] = field(default_factory=list)  # what sim_spec changed (fit.json's and the replay's notes)
 
 
 def sim_spec(ref: RobotRef) -> SimRobot:
     """The prepared robot on a floor with the recording's sensors (module docstring); raises
     :class:`~bioform_mj.robots.layout.ModelError` (exit 2) as ``robot check`` would."""
     spec, layout, _, _ = prepare_robot(ref)
+    changed = frictionless_condim1(spec)
     for s in list(spec.sensors):
         spec.delete(s)
-    spec.worldbody.add_geom(name="bioform_floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    # the floor as the scene's (robots/scene.py): MuJoCo's own contact defaults, whatever the robot file's default
+    # class says. It inherited the file's: the menagerie TIAGo's (contype 0, conaffinity 1) left its four casters
+    # (contype 0) without a floor, and the robot fell over backwards at rest in every chunk (residual RMS 7.2)
+    spec.worldbody.add_geom(
+        name="bioform_floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0, 0, 1],
+        contype=1,
+        conaffinity=1,
+        condim=3,
+        priority=0,
+        friction=[1.0, 0.005, 0.0001],
+        solref=[0.02, 1.0],
+        solimp=[0.9, 0.95, 0.001, 0.5, 2.0],
+        margin=0.0,
+        gap=0.0,
+    )
     base = spec.body(layout.base)
     base.add_site(name="bioform_base_link", pos=[0, 0, 0], size=[0.005, 0, 0], group=5)
     for side, j in zip(("left", "right"), layout.wheel_joints):
@@ -100,7 +128,32 @@ def sim_spec(ref: RobotRef) -> SimRobot:
         tuple(int(model.jnt_qposadr[j]) for j in wj),
         tuple(int(model.jnt_dofadr[j]) for j in wj),
         np.asarray(layout.axle, float),
+        [FRICTIONLESS_NOTE.format(geoms=", ".join(changed))] if changed else [],
     )
+
+
+#: sliding friction at or below which a contact geom is frictionless (MuJoCo's smallest friction, mjMINMU)
+FRICTIONLESS_MU = 1e-5
+FRICTIONLESS_NOTE = (
+    "frictionless contact geom(s) {geoms} (sliding friction 0 with condim 3, as a URDF's <gazebo> mu1 0 makes "
+    "them) simulated with condim 1: with condim 3, MuJoCo's pyramidal cone at its smallest friction 1e-5 made "
+    "the rollouts blow up (Kobuki, wheel damping 0.00088 N·m·s/rad: wheels at 320 rad/s)"
+)
+
+
+def frictionless_condim1(spec: mujoco.MjSpec) -> list[str]:
+    """Give every colliding geom of ``spec`` whose sliding friction is at most :data:`FRICTIONLESS_MU` but whose
+    ``condim`` is above 1 ``condim 1`` (a frictionless contact, as meant); returns their names (an unnamed
+    one as ``BODY#k``, its body and its index among the spec's geoms). The Kobuki URDF's casters (``<gazebo>``
+    mu1 0) came out of the import as condim 3 at friction 0 (MuJoCo: 1e-5): stable at zero wheel damping, but with
+    the fit's damping 0.00088 N·m·s/rad its rollouts diverged (the chassis pitching at 320 rad/s); condim 1
+    or the elliptic cone are stable."""
+    out = []
+    for k, g in enumerate(spec.geoms):
+        if g.condim > 1 and float(g.friction[0]) <= FRICTIONLESS_MU and (g.contype or g.conaffinity):
+            g.condim = 1
+            out.append(g.name or f"{g.parent.name}#{k}")
+    return out
 
 
 def effort_to_ctrl(robot: SimRobot, model: mujoco.MjModel, effort: np.ndarray) -> np.ndarray:
@@ -123,10 +176,18 @@ def _yaw_quat(yaw: float) -> np.ndarray:
 
 
 def initial_state(
-    robot: SimRobot, model: mujoco.MjModel, angle: np.ndarray, speed: np.ndarray, yaw: float = 0.0
+    robot: SimRobot,
+    model: mujoco.MjModel,
+    angle: np.ndarray,
+    speed: np.ndarray,
+    yaw: float = 0.0,
+    others: dict[str, tuple[float, float]] | None = None,
 ) -> np.ndarray:
     """The full-physics state (``mjSTATE_FULLPHYSICS``) at wheel angles ``angle`` (rad) and speeds ``speed``
-    (rad/s, the joints' own sense), heading ``yaw`` (rad); the body velocity that rolling implies."""
+    (rad/s, the joints' own sense), heading ``yaw`` (rad); the body velocity that rolling implies. ``others``:
+    recorded angle (rad) and speed (rad/s) of other 1-dof joints (caster swivels and rollers; NaN: as at rest):
+    the TIAGo's casters, started pointing ahead in every chunk, turned round against their swivel damping
+    where the robot drove otherwise, a drag no parameter of the fit holds."""
     lay = robot.layout
     data = mujoco.MjData(model)
     q = robot.rest_qpos.copy()
@@ -134,6 +195,13 @@ def initial_state(
     mujoco.mju_mulQuat(q[a + 3 : a + 7], _yaw_quat(yaw), robot.rest_qpos[a + 3 : a + 7].copy())
     for k in range(2):
         q[robot.wheel_qpos[k]] = angle[k]
+    qv = np.zeros(model.nv)
+    for name, (a_j, w_j) in (others or {}).items():
+        j = model.joint(name)
+        if math.isfinite(a_j):
+            q[int(j.qposadr[0])] = a_j
+        if math.isfinite(w_j):
+            qv[int(j.dofadr[0])] = w_j
     data.qpos[:] = q
     mujoco.mj_kinematics(model, data)
     r, l = lay.wheel_radius, lay.half_track
@@ -146,7 +214,6 @@ def initial_state(
     omega = np.array([0.0, 0.0, w])
     axle_world = data.xpos[base] + R @ robot.axle_base
     v_origin = v * heading + np.cross(omega, data.xpos[base] - axle_world)
-    qv = np.zeros(model.nv)
     d = robot.free_dof
     qv[d : d + 3] = v_origin  # free joint: linear velocity in the world frame
     qv[d + 3 : d + 6] = R.T @ omega  # angular velocity in the body frame
@@ -156,3 +223,28 @@ def initial_state(
     state = np.empty(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS))
     mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_FULLPHYSICS)
     return state
+
+
+def sensor_times(state_times: np.ndarray, model: mujoco.MjModel) -> np.ndarray:
+    """The times (s) of ``mujoco.rollout``'s sensordata rows, given its state rows' times ``state_times``.
+
+    Row ``i`` of a rollout holds the state *after* step ``i`` (time ``t0 + (i + 1) dt``) but the sensordata
+    ``mj_step`` computed *before* integrating it (time ``t0 + i dt``); ``mujoco.sysid`` labels the sensordata
+    with the state's times. Compared with recorded speeds stamped when measured, the simulated ones came one
+    step late: on a 60 s Kobuki recording (test recorder, no noise) that lag biased the chassis mass by −0.9 %
+    (2.973 kg ± 0.016 against 3.0) and a wheel's dry friction by +4 % (0.00625 ± 0.00022 N·m against 0.006),
+    both outside their intervals."""
+    return np.asarray(state_times, float) - float(model.opt.timestep)
+
+
+def other_joints(robot: SimRobot) -> tuple[str, ...]:
+    """The robot's 1-dof joints that move in the fit's model besides the two wheels (caster swivels and
+    rollers, free joints the mapping leaves free): a recording that holds them gives each chunk its start."""
+    model = robot.spec.compile()
+    wheels = set(robot.layout.wheel_joints)
+    one_dof = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+    return tuple(
+        model.joint(j).name
+        for j in range(model.njnt)
+        if int(model.jnt_type[j]) in one_dof and model.joint(j).name not in wheels
+    )
