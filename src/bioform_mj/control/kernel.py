@@ -279,7 +279,7 @@ def stack_step(kn, g, s, comm, lx, ly, lth, lv0, lw0, pose, vel):
     stack_tail(kn, g, s, pose, vel)
 
 
-@njit(inline=True)
+@njit
 def stack_head(kn, g, s, comm, lx, ly, lth, lv0, lw0, pose, vel):
     """A control step up to the velocity commands (:func:`stack_step` without the safety filter and
     :func:`stack_tail`): the learner (eq. 37; its loop runs zero times when off: see above), the estimator's
@@ -291,7 +291,7 @@ def stack_head(kn, g, s, comm, lx, ly, lth, lv0, lw0, pose, vel):
     velocity_commands(kn, pose, s.est_pose, s.est_vel, g.offsets, s.err, s.vs, s.cmd)
 
 
-@njit(inline=True)
+@njit
 def stack_tail(kn, g, s, pose, vel):
     """A control step after the velocity commands (and the safety filter): command derivatives, torques
     (eqs. 38–39) with saturation, and the estimator and neuron advanced to the next step."""

@@ -374,7 +374,7 @@ def after_control(k, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt
 ROW = 3
 
 
-@njit(inline=True)
+@njit
 def after_step(k, N, stride, pose, vel, est_pose, est_vel, cmd, dcmd, tau, tau_raw, saturated, c_hat, vs, met, acc,
                lim, diag):  # fmt: skip
     """:func:`after_control` without its log row, on the stack state's arrays (the compiled chunks, which write
