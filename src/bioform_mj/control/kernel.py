@@ -263,12 +263,17 @@ def control_step(g, s, lp, lv, pose, vel, comm):
 # The step's pieces take the numbers of the gains as :class:`Knobs` and only the arrays they read, one by one
 # (issue 28): numba takes a reference count on every array of a named tuple it copies (into a function,
 # inlined or not) and on the array of every field it reads, and releases them where the copy or the field's
-# name is last used; LLVM's pruning removes a count and its release only where nothing else is released
-# between them. The ~400 counts a step of the paper scene (15 % of our code's instructions) came from
-# reading fields of Gains and StackState in the per-follower helpers and in branches. Now :func:`stack_step`
-# reads each field once, at its top, and its pieces read only arrays they were given, none only under a
-# condition of their own: an array released on two paths is not pruned (so the learner runs its loop zero
-# times rather than being skipped). (Numba's inliner takes at most 30 arguments: CPython passes more as *args.)
+# name is last used; LLVM's pruning removes a count and its release only where the release post-dominates it
+# and nothing else is released between them. The ~400 counts a step of the paper scene (15 % of our code's
+# instructions) came from fields of Gains and StackState read in the per-follower helpers and under
+# conditions, and from pairs spanning the call of cbf_filter (a call numba cannot see through: its error
+# return is a path that skips the release). Now the pieces read only arrays they were given, none only under
+# a condition of their own (an array released on two paths is not pruned: so the learner's loop runs zero
+# times rather than being skipped), and the safety filter is a pass of its own between stack_head and
+# stack_tail, which the compiled chunks call on arrays bound once per chunk (49 counts a step left, mostly in
+# the plant's calls: docs/findings/performance.md). stack_head/stack_tail are calls, not inlined into the
+# chunks: inlined, L1i misses 483 -> 324 a step but +16 s of cold compile. (Numba's inliner takes at most 30
+# arguments: CPython passes more as *args.)
 @njit(inline=True)
 def stack_step(kn, g, s, comm, lx, ly, lth, lv0, lw0, pose, vel):
     """:func:`control_step` with the gains' :class:`Knobs` ``kn``, the leader's pose ``(lx, ly, lth)`` (m, m,
