@@ -278,3 +278,22 @@ def test_ideal_plant_matches_unicycle_closed_form():
     assert vel[0, 0] == pytest.approx(0.8 * 1.0, rel=1e-9)
     assert pose[0, 0] == pytest.approx(0.4, rel=1e-9)
     assert pose[0, 1] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_knobs_are_the_gains_numbers_in_order():
+    """kernel.Knobs (what the inlined step pieces read of the gains, issue 28) holds exactly the numbers of Gains,
+    each equal to the Gains field of that name, and no array."""
+    from bioform_mj.control import kernel as K
+
+    n, m = 3, 2
+    nums = {f: float(i) + 0.5 for i, f in enumerate(K.Gains._fields)}
+    nums.update(deriv=2, bio=True, learning=False, steer=True, leader_frame=False, cbf=True)
+    arr = {f: np.full((n, 2), 7.0) for f in K.Gains._fields if f not in K.KNOBS}
+    arr.update(src=np.zeros(m, dtype=np.int64), dst=np.ones(m, dtype=np.int64), lim=np.ones(n), lacc=np.ones(n))
+    arr.update(cbf_par=np.ones(5), cbf_rad=np.ones(n), cbf_b=np.ones(n), cbf_lam=np.ones(n), cbf_bad=np.zeros(n))
+    g = K.Gains(**{f: arr[f] if f in arr else nums[f] for f in K.Gains._fields})
+    kn = K.knobs(g)
+    assert kn._fields == K.KNOBS
+    assert len(K.KNOBS) + len(arr) == len(K.Gains._fields) == 53
+    for f in K.KNOBS:
+        assert getattr(kn, f) == nums[f] and type(getattr(kn, f)) is type(nums[f]), f

@@ -241,7 +241,7 @@ def _control(
         # ---- estimator_consensus: p_err, v_err of this step, leader term included (weights 1 and the
         # neighbours' current estimates on a perfect network; else Comm's weights and received values)
         stack.consensus(g, s, f, w, n, comm, recv, lp0, lp1, lp2, lv0, lv1)
-        # ---- command_and_torques
+        # ---- kernel.velocity_commands and torques
         first = s.first[w] == 1
         steer = g.sc[w, STEER] != zero
         bio = g.sc[w, BIO] != zero

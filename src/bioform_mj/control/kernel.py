@@ -18,7 +18,7 @@ sliding-mode torques with ``ĉ``; saturation; estimator and neuron advance to ``
 from __future__ import annotations
 
 from math import cos, sin
-from typing import NamedTuple
+from typing import NamedTuple, get_type_hints
 
 import numpy as np
 
@@ -169,6 +169,17 @@ class CommIn(NamedTuple):
     rv: np.ndarray
 
 
+#: :class:`Gains`' numbers (its fields that are not arrays), in order: the fields of :class:`Knobs`
+_HINTS = get_type_hints(Gains)
+KNOBS = tuple(f for f in Gains._fields if _HINTS[f] is not np.ndarray)
+_LEAD = KNOBS.index("cbf")  # Gains' numbers before its first array; ``cbf`` is the one after
+assert Gains._fields[:_LEAD] == KNOBS[:_LEAD] and KNOBS[_LEAD:] == ("cbf",)
+
+#: :class:`Gains` without its arrays: a tuple of numbers, which numba copies into an inlined function
+#: without a reference count (a tuple holding arrays takes one on each of them, issue 28)
+Knobs = NamedTuple("Knobs", [(f, _HINTS[f]) for f in KNOBS])  # type: ignore[misc]
+
+
 def new_state(n: int) -> StackState:
     """A zeroed :class:`StackState` for ``n`` followers."""
     z2 = lambda: np.zeros((n, 2))  # noqa: E731
@@ -233,6 +244,12 @@ def reset_state(g, s, est_pose0, vel0, c_hat0):
 
 
 @njit
+def knobs(g):
+    """The :class:`Knobs` of :class:`Gains` ``g`` (a call: numba's inliner takes no ``*args``)."""
+    return Knobs(*g[:_LEAD], g.cbf)
+
+
+@njit
 def control_step(g, s, lp, lv, pose, vel, comm):
     """One control step of every follower, in place on ``s`` (:class:`StackState`).
 
@@ -240,207 +257,249 @@ def control_step(g, s, lp, lv, pose, vel, comm):
     ``pose`` (n,3), ``vel`` (n,2): what each follower measures of itself; ``comm``
     (:class:`CommIn`). The torques to hold over the next period are ``s.tau`` (n,2).
     """
-    if g.learning and s.first[0] == 0:
-        learner_update(g, s, vel)
-    estimator_consensus(g, s, lp, lv, comm)
-    command_and_torques(g, s, pose, vel)
-    estimator_advance(g, s)
+    stack_step(knobs(g), g, s, comm, lp[0], lp[1], lp[2], lv[0], lv[1], pose, vel)
+
+
+# The step's pieces take the numbers of the gains as :class:`Knobs` and only the arrays they read, one by one
+# (issue 28): numba takes a reference count on every array of a named tuple it copies (into a function,
+# inlined or not) and on the array of every field it reads, and releases them where the copy or the field's
+# name is last used; LLVM's pruning removes a count and its release only where the release post-dominates it
+# and nothing else is released between them. The ~400 counts a step of the paper scene (15 % of our code's
+# instructions) came from fields of Gains and StackState read in the per-follower helpers and under
+# conditions, and from pairs spanning the call of cbf_filter (a call numba cannot see through: its error
+# return is a path that skips the release). Now the pieces read only arrays they were given, none only under
+# a condition of their own (an array released on two paths is not pruned: so the learner's loop runs zero
+# times rather than being skipped), and the safety filter is a pass of its own between stack_head and
+# stack_tail, which the compiled chunks call on arrays bound once per chunk (49 counts a step left, mostly in
+# the plant's calls: docs/findings/performance.md). stack_head/stack_tail are calls, not inlined into the
+# chunks: inlined, L1i misses 483 -> 324 a step but +16 s of cold compile. (Numba's inliner takes at most 30
+# arguments: CPython passes more as *args.)
+@njit(inline=True)
+def stack_step(kn, g, s, comm, lx, ly, lth, lv0, lw0, pose, vel):
+    """:func:`control_step` with the gains' :class:`Knobs` ``kn``, the leader's pose ``(lx, ly, lth)`` (m, m,
+    rad) and velocities ``(lv0, lw0)`` (m/s, rad/s): :func:`stack_head`, the safety filter, :func:`stack_tail`."""
+    stack_head(kn, g, s, comm, lx, ly, lth, lv0, lw0, pose, vel)
+    if kn.cbf:  # the safety filter between eq. 31 and the torque law (design §19)
+        safety_filter(pose, s.cmd, g.cbf_par, g.cbf_rad, g.cbf_obst, g.cbf_A, g.cbf_b, g.cbf_lam, g.cbf_bad)
+    stack_tail(kn, g, s, pose, vel)
+
+
+@njit
+def stack_head(kn, g, s, comm, lx, ly, lth, lv0, lw0, pose, vel):
+    """A control step up to the velocity commands (:func:`stack_step` without the safety filter and
+    :func:`stack_tail`): the learner (eq. 37; its loop runs zero times when off: see above), the estimator's
+    consensus and rates, every follower's tracking error and velocity command (eq. 31)."""
+    learner_update(kn, kn.learning and s.first[0] == 0, vel, s.z_hat, s.e_int, s.c_hat, s.d_hat, s.k_hat, s.tau_body,
+                   g.k4, g.c_min, g.c_max)  # fmt: skip
+    estimator_consensus(kn, lx, ly, lth, lv0, lw0, s.est_pose, s.est_vel, s.p_err, s.v_err, s.est_rate, g.src, g.dst,
+                        g.lacc, comm.use, comm.ew, comm.lw, comm.rp, comm.rv)  # fmt: skip
+    velocity_commands(kn, pose, s.est_pose, s.est_vel, g.offsets, s.err, s.vs, s.cmd)
+
+
+@njit
+def stack_tail(kn, g, s, pose, vel):
+    """A control step after the velocity commands (and the safety filter): command derivatives, torques
+    (eqs. 38–39) with saturation, and the estimator and neuron advanced to the next step."""
+    torques(kn, pose, vel, s.est_vel, s.err, s.vs, s.cmd, s.dcmd, s.fy, s.fdy, s.est_rate, s.c_hat, s.tau, s.tau_raw,
+            s.tau_body, s.saturated, s.first, g.lim)  # fmt: skip
+    estimator_advance(kn, s.est_pose, s.est_vel, s.est_rate, s.vs, s.err)
 
 
 @njit(inline=True)
-def learner_update(g, s, vel):
-    """Eq. 37 over the last period for every follower, with the torques applied then
-    (``s.tau_body``: as commanded, or what a plant with DC motors measured as delivered and wrote
-    there after its step, design §8.2) and the velocities ``vel`` (n, 2) measured now."""
-    dt = g.dt
-    k5 = (g.k5a, g.k5b)
-    kd = (g.kda, g.kdb)
-    kk = (g.kka, g.kkb)
-    for i in range(vel.shape[0]):
+def learner_update(kn, on, vel, z_hat, e_int, c_hat, d_hat, k_hat, tau_body, k4, c_min, c_max):
+    """Eq. 37 over the last period for every follower (``on``; else nothing), with the torques applied then
+    (``tau_body`` (n, 2): as commanded, or what a plant with DC motors measured as delivered and wrote
+    there after its step, design §8.2) and the velocities ``vel`` (n, 2) measured now; the learner's state
+    ``z_hat, e_int, c_hat, d_hat, k_hat`` (n, 2) in place."""
+    dt = kn.dt
+    k5 = (kn.k5a, kn.k5b)
+    kd = (kn.kda, kn.kdb)
+    kk = (kn.kka, kn.kkb)
+    for i in range(vel.shape[0] if on else 0):  # zero times when off: see above
         for c in range(2):  # a, then b
-            z_hat, e_int, c_hat, d_hat = s.z_hat[i, c], s.e_int[i, c], s.c_hat[i, c], s.d_hat[i, c]
-            tau, z = s.tau_body[i, c], vel[i, c]
+            z, tq = vel[i, c], tau_body[i, c]
             if kk[c] > 0.0:  # opt-in learned drag (design §14); else the paper's step, unchanged
-                zn, en, cn, dn, kn = learner_drag_step(
-                    z_hat, e_int, c_hat, d_hat, s.k_hat[i, c], tau, z, g.k4[i, c], k5[c], kd[c], kk[c], g.c_min[i, c],
-                    g.c_max[i, c], g.k_max, dt,
+                zn, en, cn, dn, kh = learner_drag_step(
+                    z_hat[i, c], e_int[i, c], c_hat[i, c], d_hat[i, c], k_hat[i, c], tq, z, k4[i, c], k5[c], kd[c],
+                    kk[c], c_min[i, c], c_max[i, c], kn.k_max, dt,
                 )  # fmt: skip
-                s.k_hat[i, c] = kn
+                k_hat[i, c] = kh
             else:
                 zn, en, cn, dn = learner_step(
-                    z_hat, e_int, c_hat, d_hat, tau, z, g.k4[i, c], k5[c], kd[c], g.c_min[i, c], g.c_max[i, c], dt
-                )
-            s.z_hat[i, c], s.e_int[i, c], s.c_hat[i, c], s.d_hat[i, c] = zn, en, cn, dn
+                    z_hat[i, c], e_int[i, c], c_hat[i, c], d_hat[i, c], tq, z, k4[i, c], k5[c], kd[c], c_min[i, c],
+                    c_max[i, c], dt,
+                )  # fmt: skip
+            z_hat[i, c], e_int[i, c], c_hat[i, c], d_hat[i, c] = zn, en, cn, dn
 
 
 @njit(inline=True)
-def command_and_torques(g, s, pose, vel):
-    """Tracking error, velocity command (eq. 31), command derivative, sliding-mode torques
-    (eqs. 38–39) and saturation for every follower, from the current estimates."""
-    first = s.first[0] == 1
+def velocity_commands(kn, pose, est_pose, est_vel, offsets, err, vs, cmd):
+    """Every follower's tracking error into ``err`` (n, 3) (:func:`follower_error`) and velocity command
+    (eq. 31) into ``cmd`` (n, 2), from the current estimates ``est_pose``, ``est_vel`` and neuron ``vs``."""
     for i in range(pose.shape[0]):
-        e0, e1, e2, v_ref, w_ref = follower_error(g, s, i, pose)
-        u = s.vs[i] if g.bio else e0
-        vc, wc = velocity_command(e1, e2, u, v_ref, w_ref, g.k1, g.k2, g.k3)
-        if g.cbf:  # the safety filter between eq. 31 and the torque law (design §19)
-            vc, wc = cbf_filter(i, vc, wc, pose, g.cbf_rad, g.cbf_obst, g.cbf_par, g.cbf_A, g.cbf_b, g.cbf_lam)
-            if g.cbf_lam[g.cbf_lam.shape[0] - 1] > CBF_RESIDUAL:  # no solution: counted, said after the run
-                g.cbf_bad[i] += 1.0
-        s.cmd[i, 0], s.cmd[i, 1] = vc, wc
-        if g.deriv == DERIV_ANALYTIC:  # chain rule through the controller's own dynamics (design §6)
-            r = s.est_rate  # this step's estimator rates (estimator_consensus)
-            dpx, dpy, dpth, dv_ir, dw_ir = r[i, 0], r[i, 1], r[i, 2], r[i, 3], r[i, 4]
+        e0, e1, e2, v_ref, w_ref = follower_error(kn, i, pose, est_pose, est_vel, offsets, err)
+        u = vs[i] if kn.bio else e0
+        cmd[i, 0], cmd[i, 1] = velocity_command(e1, e2, u, v_ref, w_ref, kn.k1, kn.k2, kn.k3)
+
+
+@njit(inline=True)
+def safety_filter(pose, cmd, cbf_par, cbf_rad, cbf_obst, cbf_A, cbf_b, cbf_lam, cbf_bad):
+    """The safety filter (design §19, :func:`~.cbf.cbf_filter`) on every follower's command ``cmd`` (n, 2) in
+    place; a step whose QP had no solution is counted in ``cbf_bad`` (n,) (said after the run). Its own pass
+    over the followers (each one's filter reads the poses, not the others' commands: the same bits as
+    filtering each command as it is made): the only call here that numba cannot see through (it could raise),
+    which keeps LLVM from pruning the reference counts of arrays bound across it."""
+    for i in range(pose.shape[0]):
+        cmd[i, 0], cmd[i, 1] = cbf_filter(i, cmd[i, 0], cmd[i, 1], pose, cbf_rad, cbf_obst, cbf_par, cbf_A, cbf_b,
+                                          cbf_lam)  # fmt: skip
+        if cbf_lam[cbf_lam.shape[0] - 1] > CBF_RESIDUAL:  # no solution
+            cbf_bad[i] += 1.0
+
+
+@njit(inline=True)
+def torques(kn, pose, vel, est_vel, err, vs, cmd, dcmd, fy, fdy, est_rate, c_hat, tau, tau_raw, tau_body, saturated,
+            first, lim):  # fmt: skip
+    """Every follower's command derivative (design §6) and sliding-mode torques (eqs. 38–39) with saturation,
+    tracking ``cmd`` (n, 2) from the errors ``err`` (n, 3) of :func:`velocity_commands` (the arrays of
+    :class:`StackState` and :class:`Gains` by their field names); then ``first[0] = 0``."""
+    first_step = first[0] == 1
+    for i in range(pose.shape[0]):
+        vc, wc = cmd[i, 0], cmd[i, 1]
+        if kn.deriv == DERIV_ANALYTIC:  # chain rule through the controller's own dynamics (design §6)
+            e0, e1, e2 = err[i, 0], err[i, 1], err[i, 2]
+            # this step's estimator rates (estimator_consensus)
+            dpx, dpy, dpth = est_rate[i, 0], est_rate[i, 1], est_rate[i, 2]
+            dv_ir, dw_ir = est_rate[i, 3], est_rate[i, 4]
             ch = cos(pose[i, 2])
             sh = sin(pose[i, 2])
             dex, dey, deth = error_rate(
-                e0, e1, vel[i, 0], vel[i, 1], s.est_vel[i, 0], dpth, e2, ch * dpx + sh * dpy, -sh * dpx + ch * dpy
+                e0, e1, vel[i, 0], vel[i, 1], est_vel[i, 0], dpth, e2, ch * dpx + sh * dpy, -sh * dpx + ch * dpy
             )
-            du = neuron_rate(s.vs[i], e0, g.A, g.B, g.D) if g.bio else dex
-            s.dcmd[i, 0], s.dcmd[i, 1] = command_rate(
-                e1, e2, s.est_vel[i, 0], dv_ir, dw_ir, dey, deth, du, g.k1, g.k2, g.k3
+            du = neuron_rate(vs[i], e0, kn.A, kn.B, kn.D) if kn.bio else dex
+            dcmd[i, 0], dcmd[i, 1] = command_rate(
+                e1, e2, est_vel[i, 0], dv_ir, dw_ir, dey, deth, du, kn.k1, kn.k2, kn.k3
             )
         else:
             for c in range(2):  # filter or backward difference (design §6)
-                follower_derivative(g, s, i, c, first)
-        follower_torques(g, s, i, vc, wc, vel)
-    s.first[0] = 0
+                follower_derivative(kn, i, c, first_step, fy, fdy, cmd, dcmd)
+        follower_torques(kn, i, vc, wc, vel, dcmd, c_hat, lim, tau, tau_raw, tau_body, saturated)
+    first[0] = 0
 
 
 # Per-follower pieces shared with the learning environment (envs/kernels.py): one-line wrappers around
-# equations (on scalars; the batch engine's Warp kernels call the same equations): a numba call that
-# passes Gains and StackState (every array of both, ~7 words each, by value) costs more than the piece
-# itself, per follower, so these and the phases of control_step are inlined (numba IR, `njit(inline=True)`):
-# control_step is one call a step (issue 28, paper scene under callgrind: our code's instructions per step
-# 13.1k -> 12.2k, its simulated L1i misses 716 -> 601; results bit-identical).
+# equations (on scalars; the batch engine's Warp kernels call the same equations), inlined (numba IR,
+# `njit(inline=True)`): a numba call passes every array by value (~7 words each), which costs more than the
+# piece itself, per follower (issue 28: the stack's phases and these inlined, our code's instructions per step
+# 13.1k -> 12.2k, its simulated L1i misses 716 -> 601; results bit-identical). Each reads every array it takes
+# (none under a condition of its own: see stack_step).
 @njit(inline=True)
-def follower_error(g, s, i, pose):
-    """Follower ``i``'s :func:`slot_error` from its leader estimate and measured ``pose`` (n, 3), into
-    ``s.err[i]``; returns ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``."""
+def follower_error(kn, i, pose, est_pose, est_vel, offsets, err):
+    """Follower ``i``'s :func:`slot_error` from its leader estimate ``est_pose``, ``est_vel`` and measured ``pose``
+    (n, 3), the slot ``offsets`` (n, 2) m, into ``err[i]``; returns ``(x̃, ỹ, θ̃, υ_ref, ω_ref)``."""
     e0, e1, e2, v_ref, w_ref = slot_error(
-        s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2], s.est_vel[i, 0], s.est_vel[i, 1], g.offsets[i, 0],
-        g.offsets[i, 1], pose[i, 0], pose[i, 1], pose[i, 2], g.leader_frame,
+        est_pose[i, 0], est_pose[i, 1], est_pose[i, 2], est_vel[i, 0], est_vel[i, 1], offsets[i, 0], offsets[i, 1],
+        pose[i, 0], pose[i, 1], pose[i, 2], kn.leader_frame,
     )  # fmt: skip
-    s.err[i, 0], s.err[i, 1], s.err[i, 2] = e0, e1, e2
+    err[i, 0], err[i, 1], err[i, 2] = e0, e1, e2
     return e0, e1, e2, v_ref, w_ref
 
 
 @njit(inline=True)
-def follower_derivative(g, s, i, c, first):
-    """:func:`command_derivative` of the command ``s.cmd[i, c]`` into ``s.dcmd[i, c]``, its state ``s.fy``,
-    ``s.fdy`` advanced; ``first``: the first step."""
-    s.fy[i, c], s.fdy[i, c], s.dcmd[i, c] = command_derivative(
-        s.fy[i, c], s.fdy[i, c], s.cmd[i, c], first, g.deriv == DERIV_DIFFERENCE, g.f00, g.f01, g.f10, g.f11, g.g0,
-        g.g1, g.dt,
+def follower_derivative(kn, i, c, first, fy, fdy, cmd, dcmd):
+    """:func:`command_derivative` of the command ``cmd[i, c]`` into ``dcmd[i, c]``, its state ``fy``, ``fdy``
+    (n, 2) advanced; ``first``: the first step."""
+    fy[i, c], fdy[i, c], dcmd[i, c] = command_derivative(
+        fy[i, c], fdy[i, c], cmd[i, c], first, kn.deriv == DERIV_DIFFERENCE, kn.f00, kn.f01, kn.f10, kn.f11, kn.g0,
+        kn.g1, kn.dt,
     )  # fmt: skip
 
 
 @njit(inline=True)
-def follower_torques(g, s, i, vc, wc, vel):
+def follower_torques(kn, i, vc, wc, vel, dcmd, c_hat, lim, tau, tau_raw, tau_body, saturated):
     """Follower ``i``'s sliding-mode torques (eqs. 38–39) tracking ``(vc, wc)`` [m/s, rad/s] with
-    ``s.dcmd[i]``, the measured ``vel`` (n, 2) and ``ĉ``; then :func:`apply_torque`."""
+    ``dcmd[i]``, the measured ``vel`` (n, 2) and ``ĉ`` (``c_hat``); then :func:`apply_torque`."""
     r0, r1 = sliding_mode(
-        vc, wc, s.dcmd[i, 0], s.dcmd[i, 1], vel[i, 0], vel[i, 1], s.c_hat[i, 0], s.c_hat[i, 1], g.ca, g.cb, g.tphi
+        vc, wc, dcmd[i, 0], dcmd[i, 1], vel[i, 0], vel[i, 1], c_hat[i, 0], c_hat[i, 1], kn.ca, kn.cb, kn.tphi
     )
-    apply_torque(g, s, i, r0, r1)
+    apply_torque(kn, i, r0, r1, lim, tau, tau_raw, tau_body, saturated)
 
 
 @njit(inline=True)
-def apply_torque(g, s, i, r0, r1):
-    """Follower ``i``'s commanded wheel torques ``(r0, r1)`` = ``[τ_L, τ_R]`` N·m into ``s.tau_raw[i]``,
-    saturated at ``g.lim[i]`` (``g.steer``: steer priority) into ``s.tau[i]``, ``s.saturated[i]``, and the
-    body torques ``s.tau_body[i]`` the learner reads."""
-    s.tau_raw[i, 0], s.tau_raw[i, 1] = r0, r1
-    L = g.lim[i]
-    s.saturated[i] = abs(r0) > L or abs(r1) > L
-    t0, t1 = saturate(r0, r1, L, g.steer)
-    s.tau[i, 0], s.tau[i, 1] = t0, t1
-    s.tau_body[i, 0] = t0 + t1  # τ_a = τ_L + τ_R
-    s.tau_body[i, 1] = t1 - t0  # τ_b = τ_R − τ_L (design §5)
+def apply_torque(kn, i, r0, r1, lim, tau, tau_raw, tau_body, saturated):
+    """Follower ``i``'s commanded wheel torques ``(r0, r1)`` = ``[τ_L, τ_R]`` N·m into ``tau_raw[i]``,
+    saturated at ``lim[i]`` (``kn.steer``: steer priority) into ``tau[i]``, ``saturated[i]``, and the
+    body torques ``tau_body[i]`` the learner reads (arrays (n, 2), ``saturated`` (n,))."""
+    tau_raw[i, 0], tau_raw[i, 1] = r0, r1
+    L = lim[i]
+    saturated[i] = abs(r0) > L or abs(r1) > L
+    t0, t1 = saturate(r0, r1, L, kn.steer)
+    tau[i, 0], tau[i, 1] = t0, t1
+    tau_body[i, 0] = t0 + t1  # τ_a = τ_L + τ_R
+    tau_body[i, 1] = t1 - t0  # τ_b = τ_R − τ_L (design §5)
 
 
 @njit
 def estimator_update(g, s, lp, lv, comm):
     """The distributed estimator (eqs. 12–13) and the neuron (eq. 32) advanced to the next step:
     consensus errors over the graph edges (and the leader for ``a_ir = 1``), one Euler step."""
-    estimator_consensus(g, s, lp, lv, comm)
-    estimator_advance(g, s)
+    kn = knobs(g)
+    estimator_consensus(kn, lp[0], lp[1], lp[2], lv[0], lv[1], s.est_pose, s.est_vel, s.p_err, s.v_err, s.est_rate,
+                        g.src, g.dst, g.lacc, comm.use, comm.ew, comm.lw, comm.rp, comm.rv)  # fmt: skip
+    estimator_advance(kn, s.est_pose, s.est_vel, s.est_rate, s.vs, s.err)
 
 
 @njit(inline=True)
-def estimator_consensus(g, s, lp, lv, comm):
-    """Consensus errors of eqs. 12–13 into ``s.p_err`` (n,3) and ``s.v_err`` (n,2): over the graph
-    edges, plus ``a_ir (P_ir − P_r)`` for the leader link; from the estimates before they advance.
-    Then the estimator's rates from them into ``s.est_rate`` (n,5) (``estimator_rates``)."""
-    n = s.est_pose.shape[0]
+def estimator_consensus(kn, lx, ly, lth, lv0, lw0, est_pose, est_vel, p_err, v_err, est_rate, src, dst, lacc, use,
+                        ew, lw, rp, rv):  # fmt: skip
+    """Consensus errors of eqs. 12–13 into ``p_err`` (n,3) and ``v_err`` (n,2): over the graph edges
+    ``src ← dst`` (m,), plus ``a_ir (P_ir − P_r)`` for the leader link (``lacc`` (n,); the leader's pose
+    ``(lx, ly, lth)``, velocities ``(lv0, lw0)``); from the estimates ``est_pose``, ``est_vel`` before they
+    advance; ``use``: the network's delivery (:class:`CommIn`: ``ew``, ``lw``, ``rp``, ``rv``). Then the
+    estimator's rates from them into ``est_rate`` (n,5) (``estimator_rates``)."""
+    n = est_pose.shape[0]
     for i in range(n):
         for c in range(3):
-            s.p_err[i, c] = 0.0
+            p_err[i, c] = 0.0
         for c in range(2):
-            s.v_err[i, c] = 0.0
-    for e in range(g.src.shape[0]):
-        i = g.src[e]
-        j = g.dst[e]
-        w = comm.ew[e] if comm.use else 1.0
+            v_err[i, c] = 0.0
+    for e in range(src.shape[0]):
+        i = src[e]
+        j = dst[e]
+        w = ew[e] if use else 1.0
         for c in range(3):
-            xj = comm.rp[e, c] if comm.use else s.est_pose[j, c]
-            d = s.est_pose[i, c] - xj
+            xj = rp[e, c] if use else est_pose[j, c]
+            d = est_pose[i, c] - xj
             if c == 2:
                 d = wrap(d)
-            s.p_err[i, c] += d * w
+            p_err[i, c] += d * w
         for c in range(2):
-            xj = comm.rv[e, c] if comm.use else s.est_vel[j, c]
-            s.v_err[i, c] += (s.est_vel[i, c] - xj) * w
+            xj = rv[e, c] if use else est_vel[j, c]
+            v_err[i, c] += (est_vel[i, c] - xj) * w
     for i in range(n):
-        a = g.lacc[i] * comm.lw[i] if comm.use else g.lacc[i]
-        s.p_err[i, 0] = a * (s.est_pose[i, 0] - lp[0]) + s.p_err[i, 0]
-        s.p_err[i, 1] = a * (s.est_pose[i, 1] - lp[1]) + s.p_err[i, 1]
-        s.p_err[i, 2] = a * wrap(s.est_pose[i, 2] - lp[2]) + s.p_err[i, 2]
-        s.v_err[i, 0] = a * (s.est_vel[i, 0] - lv[0]) + s.v_err[i, 0]
-        s.v_err[i, 1] = a * (s.est_vel[i, 1] - lv[1]) + s.v_err[i, 1]
-        r = s.est_rate
-        r[i, 0], r[i, 1], r[i, 2], r[i, 3], r[i, 4] = estimator_rates(
-            s.est_pose[i, 2],
-            s.est_vel[i, 0],
-            s.est_vel[i, 1],
-            s.p_err[i, 0],
-            s.p_err[i, 1],
-            s.p_err[i, 2],
-            s.v_err[i, 0],
-            s.v_err[i, 1],
-            g.kx,
-            g.ky,
-            g.kth,
-            g.ka0,
-            g.ka1,
-            g.kb0,
-            g.kb1,
-            g.ephi0,
-            g.ephi1,
-        )
+        a = lacc[i] * lw[i] if use else lacc[i]
+        p_err[i, 0] = a * (est_pose[i, 0] - lx) + p_err[i, 0]
+        p_err[i, 1] = a * (est_pose[i, 1] - ly) + p_err[i, 1]
+        p_err[i, 2] = a * wrap(est_pose[i, 2] - lth) + p_err[i, 2]
+        v_err[i, 0] = a * (est_vel[i, 0] - lv0) + v_err[i, 0]
+        v_err[i, 1] = a * (est_vel[i, 1] - lw0) + v_err[i, 1]
+        est_rate[i, 0], est_rate[i, 1], est_rate[i, 2], est_rate[i, 3], est_rate[i, 4] = estimator_rates(
+            est_pose[i, 2], est_vel[i, 0], est_vel[i, 1], p_err[i, 0], p_err[i, 1], p_err[i, 2], v_err[i, 0],
+            v_err[i, 1], kn.kx, kn.ky, kn.kth, kn.ka0, kn.ka1, kn.kb0, kn.kb1, kn.ephi0, kn.ephi1,
+        )  # fmt: skip
 
 
 @njit(inline=True)
-def estimator_advance(g, s):
+def estimator_advance(kn, est_pose, est_vel, est_rate, vs, err):
     """One Euler step of the estimator (eqs. 12–13) with the rates :func:`estimator_consensus`
-    computed (``s.est_rate``), and the neuron (eq. 32) for the frozen input ``x̃``."""
-    n = s.est_pose.shape[0]
-    dt = g.dt
-    r = s.est_rate
+    computed (``est_rate``), and the neuron ``vs`` (eq. 32) for the frozen input ``x̃`` (``err[:, 0]``)."""
+    n = est_pose.shape[0]
+    dt = kn.dt
     for i in range(n):
         px, py, pth, v, w = estimator_euler(
-            s.est_pose[i, 0],
-            s.est_pose[i, 1],
-            s.est_pose[i, 2],
-            s.est_vel[i, 0],
-            s.est_vel[i, 1],
-            r[i, 0],
-            r[i, 1],
-            r[i, 2],
-            r[i, 3],
-            r[i, 4],
-            dt,
-        )
-        s.est_pose[i, 0], s.est_pose[i, 1], s.est_pose[i, 2] = px, py, pth
-        s.est_vel[i, 0], s.est_vel[i, 1] = v, w
-        if g.bio:  # neuron (eq. 32), exact for the frozen input x̃
-            s.vs[i] = neuron_step(s.vs[i], s.err[i, 0], g.A, g.B, g.D, dt)
+            est_pose[i, 0], est_pose[i, 1], est_pose[i, 2], est_vel[i, 0], est_vel[i, 1], est_rate[i, 0],
+            est_rate[i, 1], est_rate[i, 2], est_rate[i, 3], est_rate[i, 4], dt,
+        )  # fmt: skip
+        est_pose[i, 0], est_pose[i, 1], est_pose[i, 2] = px, py, pth
+        est_vel[i, 0], est_vel[i, 1] = v, w
+        if kn.bio:  # neuron (eq. 32), exact for the frozen input x̃
+            vs[i] = neuron_step(vs[i], err[i, 0], kn.A, kn.B, kn.D, dt)

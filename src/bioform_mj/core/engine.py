@@ -166,27 +166,32 @@ def _acc_reset(a):
 
 
 @njit(inline=True)
-def accumulate(s, vel, met, a):
-    """After a control step: the run metrics ``met`` and the log accumulators ``a`` from the
-    stack state ``s`` and the measured velocities ``vel`` (n, 2)."""
+def accumulate(cmd, dcmd, tau, tau_raw, saturated, vel, met, a):
+    """After a control step: the run metrics ``met`` and the log accumulators ``a`` from the stack
+    state's ``cmd``, ``dcmd``, ``tau``, ``tau_raw`` (n, 2), ``saturated`` (n,) (:class:`~bioform_mj.control.
+    kernel.StackState`'s fields) and the measured velocities ``vel`` (n, 2). (The fields of ``met`` and ``a``
+    are read once, at the top: see ``control/kernel.py`` on reference counts.)"""
+    verr, msat, vmax, mtau, mtau_raw = met.verr, met.sat, met.vmax, met.tau, met.tau_raw
+    a_cmd, a_cmd_min, a_cmd_max, a_dcmd, a_tau = a.cmd, a.cmd_min, a.cmd_max, a.dcmd, a.tau
+    a_tau_min, a_tau_max, a_tau_raw, a_sat, a_count = a.tau_min, a.tau_max, a.tau_raw, a.sat, a.count
     for i in range(vel.shape[0]):
-        met.verr[i] += abs(s.cmd[i, 0] - vel[i, 0]) + abs(s.cmd[i, 1] - vel[i, 1])
-        if s.saturated[i]:
-            met.sat[i] += 1.0
-            a.sat[i] += 1.0
-        met.vmax[i] = max(met.vmax[i], abs(s.cmd[i, 0]))
-        met.tau[i] = max(met.tau[i], max(abs(s.tau[i, 0]), abs(s.tau[i, 1])))
-        met.tau_raw[i] = max(met.tau_raw[i], max(abs(s.tau_raw[i, 0]), abs(s.tau_raw[i, 1])))
+        verr[i] += abs(cmd[i, 0] - vel[i, 0]) + abs(cmd[i, 1] - vel[i, 1])
+        if saturated[i]:
+            msat[i] += 1.0
+            a_sat[i] += 1.0
+        vmax[i] = max(vmax[i], abs(cmd[i, 0]))
+        mtau[i] = max(mtau[i], max(abs(tau[i, 0]), abs(tau[i, 1])))
+        mtau_raw[i] = max(mtau_raw[i], max(abs(tau_raw[i, 0]), abs(tau_raw[i, 1])))
         for c in range(2):
-            a.cmd[i, c] += s.cmd[i, c]
-            a.dcmd[i, c] += s.dcmd[i, c]
-            a.tau[i, c] += s.tau[i, c]
-            a.tau_raw[i, c] += s.tau_raw[i, c]
-            a.cmd_min[i, c] = min(a.cmd_min[i, c], s.cmd[i, c])
-            a.cmd_max[i, c] = max(a.cmd_max[i, c], s.cmd[i, c])
-            a.tau_min[i, c] = min(a.tau_min[i, c], s.tau[i, c])
-            a.tau_max[i, c] = max(a.tau_max[i, c], s.tau[i, c])
-    a.count[0] += 1
+            a_cmd[i, c] += cmd[i, c]
+            a_dcmd[i, c] += dcmd[i, c]
+            a_tau[i, c] += tau[i, c]
+            a_tau_raw[i, c] += tau_raw[i, c]
+            a_cmd_min[i, c] = min(a_cmd_min[i, c], cmd[i, c])
+            a_cmd_max[i, c] = max(a_cmd_max[i, c], cmd[i, c])
+            a_tau_min[i, c] = min(a_tau_min[i, c], tau[i, c])
+            a_tau_max[i, c] = max(a_tau_max[i, c], tau[i, c])
+    a_count[0] += 1
 
 
 @njit
@@ -260,11 +265,10 @@ GUARDS: tuple[tuple[str, str, str | None], ...] = (
 
 
 @njit(inline=True)
-def _finite_rows(x, i):
-    for c in range(x.shape[1]):
-        if not math.isfinite(x[i, c]):
-            return False
-    return True
+def _finite(a, b, c=0.0):
+    """True if ``a``, ``b`` (and ``c``) are finite: a row of 2 (or 3) numbers (scalars: an inlined function
+    taking an array copies it with a reference count, see :func:`guards`)."""
+    return math.isfinite(a) and math.isfinite(b) and math.isfinite(c)
 
 
 @njit(inline=True)
@@ -273,54 +277,63 @@ def check(s, pose, vel, lim, diag):
 
     On failure ``diag`` (3,) receives ``(guard code, follower index, offending value)``.
     """
+    return guards(pose, vel, s.est_pose, s.est_vel, s.cmd, s.tau_raw, s.c_hat, s.vs, lim, diag)
+
+
+@njit(inline=True)
+def guards(pose, vel, est_pose, est_vel, cmd, tau_raw, c_hat, vs, lim, diag):
+    """:func:`check` on the stack state's arrays (:class:`~bioform_mj.control.kernel.StackState`'s field names).
+
+    One return, and the second pass's loop runs zero times after a failure of the first: no array is
+    released on two paths (see ``control/kernel.py`` on reference counts)."""
     n = pose.shape[0]
-    for i in range(n):
-        bad = 0
-        if not _finite_rows(pose, i):
+    bad = 0
+    who = 0
+    val = math.nan
+    for i in range(n):  # rows of 3 (poses) and 2 numbers
+        if not _finite(pose[i, 0], pose[i, 1], pose[i, 2]):
             bad = 1
-        elif not _finite_rows(vel, i):
+        elif not _finite(vel[i, 0], vel[i, 1]):
             bad = 2
-        elif not _finite_rows(s.est_pose, i):
+        elif not _finite(est_pose[i, 0], est_pose[i, 1], est_pose[i, 2]):
             bad = 3
-        elif not _finite_rows(s.est_vel, i):
+        elif not _finite(est_vel[i, 0], est_vel[i, 1]):
             bad = 4
-        elif not _finite_rows(s.cmd, i):
+        elif not _finite(cmd[i, 0], cmd[i, 1]):
             bad = 5
-        elif not _finite_rows(s.tau_raw, i):
+        elif not _finite(tau_raw[i, 0], tau_raw[i, 1]):
             bad = 6
-        elif not _finite_rows(s.c_hat, i):
+        elif not _finite(c_hat[i, 0], c_hat[i, 1]):
             bad = 7
-        elif not math.isfinite(s.vs[i]):
+        elif not math.isfinite(vs[i]):
             bad = 8
         if bad:
-            diag[0] = bad
-            diag[1] = i
-            diag[2] = math.nan
-            return False
-    for i in range(n):
-        val = 0.0
-        bad = 0
+            who = i
+            break
+    for i in range(n if bad == 0 else 0):
         pmag = max(abs(pose[i, 0]), abs(pose[i, 1]))
-        emag = max(abs(s.est_pose[i, 0]), abs(s.est_pose[i, 1]))
-        tmag = max(abs(s.tau_raw[i, 0]), abs(s.tau_raw[i, 1]))
+        emag = max(abs(est_pose[i, 0]), abs(est_pose[i, 1]))
+        tmag = max(abs(tau_raw[i, 0]), abs(tau_raw[i, 1]))
         if pmag > lim.position:
             bad, val = 9, pmag
         elif emag > lim.position:
             bad, val = 10, emag
         elif abs(vel[i, 0]) > lim.speed:
             bad, val = 11, abs(vel[i, 0])
-        elif abs(s.cmd[i, 0]) > lim.speed:
-            bad, val = 12, abs(s.cmd[i, 0])
-        elif abs(s.est_vel[i, 0]) > lim.speed:
-            bad, val = 13, abs(s.est_vel[i, 0])
+        elif abs(cmd[i, 0]) > lim.speed:
+            bad, val = 12, abs(cmd[i, 0])
+        elif abs(est_vel[i, 0]) > lim.speed:
+            bad, val = 13, abs(est_vel[i, 0])
         elif tmag > lim.torque:
             bad, val = 14, tmag
         if bad:
-            diag[0] = bad
-            diag[1] = i
-            diag[2] = val
-            return False
-    return True
+            who = i
+            break
+    if bad:
+        diag[0] = bad
+        diag[1] = who
+        diag[2] = val
+    return bad == 0
 
 
 def describe(diag: np.ndarray, t: float, lim: Bounds) -> str:
@@ -347,13 +360,33 @@ def after_control(k, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt
     Returns ``(next log row, status)``; on a failed guard the row is not written (the log
     ends at the last good row) and ``diag`` holds the diagnosis.
     """
-    accumulate(s, vel, met, acc)
-    if not check(s, pose, vel, lim, diag):
-        return j, GUARD_FAILED
-    if k % stride == 0 and k < N:
+    status = after_step(
+        k, N, stride, pose, vel, s.est_pose, s.est_vel, s.cmd, s.dcmd, s.tau, s.tau_raw, s.saturated, s.c_hat, s.vs,
+        met, acc, lim, diag,
+    )  # fmt: skip
+    if status == ROW:
         record(lg, j, k * dt, L_pose[k], L_vel[k], pose, vel, s, c_true, form, acc)
         return j + 1, OK
-    return j, OK
+    return j, status
+
+
+#: :func:`after_step`'s status when the guards passed and a log row is due
+ROW = 3
+
+
+@njit
+def after_step(k, N, stride, pose, vel, est_pose, est_vel, cmd, dcmd, tau, tau_raw, saturated, c_hat, vs, met, acc,
+               lim, diag):  # fmt: skip
+    """:func:`after_control` without its log row, on the stack state's arrays (the compiled chunks, which write
+    the row themselves with :func:`record` when this returns :data:`ROW`): :func:`accumulate`, then
+    :func:`guards`. Returns :data:`OK`, :data:`ROW` or :data:`GUARD_FAILED` (``diag`` says which)."""
+    accumulate(cmd, dcmd, tau, tau_raw, saturated, vel, met, acc)
+    status = OK  # one return (see guards)
+    if not guards(pose, vel, est_pose, est_vel, cmd, tau_raw, c_hat, vs, lim, diag):
+        status = GUARD_FAILED
+    elif k % stride == 0 and k < N:
+        status = ROW
+    return status
 
 
 class Loop(NamedTuple):

@@ -19,9 +19,13 @@ from bioform_mj.control.kernel import (
     follower_derivative,
     follower_error,
     follower_torques,
+    knobs,
     learner_update,
 )
 from bioform_mj.core.equations import njit
+
+# The stack's pieces take the gains' numbers (Knobs) and only the arrays they read (control/kernel.py, issue 28):
+# the functions here read each field of Gains and StackState they need once, at their top.
 
 
 @njit
@@ -30,11 +34,14 @@ def sense_errors(g, s, lp, lv, pose, vel, comm, learn):
     consensus with the leader ``lp`` (3,), ``lv`` (2,) through ``a_ir`` and the graph, and each
     follower's tracking error ``s.err`` (n, 3) from its own leader estimate (eqs. 27-28, or the
     slot's own pose for leader-frame offsets, design §4). ``pose`` (n,3), ``vel`` (n,2): measured."""
-    if learn and g.learning and s.first[0] == 0:
-        learner_update(g, s, vel)
-    estimator_consensus(g, s, lp, lv, comm)
+    kn = knobs(g)
+    learner_update(kn, learn and kn.learning and s.first[0] == 0, vel, s.z_hat, s.e_int, s.c_hat, s.d_hat, s.k_hat,
+                   s.tau_body, g.k4, g.c_min, g.c_max)  # fmt: skip
+    est_pose, est_vel, err, offsets = s.est_pose, s.est_vel, s.err, g.offsets
+    estimator_consensus(kn, lp[0], lp[1], lp[2], lv[0], lv[1], est_pose, est_vel, s.p_err, s.v_err, s.est_rate, g.src,
+                        g.dst, g.lacc, comm.use, comm.ew, comm.lw, comm.rp, comm.rv)  # fmt: skip
     for i in range(pose.shape[0]):
-        follower_error(g, s, i, pose)
+        follower_error(kn, i, pose, est_pose, est_vel, offsets, err)
 
 
 @njit
@@ -44,12 +51,15 @@ def track_velocity(g, s, vel, cmd):
     analytic mode of design §6 needs the kinematic law's own dynamics and falls back to the
     filter) or backward difference, sliding mode, saturation; writes ``s.cmd``, ``s.dcmd``,
     ``s.tau_raw``, ``s.tau``, ``s.tau_body``, ``s.saturated``."""
+    kn = knobs(g)
+    scmd, dcmd, fy, fdy, c_hat, lim = s.cmd, s.dcmd, s.fy, s.fdy, s.c_hat, g.lim
+    tau, tau_raw, tau_body, saturated = s.tau, s.tau_raw, s.tau_body, s.saturated
     first = s.first[0] == 1
     for i in range(vel.shape[0]):
         for c in range(2):
-            s.cmd[i, c] = cmd[i, c]
-            follower_derivative(g, s, i, c, first)
-        follower_torques(g, s, i, cmd[i, 0], cmd[i, 1], vel)
+            scmd[i, c] = cmd[i, c]
+            follower_derivative(kn, i, c, first, fy, fdy, scmd, dcmd)
+        follower_torques(kn, i, cmd[i, 0], cmd[i, 1], vel, dcmd, c_hat, lim, tau, tau_raw, tau_body, saturated)
     s.first[0] = 0
 
 
@@ -57,8 +67,10 @@ def track_velocity(g, s, vel, cmd):
 def direct_torque(g, s, tau):
     """``action = "torque"``: the agents' wheel torques ``tau`` (n, 2) N·m, already within the
     action space ``±τ_max``; the same bookkeeping as the torque law (``s.tau_body`` feeds the learner)."""
+    kn = knobs(g)
+    lim, stau, tau_raw, tau_body, saturated = g.lim, s.tau, s.tau_raw, s.tau_body, s.saturated
     for i in range(tau.shape[0]):
-        apply_torque(g, s, i, tau[i, 0], tau[i, 1])
+        apply_torque(kn, i, tau[i, 0], tau[i, 1], lim, stau, tau_raw, tau_body, saturated)
     s.first[0] = 0
 
 
@@ -161,7 +173,8 @@ def control_phase(g, s, mv, u, velocity, verr, vel, tau):
     else:
         direct_torque(g, s, u)
     velocity_error(verr, s.cmd, vel)
+    stau = s.tau
     for i in range(tau.shape[0]):
-        tau[i, 0] = s.tau[i, 0]
-        tau[i, 1] = s.tau[i, 1]
-    estimator_advance(g, s)
+        tau[i, 0] = stau[i, 0]
+        tau[i, 1] = stau[i, 1]
+    estimator_advance(knobs(g), s.est_pose, s.est_vel, s.est_rate, s.vs, s.err)

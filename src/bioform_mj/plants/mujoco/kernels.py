@@ -14,8 +14,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from bioform_mj.control.kernel import control_step
-from bioform_mj.core.engine import OK, PLANT_FAILED, after_control, record_odometry
+from bioform_mj.control.kernel import knobs, safety_filter, stack_head, stack_tail
+from bioform_mj.core.engine import OK, PLANT_FAILED, ROW, after_step, record, record_odometry
 from bioform_mj.core.equations import (
     HAVE_NUMBA,
     encoder_angle,
@@ -352,8 +352,17 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
     width goes) is copied to ``rows[j]`` (``outputs/fullstate.py``: a bag's 3-D state). Returns
     ``(steps done, next log row, status)``.
     """
-    # unpacked once (see plants/ideal.py: reading a named structure's field increfs its arrays)
+    # unpacked once, outside the step loop (see plants/ideal.py: reading a named tuple's field, or copying it,
+    # takes a reference count on its arrays)
     g, s, comm, N, dt, L_pose, L_vel, pose, vel, met, acc, lg, stride, form, lim, diag = lp
+    kn = knobs(g)
+    est_pose, est_vel, c_hat, vs, cmd, dcmd = s.est_pose, s.est_vel, s.c_hat, s.vs, s.cmd, s.dcmd
+    tau, tau_raw, saturated, tau_body = s.tau, s.tau_raw, s.saturated, s.tau_body
+    cbf_par, cbf_rad, cbf_obst, cbf_A, cbf_b, cbf_lam, cbf_bad = (
+        g.cbf_par, g.cbf_rad, g.cbf_obst, g.cbf_A, g.cbf_b, g.cbf_lam, g.cbf_bad,
+    )  # fmt: skip
+    # what the controllers are given: the truth, or the odometry (sen.on, refreshed in place each step)
+    mpose, mvel = (odo.mpose, odo.mvel) if sen.on else (pose, vel)
     (
         qpos,
         qvel,
@@ -396,7 +405,7 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
     px_every = int(ranges[3])
     j = j0
     for k in range(k0, k1):
-        apply_inputs(s.tau, k * dt, ctrl, ctrl_id, ctrl_scale, xfrc, xmat, base, m_eff, i_eff, dist, use_dist)
+        apply_inputs(tau, k * dt, ctrl, ctrl_id, ctrl_scale, xfrc, xmat, base, m_eff, i_eff, dist, use_dist)
         if rec_ctrl.shape[0] > k:
             record_inputs(rec_ctrl, rec_xfrc, k, ctrl, xfrc, base)
         for sub in range(n_sub):
@@ -409,7 +418,7 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
                 delivered_add(act_force, ctrl_id, to_wheel, dacc)
             watch_contacts(mp, dp, ncon, con, meta, owner, ci, cf, f6, hdt, (k * n_sub + sub + 1) * hdt)
         if feed_on:
-            delivered_feed(dacc, n_sub, feed, s.tau_body)
+            delivered_feed(dacc, n_sub, feed, tau_body)
         observe(qpos, qvel, q7, v6, axle, pose, vel, up)
         if (k + 1) % px_every == 0:
             watch_proximity(mp, dp, gstart, glist, ogeom, obst, rad, ranges, rf, ri, box, order, pose, (k + 1) * dt)
@@ -429,21 +438,26 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
             k + 1,
         )
         if k + 1 < N:
-            mpose, mvel = pose, vel  # what the controllers are given: the truth, or the odometry
             if sen.on:
                 odometry_read(odo, dt)
-                mpose, mvel = odo.mpose, odo.mvel
-            control_step(g, s, L_pose[k + 1], L_vel[k + 1], mpose, mvel, comm)
-            j1, status = after_control(
-                k + 1, N, stride, s, pose, vel, met, acc, lg, j, L_pose, L_vel, dt, c_true, form, lim, diag
-            )
-            if sen.on and j1 > j:
-                record_odometry(lg, j, odo.mpose, odo.mvel)
-            if j1 > j and rows.shape[0] > j:
-                copy_row(rows, j, qpos, qvel, sd)
-            j = j1
-            if status != OK:
-                return k + 1 - k0, j, status
+            k_ = k + 1
+            # kernel.stack_step, its safety filter on arrays bound above (see plants/ideal.py)
+            stack_head(kn, g, s, comm, L_pose[k_, 0], L_pose[k_, 1], L_pose[k_, 2], L_vel[k_, 0], L_vel[k_, 1], mpose,
+                       mvel)  # fmt: skip
+            if kn.cbf:
+                safety_filter(mpose, cmd, cbf_par, cbf_rad, cbf_obst, cbf_A, cbf_b, cbf_lam, cbf_bad)
+            stack_tail(kn, g, s, mpose, mvel)
+            status = after_step(k_, N, stride, pose, vel, est_pose, est_vel, cmd, dcmd, tau, tau_raw, saturated, c_hat,
+                                vs, met, acc, lim, diag)  # fmt: skip
+            if status == ROW:
+                record(lg, j, k_ * dt, L_pose[k_], L_vel[k_], pose, vel, s, c_true, form, acc)
+                if sen.on:
+                    record_odometry(lg, j, mpose, mvel)
+                if rows.shape[0] > j:
+                    copy_row(rows, j, qpos, qvel, sd)
+                j += 1
+            elif status != OK:
+                return k_ - k0, j, status
     return k1 - k0, j, OK
 
 
