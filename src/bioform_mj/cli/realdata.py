@@ -131,7 +131,7 @@ def _load(args: argparse.Namespace):
     from dataclasses import replace
 
     from bioform_mj.cli.robot import ref_from_args
-    from bioform_mj.robots.realdata.recording import Topics, read_recording
+    from bioform_mj.robots.realdata.recording import PAUSE_NOTE, Topics, read_recording
     from bioform_mj.robots.realdata.simmodel import sim_spec
 
     if args.driver and args.motor != "dc":
@@ -142,6 +142,9 @@ def _load(args: argparse.Namespace):
     joints = (args.left_joint or robot.layout.wheel_joints[0], args.right_joint or robot.layout.wheel_joints[1])
     topics = Topics(args.joint_states_topic, args.odom_topic, args.imu_topic, args.robot_ns)
     rec = read_recording(args.bag, joints, topics)
+    for note in rec.notes:
+        if note.startswith(PAUSE_NOTE):  # dropped messages: the fit skips them, the replay interpolates
+            print(f"warning: {note}", file=sys.stderr)
     rec = _before_tipping(args, rec)
     stated = rec.stated
     if args.motor:

@@ -1,0 +1,182 @@
+"""Red team, round four (issue 28): the third round's leftovers and surfaces no round had tried.
+
+Measured before the fixes (``bioform`` in a subprocess, each case in its own folder): a CSV recording with
+1e11 s between two rows was fitted (``robot fit`` 72 s, exit 0) and replayed over its interpolated gap; a
+payload event of 1e12 kg ran on the ideal plant (exit 0, ``c_true`` 1e-11) and diverged on the MuJoCo plant
+(exit 3, ``mjWARN_BADQACC`` at t = 0.029 s); ``env`` randomisation of ``payload`` up to 1e12 kg was accepted;
+``leader.speed = 1e12`` ran and stopped as diverged at t = 0 (exit 3, "leader-speed estimate 1e+09 exceeds
+limits.speed")."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bioform_mj.cli import main as cli
+from bioform_mj.core.errors import InputError
+
+HDR = ",".join(["time"] + [f"{j}_wheel.{f}" for j in ("left", "right") for f in ("position", "velocity", "effort")])
+
+
+def _csv(path: Path, times: list[float]) -> Path:
+    rows = "".join(f"{t!r},{0.001 * k!r},0.1,0.01,{0.001 * k!r},0.1,0.01\n" for k, t in enumerate(times))
+    path.write_text(HDR + "\n" + rows)
+    return path
+
+
+def _one_error(code: int, err: str, want: str) -> str:
+    lines = err.strip().splitlines()
+    errors = [e for e in lines if e.startswith("error:")]
+    assert code == 2 and len(errors) == 1, (code, lines)
+    assert want in errors[0], errors[0]
+    assert not any("Traceback" in e or "internal error" in e for e in lines), lines
+    return errors[0]
+
+
+# ------------------------------------------------------------------ part A: the leftovers
+def test_a_recording_paused_beyond_the_bound_is_refused_naming_the_lines(tmp_path, capsys):
+    """1e11 s between lines 301 and 302 of a CSV (100 Hz otherwise): one error line naming both lines, the gap
+    and the bound, exit 2, nothing written."""
+    bag = _csv(tmp_path / "r.csv", [0.01 * k for k in range(300)] + [1e11 + 0.01 * k for k in range(300)])
+    code = cli.main(["robot", "replay", "tb3", "--bag", str(bag), "--out", str(tmp_path / "out")])
+    line = _one_error(code, capsys.readouterr().err, "the joint states pause for 1e+11 s between lines 301 and 302")
+    assert "above the 600 s a recording may pause" in line and "every 0.01 s (median)" in line
+    assert not (tmp_path / "out").exists()
+
+
+def test_pause_bound_and_note(tmp_path):
+    """Below :data:`PAUSE_MAX_S` a pause is read and said (a note naming the longest), above it refused; gaps of
+    up to ten sample periods (or 0.1 s) are no pause at all."""
+    from bioform_mj.robots.realdata.recording import PAUSE_MAX_S, pauses, read_recording
+
+    assert PAUSE_MAX_S == 600.0
+    joints = ("left_wheel", "right_wheel")
+    head = [0.01 * k for k in range(300)]
+    ok = read_recording(_csv(tmp_path / "a.csv", head + [2.99 + 599.0 + 0.01 * k for k in range(300)]), joints)
+    (note,) = [n for n in ok.notes if n.startswith("the joint states pause")]
+    assert "pause 1 time(s)" in note and "the longest 599 s between lines 301 and 302" in note
+    with pytest.raises(InputError, match=r"pause for 601 s between lines 301 and 302"):
+        read_recording(_csv(tmp_path / "b.csv", head + [2.99 + 601.0 + 0.01 * k for k in range(300)]), joints)
+    t = np.arange(100) * 0.01
+    t[50:] += 0.09  # 0.1 s between two samples: ten periods, not more
+    assert pauses(t).size == 0
+    t[70:] += 0.02  # 0.03 s: three periods
+    assert pauses(t).size == 0
+    t[80:] += 0.2  # 0.21 s
+    assert pauses(t).tolist() == [79]
+    clean = read_recording(_csv(tmp_path / "c.csv", head), joints)
+    assert not [n for n in clean.notes if "pause" in n]
+
+
+def _old_picks(t: np.ndarray, length: float, max_chunks: int) -> np.ndarray:
+    """The chunk choice before pauses were known (every chunk a candidate)."""
+    n_all = int((t[-1] - t[0] + 1e-9) // length)
+    return np.unique(np.round(np.linspace(0, n_all - 1, min(n_all, max_chunks))).astype(int))
+
+
+def test_fit_chunks_skip_pauses_and_are_unchanged_without_them():
+    """Without a pause the chunks are the ones picked before (bit-equal indices, 300 random recordings); with
+    pauses none spans one, as many are picked as there are clean ones (up to ``max_chunks``), counted by brute
+    force here."""
+    from bioform_mj.robots.realdata.recording import Recording, chunk_starts, pauses
+
+    def rec(t: np.ndarray) -> Recording:
+        z = np.zeros((len(t), 2))
+        return Recording("x", ("l", "r"), t, z, z, z)
+
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        dt = float(rng.choice([0.001, 0.01, 0.02, 1 / 30]))
+        t = np.arange(int(rng.integers(3, 3000))) * dt
+        length, m = float(rng.choice([0.5, 1.0, 2.0])), int(rng.integers(1, 30))
+        assert np.array_equal(chunk_starts(rec(t), length, m), _old_picks(t, length, m))
+    for _ in range(100):
+        t = np.arange(int(rng.integers(500, 5000))) * 0.01
+        for g in rng.integers(1, len(t) - 1, size=int(rng.integers(1, 6))):
+            t[g:] += float(rng.choice([0.15, 1.0, 5.0, 100.0]))
+        length, m = float(rng.choice([0.5, 2.0])), int(rng.integers(1, 20))
+        ks = pauses(t)
+        n_all = int((t[-1] + 1e-9) // length)
+        clean = [c for c in range(n_all) if all(not (c * length < t[k + 1] and (c + 1) * length > t[k]) for k in ks)]
+        got = chunk_starts(rec(t), length, m)
+        assert set(got.tolist()) <= set(clean) and len(got) == len(set(got.tolist())) == min(len(clean), m)
+
+
+def _payload_toml(t: Path, plant: str, mass: float, inertia: float = 0.0) -> Path:
+    text = f'name = "t"\n[plant]\nkind = "{plant}"\n[sim]\nduration = 0.2\n'
+    text += f'[[events]]\ntime = 0.0\nkind = "payload"\nfollower = 1\nmass = {mass!r}\ninertia = {inertia!r}\n'
+    (t / "s.toml").write_text(text)
+    return t / "s.toml"
+
+
+@pytest.mark.parametrize(
+    "plant,mass,inertia,want",
+    [
+        ("ideal", 1e12, 0.0, "'events[0].mass': a payload of 1e+12 kg, above 100 × the robot's (plant.mass) 25 kg"),
+        ("mujoco", 1e12, 0.0, "'events[0].mass': a payload of 1e+12 kg, above 100 × the heaviest robot's mass 24.5 kg"),
+        ("ideal", 1.0, 1e12, "'events[0].inertia': a payload of 1e+12 kg·m², above 100 × the robot's (plant.inertia)"),
+    ],
+    ids=["ideal-mass", "mujoco-mass", "ideal-inertia"],
+)
+def test_a_payload_no_robot_could_carry_is_refused_before_any_step(plant, mass, inertia, want, tmp_path, capsys):
+    scen = _payload_toml(tmp_path, plant, mass, inertia)
+    code = cli.main(["run", str(scen), "--out", str(tmp_path / "out")])
+    assert "no robot of the scene could carry it" in _one_error(code, capsys.readouterr().err, want)
+    assert not (tmp_path / "out").exists()
+
+
+def test_payload_bound_is_the_scenes_robot_mass_times_100():
+    """The bound follows the scene: ``plant.mass`` on the ideal plant (just below 100 × loads, above is refused;
+    a heavier ``plant.mass`` moves it), the compiled robot's mass on the MuJoCo plant (the paper robot's subtree
+    mass, summed here from its bodies); env randomisation refuses a range reaching past it."""
+    import mujoco
+
+    from bioform_mj.envs.randomize import Randomization
+    from bioform_mj.robots.refs import models_dir
+    from bioform_mj.scenario.loader import load
+
+    ev = 'events=[{kind="payload", follower=1, time=0.0, mass=%r}]'
+    load("paper", ["sim.duration=0.2", ev % 2499.0])
+    with pytest.raises(InputError, match="events"):
+        load("paper", ["sim.duration=0.2", ev % 2501.0])
+    load("paper", ["sim.duration=0.2", ev % 2501.0, "plant.mass=26"])
+    m = mujoco.MjModel.from_xml_path(str(models_dir() / "paper_robot.xml"))
+    robot_mass = float(m.body_subtreemass[1])
+    load("paper", ["sim.duration=0.2", "plant.kind=mujoco", ev % (99.9 * robot_mass)])
+    with pytest.raises(InputError, match=f"mass {robot_mass:.4g} kg"):
+        load("paper", ["sim.duration=0.2", "plant.kind=mujoco", ev % (100.1 * robot_mass)])
+    base = load("paper")
+    Randomization({"payload": (0.0, 2500.0)}, base, 1.0)
+    with pytest.raises(ValueError, match=r"randomize\['payload'\] bound 1e\+12 is not accepted: .*could carry it"):
+        Randomization({"payload": (0.0, 1e12)}, base, 1.0)
+
+
+def test_a_leader_no_robot_could_reach_is_refused(tmp_path, capsys):
+    """``leader.speed = 1e12``: refused naming the bound, the fastest a robot of the scene could go by the run's end
+    from rest at full torque, ``2 a τ_max T`` (the ideal plant's ``c_true[0]``, ``torque.tau_max``,
+    ``sim.duration``: 320 m/s in the paper scene, computed here). A leader beyond ``limits.speed`` but within that
+    reach still runs into the guard (exit 3, as tests force a divergence)."""
+    import bioform_mj
+
+    scen = tmp_path / "s.toml"
+    scen.write_text('name = "t"\n[plant]\nkind = "ideal"\n[sim]\nduration = 0.2\n')
+    code = cli.main(["run", str(scen), "--set", "leader.speed=1e12", "--out", str(tmp_path / "out")])
+    want = "'leader.speed': the leader's speed reaches 1e+12 m/s, more than any robot of the scene could reach"
+    line = _one_error(code, capsys.readouterr().err, want)
+    assert "over sim.duration = 0.2 s, 3.2 m/s; and beyond limits.speed = 100 m/s" in line, line
+    assert not (tmp_path / "out").exists()
+    sc = bioform_mj.load("paper")
+    reach = 2 * sc.plant.c_true[0] * sc.torque.tau_max * sc.sim.duration
+    assert reach == pytest.approx(320.0)
+    top = lambda s: s.build_leader().speed_range(s.sim.duration)[1]  # noqa: E731
+    ok = bioform_mj.load("paper", overrides=[f"leader.speed={0.99 * reach}"])  # beyond the guard: runs, diverges
+    assert sc.limits.speed < top(ok) < reach
+    with pytest.raises(InputError, match=r"over sim.duration = 20 s, 320 m/s"):
+        bioform_mj.load("paper", overrides=[f"leader.speed={1.01 * reach}"])
+    bioform_mj.load("paper", overrides=[f"leader.speed={1.01 * reach}", f"limits.speed={2 * reach}"])  # guard wider
+    with pytest.raises(InputError, match=r"scenario key 'leader': the leader's speed reaches 7\.07\d*e\+06 m/s"):
+        bioform_mj.load("paper", overrides=['leader.kind="figure8"', "leader.frequency=1e6"])
+    with pytest.raises(InputError, match=r"from rest at full torque \(5 N·m a wheel"):  # the MuJoCo robot's own drive
+        bioform_mj.load("paper", overrides=["plant.kind=mujoco", "leader.speed=1e12"])
