@@ -9,6 +9,8 @@ limits.speed")."""
 
 from __future__ import annotations
 
+import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -180,3 +182,94 @@ def test_a_leader_no_robot_could_reach_is_refused(tmp_path, capsys):
         bioform_mj.load("paper", overrides=['leader.kind="figure8"', "leader.frequency=1e6"])
     with pytest.raises(InputError, match=r"from rest at full torque \(5 N·m a wheel"):  # the MuJoCo robot's own drive
         bioform_mj.load("paper", overrides=["plant.kind=mujoco", "leader.speed=1e12"])
+
+
+def test_kernel_cache_folder_falls_back_to_a_private_temporary_one(tmp_path, monkeypatch):
+    """:func:`~bioform_mj.core.jitcache.writable_cache_dir`: a usable folder is taken as it is; one that cannot be
+    made (under a file: refused even for root) falls back to ``$TMPDIR/bioform_mj-UID/NAME``, made mode 0700; a
+    ``bioform_mj-UID`` folder others may write into (or a symlink) is never used: nothing is cached then."""
+    import stat
+    import tempfile
+
+    from bioform_mj.core.jitcache import writable_cache_dir
+
+    ok = tmp_path / "home" / ".cache"
+    assert writable_cache_dir(str(ok), "k") == (str(ok), "") and ok.is_dir()
+    (tmp_path / "file").write_text("")
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    folder, note = writable_cache_dir(str(tmp_path / "file" / "c"), "numba-x")
+    private = tmp_path / "tmp" / f"bioform_mj-{os.getuid()}"
+    assert folder == str(private / "numba-x") and Path(folder).is_dir()
+    assert stat.S_IMODE(private.stat().st_mode) == 0o700
+    assert note == f"the compiled kernels are cached in '{folder}' ('{tmp_path / 'file' / 'c'}': Not a directory; " + (
+        "set NUMBA_CACHE_DIR)"
+    )
+    private.chmod(0o777)  # another user's folder, or one anyone may write into
+    folder, note = writable_cache_dir(str(tmp_path / "file" / "c"), "numba-x")
+    assert folder is None and note.startswith("the compiled kernels are not cached")
+    private.chmod(0o700)
+    private.rename(tmp_path / "elsewhere")
+    private.symlink_to(tmp_path / "elsewhere")
+    assert writable_cache_dir(str(tmp_path / "file" / "c"), "numba-x")[0] is None
+
+
+def test_an_unwritable_home_is_a_warning_line_not_an_internal_error(tmp_path):
+    """``HOME`` where ``~/.cache`` cannot be made: every import of the package was an internal error (numba's
+    "no locator available"); now one ``warning:`` line names where the kernels are cached, the command goes on;
+    Python code gets a :class:`~bioform_mj.core.errors.CacheWarning`."""
+    import subprocess
+    import sys
+
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    (tmp_path / "file").write_text("")
+    (tmp_path / "tmp").mkdir()
+    env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path / "file"), "TMPDIR": str(tmp_path / "tmp"), "PYTHONPATH": src}
+    p = subprocess.run(
+        [sys.executable, "-m", "bioform_mj.cli", "run", "nope.toml"],
+        env=env,
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
+    lines = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and len(lines) == 2, p.stderr
+    assert lines[0].startswith(f"warning: the compiled kernels are cached in '{tmp_path / 'tmp' / 'bioform_mj-'}")
+    assert lines[1] == "error: scenario file 'nope.toml' does not exist"
+
+
+@pytest.mark.slow  # an interpreter as nobody and a first compile: 1.2-4 s
+def test_a_read_only_home_as_a_user_other_than_root(tmp_path):
+    """As ``nobody`` (``setpriv``; root ignores permissions): a home of mode 0555. The package imports, its kernels
+    compile and run (``wrap(7) = 7 - 2π``) cached in the user's private temporary folder, said in a
+    :class:`~bioform_mj.core.errors.CacheWarning`."""
+    import shutil
+    import subprocess
+    import sys
+    import tempfile
+
+    if os.getuid() != 0 or shutil.which("setpriv") is None:
+        pytest.skip("needs root and setpriv to act as another user")
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    top = Path(tempfile.mkdtemp(prefix="bioform-ro-", dir="/tmp"))  # pytest's own folder is root's alone
+    try:
+        top.chmod(0o1777)
+        home = top / "ro"
+        home.mkdir(mode=0o555)
+        code = "import bioform_mj.core.equations as e; print(e._CACHE, e.wrap(7.0))"
+        env = {"PATH": "/usr/bin:/bin", "HOME": str(home), "TMPDIR": str(top), "PYTHONPATH": src}
+        p = subprocess.run(
+            ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", sys.executable, "-c", code],
+            env=env,
+            capture_output=True,
+            text=True,
+            cwd=top,
+        )
+        if p.returncode and "Permission denied" in p.stderr and "Traceback" not in p.stderr:
+            pytest.skip(f"the interpreter cannot be run as nobody here: {p.stderr.strip()}")
+        assert p.returncode == 0, p.stderr
+        assert p.stdout.split() == ["True", repr(7.0 - 2 * math.pi)]
+        assert f"CacheWarning: the compiled kernels are cached in '{top / 'bioform_mj-65534'}" in p.stderr
+        assert f"('{home}/.cache/bioform_mj/numba-" in p.stderr and "Permission denied; set NUMBA_CACHE_DIR" in p.stderr
+    finally:
+        shutil.rmtree(top, ignore_errors=True)

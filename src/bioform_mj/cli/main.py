@@ -355,8 +355,10 @@ def _dispatch(args: argparse.Namespace) -> int:
         width = max(map(len, desc))
         print("\n".join(f"{name:<{width}}  {text}" for name, text in desc.items()))
         return EXIT_OK
+    from bioform_mj.core.equations import CACHE_NOTE  # a read-only home: kernels cached elsewhere, or not at all
     from bioform_mj.core.jitwatch import watch
 
+    CACHE_NOTE and print(f"warning: {CACHE_NOTE}", file=sys.stderr)  # its paths as repr: one line
     # a compile said before it happens, terminal or not (numba's cache index missed; design §2); --quiet: not said
     say = not getattr(args, "quiet", False)
     stop_watch = watch(lambda burst: say and print(burst.line(), file=sys.stderr, flush=True))
