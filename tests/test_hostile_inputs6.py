@@ -273,3 +273,66 @@ def test_a_read_only_home_as_a_user_other_than_root(tmp_path):
         assert f"('{home}/.cache/bioform_mj/numba-" in p.stderr and "Permission denied; set NUMBA_CACHE_DIR" in p.stderr
     finally:
         shutil.rmtree(top, ignore_errors=True)
+
+
+# ------------------------------------------------------------------ part B: surfaces no round had tried
+def test_a_dotted_key_of_100000_parts_is_refused_before_parsing(tmp_path, capsys):
+    """One line ``a.a.a…= 1`` of 10^5 parts (200 kB): Python's TOML parser keeps every prefix of the key (20,000
+    parts: 1.5 GB; 10^5: a MemoryError after 36 s, an internal error). Refused by a linear scan: dots inside
+    strings and numbers are no key; 256 parts are read, 257 are not; ``--set`` values (inline tables) alike."""
+    from bioform_mj.scenario.loader import MAX_KEY_PARTS, deep_key_line
+
+    scen = tmp_path / "s.toml"
+    scen.write_text('name = "t"\n[plant]\nkind = "ideal"\n' + ".".join(["a"] * 100_000) + " = 1\n")
+    code = cli.main(["run", str(scen), "--out", str(tmp_path / "out")])
+    _one_error(code, capsys.readouterr().err, "s.toml: line 4 has a dotted key of more than 256 parts (not a scenario)")
+    assert MAX_KEY_PARTS == 256
+    key = ".".join(["a"] * 256)
+    assert deep_key_line(f"{key} = 1") == 0 and deep_key_line(f"x = 1\n{key}.b = 1") == 2
+    assert deep_key_line("[" + ".".join(['"q.q"'] * 300) + "]") == 1  # quoted parts count once each
+    assert deep_key_line('d = "' + ".".join(["a"] * 300) + '"') == 0  # a string value
+    assert deep_key_line("v = [" + ", ".join(["1.5"] * 1000) + "]") == 0  # numbers
+    assert deep_key_line(" . ".join(["a"] * 300) + " = 1") == 1  # whitespace around the dots
+    scen.write_text('name = "t"\n[plant]\nkind = "ideal"\n')
+    code = cli.main(["run", str(scen), "--set", "sim={" + ".".join(["a"] * 300) + "=1}", "--out", str(tmp_path / "o")])
+    _one_error(code, capsys.readouterr().err, "--set 'sim': the value has a dotted key of more than 256 parts")
+
+
+def test_an_ascii_terminal_gets_escapes_not_an_internal_error():
+    """``PYTHONIOENCODING=ascii`` (or a C locale without UTF-8 mode): the first ``N·m`` a command printed was an
+    internal error (UnicodeEncodeError, exit 1). The CLI's streams write what the encoding lacks escaped."""
+    import io
+
+    from bioform_mj.cli.proc import _PipeSafe
+
+    raw = io.BytesIO()
+    stream = io.TextIOWrapper(raw, encoding="ascii", write_through=True)
+    out = _PipeSafe(stream, "stderr")
+    assert out.write("warning: 1.4 N·m, 81.7 m/s², μ\u202e\n") > 0
+    assert raw.getvalue() == b"warning: 1.4 N\\xb7m, 81.7 m/s\\xb2, \\u03bc\\u202e\n"
+
+
+def test_files_are_utf8_whatever_the_locale(tmp_path):
+    """Under ``LC_ALL=C`` without UTF-8 mode (``PYTHONUTF8=0``, ``PYTHONCOERCECLOCALE=0``) ``bioform run``, ``sweep``,
+    ``robot fit`` and ``table1`` ended in internal errors writing ``±``, ``·``, ``∫`` into their text files (the
+    locale's ASCII). The writers and the CSV reader name UTF-8."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; from pathlib import Path; from bioform_mj.outputs.files import write_text\n"
+        "from bioform_mj.robots.realdata.recording import read_recording\n"
+        "d = Path(sys.argv[1]); write_text(d / 'a.md', bytes.fromhex(sys.argv[2]).decode())\n"
+        "print(read_recording(d / 'r.csv', ('left_wheel', 'right_wheel')).t.size, sys.getfilesystemencoding())\n"
+    )
+    rows = "".join(f"{0.01 * k!r},{0.001 * k!r},0.1,0.01,{0.001 * k!r},0.1,0.01,ü\n" for k in range(20))
+    (tmp_path / "r.csv").write_text(HDR + ",τ_note\n" + rows, encoding="utf-8")  # a column the fit does not use
+    env = {"PATH": "/usr/bin:/bin", "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parents[1] / "src")
+    text = "τ ± 2 N·m ∫"
+    p = subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path), text.encode().hex()], env=env, capture_output=True, text=True
+    )
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.split() == ["20", "ascii"]  # the locale really is ASCII here
+    assert (tmp_path / "a.md").read_bytes() == text.encode()

@@ -751,7 +751,7 @@ def _sweep(args: argparse.Namespace) -> int:
         )
         died = f", {tm['workers_died']} worker(s) died (rerun to retry)" if tm["workers_died"] else ""
         print(f"{tm['runs']} runs ({res['ran']} run now, {res['skipped']} already done{rate}{died})")
-        print((out / "stats.md").read_text())
+        print((out / "stats.md").read_text(encoding="utf-8"))
         print(f"outputs in {out}/ (runs.csv, runs.parquet, stats.json, stats.md, sweep.json)")
     return EXIT_OK
 

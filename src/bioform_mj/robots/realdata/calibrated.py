@@ -88,7 +88,7 @@ def write_calibrated(
             spec.delete(t)
     spec.add_text(name=CALIBRATION_TEXT, data=note)
     spec.compile()  # refuse to write a file that would not load
-    path.write_text(spec.to_xml())
+    path.write_text(spec.to_xml(), encoding="utf-8")
 
 
 def calibration_note(model: mujoco.MjModel, prefix: str = "f1/") -> list[str]:

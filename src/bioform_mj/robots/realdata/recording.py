@@ -584,7 +584,7 @@ def _read_csv(p: Path, joints: tuple[str, str]) -> tuple[Recording, np.ndarray]:
             "export a shorter window)"
         )
     try:
-        with open(p, newline="") as fh:
+        with open(p, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
             try:
                 header = [h.strip() for h in next(reader)]
