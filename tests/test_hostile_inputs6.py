@@ -336,3 +336,21 @@ def test_files_are_utf8_whatever_the_locale(tmp_path):
     assert p.returncode == 0, p.stderr
     assert p.stdout.split() == ["20", "ascii"]  # the locale really is ASCII here
     assert (tmp_path / "a.md").read_bytes() == text.encode()
+
+
+def test_a_complete_graph_beyond_a_million_edges_is_refused_unbuilt():
+    """``graph.kind = "complete"`` over 20,000 followers (2e8 edges) was a MemoryError after 25 s while the edge
+    list was built; over 1415 followers (1,000,405 edges) it is refused naming the count, before any edge is made."""
+    import bioform_mj
+    from bioform_mj.scenario.check import MAX_EDGES
+
+    assert MAX_EDGES == 10**6
+    for n, edges in ((20_000, 199_990_000), (1415, 1_000_405)):
+        ov = {
+            "sim.duration": 0.1,
+            "graph.kind": "complete",
+            "formation.offsets": [[-1.0 - 0.5 * i, 0.0] for i in range(n)],
+            "formation.initial_poses": [[-1.0 - 0.5 * i, 0.0, 0.0] for i in range(n)],
+        }
+        with pytest.raises(InputError, match=f"'complete' over {n} followers is {edges} edges, above the 1e\\+06"):
+            bioform_mj.load("paper", overrides=ov)  # (on main, 1415 followers built 1e6 edges in ~7 s and ran)

@@ -185,6 +185,12 @@ def validate(sc: Scenario) -> None:
     g = sc.graph
     if g.kind not in GRAPH_KINDS:
         raise ScenarioError("graph.kind", f"unknown topology '{g.kind}' (expected one of: {', '.join(GRAPH_KINDS)})")
+    if g.kind == "complete" and n * (n - 1) // 2 > MAX_EDGES:  # 20,000 followers: a MemoryError after 25 s
+        raise ScenarioError(
+            "graph.kind",
+            f"'complete' over {n} followers is {n * (n - 1) // 2} edges, above the {MAX_EDGES:.0e} a run holds (each "
+            "control step reads every edge); use 'chain', 'ring', 'star' or explicit edges",
+        )
     try:
         sc.build_graph()
     except GraphError as exc:
@@ -321,6 +327,10 @@ def validate(sc: Scenario) -> None:
                 "obstacles", "the ideal plant has no bodies to touch obstacles: use plant.kind = 'mujoco'"
             )
         sc.obstacle_list()  # a field too dense to place fails here, before any work
+
+
+#: most edges a follower graph may have (a complete graph of 1414 followers; issue 28)
+MAX_EDGES = 1_000_000
 
 
 #: the most a payload may be, in multiples of the heaviest robot's own mass and yaw inertia: no wheeled robot carries a
