@@ -354,3 +354,12 @@ def test_a_complete_graph_beyond_a_million_edges_is_refused_unbuilt():
         }
         with pytest.raises(InputError, match=f"'complete' over {n} followers is {edges} edges, above the 1e\\+06"):
             bioform_mj.load("paper", overrides=ov)  # (on main, 1415 followers built 1e6 edges in ~7 s and ran)
+
+
+@pytest.mark.parametrize("reps", ["0", "101", "1000000000"])
+def test_bench_reps_beyond_the_bound_is_refused_before_any_run(reps, tmp_path, capsys):
+    """``bioform bench --reps 1000000000`` ran on past 120 s with nothing said of its end (each pair runs the scene
+    twice): refused outside 1..100 before anything runs."""
+    code = cli.main(["bench", "--sizes", "3", "--reps", reps, "--json", str(tmp_path / "b.json")])
+    _one_error(code, capsys.readouterr().err, f"--reps must be in 1..100 (each pair runs the scene twice), got {reps}")
+    assert not (tmp_path / "b.json").exists()
