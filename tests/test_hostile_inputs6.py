@@ -363,3 +363,40 @@ def test_bench_reps_beyond_the_bound_is_refused_before_any_run(reps, tmp_path, c
     code = cli.main(["bench", "--sizes", "3", "--reps", reps, "--json", str(tmp_path / "b.json")])
     _one_error(code, capsys.readouterr().err, f"--reps must be in 1..100 (each pair runs the scene twice), got {reps}")
     assert not (tmp_path / "b.json").exists()
+
+
+@pytest.mark.parametrize("bad", [["1", "2"], [True, False], np.array([1j, 0.0]), np.array([0.1, None], dtype=object)])
+def test_env_actions_that_are_not_real_numbers_are_refused(bad):
+    """The parallel, single-follower and vector environments took ``["1", "2"]``, booleans and complex numbers (the
+    imaginary part dropped with a ComplexWarning) as actions; refused naming the agent. Real numbers of any
+    width still pass (float32, int, a list)."""
+    import bioform_mj.envs as E
+    from bioform_mj.envs.single import follower_env
+
+    pe = E.parallel_env("paper", overrides=["sim.duration=0.05"])
+    pe.reset(seed=0)
+    ok = {a: np.zeros(2, np.float32) for a in pe.agents}
+    with pytest.raises(ValueError, match="action of follower_1 must be 2 numbers, got "):
+        pe.step(dict.fromkeys(pe.agents, bad))
+    if not isinstance(bad[0], bool):  # beside float arrays numpy makes booleans floats (not checked per agent)
+        with pytest.raises(ValueError, match="action of follower_2 must be 2 numbers, got "):
+            pe.step({**ok, "follower_2": bad})
+    pe.step({**ok, "follower_2": [0, 0]})
+    fe = follower_env("paper", overrides=["sim.duration=0.05"])
+    fe.reset(seed=0)
+    with pytest.raises(ValueError, match="action must be 2 real numbers"):
+        fe.step(bad)
+    fe.step(np.zeros(2, np.float32))
+
+
+def test_vector_env_threads_beyond_its_worlds_are_refused_before_building():
+    """``vector_env(worlds=2, threads=10**6)``: each thread holds an ``MjData``; it ended in MuJoCo's ``FatalError:
+    Could not allocate memory``. Refused before anything is built."""
+    from bioform_mj.envs.vector import FAST, VectorEnv
+
+    if not FAST:
+        pytest.skip("needs numba's JIT")
+    with pytest.raises(
+        ValueError, match=r"threads must be at most worlds = 2 \(a thread steps a block of worlds\), got"
+    ):
+        VectorEnv("paper", 2, threads=10**6, overrides=["plant.kind=mujoco"])
