@@ -56,6 +56,7 @@ CASES: dict[int, tuple[str, float]] = {
 #: most alternated bare/loop pairs ``bioform bench`` runs (each runs the scene twice)
 MAX_REPS = 100
 
+
 def record_run(sc: Any, plant: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One closed loop on ``plant`` recording every control step's ``ctrl`` and chassis forces (untimed):
     ``(ctrl (steps, nu), xfrc (steps, n, 6), final qpos)``; ``steps`` the run's own (``sc.sim.duration``, which
