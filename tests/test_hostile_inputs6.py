@@ -400,3 +400,19 @@ def test_vector_env_threads_beyond_its_worlds_are_refused_before_building():
         ValueError, match=r"threads must be at most worlds = 2 \(a thread steps a block of worlds\), got"
     ):
         VectorEnv("paper", 2, threads=10**6, overrides=["plant.kind=mujoco"])
+
+
+def test_a_leader_turning_faster_than_any_robot_could_is_refused():
+    """``leader.kind = "circle"`` of radius 1e-300 m: the run diverged at t = 0.001 s (a commanded torque of 1.2e296
+    N·m). Refused when the leader's yaw rate passes what a robot of the scene could reach from rest at full torque,
+    ``2 b τ_max T`` (the paper: 2 · 10 · 20 · 20 = 8000 rad/s); a 5 m circle at 1 m/s (0.2 rad/s) loads."""
+    import bioform_mj
+
+    circle = ['leader.kind="circle"', "leader.y0=5"]
+    with pytest.raises(InputError, match=r"the leader turns at up to 1e\+300 rad/s.* over sim.duration = 20 s, 8000"):
+        bioform_mj.load("paper", overrides=[*circle, "leader.radius=1e-300"])
+    sc = bioform_mj.load("paper", overrides=[*circle, "leader.radius=5"])
+    assert sc.build_leader().motion_range(sc.sim.duration)[2] == pytest.approx(0.2)
+    bioform_mj.load("paper", overrides=[*circle, "leader.radius=1.01e-4", "leader.speed=0.8"])  # 7921 rad/s
+    with pytest.raises(InputError, match="the leader turns at up to 8000.8"):
+        bioform_mj.load("paper", overrides=[*circle, "leader.radius=0.9999e-4", "leader.speed=0.8"])

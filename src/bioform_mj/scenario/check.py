@@ -143,7 +143,7 @@ def validate(sc: Scenario) -> None:
             if len(t) != 3:
                 raise ScenarioError(f"{key}[{i}]", f"expected [amplitude, frequency, phase], got {list(t)}")
     traj = sc.build_leader()
-    vmin, vmax = traj.speed_range(s.duration)
+    vmin, vmax, wmax = traj.motion_range(s.duration)
     if not vmin > 1e-6:
         raise ScenarioError(
             "leader", f"the leader's speed reaches {vmin:g} m/s; its heading is undefined where it stops"
@@ -153,6 +153,12 @@ def validate(sc: Scenario) -> None:
             "leader.speed" if ld.kind in ("paper", "line", "circle") else "leader",
             f"the leader's speed reaches {vmax:g} m/s, more than any robot of the scene could reach in the run: "
             f"{reach[1]}; and beyond limits.speed = {sc.limits.speed:g} m/s (the run would stop as diverged)",
+        )
+    # a circle of radius 1e-300 m: a torque of 1e296 N·m at t = 0 (issue 28); a MuJoCo robot compiled only past 1 rad/s
+    if wmax > 1.0 and wmax > (turn := _reach(sc, yaw=True))[0]:
+        raise ScenarioError(
+            "leader",
+            f"the leader turns at up to {wmax:g} rad/s, more than any robot of the scene could in the run: {turn[1]}",
         )
 
     n = sc.n
@@ -339,29 +345,32 @@ PAYLOAD_MAX_RATIO = 100.0
 
 
 @functools.lru_cache(maxsize=64)
-def _robot_numbers(ref: Any) -> tuple[float, float, float, float]:
-    """A MuJoCo robot's mass (kg), yaw inertia (kg·m²), ``a_eff`` (m/(s²·N·m)) and largest wheel torque (N·m),
-    compiled once a process (30 ms; only for a payload or a leader beyond the guard)."""
+def _robot_numbers(ref: Any) -> tuple[float, float, float, float, float]:
+    """A MuJoCo robot's mass (kg), yaw inertia (kg·m²), ``a_eff`` (m/(s²·N·m)), largest wheel torque (N·m) and
+    ``b_eff`` (rad/(s²·N·m)), compiled once a process (30 ms; only for a payload or a leader beyond reach)."""
     from bioform_mj.robots.params import robot_truth
 
     t = robot_truth(ref)
-    return float(t.mass), float(t.yaw_inertia), float(t.a_eff), float(max(t.tau_max))
+    return float(t.mass), float(t.yaw_inertia), float(t.a_eff), float(max(t.tau_max)), float(t.b_eff)
 
 
-def _reach(sc: Scenario) -> tuple[float, str]:
-    """The fastest a robot of the scene could go by the run's end, m/s, and how: from rest at full torque on both
-    wheels, ``2 a τ_max`` m/s² for ``sim.duration`` (the ideal plant's ``plant.c_true[0]`` and ``torque.tau_max``,
-    a MuJoCo robot's compiled ``a_eff`` and drive limit; the fastest robot of the team)."""
-    pc, d = sc.plant, sc.sim.duration
+def _reach(sc: Scenario, yaw: bool = False) -> tuple[float, str]:
+    """The fastest a robot of the scene could go (``yaw``: turn) by the run's end, m/s (rad/s), and how: from rest at
+    full torque on both wheels, ``2 a τ_max`` m/s² (``2 b τ_max`` rad/s²) for ``sim.duration`` (the ideal plant's
+    ``plant.c_true`` and ``torque.tau_max``, a MuJoCo robot's compiled ``a_eff``/``b_eff`` and drive limit; the
+    fastest robot of the team)."""
+    pc, d, k = sc.plant, sc.sim.duration, 1 if yaw else 0
     if pc.kind == "mujoco" and pc.robots:
-        a, tau = max(((n[2], n[3]) for n in map(_robot_numbers, dict.fromkeys(pc.robots))), key=lambda x: x[0] * x[1])
+        nums = [_robot_numbers(r) for r in dict.fromkeys(pc.robots)]
+        c, tau = max(((n[2 + 2 * k], n[3]) for n in nums), key=lambda x: x[0] * x[1])
     else:
-        a, tau = float(pc.c_true[0]), float(sc.torque.tau_max)
-    v = 2.0 * a * tau * d
+        c, tau = float(pc.c_true[k]), float(sc.torque.tau_max)
+    v = 2.0 * c * tau * d
+    name, unit_ = ("b", "rad/(s²·N·m)") if yaw else ("a", "m/(s²·N·m)")
     return (
         v,
-        f"from rest at full torque ({tau:g} N·m a wheel, a = {a:.4g} m/(s²·N·m)) over sim.duration = {d:g} s, "
-        f"{v:.4g} m/s",
+        f"from rest at full torque ({tau:g} N·m a wheel, {name} = {c:.4g} {unit_}) over sim.duration = {d:g} s, "
+        f"{v:.4g} {'rad/s' if yaw else 'm/s'}",
     )
 
 
