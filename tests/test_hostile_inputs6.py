@@ -416,3 +416,23 @@ def test_a_leader_turning_faster_than_any_robot_could_is_refused():
     bioform_mj.load("paper", overrides=[*circle, "leader.radius=1.01e-4", "leader.speed=0.8"])  # 7921 rad/s
     with pytest.raises(InputError, match="the leader turns at up to 8000.8"):
         bioform_mj.load("paper", overrides=[*circle, "leader.radius=0.9999e-4", "leader.speed=0.8"])
+
+
+def test_a_newline_in_a_robot_or_recording_path_forges_no_line(tmp_path, capsys):
+    """A robot file named ``r\\nerror: forged.xml`` (legal on Linux): ``robot check`` printed ``pass: r`` and then a
+    line ``error: forged.xml`` on stdout (exit 0); ``robot replay`` of a recording so named did the same. The paths
+    are printed escaped (``\\n``)."""
+    from bioform_mj.robots.refs import models_dir
+
+    name = "r\nerror: forged"
+    (tmp_path / f"{name}.xml").write_text((models_dir() / "paper_robot.xml").read_text())
+    assert cli.main(["robot", "check", str(tmp_path / f"{name}.xml")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert not [ln for ln in out if ln.startswith("error:")], out[:3]
+    assert out[0] == f"pass: {tmp_path}/r\\nerror: forged.xml"
+    _csv(tmp_path / f"{name}.csv", [0.01 * k for k in range(400)])
+    assert cli.main(["robot", "replay", "tb3", "--bag", str(tmp_path / f"{name}.csv")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert (
+        not [ln for ln in out if ln.startswith("error:")] and "of " + str(tmp_path) + "/r\\nerror: forged.csv" in out[0]
+    )

@@ -17,6 +17,7 @@ import numpy as np
 
 from bioform_mj.cli.outdir import path_arg
 from bioform_mj.core.errors import InputError
+from bioform_mj.robots.sanity import one_line
 
 __all__ = ["add_parsers", "main"]
 
@@ -298,9 +299,9 @@ def _fit_main(args: argparse.Namespace) -> int:
         out / "fit.png",
         meas,
         {"published": _signals_of_chunks(chunks, sim_pub), "calibrated": _signals_of_chunks(chunks_cal, sim_cal)},
-        f"{stem}: recorded vs simulated from each chunk's recorded start ({args.bag})",
+        f"{stem}: recorded vs simulated from each chunk's recorded start ({one_line(str(args.bag))})",
     )
-    lines = [f"fit: {stem} to {args.bag} ({rec.duration:.3g} s) in {result.seconds:.0f} s"]
+    lines = [f"fit: {one_line(stem)} to {one_line(str(args.bag))} ({rec.duration:.3g} s) in {result.seconds:.0f} s"]
     for r in result.parameters:
         ci = f"± {r['ci95_halfwidth']:.2g}" if r["ci95_halfwidth"] is not None else "± inf"
         lines.append(
@@ -311,7 +312,7 @@ def _fit_main(args: argparse.Namespace) -> int:
         f"  a = {p_cal.a_eff:.5g} (published {p_pub.a_eff:.5g}), b = {p_cal.b_eff:.5g} (published {p_pub.b_eff:.5g})"
     )
     lines.append(f"  residual cost {result.cost_published:.4g} published -> {result.cost_calibrated:.4g} calibrated")
-    lines.append(f"  wrote {out / 'fit.json'}, {cal_path}, {out / 'fit.png'}")
+    lines.append(f"  wrote {out / 'fit.json'}, {one_line(str(cal_path))}, {out / 'fit.png'}")
     print("\n".join(lines))
     if unidentified:
         print(f"warning: not identified by this recording: {', '.join(unidentified)} (see fit.json)", file=sys.stderr)
@@ -337,7 +338,9 @@ def _replay_main(args: argparse.Namespace) -> int:
     report = {"recording": str(args.bag), "duration_s": rec.duration}
     for name, sim in sims.items():
         report[name] = compare(meas, sim)
-    lines = [f"replay: {Path(ref.model).stem} open loop over {rec.duration:.3g} s of {args.bag}"]
+    lines = [
+        f"replay: {one_line(Path(ref.model).stem)} open loop over {rec.duration:.3g} s of {one_line(str(args.bag))}"
+    ]
     for name in sims:
         c = report[name]
         parts = [f"{k[:-4]} {v:.3g}" for k, v in c.items() if k.endswith("_rms") and v is not None]
