@@ -127,7 +127,7 @@ def cached_check(ref: Any, key: str, run_step: float | None = None) -> dict[str,
     try:
         if not_regular(path):  # a FIFO or a device in the cache folder: never opened
             raise OSError(not_regular(path))
-        entry = json.loads(path.read_text())
+        entry = json.loads(path.read_text(encoding="utf-8"))
         stale = entry_problem(entry, CACHE_FORMAT)
         if not stale:
             _MEMO[key] = entry

@@ -355,8 +355,10 @@ def _dispatch(args: argparse.Namespace) -> int:
         width = max(map(len, desc))
         print("\n".join(f"{name:<{width}}  {text}" for name, text in desc.items()))
         return EXIT_OK
+    from bioform_mj.core.equations import CACHE_NOTE  # a read-only home: kernels cached elsewhere, or not at all
     from bioform_mj.core.jitwatch import watch
 
+    CACHE_NOTE and print(f"warning: {CACHE_NOTE}", file=sys.stderr)  # its paths as repr: one line
     # a compile said before it happens, terminal or not (numba's cache index missed; design §2); --quiet: not said
     say = not getattr(args, "quiet", False)
     stop_watch = watch(lambda burst: say and print(burst.line(), file=sys.stderr, flush=True))
@@ -749,7 +751,7 @@ def _sweep(args: argparse.Namespace) -> int:
         )
         died = f", {tm['workers_died']} worker(s) died (rerun to retry)" if tm["workers_died"] else ""
         print(f"{tm['runs']} runs ({res['ran']} run now, {res['skipped']} already done{rate}{died})")
-        print((out / "stats.md").read_text())
+        print((out / "stats.md").read_text(encoding="utf-8"))
         print(f"outputs in {out}/ (runs.csv, runs.parquet, stats.json, stats.md, sweep.json)")
     return EXIT_OK
 

@@ -23,7 +23,8 @@ class _PipeSafe:
     ``/dev/null`` (as Python's documentation of SIGPIPE recommends) and every later write is
     dropped, so the command goes on writing its files and exits with its own code (design §17).
     A control or bidirectional-format character other than tab, newline and carriage return
-    (:data:`~bioform_mj.core.errors.UNSAFE_TEXT`: U+202E, ESC) is written escaped (``\\u202e``).
+    (:data:`~bioform_mj.core.errors.UNSAFE_TEXT`: U+202E, ESC) is written escaped (``\\u202e``), as is a
+    character the stream's encoding lacks (``PYTHONIOENCODING=ascii``: ``²`` as ``\\xb2``).
     A closed pipe is silence, as Unix tools do; any other error (``error``) is said on stderr at
     the end, if stderr still works. Everything else is the wrapped stream's."""
 
@@ -37,6 +38,9 @@ class _PipeSafe:
         if not self.broken:
             try:  # bidi/format and control characters of names escaped, as one_line does (issue 28)
                 return self._stream.write(escape_unsafe(text, keep="\t\n\r") if UNSAFE_TEXT.search(text) else text)
+            except UnicodeEncodeError:  # PYTHONIOENCODING=ascii: '·', '²' were an internal error (issue 28)
+                enc = getattr(self._stream, "encoding", None) or "ascii"
+                return self.write(text.encode(enc, "backslashreplace").decode(enc))
             except OSError as exc:
                 self._break(exc)
         return len(text)

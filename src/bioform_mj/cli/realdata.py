@@ -19,6 +19,7 @@ import numpy as np
 
 from bioform_mj.cli.outdir import path_arg
 from bioform_mj.core.errors import InputError
+from bioform_mj.robots.sanity import one_line
 
 __all__ = ["add_parsers", "main"]
 
@@ -140,7 +141,7 @@ def _load(args: argparse.Namespace):
     from dataclasses import replace
 
     from bioform_mj.cli.robot import ref_from_args
-    from bioform_mj.robots.realdata.recording import Topics, read_recording
+    from bioform_mj.robots.realdata.recording import PAUSE_NOTE, Topics, read_recording
     from bioform_mj.robots.realdata.simmodel import other_joints, sim_spec
 
     if args.driver and args.motor != "dc":
@@ -156,6 +157,9 @@ def _load(args: argparse.Namespace):
     rec = read_recording(args.bag, joints, topics, other_joints(robot))
     if rec.others:
         rec.notes.append(f"the angles and speeds of {', '.join(rec.others)} from the recording start each chunk")
+    for note in rec.notes:
+        if note.startswith(PAUSE_NOTE):  # dropped messages: the fit skips them, the replay interpolates
+            print(f"warning: {note}", file=sys.stderr)
     rec = _before_tipping(args, rec)
     rec.notes.extend(robot.notes)
     if k is not None and k != 1.0:
@@ -328,7 +332,7 @@ def _fit_main(args: argparse.Namespace) -> int:
             out / "fit.png",
             meas,
             {"published": _signals_of_chunks(chunks, sim_pub), "calibrated": _signals_of_chunks(chunks_cal, sim_cal)},
-            f"{stem}: recorded vs simulated from each chunk's recorded start ({args.bag})",
+            f"{stem}: recorded vs simulated from each chunk's recorded start ({one_line(str(args.bag))})",
         )
     except BaseException:  # output files complete or absent: what this run wrote goes
         for p in made:
@@ -337,7 +341,7 @@ def _fit_main(args: argparse.Namespace) -> int:
             else:
                 p.unlink(missing_ok=True)
         raise
-    lines = [f"fit: {stem} to {args.bag} ({rec.duration:.3g} s) in {result.seconds:.0f} s"]
+    lines = [f"fit: {one_line(stem)} to {one_line(str(args.bag))} ({rec.duration:.3g} s) in {result.seconds:.0f} s"]
     for r in result.parameters:
         ci = f"± {r['ci95_halfwidth']:.2g}" if r["ci95_halfwidth"] is not None else "± inf"
         lines.append(
@@ -348,7 +352,7 @@ def _fit_main(args: argparse.Namespace) -> int:
         f"  a = {p_cal.a_eff:.5g} (published {p_pub.a_eff:.5g}), b = {p_cal.b_eff:.5g} (published {p_pub.b_eff:.5g})"
     )
     lines.append(f"  residual cost {result.cost_published:.4g} published -> {result.cost_calibrated:.4g} calibrated")
-    lines.append(f"  wrote {out / 'fit.json'}, {cal_path}, {out / 'fit.png'}")
+    lines.append(f"  wrote {out / 'fit.json'}, {one_line(str(cal_path))}, {out / 'fit.png'}")
     print("\n".join(lines))
     if unidentified:
         print(f"warning: not identified by this recording: {', '.join(unidentified)} (see fit.json)", file=sys.stderr)
@@ -374,7 +378,9 @@ def _replay_main(args: argparse.Namespace) -> int:
     report = {"recording": str(args.bag), "duration_s": rec.duration}
     for name, sim in sims.items():
         report[name] = compare(meas, sim)
-    lines = [f"replay: {Path(ref.model).stem} open loop over {rec.duration:.3g} s of {args.bag}"]
+    lines = [
+        f"replay: {one_line(Path(ref.model).stem)} open loop over {rec.duration:.3g} s of {one_line(str(args.bag))}"
+    ]
     for name in sims:
         c = report[name]
         parts = [f"{k[:-4]} {v:.3g}" for k, v in c.items() if k.endswith("_rms") and v is not None]

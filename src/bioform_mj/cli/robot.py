@@ -187,6 +187,7 @@ def main(args: argparse.Namespace) -> int:
     """Run ``bioform robot check``; prints a short report, returns the exit code."""
     from bioform_mj.outputs.files import check_out_file, write_json
     from bioform_mj.robots.contacts import floor_table
+    from bioform_mj.robots.sanity import one_line
 
     if args.json:  # before any work (exit 2): a directory, /proc/x, a read-only folder
         args.json = check_out_file(args.json, "--json")
@@ -200,7 +201,7 @@ def main(args: argparse.Namespace) -> int:
         write_json(args.json, report)
     ta = report["tip_accel_mps2"]
     lines = [
-        f"{report['verdict']}: {report['model']}",
+        f"{report['verdict']}: {one_line(report['model'])}",  # a newline in the path forged an error: line
         f"  parts: base '{report['parts']['base']}', wheels '{report['parts']['wheel_joints'][0]}' / "
         f"'{report['parts']['wheel_joints'][1]}' (sign {report['parts']['wheel_sign'][0]:+d}/"
         f"{report['parts']['wheel_sign'][1]:+d}), r = {report['wheel_radius_m']:.4g} m, "

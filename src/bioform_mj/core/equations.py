@@ -49,11 +49,27 @@ def _cache_dir() -> str:
     return os.path.join(base, "numba-" + kernel_hash())
 
 
+#: where the kernels are cached when the usual folder cannot be written, or that nothing is ("" normally; the CLI
+#: says it in a ``warning:`` line, Python code gets a :class:`~bioform_mj.core.errors.CacheWarning`)
+CACHE_NOTE = ""
+_CACHE = HAVE_NUMBA
 if HAVE_NUMBA:
+    import os as _os
+    import warnings as _warnings
+
+    from bioform_mj.core.errors import CacheWarning
     from bioform_mj.core.jitcache import guard as _guard_cache
     from bioform_mj.core.jitcache import install as _install_locator
+    from bioform_mj.core.jitcache import writable_cache_dir
 
-    numba.config.CACHE_DIR = _cache_dir()
+    _dir = _cache_dir()
+    _dir, CACHE_NOTE = writable_cache_dir(_dir, _os.path.basename(_dir))
+    if _dir is None:
+        _CACHE = False  # numba.njit(cache=True) without a writable folder raises at the decorator
+    else:
+        numba.config.CACHE_DIR = _dir
+    if CACHE_NOTE:
+        _warnings.warn(CACHE_NOTE, CacheWarning, stacklevel=2)
     _install_locator()  # the same source anywhere (a second clone) reuses the cache (core/jitcache.py)
 
 
@@ -66,7 +82,7 @@ def njit(fn: Callable | None = None, *, inline: bool = False) -> Callable:
     if not HAVE_NUMBA:  # pragma: no cover
         return fn
     opts = {"inline": "always"} if inline else {}
-    return _guard_cache(numba.njit(cache=True, nogil=True, error_model="numpy", **opts)(fn))
+    return _guard_cache(numba.njit(cache=_CACHE, nogil=True, error_model="numpy", **opts)(fn))
 
 
 def equation(fn: Callable) -> Callable:

@@ -53,6 +53,11 @@ class RobotWarning(UserWarning):
     the CLI prints each as one ``warning:`` line on stderr."""
 
 
+class CacheWarning(UserWarning):
+    """The compiled kernels cannot be cached where they usually are (a read-only home): where they are cached
+    instead, or that they are not (each run then compiles again, design §2)."""
+
+
 class OutcomeWarning(UserWarning):
     """How a run ended badly, issued by :func:`~bioform_mj.run.simulate.simulate` once it has the summary
     (never silent, design §18.1): one per follower with an outcome other than ``ok`` (``tipped``,

@@ -28,11 +28,13 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import stat
+import tempfile
 from pathlib import Path
 
 from bioform_mj.core.codehash import PACKAGE_ROOT
 
-__all__ = ["GuardedCache", "PackageLocator", "cache_subpath", "guard", "install"]
+__all__ = ["GuardedCache", "PackageLocator", "cache_subpath", "guard", "install", "writable_cache_dir"]
 
 
 def cache_subpath(py_file: str) -> str | None:
@@ -46,6 +48,39 @@ def cache_subpath(py_file: str) -> str | None:
     except (ValueError, OSError):
         return None
     return ".".join(("bioform_mj", *rel.parts)) + f"-numba{_NUMBA_VERSION}"
+
+
+def _cannot_write(path: str) -> str:
+    """Why ``path`` (created if missing) cannot hold files; "" where it can."""
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return "" if os.access(path, os.W_OK | os.X_OK) else "not writable"
+
+
+def writable_cache_dir(preferred: str, name: str) -> tuple[str | None, str]:
+    """``(folder, note)``: ``preferred`` where it can be written (note ""), else ``name`` in a private folder of
+    this user in the temporary folder (``$TMPDIR/bioform_mj-UID``, mode 0700, owned by the user: a folder another
+    user made there is never used, numba's cache files are code), else ``(None, note)``: nothing cached. A read-only
+    or foreign home made every import of the package an internal error (numba: "no locator available"; issue 28)."""
+    why = _cannot_write(preferred)
+    if not why:
+        return preferred, ""
+    uid = getattr(os, "getuid", lambda: 0)()
+    private = os.path.join(tempfile.gettempdir(), f"bioform_mj-{uid}")
+    try:
+        os.mkdir(private, 0o700)
+    except FileExistsError:
+        pass
+    except OSError:
+        return None, f"the compiled kernels are not cached ({preferred!r}: {why}; set NUMBA_CACHE_DIR)"
+    st = os.lstat(private)
+    mine = stat.S_ISDIR(st.st_mode) and st.st_uid == uid and not st.st_mode & 0o077
+    folder = os.path.join(private, name)
+    if not mine or _cannot_write(folder):
+        return None, f"the compiled kernels are not cached ({preferred!r}: {why}; set NUMBA_CACHE_DIR)"
+    return folder, f"the compiled kernels are cached in {folder!r} ({preferred!r}: {why}; set NUMBA_CACHE_DIR)"
 
 
 @functools.cache

@@ -99,6 +99,14 @@ REWARD_WEIGHTS: dict[str, float] = {
 ACTIONS = ("velocity", "torque")
 
 
+def as_numbers(x: np.ndarray, what: str) -> np.ndarray:
+    """``x`` as float64, refused (``TypeError``) unless its numbers are real numbers: strings (``"1"``), booleans,
+    complex and object arrays were taken (``np.array(..., dtype=float)`` converts them; issue 28)."""
+    if x.dtype.kind not in "fiu":
+        raise TypeError(f"{what} must be real numbers, got an array of dtype {x.dtype}")
+    return x.astype(float, copy=False)
+
+
 def _scenario_of(scenario: str | Path | Scenario, overrides: Any = None) -> Scenario:
     if isinstance(scenario, Scenario):
         if overrides:
@@ -571,13 +579,13 @@ class FormationParallelEnv(ParallelEnv):
         if missing:
             raise ValueError(f"no action for live agent(s) {', '.join(missing)}")
         try:
-            u = np.array([actions[a] for a in self.possible_agents], dtype=float)
+            u = as_numbers(np.array([actions[a] for a in self.possible_agents]), "actions")
             if u.shape == (self.n, 2) and actions_within(u, self._acc_low, self._acc_high):  # the usual case
                 return clip_into(u, self._low, self._high)
         except (ValueError, TypeError) as exc:  # ragged or non-numeric: find which agent
             for a in self.possible_agents:
                 x = np.asarray(actions[a])
-                if x.shape != (2,) or not np.issubdtype(x.dtype, np.number):
+                if x.shape != (2,) or x.dtype.kind not in "fiu":
                     raise ValueError(f"action of {a} must be 2 numbers, got {actions[a]!r}") from exc
             raise ValueError(f"actions could not be read as numbers: {exc}") from exc
         if u.shape != (self.n, 2):

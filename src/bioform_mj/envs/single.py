@@ -63,7 +63,10 @@ class FollowerEnv(gymnasium.Env):
 
     def step(self, action: Any):
         """One control period: ``(observation, reward, terminated, truncated, info)`` of the agent."""
-        a = np.asarray(action, dtype=float)
+        a = np.asarray(action)
+        if a.dtype.kind not in "fiu":  # a string "1", True, 1j were taken as numbers (issue 28)
+            raise ValueError(f"action must be 2 real numbers, got {action!r}")
+        a = a.astype(float, copy=False)
         if a.shape != (2,):
             raise ValueError(f"action must have shape (2,), got {a.shape}")
         if not np.isfinite(a).all() or np.abs(a).max() > 1.0 + 2.0**-23:  # float32 rounding of ±1 taken

@@ -303,6 +303,8 @@ class VectorEnv:
             raise ValueError(f"pin must be True or False, got {pin!r}")
         if pin and (not HAVE_TEAM or T > _usable_cpus()):
             raise ValueError(f"pin=True needs Linux and a CPU per thread: {T} threads, {_usable_cpus()} CPUs usable")
+        if T > W:  # each thread holds an MjData: threads=10**6 was MuJoCo's "Could not allocate memory" (issue 28)
+            raise ValueError(f"threads must be at most worlds = {W} (a thread steps a block of worlds), got {T}")
         env0 = parallel_env(scenario, **options)
         sc = env0.base_scenario
         if sc.plant.kind != "mujoco":
@@ -579,7 +581,9 @@ class VectorEnv:
         Python and no numpy reductions unless a world warned."""
         if not self._started or not self.running.any():
             raise RuntimeError("step() with no world running: call reset() first")
-        U = np.asarray(actions, dtype=float)
+        U = np.asarray(actions)
+        if U.dtype.kind not in "fiu":  # strings, booleans, complex were taken as numbers (issue 28)
+            raise ValueError(f"actions must be real numbers, got an array of dtype {U.dtype}")
         if U.shape != (self.nworld, self.n, 2):
             raise ValueError(f"actions must have shape ({self.nworld}, {self.n}, 2), got {U.shape}")
         self._U[...] = U  # a copy: the period clips it in place

@@ -71,10 +71,19 @@ class Trajectory:
 
     def min_speed(self, duration: float, samples_per_s: int = 200) -> float:
         """Smallest ``υ_r`` over ``[0, duration]`` (m/s); heading is undefined where it is 0."""
+        return self.speed_range(duration, samples_per_s)[0]
+
+    def speed_range(self, duration: float, samples_per_s: int = 200) -> tuple[float, float]:
+        """Smallest and largest ``υ_r`` over ``[0, duration]`` (m/s), on a grid of ``samples_per_s`` per s."""
+        return self.motion_range(duration, samples_per_s)[:2]
+
+    def motion_range(self, duration: float, samples_per_s: int = 200) -> tuple[float, float, float]:
+        """Smallest and largest ``υ_r`` (m/s) and largest ``|ω_r|`` (rad/s) over ``[0, duration]``, on a grid of
+        ``samples_per_s`` per s (``|ω_r|`` NaN where the leader stops)."""
         t = np.linspace(0.0, duration, max(2, int(duration * samples_per_s) + 1))
-        with np.errstate(divide="ignore", invalid="ignore"):  # a stopping leader gives 0/0 in ω
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # a stopping leader gives 0/0 in ω
             _, vel, _ = self.states(t)
-        return float(np.min(vel[:, 0]))
+        return float(np.min(vel[:, 0])), float(np.max(vel[:, 0])), float(np.max(np.abs(vel[:, 1])))
 
 
 @dataclass(frozen=True)

@@ -53,6 +53,10 @@ CASES: dict[int, tuple[str, float]] = {
 }
 
 
+#: most alternated bare/loop pairs ``bioform bench`` runs (each runs the scene twice)
+MAX_REPS = 100
+
+
 def record_run(sc: Any, plant: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One closed loop on ``plant`` recording every control step's ``ctrl`` and chassis forces (untimed):
     ``(ctrl (steps, nu), xfrc (steps, n, 6), final qpos)``; ``steps`` the run's own (``sc.sim.duration``, which
@@ -341,8 +345,8 @@ def run(args: argparse.Namespace) -> int:
     bad = [s for s in sizes if s not in CASES]
     if bad or not sizes:
         raise InputError(f"--sizes: {bad or sizes} not available (choose from {', '.join(map(str, CASES))})")
-    if args.reps < 1:
-        raise InputError(f"--reps must be >= 1, got {args.reps}")
+    if not 1 <= args.reps <= MAX_REPS:  # --reps 1000000000 ran on with no end said (issue 28)
+        raise InputError(f"--reps must be in 1..{MAX_REPS} (each pair runs the scene twice), got {args.reps}")
     if args.duration is not None and not (args.duration > 0 and args.duration <= 3600):
         raise InputError(f"--duration must be in (0, 3600] s, got {args.duration}")
     from bioform_mj.outputs.files import check_out_file

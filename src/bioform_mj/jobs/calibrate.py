@@ -373,7 +373,7 @@ def load_evaluations(path: Path, context: dict[str, Any]) -> dict[str, dict[str,
     InputError when they belong to another calibration (other scenario, code, robot files, seed).
     A last line cut short (the process was killed mid-write) is ignored."""
     try:
-        lines = path.read_text().splitlines()
+        lines = path.read_text(encoding="utf-8").splitlines()
     except FileNotFoundError:
         return {}
     if not lines:
@@ -455,9 +455,9 @@ def calibrate(
         context = _context(base, target, plant, seed)
         cache = load_evaluations(ev_path, context)
         if not cache:
-            with open(ev_path, "w") as f0:
+            with open(ev_path, "w", encoding="utf-8") as f0:
                 f0.write(json.dumps({"kind": _HEADER_KIND, "context": context}) + "\n")
-        fh = open(ev_path, "a")  # noqa: SIM115 - closed in the finally below
+        fh = open(ev_path, "a", encoding="utf-8")  # noqa: SIM115 - closed in the finally below
     reused = [0]
     history: list[dict[str, Any]] = []
     done = [0]

@@ -50,13 +50,13 @@ def write_json(path: str | Path, obj: Any) -> None:
     """Atomically write ``obj`` as indented JSON (NaN written as null)."""
     text = json.dumps(_clean(obj), indent=2, allow_nan=False)
     with atomic_path(path) as tmp:
-        tmp.write_text(text + "\n")
+        tmp.write_text(text + "\n", encoding="utf-8")
 
 
 def write_text(path: str | Path, text: str) -> None:
     """Atomically write a text file."""
     with atomic_path(path) as tmp:
-        tmp.write_text(text)
+        tmp.write_text(text, encoding="utf-8")  # a C or Latin-1 locale: '²' was an internal error
 
 
 def rows_to_arrow(rows: list[dict[str, Any]]) -> Any:

@@ -61,7 +61,7 @@ class MujocoLog:
             return None
         path = Path(folder) / FILENAME
         try:
-            with open(path, "a") as fh:
+            with open(path, "a", encoding="utf-8") as fh:
                 for t, msg in new:
                     fh.write(f"WARNING {time.strftime('%a %b %d %H:%M:%S %Y', time.localtime(t))}: {msg}\n\n")
         except OSError as exc:  # disk full, ulimit -f: named like every other output (design §17)

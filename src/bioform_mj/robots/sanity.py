@@ -118,7 +118,7 @@ def unstatable(path: str | Path) -> str:
         shown = str(path) if len(str(path)) <= 120 else f"{str(path)[:60]}…{str(path)[-40:]}"
         return f"'{shown}' cannot be looked up ({exc.strerror or exc})"
     except ValueError as exc:  # an embedded NUL
-        return f"'{path!r}' is no file name ({exc})"
+        return f"{str(path)!r} is no file name ({exc})"
     return ""
 
 

@@ -188,7 +188,7 @@ def peaks(
     path = cache_dir().parent / "demand" / f"{key}.json"
     if key not in _MEMO:
         try:
-            entry = json.loads(path.read_text())
+            entry = json.loads(path.read_text(encoding="utf-8"))
             if isinstance(entry, dict) and entry.get("format") == CACHE_FORMAT:
                 _MEMO[key] = entry
                 if (hit := _done(entry, "disk")) is not None:

@@ -6,6 +6,7 @@ first problem found; :func:`run_size` estimates a run's steps and memory, which 
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -142,10 +143,22 @@ def validate(sc: Scenario) -> None:
             if len(t) != 3:
                 raise ScenarioError(f"{key}[{i}]", f"expected [amplitude, frequency, phase], got {list(t)}")
     traj = sc.build_leader()
-    vmin = traj.min_speed(s.duration)
+    vmin, vmax, wmax = traj.motion_range(s.duration)
     if not vmin > 1e-6:
         raise ScenarioError(
             "leader", f"the leader's speed reaches {vmin:g} m/s; its heading is undefined where it stops"
+        )
+    if not vmax < sc.limits.speed and not vmax <= (reach := _reach(sc))[0]:  # 1e12 ran into the guard (issue 28)
+        raise ScenarioError(
+            "leader.speed" if ld.kind in ("paper", "line", "circle") else "leader",
+            f"the leader's speed reaches {vmax:g} m/s, more than any robot of the scene could reach in the run: "
+            f"{reach[1]}; and beyond limits.speed = {sc.limits.speed:g} m/s (the run would stop as diverged)",
+        )
+    # a circle of radius 1e-300 m: a torque of 1e296 N·m at t = 0 (issue 28); a MuJoCo robot compiled only past 1 rad/s
+    if wmax > 1.0 and wmax > (turn := _reach(sc, yaw=True))[0]:
+        raise ScenarioError(
+            "leader",
+            f"the leader turns at up to {wmax:g} rad/s, more than any robot of the scene could in the run: {turn[1]}",
         )
 
     n = sc.n
@@ -178,6 +191,12 @@ def validate(sc: Scenario) -> None:
     g = sc.graph
     if g.kind not in GRAPH_KINDS:
         raise ScenarioError("graph.kind", f"unknown topology '{g.kind}' (expected one of: {', '.join(GRAPH_KINDS)})")
+    if g.kind == "complete" and n * (n - 1) // 2 > MAX_EDGES:  # 20,000 followers: a MemoryError after 25 s
+        raise ScenarioError(
+            "graph.kind",
+            f"'complete' over {n} followers is {n * (n - 1) // 2} edges, above the {MAX_EDGES:.0e} a run holds (each "
+            "control step reads every edge); use 'chain', 'ring', 'star' or explicit edges",
+        )
     try:
         sc.build_graph()
     except GraphError as exc:
@@ -297,6 +316,7 @@ def validate(sc: Scenario) -> None:
             )
         _positive(f"{key}.mass", ev.mass, strict=False)
         _positive(f"{key}.inertia", ev.inertia, strict=False)
+        _check_payload(sc, key, ev.mass, ev.inertia)
 
     _validate_faults(sc)
     _validate_safety(sc.safety)
@@ -313,6 +333,67 @@ def validate(sc: Scenario) -> None:
                 "obstacles", "the ideal plant has no bodies to touch obstacles: use plant.kind = 'mujoco'"
             )
         sc.obstacle_list()  # a field too dense to place fails here, before any work
+
+
+#: most edges a follower graph may have (a complete graph of 1414 followers; issue 28)
+MAX_EDGES = 1_000_000
+
+
+#: the most a payload may be, in multiples of the heaviest robot's own mass and yaw inertia: no wheeled robot carries a
+#: hundred times its weight (a 1 kg TurtleBot3 Burger is rated for 15 kg); 1e12 kg ran and diverged (issue 28)
+PAYLOAD_MAX_RATIO = 100.0
+
+
+@functools.lru_cache(maxsize=64)
+def _robot_numbers(ref: Any) -> tuple[float, float, float, float, float]:
+    """A MuJoCo robot's mass (kg), yaw inertia (kg·m²), ``a_eff`` (m/(s²·N·m)), largest wheel torque (N·m) and
+    ``b_eff`` (rad/(s²·N·m)), compiled once a process (30 ms; only for a payload or a leader beyond reach)."""
+    from bioform_mj.robots.params import robot_truth
+
+    t = robot_truth(ref)
+    return float(t.mass), float(t.yaw_inertia), float(t.a_eff), float(max(t.tau_max)), float(t.b_eff)
+
+
+def _reach(sc: Scenario, yaw: bool = False) -> tuple[float, str]:
+    """The fastest a robot of the scene could go (``yaw``: turn) by the run's end, m/s (rad/s), and how: from rest at
+    full torque on both wheels, ``2 a τ_max`` m/s² (``2 b τ_max`` rad/s²) for ``sim.duration`` (the ideal plant's
+    ``plant.c_true`` and ``torque.tau_max``, a MuJoCo robot's compiled ``a_eff``/``b_eff`` and drive limit; the
+    fastest robot of the team)."""
+    pc, d, k = sc.plant, sc.sim.duration, 1 if yaw else 0
+    if pc.kind == "mujoco" and pc.robots:
+        nums = [_robot_numbers(r) for r in dict.fromkeys(pc.robots)]
+        c, tau = max(((n[2 + 2 * k], n[3]) for n in nums), key=lambda x: x[0] * x[1])
+    else:
+        c, tau = float(pc.c_true[k]), float(sc.torque.tau_max)
+    v = 2.0 * c * tau * d
+    name, unit_ = ("b", "rad/(s²·N·m)") if yaw else ("a", "m/(s²·N·m)")
+    return (
+        v,
+        f"from rest at full torque ({tau:g} N·m a wheel, {name} = {c:.4g} {unit_}) over sim.duration = {d:g} s, "
+        f"{v:.4g} {'rad/s' if yaw else 'm/s'}",
+    )
+
+
+def _check_payload(sc: Scenario, key: str, mass: float, inertia: float) -> None:
+    """Refuse a payload of more than :data:`PAYLOAD_MAX_RATIO` times the heaviest robot of the scene (kg, and its
+    yaw inertia, kg·m²): the ideal plant's ``plant.mass``/``plant.inertia``, the MuJoCo robots' compiled ones."""
+    if mass <= 0 and inertia <= 0:
+        return
+    pc = sc.plant
+    if pc.kind == "mujoco" and pc.robots:
+        sizes = [_robot_numbers(r) for r in dict.fromkeys(pc.robots)]
+        own = {"mass": max(n[0] for n in sizes), "inertia": max(n[1] for n in sizes)}
+        whose = {k: f"the heaviest robot's {'yaw inertia' if k == 'inertia' else k}" for k in own}
+    else:
+        own = {"mass": float(pc.mass), "inertia": float(pc.inertia)}
+        whose = {k: f"the robot's (plant.{k})" for k in own}
+    for what, v, unit_ in (("mass", mass, "kg"), ("inertia", inertia, "kg·m²")):
+        if v > PAYLOAD_MAX_RATIO * own[what]:
+            raise ScenarioError(
+                f"{key}.{what}",
+                f"a payload of {v:g} {unit_}, above {PAYLOAD_MAX_RATIO:g} × {whose[what]} {own[what]:.4g} {unit_} = "
+                f"{PAYLOAD_MAX_RATIO * own[what]:.4g} {unit_}: no robot of the scene could carry it",
+            )
 
 
 def _validate_sensing(sc: Scenario) -> None:

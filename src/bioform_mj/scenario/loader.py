@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import tomllib
 import types
 import typing
@@ -191,9 +192,42 @@ def _read_record(raw: bytes, where: str) -> dict[str, Any]:
     return data["config"]
 
 
+#: most parts a dotted TOML key may have (the deepest scenario key has 3): Python's TOML parser keeps a tuple of every
+#: prefix of a dotted key, so one line ``a.a.a…= 1`` of 10^5 parts (200 kB) asked ~38 GB (a MemoryError after 36 s,
+#: issue 28; 20,000 parts: 1.5 GB)
+MAX_KEY_PARTS = 256
+_KEY_TOKEN = re.compile(r"""\s*(?:([A-Za-z0-9_-]+)|"(?:[^"\\\n]|\\.)*"|'[^'\n]*'|(\.)|.)""")
+
+
+def deep_key_line(text: str) -> int:
+    """The first line (1-based) of ``text`` holding a run of more than :data:`MAX_KEY_PARTS` key parts joined by
+    dots, 0 if none: a scan linear in the text (only lines with that many dots are tokenised)."""
+    for n, line in enumerate(text.splitlines(), 1):
+        if line.count(".") < MAX_KEY_PARTS:
+            continue
+        run, last = 0, ""  # parts in the current chain; the last token: "part", "dot" or ""
+        for m in _KEY_TOKEN.finditer(line):
+            tok = m.group(0).strip()
+            if m.group(2):
+                run, last = (run if last == "part" else 0), "dot"
+            elif m.group(1) or (len(tok) >= 2 and tok[0] in "\"'"):
+                run, last = (run + 1 if last == "dot" else 1), "part"
+            else:
+                run, last = 0, ""
+            if run > MAX_KEY_PARTS:
+                return n
+    return 0
+
+
 def _read_toml(raw: bytes, where: str) -> dict[str, Any]:
     try:
-        return tomllib.loads(raw.decode("utf-8"))
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{where} is not valid TOML: {exc}") from None
+    if line := deep_key_line(text):
+        raise InputError(f"{where}: line {line} has a dotted key of more than {MAX_KEY_PARTS} parts (not a scenario)")
+    try:
+        return tomllib.loads(text)
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{where} is not valid TOML: {exc}") from None
     except ValueError as exc:  # an integer of more than 4300 digits (Python's int limit): was an internal error
@@ -211,6 +245,8 @@ def parse_override(text: str) -> tuple[str, Any]:
     if not sep or not key:
         raise InputError(f"--set '{text}': expected KEY=VALUE, e.g. kinematic.k1=3")
     raw = raw.strip()
+    if deep_key_line(raw):  # an inline table {a.a.a… = 1}: the parser's memory grows as the square of the parts
+        raise InputError(f"--set '{key}': the value has a dotted key of more than {MAX_KEY_PARTS} parts")
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:

@@ -95,7 +95,7 @@ def write_calibrated(
     text = spec.to_xml()
     if copied:  # the copies by their path relative to the calibrated file: the folder can move as a whole
         text = text.replace(f'file="{folder}/', f'file="{folder.name}/')
-    path.write_text(text)
+    path.write_text(text, encoding="utf-8")
 
 
 def assets_folder(path: Path) -> Path:

@@ -74,7 +74,7 @@ from bioform_mj.robots.realdata.casters import (
 )
 from bioform_mj.robots.realdata.chassis import chassis_body, explicit_base, set_yaw_inertia
 from bioform_mj.robots.realdata.intervals import autocorrelation_inflation, cluster_halfwidths
-from bioform_mj.robots.realdata.recording import Recording
+from bioform_mj.robots.realdata.recording import Recording, chunk_starts, pauses
 from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state, sensor_times
 
 __all__ = [
@@ -201,9 +201,13 @@ def make_chunks(
     grid = np.arange(1, n_grid + 1) / GRID_HZ  # chunk-local measured times, s
     dt = float(model.opt.timestep)
     starts, states, controls, measured = [], [], [], []
-    n_all = int((rec.t[-1] - rec.t[0] + 1e-9) // length)
-    # at most max_chunks, spread evenly over the recording: the fit's cost stays bounded for a long one
-    picks = np.unique(np.round(np.linspace(0, n_all - 1, min(n_all, max_chunks))).astype(int))
+    # at most max_chunks, spread evenly over the recording (none across a pause): the cost stays bounded
+    picks = chunk_starts(rec, length, max_chunks)
+    if not picks.size:
+        raise InputError(
+            f"{rec.source}: no {length:g} s chunk of joint states without a pause ({pauses(rec.t).size} pauses of more "
+            "than ten sample periods); give a shorter --chunk"
+        )
     for c in picks:
         t0 = float(rec.t[0]) + c * length
         k = int(np.searchsorted(rec.t, t0))

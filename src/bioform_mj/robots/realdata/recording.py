@@ -31,7 +31,7 @@ import numpy as np
 
 from bioform_mj.core.errors import InputError
 
-__all__ = ["Recording", "Topics", "read_recording"]
+__all__ = ["PAUSE_NOTE", "Recording", "Topics", "chunk_starts", "pauses", "read_recording"]
 
 
 @dataclass(frozen=True)
@@ -197,7 +197,8 @@ def _check_finite(name: str, t: np.ndarray, arr: np.ndarray, what: str) -> None:
         raise InputError(f"{name}: {what} is {arr[k, col]} at t = {t[k]:.6g} s (column {col}): NaN or infinite")
 
 
-def _validate(rec: Recording) -> Recording:
+def _validate(rec: Recording, lines: np.ndarray | None = None) -> Recording:
+    """Refuse what cannot be used; ``lines``: each joint state's line in a CSV file (for the messages)."""
     name = rec.source
     if len(rec.t) < 10:
         raise InputError(f"{name}: only {len(rec.t)} joint states of {rec.joints[0]}/{rec.joints[1]}: too short to fit")
@@ -217,7 +218,73 @@ def _validate(rec: Recording) -> Recording:
         _check_finite(name, rec.imu_t, rec.imu_gyro, "an IMU angular velocity")
     if float(rec.t[-1] - rec.t[0]) <= 0:
         raise InputError(f"{name}: the joint states span no time")
+    _check_pauses(rec, lines)
     return rec
+
+
+#: longest pause between two joint states a recording may hold, s: beyond it the file is two recordings joined (or a
+#: time column in other units); a CSV with 1e11 s between rows was fitted over its interpolated gap (issue 28)
+PAUSE_MAX_S = 600.0
+#: a pause: a gap between joint states longer than this many median sample periods and than :data:`PAUSE_MIN_S`
+PAUSE_FACTOR = 10.0
+PAUSE_MIN_S = 0.1
+#: how the note on pauses begins (the CLI says it in a ``warning:`` line)
+PAUSE_NOTE = "the joint states pause"
+
+
+def pauses(t: np.ndarray) -> np.ndarray:
+    """Indices ``k`` where the joint states pause between ``t[k]`` and ``t[k + 1]`` (s): the gap is longer than
+    :data:`PAUSE_FACTOR` median sample periods and :data:`PAUSE_MIN_S` (dropped messages; nothing was measured
+    there, a fit's chunk must not span it)."""
+    if len(t) < 3:
+        return np.zeros(0, int)
+    d = np.diff(t)
+    period = float(np.median(d))
+    return np.flatnonzero(d > max(PAUSE_FACTOR * period, PAUSE_MIN_S))
+
+
+def _check_pauses(rec: Recording, lines: np.ndarray | None) -> None:
+    """Refuse a pause above :data:`PAUSE_MAX_S` naming where it is; note the shorter ones (dropped messages)."""
+    ks = pauses(rec.t)
+    if not ks.size:
+        return
+    d = np.diff(rec.t)
+    k = int(ks[np.argmax(d[ks])])
+    where = f"lines {int(lines[k])} and {int(lines[k + 1])}" if lines is not None else f"messages {k + 1} and {k + 2}"
+    gap = f"{d[k]:.3g} s between {where} (t = {rec.t[k]:.6g} s and {rec.t[k + 1]:.6g} s)"
+    period = float(np.median(d))
+    if d[k] > PAUSE_MAX_S:
+        raise InputError(
+            f"{rec.source}: the joint states pause for {gap}, the samples otherwise every {period:.3g} s (median): "
+            f"above the {PAUSE_MAX_S:g} s a recording may pause (two recordings joined, or times not in seconds?); "
+            "fit each part as a recording of its own"
+        )
+    rec.notes.append(
+        f"{PAUSE_NOTE} {ks.size} time(s) (nothing recorded for over {PAUSE_FACTOR:g} sample periods; the "
+        f"longest {gap}): the fit's chunks skip the pauses, a replay interpolates the efforts across them"
+    )
+
+
+def chunk_starts(rec: Recording, length: float, max_chunks: int) -> np.ndarray:
+    """Indices ``c`` of the chunks ``[t[0] + c·length, t[0] + (c + 1)·length]`` (s) a fit simulates: at most
+    ``max_chunks``, spread evenly over those that span no pause (:func:`pauses`); without pauses every chunk of
+    the recording is a candidate. Candidates are counted as ranges, never listed (a long recording has many)."""
+    t0 = float(rec.t[0])
+    n_all = int((rec.t[-1] - t0 + 1e-9) // length)
+    lo, hi = [0], []
+    for k in pauses(rec.t):  # the chunks overlapping the open gap (t[k], t[k + 1]) are left out
+        hi.append(min(n_all, math.floor((rec.t[k] - t0) / length)))
+        lo.append(max(0, math.ceil((rec.t[k + 1] - t0) / length)))
+    hi.append(n_all)
+    ranges = [(a, b) for a, b in zip(lo, hi, strict=True) if b > a]
+    sizes = np.array([b - a for a, b in ranges], dtype=np.int64)
+    n_good = int(sizes.sum())
+    if n_good == 0:
+        return np.zeros(0, int)
+    picks = np.unique(np.round(np.linspace(0, n_good - 1, min(n_good, max_chunks))).astype(np.int64))
+    ends = np.cumsum(sizes)
+    j = np.searchsorted(ends, picks, side="right")
+    return np.array([ranges[i][0] + int(p - (ends[i - 1] if i else 0)) for i, p in zip(j, picks, strict=True)])
 
 
 def read_recording(
@@ -237,7 +304,8 @@ def read_recording(
         if not f.is_dir() and (why := not_regular(f)):
             raise InputError(f"--bag {p}: {why}")
     if p.is_file() and p.suffix.lower() == ".csv":
-        return _validate(_read_csv(p, joints))
+        rec, lines = _read_csv(p, joints)
+        return _validate(rec, lines)
     if p.is_dir():
         _check_metadata(p / "metadata.yaml")
     return _validate(_read_bag(p, joints, topics or Topics(), tuple(others)))
@@ -534,7 +602,8 @@ def upright_part(rec: Recording, need_s: float, name: str) -> tuple[Recording, s
 CSV_MAX_MB = 256
 
 
-def _read_csv(p: Path, joints: tuple[str, str]) -> Recording:
+def _read_csv(p: Path, joints: tuple[str, str]) -> tuple[Recording, np.ndarray]:
+    """The recording in CSV file ``p`` and each row's line in the file."""
     name = str(p)
     if (size := p.stat().st_size) > CSV_MAX_MB * 10**6:  # a 10 GB sparse CSV was read line by line, whole
         raise InputError(
@@ -542,7 +611,7 @@ def _read_csv(p: Path, joints: tuple[str, str]) -> Recording:
             "export a shorter window)"
         )
     try:
-        with open(p, newline="") as fh:
+        with open(p, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
             try:
                 header = [h.strip() for h in next(reader)]
@@ -560,10 +629,11 @@ def _read_csv(p: Path, joints: tuple[str, str]) -> Recording:
                 raise InputError(f"{name}: column {twice!r} appears {header.count(twice)} times in the header")
             keep = [header.index(h) for h in used]  # only these are converted and kept (10^7 columns: gigabytes)
             col = {h: i for i, h in enumerate(used)}
-            rows = []
+            rows, lines = [], []
             for k, row in enumerate(reader):
                 if not row:
                     continue
+                lines.append(reader.line_num)
                 if len(row) != len(header):
                     raise InputError(f"{name}: line {k + 2} has {len(row)} fields, the header {len(header)}")
                 try:
@@ -595,4 +665,4 @@ def _read_csv(p: Path, joints: tuple[str, str]) -> Recording:
         g = np.zeros((len(t), 3))
         g[:, 2] = a[:, col["imu.wz"]]
         rec.imu_t, rec.imu_gyro = rec.t.copy(), g
-    return rec
+    return rec, np.asarray(lines, np.int64)
