@@ -158,7 +158,8 @@ def test_payload_bound_is_the_scenes_robot_mass_times_100():
 def test_a_leader_no_robot_could_reach_is_refused(tmp_path, capsys):
     """``leader.speed = 1e12``: refused naming the bound, the fastest a robot of the scene could go by the run's end
     from rest at full torque, ``2 a τ_max T`` (the ideal plant's ``c_true[0]``, ``torque.tau_max``,
-    ``sim.duration``: 320 m/s in the paper scene, computed here). A leader beyond ``limits.speed`` but within that
+    ``sim.duration``, at least 10 s, so a short run of a fast leader still runs: 320 m/s in the paper scene,
+    computed here). A leader beyond ``limits.speed`` but within that
     reach still runs into the guard (exit 3, as tests force a divergence)."""
     import bioform_mj
 
@@ -167,7 +168,7 @@ def test_a_leader_no_robot_could_reach_is_refused(tmp_path, capsys):
     code = cli.main(["run", str(scen), "--set", "leader.speed=1e12", "--out", str(tmp_path / "out")])
     want = "'leader.speed': the leader's speed reaches 1e+12 m/s, more than any robot of the scene could reach"
     line = _one_error(code, capsys.readouterr().err, want)
-    assert "over sim.duration = 0.2 s, 3.2 m/s; and beyond limits.speed = 100 m/s" in line, line
+    assert "over 10 s (sim.duration, at least 10 s), 160 m/s; and beyond limits.speed = 100 m/s" in line, line
     assert not (tmp_path / "out").exists()
     sc = bioform_mj.load("paper")
     reach = 2 * sc.plant.c_true[0] * sc.torque.tau_max * sc.sim.duration
@@ -175,7 +176,7 @@ def test_a_leader_no_robot_could_reach_is_refused(tmp_path, capsys):
     top = lambda s: s.build_leader().speed_range(s.sim.duration)[1]  # noqa: E731
     ok = bioform_mj.load("paper", overrides=[f"leader.speed={0.99 * reach}"])  # beyond the guard: runs, diverges
     assert sc.limits.speed < top(ok) < reach
-    with pytest.raises(InputError, match=r"over sim.duration = 20 s, 320 m/s"):
+    with pytest.raises(InputError, match=r"over 20 s \(sim.duration, at least 10 s\), 320 m/s"):
         bioform_mj.load("paper", overrides=[f"leader.speed={1.01 * reach}"])
     bioform_mj.load("paper", overrides=[f"leader.speed={1.01 * reach}", f"limits.speed={2 * reach}"])  # guard wider
     with pytest.raises(InputError, match=r"scenario key 'leader': the leader's speed reaches 7\.07\d*e\+06 m/s"):
@@ -409,7 +410,9 @@ def test_a_leader_turning_faster_than_any_robot_could_is_refused():
     import bioform_mj
 
     circle = ['leader.kind="circle"', "leader.y0=5"]
-    with pytest.raises(InputError, match=r"the leader turns at up to 1e\+300 rad/s.* over sim.duration = 20 s, 8000"):
+    with pytest.raises(
+        InputError, match=r"the leader turns at up to 1e\+300 rad/s.* over 20 s \(sim.duration, at least 10 s\), 8000"
+    ):
         bioform_mj.load("paper", overrides=[*circle, "leader.radius=1e-300"])
     sc = bioform_mj.load("paper", overrides=[*circle, "leader.radius=5"])
     assert sc.build_leader().motion_range(sc.sim.duration)[2] == pytest.approx(0.2)

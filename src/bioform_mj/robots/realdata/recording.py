@@ -168,6 +168,13 @@ def _listed(names: list[str]) -> str:
     return shown + (f" and {len(names) - LIST_MAX} more" if len(names) > LIST_MAX else "")
 
 
+def _listed_some(sample: list[str], total: int) -> str:
+    """:func:`_listed` of ``sample``, the first names of ``total`` (only the first :data:`LIST_MAX` are kept)."""
+    shown = ", ".join(repr(n) for n in sample[:LIST_MAX])
+    more = max(total, len(sample)) - min(len(sample), LIST_MAX)
+    return shown + (f" and {more} more" if more > 0 else "")
+
+
 def _twice(names: list[str]) -> str | None:
     """The first name that ``names`` holds more than once (None: none does)."""
     seen: set[str] = set()
@@ -385,7 +392,8 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics, extra_joints: tu
             conns = [c for c in reader.connections if c.topic in want]
             bag_t: dict[str, list[float]] = {t: [] for t in want}
             no_effort = 0
-            others: set[str] = set()  # joints of joint states without the wheels (skipped; named if no others)
+            others: dict[str, None] = {}  # joints of joint states without the wheels (skipped; named if no others)
+            others_n = 0  # the most names one such message held
             idx: tuple[int, int] | None = None
             for conn, bag_ns, raw in _stream(reader, conns, name):
                 msg = reader.deserialize(raw, conn.msgtype)
@@ -405,7 +413,8 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics, extra_joints: tu
                             if not names:
                                 continue
                             if len(missing) == len(joints):  # another publisher's joints (an arm, casters)
-                                others.update(names[:LIST_MAX])
+                                others.update(dict.fromkeys(names[:LIST_MAX]))
+                                others_n = max(others_n, len(names))
                                 continue
                             raise InputError(
                                 f"{name}: '{topics.joint_states}' has no joint {_listed(missing)} "
@@ -461,15 +470,17 @@ def _read_bag(p: Path, joints: tuple[str, str], topics: Topics, extra_joints: tu
     if not js["t"] and others:
         raise InputError(
             f"{name}: '{topics.joint_states}' has no joint {_listed(list(joints))} "
-            f"(it has: {_listed(sorted(others))}); map the robot's wheels with --left-wheel/--right-wheel or name "
-            "the recorded joints with --left-joint/--right-joint"
+            f"(it has: {_listed_some(list(others), others_n)}); map the robot's wheels with --left-wheel/--right-wheel "
+            "or name the recorded joints with --left-joint/--right-joint"
         )
     if not js["t"]:
         what = f" ({no_effort} without an effort: the fit needs the applied torques)" if no_effort else ""
         raise InputError(f"{name}: '{topics.joint_states}' holds no joint states{what}")
     notes = ns_notes + ([f"{no_effort} joint state(s) without an effort skipped"] if no_effort else [])
     if others:  # several publishers on one topic (ROS 2 merges none): those without the wheels are not theirs
-        notes.append(f"joint states without the wheels skipped (another publisher's: {_listed(sorted(others))})")
+        notes.append(
+            f"joint states without the wheels skipped (another publisher's: {_listed_some(list(others), others_n)})"
+        )
     # one clock for all topics: the header stamps where every topic has them (a stamp of 0 at sim time 0 is
     # one), else the bag's receive times
     streams = ((topics.joint_states, js), (topics.odom, od), (topics.imu, im))
