@@ -274,31 +274,21 @@ def control_step(g, s, lp, lv, pose, vel, comm):
 # the plant's calls: docs/findings/performance.md). stack_head/stack_tail are calls, not inlined into the
 # chunks: inlined, L1i misses 483 -> 324 a step but +16 s of cold compile. (Numba's inliner takes at most 30
 # arguments: CPython passes more as *args.)
+# The chunks repeat this function's three lines on their own bound arrays rather than call one shared helper
+# (design §2): a helper inlined into their step loop binds each array it takes (those of
+# Gains, StackState and CommIn counting one by one) to a name of its own at every step, and the calls of
+# stack_head, stack_tail and cbf_filter inside keep LLVM from pruning those counts. Measured (session 13, an
+# inlined `stack_pass(kn, g, s, comm, ..., pose, vel, cmd, cbf_par, ..., cbf_bad)` used by this function and
+# both chunks; scripts/bench_callgrind.py, paper, MuJoCo, 1 s): refcount calls 49 -> 149 a step (one pair per
+# array argument: 50), our code's instructions 8,946 -> 9,615 a step; the same bits, the same cold compile.
+# tests/test_control_sequence.py checks the copies against this function, by their code and by their bits.
 @njit(inline=True)
 def stack_step(kn, g, s, comm, lx, ly, lth, lv0, lw0, pose, vel):
     """:func:`control_step` with the gains' :class:`Knobs` ``kn``, the leader's pose ``(lx, ly, lth)`` (m, m,
-    rad) and velocities ``(lv0, lw0)`` (m/s, rad/s): :func:`stack_pass` on the fields of ``g`` and ``s``."""
-    stack_pass(kn, g, s, comm, lx, ly, lth, lv0, lw0, pose, vel, s.cmd, g.cbf_par, g.cbf_rad, g.cbf_obst, g.cbf_A,
-               g.cbf_b, g.cbf_lam, g.cbf_bad)  # fmt: skip
-
-
-# The one sequence of a control step, for every loop that runs the whole stack: control_step (the step-by-step
-# loop) and both plants' compiled chunks (plants/ideal.py, plants/mujoco/kernels.py: run_chunk), which bind the
-# arrays once per chunk and pass them here (inlined: no call, and no reference count of its own; 19 arguments,
-# under the inliner's 30). What follows a step differs between the chunks (the MuJoCo chunk gives the stack the
-# odometry but engine.after_step the truth, and records the odometry and raw state rows) and stays theirs;
-# engine.after_step is one call in both. (The learning environment's step is not this sequence: the agent, not
-# eq. 31, makes the command; envs/kernels.py.)
-@njit(inline=True)
-def stack_pass(kn, g, s, comm, lx, ly, lth, lv0, lw0, pose, vel, cmd, cbf_par, cbf_rad, cbf_obst, cbf_A, cbf_b,
-               cbf_lam, cbf_bad):  # fmt: skip
-    """One control step of every follower on what it measures, ``pose`` (n, 3) and ``vel`` (n, 2), with the
-    leader's pose ``(lx, ly, lth)`` (m, m, rad) and velocities ``(lv0, lw0)`` (m/s, rad/s): :func:`stack_head`,
-    the safety filter (``kn.cbf``; on ``cmd`` = ``s.cmd`` and the ``cbf_*`` arrays of :class:`Gains`, bound by
-    the caller), :func:`stack_tail`. The torques to hold over the next period are ``s.tau`` (n, 2)."""
+    rad) and velocities ``(lv0, lw0)`` (m/s, rad/s): :func:`stack_head`, the safety filter, :func:`stack_tail`."""
     stack_head(kn, g, s, comm, lx, ly, lth, lv0, lw0, pose, vel)
     if kn.cbf:  # the safety filter between eq. 31 and the torque law (design §19)
-        safety_filter(pose, cmd, cbf_par, cbf_rad, cbf_obst, cbf_A, cbf_b, cbf_lam, cbf_bad)
+        safety_filter(pose, s.cmd, g.cbf_par, g.cbf_rad, g.cbf_obst, g.cbf_A, g.cbf_b, g.cbf_lam, g.cbf_bad)
     stack_tail(kn, g, s, pose, vel)
 
 

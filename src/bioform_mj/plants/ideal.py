@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from bioform_mj.control.kernel import knobs, stack_pass
+from bioform_mj.control.kernel import knobs, safety_filter, stack_head, stack_tail
 from bioform_mj.core.engine import OK, ROW, after_step, record
 from bioform_mj.core.equations import njit, unicycle_rk4, wrap
 from bioform_mj.formation.disturbance import harmonic_rows
@@ -82,10 +82,14 @@ def run_chunk(lp, k0, k1, n_sub, c, dist, x, extra, j0):
         _observe(x, pose, vel)
         if k + 1 < N:
             k_ = k + 1
-            # the control step (kernel.stack_pass, inlined) on arrays bound above: its safety filter is a call that
-            # could raise, so nothing bound in the loop may live across it (control/kernel.py)
-            stack_pass(kn, g, s, comm, L_pose[k_, 0], L_pose[k_, 1], L_pose[k_, 2], L_vel[k_, 0], L_vel[k_, 1], pose,
-                       vel, cmd, cbf_par, cbf_rad, cbf_obst, cbf_A, cbf_b, cbf_lam, cbf_bad)  # fmt: skip
+            # kernel.stack_step's three lines (a copy, not a call of a shared helper: control/kernel.py says
+            # why; tests/test_control_sequence.py keeps them alike), its safety filter on arrays bound above (a
+            # call that could raise: nothing bound in the loop may live across it)
+            stack_head(kn, g, s, comm, L_pose[k_, 0], L_pose[k_, 1], L_pose[k_, 2], L_vel[k_, 0], L_vel[k_, 1], pose,
+                       vel)  # fmt: skip
+            if kn.cbf:
+                safety_filter(pose, cmd, cbf_par, cbf_rad, cbf_obst, cbf_A, cbf_b, cbf_lam, cbf_bad)
+            stack_tail(kn, g, s, pose, vel)
             status = after_step(k_, N, stride, pose, vel, est_pose, est_vel, cmd, dcmd, tau, tau_raw, saturated, c_hat,
                                 vs, met, acc, lim, diag)  # fmt: skip
             if status == ROW:

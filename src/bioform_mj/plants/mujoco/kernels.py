@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from bioform_mj.control.kernel import knobs, stack_pass
+from bioform_mj.control.kernel import knobs, safety_filter, stack_head, stack_tail
 from bioform_mj.core.engine import OK, PLANT_FAILED, ROW, after_step, record, record_odometry
 from bioform_mj.core.equations import (
     HAVE_NUMBA,
@@ -441,9 +441,12 @@ def run_chunk(lp, k0, k1, n_sub, mp, dp, io, w, c_true, j0, rec_ctrl, rec_xfrc, 
             if sen.on:
                 odometry_read(odo, dt)
             k_ = k + 1
-            # the control step (kernel.stack_pass, as in plants/ideal.py) on what the controllers measure
-            stack_pass(kn, g, s, comm, L_pose[k_, 0], L_pose[k_, 1], L_pose[k_, 2], L_vel[k_, 0], L_vel[k_, 1], mpose,
-                       mvel, cmd, cbf_par, cbf_rad, cbf_obst, cbf_A, cbf_b, cbf_lam, cbf_bad)  # fmt: skip
+            # kernel.stack_step's three lines on what the controllers measure (a copy: see plants/ideal.py)
+            stack_head(kn, g, s, comm, L_pose[k_, 0], L_pose[k_, 1], L_pose[k_, 2], L_vel[k_, 0], L_vel[k_, 1], mpose,
+                       mvel)  # fmt: skip
+            if kn.cbf:
+                safety_filter(mpose, cmd, cbf_par, cbf_rad, cbf_obst, cbf_A, cbf_b, cbf_lam, cbf_bad)
+            stack_tail(kn, g, s, mpose, mvel)
             status = after_step(k_, N, stride, pose, vel, est_pose, est_vel, cmd, dcmd, tau, tau_raw, saturated, c_hat,
                                 vs, met, acc, lim, diag)  # fmt: skip
             if status == ROW:
