@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import json
 import os
 import shutil
 import subprocess
@@ -26,6 +27,27 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_callgrind import _C, _EV, parse  # noqa: E402
+
+
+def kernel_addresses() -> dict[str, str]:
+    """The entry address of every compiled specialisation of the package's kernels (numba's JIT code has no
+    symbols: callgrind names a function by its address) -> ``module.function``."""
+    from numba.core.registry import CPUDispatcher
+
+    out: dict[str, str] = {}
+    for mod in list(sys.modules.values()):
+        if not getattr(mod, "__name__", "").startswith("bioform_mj"):
+            continue
+        for name, obj in list(vars(mod).items()):
+            if isinstance(obj, CPUDispatcher):
+                for cres in obj.overloads.values():
+                    try:
+                        addr = cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
+                    except Exception:  # noqa: BLE001 - a specialisation without native code: skipped
+                        continue
+                    if addr:
+                        out[f"0x{addr:016x}"] = f"{obj.py_func.__module__.split('.')[-1]}.{name}"
+    return out
 
 
 def episode(a: argparse.Namespace, lib_path: str | None) -> None:
@@ -56,6 +78,7 @@ def episode(a: argparse.Namespace, lib_path: str | None) -> None:
         lib.cg_dump.argtypes = [ctypes.c_char_p]
         addrs = [nrt.rtsys.library.get_pointer_to_function(f) for f in ("NRT_incref", "NRT_decref")]
         Path(f"{lib_path}.nrt").write_text(" ".join(hex(x) for x in addrs))
+        Path(f"{lib_path}.names").write_text(json.dumps(kernel_addresses()))
         lib.cg_start()
         lib.cg_zero()
         for _ in range(a.steps):
@@ -105,10 +128,20 @@ def main(argv: list[str] | None = None) -> int:
         n = a.steps
         print(f"{a.scenario}, plant {a.plant}, control_dt {a.control_dt:g} s, {n} env steps; per env step:")
         print(f"  {_EV[0]} all {total / n:10.0f}   in mj_step {mj / n:10.0f}   the rest {(total - mj) / n:10.0f}")
+        known = json.loads(Path(f"{lib}.names").read_text())
         for label, addr in zip(("NRT_incref", "NRT_decref"), nrt):
             ids = {i for i, nm in names.items() if nm == f"0x{addr:016x}"}
             c = sum(v[0] for (fn, cf), v in arcs.items() if cf in ids)
-            print(f"  {label} calls {c / n:.1f}")
+            print(f"  {label} calls {c / n:.1f}; by caller (a kernel's entry address, or the JIT code's page):")
+            by: dict[str, int] = {}
+            for (fn, cf), v in arcs.items():
+                if cf in ids:
+                    nm = names.get(fn, "?")
+                    key = known.get(nm, nm)
+                    by[key] = by.get(key, 0) + v[0]
+            for key, cnt in sorted(by.items(), key=lambda kv: -kv[1]):
+                if cnt >= n * 0.5:
+                    print(f"    {key:40s} {cnt / n:7.1f}")
     return 0
 
 

@@ -105,3 +105,31 @@ def test_compiled_chunk_and_control_step_same_bits_with_the_filter_acting(plant)
     assert a.log.keys() == b.log.keys()
     for k in a.log:
         assert np.array_equal(a.log[k], b.log[k], equal_nan=a.log[k].dtype.kind == "f"), k
+
+
+def _gains(flag: str | None):
+    """A :class:`Gains` whose numbers are all different (the booleans: only ``flag`` True), its arrays empty."""
+    from typing import get_type_hints
+
+    from bioform_mj.control.kernel import Gains
+
+    hints = get_type_hints(Gains)
+    vals = {}
+    for i, f in enumerate(Gains._fields):
+        t = hints[f]
+        vals[f] = (
+            np.zeros((1, 2)) if t is np.ndarray else (f == flag) if t is bool else t(i + 1) + (0.5 if t is float else 0)
+        )
+    return Gains(**vals)
+
+
+@pytest.mark.parametrize("flag", ["bio", "learning", "steer", "leader_frame", "cbf"])
+def test_knobs_are_the_gains_numbers_field_by_field(flag):
+    """``kernel.knobs`` lists the fields one by one (inlined: no ``*args``): each in its own place."""
+    from bioform_mj.control.kernel import KNOBS, knobs
+
+    g = _gains(flag)
+    kn = knobs(g)  # compiled
+    assert kn._fields == KNOBS
+    assert tuple(kn) == tuple(getattr(g, f) for f in KNOBS)
+    assert len(set(tuple(kn)) - {True, False}) == len(KNOBS) - 5  # the numbers all differ: an order is seen

@@ -25,11 +25,7 @@ from bioform_mj.control.kernel import (
 from bioform_mj.core.equations import njit
 
 # The stack's pieces take the gains' numbers (Knobs) and only the arrays they read (control/kernel.py, issue 28):
-# the entry points here (sense_errors, control_phase, and track_velocity, direct_torque on their own) take the
-# named tuples whole (their callers: envs/fast.py, envs/parallel.py), make the Knobs first (a call), then bind
-# every field they need once, at their top, and hand the arrays to inlined helpers (no call after the binding:
-# numba's reference count of a bound array and its release can then be pruned; issue 30). Each helper reads
-# every array it takes (none under a condition of its own) and returns once.
+# the functions here read each field of Gains and StackState they need once, at their top.
 
 
 @njit
@@ -39,22 +35,11 @@ def sense_errors(g, s, lp, lv, pose, vel, comm, learn):
     follower's tracking error ``s.err`` (n, 3) from its own leader estimate (eqs. 27-28, or the
     slot's own pose for leader-frame offsets, design §4). ``pose`` (n,3), ``vel`` (n,2): measured."""
     kn = knobs(g)
-    z_hat, e_int, c_hat, d_hat, k_hat, tau_body = s.z_hat, s.e_int, s.c_hat, s.d_hat, s.k_hat, s.tau_body
-    est_pose, est_vel, p_err, v_err, est_rate, err, first = (
-        s.est_pose,
-        s.est_vel,
-        s.p_err,
-        s.v_err,
-        s.est_rate,
-        s.err,
-        s.first,
-    )
-    k4, c_min, c_max, offsets, src, dst, lacc = g.k4, g.c_min, g.c_max, g.offsets, g.src, g.dst, g.lacc
-    use, ew, lw, rp, rv = comm.use, comm.ew, comm.lw, comm.rp, comm.rv
-    learner_update(kn, learn and kn.learning and first[0] == 0, vel, z_hat, e_int, c_hat, d_hat, k_hat, tau_body, k4,
-                   c_min, c_max)  # fmt: skip
-    estimator_consensus(kn, lp[0], lp[1], lp[2], lv[0], lv[1], est_pose, est_vel, p_err, v_err, est_rate, src, dst,
-                        lacc, use, ew, lw, rp, rv)  # fmt: skip
+    learner_update(kn, learn and kn.learning and s.first[0] == 0, vel, s.z_hat, s.e_int, s.c_hat, s.d_hat, s.k_hat,
+                   s.tau_body, g.k4, g.c_min, g.c_max)  # fmt: skip
+    est_pose, est_vel, err, offsets = s.est_pose, s.est_vel, s.err, g.offsets
+    estimator_consensus(kn, lp[0], lp[1], lp[2], lv[0], lv[1], est_pose, est_vel, s.p_err, s.v_err, s.est_rate, g.src,
+                        g.dst, g.lacc, comm.use, comm.ew, comm.lw, comm.rp, comm.rv)  # fmt: skip
     for i in range(pose.shape[0]):
         follower_error(kn, i, pose, est_pose, est_vel, offsets, err)
 
@@ -65,16 +50,15 @@ def track_velocity(g, s, vel, cmd):
     ``[υ_cmd m/s, ω_cmd rad/s]`` with ``ĉ``: command derivative by the configured filter (the
     analytic mode of design §6 needs the kinematic law's own dynamics and falls back to the
     filter) or backward difference, sliding mode, saturation; writes ``s.cmd``, ``s.dcmd``,
-    ``s.tau_raw``, ``s.tau``, ``s.tau_body``, ``s.saturated`` (:func:`track_commands` on their arrays)."""
-    kn = knobs(g)
-    track_commands(kn, vel, cmd, s.cmd, s.dcmd, s.fy, s.fdy, s.c_hat, g.lim, s.tau, s.tau_raw, s.tau_body,
+    ``s.tau_raw``, ``s.tau``, ``s.tau_body``, ``s.saturated`` (:func:`track_commands`)."""
+    track_commands(knobs(g), vel, cmd, s.cmd, s.dcmd, s.fy, s.fdy, s.c_hat, g.lim, s.tau, s.tau_raw, s.tau_body,
                    s.saturated, s.first)  # fmt: skip
 
 
 @njit(inline=True)
 def track_commands(kn, vel, cmd, scmd, dcmd, fy, fdy, c_hat, lim, tau, tau_raw, tau_body, saturated, first):
-    """:func:`track_velocity` on the arrays of :class:`~.kernel.StackState` and :class:`~.kernel.Gains` by their
-    field names (``scmd``: ``s.cmd``) and the gains' :class:`~.kernel.Knobs` ``kn``; then ``first[0] = 0``."""
+    """:func:`track_velocity` with the gains' :class:`~.kernel.Knobs` ``kn`` on the arrays of
+    :class:`~.kernel.StackState` and :class:`~.kernel.Gains` by their field names (``scmd``: ``s.cmd``)."""
     first_step = first[0] == 1
     for i in range(vel.shape[0]):
         for c in range(2):
@@ -93,7 +77,7 @@ def direct_torque(g, s, tau):
 
 @njit(inline=True)
 def direct_torques(kn, tau, lim, stau, tau_raw, tau_body, saturated, first):
-    """:func:`direct_torque` on the arrays by their field names (``stau``: ``s.tau``); then ``first[0] = 0``."""
+    """:func:`direct_torque` on the arrays by their field names (``stau``: ``s.tau``)."""
     for i in range(tau.shape[0]):
         apply_torque(kn, i, tau[i, 0], tau[i, 1], lim, stau, tau_raw, tau_body, saturated)
     first[0] = 0
@@ -190,19 +174,20 @@ def clip_into(u, lo, hi):
 @njit
 def control_phase(g, s, mv, u, velocity, verr, vel, tau):
     """One call for the period's control (the stack's state is unboxed once, not three times): the
-    agents' actions ``u`` (n, 2) through the torque law (:func:`track_commands`, on the measured ``mv``;
+    agents' actions ``u`` (n, 2) through the torque law on the measured ``mv`` (:func:`track_commands`;
     ``velocity``) or as torques (:func:`direct_torques`), Table I's summand (:func:`velocity_error`, true
-    ``vel``), the torques copied to ``tau`` (n, 2), then the estimator's advance over the period."""
+    ``vel``), the torques copied to ``tau`` (n, 2), then the estimator's advance over the period. Calls
+    nothing (every piece inlined, ``knobs`` too): a call here kept LLVM from pruning the reference counts of
+    the arrays of ``g`` and ``s`` (43 a period; issue 30)."""
     kn = knobs(g)
-    scmd, dcmd, fy, fdy, c_hat, lim = s.cmd, s.dcmd, s.fy, s.fdy, s.c_hat, g.lim
-    stau, tau_raw, tau_body, saturated, first = s.tau, s.tau_raw, s.tau_body, s.saturated, s.first
-    est_pose, est_vel, est_rate, vs, err = s.est_pose, s.est_vel, s.est_rate, s.vs, s.err
     if velocity:
-        track_commands(kn, mv, u, scmd, dcmd, fy, fdy, c_hat, lim, stau, tau_raw, tau_body, saturated, first)
+        track_commands(kn, mv, u, s.cmd, s.dcmd, s.fy, s.fdy, s.c_hat, g.lim, s.tau, s.tau_raw, s.tau_body,
+                       s.saturated, s.first)  # fmt: skip
     else:
-        direct_torques(kn, u, lim, stau, tau_raw, tau_body, saturated, first)
-    velocity_error(verr, scmd, vel)
+        direct_torques(kn, u, g.lim, s.tau, s.tau_raw, s.tau_body, s.saturated, s.first)
+    velocity_error(verr, s.cmd, vel)
+    stau = s.tau
     for i in range(tau.shape[0]):
         tau[i, 0] = stau[i, 0]
         tau[i, 1] = stau[i, 1]
-    estimator_advance(kn, est_pose, est_vel, est_rate, vs, err)
+    estimator_advance(kn, s.est_pose, s.est_vel, s.est_rate, s.vs, s.err)
