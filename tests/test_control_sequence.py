@@ -125,7 +125,7 @@ def _gains(flag: str | None):
 
 @pytest.mark.parametrize("flag", ["bio", "learning", "steer", "leader_frame", "cbf"])
 def test_knobs_are_the_gains_numbers_field_by_field(flag):
-    """``kernel.knobs`` lists the fields one by one (inlined: no ``*args``): each in its own place."""
+    """``kernel.knobs`` (compiled) gives every number of the gains in its own place, named as in :data:`KNOBS`."""
     from bioform_mj.control.kernel import KNOBS, knobs
 
     g = _gains(flag)

@@ -243,16 +243,10 @@ def reset_state(g, s, est_pose0, vel0, c_hat0):
     s.first[0] = 1
 
 
-@njit(inline=True)
+@njit
 def knobs(g):
-    """The :class:`Knobs` of :class:`Gains` ``g``, field by field in the order of :data:`KNOBS` (numba's inliner
-    takes no ``*args``; inlined, a caller that takes ``g`` whole calls nothing here, which would keep LLVM from
-    pruning the reference counts of ``g``'s arrays, issue 30; ``tests/test_control_sequence.py`` checks the order)."""
-    return Knobs(
-        g.k1, g.k2, g.k3, g.A, g.B, g.D, g.kx, g.ky, g.kth, g.ka0, g.ka1, g.kb0, g.kb1, g.ephi0, g.ephi1, g.ca, g.cb,
-        g.tphi, g.f00, g.f01, g.f10, g.f11, g.g0, g.g1, g.deriv, g.k5a, g.k5b, g.kda, g.kdb, g.dt, g.bio, g.learning,
-        g.steer, g.leader_frame, g.kka, g.kkb, g.k_max, g.cbf,
-    )  # fmt: skip
+    """The :class:`Knobs` of :class:`Gains` ``g`` (a call: numba's inliner takes no ``*args``)."""
+    return Knobs(*g[:_LEAD], g.cbf)
 
 
 @njit

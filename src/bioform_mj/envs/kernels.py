@@ -26,6 +26,12 @@ from bioform_mj.core.equations import njit
 
 # The stack's pieces take the gains' numbers (Knobs) and only the arrays they read (control/kernel.py, issue 28):
 # the functions here read each field of Gains and StackState they need once, at their top.
+# Counted per environment step (scripts/bench_callgrind_env.py, paper, MuJoCo, 1 ms; session 13): 243 reference
+# counts, 175.5 of them in envs/fast.py's mujoco_period (the episode's named tuples read from its PeriodArgs), 43
+# in control_phase (one per array of its arguments), none in sense_errors. Tried here and measured worse, so not
+# kept: every field bound once at the entries' tops with the torque law, direct torques and Table I's summand as
+# inlined helpers taking arrays (243 -> 251 a step); the same with knobs inlined field by
+# field so that control_phase calls nothing (43 -> 50): its counts are not the calls' doing.
 
 
 @njit
@@ -50,37 +56,28 @@ def track_velocity(g, s, vel, cmd):
     ``[υ_cmd m/s, ω_cmd rad/s]`` with ``ĉ``: command derivative by the configured filter (the
     analytic mode of design §6 needs the kinematic law's own dynamics and falls back to the
     filter) or backward difference, sliding mode, saturation; writes ``s.cmd``, ``s.dcmd``,
-    ``s.tau_raw``, ``s.tau``, ``s.tau_body``, ``s.saturated`` (:func:`track_commands`)."""
-    track_commands(knobs(g), vel, cmd, s.cmd, s.dcmd, s.fy, s.fdy, s.c_hat, g.lim, s.tau, s.tau_raw, s.tau_body,
-                   s.saturated, s.first)  # fmt: skip
-
-
-@njit(inline=True)
-def track_commands(kn, vel, cmd, scmd, dcmd, fy, fdy, c_hat, lim, tau, tau_raw, tau_body, saturated, first):
-    """:func:`track_velocity` with the gains' :class:`~.kernel.Knobs` ``kn`` on the arrays of
-    :class:`~.kernel.StackState` and :class:`~.kernel.Gains` by their field names (``scmd``: ``s.cmd``)."""
-    first_step = first[0] == 1
+    ``s.tau_raw``, ``s.tau``, ``s.tau_body``, ``s.saturated``."""
+    kn = knobs(g)
+    scmd, dcmd, fy, fdy, c_hat, lim = s.cmd, s.dcmd, s.fy, s.fdy, s.c_hat, g.lim
+    tau, tau_raw, tau_body, saturated = s.tau, s.tau_raw, s.tau_body, s.saturated
+    first = s.first[0] == 1
     for i in range(vel.shape[0]):
         for c in range(2):
             scmd[i, c] = cmd[i, c]
-            follower_derivative(kn, i, c, first_step, fy, fdy, scmd, dcmd)
+            follower_derivative(kn, i, c, first, fy, fdy, scmd, dcmd)
         follower_torques(kn, i, cmd[i, 0], cmd[i, 1], vel, dcmd, c_hat, lim, tau, tau_raw, tau_body, saturated)
-    first[0] = 0
+    s.first[0] = 0
 
 
 @njit
 def direct_torque(g, s, tau):
     """``action = "torque"``: the agents' wheel torques ``tau`` (n, 2) N·m, already within the
     action space ``±τ_max``; the same bookkeeping as the torque law (``s.tau_body`` feeds the learner)."""
-    direct_torques(knobs(g), tau, g.lim, s.tau, s.tau_raw, s.tau_body, s.saturated, s.first)
-
-
-@njit(inline=True)
-def direct_torques(kn, tau, lim, stau, tau_raw, tau_body, saturated, first):
-    """:func:`direct_torque` on the arrays by their field names (``stau``: ``s.tau``)."""
+    kn = knobs(g)
+    lim, stau, tau_raw, tau_body, saturated = g.lim, s.tau, s.tau_raw, s.tau_body, s.saturated
     for i in range(tau.shape[0]):
         apply_torque(kn, i, tau[i, 0], tau[i, 1], lim, stau, tau_raw, tau_body, saturated)
-    first[0] = 0
+    s.first[0] = 0
 
 
 @njit
@@ -96,7 +93,7 @@ def formation_error(pose, lp, off, leader_frame, out):
         out[i] = math.hypot(pose[i, 0] - (lp[0] - ox), pose[i, 1] - (lp[1] - oy))
 
 
-@njit(inline=True)
+@njit
 def velocity_error(verr, cmd, vel):
     """Table I's metric summand: ``verr += |υ_cmd − υ| + |ω_cmd − ω|`` per follower (true velocities)."""
     for i in range(verr.shape[0]):
@@ -174,20 +171,16 @@ def clip_into(u, lo, hi):
 @njit
 def control_phase(g, s, mv, u, velocity, verr, vel, tau):
     """One call for the period's control (the stack's state is unboxed once, not three times): the
-    agents' actions ``u`` (n, 2) through the torque law on the measured ``mv`` (:func:`track_commands`;
-    ``velocity``) or as torques (:func:`direct_torques`), Table I's summand (:func:`velocity_error`, true
-    ``vel``), the torques copied to ``tau`` (n, 2), then the estimator's advance over the period. Calls
-    nothing (every piece inlined, ``knobs`` too): a call here kept LLVM from pruning the reference counts of
-    the arrays of ``g`` and ``s`` (43 a period; issue 30)."""
-    kn = knobs(g)
+    agents' actions ``u`` (n, 2) through :func:`track_velocity` (``velocity``) or
+    :func:`direct_torque`, Table I's summand (:func:`velocity_error`, true ``vel``), the torques
+    copied to ``tau`` (n, 2), then the estimator's advance over the period."""
     if velocity:
-        track_commands(kn, mv, u, s.cmd, s.dcmd, s.fy, s.fdy, s.c_hat, g.lim, s.tau, s.tau_raw, s.tau_body,
-                       s.saturated, s.first)  # fmt: skip
+        track_velocity(g, s, mv, u)
     else:
-        direct_torques(kn, u, g.lim, s.tau, s.tau_raw, s.tau_body, s.saturated, s.first)
+        direct_torque(g, s, u)
     velocity_error(verr, s.cmd, vel)
     stau = s.tau
     for i in range(tau.shape[0]):
         tau[i, 0] = stau[i, 0]
         tau[i, 1] = stau[i, 1]
-    estimator_advance(kn, s.est_pose, s.est_vel, s.est_rate, s.vs, s.err)
+    estimator_advance(knobs(g), s.est_pose, s.est_vel, s.est_rate, s.vs, s.err)
