@@ -142,3 +142,14 @@ def test_batch_env_takes_float32_actions_at_the_bounds(batched):
     over[1, 2, 1] *= 1 + 1e-6
     with pytest.raises(ValueError, match="world 1, follower_3 .* outside the action space"):
         be.step(over)
+
+
+def test_batch_env_says_it_cannot_be_pickled(batched):
+    """``pickle`` and ``deepcopy`` of the Warp-batched environment: a ``TypeError`` saying why and what to use
+    (not ctypes' own error from deep inside it)."""
+    import copy
+    import pickle
+
+    for dup in (pickle.dumps, copy.deepcopy):
+        with pytest.raises(TypeError, match="BatchEnv cannot be pickled or copied .*batch_env.*vector_env"):
+            dup(batched[0])

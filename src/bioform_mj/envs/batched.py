@@ -418,6 +418,14 @@ class BatchEnv:
         self._ended[mask.astype(bool)] = False
         return self.obs
 
+    def __reduce_ex__(self, protocol: int):
+        """Not picklable, said in one line (the worlds' state lives in Warp arrays on the device, behind ctypes
+        pointers; pickle and deepcopy failed deep inside ctypes): build one per process with ``batch_env``."""
+        raise TypeError(
+            "BatchEnv cannot be pickled or copied (its worlds live on the Warp device): build one in each process "
+            "with batch_env(...), or use vector_env (which pickles) on the CPU"
+        )
+
     def step(self, actions: Any):
         """One control period of every world that is running; returns ``(obs, reward, terminated, truncated)``:
         Warp arrays (W, n, obs_size), (W, n) and numpy booleans (W,)."""
