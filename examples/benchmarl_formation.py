@@ -32,7 +32,11 @@ class FormationTask(PettingZooClass):
 
     def get_env_fun(self, num_envs: int, continuous_actions: bool, seed: int | None, device) -> Callable[[], EnvBase]:
         return lambda: PettingZooWrapper(
-            parallel_env("paper", overrides=OVERRIDES, dtype="float32"), use_mask=False, seed=seed, device=device
+            parallel_env("paper", overrides=OVERRIDES, dtype="float32"),
+            use_mask=False,
+            seed=seed,
+            device=device,
+            return_state=self.has_state(),  # env.state(): MAPPO's centralised critic takes it
         )
 
     def supports_continuous_actions(self) -> bool:
@@ -42,7 +46,7 @@ class FormationTask(PettingZooClass):
         return False
 
     def has_state(self) -> bool:
-        return False
+        return True  # the environment's state_space: every follower's true pose and velocity
 
     def has_render(self, env: EnvBase) -> bool:
         return False

@@ -123,3 +123,33 @@ def test_torchrl_style_keys_on_the_warp_batched_env(batched):
     assert out["agents"]["reward"].shape == (W, 3, 1) and out["terminated"].shape == (W, 1)
     with pytest.raises(ValueError, match="seeds are fixed"):
         td_env.reset(seed=1)
+
+
+def test_batch_env_takes_float32_actions_at_the_bounds(batched):
+    """A float32 action at a bound (a tanh policy saturated: float32(2π) = 6.2831855 > 2π) is taken and
+    clipped onto the bound: the same next observations, bit for bit, as the float64 bound; beyond the
+    bound by more than float32 rounding (2π·(1 + 1e-6)) it is refused, naming the world and follower."""
+    be = batched[0]
+    hi = np.broadcast_to(be.high, (W, 3, 2))
+    assert float(np.float32(hi[0, 0, 1])) > hi[0, 0, 1]  # the case that stopped a run
+    got = []
+    for a in (hi.astype(np.float32), hi.astype(np.float64), -hi.astype(np.float32)):
+        be.reset()
+        got.append(be.step(a)[0].numpy().copy())
+    assert np.array_equal(got[0], got[1]) and not np.array_equal(got[0], got[2])
+    be.reset()
+    over = hi.copy()
+    over[1, 2, 1] *= 1 + 1e-6
+    with pytest.raises(ValueError, match="world 1, follower_3 .* outside the action space"):
+        be.step(over)
+
+
+def test_batch_env_says_it_cannot_be_pickled(batched):
+    """``pickle`` and ``deepcopy`` of the Warp-batched environment: a ``TypeError`` saying why and what to use
+    (not ctypes' own error from deep inside it)."""
+    import copy
+    import pickle
+
+    for dup in (pickle.dumps, copy.deepcopy):
+        with pytest.raises(TypeError, match="BatchEnv cannot be pickled or copied .*batch_env.*vector_env"):
+            dup(batched[0])

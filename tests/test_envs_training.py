@@ -6,6 +6,7 @@ wrapper under Gymnasium's and SB3's checkers, and SuperSuit + SB3 ``SubprocVecEn
 from __future__ import annotations
 
 import copy
+import functools
 import math
 import pickle
 import warnings
@@ -110,7 +111,8 @@ def test_domain_randomisation_draws_within_the_ranges():
         ("ideal", {"c_true": (0.0, 1.0)}, r"randomize\['c_true'\] bound 0"),
         ("ideal", {"friction": (0.5, 1.0)}, r"randomize\['friction'\] needs plant.kind = mujoco"),
         ("mujoco", {"c_true": (0.5, 1.0)}, r"randomize\['c_true'\] needs plant.kind = ideal"),
-        ("mujoco", {"friction": (-0.5, 1.0)}, r"randomize\['friction'\] must be >= 0"),
+        ("mujoco", {"friction": (-0.5, 1.0)}, r"randomize\['friction'\] must be > 0"),
+        ("mujoco", {"friction": (0.0, 1.0)}, r"randomize\['friction'\] must be > 0 .*no grip.*got low 0"),
     ],
 )
 def test_bad_randomisation_is_named_before_any_step(plant, rz, match):
@@ -227,13 +229,25 @@ def test_render_rgb_array(plant):
     assert f0.shape == f1.shape == (540, 960, 3) and f0.dtype == np.uint8
     assert np.mean(f0 != f1) > 0.01
     env.close()
-    render_test(lambda render_mode=None: envs_mod.env("paper", overrides=ov, render_mode="rgb_array"))
+    # as PettingZoo's own environments are tested: the env() function itself, "human" included
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        render_test(functools.partial(envs_mod.env, "paper", overrides=ov))
     plain = envs_mod.parallel_env("paper", overrides=ov)
     plain.reset(seed=0)
     with pytest.raises(RuntimeError, match="render_mode='rgb_array'"):
         plain.render()
-    with pytest.raises(ValueError, match="unknown render_mode 'human'"):
-        envs_mod.parallel_env("paper", render_mode="human")
+    with pytest.raises(ValueError, match="unknown render_mode 'ansi'"):
+        envs_mod.parallel_env("paper", render_mode="ansi")
+    import matplotlib
+
+    if matplotlib.get_backend().lower() == "agg":  # no display here: "human" says it shows nothing, once per env
+        said = [w for w in caught if "render_mode='human'" in str(w.message) and "'agg'" in str(w.message)]
+        assert len(said) == 1
+        human = envs_mod.parallel_env("paper", overrides=ov, render_mode="human")
+        with pytest.warns(UserWarning, match="nothing is shown"):
+            human.reset(seed=0)  # a human-mode reset renders (as Gymnasium's and PettingZoo's do)
+        assert human.step({a: np.zeros(2) for a in human.agents})[0] and human.render() is None
 
 
 @pytest.mark.parametrize("plant", PLANTS)
@@ -349,3 +363,37 @@ def test_a_follower_env_copy_continues_bit_for_bit(how):
         if a[2] or a[3]:
             break
     assert n == 40
+
+
+def test_follower_env_is_registered_and_passes_the_render_check():
+    """``gymnasium.make(GYMNASIUM_ID, ...)`` and ``make_vec`` build the follower environment; Gymnasium's
+    ``check_env`` with its render check (which remakes the environment from its spec in every render mode)
+    passes with every warning an error, on ``follower_env(...)`` too; "human" is refused, naming the modes."""
+    import gymnasium
+    from gymnasium.utils.env_checker import check_env
+
+    from bioform_mj.envs.single import GYMNASIUM_ID
+    from bioform_mj.outputs.gl import GLUnavailable
+
+    ov = [*SHORT, "plant.kind=ideal"]
+    made = gymnasium.make(GYMNASIUM_ID, scenario="paper", overrides=ov)
+    direct = follower_env("paper", overrides=ov)
+    assert made.unwrapped.spec.id == direct.spec.id == GYMNASIUM_ID
+    o1, _ = made.reset(seed=3)
+    o2, _ = direct.reset(seed=3)
+    a = np.float32([0.7, -0.2])
+    assert o1.tobytes() == o2.tobytes() and made.step(a)[0].tobytes() == direct.step(a)[0].tobytes()
+    venv = gymnasium.make_vec(GYMNASIUM_ID, num_envs=2, vectorization_mode="sync", scenario="paper", overrides=ov,
+                               randomize=RAND)  # fmt: skip
+    obs, _ = venv.reset(seed=0)  # seeds 0 and 1: different starts
+    assert obs.shape == (2, direct.observation_space.shape[0]) and not np.array_equal(obs[0], obs[1])
+    venv.close()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            check_env(follower_env("paper", overrides=ov, render_mode="rgb_array"))
+            check_env(made.unwrapped)
+    except GLUnavailable as exc:
+        pytest.skip(f"no off-screen OpenGL here: {exc}")
+    with pytest.raises(ValueError, match="unknown render_mode 'human' .*rgb_array"):
+        follower_env("paper", overrides=ov, render_mode="human")

@@ -279,14 +279,23 @@ def _env_reset(
 
 @wp.kernel
 def _env_check_actions(
-    action: wp.array3d(dtype=F), low: wp.array2d(dtype=F), high: wp.array2d(dtype=F), bad: wp.array(dtype=int)
+    action: wp.array3d(dtype=F),
+    low: wp.array2d(dtype=F),
+    high: wp.array2d(dtype=F),
+    acc_low: wp.array2d(dtype=F),
+    acc_high: wp.array2d(dtype=F),
+    bad: wp.array(dtype=int),
 ):
-    """``bad[0]`` = 1 + the flat index (world·n + agent) of an action that is not finite or outside the space."""
+    """``bad[0]`` = 1 + the flat index (world·n + agent) of an action that is not finite or outside the space
+    by more than float32 rounding of its bounds (``acc_low``, ``acc_high``: a float32 2π is above 2π); an
+    accepted action is clipped onto ``[low, high]`` in place (the parallel environment's rule)."""
     w, i = wp.tid()
     for c in range(2):
         u = action[w, i, c]
-        if not wp.isfinite(u) or u < low[i, c] or u > high[i, c]:
+        if not wp.isfinite(u) or u < acc_low[i, c] or u > acc_high[i, c]:
             wp.atomic_max(bad, 0, 1 + w * action.shape[1] + i)
+        else:
+            action[w, i, c] = wp.clamp(u, low[i, c], high[i, c])
 
 
 class BatchEnv:
@@ -357,6 +366,8 @@ class BatchEnv:
             self._action = wp.zeros((W, n, 2), dtype=F)
             self._low = wp.array(self.low, dtype=F)
             self._high = wp.array(self.high, dtype=F)
+            acc = np.maximum(hi, hi.astype(np.float32).astype(float))  # float32 rounding of a bound: taken
+            self._acc_low, self._acc_high = wp.array(-acc, dtype=F), wp.array(acc, dtype=F)
             self._bad = wp.zeros(1, dtype=int)
             self._mask = wp.zeros(W, dtype=int)
             self._all = wp.ones(W, dtype=int)
@@ -407,6 +418,14 @@ class BatchEnv:
         self._ended[mask.astype(bool)] = False
         return self.obs
 
+    def __reduce_ex__(self, protocol: int):
+        """Not picklable, said in one line (the worlds' state lives in Warp arrays on the device, behind ctypes
+        pointers; pickle and deepcopy failed deep inside ctypes): build one per process with ``batch_env``."""
+        raise TypeError(
+            "BatchEnv cannot be pickled or copied (its worlds live on the Warp device): build one in each process "
+            "with batch_env(...), or use vector_env (which pickles) on the CPU"
+        )
+
     def step(self, actions: Any):
         """One control period of every world that is running; returns ``(obs, reward, terminated, truncated)``:
         Warp arrays (W, n, obs_size), (W, n) and numpy booleans (W,)."""
@@ -424,8 +443,8 @@ class BatchEnv:
                     raise ValueError(f"actions must have shape ({self.nworld}, {self.n}, 2), got {a.shape}")
                 self._action.assign(a)
             self._bad.zero_()
-            wp.launch(_env_check_actions, dim=(self.nworld, self.n), inputs=[self._action, self._low, self._high,
-                                                                            self._bad])  # fmt: skip
+            chk = [self._action, self._low, self._high, self._acc_low, self._acc_high, self._bad]
+            wp.launch(_env_check_actions, dim=(self.nworld, self.n), inputs=chk)
             bad = int(self._bad.numpy()[0])
             if bad:
                 w, i = divmod(bad - 1, self.n)

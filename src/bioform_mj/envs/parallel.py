@@ -133,12 +133,13 @@ class FormationParallelEnv(ParallelEnv):
     randomize : start and domain randomisation ``{key: (low, high)}`` drawn per episode
         (:mod:`~bioform_mj.envs.randomize`; units there); None: the scenario's own start.
     max_cycles : control steps per episode (truncation); default ``sim.duration / sim.control_dt``.
-    render_mode : None or ``"rgb_array"`` (:meth:`render` returns the frame of ``bioform run --video``).
+    render_mode : None, ``"rgb_array"`` (:meth:`render` returns the frame of ``bioform run --video``) or
+        ``"human"`` (every ``reset`` and ``step`` shows that frame in a matplotlib window; :meth:`render` too).
     """
 
     metadata = {
         "name": "bioform_formation_v0",
-        "render_modes": ["rgb_array"],
+        "render_modes": ["rgb_array", "human"],
         "is_parallelizable": True,
         "render_fps": 30,
     }
@@ -163,7 +164,7 @@ class FormationParallelEnv(ParallelEnv):
             raise ValueError(f"unknown observation dtype {dtype!r} (expected float64 or float32)")
         self._dtype = np.dtype(dtype)
         if render_mode not in (None, *self.metadata["render_modes"]):
-            raise ValueError(f"unknown render_mode {render_mode!r} (expected None or one of: rgb_array)")
+            raise ValueError(f"unknown render_mode {render_mode!r} (expected None or one of: rgb_array, human)")
         if max_cycles is not None:
             if isinstance(max_cycles, bool) or not isinstance(max_cycles, (int, np.integer)) or max_cycles < 1:
                 raise ValueError(f"max_cycles must be a positive integer (control steps), got {max_cycles!r}")
@@ -377,6 +378,8 @@ class FormationParallelEnv(ParallelEnv):
         self._start(ep)
         self._log = []
         obs = self._observations()
+        if self.render_mode == "human":
+            self.render()
         return obs, {a: {"t": 0.0, "seed": ep} for a in self.agents}
 
     def _start(self, ep: int) -> None:
@@ -482,11 +485,13 @@ class FormationParallelEnv(ParallelEnv):
         if self._done:
             raise RuntimeError("step() after the episode ended: call reset() first")
         out = fast_step(self, actions) if self._fast_ok else None  # one compiled call (envs/fast.py)
-        if out is not None:
-            return out
-        u = self._actions(actions)
-        self._log.append(u)
-        return self._outputs(*self._advance(u))
+        if out is None:
+            u = self._actions(actions)
+            self._log.append(u)
+            out = self._outputs(*self._advance(u))
+        if self.render_mode == "human":
+            self.render()
+        return out
 
     def _outputs(self, r, end, trunc, diverged, hits, agents, O=None):
         """``step``'s five dicts from :meth:`_advance`'s results (``O``: the observations, computed here if None)."""
@@ -722,10 +727,10 @@ class FormationParallelEnv(ParallelEnv):
         x = np.concatenate([self._pose.ravel(), self._vel.ravel()])
         return np.clip(np.nan_to_num(x), -self._state_hi, self._state_hi).astype(self._dtype)
 
-    def render(self) -> np.ndarray:
+    def render(self) -> np.ndarray | None:
         """The current frame, ``(height, width, 3)`` uint8, with ``render_mode = "rgb_array"``: the
         renderer of ``bioform run --video`` (:mod:`~bioform_mj.envs.render`; needs off-screen OpenGL,
-        ``MUJOCO_GL=egl`` or ``osmesa``)."""
+        ``MUJOCO_GL=egl`` or ``osmesa``). ``"human"``: that frame shown in a window, None returned."""
         if self.render_mode is None:
             raise RuntimeError(
                 "render() needs a render mode: build the environment with render_mode='rgb_array' "
@@ -736,8 +741,8 @@ class FormationParallelEnv(ParallelEnv):
         if self._renderer is None:
             from bioform_mj.envs.render import EnvRenderer
 
-            self._renderer = EnvRenderer(self)
-        return self._renderer.frame(self)
+            self._renderer = EnvRenderer(self, window=self.render_mode == "human")
+        return self._renderer.show(self)
 
     def close(self) -> None:
         """Free the renderer's OpenGL context (the plant is kept: a closed environment may be reset again)."""

@@ -124,8 +124,10 @@ class Randomization:
                 )
             if key == "friction" and kind != "mujoco":
                 raise ValueError("randomize['friction'] needs plant.kind = mujoco (the ideal plant has no friction)")
-            if key == "friction" and lo < 0:
-                raise ValueError(f"randomize['friction'] must be >= 0, got low {lo:g}")
+            if key == "friction" and not lo > 0:  # load refuses a friction patch of μ 0 (no grip) alike
+                raise ValueError(
+                    f"randomize['friction'] must be > 0 (a factor 0 leaves the wheels no grip), got low {lo:g}"
+                )
             if key == "position":  # a start beyond the divergence guard ended every episode at its first step
                 far = float(np.max(np.abs(np.array(base.formation.initial_poses, float).reshape(-1, 3)[:, :2])))
                 far += base.formation.init_jitter + max(abs(lo), abs(hi))

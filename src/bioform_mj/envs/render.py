@@ -6,6 +6,10 @@ plant), the same trails, halos, slot discs and caption, drawn by the same functi
 camera differs: ``--video`` smooths its automatic camera over the whole run, known in advance;
 an environment knows only the frames so far, so the camera follows the last second of them.
 
+``render_mode = "human"`` shows the same frames in a matplotlib window (:class:`HumanWindow`): with a
+display and an interactive backend (``MPLBACKEND=TkAgg``, Qt, ...); where matplotlib has none (no display:
+its ``agg`` backend) it warns once that nothing is shown, and ``render()`` still returns None.
+
 Off-screen OpenGL: ``MUJOCO_GL=egl`` (works here, with Mesa's llvmpipe or a GPU's EGL) or
 ``osmesa``, set before MuJoCo is first imported; without one, :meth:`EnvRenderer.frame` raises
 :class:`~bioform_mj.outputs.gl.GLUnavailable` (a ``ValueError``-free ``InputError``) saying so.
@@ -39,7 +43,9 @@ class EnvRenderer:
     (the trails grow with them). ``width`` × ``height`` pixels; ``fps``: frames per second of
     simulated time the caller means to take (the camera smooths over one second of them)."""
 
-    def __init__(self, env: Any, width: int = WIDTH, height: int = HEIGHT, fps: float = 30.0) -> None:
+    def __init__(
+        self, env: Any, width: int = WIDTH, height: int = HEIGHT, fps: float = 30.0, window: bool = False
+    ) -> None:
         from bioform_mj.outputs.gl import make_renderer
         from bioform_mj.outputs.video import Caption, FrameCapture, Replay, follower_rgb
         from bioform_mj.robots.scene import robot_unit
@@ -54,6 +60,7 @@ class EnvRenderer:
         self.line_px = max(2.0, self.height / 200)
         self.unit = robot_unit(self.replay.half_track)
         self._fresh = True  # the capture's one frame is the state now: frame() draws it without sampling
+        self.window = HumanWindow(env.metadata.get("render_fps", fps)) if window else None
 
     def _sample(self, env: Any) -> None:
         """Append the environment's state now to the capture (as ``FrameCapture.sample`` does in a run)."""
@@ -110,6 +117,60 @@ class EnvRenderer:
         ]
         return np.ascontiguousarray(self.caption.draw(img, lines), dtype=np.uint8)
 
+    def show(self, env: Any) -> np.ndarray | None:
+        """``render()``'s result: the frame (``rgb_array``), or None after showing it in the window (``human``)."""
+        if self.window is None:
+            return self.frame(env)
+        if self.window.interactive:
+            self.window.show(self.frame(env))
+        return None
+
     def close(self) -> None:
-        """Free the OpenGL context."""
+        """Free the OpenGL context (and close the window)."""
         self.renderer.close()
+        if self.window is not None:
+            self.window.close()
+
+
+class HumanWindow:
+    """``render_mode = "human"``: frames shown in one matplotlib figure, paced at ``fps`` frames per second
+    of wall time at most. ``interactive``: whether matplotlib's backend can show a window; where it cannot
+    (no display: ``agg``), a ``UserWarning`` says so once and :meth:`show` is not called."""
+
+    def __init__(self, fps: float) -> None:
+        import warnings
+
+        import matplotlib
+        from matplotlib.backends import BackendFilter, backend_registry
+
+        self.backend = str(matplotlib.get_backend()).lower()
+        self.interactive = self.backend in backend_registry.list_builtin(BackendFilter.INTERACTIVE)
+        self.pause = 1.0 / float(fps)
+        self.fig = self.image = None
+        if not self.interactive:
+            warnings.warn(
+                f"render_mode='human' shows frames in a matplotlib window, but matplotlib's backend is "
+                f"{self.backend!r} (no display here): nothing is shown; use render_mode='rgb_array' and write "
+                "the frames to a video (docs/envs.md)",
+                UserWarning,
+                stacklevel=4,
+            )
+
+    def show(self, frame: np.ndarray) -> None:
+        import matplotlib.pyplot as plt
+
+        if self.fig is None or not plt.fignum_exists(self.fig.number):
+            self.fig, ax = plt.subplots(figsize=(frame.shape[1] / 100, frame.shape[0] / 100), dpi=100)
+            ax.set_position((0, 0, 1, 1))
+            ax.set_axis_off()
+            self.image = ax.imshow(frame)
+        else:
+            self.image.set_data(frame)
+        plt.pause(self.pause)
+
+    def close(self) -> None:
+        if self.fig is not None:
+            import matplotlib.pyplot as plt
+
+            plt.close(self.fig)
+            self.fig = None

@@ -19,6 +19,7 @@ from typing import Any
 import gymnasium
 import numpy as np
 from gymnasium import spaces
+from gymnasium.envs.registration import EnvSpec
 
 from bioform_mj.envs.parallel import FormationParallelEnv, parallel_env
 from bioform_mj.envs.policy import ControllerPolicy
@@ -31,6 +32,8 @@ class FollowerEnv(gymnasium.Env):
     ``others``: a callable ``obs dict -> action dict`` for the other followers (it may have
     ``reset()``), or None for the paper's controller."""
 
+    # "rgb_array" only: Gymnasium's check_env makes the environment in every listed mode ("human" would
+    # want a display); the formation environment itself also has "human"
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
 
     def __init__(
@@ -41,6 +44,8 @@ class FollowerEnv(gymnasium.Env):
         **options: Any,
     ) -> None:
         options.setdefault("dtype", "float32")
+        if options.get("render_mode") not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"unknown render_mode {options['render_mode']!r} (expected None or one of: rgb_array)")
         self.par: FormationParallelEnv = parallel_env(scenario, **options)
         if agent not in self.par.possible_agents:
             raise ValueError(f"unknown agent {agent!r} (agents: {', '.join(self.par.possible_agents)})")
@@ -51,6 +56,9 @@ class FollowerEnv(gymnasium.Env):
         self.observation_space = self.par.observation_space(agent)
         self.action_space = spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
         self._scale = self.par._high[self._i].copy()  # action ±1 → ± this bound
+        # its Gymnasium spec (gymnasium.make sets its own): check_env makes it again in each render mode
+        kwargs = {"scenario": scenario, "agent": agent, "others": others, **options}
+        self.spec = EnvSpec(GYMNASIUM_ID, entry_point="bioform_mj.envs.single:FollowerEnv", kwargs=kwargs)
 
     def reset(self, *, seed: int | None = None, options: Mapping[str, Any] | None = None):
         """Start an episode (``seed``: :meth:`FormationParallelEnv.reset`); ``(observation, info)``."""
@@ -77,12 +85,19 @@ class FollowerEnv(gymnasium.Env):
         self._obs = obs
         return obs[self.agent], rew[self.agent], bool(term[self.agent]), bool(trunc[self.agent]), info[self.agent]
 
-    def render(self) -> np.ndarray:
-        """The formation's frame (:meth:`FormationParallelEnv.render`)."""
+    def render(self) -> np.ndarray | None:
+        """The formation's frame, or None in ``"human"`` mode (:meth:`FormationParallelEnv.render`)."""
         return self.par.render()
 
     def close(self) -> None:
         self.par.close()
+
+
+#: Gymnasium's id of :class:`FollowerEnv`: ``gymnasium.make(GYMNASIUM_ID, scenario=..., **options)`` (what
+#: Gymnasium's ``check_env`` wants to test every render mode, and ``gymnasium.make_vec`` takes)
+GYMNASIUM_ID = "bioform_mj/Follower-v0"
+if GYMNASIUM_ID not in gymnasium.registry:
+    gymnasium.register(id=GYMNASIUM_ID, entry_point="bioform_mj.envs.single:FollowerEnv")
 
 
 def follower_env(scenario: str | Path | Any = "paper", **options: Any) -> FollowerEnv:

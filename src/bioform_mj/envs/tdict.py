@@ -39,6 +39,19 @@ class TorchRLStyle:
         self._term = np.zeros(self.nworld, dtype=bool)
         self._trunc = np.zeros(self.nworld, dtype=bool)
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Picklable (the torch module is not): the wrapped environment pickles as it does."""
+        return {**self.__dict__, "_torch": self._torch is not None}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        if state["_torch"]:
+            import torch as _torch
+
+            self._torch = _torch
+        else:
+            self._torch = None
+
     @property
     def batch_size(self) -> tuple[int]:
         """``(W,)``: TorchRL's batch size of this environment."""

@@ -335,6 +335,9 @@ class VectorEnv:
                 f"bound of {bound / 2**30:.2f} GiB: fewer worlds"
             )
         self.envs = [env0] + [parallel_env(scenario, **options) for _ in range(W - 1)]
+        #: what rebuilds it (pickle, deepcopy: :meth:`__getstate__`)
+        opts = dict(max_bytes=max_bytes, warm=warm, pin=pin, **env0._init_kwargs)
+        self._init = (env0.base_scenario, W, threads, opts)
         self.nworld, self.n, self.threads = W, env0.n, int(T)
         self.obs_size, self.N, self.dt = env0.obs_size, env0.N, env0.dt
         self.possible_agents = list(env0.possible_agents)
@@ -374,6 +377,10 @@ class VectorEnv:
         self._started = False
         #: the actions of the period being stepped (the period clips them in place)
         self._U = np.zeros((W, n, 2))
+        #: the periods stepped since the oldest current episode began: (actions as clipped, running) each, and
+        #: the index in it at which each world's episode began (-1: none yet): what a copy replays
+        self._hist: list[tuple[np.ndarray, np.ndarray]] = []
+        self._ep_start = np.full(W, -1, dtype=np.int64)
         #: one VecArgs per thread, built at the first step (the worlds' arguments are typed then)
         self._v: Any = None
         #: the team of threads (envs.team): (control array, worker threads, the process id that started them)
@@ -405,6 +412,11 @@ class VectorEnv:
                 raise ValueError(f"seeds must be >= 0, got {seeds}")
         for w, s in zip(sel, seeds):
             self._reset_world(int(w), s)
+        self._ep_start[sel] = len(self._hist)
+        drop = int(self._ep_start[self._ep_start >= 0].min())  # periods no current episode needs
+        if drop:
+            del self._hist[:drop]
+            self._ep_start[self._ep_start >= 0] -= drop
         self._started = True
         return self._out_obs()
 
@@ -587,6 +599,7 @@ class VectorEnv:
         if U.shape != (self.nworld, self.n, 2):
             raise ValueError(f"actions must have shape ({self.nworld}, {self.n}, 2), got {U.shape}")
         self._U[...] = U  # a copy: the period clips it in place
+        running = self.running.copy()
         if self._v is None:
             self._compile()
         if HAVE_TEAM:
@@ -611,6 +624,7 @@ class VectorEnv:
                 self.envs[bad]._actions({ag: U[bad, i] for i, ag in enumerate(self.possible_agents)})
             except ValueError as exc:
                 raise ValueError(f"world {bad}: {exc}") from exc
+        self._hist.append((self._U.copy(), running))
         if warned > 0:  # a MuJoCo warning: the single environment's period tail in Python (the state not observed)
             for w in np.flatnonzero(self._status & WARNED):
                 self._warned(int(w))
@@ -681,6 +695,42 @@ class VectorEnv:
         """The observations in the environment's dtype (a new array)."""
         self._obs_out[...] = self.obs
         return self._obs_out.copy()
+
+    # ------------------------------------------------------------------ pickling and copies
+    def __getstate__(self) -> dict[str, Any]:
+        """What rebuilds this environment (its MuJoCo models, compiled calls and threads are not picklable):
+        its arguments, each world's episode as its seed and the periods stepped since it began (actions as
+        clipped, which worlds ran), the worlds' flags and random streams. The copy replays them."""
+        rng = [None if e._np_random is None else e._np_random.bit_generator.state for e in self.envs]
+        return {
+            "init": self._init, "seeds": self.seeds.copy(), "ep_start": self._ep_start.copy(),
+            "hist": [(u.copy(), r.copy()) for u, r in self._hist], "rng": rng, "running": self.running.copy(),
+            "term": self._term.copy(), "trunc": self._trunc.copy(), "started": self._started,
+        }  # fmt: skip
+
+    def __setstate__(self, st: dict[str, Any]) -> None:
+        """Rebuild from :meth:`__getstate__`, then replay: each world's episode reset with its seed where it
+        began, the recorded periods stepped (the worlds whose current episode runs in each), so every world
+        continues bit for bit (same machine; ``tests/test_envs_training.py``)."""
+        scenario, W, T, kw = st["init"]
+        self.__init__(scenario, W, T, **kw)
+        ep, hist = st["ep_start"], st["hist"]
+        for i in range(len(hist) + 1):
+            for w in np.flatnonzero(ep == i):
+                self._reset_world(int(w), int(st["seeds"][w]))
+            if i < len(hist):
+                run = hist[i][1] & (ep >= 0) & (ep <= i)
+                if run.any():
+                    self.running[:] = run
+                    self._started = True
+                    self.step(hist[i][0])
+        self._hist, self._ep_start = [(u.copy(), r.copy()) for u, r in hist], ep.copy()
+        self.running[:], self._term[:], self._trunc[:] = st["running"], st["term"], st["trunc"]
+        for e, state in zip(self.envs, st["rng"]):
+            if state is not None:
+                e._np_random = np.random.default_rng()
+                e._np_random.bit_generator.state = state
+        self._started = st["started"]
 
     def close(self) -> None:
         """Stop and join the threads (the worlds stay: the next :meth:`step` starts them again)."""
