@@ -444,13 +444,20 @@ class FitResult:
     seconds: float
     evaluations: int
     notes: list[str] = field(default_factory=list)
+    #: s since the fit began: ``optimiser_start_s``, ``optimiser_end_s``; ``rollout_s``: one rollout of all chunks
+    #: (the published robot's); ``time_budget_s``: the budget (the optimiser stops at the first rollout after it)
+    timing: dict[str, float] = field(default_factory=dict)
 
 
-def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int):
+def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int, deadline: list[float] | None = None):
     """A residual ``fn(x, params) -> ([r], None, None)`` over all chunks: ``mujoco.sysid.model_residual``
     (one model compiled per parameter vector, the chunks rolled out in parallel by ``mujoco.rollout``) with a
     ``modify_residual`` comparing each chunk's grid samples, weighted by 1/RMS per signal. A 2-D ``x``
-    (finite-difference columns) gives a 2-D residual, one column per ``x`` column."""
+    (finite-difference columns) gives a 2-D residual, one column per ``x`` column.
+
+    ``deadline``: a one-element list holding a ``time.perf_counter()`` value (s); a residual asked for after it
+    raises :class:`_OutOfTime` before its rollouts, so that the fit's time budget holds inside an optimiser
+    iteration (a finite-difference Jacobian is one rollout per parameter), not only between iterations."""
     sysid = _sysid()
     seqs = sysid.ModelSequences(
         "robot",
@@ -476,6 +483,8 @@ def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int):
         return sysid.apply_param_modifiers(p, robot.spec)
 
     def one(x: np.ndarray, params) -> np.ndarray:
+        if deadline is not None and time.perf_counter() > deadline[0]:
+            raise _OutOfTime
         try:
             res, _, _ = sysid.model_residual(
                 x, params, build, trajs, modify_residual=modify_residual, n_threads=n_threads
@@ -523,10 +532,13 @@ def fit(
     chunks = make_chunks(robot, model, rec, chunk_s, max_chunks, CASTER_WINDOW_S if caster else 0.0)
     eps = CASTER_FD_STEP if caster else FD_STEP
     n_threads = max(1, min(len(chunks.states), __import__("os").cpu_count() or 1))
-    fn = _residual_fn(robot, chunks, n_threads)
+    deadline = [math.inf]  # set to the time budget's end while the optimiser runs
+    fn = _residual_fn(robot, chunks, n_threads, deadline)
     x0 = pd.as_vector()
     lo, hi = pd.get_bounds()
+    t_roll = time.perf_counter()
     r_pub = _flat(fn, x0, pd)
+    t_roll = time.perf_counter() - t_roll  # one rollout of all chunks, s
     cost_pub = float(r_pub @ r_pub)
     pd.update_from_vector(x0)
     start = pd.copy()
@@ -562,6 +574,7 @@ def fit(
         notes.append("the fit started from the published values (the linear estimate fitted worse)")
     pd.update_from_vector(x0)
     evals = {"n": 0, "best": start.as_vector(), "best_cost": math.inf}
+    stopped = ""
 
     def report(log) -> None:
         evals["n"] = len(log)
@@ -576,13 +589,15 @@ def fit(
                 file=sys.stderr,
                 flush=True,
             )
-        if time.perf_counter() - t_start > time_budget_s:
+        if time.perf_counter() > deadline[0]:
             raise _OutOfTime
 
     from absl import logging as absl_logging  # mujoco.sysid's logger: its start-at-bound notice is ours to say
 
     verbosity = absl_logging.get_verbosity()
     absl_logging.set_verbosity(absl_logging.ERROR)
+    deadline[0] = t_start + time_budget_s
+    t_opt = time.perf_counter()
     try:
         opt, _ = sysid.optimize(
             start,
@@ -595,17 +610,28 @@ def fit(
             xtol=X_TOL,
             output=io.StringIO(),  # the optimiser's own table: progress is report()'s one line on a terminal
         )
-    except _OutOfTime:
+    except _OutOfTime:  # from report() between iterations or from a residual within one (one rollout late at most)
         opt = start.copy()
         opt.update_from_vector(evals["best"])
-        notes.append(
+        stopped = (
             f"the optimiser stopped at the time budget ({time_budget_s:g} s) after {evals['n']} iterations: "
-            "the best point so far is reported (a shorter --chunk or fewer --max-chunks is faster)"
+            "the best point so far is reported (a shorter --chunk or fewer --max-chunks is faster; a larger "
+            "--time-budget lets it finish)"
         )
+        notes.append(stopped)
     finally:
+        deadline[0] = math.inf  # the Jacobian and the intervals below are not cut short
         absl_logging.set_verbosity(verbosity)
+        timing = {
+            "rollout_s": t_roll,
+            "optimiser_start_s": t_opt - t_start,
+            "optimiser_end_s": time.perf_counter() - t_start,
+            "time_budget_s": float(time_budget_s),
+        }
     if progress:
         print(file=sys.stderr)
+    if stopped:
+        print(f"warning: {stopped}", file=sys.stderr)
     x = opt.as_vector()
     r = _flat(fn, x, opt)
     if float(r @ r) > cost_pub:  # never report a robot that does worse than the published one
@@ -733,6 +759,7 @@ def fit(
             f"{', '.join(chunks.measured_cols)}",
             *notes,
         ],
+        timing,
     )
     return result, opt
 
