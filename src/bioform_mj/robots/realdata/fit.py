@@ -447,6 +447,13 @@ class FitResult:
     #: s since the fit began: ``optimiser_start_s``, ``optimiser_end_s``; ``rollout_s``: one rollout of all chunks
     #: (the published robot's); ``time_budget_s``: the budget (the optimiser stops at the first rollout after it)
     timing: dict[str, float] = field(default_factory=dict)
+    #: at the optimum: the weighted residual (chunk after chunk), its Jacobian in the optimiser's scaled variables
+    #: (``value = x · scale``), the scales and the chunk count: what the intervals were computed from
+    #: (``scripts/fit_coverage.py`` recomputes them)
+    residual: np.ndarray | None = None
+    jacobian: np.ndarray | None = None
+    scales: np.ndarray | None = None
+    n_chunks: int = 0
 
 
 def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int, deadline: list[float] | None = None):
@@ -760,6 +767,10 @@ def fit(
             *notes,
         ],
         timing,
+        r,
+        J,
+        np.array([p.scale for p in info]),
+        len(chunks.states),
     )
     return result, opt
 
