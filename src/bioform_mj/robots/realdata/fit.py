@@ -10,8 +10,10 @@ Each signal is weighted by one over its RMS, so wheels, speed and yaw rate count
 The parameters are found by ``mujoco.sysid`` (MuJoCo's system-identification toolbox: its
 ``ParameterDict``, residual pipeline, ``mujoco.rollout`` in parallel and least-squares optimiser) and their
 95 % confidence intervals from the Jacobian at the optimum: the wider of ``mujoco.sysid.calculate_intervals``
-(independent residuals) and a cluster-robust interval with the chunks as the independent units
-(:func:`~bioform_mj.robots.realdata.intervals.cluster_halfwidths`: the residuals within a chunk are correlated):
+(independent residuals, widened by their autocorrelation) and the leave-one-chunk-out jackknife with the chunks
+as the independent units (:func:`~bioform_mj.robots.realdata.intervals.cluster_halfwidths`, design §8.4: the
+residuals within a chunk are correlated, and with 12 chunks for 6 parameters the plain sandwich under-covers).
+The optimiser's time budget holds within an iteration: a residual asked for after it stops the optimiser:
 
 ==================  ==================================================  =========
 name                what (spec element)                                  unit
@@ -73,7 +75,7 @@ from bioform_mj.robots.realdata.casters import (
     window_means,
 )
 from bioform_mj.robots.realdata.chassis import chassis_body, explicit_base, set_yaw_inertia
-from bioform_mj.robots.realdata.intervals import autocorrelation_inflation, cluster_halfwidths
+from bioform_mj.robots.realdata.intervals import halfwidths, jacobian_at
 from bioform_mj.robots.realdata.recording import Recording, chunk_starts, pauses
 from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state, sensor_times
 
@@ -649,28 +651,9 @@ def fit(
             "the fit found nothing better than the published values (they are reported; the recording may not "
             "excite the robot, or the model lacks what the robot does: slip, backlash, a motor's dynamics)"
         )
-    # the Jacobian at the optimum by forward differences, all columns in one parallel rollout
-    h = eps * np.maximum(1.0, np.abs(x))
-    h = np.where(x + h > hi, -h, h)
-    X = x[:, None] + np.diag(h)
-    RX = _flat(fn, X, opt)
-    J = (RX - r[:, None]) / h[None, :]
-    # the same columns at a 10x step: where they differ, the residual is not smooth at this scale (open-loop
-    # rollouts that are chaotic: stick-slip of a dragging caster) and J, hence every interval, means nothing
-    h2 = 10.0 * eps * np.maximum(1.0, np.abs(x))
-    h2 = np.where(x + h2 > hi, -h2, h2)
-    J2 = (_flat(fn, x[:, None] + np.diag(h2), opt) - r[:, None]) / h2[None, :]
-    big = np.maximum(np.linalg.norm(J, axis=0), np.linalg.norm(J2, axis=0))
-    rough = np.linalg.norm(J - J2, axis=0) / np.maximum(big, 1e-300)
+    J, rough = jacobian_at(lambda X: _flat(fn, X, opt), x, r, eps, hi)
     opt.update_from_vector(x)
-    sigma, half_iid = sysid.calculate_intervals([r], J)
-    n_sig = int(np.count_nonzero(chunks.weights))
-    inflate = autocorrelation_inflation(r, len(chunks.states), n_sig)
-    half = np.maximum(half_iid * inflate, cluster_halfwidths(r, J, len(chunks.states)))
-    sd = np.sqrt(np.maximum(np.diag(sigma), 0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = sigma / np.outer(sd, sd)
-    corr = np.where(np.isfinite(corr), corr, 0.0)
+    half, corr = halfwidths(r, J, len(chunks.states), int(np.count_nonzero(chunks.weights)))
     names = list(opt.keys())
     # a model that misses the recording by far is not a measurement of anything, however narrow its intervals
     miss = math.sqrt(float(r @ r) / max(1, r.size))  # weighted residual RMS, in units of each signal's RMS

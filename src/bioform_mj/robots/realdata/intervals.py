@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-__all__ = ["autocorrelation_inflation", "cluster_halfwidths"]
+__all__ = ["autocorrelation_inflation", "cluster_halfwidths", "halfwidths", "jacobian_at"]
 
 
 def autocorrelation_inflation(r: np.ndarray, n_chunks: int, n_signals: int) -> float:
@@ -85,3 +85,36 @@ def cluster_halfwidths(
     else:
         raise ValueError(f"kind must be 'CR1' or 'CR3', got {kind!r}")
     return np.sqrt(np.maximum(np.diag(cov), 0.0)) * scipy.special.stdtrit(G - 1, 1 - alpha / 2)
+
+
+def jacobian_at(residual, x: np.ndarray, r: np.ndarray, eps: float, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The Jacobian of ``residual`` (scaled variables; ``residual(X)`` takes one point per column of ``X`` and
+    returns one residual column per point, all rolled out in parallel) at ``x``, where it is ``r``, by forward
+    differences of step ``eps · max(1, |x|)`` (backward where that passes the upper bound ``hi``); and per
+    parameter its ``roughness``: the relative change of its column at a 10× step. Where that is large the residual
+    is not smooth at this scale (open-loop rollouts that are chaotic: a dragging caster's stick-slip) and no
+    interval from ``J`` means anything (design §8.4). Returns ``(J, roughness)``."""
+    cols = []
+    for k in (1.0, 10.0):
+        h = k * eps * np.maximum(1.0, np.abs(x))
+        h = np.where(x + h > hi, -h, h)
+        cols.append((residual(x[:, None] + np.diag(h)) - r[:, None]) / h[None, :])
+    J, J2 = cols
+    big = np.maximum(np.linalg.norm(J, axis=0), np.linalg.norm(J2, axis=0))
+    return J, np.linalg.norm(J - J2, axis=0) / np.maximum(big, 1e-300)
+
+
+def halfwidths(r: np.ndarray, J: np.ndarray, n_chunks: int, n_signals: int) -> tuple[np.ndarray, np.ndarray]:
+    """The fit's 95 % half-widths (scaled units) and the parameters' correlation matrix, at the optimum: the wider
+    of the independent-residual interval (``mujoco.sysid.calculate_intervals``) widened by the residual's
+    autocorrelation (:func:`autocorrelation_inflation`) and the leave-one-chunk-out jackknife
+    (:func:`cluster_halfwidths`); the correlations from ``(JᵀJ)⁻¹``."""
+    from mujoco import sysid
+
+    sigma, half_iid = sysid.calculate_intervals([r], J)
+    inflate = autocorrelation_inflation(r, n_chunks, n_signals)
+    half = np.maximum(half_iid * inflate, cluster_halfwidths(r, J, n_chunks))
+    sd = np.sqrt(np.maximum(np.diag(sigma), 0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = sigma / np.outer(sd, sd)
+    return half, np.where(np.isfinite(corr), corr, 0.0)
