@@ -32,16 +32,17 @@ def _coverage(kind: str, reps: int = 500, G: int = 12, L: int = 20, p: int = 6, 
 
 
 def test_the_jackknife_intervals_hold_their_coverage_with_few_chunks():
-    # measured (seed 0, 500 data sets, 3000 intervals): CR1 0.80, CR3 0.91; the fit's 12 chunks and 6 parameters
+    # measured (seed 0, 500 data sets, 3000 intervals): CR1 0.809, CR3 0.930; the fit's 12 chunks and 6 parameters
     cr1, cr3 = _coverage("CR1"), _coverage("CR3")
     assert cr1 < 0.85  # the plain sandwich under-covers: each chunk's residual understates its error by its leverage
-    assert 0.89 <= cr3 <= 0.99
-    assert _coverage("CR3", reps=200, G=40, seed=1) == pytest.approx(0.95, abs=0.03)  # many chunks: nominal
+    assert 0.90 <= cr3 <= 0.99
+    assert 0.90 <= _coverage("CR3", reps=200, G=40, seed=1) <= 0.99  # many chunks (0.929): no wider than needed
 
 
 def test_the_jackknife_equals_refits_without_each_chunk():
     """On a linear problem the Gauss–Newton step without chunk c is the refit without it, exactly: the CR3
-    covariance is then the textbook leave-one-cluster-out jackknife ``(G−1)/G Σ (b₋c − b)(b₋c − b)ᵀ``."""
+    covariance is then the textbook leave-one-cluster-out jackknife ``(G−1)/G Σ (b₋c − b)(b₋c − b)ᵀ`` (and the
+    t quantile that of ``G − p`` degrees of freedom)."""
     import scipy.special
 
     rng = np.random.default_rng(3)
@@ -54,7 +55,7 @@ def test_the_jackknife_equals_refits_without_each_chunk():
         keep = np.r_[0 : c * L, (c + 1) * L : G * L]
         drops.append(np.linalg.lstsq(X[keep], y[keep], rcond=None)[0] - b)
     D = np.array(drops)
-    want = np.sqrt(np.diag((G - 1) / G * D.T @ D)) * scipy.special.stdtrit(G - 1, 0.975)
+    want = np.sqrt(np.diag((G - 1) / G * D.T @ D)) * scipy.special.stdtrit(G - p, 0.975)
     np.testing.assert_allclose(cluster_halfwidths(y - X @ b, -X, G, kind="CR3"), want, rtol=1e-9)
 
 

@@ -315,7 +315,7 @@ def _fit_main(args: argparse.Namespace) -> int:
             "unidentified": unidentified,
             "ci95_method": "the wider of the interval from J'J and the residual variance (mujoco.sysid, widened by the "
             "residual's lag-1 autocorrelation) and the leave-one-chunk-out jackknife (CR3: the chunks as independent "
-            "units, from the Jacobian, no refits), Student's t with chunks - 1 dof (design §8.4)",
+            "units, from the Jacobian, no refits; Student's t with chunks - parameters dof) (design §8.4)",
             "correlation": {"names": result.names, "matrix": np.round(result.correlation, 4).tolist()},
             "residual": {
                 "published": {"cost": result.cost_published, **_rms(chunks, sim_pub)},
