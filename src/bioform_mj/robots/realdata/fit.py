@@ -75,7 +75,7 @@ from bioform_mj.robots.realdata.casters import (
     window_means,
 )
 from bioform_mj.robots.realdata.chassis import chassis_body, explicit_base, set_yaw_inertia
-from bioform_mj.robots.realdata.intervals import halfwidths, jacobian_at
+from bioform_mj.robots.realdata.intervals import halfwidths, jacobian_at, remaining_step
 from bioform_mj.robots.realdata.recording import Recording, chunk_starts, pauses
 from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state, sensor_times
 
@@ -108,6 +108,8 @@ MISFIT_RMS = 0.3
 #: 0.94-0.97 on a tb3 with a dragging caster (friction 0.3), whose rollouts are chaotic; 0.93-1.0 on a 60 s tb3
 #: recording at 0.06 N·m whose fit stopped at its time budget after 2 iterations (mass 17 % off)
 ROUGH_JACOBIAN = 0.8
+#: the note where the Gauss-Newton step still to go exceeds half an interval (design §8.4)
+STOPPED_SHORT = "its remaining Gauss-Newton step exceeds half the interval; the intervals are widened by that step"
 #: a recording whose largest wheel rim speed is below this (m/s) hardly moved the robot: measured 12.5 mm/s
 #: on a tb3 held by a dragging caster (0.025 N·m, program 5), 355 mm/s without the drag
 STILL_RIM_SPEED = 0.02
@@ -653,7 +655,10 @@ def fit(
         )
     J, rough = jacobian_at(lambda X: _flat(fn, X, opt), x, r, eps, hi)
     opt.update_from_vector(x)
-    half, corr = halfwidths(r, J, len(chunks.states), int(np.count_nonzero(chunks.weights)))
+    step = remaining_step(r, J, x, lo, hi)  # ~0 where the optimiser converged
+    half, corr = halfwidths(r, J, len(chunks.states), int(np.count_nonzero(chunks.weights)), step)
+    if short := [n for n, d, h in zip(pd.keys(), step, half) if abs(d) > 0.5 * h]:
+        notes.append(f"the optimiser stopped short of the optimum in {', '.join(short)} ({STOPPED_SHORT})")
     names = list(opt.keys())
     # a model that misses the recording by far is not a measurement of anything, however narrow its intervals
     miss = math.sqrt(float(r @ r) / max(1, r.size))  # weighted residual RMS, in units of each signal's RMS

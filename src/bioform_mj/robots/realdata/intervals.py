@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-__all__ = ["autocorrelation_inflation", "cluster_halfwidths", "halfwidths", "jacobian_at"]
+__all__ = ["autocorrelation_inflation", "cluster_halfwidths", "halfwidths", "jacobian_at", "remaining_step"]
 
 
 def autocorrelation_inflation(r: np.ndarray, n_chunks: int, n_signals: int) -> float:
@@ -108,16 +108,50 @@ def jacobian_at(residual, x: np.ndarray, r: np.ndarray, eps: float, hi: np.ndarr
     return J, np.linalg.norm(J - J2, axis=0) / np.maximum(big, 1e-300)
 
 
-def halfwidths(r: np.ndarray, J: np.ndarray, n_chunks: int, n_signals: int) -> tuple[np.ndarray, np.ndarray]:
-    """The fit's 95 % half-widths (scaled units) and the parameters' correlation matrix, at the optimum: the wider
-    of the independent-residual interval (``mujoco.sysid.calculate_intervals``) widened by the residual's
-    autocorrelation (:func:`autocorrelation_inflation`) and the leave-one-chunk-out jackknife
-    (:func:`cluster_halfwidths`); the correlations from ``(JᵀJ)⁻¹``."""
+def remaining_step(
+    r: np.ndarray,
+    J: np.ndarray,
+    x: np.ndarray | None = None,
+    lo: np.ndarray | None = None,
+    hi: np.ndarray | None = None,
+) -> np.ndarray:
+    """The Gauss–Newton step ``δ = −(JᵀJ)⁻¹ Jᵀ r`` still to go from the reported point (scaled units): about 0
+    where the optimiser converged, the distance to the optimum where it stopped short (its time budget, its
+    iteration limit). A parameter at a bound of its search range (``x``, ``lo``, ``hi``) that the step would push
+    out of it is held there (the step is taken over the others)."""
+    free = np.ones(J.shape[1], bool)
+    step = np.zeros(J.shape[1])
+    for _ in range(2):
+        if not free.any():
+            break
+        step[:] = 0.0
+        step[free] = np.linalg.lstsq(J[:, free], -r, rcond=None)[0]
+        if x is None or lo is None or hi is None:
+            break
+        span = np.maximum(hi - lo, 1e-300)
+        out = ((x - lo <= 1e-6 * span) & (step < 0)) | ((hi - x <= 1e-6 * span) & (step > 0))
+        if not (out & free).any():
+            break
+        free &= ~out
+    return step
+
+
+def halfwidths(
+    r: np.ndarray, J: np.ndarray, n_chunks: int, n_signals: int, step: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The fit's 95 % half-widths (scaled units) and the parameters' correlation matrix, at the reported point:
+    the wider of the independent-residual interval (``mujoco.sysid.calculate_intervals``) widened by the
+    residual's autocorrelation (:func:`autocorrelation_inflation`) and the leave-one-chunk-out jackknife
+    (:func:`cluster_halfwidths`), plus ``|step|`` (:func:`remaining_step`: where the optimiser stopped short of
+    the optimum, the interval about the reported point must reach the interval about the optimum); the
+    correlations from ``(JᵀJ)⁻¹``."""
     from mujoco import sysid
 
     sigma, half_iid = sysid.calculate_intervals([r], J)
     inflate = autocorrelation_inflation(r, n_chunks, n_signals)
     half = np.maximum(half_iid * inflate, cluster_halfwidths(r, J, n_chunks))
+    if step is not None:
+        half = half + np.abs(step)
     sd = np.sqrt(np.maximum(np.diag(sigma), 0))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = sigma / np.outer(sd, sd)
