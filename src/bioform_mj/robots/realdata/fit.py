@@ -12,8 +12,9 @@ The parameters are found by ``mujoco.sysid`` (MuJoCo's system-identification too
 95 % confidence intervals from the Jacobian at the optimum: the wider of ``mujoco.sysid.calculate_intervals``
 (independent residuals, widened by their autocorrelation) and the leave-one-chunk-out jackknife with the chunks
 as the independent units (:func:`~bioform_mj.robots.realdata.intervals.cluster_halfwidths`, design §8.4: the
-residuals within a chunk are correlated, and with 12 chunks for 6 parameters the plain sandwich under-covers).
-The optimiser's time budget holds within an iteration: a residual asked for after it stops the optimiser:
+residuals within a chunk are correlated, and with 12 chunks for 6 parameters the plain sandwich under-covers),
+each widened by the Gauss–Newton step still to go where the optimiser stopped short (its time budget holds within
+an iteration: a residual asked for after the deadline stops it). The parameters:
 
 ==================  ==================================================  =========
 name                what (spec element)                                  unit
