@@ -69,8 +69,8 @@ from bioform_mj.robots.realdata.casters import (
     caster_notes,
     caster_regressor,
     caster_start,
+    caster_start_notes,
     cost_profile,
-    frictionless_casters,
     profile_row,
     robot_casters,
     window_means,
@@ -564,7 +564,7 @@ def fit(
             pd.update_from_vector(x0)
             sysid.apply_param_modifiers(pd, robot.spec)
 
-        notes += _caster_start_notes(robot, info, model)
+        notes += caster_start_notes(robot, info, model)
         g, c, more = caster_start(
             robot,
             rec,
@@ -762,21 +762,6 @@ def fit(
         len(chunks.states),
     )
     return result, opt
-
-
-def _caster_start_notes(robot: SimRobot, info: list[ParamInfo], model: mujoco.MjModel) -> list[str]:
-    """What the report says where caster friction is fitted: casters the file makes frictionless (the fit gives
-    them ``condim 3``)."""
-    out = []
-    k = [p.name for p in info].index("caster_friction")
-    geoms = frictionless_casters(model, robot_casters(robot, robot.spec, model))
-    if geoms:
-        out.append(
-            f"caster(s) {', '.join(geoms)} are frictionless in the robot file (condim 1 or friction 0): the fit "
-            f"gives them condim 3 (sliding friction, priority {CONTACT_PRIORITY}) so that their friction acts; "
-            f"published value taken as {info[k].published:g}"
-        )
-    return out
 
 
 def _still_note(robot: SimRobot, rec: Recording) -> list[str]:
