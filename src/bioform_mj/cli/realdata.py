@@ -313,8 +313,9 @@ def _fit_main(args: argparse.Namespace) -> int:
             "published": {"a": p_pub.a_eff, "b": p_pub.b_eff},
             "parameters": result.parameters,
             "unidentified": unidentified,
-            "ci95_method": "the wider of the interval from J'J and the residual variance (mujoco.sysid) and the "
-            "cluster-robust (sandwich) one with the chunks as independent units, Student's t with chunks - 1 dof",
+            "ci95_method": "the wider of the interval from J'J and the residual variance (mujoco.sysid, widened by the "
+            "residual's lag-1 autocorrelation) and the leave-one-chunk-out jackknife (CR3: the chunks as independent "
+            "units, from the Jacobian, no refits; Student's t with chunks - parameters dof) (design §8.4)",
             "correlation": {"names": result.names, "matrix": np.round(result.correlation, 4).tolist()},
             "residual": {
                 "published": {"cost": result.cost_published, **_rms(chunks, sim_pub)},

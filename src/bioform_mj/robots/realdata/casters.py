@@ -17,6 +17,7 @@ import mujoco
 import numpy as np
 
 from bioform_mj.core.errors import InputError
+from bioform_mj.robots.layout import CONTACT_PRIORITY
 from bioform_mj.robots.realdata.recording import Recording
 from bioform_mj.robots.realdata.simmodel import SimRobot
 
@@ -26,6 +27,7 @@ __all__ = [
     "caster_regressor",
     "caster_notes",
     "frictionless_casters",
+    "caster_start_notes",
     "caster_start",
     "cost_profile",
     "profile_row",
@@ -312,4 +314,19 @@ def window_means(t: np.ndarray, y: np.ndarray, ends: np.ndarray, window: float) 
     out[~empty] /= n[~empty, None]
     if empty.any():
         out[empty] = np.stack([np.interp(ends[empty] - 0.5 * window, t, y[:, c]) for c in range(y.shape[1])], 1)
+    return out
+
+
+def caster_start_notes(robot: SimRobot, info: list, model: mujoco.MjModel) -> list[str]:
+    """What the report says where caster friction is fitted: casters the file makes frictionless (the fit gives
+    them ``condim 3``)."""
+    out = []
+    k = [p.name for p in info].index("caster_friction")
+    geoms = frictionless_casters(model, robot_casters(robot, robot.spec, model))
+    if geoms:
+        out.append(
+            f"caster(s) {', '.join(geoms)} are frictionless in the robot file (condim 1 or friction 0): the fit "
+            f"gives them condim 3 (sliding friction, priority {CONTACT_PRIORITY}) so that their friction acts; "
+            f"published value taken as {info[k].published:g}"
+        )
     return out

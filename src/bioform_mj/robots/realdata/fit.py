@@ -10,8 +10,11 @@ Each signal is weighted by one over its RMS, so wheels, speed and yaw rate count
 The parameters are found by ``mujoco.sysid`` (MuJoCo's system-identification toolbox: its
 ``ParameterDict``, residual pipeline, ``mujoco.rollout`` in parallel and least-squares optimiser) and their
 95 % confidence intervals from the Jacobian at the optimum: the wider of ``mujoco.sysid.calculate_intervals``
-(independent residuals) and a cluster-robust interval with the chunks as the independent units
-(:func:`~bioform_mj.robots.realdata.intervals.cluster_halfwidths`: the residuals within a chunk are correlated):
+(independent residuals, widened by their autocorrelation) and the leave-one-chunk-out jackknife with the chunks
+as the independent units (:func:`~bioform_mj.robots.realdata.intervals.cluster_halfwidths`, design §8.4: the
+residuals within a chunk are correlated, and with 12 chunks for 6 parameters the plain sandwich under-covers),
+each widened by the Gauss–Newton step still to go where the optimiser stopped short (its time budget holds within
+an iteration: a residual asked for after the deadline stops it). The parameters:
 
 ==================  ==================================================  =========
 name                what (spec element)                                  unit
@@ -66,14 +69,14 @@ from bioform_mj.robots.realdata.casters import (
     caster_notes,
     caster_regressor,
     caster_start,
+    caster_start_notes,
     cost_profile,
-    frictionless_casters,
     profile_row,
     robot_casters,
     window_means,
 )
 from bioform_mj.robots.realdata.chassis import chassis_body, explicit_base, set_yaw_inertia
-from bioform_mj.robots.realdata.intervals import autocorrelation_inflation, cluster_halfwidths
+from bioform_mj.robots.realdata.intervals import halfwidths, jacobian_at, remaining_step
 from bioform_mj.robots.realdata.recording import Recording, chunk_starts, pauses
 from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state, sensor_times
 
@@ -106,6 +109,8 @@ MISFIT_RMS = 0.3
 #: 0.94-0.97 on a tb3 with a dragging caster (friction 0.3), whose rollouts are chaotic; 0.93-1.0 on a 60 s tb3
 #: recording at 0.06 N·m whose fit stopped at its time budget after 2 iterations (mass 17 % off)
 ROUGH_JACOBIAN = 0.8
+#: the note where the Gauss-Newton step still to go exceeds half an interval (design §8.4)
+STOPPED_SHORT = "its remaining Gauss-Newton step exceeds half the interval; the intervals are widened by that step"
 #: a recording whose largest wheel rim speed is below this (m/s) hardly moved the robot: measured 12.5 mm/s
 #: on a tb3 held by a dragging caster (0.025 N·m, program 5), 355 mm/s without the drag
 STILL_RIM_SPEED = 0.02
@@ -444,13 +449,27 @@ class FitResult:
     seconds: float
     evaluations: int
     notes: list[str] = field(default_factory=list)
+    #: s since the fit began: ``optimiser_start_s``, ``optimiser_end_s``; ``rollout_s``: one rollout of all chunks
+    #: (the published robot's); ``time_budget_s``: the budget (the optimiser stops at the first rollout after it)
+    timing: dict[str, float] = field(default_factory=dict)
+    #: at the optimum: the weighted residual (chunk after chunk), its Jacobian in the optimiser's scaled variables
+    #: (``value = x · scale``), the scales and the chunk count: what the intervals were computed from
+    #: (``scripts/fit_coverage.py`` recomputes them)
+    residual: np.ndarray | None = None
+    jacobian: np.ndarray | None = None
+    scales: np.ndarray | None = None
+    n_chunks: int = 0
 
 
-def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int):
+def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int, deadline: list[float] | None = None):
     """A residual ``fn(x, params) -> ([r], None, None)`` over all chunks: ``mujoco.sysid.model_residual``
     (one model compiled per parameter vector, the chunks rolled out in parallel by ``mujoco.rollout``) with a
     ``modify_residual`` comparing each chunk's grid samples, weighted by 1/RMS per signal. A 2-D ``x``
-    (finite-difference columns) gives a 2-D residual, one column per ``x`` column."""
+    (finite-difference columns) gives a 2-D residual, one column per ``x`` column.
+
+    ``deadline``: a one-element list holding a ``time.perf_counter()`` value (s); a residual asked for after it
+    raises :class:`_OutOfTime` before its rollouts, so that the fit's time budget holds inside an optimiser
+    iteration (a finite-difference Jacobian is one rollout per parameter), not only between iterations."""
     sysid = _sysid()
     seqs = sysid.ModelSequences(
         "robot",
@@ -476,6 +495,8 @@ def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int):
         return sysid.apply_param_modifiers(p, robot.spec)
 
     def one(x: np.ndarray, params) -> np.ndarray:
+        if deadline is not None and time.perf_counter() > deadline[0]:
+            raise _OutOfTime
         try:
             res, _, _ = sysid.model_residual(
                 x, params, build, trajs, modify_residual=modify_residual, n_threads=n_threads
@@ -523,10 +544,13 @@ def fit(
     chunks = make_chunks(robot, model, rec, chunk_s, max_chunks, CASTER_WINDOW_S if caster else 0.0)
     eps = CASTER_FD_STEP if caster else FD_STEP
     n_threads = max(1, min(len(chunks.states), __import__("os").cpu_count() or 1))
-    fn = _residual_fn(robot, chunks, n_threads)
+    deadline = [math.inf]  # set to the time budget's end while the optimiser runs
+    fn = _residual_fn(robot, chunks, n_threads, deadline)
     x0 = pd.as_vector()
     lo, hi = pd.get_bounds()
+    t_roll = time.perf_counter()
     r_pub = _flat(fn, x0, pd)
+    t_roll = time.perf_counter() - t_roll  # one rollout of all chunks, s
     cost_pub = float(r_pub @ r_pub)
     pd.update_from_vector(x0)
     start = pd.copy()
@@ -540,7 +564,7 @@ def fit(
             pd.update_from_vector(x0)
             sysid.apply_param_modifiers(pd, robot.spec)
 
-        notes += _caster_start_notes(robot, info, model)
+        notes += caster_start_notes(robot, info, model)
         g, c, more = caster_start(
             robot,
             rec,
@@ -562,6 +586,7 @@ def fit(
         notes.append("the fit started from the published values (the linear estimate fitted worse)")
     pd.update_from_vector(x0)
     evals = {"n": 0, "best": start.as_vector(), "best_cost": math.inf}
+    stopped = ""
 
     def report(log) -> None:
         evals["n"] = len(log)
@@ -576,13 +601,15 @@ def fit(
                 file=sys.stderr,
                 flush=True,
             )
-        if time.perf_counter() - t_start > time_budget_s:
+        if time.perf_counter() > deadline[0]:
             raise _OutOfTime
 
     from absl import logging as absl_logging  # mujoco.sysid's logger: its start-at-bound notice is ours to say
 
     verbosity = absl_logging.get_verbosity()
     absl_logging.set_verbosity(absl_logging.ERROR)
+    deadline[0] = t_start + time_budget_s
+    t_opt = time.perf_counter()
     try:
         opt, _ = sysid.optimize(
             start,
@@ -595,17 +622,28 @@ def fit(
             xtol=X_TOL,
             output=io.StringIO(),  # the optimiser's own table: progress is report()'s one line on a terminal
         )
-    except _OutOfTime:
+    except _OutOfTime:  # from report() between iterations or from a residual within one (one rollout late at most)
         opt = start.copy()
         opt.update_from_vector(evals["best"])
-        notes.append(
+        stopped = (
             f"the optimiser stopped at the time budget ({time_budget_s:g} s) after {evals['n']} iterations: "
-            "the best point so far is reported (a shorter --chunk or fewer --max-chunks is faster)"
+            "the best point so far is reported (a shorter --chunk or fewer --max-chunks is faster; a larger "
+            "--time-budget lets it finish)"
         )
+        notes.append(stopped)
     finally:
+        deadline[0] = math.inf  # the Jacobian and the intervals below are not cut short
         absl_logging.set_verbosity(verbosity)
+        timing = {
+            "rollout_s": t_roll,
+            "optimiser_start_s": t_opt - t_start,
+            "optimiser_end_s": time.perf_counter() - t_start,
+            "time_budget_s": float(time_budget_s),
+        }
     if progress:
         print(file=sys.stderr)
+    if stopped:
+        print(f"warning: {stopped}", file=sys.stderr)
     x = opt.as_vector()
     r = _flat(fn, x, opt)
     if float(r @ r) > cost_pub:  # never report a robot that does worse than the published one
@@ -616,28 +654,12 @@ def fit(
             "the fit found nothing better than the published values (they are reported; the recording may not "
             "excite the robot, or the model lacks what the robot does: slip, backlash, a motor's dynamics)"
         )
-    # the Jacobian at the optimum by forward differences, all columns in one parallel rollout
-    h = eps * np.maximum(1.0, np.abs(x))
-    h = np.where(x + h > hi, -h, h)
-    X = x[:, None] + np.diag(h)
-    RX = _flat(fn, X, opt)
-    J = (RX - r[:, None]) / h[None, :]
-    # the same columns at a 10x step: where they differ, the residual is not smooth at this scale (open-loop
-    # rollouts that are chaotic: stick-slip of a dragging caster) and J, hence every interval, means nothing
-    h2 = 10.0 * eps * np.maximum(1.0, np.abs(x))
-    h2 = np.where(x + h2 > hi, -h2, h2)
-    J2 = (_flat(fn, x[:, None] + np.diag(h2), opt) - r[:, None]) / h2[None, :]
-    big = np.maximum(np.linalg.norm(J, axis=0), np.linalg.norm(J2, axis=0))
-    rough = np.linalg.norm(J - J2, axis=0) / np.maximum(big, 1e-300)
+    J, rough = jacobian_at(lambda X: _flat(fn, X, opt), x, r, eps, hi)
     opt.update_from_vector(x)
-    sigma, half_iid = sysid.calculate_intervals([r], J)
-    n_sig = int(np.count_nonzero(chunks.weights))
-    inflate = autocorrelation_inflation(r, len(chunks.states), n_sig)
-    half = np.maximum(half_iid * inflate, cluster_halfwidths(r, J, len(chunks.states)))
-    sd = np.sqrt(np.maximum(np.diag(sigma), 0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = sigma / np.outer(sd, sd)
-    corr = np.where(np.isfinite(corr), corr, 0.0)
+    step = remaining_step(r, J, x, lo, hi)  # ~0 where the optimiser converged
+    half, corr = halfwidths(r, J, len(chunks.states), int(np.count_nonzero(chunks.weights)), step)
+    if short := [n for n, d, h in zip(pd.keys(), step, half) if abs(d) > 0.5 * h]:
+        notes.append(f"the optimiser stopped short of the optimum in {', '.join(short)} ({STOPPED_SHORT})")
     names = list(opt.keys())
     # a model that misses the recording by far is not a measurement of anything, however narrow its intervals
     miss = math.sqrt(float(r @ r) / max(1, r.size))  # weighted residual RMS, in units of each signal's RMS
@@ -733,23 +755,13 @@ def fit(
             f"{', '.join(chunks.measured_cols)}",
             *notes,
         ],
+        timing,
+        r,
+        J,
+        np.array([p.scale for p in info]),
+        len(chunks.states),
     )
     return result, opt
-
-
-def _caster_start_notes(robot: SimRobot, info: list[ParamInfo], model: mujoco.MjModel) -> list[str]:
-    """What the report says where caster friction is fitted: casters the file makes frictionless (the fit gives
-    them ``condim 3``)."""
-    out = []
-    k = [p.name for p in info].index("caster_friction")
-    geoms = frictionless_casters(model, robot_casters(robot, robot.spec, model))
-    if geoms:
-        out.append(
-            f"caster(s) {', '.join(geoms)} are frictionless in the robot file (condim 1 or friction 0): the fit "
-            f"gives them condim 3 (sliding friction, priority {CONTACT_PRIORITY}) so that their friction acts; "
-            f"published value taken as {info[k].published:g}"
-        )
-    return out
 
 
 def _still_note(robot: SimRobot, rec: Recording) -> list[str]:
