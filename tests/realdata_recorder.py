@@ -57,6 +57,24 @@ def _urdf_spec(robot_file: Path) -> mujoco.MjSpec:
     return spec
 
 
+def _mesh_wheel_sphere(model: mujoco.MjModel, joint: int, mesh: str) -> tuple[list[float], list[float]]:
+    """Centre (in the wheel body's frame, on the joint axis at the tread's middle) and radius (the largest distance
+    of the mesh's vertices from the axis) of the sphere a mesh wheel rolls on, from the compiled ``model`` at qpos0."""
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    g = next(k for k in range(model.ngeom) if model.geom_dataid[k] == model.mesh(mesh).id)
+    a, n = model.mesh_vertadr[model.geom_dataid[g]], model.mesh_vertnum[model.geom_dataid[g]]
+    verts = data.geom_xpos[g] + model.mesh_vert[a : a + n] @ data.geom_xmat[g].reshape(3, 3).T  # world, m
+    b = model.jnt_bodyid[joint]
+    rot = data.xmat[b].reshape(3, 3)
+    axis = rot @ model.jnt_axis[joint]
+    anchor = data.xpos[b] + rot @ model.jnt_pos[joint]
+    along = (verts - anchor) @ axis
+    radius = float(np.linalg.norm((verts - anchor) - np.outer(along, axis), axis=1).max())
+    centre = anchor + axis * 0.5 * (along.min() + along.max())
+    return (rot.T @ (centre - data.xpos[b])).tolist(), [radius, 0.0, 0.0]
+
+
 def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
     """The published file with the truth's changes and a floor, compiled."""
     urdf = Path(robot_file).suffix == ".urdf"
@@ -78,6 +96,9 @@ def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
             for g in spec.body(model0.body(model0.joint(j).bodyid[0]).name).geoms:
                 if g.type == mujoco.mjtGeom.mjGEOM_CYLINDER:
                     g.type, g.size = mujoco.mjtGeom.mjGEOM_SPHERE, [g.size[0], 0, 0]
+                elif g.type == mujoco.mjtGeom.mjGEOM_MESH:  # a mesh tyre (Fetch/Freight): a sphere of its radius
+                    g.pos, g.size = _mesh_wheel_sphere(model0, model0.joint(j).id, g.meshname)
+                    g.type, g.meshname = mujoco.mjtGeom.mjGEOM_SPHERE, ""
     else:
         base = spec.body(truth.base)
         base.mass = base.mass + truth.payload_kg
