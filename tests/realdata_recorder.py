@@ -48,10 +48,19 @@ def _urdf_spec(robot_file: Path) -> mujoco.MjSpec:
     text = Path(robot_file).read_text()
     for tag in ("gazebo", "transmission", "visual"):
         text = re.sub(rf"<{tag}\b.*?</{tag}>", "", text, flags=re.S)
-    compiler = '<mujoco><compiler discardvisual="true" fusestatic="false" inertiafromgeom="false"/></mujoco>'
+    compiler = (  # balanceinertia: the PMB-2's antenna links publish an inertia that is not positive definite
+        '<mujoco><compiler discardvisual="true" fusestatic="false" inertiafromgeom="false" balanceinertia="true"/>'
+        "</mujoco>"
+    )
     text = re.sub(r"(<robot[^>]*>)", r"\1" + compiler, text, count=1)
     spec = mujoco.MjSpec.from_string(text)
     spec.worldbody.first_body().add_freejoint()
+    for b in spec.bodies:  # an inertia matrix that is not positive definite (the PMB-2's antennas): its diagonal
+        fi = np.asarray(b.fullinertia, float)
+        if np.all(np.isfinite(fi)) and np.any(fi[3:]):
+            m = np.array([[fi[0], fi[3], fi[4]], [fi[3], fi[1], fi[5]], [fi[4], fi[5], fi[2]]])
+            if np.linalg.eigvalsh(m).min() <= 0:
+                b.fullinertia = [fi[0], fi[1], fi[2], 0.0, 0.0, 0.0]
     for g in spec.geoms:  # robot geoms 2/1, the floor 1/2: the robot touches the floor, never itself
         g.contype, g.conaffinity = 2, 1
     return spec
