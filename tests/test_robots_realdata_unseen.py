@@ -118,3 +118,33 @@ def test_fit_holds_the_caster_friction_the_mapping_states(tmp_path):
         "caster_friction",
     ]
     assert np.isfinite(json.loads((out2 / "fit.json").read_text())["residual"]["calibrated"]["cost"])
+
+
+def test_a_trial_whose_rollouts_diverge_is_scored_not_an_input_error(tmp_path):
+    """The published robot rolls out, a trial parameter set diverges (here: negative wheel damping, -5
+    N·m·s/rad): the residual is DIVERGED per sample (the optimiser keeps away) and counted for fit.json's notes,
+    instead of stopping the fit with "no usable trajectory" as it did on the Freight's caster search."""
+    pytest.importorskip("rosbags")
+    sys.path.insert(0, str(HERE))
+    import realdata_recorder as rr
+    from bioform_mj.robots.realdata.fit import DIVERGED, _residual_fn, make_chunks, parameters
+    from bioform_mj.robots.realdata.recording import read_recording
+    from bioform_mj.robots.realdata.simmodel import sim_spec
+
+    truth = rr.Truth(payload_kg=0.3, damping=(0.002, 0.0025), frictionloss=(0.004, 0.003))
+    csv = tmp_path / "rec.csv"
+    rr.record(csv, "tb3", truth, duration=4.0, tau=0.06, fmt="csv")
+    robot = sim_spec(RobotRef(model="tb3"))
+    rec = read_recording(csv, truth.joints)
+    pd, info = parameters(robot, rec, ("mass", "damping"))
+    chunks = make_chunks(robot, robot.spec.compile(), rec, 1.0, 2, 0.0)
+    fn = _residual_fn(robot, chunks, 1)
+    x0 = pd.as_vector()
+    r0 = fn(x0, pd)[0][0]
+    assert np.all(np.isfinite(r0)) and fn.diverged["n"] == 0
+    names = [p.name for p in info]
+    bad = x0.copy()
+    bad[names.index("damping_L")] = -5.0 / info[names.index("damping_L")].scale
+    r_bad = fn(bad, pd)[0][0]
+    assert r_bad.shape == r0.shape and np.all(r_bad == DIVERGED) and fn.diverged["n"] == 1
+    assert float(r_bad @ r_bad) > 100 * float(r0 @ r0)  # never chosen over the published robot (1e6 times here)
