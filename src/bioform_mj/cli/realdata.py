@@ -135,6 +135,11 @@ def main(args: argparse.Namespace) -> int:
     return args.realdata_main(args)
 
 
+def _some(names: list[str], n: int = 6) -> str:
+    """Up to ``n`` quoted names and how many more."""
+    return ", ".join(f"'{x}'" for x in names[:n]) + (f" and {len(names) - n} more" if len(names) > n else "")
+
+
 def _load(args: argparse.Namespace):
     """The robot (as robot check maps it; with ``--motor dc``, or where the bag states it, its ``<dcmotor>``
     drives taking the recorded efforts as commands) and the recording, checked against each other; returns
@@ -155,9 +160,21 @@ def _load(args: argparse.Namespace):
     robot = sim_spec(ref)
     joints = (args.left_joint or robot.layout.wheel_joints[0], args.right_joint or robot.layout.wheel_joints[1])
     topics = Topics(args.joint_states_topic, args.odom_topic, args.imu_topic, args.robot_ns)
-    rec = read_recording(args.bag, joints, topics, other_joints(robot))
+    moving = other_joints(robot)
+    rec = read_recording(args.bag, joints, topics, moving)
     if rec.others:
         rec.notes.append(f"the angles and speeds of {', '.join(rec.others)} from the recording start each chunk")
+    if unrecorded := [j for j in moving if j not in rec.others]:
+        # a PMB-2 recorded without its four swivel casters' angles: yaw inertia 14 % high outside its interval,
+        # weighted cost 220 after the fit (3-34 on robots without swivels); the TIAGo's mass 62.3 against 55.1
+        msg = (
+            f"the recording holds no angles of the robot's other moving joint(s) {_some(unrecorded)} (caster swivels "
+            "and wheels, suspensions): each chunk starts them as the file puts them at rest, and where the robot drove "
+            "otherwise they turn round against their damping, a drag no fitted parameter holds; record them in the "
+            "joint states if the robot has encoders on them"
+        )
+        rec.notes.append(msg)
+        print(f"warning: {msg}", file=sys.stderr)
     for note in rec.notes:
         if note.startswith(PAUSE_NOTE):  # dropped messages: the fit skips them, the replay interpolates
             print(f"warning: {note}", file=sys.stderr)
