@@ -36,6 +36,7 @@ class Truth:
     joints: tuple[str, str] = ("left_wheel", "right_wheel")
     base: str = "base"  # the chassis body: the payload goes on it
     odom_body: str | None = None  # the body whose pose and twist /odom reports (None: ``base``)
+    recorded: tuple[str, ...] = ()  # other 1-dof joints whose true angle and speed /joint_states also carries
 
 
 def _urdf_spec(robot_file: Path) -> mujoco.MjSpec:
@@ -169,7 +170,9 @@ def simulate(model: mujoco.MjModel, truth: Truth, duration: float, tau: float, s
     qadr = [int(model.joint(j).qposadr[0]) for j in truth.joints]
     base = model.body(truth.odom_body or truth.base).id
     n = int(round(duration / model.opt.timestep))
-    out = {k: [] for k in ("t", "q", "qd", "tau", "pos", "quat", "vbody", "wbody", "acc")}
+    out = {k: [] for k in ("t", "q", "qd", "tau", "pos", "quat", "vbody", "wbody", "acc", "oq", "oqd")}
+    oq = [int(model.joint(j).qposadr[0]) for j in truth.recorded]
+    od = [int(model.joint(j).dofadr[0]) for j in truth.recorded]
     vel6 = np.zeros(6)
     acc6 = np.zeros(6)
     for _ in range(n + 1):
@@ -191,6 +194,8 @@ def simulate(model: mujoco.MjModel, truth: Truth, duration: float, tau: float, s
         out["vbody"].append(vel6[3:].copy())
         out["wbody"].append(vel6[:3].copy())
         out["acc"].append(acc6[3:].copy())
+        out["oq"].append(data.qpos[oq].copy())
+        out["oqd"].append(data.qvel[od].copy())
         mujoco.mj_step(model, data)
     return {k: np.array(v) for k, v in out.items()}
 
@@ -257,12 +262,15 @@ def write_bag(
                 )
                 w.write(cj, t_ns, ts.serialize_cdr(arm, JointState.__msgtype__))
             rate = 0.01 * np.arange(1, len(extra_joints) + 1)
+            n_rec = len(truth.recorded)  # true angles and speeds of the recorded other joints, with the wheels' noise
+            rec_q = sim["oq"][k] + rng.normal(0, 1e-3, n_rec) if n_rec else np.zeros(0)
+            rec_qd = sim["oqd"][k] + rng.normal(0, noise, n_rec) if n_rec else np.zeros(0)
             js = JointState(
                 header=Header(stamp=st, frame_id=""),
-                name=names + list(extra_joints),
-                position=np.r_[sim["q"][k] + rng.normal(0, 1e-3, 2), rate * sim["t"][k]],
-                velocity=np.r_[sim["qd"][k] + rng.normal(0, noise, 2), rate] if velocities else np.zeros(0),
-                effort=np.r_[sim["tau"][k] + rng.normal(0, 0.02 * tau_scale, 2), 0 * rate],
+                name=names + list(truth.recorded) + list(extra_joints),
+                position=np.r_[sim["q"][k] + rng.normal(0, 1e-3, 2), rec_q, rate * sim["t"][k]],
+                velocity=np.r_[sim["qd"][k] + rng.normal(0, noise, 2), rec_qd, rate] if velocities else np.zeros(0),
+                effort=np.r_[sim["tau"][k] + rng.normal(0, 0.02 * tau_scale, 2), 0 * rec_q, 0 * rate],
             )
             w.write(cj, t_ns, ts.serialize_cdr(js, JointState.__msgtype__))
             p, q = sim["pos"][k], sim["quat"][k]
