@@ -169,9 +169,9 @@ def _load(args: argparse.Namespace):
         # weighted cost 220 after the fit (3-34 on robots without swivels); the TIAGo's mass 62.3 against 55.1
         msg = (
             f"the recording holds no angles of the robot's other moving joint(s) {_some(unrecorded)} (caster swivels "
-            "and wheels, suspensions): each chunk starts them as the file puts them at rest, and where the robot drove "
-            "otherwise they turn round against their damping, a drag no fitted parameter holds; record them in the "
-            "joint states if the robot has encoders on them"
+            "and wheels, suspensions): each chunk starts them as the file puts them at rest; where the robot had them "
+            "elsewhere (a swivel turned the other way) their moving there is a drag no fitted parameter holds; record "
+            "them in the joint states if the robot has encoders on them"
         )
         rec.notes.append(msg)
         print(f"warning: {msg}", file=sys.stderr)

@@ -660,9 +660,17 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
             free.append(j)
     jl = lambda js: _quoted(_joint_label(model, j) for j in js)  # noqa: E731
     if frozen:
+        # a driven wheel below a frozen joint: a suspension (PMB-2: its wheels' ±5 mm sliders, frozen, biased its
+        # fitted wheel damping 3x against a recording where they rode to their limit)
+        hung = [j for j in frozen if wheel_bodies & set(subtree(model, int(model.jnt_bodyid[j])).tolist())]
         notes.append(
             f"joint(s) {jl(frozen)} frozen (design §13: removed from the scene, their bodies welded where the file "
             "puts them; map free_joints = true to leave them free)"
+            + (
+                f"; a driven wheel hangs below {jl(hung)} (a suspension?): free it if it moves on the robot"
+                if hung
+                else ""
+            )
             + (
                 f"; their actuator(s) {_quoted(element_name(model, _ACT, a) for a in frozen_acts)} removed"
                 if frozen_acts
