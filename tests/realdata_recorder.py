@@ -36,6 +36,7 @@ class Truth:
     joints: tuple[str, str] = ("left_wheel", "right_wheel")
     base: str = "base"  # the chassis body: the payload goes on it
     odom_body: str | None = None  # the body whose pose and twist /odom reports (None: ``base``)
+    recorded: tuple[str, ...] = ()  # other 1-dof joints whose true angle and speed /joint_states also carries
 
 
 def _urdf_spec(robot_file: Path) -> mujoco.MjSpec:
@@ -48,13 +49,40 @@ def _urdf_spec(robot_file: Path) -> mujoco.MjSpec:
     text = Path(robot_file).read_text()
     for tag in ("gazebo", "transmission", "visual"):
         text = re.sub(rf"<{tag}\b.*?</{tag}>", "", text, flags=re.S)
-    compiler = '<mujoco><compiler discardvisual="true" fusestatic="false" inertiafromgeom="false"/></mujoco>'
+    compiler = (  # balanceinertia: the PMB-2's antenna links publish an inertia that is not positive definite
+        '<mujoco><compiler discardvisual="true" fusestatic="false" inertiafromgeom="false" balanceinertia="true"/>'
+        "</mujoco>"
+    )
     text = re.sub(r"(<robot[^>]*>)", r"\1" + compiler, text, count=1)
     spec = mujoco.MjSpec.from_string(text)
     spec.worldbody.first_body().add_freejoint()
+    for b in spec.bodies:  # an inertia matrix that is not positive definite (the PMB-2's antennas): its diagonal
+        fi = np.asarray(b.fullinertia, float)
+        if np.all(np.isfinite(fi)) and np.any(fi[3:]):
+            m = np.array([[fi[0], fi[3], fi[4]], [fi[3], fi[1], fi[5]], [fi[4], fi[5], fi[2]]])
+            if np.linalg.eigvalsh(m).min() <= 0:
+                b.fullinertia = [fi[0], fi[1], fi[2], 0.0, 0.0, 0.0]
     for g in spec.geoms:  # robot geoms 2/1, the floor 1/2: the robot touches the floor, never itself
         g.contype, g.conaffinity = 2, 1
     return spec
+
+
+def _mesh_wheel_sphere(model: mujoco.MjModel, joint: int, mesh: str) -> tuple[list[float], list[float]]:
+    """Centre (in the wheel body's frame, on the joint axis at the tread's middle) and radius (the largest distance
+    of the mesh's vertices from the axis) of the sphere a mesh wheel rolls on, from the compiled ``model`` at qpos0."""
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    g = next(k for k in range(model.ngeom) if model.geom_dataid[k] == model.mesh(mesh).id)
+    a, n = model.mesh_vertadr[model.geom_dataid[g]], model.mesh_vertnum[model.geom_dataid[g]]
+    verts = data.geom_xpos[g] + model.mesh_vert[a : a + n] @ data.geom_xmat[g].reshape(3, 3).T  # world, m
+    b = model.jnt_bodyid[joint]
+    rot = data.xmat[b].reshape(3, 3)
+    axis = rot @ model.jnt_axis[joint]
+    anchor = data.xpos[b] + rot @ model.jnt_pos[joint]
+    along = (verts - anchor) @ axis
+    radius = float(np.linalg.norm((verts - anchor) - np.outer(along, axis), axis=1).max())
+    centre = anchor + axis * 0.5 * (along.min() + along.max())
+    return (rot.T @ (centre - data.xpos[b])).tolist(), [radius, 0.0, 0.0]
 
 
 def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
@@ -78,6 +106,9 @@ def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
             for g in spec.body(model0.body(model0.joint(j).bodyid[0]).name).geoms:
                 if g.type == mujoco.mjtGeom.mjGEOM_CYLINDER:
                     g.type, g.size = mujoco.mjtGeom.mjGEOM_SPHERE, [g.size[0], 0, 0]
+                elif g.type == mujoco.mjtGeom.mjGEOM_MESH:  # a mesh tyre (Fetch/Freight): a sphere of its radius
+                    g.pos, g.size = _mesh_wheel_sphere(model0, model0.joint(j).id, g.meshname)
+                    g.type, g.meshname = mujoco.mjtGeom.mjGEOM_SPHERE, ""
     else:
         base = spec.body(truth.base)
         base.mass = base.mass + truth.payload_kg
@@ -139,7 +170,9 @@ def simulate(model: mujoco.MjModel, truth: Truth, duration: float, tau: float, s
     qadr = [int(model.joint(j).qposadr[0]) for j in truth.joints]
     base = model.body(truth.odom_body or truth.base).id
     n = int(round(duration / model.opt.timestep))
-    out = {k: [] for k in ("t", "q", "qd", "tau", "pos", "quat", "vbody", "wbody", "acc")}
+    out = {k: [] for k in ("t", "q", "qd", "tau", "pos", "quat", "vbody", "wbody", "acc", "oq", "oqd")}
+    oq = [int(model.joint(j).qposadr[0]) for j in truth.recorded]
+    od = [int(model.joint(j).dofadr[0]) for j in truth.recorded]
     vel6 = np.zeros(6)
     acc6 = np.zeros(6)
     for _ in range(n + 1):
@@ -161,6 +194,8 @@ def simulate(model: mujoco.MjModel, truth: Truth, duration: float, tau: float, s
         out["vbody"].append(vel6[3:].copy())
         out["wbody"].append(vel6[:3].copy())
         out["acc"].append(acc6[3:].copy())
+        out["oq"].append(data.qpos[oq].copy())
+        out["oqd"].append(data.qvel[od].copy())
         mujoco.mj_step(model, data)
     return {k: np.array(v) for k, v in out.items()}
 
@@ -227,12 +262,15 @@ def write_bag(
                 )
                 w.write(cj, t_ns, ts.serialize_cdr(arm, JointState.__msgtype__))
             rate = 0.01 * np.arange(1, len(extra_joints) + 1)
+            n_rec = len(truth.recorded)  # true angles and speeds of the recorded other joints, with the wheels' noise
+            rec_q = sim["oq"][k] + rng.normal(0, 1e-3, n_rec) if n_rec else np.zeros(0)
+            rec_qd = sim["oqd"][k] + rng.normal(0, noise, n_rec) if n_rec else np.zeros(0)
             js = JointState(
                 header=Header(stamp=st, frame_id=""),
-                name=names + list(extra_joints),
-                position=np.r_[sim["q"][k] + rng.normal(0, 1e-3, 2), rate * sim["t"][k]],
-                velocity=np.r_[sim["qd"][k] + rng.normal(0, noise, 2), rate] if velocities else np.zeros(0),
-                effort=np.r_[sim["tau"][k] + rng.normal(0, 0.02 * tau_scale, 2), 0 * rate],
+                name=names + list(truth.recorded) + list(extra_joints),
+                position=np.r_[sim["q"][k] + rng.normal(0, 1e-3, 2), rec_q, rate * sim["t"][k]],
+                velocity=np.r_[sim["qd"][k] + rng.normal(0, noise, 2), rec_qd, rate] if velocities else np.zeros(0),
+                effort=np.r_[sim["tau"][k] + rng.normal(0, 0.02 * tau_scale, 2), 0 * rec_q, 0 * rate],
             )
             w.write(cj, t_ns, ts.serialize_cdr(js, JointState.__msgtype__))
             p, q = sim["pos"][k], sim["quat"][k]

@@ -33,6 +33,7 @@ from bioform_mj.robots.layout import (
     _quoted,
     dc_constants,
     element_name,
+    frictionless_contacts,
     geom_support,
     subtree,
     welded_to,
@@ -587,21 +588,16 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
                 + f"), priority {CONTACT_PRIORITY} so that it decides the floor contact"
                 + (", condim 1" if condim1 else "")
             )
-    # frictionless as published: priority so that MuJoCo's max rule does not give them the floor's μ
-    raise_prio = [
-        g
-        for g in robot_geoms
-        if model.geom_bodyid[g] not in wheel_bodies
-        and (model.geom_friction[g, 0] < FRICTIONLESS or model.geom_condim[g] == 1 or g in friction)
-        and model.geom_priority[g] < CONTACT_PRIORITY
+    # frictionless as published (layout.frictionless_contacts, the one floor-contact classification, design §13):
+    # priority so that MuJoCo's max rule does not give them the floor's μ, and condim 1 (normal force only)
+    others = [g for g in robot_geoms if model.geom_bodyid[g] not in wheel_bodies]
+    pub_fl, to_condim1, note = frictionless_contacts(model, [g for g in others if g not in friction], _geom_label)
+    raise_prio = [g for g in others if (g in pub_fl or g in friction) and model.geom_priority[g] < CONTACT_PRIORITY]
+    published += [
+        (_geom_label(model, g), float(model.geom_friction[g, 0]), int(model.geom_condim[g])) for g in to_condim1
     ]
-    fl = [g for g in raise_prio if g not in friction]
-    if fl:
-        notes.append(
-            f"frictionless geom(s) {_quoted(_geom_label(model, g) for g in fl)} (friction < {FRICTIONLESS:g} or "
-            f"condim 1 as published) get priority {CONTACT_PRIORITY}: they stay frictionless against the floor "
-            "(MuJoCo would otherwise take the larger friction of the pair, the floor's)"
-        )
+    condim1 += to_condim1
+    notes += [note] if note else []
 
     # joints that are not the wheels or the root (design §13)
     wheel_set = set(int(j) for j in joints)
@@ -664,9 +660,17 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
             free.append(j)
     jl = lambda js: _quoted(_joint_label(model, j) for j in js)  # noqa: E731
     if frozen:
+        # a driven wheel below a frozen joint: a suspension (PMB-2: its wheels' ±5 mm sliders, frozen, biased its
+        # fitted wheel damping 3x against a recording where they rode to their limit)
+        hung = [j for j in frozen if wheel_bodies & set(subtree(model, int(model.jnt_bodyid[j])).tolist())]
         notes.append(
             f"joint(s) {jl(frozen)} frozen (design §13: removed from the scene, their bodies welded where the file "
             "puts them; map free_joints = true to leave them free)"
+            + (
+                f"; a driven wheel hangs below {jl(hung)} (a suspension?): free it if it moves on the robot"
+                if hung
+                else ""
+            )
             + (
                 f"; their actuator(s) {_quoted(element_name(model, _ACT, a) for a in frozen_acts)} removed"
                 if frozen_acts
@@ -710,7 +714,7 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
         )
     name_geoms = {
         g: _geom_label(model, g)
-        for g in set(raise_prio) | set(friction)
+        for g in set(raise_prio) | set(friction) | set(condim1)
         if not mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
     }
     name_joints = {

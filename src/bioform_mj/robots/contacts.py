@@ -26,7 +26,15 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from bioform_mj.robots.layout import FRICTIONLESS, RobotLayout, _label, element_name, subtree, welded_to
+from bioform_mj.robots.layout import (
+    RobotLayout,
+    _label,
+    contact_carries,
+    element_name,
+    frictionless,
+    subtree,
+    welded_to,
+)
 
 __all__ = [
     "CASTER_LOAD",
@@ -232,6 +240,7 @@ def floor_contacts(
                 "load_n": 0.0,
                 "friction": float(con.friction[0]),
                 "condim": int(con.dim),
+                "carries": contact_carries(int(con.dim)),
                 "friction_published": float(pub[0]),
                 "condim_published": int(pub[1]),
                 "priority": int(model.geom_priority[g]),
@@ -424,7 +433,7 @@ def brakes(c: dict) -> bool:
     geom with more than :data:`CASTER_LOAD` of the weight, or one the mapping names) that cannot roll, with
     friction (μ ≥ ``FRICTIONLESS`` and condim > 1). The one test ``robot check``, a run's outcomes and
     identification's ``braking_caster`` findings use (design §0, §14.2)."""
-    return c["role"] == "caster" and not c["rolls"] and c["friction"] >= FRICTIONLESS and c["condim"] != 1
+    return c["role"] == "caster" and not c["rolls"] and not frictionless(c["friction"], c["condim"])
 
 
 def braking_casters(floor: list[dict], drive_force: float) -> list[tuple[dict, float, str]]:
@@ -580,7 +589,7 @@ def align_swivels(
 
 def floor_table(report: dict[str, Any]) -> list[str]:
     """The floor contacts of a report as a small text table."""
-    rows = [("body", "geom", "role", "load N", "μ sim", "μ pub", "condim sim/pub")]
+    rows = [("body", "geom", "role", "load N", "μ sim", "μ pub", "condim sim/pub", "carries")]
     for c in report["floor_contacts"]:
         rows.append(
             (
@@ -591,6 +600,7 @@ def floor_table(report: dict[str, Any]) -> list[str]:
                 f"{c['friction']:g}",
                 f"{c['friction_published']:g}",
                 f"{c['condim']}/{c['condim_published']}",
+                c["carries"],
             )
         )
     width = [max(len(r[k]) for r in rows) for k in range(len(rows[0]))]

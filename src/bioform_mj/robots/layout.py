@@ -26,6 +26,9 @@ __all__ = [
     "RobotLayout",
     "model_path",
     "FRICTIONLESS",
+    "frictionless",
+    "frictionless_contacts",
+    "contact_carries",
     "CONTACT_PRIORITY",
     "SUPPORT_CLEARANCE",
     "subtree",
@@ -39,6 +42,46 @@ __all__ = [
 
 #: a geom whose sliding friction is below this (or whose condim is 1) is frictionless as published
 FRICTIONLESS = 1e-3
+
+
+def frictionless(mu: float, condim: int) -> bool:
+    """The one floor-contact classification (design §13): a geom of sliding friction ``mu`` (the first of
+    MuJoCo's three) and contact dimension ``condim`` is frictionless as its maker published it when ``mu`` is
+    below :data:`FRICTIONLESS` or ``condim`` is 1 (a Menagerie ``condim="1"`` caster, a URDF's ``<gazebo>``
+    ``mu1 0``). The scene simulates such a non-wheel geom with ``condim 1`` (normal force only) at
+    :data:`CONTACT_PRIORITY`; ``robot check``, ``bioform run``, the fit and the replay all take it from here."""
+    return float(mu) < FRICTIONLESS or int(condim) == 1
+
+
+def frictionless_contacts(model: mujoco.MjModel, geoms: list[int], label) -> tuple[list[int], list[int], str]:
+    """Of the non-wheel collision geoms ``geoms`` of a compiled robot, those :func:`frictionless` as published, those
+    of them the scene turns to ``condim 1`` (published above 1), and ``robot check``'s note on them ("" for none;
+    ``label(model, g)`` names a geom). A URDF's ``<gazebo>`` ``mu1 0`` imports as friction 0 at condim 3: MuJoCo's
+    pyramidal cone at its smallest μ (1e-5) is ill-conditioned (a Kobuki's loads at rest summed to 26.13 N of its
+    23.95 N weight, and the fit's rollouts with wheel damping blew up). Design §13."""
+    fl = [g for g in geoms if frictionless(model.geom_friction[g, 0], model.geom_condim[g])]
+    to1 = [g for g in fl if model.geom_condim[g] > 1]
+    if not fl:
+        return fl, to1, ""
+    note = (
+        f"frictionless geom(s) {_quoted(label(model, g) for g in fl)} (friction < {FRICTIONLESS:g} or condim 1 as "
+        f"published) simulated with condim 1 (normal force only) at priority {CONTACT_PRIORITY}: they stay "
+        "frictionless against the floor (MuJoCo would otherwise take the larger friction of the pair, the floor's)"
+    )
+    if to1:
+        note += f"; published condim {'/'.join(str(int(model.geom_condim[g])) for g in to1)} of "
+        note += _quoted(label(model, g) for g in to1)
+    return fl, to1, note
+
+
+#: what a contact of each ``condim`` transmits (MuJoCo: 1 normal, 3 + sliding, 4 + torsional, 6 + rolling)
+_CARRIES = {1: "normal", 3: "normal+sliding", 4: "normal+sliding+torsion", 6: "normal+sliding+torsion+rolling"}
+
+
+def contact_carries(condim: int) -> str:
+    """What a floor contact of dimension ``condim`` transmits, in words (``robot check``'s ``carries``):
+    ``normal`` (condim 1: a frictionless push), ``normal+sliding`` (3), ``+torsion`` (4), ``+rolling`` (6)."""
+    return _CARRIES.get(int(condim), f"condim {int(condim)}")
 
 
 #: priority given to a robot's frictionless geoms and mapped casters (design §13): above the floor's

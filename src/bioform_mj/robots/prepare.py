@@ -175,7 +175,9 @@ def prepare_robot(entry: RobotRef | str | Path) -> tuple[mujoco.MjSpec, RobotLay
     # spec elements by compiled index, resolved before anything is deleted (unnamed ones included)
     acts = {a: _spec_actuator(spec, model, a) for a in range(model.nu)}
     sjoints = {j: _spec_joint(spec, model, j) for j in set(plan["freeze"]) | set(plan["lock"])}
-    sgeoms = {g: _spec_geom(spec, model, g) for g in set(plan["priority"]) | set(plan["friction"])}
+    sgeoms = {
+        g: _spec_geom(spec, model, g) for g in set(plan["priority"]) | set(plan["friction"]) | set(plan["condim1"])
+    }
     for g, pr, gname in zip(plan["geoms"], plan["proxies"], layout.wheel_geoms):
         if pr is None and g >= 0 and not mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g):
             _spec_geom(spec, model, g).name = gname

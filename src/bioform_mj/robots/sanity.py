@@ -266,7 +266,8 @@ def urdf_value_problem(robot: ET.Element) -> str:
     for j in robot.findall("joint"):
         name = j.get("name") or "?"
         axis = j.find("axis")
-        if axis is not None and axis.get("xyz") is not None:
+        moves = j.get("type") not in ("fixed", "floating")  # urdfdom reads no axis of those (Fetch: xyz 0 0 0)
+        if moves and axis is not None and axis.get("xyz") is not None:
             a = _vec(axis.get("xyz"))
             if a is None or len(a) != 3 or not all(math.isfinite(x) for x in a) or not any(a):
                 return f"<axis xyz='{axis.get('xyz')}'> of joint '{name}': an axis must be 3 finite numbers, not all 0"

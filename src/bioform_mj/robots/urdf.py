@@ -326,6 +326,26 @@ def _parse(
             f"({len(joints)} joint(s): {', '.join(sorted({str(j.get('type')) for j in joints})) or 'none'})"
         )
 
+    # <axis> as ROS reads it (urdfdom): none on a fixed or floating joint (ignored there: the Fetch/Freight URDF's
+    # fixed joints say <axis xyz="0 0 0"/>, which the value check refused), and xyz 1 0 0 where it lacks xyz (MuJoCo's
+    # parser refuses "required attribute missing: 'xyz' Element 'axis'": MobileRobots' Pioneer 3-DX xacro has
+    # <axis xzy="0 0 1"/>, a typo, on a fixed joint, so the published robot could not be read at all)
+    no_xyz, dropped_axes = [], 0
+    for j in joints:
+        for ax in j.findall("axis"):
+            if j.get("type") in ("fixed", "floating"):
+                j.remove(ax)
+                dropped_axes += 1
+            elif ax.get("xyz") is None:
+                ax.set("xyz", "1 0 0")
+                no_xyz.append(f"'{j.get('name') or '?'}' ({j.get('type', '?')})")
+    if no_xyz:
+        notes.append(
+            f"<axis> without xyz on joint(s) {', '.join(no_xyz[:6])}"
+            + (f" and {len(no_xyz) - 6} more" if len(no_xyz) > 6 else "")
+            + ": taken as 1 0 0, the URDF default (ROS's urdfdom does the same; MuJoCo's parser would refuse it)"
+        )
+
     # <mujoco><compiler>: ours, and a meshdir the file may give for its relative mesh names
     mj = robot.find("mujoco")
     if mj is None:

@@ -47,10 +47,8 @@ def write_calibrated(
 ) -> None:
     """Write ``ref``'s robot with the fitted values of ``rows`` (fit.json's ``parameters``) to ``path``."""
     from bioform_mj.robots.realdata.chassis import chassis_body, explicit_base, set_yaw_inertia
-    from bioform_mj.robots.realdata.simmodel import frictionless_condim1
 
     spec = _source_spec(ref)
-    frictionless_condim1(spec)  # as the fit simulated them: condim 3 at friction 0 blew up with wheel damping
     val = {r["name"]: r["fitted"] for r in rows}
     chassis = chassis_body(spec.compile(), layout.base)  # as the fit chose it
     axis, _ = explicit_base(spec, chassis)

@@ -93,6 +93,8 @@ __all__ = [
 
 FIT_PARAMETERS = ("mass", "yaw_inertia", "damping", "frictionloss", "armature", "caster_friction")
 DEFAULT_FIT = ("mass", "yaw_inertia", "damping", "frictionloss", "caster_friction")
+#: a weighted residual sample (signal / its RMS) for a trial whose rollout diverged: far above any real one
+DIVERGED = 1e6
 #: measured samples per second of a chunk compared with the simulation (Hz)
 GRID_HZ = 50.0
 #: finite-difference step of the optimiser's scaled variables (a tenth of a search range is 1)
@@ -494,6 +496,9 @@ def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int, deadline: list
     def build(p):
         return sysid.apply_param_modifiers(p, robot.spec)
 
+    size: list[int] = []  # the residual's length, once a rollout gave one
+    diverged = {"n": 0}  # trials whose rollouts diverged (fit.json's notes)
+
     def one(x: np.ndarray, params) -> np.ndarray:
         if deadline is not None and time.perf_counter() > deadline[0]:
             raise _OutOfTime
@@ -502,19 +507,27 @@ def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int, deadline: list
                 x, params, build, trajs, modify_residual=modify_residual, n_threads=n_threads
             )
         except ValueError as exc:  # a rollout gone NaN under efforts far beyond the robot: an internal error before
+            if size:  # the published robot rolled out: a trial parameter made it diverge, not the efforts. The
+                # Freight's base mesh as a caster at friction 0.5-1 went NaN in the caster search, and the fit
+                # stopped blaming the efforts; a residual of DIVERGED per sample keeps the optimiser away instead
+                diverged["n"] += 1
+                return np.full(size[0], DIVERGED)
             ctl = [np.asarray(getattr(c, "data", c), float) for c in chunks.controls]
             emax = max((float(np.max(np.abs(c))) for c in ctl if c.size), default=0.0)
             raise InputError(
                 f"the robot simulated under the recording's efforts (up to {emax:.3g} in the motors' units) gives "
                 f"no usable trajectory ({exc}): do the efforts fit this robot file (N·m at the wheel, its motors)?"
             ) from None
-        return np.asarray(res).ravel()
+        out = np.asarray(res).ravel()
+        size[:] = [out.size]
+        return out
 
     def fn(x, params, **_):
         if np.ndim(x) == 1:
             return [one(x, params)], None, None
         return [np.stack([one(x[:, k], params) for k in range(x.shape[1])], axis=1)], None, None
 
+    fn.diverged = diverged
     return fn
 
 
@@ -646,6 +659,11 @@ def fit(
         print(f"warning: {stopped}", file=sys.stderr)
     x = opt.as_vector()
     r = _flat(fn, x, opt)
+    if fn.diverged["n"]:
+        notes.append(
+            f"{fn.diverged['n']} trial parameter set(s) made the rollouts diverge (MuJoCo's 'Nan, Inf or huge value' "
+            f"warnings): each was scored {DIVERGED:g} per sample, so the optimiser kept away from it"
+        )
     if float(r @ r) > cost_pub:  # never report a robot that does worse than the published one
         x = x0.copy()
         opt.update_from_vector(x)

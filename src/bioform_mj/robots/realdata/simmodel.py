@@ -33,7 +33,7 @@ __all__ = [
     "sim_spec",
     "initial_state",
     "effort_to_ctrl",
-    "frictionless_condim1",
+    "frictionless_note",
     "sensor_times",
     "other_joints",
     "SENSOR_COLUMNS",
@@ -63,7 +63,6 @@ def sim_spec(ref: RobotRef) -> SimRobot:
     """The prepared robot on a floor with the recording's sensors (module docstring); raises
     :class:`~bioform_mj.robots.layout.ModelError` (exit 2) as ``robot check`` would."""
     spec, layout, _, _ = prepare_robot(ref)
-    changed = frictionless_condim1(spec)
     for s in list(spec.sensors):
         spec.delete(s)
     # the floor as the scene's (robots/scene.py): MuJoCo's own contact defaults, whatever the robot file's default
@@ -128,32 +127,29 @@ def sim_spec(ref: RobotRef) -> SimRobot:
         tuple(int(model.jnt_qposadr[j]) for j in wj),
         tuple(int(model.jnt_dofadr[j]) for j in wj),
         np.asarray(layout.axle, float),
-        [FRICTIONLESS_NOTE.format(geoms=", ".join(changed))] if changed else [],
+        frictionless_note(layout, model),
     )
 
 
-#: sliding friction at or below which a contact geom is frictionless (MuJoCo's smallest friction, mjMINMU)
-FRICTIONLESS_MU = 1e-5
-FRICTIONLESS_NOTE = (
-    "frictionless contact geom(s) {geoms} (sliding friction 0 with condim 3, as a URDF's <gazebo> mu1 0 makes "
-    "them) simulated with condim 1: with condim 3, MuJoCo's pyramidal cone at its smallest friction 1e-5 made "
-    "the rollouts blow up (Kobuki, wheel damping 0.00088 N·m·s/rad: wheels at 320 rad/s)"
-)
+def frictionless_note(layout: RobotLayout, model: mujoco.MjModel) -> list[str]:
+    """fit.json's note on the geoms the robot file makes frictionless but publishes with ``condim`` above 1 (a
+    URDF's ``<gazebo>`` mu1 0 imports as friction 0, condim 3): :func:`~bioform_mj.robots.prepare.prepare_robot`
+    simulates them with ``condim 1`` (:func:`~bioform_mj.robots.layout.frictionless`, design §13), as ``robot
+    check`` and ``bioform run`` do. With condim 3, MuJoCo's pyramidal cone at its smallest friction 1e-5 made the
+    Kobuki's damped rollouts blow up (wheel damping 0.00088 N·m·s/rad: wheels at 320 rad/s)."""
+    from bioform_mj.robots.layout import frictionless
 
-
-def frictionless_condim1(spec: mujoco.MjSpec) -> list[str]:
-    """Give every colliding geom of ``spec`` whose sliding friction is at most :data:`FRICTIONLESS_MU` but whose
-    ``condim`` is above 1 ``condim 1`` (a frictionless contact, as meant); returns their names (an unnamed
-    one as ``BODY#k``, its body and its index among the spec's geoms). The Kobuki URDF's casters (``<gazebo>``
-    mu1 0) came out of the import as condim 3 at friction 0 (MuJoCo: 1e-5): stable at zero wheel damping, but with
-    the fit's damping 0.00088 N·m·s/rad its rollouts diverged (the chassis pitching at 320 rad/s); condim 1
-    or the elliptic cone are stable."""
-    out = []
-    for k, g in enumerate(spec.geoms):
-        if g.condim > 1 and float(g.friction[0]) <= FRICTIONLESS_MU and (g.contype or g.conaffinity):
-            g.condim = 1
-            out.append(g.name or f"{g.parent.name}#{k}")
-    return out
+    geoms = [
+        g
+        for g, mu, c in layout.published_contacts
+        if c > 1 and frictionless(mu, c) and int(model.geom(g).condim[0]) == 1  # not a caster_friction's target
+    ]
+    if not geoms:
+        return []
+    return [
+        f"frictionless contact geom(s) {', '.join(geoms)} (sliding friction below 1e-3 as published, condim above 1) "
+        "simulated with condim 1, as robot check and bioform run do (design §13)"
+    ]
 
 
 def effort_to_ctrl(robot: SimRobot, model: mujoco.MjModel, effort: np.ndarray) -> np.ndarray:
