@@ -77,7 +77,7 @@ from bioform_mj.robots.realdata.casters import (
 )
 from bioform_mj.robots.realdata.chassis import chassis_body, explicit_base, set_yaw_inertia
 from bioform_mj.robots.realdata.intervals import halfwidths, jacobian_at, remaining_step
-from bioform_mj.robots.realdata.recording import Recording, chunk_starts, pauses
+from bioform_mj.robots.realdata.recording import Recording, chunk_starts, pauses, still_note
 from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state, sensor_times
 
 __all__ = [
@@ -113,9 +113,6 @@ MISFIT_RMS = 0.3
 ROUGH_JACOBIAN = 0.8
 #: the note where the Gauss-Newton step still to go exceeds half an interval (design §8.4)
 STOPPED_SHORT = "its remaining Gauss-Newton step exceeds half the interval; the intervals are widened by that step"
-#: a recording whose largest wheel rim speed is below this (m/s) hardly moved the robot: measured 12.5 mm/s
-#: on a tb3 held by a dragging caster (0.025 N·m, program 5), 355 mm/s without the drag
-STILL_RIM_SPEED = 0.02
 
 
 def _sysid():
@@ -567,7 +564,7 @@ def fit(
     cost_pub = float(r_pub @ r_pub)
     pd.update_from_vector(x0)
     start = pd.copy()
-    notes = _still_note(robot, rec)
+    notes = still_note(rec, robot.layout.wheel_radius)
     guess = initial_guess(robot, rec, info, pd)
     r_guess = _flat(fn, guess, pd)
     cost_guess = float(r_guess @ r_guess)
@@ -780,18 +777,6 @@ def fit(
         len(chunks.states),
     )
     return result, opt
-
-
-def _still_note(robot: SimRobot, rec: Recording) -> list[str]:
-    """A note where the wheels hardly turned in the whole recording (nothing to identify)."""
-    rim = float(np.abs(rec.velocity).max()) * robot.layout.wheel_radius
-    if rim >= STILL_RIM_SPEED:
-        return []
-    return [
-        f"the wheels hardly turned (largest rim speed {1000 * rim:.2g} mm/s): the recorded torques hardly moved "
-        "the robot (a dragging caster or stiff gearboxes hold it), so the recording identifies nothing; record "
-        "with larger torques (bioform robot drive-program --accel)"
-    ]
 
 
 def simulate_chunks(robot: SimRobot, chunks: Chunks, model: mujoco.MjModel) -> list[np.ndarray]:

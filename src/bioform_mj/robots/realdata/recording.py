@@ -31,7 +31,20 @@ import numpy as np
 
 from bioform_mj.core.errors import InputError
 
-__all__ = ["PAUSE_NOTE", "Recording", "Topics", "chunk_starts", "pauses", "read_recording"]
+__all__ = [
+    "PAUSE_NOTE",
+    "STILL_RIM_SPEED",
+    "Recording",
+    "Topics",
+    "chunk_starts",
+    "pauses",
+    "read_recording",
+    "still_note",
+]
+
+#: a recording whose largest wheel rim speed is below this (m/s) hardly moved the robot: measured 12.5 mm/s
+#: on a tb3 held by a dragging caster (0.025 N·m, program 5), 355 mm/s without the drag
+STILL_RIM_SPEED = 0.02
 
 
 @dataclass(frozen=True)
@@ -677,3 +690,16 @@ def _read_csv(p: Path, joints: tuple[str, str]) -> tuple[Recording, np.ndarray]:
         g[:, 2] = a[:, col["imu.wz"]]
         rec.imu_t, rec.imu_gyro = rec.t.copy(), g
     return rec, np.asarray(lines, np.int64)
+
+
+def still_note(rec: Recording, wheel_radius: float) -> list[str]:
+    """A note where the wheels (radius ``wheel_radius``, m) hardly turned in the whole recording (nothing to
+    identify)."""
+    rim = float(np.abs(rec.velocity).max()) * wheel_radius
+    if rim >= STILL_RIM_SPEED:
+        return []
+    return [
+        f"the wheels hardly turned (largest rim speed {1000 * rim:.2g} mm/s): the recorded torques hardly moved "
+        "the robot (a dragging caster or stiff gearboxes hold it), so the recording identifies nothing; record "
+        "with larger torques (bioform robot drive-program --accel)"
+    ]
