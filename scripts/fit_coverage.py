@@ -30,22 +30,12 @@ ROOT = Path(__file__).resolve().parents[1]
 def _robots(rr):
     from bioform_mj.robots.refs import RobotRef, as_ref
 
-    kobuki = ROOT / "tests/zoo/kobuki_urdf/kobuki_standalone.urdf"
+    kobuki = rr.KOBUKI_URDF
     return {  # name: (robot file for the recorder, truth, torque scale N·m, the fit's mapping)
         "kobuki": (
             str(kobuki),
-            rr.Truth(
-                payload_kg=0.6,
-                payload_yaw_kgm2=0.01,
-                damping=(0.0008, 0.001),
-                frictionloss=(0.008, 0.006),
-                caster_friction=0.0,
-                casters=("caster_front_link", "caster_back_link"),
-                joints=("wheel_left_joint", "wheel_right_joint"),
-                base="base_link",
-                odom_body="base_footprint",
-            ),
-            0.0713,
+            rr.KOBUKI_TRUTH,
+            rr.KOBUKI_TAU,
             RobotRef(
                 model=str(kobuki),
                 base="base_footprint",

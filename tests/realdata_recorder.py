@@ -39,6 +39,24 @@ class Truth:
     recorded: tuple[str, ...] = ()  # other 1-dof joints whose true angle and speed /joint_states also carries
 
 
+#: the Kobuki URDF of the test zoo and a "real" Kobuki that differs from it (its base_link: 2.4 kg, izz 0.03675
+#: kg·m²; the payload makes 3.0 kg and 0.04675 kg·m²), recorded at KOBUKI_TAU N·m: the fit's out-of-sample tests
+#: and scripts/fit_coverage.py use this one recipe
+KOBUKI_URDF = Path(__file__).resolve().parent / "zoo" / "kobuki_urdf" / "kobuki_standalone.urdf"
+KOBUKI_TRUTH = Truth(
+    payload_kg=0.6,
+    payload_yaw_kgm2=0.01,
+    damping=(0.0008, 0.001),
+    frictionloss=(0.008, 0.006),
+    caster_friction=0.0,
+    casters=("caster_front_link", "caster_back_link"),
+    joints=("wheel_left_joint", "wheel_right_joint"),
+    base="base_link",
+    odom_body="base_footprint",
+)
+KOBUKI_TAU = 0.0713
+
+
 def _urdf_spec(robot_file: Path) -> mujoco.MjSpec:
     """A URDF through MuJoCo's own URDF parser (not the project's import): ``<gazebo>``, ``<transmission>`` and
     ``<visual>`` dropped, static links kept as bodies, links without ``<inertial>`` massless (the URDF rule), the

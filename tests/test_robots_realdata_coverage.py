@@ -30,18 +30,7 @@ def test_the_intervals_hold_the_truth_of_unseen_kobuki_recordings(tmp_path):
     from bioform_mj.robots.realdata.simmodel import other_joints, sim_spec
     from bioform_mj.robots.refs import RobotRef
 
-    urdf = HERE / "zoo/kobuki_urdf/kobuki_standalone.urdf"
-    truth = rr.Truth(
-        payload_kg=0.6,
-        payload_yaw_kgm2=0.01,
-        damping=(0.0008, 0.001),
-        frictionloss=(0.008, 0.006),
-        caster_friction=0.0,
-        casters=("caster_front_link", "caster_back_link"),
-        joints=("wheel_left_joint", "wheel_right_joint"),
-        base="base_link",
-        odom_body="base_footprint",
-    )
+    urdf, truth = rr.KOBUKI_URDF, rr.KOBUKI_TRUTH
     ref = RobotRef(
         model=str(urdf),
         base="base_footprint",
@@ -61,7 +50,7 @@ def test_the_intervals_hold_the_truth_of_unseen_kobuki_recordings(tmp_path):
     model = rr.true_model(urdf, truth)
     z, rel = [], []
     for program in (11, 12, 13):
-        sim = rr.simulate(model, truth, 60.0, 0.0713, program)
+        sim = rr.simulate(model, truth, 60.0, rr.KOBUKI_TAU, program)
         bag = tmp_path / f"kobuki{program}"
         rr.write_bag(bag, sim, truth, seed=program + 100)
         robot = sim_spec(ref)

@@ -317,20 +317,9 @@ def test_fit_recovers_a_kobuki_recorded_through_mujocos_own_urdf_parser(tmp_path
     import realdata_recorder as rr
     from bioform_mj.cli import main as cli
 
-    urdf = HERE / "zoo/kobuki_urdf/kobuki_standalone.urdf"
-    truth = rr.Truth(
-        payload_kg=0.6,
-        payload_yaw_kgm2=0.01,
-        damping=(0.0008, 0.001),
-        frictionloss=(0.008, 0.006),
-        caster_friction=0.0,
-        casters=("caster_front_link", "caster_back_link"),
-        joints=("wheel_left_joint", "wheel_right_joint"),
-        base="base_link",
-        odom_body="base_footprint",
-    )
+    urdf, truth = rr.KOBUKI_URDF, rr.KOBUKI_TRUTH
     bag = tmp_path / "kobuki"
-    rr.record(bag, str(urdf), truth, duration=60.0, tau=0.0713, seed=3)
+    rr.record(bag, str(urdf), truth, duration=60.0, tau=rr.KOBUKI_TAU, seed=3)
     out = tmp_path / "fit"
     flags = ["--base", "base_footprint", "--left-wheel", "wheel_left_joint", "--right-wheel", "wheel_right_joint"]
     argv = ["robot", "fit", str(urdf), *flags, "--tau-max", "1", "--bag", str(bag), "--out", str(out)]
