@@ -330,12 +330,11 @@ def _parse(
     # fixed joints say <axis xyz="0 0 0"/>, which the value check refused), and xyz 1 0 0 where it lacks xyz (MuJoCo's
     # parser refuses "required attribute missing: 'xyz' Element 'axis'": MobileRobots' Pioneer 3-DX xacro has
     # <axis xzy="0 0 1"/>, a typo, on a fixed joint, so the published robot could not be read at all)
-    no_xyz, dropped_axes = [], 0
+    no_xyz = []
     for j in joints:
         for ax in j.findall("axis"):
             if j.get("type") in ("fixed", "floating"):
                 j.remove(ax)
-                dropped_axes += 1
             elif ax.get("xyz") is None:
                 ax.set("xyz", "1 0 0")
                 no_xyz.append(f"'{j.get('name') or '?'}' ({j.get('type', '?')})")

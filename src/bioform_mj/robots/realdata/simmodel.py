@@ -137,7 +137,7 @@ def frictionless_note(layout: RobotLayout, model: mujoco.MjModel) -> list[str]:
     simulates them with ``condim 1`` (:func:`~bioform_mj.robots.layout.frictionless`, design §13), as ``robot
     check`` and ``bioform run`` do. With condim 3, MuJoCo's pyramidal cone at its smallest friction 1e-5 made the
     Kobuki's damped rollouts blow up (wheel damping 0.00088 N·m·s/rad: wheels at 320 rad/s)."""
-    from bioform_mj.robots.layout import frictionless
+    from bioform_mj.robots.layout import FRICTIONLESS, frictionless
 
     geoms = [
         g
@@ -147,7 +147,8 @@ def frictionless_note(layout: RobotLayout, model: mujoco.MjModel) -> list[str]:
     if not geoms:
         return []
     return [
-        f"frictionless contact geom(s) {', '.join(geoms)} (sliding friction below 1e-3 as published, condim above 1) "
+        f"frictionless contact geom(s) {', '.join(geoms)} (sliding friction below {FRICTIONLESS:g} as published, "
+        "condim above 1) "
         "simulated with condim 1, as robot check and bioform run do (design §13)"
     ]
 
