@@ -669,7 +669,14 @@ def fit(
             "the fit found nothing better than the published values (they are reported; the recording may not "
             "excite the robot, or the model lacks what the robot does: slip, backlash, a motor's dynamics)"
         )
-    J, rough = jacobian_at(lambda X: _flat(fn, X, opt), x, r, eps, hi)
+    blew = np.zeros(len(x), bool)  # a column whose finite-difference trial diverged: scored DIVERGED, not a slope
+
+    def jac_residual(X: np.ndarray) -> np.ndarray:
+        RX = _flat(fn, X, opt)
+        blew[:] |= np.all(RX == DIVERGED, axis=0)
+        return RX
+
+    J, rough = jacobian_at(jac_residual, x, r, eps, hi)
     opt.update_from_vector(x)
     step = remaining_step(r, J, x, lo, hi)  # ~0 where the optimiser converged
     half, corr = halfwidths(r, J, len(chunks.states), int(np.count_nonzero(chunks.weights)), step)
@@ -691,7 +698,7 @@ def fit(
         lo_i, hi_i = float(lo[i]) * p.scale, float(hi[i]) * p.scale
         rng = hi_i - lo_i
         narrow = math.isfinite(hw) and (hw <= 0.3 * abs(v) or hw <= 0.05 * rng)
-        ident = narrow and not misfit and rough[i] <= ROUGH_JACOBIAN
+        ident = narrow and not misfit and rough[i] <= ROUGH_JACOBIAN and not blew[i]
         partners = [
             {"name": names[k], "rho": round(float(corr[i, k]), 3)}
             for k in np.argsort(-np.abs(corr[i]))
@@ -699,6 +706,8 @@ def fit(
         ]
         at_bound = v <= lo_i + 1e-6 * rng or v >= hi_i - 1e-6 * rng
         why = [f"the model misses the recording (weighted residual RMS {miss:.2g})"] if misfit else []
+        if blew[i]:
+            why.append("a finite-difference step of it made the rollouts diverge: its Jacobian column is no slope")
         if rough[i] > ROUGH_JACOBIAN:
             why.append(
                 f"the residual is not smooth in it (its Jacobian column at a 10x step differs by {rough[i]:.0%}): "
