@@ -187,3 +187,37 @@ def test_batch_env_pickles_and_copies_and_the_copy_continues_bit_for_bit(batched
     for c in copies:
         got = _run(c, 47, 40)
         assert len(got) == len(ref) and all(np.array_equal(a, b) for a, b in zip(got, ref))
+
+
+def test_batch_env_record_for_copies_is_bounded_and_says_when_it_drops(batched, monkeypatch):
+    """A world whose episode ended and is never reset keeps the oldest episode open, so the record a copy replays
+    would grow by W·n·2 floats a period without end: past ``RECORD_CAP_BYTES`` it is dropped with one warning,
+    pickling refuses naming the worlds not reset since, and once every world is reset copies work again, bit for
+    bit. Here the cap is set to 10 periods' actions (W·n·2·8 = 144 bytes each)."""
+    import pickle
+
+    from bioform_mj.envs import batched as mod
+
+    be = batched[0]
+    per_step = W * 3 * 2 * 8
+    be.reset()  # under the real cap: the record is this one reset
+    assert be._log_bytes == W and len(be._log) == 1
+    monkeypatch.setattr(mod, "RECORD_CAP_BYTES", 10 * per_step + W)
+    with pytest.warns(UserWarning, match="cannot be pickled or copied until every world has been reset"):
+        for k in range(14):
+            be.step(actions(k))
+            assert be._log_bytes <= mod.RECORD_CAP_BYTES
+    assert be._ep_start.tolist() == [-1, -1, -1] and be._log == []
+    with pytest.raises(TypeError, match=r"cannot pickle or copy this batch_env: .*worlds \[0, 1, 2\]"):
+        pickle.dumps(be)
+    be.reset([0, 1])
+    _run(be, 14, 3)
+    with pytest.raises(TypeError, match=r"not since: worlds \[2\]"):
+        pickle.dumps(be)
+    be.reset([2])
+    _run(be, 17, 2)
+    assert be._ep_start.min() >= 0 and be._log_bytes <= mod.RECORD_CAP_BYTES
+    c = pickle.loads(pickle.dumps(be))
+    assert np.array_equal(c.obs.numpy(), be.obs.numpy())
+    got, ref = _run(c, 19, 4), _run(be, 19, 4)
+    assert all(np.array_equal(a, b) for a, b in zip(got, ref))

@@ -18,6 +18,7 @@ estimator advance) are the device functions of ``batch/stack.py`` that the close
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -298,6 +299,11 @@ def _env_check_actions(
             action[w, i, c] = wp.clamp(u, low[i, c], high[i, c])
 
 
+#: the most bytes of calls :class:`BatchEnv` keeps for its copies (bytes); a trainer that resets ended worlds stays
+#: far below it (one episode: ``T/dt`` periods of W·n·2 floats, 1,024 worlds of 4 followers over 20 s at 10 ms: 131 MB)
+RECORD_CAP_BYTES = 512 * 2**20
+
+
 class BatchEnv:
     """``W`` formations of one scenario, stepped together on a MuJoCo Warp device (``envs.batch_env``).
 
@@ -382,6 +388,11 @@ class BatchEnv:
         #: world's current episode began (0 for a world never reset: every step since the build moved it)
         self._log: list[tuple[str, np.ndarray]] = []
         self._ep_start = np.zeros(W, dtype=np.int64)
+        #: bytes the record holds, at most :data:`RECORD_CAP_BYTES`: past it (a world ended and never reset keeps
+        #: the oldest episode open, W·n·2 floats a period) the record is emptied, a warning says so once, the
+        #: worlds' episode starts become -1 (begun before the record) and pickling refuses until each is reset
+        self._log_bytes = 0
+        self._warned_cap = False
 
     # ------------------------------------------------------------------ device launches
     def _sense(self, active: wp.array) -> None:
@@ -428,18 +439,49 @@ class BatchEnv:
         sel = mask.astype(bool)
         self._ended[sel] = False
         self._ep_start[sel] = len(self._log)
-        self._log.append(("reset", sel))
-        drop = int(self._ep_start.min())  # calls no current episode needs
-        if drop:
+        self._remember(("reset", sel))
+        drop = int(self._ep_start.min())  # calls no current episode needs (-1: one began before the record)
+        if drop > 0:
+            self._log_bytes -= sum(a.nbytes for _, a in self._log[:drop])
             del self._log[:drop]
             self._ep_start -= drop
         return self.obs
+
+    def _remember(self, call: tuple[str, np.ndarray]) -> None:
+        """Append ``call`` to the record a copy replays, keeping it within :data:`RECORD_CAP_BYTES`."""
+        if call[0] == "step" and self._ep_start.max() < 0:
+            return  # every open episode began before the record: nothing a copy could replay
+        if self._log_bytes + call[1].nbytes > RECORD_CAP_BYTES:
+            if not self._warned_cap:
+                warnings.warn(f"batch_env: {self._cap_why()}", stacklevel=3)
+                self._warned_cap = True
+            if call[0] == "reset":  # the worlds it resets begin within the record again
+                self._ep_start[~call[1]] = -1
+                self._ep_start[call[1]] = 0
+            else:
+                self._ep_start[:] = -1
+            self._log.clear()
+            self._log_bytes = 0
+            if call[0] == "step":
+                return
+        self._log.append(call)
+        self._log_bytes += call[1].nbytes
+
+    def _cap_why(self) -> str:
+        return (
+            f"the record a copy replays (every call since the oldest open episode began) passed "
+            f"{RECORD_CAP_BYTES / 2**20:.3g} MiB: a world whose episode ended and is not reset keeps it open; the "
+            "record was dropped, so this environment cannot be pickled or copied until every world has been reset"
+        )
 
     # ------------------------------------------------------------------ pickling and copies
     def __getstate__(self) -> dict[str, Any]:
         """What rebuilds this environment (its Warp arrays live on the device, behind ctypes pointers, and do not
         pickle): its arguments and the calls since the oldest current episode began (each reset's worlds, each
         step's actions as checked and clipped), and which worlds' episodes ended. The copy replays them."""
+        if self._ep_start.min() < 0:
+            stale = np.flatnonzero(self._ep_start < 0).tolist()
+            raise TypeError(f"cannot pickle or copy this batch_env: {self._cap_why()} (not since: worlds {stale})")
         return {
             "init": self._init, "log": [(kind, a.copy()) for kind, a in self._log],
             "ep_start": self._ep_start.copy(), "ended": self._ended.copy(),
@@ -505,7 +547,7 @@ class BatchEnv:
                 mjw.step(r.m, d)
             self._sense(self._all)
             done = self._done.numpy()
-            self._log.append(("step", self._action.numpy().copy()))
+            self._remember(("step", self._action.numpy().copy()))
         term, trunc = done[:, 0].astype(bool) | self._ended, done[:, 1].astype(bool)
         self._ended |= term | trunc
         return self.obs, self.reward, term, trunc
