@@ -4,8 +4,8 @@ includes 0, and a parameter whose finite-difference trial at the optimum diverge
 
 The recordings come from ``tests/realdata_recorder.py`` (a plain MuJoCo loop and ``rosbags``' writer): the tb3
 with a 0.3 kg payload, wheel damping 0.002/0.0025 N·m·s/rad and dry friction **0** on the left wheel, 0.003 N·m on
-the right, 12 s at 0.025 N·m. Measured once (load 5, 16 s CPU): 10 chunks of 1.2 s; the left dry friction 0 with
-interval ±0.00031 N·m (5 % of the left wheel's RMS effort is 0.00065 N·m); the right 0.00307 ± 0.00037; the other
+the right, 12 s at 0.025 N·m. Measured once (load 6, 16.5 s CPU): 12 chunks of 1 s; the left dry friction 0 with
+interval ±0.00029 N·m (5 % of the left wheel's RMS effort is 0.00065 N·m); the right 0.00300 ± 0.00029; the other
 four identified and holding the truth.
 """
 
@@ -46,26 +46,29 @@ def _rec(seconds: float, hz: float = 100.0, gap: tuple[float, float] | None = No
 
 
 def test_a_short_recording_gets_shorter_chunks_and_an_explicit_one_is_honoured():
-    # 6 parameters want 10 chunks: 60 s and 20 s give 10 of 2 s; 12 s gives 6, so 1.2 s (10 of them); 8 s reaches
-    # only 8 at the 1 s floor (the jackknife's minimum p + 2); an explicit --chunk is kept as given
+    # 6 parameters want 10 chunks: 60 s and 20 s give 10 of 2 s; 12 s gives 6, so shorter ones up to the 12 of
+    # --max-chunks: 1 s (1.1 s gives 10); 8 s: 0.6 s (13; 0.7 s gives 11); 4 s reaches only 8 at the 0.5 s floor
+    # (the jackknife's minimum p + 2); an explicit --chunk is kept as given
     assert choose_chunk(_rec(60.0), 6, None, 12) == (2.0, [])
     assert choose_chunk(_rec(20.0), 6, None, 12) == (2.0, [])
     length, notes = choose_chunk(_rec(12.0), 6, None, 12)
-    assert length == pytest.approx(1.2) and "10 of 1.2 s" in notes[0] and "6 chunks of 2 s" in notes[0]
-    assert choose_chunk(_rec(8.0), 6, None, 12)[0] == pytest.approx(CHUNK_FLOOR_S)
+    assert length == pytest.approx(1.0) and "12 of 1 s" in notes[0] and "6 chunks of 2 s" in notes[0]
+    assert choose_chunk(_rec(12.0), 6, None, 10)[0] == pytest.approx(1.2)  # --max-chunks 10: 10 of 1.2 s
+    assert choose_chunk(_rec(8.0), 6, None, 12)[0] == pytest.approx(0.6)
+    assert choose_chunk(_rec(4.0), 6, None, 12)[0] == pytest.approx(CHUNK_FLOOR_S) == 0.5
     assert choose_chunk(_rec(12.0), 6, 2.0, 12) == (2.0, [])
     assert choose_chunk(_rec(12.0), 2, None, 12) == (2.0, [])  # 2 parameters: 6 chunks of 2 s are enough
     # a pause (dropped messages, 4-5.5 s) costs chunks: no chunk spans it, so 20 s gives 8 of 2 s (0-2, 6-20) and
-    # 1.6 s gives 10 (0-3.2, 6.4-19.2)
+    # 1.4 s gives 12 (0-2.8, 5.6-19.6; 1.5 s gives 11)
     length, notes = choose_chunk(_rec(20.0, gap=(4.0, 5.5)), 6, None, 12)
-    assert length == pytest.approx(1.6) and "8 chunks of 2 s" in notes[0] and "10 of 1.6 s" in notes[0]
+    assert length == pytest.approx(1.4) and "8 chunks of 2 s" in notes[0] and "12 of 1.4 s" in notes[0]
 
 
 def test_too_few_chunks_say_how_long_to_record():
-    assert too_short_why(8, 6, 1.0, 12) == ""
-    why = too_short_why(6, 6, 1.0, 12)
-    assert why.startswith("recording too short for an interval that holds") and "record ≥ 10 s" in why
-    assert "shorter --chunk" in too_short_why(5, 6, 2.0, 12)  # an explicit 2 s chunk: a shorter one would do
+    assert too_short_why(8, 6, 0.5, 12) == ""
+    why = too_short_why(6, 6, 0.5, 12)  # 6 parameters + 4 chunks of 0.5 s
+    assert why.startswith("recording too short for an interval that holds") and "record ≥ 5 s" in why
+    assert "shorter --chunk, down to 0.5 s" in too_short_why(5, 6, 2.0, 12)  # an explicit 2 s: shorter would do
     assert "--max-chunks" in too_short_why(4, 6, 2.0, 4)  # the user's cap, not the recording
 
 
@@ -81,6 +84,13 @@ def test_an_interval_that_includes_zero_is_never_identified():
     row["why"] = "interval ±1 kg is wide"
     settle_zero(row, eff)  # no effect bound for a mass: not identified, the bound said
     assert row["status"] == "not identified" and "includes 0" in row["why"] and "is wide" not in row["why"]
+    wide = {"name": "frictionloss_L", "unit": "N·m", "ci95": [1e-5, 3e-4], "status": "not identified"}
+    wide["why"] = "interval ±0.000145 N·m is wide"
+    settle_zero(wide, eff)  # not including 0 but too wide to identify, and below a negligible bound
+    assert wide["status"] == "negligible" and "includes 0" not in wide["why"] and "below 0.0003 N·m" in wide["why"]
+    wide = {**wide, "status": "not identified", "why": "interval ±0.0145 N·m is wide", "ci95": [1e-3, 0.03]}
+    settle_zero(wide, eff)  # its upper end is not negligible: it stays as it was
+    assert wide["status"] == "not identified" and wide["why"] == "interval ±0.0145 N·m is wide"
     held = {"name": "frictionloss_L", "unit": "N·m", "ci95": [-3e-4, 3e-4], "status": "not identified"}
     held["why"] = "the residual is not smooth in it (...)"
     settle_zero(held, eff)  # an interval that does not hold bounds nothing
@@ -108,8 +118,8 @@ def short_fit(short_bag):
 
 def test_a_short_recordings_fit_chooses_its_chunks_and_tells_zero_from_positive(short_fit):
     res, got = short_fit
-    assert res.n_chunks == 10 and res.chunk_s == pytest.approx(1.2)
-    assert res.notes[0].startswith("10 chunks of 1.2 s") and any("not 2 s" in n for n in res.notes)
+    assert res.n_chunks == 12 and res.chunk_s == pytest.approx(1.0)
+    assert res.notes[0].startswith("12 chunks of 1 s") and any("not 2 s" in n for n in res.notes)
     zero, pos = got["frictionloss_L"], got["frictionloss_R"]
     assert zero["status"] == "negligible" and zero["ci95"][0] <= 0.0 <= zero["ci95"][1], zero
     assert zero["ci95"][1] < 0.05 * 0.013  # its bound: under 5 % of the wheel's RMS effort (~0.013 N·m)
@@ -120,12 +130,12 @@ def test_a_short_recordings_fit_chooses_its_chunks_and_tells_zero_from_positive(
 
 
 def test_a_recording_too_short_even_at_the_floor_identifies_nothing(tmp_path):
-    bag = tmp_path / "tb3_6s"
-    rr.record(bag, "tb3", TRUTH, duration=6.0, tau=0.025, seed=0)
+    bag = tmp_path / "tb3_3s"
+    rr.record(bag, "tb3", TRUTH, duration=3.0, tau=0.025, seed=0)
     res, got = _fit(bag, max_iters=3)
-    assert res.n_chunks == 6 and res.chunk_s == pytest.approx(CHUNK_FLOOR_S)  # 6 s recorded: 6 chunks of 1 s
+    assert res.n_chunks == 6 and res.chunk_s == pytest.approx(CHUNK_FLOOR_S)  # 3 s recorded: 6 chunks of 0.5 s
     for p in got.values():
-        assert p["status"] == "not identified" and "record ≥ 10 s" in p["why"], p
+        assert p["status"] == "not identified" and "record ≥ 5 s" in p["why"], p
     assert any(n.startswith("no parameter is reported identified: recording too short") for n in res.notes)
 
 

@@ -96,7 +96,7 @@ def add_parsers(rsub: Any) -> None:
         "--chunk",
         type=float,
         default=None,
-        help="seconds simulated from each recorded state (default 2; shorter, down to 1, on a short recording)",
+        help="seconds simulated from each recorded state (default 2; shorter, down to 0.5, on a short recording)",
     )
     fit.add_argument("--max-chunks", type=int, default=12, help="chunks used at most, spread evenly (default 12)")
     fit.add_argument("--max-iters", type=int, default=30, help="optimiser iterations at most (default 30)")

@@ -1,7 +1,7 @@
 """``bioform robot fit``: a real robot's recording in, a calibrated robot out (issue 29; design §8, §13).
 
 The model is the project's own robot (:mod:`bioform_mj.robots.realdata.simmodel`: the file and mapping
-``robot check`` uses, on a floor). The recording is cut into chunks (2 s by default; shorter, down to 1 s, where a
+``robot check`` uses, on a floor). The recording is cut into chunks (2 s by default; shorter, down to 0.5 s, where a
 short recording gives fewer than the parameters + 4 of them: :func:`~.status.choose_chunk`); each chunk is simulated
 open loop from the state the recording gives at its start (wheel angles and speeds, the body rolling with
 them) under the recorded wheel torques, and compared with what was measured: wheel speeds, and where the
@@ -32,18 +32,17 @@ Armature is not fitted unless asked (``--fit ...,armature``): a wheel's armature
 inertia act through the same two effective inertias (design §8: ``a_eff = 1/(m r + 2 I_w/r)``,
 ``b_eff = l/(I r + 2 I_w l²/r)``), so a recording of torques and speeds cannot separate the three; fitted
 together, their intervals say so. A parameter is reported ``identified`` only when its interval is
-narrower than 30 % of its value (or than 5 % of its search range, for one found near zero) and does not
-include 0; one whose interval includes 0 is ``negligible`` where its upper end's torque at the recording's own
-speeds is under 5 % of the wheel's RMS effort, else ``not identified`` ("the recording says only that it is
-below X"); any other is ``not identified`` and its most correlated partners (``|ρ| > 0.9``) are named
-(:mod:`~bioform_mj.robots.realdata.status`). A recording too short for ``p + 2`` chunks even at the 1 s floor
-identifies nothing, and says how long to record. Caster friction is fitted only
-where the robot has casters: the mapping's (``--caster``), else those ``robot check`` finds (a non-wheel geom
-carrying a share of the weight at rest, design §0); where the recording cannot tell it from the wheels' dry
-friction (both brake the robot alike when it drives straight; only turning sets them apart), the report says
-so with their correlation. A caster the file makes frictionless (``condim 1``) is given ``condim 3`` so that its
-friction acts (a note says so), and the optimiser starts from the best, by simulation, of the linear estimate
-and of a 1-D search over the caster's friction (:func:`~.casters.caster_start`: the rest regressed around each
+narrower than 30 % of its value (so it does not include 0); one whose interval includes 0 (or is too wide) is
+``negligible`` where its upper end's torque at the recording's own speeds is under 5 % of the wheel's RMS
+effort, else ``not identified`` ("the recording says only that it is below X"); any other is ``not identified``
+and its most correlated partners (``|ρ| > 0.9``) are named (:mod:`~bioform_mj.robots.realdata.status`). A
+recording too short for ``p + 2`` chunks even at the 0.5 s floor identifies nothing, and says how long to record.
+Caster friction is fitted only where the robot has casters: the mapping's (``--caster``), else those ``robot check``
+finds (a non-wheel geom carrying a share of the weight at rest, design §0); where the recording cannot tell it from
+the wheels' dry friction (both brake the robot alike when it drives straight; only turning sets them apart), the
+report says so with their correlation. A caster the file makes frictionless (``condim 1``) is given ``condim 3``
+so that its friction acts (a note says so), and the optimiser starts from the best, by simulation, of the linear
+estimate and of a 1-D search over the caster's friction (:func:`~.casters.caster_start`: the rest regressed around each
 value). A sliding caster chatters, so where its friction is fitted the signals are compared as means over
 :data:`~.casters.CASTER_WINDOW_S` windows, the finite-difference step is :data:`~.casters.CASTER_FD_STEP` and
 every interval and status comes from the cost's profile (:func:`~.casters.cost_profile`), not the Jacobian.
