@@ -6,6 +6,9 @@ none of the fit's code), 60 s each, three torque programs and sensor-noise draws
 (``scripts/fit_coverage.py --robots kobuki --programs 11-13``): with the plain cluster-robust sandwich (the
 fit's interval before) 3 of the 18 intervals missed the truth and the RMS of (fitted − truth)/half-width was
 0.72; with the leave-one-chunk-out jackknife 1 of 18 and 0.53 (0.51 for an exact interval of a normal error).
+A parameter is identified where its interval is narrower than 30 % of its value (design §8.4): 17 of the 18 are;
+program 13's left damping (±0.00024 N·m·s/rad, 30 % of the 0.0008 truth) is not, for its width alone (the clause
+"or narrower than 5 % of the search range" that called it identified is gone).
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ def test_the_intervals_hold_the_truth_of_unseen_kobuki_recordings(tmp_path):
         "frictionloss_R": 0.006,
     }
     model = rr.true_model(urdf, truth)
-    z, rel = [], []
+    z, rel, ident = [], [], 0
     for program in (11, 12, 13):
         sim = rr.simulate(model, truth, 60.0, rr.KOBUKI_TAU, program)
         bag = tmp_path / f"kobuki{program}"
@@ -56,12 +59,15 @@ def test_the_intervals_hold_the_truth_of_unseen_kobuki_recordings(tmp_path):
         robot = sim_spec(ref)
         res, _ = fit(robot, read_recording(bag, truth.joints, None, other_joints(robot)), time_budget_s=600)
         for p in res.parameters:
-            assert p["status"] == "identified", (program, p["name"], p["why"])
+            ident += p["status"] == "identified"
+            if p["status"] != "identified":  # only for its width, and not far over the 30 % of its value
+                assert p["why"].endswith("is wide"), (program, p["name"], p["why"])
+                assert p["ci95_halfwidth"] <= 0.4 * want[p["name"]], (program, p["name"], p["why"])
             err = abs(p["fitted"] - want[p["name"]])
             z.append(err / p["ci95_halfwidth"])
             rel.append(p["ci95_halfwidth"] / want[p["name"]])
     z = np.array(z)
-    assert z.size == 18
+    assert z.size == 18 and ident >= 16, ident  # 17 measured
     assert np.sum(z > 1) <= 2, np.round(z, 2)  # 18 intervals at 95 %: 0.9 misses expected; 1 measured
     assert np.sqrt(np.mean(z**2)) <= 0.65, np.round(z, 2)  # 0.53 measured; 0.72 with the sandwich
     assert np.median(rel) <= 0.12  # honest, not useless: the median half-width 8.6 % of the value

@@ -293,6 +293,7 @@ def test_caster_profile_bounds_a_curved_cost_and_calls_a_flat_one_not_identified
     correlated with the other parameter (ρ = 0.8) the interval widens by 1/sqrt(1 - ρ²). A cost flat on a side
     gives no interval: not identified, said so."""
     from bioform_mj.robots.realdata.casters import cost_profile, profile_row
+    from bioform_mj.robots.realdata.status import settle_zero
 
     def curved(z):
         return 1.0 + 100.0 * (z[1] * 0.1 - 0.3) ** 2
@@ -322,6 +323,13 @@ def test_caster_profile_bounds_a_curved_cost_and_calls_a_flat_one_not_identified
     assert dry["status"] == "not identified" and "from its profile is wide" in dry["why"]
     profile_row(dry, {**prof, "ci95": [0.0, 0.0055], "halfwidth": 0.0028}, misfit=False)
     assert dry["status"] == "identified"
+    # ... but an interval that reaches 0 is never identified in the report (status.settle_zero, after the
+    # profiles): below 0.0055 N·m, 11 % of a 0.05 N·m RMS effort, is not negligible
+    row0 = {**dry, "name": "frictionloss_L", "unit": "N·m"}
+    settle_zero(row0, {"frictionloss_L": (1.0, 0.05)})
+    assert row0["status"] == "not identified" and "below 0.0055 N·m" in row0["why"]
+    settle_zero(row0 := {**dry, "name": "frictionloss_L", "unit": "N·m"}, {"frictionloss_L": (1.0, 0.2)})
+    assert row0["status"] == "negligible"  # 0.0055 N·m against 0.2 N·m RMS: 2.75 %
     profile_row(row, prof, misfit=True)  # a model that misses the recording identifies nothing
     assert row["status"] == "not identified"
 

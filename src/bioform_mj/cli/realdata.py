@@ -92,7 +92,12 @@ def add_parsers(rsub: Any) -> None:
         "--caster ones, and not where --caster-friction states it; given here, caster_friction fits the casters "
         "robot check finds)",
     )
-    fit.add_argument("--chunk", type=float, default=2.0, help="seconds simulated from each recorded state (default 2)")
+    fit.add_argument(
+        "--chunk",
+        type=float,
+        default=None,
+        help="seconds simulated from each recorded state (default 2; shorter, down to 0.5, on a short recording)",
+    )
     fit.add_argument("--max-chunks", type=int, default=12, help="chunks used at most, spread evenly (default 12)")
     fit.add_argument("--max-iters", type=int, default=30, help="optimiser iterations at most (default 30)")
     fit.add_argument(
@@ -277,7 +282,8 @@ def _fit_main(args: argparse.Namespace) -> int:
     unknown = [w for w in which if w not in FIT_PARAMETERS]
     if unknown:
         raise InputError(f"--fit: unknown parameter '{unknown[0]}' (expected some of: {', '.join(FIT_PARAMETERS)})")
-    if not (args.chunk > 0 and args.max_chunks >= 1 and args.max_iters >= 1 and args.time_budget > 0):
+    chunk_ok = args.chunk is None or args.chunk > 0
+    if not (chunk_ok and args.max_chunks >= 1 and args.max_iters >= 1 and args.time_budget > 0):
         raise InputError("--chunk and --time-budget must be > 0, --max-chunks and --max-iters >= 1")
     ref, robot, rec = _load(args)
     held = []
@@ -316,9 +322,9 @@ def _fit_main(args: argparse.Namespace) -> int:
         print(f"warning: {hint}", file=sys.stderr)
     model_pub = published.spec.compile()
     model_cal = sysid.apply_param_modifiers(opt, robot.spec)
-    chunks = make_chunks(published, model_pub, rec, args.chunk, args.max_chunks)
+    chunks = make_chunks(published, model_pub, rec, result.chunk_s, args.max_chunks)
     sim_pub = simulate_chunks(published, chunks, model_pub)
-    chunks_cal = make_chunks(robot, model_cal, rec, args.chunk, args.max_chunks)
+    chunks_cal = make_chunks(robot, model_cal, rec, result.chunk_s, args.max_chunks)
     sim_cal = simulate_chunks(robot, chunks_cal, model_cal)
 
     out.mkdir(parents=True, exist_ok=True)
@@ -330,7 +336,8 @@ def _fit_main(args: argparse.Namespace) -> int:
         write_calibrated(ref, robot.layout, result.parameters, casters, cal_path, str(args.bag))
         cal_ref = replace(ref, model=str(cal_path.resolve()))
         p_pub, p_cal = robot_truth(ref), robot_truth(cal_ref)
-        unidentified = [r["name"] for r in result.parameters if r["status"] != "identified"]
+        unidentified = [r["name"] for r in result.parameters if r["status"] == "not identified"]
+        negligible = [r["name"] for r in result.parameters if r["status"] == "negligible"]
         report = {
             "robot": ref.model,
             "recording": str(args.bag),
@@ -341,6 +348,7 @@ def _fit_main(args: argparse.Namespace) -> int:
             "published": {"a": p_pub.a_eff, "b": p_pub.b_eff},
             "parameters": result.parameters,
             "unidentified": unidentified,
+            "negligible": negligible,
             "ci95_method": "the wider of the interval from J'J and the residual variance (mujoco.sysid, widened by the "
             "residual's lag-1 autocorrelation) and the leave-one-chunk-out jackknife (CR3: the chunks as independent "
             "units, from the Jacobian, no refits; Student's t with chunks - parameters dof) (design §8.4)",
@@ -375,7 +383,7 @@ def _fit_main(args: argparse.Namespace) -> int:
         ci = f"± {r['ci95_halfwidth']:.2g}" if r["ci95_halfwidth"] is not None else "± inf"
         lines.append(
             f"  {r['name']:<16} published {r['published']:<10.4g} fitted {r['fitted']:<10.4g} {ci} {r['unit']}"
-            + ("" if r["status"] == "identified" else f"  NOT IDENTIFIED: {r['why']}")
+            + ("" if r["status"] == "identified" else f"  {r['status'].upper()}: {r['why']}")
         )
     lines.append(
         f"  a = {p_cal.a_eff:.5g} (published {p_pub.a_eff:.5g}), b = {p_cal.b_eff:.5g} (published {p_pub.b_eff:.5g})"

@@ -80,7 +80,7 @@ def write_calibrated(
     when = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     values = ", ".join(
         f"{r['name']} {r['fitted']:.4g} {r['unit']}".rstrip()
-        + ("" if r["status"] == "identified" else " (not identified)")
+        + ("" if r["status"] == "identified" else f" ({r['status']})")  # not identified, negligible
         for r in rows
     )
     note = f"fitted by bioform robot fit from {source} on {when}: {values} (published: {Path(ref.model).name})"

@@ -1,7 +1,8 @@
 """``bioform robot fit``: a real robot's recording in, a calibrated robot out (issue 29; design §8, §13).
 
 The model is the project's own robot (:mod:`bioform_mj.robots.realdata.simmodel`: the file and mapping
-``robot check`` uses, on a floor). The recording is cut into chunks (default 2 s); each chunk is simulated
+``robot check`` uses, on a floor). The recording is cut into chunks (2 s by default; shorter, down to 0.5 s, where a
+short recording gives fewer than the parameters + 4 of them: :func:`~.status.choose_chunk`); each chunk is simulated
 open loop from the state the recording gives at its start (wheel angles and speeds, the body rolling with
 them) under the recorded wheel torques, and compared with what was measured: wheel speeds, and where the
 recording has them the body's forward speed (``/odom`` twist) and yaw rate (``/imu``, else ``/odom``).
@@ -31,14 +32,17 @@ Armature is not fitted unless asked (``--fit ...,armature``): a wheel's armature
 inertia act through the same two effective inertias (design §8: ``a_eff = 1/(m r + 2 I_w/r)``,
 ``b_eff = l/(I r + 2 I_w l²/r)``), so a recording of torques and speeds cannot separate the three; fitted
 together, their intervals say so. A parameter is reported ``identified`` only when its interval is
-narrower than 30 % of its value (or than 5 % of its search range, for one found near zero); otherwise it is
-``not identified`` and its most correlated partners (``|ρ| > 0.9``) are named. Caster friction is fitted only
-where the robot has casters: the mapping's (``--caster``), else those ``robot check`` finds (a non-wheel geom
-carrying a share of the weight at rest, design §0); where the recording cannot tell it from the wheels' dry
-friction (both brake the robot alike when it drives straight; only turning sets them apart), the report says
-so with their correlation. A caster the file makes frictionless (``condim 1``) is given ``condim 3`` so that its
-friction acts (a note says so), and the optimiser starts from the best, by simulation, of the linear estimate
-and of a 1-D search over the caster's friction (:func:`~.casters.caster_start`: the rest regressed around each
+narrower than 30 % of its value (so it does not include 0); one whose interval includes 0 (or is too wide) is
+``negligible`` where its upper end's torque at the recording's own speeds is under 5 % of the wheel's RMS
+effort, else ``not identified`` ("the recording says only that it is below X"); any other is ``not identified``
+and its most correlated partners (``|ρ| > 0.9``) are named (:mod:`~bioform_mj.robots.realdata.status`). A
+recording too short for ``p + 2`` chunks even at the 0.5 s floor identifies nothing, and says how long to record.
+Caster friction is fitted only where the robot has casters: the mapping's (``--caster``), else those ``robot check``
+finds (a non-wheel geom carrying a share of the weight at rest, design §0); where the recording cannot tell it from
+the wheels' dry friction (both brake the robot alike when it drives straight; only turning sets them apart), the
+report says so with their correlation. A caster the file makes frictionless (``condim 1``) is given ``condim 3``
+so that its friction acts (a note says so), and the optimiser starts from the best, by simulation, of the linear
+estimate and of a 1-D search over the caster's friction (:func:`~.casters.caster_start`: the rest regressed around each
 value). A sliding caster chatters, so where its friction is fitted the signals are compared as means over
 :data:`~.casters.CASTER_WINDOW_S` windows, the finite-difference step is :data:`~.casters.CASTER_FD_STEP` and
 every interval and status comes from the cost's profile (:func:`~.casters.cost_profile`), not the Jacobian.
@@ -79,6 +83,13 @@ from bioform_mj.robots.realdata.chassis import chassis_body, explicit_base, set_
 from bioform_mj.robots.realdata.intervals import halfwidths, jacobian_at, remaining_step
 from bioform_mj.robots.realdata.recording import Recording, chunk_starts, pauses, still_note
 from bioform_mj.robots.realdata.simmodel import SimRobot, effort_to_ctrl, initial_state, sensor_times
+from bioform_mj.robots.realdata.status import (
+    choose_chunk,
+    parameter_rows,
+    settle_zero,
+    too_short_why,
+    torque_effects,
+)
 
 __all__ = [
     "FIT_PARAMETERS",
@@ -458,6 +469,8 @@ class FitResult:
     jacobian: np.ndarray | None = None
     scales: np.ndarray | None = None
     n_chunks: int = 0
+    #: the chunk length used (s): ``chunk_s`` as given, else :func:`~.status.choose_chunk`'s
+    chunk_s: float = 2.0
 
 
 def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int, deadline: list[float] | None = None):
@@ -537,20 +550,22 @@ def fit(
     rec: Recording,
     which: tuple[str, ...] = DEFAULT_FIT,
     *,
-    chunk_s: float = 2.0,
+    chunk_s: float | None = None,
     max_chunks: int = 12,
     max_iters: int = 30,
     time_budget_s: float = 60.0,
     progress: bool | None = None,
     find_casters: bool = False,
 ) -> tuple[FitResult, Any]:
-    """Fit ``which`` to the recording; returns the result and the fitted ``ParameterDict``."""
+    """Fit ``which`` to the recording; returns the result and the fitted ``ParameterDict``. ``chunk_s`` (s):
+    the chunk length; None: 2 s, shorter where the recording is short (:func:`~.status.choose_chunk`)."""
     sysid = _sysid()
     t_start = time.perf_counter()
     progress = sys.stderr.isatty() if progress is None else progress
     pd, info = parameters(robot, rec, which, find_casters)
     model = robot.spec.compile()
     caster = "caster_friction" in pd.keys()  # its chatter: windowed means and a secant step (casters.py)
+    chunk_s, chunk_notes = choose_chunk(rec, len(info), chunk_s, max_chunks)
     chunks = make_chunks(robot, model, rec, chunk_s, max_chunks, CASTER_WINDOW_S if caster else 0.0)
     eps = CASTER_FD_STEP if caster else FD_STEP
     n_threads = max(1, min(len(chunks.states), __import__("os").cpu_count() or 1))
@@ -564,7 +579,7 @@ def fit(
     cost_pub = float(r_pub @ r_pub)
     pd.update_from_vector(x0)
     start = pd.copy()
-    notes = still_note(rec, robot.layout.wheel_radius)
+    notes = chunk_notes + still_note(rec, robot.layout.wheel_radius)
     guess = initial_guess(robot, rec, info, pd)
     r_guess = _flat(fn, guess, pd)
     cost_guess = float(r_guess @ r_guess)
@@ -678,11 +693,21 @@ def fit(
 
     J, rough = jacobian_at(jac_residual, x, r, eps, hi)
     opt.update_from_vector(x)
-    step = remaining_step(r, J, x, lo, hi)  # ~0 where the optimiser converged
-    half, corr = halfwidths(r, J, len(chunks.states), int(np.count_nonzero(chunks.weights)), step)
+    # a diverged column is no slope: the intervals are those of the others with it held at its value (inf its own)
+    ok = ~blew
+    step, half, corr = np.zeros(len(x)), np.full(len(x), np.inf), np.zeros((len(x), len(x)))
+    step[ok] = remaining_step(r, J[:, ok], x[ok], lo[ok], hi[ok])  # ~0 where the optimiser converged
+    half[ok], corr[np.ix_(ok, ok)] = halfwidths(
+        r, J[:, ok], len(chunks.states), int(np.count_nonzero(chunks.weights)), step[ok]
+    )
     if short := [n for n, d, h in zip(pd.keys(), step, half) if abs(d) > 0.5 * h]:
         notes.append(f"the optimiser stopped short of the optimum in {', '.join(short)} ({STOPPED_SHORT})")
     names = list(opt.keys())
+    if blew.any():
+        notes.append(
+            f"a finite-difference trial of {', '.join(n for n, b in zip(names, blew) if b)} at the optimum diverged: "
+            "not identified, and the others' intervals hold it at its fitted value"
+        )
     # a model that misses the recording by far is not a measurement of anything, however narrow its intervals
     miss = math.sqrt(float(r @ r) / max(1, r.size))  # weighted residual RMS, in units of each signal's RMS
     misfit = miss > MISFIT_RMS
@@ -692,57 +717,18 @@ def fit(
             f"(> {MISFIT_RMS:g}); no parameter is reported identified (the model lacks what the robot does, "
             "e.g. a dragging caster or slip, or the optimiser ended far off: see fit.png)"
         )
-    rows = []
-    for i, p in enumerate(info):
-        v, hw = float(x[i]) * p.scale, float(half[i]) * p.scale
-        lo_i, hi_i = float(lo[i]) * p.scale, float(hi[i]) * p.scale
-        rng = hi_i - lo_i
-        narrow = math.isfinite(hw) and (hw <= 0.3 * abs(v) or hw <= 0.05 * rng)
-        ident = narrow and not misfit and rough[i] <= ROUGH_JACOBIAN and not blew[i]
-        partners = [
-            {"name": names[k], "rho": round(float(corr[i, k]), 3)}
-            for k in np.argsort(-np.abs(corr[i]))
-            if k != i and abs(corr[i, k]) > 0.9
-        ]
-        at_bound = v <= lo_i + 1e-6 * rng or v >= hi_i - 1e-6 * rng
-        why = [f"the model misses the recording (weighted residual RMS {miss:.2g})"] if misfit else []
-        if blew[i]:
-            why.append("a finite-difference step of it made the rollouts diverge: its Jacobian column is no slope")
-        if rough[i] > ROUGH_JACOBIAN:
-            why.append(
-                f"the residual is not smooth in it (its Jacobian column at a 10x step differs by {rough[i]:.0%}): "
-                "the open-loop rollouts are chaotic, so no interval holds"
-            )
-        if not narrow and not misfit:
-            why.append(
-                f"interval ±{hw:.3g} {p.unit}".rstrip() + (" (unbounded)" if not math.isfinite(hw) else "") + " is wide"
-            )
-        if partners and not ident:
-            why.append("correlated with " + ", ".join(f"{q['name']} (ρ = {q['rho']:+.2f})" for q in partners))
-        if at_bound:
-            why.append(f"at the bound of its search range [{lo_i:.4g}, {hi_i:.4g}]")
-        rows.append(
-            {
-                "name": p.name,
-                "what": p.what,
-                "unit": p.unit,
-                "published": p.published,
-                "fitted": v,
-                "ci95": [v - hw, v + hw] if math.isfinite(hw) else None,
-                "ci95_halfwidth": hw if math.isfinite(hw) else None,
-                "search_range": [lo_i, hi_i],
-                "status": "identified" if ident else "not identified",
-                "roughness": round(float(rough[i]), 4),  # Jacobian column change from 1x to 10x step (relative)
-                "correlated_with": partners,
-                "why": "; ".join(why),
-            }
-        )
+    too_short = too_short_why(len(chunks.states), len(names), chunk_s, max_chunks)
+    if too_short:
+        notes.append(f"no parameter is reported identified: {too_short}")
+    rows = parameter_rows(
+        info, x, half, (lo, hi), corr, rough, blew, miss if misfit else None, too_short, ROUGH_JACOBIAN
+    )
     if caster:  # the chatter: intervals and statuses from the cost's profiles, not the Jacobian (casters.py)
         cost = lambda z: float(np.sum(_flat(fn, z, opt) ** 2))  # noqa: E731
         for k, p in enumerate(info):
             bounds = (float(lo[k]) * p.scale, float(hi[k]) * p.scale)
             prof = cost_profile(cost, x, k, p.scale, len(chunks.states), corr, bounds)
-            profile_row(rows[k], prof, misfit)
+            profile_row(rows[k], prof, misfit or bool(too_short))
         rough[:] = 0.0
         opt.update_from_vector(x)
         notes.append(
@@ -758,14 +744,10 @@ def fit(
             "point far from the optimum), the optimiser cannot follow a gradient and the intervals do not hold; "
             "those parameters are not reported identified"
         )
+    effects = torque_effects(rec)
+    for row in rows:  # an interval that includes 0 is never "identified" (status.py)
+        settle_zero(row, effects)
     notes += caster_notes(robot, which, names, corr, find_casters)
-    if len(chunks.states) < len(names) + 2:
-        notes.append(
-            f"{len(chunks.states)} chunks for {len(names)} parameters: too few for the cluster-robust interval "
-            f"(needs {len(names) + 2}); the intervals are the independent-residual ones widened by the "
-            "residual's autocorrelation, and miss the chunks' own errors (their recorded start states): record "
-            f"at least {(len(names) + 2) * chunk_s:g} s"
-        )
     result = FitResult(
         rows,
         corr,
@@ -784,6 +766,7 @@ def fit(
         J,
         np.array([p.scale for p in info]),
         len(chunks.states),
+        chunk_s,
     )
     return result, opt
 
