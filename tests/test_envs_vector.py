@@ -346,3 +346,47 @@ def _has_torch() -> bool:
     except ImportError:
         return False
     return True
+
+
+def test_the_replay_history_is_bounded_when_a_world_is_never_reset():
+    """A world that ended and is never reset while another runs episode after episode: the history a copy
+    replays stays within ``2·N + 2`` periods (it kept one entry a step before: 60 here), its bytes within the
+    documented ``(3·N + 2)·W·(16·n + 1)`` and equal to what it holds counted by hand; a pickled copy still
+    continues both worlds bit for bit (the ended world's MuJoCo state too, then its next episode)."""
+    import pickle
+
+    import mujoco
+
+    ov = ["sim.duration=0.05", "sim.control_dt=0.01", "plant.kind=mujoco"]  # N = 5 periods
+    v = VectorEnv("paper", worlds=2, threads=1, overrides=ov)
+    N, n, W = v.N, v.n, 2
+    assert N == 5
+    rng = np.random.default_rng(3)
+    v.reset(seed=0)
+    longest = 0
+    for _ in range(60):
+        _, _, term, trunc = v.step(rng.uniform(v.low, v.high, (W, n, 2)))
+        if term[0] or trunc[0]:
+            v.reset(mask=[0])  # world 0 runs on; world 1 ended at period 5 and is never reset
+        longest = max(longest, len(v._hist))
+    assert not v.running[1] and v.running[0]
+    assert longest <= 2 * N + 2
+    per = W * (n * 2 * 8 + 1)  # a period's actions (float64) and running flags
+    by_hand = len(v._hist) * per + N * n * 2 * 8  # + world 1's ended episode: N periods of its actions
+    assert v.history_bytes == by_hand <= (3 * N + 2) * per
+    assert v.history_bytes < 60 * per / 2  # what one entry a step had held
+    c = pickle.loads(pickle.dumps(v))
+    sig = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    assert c.world_state(1, sig).tobytes() == v.world_state(1, sig).tobytes()
+    for e in (v, c):
+        e.reset(mask=[1])
+    for _ in range(12):
+        u = rng.uniform(v.low, v.high, (W, n, 2))
+        a, b = v.step(u), c.step(u)
+        for x, y in zip(a, b):
+            assert x.tobytes() == y.tobytes()
+        for e in (v, c):
+            if (a[2] | a[3]).any():
+                e.reset(mask=a[2] | a[3])
+    v.close()
+    c.close()

@@ -59,6 +59,8 @@ from bioform_mj.scenario.config import Scenario
 
 #: at most this share of the memory available now may be taken by the worlds (estimated before building them)
 MEMORY_SHARE = 0.5
+#: ``VectorEnv._ep_start`` of a world whose ended episode's actions were moved out of the history (``_trim``)
+ENDED = -2
 #: ns a thread of the team spins (atomic loads) before it sleeps, waiting for the next period or for the
 #: other threads' blocks (``envs.team``); 0 where the threads outnumber the CPUs this process may use
 SPIN_NS = 200_000
@@ -251,9 +253,11 @@ def _stop_team(ctl: np.ndarray, workers: list, caller: tuple | None) -> None:
 
 def _world_bytes(env: FormationParallelEnv) -> int:
     """Bytes one world holds (its MuJoCo model and data buffers, its arrays over the episode), estimated
-    from a built one: ``MjModel.nbuffer + MjData.nbuffer`` + the leader's trajectory + ~64 KiB of the stack."""
+    from a built one: ``MjModel.nbuffer + MjData.nbuffer`` + the leader's trajectory + ~64 KiB of the stack +
+    its share of the replay history's bound (``VectorEnv._trim``: ``(3·N + 2)·(16·n + 1)`` bytes)."""
     p = env._plant
-    return int(p.model.nbuffer + p.data.nbuffer + env.L_pose.nbytes + env.L_vel.nbytes + 65536)
+    hist = (3 * int(env.N) + 2) * (16 * env.n + 1)
+    return int(p.model.nbuffer + p.data.nbuffer + env.L_pose.nbytes + env.L_vel.nbytes + 65536 + hist)
 
 
 class VectorEnv:
@@ -377,10 +381,15 @@ class VectorEnv:
         self._started = False
         #: the actions of the period being stepped (the period clips them in place)
         self._U = np.zeros((W, n, 2))
-        #: the periods stepped since the oldest current episode began: (actions as clipped, running) each, and
-        #: the index in it at which each world's episode began (-1: none yet): what a copy replays
+        #: the periods stepped since the oldest running episode began: (actions as clipped, running) each, and
+        #: the index in it at which each world's episode began (-1: none yet; :data:`ENDED`: its episode ended and
+        #: its actions were moved to :attr:`_ended`): what a copy replays (:meth:`_trim` bounds it)
         self._hist: list[tuple[np.ndarray, np.ndarray]] = []
         self._ep_start = np.full(W, -1, dtype=np.int64)
+        #: world -> its ended episode's actions (periods, n, 2), for a world that ended and was not reset since
+        self._ended: dict[int, np.ndarray] = {}
+        #: :meth:`step` trims the history past this many periods (a running episode is at most N periods long)
+        self._hist_cap = 2 * int(self.N) + 2
         #: one VecArgs per thread, built at the first step (the worlds' arguments are typed then)
         self._v: Any = None
         #: the team of threads (envs.team): (control array, worker threads, the process id that started them)
@@ -412,13 +421,38 @@ class VectorEnv:
                 raise ValueError(f"seeds must be >= 0, got {seeds}")
         for w, s in zip(sel, seeds):
             self._reset_world(int(w), s)
+            self._ended.pop(int(w), None)
         self._ep_start[sel] = len(self._hist)
-        drop = int(self._ep_start[self._ep_start >= 0].min())  # periods no current episode needs
-        if drop:
-            del self._hist[:drop]
-            self._ep_start[self._ep_start >= 0] -= drop
+        self._trim()
         self._started = True
         return self._out_obs()
+
+    def _trim(self) -> None:
+        """Drop the periods no world's replay needs (:meth:`__setstate__`): a world whose episode ended and was
+        not reset has its episode's actions moved to :attr:`_ended` (at most ``N`` periods), so the history
+        goes back to the oldest *running* episode's start only: at most ``N`` periods, where a world that ended
+        and was never reset kept every later period (one entry a :meth:`step`, without bound). :meth:`step` trims
+        past ``2·N + 2`` periods, so with ``n`` followers :attr:`history_bytes` <= ``(3·N + 2)·W·(16·n + 1)``
+        bytes (the history's ``2·N + 2`` periods and the ended episodes' ``N`` each; :func:`_world_bytes` counts it
+        in the memory estimate)."""
+        ep = self._ep_start
+        for w in np.flatnonzero((ep >= 0) & ~self.running):
+            s = int(ep[w])
+            rows = [u[w] for u, r in self._hist[s:] if r[w]]  # its episode: contiguous from its start
+            self._ended[int(w)] = np.array(rows).reshape(len(rows), self.n, 2)
+            ep[w] = ENDED
+        live = ep[ep >= 0]
+        drop = int(live.min()) if live.size else len(self._hist)  # periods no running episode needs
+        if drop:
+            del self._hist[:drop]
+            ep[ep >= 0] -= drop
+
+    @property
+    def history_bytes(self) -> int:
+        """Bytes of what a copy replays (:meth:`_trim`): the periods since the oldest running episode began (each
+        ``(W, n, 2)`` actions and ``(W,)`` flags) and the ended episodes' actions."""
+        per = self.nworld * (self.n * 2 * 8 + 1)
+        return len(self._hist) * per + sum(int(a.nbytes) for a in self._ended.values())
 
     def _reset_world(self, w: int, seed: int | None) -> None:
         env = self.envs[w]
@@ -625,6 +659,8 @@ class VectorEnv:
             except ValueError as exc:
                 raise ValueError(f"world {bad}: {exc}") from exc
         self._hist.append((self._U.copy(), running))
+        if len(self._hist) > self._hist_cap:  # worlds ended and not reset: their episodes moved out (bounded)
+            self._trim()
         if warned > 0:  # a MuJoCo warning: the single environment's period tail in Python (the state not observed)
             for w in np.flatnonzero(self._status & WARNED):
                 self._warned(int(w))
@@ -704,7 +740,8 @@ class VectorEnv:
         rng = [None if e._np_random is None else e._np_random.bit_generator.state for e in self.envs]
         return {
             "init": self._init, "seeds": self.seeds.copy(), "ep_start": self._ep_start.copy(),
-            "hist": [(u.copy(), r.copy()) for u, r in self._hist], "rng": rng, "running": self.running.copy(),
+            "hist": [(u.copy(), r.copy()) for u, r in self._hist],
+            "ended": {w: a.copy() for w, a in self._ended.items()}, "rng": rng, "running": self.running.copy(),
             "term": self._term.copy(), "trunc": self._trunc.copy(), "started": self._started,
         }  # fmt: skip
 
@@ -714,7 +751,19 @@ class VectorEnv:
         continues bit for bit (same machine; ``tests/test_envs_training.py``)."""
         scenario, W, T, kw = st["init"]
         self.__init__(scenario, W, T, **kw)
-        ep, hist = st["ep_start"], st["hist"]
+        ep, hist, ended = st["ep_start"], st["hist"], st.get("ended", {})
+        if ended:  # the ended episodes first, each world on its own actions (worlds are independent)
+            for w in ended:
+                self._reset_world(int(w), int(st["seeds"][w]))
+            for j in range(max(len(a) for a in ended.values())):
+                U = np.zeros((W, self.n, 2))
+                self.running[:] = False
+                for w, a in ended.items():
+                    if j < len(a):
+                        U[w] = a[j]
+                        self.running[w] = True
+                self._started = True
+                self.step(U)
         for i in range(len(hist) + 1):
             for w in np.flatnonzero(ep == i):
                 self._reset_world(int(w), int(st["seeds"][w]))
@@ -725,6 +774,7 @@ class VectorEnv:
                     self._started = True
                     self.step(hist[i][0])
         self._hist, self._ep_start = [(u.copy(), r.copy()) for u, r in hist], ep.copy()
+        self._ended = {int(w): a.copy() for w, a in ended.items()}
         self.running[:], self._term[:], self._trunc[:] = st["running"], st["term"], st["trunc"]
         for e, state in zip(self.envs, st["rng"]):
             if state is not None:
