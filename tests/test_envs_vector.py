@@ -390,3 +390,37 @@ def test_the_replay_history_is_bounded_when_a_world_is_never_reset():
                 e.reset(mask=a[2] | a[3])
     v.close()
     c.close()
+
+
+def test_any_thread_steps_any_world_the_same_bits():
+    """The threads claim each other's worlds (``envs/worlds.py``): every world stepped each period by one thread
+    alone, that thread alternating (so each world moves between the two threads' warm ``MjData`` and is taken
+    from its own block and from the other's), gives the observations, rewards and flags of one thread stepping
+    its own block, bit for bit, through episode ends and resets."""
+    from bioform_mj.envs.worlds import block, start, warnings
+
+    W = 4
+    a, b = VectorEnv("paper", W, 1, overrides=OV), VectorEnv("paper", W, 2, overrides=OV)
+    acts = _actions(a, W, 70)
+    turn = [0]
+
+    def alone(v, ctl, spin_ns):  # dispatch's work on the calling thread, as thread 0 or thread 1
+        start(v)
+        block(v, turn[0] % 2)
+        turn[0] += 1
+        return warnings(v)
+
+    assert a.reset(seed=9).tobytes() == b.reset(seed=9).tobytes()
+    b._compile()
+    b._dispatch = alone
+    assert b.warm.all() and b.threads == 2
+    for u in acts:
+        ra, rb = a.step(u), b.step(u)
+        for x, y in zip(ra, rb):
+            assert x.tobytes() == y.tobytes()
+        done = ra[2] | ra[3]
+        if done.any():
+            assert a.reset(mask=done).tobytes() == b.reset(mask=done).tobytes()
+    assert turn[0] == 70
+    a.close()
+    b.close()
