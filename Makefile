@@ -82,11 +82,12 @@ lint: $(TEST_STAMP)
 test-slow: $(TEST_STAMP)
 	$(PY) -m pytest -q -m slow -p no:cacheprovider $(XDIST)
 
-# the train extra on top (torch 2.13.0, Stable-Baselines3, SuperSuit: about 2 minutes to install from a wheel on
-# disk, much longer where torch is downloaded), then the tests that train (SuperSuit + SB3 SubprocVecEnv on the
-# MuJoCo plant); CI runs them after make test-slow (.ci/run)
+# the train and marl extras on top (torch 2.13.0, Stable-Baselines3, SuperSuit; TorchRL 0.11.1, tensordict 0.11.0,
+# BenchMARL 1.5.2: one set that installs together; about 2 minutes to install from a wheel on disk, much longer
+# where torch is downloaded), then the tests that train (SuperSuit + SB3 SubprocVecEnv on the MuJoCo plant, TorchRL's
+# wrapper, the BenchMARL example); CI runs them after make test-slow (.ci/run)
 $(TRAIN_STAMP): $(TEST_STAMP) pyproject.toml
-	$(PY) -m pip install --quiet -e '.[test,gpu,rl,urdf,docs,ros,train]'
+	$(PY) -m pip install --quiet -e '.[test,gpu,rl,urdf,docs,ros,train,marl]'
 	touch $(TRAIN_STAMP)
 
 test-train: $(TRAIN_STAMP)

@@ -3,10 +3,11 @@
 
 BenchMARL builds its PettingZoo tasks on TorchRL's ``PettingZooWrapper``; this task class hands it
 ``bioform_mj.envs.parallel_env`` (continuous ``(υ_cmd, ω_cmd)`` actions, one group ``follower``).
-Needs ``pip install benchmarl==1.5.2`` in a virtual environment of its own (it requires torchrl < 0.12:
-pip resolves torchrl 0.11.1; first tried with torchrl 0.14.1, which pip does not pair with it):
+Needs the ``marl`` extra (benchmarl 1.5.2, which requires torchrl < 0.12: torchrl 0.11.1 and tensordict 0.11.0,
+beside the train extra's torch, SB3 and SuperSuit: one set that installs together, docs/envs.md):
 
-    python examples/benchmarl_formation.py --iters 2
+    .venv/bin/pip install -e '.[marl]'
+    python examples/benchmarl_formation.py --iters 2 --out runs/benchmarl
 """
 
 from __future__ import annotations

@@ -144,12 +144,80 @@ def test_batch_env_takes_float32_actions_at_the_bounds(batched):
         be.step(over)
 
 
-def test_batch_env_says_it_cannot_be_pickled(batched):
-    """``pickle`` and ``deepcopy`` of the Warp-batched environment: a ``TypeError`` saying why and what to use
-    (not ctypes' own error from deep inside it)."""
+def _run(env, k0: int, periods: int) -> list[np.ndarray]:
+    """``periods`` steps from period ``k0`` with :func:`actions`, resetting the worlds that end: every array the
+    caller sees (observations, rewards, flags, the observations after a reset), copied off the device."""
+    out = []
+    for k in range(k0, k0 + periods):
+        o, r, term, trunc = env.step(actions(k))
+        out += [o.numpy().copy(), r.numpy().copy(), term.copy(), trunc.copy()]
+        if (term | trunc).any():
+            out.append(env.reset(np.flatnonzero(term | trunc)).numpy().copy())
+    return out
+
+
+def test_batch_env_pickles_and_copies_and_the_copy_continues_bit_for_bit(batched):
+    """``pickle`` and ``deepcopy`` of the Warp-batched environment (and of ``TorchRLStyle`` around it) before any
+    reset and mid-episode, its worlds reset at different periods: the copy rebuilds on the same device and
+    replays the calls since the oldest current episode began, so it holds the same observations and continues
+    every world bit for bit (Warp's CPU device) through episode ends and the resets after them; the record it
+    replays starts at that oldest episode (the calls before it are dropped)."""
     import copy
     import pickle
 
-    for dup in (pickle.dumps, copy.deepcopy):
-        with pytest.raises(TypeError, match="BatchEnv cannot be pickled or copied .*batch_env.*vector_env"):
-            dup(batched[0])
+    from bioform_mj.envs.tdict import TorchRLStyle
+
+    be = batched[0]
+    fresh = batch_env("paper", worlds=W, device="cpu", overrides=OV)
+    early = pickle.loads(pickle.dumps(fresh))  # before any reset: a working environment of its own
+    assert np.array_equal(early.reset().numpy(), fresh.reset().numpy())
+    assert np.array_equal(_run(early, 0, 3)[0], _run(fresh, 0, 3)[0])
+    be.reset()
+    _run(be, 0, 30)
+    be.reset([0])  # world 0 restarts at period 30; worlds 1, 2 run on (their episodes began at period 0)
+    _run(be, 30, 12)
+    be.reset([1, 2])  # now the oldest current episode is world 0's: the 30 periods before it are dropped
+    assert len(be._log) == 12 + 2 and be._ep_start.tolist() == [0, 13, 13]
+    _run(be, 42, 5)
+    copies = [pickle.loads(pickle.dumps(be)), copy.deepcopy(TorchRLStyle(be)).env]  # each a rebuild: ~10 s here
+    for c in copies:
+        assert np.array_equal(c.obs.numpy(), be.obs.numpy()) and np.array_equal(c._ended, be._ended)
+    ref = _run(be, 47, 40)  # world 0's episode ends at its period 50 (truncation) and is reset; 1, 2 run on
+    assert any(x.dtype == bool and x[0] and not x[1:].any() for x in ref)
+    for c in copies:
+        got = _run(c, 47, 40)
+        assert len(got) == len(ref) and all(np.array_equal(a, b) for a, b in zip(got, ref))
+
+
+def test_batch_env_record_for_copies_is_bounded_and_says_when_it_drops(batched, monkeypatch):
+    """A world whose episode ended and is never reset keeps the oldest episode open, so the record a copy replays
+    would grow by W·n·2 floats a period without end: past ``RECORD_CAP_BYTES`` it is dropped with one warning,
+    pickling refuses naming the worlds not reset since, and once every world is reset copies work again, bit for
+    bit. Here the cap is set to 10 periods' actions (W·n·2·8 = 144 bytes each)."""
+    import pickle
+
+    from bioform_mj.envs import batched as mod
+
+    be = batched[0]
+    per_step = W * 3 * 2 * 8
+    be.reset()  # under the real cap: the record is this one reset
+    assert be._log_bytes == W and len(be._log) == 1
+    monkeypatch.setattr(mod, "RECORD_CAP_BYTES", 10 * per_step + W)
+    with pytest.warns(UserWarning, match="cannot be pickled or copied until every world has been reset"):
+        for k in range(14):
+            be.step(actions(k))
+            assert be._log_bytes <= mod.RECORD_CAP_BYTES
+    assert be._ep_start.tolist() == [-1, -1, -1] and be._log == []
+    with pytest.raises(TypeError, match=r"cannot pickle or copy this batch_env: .*worlds \[0, 1, 2\]"):
+        pickle.dumps(be)
+    be.reset([0, 1])
+    _run(be, 14, 3)
+    with pytest.raises(TypeError, match=r"not since: worlds \[2\]"):
+        pickle.dumps(be)
+    be.reset([2])
+    _run(be, 17, 2)
+    assert be._ep_start.min() >= 0 and be._log_bytes <= mod.RECORD_CAP_BYTES
+    c = pickle.loads(pickle.dumps(be))
+    assert np.array_equal(c.obs.numpy(), be.obs.numpy())
+    got, ref = _run(c, 19, 4), _run(be, 19, 4)
+    assert all(np.array_equal(a, b) for a, b in zip(got, ref))

@@ -18,6 +18,7 @@ estimator advance) are the device functions of ``batch/stack.py`` that the close
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
@@ -298,6 +299,11 @@ def _env_check_actions(
             action[w, i, c] = wp.clamp(u, low[i, c], high[i, c])
 
 
+#: the most bytes of calls :class:`BatchEnv` keeps for its copies (bytes); a trainer that resets ended worlds stays
+#: far below it (one episode: ``T/dt`` periods of W·n·2 floats, 1,024 worlds of 4 followers over 20 s at 10 ms: 131 MB)
+RECORD_CAP_BYTES = 512 * 2**20
+
+
 class BatchEnv:
     """``W`` formations of one scenario, stepped together on a MuJoCo Warp device (``envs.batch_env``).
 
@@ -305,7 +311,9 @@ class BatchEnv:
     ``reward`` (W, n), ``terminated`` (W,), ``truncated`` (W,) as Warp arrays on the device
     (``.numpy()``; ``wp.to_torch``/``wp.to_jax`` or DLPack share them without a copy). Actions:
     (W, n, 2) float64, a numpy or Warp array, in the same space as the parallel environment.
-    A world whose episode ended stays ended (its rows are stale) until :meth:`reset` names it.
+    A world whose episode ended stays ended (its rows are stale) until :meth:`reset` names it. ``pickle`` and
+    ``deepcopy`` rebuild it on the same device and replay its calls since the oldest current episode began
+    (:meth:`__setstate__`).
     """
 
     def __init__(
@@ -372,6 +380,19 @@ class BatchEnv:
             self._mask = wp.zeros(W, dtype=int)
             self._all = wp.ones(W, dtype=int)
         self._ended = np.ones(W, dtype=bool)
+        #: what rebuilds it (pickle, deepcopy: :meth:`__getstate__`)
+        self._init = (list(scenarios), device, dict(action=action, reward=reward, v_max=v_max, w_max=w_max,
+                                                    nconmax=nconmax, njmax=njmax))  # fmt: skip
+        #: the calls since the oldest current episode began, what a copy replays: ``("reset", mask (W,))`` and
+        #: ``("step", actions (W, n, 2) as checked and clipped)``; :attr:`_ep_start` the index in it at which each
+        #: world's current episode began (0 for a world never reset: every step since the build moved it)
+        self._log: list[tuple[str, np.ndarray]] = []
+        self._ep_start = np.zeros(W, dtype=np.int64)
+        #: bytes the record holds, at most :data:`RECORD_CAP_BYTES`: past it (a world ended and never reset keeps
+        #: the oldest episode open, W·n·2 floats a period) the record is emptied, a warning says so once, the
+        #: worlds' episode starts become -1 (begun before the record) and pickling refuses until each is reset
+        self._log_bytes = 0
+        self._warned_cap = False
 
     # ------------------------------------------------------------------ device launches
     def _sense(self, active: wp.array) -> None:
@@ -415,22 +436,84 @@ class BatchEnv:
             d.overflow.zero_()
             mjw.forward(r.m, d)
             self._sense(self._mask)
-        self._ended[mask.astype(bool)] = False
+        sel = mask.astype(bool)
+        self._ended[sel] = False
+        self._ep_start[sel] = len(self._log)
+        self._remember(("reset", sel))
+        drop = int(self._ep_start.min())  # calls no current episode needs (-1: one began before the record)
+        if drop > 0:
+            self._log_bytes -= sum(a.nbytes for _, a in self._log[:drop])
+            del self._log[:drop]
+            self._ep_start -= drop
         return self.obs
 
-    def __reduce_ex__(self, protocol: int):
-        """Not picklable, said in one line (the worlds' state lives in Warp arrays on the device, behind ctypes
-        pointers; pickle and deepcopy failed deep inside ctypes): build one per process with ``batch_env``."""
-        raise TypeError(
-            "BatchEnv cannot be pickled or copied (its worlds live on the Warp device): build one in each process "
-            "with batch_env(...), or use vector_env (which pickles) on the CPU"
+    def _remember(self, call: tuple[str, np.ndarray]) -> None:
+        """Append ``call`` to the record a copy replays, keeping it within :data:`RECORD_CAP_BYTES`."""
+        if call[0] == "step" and self._ep_start.max() < 0:
+            return  # every open episode began before the record: nothing a copy could replay
+        if self._log_bytes + call[1].nbytes > RECORD_CAP_BYTES:
+            if not self._warned_cap:
+                warnings.warn(f"batch_env: {self._cap_why()}", stacklevel=3)
+                self._warned_cap = True
+            if call[0] == "reset":  # the worlds it resets begin within the record again
+                self._ep_start[~call[1]] = -1
+                self._ep_start[call[1]] = 0
+            else:
+                self._ep_start[:] = -1
+            self._log.clear()
+            self._log_bytes = 0
+            if call[0] == "step":
+                return
+        self._log.append(call)
+        self._log_bytes += call[1].nbytes
+
+    def _cap_why(self) -> str:
+        return (
+            f"the record a copy replays (every call since the oldest open episode began) passed "
+            f"{RECORD_CAP_BYTES / 2**20:.3g} MiB: a world whose episode ended and is not reset keeps it open; the "
+            "record was dropped, so this environment cannot be pickled or copied until every world has been reset"
         )
+
+    # ------------------------------------------------------------------ pickling and copies
+    def __getstate__(self) -> dict[str, Any]:
+        """What rebuilds this environment (its Warp arrays live on the device, behind ctypes pointers, and do not
+        pickle): its arguments and the calls since the oldest current episode began (each reset's worlds, each
+        step's actions as checked and clipped), and which worlds' episodes ended. The copy replays them."""
+        if self._ep_start.min() < 0:
+            stale = np.flatnonzero(self._ep_start < 0).tolist()
+            raise TypeError(f"cannot pickle or copy this batch_env: {self._cap_why()} (not since: worlds {stale})")
+        return {
+            "init": self._init, "log": [(kind, a.copy()) for kind, a in self._log],
+            "ep_start": self._ep_start.copy(), "ended": self._ended.copy(),
+        }  # fmt: skip
+
+    def __setstate__(self, st: dict[str, Any]) -> None:
+        """Rebuild on the same device from :meth:`__getstate__`, then replay the recorded resets and steps, so
+        every world's current episode is the original's (design §20). A world is independent of the others and
+        a reset restores all of its state, so the worlds whose episode began later are right from their reset
+        on. Bit for bit where the device is (Warp's CPU device, tested); on a CUDA device MuJoCo Warp's contact
+        order and float atomics are not run-to-run reproducible (``opt.deterministic`` off), so the copy is
+        another run of the same seeds and actions, as close to the original as two runs on that device."""
+        scenarios, device, kw = st["init"]
+        self.__init__(scenarios, device, **kw)
+        for kind, a in st["log"]:
+            if kind == "reset":
+                self.reset(a)
+            else:
+                self._step(a)
+        self._ended[:] = st["ended"]
+        if not np.array_equal(self._ep_start, st["ep_start"]):  # pragma: no cover - the replay's own invariant
+            raise RuntimeError("BatchEnv copy: the replay did not rebuild the original's record of episodes")
 
     def step(self, actions: Any):
         """One control period of every world that is running; returns ``(obs, reward, terminated, truncated)``:
         Warp arrays (W, n, obs_size), (W, n) and numpy booleans (W,)."""
         if self._ended.all():
             raise RuntimeError("step() with every world's episode ended: call reset() first")
+        return self._step(actions)
+
+    def _step(self, actions: Any):
+        """:meth:`step` without the check that a world runs (a copy's replay steps worlds that ran then)."""
         r = self.run
         with wp.ScopedDevice(r.device):
             if isinstance(actions, wp.array):
@@ -464,6 +547,7 @@ class BatchEnv:
                 mjw.step(r.m, d)
             self._sense(self._all)
             done = self._done.numpy()
+            self._remember(("step", self._action.numpy().copy()))
         term, trunc = done[:, 0].astype(bool) | self._ended, done[:, 1].astype(bool)
         self._ended |= term | trunc
         return self.obs, self.reward, term, trunc
