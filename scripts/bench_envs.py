@@ -127,6 +127,12 @@ def vector(a) -> None:
             ctrl[w, k * n_sub] = ve.world_state(w, cspec)
         ctrl[:, k * n_sub : (k + 1) * n_sub] = ctrl[:, k * n_sub : k * n_sub + 1]
     state = np.empty((W, n_sub, x0.shape[1]))
+    # mujoco.rollout's outputs (every step's state and sensors), allocated and touched once, outside the timing:
+    # left to rollout, each call allocated and page-faulted 53 MB (1 ms, 4 s) to 133 MB (10 ms, 10 s) of fresh
+    # memory, which its time then counted (medians of 5 alternated calls, load ~5: 1.10x the time of a call given
+    # its outputs at 1 ms on 1 thread, 1.42x at 10 ms on 2 threads; issue 30)
+    traj = np.full((W, N * n_sub, x0.shape[1]), 0.0)
+    sens = np.full((W, N * n_sub, models[0].nsensordata), 0.0)
 
     def per_period() -> None:  # mujoco.rollout called once per period, the state carried (a closed loop's visits)
         x = x0.copy()
@@ -154,7 +160,7 @@ def vector(a) -> None:
             timed(key, lambda env=env: episode(env))
         for key, ms in (("rollout", models), ("own", own)):
             timed(key, lambda ms=ms: rollout.rollout(ms, datas, x0, ctrl, control_spec=cspec, nstep=N * n_sub,
-                                                     persistent_pool=pool))  # fmt: skip
+                                                     persistent_pool=pool, state=traj, sensordata=sens))  # fmt: skip
         timed("period", per_period)
     e, c, r, o, p = (statistics.median(rates[k][1:]) for k in ("env", "cold", "rollout", "own", "period"))
     us = {k: 1e6 * statistics.median(v[1:]) / (N * W) for k, v in cpu.items()}

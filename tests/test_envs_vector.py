@@ -346,3 +346,81 @@ def _has_torch() -> bool:
     except ImportError:
         return False
     return True
+
+
+def test_the_replay_history_is_bounded_when_a_world_is_never_reset():
+    """A world that ended and is never reset while another runs episode after episode: the history a copy
+    replays stays within ``2·N + 2`` periods (it kept one entry a step before: 60 here), its bytes within the
+    documented ``(3·N + 2)·W·(16·n + 1)`` and equal to what it holds counted by hand; a pickled copy still
+    continues both worlds bit for bit (the ended world's MuJoCo state too, then its next episode)."""
+    import pickle
+
+    import mujoco
+
+    ov = ["sim.duration=0.05", "sim.control_dt=0.01", "plant.kind=mujoco"]  # N = 5 periods
+    v = VectorEnv("paper", worlds=2, threads=1, overrides=ov)
+    N, n, W = v.N, v.n, 2
+    assert N == 5
+    rng = np.random.default_rng(3)
+    v.reset(seed=0)
+    longest = 0
+    for _ in range(60):
+        _, _, term, trunc = v.step(rng.uniform(v.low, v.high, (W, n, 2)))
+        if term[0] or trunc[0]:
+            v.reset(mask=[0])  # world 0 runs on; world 1 ended at period 5 and is never reset
+        longest = max(longest, len(v._hist))
+    assert not v.running[1] and v.running[0]
+    assert longest <= 2 * N + 2
+    per = W * (n * 2 * 8 + 1)  # a period's actions (float64) and running flags
+    by_hand = len(v._hist) * per + N * n * 2 * 8  # + world 1's ended episode: N periods of its actions
+    assert v.history_bytes == by_hand <= (3 * N + 2) * per
+    assert v.history_bytes < 60 * per / 2  # what one entry a step had held
+    c = pickle.loads(pickle.dumps(v))
+    sig = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    assert c.world_state(1, sig).tobytes() == v.world_state(1, sig).tobytes()
+    for e in (v, c):
+        e.reset(mask=[1])
+    for _ in range(12):
+        u = rng.uniform(v.low, v.high, (W, n, 2))
+        a, b = v.step(u), c.step(u)
+        for x, y in zip(a, b):
+            assert x.tobytes() == y.tobytes()
+        for e in (v, c):
+            if (a[2] | a[3]).any():
+                e.reset(mask=a[2] | a[3])
+    v.close()
+    c.close()
+
+
+def test_any_thread_steps_any_world_the_same_bits():
+    """The threads claim each other's worlds (``envs/worlds.py``): every world stepped each period by one thread
+    alone, that thread alternating (so each world moves between the two threads' warm ``MjData`` and is taken
+    from its own block and from the other's), gives the observations, rewards and flags of one thread stepping
+    its own block, bit for bit, through episode ends and resets."""
+    from bioform_mj.envs.worlds import block, start, warnings
+
+    W = 4
+    a, b = VectorEnv("paper", W, 1, overrides=OV), VectorEnv("paper", W, 2, overrides=OV)
+    acts = _actions(a, W, 70)
+    turn = [0]
+
+    def alone(v, ctl, spin_ns):  # dispatch's work on the calling thread, as thread 0 or thread 1
+        start(v)
+        block(v, turn[0] % 2)
+        turn[0] += 1
+        return warnings(v)
+
+    assert a.reset(seed=9).tobytes() == b.reset(seed=9).tobytes()
+    b._compile()
+    b._dispatch = alone
+    assert b.warm.all() and b.threads == 2
+    for u in acts:
+        ra, rb = a.step(u), b.step(u)
+        for x, y in zip(ra, rb):
+            assert x.tobytes() == y.tobytes()
+        done = ra[2] | ra[3]
+        if done.any():
+            assert a.reset(mask=done).tobytes() == b.reset(mask=done).tobytes()
+    assert turn[0] == 70
+    a.close()
+    b.close()

@@ -371,22 +371,22 @@ class FastPeriod:
             self.call = Compiled(ideal_call, (self.args, np.zeros((n, 2)), pose, vel, pose, vel,
                                               np.zeros((n, env.obs_size)), 0, 0)).call  # fmt: skip
             return
+        self._plant = p
         m, d = p.model, p.data
         cl = p.contacts.contacts
         xmat = d.xmat
         if warm is not None:
             d, ncon, con, xmat = warm
             cl = cl._replace(ncon=ncon, con=con)
-        from bioform_mj.plants.mujoco.kernels import MjIO, Watch
+        from bioform_mj.plants.mujoco.kernels import Watch
 
-        io = MjIO(
-            d.qpos, d.qvel, np.ascontiguousarray(p._q7[:, 0], dtype=np.int64),
-            np.ascontiguousarray(p._v6[:, 0], dtype=np.int64), p._axle, p._up, d.ctrl,
-            np.ascontiguousarray(p._ctrl, dtype=np.int64), p._ctrl_scale, d.xfrc_applied, xmat,
-            np.ascontiguousarray(p._base, dtype=np.int64), p._m_eff, p._i_eff,
-            np.zeros((2, 4)) if p._dist is None else p._dist, p.disturbance is not None, d.warning.number,
-            d.actuator_force, p._to_wheel, p._feed, False, p._dacc,
+        #: the plant's arrays of :class:`~bioform_mj.plants.mujoco.kernels.MjIO` that are not the ``MjData``'s
+        self._io_own = (
+            np.ascontiguousarray(p._q7[:, 0], dtype=np.int64), np.ascontiguousarray(p._v6[:, 0], dtype=np.int64),
+            np.ascontiguousarray(p._ctrl, dtype=np.int64), np.ascontiguousarray(p._base, dtype=np.int64),
+            np.zeros((2, 4)) if p._dist is None else p._dist,
         )  # fmt: skip
+        io = self._io(d, xmat)
         wt = Watch(
             p.tilt_cos, p.tip_step, p._wdof, p._wheel_sign, p._wheel_radius, p._half_track, SLIP_RATIO,
             SLIP_V_FLOOR, p._slip_need, p.slip_run, p.slip_step,
@@ -402,9 +402,35 @@ class FastPeriod:
             np.ascontiguousarray(env.graph.dst, dtype=np.int64), env._ones_e, np.empty((ne, 3)), np.empty((ne, 2)),
             env._lacc, float(env.obs_bound),
         )  # fmt: skip
+        self._fields = fields
         self.args = make_args(*fields)  # fast_plant: numba's JIT is on
         self.call = Compiled(period, (self.args, np.zeros((n, 2)), pose, vel, pose, vel, np.zeros((n, env.obs_size)),
                                       0, 0)).call  # fmt: skip
+
+    def _io(self, d: Any, xmat: np.ndarray) -> Any:
+        """The :class:`~bioform_mj.plants.mujoco.kernels.MjIO` of the plant with ``MjData`` ``d``'s arrays and the
+        chassis' orientation read from ``xmat``."""
+        from bioform_mj.plants.mujoco.kernels import MjIO
+
+        p = self._plant
+        q7, v6, ctrl, base, dist = self._io_own
+        return MjIO(
+            d.qpos, d.qvel, q7, v6, p._axle, p._up, d.ctrl, ctrl, p._ctrl_scale, d.xfrc_applied, xmat, base, p._m_eff,
+            p._i_eff, dist, p.disturbance is not None, d.warning.number, d.actuator_force, p._to_wheel, p._feed, False,
+            p._dacc,
+        )  # fmt: skip
+
+    def args_on(self, warm: tuple) -> Any:
+        """A :class:`PeriodArgs` of this episode that steps another ``MjData`` of the same sizes, ``warm`` as
+        the constructor's (``envs.vector``: any thread's warm ``MjData`` may step a world); the episode's own
+        arrays (the stack, the watches, the scratch and result arrays) are the same objects as :attr:`args`'."""
+        d, ncon, con, xmat = warm
+        f = list(self._fields)
+        i = FIELDS.index
+        f[i("io")] = self._io(d, xmat)
+        f[i("cl")] = f[i("cl")]._replace(ncon=ncon, con=con)
+        f[i("dptr")] = d._address
+        return make_args(*f)
 
 
 def fast_step(env: Any, actions: Any) -> tuple | None:

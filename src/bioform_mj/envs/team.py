@@ -149,6 +149,15 @@ def publish(ctl, i, v):
 
 
 @njit
+def bump(ctl, i):
+    """``ctl[i] += 1`` (one atomic add: the value changes whoever else bumps it at the same time; wrapping at
+    2³¹) and wake the threads sleeping on it (:func:`wait_change`)."""
+    atomic_add(ctl, i, np.int32(1))
+    if atomic_load(ctl, i + 1) > 0:
+        _syscall(_FUTEX, ctl.ctypes.data + 4 * i, _WAKE, 0x7FFFFFFF, 0, 0, 0)
+
+
+@njit
 def next_gen(g):
     """The generation after ``g`` (wrapping at 2³¹)."""
     return np.int32((np.int64(g) + 1) & 0x7FFFFFFF)

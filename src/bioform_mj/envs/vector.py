@@ -6,8 +6,10 @@ them with the layout of the Warp-batched environment (``envs.batched``: arrays w
 observations (W, n, obs_size), rewards (W, n), flags (W,)). A period of every world is
 :func:`~.fast.mujoco_period` (the single environment's compiled period, the same bits); the worlds are
 split into ``threads`` blocks, as ``mujoco.rollout`` splits its batch over a thread pool: a step is one
-compiled call (:func:`dispatch`) in which the calling thread releases the other threads, steps the first
-block and waits for theirs; the others stay in compiled code between periods (:func:`serve`, ``envs.team``).
+compiled call (:func:`~.worlds.dispatch`) in which the calling thread releases the other threads, steps its
+block and then claims what is left of the others' (a thread held up by other processes holds nothing up but
+the world it is stepping) and waits until every world is done; the others stay in compiled code between
+periods (:func:`~.worlds.serve`, ``envs.team``, ``envs.worlds``).
 World ``w``'s episode is the single environment's episode of the same seed and actions, bit for bit
 (``tests/test_envs_vector.py``).
 
@@ -36,200 +38,25 @@ from typing import Any
 
 import numpy as np
 
-from bioform_mj.core.equations import njit
-from bioform_mj.envs.fast import (
-    BAD_ACTION,
-    FAST,
-    GUARD,
-    TIPPED,
-    WARNED,
-    Compiled,
-    FastPeriod,
-    fast_plant,
-    period,
-    warning_message,
-)
-from bioform_mj.envs.kernels import actions_within
+from bioform_mj.envs.fast import FAST, WARNED, Compiled, FastPeriod, fast_plant, warning_message
 from bioform_mj.envs.parallel import FormationParallelEnv, parallel_env
-from bioform_mj.envs.team import GO, HAVE_TEAM, SLOT, STOP, atomic_load, atomic_store, next_gen, publish, wait_change
+from bioform_mj.envs.team import HAVE_TEAM
 from bioform_mj.envs.team import control as team_control
 from bioform_mj.envs.team import stop as team_stop
-from bioform_mj.plants.mujoco.kernels import copy_data, state_in, state_out
+from bioform_mj.envs.worlds import block, check, claims, dispatch, make_vargs, serve, start, warnings
 from bioform_mj.scenario.config import Scenario
 
 #: at most this share of the memory available now may be taken by the worlds (estimated before building them)
 MEMORY_SHARE = 0.5
+#: ``VectorEnv._ep_start`` of a world whose ended episode's actions were moved out of the history (``_trim``)
+ENDED = -2
 #: ns a thread of the team spins (atomic loads) before it sleeps, waiting for the next period or for the
 #: other threads' blocks (``envs.team``); 0 where the threads outnumber the CPUs this process may use
 SPIN_NS = 200_000
 
 
-@njit
-def first_bad(U, running, lo, hi):
-    """The first ``running`` world whose actions ``U[w]`` (n, 2) are not all finite within ``[lo, hi]``
-    (the float32-rounded bounds), or −1."""
-    for w in range(U.shape[0]):
-        if running[w] and not actions_within(U[w], lo, hi):
-            return w
-    return -1
-
-
-@njit
-def periods(args, lo, hi, wd, wx, ww, own, warm, X, sig, U, pose, vel, new_pose, new_vel, O, O_out, R, k, step_count,
-            status, running, term, trunc, N, dt, w_terminal):  # fmt: skip
-    """Worlds ``lo … hi−1`` that are ``running``: one :func:`~.fast.mujoco_period` each (``args`` a typed
-    list of the worlds' :class:`~.fast.PeriodArgs`, ``U`` (W, n, 2) their actions); a world's new state is
-    copied into ``pose``, ``vel`` (unless MuJoCo warned: the plant is not observed then) and its step
-    counters ``k`` (control) and ``step_count`` (the plant's) advance. ``status`` (W,): the period's bits;
-    then the step's ends, as the single environment's step sets them: ``term`` (W,) (the guards, a
-    tip-over, a MuJoCo warning), the terminal reward ``w_terminal·max(0, (N − k)·dt)`` taken from the
-    rewards ``R`` (W, n) (not for a warning: its tail runs in Python), the observations ``O`` zeroed
-    where the guards failed or MuJoCo warned, ``trunc`` (W,) at step ``N``, ``running`` cleared where
-    either; ``O_out`` (the observations in the environment's dtype) written from ``O``. Returns the
-    number of worlds that warned.
-
-    A world with ``warm[w]`` steps this block's ``MjData`` (address ``wd``; its ``xmat`` view ``wx`` and
-    warning counters ``ww``; ``args[w]`` point there): its MuJoCo state ``X[w]`` (``mj_getState``'s
-    layout for ``sig``, ``mjSTATE_INTEGRATION``) is copied in before the period and out after it, with the
-    chassis' rows of ``xmat`` (the disturbance's heading of the next period) into the world's own
-    array; where its episode ends or MuJoCo warns, the whole ``MjData`` is copied into the world's own
-    (address ``own[w]``), which then holds what stepping it would have left, and the counters are cleared."""
-    warned = 0
-    for w in range(lo, hi):
-        term[w] = False
-        trunc[w] = False
-        status[w] = 0
-        if not running[w]:
-            continue
-        a = args[w]
-        if warm[w]:
-            state_in(a.mptr, wd, X[w], sig)
-        st = period(a, U[w], pose[w], vel[w], new_pose[w], new_vel[w], O[w], k[w], step_count[w])
-        status[w] = st
-        if st & BAD_ACTION:
-            continue
-        if warm[w]:
-            state_out(a.mptr, wd, X[w], sig)
-            xm, base = a.io.xmat, a.io.base
-            for i in range(base.shape[0]):
-                for c in range(9):
-                    xm[base[i], c] = wx[base[i], c]
-        step_count[w] += 1
-        if st & WARNED:
-            warned += 1
-        else:
-            k[w] += 1
-            pose[w, :, :] = new_pose[w]
-            vel[w, :, :] = new_vel[w]
-        if st & (GUARD | TIPPED | WARNED):
-            term[w] = True
-            if not st & WARNED:
-                c = w_terminal * max(0.0, (N - k[w]) * dt)
-                for i in range(R.shape[1]):
-                    R[w, i] = R[w, i] - c
-            if st & (GUARD | WARNED):
-                O[w, :, :] = 0.0
-        elif k[w] >= N:
-            trunc[w] = True
-        running[w] = not (term[w] or trunc[w])
-        if warm[w] and not running[w]:  # ended or warned
-            copy_data(own[w], a.mptr, wd)
-            for j in range(ww.shape[0]):
-                ww[j] = 0
-        for i in range(O.shape[1]):
-            for j in range(O.shape[2]):
-                O_out[w, i, j] = O[w, i, j]
-    return warned
-
-
-#: the fields of :class:`VecArgs`: :func:`periods`' arguments, the threads' blocks (``blocks`` (T, 2): ``lo, hi``)
-#: and warm ``MjData`` (``wd`` (T,) addresses, ``wx``/``ww`` typed lists of their ``xmat`` and warning counters),
-#: the actions' bounds for :func:`first_bad`
-VFIELDS = (
-    "args", "blocks", "wd", "wx", "ww", "own", "warm", "X", "sig", "U", "pose", "vel", "new_pose", "new_vel", "O",
-    "O_out", "R", "k", "step_count", "status", "running", "term", "trunc", "N", "dt", "w_terminal", "acc_low",
-    "acc_high",
-)  # fmt: skip
-
-if FAST:
-    from numba.core import types as _types
-    from numba.experimental import structref
-
-    @structref.register
-    class VecArgsType(_types.StructRef):
-        """numba's type of :class:`VecArgs`."""
-
-        def preprocess_fields(self, fields):
-            return tuple((name, _types.unliteral(typ)) for name, typ in fields)
-
-    class VecArgs(structref.StructRefProxy):
-        """:data:`VFIELDS`, the same arrays through the environment's life, held by one compiled object: a
-        period's call unboxes one argument, not ~20 arrays (~0.3 µs each, with the GIL held)."""
-
-    structref.define_proxy(VecArgs, VecArgsType, list(VFIELDS))
-
-    @njit
-    def make_vargs(*fields):
-        """A :class:`VecArgs` of ``fields`` (in :data:`VFIELDS`' order), built in compiled code (cached)."""
-        return VecArgs(*fields)
-
-else:  # pragma: no cover - the vector environment needs numba's JIT
-    VecArgs = make_vargs = None
-
-
-@njit
-def block(v, t):
-    """Thread ``t``'s block of worlds: :func:`periods` over ``v.blocks[t]`` on its warm ``MjData``; returns
-    the number of worlds that warned."""
-    return periods(v.args, v.blocks[t, 0], v.blocks[t, 1], v.wd[t], v.wx[t], v.ww[t], v.own, v.warm, v.X, v.sig,
-                   v.U, v.pose, v.vel, v.new_pose, v.new_vel, v.O, v.O_out, v.R, v.k, v.step_count, v.status,
-                   v.running, v.term, v.trunc, v.N, v.dt, v.w_terminal)  # fmt: skip
-
-
-@njit
-def check(v):
-    """:func:`first_bad` of the actions ``v.U``."""
-    return first_bad(v.U, v.running, v.acc_low, v.acc_high)
-
-
-@njit
-def dispatch(v, ctl, team, spin_ns):
-    """One period of every world: the actions checked (a bad one: ``-(w + 1)`` for the first bad world ``w``,
-    nothing stepped), then, with ``team``, the workers released (:func:`~.team.publish` of the next "go"
-    generation in ``ctl``), block 0 run by the calling thread, and each worker's "done" waited for
-    (:func:`~.team.wait_change`, spinning up to ``spin_ns`` ns); without, block 0 alone. Returns the number of
-    worlds that warned."""
-    bad = first_bad(v.U, v.running, v.acc_low, v.acc_high)
-    if bad >= 0:
-        return -(bad + 1)
-    T = v.blocks.shape[0] if team else 1
-    prev = atomic_load(ctl, GO)
-    if T > 1:
-        publish(ctl, GO, next_gen(prev))
-    warned = block(v, 0)
-    ts = np.empty(2, dtype=np.int64)
-    for t in range(1, T):
-        wait_change(ctl, SLOT * t, prev, spin_ns, ts)
-        warned += atomic_load(ctl, SLOT * t + 2)
-    return warned
-
-
-@njit
-def serve(v, ctl, t, gen, spin_ns):
-    """Worker ``t``'s life: wait for the next "go" generation after ``gen`` (spinning up to ``spin_ns`` ns,
-    then asleep), run block ``t``, store its result and publish its "done"; return at the stop flag."""
-    ts = np.empty(2, dtype=np.int64)
-    while True:
-        gen = wait_change(ctl, GO, gen, spin_ns, ts)
-        if atomic_load(ctl, STOP):
-            return
-        w = block(v, t)
-        atomic_store(ctl, SLOT * t + 2, np.int32(w))
-        publish(ctl, SLOT * t, gen)
-
-
 def _pinned(cpu: int | None, fn: Any, *args: Any) -> None:
-    """A worker thread's life: pinned to ``cpu`` (None: not pinned), then ``fn(*args)`` (:func:`serve`)."""
+    """A worker thread's life: pinned to ``cpu`` (None: not pinned), then ``fn(*args)`` (:func:`~.worlds.serve`)."""
     if cpu is not None:
         os.sched_setaffinity(0, {cpu})
     fn(*args)
@@ -251,9 +78,11 @@ def _stop_team(ctl: np.ndarray, workers: list, caller: tuple | None) -> None:
 
 def _world_bytes(env: FormationParallelEnv) -> int:
     """Bytes one world holds (its MuJoCo model and data buffers, its arrays over the episode), estimated
-    from a built one: ``MjModel.nbuffer + MjData.nbuffer`` + the leader's trajectory + ~64 KiB of the stack."""
+    from a built one: ``MjModel.nbuffer + MjData.nbuffer`` + the leader's trajectory + ~64 KiB of the stack +
+    its share of the replay history's bound (``VectorEnv._trim``: ``(3·N + 2)·(16·n + 1)`` bytes)."""
     p = env._plant
-    return int(p.model.nbuffer + p.data.nbuffer + env.L_pose.nbytes + env.L_vel.nbytes + 65536)
+    hist = (3 * int(env.N) + 2) * (16 * env.n + 1)
+    return int(p.model.nbuffer + p.data.nbuffer + env.L_pose.nbytes + env.L_vel.nbytes + 65536 + hist)
 
 
 class VectorEnv:
@@ -377,10 +206,15 @@ class VectorEnv:
         self._started = False
         #: the actions of the period being stepped (the period clips them in place)
         self._U = np.zeros((W, n, 2))
-        #: the periods stepped since the oldest current episode began: (actions as clipped, running) each, and
-        #: the index in it at which each world's episode began (-1: none yet): what a copy replays
+        #: the periods stepped since the oldest running episode began: (actions as clipped, running) each, and
+        #: the index in it at which each world's episode began (-1: none yet; :data:`ENDED`: its episode ended and
+        #: its actions were moved to :attr:`_ended`): what a copy replays (:meth:`_trim` bounds it)
         self._hist: list[tuple[np.ndarray, np.ndarray]] = []
         self._ep_start = np.full(W, -1, dtype=np.int64)
+        #: world -> its ended episode's actions (periods, n, 2), for a world that ended and was not reset since
+        self._ended: dict[int, np.ndarray] = {}
+        #: :meth:`step` trims the history past this many periods (a running episode is at most N periods long)
+        self._hist_cap = 2 * int(self.N) + 2
         #: one VecArgs per thread, built at the first step (the worlds' arguments are typed then)
         self._v: Any = None
         #: the team of threads (envs.team): (control array, worker threads, the process id that started them)
@@ -412,13 +246,38 @@ class VectorEnv:
                 raise ValueError(f"seeds must be >= 0, got {seeds}")
         for w, s in zip(sel, seeds):
             self._reset_world(int(w), s)
+            self._ended.pop(int(w), None)
         self._ep_start[sel] = len(self._hist)
-        drop = int(self._ep_start[self._ep_start >= 0].min())  # periods no current episode needs
-        if drop:
-            del self._hist[:drop]
-            self._ep_start[self._ep_start >= 0] -= drop
+        self._trim()
         self._started = True
         return self._out_obs()
+
+    def _trim(self) -> None:
+        """Drop the periods no world's replay needs (:meth:`__setstate__`): a world whose episode ended and was
+        not reset has its episode's actions moved to :attr:`_ended` (at most ``N`` periods), so the history
+        goes back to the oldest *running* episode's start only: at most ``N`` periods, where a world that ended
+        and was never reset kept every later period (one entry a :meth:`step`, without bound). :meth:`step` trims
+        past ``2·N + 2`` periods, so with ``n`` followers :attr:`history_bytes` <= ``(3·N + 2)·W·(16·n + 1)``
+        bytes (the history's ``2·N + 2`` periods and the ended episodes' ``N`` each; :func:`_world_bytes` counts it
+        in the memory estimate)."""
+        ep = self._ep_start
+        for w in np.flatnonzero((ep >= 0) & ~self.running):
+            s = int(ep[w])
+            rows = [u[w] for u, r in self._hist[s:] if r[w]]  # its episode: contiguous from its start
+            self._ended[int(w)] = np.array(rows).reshape(len(rows), self.n, 2)
+            ep[w] = ENDED
+        live = ep[ep >= 0]
+        drop = int(live.min()) if live.size else len(self._hist)  # periods no running episode needs
+        if drop:
+            del self._hist[:drop]
+            ep[ep >= 0] -= drop
+
+    @property
+    def history_bytes(self) -> int:
+        """Bytes of what a copy replays (:meth:`_trim`): the periods since the oldest running episode began (each
+        ``(W, n, 2)`` actions and ``(W,)`` flags) and the ended episodes' actions."""
+        per = self.nworld * (self.n * 2 * 8 + 1)
+        return len(self._hist) * per + sum(int(a.nbytes) for a in self._ended.values())
 
     def _reset_world(self, w: int, seed: int | None) -> None:
         env = self.envs[w]
@@ -442,13 +301,14 @@ class VectorEnv:
             import mujoco
 
             mujoco.mj_getState(p.model, p.data, self._X[w], self._sig)
-            t = self._thread_of[w]
-            warm = (self._wdata[t], self._wviews[t][0], self._wviews[t][1], self._xmat[w])
-        fp = FastPeriod(env, r=self.reward[w], fe=self._fe[w], hits=self._hits[w], model=model, warm=warm)
-        if len(self._args) < self.nworld:
-            while len(self._args) <= w:
-                self._args.append(fp.args)
-        self._args[w] = fp.args
+            warm = [(d, v[0], v[1], self._xmat[w]) for d, v in zip(self._wdata, self._wviews)]
+        fp = FastPeriod(env, r=self.reward[w], fe=self._fe[w], hits=self._hits[w], model=model,
+                        warm=None if warm is None else warm[0])  # fmt: skip
+        W = self.nworld
+        while len(self._args) < self.threads * W:  # placeholders until each world's first reset
+            self._args.append(fp.args)
+        for t in range(self.threads):  # any thread may step it (envs.worlds): one PeriodArgs on each one's MjData
+            self._args[t * W + w] = fp.args if warm is None or t == 0 else fp.args_on(warm[t])
         env._fastp = fp
 
     def _share_init(self, env0: FormationParallelEnv) -> None:
@@ -527,9 +387,6 @@ class VectorEnv:
         self._own = np.zeros(W, dtype=np.int64)
         self._X = np.zeros((W, mujoco.mj_stateSize(m, sig)))
         self._xmat = np.zeros((W, m.nbody, 9))
-        self._thread_of = np.zeros(W, dtype=np.int64)
-        for t, (lo, hi) in enumerate(self._blocks):
-            self._thread_of[lo:hi] = t
         self._wdata, self._wviews = [], []
         c = p.contacts
         for _ in range(self.threads):
@@ -586,11 +443,12 @@ class VectorEnv:
         in the action space of every world's agents (rows of worlds not running are ignored). A world that
         ended stays ended (its rows keep their last values) until :meth:`reset` names it.
 
-        The period's Python is one copy of the actions and one compiled call (:func:`dispatch`: the check of
-        the actions, then the worlds' periods and their ends, :func:`periods`), in which the calling thread
-        steps the first block of worlds and releases and waits for the team's threads, which step the others
-        (``envs.team``: no Python, no GIL and, at a short period, no sleep between periods): no per-world
-        Python and no numpy reductions unless a world warned."""
+        The period's Python is one copy of the actions and one compiled call (:func:`~.worlds.dispatch`: the
+        check of the actions, then the worlds' periods and their ends, :func:`~.worlds.periods`), in which the
+        calling thread releases the team's threads, steps its block of worlds, claims what the others have not
+        yet taken of theirs and waits until every world is done (``envs.team``: no Python, no GIL and, at a
+        short period, no sleep between periods): no per-world Python and no numpy reductions unless a world
+        warned."""
         if not self._started or not self.running.any():
             raise RuntimeError("step() with no world running: call reset() first")
         U = np.asarray(actions)
@@ -606,18 +464,22 @@ class VectorEnv:
             if (self.threads > 1 or self._pin) and (self._team is None or self._team[2] != os.getpid()):
                 self._start_team()
             ctl = self._team[0] if self._team is not None else self._ctl1
-            warned = self._dispatch(self._v[0], ctl, self.threads > 1, self._spin_ns)
+            warned = self._dispatch(self._v[0], ctl, self._spin_ns)
         else:  # a thread pool where there are no futexes (envs.team)
             bad = self._check(self._v[0])
             if bad >= 0:
                 warned = -(bad + 1)
-            elif self.threads == 1:
-                warned = self._block(self._v[0], 0)
             else:
-                if self._pool is None:
-                    self._pool = ThreadPoolExecutor(self.threads - 1)
-                futs = [self._pool.submit(self._block, self._v[t], t) for t in range(1, self.threads)]
-                warned = self._block(self._v[0], 0) + sum(f.result() for f in futs)
+                self._start(self._v[0])
+                futs = []
+                if self.threads > 1:
+                    if self._pool is None:
+                        self._pool = ThreadPoolExecutor(self.threads - 1)
+                    futs = [self._pool.submit(self._block, self._v[t], t) for t in range(1, self.threads)]
+                self._block(self._v[0], 0)
+                for f in futs:
+                    f.result()
+                warned = self._warnings(self._v[0])
         if warned < 0:  # before any world steps: the single environment's message for the first bad world
             bad = -(warned + 1)
             try:
@@ -625,14 +487,16 @@ class VectorEnv:
             except ValueError as exc:
                 raise ValueError(f"world {bad}: {exc}") from exc
         self._hist.append((self._U.copy(), running))
+        if len(self._hist) > self._hist_cap:  # worlds ended and not reset: their episodes moved out (bounded)
+            self._trim()
         if warned > 0:  # a MuJoCo warning: the single environment's period tail in Python (the state not observed)
             for w in np.flatnonzero(self._status & WARNED):
                 self._warned(int(w))
         return self._obs_out.copy(), self.reward.copy(), self._term.copy(), self._trunc.copy()
 
     def _compile(self) -> None:
-        """:class:`VecArgs` of this environment and the specialisations of :func:`dispatch` (or, without
-        ``envs.team``, :func:`check` and :func:`block`) and :func:`serve` for its types."""
+        """:class:`~.worlds.VecArgs` of this environment and the specialisations of :func:`~.worlds.dispatch` (or,
+        without ``envs.team``, its pieces) and :func:`~.worlds.serve` for its types."""
         from numba.typed import List
 
         #: (T, 2) each thread's worlds ``lo, hi`` (:attr:`_blocks`)
@@ -641,8 +505,9 @@ class VectorEnv:
         for _cn, _cc, x, n in self._wviews:
             wx.append(x)
             ww.append(n)
+        self._claim = claims(self.threads)
         fields = (
-            self._args, self._bounds, np.array([d._address for d in self._wdata]), wx, ww,
+            self._args, self._bounds, self._claim, np.array([d._address for d in self._wdata]), wx, ww,
             self._own, self.warm, self._X, self._sig, self._U, self.pose, self.vel, self._new_pose, self._new_vel,
             self.obs, self._obs_out, self.reward, self.k, self._sc, self._status, self.running, self._term,
             self._trunc, int(self.N), float(self.dt), float(self._w_terminal), self._acc_low, self._acc_high,
@@ -654,15 +519,17 @@ class VectorEnv:
         v = self._v[0]
         if HAVE_TEAM:
             self._ctl1 = ctl = team_control(1)  # one thread: no workers to release
-            self._dispatch = Compiled(dispatch, (v, ctl, True, 0)).call
+            self._dispatch = Compiled(dispatch, (v, ctl, 0)).call
             if self.threads > 1:
                 self._serve = Compiled(serve, (v, ctl, 1, np.int32(0), 0)).call
         else:  # a thread pool where there are no futexes (envs.team)
             self._check = Compiled(check, (v,)).call
+            self._start = Compiled(start, (v,)).call
             self._block = Compiled(block, (v, 0)).call
+            self._warnings = Compiled(warnings, (v,)).call
 
     def _start_team(self) -> None:
-        """Start the workers (threads 1 … T−1) of :func:`serve` on a new control array; they are stopped by
+        """Start the workers (threads 1 … T−1) of :func:`~.worlds.serve` on a new control array; they are stopped by
         :meth:`close`, or when the environment is collected or the interpreter exits (``weakref.finalize``,
         which holds no reference to the environment). Also in a forked child, where the parent's are gone."""
         if self._stopper is not None:
@@ -704,7 +571,8 @@ class VectorEnv:
         rng = [None if e._np_random is None else e._np_random.bit_generator.state for e in self.envs]
         return {
             "init": self._init, "seeds": self.seeds.copy(), "ep_start": self._ep_start.copy(),
-            "hist": [(u.copy(), r.copy()) for u, r in self._hist], "rng": rng, "running": self.running.copy(),
+            "hist": [(u.copy(), r.copy()) for u, r in self._hist],
+            "ended": {w: a.copy() for w, a in self._ended.items()}, "rng": rng, "running": self.running.copy(),
             "term": self._term.copy(), "trunc": self._trunc.copy(), "started": self._started,
         }  # fmt: skip
 
@@ -714,7 +582,19 @@ class VectorEnv:
         continues bit for bit (same machine; ``tests/test_envs_training.py``)."""
         scenario, W, T, kw = st["init"]
         self.__init__(scenario, W, T, **kw)
-        ep, hist = st["ep_start"], st["hist"]
+        ep, hist, ended = st["ep_start"], st["hist"], st.get("ended", {})
+        if ended:  # the ended episodes first, each world on its own actions (worlds are independent)
+            for w in ended:
+                self._reset_world(int(w), int(st["seeds"][w]))
+            for j in range(max(len(a) for a in ended.values())):
+                U = np.zeros((W, self.n, 2))
+                self.running[:] = False
+                for w, a in ended.items():
+                    if j < len(a):
+                        U[w] = a[j]
+                        self.running[w] = True
+                self._started = True
+                self.step(U)
         for i in range(len(hist) + 1):
             for w in np.flatnonzero(ep == i):
                 self._reset_world(int(w), int(st["seeds"][w]))
@@ -725,6 +605,7 @@ class VectorEnv:
                     self._started = True
                     self.step(hist[i][0])
         self._hist, self._ep_start = [(u.copy(), r.copy()) for u, r in hist], ep.copy()
+        self._ended = {int(w): a.copy() for w, a in ended.items()}
         self.running[:], self._term[:], self._trunc[:] = st["running"], st["term"], st["trunc"]
         for e, state in zip(self.envs, st["rng"]):
             if state is not None:
