@@ -199,3 +199,43 @@ def test_a_frozen_suspension_above_a_driven_wheel_is_pointed_out(tmp_path):
     (note,) = [n for n in layout.notes if " frozen (design §13" in n]
     assert "'susp_joint'" in note and "'flap_joint'" in note
     assert note.split("a driven wheel hangs below ")[1].startswith("'susp_joint' (a suspension?)")
+    # the layout pairs the wheel with its suspension (what the fit's rule reads), and only that wheel
+    assert layout.suspended_wheels == (("l_wheel_joint", "susp_joint"),)
+    freed = prepare_robot(replace(_ref(tmp_path, text), free_joints=True))[1]
+    assert freed.suspended_wheels == () and "susp_joint" in freed.free_joints
+
+
+def test_a_wheel_on_a_frozen_suspension_has_its_own_terms_not_identified():
+    """design §13 / status.suspension_rule: a wheel below a frozen joint is simulated rigidly mounted while the
+    robot rode its suspension, so that wheel's damping, dry friction and armature absorb the difference (the
+    PMB-2: damping R 0.148 ± 0.041 'identified' against a truth of 0.05). Whatever their intervals, they are
+    not identified, the why says why and how to simulate it; the other wheel and the chassis keep their status."""
+    from types import SimpleNamespace
+
+    from bioform_mj.robots.realdata.status import suspension_rule
+
+    def row(name, status, why=""):
+        return {"name": name, "status": status, "why": why, "unit": "", "ci95": [0.9, 1.1]}
+
+    rows = [
+        row("mass", "identified"),
+        row("damping_L", "identified"),
+        row("damping_R", "identified"),
+        row("frictionloss_L", "negligible", "interval [0, 1e-4] N·m includes 0: below 1e-4"),
+        row("armature_L", "not identified", "interval ±1 kg·m² is wide"),
+    ]
+    lay = SimpleNamespace(wheel_joints=("lw", "rw"), suspended_wheels=(("lw", "susp"),))
+    (note,) = suspension_rule(rows, lay)
+    st = {r["name"]: r["status"] for r in rows}
+    assert st == {
+        "mass": "identified",
+        "damping_L": "not identified",
+        "damping_R": "identified",
+        "frictionloss_L": "not identified",
+        "armature_L": "not identified",
+    }
+    for r in rows[1:2] + rows[3:]:
+        assert r["why"].startswith("its wheel hangs below 'susp', which the model freezes")
+    assert rows[4]["why"].endswith("interval ±1 kg·m² is wide")  # the earlier reason kept
+    assert "'lw' below 'susp'" in note and "(damping_L, frictionloss_L would have been)" in note
+    assert suspension_rule(rows, SimpleNamespace(wheel_joints=("lw", "rw"), suspended_wheels=())) == []

@@ -8,7 +8,6 @@ reads a compiled model's layout back.
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -60,24 +59,7 @@ def layout_of(model: mujoco.MjModel, prefix: str = "") -> RobotLayout:
     else:
         adr, size = model.text_adr[tid], model.text_size[tid]
         lay = RobotLayout.from_json(bytes(model.text_data[adr : adr + size - 1]).decode())
-    if not prefix:
-        return lay
-    return replace(
-        lay,
-        base=prefix + lay.base,
-        wheel_joints=tuple(prefix + j for j in lay.wheel_joints),
-        motors=tuple(prefix + a for a in lay.motors),
-        wheel_geoms=tuple(prefix + g for g in lay.wheel_geoms),
-        disabled_actuators=tuple(prefix + a for a in lay.disabled_actuators),
-        frozen_joints=tuple(prefix + j for j in lay.frozen_joints),
-        locked_joints=tuple(prefix + j for j in lay.locked_joints),
-        held_joints=tuple(prefix + j for j in lay.held_joints),
-        free_joints=tuple(prefix + j for j in lay.free_joints),
-        rolling_joints=tuple(prefix + j for j in lay.rolling_joints),
-        casters=tuple(prefix + g for g in lay.casters),
-        priority_geoms=tuple(prefix + g for g in lay.priority_geoms),
-        published_contacts=tuple((prefix + g, f, c) for g, f, c in lay.published_contacts),
-    )
+    return lay.with_prefix(prefix) if prefix else lay
 
 
 def _convention_ref() -> RobotRef:
@@ -659,10 +641,17 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
         else:
             free.append(j)
     jl = lambda js: _quoted(_joint_label(model, j) for j in js)  # noqa: E731
+    suspended: list[tuple[str, str]] = []
     if frozen:
         # a driven wheel below a frozen joint: a suspension (PMB-2: its wheels' ±5 mm sliders, frozen, biased its
         # fitted wheel damping 3x against a recording where they rode to their limit)
         hung = [j for j in frozen if wheel_bodies & set(subtree(model, int(model.jnt_bodyid[j])).tolist())]
+        suspended = [  # each driven wheel below a frozen joint, and that joint (the fit's suspension rule)
+            (_joint_label(model, w), _joint_label(model, j))
+            for w in joints
+            for j in hung
+            if int(model.jnt_bodyid[w]) in subtree(model, int(model.jnt_bodyid[j]))
+        ]
         notes.append(
             f"joint(s) {jl(frozen)} frozen (design §13: removed from the scene, their bodies welded where the file "
             "puts them; map free_joints = true to leave them free)"
@@ -723,6 +712,7 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
     return {
         "layout": dict(
             frozen_joints=tuple(_joint_label(model, j) for j in frozen),
+            suspended_wheels=tuple(suspended),
             locked_joints=tuple(_joint_label(model, j) for j in locked),
             held_joints=tuple(_joint_label(model, j) for j in held),
             free_joints=tuple(_joint_label(model, j) for j in free),

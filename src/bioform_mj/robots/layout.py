@@ -10,7 +10,7 @@ Imports nothing of the project above :mod:`bioform_mj.robots.refs`.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import mujoco
@@ -166,6 +166,8 @@ class RobotLayout:
     notes: tuple[str, ...] = ()
     # design §13: the robot that runs and its contacts
     frozen_joints: tuple[str, ...] = ()  # removed from the scene: their bodies welded where the file puts them
+    #: (driven wheel joint, frozen joint it hangs below): a suspension the scene welds (design §13)
+    suspended_wheels: tuple[tuple[str, str], ...] = ()
     locked_joints: tuple[str, ...] = ()  # held at qpos0 by a joint equality (referenced elsewhere, not removable)
     held_joints: tuple[str, ...] = ()  # held by the model's own position actuators
     free_joints: tuple[str, ...] = ()  # left free (free_joints = true, or a ball joint that cannot be locked)
@@ -179,6 +181,26 @@ class RobotLayout:
     keyframe: str = ""
     keyframe_qpos: tuple[tuple[str, float], ...] = ()
 
+    def with_prefix(self, prefix: str) -> RobotLayout:
+        """This layout with ``prefix`` before every element name (a robot of a scene, ``layout_of``)."""
+        return replace(
+            self,
+            base=prefix + self.base,
+            wheel_joints=tuple(prefix + j for j in self.wheel_joints),
+            motors=tuple(prefix + a for a in self.motors),
+            wheel_geoms=tuple(prefix + g for g in self.wheel_geoms),
+            disabled_actuators=tuple(prefix + a for a in self.disabled_actuators),
+            frozen_joints=tuple(prefix + j for j in self.frozen_joints),
+            suspended_wheels=tuple((prefix + w, prefix + j) for w, j in self.suspended_wheels),
+            locked_joints=tuple(prefix + j for j in self.locked_joints),
+            held_joints=tuple(prefix + j for j in self.held_joints),
+            free_joints=tuple(prefix + j for j in self.free_joints),
+            rolling_joints=tuple(prefix + j for j in self.rolling_joints),
+            casters=tuple(prefix + g for g in self.casters),
+            priority_geoms=tuple(prefix + g for g in self.priority_geoms),
+            published_contacts=tuple((prefix + g, f, c) for g, f, c in self.published_contacts),
+        )
+
     def to_json(self) -> str:
         return json.dumps(asdict(self))
 
@@ -190,6 +212,7 @@ class RobotLayout:
         for k in ("frozen_joints", "locked_joints", "held_joints", "free_joints", "rolling_joints", "casters"):
             d[k] = tuple(d.get(k, ()))
         d["priority_geoms"] = tuple(d.get("priority_geoms", ()))
+        d["suspended_wheels"] = tuple((str(w), str(j)) for w, j in d.get("suspended_wheels", ()))
         d["published_contacts"] = tuple((str(g), float(f), int(c)) for g, f, c in d.get("published_contacts", ()))
         d["import_notes"] = tuple(d.get("import_notes", ()))
         d["keyframe_qpos"] = tuple((str(j), float(q)) for j, q in d.get("keyframe_qpos", ()))

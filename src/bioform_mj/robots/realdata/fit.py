@@ -87,6 +87,7 @@ from bioform_mj.robots.realdata.status import (
     choose_chunk,
     parameter_rows,
     settle_zero,
+    suspension_rule,
     too_short_why,
     torque_effects,
 )
@@ -747,6 +748,7 @@ def fit(
     effects = torque_effects(rec)
     for row in rows:  # an interval that includes 0 is never "identified" (status.py)
         settle_zero(row, effects)
+    notes += suspension_rule(rows, robot.layout)  # a wheel on a frozen suspension: its terms not identified
     notes += caster_notes(robot, which, names, corr, find_casters)
     result = FitResult(
         rows,

@@ -237,3 +237,38 @@ def parameter_rows(
             }
         )
     return rows
+
+
+def suspension_rule(rows: list[dict[str, Any]], layout: Any) -> list[str]:
+    """A wheel that hangs below a joint the scene freezes (``layout.suspended_wheels``: a suspension, design §13)
+    is simulated rigidly mounted while the robot rode it, so its own terms (``damping``, ``frictionloss``,
+    ``armature`` of that side) absorb the difference and are never reported ``identified`` or ``negligible``
+    (measured on a PMB-2 whose ±5 mm wheel sliders the recording rode: damping R 0.148 ± 0.041 N·m·s/rad
+    "identified" against a truth of 0.05; with ``--free-joints`` it held). Returns fit.json's note (empty: none)."""
+    hung = dict(layout.suspended_wheels)
+    if not hung:
+        return []
+    side_of = dict(zip(("L", "R"), layout.wheel_joints))
+    hit = []
+    for row in rows:
+        kind, _, side = row["name"].rpartition("_")
+        joint = side_of.get(side) if kind in ("damping", "frictionloss", "armature") else None
+        if joint not in hung:
+            continue
+        if row["status"] != "not identified":
+            hit.append(row["name"])
+        row["status"] = "not identified"
+        row["why"] = "; ".join(
+            [
+                f"its wheel hangs below '{hung[joint]}', which the model freezes (a suspension) while the robot rode "
+                "it: its terms absorb that; --free-joints (mapping free_joints = true) simulates it",
+                *(w for w in row["why"].split("; ") if w),
+            ]
+        )
+    joints = ", ".join(f"'{w}' below '{j}'" for w, j in hung.items())
+    return [
+        f"driven wheel(s) {joints}: a suspension the model freezes (design §13); those wheels' damping, dry friction "
+        "and armature are not reported identified"
+        + (f" ({', '.join(hit)} would have been)" if hit else "")
+        + "; give --free-joints to simulate the suspension"
+    ]
