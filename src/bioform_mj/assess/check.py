@@ -455,6 +455,7 @@ def _parts(lay: Any) -> dict[str, Any]:
         v = layout[k]
         layout[k] = [x[len("f1/") :] for x in v] if isinstance(v, (list, tuple)) else v[len("f1/") :]
     layout["published_contacts"] = [[g[len("f1/") :], f, c] for g, f, c in layout["published_contacts"]]
+    layout["suspended_wheels"] = [[w[len("f1/") :], j[len("f1/") :]] for w, j in layout["suspended_wheels"]]
     return layout
 
 
