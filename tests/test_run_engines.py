@@ -370,7 +370,11 @@ def test_bench_cli_writes_ratios(tmp_path):
     data = json.loads(out.read_text())
     (row,) = data["rows"]
     assert row["n"] == 3 and row["control_steps"] == 300
-    assert 0.2 < row["ratio"] < 5.0  # bare / loop; the target is checked by the benchmark, not here
+    # bare / loop, from the same pair of timings (one rep: the ratio is that pair's); the target is the benchmark's.
+    # Its sanity bound on CPU time: 3.5 ms of wall time is one time slice on a loaded machine (a gate beside two
+    # other jobs measured a wall ratio of 0.18, its CPU ratio unaffected), so the wall ratio is not bounded here
+    assert row["ratio"] == pytest.approx(row["bare_s"] / row["loop_s"], rel=1e-12) and row["ratio"] > 0
+    assert 0.2 < row["ratio_cpu"] < 5.0
     assert row["replay_max_abs_dqpos"] == 0.0  # the bare replay did the loop's physics bit for bit
     assert len(row["ratio_pairs"]) == 1 and row["ratio"] == row["ratio_pairs"][0]
     assert row["realtime_factor"] > 1.0
