@@ -37,6 +37,12 @@ class Truth:
     base: str = "base"  # the chassis body: the payload goes on it
     odom_body: str | None = None  # the body whose pose and twist /odom reports (None: ``base``)
     recorded: tuple[str, ...] = ()  # other 1-dof joints whose true angle and speed /joint_states also carries
+    coupled: tuple[str, str] | None = None  # a skid steer's other pair (left, right): driven with its side's
+    # torque and given its side's damping and dry friction (the Husky's rear wheels)
+    point_wheels: bool | None = None  # the driven wheels' cylinders as spheres of their radius, one rolling
+    # contact (None: a URDF's, not an MJCF's; the TIAGo's cylinders touch the floor along their edge)
+    held: tuple[str, ...] = ()  # joints taken out of the file, their bodies welded at its pose (servos holding an
+    # arm and a head still: the TIAGo's); unpowered, they sag and swing, which the fit's model does not (design §13)
 
 
 #: the Kobuki URDF of the test zoo and a "real" Kobuki that differs from it (its base_link: 2.4 kg, izz 0.03675
@@ -109,31 +115,36 @@ def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
     spec = _urdf_spec(robot_file) if urdf else mujoco.MjSpec.from_file(str(robot_file))
     for k in list(spec.keys):
         spec.delete(k)
+    for name in truth.held:
+        spec.delete(spec.joint(name))
     for a in list(spec.actuators):  # torques go in as qfrc_applied; a DC motor at 0 V would brake (back-EMF)
         spec.delete(a)
     for s in list(spec.sensors):  # some name the actuators; the recording is written from the state
         spec.delete(s)
+    model0 = spec.compile()
     if urdf:  # its inertials are full matrices: the payload as a body welded at the chassis' centre of mass
-        model0 = spec.compile()
         load = spec.body(truth.base).add_body(name="test_payload", pos=model0.body(truth.base).ipos)
         load.explicitinertial = True
         load.mass = truth.payload_kg
         y = truth.payload_yaw_kgm2
         load.inertia = [y / 2 + 1e-9, y / 2 + 1e-9, y + 1e-9]
-        for j in truth.joints:  # wheels roll on one contact point
-            for g in spec.body(model0.body(model0.joint(j).bodyid[0]).name).geoms:
-                if g.type == mujoco.mjtGeom.mjGEOM_CYLINDER:
-                    g.type, g.size = mujoco.mjtGeom.mjGEOM_SPHERE, [g.size[0], 0, 0]
-                elif g.type == mujoco.mjtGeom.mjGEOM_MESH:  # a mesh tyre (Fetch/Freight): a sphere of its radius
-                    g.pos, g.size = _mesh_wheel_sphere(model0, model0.joint(j).id, g.meshname)
-                    g.type, g.meshname = mujoco.mjtGeom.mjGEOM_SPHERE, ""
     else:
         base = spec.body(truth.base)
         base.mass = base.mass + truth.payload_kg
         inertia = np.array(base.inertia, float)
         inertia[2] += truth.payload_yaw_kgm2
         base.inertia = inertia
-    for name, d, f in zip(truth.joints, truth.damping, truth.frictionloss):
+    if urdf if truth.point_wheels is None else truth.point_wheels:
+        for j in truth.joints + (truth.coupled or ()):  # wheels roll on one contact point
+            for g in spec.body(model0.body(model0.joint(j).bodyid[0]).name).geoms:
+                if g.type == mujoco.mjtGeom.mjGEOM_CYLINDER:
+                    g.type, g.size = mujoco.mjtGeom.mjGEOM_SPHERE, [g.size[0], 0, 0]
+                elif g.type == mujoco.mjtGeom.mjGEOM_MESH:  # a mesh tyre (Fetch/Freight): a sphere of its radius
+                    g.pos, g.size = _mesh_wheel_sphere(model0, model0.joint(j).id, g.meshname)
+                    g.type, g.meshname = mujoco.mjtGeom.mjGEOM_SPHERE, ""
+    pairs = list(zip(truth.joints, truth.damping, truth.frictionloss))
+    pairs += list(zip(truth.coupled or (), truth.damping, truth.frictionloss))
+    for name, d, f in pairs:
         j = spec.joint(name)
         damping = np.array(j.damping, float)  # MuJoCo 4: [linear, ...]; the linear coefficient
         damping[0] = d
@@ -148,7 +159,18 @@ def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
             geom.friction = [truth.caster_friction, 0.005, 0.0001]
             geom.condim = 3 if truth.caster_friction > 0 else 1
             geom.priority = 2  # its own friction wins against the floor's
-    floor = spec.worldbody.add_geom(name="test_floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    # MuJoCo's own contact defaults, not the file's default class (the menagerie TIAGo's, contype 0 and type mesh,
+    # left its casters without a floor: it fell through in 0.3 s)
+    floor = spec.worldbody.add_geom(
+        name="test_floor",
+        type=mujoco.mjtGeom.mjGEOM_PLANE,
+        size=[0, 0, 1],
+        contype=1,
+        conaffinity=1,
+        condim=3,
+        friction=[1.0, 0.005, 0.0001],
+        mass=0.0,
+    )
     if urdf:
         floor.contype, floor.conaffinity = 1, 2
     return spec.compile()
@@ -185,6 +207,7 @@ def simulate(model: mujoco.MjModel, truth: Truth, duration: float, tau: float, s
     data.time = 0.0
     program = torque_program(duration, tau, seed)
     dofs = [int(model.joint(j).dofadr[0]) for j in truth.joints]
+    dofs2 = [int(model.joint(j).dofadr[0]) for j in truth.coupled or ()]
     qadr = [int(model.joint(j).qposadr[0]) for j in truth.joints]
     base = model.body(truth.odom_body or truth.base).id
     n = int(round(duration / model.opt.timestep))
@@ -197,6 +220,8 @@ def simulate(model: mujoco.MjModel, truth: Truth, duration: float, tau: float, s
         u = program(data.time)
         data.qfrc_applied[:] = 0
         data.qfrc_applied[dofs] = u
+        if dofs2:
+            data.qfrc_applied[dofs2] = u
         mujoco.mj_forward(model, data)
         # at the body's origin (ROS base_link) in its frame: ang, lin. (mjOBJ_BODY gives them at the centre of mass
         # in the principal-axes frame: the menagerie TIAGo's, turned 90° about z, recorded its forward speed as vy)
