@@ -316,7 +316,7 @@ def _fit_main(args: argparse.Namespace) -> int:
             "recording of motor current (A) needs --effort-scale Kt·N (torque constant × gear ratio); a recording "
             "of the torques commanded to the robot file's <dcmotor>s needs --motor dc; a skid-steer robot whose "
             "other wheels are driven too is not what the fit simulates (only the mapped pair is driven, the "
-            "others roll free: a Husky recorded so fitted 20 kg against 56.6 kg)"
+            "others roll free: a Husky recorded so fitted 19.4 kg against its chassis body's 56.0 kg)"
         )
         result.notes.append(hint)
         print(f"warning: {hint}", file=sys.stderr)
