@@ -14,7 +14,8 @@ seeded random actions of
 
 every step's observations, rewards and flags, and compares the two recordings: the same names, and per array the
 same dtype, shape and values (``np.array_equal`` with ``equal_nan``). Prints one line per rollout and exits 1
-if any differs, else 0.
+if any differs (or a recording imported ``bioform_mj`` from elsewhere than its tree), else 0; a tree with no
+``bioform_mj`` package: one ``error:`` line, exit 2 (it had compared the installed package with itself).
 
     python scripts/envs_identical.py REF_SRC NEW_SRC [--only vector_warm,follower] [--steps 400]
     python scripts/envs_identical.py --record OUT.npz [--steps 400]     (one tree: the current PYTHONPATH)
@@ -36,6 +37,8 @@ import numpy as np
 
 #: control period (s) and episode length (s): 1 ms, 0.15 s (150 periods), so a rollout crosses episode ends
 OVERRIDES = ["plant.kind=mujoco", "sim.control_dt=0.001", "sim.duration=0.15"]
+#: the recording's key of the source tree its ``bioform_mj`` was imported from (checked against the tree asked for)
+SOURCE = "_source"
 ROLLOUTS = ("parallel_velocity", "parallel_torque", "parallel_controller", "parallel_ideal", "follower",
             "vector_warm", "vector_cold", "vector_one")  # fmt: skip
 
@@ -140,6 +143,9 @@ def record(path: str, steps: int, only: list[str]) -> None:
         else:
             got = _vector(name, steps)
         arrays.update({f"{name}/{k}": v for k, v in got.items()})
+    import bioform_mj
+
+    arrays[SOURCE] = np.array(str(Path(bioform_mj.__file__).resolve().parent.parent))  # the tree it ran
     tmp = path + ".part.npz"
     np.savez(tmp, **arrays)
     os.replace(tmp, path)
@@ -166,6 +172,10 @@ def main() -> int:
     if a.record:
         record(a.record, a.steps, only)
         return 0
+    # a tree without the package ran the installed one instead: "identical" of one tree against itself
+    if missing := [t for t in a.trees if not (Path(_src(t)) / "bioform_mj").is_dir()]:
+        print(f"error: {missing[0]}: no bioform_mj package there (nor under its src/)", file=sys.stderr)
+        return 2
     with tempfile.TemporaryDirectory() as tmp:
         files = []
         for i, tree in enumerate(a.trees):
@@ -177,6 +187,10 @@ def main() -> int:
                 print(f"error: recording under {tree} failed: {p.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
                 return 1
             files.append(np.load(f))
+            ran = str(files[-1][SOURCE])
+            if ran != _src(tree):  # PYTHONPATH lost to another copy of the package (an installed one)
+                print(f"error: the recording for {tree} imported bioform_mj from {ran}", file=sys.stderr)
+                return 1
         ref, new = files
         differ = 0
         for name in only:

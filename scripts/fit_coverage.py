@@ -144,7 +144,8 @@ def main() -> int:
                     true = _true_values(truth, names, [p["published"] for p in res.parameters])
                     err = np.array([p["fitted"] for p in res.parameters]) - true
                     half = _halfwidths(res)
-                    rep = np.array([p["ci95_halfwidth"] or np.inf for p in res.parameters])
+                    hws = [p["ci95_halfwidth"] for p in res.parameters]
+                    rep = np.array([np.inf if h is None else h for h in hws])  # 0.0 is a width, None none
                     half["fit"] = np.where(np.isfinite(rep), rep, np.inf)
                     ident = np.array([p["status"] == "identified" for p in res.parameters])
                     got[name].append((err, true, half, ident))

@@ -203,10 +203,13 @@ def test_batch_env_record_for_copies_is_bounded_and_says_when_it_drops(batched, 
     be.reset()  # under the real cap: the record is this one reset
     assert be._log_bytes == W and len(be._log) == 1
     monkeypatch.setattr(mod, "RECORD_CAP_BYTES", 10 * per_step + W)
-    with pytest.warns(UserWarning, match="cannot be pickled or copied until every world has been reset"):
+    with pytest.warns(UserWarning, match="cannot be pickled or copied until every world has been reset") as got:
         for k in range(14):
             be.step(actions(k))
             assert be._log_bytes <= mod.RECORD_CAP_BYTES
+    # the warning names the caller's line (the step() call here), not batched.py's own step()
+    (w,) = [w for w in got if "cannot be pickled" in str(w.message)]
+    assert w.filename == __file__, w.filename
     assert be._ep_start.tolist() == [-1, -1, -1] and be._log == []
     with pytest.raises(TypeError, match=r"cannot pickle or copy this batch_env: .*worlds \[0, 1, 2\]"):
         pickle.dumps(be)

@@ -424,3 +424,20 @@ def test_any_thread_steps_any_world_the_same_bits():
     assert turn[0] == 70
     a.close()
     b.close()
+
+
+def test_the_memory_estimate_counts_each_threads_period_arguments():
+    """Each world has one ``PeriodArgs`` a thread (``envs/worlds.py``: any thread steps any world), ~14.5 KB each
+    (measured: 4,000 of them, RSS), so the memory grows with worlds × threads (``threads`` may be as many as the
+    worlds): the estimate counts :data:`~bioform_mj.envs.vector.ARGS_BYTES` a world and thread. A bound that holds
+    ``W`` worlds' own memory and one thread's arguments each takes 1 thread and refuses 4 (it took both)."""
+    from bioform_mj.envs.vector import ARGS_BYTES, _world_bytes
+
+    env = parallel_env("paper", overrides=OV)
+    env.reset(seed=0)
+    W, per = 4, _world_bytes(env)
+    assert 14_500 <= ARGS_BYTES < per / 10
+    bound = W * (per + ARGS_BYTES)
+    VectorEnv("paper", W, 1, overrides=OV, max_bytes=bound).close()
+    with pytest.raises(ValueError, match=r"4 worlds need ~.* GiB .* 4 threads"):
+        VectorEnv("paper", W, 4, overrides=OV, max_bytes=bound)

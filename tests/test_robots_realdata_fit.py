@@ -514,3 +514,13 @@ def test_the_time_budget_holds_inside_an_iteration(bag, tmp_path, capsys):
     assert len(rep["parameters"]) == 6 and all(math.isfinite(p["fitted"]) for p in rep["parameters"])
     assert any("stopped at the time budget" in n for n in rep["notes"])
     assert (out / "tb3_robot_calibrated.xml").is_file() and (out / "fit.png").is_file()
+
+
+@pytest.mark.parametrize("chunk", ["inf", "nan", "0", "-1"])
+def test_a_chunk_length_that_is_not_a_positive_number_is_refused_before_any_work(tmp_path, capsys, chunk):
+    """``--chunk inf`` was an internal error (exit 1, OverflowError in the chunk count) after the recording was
+    read; now it is the one-line refusal ``--chunk nan``, ``0`` and ``-1`` get, before the recording is read (the
+    bag named here does not exist, and that is not what the line says)."""
+    out = tmp_path / "o"
+    argv = ["robot", "fit", "tb3", "--bag", str(tmp_path / "absent"), "--chunk", chunk, "--out", str(out)]
+    _refused(argv, out, capsys, "--chunk")

@@ -172,3 +172,31 @@ def test_a_trial_that_diverges_at_the_optimum_is_not_identified_and_the_others_a
             continue
         assert got[name]["fitted"] == p["fitted"] and got[name]["status"] == p["status"], name
         assert np.isfinite(got[name]["ci95_halfwidth"])
+
+
+def test_every_trial_diverging_at_the_optimum_still_gives_a_result(short_bag, monkeypatch):
+    """Every parameter's finite-difference trial diverges at the optimum (here ``mass`` and ``yaw_inertia``, the
+    only two fitted): no column is a slope, so there is no interval at all; the fit reports each not identified
+    with the reason and no interval (it raised IndexError in the interval code, which had no column left)."""
+    from mujoco import sysid
+
+    real_res, real_jac = sysid.model_residual, fit_mod.jacobian_at
+    armed: dict[str, np.ndarray] = {}
+
+    def model_residual(x, *a, **kw):
+        if "x" in armed and np.abs(np.ravel(x) - armed["x"]).max() > 1e-12:
+            raise ValueError("Nan, Inf or huge value in QACC")
+        return real_res(x, *a, **kw)
+
+    def jacobian_at(residual, x, *a, **kw):
+        armed["x"] = np.array(x, float)
+        return real_jac(residual, x, *a, **kw)
+
+    monkeypatch.setattr(sysid, "model_residual", model_residual)
+    monkeypatch.setattr(fit_mod, "jacobian_at", jacobian_at)
+    res, got = _fit(short_bag, which=("mass", "yaw_inertia"), max_iters=3)
+    assert sorted(got) == ["mass", "yaw_inertia"]
+    for row in got.values():
+        assert row["status"] == "not identified" and "made the rollouts diverge" in row["why"], row
+        assert row["ci95"] is None and row["correlated_with"] == []
+    assert any("mass, yaw_inertia at the optimum diverged" in n for n in res.notes)

@@ -282,9 +282,9 @@ def _fit_main(args: argparse.Namespace) -> int:
     unknown = [w for w in which if w not in FIT_PARAMETERS]
     if unknown:
         raise InputError(f"--fit: unknown parameter '{unknown[0]}' (expected some of: {', '.join(FIT_PARAMETERS)})")
-    chunk_ok = args.chunk is None or args.chunk > 0
+    chunk_ok = args.chunk is None or (math.isfinite(args.chunk) and args.chunk > 0)  # inf: no chunk count
     if not (chunk_ok and args.max_chunks >= 1 and args.max_iters >= 1 and args.time_budget > 0):
-        raise InputError("--chunk and --time-budget must be > 0, --max-chunks and --max-iters >= 1")
+        raise InputError("--chunk must be a finite number > 0, --time-budget > 0, --max-chunks and --max-iters >= 1")
     ref, robot, rec = _load(args)
     held = []
     if args.fit is None and ref.caster_friction >= 0 and ref.casters:

@@ -453,7 +453,8 @@ class BatchEnv:
             return  # every open episode began before the record: nothing a copy could replay
         if self._log_bytes + call[1].nbytes > RECORD_CAP_BYTES:
             if not self._warned_cap:
-                warnings.warn(f"batch_env: {self._cap_why()}", stacklevel=3)
+                # the user's line: _remember <- reset, or _remember <- _step <- step
+                warnings.warn(f"batch_env: {self._cap_why()}", stacklevel=3 if call[0] == "reset" else 4)
                 self._warned_cap = True
             if call[0] == "reset":  # the worlds it resets begin within the record again
                 self._ep_start[~call[1]] = -1

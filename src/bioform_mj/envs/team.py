@@ -1,19 +1,22 @@
 """Persistent threads released and joined by compiled code (design §20; issue 30, item 6).
 
 At a 1 ms control period the CPU-vectorised environment (``envs/vector.py``) hands every period to its threads:
-with a ``ThreadPoolExecutor`` that is, per thread and period, a Python ``submit``, a wake-up of a sleeping
-thread, its taking the GIL to unbox the call's arguments, and the same back through the ``Future``
-(two threads, 32 worlds: 0.54 of ``mujoco.rollout`` on a quiet machine against 0.77 with one thread). Here the
-worker threads never leave compiled code between periods: each runs :func:`wait_change` on a generation
-counter in a small ``int32`` control array, which the calling thread bumps with :func:`publish`; each waits
-by spinning (atomic loads, ``pause``) for up to ``spin_ns`` nanoseconds, then sleeps on a Linux futex (no GIL
-taken either way), as OpenMP's and ``mujoco.rollout``'s thread pools spin before they sleep.
+with a ``ThreadPoolExecutor`` that is, per thread and period, a Python ``submit``, a wake-up of a sleeping thread,
+its taking the GIL to unbox the call's arguments, and the same back through the ``Future`` (two threads, 32 worlds:
+0.54 of ``mujoco.rollout`` on a quiet machine against 0.77 with one thread). Here the worker threads never leave
+compiled code between periods: each runs :func:`wait_change` on a generation counter in a small ``int32`` control
+array, which the calling thread bumps (:func:`bump`; :func:`publish` for the stop); each waits by spinning (atomic
+loads, ``pause``) for up to ``spin_ns`` nanoseconds, then sleeps on a Linux futex (no GIL taken either way), as
+OpenMP's and ``mujoco.rollout``'s thread pools spin before they sleep.
 
 The control array's layout (int32, one 64-byte line per slot): slot 0 the "go" generation (:data:`GO`), its
-sleepers' count (``GO + 1``) and the stop flag (:data:`STOP`); slot ``t ≥ 1`` (index ``SLOT * t``) worker ``t``'s
-"done" generation, the caller's sleeping flag and the worker's result. Generations wrap at 2³¹ (compared
-for inequality only). Loads and stores of the counters are sequentially consistent (LLVM atomics); what a
-thread wrote before a ``publish`` is seen by the thread whose ``wait_change`` returned its value.
+sleepers' count (``GO + 1``) and the stop flag (:data:`STOP`); slot 1 (index ``SLOT``, ``envs.worlds.ALL``) the
+count of "a thread finished its claims", which each worker bumps (:func:`bump`) after its share of a period, and
+its sleepers' count (the calling thread, waiting for the count of worlds done); the other slots of
+:func:`control`'s array are unused (workers had a "done" slot each before the threads claimed each other's worlds).
+Generations and counts wrap at 2³¹ (compared for inequality only). Loads and stores of the counters are
+sequentially consistent (LLVM atomics); what a thread wrote before a ``bump`` or ``publish`` is seen by the thread
+whose ``wait_change`` returned its value.
 
 :data:`HAVE_TEAM`: Linux on x86-64 or aarch64 with numba's JIT on (elsewhere ``envs.vector`` uses a thread pool).
 """
@@ -114,8 +117,8 @@ def now_ns(ts):
 @njit
 def wait_change(ctl, i, old, spin_ns, ts):
     """Wait until ``ctl[i] != old`` and return it: spin (atomic loads) for up to ``spin_ns`` ns, then sleep on
-    the futex at ``ctl[i]``, counting this thread in ``ctl[i + 1]`` while it sleeps (:func:`publish` wakes
-    sleepers only)."""
+    the futex at ``ctl[i]``, counting this thread in ``ctl[i + 1]`` while it sleeps (:func:`publish` and
+    :func:`bump` wake sleepers only)."""
     v = atomic_load(ctl, i)
     if v != old:
         return v

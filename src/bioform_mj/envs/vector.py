@@ -48,6 +48,10 @@ from bioform_mj.scenario.config import Scenario
 
 #: at most this share of the memory available now may be taken by the worlds (estimated before building them)
 MEMORY_SHARE = 0.5
+#: bytes of one world's :class:`~.fast.PeriodArgs` on one thread, counted in the memory estimate once per world and
+#: thread (``envs.worlds``: any thread steps any world, so each world has one a thread; measured 14.5 KB each, RSS
+#: over 4,000 of them): the worlds' memory grows with worlds × threads
+ARGS_BYTES = 16 * 1024
 #: ``VectorEnv._ep_start`` of a world whose ended episode's actions were moved out of the history (``_trim``)
 ENDED = -2
 #: ns a thread of the team spins (atomic loads) before it sleeps, waiting for the next period or for the
@@ -151,7 +155,7 @@ class VectorEnv:
                 "the CPU-vectorised environment cannot run this scenario (it needs sensing = 'truth', no DC-motor "
                 "feed, a harmonic disturbance, no per-step faults): use parallel_env"
             )
-        per = _world_bytes(env0)
+        per = _world_bytes(env0) + int(T) * ARGS_BYTES  # its own memory, and its PeriodArgs on each thread
         need = W * per
         if max_bytes is None:
             avail = _available_bytes()
@@ -160,8 +164,8 @@ class VectorEnv:
             bound = float(max_bytes)
         if bound is not None and need > bound:
             raise ValueError(
-                f"VectorEnv: {W} worlds need ~{need / 2**30:.2f} GiB ({per / 2**20:.2f} MiB a world), over the "
-                f"bound of {bound / 2**30:.2f} GiB: fewer worlds"
+                f"VectorEnv: {W} worlds need ~{need / 2**30:.2f} GiB ({per / 2**20:.2f} MiB a world on {T} "
+                f"threads), over the bound of {bound / 2**30:.2f} GiB: fewer worlds (or threads)"
             )
         self.envs = [env0] + [parallel_env(scenario, **options) for _ in range(W - 1)]
         #: what rebuilds it (pickle, deepcopy: :meth:`__getstate__`)

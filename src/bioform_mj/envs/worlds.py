@@ -16,7 +16,7 @@ stepped a world does not change its bits (``tests/test_envs_vector.py``).
 
 Counters (int32, one 64-byte line each, :data:`~.team.SLOT` entries): ``claim[SLOT·u]`` the next world of block
 ``u``; ``claim[SLOT·(T + t)]`` the worlds thread ``t`` finished this period. A period's counters are set by the
-calling thread before it releases the others (sequentially consistent stores, then the "go" publish), so a thread
+calling thread before it releases the others (sequentially consistent stores, then the "go" bump), so a thread
 that claims a world sees the period's actions and states; a world's results are seen by the calling thread
 once it has read the finished counts.
 """

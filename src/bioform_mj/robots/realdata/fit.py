@@ -697,10 +697,11 @@ def fit(
     # a diverged column is no slope: the intervals are those of the others with it held at its value (inf its own)
     ok = ~blew
     step, half, corr = np.zeros(len(x)), np.full(len(x), np.inf), np.zeros((len(x), len(x)))
-    step[ok] = remaining_step(r, J[:, ok], x[ok], lo[ok], hi[ok])  # ~0 where the optimiser converged
-    half[ok], corr[np.ix_(ok, ok)] = halfwidths(
-        r, J[:, ok], len(chunks.states), int(np.count_nonzero(chunks.weights)), step[ok]
-    )
+    if ok.any():  # every column diverged: no interval at all (the rows say why)
+        step[ok] = remaining_step(r, J[:, ok], x[ok], lo[ok], hi[ok])  # ~0 where the optimiser converged
+        half[ok], corr[np.ix_(ok, ok)] = halfwidths(
+            r, J[:, ok], len(chunks.states), int(np.count_nonzero(chunks.weights)), step[ok]
+        )
     if short := [n for n, d, h in zip(pd.keys(), step, half) if abs(d) > 0.5 * h]:
         notes.append(f"the optimiser stopped short of the optimum in {', '.join(short)} ({STOPPED_SHORT})")
     names = list(opt.keys())
