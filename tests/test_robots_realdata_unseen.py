@@ -237,5 +237,5 @@ def test_a_wheel_on_a_frozen_suspension_has_its_own_terms_not_identified():
     for r in rows[1:2] + rows[3:]:
         assert r["why"].startswith("its wheel hangs below 'susp', which the model freezes")
     assert rows[4]["why"].endswith("interval ±1 kg·m² is wide")  # the earlier reason kept
-    assert "'lw' below 'susp'" in note and "(damping_L, frictionloss_L would have been)" in note
+    assert "'lw' below 'susp'" in note and "(otherwise: damping_L identified, frictionloss_L negligible)" in note
     assert suspension_rule(rows, SimpleNamespace(wheel_joints=("lw", "rw"), suspended_wheels=())) == []

@@ -256,7 +256,7 @@ def suspension_rule(rows: list[dict[str, Any]], layout: Any) -> list[str]:
         if joint not in hung:
             continue
         if row["status"] != "not identified":
-            hit.append(row["name"])
+            hit.append(f"{row['name']} {row['status']}")
         row["status"] = "not identified"
         row["why"] = "; ".join(
             [
@@ -269,6 +269,6 @@ def suspension_rule(rows: list[dict[str, Any]], layout: Any) -> list[str]:
     return [
         f"driven wheel(s) {joints}: a suspension the model freezes (design §13); those wheels' damping, dry friction "
         "and armature are not reported identified"
-        + (f" ({', '.join(hit)} would have been)" if hit else "")
+        + (f" (otherwise: {', '.join(hit)})" if hit else "")
         + "; give --free-joints to simulate the suspension"
     ]
