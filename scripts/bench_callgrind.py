@@ -154,6 +154,25 @@ def report(path: Path, tag: str, nrt: tuple[int, int]) -> None:
         print(row(f"  {label}", cost, f"{c / steps:.1f}/st") + f"  (whole dump {c_all / steps:.1f}/st)")
 
 
+def run_callgrind(tmp: str, script: str, args: list[str]) -> tuple[Path, Path, tuple[int, int]] | None:
+    """Build the helper library (:data:`_C`) in ``tmp`` and run ``python script --inside LIB *args`` under
+    callgrind with the simulated caches (I1, D1 32 KiB 8-way, LL 1 MiB 8-way, 64 B lines), measuring only where
+    the script toggles collection. Returns the dump's path stem (``.1``, ``.2``: one per toggled part), the
+    library's path and numba's ``NRT_incref``/``NRT_decref`` addresses; None (an ``error:`` line) if it failed."""
+    src, lib = Path(tmp, "cgctl.c"), Path(tmp, "cgctl.so")
+    src.write_text(_C)
+    subprocess.run([shutil.which("cc") or "cc", "-O2", "-shared", "-fPIC", "-o", str(lib), str(src)], check=True)
+    out = Path(tmp, "cg.out")
+    cmd = [shutil.which("valgrind") or "valgrind", "--tool=callgrind", "--instr-atstart=no", "--cache-sim=yes"]
+    cmd += ["--branch-sim=yes", "--I1=32768,8,64", "--D1=32768,8,64", "--LL=1048576,8,64"]
+    cmd += [f"--callgrind-out-file={out}", sys.executable, script, "--inside", str(lib), *args]
+    proc = subprocess.run(cmd, stderr=subprocess.DEVNULL, env=dict(os.environ))
+    if proc.returncode != 0:
+        print(f"error: the run under valgrind failed (exit {proc.returncode})", file=sys.stderr)
+        return None
+    return out, lib, tuple(int(x, 16) for x in Path(f"{lib}.nrt").read_text().split())  # type: ignore[return-value]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--preset", default="paper")
@@ -164,24 +183,15 @@ def main(argv: list[str] | None = None) -> int:
     if a.inside:
         inside(a.inside, a.preset, a.duration)
         return 0
-    cc, vg = shutil.which("cc"), shutil.which("valgrind")
-    if cc is None or vg is None:
+    if shutil.which("cc") is None or shutil.which("valgrind") is None:
         print("error: needs valgrind and a C compiler (cc) on PATH", file=sys.stderr)
         return 2
     with tempfile.TemporaryDirectory() as tmp:
-        src, lib = Path(tmp, "cgctl.c"), Path(tmp, "cgctl.so")
-        src.write_text(_C)
-        subprocess.run([cc, "-O2", "-shared", "-fPIC", "-o", str(lib), str(src)], check=True)
-        out = Path(tmp, "cg.out")
-        cmd = [vg, "--tool=callgrind", "--instr-atstart=no", "--cache-sim=yes", "--branch-sim=yes"]
-        cmd += ["--I1=32768,8,64", "--D1=32768,8,64", "--LL=1048576,8,64", f"--callgrind-out-file={out}"]
-        cmd += [sys.executable, __file__, "--inside", str(lib), "--preset", a.preset, "--duration", str(a.duration)]
-        proc = subprocess.run(cmd, stderr=subprocess.DEVNULL, env=dict(os.environ))
-        if proc.returncode != 0:
-            print(f"error: the run under valgrind failed (exit {proc.returncode})", file=sys.stderr)
+        got = run_callgrind(tmp, __file__, ["--preset", a.preset, "--duration", str(a.duration)])
+        if got is None:
             return 1
+        out, _, nrt = got
         print(f"{a.preset}, {a.duration:g} s; simulated caches: I1 and D1 32 KiB 8-way, LL 1 MiB 8-way, 64 B lines")
-        nrt = tuple(int(x, 16) for x in Path(f"{lib}.nrt").read_text().split())
         report(Path(f"{out}.1"), "bare replay", nrt)
         report(Path(f"{out}.2"), "closed loop", nrt)
         if a.keep:

@@ -17,16 +17,14 @@ from __future__ import annotations
 import argparse
 import ctypes
 import json
-import os
 import shutil
-import subprocess
 import sys
 import tempfile
 import warnings
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_callgrind import _C, _EV, parse  # noqa: E402
+from bench_callgrind import _EV, parse, run_callgrind  # noqa: E402
 
 
 def kernel_addresses() -> dict[str, str]:
@@ -102,25 +100,25 @@ def main(argv: list[str] | None = None) -> int:
     if a.inside:
         episode(a, a.inside)
         return 0
-    cc, vg = shutil.which("cc"), shutil.which("valgrind")
-    if cc is None or vg is None:
+    if shutil.which("cc") is None or shutil.which("valgrind") is None:
         print("error: needs valgrind and a C compiler (cc) on PATH", file=sys.stderr)
         return 2
     episode(a, None)  # compile (or load) the kernels outside valgrind
     with tempfile.TemporaryDirectory() as tmp:
-        src, lib = Path(tmp, "cgctl.c"), Path(tmp, "cgctl.so")
-        src.write_text(_C)
-        subprocess.run([cc, "-O2", "-shared", "-fPIC", "-o", str(lib), str(src)], check=True)
-        out = Path(tmp, "cg.out")
-        cmd = [vg, "--tool=callgrind", "--instr-atstart=no", "--cache-sim=yes", "--branch-sim=yes"]
-        cmd += ["--I1=32768,8,64", "--D1=32768,8,64", "--LL=1048576,8,64", f"--callgrind-out-file={out}"]
-        cmd += [sys.executable, __file__, "--inside", str(lib), "--scenario", a.scenario, "--plant", a.plant]
-        cmd += ["--control-dt", str(a.control_dt), "--steps", str(a.steps)]
-        proc = subprocess.run(cmd, stderr=subprocess.DEVNULL, env=dict(os.environ))
-        if proc.returncode != 0:
-            print(f"error: the run under valgrind failed (exit {proc.returncode})", file=sys.stderr)
+        args = [
+            "--scenario",
+            a.scenario,
+            "--plant",
+            a.plant,
+            "--control-dt",
+            str(a.control_dt),
+            "--steps",
+            str(a.steps),
+        ]
+        got = run_callgrind(tmp, __file__, args)
+        if got is None:
             return 1
-        nrt = tuple(int(x, 16) for x in Path(f"{lib}.nrt").read_text().split())
+        out, lib, nrt = got
         names, own, arcs = parse(Path(f"{out}.1"))
         total = sum(v[0] for v in own.values())
         step_ids = {i for i, nm in names.items() if nm == "mj_step"}
