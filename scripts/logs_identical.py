@@ -51,13 +51,13 @@ CONFIGS: dict[str, tuple[list[str], float]] = {
 }
 
 
-def src_of(root: str) -> Path:
-    """The folder that holds ``bioform_mj`` under ``root`` (``root/src`` or ``root`` itself)."""
+def src_of(root: str) -> Path | None:
+    """The folder that holds ``bioform_mj`` under ``root`` (``root/src`` or ``root`` itself); None if neither."""
     p = Path(root).resolve()
     for cand in (p / "src", p):
         if (cand / "bioform_mj" / "__init__.py").is_file():
             return cand
-    raise SystemExit(f"error: no bioform_mj package under {root}")
+    return None
 
 
 def run(src: Path, argv: list[str], duration: float, out: Path, cache: str | None) -> str | None:
@@ -121,6 +121,9 @@ def main(argv: list[str] | None = None) -> int:
         print("error: --duration must be > 0 (or 0: each configuration's own)", file=sys.stderr)
         return 2
     ref, new = src_of(a.ref), src_of(a.new)
+    if ref is None or new is None:  # bad input: one line, exit 2, before any run
+        print(f"error: no bioform_mj package under {a.ref if ref is None else a.new}", file=sys.stderr)
+        return 2
     tmp = tempfile.TemporaryDirectory(prefix="logs_identical-") if a.keep is None else None
     base = Path(a.keep if a.keep is not None else tmp.name)  # type: ignore[union-attr]
     failed = 0
