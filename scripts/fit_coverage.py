@@ -71,19 +71,6 @@ def _seeds(text: str) -> list[int]:
     return out
 
 
-def _true_values(truth, names: list[str], published: list[float]) -> np.ndarray:
-    pub = dict(zip(names, published))
-    want = {
-        "mass": pub["mass"] + truth.payload_kg,
-        "yaw_inertia": pub["yaw_inertia"] + truth.payload_yaw_kgm2,
-        "damping_L": truth.damping[0],
-        "damping_R": truth.damping[1],
-        "frictionloss_L": truth.frictionloss[0],
-        "frictionloss_R": truth.frictionloss[1],
-    }
-    return np.array([want[n] for n in names])
-
-
 def _halfwidths(res) -> dict[str, np.ndarray]:
     from mujoco import sysid
 
@@ -141,7 +128,9 @@ def main() -> int:
                     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
                     shutil.rmtree(bag)
                     names = [p["name"] for p in res.parameters]
-                    true = _true_values(truth, names, [p["published"] for p in res.parameters])
+                    pub = {p["name"]: p["published"] for p in res.parameters}
+                    want = truth.values(pub["mass"], pub["yaw_inertia"])
+                    true = np.array([want[n] for n in names])
                     err = np.array([p["fitted"] for p in res.parameters]) - true
                     half = _halfwidths(res)
                     hws = [p["ci95_halfwidth"] for p in res.parameters]
