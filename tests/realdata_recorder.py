@@ -172,7 +172,9 @@ def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
             geom.condim = 3 if truth.caster_friction > 0 else 1
             geom.priority = 2  # its own friction wins against the floor's
     # MuJoCo's own contact defaults, not the file's default class (the menagerie TIAGo's, contype 0 and type mesh,
-    # left its casters without a floor: it fell through in 0.3 s)
+    # left its casters without a floor: it fell through in 0.3 s). A copy, on purpose, of the fit's floor
+    # (bioform_mj/robots/realdata/simmodel.py, sim_spec): this recorder imports nothing of the project (issue 29
+    # item 4), so that a wrong floor there cannot make the fit agree with its test recordings by construction
     floor = spec.worldbody.add_geom(
         name="test_floor",
         type=mujoco.mjtGeom.mjGEOM_PLANE,
