@@ -72,20 +72,12 @@ def _seeds(text: str) -> list[int]:
 
 
 def _halfwidths(res) -> dict[str, np.ndarray]:
-    from mujoco import sysid
+    """Both kinds of interval recomputed from the fit's residual and Jacobian, as the fit computes its own
+    (:func:`~bioform_mj.robots.realdata.intervals.halfwidths`, without the remaining step), in the parameters' units."""
+    from bioform_mj.robots.realdata.intervals import halfwidths
 
-    from bioform_mj.robots.realdata.intervals import autocorrelation_inflation, cluster_halfwidths
-
-    r, J, G = res.residual, res.jacobian, res.n_chunks
-    _, iid = sysid.calculate_intervals([r], J)
-    iid = iid * autocorrelation_inflation(r, G, _signals(res))
-    return {k: np.maximum(iid, cluster_halfwidths(r, J, G, kind=k)) * res.scales for k in ("CR1", "CR3")}
-
-
-def _signals(res) -> int:
-    """The compared signals per sample, from the first note (``compared: left_speed, right_speed, vx, wz``)."""
-    note = res.notes[0]
-    return len(note.split("compared: ", 1)[1].split(", ")) if "compared: " in note else 2
+    r, J, G, s = res.residual, res.jacobian, res.n_chunks, res.n_signals
+    return {k: halfwidths(r, J, G, s, kind=k)[0] * res.scales for k in ("CR1", "CR3")}
 
 
 def main() -> int:
