@@ -573,7 +573,7 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
     # frictionless as published (layout.frictionless_contacts, the one floor-contact classification, design §13):
     # priority so that MuJoCo's max rule does not give them the floor's μ, and condim 1 (normal force only)
     others = [g for g in robot_geoms if model.geom_bodyid[g] not in wheel_bodies]
-    pub_fl, to_condim1, note = frictionless_contacts(model, [g for g in others if g not in friction], _geom_label)
+    pub_fl, to_condim1, note = frictionless_contacts(model, [g for g in others if g not in friction])
     raise_prio = [g for g in others if (g in pub_fl or g in friction) and model.geom_priority[g] < CONTACT_PRIORITY]
     published += [
         (_geom_label(model, g), float(model.geom_friction[g, 0]), int(model.geom_condim[g])) for g in to_condim1
