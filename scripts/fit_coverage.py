@@ -71,34 +71,13 @@ def _seeds(text: str) -> list[int]:
     return out
 
 
-def _true_values(truth, names: list[str], published: list[float]) -> np.ndarray:
-    pub = dict(zip(names, published))
-    want = {
-        "mass": pub["mass"] + truth.payload_kg,
-        "yaw_inertia": pub["yaw_inertia"] + truth.payload_yaw_kgm2,
-        "damping_L": truth.damping[0],
-        "damping_R": truth.damping[1],
-        "frictionloss_L": truth.frictionloss[0],
-        "frictionloss_R": truth.frictionloss[1],
-    }
-    return np.array([want[n] for n in names])
-
-
 def _halfwidths(res) -> dict[str, np.ndarray]:
-    from mujoco import sysid
+    """Both kinds of interval recomputed from the fit's residual and Jacobian, as the fit computes its own
+    (:func:`~bioform_mj.robots.realdata.intervals.halfwidths`, without the remaining step), in the parameters' units."""
+    from bioform_mj.robots.realdata.intervals import halfwidths
 
-    from bioform_mj.robots.realdata.intervals import autocorrelation_inflation, cluster_halfwidths
-
-    r, J, G = res.residual, res.jacobian, res.n_chunks
-    _, iid = sysid.calculate_intervals([r], J)
-    iid = iid * autocorrelation_inflation(r, G, _signals(res))
-    return {k: np.maximum(iid, cluster_halfwidths(r, J, G, kind=k)) * res.scales for k in ("CR1", "CR3")}
-
-
-def _signals(res) -> int:
-    """The compared signals per sample, from the first note (``compared: left_speed, right_speed, vx, wz``)."""
-    note = res.notes[0]
-    return len(note.split("compared: ", 1)[1].split(", ")) if "compared: " in note else 2
+    r, J, G, s = res.residual, res.jacobian, res.n_chunks, res.n_signals
+    return {k: halfwidths(r, J, G, s, kind=k)[0] * res.scales for k in ("CR1", "CR3")}
 
 
 def main() -> int:
@@ -141,7 +120,9 @@ def main() -> int:
                     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
                     shutil.rmtree(bag)
                     names = [p["name"] for p in res.parameters]
-                    true = _true_values(truth, names, [p["published"] for p in res.parameters])
+                    pub = {p["name"]: p["published"] for p in res.parameters}
+                    want = truth.values(pub["mass"], pub["yaw_inertia"])
+                    true = np.array([want[n] for n in names])
                     err = np.array([p["fitted"] for p in res.parameters]) - true
                     half = _halfwidths(res)
                     hws = [p["ci95_halfwidth"] for p in res.parameters]

@@ -44,6 +44,18 @@ class Truth:
     held: tuple[str, ...] = ()  # joints taken out of the file, their bodies welded at its pose (servos holding an
     # arm and a head still: the TIAGo's); unpowered, they sag and swing, which the fit's model does not (design §13)
 
+    def values(self, published_mass: float, published_yaw_inertia: float) -> dict[str, float]:
+        """The true values of the fit's parameters (its ``fit.json`` names; SI units) given the published chassis
+        body's mass (kg) and z inertia (kg·m²): the fit test's and ``scripts/fit_coverage.py``'s ground truth."""
+        return {
+            "mass": published_mass + self.payload_kg,
+            "yaw_inertia": published_yaw_inertia + self.payload_yaw_kgm2,
+            "damping_L": self.damping[0],
+            "damping_R": self.damping[1],
+            "frictionloss_L": self.frictionloss[0],
+            "frictionloss_R": self.frictionloss[1],
+        }
+
 
 #: the Kobuki URDF of the test zoo and a "real" Kobuki that differs from it (its base_link: 2.4 kg, izz 0.03675
 #: kg·m²; the payload makes 3.0 kg and 0.04675 kg·m²), recorded at KOBUKI_TAU N·m: the fit's out-of-sample tests
@@ -160,7 +172,9 @@ def true_model(robot_file: Path, truth: Truth) -> mujoco.MjModel:
             geom.condim = 3 if truth.caster_friction > 0 else 1
             geom.priority = 2  # its own friction wins against the floor's
     # MuJoCo's own contact defaults, not the file's default class (the menagerie TIAGo's, contype 0 and type mesh,
-    # left its casters without a floor: it fell through in 0.3 s)
+    # left its casters without a floor: it fell through in 0.3 s). A copy, on purpose, of the fit's floor
+    # (bioform_mj/robots/realdata/simmodel.py, sim_spec): this recorder imports nothing of the project (issue 29
+    # item 4), so that a wrong floor there cannot make the fit agree with its test recordings by construction
     floor = spec.worldbody.add_geom(
         name="test_floor",
         type=mujoco.mjtGeom.mjGEOM_PLANE,

@@ -123,14 +123,7 @@ def test_intervals_hold_the_truth_on_most_recordings(tmp_path):
     mass 1.3 % low with ±1.0 %, a damping 1.8 % high with ±1.7 %); required here: at least 14 (78 %). The
     independent-residual intervals alone held it far less often (tb3 mass ±0.006 kg against an error of
     0.011 kg); the cluster-robust ones are about twice as wide (mass ±0.012–0.015 kg)."""
-    truth = {
-        "mass": 0.943 + TRUTH.payload_kg,
-        "yaw_inertia": 0.0020064 + TRUTH.payload_yaw_kgm2,
-        "damping_L": TRUTH.damping[0],
-        "damping_R": TRUTH.damping[1],
-        "frictionloss_L": TRUTH.frictionloss[0],
-        "frictionloss_R": TRUTH.frictionloss[1],
-    }
+    truth = TRUTH.values(0.943, 0.0020064)  # tb3_robot.xml's chassis body
     inside, total, mass_hw = 0, 0, []
     for s in (1, 2, 3):
         model = rr.true_model(rr.MODELS / "tb3_robot.xml", TRUTH)

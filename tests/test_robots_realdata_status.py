@@ -116,6 +116,28 @@ def short_fit(short_bag):
     return _fit(short_bag)
 
 
+def _diverge_off_the_optimum(monkeypatch, diverges) -> None:
+    """Make ``mujoco.sysid.model_residual`` raise as on NaN ("Nan, Inf or huge value in QACC") for a trial point
+    ``x`` where ``diverges(x, x_opt)``, but only once ``fit``'s Jacobian at the optimum ``x_opt`` has begun (armed
+    by ``jacobian_at``): the optimiser's path and optimum stay those of the fit without it."""
+    from mujoco import sysid
+
+    real_res, real_jac = sysid.model_residual, fit_mod.jacobian_at
+    armed: dict[str, np.ndarray] = {}
+
+    def model_residual(x, *a, **kw):
+        if "x" in armed and diverges(np.ravel(np.asarray(x, float)), armed["x"]):
+            raise ValueError("Nan, Inf or huge value in QACC")
+        return real_res(x, *a, **kw)
+
+    def jacobian_at(residual, x, *a, **kw):
+        armed["x"] = np.array(x, float)
+        return real_jac(residual, x, *a, **kw)
+
+    monkeypatch.setattr(sysid, "model_residual", model_residual)
+    monkeypatch.setattr(fit_mod, "jacobian_at", jacobian_at)
+
+
 def test_a_short_recordings_fit_chooses_its_chunks_and_tells_zero_from_positive(short_fit):
     res, got = short_fit
     assert res.n_chunks == 12 and res.chunk_s == pytest.approx(1.0)
@@ -145,23 +167,8 @@ def test_a_trial_that_diverges_at_the_optimum_is_not_identified_and_the_others_a
     """The rollouts diverge (``mujoco.sysid.model_residual`` raising as on NaN) whenever ``damping_R`` is moved
     off the optimum, and only in the Jacobian after the optimiser (armed by ``jacobian_at``): the optimiser's path
     and optimum are those of the fit without it."""
-    from mujoco import sysid
-
     k = list(short_fit[1]).index("damping_R")
-    real_res, real_jac = sysid.model_residual, fit_mod.jacobian_at
-    armed: dict[str, np.ndarray] = {}
-
-    def model_residual(x, *a, **kw):
-        if "x" in armed and abs(float(np.ravel(x)[k]) - armed["x"][k]) > 1e-12:
-            raise ValueError("Nan, Inf or huge value in QACC")
-        return real_res(x, *a, **kw)
-
-    def jacobian_at(residual, x, *a, **kw):
-        armed["x"] = np.array(x, float)
-        return real_jac(residual, x, *a, **kw)
-
-    monkeypatch.setattr(sysid, "model_residual", model_residual)
-    monkeypatch.setattr(fit_mod, "jacobian_at", jacobian_at)
+    _diverge_off_the_optimum(monkeypatch, lambda x, x_opt: abs(x[k] - x_opt[k]) > 1e-12)
     res, got = _fit(short_bag)
     row = got["damping_R"]
     assert row["status"] == "not identified" and "made the rollouts diverge" in row["why"]
@@ -178,22 +185,7 @@ def test_every_trial_diverging_at_the_optimum_still_gives_a_result(short_bag, mo
     """Every parameter's finite-difference trial diverges at the optimum (here ``mass`` and ``yaw_inertia``, the
     only two fitted): no column is a slope, so there is no interval at all; the fit reports each not identified
     with the reason and no interval (it raised IndexError in the interval code, which had no column left)."""
-    from mujoco import sysid
-
-    real_res, real_jac = sysid.model_residual, fit_mod.jacobian_at
-    armed: dict[str, np.ndarray] = {}
-
-    def model_residual(x, *a, **kw):
-        if "x" in armed and np.abs(np.ravel(x) - armed["x"]).max() > 1e-12:
-            raise ValueError("Nan, Inf or huge value in QACC")
-        return real_res(x, *a, **kw)
-
-    def jacobian_at(residual, x, *a, **kw):
-        armed["x"] = np.array(x, float)
-        return real_jac(residual, x, *a, **kw)
-
-    monkeypatch.setattr(sysid, "model_residual", model_residual)
-    monkeypatch.setattr(fit_mod, "jacobian_at", jacobian_at)
+    _diverge_off_the_optimum(monkeypatch, lambda x, x_opt: np.abs(x - x_opt).max() > 1e-12)
     res, got = _fit(short_bag, which=("mass", "yaw_inertia"), max_iters=3)
     assert sorted(got) == ["mass", "yaw_inertia"]
     for row in got.values():

@@ -573,7 +573,7 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
     # frictionless as published (layout.frictionless_contacts, the one floor-contact classification, design §13):
     # priority so that MuJoCo's max rule does not give them the floor's μ, and condim 1 (normal force only)
     others = [g for g in robot_geoms if model.geom_bodyid[g] not in wheel_bodies]
-    pub_fl, to_condim1, note = frictionless_contacts(model, [g for g in others if g not in friction], _geom_label)
+    pub_fl, to_condim1, note = frictionless_contacts(model, [g for g in others if g not in friction])
     raise_prio = [g for g in others if (g in pub_fl or g in friction) and model.geom_priority[g] < CONTACT_PRIORITY]
     published += [
         (_geom_label(model, g), float(model.geom_friction[g, 0]), int(model.geom_condim[g])) for g in to_condim1
@@ -645,13 +645,11 @@ def _contacts_and_joints(model, data, path, ref: RobotRef, base: int, joints, dr
     if frozen:
         # a driven wheel below a frozen joint: a suspension (PMB-2: its wheels' ±5 mm sliders, frozen, biased its
         # fitted wheel damping 3x against a recording where they rode to their limit)
-        hung = [j for j in frozen if wheel_bodies & set(subtree(model, int(model.jnt_bodyid[j])).tolist())]
-        suspended = [  # each driven wheel below a frozen joint, and that joint (the fit's suspension rule)
-            (_joint_label(model, w), _joint_label(model, j))
-            for w in joints
-            for j in hung
-            if int(model.jnt_bodyid[w]) in subtree(model, int(model.jnt_bodyid[j]))
-        ]
+        below = {j: set(subtree(model, int(model.jnt_bodyid[j])).tolist()) for j in frozen}
+        pairs = [(w, j) for w in joints for j in frozen if int(model.jnt_bodyid[w]) in below[j]]
+        hung = [j for j in frozen if any(j == k for _, k in pairs)]
+        # each driven wheel below a frozen joint, and that joint (the fit's suspension rule)
+        suspended = [(_joint_label(model, w), _joint_label(model, j)) for w, j in pairs]
         notes.append(
             f"joint(s) {jl(frozen)} frozen (design §13: removed from the scene, their bodies welded where the file "
             "puts them; map free_joints = true to leave them free)"

@@ -53,24 +53,25 @@ def frictionless(mu: float, condim: int) -> bool:
     return float(mu) < FRICTIONLESS or int(condim) == 1
 
 
-def frictionless_contacts(model: mujoco.MjModel, geoms: list[int], label) -> tuple[list[int], list[int], str]:
+def frictionless_contacts(model: mujoco.MjModel, geoms: list[int]) -> tuple[list[int], list[int], str]:
     """Of the non-wheel collision geoms ``geoms`` of a compiled robot, those :func:`frictionless` as published, those
     of them the scene turns to ``condim 1`` (published above 1), and ``robot check``'s note on them ("" for none;
-    ``label(model, g)`` names a geom). A URDF's ``<gazebo>`` ``mu1 0`` imports as friction 0 at condim 3: MuJoCo's
-    pyramidal cone at its smallest μ (1e-5) is ill-conditioned (a Kobuki's loads at rest summed to 26.13 N of its
-    23.95 N weight, and the fit's rollouts with wheel damping blew up). Design §13."""
+    geoms named as :func:`_geom_label` does). A URDF's ``<gazebo>`` ``mu1 0`` imports as friction 0 at condim 3:
+    MuJoCo's pyramidal cone at its smallest μ (1e-5) is ill-conditioned (a Kobuki's loads at rest summed to 26.13 N
+    of its 23.95 N weight, and the fit's rollouts with wheel damping blew up). Design §13."""
     fl = [g for g in geoms if frictionless(model.geom_friction[g, 0], model.geom_condim[g])]
+    names = {g: _geom_label(model, g) for g in fl}
     to1 = [g for g in fl if model.geom_condim[g] > 1]
     if not fl:
         return fl, to1, ""
     note = (
-        f"frictionless geom(s) {_quoted(label(model, g) for g in fl)} (friction < {FRICTIONLESS:g} or condim 1 as "
+        f"frictionless geom(s) {_quoted(names[g] for g in fl)} (friction < {FRICTIONLESS:g} or condim 1 as "
         f"published) simulated with condim 1 (normal force only) at priority {CONTACT_PRIORITY}: they stay "
         "frictionless against the floor (MuJoCo would otherwise take the larger friction of the pair, the floor's)"
     )
     if to1:
         note += f"; published condim {'/'.join(str(int(model.geom_condim[g])) for g in to1)} of "
-        note += _quoted(label(model, g) for g in to1)
+        note += _quoted(names[g] for g in to1)
     return fl, to1, note
 
 

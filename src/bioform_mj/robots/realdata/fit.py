@@ -472,6 +472,8 @@ class FitResult:
     n_chunks: int = 0
     #: the chunk length used (s): ``chunk_s`` as given, else :func:`~.status.choose_chunk`'s
     chunk_s: float = 2.0
+    #: the signals compared per sample (wheel speeds, and vx, wz where recorded): the residual's row width
+    n_signals: int = 2
 
 
 def _residual_fn(robot: SimRobot, chunks: Chunks, n_threads: int, deadline: list[float] | None = None):
@@ -697,11 +699,10 @@ def fit(
     # a diverged column is no slope: the intervals are those of the others with it held at its value (inf its own)
     ok = ~blew
     step, half, corr = np.zeros(len(x)), np.full(len(x), np.inf), np.zeros((len(x), len(x)))
+    n_signals = int(np.count_nonzero(chunks.weights))
     if ok.any():  # every column diverged: no interval at all (the rows say why)
         step[ok] = remaining_step(r, J[:, ok], x[ok], lo[ok], hi[ok])  # ~0 where the optimiser converged
-        half[ok], corr[np.ix_(ok, ok)] = halfwidths(
-            r, J[:, ok], len(chunks.states), int(np.count_nonzero(chunks.weights)), step[ok]
-        )
+        half[ok], corr[np.ix_(ok, ok)] = halfwidths(r, J[:, ok], len(chunks.states), n_signals, step[ok])
     if short := [n for n, d, h in zip(pd.keys(), step, half) if abs(d) > 0.5 * h]:
         notes.append(f"the optimiser stopped short of the optimum in {', '.join(short)} ({STOPPED_SHORT})")
     names = list(opt.keys())
@@ -770,6 +771,7 @@ def fit(
         np.array([p.scale for p in info]),
         len(chunks.states),
         chunk_s,
+        n_signals,
     )
     return result, opt
 

@@ -137,19 +137,25 @@ def remaining_step(
 
 
 def halfwidths(
-    r: np.ndarray, J: np.ndarray, n_chunks: int, n_signals: int, step: np.ndarray | None = None
+    r: np.ndarray,
+    J: np.ndarray,
+    n_chunks: int,
+    n_signals: int,
+    step: np.ndarray | None = None,
+    kind: str = "CR3",
 ) -> tuple[np.ndarray, np.ndarray]:
     """The fit's 95 % half-widths (scaled units) and the parameters' correlation matrix, at the reported point:
     the wider of the independent-residual interval (``mujoco.sysid.calculate_intervals``) widened by the
     residual's autocorrelation (:func:`autocorrelation_inflation`) and the leave-one-chunk-out jackknife
     (:func:`cluster_halfwidths`), plus ``|step|`` (:func:`remaining_step`: where the optimiser stopped short of
     the optimum, the interval about the reported point must reach the interval about the optimum); the
-    correlations from ``(JᵀJ)⁻¹``."""
+    correlations from ``(JᵀJ)⁻¹``. ``kind``: :func:`cluster_halfwidths`' (``CR1`` only for
+    ``scripts/fit_coverage.py``'s comparison)."""
     from mujoco import sysid
 
     sigma, half_iid = sysid.calculate_intervals([r], J)
     inflate = autocorrelation_inflation(r, n_chunks, n_signals)
-    half = np.maximum(half_iid * inflate, cluster_halfwidths(r, J, n_chunks))
+    half = np.maximum(half_iid * inflate, cluster_halfwidths(r, J, n_chunks, kind=kind))
     if step is not None:
         half = half + np.abs(step)
     sd = np.sqrt(np.maximum(np.diag(sigma), 0))

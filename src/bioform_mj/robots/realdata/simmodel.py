@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from bioform_mj.robots.layout import RobotLayout
+from bioform_mj.robots.layout import FRICTIONLESS, RobotLayout, frictionless
 from bioform_mj.robots.prepare import prepare_robot
 from bioform_mj.robots.refs import RobotRef
 
@@ -137,8 +137,6 @@ def frictionless_note(layout: RobotLayout, model: mujoco.MjModel) -> list[str]:
     simulates them with ``condim 1`` (:func:`~bioform_mj.robots.layout.frictionless`, design §13), as ``robot
     check`` and ``bioform run`` do. With condim 3, MuJoCo's pyramidal cone at its smallest friction 1e-5 made the
     Kobuki's damped rollouts blow up (wheel damping 0.00088 N·m·s/rad: wheels at 320 rad/s)."""
-    from bioform_mj.robots.layout import FRICTIONLESS, frictionless
-
     geoms = [
         g
         for g, mu, c in layout.published_contacts

@@ -38,6 +38,7 @@ __all__ = [
     "torque_effects",
     "parameter_rows",
     "settle_zero",
+    "suspension_rule",
 ]
 
 #: the default chunk length (s): where the recording gives at least ``p + CHUNK_MARGIN`` of them
