@@ -126,10 +126,7 @@ def fit_row(name: str, cfg: dict, bag: Path, out: Path) -> None:
         return
     rep = json.loads((res / "fit.json").read_text())
     pub = {q["name"]: q["published"] for q in rep["parameters"]}
-    truth = {"mass": pub.get("mass", 0.0) + tr.payload_kg,
-             "yaw_inertia": pub.get("yaw_inertia", 0.0) + tr.payload_yaw_kgm2,
-             "damping_L": tr.damping[0], "damping_R": tr.damping[1], "frictionloss_L": tr.frictionloss[0],
-             "frictionloss_R": tr.frictionloss[1], "caster_friction": tr.caster_friction}  # fmt: skip
+    truth = tr.values(pub.get("mass", 0.0), pub.get("yaw_inertia", 0.0)) | {"caster_friction": tr.caster_friction}
     for q in rep["parameters"]:
         t, ci, hw = truth.get(q["name"]), q["ci95"], q["ci95_halfwidth"]
         holds = "-" if ci is None or t is None else ("holds" if ci[0] <= t <= ci[1] else "OUTSIDE")
