@@ -43,7 +43,7 @@ from bioform_mj.envs.parallel import FormationParallelEnv, parallel_env
 from bioform_mj.envs.team import HAVE_TEAM
 from bioform_mj.envs.team import control as team_control
 from bioform_mj.envs.team import stop as team_stop
-from bioform_mj.envs.worlds import block, check, claims, dispatch, make_vargs, serve, start, warnings
+from bioform_mj.envs.worlds import block, check, claims, count_warned, dispatch, make_vargs, serve, start
 from bioform_mj.scenario.config import Scenario
 
 #: at most this share of the memory available now may be taken by the worlds (estimated before building them)
@@ -483,7 +483,7 @@ class VectorEnv:
                 self._block(self._v[0], 0)
                 for f in futs:
                     f.result()
-                warned = self._warnings(self._v[0])
+                warned = self._count_warned(self._v[0])
         if warned < 0:  # before any world steps: the single environment's message for the first bad world
             bad = -(warned + 1)
             try:
@@ -530,7 +530,7 @@ class VectorEnv:
             self._check = Compiled(check, (v,)).call
             self._start = Compiled(start, (v,)).call
             self._block = Compiled(block, (v, 0)).call
-            self._warnings = Compiled(warnings, (v,)).call
+            self._count_warned = Compiled(count_warned, (v,)).call
 
     def _start_team(self) -> None:
         """Start the workers (threads 1 … T−1) of :func:`~.worlds.serve` on a new control array; they are stopped by
