@@ -134,15 +134,13 @@ VFIELDS = (
 )  # fmt: skip
 
 if FAST:
-    from numba.core import types as _types
     from numba.experimental import structref
 
-    @structref.register
-    class VecArgsType(_types.StructRef):
-        """numba's type of :class:`VecArgs`."""
+    from bioform_mj.envs.fast import ArgsStructType
 
-        def preprocess_fields(self, fields):
-            return tuple((name, _types.unliteral(typ)) for name, typ in fields)
+    @structref.register
+    class VecArgsType(ArgsStructType):
+        """numba's type of :class:`VecArgs`."""
 
     class VecArgs(structref.StructRefProxy):
         """:data:`VFIELDS`, the same arrays through the environment's life, held by one compiled object: a
