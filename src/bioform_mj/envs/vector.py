@@ -522,7 +522,7 @@ class VectorEnv:
         self._v = [make_vargs(*fields) for _ in range(self.threads)]
         v = self._v[0]
         if HAVE_TEAM:
-            self._ctl1 = ctl = team_control(1)  # one thread: no workers to release
+            self._ctl1 = ctl = team_control()  # one thread: no workers to release
             self._dispatch = Compiled(dispatch, (v, ctl, 0)).call
             if self.threads > 1:
                 self._serve = Compiled(serve, (v, ctl, 1, np.int32(0), 0)).call
@@ -538,7 +538,7 @@ class VectorEnv:
         which holds no reference to the environment). Also in a forked child, where the parent's are gone."""
         if self._stopper is not None:
             self._stopper()
-        ctl = team_control(self.threads)
+        ctl = team_control()
         cpus: list = self._cpus if self._pin else [None] * self.threads
         caller = None
         if self._pin:
