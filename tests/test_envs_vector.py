@@ -397,7 +397,7 @@ def test_any_thread_steps_any_world_the_same_bits():
     alone, that thread alternating (so each world moves between the two threads' warm ``MjData`` and is taken
     from its own block and from the other's), gives the observations, rewards and flags of one thread stepping
     its own block, bit for bit, through episode ends and resets."""
-    from bioform_mj.envs.worlds import block, start, warnings
+    from bioform_mj.envs.worlds import block, count_warned, start
 
     W = 4
     a, b = VectorEnv("paper", W, 1, overrides=OV), VectorEnv("paper", W, 2, overrides=OV)
@@ -408,7 +408,7 @@ def test_any_thread_steps_any_world_the_same_bits():
         start(v)
         block(v, turn[0] % 2)
         turn[0] += 1
-        return warnings(v)
+        return count_warned(v)
 
     assert a.reset(seed=9).tobytes() == b.reset(seed=9).tobytes()
     b._compile()

@@ -253,12 +253,17 @@ if FAST:
     from numba.core import types as _types
     from numba.experimental import structref
 
-    @structref.register
-    class PeriodArgsType(_types.StructRef):
-        """numba's type of :class:`PeriodArgs`."""
+    class ArgsStructType(_types.StructRef):
+        """The base of the episode's argument holders' numba types (:class:`PeriodArgs`, ``envs.worlds.VecArgs``
+        …): each field typed as its value, never as a literal (an ``int`` field is ``int64``, not ``Literal[int](5)``:
+        one specialisation whatever the numbers)."""
 
         def preprocess_fields(self, fields):
             return tuple((name, _types.unliteral(typ)) for name, typ in fields)
+
+    @structref.register
+    class PeriodArgsType(ArgsStructType):
+        """numba's type of :class:`PeriodArgs`."""
 
     class PeriodArgs(structref.StructRefProxy):
         """:data:`FIELDS` held by one compiled object: passed to :func:`period` as one pointer, where
@@ -272,11 +277,8 @@ if FAST:
         return PeriodArgs(*fields)
 
     @structref.register
-    class PolicyArgsType(_types.StructRef):
+    class PolicyArgsType(ArgsStructType):
         """numba's type of :class:`PolicyArgs`."""
-
-        def preprocess_fields(self, fields):
-            return tuple((name, _types.unliteral(typ)) for name, typ in fields)
 
     class PolicyArgs(structref.StructRefProxy):
         """The paper's stack's ``(g, s, comm, verr)`` for :func:`policy_call` (see :class:`PeriodArgs`)."""
@@ -297,11 +299,8 @@ if FAST:
     period = mujoco_period
 
     @structref.register
-    class IdealArgsType(_types.StructRef):
+    class IdealArgsType(ArgsStructType):
         """numba's type of :class:`IdealArgs`."""
-
-        def preprocess_fields(self, fields):
-            return tuple((name, _types.unliteral(typ)) for name, typ in fields)
 
     class IdealArgs(structref.StructRefProxy):
         """:data:`IDEAL_FIELDS` held by one compiled object (see :class:`PeriodArgs`)."""

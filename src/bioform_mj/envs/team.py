@@ -12,8 +12,7 @@ OpenMP's and ``mujoco.rollout``'s thread pools spin before they sleep.
 The control array's layout (int32, one 64-byte line per slot): slot 0 the "go" generation (:data:`GO`), its
 sleepers' count (``GO + 1``) and the stop flag (:data:`STOP`); slot 1 (index ``SLOT``, ``envs.worlds.ALL``) the
 count of "a thread finished its claims", which each worker bumps (:func:`bump`) after its share of a period, and
-its sleepers' count (the calling thread, waiting for the count of worlds done); the other slots of
-:func:`control`'s array are unused (workers had a "done" slot each before the threads claimed each other's worlds).
+its sleepers' count (the calling thread, waiting for the count of worlds done).
 Generations and counts wrap at 2³¹ (compared for inequality only). Loads and stores of the counters are
 sequentially consistent (LLVM atomics); what a thread wrote before a ``bump`` or ``publish`` is seen by the thread
 whose ``wait_change`` returned its value.
@@ -173,6 +172,6 @@ def stop(ctl):
     publish(ctl, GO, next_gen(atomic_load(ctl, GO)))
 
 
-def control(threads: int) -> np.ndarray:
-    """A zeroed control array for ``threads`` threads (the caller and ``threads - 1`` workers)."""
-    return np.zeros(SLOT * max(threads, 1), dtype=np.int32)
+def control() -> np.ndarray:
+    """A zeroed control array: its two slots (the module docstring), whatever the number of threads."""
+    return np.zeros(2 * SLOT, dtype=np.int32)

@@ -43,7 +43,7 @@ from bioform_mj.envs.parallel import FormationParallelEnv, parallel_env
 from bioform_mj.envs.team import HAVE_TEAM
 from bioform_mj.envs.team import control as team_control
 from bioform_mj.envs.team import stop as team_stop
-from bioform_mj.envs.worlds import block, check, claims, dispatch, make_vargs, serve, start, warnings
+from bioform_mj.envs.worlds import block, check, claims, count_warned, dispatch, make_vargs, serve, start
 from bioform_mj.scenario.config import Scenario
 
 #: at most this share of the memory available now may be taken by the worlds (estimated before building them)
@@ -483,7 +483,7 @@ class VectorEnv:
                 self._block(self._v[0], 0)
                 for f in futs:
                     f.result()
-                warned = self._warnings(self._v[0])
+                warned = self._count_warned(self._v[0])
         if warned < 0:  # before any world steps: the single environment's message for the first bad world
             bad = -(warned + 1)
             try:
@@ -522,7 +522,7 @@ class VectorEnv:
         self._v = [make_vargs(*fields) for _ in range(self.threads)]
         v = self._v[0]
         if HAVE_TEAM:
-            self._ctl1 = ctl = team_control(1)  # one thread: no workers to release
+            self._ctl1 = ctl = team_control()  # one thread: no workers to release
             self._dispatch = Compiled(dispatch, (v, ctl, 0)).call
             if self.threads > 1:
                 self._serve = Compiled(serve, (v, ctl, 1, np.int32(0), 0)).call
@@ -530,7 +530,7 @@ class VectorEnv:
             self._check = Compiled(check, (v,)).call
             self._start = Compiled(start, (v,)).call
             self._block = Compiled(block, (v, 0)).call
-            self._warnings = Compiled(warnings, (v,)).call
+            self._count_warned = Compiled(count_warned, (v,)).call
 
     def _start_team(self) -> None:
         """Start the workers (threads 1 … T−1) of :func:`~.worlds.serve` on a new control array; they are stopped by
@@ -538,7 +538,7 @@ class VectorEnv:
         which holds no reference to the environment). Also in a forked child, where the parent's are gone."""
         if self._stopper is not None:
             self._stopper()
-        ctl = team_control(self.threads)
+        ctl = team_control()
         cpus: list = self._cpus if self._pin else [None] * self.threads
         caller = None
         if self._pin:

@@ -58,7 +58,7 @@ def periods(args, claim, t, blocks, wd, wx, ww, own, warm, X, sig, U, pose, vel,
     a tip-over, a MuJoCo warning), the terminal reward ``w_terminal·max(0, (N − k)·dt)`` taken from the rewards
     ``R`` (W, n) (not for a warning: its tail runs in Python), the observations ``O`` zeroed where the guards
     failed or MuJoCo warned, ``trunc`` (W,) at step ``N``, ``running`` cleared where either; ``O_out`` (the
-    observations in the environment's dtype) written from ``O``. Returns the number of worlds it stepped.
+    observations in the environment's dtype) written from ``O``.
 
     A world with ``warm[w]`` steps this thread's ``MjData`` (address ``wd``; its ``xmat`` view ``wx`` and
     warning counters ``ww``): its MuJoCo state ``X[w]`` (``mj_getState``'s layout for ``sig``,
@@ -67,7 +67,6 @@ def periods(args, claim, t, blocks, wd, wx, ww, own, warm, X, sig, U, pose, vel,
     warns, the whole ``MjData`` is copied into the world's own (address ``own[w]``), which then holds what
     stepping it would have left, and the counters are cleared."""
     T, W = blocks.shape[0], U.shape[0]
-    mine = 0
     for j in range(T):
         b = (t + j) % T
         hi = blocks[b, 1]
@@ -87,9 +86,7 @@ def periods(args, claim, t, blocks, wd, wx, ww, own, warm, X, sig, U, pose, vel,
                 if not st & BAD_ACTION:
                     _world_end(a, w, st, wd, wx, ww, own, warm, X, sig, pose, vel, new_pose, new_vel, O, O_out, R,
                                k, step_count, running, term, trunc, N, dt, w_terminal)  # fmt: skip
-            mine += 1
             atomic_add(claim, SLOT * (T + t), np.int32(1))
-    return mine
 
 
 @njit(inline=True)
@@ -137,15 +134,13 @@ VFIELDS = (
 )  # fmt: skip
 
 if FAST:
-    from numba.core import types as _types
     from numba.experimental import structref
 
-    @structref.register
-    class VecArgsType(_types.StructRef):
-        """numba's type of :class:`VecArgs`."""
+    from bioform_mj.envs.fast import ArgsStructType
 
-        def preprocess_fields(self, fields):
-            return tuple((name, _types.unliteral(typ)) for name, typ in fields)
+    @structref.register
+    class VecArgsType(ArgsStructType):
+        """numba's type of :class:`VecArgs`."""
 
     class VecArgs(structref.StructRefProxy):
         """:data:`VFIELDS`, the same arrays through the environment's life, held by one compiled object: a
@@ -170,9 +165,9 @@ def claims(threads: int) -> np.ndarray:
 @njit
 def block(v, t):
     """Thread ``t``'s claims of a period: :func:`periods` with ``v`` (:class:`VecArgs`) on its warm ``MjData``."""
-    return periods(v.args, v.claim, t, v.blocks, v.wd[t], v.wx[t], v.ww[t], v.own, v.warm, v.X, v.sig, v.U, v.pose,
-                   v.vel, v.new_pose, v.new_vel, v.O, v.O_out, v.R, v.k, v.step_count, v.status, v.running, v.term,
-                   v.trunc, v.N, v.dt, v.w_terminal)  # fmt: skip
+    periods(v.args, v.claim, t, v.blocks, v.wd[t], v.wx[t], v.ww[t], v.own, v.warm, v.X, v.sig, v.U, v.pose,
+            v.vel, v.new_pose, v.new_vel, v.O, v.O_out, v.R, v.k, v.step_count, v.status, v.running, v.term, v.trunc,
+            v.N, v.dt, v.w_terminal)  # fmt: skip
 
 
 @njit
@@ -201,7 +196,7 @@ def finished(v):
 
 
 @njit
-def warnings(v):
+def count_warned(v):
     """The number of worlds whose period MuJoCo warned in."""
     c = 0
     for w in range(v.status.shape[0]):
@@ -232,7 +227,7 @@ def dispatch(v, ctl, spin_ns):
             if finished(v) >= W:
                 break
             wait_change(ctl, ALL, g, spin_ns, ts)
-    return warnings(v)
+    return count_warned(v)
 
 
 @njit
